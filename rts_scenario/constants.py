@@ -1,0 +1,4 @@
+"""Physical constants."""
+
+C0_MPS = 299_792_458.0
+"""Speed of light in vacuum, m/s."""

@@ -1,0 +1,59 @@
+"""Exception hierarchy: every error a user can cause is an `RtsError` with one clear message."""
+
+from __future__ import annotations
+
+
+class RtsError(Exception):
+    """Base of every error the package raises on purpose."""
+
+
+class ScenarioError(RtsError):
+    """A scene, rig or profile file is invalid.
+
+    The message reads ``file:line:col: key.path: message`` so editors and people can jump to it.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        file: str | None = None,
+        line: int | None = None,
+        column: int | None = None,
+        key_path: str | None = None,
+    ) -> None:
+        self.file = file
+        self.line = line
+        self.column = column
+        self.key_path = key_path
+        self.detail = message
+        where = ""
+        if file is not None:
+            where = str(file)
+            if line is not None:
+                where += f":{line}"
+                if column is not None:
+                    where += f":{column}"
+            where += ": "
+        key = f"{key_path}: " if key_path else ""
+        super().__init__(f"{where}{key}{message}")
+
+
+class ArrayError(RtsError):
+    """A radar virtual array definition is invalid."""
+
+
+class RigError(RtsError):
+    """An RTS rig definition is invalid."""
+
+
+class SolverError(RtsError):
+    """The weight solver was called with invalid input."""
+
+
+class OutputError(RtsError):
+    """An output cannot be created or written."""
+
+
+class CheckError(RtsError):
+    """Detections cannot be checked against ground truth."""

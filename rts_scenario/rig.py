@@ -1,0 +1,334 @@
+"""RTS rigs: front ends (FE) placed in front of the radar, grouped into quads.
+
+A rig is a grid of ``rows x columns`` FEs; every 2x2 cell is a quad. FE ``r * columns + c`` sits
+in row ``r`` (row 0 lowest elevation) and column ``c`` (column 0 smallest azimuth). Inside a quad
+the FE order is the paper's Table I order: 0 and 2 have the smaller azimuth, 1 and 3 the larger;
+0 and 1 the lower elevation, 2 and 3 the higher.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import RigError, ScenarioError
+from .yamlio import Document, load_yaml, validate
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class HardwareLimits:
+    """What the RTS hardware can set, per channel."""
+
+    attenuation_min_db: float = 0.0
+    attenuation_max_db: float = 90.0
+    attenuation_step_db: float = 0.0
+    delay_min_s: float = 0.0
+    delay_step_s: float = 0.0
+    latency_s: float = 0.0
+    doppler_min_hz: float = -100e3
+    doppler_max_hz: float = 100e3
+    echoes_per_channel: int = 8
+    update_rate_hz: float = 100.0
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Level calibration point: one FE at full weight gives ``attenuation_db`` for this target."""
+
+    range_m: float = 10.0
+    rcs_dbsm: float = 10.0
+    attenuation_db: float = 40.0
+
+
+@dataclass(frozen=True, eq=False)
+class Rig:
+    """An RTS rig: FE directions and distances, calibration offsets, limits and quads.
+
+    Attributes
+    ----------
+    az_deg, el_deg, distance_m : ndarray, shape (F,)
+        FE directions as seen by the radar and their distances.
+    cal_delay_s, cal_phase_deg, cal_gain_db : ndarray, shape (F,)
+        Per-channel calibration offsets.
+    rows, columns : int
+        Grid shape; ``rows * columns == F``.
+    quads : ndarray, shape (Q, 4)
+        FE indices of every quad, paper order.
+    """
+
+    name: str
+    az_deg: FloatArray
+    el_deg: FloatArray
+    distance_m: FloatArray
+    rows: int
+    columns: int
+    cal_delay_s: FloatArray
+    cal_phase_deg: FloatArray
+    cal_gain_db: FloatArray
+    limits: HardwareLimits = HardwareLimits()
+    reference: Reference = Reference()
+    _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        n = self.rows * self.columns
+        if self.rows < 2 or self.columns < 2:
+            raise RigError(f"a rig needs at least 2 x 2 FEs, got {self.rows} x {self.columns}")
+        for name in ("az_deg", "el_deg", "distance_m", "cal_delay_s", "cal_phase_deg",
+                     "cal_gain_db"):
+            value = np.array(getattr(self, name), dtype=np.float64, ndmin=1)
+            if value.size == 1 and n > 1:
+                value = np.full(n, value.item())
+            if value.shape != (n,):
+                raise RigError(
+                    f"{name}: needs one value per FE ({self.rows} x {self.columns} = {n}), "
+                    f"got shape {value.shape}"
+                )
+            bad = ~np.isfinite(value)
+            if bad.any():
+                raise RigError(f"{name}[{int(np.argmax(bad))}]: must be finite, got {value[bad][0]}")
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        if np.any(self.distance_m <= 0):
+            raise RigError(f"distance_m: must be > 0, got {self.distance_m.min()}")
+        if np.any(np.abs(self.az_deg) >= 90) or np.any(np.abs(self.el_deg) > 90):
+            raise RigError("az_deg, el_deg: FEs must lie in front of the radar (|az| < 90, |el| <= 90)")
+        grid_az = self.az_deg.reshape(self.rows, self.columns)
+        grid_el = self.el_deg.reshape(self.rows, self.columns)
+        if np.any(np.diff(grid_az, axis=1) < 0):
+            r, c = np.argwhere(np.diff(grid_az, axis=1) < 0)[0]
+            raise RigError(
+                f"az_deg: FEs must be ordered by increasing azimuth within a row (paper order: "
+                f"FE 0 and 2 smaller azimuth than 1 and 3); row {r}: column {c} at "
+                f"{grid_az[r, c]} deg, column {c + 1} at {grid_az[r, c + 1]} deg"
+            )
+        if np.any(np.diff(grid_el, axis=0) < 0):
+            r, c = np.argwhere(np.diff(grid_el, axis=0) < 0)[0]
+            raise RigError(
+                f"el_deg: FEs must be ordered by increasing elevation between rows (paper order: "
+                f"FE 0 and 1 lower than 2 and 3); column {c}: row {r} at {grid_el[r, c]} deg, "
+                f"row {r + 1} at {grid_el[r + 1, c]} deg"
+            )
+
+    @property
+    def n_front_ends(self) -> int:
+        """Number of FEs F."""
+        return self.rows * self.columns
+
+    @property
+    def quads(self) -> IntArray:
+        """FE indices of every 2x2 cell, shape ``(Q, 4)``, paper order, row-major cells."""
+        r, c = np.meshgrid(np.arange(self.rows - 1), np.arange(self.columns - 1), indexing="ij")
+        base = (r * self.columns + c).ravel()
+        return np.stack([base, base + 1, base + self.columns, base + self.columns + 1], axis=1)
+
+    @property
+    def key(self) -> tuple[Any, ...]:
+        """Hashable identity of the FE geometry, used to cache per-rig precomputation."""
+        return (self.az_deg.tobytes(), self.el_deg.tobytes(), self.rows, self.columns)
+
+    @classmethod
+    def from_angles(
+        cls,
+        az_deg: ArrayLike,
+        el_deg: ArrayLike,
+        distance_m: ArrayLike = 1.0,
+        *,
+        name: str = "custom",
+        **kwargs: Any,
+    ) -> Rig:
+        """One quad of four FEs given in the paper's order (Table I)."""
+        az = np.array(az_deg, dtype=np.float64, ndmin=1)
+        el = np.array(el_deg, dtype=np.float64, ndmin=1)
+        if az.shape != (4,) or el.shape != (4,):
+            raise RigError(
+                f"from_angles: needs exactly 4 azimuths and 4 elevations (paper order), got "
+                f"{az.size} and {el.size}; use Rig.grid for more FEs"
+            )
+        return cls.grid(az.reshape(2, 2), el.reshape(2, 2), distance_m, name=name, **kwargs)
+
+    @classmethod
+    def grid(
+        cls,
+        az_deg: ArrayLike,
+        el_deg: ArrayLike,
+        distance_m: ArrayLike = 1.0,
+        *,
+        name: str = "custom",
+        cal_delay_s: ArrayLike = 0.0,
+        cal_phase_deg: ArrayLike = 0.0,
+        cal_gain_db: ArrayLike = 0.0,
+        limits: HardwareLimits | None = None,
+        reference: Reference | None = None,
+    ) -> Rig:
+        """A grid rig from ``(rows, columns)`` arrays of FE angles (row 0 lowest).
+
+        1-D inputs are the column azimuths and the row elevations of a regular grid.
+        """
+        az = np.asarray(az_deg, dtype=np.float64)
+        el = np.asarray(el_deg, dtype=np.float64)
+        if az.ndim == 1 and el.ndim == 1:
+            az, el = np.meshgrid(az, el)
+        if az.ndim != 2 or az.shape != el.shape:
+            raise RigError(
+                f"grid: az_deg and el_deg must both be (rows, columns) or 1-D (columns; rows), "
+                f"got shapes {az.shape} and {el.shape}"
+            )
+        rows, columns = az.shape
+        return cls(
+            name=name, az_deg=az.ravel(), el_deg=el.ravel(),
+            distance_m=np.asarray(distance_m, dtype=np.float64), rows=rows, columns=columns,
+            cal_delay_s=np.asarray(cal_delay_s, dtype=np.float64),
+            cal_phase_deg=np.asarray(cal_phase_deg, dtype=np.float64),
+            cal_gain_db=np.asarray(cal_gain_db, dtype=np.float64),
+            limits=limits or HardwareLimits(), reference=reference or Reference(),
+        )
+
+    @classmethod
+    def preset(cls, name: str) -> Rig:
+        """Return a shipped rig: see `preset_names`."""
+        names = preset_names()
+        if name not in names:
+            raise RigError(f"unknown rig preset {name!r}; valid presets: {', '.join(names)}")
+        text = resources.files("rts_scenario").joinpath(f"data/rigs/{name}.rig.yaml").read_text()
+        return cls.from_document(load_yaml(f"<preset {name}>", text))
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> Rig:
+        """Load a ``*.rig.yaml`` file (format: see ``scenarios/rigs/README.md``)."""
+        return cls.from_document(load_yaml(path))
+
+    @classmethod
+    def from_document(cls, doc: Document) -> Rig:
+        """Build a rig from a loaded YAML document, with located errors."""
+        validate(doc, RIG_SCHEMA)
+        data = doc.data
+        fes = data.get("front_ends")
+        layout = data.get("layout")
+        if (fes is None) == (layout is None):
+            raise doc.error((), "give exactly one of 'front_ends' (list) or 'layout' (grid)")
+        distance = data.get("distance_m", 1.0)
+        if layout is not None:
+            az = np.array(layout["az_deg"], dtype=np.float64)
+            el = np.array(layout["el_deg"], dtype=np.float64)
+            rows, columns = el.size, az.size
+            az_grid, el_grid = (g.ravel() for g in np.meshgrid(az, el))
+            dist = np.full(rows * columns, float(distance))
+            cal = {k: np.zeros(rows * columns) for k in ("delay_s", "phase_deg", "gain_db")}
+        else:
+            rows = data.get("rows", 2)
+            columns = data.get("columns", len(fes) // rows if rows else 0)
+            if rows * columns != len(fes):
+                raise doc.error(
+                    ("front_ends",),
+                    f"needs rows x columns = {rows} x {columns} = {rows * columns} FEs, "
+                    f"got {len(fes)}",
+                )
+            az_grid = np.array([fe["az_deg"] for fe in fes], dtype=np.float64)
+            el_grid = np.array([fe["el_deg"] for fe in fes], dtype=np.float64)
+            dist = np.array([fe.get("distance_m", distance) for fe in fes], dtype=np.float64)
+            cal = {
+                k: np.array([fe.get("calibration", {}).get(k, 0.0) for fe in fes], dtype=float)
+                for k in ("delay_s", "phase_deg", "gain_db")
+            }
+        try:
+            return cls(
+                name=data["name"], az_deg=az_grid, el_deg=el_grid, distance_m=dist, rows=rows,
+                columns=columns, cal_delay_s=cal["delay_s"], cal_phase_deg=cal["phase_deg"],
+                cal_gain_db=cal["gain_db"],
+                limits=HardwareLimits(**data.get("limits", {})),
+                reference=Reference(**data.get("reference", {})),
+            )
+        except RigError as exc:
+            key = "layout" if layout is not None else "front_ends"
+            raise doc.error((key,), str(exc)) from None
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped rig presets."""
+    folder = resources.files("rts_scenario").joinpath("data/rigs")
+    return sorted(p.name.removesuffix(".rig.yaml") for p in folder.iterdir()
+                  if p.name.endswith(".rig.yaml"))
+
+
+def _number(minimum: float | None = None, exclusive: bool = False) -> dict[str, Any]:
+    out: dict[str, Any] = {"type": "number"}
+    if minimum is not None:
+        out["exclusiveMinimum" if exclusive else "minimum"] = minimum
+    return out
+
+
+_ANGLE = {"type": "number", "minimum": -90, "maximum": 90}
+
+RIG_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "additionalProperties": False,
+    "required": ["rts_rig", "name"],
+    "properties": {
+        "rts_rig": {"enum": [1]},
+        "name": {"type": "string", "minLength": 1},
+        "description": {"type": "string"},
+        "distance_m": _number(0, exclusive=True),
+        "rows": {"type": "integer", "minimum": 2},
+        "columns": {"type": "integer", "minimum": 2},
+        "front_ends": {
+            "type": "array",
+            "minItems": 4,
+            "items": {
+                "type": "object",
+                "additionalProperties": False,
+                "required": ["az_deg", "el_deg"],
+                "properties": {
+                    "az_deg": _ANGLE,
+                    "el_deg": _ANGLE,
+                    "distance_m": _number(0, exclusive=True),
+                    "calibration": {
+                        "type": "object",
+                        "additionalProperties": False,
+                        "properties": {
+                            "delay_s": {"type": "number"},
+                            "phase_deg": {"type": "number"},
+                            "gain_db": {"type": "number"},
+                        },
+                    },
+                },
+            },
+        },
+        "layout": {
+            "type": "object",
+            "additionalProperties": False,
+            "required": ["az_deg", "el_deg"],
+            "properties": {
+                "az_deg": {"type": "array", "minItems": 2, "items": _ANGLE},
+                "el_deg": {"type": "array", "minItems": 2, "items": _ANGLE},
+            },
+        },
+        "limits": {
+            "type": "object",
+            "additionalProperties": False,
+            "properties": {
+                f.name: ({"type": "integer", "minimum": 1} if f.name == "echoes_per_channel"
+                         else _number(None if "doppler" in f.name else 0))
+                for f in fields(HardwareLimits)
+            },
+        },
+        "reference": {
+            "type": "object",
+            "additionalProperties": False,
+            "properties": {
+                "range_m": _number(0, exclusive=True),
+                "rcs_dbsm": {"type": "number"},
+                "attenuation_db": {"type": "number"},
+            },
+        },
+    },
+}
+
+__all__ = ["HardwareLimits", "Reference", "Rig", "ScenarioError", "preset_names"]

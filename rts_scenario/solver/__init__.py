@@ -1,0 +1,266 @@
+"""Four-channel weight solver: put the synthesized target at a set azimuth and elevation.
+
+``solve_weights`` assigns every target to the quad that encloses it, solves the chosen method
+on each quad's targets at once, retries targets a quad cannot synthesize in its neighbours
+(curved synthesis borders), and checks that the peak is the global maximum of the radar's
+beamformer wherever a quad can split. Per rig and array the quads' kernels, probe grids and
+split maps are computed once and cached.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..arrays import VirtualArray
+from ..errors import SolverError
+from ..rig import Rig
+from .exact import ExactQuad
+from .globalmax import GlobalMaxCheck
+from .paper import PaperQuad
+from .quads import distance_to_polygon, inside_polygon, quad_polygons
+from .reasons import Reason
+
+FloatArray = NDArray[np.float64]
+
+CHUNK = 16384
+# Targets a quad cannot synthesize are retried in quads within this distance (deg) of them.
+RETRY_MARGIN_DEG = 1.0
+# Nodes per quad side of the precomputed split map.
+SPLIT_MAP_NODES = 17
+# A quad with less area (deg^2) than this has collapsed onto a line.
+DEGENERATE_AREA_DEG2 = 1e-9
+
+
+class QuadKernel(Protocol):
+    """What a method provides per quad."""
+
+    def solve(self, az_rad: FloatArray, el_rad: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Return ``(weights (N, 4), reason (N,))``."""
+        ...
+
+
+METHODS: dict[str, Callable[[Rig, VirtualArray, NDArray[np.int64]], QuadKernel]] = {
+    "paper": PaperQuad.build,
+    "exact": ExactQuad.build,
+}
+
+
+@dataclass(frozen=True)
+class WeightSolution:
+    """Solver result, one row per target.
+
+    Attributes
+    ----------
+    weights : ndarray, shape (N, 4), float64
+        Linear amplitude weights of the quad's FEs in paper order, >= 0, max 1 per feasible
+        row, 0 for infeasible rows.
+    quad : ndarray, shape (N,), int64
+        Index into ``rig.quads`` of the quad used, -1 outside every quad.
+    reason : ndarray, shape (N,), uint8
+        `Reason` code per target; ``Reason.OK`` where feasible.
+    method : str
+        Method name.
+    """
+
+    weights: FloatArray
+    quad: NDArray[np.int64]
+    reason: NDArray[np.uint8]
+    method: str
+
+    @property
+    def feasible(self) -> NDArray[np.bool_]:
+        """Whether each target was synthesized, shape ``(N,)``."""
+        return self.reason == Reason.OK
+
+    def explain(self, index: int) -> str:
+        """Human-readable reason for target ``index``."""
+        return Reason(int(self.reason[index])).description
+
+    def counts(self) -> dict[str, int]:
+        """Number of targets per reason name (only reasons that occur)."""
+        codes, counts = np.unique(self.reason, return_counts=True)
+        return {Reason(int(c)).name: int(n) for c, n in zip(codes, counts, strict=True)}
+
+
+@dataclass
+class _Plan:
+    kernels: list[QuadKernel]
+    checks: list[GlobalMaxCheck | None]
+    polygons: FloatArray
+    degenerate: NDArray[np.bool_]
+
+
+def solve_weights(
+    az_deg: ArrayLike,
+    el_deg: ArrayLike,
+    *,
+    rig: Rig,
+    array: VirtualArray,
+    method: str = "exact",
+) -> WeightSolution:
+    """Weights of the four FEs of the enclosing quad that synthesize each target's angle.
+
+    Parameters
+    ----------
+    az_deg, el_deg : array_like, shape (N,)
+        Set azimuth (positive left) and elevation (positive up) of every target, degrees.
+    rig : Rig
+        The RTS rig.
+    array : VirtualArray
+        The radar's virtual array.
+    method : {"exact", "paper"}
+        ``"paper"``: the paper's equations (sinc model, averaged FE angles). ``"exact"``: true
+        FE directions and exact array response; the beamformer peak is on the set angle.
+
+    Returns
+    -------
+    WeightSolution
+
+    Raises
+    ------
+    SolverError
+        Unknown method, mismatched shapes or non-finite angles.
+    """
+    if method not in METHODS:
+        raise SolverError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
+    az = _angles("az_deg", az_deg)
+    el = _angles("el_deg", el_deg)
+    if az.shape != el.shape:
+        raise SolverError(
+            f"az_deg and el_deg: must have the same length, got {az.size} and {el.size}"
+        )
+    plan = _plan(rig, array, method)
+    n = az.size
+    weights = np.zeros((n, 4))
+    quad = np.full(n, -1, dtype=np.int64)
+    reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)
+    for start in range(0, n, CHUNK):
+        part = slice(start, start + CHUNK)
+        weights[part], quad[part], reason[part] = _solve_chunk(plan, az[part], el[part])
+    return WeightSolution(weights=weights, quad=quad, reason=reason, method=method)
+
+
+def _angles(name: str, values: ArrayLike) -> FloatArray:
+    try:
+        out = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SolverError(f"{name}: must be numbers in degrees, got {values!r:.80}") from None
+    if out.ndim > 1:
+        raise SolverError(f"{name}: must be a scalar or 1-D, got shape {out.shape}")
+    out = out.reshape(-1)
+    bad = ~np.isfinite(out)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SolverError(
+            f"{name}[{i}]: must be a finite angle in degrees, got {out[i]} "
+            f"({int(bad.sum())} non-finite value(s) in all)"
+        )
+    if np.any(np.abs(out) > 90.0):
+        i = int(np.argmax(np.abs(out) > 90.0))
+        raise SolverError(f"{name}[{i}]: must be within -90..90 degrees, got {out[i]}")
+    return out
+
+
+def _plan(rig: Rig, array: VirtualArray, method: str) -> _Plan:
+    key = ("plan", array.key, method)
+    if key not in rig._cache:
+        build = METHODS[method]
+        quads = rig.quads
+        polygons = quad_polygons(rig)
+        x, y = polygons[..., 0], polygons[..., 1]
+        area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
+        plan = _Plan(
+            kernels=[build(rig, array, fes) for fes in quads],
+            checks=[None] * len(quads),
+            polygons=polygons,
+            degenerate=area <= DEGENERATE_AREA_DEG2,
+        )
+        for q, fes in enumerate(quads):
+            check = GlobalMaxCheck.build(rig, array, fes)
+            if _quad_can_split(plan.kernels[q], check, polygons[q]):
+                plan.checks[q] = check
+        rig._cache[key] = plan
+    plan_out: Any = rig._cache[key]
+    return plan_out  # type: ignore[no-any-return]
+
+
+def _quad_can_split(kernel: QuadKernel, check: GlobalMaxCheck, polygon: FloatArray) -> bool:
+    """Solve a grid of nodes over the quad; True if any solved node splits or is a saddle."""
+    t = np.linspace(0.0, 1.0, SPLIT_MAP_NODES)
+    a, b = (g.ravel() for g in np.meshgrid(t, t))
+    # Bilinear map from the unit square to the corners FE 0, 1, 3, 2.
+    p0, p1, p3, p2 = polygon
+    pts = ((1 - a) * (1 - b))[:, None] * p0 + (a * (1 - b))[:, None] * p1 \
+        + (a * b)[:, None] * p3 + ((1 - a) * b)[:, None] * p2
+    az, el = np.radians(pts[:, 0]), np.radians(pts[:, 1])
+    weights, reason = kernel.solve(az, el)
+    if np.any(reason == Reason.SPLIT):
+        return True
+    ok = reason == Reason.OK
+    return bool(np.any(check.splits(az[ok], el[ok], weights[ok])))
+
+
+def _solve_chunk(
+    plan: _Plan, az_deg: FloatArray, el_deg: FloatArray
+) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.uint8]]:
+    n = az_deg.size
+    az, el = np.radians(az_deg), np.radians(el_deg)
+    weights = np.zeros((n, 4))
+    quad = np.full(n, -1, dtype=np.int64)
+    reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)
+    n_quads = len(plan.kernels)
+    for q in range(n_quads):
+        todo = quad < 0
+        take = np.flatnonzero(todo) if q else np.arange(n)
+        inside = inside_polygon(az_deg[take], el_deg[take], plan.polygons[q])
+        if plan.degenerate[q]:
+            near = distance_to_polygon(az_deg[take], el_deg[take], plan.polygons[q]) <= 0.5
+            reason[take[near & ~inside]] = Reason.DEGENERATE
+        idx = take[inside]
+        quad[idx] = q
+        if idx.size:
+            weights[idx], reason[idx] = _solve_in(plan, q, az[idx], el[idx])
+    if n_quads > 1:
+        _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
+    return weights, quad, reason
+
+
+def _solve_in(plan: _Plan, q: int, az: FloatArray, el: FloatArray) -> tuple[FloatArray, FloatArray]:
+    weights, reason = plan.kernels[q].solve(az, el)
+    check = plan.checks[q]
+    if check is not None:
+        ok = np.flatnonzero(reason == Reason.OK)
+        split = ok[check.splits(az[ok], el[ok], weights[ok])]
+        reason[split] = Reason.SPLIT
+        weights[split] = 0.0
+    return weights, reason
+
+
+def _retry_neighbours(
+    plan: _Plan,
+    az_deg: FloatArray,
+    el_deg: FloatArray,
+    weights: FloatArray,
+    quad: NDArray[np.int64],
+    reason: NDArray[np.uint8],
+) -> None:
+    for q in range(len(plan.kernels)):
+        idx = np.flatnonzero((reason == Reason.NO_SOLUTION) & (quad != q))
+        if idx.size == 0:
+            return
+        idx = idx[inside_polygon(az_deg[idx], el_deg[idx], plan.polygons[q], RETRY_MARGIN_DEG)]
+        if idx.size == 0:
+            continue
+        w, r = _solve_in(plan, q, np.radians(az_deg[idx]), np.radians(el_deg[idx]))
+        solved = r == Reason.OK
+        weights[idx[solved]] = w[solved]
+        quad[idx[solved]] = q
+        reason[idx[solved]] = Reason.OK
+
+
+__all__ = ["METHODS", "Reason", "WeightSolution", "solve_weights"]

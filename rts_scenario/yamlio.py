@@ -1,0 +1,169 @@
+"""Safe YAML loading that remembers where every value came from, and schema validation.
+
+Every error names the file, line, column and key path of the offending value, as
+``file:line:col: key.path: message``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+
+from .errors import ScenarioError
+
+KeyPath = tuple[str | int, ...]
+
+
+def format_key_path(path: KeyPath) -> str:
+    """Render ``("targets", 2, "speed_mps")`` as ``targets[2].speed_mps``."""
+    out = ""
+    for part in path:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += f".{part}" if out else str(part)
+    return out
+
+
+@dataclass(frozen=True)
+class Document:
+    """A loaded YAML document with the position of every node.
+
+    Attributes
+    ----------
+    data : object
+        Plain Python data (dicts, lists, str, int, float, bool, None).
+    file : str
+        Path the document was read from.
+    marks : dict
+        Key path -> (line, column), both 1-based, for every mapping value and list item.
+    """
+
+    data: Any
+    file: str
+    marks: dict[KeyPath, tuple[int, int]]
+
+    def error(self, path: KeyPath, message: str) -> ScenarioError:
+        """Return a `ScenarioError` located at the nearest known node of ``path``."""
+        probe = tuple(path)
+        while probe not in self.marks and probe:
+            probe = probe[:-1]
+        line, column = self.marks.get(probe, (None, None))
+        return ScenarioError(
+            message, file=self.file, line=line, column=column,
+            key_path=format_key_path(path) or None,
+        )
+
+
+class _Loader(yaml.SafeLoader):
+    """Safe loader; duplicate keys are errors instead of silently overwriting."""
+
+
+def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, int]],
+               loader: _Loader, file: str) -> Any:
+    marks[path] = (node.start_mark.line + 1, node.start_mark.column + 1)
+    if isinstance(node, yaml.MappingNode):
+        loader.flatten_mapping(node)
+        out: dict[str, Any] = {}
+        for key_node, value_node in node.value:
+            key = loader.construct_object(key_node, deep=True)
+            if not isinstance(key, str):
+                raise ScenarioError(
+                    f"keys must be strings, got {key!r}", file=file,
+                    line=key_node.start_mark.line + 1, column=key_node.start_mark.column + 1,
+                    key_path=format_key_path(path) or None,
+                )
+            if key in out:
+                raise ScenarioError(
+                    "duplicate key", file=file, line=key_node.start_mark.line + 1,
+                    column=key_node.start_mark.column + 1,
+                    key_path=format_key_path((*path, key)),
+                )
+            out[key] = _construct(value_node, (*path, key), marks, loader, file)
+        return out
+    if isinstance(node, yaml.SequenceNode):
+        return [
+            _construct(item, (*path, i), marks, loader, file) for i, item in enumerate(node.value)
+        ]
+    return loader.construct_object(node, deep=True)
+
+
+def load_yaml(path: str | Path, text: str | None = None) -> Document:
+    """Load one YAML document with a safe loader, keeping line/column marks.
+
+    Raises
+    ------
+    ScenarioError
+        If the file cannot be read or is not valid YAML.
+    """
+    file = str(path)
+    if text is None:
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ScenarioError(f"cannot read file: {exc.strerror or exc}", file=file) from None
+        except UnicodeDecodeError as exc:
+            raise ScenarioError(f"not UTF-8 text: {exc.reason}", file=file) from None
+    loader = _Loader(text)
+    try:
+        node = loader.get_single_node()
+        marks: dict[KeyPath, tuple[int, int]] = {}
+        data = None if node is None else _construct(node, (), marks, loader, file)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark else None
+        column = mark.column + 1 if mark else None
+        problem = exc.problem or exc.context or "invalid YAML"
+        raise ScenarioError(f"invalid YAML: {problem}", file=file, line=line,
+                            column=column) from None
+    except yaml.YAMLError as exc:
+        raise ScenarioError(f"invalid YAML: {exc}", file=file) from None
+    except (ValueError, TypeError, OverflowError, RecursionError) as exc:
+        raise ScenarioError(f"invalid YAML value: {exc}", file=file) from None
+    finally:
+        loader.dispose()
+    return Document(data=data, file=file, marks=marks)
+
+
+def validate(document: Document, schema: dict[str, Any]) -> None:
+    """Check ``document`` against a JSON Schema; raise the most relevant error, located.
+
+    Raises
+    ------
+    ScenarioError
+        Naming file, line, key path, the offending value and what is allowed.
+    """
+    validator = jsonschema.Draft202012Validator(schema)
+    best = jsonschema.exceptions.best_match(validator.iter_errors(document.data))
+    if best is None:
+        return
+    path: KeyPath = tuple(best.absolute_path)
+    raise document.error(path, _describe(best))
+
+
+def _describe(error: jsonschema.ValidationError) -> str:
+    value = error.instance
+    kind = error.validator
+    schema_value = error.validator_value
+    if kind == "additionalProperties":
+        allowed = sorted(error.schema.get("properties", {}))
+        extra = sorted(set(value) - set(allowed)) if isinstance(value, dict) else []
+        return f"unknown key {', '.join(map(repr, extra))}; allowed keys: {', '.join(allowed)}"
+    if kind == "enum":
+        return f"got {value!r}; allowed values: {', '.join(map(repr, schema_value))}"
+    if kind == "type":
+        return f"must be of type {schema_value}, got {value!r}"
+    if kind == "required":
+        return error.message.replace("is a required property", "is required but missing")
+    if kind in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
+        op = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
+              "exclusiveMaximum": "<"}[str(kind)]
+        return f"must be {op} {schema_value}, got {value!r}"
+    if kind in ("minItems", "maxItems"):
+        bound = "at least" if kind == "minItems" else "at most"
+        return f"must have {bound} {schema_value} items, got {len(value)}"
+    return f"{error.message}"
