@@ -243,9 +243,9 @@ class SourceResponse:
     """Response ``f_q(u, s)`` and its derivatives for a fixed set of Q sources, vectorized over N.
 
     Exploits the layout: with ``ny`` distinct y and ``nz`` distinct z positions, the steering
-    vector factors into ``ny + nz`` complex exponentials per look direction, and the sum over
-    elements becomes ``nz`` small matrix products. Any layout works; rectangular grids are
-    cheapest.
+    vector factors into ``ny + nz`` complex exponentials per look direction (half as many for a
+    symmetric set of positions), and the sum over elements becomes ``nz`` small matrix products.
+    Any layout works; rectangular grids are cheapest.
     """
 
     def __init__(self, array: VirtualArray, source_u: FloatArray, source_s: FloatArray) -> None:
@@ -260,24 +260,51 @@ class SourceResponse:
         a_src = np.exp(1j * k * (np.outer(array.y_m, source_u) + np.outer(array.z_m, source_s)))
         dy = -1j * k * array.y_m[:, None]
         dz = -1j * k * array.z_m[:, None]
-        stacked = np.concatenate(
-            [a_src, dy * a_src, dz * a_src, dy * dy * a_src, dy * dz * a_src, dz * dz * a_src],
-            axis=1,
+        stacked = np.stack(
+            [a_src, dy * a_src, dz * a_src, dy * dy * a_src, dy * dz * a_src, dz * dz * a_src]
         )
-        table = np.zeros((self.z_distinct.size, self.y_distinct.size, stacked.shape[1]), complex)
-        np.add.at(table, (iz, iy), stacked)
+        # table[iz, term, q, iy]: contribution of the element at (y_iy, z_iz).
+        table = np.zeros((self.z_distinct.size, 6, self.n_sources, self.y_distinct.size), complex)
+        np.add.at(table, (iz, slice(None), slice(None), iy), np.moveaxis(stacked, 1, 0))
         self.table = table
+        self._y_plan = _exp_plan(self.y_distinct, tol)
+        self._z_plan = _exp_plan(self.z_distinct, tol)
 
-    def evaluate(self, u: FloatArray, s: FloatArray, terms: int = 6) -> tuple[ComplexArray, ...]:
-        """Return ``f`` and its derivatives at look directions ``(u, s)``, each ``(N, Q)``.
+    def evaluate(self, u: FloatArray, s: FloatArray, terms: int = 6) -> ComplexArray:
+        """Return ``f`` and its derivatives at look directions ``(u, s)``.
 
-        The first ``terms`` of ``f, f_u, f_s, f_uu, f_us, f_ss``.
+        Shape ``(terms, Q, N)``: the first ``terms`` of ``f, f_u, f_s, f_uu, f_us, f_ss``.
         """
-        q = self.n_sources
-        table = self.table[:, :, : terms * q]
-        ey = np.exp(-1j * self.k * np.multiply.outer(u, self.y_distinct))
-        ez = np.exp(-1j * self.k * np.multiply.outer(s, self.z_distinct))
-        out = (ey @ table[0]) * ez[:, :1]
+        u = np.asarray(u, dtype=np.float64)
+        s = np.asarray(s, dtype=np.float64)
+        ey = _exp_rows(self.k, self.y_distinct, self._y_plan, u)
+        ez = _exp_rows(self.k, self.z_distinct, self._z_plan, s)
+        rows = terms * self.n_sources
+        out = (self.table[0, :terms].reshape(rows, -1) @ ey) * ez[0]
         for row in range(1, self.z_distinct.size):
-            out += (ey @ table[row]) * ez[:, row : row + 1]
-        return tuple(out[:, i * q : (i + 1) * q] for i in range(terms))
+            out += (self.table[row, :terms].reshape(rows, -1) @ ey) * ez[row]
+        return out.reshape(terms, self.n_sources, -1)
+
+
+def _exp_plan(coords: FloatArray, tol: float) -> NDArray[np.int64] | None:
+    """For coordinates symmetric about 0, index of each one's mirror image; else None."""
+    mirror = np.abs(coords[:, None] + coords[None, :]).argmin(axis=1)
+    if np.all(np.abs(coords + coords[mirror]) <= tol):
+        return mirror
+    return None
+
+
+def _exp_rows(k: float, coords: FloatArray, mirror: NDArray[np.int64] | None,
+              x: FloatArray) -> ComplexArray:
+    """``exp(-j k c x)`` for every coordinate ``c``, shape ``(len(coords), N)``."""
+    out = np.empty((coords.size, x.size), dtype=np.complex128)
+    if mirror is None:
+        np.exp(-1j * k * np.multiply.outer(coords, x), out=out)
+        return out
+    # exp(-j k (-c) x) = conj(exp(-j k c x)): compute the non-negative half only.
+    direct = (coords >= 0.0) | (mirror == np.arange(coords.size))
+    for i in np.flatnonzero(direct):
+        np.exp(-1j * k * coords[i] * x, out=out[i])
+    for i in np.flatnonzero(~direct):
+        np.conjugate(out[mirror[i]], out=out[i])
+    return out

@@ -9,12 +9,16 @@ split maps are computed once and cached.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from threadpoolctl import ThreadpoolController
 
 from ..arrays import VirtualArray
 from ..errors import SolverError
@@ -28,10 +32,14 @@ from .reasons import Reason
 FloatArray = NDArray[np.float64]
 
 CHUNK = 16384
+WORKERS = min(4, os.cpu_count() or 1)
 # Targets a quad cannot synthesize are retried in quads within this distance (deg) of them.
 RETRY_MARGIN_DEG = 1.0
 # Nodes per quad side of the precomputed split map.
 SPLIT_MAP_NODES = 17
+# The per-target local-maximum test is skipped in quads whose nodes all curve downward by at
+# least this fraction of a single FE's main-lobe curvature.
+CLEAR_MAXIMUM = 0.1
 # A quad with less area (deg^2) than this has collapsed onto a line.
 DEGENERATE_AREA_DEG2 = 1e-9
 
@@ -139,10 +147,28 @@ def solve_weights(
     weights = np.zeros((n, 4))
     quad = np.full(n, -1, dtype=np.int64)
     reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)
-    for start in range(0, n, CHUNK):
+
+    def run(start: int) -> None:
         part = slice(start, start + CHUNK)
         weights[part], quad[part], reason[part] = _solve_chunk(plan, az[part], el[part])
+
+    starts = range(0, n, CHUNK)
+    if len(starts) > 1 and WORKERS > 1:
+        # numpy releases the GIL inside its kernels, so chunks run in parallel on threads; the
+        # chunks' small matrix products must not spawn BLAS threads of their own on top.
+        with _blas_controller().limit(limits=1, user_api="blas"), ThreadPoolExecutor(
+            WORKERS
+        ) as pool:
+            list(pool.map(run, starts))
+    else:
+        for start in starts:
+            run(start)
     return WeightSolution(weights=weights, quad=quad, reason=reason, method=method)
+
+
+@lru_cache(maxsize=1)
+def _blas_controller() -> ThreadpoolController:
+    return ThreadpoolController()
 
 
 def _angles(name: str, values: ArrayLike) -> FloatArray:
@@ -182,15 +208,22 @@ def _plan(rig: Rig, array: VirtualArray, method: str) -> _Plan:
         )
         for q, fes in enumerate(quads):
             check = GlobalMaxCheck.build(rig, array, fes)
-            if _quad_can_split(plan.kernels[q], check, polygons[q]):
+            plan.kernels[q], can_split = _survey_quad(plan.kernels[q], check, polygons[q], array)
+            if can_split:
                 plan.checks[q] = check
         rig._cache[key] = plan
     plan_out: Any = rig._cache[key]
     return plan_out  # type: ignore[no-any-return]
 
 
-def _quad_can_split(kernel: QuadKernel, check: GlobalMaxCheck, polygon: FloatArray) -> bool:
-    """Solve a grid of nodes over the quad; True if any solved node splits or is a saddle."""
+def _survey_quad(
+    kernel: QuadKernel, check: GlobalMaxCheck, polygon: FloatArray, array: VirtualArray
+) -> tuple[QuadKernel, bool]:
+    """Solve a grid of nodes over the quad to learn which run-time checks it needs.
+
+    Returns the kernel (the exact one without its per-target local-maximum test where every
+    node is a clear local maximum) and whether any node's peak is not the global maximum.
+    """
     t = np.linspace(0.0, 1.0, SPLIT_MAP_NODES)
     a, b = (g.ravel() for g in np.meshgrid(t, t))
     # Bilinear map from the unit square to the corners FE 0, 1, 3, 2.
@@ -198,11 +231,20 @@ def _quad_can_split(kernel: QuadKernel, check: GlobalMaxCheck, polygon: FloatArr
     pts = ((1 - a) * (1 - b))[:, None] * p0 + (a * (1 - b))[:, None] * p1 \
         + (a * b)[:, None] * p3 + ((1 - a) * b)[:, None] * p2
     az, el = np.radians(pts[:, 0]), np.radians(pts[:, 1])
-    weights, reason = kernel.solve(az, el)
+    if isinstance(kernel, ExactQuad):
+        weights, reason, margin = kernel.solve_with_curvature(az, el, curvature=True)
+        assert margin is not None
+        k2 = array.wavenumber_rad_per_m**2
+        natural = k2 * min(float(np.mean(array.y_m**2)), float(np.mean(array.z_m**2)))
+        solved = reason != Reason.NO_SOLUTION
+        if np.all(margin[solved] < -CLEAR_MAXIMUM * natural):
+            kernel = replace(kernel, check_local_max=False)
+    else:
+        weights, reason = kernel.solve(az, el)
     if np.any(reason == Reason.SPLIT):
-        return True
+        return kernel, True
     ok = reason == Reason.OK
-    return bool(np.any(check.splits(az[ok], el[ok], weights[ok])))
+    return kernel, bool(np.any(check.splits(az[ok], el[ok], weights[ok])))
 
 
 def _solve_chunk(

@@ -35,7 +35,11 @@ _NEGATIVE_TOL = 1e-9
 # A constraint row shorter than this (relative to its scale) is absent: the FE gradients vanish.
 _RANK_TOL = 1e-12
 _MAX_ITERATIONS = 60
-_CONVERGED = 1e-13
+_PHASE_TOL = 1e-12
+
+
+def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
+    return np.einsum("qn,qn->n", a, b)
 
 
 def max_gain_weights(
@@ -43,42 +47,85 @@ def max_gain_weights(
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Maximize ``f . w / |w|`` subject to ``r1 . w = 0``, ``r2 . w = 0`` and ``w >= 0``.
 
-    All inputs have shape ``(N, 4)``. Returns ``(w, ok)``: ``w`` (unnormalized, >= 0) and whether
-    a solution with positive gain exists. Closed form, vectorized over N.
+    All inputs have shape ``(4, N)`` (one column per target). Returns ``(w, ok)``: ``w``
+    (unnormalized, >= 0, shape ``(4, N)``) and whether a solution with positive gain exists.
+    Closed form, vectorized over N.
     """
     def unit(v: FloatArray) -> FloatArray:
-        norm = np.sqrt(np.einsum("nq,nq->n", v, v))
+        norm = np.sqrt(_dot(v, v))
         keep = norm > _RANK_TOL * row_scale
-        return np.where(keep[:, None], v / np.where(keep, norm, 1.0)[:, None], 0.0)
+        return v * np.where(keep, 1.0 / np.where(keep, norm, 1.0), 0.0)
 
     e1 = unit(r1)
-    e2 = unit(r2 - np.einsum("nq,nq->n", r2, e1)[:, None] * e1)
-    w = f - np.einsum("nq,nq->n", f, e1)[:, None] * e1 - np.einsum("nq,nq->n", f, e2)[:, None] * e2
+    e2 = unit(r2 - _dot(r2, e1) * e1)
+    w = f - _dot(f, e1) * e1 - _dot(f, e2) * e2
+    norm = np.sqrt(_dot(w, w))
+    ok = (w.min(axis=0) >= -_NEGATIVE_TOL * norm) & (_dot(f, w) > 0.0)
+    fix = np.flatnonzero(~ok)
+    if fix.size:
+        w[:, fix], ok[fix] = _boundary_ray(f[:, fix], w[:, fix], e1[:, fix], e2[:, fix])
+    return np.maximum(w, 0.0), ok
 
-    # Boundary rays: also force w_k = 0. Row k of the projector P is P e_k.
-    proj = np.eye(4) - e1[:, :, None] * e1[:, None, :] - e2[:, :, None] * e2[:, None, :]
-    p_kk = np.einsum("nkk->nk", proj)
+
+def _boundary_ray(
+    f: FloatArray, w: FloatArray, e1: FloatArray, e2: FloatArray
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Fast path of `_boundary_rays`: zero the single most negative weight.
+
+    When that candidate is feasible it is the optimum (one active constraint, KKT); the rest
+    go through the full search over every boundary ray.
+    """
+    k = np.argmin(w, axis=0)
+    cols = np.arange(w.shape[1])
+    e1k, e2k = e1[k, cols], e2[k, cols]
+    p_k = -(e1 * e1k + e2 * e2k)
+    p_k[k, cols] += 1.0  # P e_k
+    p_kk = p_k[k, cols]
+    usable = p_kk > 1e-12
+    cand = w - p_k * (w[k, cols] / np.where(usable, p_kk, 1.0))
+    norm = np.sqrt(_dot(cand, cand))
+    good = usable & (cand.min(axis=0) >= -_NEGATIVE_TOL * norm) & (_dot(cand, f) > 0.0)
+    rest = np.flatnonzero(~good)
+    if rest.size:
+        cand[:, rest], good[rest] = _boundary_rays(f[:, rest], w[:, rest], e1[:, rest],
+                                                   e2[:, rest])
+    return cand, good
+
+
+def _boundary_rays(
+    f: FloatArray, w: FloatArray, e1: FloatArray, e2: FloatArray
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Best ray of the cone {w >= 0} in the null space when the projection of f leaves it.
+
+    Candidate k also forces ``w_k = 0``: the projection of ``f`` onto that line is
+    ``w - w_k / P_kk * P e_k`` (P the projector onto the null space; its row k is ``P e_k``).
+    Each candidate is a projection of f, so its gain ``f . w / |w|`` equals ``|w|``.
+    """
+    proj = np.eye(4)[:, :, None] - e1[:, None, :] * e1[None, :, :] - e2[:, None, :] * e2[None]
+    p_kk = np.einsum("kkn->kn", proj)
     usable = p_kk > 1e-12
     ratio = np.where(usable, w / np.where(usable, p_kk, 1.0), 0.0)
-    candidates = np.concatenate([w[:, None, :], w[:, None, :] - ratio[:, :, None] * proj], axis=1)
-    gain2 = np.einsum("nkq,nq->nk", candidates, f)
-    norm = np.sqrt(np.einsum("nkq,nkq->nk", candidates, candidates))
-    valid = np.concatenate([np.ones((len(f), 1), bool), usable], axis=1)
-    valid &= candidates.min(axis=2) >= -_NEGATIVE_TOL * norm
-    valid &= gain2 > 0.0
-    # Every valid candidate is a projection of f, so its gain f.w/|w| equals |w|.
-    best = np.argmax(np.where(valid, norm, -1.0), axis=1)
-    chosen = np.take_along_axis(candidates, best[:, None, None], axis=1)[:, 0, :]
-    return np.maximum(chosen, 0.0), valid.any(axis=1)
+    candidates = w[None, :, :] - ratio[:, None, :] * proj  # [k, q, n]
+    norm = np.sqrt(np.einsum("kqn,kqn->kn", candidates, candidates))
+    valid = usable & (candidates.min(axis=1) >= -_NEGATIVE_TOL * norm)
+    valid &= np.einsum("kqn,qn->kn", candidates, f) > 0.0
+    best = np.argmax(np.where(valid, norm, -1.0), axis=0)
+    chosen = np.take_along_axis(candidates, best[None, None, :], axis=0)[0]
+    return chosen, valid.any(axis=0)
 
 
 @dataclass(frozen=True)
 class ExactQuad:
-    """Per-quad precomputation of the exact method: the FEs' response kernel."""
+    """Per-quad precomputation of the exact method: the FEs' response kernel.
+
+    ``check_local_max`` is cleared by the solver's plan for quads where a grid of nodes shows a
+    clearly negative definite Hessian everywhere, which saves the second derivatives.
+    """
 
     response: SourceResponse
     centrosymmetric: bool
     row_scale: float
+    check_local_max: bool = True
 
     @classmethod
     def build(cls, rig: Rig, array: VirtualArray, fes: NDArray[np.int64]) -> ExactQuad:
@@ -98,8 +145,20 @@ class ExactQuad:
 
     def solve(self, az_rad: FloatArray, el_rad: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Return ``(weights (N, 4), reason (N,))`` for targets in this quad."""
+        w, reason, _ = self.solve_with_curvature(az_rad, el_rad, self.check_local_max)
+        return w, reason
+
+    def solve_with_curvature(
+        self, az_rad: FloatArray, el_rad: FloatArray, curvature: bool
+    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """Solve; with ``curvature``, also test for a local maximum and return its margin.
+
+        The margin is the Hessian eigenvalue of ``|B|^2 / 2`` closest to zero, relative to
+        ``|B|^2``; negative at a strict local maximum.
+        """
         u, s = direction_cosines(az_rad, el_rad)
-        f, f_u, f_s, f_uu, f_us, f_ss = self.response.evaluate(u, s)
+        resp = self.response.evaluate(u, s, terms=6 if curvature else 3)
+        f, f_u, f_s = resp[0], resp[1], resp[2]
         reason = np.full(u.shape, Reason.OK, dtype=np.uint8)
         if self.centrosymmetric:
             w, ok = max_gain_weights(f.real, f_u.real, f_s.real, self.row_scale)
@@ -107,48 +166,76 @@ class ExactQuad:
             w, ok, converged = self._iterate(f, f_u, f_s)
             reason[~converged] = Reason.NOT_CONVERGED
         reason[~ok] = Reason.NO_SOLUTION
-        reason[(reason == Reason.OK) & ~_local_maximum(w, f, f_u, f_s, f_uu, f_us, f_ss)] = (
-            Reason.SPLIT
-        )
-        top = w.max(axis=1)
-        w = w / np.where(top > 0.0, top, 1.0)[:, None]
-        w[reason != Reason.OK] = 0.0
-        return w, reason
+        margin = None
+        if curvature:
+            margin = _curvature_margin(w, resp)
+            reason[(reason == Reason.OK) & ~(margin < 0.0)] = Reason.SPLIT
+        top = w.max(axis=0)
+        w = w / np.where(top > 0.0, top, 1.0)
+        w[:, reason != Reason.OK] = 0.0
+        return w.T, reason, margin
 
     def _iterate(
         self, f: ComplexArray, f_u: ComplexArray, f_s: ComplexArray
     ) -> tuple[FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
-        # Start from the real parts: positions are centred, so f is nearly real near the FEs.
+        """Solve ``Re(conj(B) dB) = 0`` for complex responses.
+
+        With the phase ``phi`` of ``B`` frozen the problem is the real one above, so the
+        solution is a function ``w(phi)`` and only the scalar fixed point
+        ``phi = arg(f . w(phi))`` remains; secant steps on it converge in a few passes.
+        Positions are centred, so ``f`` is nearly real near the FEs and ``phi = 0`` starts well.
+        """
+        n = f.shape[1]
+        phi = np.zeros(n)
         w, ok = max_gain_weights(f.real, f_u.real, f_s.real, self.row_scale)
-        converged = np.zeros(len(f), dtype=bool)
-        active = np.arange(len(f))
+        residual = _phase_residual(f, w, phi)
+        prev_phi, prev_res = phi, residual
+        phi = phi + residual
+        converged = np.abs(residual) <= _PHASE_TOL
+        active = np.flatnonzero(~converged & ok)
         for _ in range(_MAX_ITERATIONS):
-            fa, wa = f[active], w[active]
-            b = np.einsum("nq,nq->n", fa, wa)
-            phase = np.conj(b) / np.where(b != 0, np.abs(b), 1.0)
-            rot = phase[:, None]
-            w_new, ok_new = max_gain_weights(
-                (rot * fa).real, (rot * f_u[active]).real, (rot * f_s[active]).real,
-                self.row_scale,
-            )
-            scale = np.maximum(np.abs(w_new).max(axis=1), 1e-300)
-            done = np.abs(w_new - wa).max(axis=1) <= _CONVERGED * scale
-            w[active] = w_new
-            ok[active] = ok_new
-            converged[active[done]] = True
-            active = active[~done & ok_new]
             if active.size == 0:
                 break
+            cos, sin = np.cos(phi[active]), np.sin(phi[active])
+
+            def rotate(g: ComplexArray, c: FloatArray = cos, s: FloatArray = sin) -> FloatArray:
+                return c * g.real + s * g.imag  # Re(exp(-j phi) g)
+
+            fa = f[:, active]
+            w_a, ok_a = max_gain_weights(
+                rotate(fa), rotate(f_u[:, active]), rotate(f_s[:, active]), self.row_scale
+            )
+            w[:, active] = w_a
+            ok[active] = ok_a
+            res = _phase_residual(fa, w_a, phi[active])
+            done = np.abs(res) <= _PHASE_TOL
+            converged[active[done]] = True
+            slope = (res - prev_res[active]) / (phi[active] - prev_phi[active] + 1e-300)
+            # Secant step on g(phi) = arg(B(w(phi))) - phi; the fixed-point step if g is flat.
+            secant = np.abs(slope) > 1e-3
+            step = np.where(secant, -res / np.where(secant, slope, 1.0), res)
+            prev_phi = prev_phi.copy()
+            prev_res = prev_res.copy()
+            prev_phi[active], prev_res[active] = phi[active], res
+            phi = phi.copy()
+            phi[active] += step
+            active = active[~done & ok_a]
         return w, ok, converged | ~ok
 
 
-def _local_maximum(
-    w: FloatArray, *derivatives: ComplexArray
-) -> NDArray[np.bool_]:
-    """Whether ``|B|^2`` has a strict local maximum at the look direction (Hessian test)."""
-    b, b_u, b_s, b_uu, b_us, b_ss = (np.einsum("nq,nq->n", d, w) for d in derivatives)
+def _phase_residual(f: ComplexArray, w: FloatArray, phi: FloatArray) -> FloatArray:
+    """``arg(f . w) - phi`` wrapped to (-pi, pi]."""
+    b = np.einsum("qn,qn->n", f, w)
+    return np.angle(b * np.exp(-1j * phi))
+
+
+def _curvature_margin(w: FloatArray, resp: ComplexArray) -> FloatArray:
+    """Largest Hessian eigenvalue of ``|B|^2 / 2`` over ``|B|^2`` (< 0: strict local maximum)."""
+    b, b_u, b_s, b_uu, b_us, b_ss = np.einsum("tqn,qn->tn", resp, w)
     cb = np.conj(b)
     h_uu = (cb * b_uu).real + np.abs(b_u) ** 2
     h_ss = (cb * b_ss).real + np.abs(b_s) ** 2
     h_us = (cb * b_us).real + (np.conj(b_u) * b_s).real
-    return (h_uu < 0.0) & (h_uu * h_ss - h_us * h_us > 0.0)
+    largest = 0.5 * (h_uu + h_ss) + np.sqrt(0.25 * (h_uu - h_ss) ** 2 + h_us**2)
+    power = np.abs(b) ** 2
+    return largest / np.where(power > 0.0, power, 1.0)

@@ -55,14 +55,14 @@ class GlobalMaxCheck:
         pu, ps = pu[visible], ps[visible]
         response = array.source_response(u, s)
         return cls(
-            response=response, probe_u=pu, probe_s=ps, probe_f=response.evaluate(pu, ps, terms=1)[0],
+            response=response, probe_u=pu, probe_s=ps, probe_f=response.evaluate(pu, ps, terms=1)[0].T,
             cell_u=cell_u, cell_s=cell_s,
         )
 
     def splits(self, az_rad: FloatArray, el_rad: FloatArray, weights: FloatArray) -> NDArray[np.bool_]:
         """Whether another direction out-shines the set one, shape ``(N,)``."""
         u, s = direction_cosines(az_rad, el_rad)
-        at_target = np.abs(np.einsum("nq,nq->n", self.response.evaluate(u, s, terms=1)[0], weights))
+        at_target = np.abs(np.einsum("qn,nq->n", self.response.evaluate(u, s, terms=1)[0], weights))
         at_probes = np.abs(weights @ self.probe_f.T)
         far = (((self.probe_u[None, :] - u[:, None]) / self.cell_u) ** 2
                + ((self.probe_s[None, :] - s[:, None]) / self.cell_s) ** 2) > EXCLUSION_CELLS**2
