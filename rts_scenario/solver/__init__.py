@@ -291,18 +291,20 @@ def _retry_neighbours(
     quad: NDArray[np.int64],
     reason: NDArray[np.uint8],
 ) -> None:
+    pending = np.flatnonzero(reason == Reason.NO_SOLUTION)
     for q in range(len(plan.kernels)):
-        idx = np.flatnonzero((reason == Reason.NO_SOLUTION) & (quad != q))
-        if idx.size == 0:
+        if pending.size == 0:
             return
+        idx = pending[quad[pending] != q]
         idx = idx[inside_polygon(az_deg[idx], el_deg[idx], plan.polygons[q], RETRY_MARGIN_DEG)]
         if idx.size == 0:
             continue
         w, r = _solve_in(plan, q, np.radians(az_deg[idx]), np.radians(el_deg[idx]))
-        solved = r == Reason.OK
-        weights[idx[solved]] = w[solved]
-        quad[idx[solved]] = q
-        reason[idx[solved]] = Reason.OK
+        solved = idx[r == Reason.OK]
+        weights[solved] = w[r == Reason.OK]
+        quad[solved] = q
+        reason[solved] = Reason.OK
+        pending = np.setdiff1d(pending, solved, assume_unique=True)
 
 
 __all__ = ["METHODS", "Reason", "WeightSolution", "solve_weights"]

@@ -1,0 +1,136 @@
+"""Speed against angle error of every solver method on every shipped array.
+
+The error is measured by the independent Bartlett peak search of `rts_scenario.peak` on the
+paper's evaluation grid (kit-table1 rig, azimuth -3..3 deg in 6 steps, elevation -6..6 deg in 5
+steps); the throughput by solving N random targets spread over the same region.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .arrays import PRESETS, VirtualArray
+from .peak import find_peak, snapshot
+from .rig import Rig
+from .solver import METHODS, WeightSolution, solve_weights
+
+FloatArray = NDArray[np.float64]
+
+GRID_AZ_DEG = np.linspace(-3.0, 3.0, 6)
+GRID_EL_DEG = np.linspace(-6.0, 6.0, 5)
+
+
+@dataclass(frozen=True)
+class BenchRow:
+    """One line of the speed-against-error table."""
+
+    method: str
+    array: str
+    rig: str
+    targets: int
+    throughput_per_s: float
+    feasible: int
+    grid_points: int
+    rms_az_deg: float
+    rms_el_deg: float
+    max_az_deg: float
+    max_el_deg: float
+
+
+def evaluation_grid() -> tuple[FloatArray, FloatArray]:
+    """The paper's 6 x 5 grid of set angles, flattened: ``(az_deg, el_deg)``."""
+    az, el = np.meshgrid(GRID_AZ_DEG, GRID_EL_DEG)
+    return az.ravel(), el.ravel()
+
+
+def synthesized_angles(
+    solution: WeightSolution, rig: Rig, array: VirtualArray
+) -> tuple[FloatArray, FloatArray]:
+    """Where the radar's Bartlett beamformer sees each feasible target: ``(az_deg, el_deg)``."""
+    ok = solution.feasible
+    fes = rig.quads[solution.quad[ok]]
+    x = snapshot(array, solution.weights[ok], rig.az_deg[fes], rig.el_deg[fes])
+    lo_az, hi_az = rig.az_deg.min() - 10.0, rig.az_deg.max() + 10.0
+    lo_el, hi_el = rig.el_deg.min() - 10.0, rig.el_deg.max() + 10.0
+    return find_peak(array, x, az_range_deg=(lo_az, hi_az), el_range_deg=(lo_el, hi_el))
+
+
+def angle_errors(
+    method: str, array: VirtualArray, rig: Rig
+) -> tuple[WeightSolution, FloatArray, FloatArray]:
+    """Solve the evaluation grid; return the solution and the az/el errors of feasible points."""
+    az, el = evaluation_grid()
+    sol = solve_weights(az, el, rig=rig, array=array, method=method)
+    peak_az, peak_el = synthesized_angles(sol, rig, array)
+    return sol, peak_az - az[sol.feasible], peak_el - el[sol.feasible]
+
+
+def throughput(
+    method: str, array: VirtualArray, rig: Rig, targets: int, repeats: int, seed: int = 0
+) -> float:
+    """Best-of-``repeats`` target-frames per second for ``targets`` random targets in the grid."""
+    rng = np.random.default_rng(seed)
+    az = rng.uniform(GRID_AZ_DEG[0], GRID_AZ_DEG[-1], targets)
+    el = rng.uniform(GRID_EL_DEG[0], GRID_EL_DEG[-1], targets)
+    solve_weights(az[:64], el[:64], rig=rig, array=array, method=method)  # builds the cache
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        solve_weights(az, el, rig=rig, array=array, method=method)
+        best = min(best, time.perf_counter() - start)
+    return targets / best
+
+
+def run(targets: int = 1_000_000, repeats: int = 3, rig_name: str = "kit-table1") -> list[BenchRow]:
+    """Measure every method on every array preset."""
+    rig = Rig.preset(rig_name)
+    rows = []
+    for array_name in PRESETS:
+        array = VirtualArray.preset(array_name)
+        for method in METHODS:
+            sol, err_az, err_el = angle_errors(method, array, rig)
+            rows.append(BenchRow(
+                method=method, array=array_name, rig=rig_name, targets=targets,
+                throughput_per_s=throughput(method, array, rig, targets, repeats),
+                feasible=int(sol.feasible.sum()), grid_points=len(sol.feasible),
+                rms_az_deg=float(np.sqrt(np.mean(err_az**2))),
+                rms_el_deg=float(np.sqrt(np.mean(err_el**2))),
+                max_az_deg=float(np.abs(err_az).max()), max_el_deg=float(np.abs(err_el).max()),
+            ))
+    return rows
+
+
+def format_table(rows: list[BenchRow]) -> str:
+    """Render the rows as a fixed-width table for people."""
+    head = (f"{'method':<7} {'array':<13} {'target-frames/s':>16} {'feasible':>9} "
+            f"{'rms az':>10} {'rms el':>10} {'max az':>10} {'max el':>10}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(
+            f"{r.method:<7} {r.array:<13} {r.throughput_per_s:>16,.0f} "
+            f"{r.feasible:>4}/{r.grid_points:<4} "
+            f"{_deg(r.rms_az_deg)} {_deg(r.rms_el_deg)} {_deg(r.max_az_deg)} {_deg(r.max_el_deg)}"
+        )
+    rig = rows[0].rig if rows else "?"
+    lines.append(
+        f"angle errors in degrees: independent Bartlett peak search, rig {rig}, "
+        f"az {GRID_AZ_DEG[0]:g}..{GRID_AZ_DEG[-1]:g} ({GRID_AZ_DEG.size}) x "
+        f"el {GRID_EL_DEG[0]:g}..{GRID_EL_DEG[-1]:g} ({GRID_EL_DEG.size}); "
+        f"throughput: best of repeats, N = {rows[0].targets if rows else 0:,}"
+    )
+    return "\n".join(lines)
+
+
+def _deg(value: float) -> str:
+    return f"{value:>10.2e}" if value < 1e-2 else f"{value:>10.3f}"
+
+
+def write_json(rows: list[BenchRow], path: str | Path) -> None:
+    """Write the rows as JSON (a list of objects with the `BenchRow` fields)."""
+    Path(path).write_text(json.dumps([asdict(r) for r in rows], indent=2) + "\n")
