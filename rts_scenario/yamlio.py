@@ -63,9 +63,20 @@ class _Loader(yaml.SafeLoader):
     """Safe loader; duplicate keys are errors instead of silently overwriting."""
 
 
+_MAP_TAG = "tag:yaml.org,2002:map"
+_SEQ_TAG = "tag:yaml.org,2002:seq"
+
+
 def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, int]],
                loader: _Loader, file: str) -> Any:
-    marks[path] = (node.start_mark.line + 1, node.start_mark.column + 1)
+    marks.setdefault(path, (node.start_mark.line + 1, node.start_mark.column + 1))
+    expected = {yaml.MappingNode: _MAP_TAG, yaml.SequenceNode: _SEQ_TAG}.get(type(node))
+    if expected is not None and node.tag != expected:
+        raise ScenarioError(
+            f"invalid YAML: tag {node.tag!r} is not allowed (plain data only)", file=file,
+            line=node.start_mark.line + 1, column=node.start_mark.column + 1,
+            key_path=format_key_path(path) or None,
+        )
     if isinstance(node, yaml.MappingNode):
         loader.flatten_mapping(node)
         out: dict[str, Any] = {}
@@ -83,6 +94,8 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
                     column=key_node.start_mark.column + 1,
                     key_path=format_key_path((*path, key)),
                 )
+            # A key's errors point at the key, where a reader looks for it.
+            marks[(*path, key)] = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
             out[key] = _construct(value_node, (*path, key), marks, loader, file)
         return out
     if isinstance(node, yaml.SequenceNode):
@@ -142,6 +155,11 @@ def validate(document: Document, schema: dict[str, Any]) -> None:
     if best is None:
         return
     path: KeyPath = tuple(best.absolute_path)
+    if best.validator == "additionalProperties" and isinstance(best.instance, dict):
+        allowed = best.schema.get("properties", {})
+        extra = sorted(k for k in best.instance if k not in allowed)
+        if extra:
+            path = (*path, extra[0])
     raise document.error(path, _describe(best))
 
 

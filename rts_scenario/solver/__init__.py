@@ -40,8 +40,11 @@ SPLIT_MAP_NODES = 17
 # The per-target local-maximum test is skipped in quads whose nodes all curve downward by at
 # least this fraction of a single FE's main-lobe curvature.
 CLEAR_MAXIMUM = 0.1
-# A quad with less area (deg^2) than this has collapsed onto a line.
+# A quad with less area (deg^2) than this has collapsed onto a line; targets off the line but
+# within max(REACH_DEG, REACH * its length) of it are reported as DEGENERATE, not OUTSIDE.
 DEGENERATE_AREA_DEG2 = 1e-9
+DEGENERATE_REACH_DEG = 1.0
+DEGENERATE_REACH = 0.25
 
 
 class QuadKernel(Protocol):
@@ -261,7 +264,10 @@ def _solve_chunk(
         take = np.flatnonzero(todo) if q else np.arange(n)
         inside = inside_polygon(az_deg[take], el_deg[take], plan.polygons[q])
         if plan.degenerate[q]:
-            near = distance_to_polygon(az_deg[take], el_deg[take], plan.polygons[q]) <= 0.5
+            extent = np.ptp(plan.polygons[q], axis=0).max()
+            near = distance_to_polygon(az_deg[take], el_deg[take], plan.polygons[q]) <= max(
+                DEGENERATE_REACH_DEG, DEGENERATE_REACH * extent
+            )
             reason[take[near & ~inside]] = Reason.DEGENERATE
         idx = take[inside]
         quad[idx] = q
@@ -277,9 +283,8 @@ def _solve_in(plan: _Plan, q: int, az: FloatArray, el: FloatArray) -> tuple[Floa
     check = plan.checks[q]
     if check is not None:
         ok = np.flatnonzero(reason == Reason.OK)
-        split = ok[check.splits(az[ok], el[ok], weights[ok])]
-        reason[split] = Reason.SPLIT
-        weights[split] = 0.0
+        reason[ok[check.splits(az[ok], el[ok], weights[ok])]] = Reason.SPLIT
+    weights[reason != Reason.OK] = 0.0
     return weights, reason
 
 

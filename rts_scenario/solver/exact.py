@@ -36,6 +36,10 @@ _NEGATIVE_TOL = 1e-9
 _RANK_TOL = 1e-12
 _MAX_ITERATIONS = 60
 _PHASE_TOL = 1e-12
+# The chosen weights must carry at least this share of |f| (else they are rounding residue).
+_GAIN_TOL = 1e-8
+# Stationarity must hold to this relative residual after clipping.
+_RESIDUAL_TOL = 1e-9
 
 
 def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -60,15 +64,27 @@ def max_gain_weights(
     e2 = unit(r2 - _dot(r2, e1) * e1)
     w = f - _dot(f, e1) * e1 - _dot(f, e2) * e2
     norm = np.sqrt(_dot(w, w))
-    ok = (w.min(axis=0) >= -_NEGATIVE_TOL * norm) & (_dot(f, w) > 0.0)
+    # A projection of f that is a rounding residue (f almost orthogonal to the null space)
+    # has no meaningful direction: require a real share of the gain.
+    gain_floor = _GAIN_TOL * np.sqrt(_dot(f, f))
+    ok = (w.min(axis=0) >= -_NEGATIVE_TOL * norm) & (norm > gain_floor)
     fix = np.flatnonzero(~ok)
     if fix.size:
-        w[:, fix], ok[fix] = _boundary_ray(f[:, fix], w[:, fix], e1[:, fix], e2[:, fix])
-    return np.maximum(w, 0.0), ok
+        w[:, fix], ok[fix] = _boundary_ray(
+            f[:, fix], w[:, fix], e1[:, fix], e2[:, fix], gain_floor[fix]
+        )
+    w = np.maximum(w, 0.0)
+    # Clipping rounding negatives must not break stationarity: verify it.
+    w_norm = np.sqrt(_dot(w, w))
+    for r in (r1, r2):
+        # A row below the rank floor was dropped as zero: it is held to that floor.
+        bound = np.maximum(_RESIDUAL_TOL * np.sqrt(_dot(r, r)), _RANK_TOL * row_scale)
+        ok &= np.abs(_dot(r, w)) <= bound * w_norm
+    return w, ok
 
 
 def _boundary_ray(
-    f: FloatArray, w: FloatArray, e1: FloatArray, e2: FloatArray
+    f: FloatArray, w: FloatArray, e1: FloatArray, e2: FloatArray, gain_floor: FloatArray
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Fast path of `_boundary_rays`: zero the single most negative weight.
 
@@ -84,16 +100,17 @@ def _boundary_ray(
     usable = p_kk > 1e-12
     cand = w - p_k * (w[k, cols] / np.where(usable, p_kk, 1.0))
     norm = np.sqrt(_dot(cand, cand))
-    good = usable & (cand.min(axis=0) >= -_NEGATIVE_TOL * norm) & (_dot(cand, f) > 0.0)
+    good = usable & (cand.min(axis=0) >= -_NEGATIVE_TOL * norm) & (norm > gain_floor)
     rest = np.flatnonzero(~good)
     if rest.size:
-        cand[:, rest], good[rest] = _boundary_rays(f[:, rest], w[:, rest], e1[:, rest],
-                                                   e2[:, rest])
+        cand[:, rest], good[rest] = _boundary_rays(
+            f[:, rest], w[:, rest], e1[:, rest], e2[:, rest], gain_floor[rest]
+        )
     return cand, good
 
 
 def _boundary_rays(
-    f: FloatArray, w: FloatArray, e1: FloatArray, e2: FloatArray
+    f: FloatArray, w: FloatArray, e1: FloatArray, e2: FloatArray, gain_floor: FloatArray
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Best ray of the cone {w >= 0} in the null space when the projection of f leaves it.
 
@@ -108,7 +125,7 @@ def _boundary_rays(
     candidates = w[None, :, :] - ratio[:, None, :] * proj  # [k, q, n]
     norm = np.sqrt(np.einsum("kqn,kqn->kn", candidates, candidates))
     valid = usable & (candidates.min(axis=1) >= -_NEGATIVE_TOL * norm)
-    valid &= np.einsum("kqn,qn->kn", candidates, f) > 0.0
+    valid &= norm > gain_floor
     best = np.argmax(np.where(valid, norm, -1.0), axis=0)
     chosen = np.take_along_axis(candidates, best[None, None, :], axis=0)[0]
     return chosen, valid.any(axis=0)

@@ -115,5 +115,11 @@ class PaperQuad:
             sinc_derivative(self.psi_t, el_rad, self.aperture_z_wl),
         )
         weights = np.stack([a_b * a_l, a_b * a_r, a_t * a_l, a_t * a_r], axis=1)
-        reason = np.where(ok_az & ok_el, Reason.OK, Reason.NO_SOLUTION).astype(np.uint8)
+        # Between the pair yet a negative amplitude: the sinc slopes changed sign, i.e. the FEs
+        # are farther apart than the main lobe and the echoes split.
+        within = ((az_rad >= self.theta_l) & (az_rad <= self.theta_r)
+                  & (el_rad >= self.psi_b) & (el_rad <= self.psi_t))
+        reason = np.where(
+            ok_az & ok_el, Reason.OK, np.where(within, Reason.SPLIT, Reason.NO_SOLUTION)
+        ).astype(np.uint8)
         return weights, reason

@@ -1,0 +1,19 @@
+import numpy as np
+import pytest
+
+import rts_scenario as rs
+
+
+@pytest.fixture(scope="session")
+def kit_rig() -> rs.Rig:
+    return rs.Rig.preset("kit-table1")
+
+
+@pytest.fixture(scope="session", params=["paper", "awr1843boost"])
+def array(request: pytest.FixtureRequest) -> rs.VirtualArray:
+    return rs.VirtualArray.preset(request.param)
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20261121)

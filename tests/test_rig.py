@@ -1,0 +1,132 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rts_scenario as rs
+from rts_scenario.rig import preset_names
+
+ROOT = Path(__file__).resolve().parents[1]
+TABLE_I = ([-5.4, 4.5, -3.4, 3.8], [-8.8, -7.7, 8.4, 9.9])
+
+
+def test_kit_table1_is_the_papers_table_i():
+    rig = rs.Rig.preset("kit-table1")
+    np.testing.assert_array_equal(rig.az_deg, TABLE_I[0])
+    np.testing.assert_array_equal(rig.el_deg, TABLE_I[1])
+    np.testing.assert_array_equal(rig.distance_m, 1.0)
+    assert rig.quads.tolist() == [[0, 1, 2, 3]]
+
+
+def test_from_angles_equals_preset():
+    rig = rs.Rig.from_angles(az_deg=TABLE_I[0], el_deg=TABLE_I[1], distance_m=1.0)
+    preset = rs.Rig.preset("kit-table1")
+    np.testing.assert_array_equal(rig.az_deg, preset.az_deg)
+    np.testing.assert_array_equal(rig.el_deg, preset.el_deg)
+
+
+def test_grid_quads_follow_paper_order():
+    rig = rs.Rig.grid([-20, -10, 0, 10], [-5, 5, 15])
+    assert rig.rows == 3 and rig.columns == 4
+    assert len(rig.quads) == 6
+    for fes in rig.quads:
+        az, el = rig.az_deg[fes], rig.el_deg[fes]
+        assert az[0] < az[1] and az[2] < az[3]
+        assert el[0] < el[2] and el[1] < el[3]
+    # Neighbouring quads share their border FEs.
+    assert set(rig.quads[0]) & set(rig.quads[1]) == {1, 5}
+
+
+def test_wide_preset_covers_required_field():
+    rig = rs.Rig.preset("wide-3x5")
+    assert rig.az_deg.min() <= -20 and rig.az_deg.max() >= 20
+    assert rig.el_deg.min() <= -8 and rig.el_deg.max() >= 8
+    assert set(preset_names()) >= {"kit-table1", "wide-3x5"}
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "scenarios" / "rigs").glob("*.rig.yaml")),
+                         ids=lambda p: p.name)
+def test_shipped_rig_files_load(path):
+    rig = rs.Rig.from_file(path)
+    assert rig.n_front_ends == rig.rows * rig.columns
+
+
+def test_rig_file_keeps_calibration_and_limits():
+    rig = rs.Rig.from_file(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml")
+    assert rig.cal_phase_deg[1] == 12.5
+    assert rig.distance_m[2] == 1.01
+    assert rig.limits.attenuation_step_db == 0.5
+    assert rig.limits.echoes_per_channel == 4
+    assert rig.reference.attenuation_db == 42.0
+
+
+def test_from_angles_rejects_wrong_order():
+    with pytest.raises(rs.RigError, match="increasing azimuth"):
+        rs.Rig.from_angles([4.5, -5.4, -3.4, 3.8], TABLE_I[1])
+    with pytest.raises(rs.RigError, match="increasing elevation"):
+        rs.Rig.from_angles(TABLE_I[0], [8.4, 9.9, -8.8, -7.7])
+
+
+def test_from_angles_needs_four():
+    with pytest.raises(rs.RigError, match="exactly 4"):
+        rs.Rig.from_angles([1, 2, 3], [1, 2, 3])
+
+
+def test_unknown_preset_lists_names():
+    with pytest.raises(rs.RigError, match="kit-table1"):
+        rs.Rig.preset("nope")
+
+
+BAD_RIGS = [
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\ncolour: red\n",
+     4, "colour", "unknown key 'colour'"),
+    ("rts_rig: 2\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n",
+     1, "rts_rig", "allowed values: 1"),
+    ("rts_rig: 1\nname: x\nlayout:\n  az_deg: [-5, 95]\n  el_deg: [-5, 5]\n",
+     4, "layout.az_deg[1]", "must be <= 90"),
+    ("rts_rig: 1\nname: x\nlayout:\n  az_deg: [-5, 5]\n  el_deg: [-5, five]\n",
+     5, "layout.el_deg[1]", "must be of type number"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1}\n  - {az_deg: 2, el_deg: 1}\n"
+     "  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n  - {az_deg: 3, el_deg: 2}\n",
+     3, "front_ends", "rows x columns"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 5, el_deg: 1}\n  - {az_deg: 2, el_deg: 1}\n"
+     "  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
+     3, "front_ends", "increasing azimuth"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  echoes_per_channel: 0\n", 5, "limits.echoes_per_channel", "must be >= 1"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\ndistance_m: 0\n",
+     4, "distance_m", "must be > 0"),
+    ("rts_rig: 1\nname: x\n", None, "", "exactly one of 'front_ends'"),
+    ("rts_rig: 1\nname: x\nname: y\n", 3, "name", "duplicate key"),
+    ("rts_rig: 1\nname: [x\n", 3, "", "invalid YAML"),
+    ("rts_rig: 1\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n", 1, "", "'name' is required"),
+]
+
+
+@pytest.mark.parametrize("text, line, key, message", BAD_RIGS)
+def test_bad_rig_files_name_file_line_and_key(tmp_path, text, line, key, message):
+    path = tmp_path / "bad.rig.yaml"
+    path.write_text(text)
+    with pytest.raises(rs.ScenarioError) as info:
+        rs.Rig.from_file(path)
+    err = info.value
+    assert err.file == str(path)
+    assert message in str(err)
+    if line is not None:
+        assert err.line == line, str(err)
+        assert f"{path}:{line}:" in str(err)
+    if key:
+        assert err.key_path == key
+        assert f": {key}: " in str(err)
+
+
+def test_missing_rig_file(tmp_path):
+    with pytest.raises(rs.ScenarioError, match="cannot read file"):
+        rs.Rig.from_file(tmp_path / "missing.rig.yaml")
+
+
+def test_yaml_tags_are_not_executed(tmp_path):
+    path = tmp_path / "evil.rig.yaml"
+    path.write_text("rts_rig: 1\nname: !!python/object/apply:os.system ['true']\n")
+    with pytest.raises(rs.ScenarioError, match="invalid YAML"):
+        rs.Rig.from_file(path)
