@@ -265,7 +265,8 @@ class SourceResponse:
         )
         # table[iz, term, q, iy]: contribution of the element at (y_iy, z_iz).
         table = np.zeros((self.z_distinct.size, 6, self.n_sources, self.y_distinct.size), complex)
-        np.add.at(table, (iz, slice(None), slice(None), iy), np.moveaxis(stacked, 1, 0))
+        np.add.at(table, (iz, slice(None), slice(None), iy),  # type: ignore[arg-type]
+                  np.moveaxis(stacked, 1, 0))
         self.table = table
         self._y_plan = _exp_plan(self.y_distinct, tol)
         self._z_plan = _exp_plan(self.z_distinct, tol)

@@ -44,7 +44,7 @@ class BenchRow:
 
 
 def evaluation_grid() -> tuple[FloatArray, FloatArray]:
-    """The paper's 6 x 5 grid of set angles, flattened: ``(az_deg, el_deg)``."""
+    """Return the paper's 6 x 5 grid of set angles, flattened: ``(az_deg, el_deg)``."""
     az, el = np.meshgrid(GRID_AZ_DEG, GRID_EL_DEG)
     return az.ravel(), el.ravel()
 

@@ -33,7 +33,7 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every subcommand."""
+    """Build the argument parser with every subcommand."""
     parser = argparse.ArgumentParser(
         prog="rts-scenario",
         description="Replay traffic scenes on a radar target simulator with 2-D angle of arrival.",

@@ -91,7 +91,9 @@ def find_peak(
 def _newton_refine(array: VirtualArray, x: ComplexArray, az: FloatArray,
                    el: FloatArray) -> tuple[FloatArray, FloatArray]:
     h = _FD_STEP_DEG
-    stencil = np.array([[0, 0], [h, 0], [-h, 0], [0, h], [0, -h], [h, h], [-h, -h], [h, -h], [-h, h]])
+    stencil = np.array(
+        [[0, 0], [h, 0], [-h, 0], [0, h], [0, -h], [h, h], [-h, -h], [h, -h], [-h, h]]
+    )
     for _ in range(_NEWTON_STEPS):
         p = bartlett_power(array, x, az[:, None] + stencil[:, 0], el[:, None] + stencil[:, 1])
         p = np.log(p)  # log power is closer to quadratic near a main-lobe peak

@@ -93,13 +93,17 @@ class Rig:
                 )
             bad = ~np.isfinite(value)
             if bad.any():
-                raise RigError(f"{name}[{int(np.argmax(bad))}]: must be finite, got {value[bad][0]}")
+                raise RigError(
+                    f"{name}[{int(np.argmax(bad))}]: must be finite, got {value[bad][0]}"
+                )
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         if np.any(self.distance_m <= 0):
             raise RigError(f"distance_m: must be > 0, got {self.distance_m.min()}")
         if np.any(np.abs(self.az_deg) >= 90) or np.any(np.abs(self.el_deg) > 90):
-            raise RigError("az_deg, el_deg: FEs must lie in front of the radar (|az| < 90, |el| <= 90)")
+            raise RigError(
+                "az_deg, el_deg: FEs must lie in front of the radar (|az| < 90, |el| <= 90)"
+            )
         grid_az = self.az_deg.reshape(self.rows, self.columns)
         grid_el = self.el_deg.reshape(self.rows, self.columns)
         if np.any(np.diff(grid_az, axis=1) < 0):
@@ -144,7 +148,7 @@ class Rig:
         name: str = "custom",
         **kwargs: Any,
     ) -> Rig:
-        """One quad of four FEs given in the paper's order (Table I)."""
+        """Build one quad of four FEs given in the paper's order (Table I)."""
         az = np.array(az_deg, dtype=np.float64, ndmin=1)
         el = np.array(el_deg, dtype=np.float64, ndmin=1)
         if az.shape != (4,) or el.shape != (4,):
@@ -168,7 +172,7 @@ class Rig:
         limits: HardwareLimits | None = None,
         reference: Reference | None = None,
     ) -> Rig:
-        """A grid rig from ``(rows, columns)`` arrays of FE angles (row 0 lowest).
+        """Build a grid rig from ``(rows, columns)`` arrays of FE angles (row 0 lowest).
 
         1-D inputs are the column azimuths and the row elevations of a regular grid.
         """

@@ -70,7 +70,9 @@ _SEQ_TAG = "tag:yaml.org,2002:seq"
 def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, int]],
                loader: _Loader, file: str) -> Any:
     marks.setdefault(path, (node.start_mark.line + 1, node.start_mark.column + 1))
-    expected = {yaml.MappingNode: _MAP_TAG, yaml.SequenceNode: _SEQ_TAG}.get(type(node))
+    expected = _SEQ_TAG if isinstance(node, yaml.SequenceNode) else None
+    if isinstance(node, yaml.MappingNode):
+        expected = _MAP_TAG
     if expected is not None and node.tag != expected:
         raise ScenarioError(
             f"invalid YAML: tag {node.tag!r} is not allowed (plain data only)", file=file,

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import lru_cache
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,7 +50,9 @@ DEGENERATE_REACH = 0.25
 class QuadKernel(Protocol):
     """What a method provides per quad."""
 
-    def solve(self, az_rad: FloatArray, el_rad: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def solve(
+        self, az_rad: FloatArray, el_rad: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.uint8]]:
         """Return ``(weights (N, 4), reason (N,))``."""
         ...
 
@@ -93,7 +95,7 @@ class WeightSolution:
         return Reason(int(self.reason[index])).description
 
     def counts(self) -> dict[str, int]:
-        """Number of targets per reason name (only reasons that occur)."""
+        """Count targets per reason name (only reasons that occur)."""
         codes, counts = np.unique(self.reason, return_counts=True)
         return {Reason(int(c)).name: int(n) for c, n in zip(codes, counts, strict=True)}
 
@@ -215,8 +217,8 @@ def _plan(rig: Rig, array: VirtualArray, method: str) -> _Plan:
             if can_split:
                 plan.checks[q] = check
         rig._cache[key] = plan
-    plan_out: Any = rig._cache[key]
-    return plan_out  # type: ignore[no-any-return]
+    plan_out: _Plan = rig._cache[key]
+    return plan_out
 
 
 def _survey_quad(
@@ -278,7 +280,9 @@ def _solve_chunk(
     return weights, quad, reason
 
 
-def _solve_in(plan: _Plan, q: int, az: FloatArray, el: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _solve_in(
+    plan: _Plan, q: int, az: FloatArray, el: FloatArray
+) -> tuple[FloatArray, NDArray[np.uint8]]:
     weights, reason = plan.kernels[q].solve(az, el)
     check = plan.checks[q]
     if check is not None:

@@ -160,14 +160,16 @@ class ExactQuad:
             row_scale=array.wavenumber_rad_per_m * extent * array.n_elements,
         )
 
-    def solve(self, az_rad: FloatArray, el_rad: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def solve(
+        self, az_rad: FloatArray, el_rad: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.uint8]]:
         """Return ``(weights (N, 4), reason (N,))`` for targets in this quad."""
         w, reason, _ = self.solve_with_curvature(az_rad, el_rad, self.check_local_max)
         return w, reason
 
     def solve_with_curvature(
         self, az_rad: FloatArray, el_rad: FloatArray, curvature: bool
-    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    ) -> tuple[FloatArray, NDArray[np.uint8], FloatArray | None]:
         """Solve; with ``curvature``, also test for a local maximum and return its margin.
 
         The margin is the Hessian eigenvalue of ``|B|^2 / 2`` closest to zero, relative to

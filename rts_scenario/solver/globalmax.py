@@ -1,4 +1,4 @@
-"""Is the synthesized peak the global maximum of |B|? (else the echoes split into targets)
+"""Check that the synthesized peak is the global maximum of |B| (else the echoes split).
 
 For each quad a grid of probe directions is laid over the FEs' region, extended by one
 resolution cell, and the FEs' responses at the probes are precomputed. A solution splits when a
@@ -55,11 +55,14 @@ class GlobalMaxCheck:
         pu, ps = pu[visible], ps[visible]
         response = array.source_response(u, s)
         return cls(
-            response=response, probe_u=pu, probe_s=ps, probe_f=response.evaluate(pu, ps, terms=1)[0].T,
+            response=response, probe_u=pu, probe_s=ps,
+            probe_f=response.evaluate(pu, ps, terms=1)[0].T,
             cell_u=cell_u, cell_s=cell_s,
         )
 
-    def splits(self, az_rad: FloatArray, el_rad: FloatArray, weights: FloatArray) -> NDArray[np.bool_]:
+    def splits(
+        self, az_rad: FloatArray, el_rad: FloatArray, weights: FloatArray
+    ) -> NDArray[np.bool_]:
         """Whether another direction out-shines the set one, shape ``(N,)``."""
         u, s = direction_cosines(az_rad, el_rad)
         at_target = np.abs(np.einsum("qn,nq->n", self.response.evaluate(u, s, terms=1)[0], weights))

@@ -35,7 +35,7 @@ _SERIES = [(-1) ** n * 2 * n * np.pi ** (2 * n) / float(np.prod(np.arange(1, 2 *
 
 
 def sinc_slope(x: FloatArray) -> FloatArray:
-    """Derivative of the normalized sinc, ``d/dx sin(pi x)/(pi x)``, stable at and near 0."""
+    """Return the derivative of the normalized sinc, ``d/dx sin(pi x)/(pi x)``, stable at 0."""
     x = np.asarray(x, dtype=np.float64)
     small = np.abs(x) < _SERIES_LIMIT
     x_safe = np.where(small, 1.0, x)
@@ -48,8 +48,10 @@ def sinc_slope(x: FloatArray) -> FloatArray:
     return np.where(small, series * x, closed)
 
 
-def sinc_derivative(theta_rad: FloatArray, alpha_rad: FloatArray, aperture_wl: float) -> FloatArray:
-    """The paper's ``dg_q[alpha]/d alpha`` for an FE at ``theta`` and aperture ``N d / lambda``.
+def sinc_derivative(
+    theta_rad: float | FloatArray, alpha_rad: FloatArray, aperture_wl: float
+) -> FloatArray:
+    """Return the paper's ``dg_q[alpha]/d alpha`` for an FE at ``theta``, aperture ``N d / lambda``.
 
     Equals, term for term, ``cos(a) sin(pi c D)/(pi c D^2) - cos(a) cos(pi c D)/D`` with
     ``D = sin(theta) - sin(alpha)`` and ``c = aperture_wl``, i.e. ``-c cos(alpha) sinc'(c D)``.
@@ -58,7 +60,9 @@ def sinc_derivative(theta_rad: FloatArray, alpha_rad: FloatArray, aperture_wl: f
     return -aperture_wl * np.cos(alpha_rad) * sinc_slope(x)
 
 
-def pair_weights(d_low: FloatArray, d_high: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+def pair_weights(
+    d_low: FloatArray, d_high: FloatArray
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
     """Solve ``A_low d_low + A_high d_high = 0`` for amplitudes with max 1.
 
     ``d_low`` is the derivative of the response of the FE pair at the smaller angle. Returns
@@ -104,7 +108,9 @@ class PaperQuad:
             aperture_y_wl=ap_y / array.wavelength_m, aperture_z_wl=ap_z / array.wavelength_m,
         )
 
-    def solve(self, az_rad: FloatArray, el_rad: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def solve(
+        self, az_rad: FloatArray, el_rad: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.uint8]]:
         """Return ``(weights (N, 4), reason (N,))`` for targets in this quad."""
         a_l, a_r, ok_az = pair_weights(
             sinc_derivative(self.theta_l, az_rad, self.aperture_y_wl),

@@ -1,0 +1,31 @@
+import json
+
+import rts_scenario.cli as cli
+
+
+def test_bench_prints_table_and_writes_json(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    code = cli.main(["bench", "--targets", "2000", "--repeats", "1", "--json", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "target-frames/s" in text and "exact" in text and "awr1843boost" in text
+    rows = json.loads(out.read_text())
+    assert {(r["method"], r["array"]) for r in rows} == {
+        (m, a) for m in ("paper", "exact") for a in ("paper", "awr1843boost")
+    }
+    for row in rows:
+        assert row["throughput_per_s"] > 0
+        assert row["feasible"] == row["grid_points"] == 30
+        if row["method"] == "exact":
+            assert row["max_az_deg"] <= 1e-3 and row["max_el_deg"] <= 1e-3
+        else:
+            assert 0.1 < row["rms_az_deg"] < 0.5
+
+
+def test_bad_input_is_one_line_and_exit_2(capsys):
+    assert cli.main(["bench", "--rig", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: unknown rig preset 'nope'; valid presets:")
+    assert "Traceback" not in err
+    assert cli.main(["bench", "--targets", "0"]) == 2
+    assert "--targets" in capsys.readouterr().err
