@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import RigError, ScenarioError
+from .errors import RigError
 from .yamlio import Document, load_yaml, validate
 
 FloatArray = NDArray[np.float64]
@@ -335,4 +335,4 @@ RIG_SCHEMA: dict[str, Any] = {
     },
 }
 
-__all__ = ["HardwareLimits", "Reference", "Rig", "ScenarioError", "preset_names"]
+__all__ = ["RIG_SCHEMA", "HardwareLimits", "Reference", "Rig", "preset_names"]
