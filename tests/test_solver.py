@@ -315,3 +315,29 @@ def test_wide_rig_covers_its_field(array):
     for method in METHODS:
         sol = rs.solve_weights(az, el, rig=rig, array=array, method=method)
         assert sol.feasible.all(), sol.counts()
+
+
+def _in_triangle(p, a, b, c):
+    def cross(o, u, v):
+        return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
+    d1, d2, d3 = cross(a, b, p), cross(b, c, p), cross(c, a, p)
+    return not ((d1 < 0 or d2 < 0 or d3 < 0) and (d1 > 0 or d2 > 0 or d3 > 0))
+
+
+def test_quad_assignment_on_a_measured_skewed_grid(rng):
+    from pathlib import Path
+    rig = rs.Rig.from_file(Path(__file__).parents[1] / "scenarios/rigs/lab-2x3.rig.yaml")
+    az = rng.uniform(-12.0, 12.0, 400)
+    el = rng.uniform(-10.0, 10.0, 400)
+    sol = rs.solve_weights(az, el, rig=rig, array=rs.VirtualArray.preset("paper"), method="paper")
+    for i in range(len(az)):
+        owners = []
+        for q, fes in enumerate(rig.quads):
+            corners = [(rig.az_deg[f], rig.el_deg[f]) for f in fes[[0, 1, 3, 2]]]
+            p = (az[i], el[i])
+            if _in_triangle(p, *corners[:3]) or _in_triangle(p, corners[0], *corners[2:]):
+                owners.append(q)
+        if owners:
+            assert sol.quad[i] in owners, (az[i], el[i])
+        else:
+            assert sol.reason[i] == rs.Reason.OUTSIDE and sol.quad[i] == -1, (az[i], el[i])

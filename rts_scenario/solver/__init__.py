@@ -26,7 +26,13 @@ from ..rig import Rig
 from .exact import ExactQuad
 from .globalmax import GlobalMaxCheck
 from .paper import PaperQuad
-from .quads import distance_to_polygon, inside_polygon, quad_polygons
+from .quads import (
+    candidate_quads,
+    distance_to_polygon,
+    edge_lines,
+    inside_quads,
+    quad_polygons,
+)
 from .reasons import Reason
 
 FloatArray = NDArray[np.float64]
@@ -102,9 +108,12 @@ class WeightSolution:
 
 @dataclass
 class _Plan:
+    rig: Rig
     kernels: list[QuadKernel]
     checks: list[GlobalMaxCheck | None]
     polygons: FloatArray
+    edge_lines: FloatArray
+    boxes: FloatArray
     degenerate: NDArray[np.bool_]
 
 
@@ -153,11 +162,14 @@ def solve_weights(
     quad = np.full(n, -1, dtype=np.int64)
     reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)
 
+    # Each quad's share of a chunk should stay large enough to amortize the per-call overhead.
+    chunk = CHUNK * min(len(plan.kernels), 8)
+
     def run(start: int) -> None:
-        part = slice(start, start + CHUNK)
+        part = slice(start, start + chunk)
         weights[part], quad[part], reason[part] = _solve_chunk(plan, az[part], el[part])
 
-    starts = range(0, n, CHUNK)
+    starts = range(0, n, chunk)
     if len(starts) > 1 and WORKERS > 1:
         # numpy releases the GIL inside its kernels, so chunks run in parallel on threads; the
         # chunks' small matrix products must not spawn BLAS threads of their own on top.
@@ -203,12 +215,16 @@ def _plan(rig: Rig, array: VirtualArray, method: str) -> _Plan:
         build = METHODS[method]
         quads = rig.quads
         polygons = quad_polygons(rig)
+        lines, boxes = edge_lines(polygons)
         x, y = polygons[..., 0], polygons[..., 1]
         area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
         plan = _Plan(
+            rig=rig,
             kernels=[build(rig, array, fes) for fes in quads],
             checks=[None] * len(quads),
             polygons=polygons,
+            edge_lines=lines,
+            boxes=boxes,
             degenerate=area <= DEGENERATE_AREA_DEG2,
         )
         for q, fes in enumerate(quads):
@@ -258,26 +274,40 @@ def _solve_chunk(
     n = az_deg.size
     az, el = np.radians(az_deg), np.radians(el_deg)
     weights = np.zeros((n, 4))
-    quad = np.full(n, -1, dtype=np.int64)
     reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)
-    n_quads = len(plan.kernels)
-    for q in range(n_quads):
-        todo = quad < 0
-        take = np.flatnonzero(todo) if q else np.arange(n)
-        inside = inside_polygon(az_deg[take], el_deg[take], plan.polygons[q])
+    quad = _assign_quads(plan, az_deg, el_deg, reason)
+    # Solve each quad's targets at once: group them by quad.
+    order = np.argsort(quad, kind="stable")
+    bounds = np.searchsorted(quad[order], np.arange(len(plan.kernels) + 1))
+    for q in range(len(plan.kernels)):
+        idx = order[bounds[q] : bounds[q + 1]]
+        if idx.size:
+            weights[idx], reason[idx] = _solve_in(plan, q, az[idx], el[idx])
+    if len(plan.kernels) > 1:
+        _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
+    return weights, quad, reason
+
+
+def _assign_quads(
+    plan: _Plan, az_deg: FloatArray, el_deg: FloatArray, reason: NDArray[np.uint8]
+) -> NDArray[np.int64]:
+    """Enclosing quad per target (-1: none); marks targets off a degenerate quad's line."""
+    quad = candidate_quads(plan.rig, az_deg, el_deg)
+    quad[~inside_quads(az_deg, el_deg, quad, plan.edge_lines, plan.boxes)] = -1
+    # Near bent borders the guess can miss: scan every quad for those few.
+    for q in range(len(plan.kernels)):
+        take = np.flatnonzero(quad < 0)
+        if take.size == 0:
+            break
+        hit = inside_quads(az_deg[take], el_deg[take], q, plan.edge_lines, plan.boxes)
         if plan.degenerate[q]:
             extent = np.ptp(plan.polygons[q], axis=0).max()
             near = distance_to_polygon(az_deg[take], el_deg[take], plan.polygons[q]) <= max(
                 DEGENERATE_REACH_DEG, DEGENERATE_REACH * extent
             )
-            reason[take[near & ~inside]] = Reason.DEGENERATE
-        idx = take[inside]
-        quad[idx] = q
-        if idx.size:
-            weights[idx], reason[idx] = _solve_in(plan, q, az[idx], el[idx])
-    if n_quads > 1:
-        _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
-    return weights, quad, reason
+            reason[take[near & ~hit]] = Reason.DEGENERATE
+        quad[take[hit]] = q
+    return quad
 
 
 def _solve_in(
@@ -305,7 +335,8 @@ def _retry_neighbours(
         if pending.size == 0:
             return
         idx = pending[quad[pending] != q]
-        idx = idx[inside_polygon(az_deg[idx], el_deg[idx], plan.polygons[q], RETRY_MARGIN_DEG)]
+        idx = idx[inside_quads(az_deg[idx], el_deg[idx], q, plan.edge_lines, plan.boxes,
+                               RETRY_MARGIN_DEG)]
         if idx.size == 0:
             continue
         w, r = _solve_in(plan, q, np.radians(az_deg[idx]), np.radians(el_deg[idx]))

@@ -34,28 +34,49 @@ def quad_widths_deg(rig: Rig) -> tuple[FloatArray, FloatArray]:
     return width, height
 
 
-def inside_polygon(
-    az_deg: FloatArray, el_deg: FloatArray, polygon: FloatArray, margin_deg: float = 0.0
-) -> NDArray[np.bool_]:
-    """Whether each point lies in the convex ``polygon`` (shape ``(4, 2)``, counter-clockwise).
+def edge_lines(polygons: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Inner-normal line coefficients and bounding boxes of quads ``(Q, 4, 2)``.
 
-    ``margin_deg`` grows the polygon outward by that distance from every edge.
+    Returns ``lines`` of shape ``(Q, 4, 3)`` with ``nx * az + ny * el + c`` the signed distance
+    (deg) to each edge, positive inside (zero-length edges: all zero), and ``boxes`` of shape
+    ``(Q, 4)``: ``az_min, az_max, el_min, el_max``.
     """
-    slack = margin_deg + EDGE_TOL_DEG
-    lo = polygon.min(axis=0) - slack
-    hi = polygon.max(axis=0) + slack
-    # The bounding box matters for quads collapsed onto a line, where every edge test passes.
-    inside = (az_deg >= lo[0]) & (az_deg <= hi[0]) & (el_deg >= lo[1]) & (el_deg <= hi[1])
+    a = polygons
+    d = np.roll(polygons, -1, axis=1) - a
+    length = np.hypot(d[..., 0], d[..., 1])
+    safe = np.where(length > 0.0, length, 1.0)
+    nx = np.where(length > 0.0, -d[..., 1] / safe, 0.0)
+    ny = np.where(length > 0.0, d[..., 0] / safe, 0.0)
+    c = -(nx * a[..., 0] + ny * a[..., 1])
+    boxes = np.stack([a[..., 0].min(axis=1), a[..., 0].max(axis=1),
+                      a[..., 1].min(axis=1), a[..., 1].max(axis=1)], axis=1)
+    return np.stack([nx, ny, c], axis=-1), boxes
+
+
+def inside_quads(
+    az_deg: FloatArray, el_deg: FloatArray, quad: NDArray[np.int64] | int, lines: FloatArray,
+    boxes: FloatArray, margin_deg: float = 0.0,
+) -> NDArray[np.bool_]:
+    """Whether target ``i`` lies in quad ``quad[i]`` (see `edge_lines` for the tables).
+
+    ``margin_deg`` grows every quad outward by that distance from its edges.
+    """
+    slack = EDGE_TOL_DEG + margin_deg
+    inside = (az_deg >= boxes[quad, 0] - slack) & (az_deg <= boxes[quad, 1] + slack)
+    inside &= (el_deg >= boxes[quad, 2] - slack) & (el_deg <= boxes[quad, 3] + slack)
     for i in range(4):
-        ax, ay = polygon[i]
-        bx, by = polygon[(i + 1) % 4]
-        length = np.hypot(bx - ax, by - ay)
-        if length == 0.0:
-            continue
-        # Signed distance to the edge line, positive on the inner (left) side.
-        dist = ((bx - ax) * (el_deg - ay) - (by - ay) * (az_deg - ax)) / length
+        dist = lines[quad, i, 0] * az_deg + lines[quad, i, 1] * el_deg + lines[quad, i, 2]
         inside &= dist >= -slack
     return inside
+
+
+def candidate_quads(rig: Rig, az_deg: FloatArray, el_deg: FloatArray) -> NDArray[np.int64]:
+    """Most likely enclosing quad of each target, from the grid's mean column and row angles."""
+    grid_az = rig.az_deg.reshape(rig.rows, rig.columns).mean(axis=0)
+    grid_el = rig.el_deg.reshape(rig.rows, rig.columns).mean(axis=1)
+    col = np.clip(np.searchsorted(grid_az, az_deg) - 1, 0, rig.columns - 2)
+    row = np.clip(np.searchsorted(grid_el, el_deg) - 1, 0, rig.rows - 2)
+    return row * (rig.columns - 1) + col
 
 
 def distance_to_polygon(az_deg: FloatArray, el_deg: FloatArray, polygon: FloatArray) -> FloatArray:
