@@ -287,25 +287,43 @@ class SourceResponse:
         return out.reshape(terms, self.n_sources, -1)
 
 
-def _exp_plan(coords: FloatArray, tol: float) -> NDArray[np.int64] | None:
-    """For coordinates symmetric about 0, index of each one's mirror image; else None."""
+@dataclass(frozen=True)
+class _ExpPlan:
+    """How to get ``exp(-j k c x)`` for a set of coordinates with the fewest exponentials.
+
+    ``direct`` coordinates are computed, in increasing order: by ``exp`` or, when they form an
+    arithmetic progression, from the first one and the common step by multiplication.
+    ``mirror[i]`` is the computed coordinate equal to ``-c_i`` (taken as a conjugate).
+    """
+
+    direct: NDArray[np.int64]
+    mirror: NDArray[np.int64]
+    progression: bool
+
+
+def _exp_plan(coords: FloatArray, tol: float) -> _ExpPlan:
+    index = np.arange(coords.size)
     mirror = np.abs(coords[:, None] + coords[None, :]).argmin(axis=1)
-    if np.all(np.abs(coords + coords[mirror]) <= tol):
-        return mirror
-    return None
+    symmetric = np.abs(coords + coords[mirror]) <= tol
+    direct = index[(coords >= -tol) | ~symmetric | (mirror == index)]
+    steps = np.diff(coords[direct])
+    progression = direct.size >= 3 and bool(np.all(np.abs(steps - steps[0]) <= tol))
+    return _ExpPlan(direct=direct, mirror=np.where(symmetric, mirror, -1), progression=progression)
 
 
-def _exp_rows(k: float, coords: FloatArray, mirror: NDArray[np.int64] | None,
-              x: FloatArray) -> ComplexArray:
+def _exp_rows(k: float, coords: FloatArray, plan: _ExpPlan, x: FloatArray) -> ComplexArray:
     """``exp(-j k c x)`` for every coordinate ``c``, shape ``(len(coords), N)``."""
     out = np.empty((coords.size, x.size), dtype=np.complex128)
-    if mirror is None:
-        np.exp(-1j * k * np.multiply.outer(coords, x), out=out)
-        return out
-    # exp(-j k (-c) x) = conj(exp(-j k c x)): compute the non-negative half only.
-    direct = (coords >= 0.0) | (mirror == np.arange(coords.size))
-    for i in np.flatnonzero(direct):
-        np.exp(-1j * k * coords[i] * x, out=out[i])
-    for i in np.flatnonzero(~direct):
-        np.conjugate(out[mirror[i]], out=out[i])
+    direct = plan.direct
+    if plan.progression:
+        np.exp(-1j * k * coords[direct[0]] * x, out=out[direct[0]])
+        step = np.exp(-1j * k * (coords[direct[1]] - coords[direct[0]]) * x)
+        for prev, i in zip(direct[:-1], direct[1:], strict=True):
+            np.multiply(out[prev], step, out=out[i])
+    else:
+        for i in direct:
+            np.exp(-1j * k * coords[i] * x, out=out[i])
+    # exp(-j k (-c) x) = conj(exp(-j k c x)).
+    for i in np.setdiff1d(np.arange(coords.size), direct):
+        np.conjugate(out[plan.mirror[i]], out=out[i])
     return out

@@ -167,7 +167,7 @@ def solve_weights(
 
     def run(start: int) -> None:
         part = slice(start, start + chunk)
-        weights[part], quad[part], reason[part] = _solve_chunk(plan, az[part], el[part])
+        _solve_chunk(plan, az[part], el[part], weights[part], quad[part], reason[part])
 
     starts = range(0, n, chunk)
     if len(starts) > 1 and WORKERS > 1:
@@ -269,23 +269,29 @@ def _survey_quad(
 
 
 def _solve_chunk(
-    plan: _Plan, az_deg: FloatArray, el_deg: FloatArray
-) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.uint8]]:
-    n = az_deg.size
+    plan: _Plan,
+    az_deg: FloatArray,
+    el_deg: FloatArray,
+    weights: FloatArray,
+    quad: NDArray[np.int64],
+    reason: NDArray[np.uint8],
+) -> None:
+    """Solve one chunk into the given output views (weights zeroed, reason OUTSIDE)."""
     az, el = np.radians(az_deg), np.radians(el_deg)
-    weights = np.zeros((n, 4))
-    reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)
-    quad = _assign_quads(plan, az_deg, el_deg, reason)
-    # Solve each quad's targets at once: group them by quad.
-    order = np.argsort(quad, kind="stable")
-    bounds = np.searchsorted(quad[order], np.arange(len(plan.kernels) + 1))
-    for q in range(len(plan.kernels)):
-        idx = order[bounds[q] : bounds[q + 1]]
-        if idx.size:
-            weights[idx], reason[idx] = _solve_in(plan, q, az[idx], el[idx])
+    quad[:] = _assign_quads(plan, az_deg, el_deg, reason)
+    first = quad[0] if quad.size else -1
+    if first >= 0 and np.all(quad == first):
+        weights[:], reason[:] = _solve_in(plan, int(first), az, el)
+    else:
+        # Solve each quad's targets at once: group them by quad.
+        order = np.argsort(quad, kind="stable")
+        bounds = np.searchsorted(quad[order], np.arange(len(plan.kernels) + 1))
+        for q in range(len(plan.kernels)):
+            idx = order[bounds[q] : bounds[q + 1]]
+            if idx.size:
+                weights[idx], reason[idx] = _solve_in(plan, q, az[idx], el[idx])
     if len(plan.kernels) > 1:
         _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
-    return weights, quad, reason
 
 
 def _assign_quads(
