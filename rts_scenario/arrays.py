@@ -243,9 +243,8 @@ class SourceResponse:
     """Response ``f_q(u, s)`` and its derivatives for a fixed set of Q sources, vectorized over N.
 
     Exploits the layout: with ``ny`` distinct y and ``nz`` distinct z positions, the steering
-    vector factors into ``ny + nz`` complex exponentials per look direction (half as many for a
-    symmetric set of positions), and the sum over elements becomes ``nz`` small matrix products.
-    Any layout works; rectangular grids are cheapest.
+    vector factors into ``ny + nz`` complex exponentials per look direction (fewer for symmetric
+    or evenly spaced positions); the sum over elements is one small matrix product.
     """
 
     def __init__(self, array: VirtualArray, source_u: FloatArray, source_s: FloatArray) -> None:
@@ -263,27 +262,32 @@ class SourceResponse:
         stacked = np.stack(
             [a_src, dy * a_src, dz * a_src, dy * dy * a_src, dy * dz * a_src, dz * dz * a_src]
         )
-        # table[iz, term, q, iy]: contribution of the element at (y_iy, z_iz).
-        table = np.zeros((self.z_distinct.size, 6, self.n_sources, self.y_distinct.size), complex)
-        np.add.at(table, (iz, slice(None), slice(None), iy),  # type: ignore[arg-type]
-                  np.moveaxis(stacked, 1, 0))
-        self.table = table
+        # table[term, q, v]: what element v contributes to each term, times conj(a_v(u, s)).
+        self.table = np.ascontiguousarray(np.moveaxis(stacked, 1, 2))
+        self._iy, self._iz = iy, iz
         self._y_plan = _exp_plan(self.y_distinct, tol)
         self._z_plan = _exp_plan(self.z_distinct, tol)
 
-    def evaluate(self, u: FloatArray, s: FloatArray, terms: int = 6) -> ComplexArray:
+    def evaluate(
+        self, u: FloatArray, s: FloatArray, terms: int = 6, phase: FloatArray | None = None
+    ) -> ComplexArray:
         """Return ``f`` and its derivatives at look directions ``(u, s)``.
 
-        Shape ``(terms, Q, N)``: the first ``terms`` of ``f, f_u, f_s, f_uu, f_us, f_ss``.
+        Shape ``(terms, Q, N)``: the first ``terms`` of ``f, f_u, f_s, f_uu, f_us, f_ss``,
+        multiplied by ``exp(-j phase)`` per look direction when ``phase`` is given.
         """
         u = np.asarray(u, dtype=np.float64)
         s = np.asarray(s, dtype=np.float64)
         ey = _exp_rows(self.k, self.y_distinct, self._y_plan, u)
         ez = _exp_rows(self.k, self.z_distinct, self._z_plan, s)
+        if phase is not None:
+            ez *= np.exp(-1j * phase)
+        # conj(a_v(u, s)) = exp(-j k y_v u) exp(-j k z_v s): one product per element, then one
+        # matrix product (a single pass over memory; chunks stay cache-sized).
+        look = ey[self._iy]
+        look *= ez[self._iz]
         rows = terms * self.n_sources
-        out = (self.table[0, :terms].reshape(rows, -1) @ ey) * ez[0]
-        for row in range(1, self.z_distinct.size):
-            out += (self.table[row, :terms].reshape(rows, -1) @ ey) * ez[row]
+        out = self.table[:terms].reshape(rows, -1) @ look
         return out.reshape(terms, self.n_sources, -1)
 
 

@@ -37,7 +37,7 @@ from .reasons import Reason
 
 FloatArray = NDArray[np.float64]
 
-CHUNK = 16384
+CHUNK = 32768
 WORKERS = min(4, os.cpu_count() or 1)
 # Targets a quad cannot synthesize are retried in quads within this distance (deg) of them.
 RETRY_MARGIN_DEG = 1.0
@@ -162,7 +162,8 @@ def solve_weights(
     quad = np.full(n, -1, dtype=np.int64)
     reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)
 
-    # Each quad's share of a chunk should stay large enough to amortize the per-call overhead.
+    # Each quad's share of a chunk should stay large enough to amortize the per-call overhead
+    # (threads share the GIL between numpy calls: fewer, larger calls run more in parallel).
     chunk = CHUNK * min(len(plan.kernels), 8)
 
     def run(start: int) -> None:

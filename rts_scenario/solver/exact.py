@@ -182,14 +182,16 @@ class ExactQuad:
         ``|B|^2``; negative at a strict local maximum.
         """
         u, s = direction_cosines(az_rad, el_rad)
-        resp = self.response.evaluate(u, s, terms=6 if curvature else 3)
+        # For complex responses, evaluate in the frame rotated by the expected phase of B, where
+        # the solution is (nearly) the real one; |B| and the weights do not depend on the frame.
+        phase = None if self.phase_map is None else self.phase_map(u, s)
+        resp = self.response.evaluate(u, s, terms=6 if curvature else 3, phase=phase)
         f, f_u, f_s = resp[0], resp[1], resp[2]
         reason = np.full(u.shape, Reason.OK, dtype=np.uint8)
         if self.centrosymmetric:
             w, ok = max_gain_weights(f.real, f_u.real, f_s.real, self.row_scale)
         else:
-            phi = np.zeros(u.shape) if self.phase_map is None else self.phase_map(u, s)
-            w, ok, converged = self._iterate(f, f_u, f_s, phi)
+            w, ok, converged = self._iterate(f, f_u, f_s)
             reason[~converged] = Reason.NOT_CONVERGED
         reason[~ok] = Reason.NO_SOLUTION
         margin = None
@@ -202,20 +204,17 @@ class ExactQuad:
         return w.T, reason, margin
 
     def _iterate(
-        self, f: ComplexArray, f_u: ComplexArray, f_s: ComplexArray, phi: FloatArray
+        self, f: ComplexArray, f_u: ComplexArray, f_s: ComplexArray
     ) -> tuple[FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
-        """Solve ``Re(conj(B) dB) = 0`` for complex responses, starting at phases ``phi``.
+        """Solve ``Re(conj(B) dB) = 0`` for complex responses, starting at phase 0.
 
         With the phase ``phi`` of ``B`` frozen the problem is the real one above, so the
         solution is a function ``w(phi)`` and only the scalar fixed point
-        ``phi = arg(f . w(phi))`` remains; secant steps on it converge in a few passes, and a
-        start from the quad's precomputed phase map usually needs none.
+        ``phi = arg(f . w(phi))`` remains; secant steps on it converge in a few passes, and in
+        the frame of the quad's precomputed phase map the start is usually already converged.
         """
-        cos, sin = np.cos(phi), np.sin(phi)
-        w, ok = max_gain_weights(
-            cos * f.real + sin * f.imag, cos * f_u.real + sin * f_u.imag,
-            cos * f_s.real + sin * f_s.imag, self.row_scale,
-        )
+        phi = np.zeros(f.shape[1])
+        w, ok = max_gain_weights(f.real, f_u.real, f_s.real, self.row_scale)
         residual = _phase_residual(f, w, phi)
         prev_phi, prev_res = phi, residual
         phi = phi + residual
@@ -279,7 +278,7 @@ class PhaseMap:
         gu, gs = axis(fe_u), axis(fe_s)
         u, s = (g.ravel() for g in np.meshgrid(gu, gs, indexing="ij"))
         resp = quad.response.evaluate(u, s, terms=3)
-        w, ok, converged = quad._iterate(resp[0], resp[1], resp[2], np.zeros(u.size))
+        w, ok, converged = quad._iterate(resp[0], resp[1], resp[2])
         phi = np.angle(np.einsum("qn,qn->n", resp[0], w))
         phi = np.where(ok & converged, phi, 0.0)
         return cls(u0=float(gu[0]), s0=float(gs[0]), du=float(gu[1] - gu[0]),
