@@ -26,13 +26,7 @@ from ..rig import Rig
 from .exact import ExactQuad
 from .globalmax import GlobalMaxCheck
 from .paper import PaperQuad
-from .quads import (
-    candidate_quads,
-    distance_to_polygon,
-    edge_lines,
-    inside_quads,
-    quad_polygons,
-)
+from .quads import QuadGeometry, assign_quads
 from .reasons import Reason
 
 FloatArray = NDArray[np.float64]
@@ -46,11 +40,6 @@ SPLIT_MAP_NODES = 17
 # The per-target local-maximum test is skipped in quads whose nodes all curve downward by at
 # least this fraction of a single FE's main-lobe curvature.
 CLEAR_MAXIMUM = 0.1
-# A quad with less area (deg^2) than this has collapsed onto a line; targets off the line but
-# within max(REACH_DEG, REACH * its length) of it are reported as DEGENERATE, not OUTSIDE.
-DEGENERATE_AREA_DEG2 = 1e-9
-DEGENERATE_REACH_DEG = 1.0
-DEGENERATE_REACH = 0.25
 
 
 class QuadKernel(Protocol):
@@ -108,13 +97,9 @@ class WeightSolution:
 
 @dataclass
 class _Plan:
-    rig: Rig
+    geometry: QuadGeometry
     kernels: list[QuadKernel]
     checks: list[GlobalMaxCheck | None]
-    polygons: FloatArray
-    edge_lines: FloatArray
-    boxes: FloatArray
-    degenerate: NDArray[np.bool_]
 
 
 def solve_weights(
@@ -214,23 +199,17 @@ def _plan(rig: Rig, array: VirtualArray, method: str) -> _Plan:
     key = ("plan", array.key, method)
     if key not in rig._cache:
         build = METHODS[method]
-        quads = rig.quads
-        polygons = quad_polygons(rig)
-        lines, boxes = edge_lines(polygons)
-        x, y = polygons[..., 0], polygons[..., 1]
-        area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
+        geometry = QuadGeometry.of(rig)
         plan = _Plan(
-            rig=rig,
-            kernels=[build(rig, array, fes) for fes in quads],
-            checks=[None] * len(quads),
-            polygons=polygons,
-            edge_lines=lines,
-            boxes=boxes,
-            degenerate=area <= DEGENERATE_AREA_DEG2,
+            geometry=geometry,
+            kernels=[build(rig, array, fes) for fes in rig.quads],
+            checks=[None] * len(rig.quads),
         )
-        for q, fes in enumerate(quads):
+        for q, fes in enumerate(rig.quads):
             check = GlobalMaxCheck.build(rig, array, fes)
-            plan.kernels[q], can_split = _survey_quad(plan.kernels[q], check, polygons[q], array)
+            plan.kernels[q], can_split = _survey_quad(
+                plan.kernels[q], check, geometry.polygons[q], array
+            )
             if can_split:
                 plan.checks[q] = check
         rig._cache[key] = plan
@@ -279,7 +258,8 @@ def _solve_chunk(
 ) -> None:
     """Solve one chunk into the given output views (weights zeroed, reason OUTSIDE)."""
     az, el = np.radians(az_deg), np.radians(el_deg)
-    quad[:] = _assign_quads(plan, az_deg, el_deg, reason)
+    quad[:], off_line = plan.geometry.assign(az_deg, el_deg)
+    reason[off_line] = Reason.DEGENERATE
     first = quad[0] if quad.size else -1
     if first >= 0 and np.all(quad == first):
         weights[:], reason[:] = _solve_in(plan, int(first), az, el)
@@ -293,28 +273,6 @@ def _solve_chunk(
                 weights[idx], reason[idx] = _solve_in(plan, q, az[idx], el[idx])
     if len(plan.kernels) > 1:
         _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
-
-
-def _assign_quads(
-    plan: _Plan, az_deg: FloatArray, el_deg: FloatArray, reason: NDArray[np.uint8]
-) -> NDArray[np.int64]:
-    """Enclosing quad per target (-1: none); marks targets off a degenerate quad's line."""
-    quad = candidate_quads(plan.rig, az_deg, el_deg)
-    quad[~inside_quads(az_deg, el_deg, quad, plan.edge_lines, plan.boxes)] = -1
-    # Near bent borders the guess can miss: scan every quad for those few.
-    for q in range(len(plan.kernels)):
-        take = np.flatnonzero(quad < 0)
-        if take.size == 0:
-            break
-        hit = inside_quads(az_deg[take], el_deg[take], q, plan.edge_lines, plan.boxes)
-        if plan.degenerate[q]:
-            extent = np.ptp(plan.polygons[q], axis=0).max()
-            near = distance_to_polygon(az_deg[take], el_deg[take], plan.polygons[q]) <= max(
-                DEGENERATE_REACH_DEG, DEGENERATE_REACH * extent
-            )
-            reason[take[near & ~hit]] = Reason.DEGENERATE
-        quad[take[hit]] = q
-    return quad
 
 
 def _solve_in(
@@ -342,8 +300,7 @@ def _retry_neighbours(
         if pending.size == 0:
             return
         idx = pending[quad[pending] != q]
-        idx = idx[inside_quads(az_deg[idx], el_deg[idx], q, plan.edge_lines, plan.boxes,
-                               RETRY_MARGIN_DEG)]
+        idx = idx[plan.geometry.within(az_deg[idx], el_deg[idx], q, RETRY_MARGIN_DEG)]
         if idx.size == 0:
             continue
         w, r = _solve_in(plan, q, np.radians(az_deg[idx]), np.radians(el_deg[idx]))
@@ -354,4 +311,4 @@ def _retry_neighbours(
         pending = np.setdiff1d(pending, solved, assume_unique=True)
 
 
-__all__ = ["METHODS", "Reason", "WeightSolution", "solve_weights"]
+__all__ = ["METHODS", "Reason", "WeightSolution", "assign_quads", "solve_weights"]

@@ -2,17 +2,23 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
 from ..rig import Rig
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 # Relative tolerance on the edge tests: a target on a quad's edge or corner belongs to it.
 EDGE_TOL_DEG = 1e-9
-# An angle-space quad thinner than this (deg) has collapsed onto a line or a point.
-DEGENERATE_WIDTH_DEG = 1e-6
+# A quad with less area (deg^2) than this has collapsed onto a line; targets off the line but
+# within max(REACH_DEG, REACH * its length) of it are reported as degenerate, not outside.
+DEGENERATE_AREA_DEG2 = 1e-9
+DEGENERATE_REACH_DEG = 1.0
+DEGENERATE_REACH = 0.25
 
 
 def quad_polygons(rig: Rig) -> FloatArray:
@@ -92,3 +98,63 @@ def distance_to_polygon(az_deg: FloatArray, el_deg: FloatArray, polygon: FloatAr
         )
         best = np.minimum(best, np.hypot(az_deg - a[0] - t * d[0], el_deg - a[1] - t * d[1]))
     return best
+
+
+@dataclass(frozen=True)
+class QuadGeometry:
+    """A rig's quads in angle space, prepared for fast point-in-quad tests."""
+
+    rig: Rig
+    polygons: FloatArray
+    lines: FloatArray
+    boxes: FloatArray
+    degenerate: NDArray[np.bool_]
+
+    @classmethod
+    def of(cls, rig: Rig) -> QuadGeometry:
+        """Return the geometry of ``rig`` (computed once per rig)."""
+        key = ("quad-geometry",)
+        if key not in rig._cache:
+            polygons = quad_polygons(rig)
+            lines, boxes = edge_lines(polygons)
+            x, y = polygons[..., 0], polygons[..., 1]
+            area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y,
+                                       axis=1))
+            rig._cache[key] = cls(rig=rig, polygons=polygons, lines=lines, boxes=boxes,
+                                  degenerate=area <= DEGENERATE_AREA_DEG2)
+        geometry: QuadGeometry = rig._cache[key]
+        return geometry
+
+    def within(self, az_deg: FloatArray, el_deg: FloatArray, quad: IntArray | int,
+               margin_deg: float = 0.0) -> NDArray[np.bool_]:
+        """Whether each target lies in its quad (grown by ``margin_deg``)."""
+        return inside_quads(az_deg, el_deg, quad, self.lines, self.boxes, margin_deg)
+
+    def assign(self, az_deg: FloatArray, el_deg: FloatArray) -> tuple[IntArray, NDArray[np.bool_]]:
+        """Enclosing quad per target (-1: none) and whether a miss is near a degenerate quad."""
+        quad = candidate_quads(self.rig, az_deg, el_deg)
+        quad[~self.within(az_deg, el_deg, quad)] = -1
+        off_line = np.zeros(az_deg.shape, dtype=bool)
+        # Near bent borders the guess can miss: scan every quad for those few.
+        for q in range(len(self.polygons)):
+            take = np.flatnonzero(quad < 0)
+            if take.size == 0:
+                break
+            hit = self.within(az_deg[take], el_deg[take], q)
+            if self.degenerate[q]:
+                extent = np.ptp(self.polygons[q], axis=0).max()
+                near = distance_to_polygon(az_deg[take], el_deg[take], self.polygons[q]) <= max(
+                    DEGENERATE_REACH_DEG, DEGENERATE_REACH * extent
+                )
+                off_line[take[near & ~hit]] = True
+            quad[take[hit]] = q
+        off_line &= quad < 0
+        return quad, off_line
+
+
+def assign_quads(rig: Rig, az_deg: FloatArray, el_deg: FloatArray) -> IntArray:
+    """Index of the quad enclosing each direction (-1 outside every quad), any shape."""
+    az = np.asarray(az_deg, dtype=np.float64)
+    el = np.asarray(el_deg, dtype=np.float64)
+    quad, _ = QuadGeometry.of(rig).assign(az.ravel(), el.ravel())
+    return quad.reshape(az.shape)

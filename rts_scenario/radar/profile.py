@@ -1,0 +1,210 @@
+"""Radar profiles: FMCW chirp sequence, TDM-MIMO timing and the virtual array, as data.
+
+A profile file (``*.radar.yaml``) names an array preset or gives TX/RX positions; everything
+else the product needs (wavelength, resolutions, unambiguous range and velocity) derives from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..arrays import PRESETS, VirtualArray
+from ..constants import C0_MPS
+from ..errors import ScenarioError
+from ..yamlio import Document, load_yaml, validate
+
+
+@dataclass(frozen=True, eq=False)
+class RadarProfile:
+    """An FMCW TDM-MIMO radar: chirp, timing, noise and virtual array.
+
+    Attributes
+    ----------
+    fc_hz, bandwidth_hz : float
+        Chirp start frequency and swept bandwidth.
+    ramp_time_s, idle_time_s : float
+        Chirp ramp and idle time; one chirp slot lasts their sum.
+    adc_samples : int
+        Samples per chirp, taken at ``sample_rate_hz`` (complex baseband).
+    chirp_loops : int
+        Chirps per TX per frame.
+    tx_order : tuple of int
+        TX firing order within a loop (TDM-MIMO).
+    frame_period_s : float
+        Frame repetition period.
+    noise_figure_db : float
+        Receiver noise figure.
+    array : VirtualArray
+        The virtual array at this profile's wavelength.
+    """
+
+    name: str
+    fc_hz: float
+    bandwidth_hz: float
+    ramp_time_s: float
+    idle_time_s: float
+    adc_samples: int
+    sample_rate_hz: float
+    chirp_loops: int
+    tx_order: tuple[int, ...]
+    frame_period_s: float
+    noise_figure_db: float
+    array: VirtualArray
+
+    @property
+    def wavelength_m(self) -> float:
+        """``c0 / (fc + B/2)``."""
+        return C0_MPS / (self.fc_hz + self.bandwidth_hz / 2.0)
+
+    @property
+    def slope_hz_per_s(self) -> float:
+        """Chirp slope."""
+        return self.bandwidth_hz / self.ramp_time_s
+
+    @property
+    def chirp_slot_s(self) -> float:
+        """Time from one chirp start to the next."""
+        return self.ramp_time_s + self.idle_time_s
+
+    @property
+    def range_resolution_m(self) -> float:
+        """``c0 / (2 B_sampled)`` with the bandwidth swept while sampling."""
+        sampled = self.slope_hz_per_s * self.adc_samples / self.sample_rate_hz
+        return C0_MPS / (2.0 * sampled)
+
+    @property
+    def max_range_m(self) -> float:
+        """Largest unambiguous range: the beat frequency reaches the (complex) sample rate."""
+        return self.sample_rate_hz * C0_MPS / (2.0 * self.slope_hz_per_s)
+
+    @property
+    def max_radial_velocity_mps(self) -> float:
+        """Largest unambiguous |radial velocity|: ``lambda / (4 N_tx T_slot)`` for TDM-MIMO."""
+        return self.wavelength_m / (4.0 * len(self.tx_order) * self.chirp_slot_s)
+
+    @property
+    def velocity_resolution_mps(self) -> float:
+        """``lambda / (2 N_tx N_loops T_slot)``."""
+        return self.wavelength_m / (
+            2.0 * len(self.tx_order) * self.chirp_loops * self.chirp_slot_s
+        )
+
+    @classmethod
+    def preset(cls, name: str) -> RadarProfile:
+        """Return a shipped profile: see `preset_names`."""
+        names = preset_names()
+        if name not in names:
+            raise ScenarioError(
+                f"unknown radar profile {name!r}; valid profiles: {', '.join(names)}"
+            )
+        path = f"data/radars/{name}.radar.yaml"
+        text = resources.files("rts_scenario").joinpath(path).read_text()
+        return cls.from_document(load_yaml(f"<profile {name}>", text))
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> RadarProfile:
+        """Load a ``*.radar.yaml`` file."""
+        return cls.from_document(load_yaml(path))
+
+    @classmethod
+    def from_document(cls, doc: Document) -> RadarProfile:
+        """Build a profile from a loaded document, with located errors."""
+        validate(doc, PROFILE_SCHEMA)
+        d: dict[str, Any] = doc.data
+        fc, bw = float(d["fc_hz"]), float(d["bandwidth_hz"])
+        spec = d["array"]
+        if isinstance(spec, str):
+            preset = VirtualArray.preset(spec)
+            # The preset's geometry is in wavelengths: scale it to this profile's wavelength.
+            lam = C0_MPS / (fc + bw / 2.0)
+            scale = lam / preset.wavelength_m
+            array = VirtualArray.from_positions(
+                preset.y_m * scale, preset.z_m * scale, wavelength_m=lam, name=spec
+            )
+            n_tx = {"paper": 3, "awr1843boost": 3}[spec]
+        else:
+            array = VirtualArray.from_tx_rx(
+                spec["tx_y_m"], spec["tx_z_m"], spec["rx_y_m"], spec["rx_z_m"],
+                fc_hz=fc, bandwidth_hz=bw, name=d["name"],
+            )
+            n_tx = len(spec["tx_y_m"])
+        tx_order = tuple(int(t) for t in d["tx_order"])
+        if sorted(tx_order) != list(range(n_tx)):
+            raise doc.error(
+                ("tx_order",),
+                f"must fire each of the {n_tx} TX once (a permutation of 0..{n_tx - 1}), "
+                f"got {list(tx_order)}",
+            )
+        slot = d["ramp_time_s"] + d["idle_time_s"]
+        if d["adc_samples"] / d["sample_rate_hz"] > d["ramp_time_s"]:
+            raise doc.error(
+                ("adc_samples",),
+                f"sampling takes {d['adc_samples'] / d['sample_rate_hz']:.3g} s, longer than "
+                f"ramp_time_s = {d['ramp_time_s']:.3g} s",
+            )
+        if n_tx * d["chirp_loops"] * slot > d["frame_period_s"]:
+            raise doc.error(
+                ("frame_period_s",),
+                f"the chirps of a frame take {n_tx * d['chirp_loops'] * slot:.3g} s, longer "
+                f"than the frame period {d['frame_period_s']:.3g} s",
+            )
+        return cls(
+            name=d["name"], fc_hz=fc, bandwidth_hz=bw, ramp_time_s=float(d["ramp_time_s"]),
+            idle_time_s=float(d["idle_time_s"]), adc_samples=int(d["adc_samples"]),
+            sample_rate_hz=float(d["sample_rate_hz"]), chirp_loops=int(d["chirp_loops"]),
+            tx_order=tx_order, frame_period_s=float(d["frame_period_s"]),
+            noise_figure_db=float(d.get("noise_figure_db", 15.0)), array=array,
+        )
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped radar profiles."""
+    folder = resources.files("rts_scenario").joinpath("data/radars")
+    return sorted(p.name.removesuffix(".radar.yaml") for p in folder.iterdir()
+                  if p.name.endswith(".radar.yaml"))
+
+
+_POSITIVE = {"type": "number", "exclusiveMinimum": 0}
+_POSITIONS = {"type": "array", "minItems": 1, "items": {"type": "number"}}
+
+PROFILE_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "additionalProperties": False,
+    "required": ["rts_radar", "name", "fc_hz", "bandwidth_hz", "ramp_time_s", "idle_time_s",
+                 "adc_samples", "sample_rate_hz", "chirp_loops", "tx_order", "frame_period_s",
+                 "array"],
+    "properties": {
+        "rts_radar": {"enum": [1]},
+        "name": {"type": "string", "minLength": 1},
+        "description": {"type": "string"},
+        "fc_hz": _POSITIVE,
+        "bandwidth_hz": _POSITIVE,
+        "ramp_time_s": _POSITIVE,
+        "idle_time_s": {"type": "number", "minimum": 0},
+        "adc_samples": {"type": "integer", "minimum": 2},
+        "sample_rate_hz": _POSITIVE,
+        "chirp_loops": {"type": "integer", "minimum": 1},
+        "tx_order": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 0}},
+        "frame_period_s": _POSITIVE,
+        "noise_figure_db": {"type": "number"},
+        "array": {
+            "oneOf": [
+                {"enum": list(PRESETS)},
+                {
+                    "type": "object",
+                    "additionalProperties": False,
+                    "required": ["tx_y_m", "tx_z_m", "rx_y_m", "rx_z_m"],
+                    "properties": {k: _POSITIONS for k in ("tx_y_m", "tx_z_m", "rx_y_m",
+                                                            "rx_z_m")},
+                },
+            ]
+        },
+    },
+}
+
+_ = np  # numpy is part of the public types of this module's dataclass

@@ -1,0 +1,265 @@
+"""Load and check ``*.scenario.yaml`` files.
+
+Safe YAML only; every node's line and column are kept; the JSON Schema in
+``rts_scenario/data/scenario.schema.json`` rejects unknown keys, wrong types and out-of-range
+values; then the checks the schema cannot express (times in order, distinct waypoints, unique
+names, files inside the scene's folder tree). Every error is one `ScenarioError` reading
+``file:line:col: key.path: message``.
+"""
+
+from __future__ import annotations
+
+import json
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import RtsError, ScenarioError
+from ..radar.profile import RadarProfile
+from ..radar.profile import preset_names as radar_presets
+from ..rig import Rig
+from ..rig import preset_names as rig_presets
+from ..yamlio import Document, KeyPath, load_yaml, validate
+from .model import DEFAULT_TOLERANCES, Effects, Expectations, Mount, RcsModel, Scenario, TargetSpec
+from .trajectory import LaneChange, Trajectory, TravelLaw
+from .trajectory import Path as TrajectoryPath
+
+SCENE_SUFFIX = ".scenario.yaml"
+
+
+@lru_cache(maxsize=1)
+def scenario_schema() -> dict[str, Any]:
+    """Return the JSON Schema of scene files (also shipped for editors)."""
+    text = resources.files("rts_scenario").joinpath("data/scenario.schema.json").read_text()
+    schema: dict[str, Any] = json.loads(text)
+    return schema
+
+
+def _fragment_schema() -> dict[str, Any]:
+    schema = scenario_schema()
+    return {"$ref": "#/$defs/fragment", "$defs": schema["$defs"]}
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Load, validate and compile a scene file.
+
+    Raises
+    ------
+    ScenarioError
+        With file, line, column, key path, the offending value and what is allowed.
+    """
+    path = Path(path)
+    doc = load_yaml(path)
+    if not isinstance(doc.data, dict):
+        raise doc.error((), f"a scene must be a mapping of keys, got {type(doc.data).__name__}")
+    validate(doc, scenario_schema())
+    data = doc.data
+    root = path.resolve().parent
+
+    target_sources: list[tuple[Document, KeyPath, dict[str, Any]]] = []
+    for i, name in enumerate(data.get("include", [])):
+        fragment = load_yaml(_inside(doc, ("include", i), root, name))
+        if not isinstance(fragment.data, dict):
+            raise fragment.error((), "a fragment must be a mapping with a 'targets' list")
+        validate(fragment, _fragment_schema())
+        target_sources += [(fragment, ("targets", j), t)
+                           for j, t in enumerate(fragment.data["targets"])]
+    target_sources += [(doc, ("targets", j), t) for j, t in enumerate(data["targets"])]
+
+    radar = _load_referenced(doc, ("radar", "profile"), root, data["radar"]["profile"],
+                             radar_presets(), RadarProfile.preset, RadarProfile.from_file,
+                             ".radar.yaml")
+    rig = _load_referenced(doc, ("rig",), root, data["rig"], rig_presets(), Rig.preset,
+                           Rig.from_file, ".rig.yaml")
+    effects = Effects(
+        rcs_fluctuation=data.get("effects", {}).get("rcs_fluctuation", "none"),
+        measurement_noise=dict(data.get("effects", {}).get("measurement_noise", {})),
+    )
+    ego_spec = data.get("ego", {"motion": {"type": "stationary", "position_m": [0, 0, 0]}})
+    ego = _trajectory(doc, ("ego",), ego_spec)
+
+    targets = []
+    seen: dict[str, tuple[Document, KeyPath]] = {}
+    for source, key, spec in target_sources:
+        if spec["name"] in seen:
+            first_doc, first_key = seen[spec["name"]]
+            line = first_doc.marks.get((*first_key, "name"), (None,))[0]
+            raise source.error(
+                (*key, "name"),
+                f"duplicate target name {spec['name']!r} (first used in {first_doc.file}"
+                f"{f':{line}' if line else ''}); names must be unique",
+            )
+        seen[spec["name"]] = (source, key)
+        targets.append(_target(source, key, spec, effects.rcs_fluctuation))
+
+    expect = data.get("expectations", {})
+    return Scenario(
+        name=data["name"], description=data.get("description", ""), file=str(path),
+        duration_s=float(data["duration_s"]), frame_rate_hz=float(data["frame_rate_hz"]),
+        seed=int(data.get("seed", 0)), radar=radar,
+        mount=Mount(**data["radar"].get("mount", {})), rig=rig, ego=ego,
+        targets=tuple(targets),
+        expectations=Expectations(
+            tolerances={**DEFAULT_TOLERANCES, **expect.get("tolerances", {})},
+            detection_rate=float(expect.get("detection_rate", 0.9)),
+            max_false_detections_per_frame=float(
+                expect.get("max_false_detections_per_frame", 0.1)
+            ),
+        ),
+        effects=effects,
+        marks=tuple(data.get("marks", [])),
+    )
+
+
+def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:
+    """Resolve a relative file reference; refuse anything outside the scene's folder tree."""
+    candidate = Path(name)
+    if candidate.is_absolute():
+        raise doc.error(key, f"must be a path relative to the scene's folder, got {name!r}")
+    resolved = (root / candidate).resolve()
+    if not resolved.is_relative_to(root):
+        raise doc.error(
+            key, f"{name!r} leaves the scene's folder tree ({root}); files must stay inside it"
+        )
+    if not resolved.is_file():
+        raise doc.error(key, f"file not found: {name!r} (looked in {root})")
+    return resolved
+
+
+def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets: list[str],
+                     preset: Any, from_file: Any, suffix: str) -> Any:
+    if name in presets:
+        return preset(name)
+    if not name.endswith(suffix):
+        raise doc.error(
+            key, f"unknown preset {name!r}; valid presets: {', '.join(presets)}, or a relative "
+                 f"path to a *{suffix} file",
+        )
+    try:
+        return from_file(_inside(doc, key, root, name))
+    except ScenarioError:
+        raise
+    except RtsError as exc:
+        raise doc.error(key, f"{name}: {exc}") from None
+
+
+def _target(doc: Document, key: KeyPath, spec: dict[str, Any], default_fluct: str) -> TargetSpec:
+    appear = float(spec.get("appear_s", 0.0))
+    disappear = float(spec.get("disappear_s", np.inf))
+    if disappear <= appear:
+        raise doc.error((*key, "disappear_s"),
+                        f"must be later than appear_s = {appear:g}, got {disappear:g}")
+    frame = spec.get("frame", "world")
+    return TargetSpec(
+        name=spec["name"], kind=spec.get("kind", "other"), frame=frame,
+        trajectory=_trajectory(doc, key, spec), rcs=_rcs(doc, (*key, "rcs"), spec["rcs"],
+                                                         default_fluct),
+        appear_s=appear, disappear_s=disappear,
+    )
+
+
+def _rcs(doc: Document, key: KeyPath, spec: dict[str, Any], default_fluct: str) -> RcsModel:
+    values = spec["rcs_dbsm"]
+    aspects = spec.get("aspect_deg")
+    fluctuation = spec.get("fluctuation", default_fluct)
+    if isinstance(values, list) != (aspects is not None):
+        raise doc.error(
+            key, "an RCS table needs both aspect_deg (list) and rcs_dbsm (list of the same "
+                 "length); a constant RCS gives rcs_dbsm alone",
+        )
+    if aspects is None:
+        return RcsModel(rcs_dbsm=np.array([float(values)]), fluctuation=fluctuation)
+    if len(aspects) != len(values):
+        raise doc.error((*key, "rcs_dbsm"),
+                        f"needs one value per aspect_deg entry ({len(aspects)}), got "
+                        f"{len(values)}")
+    wrapped = np.mod(np.asarray(aspects, dtype=float), 360.0)
+    if np.unique(np.round(wrapped, 9)).size != wrapped.size:
+        raise doc.error((*key, "aspect_deg"),
+                        f"aspect angles must be distinct modulo 360 deg, got {aspects}")
+    order = np.argsort(wrapped)
+    return RcsModel(rcs_dbsm=np.asarray(values, dtype=float)[order], aspect_deg=wrapped[order],
+                    fluctuation=fluctuation)
+
+
+def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any]) -> Trajectory:
+    motion = spec["motion"]
+    mkey = (*key, "motion")
+    kind = motion["type"]
+    lane_changes = tuple(
+        LaneChange(float(lc["start_s"]), float(lc["duration_s"]), float(lc["offset_m"]))
+        for lc in spec.get("lane_changes", [])
+    )
+    if kind == "waypoints":
+        return _waypoints(doc, mkey, motion, lane_changes)
+    start = np.asarray(motion["position_m"], dtype=float)
+    path = TrajectoryPath.line(start, np.radians(motion.get("heading_deg", 0.0)))
+    if kind == "stationary":
+        law = TravelLaw.pieces([0.0], [0.0], [0.0])
+    elif kind == "constant_velocity":
+        law = TravelLaw.pieces([0.0], [motion["speed_mps"]], [0.0])
+    elif kind == "constant_acceleration":
+        v0, a = float(motion["speed_mps"]), float(motion["acceleration_mps2"])
+        if a < 0.0 and v0 > 0.0:
+            law = TravelLaw.pieces([0.0, v0 / -a], [v0, 0.0], [a, 0.0])  # stops, never reverses
+        else:
+            law = TravelLaw.pieces([0.0], [v0], [max(a, 0.0) if v0 == 0.0 else a])
+    else:  # speed_profile
+        law = _speed_profile(doc, (*mkey, "profile"), motion["profile"])
+    return Trajectory(path=path, law=law, lane_changes=lane_changes)
+
+
+def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]]) -> TravelLaw:
+    times = [float(p["t_s"]) for p in profile]
+    speeds = [float(p["speed_mps"]) for p in profile]
+    for i in range(1, len(times)):
+        if times[i] <= times[i - 1]:
+            raise doc.error((*key, i, "t_s"),
+                            f"times must increase, got {times[i]:g} after {times[i - 1]:g}")
+    knots, v0, acc = [0.0], [speeds[0]], [0.0]
+    for i, t in enumerate(times):
+        nxt = (speeds[i + 1] - speeds[i]) / (times[i + 1] - t) if i + 1 < len(times) else 0.0
+        if t == 0.0:
+            acc[0] = nxt
+        else:
+            knots.append(t)
+            v0.append(speeds[i])
+            acc.append(nxt)
+    return TravelLaw.pieces(knots, v0, acc)
+
+
+def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
+               lane_changes: tuple[LaneChange, ...]) -> Trajectory:
+    points = np.array([p["position_m"] for p in motion["points"]], dtype=float)
+    speeds = [float(p["speed_mps"]) for p in motion["points"]]
+    gaps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    for i, gap in enumerate(gaps):
+        if gap < 1e-6:
+            raise doc.error((*key, "points", i + 1, "position_m"),
+                            f"repeats waypoint {i}; consecutive waypoints must differ")
+        if speeds[i] == 0.0 and speeds[i + 1] == 0.0:
+            raise doc.error((*key, "points", i + 1, "speed_mps"),
+                            f"waypoints {i} and {i + 1} both have speed 0: the object would "
+                            f"never get from one to the other")
+    if motion.get("path", "polyline") == "spline":
+        path, at_points = TrajectoryPath.spline(points)
+    else:
+        path = TrajectoryPath.polyline(points)
+        at_points = path.arc_m
+    lengths = np.diff(at_points)
+    start = float(motion.get("start_s", 0.0))
+    knots, v0, acc = ([0.0], [0.0], [0.0]) if start > 0.0 else ([], [], [])
+    t = start
+    for i, length in enumerate(lengths):
+        a = (speeds[i + 1] ** 2 - speeds[i] ** 2) / (2.0 * length)
+        knots.append(t)
+        v0.append(speeds[i])
+        acc.append(a)
+        t += 2.0 * length / (speeds[i] + speeds[i + 1])
+    knots.append(t)
+    v0.append(speeds[-1])
+    acc.append(0.0)
+    return Trajectory(path=path, law=TravelLaw.pieces(knots, v0, acc), lane_changes=lane_changes)

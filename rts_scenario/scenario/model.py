@@ -1,0 +1,128 @@
+"""The typed scene: what a loaded, checked ``*.scenario.yaml`` holds."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..radar.profile import RadarProfile
+from ..rig import Rig
+from .trajectory import Trajectory
+
+FloatArray = NDArray[np.float64]
+
+FLUCTUATIONS = ("none", "swerling1", "swerling3")
+
+DEFAULT_TOLERANCES = {
+    "range_m": 0.3,
+    "radial_velocity_mps": 0.3,
+    "az_deg": 0.5,
+    "el_deg": 1.0,
+    "rcs_db": 6.0,
+}
+
+
+@dataclass(frozen=True)
+class Mount:
+    """Radar pose on the ego: position in the ego frame (m) and yaw/pitch/roll (deg).
+
+    Angles follow ISO 8855 (x forward, y left, z up): yaw positive to the left, pitch positive
+    nose down, roll positive right side down; applied as yaw, then pitch, then roll.
+    """
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float = 0.0
+    yaw_deg: float = 0.0
+    pitch_deg: float = 0.0
+    roll_deg: float = 0.0
+
+    @property
+    def position_m(self) -> FloatArray:
+        """Mount position in the ego frame, shape (3,)."""
+        return np.array([self.x_m, self.y_m, self.z_m])
+
+    @property
+    def rotation(self) -> FloatArray:
+        """Rotation from the radar frame to the ego frame, shape (3, 3)."""
+        y, p, r = np.radians([self.yaw_deg, self.pitch_deg, self.roll_deg])
+        rz = np.array([[np.cos(y), -np.sin(y), 0.0], [np.sin(y), np.cos(y), 0.0], [0, 0, 1.0]])
+        ry = np.array([[np.cos(p), 0.0, np.sin(p)], [0, 1.0, 0], [-np.sin(p), 0.0, np.cos(p)]])
+        rx = np.array([[1.0, 0, 0], [0, np.cos(r), -np.sin(r)], [0, np.sin(r), np.cos(r)]])
+        return rz @ ry @ rx
+
+
+@dataclass(frozen=True)
+class RcsModel:
+    """Radar cross section of a target.
+
+    ``rcs_dbsm`` is a constant, or a table over ``aspect_deg`` (0: the radar sees the target's
+    front, 180: its back), interpolated linearly and periodically. ``fluctuation`` draws
+    Swerling 1 or 3 factors per frame around that mean.
+    """
+
+    rcs_dbsm: FloatArray
+    aspect_deg: FloatArray | None = None
+    fluctuation: str = "none"
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    """One target of the scene."""
+
+    name: str
+    kind: str
+    frame: str
+    trajectory: Trajectory
+    rcs: RcsModel
+    appear_s: float = 0.0
+    disappear_s: float = np.inf
+
+
+@dataclass(frozen=True)
+class Expectations:
+    """What the checker demands: error tolerances per quantity and rates."""
+
+    tolerances: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
+    detection_rate: float = 0.9
+    max_false_detections_per_frame: float = 0.1
+
+
+@dataclass(frozen=True)
+class Effects:
+    """Optional effects; each costs nothing when absent."""
+
+    rcs_fluctuation: str = "none"
+    measurement_noise: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A loaded scene."""
+
+    name: str
+    description: str
+    file: str
+    duration_s: float
+    frame_rate_hz: float
+    seed: int
+    radar: RadarProfile
+    mount: Mount
+    rig: Rig
+    ego: Trajectory
+    targets: tuple[TargetSpec, ...]
+    expectations: Expectations = Expectations()
+    effects: Effects = Effects()
+    marks: tuple[str, ...] = ()
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames: ``round(duration_s * frame_rate_hz)``, at least 1."""
+        return max(1, int(round(self.duration_s * self.frame_rate_hz)))
+
+    @property
+    def t_s(self) -> FloatArray:
+        """Frame times from 0, shape (F,)."""
+        return np.arange(self.n_frames) / self.frame_rate_hz
