@@ -32,6 +32,26 @@ def _bench(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _validate(args: argparse.Namespace) -> int:
+    from .errors import ScenarioError
+    from .kinematics import compute_tracks
+    from .scenario import load_scenario
+
+    failed = 0
+    for path in args.scenes:
+        try:
+            scene = load_scenario(path)
+            tracks = compute_tracks(scene)
+        except ScenarioError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            failed += 1
+            continue
+        share = tracks.checkable.mean() if tracks.checkable.size else 0.0
+        print(f"ok: {path}: {scene.n_frames} frames, {len(scene.targets)} targets, "
+              f"{share:.0%} of target-frames checkable")
+    return EXIT_BAD_INPUT if failed else EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -52,6 +72,13 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--repeats", type=int, default=3, help="throughput runs, best kept")
     bench.add_argument("--rig", default="kit-table1", help="rig preset (default kit-table1)")
     bench.set_defaults(handler=_bench)
+
+    validate = sub.add_parser(
+        "validate", help="check scene files",
+        description="Load and check scene files; exit 0 if all are valid, 2 otherwise.",
+    )
+    validate.add_argument("scenes", nargs="+", metavar="SCENE", help="*.scenario.yaml files")
+    validate.set_defaults(handler=_validate)
     return parser
 
 

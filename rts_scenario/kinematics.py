@@ -1,0 +1,153 @@
+"""From a scene to per-frame target parameters as the radar sees them.
+
+World frame: x forward along the road, y left, z up. The ego's body yaws with its velocity
+direction; the radar sits on the ego at its mount pose. Every array is ``[frame, target]``;
+there is no Python loop over frames or targets.
+
+Radial velocity is ``d(range)/dt`` computed from the analytic velocities of target and radar
+(the radar's includes the ego's yaw rate acting on the mount lever arm), not by differencing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .rcs import rcs_series
+from .scenario.model import Scenario
+from .scenario.trajectory import Motion, TrajectorySet
+from .solver.quads import assign_quads
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+# Below this speed (m/s) a body keeps the heading of its path instead of its velocity's.
+_STANDSTILL_MPS = 1e-6
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """Per-frame ground truth of every target, as seen by the radar.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Target names (K).
+    t_s : ndarray, shape (F,)
+        Frame times.
+    range_m, radial_velocity_mps, doppler_hz, rcs_dbsm, az_deg, el_deg : ndarray, shape (F, K)
+        Range from the radar, range rate (> 0 receding), Doppler shift
+        ``-2 v_r / wavelength``, RCS, azimuth (positive left), elevation (positive up).
+    position_m : ndarray, shape (F, K, 3)
+        Target position in the radar frame.
+    present : ndarray of bool, shape (F, K)
+        Between the target's appear and disappear times.
+    in_coverage : ndarray of bool, shape (F, K)
+        Inside a quad of the rig (its direction can be synthesized).
+    in_range, in_velocity : ndarray of bool, shape (F, K)
+        Within the radar's unambiguous range and radial velocity.
+    """
+
+    names: tuple[str, ...]
+    t_s: FloatArray
+    range_m: FloatArray
+    radial_velocity_mps: FloatArray
+    doppler_hz: FloatArray
+    rcs_dbsm: FloatArray
+    az_deg: FloatArray
+    el_deg: FloatArray
+    position_m: FloatArray
+    present: BoolArray
+    in_coverage: BoolArray
+    in_range: BoolArray
+    in_velocity: BoolArray
+
+    @property
+    def checkable(self) -> BoolArray:
+        """Present, synthesizable and unambiguous: frames a radar result can be checked on."""
+        return self.present & self.in_coverage & self.in_range & self.in_velocity
+
+
+def _rotation_z(yaw: FloatArray) -> FloatArray:
+    """Rotations about z, shape ``yaw.shape + (3, 3)``."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    zero, one = np.zeros_like(yaw), np.ones_like(yaw)
+    return np.stack([np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1),
+                     np.stack([zero, zero, one], -1)], -2)
+
+
+def _heading(motion: Motion) -> tuple[FloatArray, FloatArray]:
+    """Yaw of each body (velocity direction, or path tangent when standing) and its rate."""
+    v, a = motion.velocity_mps, motion.acceleration_mps2
+    speed2 = v[..., 0] ** 2 + v[..., 1] ** 2
+    moving = speed2 > _STANDSTILL_MPS**2
+    yaw = np.where(moving, np.arctan2(v[..., 1], v[..., 0]),
+                   np.arctan2(motion.tangent[..., 1], motion.tangent[..., 0]))
+    rate = np.where(moving, (v[..., 0] * a[..., 1] - v[..., 1] * a[..., 0])
+                    / np.where(moving, speed2, 1.0), 0.0)
+    return yaw, rate
+
+
+def compute_tracks(scenario: Scenario) -> Tracks:
+    """Evaluate the scene at every frame: range, radial velocity, Doppler, RCS and angles."""
+    t = scenario.t_s
+    targets = scenario.targets
+    ego = TrajectorySet([scenario.ego]).evaluate(t)
+    ego_yaw, ego_rate = (x[:, 0] for x in _heading(ego))
+    ego_rot = _rotation_z(ego_yaw)  # (F, 3, 3): ego frame -> world
+    omega = np.stack([np.zeros_like(ego_rate), np.zeros_like(ego_rate), ego_rate], -1)
+    ego_p, ego_v = ego.position_m[:, 0], ego.velocity_mps[:, 0]
+
+    lever = np.einsum("fij,j->fi", ego_rot, scenario.mount.position_m)
+    radar_p = ego_p + lever
+    radar_v = ego_v + np.cross(omega, lever)
+
+    motion = TrajectorySet([tg.trajectory for tg in targets]).evaluate(t)
+    p, v = motion.position_m, motion.velocity_mps
+    yaw, _ = _heading(motion)
+    relative = np.array([tg.frame == "ego" for tg in targets])
+    if relative.any():
+        # Motions given in the moving ego frame: rotate and carry along with the ego.
+        rel_p = np.einsum("fij,fkj->fki", ego_rot, p)
+        rel_v = np.einsum("fij,fkj->fki", ego_rot, v) + np.cross(omega[:, None, :], rel_p)
+        p = np.where(relative[None, :, None], ego_p[:, None, :] + rel_p, p)
+        v = np.where(relative[None, :, None], ego_v[:, None, :] + rel_v, v)
+        yaw = np.where(relative[None, :], yaw + ego_yaw[:, None], yaw)
+
+    line = p - radar_p[:, None, :]
+    range_m = np.linalg.norm(line, axis=-1)
+    safe_range = np.where(range_m > 0.0, range_m, 1.0)
+    radial = np.einsum("fki,fki->fk", line, v - radar_v[:, None, :]) / safe_range
+
+    # World -> radar frame: undo the ego yaw, then the mount rotation.
+    to_radar = np.einsum("ij,fkj->fki", scenario.mount.rotation.T,
+                         np.einsum("fji,fkj->fki", ego_rot, line))
+    x, y, z = to_radar[..., 0], to_radar[..., 1], to_radar[..., 2]
+    az = np.degrees(np.arctan2(y, x))
+    el = np.degrees(np.arctan2(z, np.hypot(x, y)))
+
+    # Aspect: where the radar lies as seen from the target's body (0: ahead of it).
+    aspect = np.degrees(np.arctan2(-line[..., 1], -line[..., 0]) - yaw)
+    rng = np.random.default_rng(scenario.seed)
+    rcs = rcs_series([tg.rcs for tg in targets], aspect, rng)
+
+    appear = np.array([tg.appear_s for tg in targets])
+    disappear = np.array([tg.disappear_s for tg in targets])
+    profile = scenario.radar
+    return Tracks(
+        names=tuple(tg.name for tg in targets),
+        t_s=t,
+        range_m=range_m,
+        radial_velocity_mps=radial,
+        doppler_hz=-2.0 * radial / profile.wavelength_m,
+        rcs_dbsm=rcs,
+        az_deg=az,
+        el_deg=el,
+        position_m=to_radar,
+        present=(t[:, None] >= appear) & (t[:, None] < disappear),
+        in_coverage=assign_quads(scenario.rig, az, el) >= 0,
+        in_range=(range_m > 0.0) & (range_m < profile.max_range_m),
+        in_velocity=np.abs(radial) < profile.max_radial_velocity_mps,
+    )

@@ -1,0 +1,16 @@
+"""Traffic scenes: the ``*.scenario.yaml`` format, its loader and the typed model."""
+
+from .loader import SCENE_SUFFIX, load_scenario, scenario_schema
+from .model import Effects, Expectations, Mount, RcsModel, Scenario, TargetSpec
+
+__all__ = [
+    "SCENE_SUFFIX",
+    "Effects",
+    "Expectations",
+    "Mount",
+    "RcsModel",
+    "Scenario",
+    "TargetSpec",
+    "load_scenario",
+    "scenario_schema",
+]
