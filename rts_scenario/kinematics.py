@@ -90,9 +90,12 @@ def _heading(motion: Motion) -> tuple[FloatArray, FloatArray]:
     return yaw, rate
 
 
-def compute_tracks(scenario: Scenario) -> Tracks:
-    """Evaluate the scene at every frame: range, radial velocity, Doppler, RCS and angles."""
-    t = scenario.t_s
+def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None) -> Tracks:
+    """Evaluate the scene at every frame: range, radial velocity, Doppler, RCS and angles.
+
+    ``t_s`` evaluates at other times than the scene's frames (shape (F,)).
+    """
+    t = scenario.t_s if t_s is None else np.asarray(t_s, dtype=np.float64)
     targets = scenario.targets
     ego = TrajectorySet([scenario.ego]).evaluate(t)
     ego_yaw, ego_rate = (x[:, 0] for x in _heading(ego))

@@ -9,12 +9,14 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 
-def piece_index(tables: list[FloatArray], query: FloatArray) -> IntArray:
+def piece_index(tables: list[FloatArray], query: FloatArray, open_end: bool = False) -> IntArray:
     """Index ``j`` with ``table_k[j] <= query[:, k] < table_k[j+1]`` per object k, clipped.
 
-    Tables are increasing; the result is clipped to ``[0, len(table_k) - 2]`` (or 0), so values
-    outside a table extrapolate its first or last piece. One searchsorted for all objects:
-    each object's table is shifted by its own multiple of a span larger than every value.
+    Tables are increasing. Values below a table's start belong to its first piece. With
+    ``open_end`` the last entry starts a piece that never ends (result up to ``len - 1``);
+    otherwise entries bound pieces and values past the end extrapolate the last one (result up
+    to ``len - 2``). One searchsorted for all objects: each object's table is shifted by its
+    own multiple of a span larger than every value.
     """
     sizes = np.array([t.size for t in tables])
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -23,4 +25,4 @@ def piece_index(tables: list[FloatArray], query: FloatArray) -> IntArray:
     shift = np.arange(len(tables)) * span
     keys = flat + np.repeat(shift, sizes)
     j = np.searchsorted(keys, query + shift, side="right") - 1 - starts
-    return np.clip(j, 0, np.maximum(sizes - 2, 0))
+    return np.clip(j, 0, np.maximum(sizes - (1 if open_end else 2), 0))

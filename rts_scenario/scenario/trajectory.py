@@ -2,9 +2,9 @@
 
 Every motion of the scene vocabulary compiles to the same three parts:
 
-- a path: a polyline in 3-D with its cumulative arc length (a straight line for the simple
-  motions; the waypoints' polyline; a dense sampling of a cubic spline with its exact tangents
-  and curvature),
+- a path: points in 3-D with their cumulative arc length and the tangents at both ends of
+  each piece (a straight line for the simple motions; the waypoints' polyline; a dense
+  sampling of a cubic spline with its exact tangents), cubic Hermite between the points,
 - a travel law: arc length over time, piecewise quadratic (constant acceleration per piece),
 - lateral offsets: smooth lane changes (quintic in time) to the left of the path.
 
@@ -32,16 +32,17 @@ SPLINE_MIN_SAMPLES = 16
 
 @dataclass(frozen=True)
 class Path:
-    """A polyline with its arc length, tangents and curvature.
+    """Points (J, 3), their cumulative arc length (J,) and unit tangents per piece.
 
-    Points (J, 3), cumulative arc length (J,), unit tangents at the points (J, 3) and the
-    curvature of each piece (J - 1,). Beyond its ends it continues straight.
+    ``tangent_start`` and ``tangent_end`` (J - 1, 3) are the directions at both ends of each
+    piece. Between points the path is the cubic Hermite curve matching points and tangents (a
+    straight piece when both point along it); beyond its ends it continues straight.
     """
 
     points: FloatArray
     arc_m: FloatArray
-    tangents: FloatArray
-    curvature: FloatArray
+    tangent_start: FloatArray
+    tangent_end: FloatArray
 
     @classmethod
     def line(cls, start: FloatArray, heading_rad: float) -> Path:
@@ -49,7 +50,7 @@ class Path:
         direction = np.array([np.cos(heading_rad), np.sin(heading_rad), 0.0])
         start = np.asarray(start, dtype=np.float64)
         return cls(points=np.stack([start, start + direction]), arc_m=np.array([0.0, 1.0]),
-                   tangents=np.stack([direction, direction]), curvature=np.zeros(1))
+                   tangent_start=direction[None], tangent_end=direction[None])
 
     @classmethod
     def polyline(cls, points: FloatArray) -> Path:
@@ -57,11 +58,9 @@ class Path:
         chords = np.diff(points, axis=0)
         lengths = np.linalg.norm(chords, axis=1)
         directions = chords / lengths[:, None]
-        # Tangent at a point: of the piece that starts there (the last point: of the last piece).
-        tangents = np.vstack([directions, directions[-1:]])
         return cls(points=np.asarray(points, dtype=np.float64),
-                   arc_m=np.concatenate([[0.0], np.cumsum(lengths)]), tangents=tangents,
-                   curvature=np.zeros(len(chords)))
+                   arc_m=np.concatenate([[0.0], np.cumsum(lengths)]),
+                   tangent_start=directions, tangent_end=directions)
 
     @classmethod
     def spline(cls, points: FloatArray) -> tuple[Path, FloatArray]:
@@ -79,15 +78,11 @@ class Path:
         )
         samples = curve(params)
         d1 = curve(params, 1)
-        d2 = curve(params, 2)
-        speed = np.linalg.norm(d1, axis=1)
-        tangents = d1 / speed[:, None]
-        planar = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-        kappa = planar / np.maximum(np.hypot(d1[:, 0], d1[:, 1]) ** 3, 1e-300)
+        tangents = d1 / np.linalg.norm(d1, axis=1)[:, None]
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(samples, axis=0), axis=1))])
         at_points = arc[np.searchsorted(params, knots)]
-        return cls(points=samples, arc_m=arc, tangents=tangents,
-                   curvature=0.5 * (kappa[:-1] + kappa[1:])), at_points
+        return cls(points=samples, arc_m=arc, tangent_start=tangents[:-1],
+                   tangent_end=tangents[1:]), at_points
 
 
 @dataclass(frozen=True)
@@ -153,9 +148,9 @@ class TrajectorySet:
         self._path_start = np.concatenate([[0], np.cumsum(sizes)[:-1]])
         self._points = np.concatenate([p.points for p in self._paths])
         self._arc = np.concatenate([p.arc_m for p in self._paths])
-        self._tangents = np.concatenate([p.tangents for p in self._paths])
-        # Curvature per point (of the piece starting there; 0 after the last point).
-        self._kappa = np.concatenate([np.append(p.curvature, 0.0) for p in self._paths])
+        self._piece_start = self._path_start - np.arange(self.count)
+        self._tangent_start = np.concatenate([p.tangent_start for p in self._paths])
+        self._tangent_end = np.concatenate([p.tangent_end for p in self._paths])
         law_sizes = np.array([law.knots_s.size for law in self._laws])
         self._law_start = np.concatenate([[0], np.cumsum(law_sizes)[:-1]])
         self._knots = np.concatenate([law.knots_s for law in self._laws])
@@ -173,31 +168,45 @@ class TrajectorySet:
         """Evaluate all objects at times ``t_s`` (shape (F,)); arrays are ``(F, K, ...)``."""
         t = np.broadcast_to(np.asarray(t_s, dtype=np.float64)[:, None], (t_s.size, self.count))
         s, ds, dds = self._travel(t)
-        # Paths have at least two points and the lookup stops one short of the end.
-        j = piece_index([p.arc_m for p in self._paths], s) + self._path_start
-        arc_j = self._arc[j]
-        piece = self._arc[j + 1] - arc_j
-        frac = np.clip((s - arc_j) / piece, 0.0, 1.0)[..., None]
-        chord = (self._points[j + 1] - self._points[j]) / piece[..., None]
-        base = self._points[j] + (s - arc_j)[..., None] * chord
-        tangent = (1.0 - frac) * self._tangents[j] + frac * self._tangents[j + 1]
-        tangent /= np.linalg.norm(tangent, axis=-1, keepdims=True)
-        kappa = self._kappa[j]
-        normal = np.stack([-tangent[..., 1], tangent[..., 0], np.zeros_like(s)], axis=-1)
-        normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-300)
+        g, g1, g2, g3 = self._path(s)  # position and its 1st..3rd derivatives by arc length
         lat, dlat, ddlat = self._lateral(t)
-        # Frenet frame: dT/dt = kappa s' N and dN/dt = -kappa s' T (planar curvature).
-        along = 1.0 - kappa * lat
-        position = base + lat[..., None] * normal
-        velocity = (ds * along)[..., None] * tangent + dlat[..., None] * normal
-        accel_t = dds * along - 2.0 * kappa * ds * dlat
-        accel_n = kappa * ds * ds * along + ddlat
-        acceleration = accel_t[..., None] * tangent + accel_n[..., None] * normal
+        n, n1, n2 = _left_normal(g1, g2, g3)
+        # Chain rule with s(t): d/dt = s' d/ds, d2/dt2 = s'' d/ds + s'^2 d2/ds2.
+        ds_, dds_ = ds[..., None], dds[..., None]
+        lat_, dlat_, ddlat_ = lat[..., None], dlat[..., None], ddlat[..., None]
+        position = g + lat_ * n
+        velocity = ds_ * g1 + dlat_ * n + lat_ * ds_ * n1
+        acceleration = (dds_ * g1 + ds_ * ds_ * g2 + ddlat_ * n + 2.0 * dlat_ * ds_ * n1
+                        + lat_ * (dds_ * n1 + ds_ * ds_ * n2))
+        tangent = g1 / np.linalg.norm(g1, axis=-1, keepdims=True)
         return Motion(position_m=position, velocity_mps=velocity, acceleration_mps2=acceleration,
                       tangent=tangent)
 
+    def _path(self, s: FloatArray) -> tuple[FloatArray, ...]:
+        """Hermite path position and its first three arc-length derivatives at ``s``."""
+        # Paths have at least two points and the lookup stops one short of the end.
+        piece = piece_index([p.arc_m for p in self._paths], s)
+        j = piece + self._path_start
+        k = piece + self._piece_start
+        length = (self._arc[j + 1] - self._arc[j])[..., None]
+        f = (s[..., None] - self._arc[j][..., None]) / length
+        fc = np.clip(f, 0.0, 1.0)
+        # Beyond the ends the path goes on straight along the end tangent.
+        beyond = (f - fc) * length
+        p0, p1 = self._points[j], self._points[j + 1]
+        m0, m1 = self._tangent_start[k] * length, self._tangent_end[k] * length
+        f2, f3 = fc * fc, fc * fc * fc
+        g = ((2 * f3 - 3 * f2 + 1) * p0 + (f3 - 2 * f2 + fc) * m0 + (-2 * f3 + 3 * f2) * p1
+             + (f3 - f2) * m1)
+        g1 = ((6 * f2 - 6 * fc) * (p0 - p1) + (3 * f2 - 4 * fc + 1) * m0
+              + (3 * f2 - 2 * fc) * m1) / length
+        inside = (beyond == 0.0)
+        g2 = ((12 * fc - 6) * (p0 - p1) + (6 * fc - 4) * m0 + (6 * fc - 2) * m1) / length**2
+        g3 = (12 * (p0 - p1) + 6 * m0 + 6 * m1) / length**3
+        return g + beyond * g1, g1, g2 * inside, g3 * inside
+
     def _travel(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        k = piece_index([law.knots_s for law in self._laws], t) + self._law_start
+        k = piece_index([law.knots_s for law in self._laws], t, open_end=True) + self._law_start
         dt = t - self._knots[k]
         a = self._a[k]
         return self._s0[k] + self._v0[k] * dt + 0.5 * a * dt * dt, self._v0[k] + a * dt, a
@@ -210,3 +219,21 @@ class TrajectorySet:
         bend = 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) / duration**2
         return ((offset * ramp).sum(axis=1), (offset * slope).sum(axis=1),
                 (offset * bend).sum(axis=1))
+
+
+def _left_normal(g1: FloatArray, g2: FloatArray, g3: FloatArray) -> tuple[FloatArray, ...]:
+    """Horizontal left normal of a path with derivative ``g1`` and its two s-derivatives."""
+    # n = perp(h) / |h| with h the horizontal part of g1 and perp(x, y) = (-y, x).
+    def perp(v: FloatArray) -> FloatArray:
+        return np.stack([-v[..., 1], v[..., 0], np.zeros_like(v[..., 0])], axis=-1)
+
+    h, h1, h2 = (np.concatenate([v[..., :2], np.zeros_like(v[..., :1])], axis=-1)
+                 for v in (g1, g2, g3))
+    norm = np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    a = (h * h1).sum(-1, keepdims=True)  # h . h'
+    b = (h1 * h1 + h * h2).sum(-1, keepdims=True)  # (h . h')'
+    n = perp(h) / norm
+    n1 = perp(h1) / norm - perp(h) * a / norm**3
+    n2 = (perp(h2) / norm - 2.0 * perp(h1) * a / norm**3
+          - perp(h) * (b / norm**3 - 3.0 * a * a / norm**5))
+    return n, n1, n2

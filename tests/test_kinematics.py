@@ -1,0 +1,218 @@
+import numpy as np
+import pytest
+from scene_helpers import write_scene
+
+from rts_scenario.kinematics import compute_tracks
+from rts_scenario.scenario import load_scenario
+
+LAMBDA = 299_792_458.0 / 77.5e9
+
+
+def tracks_of(tmp_path, targets, **extra):
+    return compute_tracks(load_scenario(write_scene(tmp_path, targets, **extra)))
+
+
+def test_straight_line_pass_by_matches_analytic_formulas(tmp_path):
+    # Radar at the origin, target passing on a line parallel to y at x = d, height h.
+    d, y0, h, v = 20.0, -15.0, 1.3, 3.0
+    tr = tracks_of(tmp_path, [{
+        "name": "passer", "rcs": {"rcs_dbsm": 10},
+        "motion": {"type": "constant_velocity", "position_m": [d, y0, h], "heading_deg": 90,
+                   "speed_mps": v},
+    }])
+    t = tr.t_s
+    y = y0 + v * t
+    rng = np.sqrt(d * d + y * y + h * h)
+    np.testing.assert_allclose(tr.range_m[:, 0], rng, rtol=1e-9)
+    np.testing.assert_allclose(tr.radial_velocity_mps[:, 0], y * v / rng, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(tr.az_deg[:, 0], np.degrees(np.arctan2(y, d)), rtol=1e-9,
+                               atol=1e-12)
+    np.testing.assert_allclose(tr.el_deg[:, 0], np.degrees(np.arctan2(h, np.hypot(d, y))),
+                               rtol=1e-9)
+    np.testing.assert_allclose(tr.doppler_hz[:, 0], -2 * y * v / rng / LAMBDA, rtol=1e-9,
+                               atol=1e-9)
+
+
+def test_moving_ego_with_mount_offset_and_yaw(tmp_path):
+    # Ego drives along x at 10 m/s; radar 3.7 m ahead, 0.5 m up, yawed 10 deg left; a target
+    # stands at (60, 4, 0.5).
+    tr = tracks_of(tmp_path, [{
+        "name": "post", "rcs": {"rcs_dbsm": 0},
+        "motion": {"type": "stationary", "position_m": [60.0, 4.0, 0.5]},
+    }], ego={"motion": {"type": "constant_velocity", "position_m": [0, 0, 0], "speed_mps": 10.0}},
+        radar={"profile": "awr1843boost", "mount": {"x_m": 3.7, "z_m": 0.5, "yaw_deg": 10.0}})
+    t = tr.t_s
+    dx = 60.0 - 3.7 - 10.0 * t
+    rng = np.hypot(dx, 4.0)
+    np.testing.assert_allclose(tr.range_m[:, 0], rng, rtol=1e-9)
+    np.testing.assert_allclose(tr.radial_velocity_mps[:, 0], -10.0 * dx / rng, rtol=1e-9)
+    np.testing.assert_allclose(tr.az_deg[:, 0], np.degrees(np.arctan2(4.0, dx)) - 10.0,
+                               atol=1e-9)
+    np.testing.assert_allclose(tr.el_deg[:, 0], 0.0, atol=1e-9)
+
+
+def test_radial_velocity_is_the_derivative_of_range(tmp_path):
+    # Curved ego path (spline), speed changes, lane changes, offset and yawed mount: compare
+    # the analytic range rate with a central difference of the range at +-1 us.
+    targets = [
+        {"name": "weaver", "rcs": {"rcs_dbsm": 0},
+         "motion": {"type": "waypoints", "path": "spline", "points": [
+             {"position_m": [30, 2, 0.5], "speed_mps": 8},
+             {"position_m": [60, -3, 0.8], "speed_mps": 12},
+             {"position_m": [90, 4, 0.5], "speed_mps": 9}]},
+         "lane_changes": [{"start_s": 0.5, "duration_s": 2.0, "offset_m": 1.5}]},
+        {"name": "braker", "rcs": {"rcs_dbsm": 0},
+         "motion": {"type": "constant_acceleration", "position_m": [40, -3.5, 0.6],
+                    "heading_deg": 5, "speed_mps": 12, "acceleration_mps2": -3}},
+        {"name": "follower", "frame": "ego", "rcs": {"rcs_dbsm": 0},
+         "motion": {"type": "constant_velocity", "position_m": [25, 1, 0.6], "speed_mps": 1.0}},
+    ]
+    ego = {"motion": {"type": "waypoints", "path": "spline", "points": [
+        {"position_m": [0, 0, 0], "speed_mps": 10},
+        {"position_m": [25, 3, 0], "speed_mps": 14},
+        {"position_m": [50, 0, 0], "speed_mps": 11}]},
+        "lane_changes": [{"start_s": 1.0, "duration_s": 1.5, "offset_m": -2.0}]}
+    radar = {"profile": "awr1843boost",
+             "mount": {"x_m": 3.7, "y_m": 0.4, "z_m": 0.5, "yaw_deg": 8.0, "pitch_deg": 2.0}}
+    scene = load_scenario(write_scene(tmp_path, targets, ego=ego, radar=radar, duration_s=4.0,
+                                      frame_rate_hz=50.0))
+    # Off the frame grid, so no sample sits exactly on a lane change's start or end, where the
+    # jerk jumps and a central difference (not the analytic rate) is off by delta * jump.
+    t = scene.t_s[1:] + 0.00317
+    delta = 1e-6
+    after = compute_tracks(scene, t + delta).range_m
+    before = compute_tracks(scene, t - delta).range_m
+    analytic = compute_tracks(scene, t).radial_velocity_mps
+    np.testing.assert_allclose((after - before) / (2 * delta), analytic, atol=1e-6)
+
+
+def test_lane_change_shifts_by_offset_smoothly(tmp_path):
+    tr = tracks_of(tmp_path, [{
+        "name": "lc", "rcs": {"rcs_dbsm": 0},
+        "motion": {"type": "constant_velocity", "position_m": [20, 0, 0], "speed_mps": 0.0},
+        "lane_changes": [{"start_s": 2.0, "duration_s": 4.0, "offset_m": 3.5}],
+    }], duration_s=8.0)
+    y = tr.position_m[:, 0, 1]
+    t = tr.t_s
+    tau = np.clip((t - 2.0) / 4.0, 0, 1)
+    np.testing.assert_allclose(y, 3.5 * (10 * tau**3 - 15 * tau**4 + 6 * tau**5), atol=1e-12)
+
+
+def test_constant_acceleration_stops_and_stays(tmp_path):
+    tr = tracks_of(tmp_path, [{
+        "name": "braking", "rcs": {"rcs_dbsm": 0},
+        "motion": {"type": "constant_acceleration", "position_m": [10, 0, 0],
+                   "speed_mps": 10, "acceleration_mps2": -4},
+    }], duration_s=6.0)
+    x = tr.position_m[:, 0, 0]
+    t = tr.t_s
+    expect = np.where(t < 2.5, 10 + 10 * t - 2 * t * t, 10 + 12.5)
+    np.testing.assert_allclose(x, expect, atol=1e-12)
+    np.testing.assert_allclose(tr.radial_velocity_mps[:, 0], np.maximum(10 - 4 * t, 0),
+                               atol=1e-12)
+
+
+def test_speed_profile_integrates_piecewise(tmp_path):
+    tr = tracks_of(tmp_path, [{
+        "name": "prof", "rcs": {"rcs_dbsm": 0},
+        "motion": {"type": "speed_profile", "position_m": [5, 0, 0], "profile": [
+            {"t_s": 1.0, "speed_mps": 2.0}, {"t_s": 3.0, "speed_mps": 6.0},
+            {"t_s": 4.0, "speed_mps": 6.0}]},
+    }], duration_s=6.0)
+    t = tr.t_s
+    # 2 m/s until 1 s, then +2 m/s^2 until 3 s, then 6 m/s.
+    x = np.where(t < 1, 5 + 2 * t,
+                 np.where(t < 3, 7 + 2 * (t - 1) + (t - 1) ** 2, 7 + 4 + 4 + 6 * (t - 3)))
+    np.testing.assert_allclose(tr.position_m[:, 0, 0], x, atol=1e-12)
+
+
+def test_waypoints_arrive_on_time_and_spline_passes_through_them(tmp_path):
+    points = [[10, 0, 0], [20, 0, 0], [20, 10, 0]]
+    for path in ("polyline", "spline"):
+        tr = tracks_of(tmp_path, [{
+            "name": "wp", "rcs": {"rcs_dbsm": 0},
+            "motion": {"type": "waypoints", "path": path, "start_s": 1.0,
+                       "points": [{"position_m": p, "speed_mps": 2.0} for p in points]},
+        }], duration_s=20.0, frame_rate_hz=100.0)
+        pos = tr.position_m[:, 0]
+        assert np.allclose(pos[:100], [10, 0, 0])  # waits until start_s
+        # Constant 2 m/s: at arc length 10 m (second waypoint for the polyline) after 5 s.
+        if path == "polyline":
+            np.testing.assert_allclose(pos[600], [20, 0, 0], atol=1e-9)
+            np.testing.assert_allclose(pos[1100], [20, 10, 0], atol=1e-9)
+        else:
+            dist = np.linalg.norm(pos - np.array([20, 10, 0]), axis=1)
+            assert dist.min() < 0.02
+            dist = np.linalg.norm(pos - np.array([20, 0, 0]), axis=1)
+            assert dist.min() < 0.02
+        speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) * 100.0
+        np.testing.assert_allclose(speed[150:1000], 2.0, rtol=2e-3)
+
+
+def test_target_in_ego_frame_keeps_its_distance(tmp_path):
+    tr = tracks_of(tmp_path, [{
+        "name": "convoy", "frame": "ego", "rcs": {"rcs_dbsm": 0},
+        "motion": {"type": "stationary", "position_m": [30, 0, 0.5]},
+    }], ego={"motion": {"type": "waypoints", "path": "spline", "points": [
+        {"position_m": [0, 0, 0], "speed_mps": 15}, {"position_m": [80, 10, 0], "speed_mps": 20},
+        {"position_m": [160, 0, 0], "speed_mps": 15}]}})
+    np.testing.assert_allclose(tr.range_m[:, 0], np.hypot(30, 0.5), rtol=1e-9)
+    np.testing.assert_allclose(tr.radial_velocity_mps[:, 0], 0.0, atol=1e-9)
+
+
+def test_rcs_table_and_fluctuation(tmp_path):
+    targets = [
+        {"name": "front", "rcs": {"aspect_deg": [0, 90, 180, 270], "rcs_dbsm": [10, 20, 30, 20]},
+         "motion": {"type": "stationary", "position_m": [20, 0, 0], "heading_deg": 180}},
+        {"name": "quarter", "rcs": {"aspect_deg": [0, 90, 180, 270], "rcs_dbsm": [10, 20, 30, 20]},
+         "motion": {"type": "stationary", "position_m": [20, 0, 0], "heading_deg": 135}},
+        {"name": "s1", "rcs": {"rcs_dbsm": 0, "fluctuation": "swerling1"},
+         "motion": {"type": "stationary", "position_m": [20, 0, 0]}},
+        {"name": "s3", "rcs": {"rcs_dbsm": 0, "fluctuation": "swerling3"},
+         "motion": {"type": "stationary", "position_m": [20, 0, 0]}},
+    ]
+    tr = tracks_of(tmp_path, targets, duration_s=500.0, seed=5)
+    # Facing the radar: aspect 0 -> 10 dBsm; yawed 45 deg away: halfway between 10 and 20.
+    np.testing.assert_allclose(tr.rcs_dbsm[:, 0], 10.0, atol=1e-12)
+    np.testing.assert_allclose(tr.rcs_dbsm[:, 1], 15.0, atol=1e-12)
+    s1 = 10 ** (tr.rcs_dbsm[:, 2] / 10)
+    s3 = 10 ** (tr.rcs_dbsm[:, 3] / 10)
+    n = len(s1)  # 10 000 draws: standard errors ~1 %
+    assert abs(s1.mean() - 1) < 4 / np.sqrt(n) and abs(s1.var() - 1) < 0.1
+    assert abs(s3.mean() - 1) < 4 * np.sqrt(0.5 / n) and abs(s3.var() - 0.5) < 0.05
+    again = tracks_of(tmp_path, targets, duration_s=500.0, seed=5)
+    np.testing.assert_array_equal(again.rcs_dbsm, tr.rcs_dbsm)
+    other = tracks_of(tmp_path, targets, duration_s=500.0, seed=6)
+    assert not np.array_equal(other.rcs_dbsm[:, 2], tr.rcs_dbsm[:, 2])
+
+
+def test_masks(tmp_path):
+    targets = [
+        {"name": "late", "appear_s": 2.0, "disappear_s": 5.0, "rcs": {"rcs_dbsm": 0},
+         "motion": {"type": "stationary", "position_m": [20, 0, 0]}},
+        {"name": "crossing", "rcs": {"rcs_dbsm": 0},
+         "motion": {"type": "constant_velocity", "position_m": [20, -12, 0],
+                    "heading_deg": 90, "speed_mps": 3.0}},
+        {"name": "far", "rcs": {"rcs_dbsm": 0},
+         "motion": {"type": "stationary", "position_m": [80, 0, 0]}},
+        {"name": "fast", "rcs": {"rcs_dbsm": 0},
+         "motion": {"type": "constant_velocity", "position_m": [10, 0, 0], "speed_mps": 12}},
+    ]
+    tr = tracks_of(tmp_path, targets)
+    t = tr.t_s
+    np.testing.assert_array_equal(tr.present[:, 0], (t >= 2.0) & (t < 5.0))
+    az = tr.az_deg[:, 1]
+    inside = np.abs(az) < 20.9
+    outside = np.abs(az) > 21.1
+    assert np.all(tr.in_coverage[inside, 1]) and not np.any(tr.in_coverage[outside, 1])
+    assert not tr.in_range[:, 2].any() and tr.in_range[:, 0].all()
+    assert not tr.in_velocity[:, 3].any() and tr.in_velocity[:, 0].all()
+    assert not tr.checkable[:, 2].any()
+
+
+@pytest.mark.parametrize("n_frames_expected, duration, rate", [(200, 10.0, 20.0), (1, 0.01, 20.0)])
+def test_frame_count(tmp_path, n_frames_expected, duration, rate):
+    tr = tracks_of(tmp_path, [{"name": "a", "rcs": {"rcs_dbsm": 0},
+                               "motion": {"type": "stationary", "position_m": [20, 0, 0]}}],
+                   duration_s=duration, frame_rate_hz=rate)
+    assert tr.t_s.shape == (n_frames_expected,)
