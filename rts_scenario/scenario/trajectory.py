@@ -229,11 +229,15 @@ def _left_normal(g1: FloatArray, g2: FloatArray, g3: FloatArray) -> tuple[FloatA
 
     h, h1, h2 = (np.concatenate([v[..., :2], np.zeros_like(v[..., :1])], axis=-1)
                  for v in (g1, g2, g3))
-    norm = np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    length = np.linalg.norm(h, axis=-1, keepdims=True)
+    # A vertical path has no horizontal left: take world +y there (it only matters for lateral
+    # offsets of a vertically moving object).
+    vertical = length < 1e-9
+    norm = np.where(vertical, 1.0, length)
     a = (h * h1).sum(-1, keepdims=True)  # h . h'
     b = (h1 * h1 + h * h2).sum(-1, keepdims=True)  # (h . h')'
-    n = perp(h) / norm
-    n1 = perp(h1) / norm - perp(h) * a / norm**3
-    n2 = (perp(h2) / norm - 2.0 * perp(h1) * a / norm**3
-          - perp(h) * (b / norm**3 - 3.0 * a * a / norm**5))
+    n = np.where(vertical, np.array([0.0, 1.0, 0.0]), perp(h) / norm)
+    n1 = np.where(vertical, 0.0, perp(h1) / norm - perp(h) * a / norm**3)
+    n2 = np.where(vertical, 0.0, perp(h2) / norm - 2.0 * perp(h1) * a / norm**3
+                  - perp(h) * (b / norm**3 - 3.0 * a * a / norm**5))
     return n, n1, n2
