@@ -6,6 +6,7 @@ Every error names the file, line, column and key path of the offending value, as
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -123,8 +124,9 @@ def load_yaml(path: str | Path, text: str | None = None) -> Document:
             raise ScenarioError(f"cannot read file: {exc.strerror or exc}", file=file) from None
         except UnicodeDecodeError as exc:
             raise ScenarioError(f"not UTF-8 text: {exc.reason}", file=file) from None
-    loader = _Loader(text)
+    loader = None
     try:
+        loader = _Loader(text)
         node = loader.get_single_node()
         marks: dict[KeyPath, tuple[int, int]] = {}
         data = None if node is None else _construct(node, (), marks, loader, file)
@@ -135,12 +137,17 @@ def load_yaml(path: str | Path, text: str | None = None) -> Document:
         problem = exc.problem or exc.context or "invalid YAML"
         raise ScenarioError(f"invalid YAML: {problem}", file=file, line=line,
                             column=column) from None
+    except yaml.reader.ReaderError as exc:
+        line = text.count("\n", 0, exc.position) + 1
+        raise ScenarioError(f"invalid YAML: {exc.reason} (character {exc.character!r})",
+                            file=file, line=line) from None
     except yaml.YAMLError as exc:
         raise ScenarioError(f"invalid YAML: {exc}", file=file) from None
     except (ValueError, TypeError, OverflowError, RecursionError) as exc:
         raise ScenarioError(f"invalid YAML value: {exc}", file=file) from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
     return Document(data=data, file=file, marks=marks)
 
 
@@ -152,6 +159,7 @@ def validate(document: Document, schema: dict[str, Any]) -> None:
     ScenarioError
         Naming file, line, key path, the offending value and what is allowed.
     """
+    _reject_non_finite(document, document.data, ())
     validator = jsonschema.Draft202012Validator(schema)
     best = jsonschema.exceptions.best_match(validator.iter_errors(document.data))
     if best is None:
@@ -163,6 +171,18 @@ def validate(document: Document, schema: dict[str, Any]) -> None:
         if extra:
             path = (*path, extra[0])
     raise document.error(path, _describe(best))
+
+
+def _reject_non_finite(document: Document, node: Any, path: KeyPath) -> None:
+    """NaN and infinities pass every JSON Schema bound (all comparisons are false): reject."""
+    if isinstance(node, float) and not math.isfinite(node):
+        raise document.error(path, f"must be a finite number, got {node}")
+    if isinstance(node, dict):
+        for key, value in node.items():
+            _reject_non_finite(document, value, (*path, key))
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            _reject_non_finite(document, value, (*path, i))
 
 
 def _describe(error: jsonschema.ValidationError) -> str:

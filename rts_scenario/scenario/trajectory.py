@@ -142,6 +142,9 @@ class TrajectorySet:
 
     def __init__(self, trajectories: list[Trajectory]) -> None:
         self.count = len(trajectories)
+        if not trajectories:  # an empty scene: tables of one dummy object, never evaluated
+            trajectories = [Trajectory(Path.line(np.zeros(3), 0.0),
+                                       TravelLaw.pieces([0.0], [0.0], [0.0]))]
         self._paths = [t.path for t in trajectories]
         self._laws = [t.law for t in trajectories]
         sizes = np.array([p.arc_m.size for p in self._paths])
@@ -166,6 +169,9 @@ class TrajectorySet:
 
     def evaluate(self, t_s: FloatArray) -> Motion:
         """Evaluate all objects at times ``t_s`` (shape (F,)); arrays are ``(F, K, ...)``."""
+        if self.count == 0:
+            empty = np.zeros((np.size(t_s), 0, 3))
+            return Motion(empty, empty, empty, empty)
         t = np.broadcast_to(np.asarray(t_s, dtype=np.float64)[:, None], (t_s.size, self.count))
         s, ds, dds = self._travel(t)
         g, g1, g2, g3 = self._path(s)  # position and its 1st..3rd derivatives by arc length

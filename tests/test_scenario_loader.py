@@ -1,0 +1,294 @@
+import re
+import shutil
+import textwrap
+from pathlib import Path
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import rts_scenario.cli as cli
+from rts_scenario import ScenarioError
+from rts_scenario.kinematics import compute_tracks
+from rts_scenario.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = sorted((ROOT / "scenarios").glob("*.scenario.yaml"))
+
+GOOD = """\
+rts_scenario: 1
+name: good
+duration_s: 5.0
+frame_rate_hz: 20.0
+radar:
+  profile: awr1843boost
+  mount: {x_m: 3.7, z_m: 0.5}
+rig: wide-3x5
+ego:
+  motion: {type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}
+targets:
+  - name: car
+    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}
+    rcs: {rcs_dbsm: 10.0}
+"""
+
+
+def test_at_least_ten_realistic_and_four_hard_scenes():
+    names = {p.name.removesuffix(".scenario.yaml") for p in SCENES}
+    hard = {n for n in names if n.startswith("hard_")}
+    assert len(names - hard) >= 10
+    assert hard >= {"hard_quad_sweep", "hard_coverage_edges", "hard_too_close",
+                    "hard_same_range_doppler"}
+
+
+@pytest.mark.parametrize("path", SCENES, ids=lambda p: p.name)
+def test_shipped_scenes_validate(path):
+    scene = load_scenario(path)
+    tracks = compute_tracks(scene)
+    assert tracks.range_m.shape == (scene.n_frames, len(scene.targets))
+    assert tracks.checkable.any()
+
+
+def test_dense_scene_has_at_least_eight_simultaneous_targets():
+    tracks = compute_tracks(load_scenario(ROOT / "scenarios" / "dense_traffic.scenario.yaml"))
+    assert tracks.checkable.sum(axis=1).max() >= 8
+
+
+def test_readme_example_is_a_valid_scene(tmp_path):
+    text = (ROOT / "scenarios" / "README.md").read_text()
+    example = re.search(r"## A complete, annotated scene\n\n```yaml\n(.*?)```", text, re.S)
+    assert example
+    shutil.copytree(ROOT / "scenarios" / "fragments", tmp_path / "fragments")
+    path = tmp_path / "example.scenario.yaml"
+    path.write_text(example.group(1))
+    scene = load_scenario(path)
+    assert [t.name for t in scene.targets][:3] == ["parked-1", "parked-2", "parked-3"]
+    assert scene.marks == ("slow",)
+
+
+def test_good_scene_loads(tmp_path):
+    path = tmp_path / "good.scenario.yaml"
+    path.write_text(GOOD)
+    scene = load_scenario(path)
+    assert scene.n_frames == 100 and scene.targets[0].name == "car"
+
+
+def edit(replace: str, by: str) -> str:
+    assert replace in GOOD
+    return GOOD.replace(replace, by)
+
+
+# (scene text, expected line, expected key path, expected message fragment)
+BAD = [
+    (edit("rts_scenario: 1", "rts_scenario: 2"), 1, "rts_scenario", "allowed values: 1"),
+    (edit("name: good", "name: good\ncolour: red"), 3, "colour", "unknown key 'colour'"),
+    (edit("duration_s: 5.0", "duration_s: -1"), 3, "duration_s", "must be > 0"),
+    (edit("duration_s: 5.0", "duration_s: five"), 3, "duration_s", "must be of type number"),
+    (edit("frame_rate_hz: 20.0\n", ""), 1, "", "'frame_rate_hz' is required"),
+    (edit("profile: awr1843boost", "profile: awr9999"), 6, "radar.profile",
+     "unknown preset 'awr9999'; valid presets: awr1843boost, paper"),
+    (edit("mount: {x_m: 3.7, z_m: 0.5}", "mount: {x_m: 3.7, yaw_deg: 270}"), 7,
+     "radar.mount.yaw_deg", "must be <= 180"),
+    (edit("rig: wide-3x5", "rig: narrow"), 8, "rig", "valid presets: kit-table1, wide-3x5"),
+    (edit("rig: wide-3x5", "rig: ../../etc/x.rig.yaml"), 8, "rig",
+     "leaves the scene's folder tree"),
+    (edit("rig: wide-3x5", "rig: /etc/x.rig.yaml"), 8, "rig", "must be a path relative"),
+    (edit("rig: wide-3x5", "rig: rigs/missing.rig.yaml"), 8, "rig", "file not found"),
+    (edit("type: constant_velocity, position_m: [0, 0, 0]",
+          "type: teleport, position_m: [0, 0, 0]"), 10, "ego.motion.type",
+     "allowed values: 'stationary', 'constant_velocity'"),
+    (edit("position_m: [0, 0, 0]", "position_m: [0, 0]"), 10, "ego.motion.position_m",
+     "must have at least 3 items"),
+    (edit("speed_mps: 20.0}", "speed_mps: 20.0, acceleration_mps2: 1}"), 10,
+     "ego.motion.acceleration_mps2", "unknown key 'acceleration_mps2'"),
+    (edit("speed_mps: 20.0}", "speed_mps: -20.0}"), 10, "ego.motion.speed_mps", "must be >= 0"),
+    (edit("  - name: car\n", "  - name: car!\n"), 12, "targets[0].name", "does not match"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0, fluctuation: swerling2}"),
+     14, "targets[0].rcs.fluctuation", "allowed values: 'none', 'swerling1', 'swerling3'"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: [1, 2]}"), 14, "targets[0].rcs",
+     "an RCS table needs both aspect_deg"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {aspect_deg: [0, 90, 180], rcs_dbsm: [1, 2]}"),
+     14, "targets[0].rcs.rcs_dbsm", "needs one value per aspect_deg entry (3), got 2"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {aspect_deg: [0, 360], rcs_dbsm: [1, 2]}"),
+     14, "targets[0].rcs.aspect_deg", "distinct modulo 360"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 4\n"
+          "    disappear_s: 2"), 16, "targets[0].disappear_s", "must be later than appear_s"),
+    (edit("    rcs: {rcs_dbsm: 10.0}\n", "    rcs: {rcs_dbsm: 10.0}\n" + GOOD.split("targets:\n")[1]),
+     15, "targets[1].name", "duplicate target name 'car'"),
+    (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "    motion:\n      type: speed_profile\n      position_m: [30, 0, 0]\n      profile:\n"
+          "        - {t_s: 2, speed_mps: 3}\n        - {t_s: 1, speed_mps: 4}"), 18,
+     "targets[0].motion.profile[1].t_s", "times must increase, got 1 after 2"),
+    (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "    motion:\n      type: waypoints\n      points:\n"
+          "        - {position_m: [30, 0, 0], speed_mps: 3}\n"
+          "        - {position_m: [30, 0, 0], speed_mps: 3}"), 17,
+     "targets[0].motion.points[1].position_m", "consecutive waypoints must differ"),
+    (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "    motion:\n      type: waypoints\n      points:\n"
+          "        - {position_m: [30, 0, 0], speed_mps: 0}\n"
+          "        - {position_m: [40, 0, 0], speed_mps: 0}"), 17,
+     "targets[0].motion.points[1].speed_mps", "both have speed 0"),
+    (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "    motion:\n      type: waypoints\n      points:\n"
+          "        - {position_m: [30, 0, 0], speed_mps: 3}"), 15, "targets[0].motion.points",
+     "must have at least 2 items"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
+          "      - {start_s: 1, duration_s: 0, offset_m: 3}"), 16,
+     "targets[0].lane_changes[0].duration_s", "must be > 0"),
+    (edit("targets:", "include: [../outside.yaml]\ntargets:"), 11, "include[0]",
+     "leaves the scene's folder tree"),
+    (edit("name: good", "name: good\nname: again"), 3, "name", "duplicate key"),
+    (edit("rig: wide-3x5", "rig: [wide"), 9, "", "invalid YAML"),
+    (edit("name: good", "name: !!python/object/apply:os.system [echo]"), 2, "name",
+     "invalid YAML"),
+    ("- just\n- a list\n", 1, "", "a scene must be a mapping"),
+    ("", None, "", "a scene must be a mapping"),
+    (edit("rig: wide-3x5", "rig: wide-3x5\nexpectations: {detection_rate: 1.5}"), 9,
+     "expectations.detection_rate", "must be <= 1"),
+]
+
+
+@pytest.mark.parametrize("text, line, key, message", BAD)
+def test_bad_scenes_name_file_line_key_and_what_is_allowed(tmp_path, text, line, key, message):
+    path = tmp_path / "bad.scenario.yaml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    err = info.value
+    assert err.file == str(path)
+    assert message in str(err), str(err)
+    if line is not None:
+        assert err.line == line, str(err)
+        assert str(err).startswith(f"{path}:{line}:")
+    if key:
+        assert err.key_path == key, str(err)
+        assert f": {key}: " in str(err)
+
+
+def test_twenty_distinct_bad_inputs():
+    assert len({message for *_, message in BAD}) >= 20
+
+
+def test_errors_in_included_and_referenced_files_point_into_them(tmp_path):
+    (tmp_path / "frag").mkdir()
+    (tmp_path / "frag" / "more.yaml").write_text(textwrap.dedent("""\
+        targets:
+          - name: extra
+            motion: {type: stationary, position_m: [20, 0, 0]}
+            rcs: {rcs_dbsm: 10, colour: red}
+        """))
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("targets:", "include: [frag/more.yaml]\ntargets:"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    assert info.value.file.endswith("more.yaml") and info.value.line == 4
+    assert info.value.key_path == "targets[0].rcs.colour"
+
+    (tmp_path / "rigs").mkdir()
+    (tmp_path / "rigs" / "bad.rig.yaml").write_text("rts_rig: 1\nname: r\nlayout: {az_deg: [1]}\n")
+    scene.write_text(edit("rig: wide-3x5", "rig: rigs/bad.rig.yaml"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    assert info.value.file.endswith("bad.rig.yaml") and info.value.line == 3
+
+
+def test_relative_rig_and_profile_files_inside_the_tree(tmp_path):
+    (tmp_path / "rigs").mkdir()
+    shutil.copy(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml", tmp_path / "rigs")
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("rig: wide-3x5", "rig: rigs/lab-2x3.rig.yaml"))
+    assert load_scenario(scene).rig.name == "lab-2x3"
+
+
+def test_cli_validate_exit_codes(tmp_path, capsys):
+    good = tmp_path / "good.scenario.yaml"
+    good.write_text(GOOD)
+    bad = tmp_path / "bad.scenario.yaml"
+    bad.write_text(edit("rts_scenario: 1", "rts_scenario: 3"))
+    assert cli.main(["validate", str(good)]) == 0
+    assert "ok:" in capsys.readouterr().out
+    assert cli.main(["validate", str(good), str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {bad}:1:") and "Traceback" not in err
+
+
+# --- fuzzing: only ScenarioError may escape the loader ---------------------------------------
+
+scalars = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6),
+                    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=12))
+documents = st.recursive(
+    scalars,
+    lambda children: st.lists(children, max_size=4)
+    | st.dictionaries(st.sampled_from(["rts_scenario", "name", "duration_s", "frame_rate_hz",
+                                       "radar", "rig", "ego", "targets", "motion", "type",
+                                       "position_m", "speed_mps", "rcs", "rcs_dbsm", "profile",
+                                       "points", "include", "x"]) | st.text(max_size=6),
+                      children, max_size=6),
+    max_leaves=25,
+)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                   HealthCheck.function_scoped_fixture])
+@given(doc=documents)
+def test_fuzz_random_documents(tmp_path, doc):
+    path = tmp_path / "fuzz.scenario.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    try:
+        load_scenario(path)
+    except ScenarioError:
+        pass
+
+
+def _mutations(good: dict):
+    """Valid scene with one value replaced somewhere."""
+    paths = []
+
+    def walk(node, prefix):
+        if isinstance(node, dict):
+            for k, v in node.items():
+                paths.append((*prefix, k))
+                walk(v, (*prefix, k))
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                paths.append((*prefix, i))
+                walk(v, (*prefix, i))
+
+    walk(good, ())
+    return st.tuples(st.sampled_from(paths), scalars | st.lists(scalars, max_size=3))
+
+
+GOOD_DATA = yaml.safe_load(GOOD)
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                   HealthCheck.function_scoped_fixture])
+@given(change=_mutations(GOOD_DATA))
+def test_fuzz_mutated_scenes(tmp_path, change):
+    import copy
+    path_keys, value = change
+    data = copy.deepcopy(GOOD_DATA)
+    node = data
+    for k in path_keys[:-1]:
+        node = node[k]
+    node[path_keys[-1]] = value
+    path = tmp_path / "fuzz.scenario.yaml"
+    path.write_text(yaml.safe_dump(data))
+    try:
+        scene = load_scenario(path)
+        compute_tracks(scene)
+    except ScenarioError:
+        pass
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(text=st.text(max_size=200))
+def test_fuzz_raw_text(tmp_path, text):
+    path = tmp_path / "raw.scenario.yaml"
+    path.write_text(text, encoding="utf-8", errors="surrogatepass")
+    try:
+        load_scenario(path)
+    except ScenarioError:
+        pass
