@@ -114,7 +114,8 @@ BAD = [
      14, "targets[0].rcs.aspect_deg", "distinct modulo 360"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 4\n"
           "    disappear_s: 2"), 16, "targets[0].disappear_s", "must be later than appear_s"),
-    (edit("    rcs: {rcs_dbsm: 10.0}\n", "    rcs: {rcs_dbsm: 10.0}\n" + GOOD.split("targets:\n")[1]),
+    (edit("    rcs: {rcs_dbsm: 10.0}\n",
+          "    rcs: {rcs_dbsm: 10.0}\n" + GOOD.split("targets:\n")[1]),
      15, "targets[1].name", "duplicate target name 'car'"),
     (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
           "    motion:\n      type: speed_profile\n      position_m: [30, 0, 0]\n      profile:\n"
@@ -216,6 +217,9 @@ def test_cli_validate_exit_codes(tmp_path, capsys):
 
 # --- fuzzing: only ScenarioError may escape the loader ---------------------------------------
 
+# Each example writes its own file into tmp_path, so sharing the fixture is intended.
+FUZZ_CHECKS = [HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
+
 scalars = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6),
                     st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=12))
 documents = st.recursive(
@@ -230,8 +234,7 @@ documents = st.recursive(
 )
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                   HealthCheck.function_scoped_fixture])
+@settings(max_examples=150, deadline=None, suppress_health_check=FUZZ_CHECKS)
 @given(doc=documents)
 def test_fuzz_random_documents(tmp_path, doc):
     path = tmp_path / "fuzz.scenario.yaml"
@@ -263,8 +266,7 @@ def _mutations(good: dict):
 GOOD_DATA = yaml.safe_load(GOOD)
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                   HealthCheck.function_scoped_fixture])
+@settings(max_examples=200, deadline=None, suppress_health_check=FUZZ_CHECKS)
 @given(change=_mutations(GOOD_DATA))
 def test_fuzz_mutated_scenes(tmp_path, change):
     import copy
@@ -283,7 +285,7 @@ def test_fuzz_mutated_scenes(tmp_path, change):
         pass
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=100, deadline=None, suppress_health_check=FUZZ_CHECKS)
 @given(text=st.text(max_size=200))
 def test_fuzz_raw_text(tmp_path, text):
     path = tmp_path / "raw.scenario.yaml"
