@@ -78,13 +78,18 @@ def _rotation_z(yaw: FloatArray) -> FloatArray:
                      np.stack([zero, zero, one], -1)], -2)
 
 
-def _heading(motion: Motion) -> tuple[FloatArray, FloatArray]:
-    """Yaw of each body (velocity direction, or path tangent when standing) and its rate."""
+def _heading(motion: Motion) -> tuple[FloatArray, FloatArray | None]:
+    """Yaw of each body (velocity direction, or path tangent when standing) and its rate.
+
+    The rate needs the motion's acceleration; without it it is None.
+    """
     v, a = motion.velocity_mps, motion.acceleration_mps2
     speed2 = v[..., 0] ** 2 + v[..., 1] ** 2
     moving = speed2 > _STANDSTILL_MPS**2
     yaw = np.where(moving, np.arctan2(v[..., 1], v[..., 0]),
                    np.arctan2(motion.tangent[..., 1], motion.tangent[..., 0]))
+    if a is None:
+        return yaw, None
     rate = np.where(moving, (v[..., 0] * a[..., 1] - v[..., 1] * a[..., 0])
                     / np.where(moving, speed2, 1.0), 0.0)
     return yaw, rate
@@ -98,7 +103,9 @@ def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None) -> Tracks:
     t = scenario.t_s if t_s is None else np.asarray(t_s, dtype=np.float64)
     targets = scenario.targets
     ego = TrajectorySet([scenario.ego]).evaluate(t)
-    ego_yaw, ego_rate = (x[:, 0] for x in _heading(ego))
+    ego_yaw, ego_rate = _heading(ego)
+    assert ego_rate is not None
+    ego_yaw, ego_rate = ego_yaw[:, 0], ego_rate[:, 0]
     ego_rot = _rotation_z(ego_yaw)  # (F, 3, 3): ego frame -> world
     omega = np.stack([np.zeros_like(ego_rate), np.zeros_like(ego_rate), ego_rate], -1)
     ego_p, ego_v = ego.position_m[:, 0], ego.velocity_mps[:, 0]
@@ -107,7 +114,7 @@ def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None) -> Tracks:
     radar_p = ego_p + lever
     radar_v = ego_v + np.cross(omega, lever)
 
-    motion = TrajectorySet([tg.trajectory for tg in targets]).evaluate(t)
+    motion = TrajectorySet([tg.trajectory for tg in targets]).evaluate(t, acceleration=False)
     p, v = motion.position_m, motion.velocity_mps
     yaw, _ = _heading(motion)
     relative = np.array([tg.frame == "ego" for tg in targets])

@@ -133,7 +133,7 @@ class Motion:
 
     position_m: FloatArray
     velocity_mps: FloatArray
-    acceleration_mps2: FloatArray
+    acceleration_mps2: FloatArray | None
     tangent: FloatArray
 
 
@@ -167,14 +167,18 @@ class TrajectorySet:
             for i, lc in enumerate(traj.lane_changes):
                 self._lc[:, i, k] = (lc.start_s, lc.duration_s, lc.offset_m)
 
-    def evaluate(self, t_s: FloatArray) -> Motion:
-        """Evaluate all objects at times ``t_s`` (shape (F,)); arrays are ``(F, K, ...)``."""
+    def evaluate(self, t_s: FloatArray, acceleration: bool = True) -> Motion:
+        """Evaluate all objects at times ``t_s`` (shape (F,)); arrays are ``(F, K, ...)``.
+
+        Without ``acceleration`` the motion's acceleration is left out (None), which saves the
+        path's third derivative.
+        """
         if self.count == 0:
             empty = np.zeros((np.size(t_s), 0, 3))
-            return Motion(empty, empty, empty, empty)
+            return Motion(empty, empty, empty if acceleration else None, empty)
         t = np.broadcast_to(np.asarray(t_s, dtype=np.float64)[:, None], (t_s.size, self.count))
         s, ds, dds = self._travel(t)
-        g, g1, g2, g3 = self._path(s)  # position and its 1st..3rd derivatives by arc length
+        g, g1, g2, g3 = self._path(s, third=acceleration)
         lat, dlat, ddlat = self._lateral(t)
         n, n1, n2 = _left_normal(g1, g2, g3)
         # Chain rule with s(t): d/dt = s' d/ds, d2/dt2 = s'' d/ds + s'^2 d2/ds2.
@@ -182,14 +186,19 @@ class TrajectorySet:
         lat_, dlat_, ddlat_ = lat[..., None], dlat[..., None], ddlat[..., None]
         position = g + lat_ * n
         velocity = ds_ * g1 + dlat_ * n + lat_ * ds_ * n1
-        acceleration = (dds_ * g1 + ds_ * ds_ * g2 + ddlat_ * n + 2.0 * dlat_ * ds_ * n1
-                        + lat_ * (dds_ * n1 + ds_ * ds_ * n2))
+        accel = None
+        if acceleration:
+            assert n2 is not None
+            accel = (dds_ * g1 + ds_ * ds_ * g2 + ddlat_ * n + 2.0 * dlat_ * ds_ * n1
+                     + lat_ * (dds_ * n1 + ds_ * ds_ * n2))
         tangent = g1 / np.linalg.norm(g1, axis=-1, keepdims=True)
-        return Motion(position_m=position, velocity_mps=velocity, acceleration_mps2=acceleration,
+        return Motion(position_m=position, velocity_mps=velocity, acceleration_mps2=accel,
                       tangent=tangent)
 
-    def _path(self, s: FloatArray) -> tuple[FloatArray, ...]:
-        """Hermite path position and its first three arc-length derivatives at ``s``."""
+    def _path(
+        self, s: FloatArray, third: bool
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None]:
+        """Hermite path position and its arc-length derivatives (the third one if asked)."""
         # Paths have at least two points and the lookup stops one short of the end.
         piece = piece_index([p.arc_m for p in self._paths], s)
         j = piece + self._path_start
@@ -199,17 +208,18 @@ class TrajectorySet:
         fc = np.clip(f, 0.0, 1.0)
         # Beyond the ends the path goes on straight along the end tangent.
         beyond = (f - fc) * length
-        p0, p1 = self._points[j], self._points[j + 1]
+        p0 = self._points[j]
+        chord = self._points[j + 1] - p0
         m0, m1 = self._tangent_start[k] * length, self._tangent_end[k] * length
-        f2, f3 = fc * fc, fc * fc * fc
-        g = ((2 * f3 - 3 * f2 + 1) * p0 + (f3 - 2 * f2 + fc) * m0 + (-2 * f3 + 3 * f2) * p1
-             + (f3 - f2) * m1)
-        g1 = ((6 * f2 - 6 * fc) * (p0 - p1) + (3 * f2 - 4 * fc + 1) * m0
-              + (3 * f2 - 2 * fc) * m1) / length
-        inside = (beyond == 0.0)
-        g2 = ((12 * fc - 6) * (p0 - p1) + (6 * fc - 4) * m0 + (6 * fc - 2) * m1) / length**2
-        g3 = (12 * (p0 - p1) + 6 * m0 + 6 * m1) / length**3
-        return g + beyond * g1, g1, g2 * inside, g3 * inside
+        f2 = fc * fc
+        # Hermite form p0 + h01 (p1 - p0) + h10 m0 + h11 m1 (as h00 + h01 = 1).
+        g = p0 + (3 * f2 - 2 * f2 * fc) * chord + (f2 * fc - 2 * f2 + fc) * m0 + (f2 * fc - f2) * m1
+        g1 = ((6 * fc - 6 * f2) * chord + (3 * f2 - 4 * fc + 1) * m0 + (3 * f2 - 2 * fc) * m1
+              ) / length
+        inside = beyond == 0.0
+        g2 = ((6 - 12 * fc) * chord + (6 * fc - 4) * m0 + (6 * fc - 2) * m1) / length**2 * inside
+        g3 = ((6 * (m0 + m1) - 12 * chord) / length**3 * inside) if third else None
+        return g + beyond * g1, g1, g2, g3
 
     def _travel(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         k = piece_index([law.knots_s for law in self._laws], t, open_end=True) + self._law_start
@@ -227,23 +237,30 @@ class TrajectorySet:
                 (offset * bend).sum(axis=1))
 
 
-def _left_normal(g1: FloatArray, g2: FloatArray, g3: FloatArray) -> tuple[FloatArray, ...]:
-    """Horizontal left normal of a path with derivative ``g1`` and its two s-derivatives."""
+def _left_normal(
+    g1: FloatArray, g2: FloatArray, g3: FloatArray | None
+) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    """Horizontal left normal of a path with derivative ``g1`` and its s-derivatives.
+
+    The second derivative needs ``g3``; without it it is None.
+    """
     # n = perp(h) / |h| with h the horizontal part of g1 and perp(x, y) = (-y, x).
     def perp(v: FloatArray) -> FloatArray:
         return np.stack([-v[..., 1], v[..., 0], np.zeros_like(v[..., 0])], axis=-1)
 
-    h, h1, h2 = (np.concatenate([v[..., :2], np.zeros_like(v[..., :1])], axis=-1)
-                 for v in (g1, g2, g3))
+    h, h1 = (np.concatenate([v[..., :2], np.zeros_like(v[..., :1])], axis=-1) for v in (g1, g2))
     length = np.linalg.norm(h, axis=-1, keepdims=True)
     # A vertical path has no horizontal left: take world +y there (it only matters for lateral
     # offsets of a vertically moving object).
     vertical = length < 1e-9
     norm = np.where(vertical, 1.0, length)
     a = (h * h1).sum(-1, keepdims=True)  # h . h'
-    b = (h1 * h1 + h * h2).sum(-1, keepdims=True)  # (h . h')'
     n = np.where(vertical, np.array([0.0, 1.0, 0.0]), perp(h) / norm)
     n1 = np.where(vertical, 0.0, perp(h1) / norm - perp(h) * a / norm**3)
-    n2 = np.where(vertical, 0.0, perp(h2) / norm - 2.0 * perp(h1) * a / norm**3
-                  - perp(h) * (b / norm**3 - 3.0 * a * a / norm**5))
+    n2 = None
+    if g3 is not None:
+        h2 = np.concatenate([g3[..., :2], np.zeros_like(g3[..., :1])], axis=-1)
+        b = (h1 * h1 + h * h2).sum(-1, keepdims=True)  # (h . h')'
+        n2 = np.where(vertical, 0.0, perp(h2) / norm - 2.0 * perp(h1) * a / norm**3
+                      - perp(h) * (b / norm**3 - 3.0 * a * a / norm**5))
     return n, n1, n2
