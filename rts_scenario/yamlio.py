@@ -65,7 +65,7 @@ class Document:
 _SafeBase: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-class _Loader(_SafeBase):  # type: ignore[misc]
+class _Loader(_SafeBase):
     """Safe loader; duplicate keys are errors instead of silently overwriting."""
 
 
