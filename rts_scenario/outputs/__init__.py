@@ -1,0 +1,69 @@
+"""Outputs for schedules, by name: built-ins plus plugins from an entry-point group.
+
+A spec names the output and its target: ``file:PATH`` (``.npz`` or ``.csv``),
+``udp://HOST:PORT``, or ``NAME[:ARGUMENT]`` for any registered output. Third-party RTS drivers
+register an `Output` subclass in the ``rts_scenario.outputs`` entry-point group; it is imported
+only when selected, so a missing driver fails only for the user who picks it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from importlib import import_module
+from importlib.metadata import entry_points
+from typing import Any
+
+from ..errors import OutputError
+from .base import Output
+
+ENTRY_POINT_GROUP = "rts_scenario.outputs"
+
+# Built-ins, imported lazily: name -> "module:Class".
+_BUILTIN = {
+    "file": "rts_scenario.outputs.file:FileOutput",
+    "udp": "rts_scenario.outputs.udp:UdpOutput",
+}
+
+
+def _plugins() -> dict[str, Any]:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def available_outputs() -> list[str]:
+    """Names of every output: built-ins and installed plugins."""
+    return sorted({*_BUILTIN, *_plugins()})
+
+
+def output_class(name: str) -> type[Output]:
+    """Return the `Output` subclass registered under ``name``."""
+    try:
+        if name in _BUILTIN:
+            module, attr = _BUILTIN[name].split(":")
+            cls = getattr(import_module(module), attr)
+        else:
+            plugins = _plugins()
+            if name not in plugins:
+                raise OutputError(
+                    f"unknown output {name!r}; valid outputs: {', '.join(available_outputs())}"
+                )
+            cls = plugins[name].load()
+    except ImportError as exc:
+        raise OutputError(f"output {name!r} cannot be loaded: {exc}") from None
+    if not (isinstance(cls, type) and issubclass(cls, Output)):
+        raise OutputError(f"output {name!r} is not an rts_scenario Output subclass: {cls!r}")
+    return cls
+
+
+def open_output(spec: str, **options: Any) -> Output:
+    """Create the output a spec names (see the module docstring); ``options`` go to it."""
+    if spec.startswith("udp://"):
+        name, argument = "udp", spec[len("udp://"):]
+    elif ":" in spec:
+        name, argument = spec.split(":", 1)
+    else:
+        name, argument = spec, ""
+    factory: Callable[..., Output] = output_class(name)
+    return factory(argument, **options) if argument else factory(**options)
+
+
+__all__ = ["ENTRY_POINT_GROUP", "Output", "available_outputs", "open_output", "output_class"]

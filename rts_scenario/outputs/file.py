@@ -1,0 +1,182 @@
+"""Schedule files: ``.npz`` (every array, lossless) and ``.csv`` (one row per entry).
+
+CSV format (version 1): comment lines first, then a header row and one row per frame x
+target x channel::
+
+    # rts-scenario schedule v1
+    # targets: lead-car,truck-left
+    frame,t_s,target,channel,quad,fe,active,status,weight,attenuation_db,delay_s,doppler_hz,...
+
+Columns: ``frame`` (index in the scene), ``t_s``, ``target`` (index into the ``targets``
+line), ``channel`` (0..3, the quad's FE in paper order), ``quad`` and ``fe`` (rig indices, -1
+when not emitted), ``active`` (0/1), ``status`` (`rts_scenario.schedule.Status` bit flags of
+the entry), ``weight``, ``attenuation_db``, ``delay_s``, ``doppler_hz``, ``phase_rad`` (empty
+when the channel is off) and ``angle_error_az_deg``, ``angle_error_el_deg`` (predicted error
+left by the attenuator's quantization). Floats are written with 17 significant digits, so
+reading a file back gives the same schedule.
+"""
+
+from __future__ import annotations
+
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import OutputError
+from ..schedule import Schedule
+from .base import Output
+
+CSV_COLUMNS = ("frame", "t_s", "target", "channel", "quad", "fe", "active", "status", "weight",
+               "attenuation_db", "delay_s", "doppler_hz", "phase_rad", "angle_error_az_deg",
+               "angle_error_el_deg")
+_MAGIC = "# rts-scenario schedule v1"
+
+
+class FileOutput(Output):
+    """Collect the batches and write them to ``path`` on close (``.npz`` or ``.csv``)."""
+
+    name = "file"
+
+    def __init__(self, path: str | Path) -> None:
+        super().__init__()
+        self.path = Path(path)
+        if self.path.suffix not in (".npz", ".csv"):
+            raise OutputError(
+                f"file:{path}: unknown format {self.path.suffix!r}; valid: .npz, .csv"
+            )
+        if not self.path.parent.is_dir():
+            raise OutputError(f"file:{path}: folder {self.path.parent} does not exist")
+        self._batches: list[Schedule] = []
+
+    def _write(self, batch: Schedule) -> None:
+        self._batches.append(batch)
+
+    def _close(self) -> None:
+        if not self._batches:
+            return
+        write_schedule(concatenate(self._batches), self.path)
+
+
+def concatenate(batches: list[Schedule]) -> Schedule:
+    """Join consecutive batches into one schedule."""
+    first = batches[0]
+    values: dict[str, Any] = {
+        f.name: first.names if f.name == "names"
+        else np.concatenate([getattr(b, f.name) for b in batches])
+        for f in fields(Schedule)
+    }
+    return Schedule(**values)
+
+
+def write_schedule(schedule: Schedule, path: str | Path) -> None:
+    """Write ``schedule`` to a ``.npz`` or ``.csv`` file."""
+    path = Path(path)
+    try:
+        if path.suffix == ".npz":
+            arrays = {f.name: getattr(schedule, f.name) for f in fields(Schedule)}
+            arrays["names"] = np.array(schedule.names, dtype=str)
+            np.savez_compressed(path, **arrays)
+        elif path.suffix == ".csv":
+            _write_csv(schedule, path)
+        else:
+            raise OutputError(f"{path}: unknown format {path.suffix!r}; valid: .npz, .csv")
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+
+def read_schedule(path: str | Path) -> Schedule:
+    """Read a schedule written by `write_schedule` (or `FileOutput`)."""
+    path = Path(path)
+    try:
+        if path.suffix == ".npz":
+            with np.load(path, allow_pickle=False) as data:
+                values = {f.name: data[f.name] for f in fields(Schedule)}
+            values["names"] = tuple(str(n) for n in values["names"])
+            return Schedule(**values)
+        if path.suffix == ".csv":
+            return _read_csv(path)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except (KeyError, ValueError) as exc:
+        raise OutputError(f"{path}: not a schedule file: {exc}") from None
+    raise OutputError(f"{path}: unknown format {path.suffix!r}; valid: .npz, .csv")
+
+
+def _write_csv(schedule: Schedule, path: Path) -> None:
+    n_frames, n_targets = schedule.status.shape
+    f, k, c = (g.ravel() for g in np.meshgrid(np.arange(n_frames), np.arange(n_targets),
+                                               np.arange(4), indexing="ij"))
+    per_entry = {
+        "frame": schedule.frame_index[f], "t_s": schedule.t_s[f], "target": k, "channel": c,
+        "quad": schedule.quad[f, k], "fe": schedule.fe.ravel(),
+        "active": schedule.active.ravel().astype(int), "status": schedule.status[f, k],
+        "weight": schedule.weight.ravel(), "attenuation_db": schedule.attenuation_db.ravel(),
+        "delay_s": schedule.delay_s.ravel(), "doppler_hz": schedule.doppler_hz.ravel(),
+        "phase_rad": schedule.phase_rad.ravel(),
+        "angle_error_az_deg": schedule.angle_error_deg[f, k, 0],
+        "angle_error_el_deg": schedule.angle_error_deg[f, k, 1],
+    }
+    integers = {"frame", "target", "channel", "quad", "fe", "active", "status"}
+    columns = []
+    for name in CSV_COLUMNS:
+        values = per_entry[name]
+        if name in integers:
+            columns.append(values.astype(np.int64).astype(str))
+        else:
+            text = np.char.mod("%.17g", values)
+            columns.append(np.where(np.isnan(values), "", text))
+    rows = columns[0].astype(object)
+    for col in columns[1:]:
+        rows = rows + "," + col
+    with path.open("w", encoding="utf-8") as fh:
+        fh.write(f"{_MAGIC}\n# targets: {','.join(schedule.names)}\n")
+        fh.write(",".join(CSV_COLUMNS) + "\n")
+        fh.write("\n".join(rows.tolist()))
+        fh.write("\n")
+
+
+def _read_csv(path: Path) -> Schedule:
+    with path.open(encoding="utf-8") as fh:
+        magic = fh.readline().rstrip("\n")
+        targets = fh.readline().rstrip("\n")
+        header = fh.readline().rstrip("\n")
+        body = fh.read()
+    if magic != _MAGIC or not targets.startswith("# targets:") or header != ",".join(CSV_COLUMNS):
+        raise ValueError("missing the rts-scenario schedule header")
+    names = tuple(n for n in targets[len("# targets:"):].strip().split(",") if n)
+    lines = [line for line in body.split("\n") if line]
+    cells = np.array([line.split(",") for line in lines], dtype=object).reshape(-1,
+                                                                                len(CSV_COLUMNS))
+    col = {name: cells[:, i] for i, name in enumerate(CSV_COLUMNS)}
+
+    def floats(name: str) -> np.ndarray:
+        return np.array([float(v) if v else np.nan for v in col[name]])
+
+    def ints(name: str) -> np.ndarray:
+        return col[name].astype(np.int64)
+
+    n_targets = len(names)
+    n_frames = len(lines) // (4 * max(n_targets, 1))
+    shape3 = (n_frames, n_targets, 4)
+
+    def entry(values: np.ndarray) -> np.ndarray:
+        return values.reshape(shape3)[:, :, 0]
+
+    return Schedule(
+        t_s=floats("t_s").reshape(shape3)[:, 0, 0],
+        frame_index=ints("frame").reshape(shape3)[:, 0, 0],
+        names=names,
+        quad=entry(ints("quad")),
+        fe=ints("fe").reshape(shape3),
+        weight=floats("weight").reshape(shape3),
+        attenuation_db=floats("attenuation_db").reshape(shape3),
+        delay_s=floats("delay_s").reshape(shape3),
+        doppler_hz=floats("doppler_hz").reshape(shape3),
+        phase_rad=floats("phase_rad").reshape(shape3),
+        active=ints("active").reshape(shape3).astype(bool),
+        status=entry(ints("status")).astype(np.uint16),
+        angle_error_deg=np.stack([entry(floats("angle_error_az_deg")),
+                                  entry(floats("angle_error_el_deg"))], axis=-1),
+    )

@@ -1,0 +1,377 @@
+"""Schedule streaming to the RTS over UDP, and a reference receiver (a simulated RTS endpoint).
+
+Protocol (version 1, all fields big-endian; see docs/udp-protocol.md)::
+
+    header  28 bytes  magic "RTSS" | version u8 | kind u8 (0 full frame, 1 delta)
+                      | sequence u32 (per datagram) | frame u32 | part u16 | parts u16
+                      | t_s f64 (scene time) | entries u16
+    entry   28 bytes  target u16 | channel u8 | flags u8 (bit 0: active) | fe i16 | status u16
+                      | attenuation_db f32 | delay_s f64 | doppler_hz f32 | phase_rad f32
+    trailer  4 bytes  CRC-32 (zlib) of header and entries
+
+A frame is split into as many datagrams (parts) as needed to keep each under 1400 bytes. A full
+frame lists every active channel; a delta lists the channels of entries that changed since the
+previous frame (inactive ones with flag 0), and a full frame is sent every ``keyframe_every``
+frames so a receiver that lost a delta can resynchronize.
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+import threading
+import time
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import OutputError
+from ..schedule import Schedule
+from .base import Output
+
+MAGIC = b"RTSS"
+VERSION = 1
+KIND_FULL = 0
+KIND_DELTA = 1
+HEADER = struct.Struct("!4sBBIIHHdH")
+TRAILER = struct.Struct("!I")
+ENTRY = np.dtype([("target", ">u2"), ("channel", "u1"), ("flags", "u1"), ("fe", ">i2"),
+                  ("status", ">u2"), ("attenuation_db", ">f4"), ("delay_s", ">f8"),
+                  ("doppler_hz", ">f4"), ("phase_rad", ">f4")])
+MAX_DATAGRAM = 1400
+MAX_ENTRIES = (MAX_DATAGRAM - HEADER.size - TRAILER.size) // ENTRY.itemsize
+
+PACING = ("realtime", "fast")
+MODES = ("full", "delta")
+
+
+def frame_entries(schedule: Schedule, pos: int, changed: NDArray[np.bool_] | None) -> np.ndarray:
+    """Return frame ``pos``'s entries as a structured array (all active, or the changed)."""
+    if changed is None:
+        k, c = np.nonzero(schedule.active[pos])
+    else:
+        k, c = np.nonzero(np.broadcast_to(changed[pos][:, None], schedule.active[pos].shape))
+    out = np.zeros(k.size, dtype=ENTRY)
+    out["target"] = k
+    out["channel"] = c
+    out["flags"] = schedule.active[pos, k, c]
+    out["fe"] = schedule.fe[pos, k, c]
+    out["status"] = schedule.status[pos, k]
+    for name in ("attenuation_db", "delay_s", "doppler_hz", "phase_rad"):
+        out[name] = np.nan_to_num(getattr(schedule, name)[pos, k, c], nan=0.0)
+    return out
+
+
+def encode_frame(entries: np.ndarray, *, kind: int, frame: int, t_s: float,
+                 first_sequence: int) -> list[bytes]:
+    """Split a frame's entries into datagrams numbered from ``first_sequence``."""
+    parts = max(1, -(-entries.size // MAX_ENTRIES))
+    out = []
+    for part in range(parts):
+        chunk = entries[part * MAX_ENTRIES : (part + 1) * MAX_ENTRIES]
+        head = HEADER.pack(MAGIC, VERSION, kind, (first_sequence + part) & 0xFFFFFFFF, frame,
+                           part, parts, t_s, chunk.size)
+        body = head + chunk.tobytes()
+        out.append(body + TRAILER.pack(zlib.crc32(body)))
+    return out
+
+
+class UdpOutput(Output):
+    """Stream a schedule to ``HOST:PORT``, paced at the frame times or as fast as possible."""
+
+    name = "udp"
+
+    def __init__(self, address: str, *, pacing: str = "realtime", mode: str = "full",
+                 keyframe_every: int = 20) -> None:
+        super().__init__()
+        if pacing not in PACING:
+            raise OutputError(f"udp: unknown pacing {pacing!r}; valid: {', '.join(PACING)}")
+        if mode not in MODES:
+            raise OutputError(f"udp: unknown mode {mode!r}; valid: {', '.join(MODES)}")
+        host, _, port = address.rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise OutputError(f"udp://{address}: expected udp://HOST:PORT with a port 1..65535")
+        self.address = (host.strip("[]"), int(port))
+        self.pacing = pacing
+        self.mode = mode
+        self.keyframe_every = max(1, keyframe_every)
+        try:
+            family = socket.AF_INET6 if ":" in self.address[0] else socket.AF_INET
+            self._socket = socket.socket(family, socket.SOCK_DGRAM)
+        except OSError as exc:
+            raise OutputError(f"udp://{address}: cannot open a socket: {exc}") from None
+        # Every datagram goes through ``send``; tests swap in a `FaultInjector` around
+        # ``transmit``.
+        self.send: Callable[[bytes], None] = self.transmit
+        self._sequence = 0
+        self._start: float | None = None
+        self._t0 = 0.0
+        self._frames_sent = 0
+        self.entries_sent = 0
+        self.datagrams_sent = 0
+        self.lateness_s: list[float] = []
+
+    def transmit(self, datagram: bytes) -> None:
+        """Put one datagram on the network."""
+        try:
+            self._socket.sendto(datagram, self.address)
+        except OSError as exc:
+            raise OutputError(f"udp://{self.address[0]}:{self.address[1]}: send failed: "
+                              f"{exc}") from None
+
+    def _write(self, batch: Schedule) -> None:
+        changed = batch.changed() if self.mode == "delta" else None
+        for pos in range(batch.n_frames):  # frames go out one by one, at their own time
+            keyframe = changed is None or self._frames_sent % self.keyframe_every == 0
+            entries = frame_entries(batch, pos, None if keyframe else changed)
+            datagrams = encode_frame(
+                entries, kind=KIND_FULL if keyframe else KIND_DELTA,
+                frame=int(batch.frame_index[pos]), t_s=float(batch.t_s[pos]),
+                first_sequence=self._sequence)
+            if self.pacing == "realtime":
+                self._wait_for(float(batch.t_s[pos]))
+            for datagram in datagrams:
+                self.send(datagram)
+            self._sequence += len(datagrams)
+            self.datagrams_sent += len(datagrams)
+            self.entries_sent += entries.size
+            self._frames_sent += 1
+
+    def _wait_for(self, t_s: float) -> None:
+        now = time.perf_counter()
+        if self._start is None:
+            self._start, self._t0 = now, t_s
+        due = self._start + (t_s - self._t0)
+        # Sleep most of the way, then spin: sleep alone overshoots by up to a few ms.
+        if due - now > 0.002:
+            time.sleep(due - now - 0.002)
+        while (now := time.perf_counter()) < due:
+            pass
+        self.lateness_s.append(now - due)
+
+    def _close(self) -> None:
+        self._socket.close()
+
+
+@dataclass
+class ReceiverStats:
+    """What the reference receiver saw."""
+
+    datagrams: int = 0
+    corrupted: int = 0
+    malformed: int = 0
+    duplicates: int = 0
+    reordered: int = 0
+    stale: int = 0
+    frames_applied: int = 0
+    entries_applied: int = 0
+    lost_datagrams: int = 0
+    lost_frames: int = 0
+    unsynced_frames: int = 0
+
+    @property
+    def clean(self) -> bool:
+        """No loss, reordering, duplication, corruption or malformed data."""
+        return not (self.corrupted or self.malformed or self.duplicates or self.reordered
+                    or self.stale or self.lost_datagrams or self.lost_frames
+                    or self.unsynced_frames)
+
+
+class UdpReceiver:
+    """Reference RTS endpoint: validates, reassembles and applies schedule datagrams.
+
+    Nothing that fails validation is applied; frames are applied complete and in order (a
+    datagram of a frame older than one already applied is stale and dropped; a delta after a
+    gap waits for the next full frame). `state` holds the applied entry of every
+    ``(target, channel)``.
+    """
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self._socket = socket.socket(family, socket.SOCK_DGRAM)
+        self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+        self._socket.bind((host, port))
+        self._socket.settimeout(0.02)
+        self.address: tuple[str, int] = self._socket.getsockname()[:2]
+        self.stats = ReceiverStats()
+        self._table = np.zeros((0, 4), dtype=ENTRY)
+        self._live = np.zeros((0, 4), dtype=bool)
+        self._closed = False
+        self.applied: list[tuple[int, float, np.ndarray]] = []
+        self._seen: set[int] = set()
+        self._max_sequence = -1
+        self._min_sequence: int | None = None
+        self._pending: dict[int, dict[int, np.ndarray]] = {}
+        self._pending_meta: dict[int, tuple[int, int, float]] = {}
+        self._last_frame = -1
+        self._frames_seen: set[int] = set()
+        self._synced = True
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    def start(self) -> UdpReceiver:
+        """Receive in a background thread until `stop`."""
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, drain_s: float = 0.2) -> ReceiverStats:
+        """Stop receiving (after ``drain_s`` of quiet), close and count what never arrived."""
+        if self._thread is not None:
+            deadline = time.perf_counter() + drain_s
+            received = self.stats.datagrams
+            while time.perf_counter() < deadline:
+                time.sleep(0.02)
+                if self.stats.datagrams != received:
+                    received = self.stats.datagrams
+                    deadline = time.perf_counter() + drain_s
+            self._stop.set()
+            self._thread.join()
+            self._thread = None
+        if not self._closed:
+            self._closed = True
+            self._socket.close()
+            self._finish()
+        return self.stats
+
+    @property
+    def state(self) -> np.ndarray:
+        """Applied entries of every active ``(target, channel)`` (structured array)."""
+        return self._table[self._live]
+
+    def __enter__(self) -> UdpReceiver:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop(drain_s=0.0)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                datagram = self._socket.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+            self.handle(datagram)
+
+    def handle(self, datagram: bytes) -> None:
+        """Validate and process one datagram."""
+        stats = self.stats
+        stats.datagrams += 1
+        if len(datagram) < HEADER.size + TRAILER.size:
+            stats.malformed += 1
+            return
+        body, (crc,) = datagram[:-TRAILER.size], TRAILER.unpack(datagram[-TRAILER.size:])
+        if zlib.crc32(body) != crc:
+            stats.corrupted += 1
+            return
+        magic, version, kind, seq, frame, part, parts, t_s, count = HEADER.unpack(
+            body[:HEADER.size])
+        if (magic != MAGIC or version != VERSION or kind not in (KIND_FULL, KIND_DELTA)
+                or part >= parts or len(body) != HEADER.size + count * ENTRY.itemsize):
+            stats.malformed += 1
+            return
+        if seq in self._seen:
+            stats.duplicates += 1
+            return
+        if seq < self._max_sequence:
+            stats.reordered += 1
+        self._seen.add(seq)
+        self._max_sequence = max(self._max_sequence, seq)
+        self._min_sequence = seq if self._min_sequence is None else min(self._min_sequence, seq)
+        self._frames_seen.add(frame)
+        if frame <= self._last_frame:
+            stats.stale += 1
+            return
+        entries = np.frombuffer(body, dtype=ENTRY, offset=HEADER.size, count=count)
+        self._pending.setdefault(frame, {})[part] = entries
+        self._pending_meta[frame] = (kind, parts, t_s)
+        if len(self._pending[frame]) == parts:
+            self._apply(frame)
+
+    def _apply(self, frame: int) -> None:
+        kind, parts, t_s = self._pending_meta.pop(frame)
+        chunks = self._pending.pop(frame)
+        entries = np.concatenate([chunks[p] for p in range(parts)])
+        # Older incomplete frames can no longer be applied in order.
+        for old in [f for f in self._pending if f < frame]:
+            del self._pending[old]
+            del self._pending_meta[old]
+        if kind == KIND_DELTA and (not self._synced or frame != self._last_frame + 1):
+            self._synced = False
+            self.stats.unsynced_frames += 1
+            self._last_frame = frame
+            return
+        if kind == KIND_FULL:
+            self._live[:] = False
+            self._synced = True
+        target, channel = entries["target"].astype(np.int64), entries["channel"].astype(np.int64)
+        if target.size and target.max() >= len(self._table):
+            grow = int(target.max()) + 1 - len(self._table)
+            self._table = np.concatenate([self._table, np.zeros((grow, 4), dtype=ENTRY)])
+            self._live = np.concatenate([self._live, np.zeros((grow, 4), dtype=bool)])
+        on = (entries["flags"] & 1).astype(bool)
+        self._table[target[on], channel[on]] = entries[on]
+        self._live[target, channel] = on
+        self._last_frame = frame
+        self.applied.append((frame, t_s, entries))
+        self.stats.frames_applied += 1
+        self.stats.entries_applied += entries.size
+
+    def _finish(self) -> None:
+        stats = self.stats
+        if self._min_sequence is not None:
+            stats.lost_datagrams = (self._max_sequence - self._min_sequence + 1) - len(self._seen)
+        applied = {frame for frame, _, _ in self.applied}
+        if self._frames_seen:
+            expected = set(range(min(self._frames_seen), max(self._frames_seen) + 1))
+            stats.lost_frames = len(expected - applied) - stats.unsynced_frames
+
+
+class FaultInjector:
+    """Test tool: a ``send`` hook for `UdpOutput` that drops, duplicates, reorders or corrupts.
+
+    Probabilities are per datagram; ``rng`` makes runs repeatable. ``log`` counts what was done.
+    """
+
+    def __init__(self, send: Callable[[bytes], None], rng: np.random.Generator, *,
+                 drop: float = 0.0, duplicate: float = 0.0, reorder: float = 0.0,
+                 corrupt: float = 0.0) -> None:
+        self._send = send
+        self._rng = rng
+        self.p = {"drop": drop, "duplicate": duplicate, "reorder": reorder, "corrupt": corrupt}
+        self.log = dict.fromkeys(self.p, 0)
+        self._held: bytes | None = None
+
+    def __call__(self, datagram: bytes) -> None:
+        """Pass ``datagram`` on, or not, as the dice say."""
+        roll = self._rng.random(4)
+        if roll[0] < self.p["drop"]:
+            self.log["drop"] += 1
+            return
+        if roll[3] < self.p["corrupt"]:
+            self.log["corrupt"] += 1
+            data = bytearray(datagram)
+            data[int(self._rng.integers(len(data)))] ^= 1 << int(self._rng.integers(8))
+            datagram = bytes(data)
+        if self._held is None and roll[2] < self.p["reorder"]:
+            self.log["reorder"] += 1
+            self._held = datagram
+            return
+        self._send(datagram)
+        if roll[1] < self.p["duplicate"]:
+            self.log["duplicate"] += 1
+            self._send(datagram)
+        if self._held is not None:
+            held, self._held = self._held, None
+            self._send(held)
+
+    def flush(self) -> None:
+        """Send a datagram still held back for reordering."""
+        if self._held is not None:
+            held, self._held = self._held, None
+            self._send(held)

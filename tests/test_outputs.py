@@ -1,0 +1,132 @@
+import time
+from importlib.metadata import EntryPoint
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rts_scenario.outputs as outputs
+from rts_scenario import OutputError
+from rts_scenario.kinematics import compute_tracks
+from rts_scenario.outputs import available_outputs, open_output
+from rts_scenario.outputs.file import read_schedule
+from rts_scenario.outputs.udp import FaultInjector, UdpReceiver
+from rts_scenario.scenario import load_scenario
+from rts_scenario.schedule import build_schedule
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def schedule():
+    scene = load_scenario(ROOT / "scenarios" / "dense_traffic.scenario.yaml")
+    return build_schedule(compute_tracks(scene), scene.rig, scene.radar)
+
+
+def assert_same(a, b):
+    for name in ("t_s", "frame_index", "quad", "fe", "weight", "attenuation_db", "delay_s",
+                 "doppler_hz", "phase_rad", "active", "status", "angle_error_deg"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert a.names == b.names
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_file_round_trip(tmp_path, schedule, suffix):
+    path = tmp_path / f"s{suffix}"
+    with open_output(f"file:{path}") as out:
+        out.write(schedule.frames(0, 123))
+        out.write(schedule.frames(123, schedule.n_frames))
+    assert_same(read_schedule(path), schedule)
+
+
+def test_output_contract(tmp_path, schedule):
+    out = open_output(f"file:{tmp_path / 'x.npz'}")
+    out.close()
+    out.close()
+    with pytest.raises(OutputError, match="write after close"):
+        out.write(schedule)
+
+
+def test_registry_errors_list_valid_names(tmp_path):
+    assert {"file", "udp"} <= set(available_outputs())
+    with pytest.raises(OutputError, match="valid outputs: .*file.*udp"):
+        open_output("carrier-pigeon:somewhere")
+    with pytest.raises(OutputError, match="valid: .npz, .csv"):
+        open_output(f"file:{tmp_path / 'x.txt'}")
+    with pytest.raises(OutputError, match="HOST:PORT"):
+        open_output("udp://localhost")
+
+
+def test_plugins_come_from_the_entry_point_group(monkeypatch, schedule):
+    plugin = EntryPoint(name="dummy", value="dummy_output:DummyOutput",
+                        group=outputs.ENTRY_POINT_GROUP)
+    broken = EntryPoint(name="broken", value="no_such_module:Driver",
+                        group=outputs.ENTRY_POINT_GROUP)
+    monkeypatch.setattr(outputs, "entry_points", lambda group: [plugin, broken])
+    assert {"dummy", "broken"} <= set(available_outputs())
+    with open_output("dummy:rig-7") as out:
+        out.write(schedule.frames(0, 10))
+    assert out.argument == "rig-7" and out.frames == 10 and out.closes == 1
+    with pytest.raises(OutputError, match="output 'broken' cannot be loaded"):
+        open_output("broken")
+
+
+@pytest.mark.parametrize("mode", ["full", "delta"])
+def test_udp_loopback_applies_every_frame(schedule, mode):
+    receiver = UdpReceiver().start()
+    with open_output(f"udp://127.0.0.1:{receiver.address[1]}", pacing="fast", mode=mode) as out:
+        out.write(schedule)
+    stats = receiver.stop()
+    assert stats.clean, stats
+    assert stats.frames_applied == schedule.n_frames
+    # The endpoint's table equals the last frame's active channels.
+    last = schedule.n_frames - 1
+    k, c = np.nonzero(schedule.active[last])
+    state = receiver.state
+    got = {(int(e["target"]), int(e["channel"])): e for e in state}
+    assert set(got) == set(zip(k.tolist(), c.tolist(), strict=True))
+    for kk, cc in zip(k, c, strict=True):
+        e = got[(kk, cc)]
+        assert e["delay_s"] == schedule.delay_s[last, kk, cc]
+        assert e["attenuation_db"] == np.float32(schedule.attenuation_db[last, kk, cc])
+
+
+@pytest.mark.parametrize("fault, counter", [
+    ("drop", "lost_datagrams"), ("duplicate", "duplicates"), ("reorder", "reordered"),
+    ("corrupt", "corrupted"),
+])
+def test_udp_faults_are_detected_and_nothing_bad_is_applied(schedule, fault, counter):
+    receiver = UdpReceiver().start()
+    out = open_output(f"udp://127.0.0.1:{receiver.address[1]}", pacing="fast")
+    injector = FaultInjector(out.transmit, np.random.default_rng(5), **{fault: 0.05})
+    out.send = injector
+    out.write(schedule)
+    injector.flush()
+    out.close()
+    stats = receiver.stop()
+    assert injector.log[fault] > 0
+    assert getattr(stats, counter) >= injector.log[fault] if fault != "reorder" else \
+        stats.reordered > 0
+    assert not stats.clean
+    # Every applied frame is exactly what the schedule says, in order.
+    frames = [f for f, _, _ in receiver.applied]
+    assert frames == sorted(frames)
+    for frame, _, entries in receiver.applied:
+        k, c = entries["target"].astype(int), entries["channel"].astype(int)
+        np.testing.assert_array_equal(entries["delay_s"], schedule.delay_s[frame, k, c])
+        assert schedule.active[frame, k, c].all()
+        assert len(entries) == schedule.active[frame].sum()
+    if fault in ("drop", "corrupt"):
+        assert stats.lost_frames > 0 and stats.frames_applied < schedule.n_frames
+
+
+def test_udp_paced_streaming_follows_the_frame_clock(schedule):
+    receiver = UdpReceiver().start()
+    part = schedule.frames(0, 20)
+    with open_output(f"udp://127.0.0.1:{receiver.address[1]}", pacing="realtime") as out:
+        start = time.perf_counter()
+        out.write(part)
+        elapsed = time.perf_counter() - start
+    receiver.stop()
+    assert elapsed == pytest.approx(part.t_s[-1] - part.t_s[0], abs=0.02)
+    assert max(out.lateness_s) < 0.01
