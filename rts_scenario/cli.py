@@ -26,8 +26,11 @@ def _bench(args: argparse.Namespace) -> int:
         )
     rows = bench.run(targets=args.targets, repeats=args.repeats, rig_name=args.rig)
     print(bench.format_table(rows))
+    quantized = bench.quantization(rig_name=args.rig)
+    print()
+    print(bench.format_quantization(quantized))
     if args.json:
-        bench.write_json(rows, args.json)
+        bench.write_json(rows, quantized, args.json)
         print(f"wrote {args.json}")
     return EXIT_OK
 

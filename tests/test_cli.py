@@ -9,7 +9,12 @@ def test_bench_prints_table_and_writes_json(tmp_path, capsys):
     assert code == 0
     text = capsys.readouterr().out
     assert "target-frames/s" in text and "exact" in text and "awr1843boost" in text
-    rows = json.loads(out.read_text())
+    data = json.loads(out.read_text())
+    rows = data["solver"]
+    quantized = {(q["array"], q["mode"]): q for q in data["quantization"]}
+    for array in ("paper", "awr1843boost"):
+        assert quantized[(array, "aware")]["max_deg"] <= 0.05
+        assert quantized[(array, "naive")]["max_deg"] > quantized[(array, "aware")]["max_deg"]
     assert {(r["method"], r["array"]) for r in rows} == {
         (m, a) for m in ("paper", "exact") for a in ("paper", "awr1843boost")
     }

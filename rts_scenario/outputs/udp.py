@@ -201,6 +201,7 @@ class UdpReceiver:
         self._live = np.zeros((0, 4), dtype=bool)
         self._closed = False
         self.applied: list[tuple[int, float, np.ndarray]] = []
+        self.arrival_s: list[float] = []
         self._seen: set[int] = set()
         self._max_sequence = -1
         self._min_sequence: int | None = None
@@ -319,6 +320,7 @@ class UdpReceiver:
         self._live[target, channel] = on
         self._last_frame = frame
         self.applied.append((frame, t_s, entries))
+        self.arrival_s.append(time.perf_counter())
         self.stats.frames_applied += 1
         self.stats.entries_applied += entries.size
 
