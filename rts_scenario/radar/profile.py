@@ -37,10 +37,13 @@ class RadarProfile:
         TX firing order within a loop (TDM-MIMO).
     frame_period_s : float
         Frame repetition period.
-    noise_figure_db : float
-        Receiver noise figure.
+    noise_level_db : float
+        Thermal noise per complex ADC sample, dB relative to the full-scale amplitude 1 that an
+        echo through a 0 dB attenuator produces.
     array : VirtualArray
         The virtual array at this profile's wavelength.
+    tx_index : tuple of int
+        The TX of each virtual element (elements are TX-major: TX t, RX r is t * n_rx + r).
     """
 
     name: str
@@ -53,8 +56,9 @@ class RadarProfile:
     chirp_loops: int
     tx_order: tuple[int, ...]
     frame_period_s: float
-    noise_figure_db: float
+    noise_level_db: float
     array: VirtualArray
+    tx_index: tuple[int, ...] = ()
 
     @property
     def wavelength_m(self) -> float:
@@ -70,6 +74,11 @@ class RadarProfile:
     def chirp_slot_s(self) -> float:
         """Time from one chirp start to the next."""
         return self.ramp_time_s + self.idle_time_s
+
+    @property
+    def loop_time_s(self) -> float:
+        """Time of one TDM loop (every TX once): the slow-time sampling interval."""
+        return len(self.tx_order) * self.chirp_slot_s
 
     @property
     def range_resolution_m(self) -> float:
@@ -158,7 +167,8 @@ class RadarProfile:
             idle_time_s=float(d["idle_time_s"]), adc_samples=int(d["adc_samples"]),
             sample_rate_hz=float(d["sample_rate_hz"]), chirp_loops=int(d["chirp_loops"]),
             tx_order=tx_order, frame_period_s=float(d["frame_period_s"]),
-            noise_figure_db=float(d.get("noise_figure_db", 15.0)), array=array,
+            noise_level_db=float(d.get("noise_level_db", -75.0)), array=array,
+            tx_index=tuple(int(t) for t in np.repeat(np.arange(n_tx), array.n_elements // n_tx)),
         )
 
 
@@ -191,7 +201,7 @@ PROFILE_SCHEMA: dict[str, Any] = {
         "chirp_loops": {"type": "integer", "minimum": 1},
         "tx_order": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 0}},
         "frame_period_s": _POSITIVE,
-        "noise_figure_db": {"type": "number"},
+        "noise_level_db": {"type": "number", "minimum": -300, "maximum": 0},
         "array": {
             "oneOf": [
                 {"enum": list(PRESETS)},
@@ -207,4 +217,3 @@ PROFILE_SCHEMA: dict[str, Any] = {
     },
 }
 
-_ = np  # numpy is part of the public types of this module's dataclass
