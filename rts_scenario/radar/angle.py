@@ -1,0 +1,173 @@
+"""Angle estimation from array snapshots: a 2-D Bartlett beamformer and TI's method.
+
+Both take snapshots ``(D, M)`` (one per detection, virtual elements of the profile's array,
+TDM-Doppler already compensated) and return azimuth and elevation in degrees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..arrays import VirtualArray, angles_from_cosines
+from ..errors import RtsError
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+
+ESTIMATORS = ("bartlett", "ti")
+
+
+@dataclass(frozen=True)
+class AngleEstimate:
+    """Per snapshot: azimuth, elevation (deg) and the index of the snapshot it came from."""
+
+    az_deg: FloatArray
+    el_deg: FloatArray
+    source: NDArray[np.int64]
+    power: FloatArray
+
+
+class Bartlett2D:
+    """Conventional beamformer over (u, s): coarse grid, then Newton steps on the peak.
+
+    ``peak_ratio`` below 1 also reports secondary peaks at least that fraction (in power) of
+    the strongest one, so two targets in one range-Doppler cell give two detections when the
+    array resolves them.
+    """
+
+    def __init__(self, array: VirtualArray, *, u_max: float = 0.8, s_max: float = 0.6,
+                 step: float = 0.02, peak_ratio: float = 0.5, max_peaks: int = 2) -> None:
+        self.array = array
+        self.k = array.wavenumber_rad_per_m
+        gu = np.arange(-u_max, u_max + step / 2, step)
+        gs = np.arange(-s_max, s_max + step / 2, step)
+        self.shape = (gu.size, gs.size)
+        u, s = (g.ravel() for g in np.meshgrid(gu, gs, indexing="ij"))
+        self.grid_u, self.grid_s = u, s
+        self.steer = np.exp(1j * self.k * (np.outer(u, array.y_m) + np.outer(s, array.z_m)))
+        self.peak_ratio = peak_ratio
+        self.max_peaks = max_peaks
+
+    def __call__(self, snapshots: ComplexArray) -> AngleEstimate:
+        """Estimate the angles of every snapshot (shape (D, M))."""
+        x = np.atleast_2d(snapshots)
+        spectrum = np.abs(x @ self.steer.conj().T) ** 2  # (D, G)
+        spec = spectrum.reshape(len(x), *self.shape)
+        # Local maxima of each spectrum (3 x 3), strongest first.
+        padded = np.pad(spec, ((0, 0), (1, 1), (1, 1)), constant_values=-1.0)
+        neighbours = np.stack([padded[:, 1 + du : padded.shape[1] - 1 + du,
+                                      1 + ds : padded.shape[2] - 1 + ds]
+                               for du in (-1, 0, 1) for ds in (-1, 0, 1) if du or ds])
+        is_peak = np.all(spec >= neighbours, axis=0).reshape(len(x), -1)
+        ranked = np.argsort(-np.where(is_peak, spectrum, -1.0), axis=1)[:, : self.max_peaks]
+        best = spectrum[np.arange(len(x)), ranked[:, 0]]
+        rows, cols = [], []
+        for rank in range(ranked.shape[1]):  # a few peaks per snapshot at most
+            idx = ranked[:, rank]
+            value = spectrum[np.arange(len(x)), idx]
+            keep = is_peak[np.arange(len(x)), idx] & (
+                (rank == 0) | (value >= self.peak_ratio * best))
+            rows.append(np.flatnonzero(keep))
+            cols.append(idx[keep])
+        source = np.concatenate(rows)
+        start = np.concatenate(cols)
+        u, s = self._refine(x[source], self.grid_u[start], self.grid_s[start])
+        az, el = angles_from_cosines(u, s)
+        power = np.abs(np.einsum("dm,dm->d", x[source], self._steering(u, s).conj())) ** 2
+        return AngleEstimate(np.degrees(az), np.degrees(el), source, power)
+
+    def _steering(self, u: FloatArray, s: FloatArray) -> ComplexArray:
+        return np.exp(1j * self.k * (np.outer(u, self.array.y_m) + np.outer(s, self.array.z_m)))
+
+    def _refine(self, x: ComplexArray, u: FloatArray, s: FloatArray,
+                steps: int = 8) -> tuple[FloatArray, FloatArray]:
+        """Newton steps on ``|a(u, s)^H x|^2`` with analytic derivatives."""
+        y, z = self.array.y_m, self.array.z_m
+        for _ in range(steps):
+            a = self._steering(u, s).conj()
+            b = np.einsum("dm,dm->d", x, a)
+            dy, dz = -1j * self.k * y, -1j * self.k * z
+            b_u = np.einsum("dm,dm->d", x, a * dy)
+            b_s = np.einsum("dm,dm->d", x, a * dz)
+            b_uu = np.einsum("dm,dm->d", x, a * dy * dy)
+            b_us = np.einsum("dm,dm->d", x, a * dy * dz)
+            b_ss = np.einsum("dm,dm->d", x, a * dz * dz)
+            cb = np.conj(b)
+            g_u, g_s = (cb * b_u).real, (cb * b_s).real
+            h_uu = (cb * b_uu).real + np.abs(b_u) ** 2
+            h_ss = (cb * b_ss).real + np.abs(b_s) ** 2
+            h_us = (cb * b_us).real + (np.conj(b_u) * b_s).real
+            det = h_uu * h_ss - h_us * h_us
+            ok = (h_uu < 0) & (det > 0)
+            det = np.where(ok, det, 1.0)
+            du = np.where(ok, -(h_ss * g_u - h_us * g_s) / det, 0.0)
+            ds = np.where(ok, -(h_uu * g_s - h_us * g_u) / det, 0.0)
+            limit = 0.02  # a grid step at most per iteration
+            scale = np.minimum(1.0, limit / np.maximum(np.hypot(du, ds), 1e-300))
+            u, s = u + du * scale, s + ds * scale
+        return u, s
+
+
+class TiStyle:
+    """TI's mmWave SDK method: azimuth FFT over the azimuth row, elevation from the phase
+    difference between the elevated row and the azimuth row at the azimuth peak.
+    """
+
+    def __init__(self, array: VirtualArray, *, fft_size: int = 64) -> None:
+        tol = 1e-9 * array.wavelength_m
+        rows = np.round(array.z_m / tol) * tol
+        levels, counts = np.unique(rows, return_counts=True)
+        az_level = levels[np.argmax(counts)]
+        above = levels[levels > az_level + tol]
+        if above.size == 0:
+            raise RtsError(f"array {array.name!r}: TI-style elevation needs a second row of "
+                           f"elements above the azimuth row")
+        el_level = above[0]
+        self.az_idx = np.flatnonzero(np.abs(rows - az_level) <= tol)
+        self.az_idx = self.az_idx[np.argsort(array.y_m[self.az_idx])]
+        y_az = array.y_m[self.az_idx]
+        pitch = np.diff(y_az)
+        if pitch.size == 0 or np.ptp(pitch) > tol:
+            raise RtsError(f"array {array.name!r}: TI-style azimuth needs an evenly spaced row")
+        self.d = float(pitch[0])
+        self.el_idx = np.flatnonzero(np.abs(rows - el_level) <= tol)
+        self.dz = float(el_level - az_level)
+        self.array = array
+        self.k = array.wavenumber_rad_per_m
+        self.fft_size = max(fft_size, 1 << int(np.ceil(np.log2(len(self.az_idx)))))
+
+    def __call__(self, snapshots: ComplexArray) -> AngleEstimate:
+        """Estimate the angles of every snapshot (shape (D, M))."""
+        x = np.atleast_2d(snapshots)
+        n = self.fft_size
+        spec = np.abs(np.fft.fft(x[:, self.az_idx], n=n, axis=1)) ** 2
+        peak = np.argmax(spec, axis=1)
+        rows = np.arange(len(x))
+        left, mid, right = (spec[rows, (peak + o) % n] for o in (-1, 0, 1))
+        denom = left - 2 * mid + right
+        frac = np.where(denom < 0, 0.5 * (left - right) / np.where(denom < 0, denom, 1.0), 0.0)
+        # The FFT sums x_m e^{-j 2 pi b m / n}; x_m = e^{j k d u m} peaks at 2 pi b / n = k d u.
+        phase = 2 * np.pi * (peak + frac) / n
+        phase = np.mod(phase + np.pi, 2 * np.pi) - np.pi
+        u = phase / (self.k * self.d)
+        # Beamform both rows towards u and compare their phases: k dz s.
+        y = self.array.y_m
+        w_az = np.exp(-1j * self.k * np.outer(u, y[self.az_idx]))
+        w_el = np.exp(-1j * self.k * np.outer(u, y[self.el_idx]))
+        b_az = np.einsum("dm,dm->d", x[:, self.az_idx], w_az)
+        b_el = np.einsum("dm,dm->d", x[:, self.el_idx], w_el)
+        s = np.angle(b_el * np.conj(b_az)) / (self.k * self.dz)
+        az, el = angles_from_cosines(u, np.clip(s, -1.0, 1.0))
+        return AngleEstimate(np.degrees(az), np.degrees(el), rows, np.abs(b_az) ** 2)
+
+
+def make_estimator(name: str, array: VirtualArray) -> Bartlett2D | TiStyle:
+    """Return the estimator called ``name`` for ``array``."""
+    if name == "bartlett":
+        return Bartlett2D(array)
+    if name == "ti":
+        return TiStyle(array)
+    raise RtsError(f"unknown angle estimator {name!r}; valid: {', '.join(ESTIMATORS)}")
