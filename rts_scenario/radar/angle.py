@@ -112,8 +112,11 @@ class Bartlett2D:
 
 
 class TiStyle:
-    """TI's mmWave SDK method: azimuth FFT over the azimuth row, elevation from the phase
-    difference between the elevated row and the azimuth row at the azimuth peak.
+    """TI's mmWave SDK method: azimuth FFT, elevation from a phase difference.
+
+    The azimuth comes from a zero-padded FFT over the azimuth row (peak interpolated), the
+    elevation from the phase difference between the elevated row and the azimuth row, both
+    beamformed towards that azimuth.
     """
 
     def __init__(self, array: VirtualArray, *, fft_size: int = 64) -> None:

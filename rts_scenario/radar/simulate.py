@@ -167,7 +167,7 @@ class SimulatedRadar:
     # -- from schedule to echoes ---------------------------------------------------------------
 
     def echoes(self, schedule: Schedule, pos: int) -> Echoes:
-        """The echoes the radar receives in frame ``pos`` of ``schedule``."""
+        """Return the echoes the radar receives in frame ``pos`` of ``schedule``."""
         assert self.errors is not None
         err, rig, p = self.errors, self.rig, self.profile
         k, c = np.nonzero(schedule.active[pos])
@@ -188,11 +188,11 @@ class SimulatedRadar:
     # -- the radar -----------------------------------------------------------------------------
 
     def process(self, schedule: Schedule) -> list[Detections]:
-        """Detections of every frame of ``schedule``."""
+        """Return the detections of every frame of ``schedule``."""
         return [self.detect(schedule, pos) for pos in range(schedule.n_frames)]
 
     def detect(self, schedule: Schedule, pos: int) -> Detections:
-        """Detections of frame ``pos``, with the fidelity the frame needs."""
+        """Return the detections of frame ``pos``, with the fidelity the frame needs."""
         echoes = self.echoes(schedule, pos)
         use_adc = self.fidelity == "adc" or (self.fidelity == "auto" and self._crowded(echoes))
         frame, t_s = int(schedule.frame_index[pos]), float(schedule.t_s[pos])
@@ -302,7 +302,8 @@ class SimulatedRadar:
         # The snapshot at a target's peak cell: each echo's windowed FFT peak, phased by its
         # direction and TDM slot (echoes of one target share delay and Doppler, so the rest of
         # the phase is common to them and does not move the angle).
-        contrib = (echoes.amplitude * self._gain * np.exp(1j * echoes.phase_rad))[:, None] * np.exp(1j * (
+        level = echoes.amplitude * self._gain * np.exp(1j * echoes.phase_rad)
+        contrib = level[:, None] * np.exp(1j * (
             k * (np.outer(echoes.u, arr.y_m) + np.outer(echoes.s, arr.z_m))
             + 2.0 * np.pi * np.outer(echoes.doppler_hz, self._slot * p.chirp_slot_s)))
         snap = np.zeros((targets.size, arr.n_elements), dtype=complex)
