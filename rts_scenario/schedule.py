@@ -245,6 +245,7 @@ def build_schedule(
                      + 40.0 * np.log10(tracks.range_m / ref.range_m))
     attenuation = np.full((*shape, 4), np.nan)
     angle_error = np.zeros((*shape, 2))
+    clipped = np.zeros(shape, dtype=bool)
     responses = _quad_responses(rig, array)
     for q in range(len(rig.quads)):  # per quad of the rig, vectorized over its entries
         sel = np.flatnonzero((quad.ravel() == q) & ok.ravel())
@@ -255,18 +256,17 @@ def build_schedule(
         resp = responses[q].evaluate(u, s)
         # A channel's calibration gain offset is part of its setting, so it is quantized too.
         offset = rig.cal_gain_db[rig.quads[q]][None, :]
-        w, att, err = _levels(resp, weight.reshape(-1, 4)[sel], single_db.ravel()[sel][:, None]
-                              + offset, array.n_elements, limits, quantization, u, s)
+        w, att, err, clip = _levels(resp, weight.reshape(-1, 4)[sel],
+                                    single_db.ravel()[sel][:, None] + offset,
+                                    array.n_elements, limits, quantization, u, s)
+        clipped.ravel()[sel] = clip
         weight.reshape(-1, 4)[sel] = w
         attenuation.reshape(-1, 4)[sel] = att
         angle_error.reshape(-1, 2)[sel] = err
     # Quantization may switch an idle channel on (weakly) to hold the angle.
     active = ok[..., None] & (weight > 0.0)
     attenuation[~active] = np.nan
-    clipped = active & ((attenuation < limits.attenuation_min_db - 1e-9)
-                        | (attenuation > limits.attenuation_max_db + 1e-9))
-    attenuation = np.clip(attenuation, limits.attenuation_min_db, limits.attenuation_max_db)
-    status |= np.where(clipped.any(axis=-1), Status.ATTENUATION_CLIPPED, 0).astype(np.uint16)
+    status |= np.where(clipped, Status.ATTENUATION_CLIPPED, 0).astype(np.uint16)
 
     # Delays: the echo through FE q must arrive 2R/c0 after transmission.
     fe0 = np.maximum(fe, 0)
@@ -343,8 +343,12 @@ def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: 
 
 def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatArray,
             n_elements: int, limits: HardwareLimits, mode: str, u: FloatArray,
-            s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Weights, channel attenuations (N, 4) and predicted angle errors (N, 2).
+            s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Weights, channel attenuations (N, 4), predicted angle errors (N, 2) and clipping (N,).
+
+    Clipped: a channel needed less attenuation than the attenuator's minimum (the echo stays
+    too weak), or every channel needed more than its maximum (too strong).
+
 
     ``single_db`` (N, 4) is each channel's attenuation for full weight (calibration included).
     With an attenuation step the settings snap to the attenuator's grid.
@@ -355,14 +359,14 @@ def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatA
     with np.errstate(divide="ignore"):
         exact = np.where(on, full - 20.0 * np.log10(np.where(on, weights, 1.0)), np.inf)
     step = limits.attenuation_step_db
-    if step <= 0.0:
-        return weights, np.where(on, exact, np.nan), predicted_angle_error(resp, weights, u, s)
     grid = _Grid(limits.attenuation_min_db, step, limits.attenuation_max_db)
-    chosen = grid.nearest(exact)
-    if mode == "aware":
-        # Blocks keep the (entries x candidates) temporaries in cache; the search only runs
-        # where rounding leaves a noticeable error.
-        # A wider search only where the narrow one leaves a noticeable error.
+    # A channel that needs more attenuation than the attenuator has is switched off: its
+    # weight is tiny, and playing it too loud would move the angle more than leaving it out.
+    chosen = grid.nearest(exact) if step > 0.0 else np.where(
+        exact <= grid.high + 1e-9, np.maximum(exact, grid.low), np.inf)
+    if step > 0.0 and mode == "aware":
+        # Blocks keep the (entries x candidates) temporaries in cache; a wider search follows
+        # only where the narrow one leaves a noticeable error.
         for reach, above in zip(SEARCH_STEPS, SEARCH_ABOVE_DEG, strict=True):
             amps = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
             err = predicted_angle_error(resp, amps, u, s)
@@ -371,11 +375,16 @@ def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatA
                 b = todo[start : start + SEARCH_BLOCK]
                 chosen[b] = _search_grid(resp[:, :, b], weights[b], full[b], grid, u[b],
                                          s[b], chosen[b], reach)
+    # A target too weak for every channel keeps its channels at the attenuator's maximum
+    # (and is flagged by the caller).
+    dark = on.any(axis=1) & ~np.isfinite(chosen).any(axis=1)
+    chosen[dark] = np.where(on[dark], grid.high, np.inf)
     new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
     top = new_w.max(axis=1, keepdims=True)
     new_w = new_w / np.where(top > 0.0, top, 1.0)
+    clipped: NDArray[np.bool_] = dark | (on & (exact < grid.low - 1e-9)).any(axis=1)
     return (new_w, np.where(np.isfinite(chosen), chosen, np.nan),
-            predicted_angle_error(resp, new_w, u, s))
+            predicted_angle_error(resp, new_w, u, s), clipped)
 
 
 @dataclass(frozen=True)
@@ -387,6 +396,7 @@ class _Grid:
     high: float
 
     def nearest(self, att: FloatArray) -> FloatArray:
+        """Nearest setting (the minimum below it; off above the maximum)."""
         snapped = self.low + np.round((att - self.low) / self.step) * self.step
         snapped = np.maximum(snapped, self.low)
         return np.where(snapped <= self.high + 1e-9, snapped, np.inf)

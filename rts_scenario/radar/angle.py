@@ -48,6 +48,7 @@ class Bartlett2D:
         u, s = (g.ravel() for g in np.meshgrid(gu, gs, indexing="ij"))
         self.grid_u, self.grid_s = u, s
         self.steer = np.exp(1j * self.k * (np.outer(u, array.y_m) + np.outer(s, array.z_m)))
+        self.step = step
         self.peak_ratio = peak_ratio
         self.max_peaks = max_peaks
 
@@ -83,7 +84,7 @@ class Bartlett2D:
         return np.exp(1j * self.k * (np.outer(u, self.array.y_m) + np.outer(s, self.array.z_m)))
 
     def _refine(self, x: ComplexArray, u: FloatArray, s: FloatArray,
-                steps: int = 8) -> tuple[FloatArray, FloatArray]:
+                steps: int = 12) -> tuple[FloatArray, FloatArray]:
         """Newton steps on ``|a(u, s)^H x|^2`` with analytic derivatives."""
         y, z = self.array.y_m, self.array.z_m
         for _ in range(steps):
@@ -103,10 +104,11 @@ class Bartlett2D:
             det = h_uu * h_ss - h_us * h_us
             ok = (h_uu < 0) & (det > 0)
             det = np.where(ok, det, 1.0)
-            du = np.where(ok, -(h_ss * g_u - h_us * g_s) / det, 0.0)
-            ds = np.where(ok, -(h_uu * g_s - h_us * g_u) / det, 0.0)
-            limit = 0.02  # a grid step at most per iteration
-            scale = np.minimum(1.0, limit / np.maximum(np.hypot(du, ds), 1e-300))
+            # Newton where the spectrum curves down; elsewhere a short climb along the gradient.
+            g_norm = np.maximum(np.hypot(g_u, g_s), 1e-300)
+            du = np.where(ok, -(h_ss * g_u - h_us * g_s) / det, 0.25 * self.step * g_u / g_norm)
+            ds = np.where(ok, -(h_uu * g_s - h_us * g_u) / det, 0.25 * self.step * g_s / g_norm)
+            scale = np.minimum(1.0, self.step / np.maximum(np.hypot(du, ds), 1e-300))
             u, s = u + du * scale, s + ds * scale
         return u, s
 
