@@ -382,7 +382,7 @@ def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatA
     new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
     top = new_w.max(axis=1, keepdims=True)
     new_w = new_w / np.where(top > 0.0, top, 1.0)
-    clipped: NDArray[np.bool_] = dark | (on & (exact < grid.low - 1e-9)).any(axis=1)
+    clipped = np.asarray(dark | (on & (exact < grid.low - 1e-9)).any(axis=1), dtype=bool)
     return (new_w, np.where(np.isfinite(chosen), chosen, np.nan),
             predicted_angle_error(resp, new_w, u, s), clipped)
 
