@@ -375,10 +375,14 @@ def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatA
                 b = todo[start : start + SEARCH_BLOCK]
                 chosen[b] = _search_grid(resp[:, :, b], weights[b], full[b], grid, u[b],
                                          s[b], chosen[b], reach)
-    # A target too weak for every channel keeps its channels at the attenuator's maximum
-    # (and is flagged by the caller).
+    # A target too weak for every channel is played as weak as possible: its strongest channel
+    # at the attenuator's maximum, the others kept in proportion where they fit (the caller
+    # flags it as clipped).
     dark = on.any(axis=1) & ~np.isfinite(chosen).any(axis=1)
-    chosen[dark] = np.where(on[dark], grid.high, np.inf)
+    if dark.any():
+        lifted = exact[dark] - (exact[dark].min(axis=1, keepdims=True) - grid.high)
+        chosen[dark] = grid.nearest(lifted) if step > 0.0 else np.where(
+            lifted <= grid.high + 1e-9, lifted, np.inf)
     new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
     top = new_w.max(axis=1, keepdims=True)
     new_w = new_w / np.where(top > 0.0, top, 1.0)

@@ -1,7 +1,8 @@
 """Outputs for schedules, by name: built-ins plus plugins from an entry-point group.
 
 A spec names the output and its target: ``file:PATH`` (``.npz`` or ``.csv``),
-``udp://HOST:PORT``, or ``NAME[:ARGUMENT]`` for any registered output. Third-party RTS drivers
+``udp://HOST:PORT``, ``simulated-radar`` (options: profile, rig, ...), or ``NAME[:ARGUMENT]``
+for any registered output. Third-party RTS drivers
 register an `Output` subclass in the ``rts_scenario.outputs`` entry-point group; it is imported
 only when selected, so a missing driver fails only for the user who picks it.
 """
@@ -22,6 +23,7 @@ ENTRY_POINT_GROUP = "rts_scenario.outputs"
 _BUILTIN = {
     "file": "rts_scenario.outputs.file:FileOutput",
     "udp": "rts_scenario.outputs.udp:UdpOutput",
+    "simulated-radar": "rts_scenario.outputs.radar:SimulatedRadarOutput",
 }
 
 

@@ -55,6 +55,8 @@ class Bartlett2D:
     def __call__(self, snapshots: ComplexArray) -> AngleEstimate:
         """Estimate the angles of every snapshot (shape (D, M))."""
         x = np.atleast_2d(snapshots)
+        if len(x) == 0:
+            return _nothing()
         spectrum = np.abs(x @ self.steer.conj().T) ** 2  # (D, G)
         spec = spectrum.reshape(len(x), *self.shape)
         # Local maxima of each spectrum (3 x 3), strongest first.
@@ -147,6 +149,8 @@ class TiStyle:
     def __call__(self, snapshots: ComplexArray) -> AngleEstimate:
         """Estimate the angles of every snapshot (shape (D, M))."""
         x = np.atleast_2d(snapshots)
+        if len(x) == 0:
+            return _nothing()
         n = self.fft_size
         spec = np.abs(np.fft.fft(x[:, self.az_idx], n=n, axis=1)) ** 2
         peak = np.argmax(spec, axis=1)
@@ -167,6 +171,11 @@ class TiStyle:
         s = np.angle(b_el * np.conj(b_az)) / (self.k * self.dz)
         az, el = angles_from_cosines(u, np.clip(s, -1.0, 1.0))
         return AngleEstimate(np.degrees(az), np.degrees(el), rows, np.abs(b_az) ** 2)
+
+
+def _nothing() -> AngleEstimate:
+    empty = np.zeros(0)
+    return AngleEstimate(empty, empty, np.zeros(0, dtype=np.int64), empty)
 
 
 def make_estimator(name: str, array: VirtualArray) -> Bartlett2D | TiStyle:
