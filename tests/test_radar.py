@@ -15,13 +15,14 @@ KIT = rs.Rig.preset("kit-table1")
 
 
 def tracks(az, el, *, radar=PAPER, range_m=12.3, v=-2.0, rcs=10.0):
-    """One target per frame (F frames), or K targets in one frame with ``per_frame=False``."""
+    """One target, one frame per direction."""
     az, el = np.atleast_1d(az).astype(float), np.atleast_1d(el).astype(float)
     f = az.size
     one = np.ones((f, 1), bool)
     full = lambda x: np.broadcast_to(np.asarray(x, float).reshape(-1, 1), (f, 1)).copy()  # noqa
     return Tracks(names=("t",), t_s=np.arange(f) * 0.05, range_m=full(range_m),
-                  radial_velocity_mps=full(v), doppler_hz=full(-2 * np.asarray(v) / radar.wavelength_m),
+                  radial_velocity_mps=full(v),
+                  doppler_hz=full(-2 * np.asarray(v) / radar.wavelength_m),
                   rcs_dbsm=full(rcs), az_deg=az[:, None], el_deg=el[:, None],
                   position_m=np.zeros((f, 1, 3)), present=one, in_coverage=one, in_range=one,
                   in_velocity=one)
