@@ -39,16 +39,19 @@ class Bartlett2D:
     """
 
     def __init__(self, array: VirtualArray, *, u_max: float = 0.8, s_max: float = 0.6,
-                 step: float = 0.02, peak_ratio: float = 0.5, max_peaks: int = 2) -> None:
+                 per_cell: int = 6, peak_ratio: float = 0.5, max_peaks: int = 2) -> None:
         self.array = array
         self.k = array.wavenumber_rad_per_m
-        gu = np.arange(-u_max, u_max + step / 2, step)
-        gs = np.arange(-s_max, s_max + step / 2, step)
+        # Grid steps: a fraction of the resolution cell (wavelength / aperture) per axis.
+        ap_y, ap_z = array.sinc_aperture_m()
+        self.step_u = min(array.wavelength_m / ap_y if ap_y else 2.0, 1.0) / per_cell
+        self.step_s = min(array.wavelength_m / ap_z if ap_z else 2.0, 1.0) / per_cell
+        gu = np.arange(-u_max, u_max + self.step_u / 2, self.step_u)
+        gs = np.arange(-s_max, s_max + self.step_s / 2, self.step_s)
         self.shape = (gu.size, gs.size)
         u, s = (g.ravel() for g in np.meshgrid(gu, gs, indexing="ij"))
         self.grid_u, self.grid_s = u, s
         self.steer = np.exp(1j * self.k * (np.outer(u, array.y_m) + np.outer(s, array.z_m)))
-        self.step = step
         self.peak_ratio = peak_ratio
         self.max_peaks = max_peaks
 
@@ -107,10 +110,15 @@ class Bartlett2D:
             ok = (h_uu < 0) & (det > 0)
             det = np.where(ok, det, 1.0)
             # Newton where the spectrum curves down; elsewhere a short climb along the gradient.
-            g_norm = np.maximum(np.hypot(g_u, g_s), 1e-300)
-            du = np.where(ok, -(h_ss * g_u - h_us * g_s) / det, 0.25 * self.step * g_u / g_norm)
-            ds = np.where(ok, -(h_uu * g_s - h_us * g_u) / det, 0.25 * self.step * g_s / g_norm)
-            scale = np.minimum(1.0, self.step / np.maximum(np.hypot(du, ds), 1e-300))
+            # Steps are measured in grid cells and limited to one.
+            gu_c, gs_c = g_u * self.step_u, g_s * self.step_s
+            g_norm = np.maximum(np.hypot(gu_c, gs_c), 1e-300)
+            du = np.where(ok, -(h_ss * g_u - h_us * g_s) / det,
+                          0.25 * self.step_u * gu_c / g_norm)
+            ds = np.where(ok, -(h_uu * g_s - h_us * g_u) / det,
+                          0.25 * self.step_s * gs_c / g_norm)
+            cells = np.hypot(du / self.step_u, ds / self.step_s)
+            scale = np.minimum(1.0, 1.0 / np.maximum(cells, 1e-300))
             u, s = u + du * scale, s + ds * scale
         return u, s
 

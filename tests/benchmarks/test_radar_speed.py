@@ -1,0 +1,44 @@
+"""Simulated radar frame rates (run: pytest tests/benchmarks --benchmark-json=...)."""
+
+import numpy as np
+import pytest
+from scene_helpers import write_scene
+
+from rts_scenario.kinematics import compute_tracks
+from rts_scenario.radar.simulate import SimulatedRadar
+from rts_scenario.scenario import load_scenario
+from rts_scenario.schedule import build_schedule
+
+
+@pytest.fixture(scope="module")
+def eight_targets(tmp_path_factory):
+    """60 s at 20 Hz, awr1843boost, 8 targets drifting around the ego over the wide rig."""
+    rng = np.random.default_rng(4)
+    targets = [{"name": f"car{i}", "frame": "ego", "rcs": {"rcs_dbsm": float(rng.uniform(0, 20))},
+                "motion": {"type": "constant_velocity",
+                           "position_m": [float(20 + 5 * i), float(rng.uniform(-4, 4)), 0.6],
+                           "speed_mps": float(rng.uniform(0.0, 0.3))}} for i in range(8)]
+    ego = {"motion": {"type": "constant_velocity", "position_m": [0, 0, 0], "speed_mps": 22.0}}
+    path = write_scene(tmp_path_factory.mktemp("radar"), targets, duration_s=60.0,
+                       frame_rate_hz=20.0, ego=ego, radar={"profile": "awr1843boost"})
+    scene = load_scenario(path)
+    schedule = build_schedule(compute_tracks(scene), scene.rig, scene.radar)
+    assert schedule.emitted.sum(axis=1).min() == 8
+    return scene, schedule
+
+
+@pytest.mark.parametrize("fidelity, frames", [("adc", 40), ("analytic", 1200)])
+def test_radar_frames_per_second(benchmark, eight_targets, fidelity, frames):
+    scene, schedule = eight_targets
+    part = schedule.frames(0, frames)
+    benchmark.group = f"simulated radar, awr1843boost, 8 targets: {fidelity}"
+
+    def run():
+        radar = SimulatedRadar(scene.radar, scene.rig, fidelity=fidelity,
+                               rng=np.random.default_rng(0))
+        return radar.process(part)
+
+    dets = benchmark.pedantic(run, rounds=3, iterations=1, warmup_rounds=1)
+    assert len(dets) == frames
+    assert np.mean([d.count for d in dets]) >= 7.5
+    benchmark.extra_info["frames_per_s"] = frames / benchmark.stats.stats.min
