@@ -23,7 +23,16 @@ from ..radar.profile import preset_names as radar_presets
 from ..rig import Rig
 from ..rig import preset_names as rig_presets
 from ..yamlio import Document, KeyPath, load_yaml, validate
-from .model import DEFAULT_TOLERANCES, Effects, Expectations, Mount, RcsModel, Scenario, TargetSpec
+from .model import (
+    DEFAULT_TOLERANCES,
+    Effects,
+    Expectations,
+    Mount,
+    RadarOptions,
+    RcsModel,
+    Scenario,
+    TargetSpec,
+)
 from .trajectory import LaneChange, Trajectory, TravelLaw
 from .trajectory import Path as TrajectoryPath
 
@@ -111,6 +120,8 @@ def load_scenario(path: str | Path) -> Scenario:
         ),
         effects=effects,
         marks=tuple(data.get("marks", [])),
+        radar_options=RadarOptions(**{k: v for k, v in data["radar"].items()
+                                      if k in ("fidelity", "estimator", "cfar", "noise")}),
     )
 
 

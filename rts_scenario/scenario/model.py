@@ -55,6 +55,16 @@ class Mount:
 
 
 @dataclass(frozen=True)
+class RadarOptions:
+    """How the built-in simulated radar runs this scene."""
+
+    fidelity: str = "auto"
+    estimator: str = "bartlett"
+    cfar: str = "ca"
+    noise: bool = True
+
+
+@dataclass(frozen=True)
 class RcsModel:
     """Radar cross section of a target.
 
@@ -116,6 +126,7 @@ class Scenario:
     expectations: Expectations = Expectations()
     effects: Effects = Effects()
     marks: tuple[str, ...] = ()
+    radar_options: RadarOptions = RadarOptions()
 
     @property
     def n_frames(self) -> int:
