@@ -28,7 +28,7 @@ class HardwareLimits:
     """What the RTS hardware can set, per channel."""
 
     attenuation_min_db: float = 0.0
-    attenuation_max_db: float = 90.0
+    attenuation_max_db: float = 120.0
     attenuation_step_db: float = 0.0
     delay_min_s: float = 0.0
     delay_step_s: float = 0.0
