@@ -262,7 +262,7 @@ def _assign(frame_of: NDArray[np.int64], candidates: NDArray[np.bool_],
     per_det = candidates.sum(axis=1)
     targets_hit = np.zeros((int(frame_of.max()) + 1, candidates.shape[1]), dtype=np.int64)
     np.add.at(targets_hit, frame_of, candidates.astype(np.int64))
-    ambiguous_frames = (targets_hit > 1).any(axis=1)
+    ambiguous_frames = np.asarray((targets_hit > 1).any(axis=1), dtype=bool)
     simple = (per_det == 1) & ~ambiguous_frames[frame_of]
     out[simple] = np.argmax(candidates[simple], axis=1)
     hard = np.flatnonzero(ambiguous_frames)
