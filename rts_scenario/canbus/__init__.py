@@ -150,6 +150,9 @@ class DetectionReceiver(can.Listener):
         self.frames: dict[int, ReceivedFrame] = {}
         self._current: ReceivedFrame | None = None
         self._latest = -1
+        # Detections that came before their frame's header, by frame counter (low 8 bits).
+        self._waiting: dict[int, list[tuple[cantools.database.can.Message, dict[str, float]]]]
+        self._waiting = {}
 
     def on_message_received(self, msg: can.Message) -> None:
         """Handle one message (called by python-can's Notifier, or directly)."""
@@ -203,6 +206,9 @@ class DetectionReceiver(can.Listener):
             arrival_s=time.perf_counter())
         self.frames[counter] = frame
         self._current = frame
+        for message, values in self._waiting.pop(counter & 0xFF, []):
+            self.stats.orphans -= 1
+            self._attach(frame, message, values)
 
     def _on_detection(self, message: cantools.database.can.Message,
                       values: dict[str, float]) -> None:
@@ -211,14 +217,22 @@ class DetectionReceiver(can.Listener):
         if m.frame_counter is not None and m.frame_counter in values:
             low = int(values[m.frame_counter])
             if frame is None or (frame.counter & 0xFF) != low:
-                # Late part of an earlier frame, or of one whose header never came.
+                # Late part of an earlier frame, or early part of one whose header is late.
+                self.stats.reordered += 1
                 frame = next((f for c, f in reversed(self.frames.items()) if c & 0xFF == low),
                              None)
-                if frame is not None:
-                    self.stats.reordered += 1
+                if frame is None:
+                    self._waiting.setdefault(low, []).append((message, values))
+                    self.stats.orphans += 1  # until its header comes
+                    return
         if frame is None:
             self.stats.orphans += 1
             return
+        self._attach(frame, message, values)
+
+    def _attach(self, frame: ReceivedFrame, message: cantools.database.can.Message,
+                values: dict[str, float]) -> None:
+        m = self.mapping
         index = int(values[m.index])
         part = frame.parts.setdefault(index, {})
         if set(values) & set(part) - {m.index, m.frame_counter, m.checksum}:

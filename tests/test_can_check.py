@@ -1,0 +1,232 @@
+import json
+from pathlib import Path
+
+import can
+import can.interfaces.virtual
+import cantools
+import numpy as np
+import pytest
+
+from rts_scenario import CheckError
+from rts_scenario.canbus import DetectionPublisher, DetectionReceiver, open_bus
+from rts_scenario.canbus.mapping import CanMapping
+from rts_scenario.check import check
+from rts_scenario.kinematics import compute_tracks
+from rts_scenario.radar.simulate import Detections, SimulatedRadar
+from rts_scenario.scenario import load_scenario
+from rts_scenario.schedule import build_schedule
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(autouse=True)
+def no_bus_left_open(monkeypatch):
+    """Fail the test if it leaves a virtual bus open."""
+    created = []
+    original = can.interfaces.virtual.VirtualBus.__init__
+
+    def init(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        created.append(self)
+
+    monkeypatch.setattr(can.interfaces.virtual.VirtualBus, "__init__", init)
+    yield created
+    left = [b for b in created if not b._is_shutdown]
+    for b in left:
+        b.shutdown()
+    assert not left, f"{len(left)} CAN bus(es) left open"
+
+
+@pytest.fixture(scope="module")
+def cut_in():
+    scene = load_scenario(ROOT / "scenarios" / "cut_in.scenario.yaml")
+    tracks = compute_tracks(scene)
+    schedule = build_schedule(tracks, scene.rig, scene.radar)
+    frames = SimulatedRadar(scene.radar, scene.rig, rng=np.random.default_rng(0)).process(schedule)
+    return scene, tracks, schedule, frames
+
+
+class FaultyBus:
+    """Forward sends to a bus, dropping, duplicating, reordering or corrupting some."""
+
+    def __init__(self, bus, rng, fault=None, p=0.0):
+        self.bus, self.rng, self.fault, self.p = bus, rng, fault, p
+        self.held = None
+        self.count = 0
+
+    def send(self, msg):
+        hit = self.fault is not None and self.rng.random() < self.p
+        if hit:
+            self.count += 1
+            if self.fault == "drop":
+                return
+            if self.fault == "corrupt":
+                data = bytearray(msg.data)
+                data[int(self.rng.integers(len(data)))] ^= 0x10
+                msg = can.Message(arbitration_id=msg.arbitration_id, data=bytes(data),
+                                  is_extended_id=False)
+            if self.fault == "reorder" and self.held is None:
+                self.held = msg
+                return
+            if self.fault == "wrong_id":
+                msg = can.Message(arbitration_id=0x7E0, data=msg.data, is_extended_id=False)
+        self.bus.send(msg)
+        if hit and self.fault == "duplicate":
+            self.bus.send(msg)
+        if self.held is not None and not (hit and self.fault == "reorder"):
+            self.bus.send(self.held)
+            self.held = None
+
+
+def run_over_bus(frames, fault=None, p=0.0, fd=False, mapping=None, send=None):
+    with open_bus(channel="test-check", fd=fd) as listen, open_bus(channel="test-check",
+                                                                    fd=fd) as talk:
+        receiver = DetectionReceiver(mapping)
+        faulty = FaultyBus(talk, np.random.default_rng(7), fault, p)
+        if send is None:
+            publisher = DetectionPublisher(faulty, fd=fd)
+            for frame in frames:
+                publisher.publish(frame)
+        else:
+            send(faulty)
+        while (msg := listen.recv(timeout=0.05)) is not None:
+            receiver.on_message_received(msg)
+    return receiver, faulty
+
+
+def test_clean_run_passes_with_every_frame_checked(cut_in):
+    scene, tracks, schedule, frames = cut_in
+    receiver, _ = run_over_bus(frames)
+    assert receiver.stats.clean
+    report = check(scene.name, tracks, schedule.emitted, receiver, scene.expectations)
+    assert report.passed, report.reasons
+    assert report.frames["checked"] == report.frames["total"] == scene.n_frames
+    data = json.loads(report.to_json())
+    for key in ("passed", "frames", "targets", "errors", "detection_rate", "timing"):
+        assert key in data
+    assert data["errors"]["range_m"]["rms"] < 0.05
+    assert "PASS" in report.table()
+
+
+@pytest.mark.parametrize("fd", [False, True])
+def test_round_trip_of_every_signal_at_its_limits(fd):
+    limits = [
+        dict(range_m=0.0, v=-163.84, az=-163.84, el=-163.84, rcs=-64.0, snr=0.0),
+        dict(range_m=327.675, v=163.835, az=163.835, el=163.835, rcs=63.5, snr=127.5),
+        dict(range_m=12.345, v=-2.005, az=-0.005, el=0.005, rcs=7.5, snr=33.5),
+    ]
+    frames = [Detections(frame=i, t_s=0.05 * i,
+                         range_m=np.array([x["range_m"]]),
+                         radial_velocity_mps=np.array([x["v"]]), az_deg=np.array([x["az"]]),
+                         el_deg=np.array([x["el"]]), snr_db=np.array([x["snr"]]),
+                         rcs_dbsm=np.array([x["rcs"]])) for i, x in enumerate(limits)]
+    receiver, _ = run_over_bus(frames, fd=fd)
+    assert receiver.stats.clean
+    for i, x in enumerate(limits):
+        got = receiver.detections(i)
+        # Exact at the 0.005 m / 0.005 deg resolution: the 0.01 checks are not blurred.
+        assert got["range_m"][0] == pytest.approx(x["range_m"], abs=1e-9)
+        assert got["radial_velocity_mps"][0] == pytest.approx(x["v"], abs=1e-9)
+        assert got["azimuth_deg"][0] == pytest.approx(x["az"], abs=1e-9)
+        assert got["elevation_deg"][0] == pytest.approx(x["el"], abs=1e-9)
+        assert got["rcs_dbsm"][0] == pytest.approx(x["rcs"], abs=1e-9)
+        assert got["snr_db"][0] == pytest.approx(x["snr"], abs=1e-9)
+
+
+def test_out_of_range_values_are_a_clear_error():
+    from rts_scenario import OutputError
+    frame = Detections(frame=0, t_s=0.0, range_m=np.array([400.0]),
+                       radial_velocity_mps=np.zeros(1), az_deg=np.zeros(1), el_deg=np.zeros(1),
+                       snr_db=np.zeros(1), rcs_dbsm=np.zeros(1))
+    with open_bus(channel="x") as bus, pytest.raises(OutputError, match="Range"):
+        DetectionPublisher(bus).publish(frame)
+
+
+@pytest.mark.parametrize("fault, counter, fails", [
+    ("drop", None, True),
+    ("corrupt", "checksum_errors", True),
+    ("duplicate", "duplicates", False),
+    ("reorder", "reordered", False),
+    ("wrong_id", "unknown_ids", True),
+])
+def test_faults_are_detected_and_missing_data_never_passes(cut_in, fault, counter, fails):
+    scene, tracks, schedule, frames = cut_in
+    receiver, faulty = run_over_bus(frames, fault, p=0.01)
+    assert faulty.count > 0
+    report = check(scene.name, tracks, schedule.emitted, receiver, scene.expectations)
+    if counter is not None:
+        assert getattr(receiver.stats, counter) > 0
+        assert report.bus[counter] > 0
+    if fails:
+        assert not report.passed
+        assert report.frames["incomplete"] + report.frames["missing"] > 0
+        assert any("could not be checked" in r for r in report.reasons)
+    else:
+        # Nothing was lost: every frame is still complete and checked.
+        assert report.frames["checked"] == scene.n_frames
+    assert report.table()  # the report renders whatever happened
+
+
+def test_silent_bus_fails(cut_in):
+    scene, tracks, schedule, _ = cut_in
+    receiver, _ = run_over_bus([])
+    report = check(scene.name, tracks, schedule.emitted, receiver, scene.expectations)
+    assert not report.passed
+    assert any("silent" in r for r in report.reasons)
+    assert report.frames["missing"] == scene.n_frames
+
+
+def test_bus_error_frames_are_reported(cut_in):
+    scene, tracks, schedule, frames = cut_in
+    receiver = DetectionReceiver()
+    receiver.on_message_received(can.Message(is_error_frame=True))
+    assert receiver.stats.error_frames == 1 and not receiver.stats.clean
+
+
+def test_bad_interface_names_the_valid_ones():
+    with pytest.raises(CheckError, match="valid interfaces: .*virtual"):
+        open_bus("carrier-pigeon", "0")
+
+
+def test_third_party_cluster_list_with_mapping(cut_in):
+    scene, tracks, schedule, frames = cut_in
+    mapping = CanMapping.from_file(ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml")
+    assert mapping.quantities == {"range_m", "azimuth_deg", "radial_velocity_mps", "rcs_dbsm"}
+    db = cantools.database.load_file(ROOT / "scenarios" / "can" / "cluster_list.dbc")
+    status, general = db.get_message_by_name("Cluster_Status"), db.get_message_by_name(
+        "Cluster_General")
+
+    def send(bus):
+        # The third-party radar reports each detection as distance and relative velocity.
+        for frame in frames:
+            bus.send(can.Message(arbitration_id=status.frame_id, is_extended_id=False,
+                                 data=status.encode({"NofClustersNear": frame.count,
+                                                     "NofClustersFar": 0,
+                                                     "MeasCounter": frame.frame,
+                                                     "InterfaceVersion": 1})))
+            az, rng = np.radians(frame.az_deg), frame.range_m
+            x, y = rng * np.cos(az), rng * np.sin(az)
+            vx, vy = frame.radial_velocity_mps * np.cos(az), frame.radial_velocity_mps * np.sin(az)
+            for i in range(frame.count):
+                values = {"ClusterId": i, "DistLong": x[i], "DistLat": y[i], "VrelLong": vx[i],
+                          "VrelLat": vy[i], "DynProp": 0, "RCS": frame.rcs_dbsm[i]}
+                bus.send(can.Message(arbitration_id=general.frame_id, is_extended_id=False,
+                                     data=general.encode(values, strict=False)))
+
+    receiver, _ = run_over_bus(None, mapping=mapping, send=send)
+    assert receiver.stats.clean
+    report = check(scene.name, tracks, schedule.emitted, receiver, scene.expectations)
+    # Elevation is not in the cluster list: it is not checked. 0.2 m steps keep the rest.
+    assert report.targets[0].errors["el_deg"].count == 0
+    assert report.errors["range_m"].max < 0.2
+    assert report.passed, report.reasons
+
+
+def test_mapping_errors_are_located(tmp_path):
+    from rts_scenario import ScenarioError
+    (tmp_path / "x.dbc").write_text((ROOT / "scenarios" / "can" / "cluster_list.dbc").read_text())
+    text = (ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml").read_text()
+    bad = tmp_path / "bad.mapping.yaml"
+    bad.write_text(text.replace("cluster_list.dbc", "x.dbc").replace("DistLat", "DistSide"))
+    with pytest.raises(ScenarioError, match="signal 'DistSide' is not in the detection"):
+        CanMapping.from_file(bad)
