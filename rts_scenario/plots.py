@@ -1,0 +1,107 @@
+"""PNG plots of a run: the scene and coverage, the schedule, the errors (needs matplotlib)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .errors import RtsError
+from .solver.quads import quad_polygons
+
+if TYPE_CHECKING:
+    from .runner import RunResult
+
+
+def _pyplot() -> Any:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise RtsError("--plot needs matplotlib: pip install 'rts-scenario[plot]'") from None
+    return plt
+
+
+def write_plots(result: RunResult, folder: str | Path) -> list[Path]:
+    """Write the run's plots into ``folder``; return the files written."""
+    plt = _pyplot()
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    tracks, schedule, scene, report = result.tracks, result.schedule, result.scene, result.report
+    stem = scene.name
+    names = tracks.names
+    colors = plt.cm.tab10(np.arange(len(names)) % 10)
+    written = []
+
+    fig, (top, angles) = plt.subplots(1, 2, figsize=(13, 5.5))
+    for k, name in enumerate(names):
+        seen = tracks.present[:, k]
+        top.plot(tracks.position_m[seen, k, 1], tracks.position_m[seen, k, 0], color=colors[k],
+                 label=name)
+        angles.plot(tracks.az_deg[seen, k], tracks.el_deg[seen, k], color=colors[k])
+        ok = tracks.checkable[:, k]
+        angles.plot(tracks.az_deg[ok, k], tracks.el_deg[ok, k], ".", ms=2, color=colors[k])
+    for poly in quad_polygons(scene.rig):
+        ring = np.vstack([poly, poly[:1]])
+        angles.fill(ring[:, 0], ring[:, 1], color="0.85", zorder=0)
+        angles.plot(ring[:, 0], ring[:, 1], color="0.6", lw=0.8, zorder=0)
+    angles.plot(scene.rig.az_deg, scene.rig.el_deg, "k^", ms=6, label="front ends")
+    top.set(xlabel="y (m, left)", ylabel="x (m, forward)", title="targets seen from the radar")
+    top.invert_xaxis()
+    top.legend(fontsize=7, loc="best")
+    angles.set(xlabel="azimuth (deg, left)", ylabel="elevation (deg)",
+               title="directions and rig coverage (dots: checkable frames)")
+    angles.invert_xaxis()
+    angles.legend(fontsize=7, loc="best")
+    fig.suptitle(f"{stem}: scene")
+    written.append(_save(fig, folder / f"{stem}-scene.png"))
+
+    fig, (att, delay) = plt.subplots(2, 1, figsize=(12, 7), sharex=True)
+    for k, name in enumerate(names):
+        for c in range(4):
+            on = schedule.active[:, k, c]
+            if on.any():
+                att.plot(schedule.t_s[on], schedule.attenuation_db[on, k, c], ".", ms=2,
+                         color=colors[k], label=name if c == 0 else None)
+        on = np.asarray(schedule.active[:, k].any(axis=1), dtype=bool)
+        delay.plot(schedule.t_s[on], np.nanmean(schedule.delay_s[on, k], axis=1) * 1e9, ".",
+                   ms=2, color=colors[k])
+    att.set(ylabel="attenuation per channel (dB)", title="schedule")
+    att.legend(fontsize=7, loc="best", markerscale=4)
+    delay.set(xlabel="time (s)", ylabel="RTS delay (ns)")
+    written.append(_save(fig, folder / f"{stem}-schedule.png"))
+
+    quantities = [("error_range_m", "range (m)", "range_m"),
+                  ("error_radial_velocity_mps", "radial velocity (m/s)", "radial_velocity_mps"),
+                  ("error_az_deg", "azimuth (deg)", "az_deg"),
+                  ("error_el_deg", "elevation (deg)", "el_deg")]
+    fig, axes = plt.subplots(len(quantities), 1, figsize=(12, 9), sharex=True)
+    for ax, (key, label, tol_key) in zip(axes, quantities, strict=True):
+        err = report.per_frame.get(key)
+        tol = scene.expectations.tolerances[tol_key]
+        ax.axhspan(-tol, tol, color="0.9", zorder=0)
+        if err is not None:
+            for k in range(len(names)):
+                ax.plot(tracks.t_s, err[:, k], ".", ms=2, color=colors[k])
+        ax.set_ylabel(label)
+    missed = report.per_frame["checkable"] & ~report.per_frame["detected"]
+    for k in range(len(names)):
+        t = tracks.t_s[missed[:, k]]
+        axes[0].plot(t, np.zeros_like(t), "x", ms=3, color=colors[k])
+    axes[0].set_title("detection errors (band: tolerance; x: missed)")
+    axes[-1].set_xlabel("time (s)")
+    written.append(_save(fig, folder / f"{stem}-errors.png"))
+    return written
+
+
+def _save(fig: Any, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    fig.clf()
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return path
