@@ -1,6 +1,6 @@
 """Traffic scenes: the ``*.scenario.yaml`` format, its loader and the typed model."""
 
-from .loader import SCENE_SUFFIX, load_scenario, scenario_schema
+from .loader import SCENE_SUFFIX, load_scenario, parametrizations, scenario_schema
 from .model import Effects, Expectations, Mount, RcsModel, Scenario, TargetSpec
 
 __all__ = [
@@ -12,5 +12,6 @@ __all__ = [
     "Scenario",
     "TargetSpec",
     "load_scenario",
+    "parametrizations",
     "scenario_schema",
 ]

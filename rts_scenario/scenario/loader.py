@@ -9,6 +9,7 @@ names, files inside the scene's folder tree). Every error is one `ScenarioError`
 
 from __future__ import annotations
 
+import itertools
 import json
 from functools import lru_cache
 from importlib import resources
@@ -52,8 +53,11 @@ def _fragment_schema() -> dict[str, Any]:
     return {"$ref": "#/$defs/fragment", "$defs": schema["$defs"]}
 
 
-def load_scenario(path: str | Path) -> Scenario:
+def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> Scenario:
     """Load, validate and compile a scene file.
+
+    ``overrides`` replaces values by key path (``radar.estimator``, ``targets.0.rcs.rcs_dbsm``)
+    before validation: one combination of the scene's ``parametrize`` block.
 
     Raises
     ------
@@ -64,6 +68,8 @@ def load_scenario(path: str | Path) -> Scenario:
     doc = load_yaml(path)
     if not isinstance(doc.data, dict):
         raise doc.error((), f"a scene must be a mapping of keys, got {type(doc.data).__name__}")
+    for dotted, value in (overrides or {}).items():
+        _override(doc, dotted, value)
     validate(doc, scenario_schema())
     data = doc.data
     root = path.resolve().parent
@@ -123,6 +129,37 @@ def load_scenario(path: str | Path) -> Scenario:
         radar_options=RadarOptions(**{k: v for k, v in data["radar"].items()
                                       if k in ("fidelity", "estimator", "cfar", "noise")}),
     )
+
+
+def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
+    """List the scene's test combinations: ``(id, overrides)``; one ``("", {})`` if none."""
+    doc = load_yaml(path)
+    block = doc.data.get("parametrize") if isinstance(doc.data, dict) else None
+    if not block:
+        return [("", {})]
+    validate(doc, scenario_schema())
+    keys = list(block)
+    combos = []
+    for values in itertools.product(*(block[k] for k in keys)):
+        overrides = dict(zip(keys, values, strict=True))
+        ident = "-".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in overrides.items())
+        combos.append((ident, overrides))
+    return combos
+
+
+def _override(doc: Document, key: str, value: Any) -> None:
+    parts: list[str | int] = [int(p) if p.isdigit() else p for p in key.split(".")]
+    node: Any = doc.data
+    for i, part in enumerate(parts[:-1]):
+        try:
+            node = node[part]
+        except (KeyError, IndexError, TypeError):
+            raise doc.error(("parametrize",), f"{key}: no such key path in the scene (at "
+                                              f"{'.'.join(map(str, parts[: i + 1]))})") from None
+    try:
+        node[parts[-1]] = value
+    except (IndexError, TypeError):
+        raise doc.error(("parametrize",), f"{key}: no such key path in the scene") from None
 
 
 def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:

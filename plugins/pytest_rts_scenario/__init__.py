@@ -1,0 +1,180 @@
+"""pytest plugin: every ``*.scenario.yaml`` is a test; ``rts_run`` runs scenes from Python.
+
+Installed with rts-scenario (entry point ``pytest11``). One item per scene and per combination
+of its ``parametrize`` block; a failing scene shows its report and its worst frames; metrics
+go to the JUnit XML as properties; a scene's ``marks`` become pytest marks. Each test uses a
+private virtual CAN channel, so ``pytest -n auto`` (pytest-xdist) gives the same verdicts.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Callable, Iterator
+from fnmatch import fnmatch
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from rts_scenario.check import Report
+from rts_scenario.errors import RtsError
+from rts_scenario.runner import RunOptions, RunResult, run_scene
+from rts_scenario.scenario import load_scenario, parametrizations
+
+DEFAULT_PATTERN = "*.scenario.yaml"
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    """Options mirroring ``rts-scenario run``."""
+    group = parser.getgroup("rts-scenario", "scene files as tests")
+    group.addoption("--rts-output", default="simulated-radar",
+                    help="where schedules go: simulated-radar (default), udp://HOST:PORT, "
+                         "file:PATH")
+    group.addoption("--rts-can-interface", default="virtual",
+                    help="python-can interface for detections (default virtual)")
+    group.addoption("--rts-can-channel", default=None,
+                    help="CAN channel (default: a private one per test)")
+    group.addoption("--rts-can-fd", action="store_true", help="CAN FD detection messages")
+    group.addoption("--rts-mapping", default=None, help="*.mapping.yaml of a third-party radar")
+    group.addoption("--rts-method", default="exact", choices=["exact", "paper"],
+                    help="weight solver (default exact)")
+    parser.addini("rts_scenario_pattern", "glob of the scene files to collect",
+                  default=DEFAULT_PATTERN)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Register the marks shipped scenes use."""
+    for line in ("slow: a long scene", "hardware: needs a real RTS and radar",
+                 "hard: a hard numerical or physical case"):
+        config.addinivalue_line("markers", line)
+
+
+def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> ScenarioFile | None:
+    """Collect scene files matching the ``rts_scenario_pattern`` ini option."""
+    if fnmatch(file_path.name, parent.config.getini("rts_scenario_pattern")):
+        return ScenarioFile.from_parent(parent, path=file_path)
+    return None
+
+
+def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    values = {
+        "output": config.getoption("--rts-output"),
+        "can_interface": config.getoption("--rts-can-interface"),
+        "can_channel": config.getoption("--rts-can-channel")
+        or f"rts-scenario-{worker}-{uuid.uuid4().hex[:8]}",
+        "can_fd": config.getoption("--rts-can-fd"),
+        "mapping": config.getoption("--rts-mapping"),
+        "method": config.getoption("--rts-method"),
+    }
+    values.update(overrides)
+    return RunOptions(**values)
+
+
+class ScenarioFile(pytest.File):
+    """A scene file: one item per parametrized combination."""
+
+    def collect(self) -> Iterator[ScenarioItem]:
+        """Validate the scene (a bad file is a collection error naming file and line)."""
+        try:
+            combos = parametrizations(self.path)
+            scenes = [(ident, overrides, load_scenario(self.path, overrides))
+                      for ident, overrides in combos]
+        except RtsError as exc:
+            raise self.CollectError(str(exc)) from None
+        for ident, overrides, scene in scenes:
+            name = f"{scene.name}[{ident}]" if ident else scene.name
+            yield ScenarioItem.from_parent(self, name=name, overrides=overrides,
+                                           marks=scene.marks)
+
+
+class ScenarioFailed(Exception):
+    """A scene ran and its check failed."""
+
+    def __init__(self, result: RunResult) -> None:
+        super().__init__(result.report.scene)
+        self.result = result
+
+
+class ScenarioItem(pytest.Item):
+    """One run of a scene."""
+
+    def __init__(self, *, overrides: dict[str, Any], marks: tuple[str, ...],
+                 **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.overrides = overrides
+        for mark in marks:
+            self.add_marker(mark)
+
+    def runtest(self) -> None:
+        """Run the scene end to end and check it."""
+        result = run_scene(load_scenario(self.path, self.overrides), _options(self.config))
+        report = result.report
+        self.user_properties.extend(_metrics(report))
+        if not report.passed:
+            raise ScenarioFailed(result)
+
+    def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException],
+                     style: Any = None) -> str | Any:
+        """Show the report and worst frames of a failed check; one clean line for bad input."""
+        if isinstance(excinfo.value, ScenarioFailed):
+            return _render(excinfo.value.result)
+        if isinstance(excinfo.value, RtsError):
+            return f"error: {excinfo.value}"
+        return super().repr_failure(excinfo, style=style)
+
+    def reportinfo(self) -> tuple[Path, int, str]:
+        """Where the test comes from."""
+        return self.path, 0, f"scenario: {self.name}"
+
+
+def _metrics(report: Report) -> list[tuple[str, object]]:
+    out: list[tuple[str, object]] = [("passed", report.passed),
+                                     ("detection_rate", round(report.detection_rate, 4)),
+                                     ("false_detections", report.false_detections)]
+    for name, stats in report.errors.items():
+        if stats.count:
+            out += [(f"{name}_rms", round(stats.rms, 5)), (f"{name}_max", round(stats.max, 5))]
+    return out
+
+
+def _render(result: RunResult, worst: int = 8) -> str:
+    """Render the report table and the worst frames (misses first, then largest errors)."""
+    report, tracks, scene = result.report, result.tracks, result.scene
+    pf = report.per_frame
+    tol = scene.expectations.tolerances
+    keys = [("error_range_m", "range_m"), ("error_radial_velocity_mps", "radial_velocity_mps"),
+            ("error_az_deg", "az_deg"), ("error_el_deg", "el_deg")]
+    score = np.zeros(pf["checkable"].shape)
+    for key, tol_key in keys:
+        if key in pf:
+            score = np.fmax(score, np.abs(pf[key]) / tol[tol_key])
+    score = np.where(pf["checkable"] & ~pf["detected"] & np.isnan(pf.get("error_range_m", score)),
+                     np.inf, score)
+    score = np.where(pf["checkable"], score, -1.0)
+    order = np.argsort(-score, axis=None)[:worst]
+    lines = [report.table(), "", "worst frames (error / tolerance):",
+             f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
+             f"{'el':>8}"]
+    for flat in order:
+        f, k = np.unravel_index(flat, score.shape)
+        if score[f, k] < 0:
+            break
+        cells = []
+        for key, _ in keys:
+            value = pf.get(key, np.full(score.shape, np.nan))[f, k]
+            cells.append("missed" if np.isnan(value) else f"{value:+.3f}")
+        lines.append(f"{f:>6} {tracks.t_s[f]:>7.2f} {tracks.names[k]:<18} "
+                     + " ".join(f"{c:>8}" for c in cells))
+    return "\n".join(lines)
+
+
+@pytest.fixture
+def rts_run(request: pytest.FixtureRequest) -> Callable[..., RunResult]:
+    """Run a scene (path or loaded `Scenario`) end to end; keyword options as `RunOptions`."""
+    def run(scene: Any, **options: Any) -> RunResult:
+        return run_scene(scene, _options(request.config, **options))
+
+    return run
