@@ -34,3 +34,39 @@ def test_bad_input_is_one_line_and_exit_2(capsys):
     assert "Traceback" not in err
     assert cli.main(["bench", "--targets", "0"]) == 2
     assert "--targets" in capsys.readouterr().err
+
+
+def test_run_exit_codes_json_and_plots(tmp_path, capsys):
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    good = root / "scenarios" / "highway_following.scenario.yaml"
+    out = tmp_path / "report.json"
+    assert cli.main(["run", str(good), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "PASS: highway-following" in text and "timing:" in text
+    report = json.loads(out.read_text())
+    for key in ("passed", "frames", "targets", "errors", "detection_rate", "timing",
+                "false_detections", "bus"):
+        assert key in report
+    assert report["errors"]["az_deg"]["rms"] < 0.5 and report["errors"]["range_m"]["max"] >= 0
+    failing = tmp_path / "fail.scenario.yaml"
+    failing.write_text(good.read_text().replace("az_deg: 0.5", "az_deg: 0.000001"))
+    assert cli.main(["run", str(failing)]) == 1
+    assert "FAIL" in capsys.readouterr().out
+    assert cli.main(["run", str(tmp_path / "missing.scenario.yaml")]) == 2
+    assert capsys.readouterr().err.startswith("error: ")
+
+
+def test_schedule_and_list_outputs(tmp_path, capsys):
+    from pathlib import Path
+
+    from rts_scenario.outputs.file import read_schedule
+
+    root = Path(__file__).resolve().parents[1]
+    target = tmp_path / "s.npz"
+    assert cli.main(["schedule", str(root / "scenarios" / "cut_in.scenario.yaml"), "--output",
+                     f"file:{target}"]) == 0
+    assert read_schedule(target).n_frames == 240
+    assert cli.main(["list-outputs"]) == 0
+    assert set(capsys.readouterr().out.split()) >= {"file", "udp", "simulated-radar"}

@@ -1,0 +1,112 @@
+"""The pytest plugin, driven through pytester."""
+
+import shutil
+import textwrap
+from pathlib import Path
+
+import pytest
+
+pytest_plugins = ["pytester"]
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def scene(name: str, *, detection_rate: float = 0.9, extra: str = "") -> str:
+    return textwrap.dedent(f"""\
+        rts_scenario: 1
+        name: {name}
+        duration_s: 2.0
+        frame_rate_hz: 20.0
+        radar: {{profile: awr1843boost, mount: {{x_m: 3.7, z_m: 0.5}}}}
+        rig: wide-3x5
+        ego:
+          motion: {{type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}}
+        targets:
+          - name: car
+            motion: {{type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}}
+            rcs: {{rcs_dbsm: 10.0}}
+        expectations:
+          detection_rate: {detection_rate}
+        """) + extra
+
+
+def test_collects_scene_files_and_runs_them(pytester):
+    pytester.makefile(".scenario.yaml", follow=scene("follow"))
+    pytester.makefile(".yaml", unrelated="a: 1\n")
+    result = pytester.runpytest("-v")
+    result.stdout.fnmatch_lines(["*follow.scenario.yaml::follow PASSED*"])
+    result.assert_outcomes(passed=1)
+
+
+def test_parametrized_combinations_and_marks(pytester):
+    extra = "parametrize:\n  radar.estimator: [bartlett, ti]\nmarks: [slow]\n"
+    pytester.makefile(".scenario.yaml", combo=scene("combo", extra=extra))
+    result = pytester.runpytest("-v", "-m", "slow")
+    result.stdout.fnmatch_lines(["*combo[[]estimator=bartlett[]] PASSED*",
+                                 "*combo[[]estimator=ti[]] PASSED*"])
+    result.assert_outcomes(passed=2)
+    assert pytester.runpytest("-m", "not slow").ret == pytest.ExitCode.NO_TESTS_COLLECTED
+
+
+def test_failure_shows_the_report_and_worst_frames(pytester):
+    # A target the rig cannot show (far outside its coverage) never gets detected.
+    text = scene("impossible").replace("[30, 0, 0.6]", "[30, 20, 0.6]")
+    pytester.makefile(".scenario.yaml", impossible=text)
+    result = pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*FAIL: impossible*nothing to check*"])
+    assert "Traceback" not in result.stdout.str()
+
+
+def test_failing_detection_rate_lists_worst_frames(pytester):
+    pytester.makefile(".scenario.yaml", strict=scene("strict").replace(
+        "detection_rate: 0.9", "detection_rate: 0.9\n  tolerances: {az_deg: 0.00001}"))
+    result = pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*car*FAIL*", "*worst frames (error / tolerance):*",
+                                 "*frame*t_s*target*range*vel*az*el*"])
+
+
+def test_bad_scene_is_a_collection_error_naming_file_and_line(pytester):
+    pytester.makefile(".scenario.yaml", broken=scene("broken").replace("rig: wide-3x5",
+                                                                       "rig: wide-3x9"))
+    result = pytester.runpytest()
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines(["*broken.scenario.yaml:6:*rig: unknown preset 'wide-3x9'*"])
+    assert "Traceback" not in result.stdout.str()
+
+
+def test_pattern_is_configurable(pytester):
+    pytester.makefile(".yml", odd=scene("odd"))
+    pytester.makeini("[pytest]\nrts_scenario_pattern = *.yml\n")
+    pytester.runpytest().assert_outcomes(passed=1)
+
+
+def test_junit_properties_and_rts_run_fixture(pytester):
+    pytester.makefile(".scenario.yaml", follow=scene("follow"))
+    pytester.makepyfile(test_api="""
+        def test_fixture(rts_run, pytestconfig):
+            import pathlib
+            result = rts_run(pathlib.Path(str(pytestconfig.rootpath)) / "follow.scenario.yaml")
+            assert result.report.passed
+            assert result.report.frames["checked"] == 40
+    """)
+    result = pytester.runpytest("--junitxml=out.xml")
+    result.assert_outcomes(passed=2)
+    xml = (pytester.path / "out.xml").read_text()
+    assert 'name="detection_rate"' in xml and 'name="az_deg_rms"' in xml
+
+
+def test_xdist_gives_the_same_verdicts(pytester):
+    for name in ("cut_in", "highway_following", "hard_quad_sweep", "overtaking"):
+        shutil.copy(ROOT / "scenarios" / f"{name}.scenario.yaml", pytester.path)
+    pytester.makefile(".scenario.yaml", impossible=scene("impossible").replace(
+        "[30, 0, 0.6]", "[30, 20, 0.6]"))
+    serial = pytester.runpytest("-n", "0", "-q", "-rA")
+    parallel = pytester.runpytest("-n", "2", "-q", "-rA")
+
+    def verdicts(result):
+        return sorted(line.split(" ", 1) for line in result.stdout.lines
+                      if line.startswith(("PASSED ", "FAILED ")))
+
+    assert verdicts(serial) == verdicts(parallel)
+    parallel.assert_outcomes(passed=5, failed=1)
