@@ -1,0 +1,286 @@
+"""Phase and gain coherence of the RTS channels: pairwise sweeps, closed by least squares.
+
+The paper calibrates two FEs at a time: with both on, it sweeps one channel's delay (that is,
+its carrier phase) and keeps the setting where the superimposed target's angle error is
+smallest. Here each pair plays a target with unequal weights (1 and ``weight_ratio``), so the
+synthesized angle moves along the pair's line with the pair's phase difference; that shift is
+an even function of the phase error around coherence, so the first harmonic of the sweep puts
+coherence at its phase exactly (no search on a grid, robust to noise). Single-channel frames of
+each pair give the gain ratio from the detected levels.
+
+Phase coherence is only measurable in pairs but needed between all channels at once: the
+differences of all pairs (6 per quad) are solved together by least squares for one offset per
+channel (the first FE is the reference). A pair whose residual stands out reveals a bad channel
+or a moved FE.
+
+Measurements run through `measure` - schedule in, detections out - so the same procedure
+drives the built-in simulated radar (`simulated_measure`) or a real bench (any output plus the
+CAN checker).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, replace
+from itertools import combinations
+from pathlib import Path
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+
+from .canbus import DetectionReceiver
+from .constants import C0_MPS
+from .errors import RtsError
+from .outputs.base import Output
+from .peak import find_peak, snapshot
+from .radar.profile import RadarProfile
+from .radar.simulate import ChannelErrors, Detections, SimulatedRadar
+from .rig import Rig
+from .schedule import Schedule
+
+FloatArray = NDArray[np.float64]
+Measure = Callable[[Schedule], list[Detections]]
+
+# A pair whose phase residual exceeds this (deg), or gain residual this (dB), is suspect.
+SUSPECT_PHASE_DEG = 3.0
+SUSPECT_GAIN_DB = 0.3
+
+
+@dataclass(frozen=True)
+class PairMeasurement:
+    """One pair's sweep: FE ``a`` (strong) and ``b`` (weak, swept)."""
+
+    a: int
+    b: int
+    sweep_deg: FloatArray
+    shift_deg: FloatArray
+    phase_deg: float
+    gain_db: float
+    swing_deg: float
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Per-channel offsets relative to the reference FE, and the evidence for them."""
+
+    phase_deg: FloatArray
+    gain_db: FloatArray
+    pairs: tuple[PairMeasurement, ...]
+    phase_residual_deg: FloatArray
+    gain_residual_db: FloatArray
+
+    @property
+    def suspects(self) -> list[str]:
+        """Pairs whose measurements do not fit the others (bad channel, moved FE)."""
+        out = []
+        for p, rp, rg in zip(self.pairs, self.phase_residual_deg, self.gain_residual_db,
+                             strict=True):
+            if abs(rp) > SUSPECT_PHASE_DEG or abs(rg) > SUSPECT_GAIN_DB:
+                out.append(f"FE {p.a}-{p.b}: residual {rp:+.1f} deg, {rg:+.2f} dB")
+        return out
+
+    def apply(self, rig: Rig) -> Rig:
+        """Return the rig with these offsets added to its calibration (phase and gain)."""
+        return replace(rig, cal_phase_deg=_wrap(rig.cal_phase_deg - self.phase_deg),
+                       cal_gain_db=rig.cal_gain_db + self.gain_db, _cache={})
+
+
+def _wrap(deg: FloatArray | float) -> FloatArray:
+    return np.mod(np.asarray(deg) + 180.0, 360.0) - 180.0
+
+
+def pairs_of(rig: Rig) -> list[tuple[int, int]]:
+    """Every pair of FEs that share a quad (6 per quad)."""
+    found = set()
+    for quad in rig.quads:
+        for a, b in combinations(sorted(quad.tolist()), 2):
+            found.add((a, b))
+    return sorted(found)
+
+
+def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, sweep_step_deg: float = 15.0,
+              weight_ratio: float = 0.5, range_m: float = 10.0, attenuation_db: float = 40.0,
+              progress: Callable[[int, int], None] | None = None) -> CalibrationResult:
+    """Measure every pair and solve for per-channel phase and gain offsets.
+
+    Parameters
+    ----------
+    rig : Rig
+        The rig; its current calibration is the starting point.
+    radar : RadarProfile
+        The radar (wavelength and array for the expected angles).
+    measure : callable
+        Plays a schedule, returns one `Detections` per frame.
+    sweep_step_deg : float
+        Phase step of the sweep (a full turn is swept).
+    weight_ratio : float
+        Amplitude of the swept channel relative to the other (unequal weights make the angle
+        depend on the phase).
+    """
+    pairs = pairs_of(rig)
+    sweep = np.arange(0.0, 360.0, sweep_step_deg)
+    schedule, layout = _calibration_schedule(rig, radar, pairs, sweep, weight_ratio, range_m,
+                                             attenuation_db)
+    detections = []
+    batch = len(sweep) + 2
+    for i in range(len(pairs)):  # one pair at a time, like on the bench
+        detections += measure(schedule.frames(i * batch, (i + 1) * batch))
+        if progress is not None:
+            progress(i + 1, len(pairs))
+    measured = [_fit_pair(rig, radar, a, b, sweep, weight_ratio,
+                          detections[i * batch : (i + 1) * batch])
+                for i, (a, b) in enumerate(pairs)]
+    phase, phase_res = _close(rig.n_front_ends, measured, "phase_deg", circular=True)
+    gain, gain_res = _close(rig.n_front_ends, measured, "gain_db", circular=False)
+    return CalibrationResult(phase_deg=phase, gain_db=gain, pairs=tuple(measured),
+                             phase_residual_deg=phase_res, gain_residual_db=gain_res)
+
+
+def _calibration_schedule(rig: Rig, radar: RadarProfile, pairs: list[tuple[int, int]],
+                          sweep: FloatArray, ratio: float, range_m: float,
+                          level_db: float) -> tuple[Schedule, list[tuple[int, int]]]:
+    """Frames per pair: FE a alone, FE b alone, then both with b's phase swept."""
+    rows: list[tuple[tuple[int, float, float], tuple[int, float, float] | None]] = []
+    for a, b in pairs:
+        rows.append(((a, 1.0, 0.0), None))
+        rows.append(((b, 1.0, 0.0), None))
+        rows += [((a, 1.0, 0.0), (b, ratio, s)) for s in sweep]
+    n = len(rows)
+    fe = np.full((n, 1, 4), -1, dtype=np.int64)
+    weight = np.zeros((n, 1, 4))
+    extra = np.zeros((n, 1, 4))
+    for f, (first, second) in enumerate(rows):  # building the test pattern, not a hot path
+        for c, item in enumerate((first, second)):
+            if item is not None:
+                fe[f, 0, c], weight[f, 0, c], extra[f, 0, c] = item
+    active = fe >= 0
+    fe0 = np.maximum(fe, 0)
+    delay = (2.0 * range_m / C0_MPS - 2.0 * rig.distance_m[fe0] / C0_MPS - rig.limits.latency_s
+             + rig.cal_delay_s[fe0])
+    doppler = np.full(fe.shape, 2.0 * 1.0 / radar.wavelength_m)  # approaching at 1 m/s
+    with np.errstate(divide="ignore"):
+        attenuation = level_db - 20.0 * np.log10(weight) + rig.cal_gain_db[fe0]
+    phase = np.radians(rig.cal_phase_deg[fe0] + extra)
+    nan = np.nan
+    schedule = Schedule(
+        t_s=np.arange(n, dtype=np.float64) * 0.05, frame_index=np.arange(n), names=("calibration",),
+        quad=np.full((n, 1), -1), fe=np.where(active, fe, -1), weight=weight,
+        attenuation_db=np.where(active, attenuation, nan), delay_s=np.where(active, delay, nan),
+        doppler_hz=np.where(active, doppler, nan), phase_rad=np.where(active, phase, nan),
+        active=active, status=np.zeros((n, 1), dtype=np.uint16),
+        angle_error_deg=np.zeros((n, 1, 2)))
+    return schedule, pairs
+
+
+def _fit_pair(rig: Rig, radar: RadarProfile, a: int, b: int, sweep: FloatArray, ratio: float,
+              dets: list[Detections]) -> PairMeasurement:
+    """Phase difference (a - b) from the sweep's first harmonic; gain ratio from levels."""
+    def one(d: Detections, what: str) -> float:
+        if d.count == 0:
+            raise RtsError(f"calibration: no detection for FE pair {a}-{b} in frame {d.frame}; "
+                           f"check the radar sees the rig")
+        strongest = int(np.argmax(d.snr_db))
+        return float(getattr(d, what)[strongest])
+
+    level_a, level_b = one(dets[0], "rcs_dbsm"), one(dets[1], "rcs_dbsm")
+    # Expected direction of the coherent pair, from the nominal geometry.
+    x = snapshot(radar.array, [[1.0, ratio]], rig.az_deg[[a, b]], rig.el_deg[[a, b]])
+    exp_az, exp_el = find_peak(radar.array, x, az_range_deg=(-60, 60), el_range_deg=(-45, 45),
+                               grid_step_deg=0.5)
+    axis = np.array([rig.az_deg[b] - rig.az_deg[a], rig.el_deg[b] - rig.el_deg[a]])
+    axis /= np.linalg.norm(axis)
+    az = np.array([one(d, "az_deg") for d in dets[2:]])
+    el = np.array([one(d, "el_deg") for d in dets[2:]])
+    shift = (az - exp_az[0]) * axis[0] + (el - exp_el[0]) * axis[1]
+    # Shift towards the weak FE is largest when coherent, and even around that point.
+    theta = np.radians(sweep)
+    design = np.column_stack([np.ones_like(theta), np.cos(theta), np.sin(theta)])
+    p0, p1, p2 = np.linalg.lstsq(design, shift, rcond=None)[0]
+    coherent = float(np.degrees(np.arctan2(p2, p1)))
+    # Applying phase s to b is coherent when s = phi_a - phi_b.
+    return PairMeasurement(a=a, b=b, sweep_deg=sweep, shift_deg=shift,
+                           phase_deg=float(_wrap(coherent)), gain_db=level_a - level_b,
+                           swing_deg=float(np.hypot(p1, p2)))
+
+
+def _close(n_fe: int, pairs: list[PairMeasurement], field: str,
+           circular: bool) -> tuple[FloatArray, FloatArray]:
+    """Least squares for per-channel values v with v_a - v_b = pair value (v_0 = 0)."""
+    design = np.zeros((len(pairs), n_fe))
+    values = np.array([getattr(p, field) for p in pairs])
+    for i, p in enumerate(pairs):
+        design[i, p.a], design[i, p.b] = 1.0, -1.0
+    design = design[:, 1:]  # the first FE is the reference
+    if circular:
+        # Unwrap each pair against a first solution from a spanning set of pairs.
+        first = np.linalg.lstsq(design, values, rcond=None)[0]
+        for _ in range(3):
+            predicted = design @ first
+            values = predicted + _wrap(values - predicted)
+            first = np.linalg.lstsq(design, values, rcond=None)[0]
+        solution = first
+    else:
+        solution = np.linalg.lstsq(design, values, rcond=None)[0]
+    residual = values - design @ solution
+    if circular:
+        residual = _wrap(residual)
+    return np.concatenate([[0.0], solution]), residual
+
+
+def simulated_measure(radar: RadarProfile, rig: Rig, errors: ChannelErrors, *,
+                      fidelity: str = "analytic", noise: bool = False,
+                      rng: np.random.Generator | None = None) -> Measure:
+    """Play schedules on the simulated radar with injected channel errors (a `measure`)."""
+    sim = SimulatedRadar(radar, rig, fidelity=fidelity, noise=noise, errors=errors,
+                         rng=rng or np.random.default_rng(0))
+    return sim.process
+
+
+def can_measure(output: Output, receiver: DetectionReceiver, drain_s: float = 2.0) -> Measure:
+    """Measure through an output and the CAN checker: the bench procedure.
+
+    Each schedule goes to ``output`` (a real RTS, or the simulated radar publishing on CAN);
+    the radar's frames come back through ``receiver`` (listening on the bus) by frame counter.
+    """
+    def measure(schedule: Schedule) -> list[Detections]:
+        before = receiver.stats.messages
+        output.write(schedule)
+        deadline = time.perf_counter() + drain_s
+        wanted = [int(f) & 0xFFFF for f in schedule.frame_index]
+        while time.perf_counter() < deadline and not all(
+                w in receiver.frames and receiver.frames[w].complete(
+                    receiver.halves_per_detection) for w in wanted):
+            time.sleep(0.002)
+        if receiver.stats.messages == before:
+            raise RtsError("calibration: the radar sent nothing over CAN; check the bus")
+        out = []
+        for f, w in zip(schedule.frame_index, wanted, strict=True):
+            frame = receiver.frames.get(w)
+            values = receiver.detections(w) if frame is not None else {}
+            n = len(next(iter(values.values()))) if values else 0
+            empty = np.zeros(n)
+            out.append(Detections(
+                frame=int(f), t_s=float(schedule.t_s[0]),
+                range_m=values.get("range_m", empty),
+                radial_velocity_mps=values.get("radial_velocity_mps", empty),
+                az_deg=values.get("azimuth_deg", empty), el_deg=values.get("elevation_deg", empty),
+                snr_db=values.get("snr_db", empty), rcs_dbsm=values.get("rcs_dbsm", empty)))
+        return out
+
+    return measure
+
+
+def write_rig(rig: Rig, path: str | Path) -> None:
+    """Write ``rig`` as a ``*.rig.yaml`` file, calibration offsets included."""
+    fes = []
+    for i in range(rig.n_front_ends):  # one entry per FE
+        fes.append({"az_deg": float(rig.az_deg[i]), "el_deg": float(rig.el_deg[i]),
+                    "distance_m": float(rig.distance_m[i]),
+                    "calibration": {"delay_s": float(rig.cal_delay_s[i]),
+                                    "phase_deg": round(float(rig.cal_phase_deg[i]), 4),
+                                    "gain_db": round(float(rig.cal_gain_db[i]), 4)}})
+    data = {"rts_rig": 1, "name": rig.name, "rows": rig.rows, "columns": rig.columns,
+            "front_ends": fes, "limits": asdict(rig.limits), "reference": asdict(rig.reference)}
+    Path(path).write_text(yaml.safe_dump(data, sort_keys=False, width=100))
