@@ -5,8 +5,9 @@ its carrier phase) and keeps the setting where the superimposed target's angle e
 smallest. Here each pair plays a target with unequal weights (1 and ``weight_ratio``), so the
 synthesized angle moves along the pair's line with the pair's phase difference; that shift is
 an even function of the phase error around coherence, so the first harmonic of the sweep puts
-coherence at its phase exactly (no search on a grid, robust to noise). Single-channel frames of
-each pair give the gain ratio from the detected levels.
+coherence at its phase exactly (no search on a grid, robust to noise). Where the coherent pair
+peaks then gives the gain ratio, by inverting the array model (detected levels, also recorded,
+are too coarse on classic CAN).
 
 Phase coherence is only measurable in pairs but needed between all channels at once: the
 differences of all pairs (6 per quad) are solved together by least squares for one offset per
@@ -46,11 +47,17 @@ Measure = Callable[[Schedule], list[Detections]]
 # A pair whose phase residual exceeds this (deg), or gain residual this (dB), is suspect.
 SUSPECT_PHASE_DEG = 3.0
 SUSPECT_GAIN_DB = 0.3
+# Frames per pair at its coherence point, averaged for the gain.
+GAIN_REPEATS = 4
 
 
 @dataclass(frozen=True)
 class PairMeasurement:
-    """One pair's sweep: FE ``a`` (strong) and ``b`` (weak, swept)."""
+    """One pair's measurement: FE ``a`` (strong) and ``b`` (weak, swept).
+
+    ``phase_deg`` and ``gain_db`` are a minus b; ``level_db`` is the difference of the detected
+    single-channel levels (coarse, for the record).
+    """
 
     a: int
     b: int
@@ -58,6 +65,7 @@ class PairMeasurement:
     shift_deg: FloatArray
     phase_deg: float
     gain_db: float
+    level_db: float
     swing_deg: float
 
 
@@ -121,40 +129,56 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, sweep_step_deg
     """
     pairs = pairs_of(rig)
     sweep = np.arange(0.0, 360.0, sweep_step_deg)
-    schedule, layout = _calibration_schedule(rig, radar, pairs, sweep, weight_ratio, range_m,
-                                             attenuation_db)
-    detections = []
+    # Round 1: each pair alone, then with the weak channel's phase swept.
+    rows: list[list[tuple[int, float, float]]] = []
+    for a, b in pairs:
+        rows += [[(a, 1.0, 0.0)], [(b, 1.0, 0.0)]]
+        rows += [[(a, 1.0, 0.0), (b, weight_ratio, s)] for s in sweep]
     batch = len(sweep) + 2
-    for i in range(len(pairs)):  # one pair at a time, like on the bench
-        detections += measure(schedule.frames(i * batch, (i + 1) * batch))
-        if progress is not None:
-            progress(i + 1, len(pairs))
-    measured = [_fit_pair(rig, radar, a, b, sweep, weight_ratio,
-                          detections[i * batch : (i + 1) * batch])
-                for i, (a, b) in enumerate(pairs)]
+    dets = _measure_pairs(rig, radar, measure, rows, batch, range_m, attenuation_db, progress)
+    fitted = [_fit_phase(rig, radar, a, b, sweep, weight_ratio, dets[i * batch : (i + 1) * batch])
+              for i, (a, b) in enumerate(pairs)]
+    # Round 2: each pair at its coherence point; where it peaks gives the gain ratio.
+    rows = [[(a, 1.0, 0.0), (b, weight_ratio, f.phase_deg)] for (a, b), f in zip(pairs, fitted,
+                                                                                strict=True)
+            for _ in range(GAIN_REPEATS)]
+    dets = _measure_pairs(rig, radar, measure, rows, GAIN_REPEATS, range_m, attenuation_db,
+                          None)
+    measured = [_fit_gain(rig, radar, f, weight_ratio,
+                          dets[i * GAIN_REPEATS : (i + 1) * GAIN_REPEATS])
+                for i, f in enumerate(fitted)]
     phase, phase_res = _close(rig.n_front_ends, measured, "phase_deg", circular=True)
     gain, gain_res = _close(rig.n_front_ends, measured, "gain_db", circular=False)
     return CalibrationResult(phase_deg=phase, gain_db=gain, pairs=tuple(measured),
                              phase_residual_deg=phase_res, gain_residual_db=gain_res)
 
 
-def _calibration_schedule(rig: Rig, radar: RadarProfile, pairs: list[tuple[int, int]],
-                          sweep: FloatArray, ratio: float, range_m: float,
-                          level_db: float) -> tuple[Schedule, list[tuple[int, int]]]:
-    """Frames per pair: FE a alone, FE b alone, then both with b's phase swept."""
-    rows: list[tuple[tuple[int, float, float], tuple[int, float, float] | None]] = []
-    for a, b in pairs:
-        rows.append(((a, 1.0, 0.0), None))
-        rows.append(((b, 1.0, 0.0), None))
-        rows += [((a, 1.0, 0.0), (b, ratio, s)) for s in sweep]
+def _measure_pairs(rig: Rig, radar: RadarProfile, measure: Measure,
+                   rows: list[list[tuple[int, float, float]]], batch: int, range_m: float,
+                   level_db: float, progress: Callable[[int, int], None] | None
+                   ) -> list[Detections]:
+    """Play the frames, one pair's batch at a time (like on the bench)."""
+    schedule = _calibration_schedule(rig, radar, rows, range_m, level_db)
+    dets: list[Detections] = []
+    total = len(rows) // batch
+    for i in range(total):  # one pair at a time
+        dets += measure(schedule.frames(i * batch, (i + 1) * batch))
+        if progress is not None:
+            progress(i + 1, total)
+    return dets
+
+
+def _calibration_schedule(rig: Rig, radar: RadarProfile,
+                          rows: list[list[tuple[int, float, float]]], range_m: float,
+                          level_db: float) -> Schedule:
+    """One frame per row: the listed FEs on, each with a weight and an extra phase (deg)."""
     n = len(rows)
     fe = np.full((n, 1, 4), -1, dtype=np.int64)
     weight = np.zeros((n, 1, 4))
     extra = np.zeros((n, 1, 4))
-    for f, (first, second) in enumerate(rows):  # building the test pattern, not a hot path
-        for c, item in enumerate((first, second)):
-            if item is not None:
-                fe[f, 0, c], weight[f, 0, c], extra[f, 0, c] = item
+    for f, row in enumerate(rows):  # building the test pattern, not a hot path
+        for c, item in enumerate(row):
+            fe[f, 0, c], weight[f, 0, c], extra[f, 0, c] = item
     active = fe >= 0
     fe0 = np.maximum(fe, 0)
     delay = (2.0 * range_m / C0_MPS - 2.0 * rig.distance_m[fe0] / C0_MPS - rig.limits.latency_s
@@ -171,38 +195,77 @@ def _calibration_schedule(rig: Rig, radar: RadarProfile, pairs: list[tuple[int, 
         doppler_hz=np.where(active, doppler, nan), phase_rad=np.where(active, phase, nan),
         active=active, status=np.zeros((n, 1), dtype=np.uint16),
         angle_error_deg=np.zeros((n, 1, 2)))
-    return schedule, pairs
+    return schedule
 
 
-def _fit_pair(rig: Rig, radar: RadarProfile, a: int, b: int, sweep: FloatArray, ratio: float,
-              dets: list[Detections]) -> PairMeasurement:
-    """Phase difference (a - b) from the sweep's first harmonic; gain ratio from levels."""
-    def one(d: Detections, what: str) -> float:
-        if d.count == 0:
-            raise RtsError(f"calibration: no detection for FE pair {a}-{b} in frame {d.frame}; "
-                           f"check the radar sees the rig")
-        strongest = int(np.argmax(d.snr_db))
-        return float(getattr(d, what)[strongest])
+def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
+    if d.count == 0:
+        raise RtsError(f"calibration: no detection for FE pair {pair[0]}-{pair[1]} in frame "
+                       f"{d.frame}; check that the radar sees the rig")
+    return float(getattr(d, what)[int(np.argmax(d.snr_db))])
 
-    level_a, level_b = one(dets[0], "rcs_dbsm"), one(dets[1], "rcs_dbsm")
-    # Expected direction of the coherent pair, from the nominal geometry.
-    x = snapshot(radar.array, [[1.0, ratio]], rig.az_deg[[a, b]], rig.el_deg[[a, b]])
-    exp_az, exp_el = find_peak(radar.array, x, az_range_deg=(-60, 60), el_range_deg=(-45, 45),
-                               grid_step_deg=0.5)
+
+def _axis(rig: Rig, a: int, b: int) -> FloatArray:
     axis = np.array([rig.az_deg[b] - rig.az_deg[a], rig.el_deg[b] - rig.el_deg[a]])
-    axis /= np.linalg.norm(axis)
-    az = np.array([one(d, "az_deg") for d in dets[2:]])
-    el = np.array([one(d, "el_deg") for d in dets[2:]])
-    shift = (az - exp_az[0]) * axis[0] + (el - exp_el[0]) * axis[1]
-    # Shift towards the weak FE is largest when coherent, and even around that point.
+    return axis / np.linalg.norm(axis)
+
+
+def _shift(rig: Rig, a: int, b: int, dets: list[Detections]) -> FloatArray:
+    """Project each frame's detection on the pair's axis (deg)."""
+    axis = _axis(rig, a, b)
+    az = np.array([_strongest(d, "az_deg", (a, b)) for d in dets])
+    el = np.array([_strongest(d, "el_deg", (a, b)) for d in dets])
+    return az * axis[0] + el * axis[1]
+
+
+def _model_shift(rig: Rig, radar: RadarProfile, a: int, b: int, weight: float) -> float:
+    """Where a coherent pair with weights (1, weight) peaks along its axis (nominal geometry)."""
+    x = snapshot(radar.array, [[1.0, weight]], rig.az_deg[[a, b]], rig.el_deg[[a, b]])
+    az_win = (min(rig.az_deg[[a, b]]) - 3.0, max(rig.az_deg[[a, b]]) + 3.0)
+    el_win = (min(rig.el_deg[[a, b]]) - 3.0, max(rig.el_deg[[a, b]]) + 3.0)
+    p_az, p_el = find_peak(radar.array, x, az_range_deg=az_win, el_range_deg=el_win,
+                           grid_step_deg=0.1)
+    axis = _axis(rig, a, b)
+    return float(p_az[0] * axis[0] + p_el[0] * axis[1])
+
+
+def _fit_phase(rig: Rig, radar: RadarProfile, a: int, b: int, sweep: FloatArray, ratio: float,
+               dets: list[Detections]) -> PairMeasurement:
+    """Phase difference (a - b): the first-harmonic phase of the sweep's shift."""
+    level_a = _strongest(dets[0], "rcs_dbsm", (a, b))
+    level_b = _strongest(dets[1], "rcs_dbsm", (a, b))
+    shift = _shift(rig, a, b, dets[2:]) - _model_shift(rig, radar, a, b, ratio)
+    # The shift towards the weak FE is largest when coherent and even around that point.
     theta = np.radians(sweep)
     design = np.column_stack([np.ones_like(theta), np.cos(theta), np.sin(theta)])
-    p0, p1, p2 = np.linalg.lstsq(design, shift, rcond=None)[0]
-    coherent = float(np.degrees(np.arctan2(p2, p1)))
+    _, p1, p2 = np.linalg.lstsq(design, shift, rcond=None)[0]
     # Applying phase s to b is coherent when s = phi_a - phi_b.
     return PairMeasurement(a=a, b=b, sweep_deg=sweep, shift_deg=shift,
-                           phase_deg=float(_wrap(coherent)), gain_db=level_a - level_b,
+                           phase_deg=float(_wrap(np.degrees(np.arctan2(p2, p1)))),
+                           gain_db=float("nan"), level_db=level_a - level_b,
                            swing_deg=float(np.hypot(p1, p2)))
+
+
+def _fit_gain(rig: Rig, radar: RadarProfile, pair: PairMeasurement, ratio: float,
+              dets: list[Detections]) -> PairMeasurement:
+    """Gain difference (a - b): b's strength that puts the coherent peak where it was seen.
+
+    Secant steps on the array model (the detected levels are too coarse on classic CAN).
+    """
+    a, b = pair.a, pair.b
+    seen = float(np.mean(_shift(rig, a, b, dets)))
+
+    def miss(gain_b_db: float) -> float:
+        return _model_shift(rig, radar, a, b, ratio * 10.0 ** (gain_b_db / 20.0)) - seen
+
+    x0, x1 = 0.0, 0.5
+    f0, f1 = miss(x0), miss(x1)
+    for _ in range(10):  # secant steps: a handful converge
+        if abs(f1) < 1e-7 or f1 == f0:
+            break
+        x0, x1 = x1, x1 - f1 * (x1 - x0) / (f1 - f0)
+        f0, f1 = f1, miss(x1)
+    return replace(pair, gain_db=-x1)
 
 
 def _close(n_fe: int, pairs: list[PairMeasurement], field: str,
@@ -245,6 +308,7 @@ def can_measure(output: Output, receiver: DetectionReceiver, drain_s: float = 2.
     the radar's frames come back through ``receiver`` (listening on the bus) by frame counter.
     """
     def measure(schedule: Schedule) -> list[Detections]:
+        receiver.reset()
         before = receiver.stats.messages
         output.write(schedule)
         deadline = time.perf_counter() + drain_s
@@ -284,3 +348,43 @@ def write_rig(rig: Rig, path: str | Path) -> None:
     data = {"rts_rig": 1, "name": rig.name, "rows": rig.rows, "columns": rig.columns,
             "front_ends": fes, "limits": asdict(rig.limits), "reference": asdict(rig.reference)}
     Path(path).write_text(yaml.safe_dump(data, sort_keys=False, width=100))
+
+
+def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
+                method: str = "exact") -> FloatArray:
+    """Measure detected minus set angle (deg, (G, 2)) over a grid inside the rig's quads.
+
+    The grid is the paper's (azimuth -3..3 deg x elevation -6..6 deg) for kit-table1, and a
+    6 x 5 grid over the middle of every quad otherwise.
+    """
+    from .bench import evaluation_grid
+    from .kinematics import Tracks
+    from .schedule import build_schedule
+
+    if rig.name == "kit-table1":
+        az, el = evaluation_grid()
+    else:
+        a, b = (g.ravel() for g in np.meshgrid(np.linspace(0.2, 0.8, 6), np.linspace(0.2, 0.8, 5)))
+        corners = rig.quads[:, [0, 1, 3, 2]]
+        p0, p1, p3, p2 = (np.stack([rig.az_deg[corners[:, i]], rig.el_deg[corners[:, i]]], -1)
+                          for i in range(4))
+        pts = (((1 - a) * (1 - b))[:, None, None] * p0 + (a * (1 - b))[:, None, None] * p1
+               + (a * b)[:, None, None] * p3 + ((1 - a) * b)[:, None, None] * p2)
+        az, el = pts[..., 0].ravel(), pts[..., 1].ravel()
+    n = az.size
+    one = np.ones((n, 1), dtype=bool)
+    tracks = Tracks(names=("grid",), t_s=np.arange(n, dtype=np.float64) * 0.05,
+                    range_m=np.full((n, 1), 10.0),
+                    radial_velocity_mps=np.full((n, 1), -1.0),
+                    doppler_hz=np.full((n, 1), 2.0 / radar.wavelength_m),
+                    rcs_dbsm=np.full((n, 1), 10.0), az_deg=az[:, None], el_deg=el[:, None],
+                    position_m=np.zeros((n, 1, 3)), present=one, in_coverage=one, in_range=one,
+                    in_velocity=one)
+    schedule = build_schedule(tracks, rig, radar, method=method)
+    dets = measure(schedule)
+    out = np.full((n, 2), np.nan)
+    for i, d in enumerate(dets):  # one target per frame
+        if d.count:
+            k = int(np.argmax(d.snr_db))
+            out[i] = d.az_deg[k] - az[i], d.el_deg[k] - el[i]
+    return out

@@ -105,3 +105,22 @@ def _save(fig: Any, path: Path) -> Path:
 
     plt.close(fig)
     return path
+
+
+def write_calibration_plot(result: Any, folder: str | Path, name: str) -> Path:
+    """Plot every pair's sweep (shift along the pair against the applied phase) and its fit."""
+    plt = _pyplot()
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    pairs = result.pairs
+    cols = min(3, len(pairs))
+    rows = int(np.ceil(len(pairs) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
+    for ax, p in zip(axes.ravel(), pairs, strict=False):
+        ax.plot(p.sweep_deg, p.shift_deg, "o", ms=3)
+        ax.axvline(np.mod(p.phase_deg, 360.0), color="k", lw=0.8)
+        ax.set(title=f"FE {p.a}-{p.b}: coherent at {p.phase_deg:+.1f} deg",
+               xlabel="phase applied to FE b (deg)", ylabel="shift towards b (deg)")
+    for ax in axes.ravel()[len(pairs):]:
+        ax.axis("off")
+    return _save(fig, folder / f"{name}-calibration.png")

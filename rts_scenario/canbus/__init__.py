@@ -154,6 +154,13 @@ class DetectionReceiver(can.Listener):
         self._waiting: dict[int, list[tuple[cantools.database.can.Message, dict[str, float]]]]
         self._waiting = {}
 
+    def reset(self) -> None:
+        """Forget the frames received so far (a new measurement reuses frame counters)."""
+        self.frames = {}
+        self._current = None
+        self._latest = -1
+        self._waiting = {}
+
     def on_message_received(self, msg: can.Message) -> None:
         """Handle one message (called by python-can's Notifier, or directly)."""
         stats = self.stats
