@@ -277,15 +277,21 @@ def _close(n_fe: int, pairs: list[PairMeasurement], field: str,
         design[i, p.a], design[i, p.b] = 1.0, -1.0
     design = design[:, 1:]  # the first FE is the reference
     if circular:
-        # Unwrap each pair against a first solution from a spanning set of pairs.
-        first = np.linalg.lstsq(design, values, rcond=None)[0]
-        for _ in range(3):
-            predicted = design @ first
-            values = predicted + _wrap(values - predicted)
-            first = np.linalg.lstsq(design, values, rcond=None)[0]
-        solution = first
-    else:
-        solution = np.linalg.lstsq(design, values, rcond=None)[0]
+        # Unwrap each pair against a first solution grown along a spanning tree from the
+        # reference (a least-squares fit of wrapped values can land a quarter turn off).
+        first = np.full(n_fe, np.nan)
+        first[0] = 0.0
+        for _ in range(n_fe):  # grow the tree one layer at a time
+            for p, v in zip(pairs, values, strict=True):
+                if np.isnan(first[p.b]) and not np.isnan(first[p.a]):
+                    first[p.b] = first[p.a] - v
+                elif np.isnan(first[p.a]) and not np.isnan(first[p.b]):
+                    first[p.a] = first[p.b] + v
+        if np.isnan(first).any():
+            raise RtsError("calibration: the measured pairs do not connect every channel")
+        predicted = design @ first[1:]
+        values = predicted + _wrap(values - predicted)
+    solution = np.linalg.lstsq(design, values, rcond=None)[0]
     residual = values - design @ solution
     if circular:
         residual = _wrap(residual)
