@@ -32,7 +32,13 @@ from enum import IntFlag
 import numpy as np
 from numpy.typing import NDArray
 
-from .arrays import SourceResponse, VirtualArray, angles_from_cosines, direction_cosines
+from .arrays import (
+    SourceResponse,
+    VirtualArray,
+    angles_from_cosines,
+    direction_cosines,
+    power_curvature,
+)
 from .constants import C0_MPS
 from .errors import RtsError
 from .kinematics import Tracks
@@ -325,12 +331,7 @@ def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: 
     candidate weight sets. Returns ``(..., 2)``.
     """
     w = weights if weights.ndim == 3 else weights[:, None, :]
-    b, b_u, b_s, b_uu, b_us, b_ss = np.einsum("tqn,ncq->tnc", resp, w)
-    cb = np.conj(b)
-    g_u, g_s = (cb * b_u).real, (cb * b_s).real
-    h_uu = (cb * b_uu).real + np.abs(b_u) ** 2
-    h_ss = (cb * b_ss).real + np.abs(b_s) ** 2
-    h_us = (cb * b_us).real + (np.conj(b_u) * b_s).real
+    g_u, g_s, h_uu, h_us, h_ss = power_curvature(*np.einsum("tqn,ncq->tnc", resp, w))
     det = h_uu * h_ss - h_us * h_us
     det = np.where(det > 0.0, det, np.inf)  # no maximum nearby: reported as no shift
     du = -(h_ss * g_u - h_us * g_s) / det
@@ -508,9 +509,7 @@ def _sensitivity(resp: NDArray[np.complex128], weights: FloatArray) -> FloatArra
     """Peak shift in (u, s) per unit change of each channel amplitude, shape (N, 2, 4)."""
     b, b_u, b_s, b_uu, b_us, b_ss = np.einsum("tqn,nq->tn", resp, weights)
     cb = np.conj(b)
-    h_uu = (cb * b_uu).real + np.abs(b_u) ** 2
-    h_ss = (cb * b_ss).real + np.abs(b_s) ** 2
-    h_us = (cb * b_us).real + (np.conj(b_u) * b_s).real
+    _, _, h_uu, h_us, h_ss = power_curvature(b, b_u, b_s, b_uu, b_us, b_ss)
     det = h_uu * h_ss - h_us * h_us
     det = np.where(det > 0.0, det, np.inf)
     # d(gradient)/dw_q at a stationary point: Re(conj(B) f_q,i).

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..arrays import VirtualArray, angles_from_cosines
+from ..arrays import VirtualArray, angles_from_cosines, power_curvature
 from ..errors import RtsError
 
 FloatArray = NDArray[np.float64]
@@ -101,11 +101,7 @@ class Bartlett2D:
             b_uu = np.einsum("dm,dm->d", x, a * dy * dy)
             b_us = np.einsum("dm,dm->d", x, a * dy * dz)
             b_ss = np.einsum("dm,dm->d", x, a * dz * dz)
-            cb = np.conj(b)
-            g_u, g_s = (cb * b_u).real, (cb * b_s).real
-            h_uu = (cb * b_uu).real + np.abs(b_u) ** 2
-            h_ss = (cb * b_ss).real + np.abs(b_s) ** 2
-            h_us = (cb * b_us).real + (np.conj(b_u) * b_s).real
+            g_u, g_s, h_uu, h_us, h_ss = power_curvature(b, b_u, b_s, b_uu, b_us, b_ss)
             det = h_uu * h_ss - h_us * h_us
             ok = (h_uu < 0) & (det > 0)
             det = np.where(ok, det, 1.0)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..arrays import SourceResponse, VirtualArray, direction_cosines
+from ..arrays import SourceResponse, VirtualArray, direction_cosines, power_curvature
 from ..errors import SolverError
 from ..rig import Rig
 from .reasons import Reason
@@ -316,10 +316,7 @@ def _phase_residual(f: ComplexArray, w: FloatArray, phi: FloatArray) -> FloatArr
 def _curvature_margin(w: FloatArray, resp: ComplexArray) -> FloatArray:
     """Largest Hessian eigenvalue of ``|B|^2 / 2`` over ``|B|^2`` (< 0: strict local maximum)."""
     b, b_u, b_s, b_uu, b_us, b_ss = np.einsum("tqn,qn->tn", resp, w)
-    cb = np.conj(b)
-    h_uu = (cb * b_uu).real + np.abs(b_u) ** 2
-    h_ss = (cb * b_ss).real + np.abs(b_s) ** 2
-    h_us = (cb * b_us).real + (np.conj(b_u) * b_s).real
+    _, _, h_uu, h_us, h_ss = power_curvature(b, b_u, b_s, b_uu, b_us, b_ss)
     largest = 0.5 * (h_uu + h_ss) + np.sqrt(0.25 * (h_uu - h_ss) ** 2 + h_us**2)
     power = np.abs(b) ** 2
     return largest / np.where(power > 0.0, power, 1.0)
