@@ -101,8 +101,9 @@ def test_xdist_gives_the_same_verdicts(pytester):
         shutil.copy(ROOT / "scenarios" / f"{name}.scenario.yaml", pytester.path)
     pytester.makefile(".scenario.yaml", impossible=scene("impossible").replace(
         "[30, 0, 0.6]", "[30, 20, 0.6]"))
-    serial = pytester.runpytest("-n", "0", "-q", "-rA")
-    parallel = pytester.runpytest("-n", "2", "-q", "-rA")
+    # (pytest-benchmark has nothing to measure here and warns under xdist: keep it out.)
+    serial = pytester.runpytest("-n", "0", "-q", "-rA", "-p", "no:benchmark")
+    parallel = pytester.runpytest("-n", "2", "-q", "-rA", "-p", "no:benchmark")
 
     def verdicts(result):
         return sorted(line.split(" ", 1) for line in result.stdout.lines
