@@ -130,6 +130,7 @@ def _list_outputs(args: argparse.Namespace) -> int:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
+    import can
     import numpy as np
 
     from . import calibration as cal
@@ -152,7 +153,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     listen = open_bus(args.can_interface, channel)
     talk = None
     receiver = DetectionReceiver()
-    notifier = __import__("can").Notifier(listen, [receiver], timeout=0.05)
+    notifier = can.Notifier(listen, [receiver], timeout=0.05)
     output: Output
     try:
         if args.output == "simulated-radar":
@@ -270,9 +271,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     calibrate = sub.add_parser(
         "calibrate", help="calibrate the phase and gain of the RTS channels",
-        description="Pairwise phase sweeps and single-channel levels through the output and "
-                    "the CAN checker, closed by least squares into per-channel offsets. On the "
-                    "simulated radar, --inject-* adds random channel errors to recover.",
+        description="Pairwise phase sweeps, then each pair at its coherence point, through the "
+                    "output and the CAN checker; least squares over all pairs gives per-channel "
+                    "phase and gain offsets. On the simulated radar, --inject-* adds random "
+                    "channel errors to recover.",
     )
     calibrate.add_argument("rig", metavar="RIG", help="rig preset or *.rig.yaml")
     calibrate.add_argument("--radar", default="paper", help="radar profile (default paper)")
