@@ -18,10 +18,11 @@ import numpy as np
 
 from .canbus import DetectionPublisher, DetectionReceiver, open_bus
 from .canbus.mapping import CanMapping
-from .check import Report, check
+from .check import check
 from .kinematics import Tracks, compute_tracks
 from .outputs import Output, open_output
 from .outputs.radar import SimulatedRadarOutput
+from .report import Report
 from .scenario import Scenario, load_scenario
 from .schedule import Schedule, build_schedule
 

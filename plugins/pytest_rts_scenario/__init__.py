@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from rts_scenario.check import Report
 from rts_scenario.errors import RtsError
+from rts_scenario.report import Report
 from rts_scenario.runner import RunOptions, RunResult, run_scene
 from rts_scenario.scenario import load_scenario, parametrizations
 
