@@ -1,7 +1,16 @@
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings
 
 import rts_scenario as rs
+
+# CI replays the same examples every run (a new counterexample should come from a developer's
+# run, not block a landing at random); locally hypothesis explores freely.
+settings.register_profile("ci", derandomize=True, print_blob=True)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 
 @pytest.fixture(scope="session")
@@ -17,14 +26,3 @@ def array(request: pytest.FixtureRequest) -> rs.VirtualArray:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20261121)
-
-
-# CI replays the same examples every run (a new counterexample should come from a developer's
-# run, not block a landing at random); locally hypothesis explores freely.
-import os  # noqa: E402
-
-from hypothesis import settings  # noqa: E402
-
-settings.register_profile("ci", derandomize=True, print_blob=True)
-if os.environ.get("CI"):
-    settings.load_profile("ci")
