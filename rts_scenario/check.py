@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from .canbus import BusStats, DetectionReceiver
+from .canbus import DetectionReceiver
 from .kinematics import Tracks
 from .report import ErrorStats, Report, TargetResult
 from .scenario.model import Expectations
@@ -152,7 +152,7 @@ def check(scene: str, tracks: Tracks, played: NDArray[np.bool_], receiver: Detec
         targets=targets, errors=all_stats,
         detection_rate=float(detected.sum() / n_truth) if n_truth else float("nan"),
         false_detections=false_det, false_detections_per_frame=per_frame,
-        bus=asdict(bus) if isinstance(bus, BusStats) else dict(bus),
+        bus=asdict(bus),
         per_frame={"t_s": tracks.t_s, "detected": detected, "checkable": truth,
                    "frame_status": status, **{f"error_{a}": e for a, e in errors.items()}},
     )
