@@ -33,11 +33,12 @@ from numpy.typing import NDArray
 
 from .canbus import DetectionReceiver
 from .constants import C0_MPS
+from .detections import Detections
 from .errors import RtsError
 from .outputs.base import Output
 from .peak import find_peak, snapshot
 from .radar.profile import RadarProfile
-from .radar.simulate import ChannelErrors, Detections, SimulatedRadar
+from .radar.simulate import ChannelErrors, SimulatedRadar
 from .rig import Rig
 from .schedule import Schedule
 
@@ -199,10 +200,12 @@ def _calibration_schedule(rig: Rig, radar: RadarProfile,
 
 
 def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
-    if d.count == 0:
-        raise RtsError(f"calibration: no detection for FE pair {pair[0]}-{pair[1]} in frame "
-                       f"{d.frame}; check that the radar sees the rig")
-    return float(getattr(d, what)[int(np.argmax(d.snr_db))])
+    k = d.strongest()
+    values = getattr(d, what)
+    if k is None or values is None:
+        raise RtsError(f"calibration: no detection with {what} for FE pair {pair[0]}-{pair[1]} "
+                       f"in cycle {d.cycle}; check that the radar sees the rig")
+    return float(values[k])
 
 
 def _axis(rig: Rig, a: int, b: int) -> FloatArray:
@@ -311,33 +314,23 @@ def can_measure(output: Output, receiver: DetectionReceiver, drain_s: float = 2.
     """Measure through an output and the CAN checker: the bench procedure.
 
     Each schedule goes to ``output`` (a real RTS, or the simulated radar publishing on CAN);
-    the radar's frames come back through ``receiver`` (listening on the bus) by frame counter.
+    the radar's cycles come back through ``receiver`` (listening on the bus).
     """
     def measure(schedule: Schedule) -> list[Detections]:
         receiver.reset()
         before = receiver.stats.messages
         output.write(schedule)
         deadline = time.perf_counter() + drain_s
-        wanted = [int(f) & 0xFFFF for f in schedule.frame_index]
-        while time.perf_counter() < deadline and not all(
-                w in receiver.frames and receiver.frames[w].complete(
-                    receiver.halves_per_detection) for w in wanted):
+        got: dict[int, Detections] = {}
+        wanted = {int(f) & 0xFFFF for f in schedule.frame_index}
+        while time.perf_counter() < deadline and not wanted <= set(got):
+            got.update((c.cycle, c) for c in receiver.pop() if c.complete)
             time.sleep(0.002)
+        got.update((c.cycle, c) for c in receiver.flush() if c.complete)
         if receiver.stats.messages == before:
             raise RtsError("calibration: the radar sent nothing over CAN; check the bus")
-        out = []
-        for f, w in zip(schedule.frame_index, wanted, strict=True):
-            frame = receiver.frames.get(w)
-            values = receiver.detections(w) if frame is not None else {}
-            n = len(next(iter(values.values()))) if values else 0
-            empty = np.zeros(n)
-            out.append(Detections(
-                frame=int(f), t_s=float(schedule.t_s[0]),
-                range_m=values.get("range_m", empty),
-                radial_velocity_mps=values.get("radial_velocity_mps", empty),
-                az_deg=values.get("azimuth_deg", empty), el_deg=values.get("elevation_deg", empty),
-                snr_db=values.get("snr_db", empty), rcs_dbsm=values.get("rcs_dbsm", empty)))
-        return out
+        return [got.get(int(f) & 0xFFFF, Detections.empty(int(f), float(schedule.t_s[0])))
+                for f in schedule.frame_index]
 
     return measure
 
@@ -390,7 +383,7 @@ def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
     dets = measure(schedule)
     out = np.full((n, 2), np.nan)
     for i, d in enumerate(dets):  # one target per frame
-        if d.count:
-            k = int(np.argmax(d.snr_db))
+        k = d.strongest()
+        if k is not None and d.az_deg is not None and d.el_deg is not None:
             out[i] = d.az_deg[k] - az[i], d.el_deg[k] - el[i]
     return out

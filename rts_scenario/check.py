@@ -1,164 +1,319 @@
 """Compare the radar's detections with the scene's ground truth: errors, rates, verdict.
 
+The checker consumes `Detections` (radar cycles) from any source - the simulated radar, the CAN
+receiver, a recorded log - and never sees a bus. It streams: ground truth arrives in blocks of
+frames, cycles as they come, and `Checker.settle` checks the frames whose cycles are due and
+forgets them, keeping running statistics, the worst frames and (on request) a per-frame record
+on disk. Memory does not grow with the length of a run.
+
+A cycle belongs to the scene frame its counter names; the counter may wrap (16 bits on the
+bus), the nearest frame of the open window resolves it.
+
 Per frame, detections are associated with the targets the RTS played (gated at 3x each
 quantity's tolerance, then an optimal assignment on the normalized distance). A checkable
 target (present, synthesizable, unambiguous for the radar, played) counts as detected in a
 frame when a detection is assigned to it and every checked quantity lies within its tolerance.
+A quantity the radar does not report is not checked.
 
 Verdict (pass only if all hold): every target's detection rate reaches the scene's
 ``detection_rate``; false detections per frame stay within ``max_false_detections_per_frame``;
 and no frame that had something to check is missing, incomplete or corrupted - such frames
-count as missed and fail the run, so missing data can never pass.
+count as missed and fail the run, so missing data can never pass. A frame counts as checked
+only when every checkable target in it was matched to a detection.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict
+import heapq
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from .canbus import DetectionReceiver
+from .detections import Detections, unwrap_counter
 from .kinematics import Tracks
-from .report import ErrorStats, Report, TargetResult
+from .report import FrameRecord, Report, RunningStats, TargetResult
 from .scenario.model import Expectations
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
-# Checked quantity: (track attribute, mapping quantity, tolerance key).
+# Checked quantity: (name in Tracks and Detections, tolerance key).
 QUANTITIES = (
-    ("range_m", "range_m", "range_m"),
-    ("radial_velocity_mps", "radial_velocity_mps", "radial_velocity_mps"),
-    ("az_deg", "azimuth_deg", "az_deg"),
-    ("el_deg", "elevation_deg", "el_deg"),
-    ("rcs_dbsm", "rcs_dbsm", "rcs_db"),
+    ("range_m", "range_m"),
+    ("radial_velocity_mps", "radial_velocity_mps"),
+    ("az_deg", "az_deg"),
+    ("el_deg", "el_deg"),
+    ("rcs_dbsm", "rcs_db"),
 )
 GATE = 3.0
+# Worst target-frames kept for the report.
+WORST_FRAMES = 8
+# The counter of rts-scenario's own frame header (16 bits).
+COUNTER_MODULUS = 65536
+
+_OK, _MISSING, _INCOMPLETE = 0, 1, 2
 
 
-def check(scene: str, tracks: Tracks, played: NDArray[np.bool_], receiver: DetectionReceiver,
-          expectations: Expectations) -> Report:
-    """Check what the receiver reassembled against the ground truth.
+@dataclass(frozen=True)
+class _Block:
+    """Ground truth of consecutive frames ``first .. first + len(t_s)``."""
+
+    first: int
+    tracks: Tracks
+    played: BoolArray
+
+    @property
+    def end(self) -> int:
+        return self.first + int(self.tracks.t_s.size)
+
+
+class Checker:
+    """Streaming check of radar cycles against ground truth.
+
+    Parameters
+    ----------
+    scene : str
+        Scene name, for the report.
+    names : tuple of str
+        Target names (K).
+    expectations : Expectations
+        Tolerances and required rates.
+    counter_modulus : int
+        The radar's cycle counter wraps at this value.
+    record : FrameRecord, optional
+        Where per-frame arrays go (none kept without it).
+    """
+
+    def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
+                 counter_modulus: int = COUNTER_MODULUS, record: FrameRecord | None = None
+                 ) -> None:
+        self.scene = scene
+        self.names = names
+        self.expectations = expectations
+        self.modulus = counter_modulus
+        self.record = record
+        n = len(names)
+        self._blocks: list[_Block] = []
+        self._cycles: dict[int, Detections] = {}
+        self._settled = 0  # frames before this one are done
+        self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
+        self._checkable = np.zeros(n, dtype=np.int64)
+        self._detected = np.zeros(n, dtype=np.int64)
+        self._matched = 0
+        self._unchecked = 0
+        self._false = 0
+        self._worst: list[tuple[float, int, int, dict[str, Any]]] = []
+        self.frames = {"total": 0, "checked": 0, "received": 0, "unmatched": 0, "missing": 0,
+                       "incomplete": 0, "late": 0, "repeated": 0}
+
+    def add_truth(self, first_frame: int, tracks: Tracks, played: BoolArray) -> None:
+        """Ground truth of frames ``first_frame ..`` (consecutive with the blocks before)."""
+        expected = self._blocks[-1].end if self._blocks else self._settled
+        if first_frame != expected:
+            raise ValueError(f"truth block starts at frame {first_frame}, expected {expected}")
+        self._blocks.append(_Block(first_frame, tracks, np.asarray(played, dtype=bool)))
+
+    def add_cycles(self, cycles: Iterable[Detections]) -> None:
+        """Take radar cycles; each is filed under the frame its counter names."""
+        cycles = list(cycles)
+        if not cycles:
+            return
+        end = self._blocks[-1].end if self._blocks else self._settled
+        near = (self._settled + end) // 2
+        frames = unwrap_counter(np.array([c.cycle for c in cycles]), near, self.modulus)
+        for frame, cycle in zip(frames.tolist(), cycles, strict=True):  # one per radar cycle
+            if frame < self._settled:
+                self.frames["late"] += 1
+            elif frame in self._cycles:
+                self.frames["repeated"] += 1
+            else:
+                self._cycles[frame] = cycle
+
+    def settle(self, before_frame: int | None = None) -> None:
+        """Check every truth block that ends at or before ``before_frame`` (all if None)."""
+        while self._blocks and (before_frame is None or self._blocks[0].end <= before_frame):
+            block = self._blocks.pop(0)
+            self._check_block(block)
+            self._settled = block.end
+        if before_frame is None:
+            self.frames["late"] += len(self._cycles)  # cycles for frames the scene never had
+            self._cycles.clear()
+
+    def _check_block(self, block: _Block) -> None:
+        tracks, n_frames = block.tracks, block.end - block.first
+        n_targets = len(self.names)
+        tol = self.expectations.tolerances
+        status = np.full(n_frames, _MISSING, dtype=np.int8)
+        got: list[Detections] = []
+        rows: list[int] = []
+        for f in range(block.first, block.end):  # pick this block's cycles out of the queue
+            cycle = self._cycles.pop(f, None)
+            if cycle is None:
+                continue
+            if not cycle.complete:
+                status[f - block.first] = _INCOMPLETE
+                continue
+            status[f - block.first] = _OK
+            got.append(cycle)
+            rows.append(f - block.first)
+        frame_of = np.repeat(np.array(rows, dtype=np.int64),
+                             [c.count for c in got]).astype(np.int64)
+        n_det = frame_of.size
+        truth = tracks.checkable & block.played
+
+        cost = np.zeros((n_det, n_targets))
+        inside = np.ones((n_det, n_targets), dtype=bool)
+        diffs: dict[str, FloatArray] = {}
+        for q, key in QUANTITIES:
+            values = np.concatenate(
+                [getattr(c, q) if getattr(c, q) is not None else np.full(c.count, np.nan)
+                 for c in got]) if got else np.zeros(0)
+            diff = values[:, None] - getattr(tracks, q)[frame_of]
+            if q == "az_deg":
+                diff = (diff + 180.0) % 360.0 - 180.0
+            diffs[q] = diff
+            if q != "rcs_dbsm":  # RCS fluctuates: it does not decide who is who
+                norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
+                cost += norm * norm
+                inside &= np.abs(norm) <= GATE
+        candidates = inside & block.played[frame_of]
+        match = _assign(frame_of, candidates, cost)
+        matched = match >= 0
+
+        assigned = np.zeros((n_frames, n_targets), dtype=bool)
+        assigned[frame_of[matched], match[matched]] = True
+        within = np.ones((n_frames, n_targets), dtype=bool)
+        errors = {}
+        for q, key in QUANTITIES:
+            err = np.full((n_frames, n_targets), np.nan)
+            err[frame_of[matched], match[matched]] = diffs[q][np.flatnonzero(matched),
+                                                               match[matched]]
+            errors[q] = err
+            within &= ~(np.abs(err) > tol[key])
+            self._stats[q].add(err, truth)
+        detected = assigned & within & truth
+
+        ok = status == _OK
+        whole = ok & ~(truth & ~assigned).any(axis=1)
+        self._checkable += truth.sum(axis=0)
+        self._detected += detected.sum(axis=0)
+        self._matched += int((assigned & truth).sum())
+        self._unchecked += int(((~ok)[:, None] & truth).sum())
+        self._false += int((~matched).sum())
+        counts = self.frames
+        counts["total"] += n_frames
+        counts["received"] += int(ok.sum())
+        counts["checked"] += int(whole.sum())
+        counts["unmatched"] += int((ok & ~whole).sum())
+        counts["missing"] += int((status == _MISSING).sum())
+        counts["incomplete"] += int((status == _INCOMPLETE).sum())
+        self._keep_worst(block, truth, assigned, errors)
+        if self.record is not None:
+            self.record.append({"frame": np.arange(block.first, block.end), "t_s": tracks.t_s,
+                                "detected": detected, "checkable": truth,
+                                "frame_status": status,
+                                **{f"error_{q}": e for q, e in errors.items()}})
+
+    def _keep_worst(self, block: _Block, truth: BoolArray, assigned: BoolArray,
+                    errors: dict[str, FloatArray]) -> None:
+        """Keep the `WORST_FRAMES` worst target-frames: misses first, then error/tolerance."""
+        tol = self.expectations.tolerances
+        score = np.zeros(truth.shape)
+        for q, key in QUANTITIES[:4]:
+            score = np.fmax(score, np.abs(errors[q]) / tol[key])
+        score = np.where(truth & ~assigned, np.inf, score)
+        score = np.where(truth, score, -1.0)
+        top = np.argsort(-score, axis=None)[:WORST_FRAMES]
+        for flat in top:  # at most WORST_FRAMES per block
+            f, k = np.unravel_index(flat, score.shape)
+            if score[f, k] < 0:
+                break
+            entry = {"frame": block.first + int(f), "t_s": float(block.tracks.t_s[f]),
+                     "target": self.names[k], "missed": bool(not assigned[f, k]),
+                     **{q: float(errors[q][f, k]) for q, _ in QUANTITIES}}
+            item = (float(score[f, k]), -(block.first + int(f)), -int(k), entry)
+            if len(self._worst) < WORST_FRAMES:
+                heapq.heappush(self._worst, item)
+            elif item[:3] > self._worst[0][:3]:
+                heapq.heapreplace(self._worst, item)
+
+    def report(self, bus: dict[str, int] | None = None) -> Report:
+        """Return the verdict so far (call `settle` first); ``bus``: the transport's counters."""
+        exp = self.expectations
+        targets = []
+        for k, name in enumerate(self.names):  # one summary row per target
+            n_check, n_det = int(self._checkable[k]), int(self._detected[k])
+            rate = n_det / n_check if n_check else float("nan")
+            targets.append(TargetResult(
+                name=name, checkable_frames=n_check, detected_frames=n_det, detection_rate=rate,
+                errors={q: self._stats[q].result(k) for q, _ in QUANTITIES},
+                passed=n_check == 0 or rate >= exp.detection_rate - 1e-12))
+        reasons = [f"{t.name}: detection rate {t.detection_rate:.1%} < "
+                   f"{exp.detection_rate:.1%}" for t in targets if not t.passed]
+        frames = self.frames
+        per_frame = self._false / max(frames["received"], 1)
+        if per_frame > exp.max_false_detections_per_frame:
+            reasons.append(f"{per_frame:.3f} false detections per frame > "
+                           f"{exp.max_false_detections_per_frame:g}")
+        if self._unchecked:
+            reasons.append(f"{frames['missing']} frames missing and {frames['incomplete']} "
+                           f"incomplete: {self._unchecked} target-frames could not be checked")
+        if bus is not None:
+            if bus.get("messages", 0) == 0:
+                reasons.append("the bus was silent: no message received")
+            lost = {"checksum errors": bus.get("checksum_errors", 0),
+                    "undecodable messages": bus.get("decode_errors", 0),
+                    "detections without a frame header": bus.get("orphans", 0)}
+            reasons += [f"{v} {k}" for k, v in lost.items() if v]
+        n_truth = int(self._checkable.sum())
+        if n_truth == 0:
+            reasons.append("nothing to check: no target was checkable in any frame")
+        worst = [entry for *_, entry in sorted(self._worst, key=lambda w: w[:3], reverse=True)]
+        return Report(
+            scene=self.scene, passed=not reasons, reasons=reasons,
+            frames={**frames, "late": frames["late"] + (bus or {}).get("reordered", 0)},
+            targets=targets, errors={q: self._stats[q].result() for q, _ in QUANTITIES},
+            detection_rate=float(self._detected.sum() / n_truth) if n_truth else float("nan"),
+            false_detections=self._false, false_detections_per_frame=per_frame,
+            bus=dict(bus or {}),
+            target_frames={"checkable": n_truth, "matched": self._matched,
+                           "unmatched": n_truth - self._matched - self._unchecked,
+                           "unchecked": self._unchecked, "detected": int(self._detected.sum())},
+            worst_frames=worst, record=self.record)
+
+
+def check(scene: str, tracks: Tracks, played: BoolArray, cycles: Iterable[Detections],
+          expectations: Expectations, *, bus: dict[str, int] | None = None,
+          counter_modulus: int = COUNTER_MODULUS) -> Report:
+    """Check radar cycles against the ground truth of a whole scene at once.
 
     Parameters
     ----------
     scene : str
         Scene name, for the report.
     tracks : Tracks
-        Ground truth, (F, K).
+        Ground truth, (F, K), frame 0 first.
     played : ndarray of bool, shape (F, K)
         Targets the RTS played (the schedule's emitted entries).
-    receiver : DetectionReceiver
-        The radar's frames as received from the bus (frame counter = scene frame index).
+    cycles : iterable of Detections
+        The radar's cycles (counter = scene frame index, possibly wrapped).
     expectations : Expectations
         Tolerances and required rates.
+    bus : dict, optional
+        The transport's counters (`rts_scenario.canbus.BusStats` as a dict).
     """
-    n_frames, n_targets = tracks.range_m.shape
-    tol = expectations.tolerances
-    available = receiver.mapping.quantities
-    checked_q = [(attr, q, key) for attr, q, key in QUANTITIES if q in available]
-    truth = tracks.checkable & played
-    halves = receiver.halves_per_detection
-    status = np.zeros(n_frames, dtype=np.int8)  # 0 ok, 1 missing, 2 incomplete
-    det: dict[str, list[FloatArray]] = {q: [] for _, q, _ in checked_q}
-    det_frame: list[int] = []
-    for f in range(n_frames):  # reassembled frames come one by one from the receiver
-        frame = receiver.frames.get(f & 0xFFFF)
-        if frame is None:
-            status[f] = 1
-            continue
-        if not frame.complete(halves):
-            status[f] = 2
-            continue
-        values = receiver.detections(f & 0xFFFF)
-        count = len(frame.parts)
-        for _, q, _ in checked_q:
-            det[q].append(values[q])
-        det_frame.extend([f] * count)
-    frame_of = np.asarray(det_frame, dtype=np.int64)
-    d_values = {q: np.concatenate(v) if v else np.zeros(0) for q, v in det.items()}
-
-    # Gate and cost for every (detection, target) pair of the same frame.
-    cost = np.zeros((frame_of.size, n_targets))
-    inside = np.ones((frame_of.size, n_targets), dtype=bool)
-    diffs = {}
-    for attr, q, key in checked_q:
-        truth_q = getattr(tracks, attr)[frame_of]  # (D, K)
-        diff = d_values[q][:, None] - truth_q
-        if attr == "az_deg":
-            diff = (diff + 180.0) % 360.0 - 180.0
-        diffs[attr] = diff
-        if attr != "rcs_dbsm":  # RCS fluctuates: it does not decide who is who
-            norm = diff / tol[key]
-            cost += norm * norm
-            inside &= np.abs(norm) <= GATE
-    candidates = inside & played[frame_of]
-    match_target = _assign(frame_of, candidates, cost)
-
-    matched = match_target >= 0
-    errors = {attr: np.full((n_frames, n_targets), np.nan) for attr, _, _ in checked_q}
-    for attr in errors:
-        errors[attr][frame_of[matched], match_target[matched]] = diffs[attr][
-            np.flatnonzero(matched), match_target[matched]]
-    within = np.ones((n_frames, n_targets), dtype=bool)
-    assigned = np.zeros((n_frames, n_targets), dtype=bool)
-    assigned[frame_of[matched], match_target[matched]] = True
-    for attr, _, key in checked_q:
-        within &= ~(np.abs(errors[attr]) > tol[key])
-    detected = assigned & within & truth
-
-    unchecked = (status > 0)[:, None] & truth
-    false_det = int((~matched).sum())
-    checked_frames = int((status == 0).sum())
-    targets = []
-    for k, name in enumerate(tracks.names):  # one summary row per target
-        n_check = int(truth[:, k].sum())
-        n_det = int(detected[:, k].sum())
-        rate = n_det / n_check if n_check else float("nan")
-        stats = {attr: ErrorStats.of(errors[attr][:, k][truth[:, k]]) for attr, _, _ in
-                 checked_q}
-        for attr, _, _ in QUANTITIES:
-            stats.setdefault(attr, ErrorStats.of(np.zeros(0)))
-        targets.append(TargetResult(name=name, checkable_frames=n_check, detected_frames=n_det,
-                                    detection_rate=rate, errors=stats,
-                                    passed=n_check == 0
-                                    or rate >= expectations.detection_rate - 1e-12))
-    reasons = [f"{t.name}: detection rate {t.detection_rate:.1%} < "
-               f"{expectations.detection_rate:.1%}" for t in targets if not t.passed]
-    per_frame = false_det / max(checked_frames, 1)
-    if per_frame > expectations.max_false_detections_per_frame:
-        reasons.append(f"{per_frame:.3f} false detections per frame > "
-                       f"{expectations.max_false_detections_per_frame:g}")
-    if unchecked.any():
-        reasons.append(f"{int((status == 1).sum())} frames missing and "
-                       f"{int((status == 2).sum())} incomplete: "
-                       f"{int(unchecked.sum())} target-frames could not be checked")
-    bus = receiver.stats
-    if bus.messages == 0:
-        reasons.append("the bus was silent: no message received")
-    lost = {"checksum errors": bus.checksum_errors, "undecodable messages": bus.decode_errors,
-            "detections without a frame header": bus.orphans}
-    reasons += [f"{v} {k}" for k, v in lost.items() if v]
-    if not truth.any():
-        reasons.append("nothing to check: no target was checkable in any frame")
-    all_stats = {attr: ErrorStats.of(errors[attr][truth]) for attr, _, _ in checked_q}
-    n_truth = int(truth.sum())
-    return Report(
-        scene=scene, passed=not reasons, reasons=reasons,
-        frames={"total": n_frames, "checked": checked_frames,
-                "missing": int((status == 1).sum()), "incomplete": int((status == 2).sum()),
-                "late": bus.reordered},
-        targets=targets, errors=all_stats,
-        detection_rate=float(detected.sum() / n_truth) if n_truth else float("nan"),
-        false_detections=false_det, false_detections_per_frame=per_frame,
-        bus=asdict(bus),
-        per_frame={"t_s": tracks.t_s, "detected": detected, "checkable": truth,
-                   "frame_status": status, **{f"error_{a}": e for a, e in errors.items()}},
-    )
+    checker = Checker(scene, tracks.names, expectations, counter_modulus=counter_modulus)
+    checker.add_truth(0, tracks, played)
+    checker.add_cycles(cycles)
+    checker.settle()
+    return checker.report(bus)
 
 
-def _assign(frame_of: NDArray[np.int64], candidates: NDArray[np.bool_],
+def _assign(frame_of: NDArray[np.int64], candidates: BoolArray,
             cost: FloatArray) -> NDArray[np.int64]:
     """Target assigned to each detection (-1: none), optimal per frame.
 

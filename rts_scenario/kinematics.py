@@ -95,12 +95,16 @@ def _heading(motion: Motion) -> tuple[FloatArray, FloatArray | None]:
     return yaw, rate
 
 
-def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None) -> Tracks:
+def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None,
+                   frame_index: NDArray[np.int64] | None = None) -> Tracks:
     """Evaluate the scene at every frame: range, radial velocity, Doppler, RCS and angles.
 
-    ``t_s`` evaluates at other times than the scene's frames (shape (F,)).
+    ``t_s`` evaluates at other times than the scene's frames (shape (F,)); ``frame_index``
+    (shape (F,), default 0, 1, ...) numbers them for the RCS fluctuation, so a scene evaluated
+    batch by batch equals the scene evaluated at once.
     """
     t = scenario.t_s if t_s is None else np.asarray(t_s, dtype=np.float64)
+    frames = np.arange(t.size) if frame_index is None else np.asarray(frame_index)
     targets = scenario.targets
     ego = TrajectorySet([scenario.ego]).evaluate(t)
     ego_yaw, ego_rate = _heading(ego)
@@ -140,8 +144,7 @@ def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None) -> Tracks:
 
     # Aspect: where the radar lies as seen from the target's body (0: ahead of it).
     aspect = np.degrees(np.arctan2(-line[..., 1], -line[..., 0]) - yaw)
-    rng = np.random.default_rng(scenario.seed)
-    rcs = rcs_series([tg.rcs for tg in targets], aspect, rng)
+    rcs = rcs_series([tg.rcs for tg in targets], aspect, scenario.seed, frames)
 
     appear = np.array([tg.appear_s for tg in targets])
     disappear = np.array([tg.disappear_s for tg in targets])

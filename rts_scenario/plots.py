@@ -11,7 +11,7 @@ from .errors import RtsError
 from .solver.quads import quad_polygons
 
 if TYPE_CHECKING:
-    from .runner import RunResult
+    from .pipeline import RunResult
 
 
 def _pyplot() -> Any:
@@ -30,7 +30,16 @@ def write_plots(result: RunResult, folder: str | Path) -> list[Path]:
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    tracks, schedule, scene, report = result.tracks, result.schedule, result.scene, result.report
+    from .kinematics import compute_tracks
+    from .schedule import build_schedule
+
+    scene, report = result.scene, result.report
+    per_frame = report.per_frame
+    if not per_frame:
+        raise RtsError("plots need the per-frame record: run with RunOptions(record=True)")
+    # The run streamed its frames; the plots draw the whole scene, so it is evaluated again.
+    tracks = compute_tracks(scene)
+    schedule = build_schedule(tracks, scene.rig, scene.radar, frame_rate_hz=scene.frame_rate_hz)
     stem = scene.name
     names = tracks.names
     colors = plt.cm.tab10(np.arange(len(names)) % 10)
@@ -80,14 +89,14 @@ def write_plots(result: RunResult, folder: str | Path) -> list[Path]:
                   ("error_el_deg", "elevation (deg)", "el_deg")]
     fig, axes = plt.subplots(len(quantities), 1, figsize=(12, 9), sharex=True)
     for ax, (key, label, tol_key) in zip(axes, quantities, strict=True):
-        err = report.per_frame.get(key)
+        err = per_frame.get(key)
         tol = scene.expectations.tolerances[tol_key]
         ax.axhspan(-tol, tol, color="0.9", zorder=0)
         if err is not None:
             for k in range(len(names)):
                 ax.plot(tracks.t_s, err[:, k], ".", ms=2, color=colors[k])
         ax.set_ylabel(label)
-    missed = report.per_frame["checkable"] & ~report.per_frame["detected"]
+    missed = per_frame["checkable"] & ~per_frame["detected"]
     for k in range(len(names)):
         t = tracks.t_s[missed[:, k]]
         axes[0].plot(t, np.zeros_like(t), "x", ms=3, color=colors[k])

@@ -1,4 +1,9 @@
-"""Radar cross section series: constant, aspect-angle tables, Swerling 1 and 3 fluctuation."""
+"""Radar cross section series: constant, aspect-angle tables, Swerling 1 and 3 fluctuation.
+
+Fluctuation draws are counter-based: each (seed, target, frame) has its own uniform numbers,
+computed by a SplitMix64 hash of those indices, so a scene evaluated in batches of frames (a
+streaming run) draws exactly what it draws in one piece.
+"""
 
 from __future__ import annotations
 
@@ -11,8 +16,8 @@ from .scenario.model import RcsModel
 FloatArray = NDArray[np.float64]
 
 
-def rcs_series(models: list[RcsModel], aspect_deg: FloatArray,
-               rng: np.random.Generator) -> FloatArray:
+def rcs_series(models: list[RcsModel], aspect_deg: FloatArray, seed: int,
+               frame_index: NDArray[np.int64]) -> FloatArray:
     """RCS in dBsm per frame and target, shape ``(F, K)``.
 
     Parameters
@@ -21,8 +26,10 @@ def rcs_series(models: list[RcsModel], aspect_deg: FloatArray,
         One per target (K).
     aspect_deg : ndarray, shape (F, K)
         Aspect angle of the radar as seen from each target (0: from the front).
-    rng : numpy.random.Generator
-        Source of the fluctuation; the same seed gives the same series.
+    seed : int
+        Seed of the fluctuation; the same seed gives the same series.
+    frame_index : ndarray of int, shape (F,)
+        Index of each frame in the scene (the fluctuation is a function of it).
     """
     n_frames, n_targets = aspect_deg.shape
     out = np.empty((n_frames, n_targets))
@@ -35,18 +42,41 @@ def rcs_series(models: list[RcsModel], aspect_deg: FloatArray,
     for kind, draw in (("swerling1", _swerling1), ("swerling3", _swerling3)):
         idx = [k for k, m in enumerate(models) if m.fluctuation == kind]
         if idx:
-            out[:, idx] += 10.0 * np.log10(draw(rng, (n_frames, len(idx))))
+            frames = np.asarray(frame_index, dtype=np.uint64)[:, None]
+            out[:, idx] += 10.0 * np.log10(draw(seed, frames, np.array(idx, dtype=np.uint64)))
     return out
 
 
-def _swerling1(rng: np.random.Generator, shape: tuple[int, int]) -> FloatArray:
+def _swerling1(seed: int, frame: NDArray[np.uint64], target: NDArray[np.uint64]) -> FloatArray:
     # Chi-square with 2 degrees of freedom, mean 1: exponential power, frame to frame.
-    return rng.exponential(1.0, shape)
+    return -np.log1p(-uniforms(seed, frame, target, 0))
 
 
-def _swerling3(rng: np.random.Generator, shape: tuple[int, int]) -> FloatArray:
-    # Chi-square with 4 degrees of freedom, mean 1.
-    return rng.gamma(2.0, 0.5, shape)
+def _swerling3(seed: int, frame: NDArray[np.uint64], target: NDArray[np.uint64]) -> FloatArray:
+    # Chi-square with 4 degrees of freedom, mean 1: the mean of two exponentials.
+    return -0.5 * (np.log1p(-uniforms(seed, frame, target, 1))
+                   + np.log1p(-uniforms(seed, frame, target, 2)))
+
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+
+
+def uniforms(seed: int, frame: NDArray[np.uint64], target: NDArray[np.uint64],
+             stream: int) -> FloatArray:
+    """Uniform numbers in [0, 1), one per (frame, target) (broadcast), for ``seed`` and ``stream``.
+
+    SplitMix64 of a key made of the four indices: independent of how frames are batched.
+    """
+    with np.errstate(over="ignore"):  # modular arithmetic is the point
+        key = (np.uint64(seed & 0xFFFFFFFF) * _MIX1 + np.uint64(stream) * _MIX2
+               + target * _GOLDEN) ^ (frame * _MIX1 + _GOLDEN)
+        z = key + _GOLDEN
+        z = (z ^ (z >> np.uint64(30))) * _MIX1
+        z = (z ^ (z >> np.uint64(27))) * _MIX2
+        z = z ^ (z >> np.uint64(31))
+    return (z >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
 
 
 def _interpolate_tables(models: list[RcsModel], aspect_deg: FloatArray) -> FloatArray:

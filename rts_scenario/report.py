@@ -1,15 +1,32 @@
-"""The verdict of a run and its evidence: per target, per quantity, per frame."""
+"""The verdict of a run and its evidence: per target, per quantity, per frame.
+
+Statistics are kept running (`RunningStats`) so a run of any length reports in bounded memory;
+the per-frame record (`FrameRecord`) is written to disk only when asked for.
+"""
 
 from __future__ import annotations
 
 import json
+import math
+import tempfile
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
+
+# Percentiles come from a histogram of |error| with bins this much wider than the one below
+# (1 % wide: a percentile is exact to 0.5 %) from HIST_LOW to HIST_HIGH; smaller errors count
+# as zero, larger ones as HIST_HIGH (count, max and rms stay exact). About 3,500 bins: 14 kB
+# per target and quantity, whatever the length of the run.
+HIST_RATIO = 1.01
+HIST_LOW = 1e-9
+HIST_HIGH = 1e6
+_LOG_RATIO = math.log(HIST_RATIO)
+HIST_BINS = int(math.ceil(math.log(HIST_HIGH / HIST_LOW) / _LOG_RATIO)) + 2
 
 
 @dataclass
@@ -25,11 +42,106 @@ class ErrorStats:
     @classmethod
     def of(cls, errors: FloatArray) -> ErrorStats:
         """Statistics of the finite values of ``errors``."""
-        e = np.abs(errors[np.isfinite(errors)])
+        stats = RunningStats(1)
+        stats.add(np.asarray(errors, dtype=np.float64).reshape(-1, 1))
+        return stats.result()
+
+
+class RunningStats:
+    """Count, rms, max and percentiles of |error| of ``n`` series, fed in batches.
+
+    Memory is constant: percentiles are read from a geometric histogram (`HIST_RATIO`).
+    """
+
+    def __init__(self, n: int = 1) -> None:
+        self.count = np.zeros(n, dtype=np.int64)
+        self.sum_sq = np.zeros(n)
+        self.max = np.zeros(n)
+        self.hist = np.zeros((n, HIST_BINS), dtype=np.int32)
+
+    def add(self, errors: FloatArray, mask: NDArray[np.bool_] | None = None) -> None:
+        """Take the finite values of ``errors`` (shape ``(..., n)``) where ``mask`` holds."""
+        e = np.abs(np.asarray(errors, dtype=np.float64))
+        e = e.reshape(-1, self.count.size)
+        take = np.isfinite(e)
+        if mask is not None:
+            take &= np.asarray(mask, dtype=bool).reshape(e.shape)
+        series = np.broadcast_to(np.arange(self.count.size), e.shape)[take]
+        e = e[take]
         if e.size == 0:
-            return cls(0, float("nan"), float("nan"), float("nan"), float("nan"))
-        return cls(int(e.size), float(np.sqrt(np.mean(e * e))), float(e.max()),
-                   float(np.percentile(e, 50)), float(np.percentile(e, 95)))
+            return
+        n = self.count.size
+        self.count += np.bincount(series, minlength=n)
+        self.sum_sq += np.bincount(series, weights=e * e, minlength=n)
+        np.maximum.at(self.max, series, e)
+        self.hist += np.bincount(series * HIST_BINS + _bin(e), minlength=n * HIST_BINS
+                                 ).reshape(n, HIST_BINS).astype(np.int32)
+
+    def result(self, i: int | None = None) -> ErrorStats:
+        """Statistics of series ``i``, or of all series together."""
+        pick = slice(None) if i is None else slice(i, i + 1)
+        count = int(self.count[pick].sum())
+        if count == 0:
+            nan = float("nan")
+            return ErrorStats(0, nan, nan, nan, nan)
+        top = float(self.max[pick].max())
+        hist = self.hist[pick].sum(axis=0)
+        return ErrorStats(count, math.sqrt(float(self.sum_sq[pick].sum()) / count), top,
+                          _percentile(hist, count, 50.0, top), _percentile(hist, count, 95.0, top))
+
+
+def _percentile(hist: NDArray[np.int64], count: int, q: float, top: float) -> float:
+    """Read the ``q``-th percentile (0..100) from a histogram: its bin's geometric middle."""
+    rank = q / 100.0 * (count - 1)
+    b = int(np.searchsorted(np.cumsum(hist), rank, side="right"))
+    if b == 0:
+        return 0.0
+    return min(HIST_LOW * HIST_RATIO ** (b - 0.5), top)
+
+
+def _bin(e: FloatArray) -> NDArray[np.int64]:
+    """Histogram bin of each |error|: 0 below HIST_LOW, then geometric bins."""
+    with np.errstate(divide="ignore"):
+        b = np.floor(np.log(np.maximum(e, HIST_LOW * 0.5) / HIST_LOW) / _LOG_RATIO) + 1
+    return np.clip(b, 0, HIST_BINS - 1).astype(np.int64)
+
+
+class FrameRecord:
+    """Per-frame arrays of a run, spilled to disk batch by batch (read back on demand).
+
+    Each `append` writes one ``.npz`` with arrays whose first axis is frames; `load`
+    concatenates them. The files live in ``folder`` (a private temporary folder by default,
+    removed with the record).
+    """
+
+    def __init__(self, folder: str | Path | None = None) -> None:
+        self._tmp = None if folder is not None else tempfile.TemporaryDirectory(
+            prefix="rts-scenario-record-")
+        self.folder = Path(folder if folder is not None else self._tmp.name)  # type: ignore[union-attr]
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.parts = 0
+        self.frames = 0
+
+    def append(self, arrays: dict[str, np.ndarray]) -> None:
+        """Write one batch (all arrays share their first axis)."""
+        np.savez(self.folder / f"part-{self.parts:06d}.npz", **arrays)  # type: ignore[arg-type]
+        self.parts += 1
+        self.frames += len(next(iter(arrays.values()))) if arrays else 0
+
+    def load(self) -> dict[str, np.ndarray]:
+        """All batches, concatenated along frames."""
+        chunks: dict[str, list[np.ndarray]] = {}
+        for i in range(self.parts):  # one file per batch
+            with np.load(self.folder / f"part-{i:06d}.npz") as part:
+                for key in part.files:
+                    chunks.setdefault(key, []).append(part[key])
+        return {k: np.concatenate(v) for k, v in chunks.items()}
+
+    def close(self) -> None:
+        """Remove the private folder (a named folder stays)."""
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
 
 
 @dataclass
@@ -46,7 +158,12 @@ class TargetResult:
 
 @dataclass
 class Report:
-    """The verdict of a run and the evidence for it."""
+    """The verdict of a run and the evidence for it.
+
+    ``worst_frames`` lists the worst target-frames (misses first, then by error over
+    tolerance); ``record`` holds every frame's arrays when the run was asked to record them
+    (`per_frame` reads them back).
+    """
 
     scene: str
     passed: bool
@@ -58,18 +175,29 @@ class Report:
     false_detections: int
     false_detections_per_frame: float
     bus: dict[str, int]
+    target_frames: dict[str, int] = field(default_factory=dict)
     timing: dict[str, float] = field(default_factory=dict)
-    per_frame: dict[str, Any] = field(default_factory=dict, repr=False)
+    worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
+    record: FrameRecord | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def per_frame(self) -> dict[str, np.ndarray]:
+        """Every frame's arrays, read back from the record (empty without one).
+
+        Keys: ``frame``, ``t_s``, ``detected``, ``checkable``, ``frame_status``,
+        ``error_<quantity>``.
+        """
+        return self.record.load() if self.record is not None else {}
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data for JSON (per-frame arrays left out)."""
-        out = asdict(self)
-        out.pop("per_frame")
-        return out
+        """Plain data for JSON (per-frame arrays and the worst frames left out)."""
+        out = {k: v for k, v in asdict(_without_record(self)).items()
+               if k not in ("record", "worst_frames")}
+        return dict(_strict(out))
 
     def to_json(self) -> str:
-        """Render the report as JSON (keys documented in docs/report.md)."""
-        return json.dumps(self.to_dict(), indent=2, allow_nan=True) + "\n"
+        """Render the report as strict JSON (keys documented in docs/report.md; NaN: null)."""
+        return json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n"
 
     def table(self) -> str:
         """Render the report as a text table for people."""
@@ -90,6 +218,7 @@ class Report:
                 f"{'pass' if t.passed else 'FAIL'}")
         f = self.frames
         lines.append(f"frames: {f['total']} in the scene, {f['checked']} checked, "
+                     f"{f.get('unmatched', 0)} with unmatched targets, "
                      f"{f['missing']} missing, {f['incomplete']} incomplete; "
                      f"false detections: {self.false_detections} "
                      f"({self.false_detections_per_frame:.3f} per frame)")
@@ -100,3 +229,21 @@ class Report:
         lines.append(("PASS" if self.passed else "FAIL") + f": {self.scene}"
                      + ("" if self.passed else " - " + "; ".join(self.reasons)))
         return "\n".join(lines)
+
+
+def _without_record(report: Report) -> Report:
+    # asdict deep-copies every field; the record is a handle, not data.
+    from dataclasses import replace
+
+    return replace(report, record=None)
+
+
+def _strict(value: Any) -> Any:
+    """Non-finite floats become None (strict JSON)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict(v) for v in value]
+    return value

@@ -12,7 +12,8 @@ from rts_scenario.canbus import DetectionPublisher, DetectionReceiver, open_bus
 from rts_scenario.canbus.mapping import CanMapping
 from rts_scenario.check import check
 from rts_scenario.kinematics import compute_tracks
-from rts_scenario.radar.simulate import Detections, SimulatedRadar
+from rts_scenario.detections import Detections
+from rts_scenario.radar.simulate import SimulatedRadar
 from rts_scenario.scenario import load_scenario
 from rts_scenario.schedule import build_schedule
 
@@ -98,7 +99,8 @@ def test_clean_run_passes_with_every_frame_checked(cut_in):
     scene, tracks, schedule, frames = cut_in
     receiver, _ = run_over_bus(frames)
     assert receiver.stats.clean
-    report = check(scene.name, tracks, schedule.emitted, receiver, scene.expectations)
+    report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+                   bus=vars(receiver.stats))
     assert report.passed, report.reasons
     assert report.frames["checked"] == report.frames["total"] == scene.n_frames
     data = json.loads(report.to_json())
@@ -115,27 +117,30 @@ def test_round_trip_of_every_signal_at_its_limits(fd):
         dict(range_m=327.675, v=163.835, az=163.835, el=163.835, rcs=63.5, snr=127.5),
         dict(range_m=12.345, v=-2.005, az=-0.005, el=0.005, rcs=7.5, snr=33.5),
     ]
-    frames = [Detections(frame=i, t_s=0.05 * i,
+    frames = [Detections(cycle=i, t_s=0.05 * i,
                          range_m=np.array([x["range_m"]]),
                          radial_velocity_mps=np.array([x["v"]]), az_deg=np.array([x["az"]]),
                          el_deg=np.array([x["el"]]), snr_db=np.array([x["snr"]]),
                          rcs_dbsm=np.array([x["rcs"]])) for i, x in enumerate(limits)]
     receiver, _ = run_over_bus(frames, fd=fd)
     assert receiver.stats.clean
+    cycles = receiver.flush()
+    assert [c.cycle for c in cycles] == list(range(len(limits)))
     for i, x in enumerate(limits):
-        got = receiver.detections(i)
+        got = vars(cycles[i])
+        assert cycles[i].complete and cycles[i].t_s == pytest.approx(0.05 * i, abs=1e-4)
         # Exact at the 0.005 m / 0.005 deg resolution: the 0.01 checks are not blurred.
         assert got["range_m"][0] == pytest.approx(x["range_m"], abs=1e-9)
         assert got["radial_velocity_mps"][0] == pytest.approx(x["v"], abs=1e-9)
-        assert got["azimuth_deg"][0] == pytest.approx(x["az"], abs=1e-9)
-        assert got["elevation_deg"][0] == pytest.approx(x["el"], abs=1e-9)
+        assert got["az_deg"][0] == pytest.approx(x["az"], abs=1e-9)
+        assert got["el_deg"][0] == pytest.approx(x["el"], abs=1e-9)
         assert got["rcs_dbsm"][0] == pytest.approx(x["rcs"], abs=1e-9)
         assert got["snr_db"][0] == pytest.approx(x["snr"], abs=1e-9)
 
 
 def test_out_of_range_values_are_a_clear_error():
     from rts_scenario import OutputError
-    frame = Detections(frame=0, t_s=0.0, range_m=np.array([400.0]),
+    frame = Detections(cycle=0, t_s=0.0, range_m=np.array([400.0]),
                        radial_velocity_mps=np.zeros(1), az_deg=np.zeros(1), el_deg=np.zeros(1),
                        snr_db=np.zeros(1), rcs_dbsm=np.zeros(1))
     with open_bus(channel="x") as bus, pytest.raises(OutputError, match="Range"):
@@ -153,7 +158,8 @@ def test_faults_are_detected_and_missing_data_never_passes(cut_in, fault, counte
     scene, tracks, schedule, frames = cut_in
     receiver, faulty = run_over_bus(frames, fault, p=0.01)
     assert faulty.count > 0
-    report = check(scene.name, tracks, schedule.emitted, receiver, scene.expectations)
+    report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+                   bus=vars(receiver.stats))
     if counter is not None:
         assert getattr(receiver.stats, counter) > 0
         assert report.bus[counter] > 0
@@ -170,7 +176,8 @@ def test_faults_are_detected_and_missing_data_never_passes(cut_in, fault, counte
 def test_silent_bus_fails(cut_in):
     scene, tracks, schedule, _ = cut_in
     receiver, _ = run_over_bus([])
-    report = check(scene.name, tracks, schedule.emitted, receiver, scene.expectations)
+    report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+                   bus=vars(receiver.stats))
     assert not report.passed
     assert any("silent" in r for r in report.reasons)
     assert report.frames["missing"] == scene.n_frames
@@ -202,7 +209,7 @@ def test_third_party_cluster_list_with_mapping(cut_in):
             bus.send(can.Message(arbitration_id=status.frame_id, is_extended_id=False,
                                  data=status.encode({"NofClustersNear": frame.count,
                                                      "NofClustersFar": 0,
-                                                     "MeasCounter": frame.frame,
+                                                     "MeasCounter": frame.cycle,
                                                      "InterfaceVersion": 1})))
             az, rng = np.radians(frame.az_deg), frame.range_m
             x, y = rng * np.cos(az), rng * np.sin(az)
@@ -215,7 +222,8 @@ def test_third_party_cluster_list_with_mapping(cut_in):
 
     receiver, _ = run_over_bus(None, mapping=mapping, send=send)
     assert receiver.stats.clean
-    report = check(scene.name, tracks, schedule.emitted, receiver, scene.expectations)
+    report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+                   bus=vars(receiver.stats))
     # Elevation is not in the cluster list: it is not checked. 0.2 m steps keep the rest.
     assert report.targets[0].errors["el_deg"].count == 0
     assert report.errors["range_m"].max < 0.2

@@ -166,7 +166,7 @@ def test_simulated_radar_output_and_bad_options():
     with open_output("simulated-radar", profile=PAPER, rig=KIT, noise=False,
                      sink=got.append) as out:
         out.write(sch)
-    assert [d.frame for d in got] == [0, 1] and all(d.count == 1 for d in got)
+    assert [d.cycle for d in got] == [0, 1] and all(d.count == 1 for d in got)
     with pytest.raises(rs.RtsError, match="valid: auto, adc, analytic"):
         SimulatedRadar(PAPER, KIT, fidelity="exact")
     with pytest.raises(rs.RtsError, match="valid: bartlett, ti"):

@@ -15,7 +15,6 @@ from fnmatch import fnmatch
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 
 from rts_scenario.errors import RtsError
@@ -140,33 +139,16 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
     return out
 
 
-def _render(result: RunResult, worst: int = 8) -> str:
+def _render(result: RunResult) -> str:
     """Render the report table and the worst frames (misses first, then largest errors)."""
-    report, tracks, scene = result.report, result.tracks, result.scene
-    pf = report.per_frame
-    tol = scene.expectations.tolerances
-    keys = [("error_range_m", "range_m"), ("error_radial_velocity_mps", "radial_velocity_mps"),
-            ("error_az_deg", "az_deg"), ("error_el_deg", "el_deg")]
-    score = np.zeros(pf["checkable"].shape)
-    for key, tol_key in keys:
-        if key in pf:
-            score = np.fmax(score, np.abs(pf[key]) / tol[tol_key])
-    score = np.where(pf["checkable"] & ~pf["detected"] & np.isnan(pf.get("error_range_m", score)),
-                     np.inf, score)
-    score = np.where(pf["checkable"], score, -1.0)
-    order = np.argsort(-score, axis=None)[:worst]
+    report = result.report
     lines = [report.table(), "", "worst frames (error / tolerance):",
              f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
              f"{'el':>8}"]
-    for flat in order:
-        f, k = np.unravel_index(flat, score.shape)
-        if score[f, k] < 0:
-            break
-        cells = []
-        for key, _ in keys:
-            value = pf.get(key, np.full(score.shape, np.nan))[f, k]
-            cells.append("missed" if np.isnan(value) else f"{value:+.3f}")
-        lines.append(f"{f:>6} {tracks.t_s[f]:>7.2f} {tracks.names[k]:<18} "
+    for row in report.worst_frames:
+        cells = ["missed" if row["missed"] else f"{row[key]:+.3f}"
+                 for key in ("range_m", "radial_velocity_mps", "az_deg", "el_deg")]
+        lines.append(f"{row['frame']:>6} {row['t_s']:>7.2f} {row['target']:<18} "
                      + " ".join(f"{c:>8}" for c in cells))
     return "\n".join(lines)
 

@@ -3,14 +3,15 @@
 The simulated radar publishes each frame as a header message (frame counter, detection count,
 time) followed by its detections (two classic CAN messages per detection, or one CAN FD
 message), each with an end-to-end checksum. `DetectionReceiver` is a python-can listener that
-decodes any radar's messages through a `CanMapping` and reassembles them into frames, counting
-everything that goes wrong on the way.
+decodes any radar's messages through a `CanMapping` and reassembles them into `Detections`
+(one per radar cycle), counting everything that goes wrong on the way. It keeps only the few
+cycles still being assembled: memory does not grow with the length of a run.
 """
 
 from __future__ import annotations
 
-import time
 import zlib
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -18,8 +19,8 @@ import can
 import cantools
 import numpy as np
 
+from ..detections import QUANTITIES, Detections
 from ..errors import CheckError, OutputError
-from ..radar.simulate import Detections
 from .mapping import CanMapping
 
 DEFAULT_INTERFACE = "virtual"
@@ -77,21 +78,28 @@ class DetectionPublisher:
         self.sent += 1
 
     def publish(self, frame: Detections) -> None:
-        """Send one frame: header, then every detection."""
+        """Send one cycle: header, then every detection."""
         n = frame.count
         if n > 255:
-            raise OutputError(f"CAN: frame {frame.frame} has {n} detections; at most 255 fit")
-        self._send(self._header, {"FrameCounter": frame.frame & 0xFFFF, "DetectionCount": n,
-                                  "TimeStamp": min(frame.t_s, 429496.7295)})
+            raise OutputError(f"CAN: cycle {frame.cycle} has {n} detections; at most 255 fit")
+        absent = [q for q in QUANTITIES if getattr(frame, q) is None]
+        if absent:
+            raise OutputError(f"CAN: rts-scenario's messages carry every quantity; cycle "
+                              f"{frame.cycle} lacks {', '.join(absent)}")
+        assert frame.snr_db is not None and frame.rcs_dbsm is not None
+        self._send(self._header, {"FrameCounter": frame.cycle & 0xFFFF, "DetectionCount": n,
+                                  "TimeStamp": min(frame.t_s or 0.0, 429496.7295)})
         # Metadata saturates at the DBC's limits; measured quantities must fit as they are.
         snr = np.clip(frame.snr_db, 0.0, 127.5)
         rcs_max = 63.5 if not self.fd else 327.67
         rcs = np.clip(np.nan_to_num(frame.rcs_dbsm, nan=-64.0, neginf=-64.0), -64.0, rcs_max)
-        counter8 = frame.frame & 0xFF
+        counter8 = frame.cycle & 0xFF
         for i in range(n):  # one encoded message per detection (cantools encodes one at a time)
-            values = {"FrameCounter8": counter8, "Index": i, "Range": frame.range_m[i],
-                      "RadialVelocity": frame.radial_velocity_mps[i],
-                      "Azimuth": frame.az_deg[i], "Elevation": frame.el_deg[i],
+            values = {"FrameCounter8": counter8, "Index": i,
+                      "Range": frame.range_m[i],  # type: ignore[index]
+                      "RadialVelocity": frame.radial_velocity_mps[i],  # type: ignore[index]
+                      "Azimuth": frame.az_deg[i],  # type: ignore[index]
+                      "Elevation": frame.el_deg[i],  # type: ignore[index]
                       "RCS": rcs[i], "SNR": snr[i]}
             for message in self._parts:
                 wanted = {s.name for s in message.signals}
@@ -119,13 +127,12 @@ class BusStats:
 
 
 @dataclass
-class ReceivedFrame:
-    """A frame reassembled from the bus."""
+class _Assembly:
+    """A cycle being reassembled from the bus."""
 
     counter: int
     expected: int
     timestamp_s: float | None
-    arrival_s: float
     parts: dict[int, dict[str, float]] = field(default_factory=dict)
     halves: dict[int, int] = field(default_factory=dict)
 
@@ -135,8 +142,18 @@ class ReceivedFrame:
             self.halves.get(i, 0) == halves_per_detection for i in self.parts)
 
 
+# Cycles kept open for late or reordered parts; older incomplete ones are handed on as such.
+OPEN_CYCLES = 16
+# Counters remembered to recognise duplicated headers and parts of cycles already handed on.
+RECENT_CYCLES = 256
+
+
 class DetectionReceiver(can.Listener):
-    """Decode detection messages through a mapping and reassemble frames (a can.Listener)."""
+    """Decode detection messages through a mapping into `Detections` (a can.Listener).
+
+    Finished cycles queue up until `pop` takes them (`flush` also hands on the ones still
+    open, as incomplete). Only `OPEN_CYCLES` cycles are assembled at a time.
+    """
 
     def __init__(self, mapping: CanMapping | None = None) -> None:
         self.mapping = mapping or CanMapping.builtin()
@@ -147,19 +164,37 @@ class DetectionReceiver(can.Listener):
                                          *([self.mapping.fd_message]
                                            if self.mapping.fd_message else []))}
         self.stats = BusStats()
-        self.frames: dict[int, ReceivedFrame] = {}
-        self._current: ReceivedFrame | None = None
-        self._latest = -1
-        # Detections that came before their frame's header, by frame counter (low 8 bits).
-        self._waiting: dict[int, list[tuple[cantools.database.can.Message, dict[str, float]]]]
-        self._waiting = {}
+        self.reset()
 
     def reset(self) -> None:
-        """Forget the frames received so far (a new measurement reuses frame counters)."""
-        self.frames = {}
-        self._current = None
+        """Forget the cycles received so far (a new measurement reuses counters)."""
+        self._open: OrderedDict[int, _Assembly] = OrderedDict()
+        self._ready: deque[Detections] = deque()
+        self._recent: OrderedDict[int, bool] = OrderedDict()  # counter -> handed on complete
+        self._current: _Assembly | None = None
         self._latest = -1
-        self._waiting = {}
+        # Detections that came before their cycle's header, by counter (low 8 bits).
+        self._waiting: OrderedDict[int, list[tuple[cantools.database.can.Message,
+                                                   dict[str, float]]]] = OrderedDict()
+
+    @property
+    def pending(self) -> int:
+        """Cycles handed on and not yet taken by `pop`."""
+        return len(self._ready)
+
+    def pop(self) -> list[Detections]:
+        """Take the finished cycles, oldest first."""
+        out = []
+        while self._ready:
+            out.append(self._ready.popleft())
+        return out
+
+    def flush(self) -> list[Detections]:
+        """Hand on every open cycle (incomplete ones marked so) and take all cycles."""
+        while self._open:
+            self._finish(next(iter(self._open)))
+        self._current = None
+        return self.pop()
 
     def on_message_received(self, msg: can.Message) -> None:
         """Handle one message (called by python-can's Notifier, or directly)."""
@@ -200,22 +235,25 @@ class DetectionReceiver(can.Listener):
     def _on_header(self, values: dict[str, float]) -> None:
         m = self.mapping
         counter = int(values[m.counter])
-        if counter in self.frames:
+        if counter in self._open or counter in self._recent:
             self.stats.duplicates += 1
             return
         if self._latest >= 0 and _behind(counter, self._latest):
             self.stats.reordered += 1
         else:
             self._latest = counter
-        frame = ReceivedFrame(
+        frame = _Assembly(
             counter=counter, expected=int(sum(values[c] for c in m.count)),
-            timestamp_s=values.get(m.timestamp) if m.timestamp else None,
-            arrival_s=time.perf_counter())
-        self.frames[counter] = frame
+            timestamp_s=values.get(m.timestamp) if m.timestamp else None)
+        self._open[counter] = frame
         self._current = frame
-        for message, values in self._waiting.pop(counter & 0xFF, []):
+        for message, early in self._waiting.pop(counter & 0xFF, []):
             self.stats.orphans -= 1
-            self._attach(frame, message, values)
+            self._attach(frame, message, early)
+        if frame.complete(self.halves_per_detection):
+            self._finish(counter)
+        while len(self._open) > OPEN_CYCLES:
+            self._finish(next(iter(self._open)))
 
     def _on_detection(self, message: cantools.database.can.Message,
                       values: dict[str, float]) -> None:
@@ -224,20 +262,38 @@ class DetectionReceiver(can.Listener):
         if m.frame_counter is not None and m.frame_counter in values:
             low = int(values[m.frame_counter])
             if frame is None or (frame.counter & 0xFF) != low:
-                # Late part of an earlier frame, or early part of one whose header is late.
+                # Late part of an earlier cycle, or early part of one whose header is late.
                 self.stats.reordered += 1
-                frame = next((f for c, f in reversed(self.frames.items()) if c & 0xFF == low),
+                frame = next((f for c, f in reversed(self._open.items()) if c & 0xFF == low),
                              None)
                 if frame is None:
+                    done = next((whole for c, whole in reversed(self._recent.items())
+                                 if c & 0xFF == low), None)
+                    if done is not None:
+                        # Its cycle was handed on: a copy if it was whole, else too late.
+                        if done:
+                            self.stats.duplicates += 1
+                        return
                     self._waiting.setdefault(low, []).append((message, values))
                     self.stats.orphans += 1  # until its header comes
+                    while len(self._waiting) > OPEN_CYCLES:
+                        self._waiting.popitem(last=False)
                     return
         if frame is None:
             self.stats.orphans += 1
             return
+        if frame.counter not in self._open:
+            # Its cycle was handed on: a copy if it was whole, else too late to count.
+            if self._recent.get(frame.counter, False):
+                self.stats.duplicates += 1
+            else:
+                self.stats.orphans += 1
+            return
         self._attach(frame, message, values)
+        if frame.complete(self.halves_per_detection):
+            self._finish(frame.counter)
 
-    def _attach(self, frame: ReceivedFrame, message: cantools.database.can.Message,
+    def _attach(self, frame: _Assembly, message: cantools.database.can.Message,
                 values: dict[str, float]) -> None:
         m = self.mapping
         index = int(values[m.index])
@@ -250,9 +306,20 @@ class DetectionReceiver(can.Listener):
         whole = message.name == m.fd_message
         frame.halves[index] = frame.halves.get(index, 0) + (len(m.messages) if whole else 1)
 
-    def detections(self, counter: int) -> dict[str, np.ndarray]:
-        """Arrays of the quantities the mapping carries for one received frame (polar)."""
-        frame = self.frames[counter]
+    def _finish(self, counter: int) -> None:
+        """Hand on an open cycle as `Detections`."""
+        frame = self._open.pop(counter)
+        complete = frame.complete(self.halves_per_detection)
+        self._recent[counter] = complete
+        while len(self._recent) > RECENT_CYCLES:
+            self._recent.popitem(last=False)
+        if self._current is frame and not complete:
+            self._current = None
+        self._ready.append(Detections(cycle=counter, t_s=frame.timestamp_s, complete=complete,
+                                      **self._quantities(frame)))
+
+    def _quantities(self, frame: _Assembly) -> dict[str, np.ndarray]:
+        """Arrays of the quantities the mapping carries (polar, rts-scenario's names)."""
         m = self.mapping
         rows = [frame.parts[i] for i in sorted(frame.parts)]
 
@@ -262,17 +329,19 @@ class DetectionReceiver(can.Listener):
 
         out: dict[str, np.ndarray] = {}
         if m.form == "polar":
-            for q in ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps"):
+            for q, name in (("range_m", "range_m"), ("azimuth_deg", "az_deg"),
+                            ("elevation_deg", "el_deg"),
+                            ("radial_velocity_mps", "radial_velocity_mps")):
                 if q in m.fields:
-                    out[q] = get(q)
+                    out[name] = get(q)
         else:
             x, y = get("x_m"), get("y_m")
             z = get("z_m") if "z_m" in m.fields else np.zeros_like(x)
             rng = np.sqrt(x * x + y * y + z * z)
             out["range_m"] = rng
-            out["azimuth_deg"] = np.degrees(np.arctan2(y, x))
+            out["az_deg"] = np.degrees(np.arctan2(y, x))
             if "z_m" in m.fields:
-                out["elevation_deg"] = np.degrees(np.arctan2(z, np.hypot(x, y)))
+                out["el_deg"] = np.degrees(np.arctan2(z, np.hypot(x, y)))
             if "vx_mps" in m.fields and "vy_mps" in m.fields:
                 out["radial_velocity_mps"] = (x * get("vx_mps") + y * get("vy_mps")) / np.where(
                     rng > 0, rng, 1.0)

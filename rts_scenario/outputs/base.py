@@ -3,11 +3,40 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
 from types import TracebackType
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar, TypeVar
 
 from ..errors import OutputError
 from ..schedule import Schedule
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from ..detections import Detections
+    from ..radar.profile import RadarProfile
+    from ..radar.simulate import ChannelErrors
+    from ..rig import Rig
+    from ..scenario.model import RadarOptions
+
+_O = TypeVar("_O", bound="Output")
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """What a run offers the output it opens (`Output.for_run`).
+
+    ``open_publisher`` returns a sink for radar cycles that the run's checker will receive (it
+    opens the publishing side of the detection bus; the run closes it).
+    """
+
+    rig: Rig
+    radar: RadarProfile
+    radar_options: RadarOptions
+    open_publisher: Callable[[], Callable[[Detections], None]]
+    rng: np.random.Generator
+    errors: ChannelErrors | None = None
 
 
 class Output(ABC):
@@ -21,6 +50,15 @@ class Output(ABC):
 
     def __init__(self) -> None:
         self._closed = False
+
+    @classmethod
+    def for_run(cls: type[_O], argument: str, context: RunContext) -> _O:
+        """Open this output for a run (``argument``: the text after ``NAME:`` in the spec).
+
+        Outputs that need to know the rig or the radar override this; the default ignores the
+        context.
+        """
+        return cls(argument) if argument else cls()  # type: ignore[call-arg]
 
     @property
     def closed(self) -> bool:

@@ -30,6 +30,7 @@ from scipy import ndimage
 
 from ..arrays import direction_cosines
 from ..constants import C0_MPS
+from ..detections import Detections
 from ..errors import RtsError
 from ..rig import Rig
 from ..schedule import Schedule
@@ -89,25 +90,6 @@ class Echoes:
     phase_rad: FloatArray
     u: FloatArray
     s: FloatArray
-
-
-@dataclass(frozen=True)
-class Detections:
-    """One frame of radar output, shape (D,) each."""
-
-    frame: int
-    t_s: float
-    range_m: FloatArray
-    radial_velocity_mps: FloatArray
-    az_deg: FloatArray
-    el_deg: FloatArray
-    snr_db: FloatArray
-    rcs_dbsm: FloatArray
-
-    @property
-    def count(self) -> int:
-        """Number of detections."""
-        return int(self.range_m.size)
 
 
 @dataclass
@@ -298,7 +280,7 @@ class SimulatedRadar:
         mid = mid / loss**2
         found = self._measure(snap, r_frac * self._range_bin_m, doppler,
                               10.0 * np.log10(mid / noise[d_idx, r_idx]))
-        return Detections(frame=frame, t_s=t_s,
+        return Detections(cycle=frame, t_s=t_s,
                           **{name: v for name, v in found.items() if name != "source"})
 
     def _noise_floor(self, power: FloatArray) -> FloatArray:
@@ -369,7 +351,7 @@ class SimulatedRadar:
         for pos in np.flatnonzero(frames):  # split the batch into frames
             rows = order[bounds[pos] : bounds[pos + 1]]
             out[pos] = Detections(
-                frame=int(schedule.frame_index[pos]), t_s=float(schedule.t_s[pos]),
+                cycle=int(schedule.frame_index[pos]), t_s=float(schedule.t_s[pos]),
                 **{name: values[rows] for name, values in found.items() if name != "source"})
         return out
 
@@ -403,5 +385,4 @@ def _hann_response(offset: FloatArray) -> FloatArray:
 
 
 def _empty(frame: int, t_s: float) -> Detections:
-    e = np.zeros(0)
-    return Detections(frame, t_s, e, e, e, e, e, e)
+    return Detections.empty(frame, t_s)

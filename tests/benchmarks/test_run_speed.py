@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from rts_scenario.runner import run_scene
+from rts_scenario.pipeline import run_scene
 
 SCENE = Path(__file__).resolve().parents[2] / "scenarios" / "highway_platoon_60s.scenario.yaml"
 

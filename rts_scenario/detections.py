@@ -1,0 +1,108 @@
+"""Detections: one radar cycle, whatever produced it (simulated radar, CAN, a recorded log).
+
+This is the currency between the radar side and the checker. A cycle carries the radar's own
+cycle counter (as the radar numbers it: it may start anywhere and wrap), its measurement time on
+the radar's clock, and one array per reported quantity. A quantity the radar does not report is
+``None`` (absent), never zeros: the checker checks only what is there.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import RtsError
+
+FloatArray = NDArray[np.float64]
+
+# Quantities a cycle may carry, in the order reports list them.
+QUANTITIES = ("range_m", "radial_velocity_mps", "az_deg", "el_deg", "rcs_dbsm", "snr_db")
+
+
+@dataclass(frozen=True)
+class Detections:
+    """One radar cycle: its counter, its measurement time and the detections' quantities.
+
+    Attributes
+    ----------
+    cycle : int
+        The radar's cycle counter as reported (no unwrapping; see `unwrap_counter`).
+    t_s : float or None
+        Measurement time on the radar's clock, seconds (None when the radar does not say).
+    range_m, radial_velocity_mps, az_deg, el_deg, rcs_dbsm, snr_db : ndarray, shape (D,), or None
+        One value per detection; None when the radar does not report that quantity.
+        ``radial_velocity_mps`` > 0 means receding; angles in the radar frame (DESIGN.md 4).
+    complete : bool
+        False when the cycle arrived damaged (detections lost or corrupted on the way): a
+        checker must not take it as the radar's whole answer.
+    """
+
+    cycle: int
+    t_s: float | None
+    range_m: FloatArray | None = None
+    radial_velocity_mps: FloatArray | None = None
+    az_deg: FloatArray | None = None
+    el_deg: FloatArray | None = None
+    rcs_dbsm: FloatArray | None = None
+    snr_db: FloatArray | None = None
+    complete: bool = True
+
+    def __post_init__(self) -> None:
+        sizes = set()
+        for name in QUANTITIES:
+            value = getattr(self, name)
+            if value is None:
+                continue
+            array = np.asarray(value, dtype=np.float64).reshape(-1)
+            object.__setattr__(self, name, array)
+            sizes.add(array.size)
+        if len(sizes) > 1:
+            raise RtsError(f"detections of cycle {self.cycle}: quantities differ in length "
+                           f"({', '.join(f'{n} {getattr(self, n).size}' for n in self.present)})")
+
+    @property
+    def present(self) -> tuple[str, ...]:
+        """Names of the quantities this cycle reports."""
+        return tuple(n for n in QUANTITIES if getattr(self, n) is not None)
+
+    @property
+    def count(self) -> int:
+        """Number of detections D."""
+        for name in QUANTITIES:
+            value = getattr(self, name)
+            if value is not None:
+                return int(value.size)
+        return 0
+
+    def strongest(self) -> int | None:
+        """Index of the strongest detection (SNR, else RCS), None without detections."""
+        if self.count == 0:
+            return None
+        level = self.snr_db if self.snr_db is not None else self.rcs_dbsm
+        return 0 if level is None else int(np.argmax(level))
+
+    @classmethod
+    def empty(cls, cycle: int, t_s: float | None, quantities: Iterable[str] = QUANTITIES,
+              complete: bool = True) -> Detections:
+        """Return a cycle without detections that reports ``quantities``."""
+        none = np.zeros(0)
+        return cls(cycle=cycle, t_s=t_s, complete=complete,
+                   **{q: none for q in quantities})
+
+
+def unwrap_counter(counter: NDArray[np.int64], near: NDArray[np.int64] | int,
+                   modulus: int) -> NDArray[np.int64]:
+    """Full cycle numbers of wrapped counters: the value ``counter + k * modulus`` nearest ``near``.
+
+    A radar's counter wraps (16 bits on rts-scenario's own messages); over a scene longer than
+    one wrap the counter alone is ambiguous, the expected position resolves it.
+    """
+    counter = np.asarray(counter, dtype=np.int64)
+    k = np.round((np.asarray(near, dtype=np.float64) - counter) / modulus).astype(np.int64)
+    return counter + k * modulus
+
+
+__all__ = ["QUANTITIES", "Detections", "unwrap_counter"]

@@ -1,0 +1,295 @@
+"""One pipeline for every run: scene -> tracks -> schedule -> output -> radar -> CAN -> check.
+
+`Pipeline` wires a bench once - the CAN bus the checker listens on, the receiver, the output
+(from the registry: a file, the RTS over UDP, the simulated radar, a plugin) and, when the output
+is the simulated radar, the bus it publishes its detections on - and closes all of it. A scene
+runs as a stream of frame batches: kinematics, schedule, playback, reception and checking per
+batch, so memory does not grow with the length of the scene. The CLI, the pytest plugin and
+calibration all run through it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from types import TracebackType
+
+import can
+import numpy as np
+
+from .canbus import DetectionPublisher, DetectionReceiver, open_bus
+from .canbus.mapping import CanMapping
+from .check import Checker
+from .detections import Detections
+from .kinematics import compute_tracks
+from .outputs import Output, output_class
+from .outputs.base import RunContext
+from .radar.profile import RadarProfile
+from .radar.simulate import ChannelErrors
+from .report import FrameRecord, Report
+from .rig import Rig
+from .scenario import Scenario, load_scenario
+from .scenario.model import RadarOptions
+from .schedule import Schedule, build_schedule
+
+# Frames per batch: large enough to amortize per-call costs, small enough for bounded memory.
+BATCH_FRAMES = 500
+# Without a known message count (a real radar), the bus is drained once it was quiet this long.
+QUIET_S = 0.2
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run a scene.
+
+    Attributes
+    ----------
+    output : str
+        Output spec: ``simulated-radar`` (default), ``udp://HOST:PORT``, ``file:PATH`` or any
+        registered ``NAME[:ARGUMENT]``.
+    can_interface, can_channel, can_fd : str, str or None, bool
+        The bus the radar's detections come on (python-can); a private virtual channel by
+        default.
+    mapping : str, optional
+        ``*.mapping.yaml`` of a third-party radar's DBC.
+    method : {"exact", "paper"}
+        Weight solver.
+    drain_s : float
+        Longest wait for the radar's last detections after the last frame.
+    batch_frames : int
+        Frames per streamed batch.
+    record : bool
+        Keep every frame's check arrays (on disk) for plots and post-processing.
+    """
+
+    output: str = "simulated-radar"
+    can_interface: str = "virtual"
+    can_channel: str | None = None
+    can_fd: bool = False
+    mapping: str | None = None
+    method: str = "exact"
+    drain_s: float = 2.0
+    batch_frames: int = BATCH_FRAMES
+    record: bool = False
+
+
+@dataclass
+class RunResult:
+    """What a run produced: the scene and its report (per-frame arrays in ``report.record``)."""
+
+    scene: Scenario
+    report: Report
+
+
+@dataclass
+class _Timing:
+    """Seconds per stage, summed over batches."""
+
+    stages: dict[str, float] = field(default_factory=dict)
+
+    def add(self, stage: str, since: float) -> float:
+        now = time.perf_counter()
+        self.stages[stage] = self.stages.get(stage, 0.0) + now - since
+        return now
+
+
+class Pipeline:
+    """A wired bench: output, detection bus, receiver; closes everything it opened.
+
+    Parameters
+    ----------
+    rig : Rig
+        The RTS rig.
+    radar : RadarProfile
+        The radar under test (the simulated radar's profile; the array the solver uses).
+    options : RunOptions, optional
+        Output, bus and solver choices.
+    radar_options : RadarOptions, optional
+        How the simulated radar runs (fidelity, estimator, CFAR, noise).
+    errors : ChannelErrors, optional
+        Channel errors injected into the simulated bench (calibration studies).
+    rng : numpy.random.Generator, optional
+        Noise source of the simulated radar.
+    """
+
+    def __init__(self, rig: Rig, radar: RadarProfile, options: RunOptions | None = None, *,
+                 radar_options: RadarOptions | None = None, errors: ChannelErrors | None = None,
+                 rng: np.random.Generator | None = None) -> None:
+        self.rig = rig
+        self.radar = radar
+        self.options = options = options or RunOptions()
+        self._buses: list[can.BusABC] = []
+        self._publisher: DetectionPublisher | None = None
+        self._notifier: can.Notifier | None = None
+        self.output: Output | None = None
+        self.channel = options.can_channel or f"rts-scenario-{id(self):x}"
+        try:
+            self.mapping = CanMapping.from_file(options.mapping) if options.mapping else None
+            self.receiver = DetectionReceiver(self.mapping)
+            listen = self._open_bus()
+            self._notifier = can.Notifier(listen, [self.receiver], timeout=0.05)
+            name, argument = _split_spec(options.output)
+            context = RunContext(rig=rig, radar=radar, radar_options=radar_options
+                                 or RadarOptions(), open_publisher=self._open_publisher,
+                                 rng=rng if rng is not None else np.random.default_rng(0),
+                                 errors=errors)
+            self.output = output_class(name).for_run(argument, context)
+        except BaseException:
+            self.close()
+            raise
+
+    @classmethod
+    def for_scene(cls, scene: Scenario, options: RunOptions | None = None) -> Pipeline:
+        """Wire the bench a scene asks for: its rig, radar, simulated-radar options and seed."""
+        return cls(scene.rig, scene.radar, options, radar_options=scene.radar_options,
+                   rng=np.random.default_rng(scene.seed))
+
+    def _open_bus(self) -> can.BusABC:
+        o = self.options
+        bus = open_bus(o.can_interface, self.channel, fd=o.can_fd)
+        self._buses.append(bus)
+        return bus
+
+    def _open_publisher(self) -> Callable[[Detections], None]:
+        if self._publisher is None:
+            self._publisher = DetectionPublisher(self._open_bus(), fd=self.options.can_fd)
+        return self._publisher.publish
+
+    @property
+    def counter_modulus(self) -> int:
+        """Where the radar's cycle counter wraps (from the header's counter signal)."""
+        m = self.receiver.mapping
+        return 1 << int(m.db.get_message_by_name(m.header).get_signal_by_name(m.counter).length)
+
+    # -- playing ---------------------------------------------------------------------------
+
+    def write(self, schedule: Schedule) -> None:
+        """Send a batch of frames to the output."""
+        assert self.output is not None
+        self.output.write(schedule)
+
+    def receive(self, *, final: bool = False) -> list[Detections]:
+        """Return the radar cycles received so far.
+
+        With the simulated radar, waits until every message it published has arrived. For a
+        real radar, returns what is there, except at the end (``final``): then waits until the
+        bus has been quiet for `QUIET_S` (at most ``drain_s``) and hands on the cycles still
+        being assembled, as incomplete where parts are missing.
+        """
+        deadline = time.perf_counter() + self.options.drain_s
+        expected = self._publisher.sent if self._publisher is not None else None
+        stats = self.receiver.stats
+        seen, quiet_since = -1, time.perf_counter()
+        while time.perf_counter() < deadline:
+            count = stats.messages
+            if expected is not None and count >= expected:
+                break
+            if expected is None and not final:
+                break
+            if count != seen:
+                seen, quiet_since = count, time.perf_counter()
+            elif expected is None and time.perf_counter() - quiet_since > QUIET_S:
+                break
+            time.sleep(0.002)
+        return self.receiver.flush() if final else self.receiver.pop()
+
+    def play(self, schedule: Schedule) -> list[Detections]:
+        """Play a schedule and return the radar's cycles for it (a calibration measurement)."""
+        self.receiver.reset()
+        self.write(schedule)
+        return self.receive(final=True)
+
+    def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
+            timing: dict[str, float] | None = None) -> RunResult:
+        """Run a scene batch by batch and check the radar's detections.
+
+        ``progress(done, total)`` is called after each batch; ``timing`` holds seconds already
+        spent before the run (e.g. loading) and is reported with the run's own.
+        """
+        options = self.options
+        clock = _Timing(dict(timing or {}))
+        start = mark = time.perf_counter()
+        record = FrameRecord() if options.record else None
+        checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
+                          counter_modulus=self.counter_modulus, record=record)
+        n_frames = scene.n_frames
+        t_all = scene.t_s
+        self.receiver.reset()
+        for first in range(0, n_frames, options.batch_frames):
+            frames = np.arange(first, min(first + options.batch_frames, n_frames))
+            tracks = compute_tracks(scene, t_all[frames], frames)
+            mark = clock.add("kinematics_s", mark)
+            schedule = build_schedule(tracks, scene.rig, scene.radar, method=options.method,
+                                      frame_rate_hz=scene.frame_rate_hz)
+            schedule = replace(schedule, frame_index=frames)
+            mark = clock.add("schedule_s", mark)
+            checker.add_truth(first, tracks, schedule.emitted)
+            self.write(schedule)
+            mark = clock.add("play_s", mark)
+            cycles = self.receive()
+            mark = clock.add("receive_s", mark)
+            checker.add_cycles(cycles)
+            # The batch before this one is due: its cycles had a whole batch to arrive.
+            checker.settle(before_frame=first)
+            mark = clock.add("check_s", mark)
+            if progress is not None:
+                progress(int(frames[-1]) + 1, n_frames)
+        checker.add_cycles(self.receive(final=True))
+        mark = clock.add("receive_s", mark)
+        checker.settle()
+        bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
+        report = checker.report(bus)
+        clock.add("check_s", mark)
+        clock.stages["total_s"] = clock.stages.get("load_s", 0.0) + time.perf_counter() - start
+        report.timing = clock.stages
+        return RunResult(scene=scene, report=report)
+
+    # -- closing ---------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Close the output, stop the listener and shut every bus down (safe to call twice)."""
+        try:
+            if self.output is not None:
+                self.output.close()
+        finally:
+            if self._notifier is not None:
+                self._notifier.stop()
+                self._notifier = None
+            while self._buses:
+                self._buses.pop().shutdown()
+
+    def __enter__(self) -> Pipeline:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
+              progress: Callable[[int, int], None] | None = None) -> RunResult:
+    """Load (if given a path) and run a scene on the bench ``options`` describe.
+
+    ``progress(done, total)`` is called after each batch of frames.
+    """
+    start = time.perf_counter()
+    if not isinstance(scene, Scenario):
+        scene = load_scenario(scene)
+    timing = {"load_s": time.perf_counter() - start}
+    with Pipeline.for_scene(scene, options) as pipeline:
+        return pipeline.run(scene, progress, timing)
+
+
+def _split_spec(spec: str) -> tuple[str, str]:
+    """Output name and argument of a spec (``udp://HOST:PORT``, ``file:PATH``, ``NAME``)."""
+    if spec.startswith("udp://"):
+        return "udp", spec[len("udp://"):]
+    if ":" in spec:
+        name, argument = spec.split(":", 1)
+        return name, argument
+    return spec, ""
+
+
+__all__ = ["BATCH_FRAMES", "Pipeline", "RunOptions", "RunResult", "run_scene"]
