@@ -1,0 +1,197 @@
+"""The streaming checker against hand-built truth and cycles (no simulator involved)."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from rts_scenario.check import Checker, check
+from rts_scenario.detections import Detections, unwrap_counter
+from rts_scenario.kinematics import Tracks
+from rts_scenario.report import FrameRecord, RunningStats
+from rts_scenario.scenario.model import Expectations
+
+EXPECT = Expectations(tolerances={"range_m": 0.3, "radial_velocity_mps": 0.3, "az_deg": 0.5,
+                                  "el_deg": 1.0, "rcs_db": 100.0})
+
+
+def truth(n_frames, n_targets=2, first=0):
+    """Targets whose range and angles change every frame (no two frames alike)."""
+    f = np.arange(first, first + n_frames, dtype=float)[:, None]
+    k = np.arange(n_targets, dtype=float)[None, :]
+    shape = (n_frames, n_targets)
+    ones = np.ones(shape, dtype=bool)
+    return Tracks(names=tuple(f"t{i}" for i in range(n_targets)), t_s=f[:, 0] * 0.05,
+                  range_m=20.0 + 10.0 * k + 5.0 * np.sin(f * 0.01),
+                  radial_velocity_mps=np.cos(f * 0.01) + k, doppler_hz=np.zeros(shape),
+                  rcs_dbsm=np.full(shape, 10.0), az_deg=np.sin(f * 0.003) * 3.0 - 2.0 * k,
+                  el_deg=np.zeros(shape) + 0.5 * k, position_m=np.zeros((*shape, 3)),
+                  present=ones, in_coverage=ones, in_range=ones, in_velocity=ones)
+
+
+def cycles_from(tracks, first=0, modulus=65536, drop=None, offset=0.0):
+    """One cycle per frame reporting each target's truth (``drop``: (frame, target) pairs)."""
+    drop = drop or set()
+    out = []
+    for f in range(tracks.t_s.size):
+        keep = [k for k in range(len(tracks.names)) if (first + f, k) not in drop]
+        out.append(Detections(
+            cycle=(first + f) % modulus, t_s=float(tracks.t_s[f]),
+            range_m=tracks.range_m[f, keep] + offset,
+            radial_velocity_mps=tracks.radial_velocity_mps[f, keep],
+            az_deg=tracks.az_deg[f, keep], el_deg=tracks.el_deg[f, keep],
+            rcs_dbsm=tracks.rcs_dbsm[f, keep], snr_db=np.full(len(keep), 30.0)))
+    return out
+
+
+def block(tracks, a, b):
+    return Tracks(**{f.name: (getattr(tracks, f.name) if f.name == "names"
+                              else getattr(tracks, f.name)[a:b])
+                     for f in dataclasses.fields(Tracks)})
+
+
+def flat(value, key=""):
+    """Nested report data as {path: value} (sums may differ in the last bit by block order)."""
+    if isinstance(value, dict):
+        return {k2: v2 for k, v in value.items() for k2, v2 in flat(v, f"{key}.{k}").items()}
+    if isinstance(value, list):
+        return {k2: v2 for i, v in enumerate(value) for k2, v2 in flat(v, f"{key}.{i}").items()}
+    return {key: value}
+
+
+def test_perfect_cycles_pass_with_every_frame_checked():
+    tr = truth(300)
+    report = check("s", tr, np.ones((300, 2), bool), cycles_from(tr), EXPECT)
+    assert report.passed, report.reasons
+    assert report.frames["checked"] == report.frames["received"] == 300
+    assert report.target_frames == {"checkable": 600, "matched": 600, "unmatched": 0,
+                                    "unchecked": 0, "detected": 600}
+    assert report.errors["range_m"].max == 0.0
+
+
+def test_streaming_in_blocks_equals_one_shot():
+    tr = truth(400)
+    played = np.ones((400, 2), bool)
+    drop = {(17, 0), (230, 1)}
+    cycles = cycles_from(tr, drop=drop, offset=0.05)
+    whole = check("s", tr, played, cycles, EXPECT).to_dict()
+    checker = Checker("s", tr.names, EXPECT)
+    edges = [0, 37, 150, 151, 399, 400]
+    for i, (a, b) in enumerate(zip(edges, edges[1:], strict=False)):
+        checker.add_truth(a, block(tr, a, b), played[a:b])
+        if i:  # cycles of a block arrive one block late, as from a radar with latency
+            checker.add_cycles(cycles[edges[i - 1]:a])
+        checker.settle(before_frame=edges[i - 1] if i else 0)
+    checker.add_cycles(cycles[edges[-2]:])
+    checker.settle()
+    assert flat(checker.report().to_dict()) == pytest.approx(flat(whole), rel=1e-12)
+
+
+def test_unmatched_target_frames_are_never_reported_as_checked():
+    tr = truth(100)
+    drop = {(10, 0), (11, 0), (50, 1)}
+    report = check("s", tr, np.ones((100, 2), bool), cycles_from(tr, drop=drop), EXPECT)
+    assert report.frames["received"] == 100
+    assert report.frames["checked"] == 97 and report.frames["unmatched"] == 3
+    assert report.target_frames["unmatched"] == 3 and report.target_frames["matched"] == 197
+    assert report.targets[0].detected_frames == 98
+    missed = [w for w in report.worst_frames if w["missed"]]
+    assert {(w["frame"], w["target"]) for w in missed} == {(10, "t0"), (11, "t0"), (50, "t1")}
+
+
+def test_wrapped_counters_are_checked_against_their_own_frames():
+    n = 70_000  # beyond one 16-bit wrap
+    tr = truth(n, n_targets=1)
+    played = np.ones((n, 1), bool)
+    cycles = cycles_from(tr)
+    checker = Checker("long", tr.names, EXPECT)
+    step = 5000
+    for a in range(0, n, step):
+        checker.add_truth(a, block(tr, a, a + step), played[a:a + step])
+        checker.add_cycles(cycles[a:a + step])
+        checker.settle(before_frame=a)
+    checker.settle()
+    report = checker.report()
+    assert report.frames["checked"] == n and report.frames["late"] == 0
+    assert report.errors["range_m"].max == 0.0 and report.passed
+
+
+def test_a_cycle_checked_against_the_wrong_wrap_fails():
+    n = 70_000
+    tr = truth(n, n_targets=1)
+    cycles = cycles_from(tr)
+    # The radar reports frame f - 65536's values under frame f's counter: the truth differs.
+    confused = [dataclasses.replace(cycles[f - 65536], cycle=cycles[f].cycle)
+                if f >= 65536 else cycles[f] for f in range(n)]
+    report = check("s", tr, np.ones((n, 1), bool), confused, EXPECT)
+    assert report.targets[0].detected_frames < n - 4000
+
+
+def test_missing_and_incomplete_cycles_fail_and_are_counted():
+    tr = truth(50)
+    cycles = cycles_from(tr)
+    cycles[3] = dataclasses.replace(cycles[3], complete=False)
+    del cycles[7]
+    report = check("s", tr, np.ones((50, 2), bool), cycles, EXPECT)
+    assert report.frames["missing"] == 1 and report.frames["incomplete"] == 1
+    assert report.target_frames["unchecked"] == 4
+    assert not report.passed and any("could not be checked" in r for r in report.reasons)
+
+
+def test_absent_quantities_are_not_checked():
+    tr = truth(20)
+    cycles = [dataclasses.replace(c, el_deg=None, rcs_dbsm=None) for c in cycles_from(tr)]
+    report = check("s", tr, np.ones((20, 2), bool), cycles, EXPECT)
+    assert report.passed
+    assert report.errors["el_deg"].count == 0 and report.errors["range_m"].count == 40
+
+
+def test_cycles_for_frames_the_scene_never_had_are_late_not_lost():
+    tr = truth(10)
+    cycles = cycles_from(tr) + cycles_from(truth(3, first=9000), first=9000)
+    report = check("s", tr, np.ones((10, 2), bool), cycles, EXPECT)
+    assert report.frames["late"] == 3 and report.frames["checked"] == 10
+
+
+def test_detections_reject_quantities_of_different_lengths():
+    from rts_scenario.errors import RtsError
+    with pytest.raises(RtsError, match="differ in length"):
+        Detections(cycle=1, t_s=0.0, range_m=np.zeros(2), az_deg=np.zeros(3))
+    d = Detections(cycle=1, t_s=None, range_m=[1.0, 2.0], snr_db=[3.0, 9.0])
+    assert d.count == 2 and d.present == ("range_m", "snr_db") and d.strongest() == 1
+
+
+@pytest.mark.parametrize("near", [0, 65535, 65536 * 3 + 10])
+def test_unwrap_counter_picks_the_nearest_wrap(near):
+    frames = near + np.arange(-20000, 20000, 997)
+    np.testing.assert_array_equal(unwrap_counter(frames % 65536, near, 65536), frames)
+
+
+def test_running_stats_match_numpy():
+    rng = np.random.default_rng(3)
+    x = rng.lognormal(-3.0, 2.0, (5000, 3)) * rng.choice([-1, 1], (5000, 3))
+    x[::97, 1] = np.nan
+    stats = RunningStats(3)
+    for part in np.array_split(x, 7):
+        stats.add(part)
+    for k in range(3):
+        col = np.abs(x[:, k][np.isfinite(x[:, k])])
+        got = stats.result(k)
+        assert got.count == col.size
+        assert got.rms == pytest.approx(np.sqrt(np.mean(col**2)), rel=1e-12)
+        assert got.max == col.max()
+        # A 1 % histogram bin: the percentile is within half a bin of numpy's.
+        for q, value in ((50, got.p50), (95, got.p95)):
+            assert value == pytest.approx(np.percentile(col, q), rel=0.006)
+    assert stats.result().count == sum(stats.result(k).count for k in range(3))
+
+
+def test_frame_record_round_trip(tmp_path):
+    record = FrameRecord(tmp_path / "rec")
+    a = {"t_s": np.arange(3.0), "ok": np.array([[True, False]] * 3)}
+    b = {"t_s": np.arange(3.0, 5.0), "ok": np.array([[False, True]] * 2)}
+    record.append(a)
+    record.append(b)
+    back = record.load()
+    np.testing.assert_array_equal(back["t_s"], np.arange(5.0))
+    assert back["ok"].shape == (5, 2) and record.frames == 5

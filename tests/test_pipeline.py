@@ -1,0 +1,99 @@
+"""The pipeline: batches change nothing, every bus closes, nothing unseen passes."""
+
+import dataclasses
+from pathlib import Path
+
+import can.interfaces.virtual
+import numpy as np
+import pytest
+
+from rts_scenario import OutputError
+from rts_scenario.kinematics import compute_tracks
+from rts_scenario.pipeline import Pipeline, RunOptions, run_scene
+from rts_scenario.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+PLATOON = ROOT / "scenarios" / "highway_platoon_60s.scenario.yaml"
+CUT_IN = ROOT / "scenarios" / "cut_in.scenario.yaml"
+
+
+@pytest.fixture(autouse=True)
+def no_bus_left_open(monkeypatch):
+    created = []
+    original = can.interfaces.virtual.VirtualBus.__init__
+
+    def init(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        created.append(self)
+
+    monkeypatch.setattr(can.interfaces.virtual.VirtualBus, "__init__", init)
+    yield created
+    left = [b for b in created if not b._is_shutdown]
+    for b in left:
+        b.shutdown()
+    assert not left, f"{len(left)} CAN bus(es) left open"
+
+
+def test_tracks_in_batches_equal_the_whole_scene():
+    scene = load_scenario(PLATOON)  # Swerling targets: the fluctuation must not restart
+    whole = compute_tracks(scene)
+    edges = [0, 1, 333, 334, 900, scene.n_frames]
+    parts = [compute_tracks(scene, scene.t_s[a:b], np.arange(a, b))
+             for a, b in zip(edges, edges[1:], strict=False)]
+    for field in dataclasses.fields(whole):
+        if field.name == "names":
+            continue
+        joined = np.concatenate([getattr(p, field.name) for p in parts])
+        np.testing.assert_array_equal(joined, getattr(whole, field.name), err_msg=field.name)
+    # The fluctuation is a fluctuation: Swerling 1 power has unit mean and unit variance.
+    power = 10.0 ** ((whole.rcs_dbsm[:, 0] - 10.0) / 10.0)
+    assert power.mean() == pytest.approx(1.0, abs=0.1)
+    assert power.var() == pytest.approx(1.0, abs=0.25)
+
+
+def test_batch_size_does_not_change_the_verdict(no_bus_left_open):
+    scene = load_scenario(CUT_IN, {"radar.noise": False})
+    small = run_scene(scene, RunOptions(batch_frames=37)).report
+    large = run_scene(scene, RunOptions(batch_frames=1000)).report
+    assert small.passed and large.passed
+    assert small.frames == large.frames and small.target_frames == large.target_frames
+    for q in ("range_m", "az_deg", "el_deg"):
+        assert small.errors[q].max == pytest.approx(large.errors[q].max, rel=1e-9)
+    assert len(no_bus_left_open) == 4  # a listener and a publisher per run, all closed
+
+
+def test_an_output_that_plays_to_no_radar_fails_the_run(tmp_path):
+    # The schedule goes to a file and no radar answers: every frame is missing, nothing passes.
+    options = RunOptions(output=f"file:{tmp_path / 'schedule.npz'}", drain_s=0.3)
+    report = run_scene(CUT_IN, options).report
+    assert not report.passed
+    assert report.frames["missing"] == report.frames["total"] == 240
+    assert report.frames["checked"] == 0
+    assert any("silent" in r for r in report.reasons)
+    assert (tmp_path / "schedule.npz").exists()
+
+
+def test_unknown_output_lists_the_valid_ones_and_closes_the_bus():
+    scene = load_scenario(CUT_IN)
+    with pytest.raises(OutputError, match="valid outputs: .*simulated-radar"):
+        Pipeline.for_scene(scene, RunOptions(output="carrier-pigeon"))
+
+
+def test_record_reads_every_frame_back():
+    report = run_scene(CUT_IN, RunOptions(record=True, batch_frames=100)).report
+    frames = report.per_frame
+    np.testing.assert_array_equal(frames["frame"], np.arange(240))
+    assert frames["error_az_deg"].shape == (240, 1)
+    assert int(frames["detected"].sum()) == report.targets[0].detected_frames
+    assert report.to_json()  # the record handle stays out of the JSON
+
+
+def test_pipeline_plays_a_schedule_for_calibration():
+    scene = load_scenario(CUT_IN, {"radar.noise": False})
+    from rts_scenario.schedule import build_schedule
+
+    schedule = build_schedule(compute_tracks(scene), scene.rig, scene.radar).frames(0, 5)
+    with Pipeline.for_scene(scene) as pipeline:
+        cycles = pipeline.play(schedule)
+    assert [c.cycle for c in cycles] == [0, 1, 2, 3, 4]
+    assert all(c.complete and c.count == 1 for c in cycles)
