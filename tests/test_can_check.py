@@ -11,8 +11,8 @@ from rts_scenario import CheckError
 from rts_scenario.canbus import DetectionPublisher, DetectionReceiver, open_bus
 from rts_scenario.canbus.mapping import CanMapping
 from rts_scenario.check import check
-from rts_scenario.kinematics import compute_tracks
 from rts_scenario.detections import Detections
+from rts_scenario.kinematics import compute_tracks
 from rts_scenario.radar.simulate import SimulatedRadar
 from rts_scenario.scenario import load_scenario
 from rts_scenario.schedule import build_schedule

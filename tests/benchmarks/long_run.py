@@ -48,7 +48,8 @@ targets:
   - {{name: left, rcs: {{rcs_dbsm: 9.0}},
      motion: {{type: speed_profile, position_m: [22, 3.5, 0.6], profile: {profile(25.0, 0.3, 1)}}}}}
   - {{name: right, rcs: {{rcs_dbsm: 12.0}},
-     motion: {{type: speed_profile, position_m: [50, -3.5, 1.0], profile: {profile(25.0, 0.5, 0)}}}}}
+     motion: {{type: speed_profile, position_m: [50, -3.5, 1.0],
+              profile: {profile(25.0, 0.5, 0)}}}}}
   - {{name: far, rcs: {{rcs_dbsm: 15.0, fluctuation: swerling3}},
      motion: {{type: speed_profile, position_m: [70, 0.3, 1.2], profile: {profile(25.0, 0.6, 1)}}}}}
 expectations:
