@@ -23,7 +23,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal, Protocol
@@ -72,9 +72,11 @@ METHODS: dict[str, Callable[[Rig, VirtualArray, NDArray[np.int64]], QuadKernel]]
 }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SolverPlan:
     """Precomputed solver state for one (rig FE geometry, array, method).
+
+    Plans compare by identity; ``key`` names the values a plan stands for.
 
     Attributes
     ----------
@@ -102,8 +104,8 @@ class SolverPlan:
     kernels: tuple[QuadKernel, ...]
     checks: tuple[GlobalMaxCheck | None, ...]
     responses: tuple[SourceResponse, ...]
-    origin: Origin = field(default="built", compare=False)
-    seconds: float = field(default=0.0, compare=False)
+    origin: Origin = "built"
+    seconds: float = 0.0
 
     def describe(self) -> str:
         """One line for a run's timing summary, e.g. ``plan 12 ms (disk)``."""
