@@ -194,11 +194,14 @@ def test_default_cache_dir_per_platform(monkeypatch, platform, env, expected):
     assert plan_cache_dir() == expected
 
 
-def test_plan_of_another_method_is_refused(kit_rig):
+def test_plan_of_other_values_is_refused(kit_rig):
     array = rs.VirtualArray.preset("paper")
     plan = solver_plan(kit_rig, array, "paper")
-    with pytest.raises(rs.SolverError, match="built for method 'paper'"):
+    with pytest.raises(rs.SolverError, match="its method: 'paper'"):
         rs.solve_weights(AZ_DEG, EL_DEG, rig=kit_rig, array=array, method="exact", plan=plan)
+    moved = dataclasses.replace(kit_rig, az_deg=kit_rig.az_deg + 1.0)
+    with pytest.raises(rs.SolverError, match="built for other values than rig 'kit-table1'"):
+        rs.solve_weights(AZ_DEG, EL_DEG, rig=moved, array=array, method="paper", plan=plan)
 
 
 def test_plan_holds_the_schedule_responses(kit_rig):

@@ -23,7 +23,14 @@ from ..arrays import VirtualArray
 from ..errors import SolverError
 from ..quads import assign_quads
 from ..rig import Rig
-from .plan import METHODS, SolverPlan, clear_memory_cache, plan_cache_dir, solver_plan
+from .plan import (
+    METHODS,
+    SolverPlan,
+    clear_memory_cache,
+    plan_cache_dir,
+    plan_key,
+    solver_plan,
+)
 from .reasons import Reason
 
 FloatArray = NDArray[np.float64]
@@ -104,7 +111,7 @@ def solve_weights(
     Raises
     ------
     SolverError
-        Unknown method, mismatched shapes or non-finite angles, or a plan of another method.
+        Unknown method, mismatched shapes or non-finite angles, or a ``plan`` of other values.
     """
     if method not in METHODS:
         raise SolverError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
@@ -116,8 +123,14 @@ def solve_weights(
         )
     if plan is None:
         plan = solver_plan(rig, array, method)
-    elif plan.method != method:
-        raise SolverError(f"plan: was built for method {plan.method!r}, not {method!r}")
+    elif plan.key != plan_key(rig, array, method):
+        # Weights from a plan of other values synthesize other angles, silently.
+        raise SolverError(
+            f"plan: was built for other values than rig {rig.name!r}, array {array.name!r}, "
+            f"method {method!r} (its method: {plan.method!r}); a plan is made for one set of FE "
+            f"angles, grid shape, element positions, wavelength and method: get it from "
+            f"solver_plan(rig, array, method)"
+        )
     n = az.size
     weights = np.zeros((n, 4))
     quad = np.full(n, -1, dtype=np.int64)
@@ -242,6 +255,7 @@ __all__ = [
     "assign_quads",
     "clear_memory_cache",
     "plan_cache_dir",
+    "plan_key",
     "solve_weights",
     "solver_plan",
 ]
