@@ -12,7 +12,8 @@ is real.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -74,7 +75,6 @@ class VirtualArray:
     z_m: FloatArray
     wavelength_m: float
     name: str = "custom"
-    _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def from_positions(
@@ -164,16 +164,13 @@ class VirtualArray:
         """Wavenumber ``k = 2 pi / wavelength``."""
         return 2.0 * np.pi / self.wavelength_m
 
-    @property
+    @cached_property
     def is_centrosymmetric(self) -> bool:
         """Whether the layout equals its point reflection (then the response is real)."""
-        key = ("centrosymmetric",)
-        if key not in self._cache:
-            tol = 1e-9 * self.wavelength_m
-            pos = np.column_stack([self.y_m, self.z_m])
-            dist = np.abs(pos[:, None, :] + pos[None, :, :]).max(axis=2)
-            self._cache[key] = bool(np.all(dist.min(axis=1) <= tol))
-        return bool(self._cache[key])
+        tol = 1e-9 * self.wavelength_m
+        pos = np.column_stack([self.y_m, self.z_m])
+        dist = np.abs(pos[:, None, :] + pos[None, :, :]).max(axis=2)
+        return bool(np.all(dist.min(axis=1) <= tol))
 
     @property
     def key(self) -> tuple[Any, ...]:

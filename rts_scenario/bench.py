@@ -132,7 +132,7 @@ def quantization(step_db: float = 0.5, rig_name: str = "kit-table1") -> list[Qua
     ones = np.ones((1, n), dtype=bool)
     preset = Rig.preset(rig_name)
     limits = replace(preset.limits, attenuation_step_db=step_db, echoes_per_channel=n)
-    rig = replace(preset, limits=limits, _cache={})
+    rig = replace(preset, limits=limits)
     rows = []
     for array_name in PRESETS:
         radar = RadarProfile.preset(array_name)

@@ -93,7 +93,7 @@ class CalibrationResult:
     def apply(self, rig: Rig) -> Rig:
         """Return the rig with these offsets added to its calibration (phase and gain)."""
         return replace(rig, cal_phase_deg=_wrap(rig.cal_phase_deg - self.phase_deg),
-                       cal_gain_db=rig.cal_gain_db + self.gain_db, _cache={})
+                       cal_gain_db=rig.cal_gain_db + self.gain_db)
 
 
 def _wrap(deg: FloatArray | float) -> FloatArray:

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .quads import assign_quads
 from .rcs import rcs_series
 from .scenario.model import Scenario
 from .scenario.trajectory import Motion, TrajectorySet
-from .solver.quads import assign_quads
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

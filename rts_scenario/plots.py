@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .errors import RtsError
-from .solver.quads import quad_polygons
+from .quads import quad_polygons
 
 if TYPE_CHECKING:
     from .pipeline import RunResult

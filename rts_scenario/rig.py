@@ -8,7 +8,7 @@ the FE order is the paper's Table I order: 0 and 2 have the smaller azimuth, 1 a
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -75,7 +75,6 @@ class Rig:
     cal_gain_db: FloatArray
     limits: HardwareLimits = HardwareLimits()
     reference: Reference = Reference()
-    _cache: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n = self.rows * self.columns

@@ -33,8 +33,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .arrays import (
-    SourceResponse,
-    VirtualArray,
     angles_from_cosines,
     direction_cosines,
     power_curvature,
@@ -44,7 +42,7 @@ from .errors import RtsError
 from .kinematics import Tracks
 from .radar.profile import RadarProfile
 from .rig import HardwareLimits, Rig
-from .solver import Reason, solve_weights
+from .solver import Reason, solve_weights, solver_plan
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -252,7 +250,7 @@ def build_schedule(
     attenuation = np.full((*shape, 4), np.nan)
     angle_error = np.zeros((*shape, 2))
     clipped = np.zeros(shape, dtype=bool)
-    responses = _quad_responses(rig, array)
+    responses = solver_plan(rig, array, method).responses
     for q in range(len(rig.quads)):  # per quad of the rig, vectorized over its entries
         sel = np.flatnonzero((quad.ravel() == q) & ok.ravel())
         if sel.size == 0:
@@ -308,18 +306,6 @@ def build_schedule(
         phase_rad=np.where(emitted, phase, nan), active=emitted, status=status,
         angle_error_deg=np.where(emitted.any(-1)[..., None], angle_error, nan),
     )
-
-
-def _quad_responses(rig: Rig, array: VirtualArray) -> list[SourceResponse]:
-    key = ("responses", array.key)
-    if key not in rig._cache:
-        cache = []
-        for fes in rig.quads:
-            u, s = direction_cosines(np.radians(rig.az_deg[fes]), np.radians(rig.el_deg[fes]))
-            cache.append(array.source_response(u, s))
-        rig._cache[key] = cache
-    out: list[SourceResponse] = rig._cache[key]
-    return out
 
 
 def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: FloatArray,

@@ -13,6 +13,19 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 
+@pytest.fixture(scope="session", autouse=True)
+def plan_cache_dir(tmp_path_factory: pytest.TempPathFactory):
+    """Keep the solver's disk cache of plans out of the user's cache directory.
+
+    One directory per test session: tests see the same cache whatever their order, and no plan
+    from an earlier run (or other code) is ever loaded.
+    """
+    directory = tmp_path_factory.mktemp("plan-cache")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("RTS_SCENARIO_CACHE_DIR", str(directory))
+        yield directory
+
+
 @pytest.fixture(scope="session")
 def kit_rig() -> rs.Rig:
     return rs.Rig.preset("kit-table1")

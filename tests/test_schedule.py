@@ -30,7 +30,7 @@ def tracks(az, el, *, range_m=10.0, rcs=10.0, v=0.0, present=True, frames=1):
 
 def rig_with(rig=None, **limits):
     rig = rig or rs.Rig.preset("kit-table1")
-    return dataclasses.replace(rig, limits=dataclasses.replace(rig.limits, **limits), _cache={})
+    return dataclasses.replace(rig, limits=dataclasses.replace(rig.limits, **limits))
 
 
 def test_delay_for_known_range_and_fe_distance():

@@ -327,8 +327,8 @@ def _in_triangle(p, a, b, c):
 def test_quad_assignment_on_a_measured_skewed_grid(rng):
     from pathlib import Path
 
+    from rts_scenario.quads import distance_to_polygon
     from rts_scenario.solver import RETRY_MARGIN_DEG
-    from rts_scenario.solver.quads import distance_to_polygon
     rig = rs.Rig.from_file(Path(__file__).parents[1] / "scenarios/rigs/lab-2x3.rig.yaml")
     az = rng.uniform(-12.0, 12.0, 400)
     el = rng.uniform(-10.0, 10.0, 400)

@@ -3,18 +3,17 @@
 ``solve_weights`` assigns every target to the quad that encloses it, solves the chosen method
 on each quad's targets at once, retries targets a quad cannot synthesize in its neighbours
 (curved synthesis borders), and checks that the peak is the global maximum of the radar's
-beamformer wherever a quad can split. Per rig and array the quads' kernels, probe grids and
-split maps are computed once and cached.
+beamformer wherever a quad can split. Per rig FE geometry, array and method the quads' kernels,
+probe grids and split maps are computed once into a `SolverPlan`, cached by value in memory and
+on disk (see `rts_scenario.solver.plan`).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -22,11 +21,16 @@ from threadpoolctl import ThreadpoolController
 
 from ..arrays import VirtualArray
 from ..errors import SolverError
+from ..quads import assign_quads
 from ..rig import Rig
-from .exact import ExactQuad
-from .globalmax import GlobalMaxCheck
-from .paper import PaperQuad
-from .quads import QuadGeometry, assign_quads
+from .plan import (
+    METHODS,
+    SolverPlan,
+    clear_memory_cache,
+    plan_cache_dir,
+    plan_key,
+    solver_plan,
+)
 from .reasons import Reason
 
 FloatArray = NDArray[np.float64]
@@ -35,27 +39,6 @@ CHUNK = 32768
 WORKERS = min(4, os.cpu_count() or 1)
 # Targets a quad cannot synthesize are retried in quads within this distance (deg) of them.
 RETRY_MARGIN_DEG = 1.0
-# Nodes per quad side of the precomputed split map.
-SPLIT_MAP_NODES = 17
-# The per-target local-maximum test is skipped in quads whose nodes all curve downward by at
-# least this fraction of a single FE's main-lobe curvature.
-CLEAR_MAXIMUM = 0.1
-
-
-class QuadKernel(Protocol):
-    """What a method provides per quad."""
-
-    def solve(
-        self, az_rad: FloatArray, el_rad: FloatArray
-    ) -> tuple[FloatArray, NDArray[np.uint8]]:
-        """Return ``(weights (N, 4), reason (N,))``."""
-        ...
-
-
-METHODS: dict[str, Callable[[Rig, VirtualArray, NDArray[np.int64]], QuadKernel]] = {
-    "paper": PaperQuad.build,
-    "exact": ExactQuad.build,
-}
 
 
 @dataclass(frozen=True)
@@ -95,13 +78,6 @@ class WeightSolution:
         return {Reason(int(c)).name: int(n) for c, n in zip(codes, counts, strict=True)}
 
 
-@dataclass
-class _Plan:
-    geometry: QuadGeometry
-    kernels: list[QuadKernel]
-    checks: list[GlobalMaxCheck | None]
-
-
 def solve_weights(
     az_deg: ArrayLike,
     el_deg: ArrayLike,
@@ -109,6 +85,7 @@ def solve_weights(
     rig: Rig,
     array: VirtualArray,
     method: str = "exact",
+    plan: SolverPlan | None = None,
 ) -> WeightSolution:
     """Weights of the four FEs of the enclosing quad that synthesize each target's angle.
 
@@ -123,6 +100,9 @@ def solve_weights(
     method : {"exact", "paper"}
         ``"paper"``: the paper's equations (sinc model, averaged FE angles). ``"exact"``: true
         FE directions and exact array response; the beamformer peak is on the set angle.
+    plan : SolverPlan, optional
+        The plan of ``rig``, ``array`` and ``method`` from `solver_plan`, when the caller has
+        it already (default: get it from `solver_plan`).
 
     Returns
     -------
@@ -131,7 +111,7 @@ def solve_weights(
     Raises
     ------
     SolverError
-        Unknown method, mismatched shapes or non-finite angles.
+        Unknown method, mismatched shapes or non-finite angles, or a ``plan`` of other values.
     """
     if method not in METHODS:
         raise SolverError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
@@ -141,7 +121,16 @@ def solve_weights(
         raise SolverError(
             f"az_deg and el_deg: must have the same length, got {az.size} and {el.size}"
         )
-    plan = _plan(rig, array, method)
+    if plan is None:
+        plan = solver_plan(rig, array, method)
+    elif plan.key != plan_key(rig, array, method):
+        # Weights from a plan of other values synthesize other angles, silently.
+        raise SolverError(
+            f"plan: was built for other values than rig {rig.name!r}, array {array.name!r}, "
+            f"method {method!r} (its method: {plan.method!r}); a plan is made for one set of FE "
+            f"angles, grid shape, element positions, wavelength and method: get it from "
+            f"solver_plan(rig, array, method)"
+        )
     n = az.size
     weights = np.zeros((n, 4))
     quad = np.full(n, -1, dtype=np.int64)
@@ -195,61 +184,8 @@ def _angles(name: str, values: ArrayLike) -> FloatArray:
     return out
 
 
-def _plan(rig: Rig, array: VirtualArray, method: str) -> _Plan:
-    key = ("plan", array.key, method)
-    if key not in rig._cache:
-        build = METHODS[method]
-        geometry = QuadGeometry.of(rig)
-        plan = _Plan(
-            geometry=geometry,
-            kernels=[build(rig, array, fes) for fes in rig.quads],
-            checks=[None] * len(rig.quads),
-        )
-        for q, fes in enumerate(rig.quads):
-            check = GlobalMaxCheck.build(rig, array, fes)
-            plan.kernels[q], can_split = _survey_quad(
-                plan.kernels[q], check, geometry.polygons[q], array
-            )
-            if can_split:
-                plan.checks[q] = check
-        rig._cache[key] = plan
-    plan_out: _Plan = rig._cache[key]
-    return plan_out
-
-
-def _survey_quad(
-    kernel: QuadKernel, check: GlobalMaxCheck, polygon: FloatArray, array: VirtualArray
-) -> tuple[QuadKernel, bool]:
-    """Solve a grid of nodes over the quad to learn which run-time checks it needs.
-
-    Returns the kernel (the exact one without its per-target local-maximum test where every
-    node is a clear local maximum) and whether any node's peak is not the global maximum.
-    """
-    t = np.linspace(0.0, 1.0, SPLIT_MAP_NODES)
-    a, b = (g.ravel() for g in np.meshgrid(t, t))
-    # Bilinear map from the unit square to the corners FE 0, 1, 3, 2.
-    p0, p1, p3, p2 = polygon
-    pts = ((1 - a) * (1 - b))[:, None] * p0 + (a * (1 - b))[:, None] * p1 \
-        + (a * b)[:, None] * p3 + ((1 - a) * b)[:, None] * p2
-    az, el = np.radians(pts[:, 0]), np.radians(pts[:, 1])
-    if isinstance(kernel, ExactQuad):
-        weights, reason, margin = kernel.solve_with_curvature(az, el, curvature=True)
-        assert margin is not None
-        k2 = array.wavenumber_rad_per_m**2
-        natural = k2 * min(float(np.mean(array.y_m**2)), float(np.mean(array.z_m**2)))
-        solved = reason != Reason.NO_SOLUTION
-        if np.all(margin[solved] < -CLEAR_MAXIMUM * natural):
-            kernel = replace(kernel, check_local_max=False)
-    else:
-        weights, reason = kernel.solve(az, el)
-    if np.any(reason == Reason.SPLIT):
-        return kernel, True
-    ok = reason == Reason.OK
-    return kernel, bool(np.any(check.splits(az[ok], el[ok], weights[ok])))
-
-
 def _solve_chunk(
-    plan: _Plan,
+    plan: SolverPlan,
     az_deg: FloatArray,
     el_deg: FloatArray,
     weights: FloatArray,
@@ -276,7 +212,7 @@ def _solve_chunk(
 
 
 def _solve_in(
-    plan: _Plan, q: int, az: FloatArray, el: FloatArray
+    plan: SolverPlan, q: int, az: FloatArray, el: FloatArray
 ) -> tuple[FloatArray, NDArray[np.uint8]]:
     weights, reason = plan.kernels[q].solve(az, el)
     check = plan.checks[q]
@@ -288,7 +224,7 @@ def _solve_in(
 
 
 def _retry_neighbours(
-    plan: _Plan,
+    plan: SolverPlan,
     az_deg: FloatArray,
     el_deg: FloatArray,
     weights: FloatArray,
@@ -311,4 +247,15 @@ def _retry_neighbours(
         pending = np.setdiff1d(pending, solved, assume_unique=True)
 
 
-__all__ = ["METHODS", "Reason", "WeightSolution", "assign_quads", "solve_weights"]
+__all__ = [
+    "METHODS",
+    "Reason",
+    "SolverPlan",
+    "WeightSolution",
+    "assign_quads",
+    "clear_memory_cache",
+    "plan_cache_dir",
+    "plan_key",
+    "solve_weights",
+    "solver_plan",
+]

@@ -26,7 +26,7 @@ def scene_tracks(tmp_path_factory):
 def rig_for(scene, step_db):
     limits = dataclasses.replace(scene.rig.limits, attenuation_step_db=step_db,
                                  echoes_per_channel=64)
-    return dataclasses.replace(scene.rig, limits=limits, _cache={})
+    return dataclasses.replace(scene.rig, limits=limits)
 
 
 @pytest.mark.parametrize("step_db, mode", [(0.0, "aware"), (0.5, "naive"), (0.5, "aware")],

@@ -1,13 +1,18 @@
-"""Which quad of a rig encloses each target (point in quadrilateral, in angle space)."""
+"""Which quad of a rig encloses each target (point in quadrilateral, in angle space).
+
+The geometry depends only on the rig's FE angles and grid shape; it is computed once per set of
+values (never stored on a rig, so a rig changed with ``dataclasses.replace`` gets its own).
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..rig import Rig
+from .rig import Rig
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -76,13 +81,14 @@ def inside_quads(
     return inside
 
 
-def candidate_quads(rig: Rig, az_deg: FloatArray, el_deg: FloatArray) -> NDArray[np.int64]:
+def candidate_quads(
+    column_az_deg: FloatArray, row_el_deg: FloatArray, az_deg: FloatArray, el_deg: FloatArray
+) -> NDArray[np.int64]:
     """Most likely enclosing quad of each target, from the grid's mean column and row angles."""
-    grid_az = rig.az_deg.reshape(rig.rows, rig.columns).mean(axis=0)
-    grid_el = rig.el_deg.reshape(rig.rows, rig.columns).mean(axis=1)
-    col = np.clip(np.searchsorted(grid_az, az_deg) - 1, 0, rig.columns - 2)
-    row = np.clip(np.searchsorted(grid_el, el_deg) - 1, 0, rig.rows - 2)
-    return row * (rig.columns - 1) + col
+    columns, rows = column_az_deg.size, row_el_deg.size
+    col = np.clip(np.searchsorted(column_az_deg, az_deg) - 1, 0, columns - 2)
+    row = np.clip(np.searchsorted(row_el_deg, el_deg) - 1, 0, rows - 2)
+    return row * (columns - 1) + col
 
 
 def distance_to_polygon(az_deg: FloatArray, el_deg: FloatArray, polygon: FloatArray) -> FloatArray:
@@ -102,27 +108,48 @@ def distance_to_polygon(az_deg: FloatArray, el_deg: FloatArray, polygon: FloatAr
 
 @dataclass(frozen=True)
 class QuadGeometry:
-    """A rig's quads in angle space, prepared for fast point-in-quad tests."""
+    """A rig's quads in angle space, prepared for fast point-in-quad tests.
 
-    rig: Rig
+    Attributes
+    ----------
+    polygons : ndarray, shape (Q, 4, 2)
+        Quad corners, see `quad_polygons`.
+    lines, boxes : ndarray, shapes (Q, 4, 3) and (Q, 4)
+        Edge lines and bounding boxes, see `edge_lines`.
+    degenerate : ndarray, shape (Q,), bool
+        Quads collapsed onto a line.
+    column_az_deg, row_el_deg : ndarray, shapes (columns,) and (rows,)
+        Mean azimuth of every grid column and mean elevation of every grid row, degrees.
+    """
+
     polygons: FloatArray
     lines: FloatArray
     boxes: FloatArray
     degenerate: NDArray[np.bool_]
+    column_az_deg: FloatArray
+    row_el_deg: FloatArray
 
     @classmethod
     def of(cls, rig: Rig) -> QuadGeometry:
-        """Return the geometry of ``rig`` (computed once per rig)."""
-        key = ("quad-geometry",)
-        if key not in rig._cache:
-            polygons = quad_polygons(rig)
-            lines, boxes = edge_lines(polygons)
-            x, y = polygons[..., 0], polygons[..., 1]
-            area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y,
-                                       axis=1))
-            rig._cache[key] = cls(rig=rig, polygons=polygons, lines=lines, boxes=boxes,
-                                  degenerate=area <= DEGENERATE_AREA_DEG2)
-        geometry: QuadGeometry = rig._cache[key]
+        """Return the geometry of ``rig`` (computed once per set of FE angles and grid shape)."""
+        return _geometry(rig.az_deg.tobytes(), rig.el_deg.tobytes(), rig.rows, rig.columns)
+
+    @classmethod
+    def build(cls, rig: Rig) -> QuadGeometry:
+        """Compute the geometry of ``rig`` (uncached: see `of`)."""
+        polygons = quad_polygons(rig)
+        lines, boxes = edge_lines(polygons)
+        x, y = polygons[..., 0], polygons[..., 1]
+        area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y,
+                                   axis=1))
+        geometry = cls(
+            polygons=polygons, lines=lines, boxes=boxes, degenerate=area <= DEGENERATE_AREA_DEG2,
+            column_az_deg=rig.az_deg.reshape(rig.rows, rig.columns).mean(axis=0),
+            row_el_deg=rig.el_deg.reshape(rig.rows, rig.columns).mean(axis=1),
+        )
+        # Shared between every caller with the same values: nobody may change it.
+        for value in vars(geometry).values():
+            value.setflags(write=False)
         return geometry
 
     def within(self, az_deg: FloatArray, el_deg: FloatArray, quad: IntArray | int,
@@ -132,7 +159,7 @@ class QuadGeometry:
 
     def assign(self, az_deg: FloatArray, el_deg: FloatArray) -> tuple[IntArray, NDArray[np.bool_]]:
         """Enclosing quad per target (-1: none) and whether a miss is near a degenerate quad."""
-        quad = candidate_quads(self.rig, az_deg, el_deg)
+        quad = candidate_quads(self.column_az_deg, self.row_el_deg, az_deg, el_deg)
         quad[~self.within(az_deg, el_deg, quad)] = -1
         off_line = np.zeros(az_deg.shape, dtype=bool)
         # Near bent borders the guess can miss: scan every quad for those few.
@@ -158,3 +185,10 @@ def assign_quads(rig: Rig, az_deg: FloatArray, el_deg: FloatArray) -> IntArray:
     el = np.asarray(el_deg, dtype=np.float64)
     quad, _ = QuadGeometry.of(rig).assign(az.ravel(), el.ravel())
     return quad.reshape(az.shape)
+
+
+@lru_cache(maxsize=32)
+def _geometry(az_bytes: bytes, el_bytes: bytes, rows: int, columns: int) -> QuadGeometry:
+    az = np.frombuffer(az_bytes, dtype=np.float64)
+    el = np.frombuffer(el_bytes, dtype=np.float64)
+    return QuadGeometry.build(Rig.grid(az.reshape(rows, columns), el.reshape(rows, columns)))
