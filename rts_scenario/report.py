@@ -160,6 +160,7 @@ class TargetResult:
 class Report:
     """The verdict of a run and the evidence for it.
 
+    ``solver_plan`` says where the run's solver plan came from (built, memory, disk).
     ``worst_frames`` lists the worst target-frames (misses first, then by error over
     tolerance); ``record`` holds every frame's arrays when the run was asked to record them
     (`per_frame` reads them back).
@@ -177,6 +178,7 @@ class Report:
     bus: dict[str, int]
     target_frames: dict[str, int] = field(default_factory=dict)
     timing: dict[str, float] = field(default_factory=dict)
+    solver_plan: str = ""
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
     record: FrameRecord | None = field(default=None, repr=False, compare=False)
 
