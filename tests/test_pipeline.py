@@ -97,3 +97,13 @@ def test_pipeline_plays_a_schedule_for_calibration():
         cycles = pipeline.play(schedule)
     assert [c.cycle for c in cycles] == [0, 1, 2, 3, 4]
     assert all(c.complete and c.count == 1 for c in cycles)
+
+
+def test_public_api_names_every_stage():
+    import rts_scenario as rs
+
+    assert sorted(rs.__all__) == sorted(rs._EXPORTS)
+    for name in rs.__all__:
+        assert getattr(rs, name) is not None
+    result = rs.run_scene(CUT_IN, rs.RunOptions())
+    assert isinstance(result.report, rs.Report) and result.report.passed
