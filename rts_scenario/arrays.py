@@ -230,20 +230,6 @@ class VirtualArray:
         return SourceResponse(self, np.ravel(source_u), np.ravel(source_s))
 
 
-def power_curvature(
-    b: ComplexArray, b_u: ComplexArray, b_s: ComplexArray, b_uu: ComplexArray,
-    b_us: ComplexArray, b_ss: ComplexArray,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Gradient and Hessian of ``|B|^2 / 2`` in (u, s) from B and its derivatives.
-
-    Returns ``(g_u, g_s, h_uu, h_us, h_ss)``; a peak has zero gradient and a negative definite
-    Hessian. Every Newton step on a beamformer output in the package goes through here.
-    """
-    cb = np.conj(b)
-    return ((cb * b_u).real, (cb * b_s).real, (cb * b_uu).real + np.abs(b_u) ** 2,
-            (cb * b_us).real + (np.conj(b_u) * b_s).real, (cb * b_ss).real + np.abs(b_s) ** 2)
-
-
 def _distinct(values: FloatArray, tol: float) -> FloatArray:
     ordered = np.sort(values)
     keep = np.concatenate([[True], np.diff(ordered) > tol])

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..arrays import VirtualArray, angles_from_cosines, power_curvature
+from ..arrays import VirtualArray, angles_from_cosines
+from ..beamformer import hessian_step, power_curvature
 from ..errors import RtsError
 
 FloatArray = NDArray[np.float64]
@@ -102,17 +103,13 @@ class Bartlett2D:
             b_us = np.einsum("dm,dm->d", x, a * dy * dz)
             b_ss = np.einsum("dm,dm->d", x, a * dz * dz)
             g_u, g_s, h_uu, h_us, h_ss = power_curvature(b, b_u, b_s, b_uu, b_us, b_ss)
-            det = h_uu * h_ss - h_us * h_us
-            ok = (h_uu < 0) & (det > 0)
-            det = np.where(ok, det, 1.0)
+            du, ds, ok = hessian_step(g_u, g_s, h_uu, h_us, h_ss)
             # Newton where the spectrum curves down; elsewhere a short climb along the gradient.
             # Steps are measured in grid cells and limited to one.
             gu_c, gs_c = g_u * self.step_u, g_s * self.step_s
             g_norm = np.maximum(np.hypot(gu_c, gs_c), 1e-300)
-            du = np.where(ok, -(h_ss * g_u - h_us * g_s) / det,
-                          0.25 * self.step_u * gu_c / g_norm)
-            ds = np.where(ok, -(h_uu * g_s - h_us * g_u) / det,
-                          0.25 * self.step_s * gs_c / g_norm)
+            du = np.where(ok, du, 0.25 * self.step_u * gu_c / g_norm)
+            ds = np.where(ok, ds, 0.25 * self.step_s * gs_c / g_norm)
             cells = np.hypot(du / self.step_u, ds / self.step_s)
             scale = np.minimum(1.0, 1.0 / np.maximum(cells, 1e-300))
             u, s = u + du * scale, s + ds * scale

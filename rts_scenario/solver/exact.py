@@ -22,7 +22,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..arrays import SourceResponse, VirtualArray, direction_cosines, power_curvature
+from ..arrays import SourceResponse, VirtualArray, direction_cosines
+from ..beamformer import power_curvature
 from ..errors import SolverError
 from ..rig import Rig
 from .reasons import Reason

@@ -1,0 +1,214 @@
+"""Build per-frame four-channel schedules: what each RTS channel must do for each target.
+
+For every frame f, target k and channel c (the quad's FE in paper order) the schedule holds the
+FE index, attenuation, delay, Doppler shift and phase, and per entry (f, k) a set of status
+flags. Formulas (DESIGN.md 5.4):
+
+- level: a real target of RCS sigma at range R returns amplitude ~ sqrt(sigma) / R^2, so one FE
+  at full weight needs ``A = A_ref - (rcs - rcs_ref) + 40 log10(R / R_ref)`` dB; the
+  superposition's peak gain is ``g = |sum_q w_q f_q| / M`` and channel q gets
+  ``A - 20 log10(w_q / g)`` plus its calibration gain offset, fitted to the attenuator by
+  `rts_scenario.schedule.quantization`;
+- delay: ``tau_q = 2R/c0 - 2 R_c,q / c0 - tau_hw + delta_q``; quantizing it is compensated in
+  the channel phase so the channels stay coherent;
+- Doppler: ``doppler_hz`` of the track on all channels;
+- phase: the channel's calibration phase (plus the delay-quantization compensation);
+- echo slots: `rts_scenario.schedule.echo_slots`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..arrays import direction_cosines
+from ..constants import C0_MPS
+from ..kinematics import Tracks
+from ..radar.profile import RadarProfile
+from ..rig import HardwareLimits, Rig
+from ..solver import Reason, solve_weights, solver_plan
+from .echo_slots import assign_echo_slots
+from .model import BLOCKING, Schedule, ScheduleError, Status
+from .quantization import QUANTIZATION_MODES, attenuator_settings, predicted_angle_error
+
+FloatArray = NDArray[np.float64]
+
+# The scene's frame rate may equal the rig's update rate up to rounding (relative).
+RATE_SLACK = 1e-9
+# A delay that rounds to the minimum is not too close: far below any delay step.
+DELAY_SLACK_S = 1e-18
+
+_REASON_STATUS = {
+    Reason.OK: Status.OK,
+    Reason.OUTSIDE: Status.OUT_OF_COVERAGE,
+    Reason.NO_SOLUTION: Status.NOT_SYNTHESIZABLE,
+    Reason.DEGENERATE: Status.NOT_SYNTHESIZABLE,
+    Reason.SPLIT: Status.SPLIT,
+    Reason.NOT_CONVERGED: Status.NOT_SYNTHESIZABLE,
+}
+
+
+def build_schedule(
+    tracks: Tracks,
+    rig: Rig,
+    radar: RadarProfile,
+    *,
+    method: str = "exact",
+    quantization: str = "aware",
+    frame_rate_hz: float | None = None,
+) -> Schedule:
+    """Turn per-frame target tracks into channel settings for the rig.
+
+    Parameters
+    ----------
+    tracks : Tracks
+        Ground truth per frame and target (`rts_scenario.kinematics.compute_tracks`).
+    rig : Rig
+        The RTS rig, with its calibration and hardware limits.
+    radar : RadarProfile
+        The radar under test (array and wavelength).
+    method : {"exact", "paper"}
+        Weight solver method.
+    quantization : {"aware", "naive"}
+        How attenuations snap to the attenuator's step (no effect without a step).
+    frame_rate_hz : float, optional
+        Scene frame rate, checked against the rig's update rate.
+
+    Raises
+    ------
+    ScheduleError
+        If the scene's frame rate exceeds the rig's update rate or a mode is unknown.
+    """
+    limits = rig.limits
+    if quantization not in QUANTIZATION_MODES:
+        raise ScheduleError(f"quantization: unknown mode {quantization!r}; valid modes: "
+                            f"{', '.join(QUANTIZATION_MODES)}")
+    if frame_rate_hz is not None and frame_rate_hz > limits.update_rate_hz * (1 + RATE_SLACK):
+        raise ScheduleError(
+            f"frame_rate_hz: the scene runs at {frame_rate_hz:g} Hz but rig {rig.name!r} "
+            f"updates at most {limits.update_rate_hz:g} Hz (limits.update_rate_hz)"
+        )
+    array = radar.array
+    shape = tracks.range_m.shape
+    status = np.where(tracks.present, Status.OK, Status.NOT_PRESENT).astype(np.uint16)
+    status |= np.where(tracks.present & ~tracks.in_coverage, Status.OUT_OF_COVERAGE,
+                       Status.OK).astype(np.uint16)
+
+    # A target whose direction never changes (a static scene) is solved once, not per frame.
+    todo = tracks.present & tracks.in_coverage
+    first = np.argmax(todo, axis=0)
+    steady = np.all(((tracks.az_deg == tracks.az_deg[first, np.arange(shape[1])])
+                     & (tracks.el_deg == tracks.el_deg[first, np.arange(shape[1])])) | ~todo,
+                    axis=0)
+    solve = todo & ~steady[None, :]
+    solve[first[steady], np.flatnonzero(steady)] = todo[first[steady], np.flatnonzero(steady)]
+    flat = np.flatnonzero(solve.ravel())
+    sol = solve_weights(tracks.az_deg.ravel()[flat], tracks.el_deg.ravel()[flat], rig=rig,
+                        array=array, method=method)
+    # Broadcast each steady target's solution to all its frames.
+    source = np.full(shape, -1, dtype=np.int64)
+    source.ravel()[flat] = np.arange(flat.size)
+    source = np.where(steady[None, :] & todo, source[first, np.arange(shape[1])][None, :],
+                      source)
+    pick = source.ravel()[todo.ravel()]
+    quad = np.full(shape, -1, dtype=np.int64)
+    weight = np.zeros((*shape, 4))
+    quad.ravel()[todo.ravel()] = sol.quad[pick]
+    weight.reshape(-1, 4)[todo.ravel()] = sol.weights[pick]
+    reason_status = np.array([_REASON_STATUS[Reason(r)] for r in range(len(Reason))],
+                             dtype=np.uint16)
+    status.ravel()[todo.ravel()] |= reason_status[sol.reason[pick]]
+
+    ok = status == Status.OK
+    fe = np.where(ok[..., None], rig.quads[np.maximum(quad, 0)], -1)
+
+    # Level of one FE at full weight, then per channel with the superposition gain.
+    ref = rig.reference
+    with np.errstate(divide="ignore"):
+        single_db = (ref.attenuation_db - (tracks.rcs_dbsm - ref.rcs_dbsm)
+                     + 40.0 * np.log10(tracks.range_m / ref.range_m))
+    attenuation = np.full((*shape, 4), np.nan)
+    angle_error = np.zeros((*shape, 2))
+    clipped = np.zeros(shape, dtype=bool)
+    responses = solver_plan(rig, array, method).responses
+    for q in range(len(rig.quads)):  # per quad of the rig, vectorized over its entries
+        sel = np.flatnonzero((quad.ravel() == q) & ok.ravel())
+        if sel.size == 0:
+            continue
+        u, s = direction_cosines(np.radians(tracks.az_deg.ravel()[sel]),
+                                 np.radians(tracks.el_deg.ravel()[sel]))
+        resp = responses[q].evaluate(u, s)
+        # A channel's calibration gain offset is part of its setting, so it is quantized too.
+        offset = rig.cal_gain_db[rig.quads[q]][None, :]
+        w, att, err, clip = _levels(resp, weight.reshape(-1, 4)[sel],
+                                    single_db.ravel()[sel][:, None] + offset,
+                                    array.n_elements, limits, quantization, u, s)
+        clipped.ravel()[sel] = clip
+        weight.reshape(-1, 4)[sel] = w
+        attenuation.reshape(-1, 4)[sel] = att
+        angle_error.reshape(-1, 2)[sel] = err
+    # Quantization may switch an idle channel on (weakly) to hold the angle.
+    active = ok[..., None] & (weight > 0.0)
+    attenuation[~active] = np.nan
+    status |= np.where(clipped, Status.ATTENUATION_CLIPPED, 0).astype(np.uint16)
+
+    # Delays: the echo through FE q must arrive 2R/c0 after transmission.
+    fe0 = np.maximum(fe, 0)
+    exact_delay = (2.0 * tracks.range_m[..., None] / C0_MPS
+                   - 2.0 * rig.distance_m[fe0] / C0_MPS - limits.latency_s
+                   + rig.cal_delay_s[fe0])
+    delay = exact_delay
+    if limits.delay_step_s > 0.0:
+        delay = np.round(exact_delay / limits.delay_step_s) * limits.delay_step_s
+    too_close = (active & (delay < limits.delay_min_s - DELAY_SLACK_S)).any(axis=-1)
+    status |= np.where(too_close, Status.TOO_CLOSE, 0).astype(np.uint16)
+    # A quantized delay shifts the carrier phase: give it back in the channel phase.
+    carrier_hz = C0_MPS / radar.wavelength_m
+    phase = (np.radians(rig.cal_phase_deg[fe0]) + 2.0 * np.pi * carrier_hz * (exact_delay - delay))
+    phase = np.mod(phase + np.pi, 2.0 * np.pi) - np.pi
+
+    doppler = np.broadcast_to(tracks.doppler_hz[..., None], (*shape, 4)).copy()
+    off_range = (tracks.doppler_hz < limits.doppler_min_hz) | (
+        tracks.doppler_hz > limits.doppler_max_hz)
+    status |= np.where(off_range & ok, Status.DOPPLER_OUT_OF_RANGE, 0).astype(np.uint16)
+
+    status |= assign_echo_slots(fe, active & ((status & BLOCKING) == 0)[..., None], tracks,
+                                limits.echoes_per_channel, rig.n_front_ends)
+
+    emitted = ((status & BLOCKING) == 0)[..., None] & active
+    nan = np.nan
+    return Schedule(
+        t_s=tracks.t_s, frame_index=np.arange(shape[0]), names=tracks.names,
+        quad=np.where(emitted.any(-1), quad, -1), fe=np.where(emitted, fe, -1),
+        weight=np.where(emitted, weight, 0.0),
+        attenuation_db=np.where(emitted, attenuation, nan),
+        delay_s=np.where(emitted, delay, nan), doppler_hz=np.where(emitted, doppler, nan),
+        phase_rad=np.where(emitted, phase, nan), active=emitted, status=status,
+        angle_error_deg=np.where(emitted.any(-1)[..., None], angle_error, nan),
+    )
+
+
+def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatArray,
+            n_elements: int, limits: HardwareLimits, mode: str, u: FloatArray,
+            s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Weights, channel attenuations (N, 4), predicted angle errors (N, 2) and clipping (N,).
+
+    ``single_db`` (N, 4) is each channel's attenuation for full weight (calibration included).
+    The attenuations are fitted to the attenuator's range and step
+    (`rts_scenario.schedule.quantization.attenuator_settings`, which also says what clipped
+    means); the weights follow from the settings.
+    """
+    gain = np.abs(np.einsum("qn,nq->n", resp[0], weights)) / n_elements
+    on = weights > 0.0
+    full = single_db + 20.0 * np.log10(gain)[:, None]  # attenuation at weight 1
+    with np.errstate(divide="ignore"):
+        exact = np.where(on, full - 20.0 * np.log10(np.where(on, weights, 1.0)), np.inf)
+    chosen, clipped = attenuator_settings(resp, weights, full, exact, limits, mode, u, s)
+    new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
+    top = new_w.max(axis=1, keepdims=True)
+    new_w = new_w / np.where(top > 0.0, top, 1.0)
+    return (new_w, np.where(np.isfinite(chosen), chosen, np.nan),
+            predicted_angle_error(resp, new_w, u, s), clipped)
+
+
+__all__ = ["build_schedule"]

@@ -1,0 +1,116 @@
+"""The schedule's data model: per-frame channel settings and their status flags."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from enum import IntFlag
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import RtsError
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+class ScheduleError(RtsError):
+    """A schedule cannot be built (e.g. the scene outpaces the RTS)."""
+
+
+class Status(IntFlag):
+    """Per-entry flags. Any flag but ``ATTENUATION_CLIPPED`` keeps the entry from being emitted."""
+
+    OK = 0
+    NOT_PRESENT = 1
+    OUT_OF_COVERAGE = 2
+    NOT_SYNTHESIZABLE = 4
+    SPLIT = 8
+    TOO_CLOSE = 16
+    DOPPLER_OUT_OF_RANGE = 32
+    NO_ECHO_SLOT = 64
+    ATTENUATION_CLIPPED = 128
+
+
+BLOCKING = Status(~Status.ATTENUATION_CLIPPED & 0xFF)
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Channel settings per frame (F), target (K) and channel (4, paper order).
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (F,)
+        Frame times.
+    frame_index : ndarray, shape (F,)
+        Index of each frame in the whole scene (batches keep it).
+    names : tuple of str
+        Target names (K).
+    quad : ndarray, shape (F, K)
+        Quad used, -1 when not synthesized.
+    fe : ndarray, shape (F, K, 4)
+        Rig FE index of each channel, -1 when not synthesized.
+    weight : ndarray, shape (F, K, 4)
+        Linear amplitude weights after quantization (max 1 per emitted entry).
+    attenuation_db, delay_s, doppler_hz, phase_rad : ndarray, shape (F, K, 4)
+        The channel settings (NaN where the channel is off).
+    active : ndarray of bool, shape (F, K, 4)
+        Channels that emit an echo.
+    status : ndarray, shape (F, K)
+        `Status` flags.
+    angle_error_deg : ndarray, shape (F, K, 2)
+        Predicted azimuth and elevation error left by the quantization of the attenuations.
+    """
+
+    t_s: FloatArray
+    frame_index: IntArray
+    names: tuple[str, ...]
+    quad: IntArray
+    fe: IntArray
+    weight: FloatArray
+    attenuation_db: FloatArray
+    delay_s: FloatArray
+    doppler_hz: FloatArray
+    phase_rad: FloatArray
+    active: BoolArray
+    status: NDArray[np.uint16]
+    angle_error_deg: FloatArray
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames F."""
+        return int(self.t_s.size)
+
+    @property
+    def emitted(self) -> BoolArray:
+        """Entries (F, K) the RTS plays."""
+        return (self.status & BLOCKING) == 0
+
+    def frames(self, start: int, stop: int) -> Schedule:
+        """Return the frames ``start:stop`` as a schedule of their own (views, no copy)."""
+        part = slice(start, stop)
+        return Schedule(**{
+            f.name: getattr(self, f.name) if f.name == "names" else getattr(self, f.name)[part]
+            for f in fields(self)
+        })
+
+    def changed(self) -> BoolArray:
+        """Entries (F, K) that differ from the previous frame (all of frame 0).
+
+        Static targets and unchanged entries need not be sent again: an output in delta mode
+        sends only these.
+        """
+        out = np.ones(self.status.shape, dtype=bool)
+        if self.n_frames > 1:
+            same = self.status[1:] == self.status[:-1]
+            for name in ("fe", "attenuation_db", "delay_s", "doppler_hz", "phase_rad", "active"):
+                a = getattr(self, name)
+                same &= np.all((a[1:] == a[:-1]) | (np.isnan(a[1:]) & np.isnan(a[:-1]))
+                               if a.dtype.kind == "f" else a[1:] == a[:-1], axis=-1)
+            out[1:] = ~same
+        return out
+
+
+__all__ = ["BLOCKING", "Schedule", "ScheduleError", "Status"]

@@ -1,0 +1,274 @@
+"""Attenuator quantization that keeps the synthesized angle: choose grid settings, predict errors.
+
+With an attenuation step, each channel's attenuation is set to the grid value below or above
+the exact one, choosing the combination whose synthesized angle is closest to the set angle (a
+Newton step on the exact beamformer response predicts the angle of every combination); the
+predicted remaining error is kept per entry. Without a step only the attenuator's range applies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..arrays import angles_from_cosines
+from ..beamformer import hessian_step, newton_step, power_curvature
+from ..rig import HardwareLimits
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+QUANTIZATION_MODES = ("aware", "naive")
+# Settings are computed as ``low + k * step`` or from exact levels; comparisons against the
+# attenuator's limits allow this much so that rounding (of order 1e-14 dB) never turns a
+# reachable setting into an unreachable one. Far below any attenuator's resolution.
+GRID_SLACK_DB = 1e-9
+# Floor on squared norms before dividing by them: a channel whose steps do not move the angle
+# at all gets no step instead of a division by zero (any real norm is far larger).
+NORM_FLOOR = 1e-300
+# Candidates ranked best by the linear model that the exact prediction then compares: the
+# linear model is good enough to rank, the exact prediction (one Newton step per candidate) is
+# what costs, so only a few go on.
+SHORTLIST = 8
+# The quantization-aware search moves two channels by up to SEARCH_STEPS grid steps either side
+# of their nearest setting, on the entries whose current setting errs more than
+# SEARCH_ABOVE_DEG (wider passes follow for what is left), and the weakest channel by up to
+# FINE_STEPS. The candidate count grows with the square of the reach, so the narrow pass runs
+# on most entries and the wide one only where an error well above the first threshold is left.
+# The weakest channel moves the angle least per step, so it needs the widest range.
+SEARCH_STEPS = (2, 4)
+SEARCH_ABOVE_DEG = (0.005, 0.03)
+FINE_STEPS = 8
+# Entries go in blocks of SEARCH_BLOCK: the (entries x candidates) temporaries stay in cache.
+SEARCH_BLOCK = 1024
+
+
+def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: FloatArray,
+                          s: FloatArray) -> FloatArray:
+    """Azimuth/elevation error (deg) of the beamformer peak of ``weights`` near ``(u, s)``.
+
+    One Newton step on ``|B|^2 / 2`` from the set direction (`rts_scenario.beamformer`), with
+    the exact response and its derivatives ``resp`` (shape (6, 4, N)); where the response has
+    no definite curvature nearby the error is reported as zero.
+
+    Parameters
+    ----------
+    resp : ndarray of complex, shape (6, 4, N)
+        ``f, f_u, f_s, f_uu, f_us, f_ss`` of the quad's four channels at the set directions.
+    weights : ndarray, shape (N, 4) or (N, C, 4)
+        Channel amplitudes, or C candidate amplitude sets per entry.
+    u, s : ndarray, shape (N,)
+        Set directions in direction cosines.
+
+    Returns
+    -------
+    ndarray, shape (N, 2) or (N, C, 2)
+        Predicted azimuth and elevation error in degrees.
+    """
+    w = weights if weights.ndim == 3 else weights[:, None, :]
+    du, dsv, _ = newton_step(*np.einsum("tqn,ncq->tnc", resp, w))
+    az0, el0 = angles_from_cosines(u, s)
+    az1, el1 = angles_from_cosines(u[:, None] + du, s[:, None] + dsv)
+    err = np.degrees(np.stack([az1 - az0[:, None], el1 - el0[:, None]], axis=-1))
+    return err if weights.ndim == 3 else err[:, 0]
+
+
+def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full: FloatArray,
+                        exact: FloatArray, limits: HardwareLimits, mode: str, u: FloatArray,
+                        s: FloatArray) -> tuple[FloatArray, BoolArray]:
+    """Attenuator settings for the exact channel attenuations, and where they clip.
+
+    Parameters
+    ----------
+    resp : ndarray of complex, shape (6, 4, N)
+        Exact response of the quad's channels and its derivatives at the set directions.
+    weights : ndarray, shape (N, 4)
+        Solved amplitude weights (0: channel off).
+    full : ndarray, shape (N, 4)
+        Each channel's attenuation (dB) at amplitude 1.
+    exact : ndarray, shape (N, 4)
+        The exact attenuation (dB) each channel needs; inf where it is off.
+    limits : HardwareLimits
+        The attenuator's range and step.
+    mode : {"aware", "naive"}
+        With a step: search the grid for the smallest predicted angle error, or round.
+    u, s : ndarray, shape (N,)
+        Set directions in direction cosines.
+
+    Returns
+    -------
+    chosen : ndarray, shape (N, 4)
+        Attenuation settings in dB; inf where the channel is off.
+    clipped : ndarray of bool, shape (N,)
+        A channel needed less attenuation than the attenuator's minimum (the echo stays too
+        weak), or every channel needed more than its maximum (too strong).
+    """
+    on = weights > 0.0
+    step = limits.attenuation_step_db
+    grid = _Grid(limits.attenuation_min_db, step, limits.attenuation_max_db)
+    # A channel that needs more attenuation than the attenuator has is switched off: its
+    # weight is tiny, and playing it too loud would move the angle more than leaving it out.
+    chosen = grid.nearest(exact) if step > 0.0 else np.where(
+        exact <= grid.high + GRID_SLACK_DB, np.maximum(exact, grid.low), np.inf)
+    if step > 0.0 and mode == "aware":
+        # A wider search follows only where the narrow one leaves a noticeable error.
+        for reach, above in zip(SEARCH_STEPS, SEARCH_ABOVE_DEG, strict=True):
+            amps = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
+            err = predicted_angle_error(resp, amps, u, s)
+            todo = np.flatnonzero(np.hypot(err[:, 0], err[:, 1]) > above)
+            for start in range(0, todo.size, SEARCH_BLOCK):
+                b = todo[start : start + SEARCH_BLOCK]
+                chosen[b] = _search_grid(resp[:, :, b], weights[b], full[b], grid, u[b],
+                                         s[b], chosen[b], reach)
+    # A target too weak for every channel is played as weak as possible: its strongest channel
+    # at the attenuator's maximum, the others kept in proportion where they fit (flagged as
+    # clipped).
+    dark = on.any(axis=1) & ~np.isfinite(chosen).any(axis=1)
+    if dark.any():
+        lifted = exact[dark] - (exact[dark].min(axis=1, keepdims=True) - grid.high)
+        chosen[dark] = grid.nearest(lifted) if step > 0.0 else np.where(
+            lifted <= grid.high + GRID_SLACK_DB, lifted, np.inf)
+    clipped = np.asarray(dark | (on & (exact < grid.low - GRID_SLACK_DB)).any(axis=1),
+                         dtype=bool)
+    return chosen, clipped
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """The attenuator's settings: ``low + k * step`` up to ``high``; inf means off."""
+
+    low: float
+    step: float
+    high: float
+
+    def nearest(self, att: FloatArray) -> FloatArray:
+        """Nearest setting (the minimum below it; off above the maximum)."""
+        snapped = self.low + np.round((att - self.low) / self.step) * self.step
+        snapped = np.maximum(snapped, self.low)
+        return np.where(snapped <= self.high + GRID_SLACK_DB, snapped, np.inf)
+
+    def holds(self, att: FloatArray) -> BoolArray:
+        """Return where the settings lie within the attenuator's range."""
+        return np.asarray((att >= self.low - GRID_SLACK_DB) & (att <= self.high + GRID_SLACK_DB),
+                          dtype=bool)
+
+
+def _search_grid(resp: NDArray[np.complex128], weights: FloatArray, full: FloatArray,
+                 grid: _Grid, u: FloatArray, s: FloatArray, naive: FloatArray,
+                 reach: int) -> FloatArray:
+    """Grid settings whose synthesized angle is closest to the set one.
+
+    A linear model predicts the peak shift caused by small changes of the channel amplitudes
+    (``G``, 2 x 4 per entry, from the Newton step on the exact response). A common change of
+    all channels only changes the level, so the strongest channel stays at its nearest grid
+    value; the next two try ``reach`` steps either side of theirs; the weakest, whose steps
+    move the angle least, takes the step count that best cancels what is left (solved, then
+    the two nearest counts compared). A channel that is off may come on at the weak grid level
+    that best cancels the rest. The best candidates by the linear model go to the exact
+    prediction, which picks the final setting (the naive one competes too, so the search never
+    does worse than rounding).
+    """
+    n = len(weights)
+    rows = np.arange(n)
+    sens = _sensitivity(resp, weights) * _degree_scale(u, s)[:, :, None]  # (N, 2, 4), deg
+    # A channel beyond the attenuator's range is off; it may come back below (idle stage).
+    on = np.isfinite(naive)
+    fine = FINE_STEPS
+    steps = np.arange(-fine, fine + 1)
+    # Per channel and step count: the peak shift it causes (a step beyond the range: off).
+    setting = naive[:, :, None] + steps * grid.step  # (N, 4, S)
+    valid = on[:, :, None] & grid.holds(setting)
+    amp = np.where(on, 10.0 ** (-(np.where(on, naive, 0.0) - full) / 20.0), 0.0)
+    amp = np.where(valid, amp[:, :, None] * 10.0 ** (-steps * grid.step / 20.0), 0.0)
+    shift = sens[:, :, :, None] * (amp - weights[:, :, None])[:, None]  # (N, 2, 4, S)
+    shift = np.where(on[:, None, :, None], shift, 0.0)
+    # Roles by weight: reference (fixed), two searched, the weakest solved.
+    ranked = np.argsort(-weights, axis=1)
+    ref, qa, qb, qc = ranked.T
+    span = np.arange(fine - reach, fine + reach + 1)
+    base = shift[rows, :, ref, fine][:, :, None, None]  # (N, 2, 1, 1)
+    resid = (base + shift[rows, :, qa][:, :, span][:, :, :, None]
+             + shift[rows, :, qb][:, :, span][:, :, None, :]).reshape(n, 2, -1)  # (N, 2, C)
+    # Weakest channel: continuous step count along its per-step direction, then both neighbours.
+    table_c = shift[rows, :, qc]  # (N, 2, S)
+    direction = 0.5 * (table_c[:, :, fine + 1] - table_c[:, :, fine - 1])
+    dd = np.maximum((direction * direction).sum(1), NORM_FLOOR)[:, None]
+    t_star = -((resid + table_c[:, :, fine][:, :, None]) * direction[:, :, None]).sum(1) / dd
+    lower = np.clip(np.floor(t_star), -fine, fine).astype(np.int64)
+    upper = np.clip(lower + 1, -fine, fine)
+    best_k = lower
+    cost = None
+    for k in (lower, upper):
+        moved = resid + np.take_along_axis(table_c, (k + fine)[:, None, :].repeat(2, 1), axis=2)
+        c = np.hypot(moved[:, 0], moved[:, 1])
+        if cost is None:
+            cost, final = c, moved
+        else:
+            take = c < cost
+            cost = np.where(take, c, cost)
+            best_k = np.where(take, k, best_k)
+            final = np.where(take[:, None, :], moved, final)
+    assert cost is not None
+    # An idle channel may come on weakly to cancel what is left along its own direction.
+    extra_q = np.full(cost.shape, -1)
+    extra_att = np.zeros(cost.shape)
+    for q in range(4):  # the four channels of a quad
+        idle = np.flatnonzero(~on[:, q])
+        if idle.size == 0:
+            continue
+        g = sens[idle, :, q]  # (I, 2)
+        r = final[idle]  # (I, 2, C)
+        a_star = -(g[:, :, None] * r).sum(1) / np.maximum((g * g).sum(-1), NORM_FLOOR)[:, None]
+        with np.errstate(divide="ignore"):
+            att = grid.nearest(full[idle, None, q] - 20.0 * np.log10(np.maximum(a_star, 0.0)))
+        a = np.where(np.isfinite(att), 10.0 ** (-(att - full[idle, None, q]) / 20.0), 0.0)
+        moved = r + a[:, None, :] * g[:, :, None]
+        new_cost = np.hypot(moved[:, 0], moved[:, 1])
+        better = (a > 0.0) & (new_cost < cost[idle])
+        cost[idle] = np.where(better, new_cost, cost[idle])
+        extra_q[idle] = np.where(better, q, extra_q[idle])
+        extra_att[idle] = np.where(better, att, extra_att[idle])
+    # The linear model shortlists; the exact prediction decides (the naive setting included).
+    keep_n = min(SHORTLIST, cost.shape[1])
+    shortlist = np.argpartition(cost, keep_n - 1, axis=1)[:, :keep_n]  # (N, S)
+    ia, ib = np.unravel_index(shortlist, (span.size, span.size))
+    counts = np.stack([np.zeros_like(ia), span[ia] - fine, span[ib] - fine,
+                       np.take_along_axis(best_k, shortlist, axis=1)], axis=-1)  # per role
+    chosen = np.repeat(naive[:, None, :], keep_n, axis=1)
+    for role, q in enumerate((ref, qa, qb, qc)):
+        col = q[:, None]
+        chosen[rows[:, None], np.arange(keep_n)[None], col] = (
+            naive[rows[:, None], col] + counts[..., role] * grid.step)
+    chosen = np.where(on[:, None, :] & grid.holds(chosen), chosen, np.inf)
+    picked = extra_q[rows[:, None], shortlist]
+    n_idx, s_idx = np.nonzero(picked >= 0)
+    chosen[n_idx, s_idx, picked[n_idx, s_idx]] = extra_att[n_idx, shortlist[n_idx, s_idx]]
+    options = np.concatenate([naive[:, None, :], chosen], axis=1)
+    amps = np.where(np.isfinite(options), 10.0 ** (-(options - full[:, None, :]) / 20.0), 0.0)
+    err = predicted_angle_error(resp, amps, u, s)
+    keep = np.argmin(np.hypot(err[..., 0], err[..., 1]), axis=1)
+    return options[rows, keep]
+
+
+def _sensitivity(resp: NDArray[np.complex128], weights: FloatArray) -> FloatArray:
+    """Peak shift in (u, s) per unit change of each channel amplitude, shape (N, 2, 4)."""
+    b, b_u, b_s, b_uu, b_us, b_ss = np.einsum("tqn,nq->tn", resp, weights)
+    cb = np.conj(b)
+    _, _, h_uu, h_us, h_ss = power_curvature(b, b_u, b_s, b_uu, b_us, b_ss)
+    # d(gradient)/dw_q at a stationary point: Re(conj(B) f_q,i); the peak moves by the Newton
+    # step of that gradient change.
+    d_u = (cb[None] * resp[1]).real.T  # (N, 4)
+    d_s = (cb[None] * resp[2]).real.T
+    du, ds, _ = hessian_step(d_u, d_s, h_uu[:, None], h_us[:, None], h_ss[:, None])
+    return np.stack([du, ds], axis=1)
+
+
+def _degree_scale(u: FloatArray, s: FloatArray) -> FloatArray:
+    """Local degrees per unit of u and s (azimuth and elevation), shape (N, 2)."""
+    az, el = angles_from_cosines(u, s)
+    return np.degrees(np.stack([1.0 / (np.cos(el) * np.cos(az)), 1.0 / np.cos(el)], axis=-1))
+
+
+__all__ = ["QUANTIZATION_MODES", "attenuator_settings", "predicted_angle_error"]
