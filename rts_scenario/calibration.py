@@ -363,7 +363,7 @@ def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
     The grid is the paper's (azimuth -3..3 deg x elevation -6..6 deg) for kit-table1, and a
     6 x 5 grid over the middle of every quad otherwise.
     """
-    from .bench import evaluation_grid
+    from .evaluation import evaluation_grid
     from .kinematics import Tracks
     from .schedule import build_schedule
 
