@@ -1,8 +1,8 @@
 """Speed against angle error of every solver method on every shipped array.
 
-The error is measured by the independent Bartlett peak search of `rts_scenario.peak` on the
-paper's evaluation grid (kit-table1 rig, azimuth -3..3 deg in 6 steps, elevation -6..6 deg in 5
-steps); the throughput by solving N random targets spread over the same region.
+The error is measured on the paper's evaluation grid by the independent peak search
+(`rts_scenario.evaluation`); the throughput by solving N random targets spread over the same
+region.
 """
 
 from __future__ import annotations
@@ -13,17 +13,12 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
 from .arrays import PRESETS, VirtualArray
+from .evaluation import GRID_AZ_DEG, GRID_EL_DEG, angle_errors, evaluation_grid
 from .peak import find_peak, snapshot
 from .rig import Rig
-from .solver import METHODS, WeightSolution, solve_weights
-
-FloatArray = NDArray[np.float64]
-
-GRID_AZ_DEG = np.linspace(-3.0, 3.0, 6)
-GRID_EL_DEG = np.linspace(-6.0, 6.0, 5)
+from .solver import METHODS, solve_weights
 
 
 @dataclass(frozen=True)
@@ -41,34 +36,6 @@ class BenchRow:
     rms_el_deg: float
     max_az_deg: float
     max_el_deg: float
-
-
-def evaluation_grid() -> tuple[FloatArray, FloatArray]:
-    """Return the paper's 6 x 5 grid of set angles, flattened: ``(az_deg, el_deg)``."""
-    az, el = np.meshgrid(GRID_AZ_DEG, GRID_EL_DEG)
-    return az.ravel(), el.ravel()
-
-
-def synthesized_angles(
-    solution: WeightSolution, rig: Rig, array: VirtualArray
-) -> tuple[FloatArray, FloatArray]:
-    """Where the radar's Bartlett beamformer sees each feasible target: ``(az_deg, el_deg)``."""
-    ok = solution.feasible
-    fes = rig.quads[solution.quad[ok]]
-    x = snapshot(array, solution.weights[ok], rig.az_deg[fes], rig.el_deg[fes])
-    lo_az, hi_az = rig.az_deg.min() - 10.0, rig.az_deg.max() + 10.0
-    lo_el, hi_el = rig.el_deg.min() - 10.0, rig.el_deg.max() + 10.0
-    return find_peak(array, x, az_range_deg=(lo_az, hi_az), el_range_deg=(lo_el, hi_el))
-
-
-def angle_errors(
-    method: str, array: VirtualArray, rig: Rig
-) -> tuple[WeightSolution, FloatArray, FloatArray]:
-    """Solve the evaluation grid; return the solution and the az/el errors of feasible points."""
-    az, el = evaluation_grid()
-    sol = solve_weights(az, el, rig=rig, array=array, method=method)
-    peak_az, peak_el = synthesized_angles(sol, rig, array)
-    return sol, peak_az - az[sol.feasible], peak_el - el[sol.feasible]
 
 
 def throughput(

@@ -14,14 +14,13 @@ differences of all pairs (6 per quad) are solved together by least squares for o
 channel (the first FE is the reference). A pair whose residual stands out reveals a bad channel
 or a moved FE.
 
-Measurements run through `measure` - schedule in, detections out - so the same procedure
-drives the built-in simulated radar (`simulated_measure`) or a real bench (any output plus the
-CAN checker).
+Measurements run through `measure` - schedule in, one `Detections` per frame out - so the same
+procedure drives the built-in simulated radar directly (`simulated_measure`) or any bench through
+the pipeline (`rts_scenario.pipeline.Pipeline.play`: an output plus the radar's CAN bus).
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from itertools import combinations
@@ -31,11 +30,9 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from .canbus import DetectionReceiver
 from .constants import C0_MPS
 from .detections import Detections
 from .errors import RtsError
-from .outputs.base import Output
 from .peak import find_peak, snapshot
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors, SimulatedRadar
@@ -310,31 +307,6 @@ def simulated_measure(radar: RadarProfile, rig: Rig, errors: ChannelErrors, *,
     return sim.process
 
 
-def can_measure(output: Output, receiver: DetectionReceiver, drain_s: float = 2.0) -> Measure:
-    """Measure through an output and the CAN checker: the bench procedure.
-
-    Each schedule goes to ``output`` (a real RTS, or the simulated radar publishing on CAN);
-    the radar's cycles come back through ``receiver`` (listening on the bus).
-    """
-    def measure(schedule: Schedule) -> list[Detections]:
-        receiver.reset()
-        before = receiver.stats.messages
-        output.write(schedule)
-        deadline = time.perf_counter() + drain_s
-        got: dict[int, Detections] = {}
-        wanted = {int(f) & 0xFFFF for f in schedule.frame_index}
-        while time.perf_counter() < deadline and not wanted <= set(got):
-            got.update((c.cycle, c) for c in receiver.pop() if c.complete)
-            time.sleep(0.002)
-        got.update((c.cycle, c) for c in receiver.flush() if c.complete)
-        if receiver.stats.messages == before:
-            raise RtsError("calibration: the radar sent nothing over CAN; check the bus")
-        return [got.get(int(f) & 0xFFFF, Detections.empty(int(f), float(schedule.t_s[0])))
-                for f in schedule.frame_index]
-
-    return measure
-
-
 def write_rig(rig: Rig, path: str | Path) -> None:
     """Write ``rig`` as a ``*.rig.yaml`` file, calibration offsets included."""
     fes = []
@@ -356,7 +328,7 @@ def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
     The grid is the paper's (azimuth -3..3 deg x elevation -6..6 deg) for kit-table1, and a
     6 x 5 grid over the middle of every quad otherwise.
     """
-    from .bench import evaluation_grid
+    from .evaluation import evaluation_grid
     from .kinematics import Tracks
     from .schedule import build_schedule
 

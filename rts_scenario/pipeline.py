@@ -22,7 +22,7 @@ import numpy as np
 from .canbus import DetectionPublisher, DetectionReceiver, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker
-from .detections import Detections
+from .detections import Detections, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class
 from .outputs.base import RunContext
@@ -197,10 +197,21 @@ class Pipeline:
         return self.receiver.flush() if final else self.receiver.pop()
 
     def play(self, schedule: Schedule) -> list[Detections]:
-        """Play a schedule and return the radar's cycles for it (a calibration measurement)."""
+        """Play a schedule; return one cycle per frame, in frame order (a measurement).
+
+        A frame whose cycle did not come back, or came back damaged, gets an empty cycle marked
+        incomplete.
+        """
         self.receiver.reset()
         self.write(schedule)
-        return self.receive(final=True)
+        cycles = [c for c in self.receive(final=True) if c.complete]
+        frames = schedule.frame_index
+        near = int(frames[frames.size // 2]) if frames.size else 0
+        found = dict(zip(unwrap_counter(np.array([c.cycle for c in cycles], dtype=np.int64),
+                                        near, self.counter_modulus).tolist(), cycles,
+                         strict=True))
+        return [found.get(int(f), Detections.empty(int(f), float(t), (), complete=False))
+                for f, t in zip(frames, schedule.t_s, strict=True)]
 
     def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
             timing: dict[str, float] | None = None) -> RunResult:

@@ -70,3 +70,22 @@ def test_schedule_and_list_outputs(tmp_path, capsys):
     assert read_schedule(target).n_frames == 240
     assert cli.main(["list-outputs"]) == 0
     assert set(capsys.readouterr().out.split()) >= {"file", "udp", "simulated-radar"}
+
+
+def test_unwritable_json_is_one_line_naming_option_and_path(tmp_path, capsys):
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    target = tmp_path / "no-such-folder" / "report.json"
+    assert cli.main(["run", str(root / "scenarios" / "cut_in.scenario.yaml"),
+                     "--json", str(target)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: --json {target}: cannot write:")
+    assert "Traceback" not in err
+
+
+def test_validate_a_directory_is_a_clear_error(tmp_path, capsys):
+    assert cli.main(["validate", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {tmp_path}: cannot read file:")
+    assert "Traceback" not in err

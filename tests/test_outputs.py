@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import rts_scenario.outputs as outputs
+import rts_scenario.registry as registry
 from rts_scenario import OutputError
 from rts_scenario.kinematics import compute_tracks
 from rts_scenario.outputs import available_outputs, open_output
@@ -62,7 +63,7 @@ def test_plugins_come_from_the_entry_point_group(monkeypatch, schedule):
                         group=outputs.ENTRY_POINT_GROUP)
     broken = EntryPoint(name="broken", value="no_such_module:Driver",
                         group=outputs.ENTRY_POINT_GROUP)
-    monkeypatch.setattr(outputs, "entry_points", lambda group: [plugin, broken])
+    monkeypatch.setattr(registry, "entry_points", lambda group: [plugin, broken])
     assert {"dummy", "broken"} <= set(available_outputs())
     with open_output("dummy:rig-7") as out:
         out.write(schedule.frames(0, 10))

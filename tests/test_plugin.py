@@ -1,6 +1,9 @@
 """The pytest plugin, driven through pytester."""
 
+import os
 import shutil
+import subprocess
+import sys
 import textwrap
 from pathlib import Path
 
@@ -111,3 +114,16 @@ def test_xdist_gives_the_same_verdicts(pytester):
 
     assert verdicts(serial) == verdicts(parallel)
     parallel.assert_outcomes(passed=5, failed=1)
+
+
+def test_importing_the_plugin_leaves_the_library_alone():
+    import pytest_rts_scenario
+
+    # The same plugin and library as this test run, whatever is installed.
+    path = [str(Path(pytest_rts_scenario.__file__).parents[1]), str(ROOT),
+            os.environ.get("PYTHONPATH", "")]
+    heavy = ("rts_scenario.pipeline", "scipy", "can", "cantools")
+    code = f"import sys, pytest_rts_scenario; print([m for m in {heavy!r} if m in sys.modules])"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            env={**os.environ, "PYTHONPATH": os.pathsep.join(path)}, check=True)
+    assert result.stdout.strip() == "[]"

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import rts_scenario as rs
-from rts_scenario.bench import evaluation_grid
+from rts_scenario.evaluation import evaluation_grid
 from rts_scenario.kinematics import Tracks
 from rts_scenario.outputs import open_output
 from rts_scenario.radar import RadarProfile

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import rts_scenario as rs
-from rts_scenario.bench import evaluation_grid
+from rts_scenario.evaluation import evaluation_grid
 from rts_scenario.kinematics import Tracks
 from rts_scenario.peak import find_peak, snapshot
 from rts_scenario.radar import RadarProfile

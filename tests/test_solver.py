@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import rts_scenario as rs
-from rts_scenario.bench import angle_errors
+from rts_scenario.evaluation import angle_errors
 from rts_scenario.peak import find_peak, snapshot
 from rts_scenario.solver.paper import sinc_slope
 

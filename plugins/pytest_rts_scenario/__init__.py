@@ -4,6 +4,10 @@ Installed with rts-scenario (entry point ``pytest11``). One item per scene and p
 of its ``parametrize`` block; a failing scene shows its report and its worst frames; metrics
 go to the JUnit XML as properties; a scene's ``marks`` become pytest marks. Each test uses a
 private virtual CAN channel, so ``pytest -n auto`` (pytest-xdist) gives the same verdicts.
+
+The library (numpy, scipy, python-can, cantools) is imported only when a scene file is collected
+or ``rts_run`` is used: every pytest start-up in an environment with rts-scenario installed loads
+this plugin, most of them for tests that have nothing to do with scenes.
 """
 
 from __future__ import annotations
@@ -13,14 +17,13 @@ import uuid
 from collections.abc import Callable, Iterator
 from fnmatch import fnmatch
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from rts_scenario.errors import RtsError
-from rts_scenario.report import Report
-from rts_scenario.runner import RunOptions, RunResult, run_scene
-from rts_scenario.scenario import load_scenario, parametrizations
+if TYPE_CHECKING:
+    from rts_scenario.pipeline import RunOptions, RunResult
+    from rts_scenario.report import Report
 
 DEFAULT_PATTERN = "*.scenario.yaml"
 
@@ -58,6 +61,8 @@ def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> ScenarioFi
 
 
 def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
+    from rts_scenario.pipeline import RunOptions
+
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
     values = {
         "output": config.getoption("--rts-output"),
@@ -77,6 +82,9 @@ class ScenarioFile(pytest.File):
 
     def collect(self) -> Iterator[ScenarioItem]:
         """Validate the scene (a bad file is a collection error naming file and line)."""
+        from rts_scenario.errors import RtsError
+        from rts_scenario.scenario import load_scenario, parametrizations
+
         try:
             combos = parametrizations(self.path)
             scenes = [(ident, overrides, load_scenario(self.path, overrides))
@@ -109,6 +117,9 @@ class ScenarioItem(pytest.Item):
 
     def runtest(self) -> None:
         """Run the scene end to end and check it."""
+        from rts_scenario.pipeline import run_scene
+        from rts_scenario.scenario import load_scenario
+
         result = run_scene(load_scenario(self.path, self.overrides), _options(self.config))
         report = result.report
         self.user_properties.extend(_metrics(report))
@@ -118,6 +129,8 @@ class ScenarioItem(pytest.Item):
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException],
                      style: Any = None) -> str | Any:
         """Show the report and worst frames of a failed check; one clean line for bad input."""
+        from rts_scenario.errors import RtsError
+
         if isinstance(excinfo.value, ScenarioFailed):
             return _render(excinfo.value.result)
         if isinstance(excinfo.value, RtsError):
@@ -157,6 +170,8 @@ def _render(result: RunResult) -> str:
 def rts_run(request: pytest.FixtureRequest) -> Callable[..., RunResult]:
     """Run a scene (path or loaded `Scenario`) end to end; keyword options as `RunOptions`."""
     def run(scene: Any, **options: Any) -> RunResult:
+        from rts_scenario.pipeline import run_scene
+
         return run_scene(scene, _options(request.config, **options))
 
     return run

@@ -10,47 +10,34 @@ only when selected, so a missing driver fails only for the user who picks it.
 from __future__ import annotations
 
 from collections.abc import Callable
-from importlib import import_module
-from importlib.metadata import entry_points
 from typing import Any
 
 from ..errors import OutputError
+from ..registry import Registry
 from .base import Output
 
 ENTRY_POINT_GROUP = "rts_scenario.outputs"
 
-# Built-ins, imported lazily: name -> "module:Class".
-_BUILTIN = {
-    "file": "rts_scenario.outputs.file:FileOutput",
-    "udp": "rts_scenario.outputs.udp:UdpOutput",
-    "simulated-radar": "rts_scenario.outputs.radar:SimulatedRadarOutput",
-}
-
-
-def _plugins() -> dict[str, Any]:
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+_REGISTRY = Registry(
+    "output",
+    {
+        "file": "rts_scenario.outputs.file:FileOutput",
+        "udp": "rts_scenario.outputs.udp:UdpOutput",
+        "simulated-radar": "rts_scenario.outputs.radar:SimulatedRadarOutput",
+    },
+    entry_point_group=ENTRY_POINT_GROUP,
+    error=OutputError,
+)
 
 
 def available_outputs() -> list[str]:
     """Names of every output: built-ins and installed plugins."""
-    return sorted({*_BUILTIN, *_plugins()})
+    return _REGISTRY.names()
 
 
 def output_class(name: str) -> type[Output]:
     """Return the `Output` subclass registered under ``name``."""
-    try:
-        if name in _BUILTIN:
-            module, attr = _BUILTIN[name].split(":")
-            cls = getattr(import_module(module), attr)
-        else:
-            plugins = _plugins()
-            if name not in plugins:
-                raise OutputError(
-                    f"unknown output {name!r}; valid outputs: {', '.join(available_outputs())}"
-                )
-            cls = plugins[name].load()
-    except ImportError as exc:
-        raise OutputError(f"output {name!r} cannot be loaded: {exc}") from None
+    cls = _REGISTRY.get(name)
     if not (isinstance(cls, type) and issubclass(cls, Output)):
         raise OutputError(f"output {name!r} is not an rts_scenario Output subclass: {cls!r}")
     return cls

@@ -14,11 +14,16 @@ from numpy.typing import NDArray
 from ..arrays import VirtualArray, angles_from_cosines
 from ..beamformer import hessian_step, power_curvature
 from ..errors import RtsError
+from ..registry import Registry
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
-ESTIMATORS = ("bartlett", "ti")
+_ESTIMATOR_REGISTRY = Registry("angle estimator", {
+    "bartlett": "rts_scenario.radar.angle:Bartlett2D",
+    "ti": "rts_scenario.radar.angle:TiStyle",
+})
+ESTIMATORS = tuple(_ESTIMATOR_REGISTRY.names())
 
 
 @dataclass(frozen=True)
@@ -180,9 +185,5 @@ def _nothing() -> AngleEstimate:
 
 
 def make_estimator(name: str, array: VirtualArray) -> Bartlett2D | TiStyle:
-    """Return the estimator called ``name`` for ``array``."""
-    if name == "bartlett":
-        return Bartlett2D(array)
-    if name == "ti":
-        return TiStyle(array)
-    raise RtsError(f"unknown angle estimator {name!r}; valid: {', '.join(ESTIMATORS)}")
+    """Return the estimator called ``name`` (one of `ESTIMATORS`) for ``array``."""
+    return _ESTIMATOR_REGISTRY.get(name)(array)
