@@ -7,7 +7,7 @@ dependency fails only for the user who picks it, with a message naming it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from importlib import import_module
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
@@ -29,17 +29,22 @@ class Registry:
         Entry-point group that installed packages extend the registry from.
     error : type of RtsError
         Raised for an unknown name or an entry that cannot be imported.
+    plural : str, optional
+        The kind in the plural (default: ``kind + "s"``).
+
+    ``name in registry`` and iteration (over `names`) work as for a mapping of names.
     """
 
     def __init__(self, kind: str, builtins: Mapping[str, str], *,
                  entry_point_group: str | None = None,
-                 error: type[RtsError] = RtsError) -> None:
+                 error: type[RtsError] = RtsError, plural: str | None = None) -> None:
         for name, target in builtins.items():
             module, _, attr = target.partition(":")
             if not module or not attr:
                 raise ValueError(f"built-in {kind} {name!r}: expected 'module:attr', "
                                  f"got {target!r}")
         self.kind = kind
+        self.plural = plural or f"{kind}s"
         self.entry_point_group = entry_point_group
         self.error = error
         self._builtins = dict(builtins)
@@ -50,8 +55,14 @@ class Registry:
         return {ep.name: ep for ep in entry_points(group=self.entry_point_group)}
 
     def names(self) -> list[str]:
-        """Every name, built-ins and installed plugins, sorted; imports nothing."""
-        return sorted({*self._builtins, *self._plugins()})
+        """Every name: built-ins in their order, then installed plugins, sorted; imports nothing."""
+        return [*self._builtins, *sorted(set(self._plugins()) - set(self._builtins))]
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and (name in self._builtins or name in self._plugins())
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.names())
 
     def get(self, name: str) -> Any:
         """Import and return the object registered under ``name``.
@@ -68,7 +79,7 @@ class Registry:
                 return getattr(import_module(module), attr)
             plugins = self._plugins()
             if name not in plugins:
-                raise self.error(f"unknown {self.kind} {name!r}; valid {self.kind}s: "
+                raise self.error(f"unknown {self.kind} {name!r}; valid {self.plural}: "
                                  f"{', '.join(self.names())}")
             return plugins[name].load()
         except (ImportError, AttributeError) as exc:

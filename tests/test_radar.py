@@ -167,7 +167,9 @@ def test_simulated_radar_output_and_bad_options():
                      sink=got.append) as out:
         out.write(sch)
     assert [d.cycle for d in got] == [0, 1] and all(d.count == 1 for d in got)
-    with pytest.raises(rs.RtsError, match="valid: auto, adc, analytic"):
+    with pytest.raises(rs.RtsError,
+                       match="unknown fidelity .exact.; valid fidelities: auto, adc, analytic"):
         SimulatedRadar(PAPER, KIT, fidelity="exact")
-    with pytest.raises(rs.RtsError, match="valid: bartlett, ti"):
+    with pytest.raises(rs.RtsError,
+                       match="unknown angle estimator .music.; valid angle estimators: bartlett, ti"):
         SimulatedRadar(PAPER, KIT, estimator="music")

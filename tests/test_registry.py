@@ -12,8 +12,8 @@ from rts_scenario.registry import Registry
 def test_unknown_name_lists_the_valid_names():
     reg = Registry("widget", {"b": "json:dumps", "a": "json:loads", "c": "json:JSONDecoder"},
                    error=OutputError)
-    assert reg.names() == ["a", "b", "c"]
-    with pytest.raises(OutputError, match=r"^unknown widget 'x'; valid widgets: a, b, c$"):
+    assert reg.names() == ["b", "a", "c"]  # built-ins in their declared order
+    with pytest.raises(OutputError, match=r"^unknown widget 'x'; valid widgets: b, a, c$"):
         reg.get("x")
 
 
@@ -24,7 +24,7 @@ def test_builtins_are_imported_only_when_selected(tmp_path, monkeypatch):
     reg = Registry("widget", {"probe": "rts_registry_probe:Probe",
                               "missing": "rts_no_such_module_xyz:Thing",
                               "typo": "rts_registry_probe:Prob"})
-    assert reg.names() == ["missing", "probe", "typo"]
+    assert reg.names() == ["probe", "missing", "typo"]
     assert "rts_registry_probe" not in sys.modules
     assert reg.get("probe").__name__ == "Probe"
     assert "rts_registry_probe" in sys.modules
@@ -48,7 +48,7 @@ def test_entry_points_extend_the_builtins(monkeypatch):
 
     monkeypatch.setattr(registry, "entry_points", fake_entry_points)
     reg = Registry("widget", {"dumps": "json:dumps"}, entry_point_group=group)
-    assert reg.names() == ["broken", "decoder", "dumps"]
+    assert reg.names() == ["dumps", "broken", "decoder"]  # built-ins, then plugins
     assert seen == [group]
     assert reg.get("decoder") is json.JSONDecoder
     assert reg.get("dumps") is json.dumps  # a built-in wins over a plugin of the same name
@@ -76,3 +76,15 @@ def test_estimators_and_outputs_use_the_registry():
     with pytest.raises(RtsError, match="unknown angle estimator 'music'; "
                                        "valid angle estimators: bartlett, ti"):
         make_estimator("music", VirtualArray.preset("paper"))
+
+
+def test_solver_methods_and_fidelities_share_the_registry_shape():
+    from rts_scenario.radar.simulate import FIDELITIES
+    from rts_scenario.solver import METHODS
+
+    assert list(METHODS) == ["paper", "exact"] and "exact" in METHODS and "music" not in METHODS
+    assert list(FIDELITIES) == ["auto", "adc", "analytic"]
+    from rts_scenario.errors import SolverError
+
+    with pytest.raises(SolverError, match="unknown method 'fast'; valid methods: paper, exact"):
+        METHODS.get("fast")

@@ -32,15 +32,37 @@ from ..arrays import direction_cosines
 from ..constants import C0_MPS
 from ..detections import Detections
 from ..errors import RtsError
+from ..registry import Registry
 from ..rig import Rig
 from ..schedule import Schedule
-from .angle import ESTIMATORS, make_estimator
+from .angle import make_estimator
 from .profile import RadarProfile
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
-FIDELITIES = ("auto", "adc", "analytic")
+def cube_every_frame(radar: SimulatedRadar, echoes: Echoes, n_frames: int) -> NDArray[np.bool_]:
+    """Fidelity ``adc``: every frame goes through the beat-signal cube."""
+    return np.ones(n_frames, dtype=bool)
+
+
+def cube_no_frame(radar: SimulatedRadar, echoes: Echoes, n_frames: int) -> NDArray[np.bool_]:
+    """Fidelity ``analytic``: no frame needs the cube."""
+    return np.zeros(n_frames, dtype=bool)
+
+
+def cube_crowded_frames(radar: SimulatedRadar, echoes: Echoes,
+                        n_frames: int) -> NDArray[np.bool_]:
+    """Fidelity ``auto``: the cube only where targets share a range-Doppler neighbourhood."""
+    return radar.crowded(echoes, n_frames)
+
+
+# A fidelity is the choice of the frames that go through the cube (the others are analytic).
+FIDELITIES = Registry("fidelity", {
+    "auto": "rts_scenario.radar.simulate:cube_crowded_frames",
+    "adc": "rts_scenario.radar.simulate:cube_every_frame",
+    "analytic": "rts_scenario.radar.simulate:cube_no_frame",
+}, plural="fidelities")
 CFARS = ("ca", "os")
 
 
@@ -128,12 +150,10 @@ class SimulatedRadar:
     frames_analytic: int = 0
 
     def __post_init__(self) -> None:
-        for name, value, valid in (("fidelity", self.fidelity, FIDELITIES),
-                                   ("estimator", self.estimator, ESTIMATORS),
-                                   ("cfar", self.cfar, CFARS)):
-            if value not in valid:
-                raise RtsError(f"simulated radar: unknown {name} {value!r}; valid: "
-                               f"{', '.join(valid)}")
+        if self.cfar not in CFARS:
+            raise RtsError(f"simulated radar: unknown cfar {self.cfar!r}; valid: "
+                           f"{', '.join(CFARS)}")
+        self._cube_frames = FIDELITIES.get(self.fidelity)
         p = self.profile
         if self.errors is None:
             self.errors = ChannelErrors.none(self.rig.n_front_ends)
@@ -184,12 +204,7 @@ class SimulatedRadar:
         """
         echoes = self.echoes(schedule)
         n_frames = schedule.n_frames
-        if self.fidelity == "adc":
-            use_adc = np.ones(n_frames, dtype=bool)
-        elif self.fidelity == "analytic":
-            use_adc = np.zeros(n_frames, dtype=bool)
-        else:
-            use_adc = self._crowded(echoes, n_frames)
+        use_adc = self._cube_frames(self, echoes, n_frames)
         self.frames_adc += int(use_adc.sum())
         self.frames_analytic += int(n_frames - use_adc.sum())
         out = self._detect_analytic(echoes, schedule, ~use_adc)
@@ -206,7 +221,7 @@ class SimulatedRadar:
         doppler_bin = echoes.doppler_hz * p.loop_time_s * self._loops
         return range_bin, doppler_bin
 
-    def _crowded(self, echoes: Echoes, n_frames: int) -> NDArray[np.bool_]:
+    def crowded(self, echoes: Echoes, n_frames: int) -> NDArray[np.bool_]:
         """Frames where two targets share a range-Doppler neighbourhood (need the real cube)."""
         crowded = np.zeros(n_frames, dtype=bool)
         if echoes.target.size == 0:

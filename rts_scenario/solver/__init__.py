@@ -113,8 +113,7 @@ def solve_weights(
     SolverError
         Unknown method, mismatched shapes or non-finite angles, or a ``plan`` of other values.
     """
-    if method not in METHODS:
-        raise SolverError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
+    METHODS.get(method)  # an unknown name is an error naming the valid ones
     az = _angles("az_deg", az_deg)
     el = _angles("el_deg", el_deg)
     if az.shape != el.shape:

@@ -33,12 +33,13 @@ from numpy.typing import NDArray
 
 from .. import quads as quads_module
 from ..arrays import SourceResponse, VirtualArray, direction_cosines
+from ..errors import SolverError
 from ..quads import QuadGeometry
+from ..registry import Registry
 from ..rig import Rig
 from . import exact, globalmax
 from .exact import ExactQuad, PhaseMap
 from .globalmax import GlobalMaxCheck
-from .paper import PaperQuad
 from .reasons import Reason
 
 FloatArray = NDArray[np.float64]
@@ -66,10 +67,12 @@ class QuadKernel(Protocol):
         ...
 
 
-METHODS: dict[str, Callable[[Rig, VirtualArray, NDArray[np.int64]], QuadKernel]] = {
-    "paper": PaperQuad.build,
-    "exact": ExactQuad.build,
-}
+# Solver methods by name: a class with ``build(rig, array, fes) -> QuadKernel``. Packages add
+# their own through the entry-point group.
+METHODS = Registry("method", {
+    "paper": "rts_scenario.solver.paper:PaperQuad",
+    "exact": "rts_scenario.solver.exact:ExactQuad",
+}, entry_point_group="rts_scenario.solver_methods", error=SolverError)
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,7 +149,7 @@ def build_plan(rig: Rig, array: VirtualArray, method: str, *, key: str | None = 
 
     Every quad's kernel is surveyed on a grid of nodes to learn which run-time checks it needs.
     """
-    build = METHODS[method]
+    build: Callable[[Rig, VirtualArray, NDArray[np.int64]], QuadKernel] = METHODS.get(method).build
     geometry = QuadGeometry.of(rig)
     kernels: list[QuadKernel] = []
     checks: list[GlobalMaxCheck | None] = []
