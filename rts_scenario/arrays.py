@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .constants import C0_MPS
 from .errors import ArrayError
+from .propagation import C0_MPS
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]

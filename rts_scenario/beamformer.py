@@ -4,7 +4,7 @@
 (`rts_scenario.arrays`). Its derivatives ``B_u, B_s, B_uu, B_us, B_ss`` come from the array
 response (`rts_scenario.arrays.SourceResponse.evaluate`) or from the snapshots directly. Every
 Newton step on a beamformer output in the package (the schedule's predicted angle error and
-sensitivity, the simulated radar's estimator) goes through here; `rts_scenario.peak`, the
+sensitivity, the simulated radar's estimator) goes through here; `rts_scenario.peak_search`, the
 independent measuring instrument, deliberately does not.
 """
 

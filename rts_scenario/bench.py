@@ -16,7 +16,7 @@ import numpy as np
 
 from .arrays import PRESETS, VirtualArray
 from .evaluation import GRID_AZ_DEG, GRID_EL_DEG, angle_errors, evaluation_grid
-from .peak import find_peak, snapshot
+from .peak_search import find_peak, snapshot
 from .rig import Rig
 from .solver import METHODS, solve_weights
 

@@ -30,10 +30,10 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from .constants import C0_MPS
 from .detections import Detections
 from .errors import RtsError
-from .peak import find_peak, snapshot
+from .peak_search import find_peak, snapshot
+from .propagation import C0_MPS
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors, SimulatedRadar
 from .rig import Rig

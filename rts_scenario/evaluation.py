@@ -2,7 +2,7 @@
 
 The reference against which solver methods, the bench table and calibration are measured:
 set angles on the paper's grid (azimuth -3..3 deg in 6 steps, elevation -6..6 deg in 5 steps)
-and where the Bartlett peak search of `rts_scenario.peak`, which knows nothing of the solver,
+and where the Bartlett peak search of `rts_scenario.peak_search`, which knows nothing of the solver,
 finds the synthesized targets.
 """
 
@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .arrays import VirtualArray
-from .peak import find_peak, snapshot
+from .peak_search import find_peak, snapshot
 from .rig import Rig
 from .solver import WeightSolution, solve_weights
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .lookup import piece_index
+from .piecewise import piece_index
 from .scenario.model import RcsModel
 
 FloatArray = NDArray[np.float64]

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import RigError
-from .yamlio import Document, load_yaml, validate
+from .located_yaml import Document, load_yaml, validate
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

@@ -6,7 +6,7 @@ import pytest
 import rts_scenario as rs
 from rts_scenario.evaluation import evaluation_grid
 from rts_scenario.kinematics import Tracks
-from rts_scenario.peak import find_peak, snapshot
+from rts_scenario.peak_search import find_peak, snapshot
 from rts_scenario.radar import RadarProfile
 from rts_scenario.schedule import ScheduleError, Status, build_schedule
 

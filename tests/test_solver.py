@@ -5,7 +5,7 @@ import pytest
 
 import rts_scenario as rs
 from rts_scenario.evaluation import angle_errors
-from rts_scenario.peak import find_peak, snapshot
+from rts_scenario.peak_search import find_peak, snapshot
 from rts_scenario.solver.paper import sinc_slope
 
 METHODS = ["paper", "exact"]

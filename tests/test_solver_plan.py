@@ -10,7 +10,7 @@ import pytest
 
 import rts_scenario as rs
 from rts_scenario.arrays import angles_from_cosines
-from rts_scenario.peak import find_peak, snapshot
+from rts_scenario.peak_search import find_peak, snapshot
 from rts_scenario.solver import plan as plan_module
 from rts_scenario.solver import solver_plan
 from rts_scenario.solver.plan import clear_memory_cache, plan_cache_dir, plan_key

@@ -5,7 +5,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import rts_scenario as rs
-from rts_scenario.peak import find_peak, snapshot
+from rts_scenario.peak_search import find_peak, snapshot
 
 ARRAYS = {name: rs.VirtualArray.preset(name) for name in ("paper", "awr1843boost")}
 KIT = rs.Rig.preset("kit-table1")

@@ -17,7 +17,7 @@ from typing import Any
 
 import cantools
 
-from ..yamlio import Document, load_yaml, validate
+from ..located_yaml import Document, load_yaml, validate
 
 QUANTITIES = ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps", "x_m", "y_m",
               "z_m", "vx_mps", "vy_mps", "rcs_dbsm", "snr_db")

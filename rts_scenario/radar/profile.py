@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from ..arrays import PRESETS, VirtualArray
-from ..constants import C0_MPS
 from ..errors import ScenarioError
-from ..yamlio import Document, load_yaml, validate
+from ..located_yaml import Document, load_yaml, validate
+from ..propagation import C0_MPS
 
 
 @dataclass(frozen=True, eq=False)

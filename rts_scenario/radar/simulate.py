@@ -29,9 +29,9 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from ..arrays import direction_cosines
-from ..constants import C0_MPS
 from ..detections import Detections
 from ..errors import RtsError
+from ..propagation import C0_MPS
 from ..registry import Registry
 from ..rig import Rig
 from ..schedule import Schedule

@@ -19,11 +19,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import RtsError, ScenarioError
+from ..located_yaml import Document, KeyPath, load_yaml, validate
 from ..radar.profile import RadarProfile
 from ..radar.profile import preset_names as radar_presets
 from ..rig import Rig
 from ..rig import preset_names as rig_presets
-from ..yamlio import Document, KeyPath, load_yaml, validate
 from .model import (
     DEFAULT_TOLERANCES,
     Effects,

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
-from ..lookup import piece_index
+from ..piecewise import piece_index
 
 FloatArray = NDArray[np.float64]
 

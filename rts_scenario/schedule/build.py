@@ -22,8 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..arrays import direction_cosines
-from ..constants import C0_MPS
 from ..kinematics import Tracks
+from ..propagation import C0_MPS
 from ..radar.profile import RadarProfile
 from ..rig import HardwareLimits, Rig
 from ..solver import Reason, solve_weights, solver_plan

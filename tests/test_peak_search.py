@@ -3,7 +3,7 @@
 import numpy as np
 
 import rts_scenario as rs
-from rts_scenario.peak import find_peak, snapshot
+from rts_scenario.peak_search import find_peak, snapshot
 
 
 def test_single_source_peak_is_its_direction(array):
