@@ -1,11 +1,14 @@
 import json
 
+import pytest
+
 import rts_scenario.cli as cli
 
 
 def test_bench_prints_table_and_writes_json(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    code = cli.main(["bench", "--targets", "2000", "--repeats", "1", "--json", str(out)])
+    code = cli.main(["bench", "--targets", "2000", "--repeats", "1", "--scene-s", "10",
+                     "--json", str(out)])
     assert code == 0
     text = capsys.readouterr().out
     assert "target-frames/s" in text and "exact" in text and "awr1843boost" in text
@@ -25,6 +28,10 @@ def test_bench_prints_table_and_writes_json(tmp_path, capsys):
             assert row["max_az_deg"] <= 1e-3 and row["max_el_deg"] <= 1e-3
         else:
             assert 0.1 < row["rms_az_deg"] < 0.5
+    end = data["end_to_end"]
+    assert end["frames"] == 200 and end["targets"] == 4 and end["passed"]
+    assert end["realtime_factor"] == pytest.approx(10.0 / end["wall_s"])
+    assert "end to end: motorway-10s" in text
 
 
 def test_bad_input_is_one_line_and_exit_2(capsys):

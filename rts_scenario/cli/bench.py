@@ -16,14 +16,22 @@ def _do_bench(args: argparse.Namespace) -> int:
         raise RtsError(
             f"--targets and --repeats: must be >= 1, got {args.targets} and {args.repeats}"
         )
+    if not 0.0 <= args.scene_s <= 86400.0:
+        raise RtsError(f"--scene-s: must be within 0..86400 s (0: no end-to-end run), "
+                       f"got {args.scene_s}")
     rows = bench.run(targets=args.targets, repeats=args.repeats, rig_name=args.rig)
     print(bench.format_table(rows))
     quantized = bench.quantization(rig_name=args.rig)
     print()
     print(bench.format_quantization(quantized))
+    end = None
+    if args.scene_s > 0:
+        end = bench.end_to_end(args.scene_s)
+        print()
+        print(bench.format_end_to_end(end))
     if args.json:
         with writing("--json", args.json):
-            bench.write_json(rows, quantized, args.json)
+            bench.write_json(rows, quantized, args.json, end)
         print(f"wrote {args.json}")
     return EXIT_OK
 
@@ -36,6 +44,9 @@ def add_parser(subparsers: Any) -> None:
                     "angle error measured by an independent beamformer peak search.",
     )
     parser.add_argument("--json", metavar="OUT", help="also write the table as JSON")
+    parser.add_argument("--scene-s", type=float, default=60.0,
+                        help="length of the motorway scene run end to end through the pipeline "
+                             "(default 60 s; 0 skips it)")
     parser.add_argument("--targets", type=int, default=1_000_000,
                         help="targets per throughput run (default 1,000,000)")
     parser.add_argument("--repeats", type=int, default=3, help="throughput runs, best kept")
