@@ -17,8 +17,9 @@ The stages a user scripts against, each a function over typed values::
     sol.weights, sol.quad, sol.feasible, sol.reason
 
 A run streams: `Pipeline` wires the output, the detection bus and the checker, and plays the
-scene in frame batches; radar cycles travel as `Detections` and `check`/`Checker` compare them
-with the ground truth. Names are imported on first use, so ``import rts_scenario`` stays cheap.
+scene in frame batches; radar cycles travel as `Detections` and `Checker` compares them
+with the ground truth (`check_cycles`: a whole scene at once). Names are imported on first use,
+so ``import rts_scenario`` stays cheap.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ _EXPORTS = {
     "Output": "outputs", "available_outputs": "outputs", "open_output": "outputs",
     "RadarProfile": "radar.profile",
     "Detections": "detections",
-    "Checker": "check", "check": "check",
+    "Checker": "check", "check_cycles": "check",
     "ErrorStats": "report", "Report": "report",
     "Pipeline": "pipeline", "RunOptions": "pipeline", "RunResult": "pipeline",
     "run_scene": "pipeline",
@@ -79,7 +80,7 @@ __all__ = [
     "WeightSolution",
     "available_outputs",
     "build_schedule",
-    "check",
+    "check_cycles",
     "compute_tracks",
     "load_scenario",
     "open_output",
@@ -104,7 +105,7 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:
     from .arrays import VirtualArray
-    from .check import Checker, check
+    from .check import Checker, check_cycles
     from .detections import Detections
     from .errors import (
         ArrayError,

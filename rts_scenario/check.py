@@ -286,7 +286,7 @@ class Checker:
             worst_frames=worst, record=self.record)
 
 
-def check(scene: str, tracks: Tracks, played: BoolArray, cycles: Iterable[Detections],
+def check_cycles(scene: str, tracks: Tracks, played: BoolArray, cycles: Iterable[Detections],
           expectations: Expectations, *, bus: dict[str, int] | None = None,
           counter_modulus: int = COUNTER_MODULUS) -> Report:
     """Check radar cycles against the ground truth of a whole scene at once.

@@ -10,7 +10,7 @@ import pytest
 from rts_scenario import CheckError
 from rts_scenario.canbus import DetectionPublisher, DetectionReceiver, open_bus
 from rts_scenario.canbus.mapping import CanMapping
-from rts_scenario.check import check
+from rts_scenario.check import check_cycles as check
 from rts_scenario.detections import Detections
 from rts_scenario.kinematics import compute_tracks
 from rts_scenario.radar.simulate import SimulatedRadar

@@ -5,7 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rts_scenario.check import Checker, check
+from rts_scenario.check import Checker
+from rts_scenario.check import check_cycles as check
 from rts_scenario.detections import Detections, unwrap_counter
 from rts_scenario.kinematics import Tracks
 from rts_scenario.report import FrameRecord, RunningStats

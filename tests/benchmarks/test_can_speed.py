@@ -4,7 +4,7 @@ import numpy as np
 from test_radar_speed import eight_targets  # noqa: F401 - shared fixture
 
 from rts_scenario.canbus import DetectionPublisher, DetectionReceiver, open_bus
-from rts_scenario.check import check
+from rts_scenario.check import check_cycles as check
 from rts_scenario.kinematics import compute_tracks
 from rts_scenario.radar.simulate import SimulatedRadar
 
