@@ -1,5 +1,6 @@
 import os
 
+import can.interfaces.virtual
 import numpy as np
 import pytest
 from hypothesis import settings
@@ -39,3 +40,21 @@ def array(request: pytest.FixtureRequest) -> rs.VirtualArray:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20261121)
+
+
+@pytest.fixture
+def no_bus_left_open(monkeypatch):
+    """Fail the test if it leaves a virtual CAN bus open; yields the buses it created."""
+    created = []
+    original = can.interfaces.virtual.VirtualBus.__init__
+
+    def init(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        created.append(self)
+
+    monkeypatch.setattr(can.interfaces.virtual.VirtualBus, "__init__", init)
+    yield created
+    left = [b for b in created if not b._is_shutdown]
+    for b in left:
+        b.shutdown()
+    assert not left, f"{len(left)} CAN bus(es) left open"

@@ -2,7 +2,6 @@ import json
 from pathlib import Path
 
 import can
-import can.interfaces.virtual
 import cantools
 import numpy as np
 import pytest
@@ -20,22 +19,7 @@ from rts_scenario.schedule import build_schedule
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(autouse=True)
-def no_bus_left_open(monkeypatch):
-    """Fail the test if it leaves a virtual bus open."""
-    created = []
-    original = can.interfaces.virtual.VirtualBus.__init__
-
-    def init(self, *args, **kwargs):
-        original(self, *args, **kwargs)
-        created.append(self)
-
-    monkeypatch.setattr(can.interfaces.virtual.VirtualBus, "__init__", init)
-    yield created
-    left = [b for b in created if not b._is_shutdown]
-    for b in left:
-        b.shutdown()
-    assert not left, f"{len(left)} CAN bus(es) left open"
+pytestmark = pytest.mark.usefixtures("no_bus_left_open")
 
 
 @pytest.fixture(scope="module")

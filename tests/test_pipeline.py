@@ -3,7 +3,6 @@
 import dataclasses
 from pathlib import Path
 
-import can.interfaces.virtual
 import numpy as np
 import pytest
 
@@ -17,21 +16,7 @@ PLATOON = ROOT / "scenarios" / "highway_platoon_60s.scenario.yaml"
 CUT_IN = ROOT / "scenarios" / "cut_in.scenario.yaml"
 
 
-@pytest.fixture(autouse=True)
-def no_bus_left_open(monkeypatch):
-    created = []
-    original = can.interfaces.virtual.VirtualBus.__init__
-
-    def init(self, *args, **kwargs):
-        original(self, *args, **kwargs)
-        created.append(self)
-
-    monkeypatch.setattr(can.interfaces.virtual.VirtualBus, "__init__", init)
-    yield created
-    left = [b for b in created if not b._is_shutdown]
-    for b in left:
-        b.shutdown()
-    assert not left, f"{len(left)} CAN bus(es) left open"
+pytestmark = pytest.mark.usefixtures("no_bus_left_open")
 
 
 def test_tracks_in_batches_equal_the_whole_scene():
