@@ -20,14 +20,21 @@ Verdict (pass only if all hold): every target's detection rate reaches the scene
 and no frame that had something to check is missing, incomplete or corrupted - such frames
 count as missed and fail the run, so missing data can never pass. A frame counts as checked
 only when every checkable target in it was matched to a detection.
+
+A target-frame the bench did not play as the scene specifies it, or that the radar cannot measure
+unambiguously (a `LIMITS` entry: outside the rig's coverage, no echo slot, attenuation clipped,
+beyond the radar's unambiguous range, ...), is not checkable, and it is not silently dropped
+either: it is counted per target and limit, and fails the verdict unless the scene declares the
+limit expected (``expectations.expected_limits`` or the target's ``expected_limits``).
 """
 
 from __future__ import annotations
 
+import csv
 import heapq
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,7 +43,8 @@ from scipy.optimize import linear_sum_assignment
 from .detections import Detections, unwrap_counter
 from .kinematics import Tracks
 from .report import FrameRecord, Report, RunningStats, TargetResult
-from .scenario.model import Expectations
+from .scenario.model import LIMITS, Expectations
+from .schedule.model import BLOCKING, Status
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -57,6 +65,38 @@ COUNTER_MODULUS = 65536
 
 _OK, _MISSING, _INCOMPLETE = 0, 1, 2
 
+# Schedule flags behind each limit of the bench.
+_LIMIT_FLAGS = {
+    "out_of_coverage": Status.OUT_OF_COVERAGE,
+    "not_synthesizable": Status.NOT_SYNTHESIZABLE,
+    "split": Status.SPLIT,
+    "too_close": Status.TOO_CLOSE,
+    "doppler_out_of_range": Status.DOPPLER_OUT_OF_RANGE,
+    "no_echo_slot": Status.NO_ECHO_SLOT,
+    "attenuation_clipped": Status.ATTENUATION_CLIPPED,
+}
+# Columns of the detections CSV (``run --detections``), in order.
+DETECTION_COLUMNS = ("scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
+                     "el_deg", "snr_db", "rcs_dbsm", "target")
+
+
+def limit_masks(tracks: Tracks, status: NDArray[np.uint16]) -> dict[str, BoolArray]:
+    """Target-frames (F, K) under each limit of `LIMITS` (present targets only).
+
+    ``status`` is the schedule's `Status` per target-frame; the radar's limits come from the
+    tracks (unambiguous range and radial velocity).
+    """
+    present = tracks.present
+    out = {name: present & ((status & flag) != 0) for name, flag in _LIMIT_FLAGS.items()}
+    out["beyond_radar_range"] = present & ~tracks.in_range
+    out["beyond_radar_velocity"] = present & ~tracks.in_velocity
+    return out
+
+
+def checkable(tracks: Tracks, status: NDArray[np.uint16]) -> BoolArray:
+    """Target-frames (F, K) played exactly as specified and measurable by the radar."""
+    return tracks.present & (status == Status.OK) & tracks.in_range & tracks.in_velocity
+
 
 @dataclass(frozen=True)
 class _Block:
@@ -64,7 +104,7 @@ class _Block:
 
     first: int
     tracks: Tracks
-    played: BoolArray
+    status: NDArray[np.uint16]
 
     @property
     def end(self) -> int:
@@ -86,17 +126,33 @@ class Checker:
         The radar's cycle counter wraps at this value.
     record : FrameRecord, optional
         Where per-frame arrays go (none kept without it).
+    expected_limits : sequence of frozenset of str, optional
+        Per target, limits the scene expects besides ``expectations.expected_limits``.
+    scene_limits : mapping of str to str, optional
+        Limits the whole scene hits (e.g. ``frame_rate_above_radar``) and why.
+    detections_out : text file, optional
+        Every detection is written there as a CSV row (`DETECTION_COLUMNS`, no header).
     """
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
-                 counter_modulus: int = COUNTER_MODULUS, record: FrameRecord | None = None
-                 ) -> None:
+                 counter_modulus: int = COUNTER_MODULUS, record: FrameRecord | None = None,
+                 expected_limits: Sequence[frozenset[str]] | None = None,
+                 scene_limits: Mapping[str, str] | None = None,
+                 detections_out: TextIO | None = None) -> None:
         self.scene = scene
         self.names = names
         self.expectations = expectations
         self.modulus = counter_modulus
         self.record = record
         n = len(names)
+        self._expected = [expectations.expected_limits | (expected_limits[k] if expected_limits
+                                                           else frozenset()) for k in range(n)]
+        self._scene_limits = dict(scene_limits or {})
+        self._csv = csv.writer(detections_out) if detections_out is not None else None
+        self._limits = {name: np.zeros(n, dtype=np.int64) for name in LIMITS}
+        self._out_of_tolerance = np.zeros(n, dtype=np.int64)
+        self._missed = np.zeros(n, dtype=np.int64)
+        self._unchecked_k = np.zeros(n, dtype=np.int64)
         self._blocks: list[_Block] = []
         self._cycles: dict[int, Detections] = {}
         self._settled = 0  # frames before this one are done
@@ -110,12 +166,15 @@ class Checker:
         self.frames = {"total": 0, "checked": 0, "received": 0, "unmatched": 0, "missing": 0,
                        "incomplete": 0, "late": 0, "repeated": 0}
 
-    def add_truth(self, first_frame: int, tracks: Tracks, played: BoolArray) -> None:
-        """Ground truth of frames ``first_frame ..`` (consecutive with the blocks before)."""
+    def add_truth(self, first_frame: int, tracks: Tracks, status: NDArray[np.uint16]) -> None:
+        """Ground truth of frames ``first_frame ..`` and the schedule's `Status` of each.
+
+        Blocks must follow each other without a gap.
+        """
         expected = self._blocks[-1].end if self._blocks else self._settled
         if first_frame != expected:
             raise ValueError(f"truth block starts at frame {first_frame}, expected {expected}")
-        self._blocks.append(_Block(first_frame, tracks, np.asarray(played, dtype=bool)))
+        self._blocks.append(_Block(first_frame, tracks, np.asarray(status, dtype=np.uint16)))
 
     def add_cycles(self, cycles: Iterable[Detections]) -> None:
         """Take radar cycles; each is filed under the frame its counter names."""
@@ -160,10 +219,13 @@ class Checker:
             status[f - block.first] = _OK
             got.append(cycle)
             rows.append(f - block.first)
-        frame_of = np.repeat(np.array(rows, dtype=np.int64),
-                             [c.count for c in got]).astype(np.int64)
+        counts = [c.count for c in got]
+        frame_of = np.repeat(np.array(rows, dtype=np.int64), counts).astype(np.int64)
         n_det = frame_of.size
-        truth = tracks.checkable & block.played
+        truth = checkable(tracks, block.status)
+        # Echoes the RTS sent (a clipped one too, distorted): detections of them are no false
+        # alarms, whether or not the target-frame can be checked.
+        played = (block.status & BLOCKING) == 0
 
         cost = np.zeros((n_det, n_targets))
         inside = np.ones((n_det, n_targets), dtype=bool)
@@ -180,7 +242,7 @@ class Checker:
                 norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
                 cost += norm * norm
                 inside &= np.abs(norm) <= GATE
-        candidates = inside & block.played[frame_of]
+        candidates = inside & played[frame_of]
         match = _assign(frame_of, candidates, cost)
         matched = match >= 0
 
@@ -198,25 +260,51 @@ class Checker:
         detected = assigned & within & truth
 
         ok = status == _OK
+        for name, mask in limit_masks(tracks, block.status).items():
+            self._limits[name] += mask.sum(axis=0)
+        self._out_of_tolerance += (assigned & ~within & truth).sum(axis=0)
+        self._missed += (ok[:, None] & truth & ~assigned).sum(axis=0)
+        self._unchecked_k += ((~ok)[:, None] & truth).sum(axis=0)
+        if self._csv is not None and n_det:
+            self._write_detections(got, counts, block, frame_of, match, diffs)
         whole = ok & ~(truth & ~assigned).any(axis=1)
         self._checkable += truth.sum(axis=0)
         self._detected += detected.sum(axis=0)
         self._matched += int((assigned & truth).sum())
         self._unchecked += int(((~ok)[:, None] & truth).sum())
         self._false += int((~matched).sum())
-        counts = self.frames
-        counts["total"] += n_frames
-        counts["received"] += int(ok.sum())
-        counts["checked"] += int(whole.sum())
-        counts["unmatched"] += int((ok & ~whole).sum())
-        counts["missing"] += int((status == _MISSING).sum())
-        counts["incomplete"] += int((status == _INCOMPLETE).sum())
+        tally = self.frames
+        tally["total"] += n_frames
+        tally["received"] += int(ok.sum())
+        tally["checked"] += int(whole.sum())
+        tally["unmatched"] += int((ok & ~whole).sum())
+        tally["missing"] += int((status == _MISSING).sum())
+        tally["incomplete"] += int((status == _INCOMPLETE).sum())
         self._keep_worst(block, truth, assigned, errors)
         if self.record is not None:
             self.record.append({"frame": np.arange(block.first, block.end), "t_s": tracks.t_s,
                                 "detected": detected, "checkable": truth,
                                 "frame_status": status,
                                 **{f"error_{q}": e for q, e in errors.items()}})
+
+    def _write_detections(self, got: list[Detections], counts: list[int], block: _Block,
+                          frame_of: NDArray[np.int64], match: NDArray[np.int64],
+                          diffs: dict[str, FloatArray]) -> None:
+        """One CSV row per detection (`DETECTION_COLUMNS`); the target it was assigned to."""
+        assert self._csv is not None
+        cycle = np.repeat([c.cycle for c in got], counts)
+        # The radar's measurement time; the frame's time where the radar gives none.
+        t_s = np.repeat([np.nan if c.t_s is None else c.t_s for c in got], counts)
+        t_s = np.where(np.isnan(t_s), block.tracks.t_s[frame_of], t_s)
+        columns: list[Any] = [[self.scene] * frame_of.size, cycle.tolist(),
+                              np.round(t_s, 6).tolist()]
+        for q in ("range_m", "radial_velocity_mps", "az_deg", "el_deg", "snr_db", "rcs_dbsm"):
+            values = np.concatenate([getattr(c, q) if getattr(c, q) is not None
+                                     else np.full(c.count, np.nan) for c in got])
+            columns.append(["" if np.isnan(v) else f"{v:.6g}" for v in values.tolist()])
+        names = np.array(("", *self.names), dtype=object)
+        columns.append(names[match + 1].tolist())
+        self._csv.writerows(zip(*columns, strict=True))
 
     def _keep_worst(self, block: _Block, truth: BoolArray, assigned: BoolArray,
                     errors: dict[str, FloatArray]) -> None:
@@ -245,15 +333,30 @@ class Checker:
         """Return the verdict so far (call `settle` first); ``bus``: the transport's counters."""
         exp = self.expectations
         targets = []
+        limit_reasons = []
         for k, name in enumerate(self.names):  # one summary row per target
             n_check, n_det = int(self._checkable[k]), int(self._detected[k])
             rate = n_det / n_check if n_check else float("nan")
+            hit = {lim: int(c[k]) for lim, c in self._limits.items() if c[k]}
+            unexpected = [lim for lim in hit if lim not in self._expected[k]]
+            if unexpected:
+                limit_reasons.append(
+                    f"{name}: target-frames not played or not measurable as specified: "
+                    + ", ".join(f"{lim} {hit[lim]}" for lim in unexpected)
+                    + " (list them in expected_limits if the scene means it)")
             targets.append(TargetResult(
                 name=name, checkable_frames=n_check, detected_frames=n_det, detection_rate=rate,
                 errors={q: self._stats[q].result(k) for q, _ in QUANTITIES},
-                passed=n_check == 0 or rate >= exp.detection_rate - 1e-12))
-        reasons = [f"{t.name}: detection rate {t.detection_rate:.1%} < "
-                   f"{exp.detection_rate:.1%}" for t in targets if not t.passed]
+                passed=(n_check == 0 or rate >= exp.detection_rate - 1e-12) and not unexpected,
+                out_of_tolerance_frames=int(self._out_of_tolerance[k]),
+                missed_frames=int(self._missed[k]), unchecked_frames=int(self._unchecked_k[k]),
+                limits=hit, unexpected_limits=unexpected))
+        reasons = [f"{lim}: {why}" for lim, why in self._scene_limits.items()
+                   if lim not in exp.expected_limits]
+        reasons += [f"{t.name}: detection rate {t.detection_rate:.1%} < "
+                    f"{exp.detection_rate:.1%}" for t in targets
+                    if t.checkable_frames and t.detection_rate < exp.detection_rate - 1e-12]
+        reasons += limit_reasons
         frames = self.frames
         per_frame = self._false / max(frames["received"], 1)
         if per_frame > exp.max_false_detections_per_frame:
@@ -283,12 +386,15 @@ class Checker:
             target_frames={"checkable": n_truth, "matched": self._matched,
                            "unmatched": n_truth - self._matched - self._unchecked,
                            "unchecked": self._unchecked, "detected": int(self._detected.sum())},
+            scene_limits={name: {"why": why, "expected": name in exp.expected_limits}
+                          for name, why in self._scene_limits.items()},
             worst_frames=worst, record=self.record)
 
 
-def check_cycles(scene: str, tracks: Tracks, played: BoolArray, cycles: Iterable[Detections],
-          expectations: Expectations, *, bus: dict[str, int] | None = None,
-          counter_modulus: int = COUNTER_MODULUS) -> Report:
+def check_cycles(scene: str, tracks: Tracks, status: NDArray[np.uint16],
+                 cycles: Iterable[Detections], expectations: Expectations, *,
+                 bus: dict[str, int] | None = None, counter_modulus: int = COUNTER_MODULUS,
+                 expected_limits: Sequence[frozenset[str]] | None = None) -> Report:
     """Check radar cycles against the ground truth of a whole scene at once.
 
     Parameters
@@ -297,17 +403,21 @@ def check_cycles(scene: str, tracks: Tracks, played: BoolArray, cycles: Iterable
         Scene name, for the report.
     tracks : Tracks
         Ground truth, (F, K), frame 0 first.
-    played : ndarray of bool, shape (F, K)
-        Targets the RTS played (the schedule's emitted entries).
+    status : ndarray of uint16, shape (F, K)
+        The schedule's `rts_scenario.schedule.Status` of every target-frame (what the RTS
+        played, and every limit it hit).
     cycles : iterable of Detections
         The radar's cycles (counter = scene frame index, possibly wrapped).
     expectations : Expectations
         Tolerances and required rates.
     bus : dict, optional
         The transport's counters (`rts_scenario.canbus.BusStats` as a dict).
+    expected_limits : sequence of frozenset, optional
+        Per target, limits expected besides the scene's.
     """
-    checker = Checker(scene, tracks.names, expectations, counter_modulus=counter_modulus)
-    checker.add_truth(0, tracks, played)
+    checker = Checker(scene, tracks.names, expectations, counter_modulus=counter_modulus,
+                      expected_limits=expected_limits)
+    checker.add_truth(0, tracks, status)
     checker.add_cycles(cycles)
     checker.settle()
     return checker.report(bus)

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
+from typing import TextIO
 
 import can
 import numpy as np
@@ -214,18 +215,23 @@ class Pipeline:
                 for f, t in zip(frames, schedule.t_s, strict=True)]
 
     def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
-            timing: dict[str, float] | None = None) -> RunResult:
+            timing: dict[str, float] | None = None,
+            detections_out: TextIO | None = None) -> RunResult:
         """Run a scene batch by batch and check the radar's detections.
 
         ``progress(done, total)`` is called after each batch; ``timing`` holds seconds already
-        spent before the run (e.g. loading) and is reported with the run's own.
+        spent before the run (e.g. loading) and is reported with the run's own;
+        ``detections_out`` receives every detection as a CSV row
+        (`rts_scenario.check.DETECTION_COLUMNS`).
         """
         options = self.options
         clock = _Timing(dict(timing or {}))
         start = mark = time.perf_counter()
         record = FrameRecord() if options.record else None
         checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
-                          counter_modulus=self.counter_modulus, record=record)
+                          counter_modulus=self.counter_modulus, record=record,
+                          expected_limits=[t.expected_limits for t in scene.targets],
+                          scene_limits=scene_limits(scene), detections_out=detections_out)
         n_frames = scene.n_frames
         t_all = scene.t_s
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
@@ -241,7 +247,7 @@ class Pipeline:
                                       frame_rate_hz=scene.frame_rate_hz)
             schedule = replace(schedule, frame_index=frames)
             mark = clock.add("schedule_s", mark)
-            checker.add_truth(first, tracks, schedule.emitted)
+            checker.add_truth(first, tracks, schedule.status)
             self.write(schedule)
             mark = clock.add("play_s", mark)
             cycles = self.receive()
@@ -286,17 +292,31 @@ class Pipeline:
 
 
 def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
-              progress: Callable[[int, int], None] | None = None) -> RunResult:
+              progress: Callable[[int, int], None] | None = None,
+              detections_out: TextIO | None = None) -> RunResult:
     """Load (if given a path) and run a scene on the bench ``options`` describe.
 
-    ``progress(done, total)`` is called after each batch of frames.
+    ``progress(done, total)`` is called after each batch of frames; ``detections_out`` gets
+    every detection as a CSV row.
     """
     start = time.perf_counter()
     if not isinstance(scene, Scenario):
         scene = load_scenario(scene)
     timing = {"load_s": time.perf_counter() - start}
     with Pipeline.for_scene(scene, options) as pipeline:
-        return pipeline.run(scene, progress, timing)
+        return pipeline.run(scene, progress, timing, detections_out)
+
+
+def scene_limits(scene: Scenario) -> dict[str, str]:
+    """Limits the whole scene hits, with why (see `rts_scenario.scenario.model.LIMITS`)."""
+    out = {}
+    radar_hz = 1.0 / scene.radar.frame_period_s
+    if scene.frame_rate_hz > radar_hz * (1.0 + 1e-9):
+        out["frame_rate_above_radar"] = (
+            f"the scene runs at {scene.frame_rate_hz:g} frames/s but radar "
+            f"{scene.radar.name!r} measures {radar_hz:g} cycles/s (frame_period_s "
+            f"{scene.radar.frame_period_s:g}): it cannot report every frame")
+    return out
 
 
 def _split_spec(spec: str) -> tuple[str, str]:

@@ -154,12 +154,18 @@ class TargetResult:
     detection_rate: float
     errors: dict[str, ErrorStats]
     passed: bool
+    out_of_tolerance_frames: int = 0
+    missed_frames: int = 0
+    unchecked_frames: int = 0
+    limits: dict[str, int] = field(default_factory=dict)
+    unexpected_limits: list[str] = field(default_factory=list)
 
 
 @dataclass
 class Report:
     """The verdict of a run and the evidence for it.
 
+    ``scene_limits`` names the limits the whole scene hits (``{"why": ..., "expected": ...}``).
     ``solver_plan`` says where the run's solver plan came from (built, memory, disk).
     ``worst_frames`` lists the worst target-frames (misses first, then by error over
     tolerance); ``record`` holds every frame's arrays when the run was asked to record them
@@ -177,6 +183,7 @@ class Report:
     false_detections_per_frame: float
     bus: dict[str, int]
     target_frames: dict[str, int] = field(default_factory=dict)
+    scene_limits: dict[str, dict[str, Any]] = field(default_factory=dict)
     timing: dict[str, float] = field(default_factory=dict)
     solver_plan: str = ""
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
@@ -203,9 +210,9 @@ class Report:
 
     def table(self) -> str:
         """Render the report as a text table for people."""
-        head = (f"{'target':<18} {'frames':>6} {'det. rate':>9}  {'range rms/max m':>15}  "
-                f"{'vel rms/max m/s':>15}  {'az rms/max deg':>14}  {'el rms/max deg':>14}  "
-                f"verdict")
+        head = (f"{'target':<18} {'frames':>6} {'det. rate':>9} {'missed':>6} {'out tol':>7}  "
+                f"{'range rms/max m':>15}  {'vel rms/max m/s':>15}  {'az rms/max deg':>14}  "
+                f"{'el rms/max deg':>14}  {'rcs rms/max dB':>14}  verdict")
         lines = [head, "-" * len(head)]
 
         def pair(s: ErrorStats) -> str:
@@ -213,11 +220,22 @@ class Report:
 
         for t in self.targets:
             e = t.errors
+            rate = "-" if not t.checkable_frames else f"{t.detection_rate:.1%}"
             lines.append(
-                f"{t.name:<18} {t.checkable_frames:>6} {t.detection_rate:>9.1%}  "
+                f"{t.name:<18} {t.checkable_frames:>6} {rate:>9} {t.missed_frames:>6} "
+                f"{t.out_of_tolerance_frames:>7}  "
                 f"{pair(e['range_m']):>15}  {pair(e['radial_velocity_mps']):>15}  "
-                f"{pair(e['az_deg']):>14}  {pair(e['el_deg']):>14}  "
+                f"{pair(e['az_deg']):>14}  {pair(e['el_deg']):>14}  {pair(e['rcs_dbsm']):>14}  "
                 f"{'pass' if t.passed else 'FAIL'}")
+        limited = [t for t in self.targets if t.limits]
+        if limited or self.scene_limits:
+            lines.append("limits (target-frames not played or not measurable as specified): "
+                         + "; ".join(
+                             [f"{name}{' (expected)' if hit['expected'] else ''}"
+                              for name, hit in self.scene_limits.items()]
+                             + [f"{t.name} " + ", ".join(
+                                 f"{lim} {n}{'' if lim in t.unexpected_limits else ' (expected)'}"
+                                 for lim, n in t.limits.items()) for t in limited]))
         f = self.frames
         lines.append(f"frames: {f['total']} in the scene, {f['checked']} checked, "
                      f"{f.get('unmatched', 0)} with unmatched targets, "

@@ -83,7 +83,7 @@ def test_clean_run_passes_with_every_frame_checked(cut_in):
     scene, tracks, schedule, frames = cut_in
     receiver, _ = run_over_bus(frames)
     assert receiver.stats.clean
-    report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+    report = check(scene.name, tracks, schedule.status, receiver.flush(), scene.expectations,
                    bus=vars(receiver.stats))
     assert report.passed, report.reasons
     assert report.frames["checked"] == report.frames["total"] == scene.n_frames
@@ -142,7 +142,7 @@ def test_faults_are_detected_and_missing_data_never_passes(cut_in, fault, counte
     scene, tracks, schedule, frames = cut_in
     receiver, faulty = run_over_bus(frames, fault, p=0.01)
     assert faulty.count > 0
-    report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+    report = check(scene.name, tracks, schedule.status, receiver.flush(), scene.expectations,
                    bus=vars(receiver.stats))
     if counter is not None:
         assert getattr(receiver.stats, counter) > 0
@@ -160,7 +160,7 @@ def test_faults_are_detected_and_missing_data_never_passes(cut_in, fault, counte
 def test_silent_bus_fails(cut_in):
     scene, tracks, schedule, _ = cut_in
     receiver, _ = run_over_bus([])
-    report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+    report = check(scene.name, tracks, schedule.status, receiver.flush(), scene.expectations,
                    bus=vars(receiver.stats))
     assert not report.passed
     assert any("silent" in r for r in report.reasons)
@@ -206,7 +206,7 @@ def test_third_party_cluster_list_with_mapping(cut_in):
 
     receiver, _ = run_over_bus(None, mapping=mapping, send=send)
     assert receiver.stats.clean
-    report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+    report = check(scene.name, tracks, schedule.status, receiver.flush(), scene.expectations,
                    bus=vars(receiver.stats))
     # Elevation is not in the cluster list: it is not checked. 0.2 m steps keep the rest.
     assert report.targets[0].errors["el_deg"].count == 0

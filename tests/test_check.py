@@ -12,6 +12,11 @@ from rts_scenario.kinematics import Tracks
 from rts_scenario.report import FrameRecord, RunningStats
 from rts_scenario.scenario.model import Expectations
 
+def OK(n_frames, n_targets):
+    """Schedule status of target-frames played exactly as specified."""
+    return np.zeros((n_frames, n_targets), dtype=np.uint16)
+
+
 EXPECT = Expectations(tolerances={"range_m": 0.3, "radial_velocity_mps": 0.3, "az_deg": 0.5,
                                   "el_deg": 1.0, "rcs_db": 100.0})
 
@@ -62,7 +67,7 @@ def flat(value, key=""):
 
 def test_perfect_cycles_pass_with_every_frame_checked():
     tr = truth(300)
-    report = check("s", tr, np.ones((300, 2), bool), cycles_from(tr), EXPECT)
+    report = check("s", tr, OK(300, 2), cycles_from(tr), EXPECT)
     assert report.passed, report.reasons
     assert report.frames["checked"] == report.frames["received"] == 300
     assert report.target_frames == {"checkable": 600, "matched": 600, "unmatched": 0,
@@ -72,7 +77,7 @@ def test_perfect_cycles_pass_with_every_frame_checked():
 
 def test_streaming_in_blocks_equals_one_shot():
     tr = truth(400)
-    played = np.ones((400, 2), bool)
+    played = OK(400, 2)
     drop = {(17, 0), (230, 1)}
     cycles = cycles_from(tr, drop=drop, offset=0.05)
     whole = check("s", tr, played, cycles, EXPECT).to_dict()
@@ -91,7 +96,7 @@ def test_streaming_in_blocks_equals_one_shot():
 def test_unmatched_target_frames_are_never_reported_as_checked():
     tr = truth(100)
     drop = {(10, 0), (11, 0), (50, 1)}
-    report = check("s", tr, np.ones((100, 2), bool), cycles_from(tr, drop=drop), EXPECT)
+    report = check("s", tr, OK(100, 2), cycles_from(tr, drop=drop), EXPECT)
     assert report.frames["received"] == 100
     assert report.frames["checked"] == 97 and report.frames["unmatched"] == 3
     assert report.target_frames["unmatched"] == 3 and report.target_frames["matched"] == 197
@@ -103,7 +108,7 @@ def test_unmatched_target_frames_are_never_reported_as_checked():
 def test_wrapped_counters_are_checked_against_their_own_frames():
     n = 70_000  # beyond one 16-bit wrap
     tr = truth(n, n_targets=1)
-    played = np.ones((n, 1), bool)
+    played = OK(n, 1)
     cycles = cycles_from(tr)
     checker = Checker("long", tr.names, EXPECT)
     step = 5000
@@ -124,7 +129,7 @@ def test_a_cycle_checked_against_the_wrong_wrap_fails():
     # The radar reports frame f - 65536's values under frame f's counter: the truth differs.
     confused = [dataclasses.replace(cycles[f - 65536], cycle=cycles[f].cycle)
                 if f >= 65536 else cycles[f] for f in range(n)]
-    report = check("s", tr, np.ones((n, 1), bool), confused, EXPECT)
+    report = check("s", tr, OK(n, 1), confused, EXPECT)
     assert report.targets[0].detected_frames < n - 4000
 
 
@@ -133,7 +138,7 @@ def test_missing_and_incomplete_cycles_fail_and_are_counted():
     cycles = cycles_from(tr)
     cycles[3] = dataclasses.replace(cycles[3], complete=False)
     del cycles[7]
-    report = check("s", tr, np.ones((50, 2), bool), cycles, EXPECT)
+    report = check("s", tr, OK(50, 2), cycles, EXPECT)
     assert report.frames["missing"] == 1 and report.frames["incomplete"] == 1
     assert report.target_frames["unchecked"] == 4
     assert not report.passed and any("could not be checked" in r for r in report.reasons)
@@ -142,7 +147,7 @@ def test_missing_and_incomplete_cycles_fail_and_are_counted():
 def test_absent_quantities_are_not_checked():
     tr = truth(20)
     cycles = [dataclasses.replace(c, el_deg=None, rcs_dbsm=None) for c in cycles_from(tr)]
-    report = check("s", tr, np.ones((20, 2), bool), cycles, EXPECT)
+    report = check("s", tr, OK(20, 2), cycles, EXPECT)
     assert report.passed
     assert report.errors["el_deg"].count == 0 and report.errors["range_m"].count == 40
 
@@ -150,7 +155,7 @@ def test_absent_quantities_are_not_checked():
 def test_cycles_for_frames_the_scene_never_had_are_late_not_lost():
     tr = truth(10)
     cycles = cycles_from(tr) + cycles_from(truth(3, first=9000), first=9000)
-    report = check("s", tr, np.ones((10, 2), bool), cycles, EXPECT)
+    report = check("s", tr, OK(10, 2), cycles, EXPECT)
     assert report.frames["late"] == 3 and report.frames["checked"] == 10
 
 

@@ -123,6 +123,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
             max_false_detections_per_frame=float(
                 expect.get("max_false_detections_per_frame", 0.1)
             ),
+            expected_limits=frozenset(expect.get("expected_limits", ())),
         ),
         effects=effects,
         marks=tuple(data.get("marks", [])),
@@ -206,6 +207,7 @@ def _target(doc: Document, key: KeyPath, spec: dict[str, Any], default_fluct: st
         trajectory=_trajectory(doc, key, spec), rcs=_rcs(doc, (*key, "rcs"), spec["rcs"],
                                                          default_fluct),
         appear_s=appear, disappear_s=disappear,
+        expected_limits=frozenset(spec.get("expected_limits", ())),
     )
 
 

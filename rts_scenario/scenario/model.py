@@ -15,6 +15,23 @@ FloatArray = NDArray[np.float64]
 
 FLUCTUATIONS = ("none", "swerling1", "swerling3")
 
+# What the bench or the radar may fail to do for a target-frame. A target-frame under a limit is
+# not played (or not measurable) as the scene specifies it: it fails the verdict unless the scene
+# lists the limit in ``expectations.expected_limits`` (or the target in its own
+# ``expected_limits``).
+LIMITS = {
+    "out_of_coverage": "outside every quad of the rig",
+    "not_synthesizable": "inside the rig, but no weights put the target there",
+    "split": "the echoes would split into several targets",
+    "too_close": "nearer than the RTS's shortest delay",
+    "doppler_out_of_range": "Doppler shift beyond the RTS's range",
+    "no_echo_slot": "no echo slot left on a front end it needs",
+    "attenuation_clipped": "level beyond the attenuator's range (played distorted)",
+    "beyond_radar_range": "beyond the radar's unambiguous range",
+    "beyond_radar_velocity": "beyond the radar's unambiguous radial velocity",
+    "frame_rate_above_radar": "the scene's frames come faster than the radar's cycles",
+}
+
 DEFAULT_TOLERANCES = {
     "range_m": 0.3,
     "radial_velocity_mps": 0.3,
@@ -89,6 +106,7 @@ class TargetSpec:
     rcs: RcsModel
     appear_s: float = 0.0
     disappear_s: float = np.inf
+    expected_limits: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -98,6 +116,7 @@ class Expectations:
     tolerances: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
     detection_rate: float = 0.9
     max_false_detections_per_frame: float = 0.1
+    expected_limits: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)

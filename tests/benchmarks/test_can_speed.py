@@ -28,7 +28,7 @@ def test_can_encode_bus_decode_check(benchmark, eight_targets):  # noqa: F811
                     receiver.on_message_received(msg)
             while (msg := listen.recv(timeout=0.01)) is not None:
                 receiver.on_message_received(msg)
-        report = check(scene.name, tracks, schedule.emitted, receiver.flush(), scene.expectations,
+        report = check(scene.name, tracks, schedule.status, receiver.flush(), scene.expectations,
                    bus=vars(receiver.stats))
         result.update(sent=publisher.sent, stats=receiver.stats, report=report)
 

@@ -1,0 +1,86 @@
+"""Honest verdicts: what the bench or the radar could not do fails unless the scene expects it."""
+
+import textwrap
+
+import pytest
+
+from rts_scenario.pipeline import RunOptions, run_scene
+
+HEAD = """\
+rts_scenario: 1
+name: {name}
+duration_s: 1.0
+frame_rate_hz: {rate}
+seed: 1
+radar:
+  profile: awr1843boost
+  mount: {{x_m: 3.7, z_m: 0.5}}
+  fidelity: analytic
+  noise: false
+rig: wide-3x5
+ego:
+  motion: {{type: stationary, position_m: [0, 0, 0]}}
+"""
+
+
+def scene(tmp_path, name, targets, rate=20.0, expectations=""):
+    text = HEAD.format(name=name, rate=rate) + "targets:\n" + textwrap.indent(
+        textwrap.dedent(targets), "  ") + "expectations:\n  detection_rate: 0.9\n" + expectations
+    path = tmp_path / f"{name}.scenario.yaml"
+    path.write_text(text)
+    return path
+
+
+CAR = "- {name: car, rcs: {rcs_dbsm: 10.0}, motion: {type: stationary, position_m: [40, 0, 1.1]}}\n"
+
+
+def posts(expect):
+    # 20 posts nearer than the car, in the same direction: the FEs' echo slots (8) run out.
+    return "".join(
+        f"- {{name: post-{i}, rcs: {{rcs_dbsm: 0.0}}, {expect}"
+        f"motion: {{type: stationary, position_m: [{14 + i * 0.5}, {0.2 * (i % 3 - 1):.1f}, "
+        f"1.1]}}}}\n" for i in range(20))
+
+
+def test_a_target_that_lost_its_echo_slot_fails_naming_the_limit(tmp_path):
+    path = scene(tmp_path, "posts", CAR + posts("expected_limits: [no_echo_slot], "))
+    report = run_scene(path, RunOptions(drain_s=1.0)).report
+    assert not report.passed
+    car = next(t for t in report.targets if t.name == "car")
+    assert car.limits == {"no_echo_slot": 20} and car.unexpected_limits == ["no_echo_slot"]
+    assert car.checkable_frames == 0 and not car.passed
+    assert any(r.startswith("car: ") and "no_echo_slot 20" in r for r in report.reasons)
+    # The posts that lost theirs were expected to: they do not fail the verdict.
+    assert not any(r.startswith("post-") for r in report.reasons)
+
+
+def test_the_same_limit_passes_when_the_scene_expects_it(tmp_path):
+    path = scene(tmp_path, "posts-expected", CAR + posts(""),
+                 expectations="  expected_limits: [no_echo_slot]\n")
+    report = run_scene(path, RunOptions(drain_s=1.0)).report
+    car = next(t for t in report.targets if t.name == "car")
+    assert car.limits == {"no_echo_slot": 20} and car.unexpected_limits == []
+    assert not any("no_echo_slot" in r for r in report.reasons)
+
+
+@pytest.mark.parametrize("expected", [False, True])
+def test_frames_faster_than_the_radar_fail_unless_expected(tmp_path, expected):
+    path = scene(tmp_path, f"fast-{expected}", CAR, rate=100.0,
+                 expectations="  expected_limits: [frame_rate_above_radar]\n" if expected else "")
+    report = run_scene(path, RunOptions(drain_s=1.0)).report
+    assert "frame_rate_above_radar" in report.scene_limits
+    assert report.passed == expected
+    if not expected:
+        assert any("100 frames/s" in r and "20 cycles/s" in r for r in report.reasons)
+
+
+def test_a_clipped_level_is_the_bench_s_limit_not_the_radar_s(tmp_path):
+    # 60 dBsm at 5 m needs less attenuation than the attenuator's 0 dB minimum.
+    loud = "- {name: wall, rcs: {rcs_dbsm: 60.0}, motion: {type: stationary, " \
+           "position_m: [8.7, 0, 1.1]}}\n"
+    report = run_scene(scene(tmp_path, "loud", loud), RunOptions(drain_s=1.0)).report
+    wall = report.targets[0]
+    assert wall.limits.get("attenuation_clipped", 0) == 20 and not report.passed
+    assert any("attenuation_clipped 20" in r for r in report.reasons)
+    # A clipped echo is still played: its detections are not false alarms.
+    assert report.false_detections == 0
