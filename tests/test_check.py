@@ -12,6 +12,7 @@ from rts_scenario.kinematics import Tracks
 from rts_scenario.report import FrameRecord, RunningStats
 from rts_scenario.scenario.model import Expectations
 
+
 def OK(n_frames, n_targets):
     """Schedule status of target-frames played exactly as specified."""
     return np.zeros((n_frames, n_targets), dtype=np.uint16)

@@ -92,3 +92,20 @@ def test_public_api_names_every_stage():
         assert getattr(rs, name) is not None
     result = rs.run_scene(CUT_IN, rs.RunOptions())
     assert isinstance(result.report, rs.Report) and result.report.passed
+
+
+def test_detections_csv_has_every_detection_and_its_target():
+    import csv
+    import io
+
+    from rts_scenario.check import DETECTION_COLUMNS
+
+    out = io.StringIO()
+    report = run_scene(CUT_IN, RunOptions(batch_frames=64), detections_out=out).report
+    rows = list(csv.reader(io.StringIO(out.getvalue())))
+    assert len(rows) == report.targets[0].detected_frames + report.false_detections
+    assert all(len(r) == len(DETECTION_COLUMNS) for r in rows)
+    record = dict(zip(DETECTION_COLUMNS, rows[0], strict=True))
+    assert record["scene"] == "cut-in" and record["cycle"] == "0" and record["t_s"] == "0.0"
+    assert record["target"] == "cutting-car" and float(record["range_m"]) > 0
+    assert [int(r[1]) for r in rows] == sorted(int(r[1]) for r in rows)
