@@ -27,6 +27,7 @@ from .detections import Detections, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class
 from .outputs.base import RunContext
+from .preflight import scene_limits
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report
@@ -306,17 +307,6 @@ def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
     with Pipeline.for_scene(scene, options) as pipeline:
         return pipeline.run(scene, progress, timing, detections_out)
 
-
-def scene_limits(scene: Scenario) -> dict[str, str]:
-    """Limits the whole scene hits, with why (see `rts_scenario.scenario.model.LIMITS`)."""
-    out = {}
-    radar_hz = 1.0 / scene.radar.frame_period_s
-    if scene.frame_rate_hz > radar_hz * (1.0 + 1e-9):
-        out["frame_rate_above_radar"] = (
-            f"the scene runs at {scene.frame_rate_hz:g} frames/s but radar "
-            f"{scene.radar.name!r} measures {radar_hz:g} cycles/s (frame_period_s "
-            f"{scene.radar.frame_period_s:g}): it cannot report every frame")
-    return out
 
 
 def _split_spec(spec: str) -> tuple[str, str]:

@@ -84,3 +84,19 @@ def test_a_clipped_level_is_the_bench_s_limit_not_the_radar_s(tmp_path):
     assert any("attenuation_clipped 20" in r for r in report.reasons)
     # A clipped echo is still played: its detections are not false alarms.
     assert report.false_detections == 0
+
+
+def test_preflight_names_the_limits_before_anything_plays(tmp_path):
+    from rts_scenario.preflight import preflight
+    from rts_scenario.scenario import load_scenario
+
+    path = scene(tmp_path, "posts-pre", CAR + posts("expected_limits: [no_echo_slot], "),
+                 rate=100.0)
+    pre = preflight(load_scenario(path))
+    assert pre.targets["car"] == {"no_echo_slot": 100}
+    lines = pre.unexpected()
+    assert lines[0].startswith("frame_rate_above_radar: the scene runs at 100 frames/s")
+    assert any(line.startswith("car: no_echo_slot in 100 frames") for line in lines)
+    assert not any(line.startswith("post-") for line in lines)
+    assert any(line.startswith("post-19: no_echo_slot in 100 frames") and "(expected)" in line
+               for line in pre.expected_lines())

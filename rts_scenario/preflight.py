@@ -1,0 +1,104 @@
+"""Preflight: what the bench and the radar cannot do for a scene, known before anything plays.
+
+Streams the scene's kinematics and schedule in frame batches (bounded memory, no output, no
+radar) and counts, per target, the target-frames under each limit of
+`rts_scenario.scenario.model.LIMITS`, plus the limits of the whole scene. `validate` prints it;
+a run prints it before playing, so an hour on a real bench is not spent to learn that a target
+was never played.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .check import limit_masks
+from .kinematics import compute_tracks
+from .scenario.model import LIMITS, Scenario
+from .schedule import build_schedule
+
+BATCH_FRAMES = 2000
+
+
+@dataclass(frozen=True)
+class Preflight:
+    """Limits a scene hits, per target and for the whole scene.
+
+    Attributes
+    ----------
+    scene : str
+        Scene name.
+    targets : dict of str to dict of str to int
+        Per target name: target-frames under each limit it hits.
+    scene_limits : dict of str to str
+        Limits of the whole scene and why.
+    expected : dict of str to frozenset of str
+        Per target name: the limits the scene declares expected for it.
+    scene_expected : frozenset of str
+        Scene-wide limits the scene declares expected.
+    """
+
+    scene: str
+    targets: dict[str, dict[str, int]]
+    scene_limits: dict[str, str]
+    expected: dict[str, frozenset[str]]
+    scene_expected: frozenset[str]
+
+    def unexpected(self) -> list[str]:
+        """One line per limit the scene does not declare (these fail a run's verdict)."""
+        out = [f"{name}: {why}" for name, why in self.scene_limits.items()
+               if name not in self.scene_expected]
+        for target, hits in self.targets.items():
+            bad = {lim: n for lim, n in hits.items() if lim not in self.expected[target]}
+            if bad:
+                out.append(f"{target}: " + ", ".join(
+                    f"{lim} in {n} frames ({LIMITS[lim]})" for lim, n in bad.items()))
+        return out
+
+    def expected_lines(self) -> list[str]:
+        """One line per target whose limits the scene declares (shown, not failing)."""
+        out = [f"{name}: {why} (expected)" for name, why in self.scene_limits.items()
+               if name in self.scene_expected]
+        for target, hits in self.targets.items():
+            good = {lim: n for lim, n in hits.items() if lim in self.expected[target]}
+            if good:
+                out.append(f"{target}: " + ", ".join(f"{lim} in {n} frames"
+                                                     for lim, n in good.items()) + " (expected)")
+        return out
+
+
+def scene_limits(scene: Scenario) -> dict[str, str]:
+    """Limits the whole scene hits, with why (see `rts_scenario.scenario.model.LIMITS`)."""
+    out = {}
+    radar_hz = 1.0 / scene.radar.frame_period_s
+    if scene.frame_rate_hz > radar_hz * (1.0 + 1e-9):
+        out["frame_rate_above_radar"] = (
+            f"the scene runs at {scene.frame_rate_hz:g} frames/s but radar "
+            f"{scene.radar.name!r} measures {radar_hz:g} cycles/s (frame_period_s "
+            f"{scene.radar.frame_period_s:g}): it cannot report every frame")
+    return out
+
+
+def preflight(scene: Scenario, method: str = "exact",
+              batch_frames: int = BATCH_FRAMES) -> Preflight:
+    """Count the limits ``scene`` hits with the weight solver ``method``."""
+    names = tuple(t.name for t in scene.targets)
+    counts = {lim: np.zeros(len(names), dtype=np.int64) for lim in LIMITS}
+    t_all = scene.t_s
+    for first in range(0, scene.n_frames, batch_frames):
+        frames = np.arange(first, min(first + batch_frames, scene.n_frames))
+        tracks = compute_tracks(scene, t_all[frames], frames)
+        schedule = build_schedule(tracks, scene.rig, scene.radar, method=method,
+                                  frame_rate_hz=scene.frame_rate_hz)
+        for lim, mask in limit_masks(tracks, schedule.status).items():
+            counts[lim] += mask.sum(axis=0)
+    expected = scene.expectations.expected_limits
+    return Preflight(
+        scene=scene.name,
+        targets={name: {lim: int(c[k]) for lim, c in counts.items() if c[k]}
+                 for k, name in enumerate(names)
+                 if any(c[k] for c in counts.values())},
+        scene_limits=scene_limits(scene),
+        expected={t.name: expected | t.expected_limits for t in scene.targets},
+        scene_expected=expected)
