@@ -122,13 +122,71 @@ def test_round_trip_of_every_signal_at_its_limits(fd):
         assert got["snr_db"][0] == pytest.approx(x["snr"], abs=1e-9)
 
 
-def test_out_of_range_values_are_a_clear_error():
-    from rts_scenario import OutputError
-    frame = Detections(cycle=0, t_s=0.0, range_m=np.array([400.0]),
-                       radial_velocity_mps=np.zeros(1), az_deg=np.zeros(1), el_deg=np.zeros(1),
-                       snr_db=np.zeros(1), rcs_dbsm=np.zeros(1))
-    with open_bus(channel="x") as bus, pytest.raises(OutputError, match="Range"):
-        DetectionPublisher(bus).publish(frame)
+def one_cycle(cycle, range_m, **values):
+    """A cycle whose detections are at ``range_m``, every other quantity 0 unless given."""
+    range_m = np.asarray(range_m, dtype=float)
+    columns = {q: np.asarray(values.get(q, np.zeros(range_m.size)), dtype=float)
+               for q in ("radial_velocity_mps", "az_deg", "el_deg", "snr_db", "rcs_dbsm")}
+    return Detections(cycle=cycle, t_s=0.05 * cycle, range_m=range_m, **columns)
+
+
+@pytest.mark.parametrize("fd", [False, True])
+def test_out_of_range_values_are_counted_and_not_sent(fd):
+    # A negative range (sub-bin interpolation next to 0), one beyond the DBC's 327.675 m, an
+    # unknown velocity: no signal carries them. The others of the cycle and the next cycle
+    # arrive, complete; the publisher counts what it left out and says why.
+    frames = [one_cycle(0, [12.0, -0.146, 400.0, 20.0, 30.0],
+                        radial_velocity_mps=[1.0, 0.0, 0.0, np.nan, -2.0]),
+              one_cycle(1, [40.0])]
+    publishers = []
+
+    def send(bus):
+        publishers.append(DetectionPublisher(bus, fd=fd))
+        for frame in frames:
+            publishers[0].publish(frame)
+
+    receiver, _ = run_over_bus(None, fd=fd, send=send)
+    publisher = publishers[0]
+    assert publisher.unsendable == {"Range": 2, "RadialVelocity": 1}
+    assert publisher.unsendable_detections == 3
+    assert publisher.unsendable_reason == ("CAN: cycle 0 detection 1 not sent: Range -0.146 "
+                                           "outside [0, 327.675] m")
+    assert receiver.stats.clean
+    cycles = receiver.flush()
+    assert [c.cycle for c in cycles] == [0, 1] and all(c.complete for c in cycles)
+    np.testing.assert_allclose(cycles[0].range_m, [12.0, 30.0])
+    np.testing.assert_allclose(cycles[0].radial_velocity_mps, [1.0, -2.0])
+    np.testing.assert_allclose(cycles[1].range_m, [40.0])
+
+
+@pytest.mark.parametrize("fd", [False, True])
+def test_more_than_255_detections_in_a_cycle(fd):
+    # 300 detections: CAN FD numbers them all; classic CAN's 8-bit index the first 256 (its
+    # two messages per detection would not fit 300 per radar cycle on the bus anyway).
+    n = 300
+    frame = one_cycle(7, 1.0 + 0.25 * np.arange(n), az_deg=np.linspace(-60, 60, n))
+    publishers = []
+
+    def send(bus):
+        publishers.append(DetectionPublisher(bus, fd=fd))
+        publishers[0].publish(frame)
+        publishers[0].publish(one_cycle(8, [5.0]))
+
+    receiver, _ = run_over_bus(None, fd=fd, send=send)
+    assert receiver.stats.clean
+    cycles = receiver.flush()
+    assert [c.cycle for c in cycles] == [7, 8] and all(c.complete for c in cycles)
+    kept = n if fd else 256
+    assert cycles[0].count == kept
+    np.testing.assert_allclose(cycles[0].range_m, frame.range_m[:kept], atol=0.0025)
+    np.testing.assert_allclose(cycles[0].az_deg, frame.az_deg[:kept], atol=0.0025)
+    assert publishers[0].unsendable == ({} if fd else {"Index": n - 256})
+    # The header counts up to 1023 detections: more are counted, not sent, in CAN FD too.
+    with open_bus(channel="test-many") as bus:
+        publisher = DetectionPublisher(bus, fd=True)
+        publisher.publish(one_cycle(0, np.full(1100, 10.0)))
+        assert publisher.unsendable == {"DetectionCount": 1100 - 1023}
+        assert publisher.sent == 1 + 1023
 
 
 @pytest.mark.parametrize("fault, counter, fails", [
@@ -222,3 +280,31 @@ def test_mapping_errors_are_located(tmp_path):
     bad.write_text(text.replace("cluster_list.dbc", "x.dbc").replace("DistLat", "DistSide"))
     with pytest.raises(ScenarioError, match="signal 'DistSide' is not in the detection"):
         CanMapping.from_file(bad)
+
+
+def test_cycles_beyond_the_counters_wrap_keep_their_own_values():
+    # A radar counting from 65,000 on: its 16-bit header counter wraps after 536 cycles, the
+    # detections' 8-bit one every 256. The receiver remembers at most RECENT_CYCLES counters,
+    # so 536 cycles before the wrap and 864 after cover all it can confuse (publishing all
+    # 70,000 cycles from 0 passes the same way but takes ~30 s). Each cycle comes back once,
+    # whole, with its own values and counter.
+    cycles = np.arange(65_000, 66_400)
+    got = []
+    with open_bus(channel="test-wrap") as listen, open_bus(channel="test-wrap") as talk:
+        receiver = DetectionReceiver()
+        publisher = DetectionPublisher(talk)
+        for start in range(0, cycles.size, 100):
+            for i in cycles[start : start + 100]:
+                publisher.publish(one_cycle(int(i), [0.005 * (i % 60_000)],
+                                            az_deg=[0.005 * (i % 30_000) - 75.0]))
+            while (msg := listen.recv(timeout=0)) is not None:
+                receiver.on_message_received(msg)
+            got.extend(receiver.pop())
+        got.extend(receiver.flush())
+    assert receiver.stats.clean and publisher.sent == 3 * cycles.size
+    assert [c.cycle for c in got] == list(cycles % 65536)
+    assert all(c.complete and c.count == 1 for c in got)
+    np.testing.assert_allclose([c.range_m[0] for c in got], 0.005 * (cycles % 60_000),
+                               atol=1e-9)
+    np.testing.assert_allclose([c.az_deg[0] for c in got], 0.005 * (cycles % 30_000) - 75.0,
+                               atol=1e-9)

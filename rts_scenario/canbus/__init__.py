@@ -2,7 +2,8 @@
 
 The simulated radar publishes each frame as a header message (frame counter, detection count,
 time) followed by its detections (two classic CAN messages per detection, or one CAN FD
-message), each with an end-to-end checksum. `DetectionReceiver` is a python-can listener that
+message), each with an end-to-end checksum; a detection no signal can carry is left out and
+counted (`DetectionPublisher.unsendable`). `DetectionReceiver` is a python-can listener that
 decodes any radar's messages through a `CanMapping` and reassembles them into `Detections`
 (one per radar cycle), counting everything that goes wrong on the way. It keeps only the few
 cycles still being assembled: memory does not grow with the length of a run.
@@ -11,7 +12,7 @@ cycles still being assembled: memory does not grow with the length of a run.
 from __future__ import annotations
 
 import zlib
-from collections import OrderedDict, deque
+from collections import Counter, OrderedDict, deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,6 +47,12 @@ def _checksum(data: bytes, position: int) -> int:
     return zlib.crc32(data[:position] + data[position + 1 :]) & 0xFF
 
 
+def _limits(sig: cantools.database.can.Signal) -> tuple[float, float]:
+    """Return a signal's physical range as the DBC states it (ours states every one)."""
+    assert sig.minimum is not None and sig.maximum is not None
+    return float(sig.minimum), float(sig.maximum)
+
+
 def _checksum_byte(message: cantools.database.can.Message, name: str) -> int:
     sig = message.get_signal_by_name(name)
     if sig.length != 8 or sig.start % 8 or sig.byte_order != "little_endian":
@@ -54,7 +61,27 @@ def _checksum_byte(message: cantools.database.can.Message, name: str) -> int:
 
 
 class DetectionPublisher:
-    """Encode radar frames with rts-scenario's DBC and send them on a bus."""
+    """Encode radar frames with rts-scenario's DBC and send them on a bus.
+
+    A detection is sent only if every value fits its signal: a value outside a signal's range
+    (a negative range from sub-bin interpolation, a range or velocity beyond what the DBC
+    scales to, NaN) cannot be carried, and neither can a detection past the last index or
+    count the layout has (classic CAN indexes 256 detections per cycle, CAN FD 1023). Such a
+    detection is left out of its cycle (the header announces only the ones sent, so the cycle
+    still arrives complete) and counted, never an error.
+
+    Attributes
+    ----------
+    sent : int
+        Messages sent.
+    unsendable : collections.Counter of str
+        Detections left out, by the signal that could not carry them (e.g. ``{"Range": 2}``);
+        a detection with several such values counts once, for the first of them.
+    unsendable_detections : int
+        Detections left out in total (``sum(unsendable.values())``).
+    unsendable_reason : str or None
+        One line on the first detection left out: cycle, detection, signal, value, range.
+    """
 
     def __init__(self, bus: can.BusABC, *, fd: bool = False) -> None:
         self.bus = bus
@@ -64,7 +91,21 @@ class DetectionPublisher:
         self._header = db.get_message_by_name("RTS_FrameHeader")
         names = ["RTS_DetectionFD"] if fd else ["RTS_DetectionA", "RTS_DetectionB"]
         self._parts = [db.get_message_by_name(n) for n in names]
+        self._signals = {s.name: s for m in self._parts for s in m.signals}
+        # Detections per cycle the layout can number and announce.
+        index = _limits(self._signals["Index"])[1]
+        count = _limits(self._header.get_signal_by_name("DetectionCount"))[1]
+        self._capacity, self._capacity_signal = min((int(index) + 1, "Index"),
+                                                    (int(count), "DetectionCount"))
+        self._latest_time_s = _limits(self._header.get_signal_by_name("TimeStamp"))[1]
         self.sent = 0
+        self.unsendable: Counter[str] = Counter()
+        self.unsendable_reason: str | None = None
+
+    @property
+    def unsendable_detections(self) -> int:
+        """Detections left out because no signal could carry them."""
+        return sum(self.unsendable.values())
 
     def _send(self, message: cantools.database.can.Message, values: dict[str, float]) -> None:
         try:
@@ -77,30 +118,53 @@ class DetectionPublisher:
                                   is_extended_id=False, is_fd=self.fd))
         self.sent += 1
 
+    def _leave_out(self, cycle: int, index: int, signal: str, value: float,
+                   allowed: str) -> None:
+        self.unsendable[signal] += 1
+        if self.unsendable_reason is None:
+            self.unsendable_reason = (f"CAN: cycle {cycle} detection {index} not sent: {signal} "
+                                      f"{value:g} outside {allowed}")
+
     def publish(self, frame: Detections) -> None:
-        """Send one cycle: header, then every detection."""
-        n = frame.count
-        if n > 255:
-            raise OutputError(f"CAN: cycle {frame.cycle} has {n} detections; at most 255 fit")
+        """Send one cycle: header, then every detection the messages can carry."""
         absent = [q for q in QUANTITIES if getattr(frame, q) is None]
         if absent:
             raise OutputError(f"CAN: rts-scenario's messages carry every quantity; cycle "
                               f"{frame.cycle} lacks {', '.join(absent)}")
         assert frame.snr_db is not None and frame.rcs_dbsm is not None
-        self._send(self._header, {"FrameCounter": frame.cycle & 0xFFFF, "DetectionCount": n,
-                                  "TimeStamp": min(frame.t_s or 0.0, 429496.7295)})
         # Metadata saturates at the DBC's limits; measured quantities must fit as they are.
-        snr = np.clip(frame.snr_db, 0.0, 127.5)
-        rcs_max = 63.5 if not self.fd else 327.67
-        rcs = np.clip(np.nan_to_num(frame.rcs_dbsm, nan=-64.0, neginf=-64.0), -64.0, rcs_max)
+        rcs_min, rcs_max = _limits(self._signals["RCS"])
+        snr_min, snr_max = _limits(self._signals["SNR"])
+        columns: dict[str, np.ndarray] = {
+            "Range": np.asarray(frame.range_m, dtype=float),
+            "RadialVelocity": np.asarray(frame.radial_velocity_mps, dtype=float),
+            "Azimuth": np.asarray(frame.az_deg, dtype=float),
+            "Elevation": np.asarray(frame.el_deg, dtype=float),
+            "RCS": np.clip(np.nan_to_num(frame.rcs_dbsm, nan=rcs_min, neginf=rcs_min),
+                           rcs_min, rcs_max),
+            "SNR": np.clip(frame.snr_db, snr_min, snr_max)}
+        fits = np.ones(frame.count, dtype=bool)
+        for name, column in columns.items():
+            sig = self._signals[name]
+            low, high = _limits(sig)
+            inside = (column >= low) & (column <= high)  # NaN is outside
+            if not inside.all():
+                for i in np.flatnonzero(fits & ~inside):
+                    self._leave_out(frame.cycle, int(i), name, float(column[i]),
+                                    f"[{low:g}, {high:g}] {sig.unit or ''}".rstrip())
+                fits &= inside
+        send = np.flatnonzero(fits)
+        for i in send[self._capacity :]:
+            self._leave_out(frame.cycle, int(i), self._capacity_signal, float(self._capacity),
+                            f"the {self._capacity} detections per cycle it numbers")
+        send = send[: self._capacity]
+        self._send(self._header, {"FrameCounter": frame.cycle & 0xFFFF,
+                                  "DetectionCount": send.size,
+                                  "TimeStamp": min(frame.t_s or 0.0, self._latest_time_s)})
         counter8 = frame.cycle & 0xFF
-        for i in range(n):  # one encoded message per detection (cantools encodes one at a time)
-            values = {"FrameCounter8": counter8, "Index": i,
-                      "Range": frame.range_m[i],  # type: ignore[index]
-                      "RadialVelocity": frame.radial_velocity_mps[i],  # type: ignore[index]
-                      "Azimuth": frame.az_deg[i],  # type: ignore[index]
-                      "Elevation": frame.el_deg[i],  # type: ignore[index]
-                      "RCS": rcs[i], "SNR": snr[i]}
+        for index, i in enumerate(send):  # one encoded message each (cantools encodes one)
+            values = {"FrameCounter8": counter8, "Index": index,
+                      **{name: float(column[i]) for name, column in columns.items()}}
             for message in self._parts:
                 wanted = {s.name for s in message.signals}
                 self._send(message, {k: v for k, v in values.items() if k in wanted})

@@ -17,6 +17,14 @@ only for frames where targets share a range-Doppler neighbourhood (within 2.5 bi
 analytic model cannot tell them apart. Interactions between separate cells (a strong target
 masking a weak one in the CFAR's training cells) and false alarms exist only in ``adc``: force it
 when a test is about them.
+
+Both FFTs are circular, so in every fidelity range and velocity fold as a real radar's do: the
+sampled beat frequency ``S tau`` aliases modulo the (complex) sample rate, so the range bin
+``S tau N / fs`` wraps into [0, N) and the range into [0, ``c0 fs / (2 S)``); the Doppler
+sampled once per TDM loop wraps into [-1 / (2 T_loop), 1 / (2 T_loop)), i.e. the Doppler bin
+into [-L/2, L/2). The radar knows only the folded Doppler: its TDM-MIMO compensation uses it,
+so a target folded by a number of loops that is not a multiple of the TX count keeps a
+phase ramp over the TX slots and its angles come out wrong, as on the real radar.
 """
 
 from __future__ import annotations
@@ -215,11 +223,17 @@ class SimulatedRadar:
         return [d for d in out if d is not None]
 
     def _bins(self, echoes: Echoes) -> tuple[FloatArray, FloatArray]:
-        """Fractional range and (centred) Doppler bins of each echo."""
+        """Fractional range and (centred) Doppler bins of each echo, before folding."""
         p = self.profile
         range_bin = p.slope_hz_per_s * echoes.delay_s / p.sample_rate_hz * self._n
         doppler_bin = echoes.doppler_hz * p.loop_time_s * self._loops
         return range_bin, doppler_bin
+
+    def _fold(self, range_bin: FloatArray, doppler_bin: FloatArray
+              ) -> tuple[FloatArray, FloatArray]:
+        """Bins where the circular FFTs show them: range in [0, N), Doppler in [-L/2, L/2)."""
+        half = self._loops / 2.0
+        return np.mod(range_bin, self._n), np.mod(doppler_bin + half, self._loops) - half
 
     def crowded(self, echoes: Echoes, n_frames: int) -> NDArray[np.bool_]:
         """Frames where two targets share a range-Doppler neighbourhood (need the real cube)."""
@@ -233,11 +247,13 @@ class SimulatedRadar:
         f, r, d = echoes.frame[first], rb[first], db[first]
         order = np.argsort(f, kind="stable")
         f, r, d = f[order], r[order], d[order]
-        # Compare every pair within a frame: pairs of entries of the same frame.
+        # Compare every pair within a frame, at their distance on the circular (folded) axes.
         same = f[:, None] == f[None, :]
-        near = same & (np.abs(r[:, None] - r[None, :]) < 2.5) & (
-            np.abs(np.mod(d[:, None] - d[None, :] + self._loops / 2, self._loops)
-                   - self._loops / 2) < 2.5)
+
+        def apart(x: FloatArray, n: int) -> FloatArray:
+            return np.abs(np.mod(x[:, None] - x[None, :] + n / 2, n) - n / 2)
+
+        near = same & (apart(r, self._n) < 2.5) & (apart(d, self._loops) < 2.5)
         pair = np.triu(near, 1).any(axis=1)
         crowded[f[pair]] = True
         return crowded
@@ -255,7 +271,8 @@ class SimulatedRadar:
         chan = (echoes.amplitude * np.exp(1j * echoes.phase_rad))[None, :] * np.exp(1j * (
             k * (np.outer(arr.y_m, echoes.u) + np.outer(arr.z_m, echoes.s))
             + 2.0 * np.pi * np.outer(self._slot * p.chirp_slot_s, echoes.doppler_hz)))  # (M, E)
-        lm = (slow[:, None, :] * chan[None, :, :]).reshape(-1, echoes.amplitude.size)
+        lm = (slow[:, None, :] * chan[None, :, :]).reshape(self._loops * arr.n_elements,
+                                                           echoes.amplitude.size)
         cube = (lm @ fast).reshape(self._loops, arr.n_elements, self._n)
         if self._sigma > 0.0:
             noise = self.rng.standard_normal((2, *cube.shape)) * (self._sigma / np.sqrt(2.0))
@@ -269,8 +286,9 @@ class SimulatedRadar:
         spec = np.fft.fftshift(np.fft.fft(spec * self._win_d[:, None, None], axis=0), axes=0)
         power = (np.abs(spec) ** 2).sum(axis=1)  # (L, N): non-coherent over channels
         noise = self._noise_floor(power)
+        # Both FFTs are circular: a peak's neighbours wrap around in range and Doppler alike.
         hits = (power > noise * 10.0 ** (self.threshold_db / 10.0)) & (
-            power == ndimage.maximum_filter(power, size=3, mode=("wrap", "nearest")))
+            power == ndimage.maximum_filter(power, size=3, mode="wrap"))
         d_idx, r_idx = np.nonzero(hits)
         if d_idx.size == 0:
             return _empty(frame, t_s)
@@ -280,14 +298,13 @@ class SimulatedRadar:
             den = lo - 2 * mid + hi
             return np.where(den < 0, 0.5 * (lo - hi) / np.where(den < 0, den, 1.0), 0.0)
 
-        r_lo = power[d_idx, np.maximum(r_idx - 1, 0)]
-        r_hi = power[d_idx, np.minimum(r_idx + 1, self._n - 1)]
+        r_lo = power[d_idx, (r_idx - 1) % self._n]
+        r_hi = power[d_idx, (r_idx + 1) % self._n]
         d_lo = power[(d_idx - 1) % self._loops, r_idx]
         d_hi = power[(d_idx + 1) % self._loops, r_idx]
         mid = power[d_idx, r_idx]
         r_off, d_off = vertex(r_lo, mid, r_hi), vertex(d_lo, mid, d_hi)
-        r_frac = r_idx + r_off
-        d_frac = d_idx - self._loops // 2 + d_off
+        r_frac, d_frac = self._fold(r_idx + r_off, d_idx - self._loops // 2 + d_off)
         doppler = d_frac / (self._loops * p.loop_time_s)
         # Undo the straddle loss of a peak between bins (Hann: sinc(x) / (1 - x^2)).
         loss = _hann_response(r_off) * _hann_response(d_off)
@@ -341,8 +358,7 @@ class SimulatedRadar:
         np.add.at(snap, inverse, contrib)
         first = np.unique(inverse, return_index=True)[1]
         frame_of = e["frame"][first]
-        delay, doppler = e["delay_s"][first], e["doppler_hz"][first]
-        range_m = p.slope_hz_per_s * delay / p.sample_rate_hz * self._n * self._range_bin_m
+        range_bin, doppler_bin = self._bins(Echoes(**{name: v[first] for name, v in e.items()}))
         noise_power = self._sigma**2 * self._noise_gain  # per channel, after both FFTs
         if self._sigma > 0.0:
             noise = self.rng.standard_normal((2, *snap.shape)) * np.sqrt(noise_power / 2.0)
@@ -350,12 +366,15 @@ class SimulatedRadar:
             snap = snap + noise[0] + 1j * noise[1]
             # Sub-bin estimates scatter like the interpolated FFT peak: ~1 / (pi sqrt(2 SNR)).
             spread = 1.0 / (np.pi * np.sqrt(2.0 * clean))
-            range_m = range_m + self.rng.standard_normal(clean.size) * spread * self._range_bin_m
-            doppler = doppler + self.rng.standard_normal(clean.size) * spread / (
-                self._loops * p.loop_time_s)
+            range_bin = range_bin + self.rng.standard_normal(clean.size) * spread
+            doppler_bin = doppler_bin + self.rng.standard_normal(clean.size) * spread
             snr = (np.abs(snap) ** 2).sum(axis=1) / (noise_power * arr.n_elements)
         else:
             snr = np.full(entry.size, np.inf)
+        # What the FFTs show; the TDM compensation and the angles get the folded Doppler too.
+        range_bin, doppler_bin = self._fold(range_bin, doppler_bin)
+        range_m = range_bin * self._range_bin_m
+        doppler = doppler_bin / (self._loops * p.loop_time_s)
         seen = snr > 10.0 ** (self.threshold_db / 10.0)
         with np.errstate(divide="ignore"):
             found = self._measure(snap[seen], range_m[seen], doppler[seen],
