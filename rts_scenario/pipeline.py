@@ -263,6 +263,10 @@ class Pipeline:
         mark = clock.add("receive_s", mark)
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
+        if self._publisher is not None:
+            # Detections the simulated radar made that the bus could not carry (out of a
+            # signal's range): the checker never saw them.
+            bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
         clock.add("check_s", mark)
         clock.stages["total_s"] = clock.stages.get("load_s", 0.0) + time.perf_counter() - start

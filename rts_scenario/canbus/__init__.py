@@ -11,6 +11,7 @@ cycles still being assembled: memory does not grow with the length of a run.
 
 from __future__ import annotations
 
+import threading
 import zlib
 from collections import Counter, OrderedDict, deque
 from dataclasses import dataclass, field
@@ -228,10 +229,16 @@ class DetectionReceiver(can.Listener):
                                          *([self.mapping.fd_message]
                                            if self.mapping.fd_message else []))}
         self.stats = BusStats()
+        # The notifier's thread feeds messages while the run's thread takes cycles.
+        self._lock = threading.Lock()
         self.reset()
 
     def reset(self) -> None:
         """Forget the cycles received so far (a new measurement reuses counters)."""
+        with self._lock:
+            self._reset()
+
+    def _reset(self) -> None:
         self._open: OrderedDict[int, _Assembly] = OrderedDict()
         self._ready: deque[Detections] = deque()
         self._recent: OrderedDict[int, bool] = OrderedDict()  # counter -> handed on complete
@@ -255,13 +262,18 @@ class DetectionReceiver(can.Listener):
 
     def flush(self) -> list[Detections]:
         """Hand on every open cycle (incomplete ones marked so) and take all cycles."""
-        while self._open:
-            self._finish(next(iter(self._open)))
-        self._current = None
+        with self._lock:
+            while self._open:
+                self._finish(next(iter(self._open)))
+            self._current = None
         return self.pop()
 
     def on_message_received(self, msg: can.Message) -> None:
         """Handle one message (called by python-can's Notifier, or directly)."""
+        with self._lock:
+            self._receive(msg)
+
+    def _receive(self, msg: can.Message) -> None:
         stats = self.stats
         stats.messages += 1
         if msg.is_error_frame:
