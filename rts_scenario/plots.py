@@ -26,6 +26,11 @@ def _pyplot() -> Any:
     return plt
 
 
+def require_matplotlib() -> None:
+    """Raise the `RtsError` plots would raise without matplotlib (before a run, not after)."""
+    _pyplot()
+
+
 def safe_stem(name: str) -> str:
     """Return a file name stem for a scene or rig name: only ``[A-Za-z0-9._-]``, no leading dot.
 

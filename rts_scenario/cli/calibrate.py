@@ -42,6 +42,9 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     if args.write:
         check_writable_file("--write", args.write)
     if args.plot:
+        from ..plots import require_matplotlib
+
+        require_matplotlib()
         check_writable_folder("--plot", args.plot)
     rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
                          ".rig.yaml")

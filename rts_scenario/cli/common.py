@@ -183,3 +183,13 @@ def check_readable_file(option: str, path: str) -> None:
 def one_line(exc: BaseException) -> str:
     """Return an exception's message on one line (the CLI prints one ``error:`` line)."""
     return " ".join(part.strip() for part in str(exc).splitlines() if part.strip()) or repr(exc)
+
+
+def located(path: str, exc: BaseException) -> str:
+    """Return the error's message, starting with the scene file when the error does not name it."""
+    from ..errors import ScenarioError
+
+    message = one_line(exc)
+    if isinstance(exc, ScenarioError) and exc.file is not None:
+        return message
+    return f"{path}: {message}"

@@ -17,6 +17,7 @@ from .common import (
     check_output,
     check_writable_file,
     check_writable_folder,
+    located,
     named_file,
     one_line,
     writing,
@@ -41,6 +42,9 @@ def _do_run(args: argparse.Namespace) -> int:
     if args.json:
         check_writable_file("--json", args.json)
     if args.plot:
+        from ..plots import require_matplotlib
+
+        require_matplotlib()
         check_writable_folder("--plot", args.plot)
 
     options = RunOptions(output=args.output, can_interface=args.can_interface,
@@ -51,7 +55,10 @@ def _do_run(args: argparse.Namespace) -> int:
     bad_input = runtime_error = False
 
     def failed(scene: str, path: str, exc: BaseException) -> None:
-        message = one_line(exc)
+        message = located(path, exc)
+        if not isinstance(exc, RtsError):
+            message = (f"{path}: {type(exc).__name__}: {one_line(exc)} (a runtime error; "
+                       f"--debug shows where)")
         print(f"error: {message}", file=sys.stderr)
         entries.append({"scene": scene, "file": path, "status": "error", "error": message})
 

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING, Any
 
-from .common import EXIT_BAD_INPUT, EXIT_OK, one_line
+from .common import EXIT_BAD_INPUT, EXIT_OK, located
 
 if TYPE_CHECKING:
     from ..scenario import Scenario
@@ -57,18 +57,22 @@ def _do_validate(args: argparse.Namespace) -> int:
         try:
             combos = parametrizations(path)
         except RtsError as exc:
-            print(f"error: {one_line(exc)}", file=sys.stderr)
+            print(f"error: {located(path, exc)}", file=sys.stderr)
             bad += 1
             continue
+        reported: set[str] = set()
         for ident, overrides in combos:
             label = f"{path}[{ident}]" if ident else str(path)
             try:
                 scene = load_scenario(path, overrides)
                 limits = schedule_limits(scene, args.method)
             except RtsError as exc:
-                where = f" [{ident}]" if ident else ""
-                print(f"error: {one_line(exc)}{where}", file=sys.stderr)
                 bad += 1
+                message = located(path, exc)
+                if message not in reported:  # an error every combination shares, once
+                    reported.add(message)
+                    where = f" [{ident}]" if ident else ""
+                    print(f"error: {message}{where}", file=sys.stderr)
                 continue
             kind = "error" if args.strict else "warning"
             for target, hits in limits.items():
