@@ -113,24 +113,102 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
     return loader.construct_object(node, deep=True)
 
 
+# Bounds that keep a hostile or broken file from exhausting memory, time or the C stack: a
+# scene is a few kilobytes; an alias "bomb" of 2 kB would otherwise expand to 10^9 nodes, and
+# deep nesting overflows the C composer's stack.
+MAX_DOCUMENT_BYTES = 4 * 1024 * 1024
+MAX_NODES = 1_000_000
+MAX_DEPTH = 64
+
+
+def _read_bounded(path: str | Path, file: str) -> str:
+    try:
+        with open(path, "rb") as stream:
+            raw = stream.read(MAX_DOCUMENT_BYTES + 1)
+    except OSError as exc:
+        raise ScenarioError(f"cannot read file: {exc.strerror or exc}", file=file) from None
+    if len(raw) > MAX_DOCUMENT_BYTES:
+        raise ScenarioError(_too_big(), file=file)
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"not UTF-8 text: {exc.reason}", file=file) from None
+
+
+def _too_big() -> str:
+    return (f"document larger than the limit of {MAX_DOCUMENT_BYTES // (1024 * 1024)} MB "
+            f"({MAX_DOCUMENT_BYTES} bytes)")
+
+
+def _check_bounds(text: str, file: str) -> None:
+    """Walk the parser's events once: nesting depth and the size with every alias expanded.
+
+    An alias counts as many nodes as the anchored node it repeats, so the expanded size is
+    known before anything is composed or constructed (alias bombs fail here, in microseconds).
+    """
+    loader = _Loader(text)
+    try:
+        sizes: dict[str, int] = {}
+        stack: list[list[Any]] = []  # [anchor, nodes so far] per open collection
+        total = 0
+
+        def fail(event: Any, message: str) -> ScenarioError:
+            return ScenarioError(message, file=file, line=event.start_mark.line + 1,
+                                 column=event.start_mark.column + 1)
+
+        while True:
+            event = loader.get_event()
+            if isinstance(event, yaml.StreamEndEvent):
+                return
+            if isinstance(event, yaml.CollectionStartEvent):
+                if len(stack) >= MAX_DEPTH:
+                    raise fail(event, f"nesting deeper than the limit of {MAX_DEPTH} levels")
+                stack.append([event.anchor, 1])
+                continue
+            if isinstance(event, yaml.AliasEvent):
+                if event.anchor not in sizes:
+                    raise fail(event, f"alias *{event.anchor} refers to a node that contains "
+                                      f"it (recursive data is not allowed)")
+                size = sizes[event.anchor]
+            elif isinstance(event, yaml.ScalarEvent):
+                size = 1
+                if event.anchor is not None:
+                    sizes[event.anchor] = size
+            elif isinstance(event, yaml.CollectionEndEvent):
+                anchor, size = stack.pop()
+                if anchor is not None:
+                    sizes[anchor] = size
+            else:
+                continue
+            if stack:
+                stack[-1][1] += size
+            total += size
+            if (stack[0][1] if stack else total) > MAX_NODES:
+                raise fail(event, f"document expands to more than {MAX_NODES:,} YAML nodes "
+                                  f"(aliases counted as the nodes they repeat)")
+    finally:
+        loader.dispose()
+
+
 def load_yaml(path: str | Path, text: str | None = None) -> Document:
     """Load one YAML document with a safe loader, keeping line/column marks.
+
+    Documents are bounded: at most `MAX_DOCUMENT_BYTES`, `MAX_NODES` nodes with every alias
+    expanded, and `MAX_DEPTH` levels of nesting.
 
     Raises
     ------
     ScenarioError
-        If the file cannot be read or is not valid YAML.
+        If the file cannot be read, is not valid YAML or exceeds a bound.
     """
     file = str(path)
     if text is None:
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ScenarioError(f"cannot read file: {exc.strerror or exc}", file=file) from None
-        except UnicodeDecodeError as exc:
-            raise ScenarioError(f"not UTF-8 text: {exc.reason}", file=file) from None
+        text = _read_bounded(path, file)
+    elif len(text.encode("utf-8", "surrogatepass")) > MAX_DOCUMENT_BYTES:
+        raise ScenarioError(_too_big(), file=file)
     loader = None
     try:
+        _check_bounds(text, file)
         loader = _Loader(text)
         node = loader.get_single_node()
         marks: dict[KeyPath, tuple[int, int]] = {}

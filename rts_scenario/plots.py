@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,8 +26,25 @@ def _pyplot() -> Any:
     return plt
 
 
-def write_plots(result: RunResult, folder: str | Path) -> list[Path]:
-    """Write the run's plots into ``folder``; return the files written."""
+def require_matplotlib() -> None:
+    """Raise the `RtsError` plots would raise without matplotlib (before a run, not after)."""
+    _pyplot()
+
+
+def safe_stem(name: str) -> str:
+    """Return a file name stem for a scene or rig name: only ``[A-Za-z0-9._-]``, no leading dot.
+
+    Names come from files anyone may write; a stem never leaves the plot folder.
+    """
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).lstrip(".")
+    return stem or "scene"
+
+
+def write_plots(result: RunResult, folder: str | Path, stem: str | None = None) -> list[Path]:
+    """Write the run's plots into ``folder``; return the files written.
+
+    ``stem`` starts every file name (default: the scene's name, made safe by `safe_stem`).
+    """
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -40,7 +58,7 @@ def write_plots(result: RunResult, folder: str | Path) -> list[Path]:
     # The run streamed its frames; the plots draw the whole scene, so it is evaluated again.
     tracks = compute_tracks(scene)
     schedule = build_schedule(tracks, scene.rig, scene.radar, frame_rate_hz=scene.frame_rate_hz)
-    stem = scene.name
+    stem = safe_stem(stem if stem is not None else scene.name)
     names = tracks.names
     colors = plt.cm.tab10(np.arange(len(names)) % 10)
     written = []
@@ -132,4 +150,4 @@ def write_calibration_plot(result: Any, folder: str | Path, name: str) -> Path:
                xlabel="phase applied to FE b (deg)", ylabel="shift towards b (deg)")
     for ax in axes.ravel()[len(pairs):]:
         ax.axis("off")
-    return _save(fig, folder / f"{name}-calibration.png")
+    return _save(fig, folder / f"{safe_stem(name)}-calibration.png")

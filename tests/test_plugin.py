@@ -9,6 +9,10 @@ from pathlib import Path
 
 import pytest
 
+# pytester runs pytest in this process and drops the modules a run imported; numpy's and
+# scipy's extension modules cannot load twice, so the library is imported here, once.
+import rts_scenario.pipeline  # noqa: F401
+
 pytest_plugins = ["pytester"]
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -58,6 +62,39 @@ def test_failure_shows_the_report_and_worst_frames(pytester):
     result.assert_outcomes(failed=1)
     result.stdout.fnmatch_lines(["*FAIL: impossible*nothing to check*"])
     assert "Traceback" not in result.stdout.str()
+
+
+def test_failure_summary_starts_with_the_verdict_and_its_reasons(pytester):
+    text = scene("impossible").replace("[30, 0, 0.6]", "[30, 20, 0.6]")
+    pytester.makefile(".scenario.yaml", impossible=text)
+    result = pytester.runpytest()
+    lines = result.stdout.lines
+    verdict = next(i for i, line in enumerate(lines) if line.startswith("FAIL: impossible - "))
+    assert "nothing to check" in lines[verdict]
+    assert lines[verdict + 2].startswith("target ")  # then the table
+
+
+def test_bad_rts_output_stops_the_session_once(pytester):
+    for name in ("one", "two", "three"):
+        pytester.makefile(".scenario.yaml", **{name: scene(name)})
+    result = pytester.runpytest("--rts-output", "carrier-pigeon")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert text.count("unknown output 'carrier-pigeon'") == 1
+    assert "valid outputs: file, udp, simulated-radar" in text
+    assert "Traceback" not in text
+
+
+def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):
+    sub = pytester.mkdir("sub")
+    (sub / "data").mkdir()
+    (sub / "data" / "near.scenario.yaml").write_text(scene("near"))
+    (sub / "test_near.py").write_text(textwrap.dedent("""
+        def test_relative(rts_run):
+            assert rts_run("data/near.scenario.yaml").report.passed
+    """))
+    pytester.makeini("[pytest]\nrts_scenario_pattern = *.nothing\n")
+    pytester.runpytest().assert_outcomes(passed=1)
 
 
 def test_failing_detection_rate_lists_worst_frames(pytester):

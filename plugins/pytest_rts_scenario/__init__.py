@@ -47,10 +47,19 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the marks shipped scenes use."""
+    """Register the marks shipped scenes use; refuse a bad ``--rts-output`` once, up front."""
     for line in ("slow: a long scene", "hardware: needs a real RTS and radar",
                  "hard: a hard numerical or physical case"):
         config.addinivalue_line("markers", line)
+    spec = config.getoption("--rts-output")
+    if spec != "simulated-radar":  # the default needs no check (nor the library's import)
+        from rts_scenario.cli.common import check_output
+        from rts_scenario.errors import RtsError
+
+        try:
+            check_output("--rts-output", spec, run=True)
+        except RtsError as exc:
+            raise pytest.UsageError(str(exc)) from None
 
 
 def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> ScenarioFile | None:
@@ -155,7 +164,8 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
 def _render(result: RunResult) -> str:
     """Render the report table and the worst frames (misses first, then largest errors)."""
     report = result.report
-    lines = [report.table(), "", "worst frames (error / tolerance):",
+    lines = [f"FAIL: {report.scene} - {'; '.join(report.reasons)}", "", report.table(), "",
+             "worst frames (error / tolerance):",
              f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
              f"{'el':>8}"]
     for row in report.worst_frames:
@@ -168,10 +178,18 @@ def _render(result: RunResult) -> str:
 
 @pytest.fixture
 def rts_run(request: pytest.FixtureRequest) -> Callable[..., RunResult]:
-    """Run a scene (path or loaded `Scenario`) end to end; keyword options as `RunOptions`."""
+    """Run a scene (path or loaded `Scenario`) end to end; keyword options as `RunOptions`.
+
+    A relative path that does not exist from the current folder is taken relative to the
+    calling test file's folder.
+    """
     def run(scene: Any, **options: Any) -> RunResult:
         from rts_scenario.pipeline import run_scene
 
+        if isinstance(scene, str | Path) and not Path(scene).is_absolute():
+            beside_test = request.path.parent / scene
+            if not Path(scene).exists() and beside_test.exists():
+                scene = beside_test
         return run_scene(scene, _options(request.config, **options))
 
     return run

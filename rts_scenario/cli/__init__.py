@@ -3,8 +3,8 @@
 Each subcommand module has ``add_parser(subparsers)`` and a ``_do_<name>(args)`` handler that
 imports the library only when it runs, so ``rts-scenario --help`` stays fast.
 
-Exit codes: 0 success, 1 a check failed, 2 bad input. Errors print ``error: ...`` without a
-traceback unless ``--debug`` is given.
+Exit codes: 0 success, 1 a check failed, 2 bad input (arguments or files), 3 runtime error.
+Errors print one ``error: ...`` line without a traceback unless ``--debug`` is given.
 """
 
 from __future__ import annotations
@@ -13,12 +13,13 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from .. import __version__
 from ..errors import RtsError
-from . import bench, calibrate, list_outputs, run, schedule, validate
-from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK
+from . import bench, calibrate, list_outputs, list_scenes, listen, run, schedule, validate
+from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK, EXIT_RUNTIME_ERROR, one_line
 
 # In the order `--help` lists them.
-_SUBCOMMANDS = (bench, validate, run, schedule, calibrate, list_outputs)
+_SUBCOMMANDS = (bench, validate, run, schedule, calibrate, list_scenes, list_outputs, listen)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -26,15 +27,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rts-scenario",
         description="Replay traffic scenes on a radar target simulator with 2-D angle of arrival.",
+        epilog="Exit codes: 0 pass, 1 a check failed, 2 bad input (arguments or files), "
+               "3 runtime error.",
     )
+    parser.add_argument("--version", action="version", version=f"rts-scenario {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    # `--debug` also after the subcommand; SUPPRESS keeps the top-level value when absent there.
+    debug = argparse.ArgumentParser(add_help=False)
+    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="show tracebacks on errors")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in _SUBCOMMANDS:
-        module.add_parser(subparsers)
+        module.add_parser(subparsers, [debug])
     return parser
 
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_FAIL", "EXIT_OK", "build_parser", "main"]
+__all__ = ["EXIT_BAD_INPUT", "EXIT_FAIL", "EXIT_OK", "EXIT_RUNTIME_ERROR", "build_parser",
+           "main"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -47,11 +56,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RtsError as exc:
         if args.debug:
             raise
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return EXIT_FAIL
+    except Exception as exc:
+        if args.debug:
+            raise
+        print(f"error: {type(exc).__name__}: {one_line(exc)} (a runtime error; --debug shows "
+              f"the traceback)", file=sys.stderr)
+        return EXIT_RUNTIME_ERROR
 
 
 if __name__ == "__main__":

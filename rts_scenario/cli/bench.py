@@ -6,19 +6,27 @@ import argparse
 from typing import Any
 
 from ..errors import RtsError
-from .common import EXIT_OK, writing
+from .common import EXIT_OK, check_number, check_writable_file, writing
+
+# One throughput run holds a few arrays of this many targets in memory (about 1 kB each).
+MAX_TARGETS = 10_000_000
+MAX_REPEATS = 100
 
 
 def _do_bench(args: argparse.Namespace) -> int:
     from .. import bench
+    from ..rig import preset_names
 
-    if args.targets < 1 or args.repeats < 1:
-        raise RtsError(
-            f"--targets and --repeats: must be >= 1, got {args.targets} and {args.repeats}"
-        )
-    if not 0.0 <= args.scene_s <= 86400.0:
-        raise RtsError(f"--scene-s: must be within 0..86400 s (0: no end-to-end run), "
-                       f"got {args.scene_s}")
+    if not 1 <= args.targets <= MAX_TARGETS:
+        raise RtsError(f"--targets: must be within 1..{MAX_TARGETS}, got {args.targets}")
+    if not 1 <= args.repeats <= MAX_REPEATS:
+        raise RtsError(f"--repeats: must be within 1..{MAX_REPEATS}, got {args.repeats}")
+    check_number("--scene-s", args.scene_s, low=0.0, high=86400.0)
+    if args.rig not in preset_names():
+        raise RtsError(f"unknown rig preset {args.rig!r}; valid presets: "
+                       f"{', '.join(preset_names())} (--rig)")
+    if args.json:
+        check_writable_file("--json", args.json)
     rows = bench.run(targets=args.targets, repeats=args.repeats, rig_name=args.rig)
     print(bench.format_table(rows))
     quantized = bench.quantization(rig_name=args.rig)
@@ -36,10 +44,10 @@ def _do_bench(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     """Add the ``bench`` subcommand."""
     parser = subparsers.add_parser(
-        "bench", help="speed against angle error of every solver method",
+        "bench", help="speed against angle error of every solver method", parents=parents,
         description="Table of solver methods x array presets: throughput (target-frames/s) and "
                     "angle error measured by an independent beamformer peak search.",
     )

@@ -5,13 +5,26 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import EXIT_OK, Progress, writing
+from .common import (
+    EXIT_OK,
+    Progress,
+    check_can_interface,
+    check_number,
+    check_output,
+    check_writable_file,
+    check_writable_folder,
+    preset_or_file,
+    writing,
+)
+
+MAX_INJECT_GAIN_DB = 20.0
 
 
 def _do_calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .. import calibration as cal
+    from ..errors import RtsError
     from ..pipeline import Pipeline, RunOptions
     from ..radar.profile import RadarProfile
     from ..radar.profile import preset_names as radar_presets
@@ -20,9 +33,23 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     from ..rig import preset_names as rig_presets
     from ..scenario.model import RadarOptions
 
-    rig = Rig.preset(args.rig) if args.rig in rig_presets() else Rig.from_file(args.rig)
-    radar = (RadarProfile.preset(args.radar) if args.radar in radar_presets()
-             else RadarProfile.from_file(args.radar))
+    check_number("--inject-phase-deg", args.inject_phase_deg, low=0.0, high=180.0)
+    check_number("--inject-gain-db", args.inject_gain_db, low=0.0, high=MAX_INJECT_GAIN_DB)
+    if args.seed < 0:
+        raise RtsError(f"--seed: must be >= 0, got {args.seed}")
+    check_output("--output", args.output, run=True)
+    check_can_interface("--can-interface", args.can_interface)
+    if args.write:
+        check_writable_file("--write", args.write)
+    if args.plot:
+        from ..plots import require_matplotlib
+
+        require_matplotlib()
+        check_writable_folder("--plot", args.plot)
+    rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
+                         ".rig.yaml")
+    radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
+                           RadarProfile.from_file, ".radar.yaml")
     rng = np.random.default_rng(args.seed)
     errors = ChannelErrors.random(rig.n_front_ends, rng, phase_deg=args.inject_phase_deg,
                                   gain_db=args.inject_gain_db)
@@ -75,10 +102,10 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     """Add the ``calibrate`` subcommand."""
     parser = subparsers.add_parser(
-        "calibrate", help="calibrate the phase and gain of the RTS channels",
+        "calibrate", help="calibrate the phase and gain of the RTS channels", parents=parents,
         description="Pairwise phase sweeps, then each pair at its coherence point, through the "
                     "output and the CAN checker; least squares over all pairs gives per-channel "
                     "phase and gain offsets. On the simulated radar, --inject-* adds random "
@@ -93,10 +120,12 @@ def add_parser(subparsers: Any) -> None:
     parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
     parser.add_argument("--noise", action="store_true", help="thermal noise (simulated)")
     parser.add_argument("--inject-phase-deg", type=float, default=0.0,
-                        help="simulated radar: random channel phase errors within +-this")
+                        help="simulated radar: random channel phase errors within +-this "
+                             "(0..180)")
     parser.add_argument("--inject-gain-db", type=float, default=0.0,
-                        help="simulated radar: random channel gain errors within +-this")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the injected errors")
+                        help="simulated radar: random channel gain errors within +-this "
+                             f"(0..{MAX_INJECT_GAIN_DB:g})")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the injected errors (>= 0)")
     parser.add_argument("--write", metavar="RIG_OUT", help="write the calibrated rig file")
     parser.add_argument("--plot", metavar="DIR", help="plot the sweeps (needs matplotlib)")
     parser.set_defaults(handler=_do_calibrate)

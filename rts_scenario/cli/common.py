@@ -1,17 +1,22 @@
-"""What the subcommands share: exit codes, the progress bar, errors of files named by options."""
+"""What the subcommands share: exit codes, the progress bar, checks of what options name."""
 
 from __future__ import annotations
 
+import math
+import os
 import sys
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from ..errors import RtsError
 
 EXIT_OK = 0
 EXIT_FAIL = 1
 EXIT_BAD_INPUT = 2
+EXIT_RUNTIME_ERROR = 3
 
 
 class Progress:
@@ -42,3 +47,149 @@ def writing(option: str, path: str | Path) -> Iterator[None]:
     except OSError as exc:
         reason = exc.strerror or str(exc)
         raise RtsError(f"{option} {path}: cannot write: {reason}") from exc
+
+
+def check_writable_file(option: str, path: str | Path) -> None:
+    """Fail now, before a long run, if the file ``option`` names could not be written later.
+
+    The probe opens the file for appending (and removes it again if it did not exist), so
+    read-only file systems and missing permissions are found whoever runs it.
+    """
+    target = Path(path)
+    if str(path) == "":
+        raise RtsError(f"{option}: needs a file path, got an empty one")
+    if target.is_dir():
+        raise RtsError(f"{option} {path}: cannot write: is a folder; give a file path")
+    parent = target.parent
+    if not parent.is_dir():
+        what = "is not a folder" if parent.exists() else "does not exist"
+        raise RtsError(f"{option} {path}: cannot write: folder {parent} {what}")
+    existed = target.exists()
+    with writing(option, path):
+        with open(target, "ab"):
+            pass
+        if not existed:
+            target.unlink()
+
+
+def check_writable_folder(option: str, path: str | Path) -> None:
+    """Fail now if the folder ``option`` names (created when missing) could not be written."""
+    if str(path) == "":
+        raise RtsError(f"{option}: needs a folder path, got an empty one")
+    folder = Path(path)
+    probe = folder
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        where = "" if probe == folder else f" ({probe} is a file)"
+        raise RtsError(f"{option} {path}: cannot write: not a folder{where}")
+    with writing(option, path):
+        if not os.access(probe, os.W_OK | os.X_OK):
+            raise PermissionError(13, "Permission denied")
+        with tempfile.TemporaryFile(dir=probe):
+            pass
+
+
+def check_number(option: str, value: float, *, low: float | None = None,
+                 high: float | None = None) -> None:
+    """Reject NaN, infinities and values outside ``low..high`` naming the option."""
+    allowed = ("a finite number" if low is None and high is None
+               else f"within {low:g}..{high:g}" if low is not None and high is not None
+               else f">= {low:g}" if low is not None else f"<= {high:g}")
+    if not math.isfinite(value) or (low is not None and value < low) or (
+            high is not None and value > high):
+        raise RtsError(f"{option}: must be {allowed}, got {value}")
+
+
+def check_output(option: str, spec: str, *, run: bool) -> None:
+    """Check an output spec before anything runs: a known name and a usable argument.
+
+    ``run`` says whether the output is opened by a run (which provides the rig and radar the
+    simulated radar needs) or on its own (``schedule``).
+    """
+    from ..outputs import available_outputs
+
+    name, argument = _split_spec(spec)
+    valid = available_outputs()
+    usage = "simulated-radar, udp://HOST:PORT, file:PATH (.npz or .csv)"
+    if not run:
+        usage = "udp://HOST:PORT, file:PATH (.npz or .csv)"
+    if name not in valid:
+        raise RtsError(f"{option} {spec!r}: unknown output {name!r}; valid outputs: "
+                       f"{', '.join(valid)} (as {usage})")
+    if name == "simulated-radar" and not run:
+        raise RtsError(f"{option} {spec}: the simulated radar needs a run (rts-scenario run); "
+                       f"a schedule goes to {usage}")
+    if name == "simulated-radar" and argument:
+        raise RtsError(f"{option} {spec!r}: simulated-radar takes no argument")
+    if name == "file":
+        if not argument:
+            raise RtsError(f"{option} {spec!r}: file needs a path: file:PATH (.npz or .csv)")
+        if Path(argument).suffix not in (".npz", ".csv"):
+            raise RtsError(f"{option} {spec}: unknown file format "
+                           f"{Path(argument).suffix or '(none)'!r}; valid: .npz, .csv")
+        check_writable_file(option, argument)
+    if name == "udp":
+        from ..outputs import open_output
+
+        try:
+            open_output(spec).close()  # parses HOST:PORT and opens (then closes) a socket
+        except RtsError as exc:
+            raise RtsError(f"{option} {one_line(exc)}") from None
+
+
+def named_file(option: str, load: Any, path: str) -> Any:
+    """``load(path)`` with the option named in its error (a file an option names)."""
+    try:
+        return load(path)
+    except RtsError as exc:
+        raise RtsError(f"{option} {one_line(exc)}") from None
+
+
+def preset_or_file(what: str, name: str, presets: list[str], preset: Any, from_file: Any,
+                   suffix: str) -> Any:
+    """Load a preset by name or a file by path; an unknown name lists both choices."""
+    if name in presets:
+        return preset(name)
+    if not Path(name).is_file():
+        raise RtsError(f"{what} {name!r}: unknown preset and no such file; valid presets: "
+                       f"{', '.join(presets)}, or a *{suffix} file")
+    return named_file(what, from_file, name)
+
+
+def _split_spec(spec: str) -> tuple[str, str]:
+    if spec.startswith("udp://"):
+        return "udp", spec[len("udp://"):]
+    name, _, argument = spec.partition(":")
+    return name, argument
+
+
+def check_can_interface(option: str, interface: str) -> None:
+    """Reject a python-can interface name python-can does not know."""
+    from can.interfaces import VALID_INTERFACES
+
+    if interface not in VALID_INTERFACES:
+        raise RtsError(f"{option} {interface!r}: unknown python-can interface; valid: "
+                       f"{', '.join(sorted(VALID_INTERFACES))}")
+
+
+def check_readable_file(option: str, path: str) -> None:
+    """Reject a path that is not a readable file."""
+    if not Path(path).is_file():
+        what = "is a folder" if Path(path).is_dir() else "file not found"
+        raise RtsError(f"{option} {path}: {what}")
+
+
+def one_line(exc: BaseException) -> str:
+    """Return an exception's message on one line (the CLI prints one ``error:`` line)."""
+    return " ".join(part.strip() for part in str(exc).splitlines() if part.strip()) or repr(exc)
+
+
+def located(path: str, exc: BaseException) -> str:
+    """Return the error's message, starting with the scene file when the error does not name it."""
+    from ..errors import ScenarioError
+
+    message = one_line(exc)
+    if isinstance(exc, ScenarioError) and exc.file is not None:
+        return message
+    return f"{path}: {message}"

@@ -16,7 +16,8 @@ def _do_list_outputs(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     """Add the ``list-outputs`` subcommand."""
-    parser = subparsers.add_parser("list-outputs", help="list the available outputs")
+    parser = subparsers.add_parser("list-outputs", help="list the available outputs",
+                                   parents=parents)
     parser.set_defaults(handler=_do_list_outputs)

@@ -3,53 +3,143 @@
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 from typing import Any
 
-from .common import EXIT_FAIL, EXIT_OK, Progress, writing
+from .common import (
+    EXIT_BAD_INPUT,
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_RUNTIME_ERROR,
+    Progress,
+    check_can_interface,
+    check_output,
+    check_writable_file,
+    check_writable_folder,
+    located,
+    named_file,
+    one_line,
+    writing,
+)
 
 
 def _do_run(args: argparse.Namespace) -> int:
     import json
-    from pathlib import Path
 
+    from ..canbus.mapping import CanMapping
+    from ..errors import RtsError, ScenarioError
     from ..pipeline import RunOptions, run_scene
+    from ..plots import safe_stem
+    from ..scenario import SCENE_SUFFIX, load_scenario
+    from ..schedule import ScheduleError
+
+    # Everything the options name is checked before the first scene runs, not after it.
+    check_output("--output", args.output, run=True)
+    check_can_interface("--can-interface", args.can_interface)
+    if args.mapping:
+        named_file("--mapping", CanMapping.from_file, args.mapping)
+    if args.json:
+        check_writable_file("--json", args.json)
+    if args.plot:
+        from ..plots import require_matplotlib
+
+        require_matplotlib()
+        check_writable_folder("--plot", args.plot)
 
     options = RunOptions(output=args.output, can_interface=args.can_interface,
                          can_channel=args.can_channel, can_fd=args.can_fd,
                          mapping=args.mapping, method=args.method, record=bool(args.plot))
-    reports = []
+    entries: list[dict[str, Any]] = []
+    stems: set[str] = set()
+    bad_input = runtime_error = False
+
+    def failed(scene: str, path: str, exc: BaseException) -> None:
+        message = located(path, exc)
+        if not isinstance(exc, RtsError):
+            message = (f"{path}: {type(exc).__name__}: {one_line(exc)} (a runtime error; "
+                       f"--debug shows where)")
+        print(f"error: {message}", file=sys.stderr)
+        entries.append({"scene": scene, "file": path, "status": "error", "error": message})
+
     for path in args.scenes:
-        result = run_scene(path, options, progress=Progress(Path(path).name))
-        report = result.report
-        reports.append(report.to_dict())
-        print(report.table())
-        print("timing: " + ", ".join(
-            f"{k.removesuffix('_s')} {v * 1e3:.0f} ms"
-            + (f" ({report.solver_plan})" if k == "plan_s" else "")
-            for k, v in report.timing.items()))
-        if args.plot:
-            from ..plots import write_plots
+        try:
+            scene = load_scenario(path)
+        except Exception as exc:
+            if args.debug:
+                raise
+            failed(Path(path).name.removesuffix(SCENE_SUFFIX), path, exc)
+            # A file that does not load is bad input; anything else is a runtime error.
+            bad_input = bad_input or isinstance(exc, RtsError)
+            runtime_error = runtime_error or not isinstance(exc, RtsError)
+            continue
+        try:
+            result = run_scene(scene, options, progress=Progress(Path(path).name))
+            report = result.report
+            print(report.table())
+            print("timing: " + ", ".join(
+                f"{k.removesuffix('_s')} {v * 1e3:.0f} ms"
+                + (f" ({report.solver_plan})" if k == "plan_s" else "")
+                for k, v in report.timing.items()))
+            if args.plot:
+                from ..plots import write_plots
 
-            with writing("--plot", args.plot):
-                written_plots = write_plots(result, args.plot)
-            for written in written_plots:
-                print(f"wrote {written}")
-        print()
+                stem = _unique(safe_stem(scene.name), stems)
+                with writing("--plot", args.plot):
+                    written_plots = write_plots(result, args.plot, stem)
+                for written in written_plots:
+                    print(f"wrote {written}")
+        except Exception as exc:
+            if args.debug:
+                raise
+            failed(scene.name, path, exc)
+            # The scene loaded but its schedule cannot be built (e.g. the rig's update rate):
+            # still the scene's fault, not the run's.
+            if isinstance(exc, ScenarioError | ScheduleError):
+                bad_input = True
+            else:
+                runtime_error = True
+            continue
+        finally:
+            print()
+        entries.append({"file": path, "status": "pass" if report.passed else "fail",
+                        **report.to_dict()})
+
+    if len(args.scenes) > 1:
+        for entry in entries:
+            line = f"{entry['status'].upper()} {entry['scene']} ({entry['file']})"
+            print(line + (f": {entry['error']}" if entry["status"] == "error" else ""))
     if args.json:
-        payload = reports[0] if len(reports) == 1 else reports
+        payload = entries[0] if len(entries) == 1 else entries
         with writing("--json", args.json):
-            Path(args.json).write_text(json.dumps(payload, indent=2) + "\n")
+            Path(args.json).write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
-    return EXIT_OK if all(r["passed"] for r in reports) else EXIT_FAIL
+    if runtime_error:
+        return EXIT_RUNTIME_ERROR
+    if bad_input:
+        return EXIT_BAD_INPUT
+    return EXIT_OK if all(e["status"] == "pass" for e in entries) else EXIT_FAIL
 
 
-def add_parser(subparsers: Any) -> None:
+def _unique(stem: str, taken: set[str]) -> str:
+    """``stem``, or ``stem-2``, ``stem-3``, ... if a scene of this run already used it."""
+    candidate, n = stem, 1
+    while candidate in taken:
+        n += 1
+        candidate = f"{stem}-{n}"
+    taken.add(candidate)
+    return candidate
+
+
+def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     """Add the ``run`` subcommand."""
     parser = subparsers.add_parser(
-        "run", help="run scenes end to end and check the radar",
+        "run", help="run scenes end to end and check the radar", parents=parents,
         description="Load each scene, build its schedule, play it (by default on the built-in "
-                    "simulated radar), read the detections over CAN and check them. Exit 0 if "
-                    "every scene passes, 1 if one fails, 2 on bad input.",
+                    "simulated radar), read the detections over CAN and check them. Every scene "
+                    "runs even if another errs. Exit 0 if every scene passes, 1 if one fails, 2 "
+                    "on bad input (arguments, a scene that does not load), 3 on a runtime "
+                    "error.",
     )
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="*.scenario.yaml files")
     parser.add_argument("--output", default="simulated-radar",

@@ -39,6 +39,10 @@ from .trajectory import Path as TrajectoryPath
 
 SCENE_SUFFIX = ".scenario.yaml"
 
+# What a run can stream and check in reasonable time and memory (a 24 h scene at 20 Hz with 28
+# targets); the schema states it on duration_s and frame_rate_hz.
+MAX_TARGET_FRAMES = 50_000_000
+
 
 @lru_cache(maxsize=1)
 def scenario_schema() -> dict[str, Any]:
@@ -70,6 +74,10 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         raise doc.error((), f"a scene must be a mapping of keys, got {type(doc.data).__name__}")
     for dotted, value in (overrides or {}).items():
         _override(doc, dotted, value)
+    effects_spec = doc.data.get("effects")
+    if isinstance(effects_spec, dict) and "measurement_noise" in effects_spec:
+        raise doc.error(("effects", "measurement_noise"),
+                        "not supported; the simulated radar's noise comes from radar.noise")
     validate(doc, scenario_schema())
     data = doc.data
     root = path.resolve().parent
@@ -89,10 +97,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                              ".radar.yaml")
     rig = _load_referenced(doc, ("rig",), root, data["rig"], rig_presets(), Rig.preset,
                            Rig.from_file, ".rig.yaml")
-    effects = Effects(
-        rcs_fluctuation=data.get("effects", {}).get("rcs_fluctuation", "none"),
-        measurement_noise=dict(data.get("effects", {}).get("measurement_noise", {})),
-    )
+    effects = Effects(rcs_fluctuation=data.get("effects", {}).get("rcs_fluctuation", "none"))
     ego_spec = data.get("ego", {"motion": {"type": "stationary", "position_m": [0, 0, 0]}})
     ego = _trajectory(doc, ("ego",), ego_spec)
 
@@ -110,6 +115,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         seen[spec["name"]] = (source, key)
         targets.append(_target(source, key, spec, effects.rcs_fluctuation))
 
+    _check_size(doc, float(data["duration_s"]), float(data["frame_rate_hz"]), len(targets))
     expect = data.get("expectations", {})
     return Scenario(
         name=data["name"], description=data.get("description", ""), file=str(path),
@@ -130,6 +136,18 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         radar_options=RadarOptions(**{k: v for k, v in data["radar"].items()
                                       if k in ("fidelity", "estimator", "cfar", "noise")}),
     )
+
+
+def _check_size(doc: Document, duration_s: float, frame_rate_hz: float, n_targets: int) -> None:
+    """Refuse scenes with more target-frames than a run can stream (`MAX_TARGET_FRAMES`)."""
+    n_frames = max(1, int(round(duration_s * frame_rate_hz)))
+    if n_frames * max(1, n_targets) > MAX_TARGET_FRAMES:
+        raise doc.error(
+            ("duration_s",),
+            f"duration_s x frame_rate_hz = {duration_s:g} s x {frame_rate_hz:g} Hz = {n_frames:,} "
+            f"frames x {n_targets} targets = {n_frames * max(1, n_targets):,} target-frames; "
+            f"the limit is {MAX_TARGET_FRAMES:,} (shorten duration_s or lower frame_rate_hz)",
+        )
 
 
 def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:

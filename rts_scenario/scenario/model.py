@@ -124,7 +124,6 @@ class Effects:
     """Optional effects; each costs nothing when absent."""
 
     rcs_fluctuation: str = "none"
-    measurement_noise: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)

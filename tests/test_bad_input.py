@@ -1,0 +1,522 @@
+"""Acceptance test: no input ends in a traceback.
+
+A catalogue of bad scene files and bad command lines. Each ends in exactly one ``error:`` line
+that names the file, line and key (YAML) or the argument, and what is allowed, with the
+documented exit code; a hypothesis test throws random argument lists at the CLI.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import rts_scenario.cli as cli
+
+ROOT = Path(__file__).resolve().parents[1]
+
+TINY = """\
+rts_scenario: 1
+name: tiny
+duration_s: 0.5
+frame_rate_hz: 10.0
+radar:
+  profile: awr1843boost
+  mount: {x_m: 3.7, z_m: 0.5}
+rig: wide-3x5
+ego:
+  motion: {type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}
+targets:
+  - name: car
+    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}
+    rcs: {rcs_dbsm: 10.0}
+"""
+
+
+def alias_bomb() -> str:
+    """A "billion laughs" document of about 2 kB: 10^31 nodes once its aliases are expanded."""
+    lines = ['l0: &l0 ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for i in range(1, 31):
+        lines.append(f"l{i}: &l{i} [" + ", ".join([f"*l{i - 1}"] * 10) + "]")
+    return "\n".join(lines) + "\n"
+
+
+def sub(old: str, new: str) -> str:
+    assert old in TINY, old
+    return TINY.replace(old, new)
+
+
+TARGET = "  - name: car\n"
+MOTION = "    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}\n"
+
+# (id, scene text (or bytes), regex of the message after "error: "; {f} is the scene's path)
+SCENE_CASES: list[tuple[str, str | bytes, str]] = [
+    ("alias-bomb", alias_bomb(),
+     r"^{f}:\d+:\d+: document expands to more than 1,000,000 YAML nodes"),
+    ("recursive-alias", TINY + "description: &d [*d]\n", r"^{f}:15:\d+: alias \*d refers to"),
+    ("deep-nesting", TINY + "description: " + "[" * 100 + "]" * 100 + "\n",
+     r"^{f}:15:\d+: nesting deeper than the limit of 64 levels"),
+    ("too-many-nodes", TINY + "marks: [" + ", ".join(["a"] * 1_000_100) + "]\n",
+     r"^{f}:15:\d+: document expands to more than 1,000,000 YAML nodes"),
+    ("document-too-large", TINY + "description: " + "x" * (4 * 1024 * 1024) + "\n",
+     r"^{f}: document larger than the limit of 4 MB"),
+    ("invalid-yaml", TINY + "description: [unclosed\n", r"^{f}:\d+:\d+: invalid YAML"),
+    ("tab-indent", sub("  profile: awr1843boost", "\tprofile: awr1843boost"),
+     r"^{f}:\d+:\d+: invalid YAML"),
+    ("duplicate-key", TINY + "name: again\n", r"^{f}:15:1: name: duplicate key"),
+    ("non-string-key", TINY + "1: one\n", r"^{f}:\d+:\d+: keys must be strings"),
+    ("python-tag", TINY + "description: !!python/object:os.system x\n",
+     r"^{f}:15:\d+: .*(tag|constructor)"),
+    ("custom-tag", TINY + "seed: !custom 3\n", r"^{f}:\d+:\d+: .*tag"),
+    ("top-level-list", "- 1\n- 2\n", r"^{f}:1:1: a scene must be a mapping of keys, got list"),
+    ("empty-file", "", r"^{f}: a scene must be a mapping of keys, got NoneType"),
+    ("not-utf8", b"name: \xff\xfe\n", r"^{f}: not UTF-8 text"),
+    ("missing-name", sub("name: tiny\n", ""), r"^{f}.*'name' is required but missing"),
+    ("unknown-key", TINY + "colour: red\n", r"^{f}:15:1: colour: unknown key 'colour'; allowed"),
+    ("version-2", sub("rts_scenario: 1", "rts_scenario: 2"),
+     r"^{f}:1:1: rts_scenario: got 2; allowed values: 1"),
+    ("duration-string", sub("duration_s: 0.5", "duration_s: ten"),
+     r"^{f}:3:1: duration_s: must be of type number, got 'ten'"),
+    ("duration-negative", sub("duration_s: 0.5", "duration_s: -1"),
+     r"^{f}:3:1: duration_s: must be > 0, got -1"),
+    ("duration-nan", sub("duration_s: 0.5", "duration_s: .nan"),
+     r"^{f}:3:1: duration_s: must be a finite number, got nan"),
+    ("duration-too-long", sub("duration_s: 0.5", "duration_s: 100000"),
+     r"^{f}:3:1: duration_s: must be <= 86400"),
+    ("frame-rate-inf", sub("frame_rate_hz: 10.0", "frame_rate_hz: .inf"),
+     r"^{f}:4:1: frame_rate_hz: must be a finite number, got inf"),
+    ("frame-rate-above-schema", sub("frame_rate_hz: 10.0", "frame_rate_hz: 5000"),
+     r"^{f}:4:1: frame_rate_hz: must be <= 1000"),
+    ("frame-rate-above-rig", sub("frame_rate_hz: 10.0", "frame_rate_hz: 500"),
+     r"^{f}: frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most"),
+    ("target-frames-too-many", sub("duration_s: 0.5", "duration_s: 86400").replace(
+        "frame_rate_hz: 10.0", "frame_rate_hz: 1000"),
+     r"^{f}:3:1: duration_s: duration_s x frame_rate_hz = .* the limit is 50,000,000"),
+    ("measurement-noise", TINY + "effects:\n  measurement_noise: {range_m: 0.05}\n",
+     r"^{f}:16:3: effects.measurement_noise: not supported; the simulated radar's noise comes "
+     r"from radar.noise"),
+    ("unknown-rig", sub("rig: wide-3x5", "rig: wide-9x9"),
+     r"^{f}:8:1: rig: unknown preset 'wide-9x9'; valid presets: .*wide-3x5"),
+    ("unknown-radar", sub("profile: awr1843boost", "profile: awr9999"),
+     r"^{f}:6:3: radar.profile: unknown preset 'awr9999'; valid presets"),
+    ("rig-outside-tree", sub("rig: wide-3x5", "rig: ../elsewhere.rig.yaml"),
+     r"^{f}:8:1: rig: '../elsewhere.rig.yaml' leaves the scene's folder tree"),
+    ("absolute-include", TINY + "include: [/etc/passwd]\n",
+     r"^{f}:15:\d+: include\[0\]: must be a path relative to the scene's folder"),
+    ("missing-include", TINY + "include: [nothing.yaml]\n",
+     r"^{f}:15:\d+: include\[0\]: file not found: 'nothing.yaml'"),
+    ("target-without-motion", sub(MOTION, ""),
+     r"^{f}:12:\d+: targets\[0\].*'motion' is required but missing"),
+    ("bad-target-name", sub("name: car", "name: my car"),
+     r"^{f}:12:\d+: targets\[0\].name: .*does not match"),
+    ("duplicate-target", TINY + TARGET.replace("targets", "") + MOTION
+     + "    rcs: {rcs_dbsm: 10.0}\n",
+     r"^{f}:15:\d+: targets\[1\].name: duplicate target name 'car'"),
+    ("unknown-motion", sub("type: constant_velocity, position_m: [30",
+                           "type: teleport, position_m: [30"),
+     r"^{f}:13:\d+: targets\[0\].motion"),
+    ("position-wrong-length", sub("position_m: [30, 0, 0.6]", "position_m: [30, 0]"),
+     r"^{f}:13:\d+: targets\[0\].motion.*(position_m|items)"),
+    ("speed-profile-not-increasing", sub(
+        MOTION, "    motion: {type: speed_profile, position_m: [30, 0, 0.6], profile: "
+                "[{t_s: 1, speed_mps: 1}, {t_s: 1, speed_mps: 2}]}\n"),
+     r"^{f}:13:\d+: targets\[0\].motion.profile\[1\].t_s: times must increase"),
+    ("repeated-waypoint", sub(
+        MOTION, "    motion: {type: waypoints, points: [{position_m: [30, 0, 0], speed_mps: 1}, "
+                "{position_m: [30, 0, 0], speed_mps: 1}]}\n"),
+     r"^{f}:13:\d+: targets\[0\].motion.points\[1\].position_m: repeats waypoint 0"),
+    ("disappear-before-appear", TINY + "    appear_s: 2\n    disappear_s: 1\n",
+     r"^{f}:16:5: targets\[0\].disappear_s: must be later than appear_s = 2, got 1"),
+    ("rcs-table-mismatch", sub("rcs: {rcs_dbsm: 10.0}",
+                               "rcs: {aspect_deg: [0, 90], rcs_dbsm: [1, 2, 3]}"),
+     r"^{f}:14:\d+: targets\[0\].rcs.rcs_dbsm: needs one value per aspect_deg entry"),
+    ("detection-rate-2", TINY + "expectations: {detection_rate: 2}\n",
+     r"^{f}:15:\d+: expectations.detection_rate: must be <= 1, got 2"),
+    ("tolerance-zero", TINY + "expectations: {tolerances: {az_deg: 0}}\n",
+     r"^{f}:15:\d+: expectations.tolerances.az_deg: must be > 0, got 0"),
+    ("seed-negative", TINY + "seed: -4\n", r"^{f}:15:1: seed: must be >= 0, got -4"),
+    ("bad-mark", TINY + "marks: [not a mark]\n", r"^{f}:15:\d+: marks\[0\]: .*does not match"),
+    ("parametrize-bad-path", TINY + "parametrize: {radar.nothing.here: [1, 2]}\n",
+     r"^{f}:15:1: parametrize: radar.nothing.here: no such key path in the scene"),
+    ("parametrize-combination-fails", TINY + "parametrize: {frame_rate_hz: [10, 400]}\n",
+     r"^{f}: frame_rate_hz: the scene runs at 400 Hz .*\[frame_rate_hz=400\]$"),
+]
+
+
+def one_error(err: str) -> str:
+    """The message of the only ``error:`` line in ``err`` (argparse's lines included)."""
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if re.search(r"(^|: )error: ", line)]
+    assert len(lines) == 1, err
+    return lines[0].split("error: ", 1)[1]
+
+
+def call(argv: list[str]) -> int:
+    """Run the CLI in-process; argparse's usage errors come back as their exit code."""
+    try:
+        return cli.main(argv)
+    except SystemExit as exc:
+        assert exc.code == 2, exc.code  # only argparse exits, and only with 2
+        return 2
+
+
+@pytest.mark.parametrize(("text", "pattern"), [c[1:] for c in SCENE_CASES],
+                         ids=[c[0] for c in SCENE_CASES])
+def test_bad_scene_is_one_located_error_line(tmp_path, capsys, text, pattern):
+    path = tmp_path / "bad.scenario.yaml"
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    assert call(["validate", str(path)]) == 2
+    message = one_error(capsys.readouterr().err)
+    assert re.search(pattern.replace("{f}", re.escape(str(path))), message), message
+
+
+@pytest.fixture
+def places(tmp_path):
+    """A good tiny scene, a folder, a plain file and a missing folder to point options at."""
+    scene = tmp_path / "tiny.scenario.yaml"
+    scene.write_text(TINY)
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    return {"scene": str(scene), "dir": str(folder), "file": str(plain),
+            "missing": str(tmp_path / "missing" / "out.json"), "tmp": str(tmp_path)}
+
+
+# (id, argv ({scene}, {dir}, {file}, {missing}, {tmp} filled in), exit code, message regex)
+CLI_CASES: list[tuple[str, list[str], int, str]] = [
+    ("run-json-folder", ["run", "{scene}", "--json", "{dir}"], 2,
+     r"^--json {dir}: cannot write: is a folder"),
+    ("run-json-under-file", ["run", "{scene}", "--json", "{file}/r.json"], 2,
+     r"^--json {file}/r.json: cannot write: folder {file} is not a folder"),
+    ("run-json-missing-folder", ["run", "{scene}", "--json", "{missing}"], 2,
+     r"^--json {missing}: cannot write: folder .* does not exist"),
+    ("run-plot-on-file", ["run", "{scene}", "--plot", "{file}"], 2,
+     r"^--plot (needs matplotlib|{file}: cannot write: not a folder)"),
+    ("run-output-unknown", ["run", "{scene}", "--output", "carrier-pigeon"], 2,
+     r"^--output 'carrier-pigeon': unknown output 'carrier-pigeon'; valid outputs: .*udp"),
+    ("run-output-file-empty", ["run", "{scene}", "--output", "file:"], 2,
+     r"^--output 'file:': file needs a path"),
+    ("run-output-udp-no-port", ["run", "{scene}", "--output", "udp://localhost"], 2,
+     r"^--output udp://localhost: expected udp://HOST:PORT"),
+    ("run-output-simulated-radar-argument", ["run", "{scene}", "--output", "simulated-radar:x"],
+     2, r"^--output 'simulated-radar:x': simulated-radar takes no argument"),
+    ("run-can-interface", ["run", "{scene}", "--can-interface", "carrier-pigeon"], 2,
+     r"^--can-interface 'carrier-pigeon': unknown python-can interface; valid: .*virtual"),
+    ("run-mapping-missing", ["run", "{scene}", "--mapping", "{tmp}/none.mapping.yaml"], 2,
+     r"^--mapping {tmp}/none.mapping.yaml: cannot read file"),
+    ("run-missing-scene", ["run", "{tmp}/none.scenario.yaml"], 2,
+     r"^{tmp}/none.scenario.yaml: cannot read file"),
+    ("run-scene-is-folder", ["run", "{dir}"], 2, r"^{dir}: cannot read file"),
+    ("run-method", ["run", "{scene}", "--method", "guess"], 2, r"argument --method"),
+    ("run-no-scene", ["run"], 2, r"the following arguments are required: SCENE"),
+    ("schedule-simulated-radar", ["schedule", "{scene}", "--output", "simulated-radar"], 2,
+     r"^--output simulated-radar: the simulated radar needs a run"),
+    ("schedule-file-empty", ["schedule", "{scene}", "--output", "file:"], 2,
+     r"^--output 'file:': file needs a path: file:PATH \(.npz or .csv\)"),
+    ("schedule-file-format", ["schedule", "{scene}", "--output", "file:{tmp}/s.txt"], 2,
+     r"^--output file:{tmp}/s.txt: unknown file format '.txt'; valid: .npz, .csv"),
+    ("schedule-file-folder", ["schedule", "{scene}", "--output", "file:{dir}/"], 2,
+     r"^--output file:{dir}/: unknown file format"),
+    ("schedule-file-missing-folder", ["schedule", "{scene}", "--output",
+                                      "file:{tmp}/missing/s.npz"], 2,
+     r"^--output {tmp}/missing/s.npz: cannot write: folder .* does not exist"),
+    ("schedule-no-output", ["schedule", "{scene}"], 2, r"required: --output"),
+    ("schedule-bad-scene", ["schedule", "{file}", "--output", "file:{tmp}/s.npz"], 2,
+     r"^{file}:1:1: a scene must be a mapping of keys, got str"),
+    ("calibrate-gain-nan", ["calibrate", "kit-table1", "--inject-gain-db", "nan"], 2,
+     r"^--inject-gain-db: must be within 0..20, got nan"),
+    ("calibrate-gain-negative", ["calibrate", "kit-table1", "--inject-gain-db", "-1"], 2,
+     r"^--inject-gain-db: must be within 0..20, got -1"),
+    ("calibrate-phase-negative", ["calibrate", "kit-table1", "--inject-phase-deg", "-5"], 2,
+     r"^--inject-phase-deg: must be within 0..180, got -5"),
+    ("calibrate-phase-inf", ["calibrate", "kit-table1", "--inject-phase-deg", "inf"], 2,
+     r"^--inject-phase-deg: must be within 0..180, got inf"),
+    ("calibrate-seed-negative", ["calibrate", "kit-table1", "--seed", "-1"], 2,
+     r"^--seed: must be >= 0, got -1"),
+    ("calibrate-write-folder", ["calibrate", "kit-table1", "--write", "{dir}"], 2,
+     r"^--write {dir}: cannot write: is a folder"),
+    ("calibrate-write-missing-folder", ["calibrate", "kit-table1", "--write", "{missing}"], 2,
+     r"^--write {missing}: cannot write: folder .* does not exist"),
+    ("calibrate-plot-file", ["calibrate", "kit-table1", "--plot", "{file}"], 2,
+     r"^--plot (needs matplotlib|{file}: cannot write: not a folder)"),
+    ("calibrate-unknown-rig", ["calibrate", "kit-table9"], 2,
+     r"^RIG 'kit-table9': unknown preset and no such file; valid presets: .*kit-table1"),
+    ("calibrate-rig-not-a-rig", ["calibrate", "{file}"], 2, r"^RIG {file}"),
+    ("calibrate-unknown-radar", ["calibrate", "kit-table1", "--radar", "x"], 2,
+     r"^--radar 'x': unknown preset and no such file; valid presets: .*paper"),
+    ("calibrate-output", ["calibrate", "kit-table1", "--output", "nowhere"], 2,
+     r"^--output 'nowhere': unknown output 'nowhere'"),
+    ("calibrate-fidelity", ["calibrate", "kit-table1", "--fidelity", "best"], 2,
+     r"argument --fidelity"),
+    ("bench-json-folder", ["bench", "--targets", "10", "--scene-s", "0", "--json", "{dir}"], 2,
+     r"^--json {dir}: cannot write: is a folder"),
+    ("bench-json-under-file", ["bench", "--targets", "10", "--scene-s", "0", "--json",
+                               "{file}/b.json"], 2, r"^--json {file}/b.json: cannot write"),
+    ("bench-targets-zero", ["bench", "--targets", "0"], 2,
+     r"^--targets: must be within 1..10000000, got 0"),
+    ("bench-targets-huge", ["bench", "--targets", "100000000000"], 2,
+     r"^--targets: must be within 1..10000000"),
+    ("bench-repeats", ["bench", "--repeats", "0"], 2, r"^--repeats: must be within 1..100"),
+    ("bench-scene-nan", ["bench", "--scene-s", "nan"], 2, r"^--scene-s: must be within 0..86400"),
+    ("bench-scene-negative", ["bench", "--scene-s", "-3"], 2, r"^--scene-s: must be within"),
+    ("bench-rig", ["bench", "--rig", "nope"], 2, r"^unknown rig preset 'nope'; valid presets"),
+    ("bench-targets-text", ["bench", "--targets", "many"], 2, r"argument --targets"),
+    ("listen-scheme", ["rts-listen", "tcp://127.0.0.1:5005"], 2,
+     r"^ADDRESS 'tcp://127.0.0.1:5005': expected udp://HOST:PORT"),
+    ("listen-port", ["rts-listen", "udp://127.0.0.1:70000"], 2,
+     r"^ADDRESS 'udp://127.0.0.1:70000': expected udp://HOST:PORT with a port 0..65535"),
+    ("listen-count", ["rts-listen", "udp://127.0.0.1:0", "--count", "0"], 2,
+     r"^--count: must be >= 1, got 0"),
+    ("listen-seconds", ["rts-listen", "udp://127.0.0.1:0", "--seconds", "nan"], 2,
+     r"^--seconds: must be within"),
+    ("listen-host", ["rts-listen", "udp://no.such.host.invalid:5005", "--seconds", "0.1"], 2,
+     r"^udp://no.such.host.invalid:5005: cannot listen"),
+    ("validate-missing", ["validate", "{tmp}/none.scenario.yaml"], 2,
+     r"^{tmp}/none.scenario.yaml: cannot read file"),
+    ("validate-dev-zero", ["validate", "/dev/zero"], 2,
+     r"^/dev/zero: document larger than the limit of 4 MB"),
+    ("unknown-command", ["fly"], 2, r"invalid choice: 'fly'"),
+]
+
+
+@pytest.mark.parametrize(("argv", "code", "pattern"), [c[1:] for c in CLI_CASES],
+                         ids=[c[0] for c in CLI_CASES])
+def test_bad_arguments_are_one_error_line(places, capsys, argv, code, pattern):
+    argv = [a.format(**places) for a in argv]
+    assert call(argv) == code
+    out, err = capsys.readouterr()
+    message = one_error(err)
+    expected = pattern
+    for key, value in places.items():
+        expected = expected.replace("{" + key + "}", re.escape(value))
+    assert re.search(expected, message), message
+    assert "timing:" not in out  # checked before anything ran
+
+
+def test_catalogue_is_complete():
+    assert len(SCENE_CASES) + len(CLI_CASES) >= 50
+
+
+def test_alias_bomb_fails_fast_in_little_memory(tmp_path):
+    path = tmp_path / "bomb.scenario.yaml"
+    path.write_text(alias_bomb())
+    assert 1500 < path.stat().st_size < 2500
+    code = textwrap.dedent(f"""
+        import resource, time
+        from rts_scenario.errors import ScenarioError
+        from rts_scenario.scenario import load_scenario
+        start = time.perf_counter()
+        try:
+            load_scenario({str(path)!r})
+        except ScenarioError as exc:
+            message = str(exc)
+        print(time.perf_counter() - start)
+        print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+        print(message)
+    """)
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            check=True, env={**os.environ, "PYTHONPATH": os.pathsep.join(
+                                [str(ROOT), os.environ.get("PYTHONPATH", "")])})
+    seconds, max_rss_kb, message = result.stdout.strip().split("\n")
+    assert float(seconds) < 1.0
+    assert int(max_rss_kb) < 200 * 1024  # the whole interpreter, libraries included
+    assert re.match(re.escape(str(path)) + r":\d+:\d+: document expands", message)
+
+
+def test_validate_builds_every_combination_and_strict_turns_warnings_into_errors(tmp_path,
+                                                                                capsys):
+    path = tmp_path / "edge.scenario.yaml"
+    # A second target far to the side: out of the rig's coverage in every frame.
+    path.write_text(TINY + "  - name: aside\n"
+                    "    motion: {type: stationary, position_m: [30, 40, 0.6]}\n"
+                    "    rcs: {rcs_dbsm: 10.0}\n"
+                    "parametrize: {radar.estimator: [bartlett, ti]}\n")
+    assert call(["validate", str(path)]) == 0
+    out, err = capsys.readouterr()
+    assert out.count("ok: ") == 2 and "[estimator=ti]" in out
+    warnings = [line for line in err.splitlines() if line.startswith("warning: ")]
+    assert len(warnings) == 2 and all("'aside': OUT_OF_COVERAGE in 5 of 5 frames" in w
+                                      for w in warnings)
+    assert "'car'" not in err
+    assert call(["validate", "--strict", str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert "ok: " not in out
+    assert [line.split(": ", 1)[0] for line in err.splitlines()] == ["error", "error"]
+
+
+def test_validate_accepts_exactly_what_run_accepts(tmp_path, capsys):
+    fast = tmp_path / "fast.scenario.yaml"
+    fast.write_text(sub("frame_rate_hz: 10.0", "frame_rate_hz: 400"))
+    assert call(["validate", str(fast)]) == 2
+    validate_message = one_error(capsys.readouterr().err)
+    assert call(["run", str(fast)]) == 2
+    assert one_error(capsys.readouterr().err) == validate_message
+
+
+def write_scene(folder: Path, file: str, name: str, extra: str = "") -> str:
+    path = folder / file
+    path.write_text(sub("name: tiny", f"name: {name!r}") + extra)
+    return str(path)
+
+
+def test_batch_runs_every_scene_and_reports_each(tmp_path, capsys):
+    good = write_scene(tmp_path, "a.scenario.yaml", "alpha")
+    broken = tmp_path / "b.scenario.yaml"
+    broken.write_text(TINY + "colour: red\n")
+    failing = write_scene(tmp_path, "c.scenario.yaml", "gamma",
+                          "expectations: {tolerances: {az_deg: 0.000001}}\n")
+    report = tmp_path / "report.json"
+    code = call(["run", good, str(broken), failing, "--json", str(report)])
+    out, err = capsys.readouterr()
+    assert code == 2  # a scene that does not load is bad input
+    assert one_error(err).startswith(f"{broken}:15:1: colour: unknown key")
+    entries = json.loads(report.read_text())
+    assert [(e["scene"], e["file"], e["status"]) for e in entries] == [
+        ("alpha", good, "pass"), ("b", str(broken), "error"), ("gamma", failing, "fail")]
+    assert entries[1]["error"].startswith(f"{broken}:15:1: colour: unknown key")
+    assert entries[0]["passed"] is True and "errors" in entries[0]
+    summary = out.strip().splitlines()[-4:-1]
+    assert summary == [f"PASS alpha ({good})",
+                       f"ERROR b ({broken}): {entries[1]['error']}",
+                       f"FAIL gamma ({failing})"]
+    assert call(["run", good, failing]) == 1
+    capsys.readouterr()
+
+
+def test_runtime_error_does_not_stop_the_batch(tmp_path, capsys, monkeypatch):
+    import rts_scenario.pipeline as pipeline
+
+    first = write_scene(tmp_path, "a.scenario.yaml", "alpha")
+    second = write_scene(tmp_path, "b.scenario.yaml", "beta")
+    real = pipeline.run_scene
+
+    def flaky(scene, *args, **kwargs):
+        if scene.name == "alpha":
+            raise RuntimeError("the bench caught fire")
+        return real(scene, *args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "run_scene", flaky)
+    report = tmp_path / "r.json"
+    assert call(["run", first, second, "--json", str(report)]) == 3
+    out, err = capsys.readouterr()
+    assert "RuntimeError: the bench caught fire" in one_error(err)
+    assert [e["status"] for e in json.loads(report.read_text())] == ["error", "pass"]
+    assert f"PASS beta ({second})" in out
+    with pytest.raises(RuntimeError, match="caught fire"):
+        cli.main(["--debug", "run", first, second])
+    with pytest.raises(RuntimeError, match="caught fire"):
+        cli.main(["run", first, "--debug"])
+
+
+def test_plot_file_names_are_safe_and_unique():
+    from rts_scenario.cli.run import _unique
+    from rts_scenario.plots import safe_stem
+
+    assert safe_stem("../../etc/passwd") == "_.._etc_passwd"
+    assert safe_stem("...hidden") == "hidden"
+    assert safe_stem("cut in: A/B") == "cut_in_A_B"
+    assert safe_stem("///") == "_" and safe_stem("..") == "scene"
+    taken: set[str] = set()
+    assert [_unique(s, taken) for s in ("a", "a", "b", "a")] == ["a", "a-2", "b", "a-3"]
+
+
+def test_version_and_list(capsys, monkeypatch):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == "rts-scenario 0.1.0"
+    monkeypatch.chdir(ROOT)
+    assert call(["list"]) == 0
+    out = capsys.readouterr().out
+    for name in ("scenarios/cut_in.scenario.yaml", "kit-table1", "wide-3x5", "awr1843boost",
+                 "paper"):
+        assert name in out
+
+
+def test_rts_listen_prints_each_applied_frame(tmp_path, capsys):
+    import socket
+    import threading
+    import time
+
+    from rts_scenario.kinematics import compute_tracks
+    from rts_scenario.outputs import open_output
+    from rts_scenario.scenario import load_scenario
+    from rts_scenario.schedule import build_schedule
+
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    codes: list[int] = []
+    listener = threading.Thread(target=lambda: codes.append(cli.main(
+        ["rts-listen", f"udp://127.0.0.1:{port}", "--count", "3", "--seconds", "10"])))
+    listener.start()
+    path = tmp_path / "tiny.scenario.yaml"
+    path.write_text(TINY)
+    scene = load_scenario(path)
+    schedule = build_schedule(compute_tracks(scene), scene.rig, scene.radar)
+    deadline = time.monotonic() + 10
+    while listener.is_alive() and time.monotonic() < deadline:
+        with open_output(f"udp://127.0.0.1:{port}", pacing="fast") as out:
+            out.write(schedule)
+        listener.join(0.3)
+    listener.join(5)
+    assert codes == [0]
+    lines = capsys.readouterr().out.splitlines()
+    frames = [line for line in lines if line.startswith("frame ")]
+    assert len(frames) == 3
+    assert re.match(r"frame 0 t 0.000 s: \d+ entries, \d+ active", frames[0])
+
+
+# A pool of good and bad values per option; the CLI may exit 0..3, never raise.
+_SCENE_ARGS = ["{scene}", "{file}", "{dir}", "{tmp}/none.scenario.yaml", "", "-"]
+_OPTIONS = {
+    "validate": [[], ["--strict"], ["--method", "paper"], ["--method", "x"]],
+    "schedule": [["--output", "file:{tmp}/s.npz"], ["--output", "file:{tmp}/s.csv"],
+                 ["--output", "file:"], ["--output", "simulated-radar"], ["--output", "x:y"],
+                 ["--output", "file:{dir}"], ["--method", "paper", "--output", "udp://h"]],
+    "list": [[], ["--debug"]],
+    "list-outputs": [[], ["extra"]],
+    "bench": [["--targets", "5", "--repeats", "1", "--scene-s", "0"],
+              ["--targets", "5", "--scene-s", "nan"], ["--targets", "-1"],
+              ["--targets", "5", "--scene-s", "0", "--json", "{dir}"],
+              ["--targets", "5", "--scene-s", "0", "--rig", "wide-3x5"],
+              ["--targets", "5", "--scene-s", "0", "--rig", "{file}"]],
+    "run": [[], ["--json", "{tmp}/r.json"], ["--json", "{dir}"], ["--plot", "{file}"],
+            ["--output", "file:"], ["--method", "paper"], ["--can-interface", "x"],
+            ["--mapping", "{file}"]],
+}
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[
+    HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_random_command_lines_never_raise(places, capsys, data):
+    command = data.draw(st.sampled_from(sorted(_OPTIONS)))
+    argv = [command]
+    if command in ("validate", "schedule", "run"):
+        argv.append(data.draw(st.sampled_from(_SCENE_ARGS)))
+        if command == "run":
+            # Only the tiny scene runs; everything else fails before a run.
+            argv[-1] = data.draw(st.sampled_from(["{scene}", "{file}", "{dir}"]))
+    for _ in range(data.draw(st.integers(0, 2))):
+        argv += data.draw(st.sampled_from(_OPTIONS[command]))
+    argv = [a.format(**places) for a in argv]
+    code = call(argv)
+    assert code in (0, 1, 2, 3)
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    if code == 2:
+        assert one_error(err)
