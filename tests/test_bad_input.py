@@ -347,13 +347,25 @@ def test_validate_builds_every_combination_and_strict_turns_warnings_into_errors
     out, err = capsys.readouterr()
     assert out.count("ok: ") == 2 and "[estimator=ti]" in out
     warnings = [line for line in err.splitlines() if line.startswith("warning: ")]
-    assert len(warnings) == 2 and all("'aside': OUT_OF_COVERAGE in 5 of 5 frames" in w
+    assert len(warnings) == 2 and all(": aside: out_of_coverage in 5 frames" in w
                                       for w in warnings)
-    assert "'car'" not in err
+    assert "car" not in err
     assert call(["validate", "--strict", str(path)]) == 2
     out, err = capsys.readouterr()
     assert "ok: " not in out
     assert [line.split(": ", 1)[0] for line in err.splitlines()] == ["error", "error"]
+    # A limit the scene declares is shown, and is no error even with --strict.
+    path.write_text(path.read_text().replace("    rcs: {rcs_dbsm: 10.0}\nparametrize",
+                                             "    rcs: {rcs_dbsm: 10.0}\n"
+                                             "    expected_limits: [out_of_coverage, "
+                                             "beyond_radar_velocity]\n"
+                                             "parametrize"))
+    assert call(["validate", "--strict", str(path)]) == 0
+    out, err = capsys.readouterr()
+    assert out.count("ok: ") == 2
+    assert out.count("aside: out_of_coverage in 5 frames, beyond_radar_velocity in 1 frames "
+                     "(expected)") == 2
+    assert err == ""
 
 
 def test_validate_accepts_exactly_what_run_accepts(tmp_path, capsys):

@@ -1,8 +1,11 @@
 import json
+from pathlib import Path
 
 import pytest
 
 import rts_scenario.cli as cli
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_bench_prints_table_and_writes_json(tmp_path, capsys):
@@ -96,3 +99,22 @@ def test_validate_a_directory_is_a_clear_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith(f"error: {tmp_path}: cannot read file:")
     assert "Traceback" not in err
+
+
+def test_run_writes_every_detection_as_csv(tmp_path, capsys):
+    import csv
+
+    out = tmp_path / "d.csv"
+    scenes = [str(ROOT / "scenarios" / f"{s}.scenario.yaml") for s in ("cut_in", "overtaking")]
+    code = cli.main(["run", *scenes, "--detections", str(out), "--json", str(tmp_path / "r.json")])
+    assert code == 0
+    rows = list(csv.DictReader(out.open()))
+    report = json.loads((tmp_path / "r.json").read_text())
+    for entry in report:
+        mine = [r for r in rows if r["scene"] == entry["scene"]]
+        detected = sum(t["detected_frames"] + t["out_of_tolerance_frames"]
+                       for t in entry["targets"])
+        assert len(mine) == detected + entry["false_detections"]
+    assert list(rows[0]) == ["scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
+                             "el_deg", "snr_db", "rcs_dbsm", "target"]
+    assert {r["target"] for r in rows} <= {"cutting-car", "overtaker", ""}

@@ -28,9 +28,11 @@ def _do_run(args: argparse.Namespace) -> int:
     import json
 
     from ..canbus.mapping import CanMapping
+    from ..check import DETECTION_COLUMNS
     from ..errors import RtsError, ScenarioError
     from ..pipeline import RunOptions, run_scene
     from ..plots import safe_stem
+    from ..preflight import preflight
     from ..scenario import SCENE_SUFFIX, load_scenario
     from ..schedule import ScheduleError
 
@@ -41,6 +43,8 @@ def _do_run(args: argparse.Namespace) -> int:
         named_file("--mapping", CanMapping.from_file, args.mapping)
     if args.json:
         check_writable_file("--json", args.json)
+    if args.detections:
+        check_writable_file("--detections", args.detections)
     if args.plot:
         from ..plots import require_matplotlib
 
@@ -53,6 +57,11 @@ def _do_run(args: argparse.Namespace) -> int:
     entries: list[dict[str, Any]] = []
     stems: set[str] = set()
     bad_input = runtime_error = False
+    detections = None
+    if args.detections:
+        with writing("--detections", args.detections):
+            detections = open(args.detections, "w", newline="")  # closed after the last scene
+        detections.write(",".join(DETECTION_COLUMNS) + "\n")
 
     def failed(scene: str, path: str, exc: BaseException) -> None:
         message = located(path, exc)
@@ -74,7 +83,11 @@ def _do_run(args: argparse.Namespace) -> int:
             runtime_error = runtime_error or not isinstance(exc, RtsError)
             continue
         try:
-            result = run_scene(scene, options, progress=Progress(Path(path).name))
+            # Before anything plays: what the bench or the radar will not do as specified.
+            for line in preflight(scene, args.method).unexpected():
+                print(f"warning: {path}: {line}", file=sys.stderr)
+            result = run_scene(scene, options, progress=Progress(Path(path).name),
+                               detections_out=detections)
             report = result.report
             print(report.table())
             print("timing: " + ", ".join(
@@ -105,6 +118,9 @@ def _do_run(args: argparse.Namespace) -> int:
         entries.append({"file": path, "status": "pass" if report.passed else "fail",
                         **report.to_dict()})
 
+    if detections is not None:
+        detections.close()
+        print(f"wrote {args.detections}")
     if len(args.scenes) > 1:
         for entry in entries:
             line = f"{entry['status'].upper()} {entry['scene']} ({entry['file']})"
@@ -154,4 +170,7 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                         help="weight solver (default exact)")
     parser.add_argument("--json", metavar="REPORT", help="write the report as JSON")
     parser.add_argument("--plot", metavar="DIR", help="write PNG plots (needs matplotlib)")
+    parser.add_argument("--detections", metavar="CSV",
+                        help="write every detection, with the target it was assigned to, as CSV "
+                             "(columns in docs/report.md)")
     parser.set_defaults(handler=_do_run)
