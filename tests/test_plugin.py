@@ -54,6 +54,12 @@ def test_parametrized_combinations_and_marks(pytester):
     assert pytester.runpytest("-m", "not slow").ret == pytest.ExitCode.NO_TESTS_COLLECTED
 
 
+def test_a_scene_s_own_marks_pass_strict_markers(pytester):
+    pytester.makefile(".scenario.yaml", night=scene("night", extra="marks: [nightly]\n"))
+    result = pytester.runpytest("--strict-markers", "-m", "nightly")
+    result.assert_outcomes(passed=1)
+
+
 def test_failure_shows_the_report_and_worst_frames(pytester):
     # A target the rig cannot show (far outside its coverage) never gets detected.
     text = scene("impossible").replace("[30, 0, 0.6]", "[30, 20, 0.6]")

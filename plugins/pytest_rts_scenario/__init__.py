@@ -100,7 +100,13 @@ class ScenarioFile(pytest.File):
                       for ident, overrides in combos]
         except RtsError as exc:
             raise self.CollectError(str(exc)) from None
+        known = {line.split(":", 1)[0].split("(", 1)[0].strip()
+                 for line in self.config.getini("markers")}
         for ident, overrides, scene in scenes:
+            # A scene's own marks are registered, so --strict-markers accepts them.
+            for mark in set(scene.marks) - known:
+                self.config.addinivalue_line("markers", f"{mark}: a mark of scene files")
+                known.add(mark)
             name = f"{scene.name}[{ident}]" if ident else scene.name
             yield ScenarioItem.from_parent(self, name=name, overrides=overrides,
                                            marks=scene.marks)
