@@ -156,7 +156,7 @@ def _measure_pairs(rig: Rig, radar: RadarProfile, measure: Measure,
                    level_db: float, progress: Callable[[int, int], None] | None
                    ) -> list[Detections]:
     """Play the frames, one pair's batch at a time (like on the bench)."""
-    schedule = _calibration_schedule(rig, radar, rows, range_m, level_db)
+    schedule = pattern_schedule(rig, radar, rows, range_m, level_db)
     dets: list[Detections] = []
     total = len(rows) // batch
     for i in range(total):  # one pair at a time
@@ -166,10 +166,14 @@ def _measure_pairs(rig: Rig, radar: RadarProfile, measure: Measure,
     return dets
 
 
-def _calibration_schedule(rig: Rig, radar: RadarProfile,
-                          rows: list[list[tuple[int, float, float]]], range_m: float,
-                          level_db: float) -> Schedule:
-    """One frame per row: the listed FEs on, each with a weight and an extra phase (deg)."""
+def pattern_schedule(rig: Rig, radar: RadarProfile, rows: list[list[tuple[int, float, float]]],
+                     range_m: float, level_db: float) -> Schedule:
+    """Return a test pattern: one frame per row, the listed FEs of each row on.
+
+    Each row item is ``(fe, weight, extra phase deg)``; the target is at ``range_m``,
+    approaching at 1 m/s, with ``level_db`` of attenuation at weight 1 (plus each channel's
+    calibration).
+    """
     n = len(rows)
     fe = np.full((n, 1, 4), -1, dtype=np.int64)
     weight = np.zeros((n, 1, 4))

@@ -25,7 +25,7 @@ from .canbus.mapping import CanMapping
 from .check import Checker
 from .detections import Detections, unwrap_counter
 from .kinematics import compute_tracks
-from .outputs import Output, output_class
+from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .preflight import scene_limits
 from .radar.profile import RadarProfile
@@ -133,7 +133,7 @@ class Pipeline:
             self.receiver = DetectionReceiver(self.mapping)
             listen = self._open_bus()
             self._notifier = can.Notifier(listen, [self.receiver], timeout=0.05)
-            name, argument = _split_spec(options.output)
+            name, argument = split_spec(options.output)
             context = RunContext(rig=rig, radar=radar, radar_options=radar_options
                                  or RadarOptions(), open_publisher=self._open_publisher,
                                  rng=rng if rng is not None else np.random.default_rng(0),
@@ -311,16 +311,6 @@ def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
     with Pipeline.for_scene(scene, options) as pipeline:
         return pipeline.run(scene, progress, timing, detections_out)
 
-
-
-def _split_spec(spec: str) -> tuple[str, str]:
-    """Output name and argument of a spec (``udp://HOST:PORT``, ``file:PATH``, ``NAME``)."""
-    if spec.startswith("udp://"):
-        return "udp", spec[len("udp://"):]
-    if ":" in spec:
-        name, argument = spec.split(":", 1)
-        return name, argument
-    return spec, ""
 
 
 __all__ = ["BATCH_FRAMES", "Pipeline", "RunOptions", "RunResult", "run_scene"]

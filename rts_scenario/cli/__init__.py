@@ -15,11 +15,22 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..errors import RtsError
-from . import bench, calibrate, list_outputs, list_scenes, listen, run, schedule, validate
+from . import (
+    bench,
+    calibrate,
+    list_outputs,
+    list_scenes,
+    listen,
+    run,
+    schedule,
+    survey,
+    validate,
+)
 from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK, EXIT_RUNTIME_ERROR, one_line
 
 # In the order `--help` lists them.
-_SUBCOMMANDS = (bench, validate, run, schedule, calibrate, list_scenes, list_outputs, listen)
+_SUBCOMMANDS = (bench, validate, run, schedule, calibrate, survey, list_scenes, list_outputs,
+                listen)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -107,9 +107,9 @@ def check_output(option: str, spec: str, *, run: bool) -> None:
     ``run`` says whether the output is opened by a run (which provides the rig and radar the
     simulated radar needs) or on its own (``schedule``).
     """
-    from ..outputs import available_outputs
+    from ..outputs import available_outputs, split_spec
 
-    name, argument = _split_spec(spec)
+    name, argument = split_spec(spec)
     valid = available_outputs()
     usage = "simulated-radar, udp://HOST:PORT, file:PATH (.npz or .csv)"
     if not run:
@@ -155,13 +155,6 @@ def preset_or_file(what: str, name: str, presets: list[str], preset: Any, from_f
         raise RtsError(f"{what} {name!r}: unknown preset and no such file; valid presets: "
                        f"{', '.join(presets)}, or a *{suffix} file")
     return named_file(what, from_file, name)
-
-
-def _split_spec(spec: str) -> tuple[str, str]:
-    if spec.startswith("udp://"):
-        return "udp", spec[len("udp://"):]
-    name, _, argument = spec.partition(":")
-    return name, argument
 
 
 def check_can_interface(option: str, interface: str) -> None:

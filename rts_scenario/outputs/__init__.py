@@ -43,16 +43,20 @@ def output_class(name: str) -> type[Output]:
     return cls
 
 
+def split_spec(spec: str) -> tuple[str, str]:
+    """Output name and argument of a spec: ``udp://HOST:PORT``, ``NAME:ARGUMENT`` or ``NAME``."""
+    if spec.startswith("udp://"):
+        return "udp", spec[len("udp://"):]
+    name, _, argument = spec.partition(":")
+    return name, argument
+
+
 def open_output(spec: str, **options: Any) -> Output:
     """Create the output a spec names (see the module docstring); ``options`` go to it."""
-    if spec.startswith("udp://"):
-        name, argument = "udp", spec[len("udp://"):]
-    elif ":" in spec:
-        name, argument = spec.split(":", 1)
-    else:
-        name, argument = spec, ""
+    name, argument = split_spec(spec)
     factory: Callable[..., Output] = output_class(name)
     return factory(argument, **options) if argument else factory(**options)
 
 
-__all__ = ["ENTRY_POINT_GROUP", "Output", "available_outputs", "open_output", "output_class"]
+__all__ = ["ENTRY_POINT_GROUP", "Output", "available_outputs", "open_output", "output_class",
+           "split_spec"]
