@@ -27,7 +27,7 @@ from .detections import Detections, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
-from .preflight import scene_limits
+from .preflight import Preflight, preflight, scene_limits
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report
@@ -217,13 +217,15 @@ class Pipeline:
 
     def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
             timing: dict[str, float] | None = None,
-            detections_out: TextIO | None = None) -> RunResult:
+            detections_out: TextIO | None = None,
+            on_preflight: Callable[[Preflight], None] | None = None) -> RunResult:
         """Run a scene batch by batch and check the radar's detections.
 
         ``progress(done, total)`` is called after each batch; ``timing`` holds seconds already
         spent before the run (e.g. loading) and is reported with the run's own;
         ``detections_out`` receives every detection as a CSV row
-        (`rts_scenario.check.DETECTION_COLUMNS`).
+        (`rts_scenario.check.DETECTION_COLUMNS`); ``on_preflight``, when given, receives the
+        scene's `Preflight` before anything plays.
         """
         options = self.options
         clock = _Timing(dict(timing or {}))
@@ -239,6 +241,9 @@ class Pipeline:
         # read from disk instead of being built again.
         plan = solver_plan(scene.rig, scene.radar.array, options.method)
         mark = clock.add("plan_s", mark)
+        if on_preflight is not None:
+            on_preflight(preflight(scene, options.method))
+            mark = clock.add("preflight_s", mark)
         self.receiver.reset()
         for first in range(0, n_frames, options.batch_frames):
             frames = np.arange(first, min(first + options.batch_frames, n_frames))
@@ -298,18 +303,22 @@ class Pipeline:
 
 def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
               progress: Callable[[int, int], None] | None = None,
-              detections_out: TextIO | None = None) -> RunResult:
+              detections_out: TextIO | None = None,
+              on_preflight: Callable[[Preflight], None] | None = None,
+              timing: dict[str, float] | None = None) -> RunResult:
     """Load (if given a path) and run a scene on the bench ``options`` describe.
 
     ``progress(done, total)`` is called after each batch of frames; ``detections_out`` gets
-    every detection as a CSV row.
+    every detection as a CSV row; ``on_preflight`` the scene's `Preflight` before it plays;
+    ``timing`` holds seconds spent before (e.g. loading a scene passed in loaded).
     """
     start = time.perf_counter()
+    timing = dict(timing or {})
     if not isinstance(scene, Scenario):
         scene = load_scenario(scene)
-    timing = {"load_s": time.perf_counter() - start}
+        timing["load_s"] = timing.get("load_s", 0.0) + time.perf_counter() - start
     with Pipeline.for_scene(scene, options) as pipeline:
-        return pipeline.run(scene, progress, timing, detections_out)
+        return pipeline.run(scene, progress, timing, detections_out, on_preflight)
 
 
 

@@ -100,3 +100,15 @@ def test_preflight_names_the_limits_before_anything_plays(tmp_path):
     assert not any(line.startswith("post-") for line in lines)
     assert any(line.startswith("post-19: no_echo_slot in 100 frames") and "(expected)" in line
                for line in pre.expected_lines())
+
+
+def test_run_prints_the_preflight_before_playing(tmp_path, capsys):
+    import rts_scenario.cli as cli
+
+    path = scene(tmp_path, "posts-cli", CAR + posts("expected_limits: [no_echo_slot], "))
+    assert cli.main(["run", str(path)]) == 1
+    captured = capsys.readouterr()
+    warnings = [line for line in captured.err.splitlines() if line.startswith("warning: ")]
+    assert warnings == [f"warning: {path}: car: no_echo_slot in 20 frames (no echo slot left "
+                        "on a front end it needs)"]
+    assert "preflight" in captured.out.splitlines()[-2]  # the timing line counts it

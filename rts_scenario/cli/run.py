@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ def _do_run(args: argparse.Namespace) -> int:
     from ..errors import RtsError, ScenarioError
     from ..pipeline import RunOptions, run_scene
     from ..plots import safe_stem
-    from ..preflight import preflight
+    from ..preflight import Preflight
     from ..scenario import SCENE_SUFFIX, load_scenario
     from ..schedule import ScheduleError
 
@@ -72,6 +73,7 @@ def _do_run(args: argparse.Namespace) -> int:
         entries.append({"scene": scene, "file": path, "status": "error", "error": message})
 
     for path in args.scenes:
+        start = time.perf_counter()
         try:
             scene = load_scenario(path)
         except Exception as exc:
@@ -83,11 +85,15 @@ def _do_run(args: argparse.Namespace) -> int:
             runtime_error = runtime_error or not isinstance(exc, RtsError)
             continue
         try:
-            # Before anything plays: what the bench or the radar will not do as specified.
-            for line in preflight(scene, args.method).unexpected():
-                print(f"warning: {path}: {line}", file=sys.stderr)
+            loaded = {"load_s": time.perf_counter() - start}
+
+            def warn(pre: Preflight, path: str = path) -> None:
+                # Before anything plays: what the bench or the radar will not do as specified.
+                for line in pre.unexpected():
+                    print(f"warning: {path}: {line}", file=sys.stderr)
+
             result = run_scene(scene, options, progress=Progress(Path(path).name),
-                               detections_out=detections)
+                               detections_out=detections, on_preflight=warn, timing=loaded)
             report = result.report
             print(report.table())
             print("timing: " + ", ".join(
