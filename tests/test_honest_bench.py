@@ -194,3 +194,16 @@ def test_near_field_warning_names_the_effect():
     assert near_field_warning(RadarProfile.preset("paper"), KIT) is None
     far = dataclasses.replace(KIT, distance_m=np.full(4, 100.0))
     assert near_field_warning(cascade, far) is None
+
+
+def test_cascade_sees_each_fe_where_the_reference_says():
+    # 12 TX x 16 RX, 10 cm across: at 1 m deep in its near field (~1.4 deg in elevation with its
+    # TX group 2 cm below the RX row).
+    cascade = RadarProfile.preset("cascade-12x16")
+    az, el = SimulatedRadar(cascade, KIT, noise=False).fe_directions()
+    want = np.array([seen_direction_of_fe(KIT.az_deg[fe], KIT.el_deg[fe], KIT.distance_m[fe],
+                                          *layout(cascade), chirp=chirp_of(cascade))
+                     for fe in range(4)])
+    np.testing.assert_allclose(az, want[:, 0], atol=0.005)
+    np.testing.assert_allclose(el, want[:, 1], atol=0.005)
+    assert np.abs(el - KIT.el_deg).max() > 1.0

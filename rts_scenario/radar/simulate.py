@@ -5,10 +5,13 @@ The bench is modelled from its physics, independently of the solver's plane-wave
 receive antenna -> RTS (delay tau, Doppler fD, level A, phase phi, plus any injected channel
 errors) -> the FE's transmit antenna -> radar RX element r along straight spherical paths
 (``d_up``, ``d_down``), with free-space amplitude loss per leg normalised to the FE's nominal
-distance D: ``A (D / d_up) (D / d_down)``. With ``T_air = (d_up + d_down) / c0`` and
-``T = T_air + tau``, the radar mixes the received signal with the conjugate of its own chirp
-(start frequency f0, slope S) and samples, for virtual element v (TX t fired in slot i_t of
-each loop), loop l, fast time ``t_f = t_adc + n / fs``::
+distance D: ``A (D / d_up) (D / d_down)``. The radar's antennas are the profile's physical ones
+(`rts_scenario.arrays.Antennas`, relative to its reference point); an FE sits at its rig
+direction and distance from that point (moved by any injected position error), its antennas
+offset from there by the rig's ``rx_offset_m``/``tx_offset_m``. With
+``T_air = (d_up + d_down) / c0`` and ``T = T_air + tau``, the radar mixes the received signal
+with the conjugate of its own chirp (start frequency f0, slope S) and samples, for virtual
+element v (TX t fired in slot i_t of each loop), loop l, fast time ``t_f = t_adc + n / fs``::
 
     x = A_v exp(j [phi - 2 pi (f0 T_air + f_x tau + S t_f T - S T^2 / 2)
                    + 2 pi fD (l T_loop + i_t T_slot + t_f - d_down / c0)])
