@@ -29,6 +29,18 @@ PAPER_FC_HZ = 77e9
 PAPER_BANDWIDTH_HZ = 1e9
 
 PRESETS = ("paper", "awr1843boost")
+"""Virtual-array presets (`VirtualArray.preset`)."""
+ANTENNA_PRESETS = ("paper", "awr1843boost", "cascade-12x16")
+"""Physical antenna layouts (`Antennas.preset`), for radar profiles."""
+
+# AWR1843BOOST: how far the TX group's centroid sits from the RX group's along y (TX towards -y).
+# An assumption about the board (the TX patches are beside the RX patches, about a centimetre
+# apart): it moves the physical antennas, never the virtual array.
+AWR1843BOOST_TX_RX_SEPARATION_M = 0.010
+# MMWCAS-RF-EVM: how far the TX group's centroid sits below the RX row. An approximation (the
+# published layout gives positions within each group only): it moves the physical antennas, never
+# the virtual array.
+CASCADE_TX_RX_SEPARATION_M = 0.020
 
 
 def wavelength_from_chirp(fc_hz: float, bandwidth_hz: float) -> float:
@@ -55,6 +67,123 @@ def angles_from_cosines(u: ArrayLike, s: ArrayLike) -> tuple[FloatArray, FloatAr
     cos_el = np.sqrt(1.0 - s * s)
     az = np.arctan2(u, np.sqrt(np.maximum(cos_el * cos_el - u * u, 0.0)))
     return az, el
+
+
+@dataclass(frozen=True, eq=False)
+class Antennas:
+    """Physical TX and RX antennas of a radar: phase centres in its face plane ``x = 0``.
+
+    Positions are relative to the radar's **reference point**, the point from which the rig's FE
+    azimuths, elevations and distances are measured (and the mount pose is given). The virtual
+    array (`virtual_array`) only depends on the positions within the TX group and within the RX
+    group; where the groups sit relative to the reference point matters at the bench, where the
+    FEs are close enough for the paths to be spherical.
+
+    Parameters
+    ----------
+    tx_y_m, tx_z_m : ndarray, shape (T,)
+        TX phase centres along y (left) and z (up), metres.
+    rx_y_m, rx_z_m : ndarray, shape (R,)
+        RX phase centres, metres.
+    name : str
+        Preset or profile name, for reports.
+    """
+
+    tx_y_m: FloatArray
+    tx_z_m: FloatArray
+    rx_y_m: FloatArray
+    rx_z_m: FloatArray
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        for group in ("tx", "rx"):
+            y = np.array(getattr(self, f"{group}_y_m"), dtype=np.float64, ndmin=1)
+            z = np.array(getattr(self, f"{group}_z_m"), dtype=np.float64, ndmin=1)
+            if y.ndim != 1 or y.shape != z.shape or y.size == 0:
+                raise ArrayError(
+                    f"{group}_y_m and {group}_z_m: must be non-empty lists of the same length, "
+                    f"got shapes {y.shape} and {z.shape}"
+                )
+            if not (np.all(np.isfinite(y)) and np.all(np.isfinite(z))):
+                raise ArrayError(f"{group}_y_m, {group}_z_m: positions must be finite numbers")
+            for name, value in ((f"{group}_y_m", y), (f"{group}_z_m", z)):
+                value.setflags(write=False)
+                object.__setattr__(self, name, value)
+
+    @classmethod
+    def preset(cls, name: str, wavelength_m: float) -> Antennas:
+        """Return a shipped layout, its spacings in units of ``wavelength_m``.
+
+        Every preset puts the reference point at the virtual array's centroid (the midpoint
+        between the TX group's and the RX group's centroids): a far FE's echo then reaches the
+        virtual array with the same phase from every direction, as the solver assumes. A
+        reference point elsewhere adds a direction-dependent phase to each FE's echo that the
+        rig's phase calibration has to take out.
+
+        ``paper``: 4 RX along y, lambda/2 apart, and 3 TX along z at y = 0, lambda/2 apart,
+        both centred on the reference point.
+
+        ``awr1843boost``: RX at y = -3l/4 .. 3l/4 (lambda/2 apart) around y = +5 mm; TX0, TX1,
+        TX2 at y = -l, 0, +l around y = -5 mm (the groups' centroids
+        `AWR1843BOOST_TX_RX_SEPARATION_M` = 10 mm apart); TX0, TX2 and the RX row at
+        z = -l/12, TX1 l/2 higher. Relative to each other these are DESIGN 5.1's positions
+        (RX at 0 .. 3l/2, TX0 (0, 0), TX1 (l, l/2), TX2 (2l, 0)), so the virtual array is that
+        of ``VirtualArray.preset("awr1843boost")``.
+
+        ``cascade-12x16``: TI's 4-chip cascade board MMWCAS-RF-EVM, positions in units of
+        d = lambda/2 as published in TI's cascade processing examples (mmWave Studio MATLAB
+        ``TI_Cascade_TX_position_azi/ele``, ``TI_Cascade_RX_position_azi``, designed for
+        76.8 GHz): RX at azimuth 11..14, 50..53, 46..49, 0..3 (one row); TX at azimuth
+        11, 10, 9, 32, 28, 24, 20, 16, 12, 8, 4, 0 and elevation 6, 4, 1, 0, ... 0. The 9 TX
+        of the lower row, 2 lambda apart, make 86 distinct virtual azimuth positions; the 3
+        raised TX give elevation. Physical placement (an approximation): both groups centred
+        on the reference point in y, the TX group's centroid `CASCADE_TX_RX_SEPARATION_M`
+        (20 mm) below the RX row.
+        """
+        lam = float(wavelength_m)
+        half = lam / 2.0
+        steps3 = np.arange(3, dtype=np.float64) - 1.0  # -1, 0, 1
+        steps4 = np.arange(4, dtype=np.float64) - 1.5  # -3/2 .. 3/2
+        if name == "paper":
+            return cls(np.zeros(3), steps3 * half, steps4 * half, np.zeros(4), name=name)
+        if name == "awr1843boost":
+            sep = AWR1843BOOST_TX_RX_SEPARATION_M
+            return cls(-sep / 2.0 + steps3 * lam, np.array([0.0, half, 0.0]) - lam / 12.0,
+                       sep / 2.0 + steps4 * half, np.full(4, -lam / 12.0), name=name)
+        if name == "cascade-12x16":
+            tx_az = np.array([11, 10, 9, 32, 28, 24, 20, 16, 12, 8, 4, 0], dtype=float)
+            tx_el = np.array([6, 4, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0], dtype=float)
+            rx_az = np.concatenate([np.arange(11, 15), np.arange(50, 54), np.arange(46, 50),
+                                    np.arange(0, 4)]).astype(float)
+            sep = CASCADE_TX_RX_SEPARATION_M
+            return cls((tx_az - tx_az.mean()) * half,
+                       -sep / 2.0 + (tx_el - tx_el.mean()) * half,
+                       (rx_az - rx_az.mean()) * half, np.full(16, sep / 2.0), name=name)
+        raise ArrayError(
+            f"unknown antenna preset {name!r}; valid presets: {', '.join(ANTENNA_PRESETS)}"
+        )
+
+    @property
+    def n_tx(self) -> int:
+        """Number of TX antennas."""
+        return int(self.tx_y_m.size)
+
+    @property
+    def n_rx(self) -> int:
+        """Number of RX antennas."""
+        return int(self.rx_y_m.size)
+
+    @property
+    def extent_m(self) -> float:
+        """Largest distance between any two antennas (the aperture D of the Fraunhofer distance)."""
+        y = np.concatenate([self.tx_y_m, self.rx_y_m])
+        z = np.concatenate([self.tx_z_m, self.rx_z_m])
+        return float(np.hypot(y[:, None] - y[None, :], z[:, None] - z[None, :]).max())
+
+    def virtual_array(self, *, fc_hz: float, bandwidth_hz: float) -> VirtualArray:
+        """Return the TDM-MIMO virtual array (TX-major, centred) at the chirp centre wavelength."""
+        return VirtualArray.from_tx_rx(self.tx_y_m, self.tx_z_m, self.rx_y_m, self.rx_z_m,
+                                       fc_hz=fc_hz, bandwidth_hz=bandwidth_hz, name=self.name)
 
 
 @dataclass(frozen=True, eq=False)

@@ -4,11 +4,16 @@ A rig is a grid of ``rows x columns`` FEs; every 2x2 cell is a quad. FE ``r * co
 in row ``r`` (row 0 lowest elevation) and column ``c`` (column 0 smallest azimuth). Inside a quad
 the FE order is the paper's Table I order: 0 and 2 have the smaller azimuth, 1 and 3 the larger;
 0 and 1 the lower elevation, 2 and 3 the higher.
+
+FE directions and distances are measured from the radar's reference point (see
+`rts_scenario.arrays.Antennas`). Each FE has a receive and a transmit antenna, offset from its
+nominal point perpendicular to its line of sight (`Rig.rx_offset_m`, `Rig.tx_offset_m`), and the
+rig says how its RTS delays the signal (`RtsDelayModel`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -48,6 +53,40 @@ class Reference:
     attenuation_db: float = 40.0
 
 
+DELAY_MODELS = ("if", "rf")
+
+
+@dataclass(frozen=True)
+class RtsDelayModel:
+    """How the RTS delays the radar's signal, which decides the phase a delay adds.
+
+    ``"if"`` (the paper's digital RTS): the signal is down-converted with a fixed LO, delayed
+    at an intermediate frequency (``if_frequency_hz`` at the chirp's start frequency) and
+    up-converted with the same LO, so a delay tau turns the echo's phase by ``2 pi f_if tau``
+    while the air paths set the carrier phase. ``"rf"``: an RF delay line, tau turns the phase
+    by ``2 pi f_carrier tau`` like an air path.
+    """
+
+    delay_model: str = "if"
+    if_frequency_hz: float = 500.0e6
+
+    def __post_init__(self) -> None:
+        if self.delay_model not in DELAY_MODELS:
+            raise RigError(f"rts.delay_model: must be one of {', '.join(DELAY_MODELS)}, got "
+                           f"{self.delay_model!r}")
+        if not (np.isfinite(self.if_frequency_hz) and self.if_frequency_hz > 0):
+            raise RigError(f"rts.if_frequency_hz: must be finite and > 0, got "
+                           f"{self.if_frequency_hz!r}")
+
+    def delayed_frequency_hz(self, fc_hz: float) -> float:
+        """Frequency of the delayed signal at the chirp's start frequency ``fc_hz``.
+
+        The IF (``if_frequency_hz``) for a digital RTS, the carrier ``fc_hz`` for an RF delay
+        line; both sweep with the chirp.
+        """
+        return self.if_frequency_hz if self.delay_model == "if" else float(fc_hz)
+
+
 @dataclass(frozen=True, eq=False)
 class Rig:
     """An RTS rig: FE directions and distances, calibration offsets, limits and quads.
@@ -62,6 +101,13 @@ class Rig:
         Grid shape; ``rows * columns == F``.
     quads : ndarray, shape (Q, 4)
         FE indices of every quad, paper order.
+    rx_offset_m, tx_offset_m : ndarray, shape (F, 2)
+        Each FE's receive and transmit antenna relative to its nominal point, ``[dy, dz]``,
+        perpendicular to its line of sight: ``dy`` along increasing azimuth
+        ``(-sin az, cos az, 0)``, ``dz`` along increasing elevation
+        ``(-sin el cos az, -sin el sin az, cos el)``.
+    rts : RtsDelayModel
+        How the RTS delays the signal (default: the paper's digital IF RTS at 500 MHz).
     """
 
     name: str
@@ -75,6 +121,9 @@ class Rig:
     cal_gain_db: FloatArray
     limits: HardwareLimits = HardwareLimits()
     reference: Reference = Reference()
+    rx_offset_m: FloatArray = field(default_factory=lambda: np.zeros(2))
+    tx_offset_m: FloatArray = field(default_factory=lambda: np.zeros(2))
+    rts: RtsDelayModel = RtsDelayModel()
 
     def __post_init__(self) -> None:
         n = self.rows * self.columns
@@ -95,6 +144,17 @@ class Rig:
                 raise RigError(
                     f"{name}[{int(np.argmax(bad))}]: must be finite, got {value[bad][0]}"
                 )
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        for name in ("rx_offset_m", "tx_offset_m"):
+            value = np.array(getattr(self, name), dtype=np.float64, ndmin=1)
+            if value.shape == (2,):
+                value = np.tile(value, (n, 1))
+            if value.shape != (n, 2):
+                raise RigError(f"{name}: needs [dy, dz] for all FEs or one per FE ({n}), got "
+                               f"shape {value.shape}")
+            if not np.all(np.isfinite(value)):
+                raise RigError(f"{name}: offsets must be finite")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         if np.any(self.distance_m <= 0):
@@ -170,10 +230,14 @@ class Rig:
         cal_gain_db: ArrayLike = 0.0,
         limits: HardwareLimits | None = None,
         reference: Reference | None = None,
+        rx_offset_m: ArrayLike = (0.0, 0.0),
+        tx_offset_m: ArrayLike = (0.0, 0.0),
+        rts: RtsDelayModel | None = None,
     ) -> Rig:
         """Build a grid rig from ``(rows, columns)`` arrays of FE angles (row 0 lowest).
 
-        1-D inputs are the column azimuths and the row elevations of a regular grid.
+        1-D inputs are the column azimuths and the row elevations of a regular grid. FE antenna
+        offsets are ``[dy, dz]`` for all FEs or one row per FE (row-major FE order).
         """
         az = np.asarray(az_deg, dtype=np.float64)
         el = np.asarray(el_deg, dtype=np.float64)
@@ -192,6 +256,8 @@ class Rig:
             cal_phase_deg=np.asarray(cal_phase_deg, dtype=np.float64),
             cal_gain_db=np.asarray(cal_gain_db, dtype=np.float64),
             limits=limits or HardwareLimits(), reference=reference or Reference(),
+            rx_offset_m=np.asarray(rx_offset_m, dtype=np.float64),
+            tx_offset_m=np.asarray(tx_offset_m, dtype=np.float64), rts=rts or RtsDelayModel(),
         )
 
     @classmethod
@@ -225,6 +291,7 @@ class Rig:
             az_grid, el_grid = (g.ravel() for g in np.meshgrid(az, el))
             dist = np.full(rows * columns, float(distance))
             cal = {k: np.zeros(rows * columns) for k in ("delay_s", "phase_deg", "gain_db")}
+            offsets = {k: np.zeros((rows * columns, 2)) for k in ("rx_offset_m", "tx_offset_m")}
         else:
             rows = data.get("rows", 2)
             columns = data.get("columns", len(fes) // rows if rows else 0)
@@ -241,6 +308,15 @@ class Rig:
                 k: np.array([fe.get("calibration", {}).get(k, 0.0) for fe in fes], dtype=float)
                 for k in ("delay_s", "phase_deg", "gain_db")
             }
+            offsets = {k: np.array([fe.get(k, (0.0, 0.0)) for fe in fes], dtype=float)
+                       for k in ("rx_offset_m", "tx_offset_m")}
+        rts = data.get("rts", {})
+        try:
+            delay_model = RtsDelayModel(
+                delay_model=rts.get("delay_model", "if"),
+                if_frequency_hz=float(rts.get("if_frequency_hz", 500.0e6)))
+        except RigError as exc:
+            raise doc.error(("rts",), str(exc)) from None
         try:
             return cls(
                 name=data["name"], az_deg=az_grid, el_deg=el_grid, distance_m=dist, rows=rows,
@@ -248,6 +324,8 @@ class Rig:
                 cal_gain_db=cal["gain_db"],
                 limits=HardwareLimits(**data.get("limits", {})),
                 reference=Reference(**data.get("reference", {})),
+                rx_offset_m=offsets["rx_offset_m"], tx_offset_m=offsets["tx_offset_m"],
+                rts=delay_model,
             )
         except RigError as exc:
             key = "layout" if layout is not None else "front_ends"
@@ -269,6 +347,7 @@ def _number(minimum: float | None = None, exclusive: bool = False) -> dict[str, 
 
 
 _ANGLE = {"type": "number", "minimum": -90, "maximum": 90}
+_OFFSET = {"type": "array", "minItems": 2, "maxItems": 2, "items": {"type": "number"}}
 
 RIG_SCHEMA: dict[str, Any] = {
     "type": "object",
@@ -292,6 +371,8 @@ RIG_SCHEMA: dict[str, Any] = {
                     "az_deg": _ANGLE,
                     "el_deg": _ANGLE,
                     "distance_m": _number(0, exclusive=True),
+                    "rx_offset_m": _OFFSET,
+                    "tx_offset_m": _OFFSET,
                     "calibration": {
                         "type": "object",
                         "additionalProperties": False,
@@ -322,6 +403,14 @@ RIG_SCHEMA: dict[str, Any] = {
                 for f in fields(HardwareLimits)
             },
         },
+        "rts": {
+            "type": "object",
+            "additionalProperties": False,
+            "properties": {
+                "delay_model": {"enum": list(DELAY_MODELS)},
+                "if_frequency_hz": _number(0, exclusive=True),
+            },
+        },
         "reference": {
             "type": "object",
             "additionalProperties": False,
@@ -334,4 +423,5 @@ RIG_SCHEMA: dict[str, Any] = {
     },
 }
 
-__all__ = ["RIG_SCHEMA", "HardwareLimits", "Reference", "Rig", "preset_names"]
+__all__ = ["DELAY_MODELS", "RIG_SCHEMA", "HardwareLimits", "Reference", "Rig", "RtsDelayModel",
+           "preset_names"]

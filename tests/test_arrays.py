@@ -2,7 +2,12 @@ import numpy as np
 import pytest
 
 import rts_scenario as rs
-from rts_scenario.arrays import angles_from_cosines, direction_cosines, wavelength_from_chirp
+from rts_scenario.arrays import (
+    Antennas,
+    angles_from_cosines,
+    direction_cosines,
+    wavelength_from_chirp,
+)
 
 C0 = 299_792_458.0
 LAM = C0 / (77e9 + 0.5e9)
@@ -139,3 +144,41 @@ def test_sinc_apertures():
     # N_rx d_y = 4 * lambda/2 and N_tx d_z = 3 * lambda/2 for the paper's model.
     np.testing.assert_allclose(np.array(paper.sinc_aperture_m()) / LAM, [2.0, 1.5])
     np.testing.assert_allclose(np.array(awr.sinc_aperture_m()) / LAM, [4.0, 1.0])
+
+
+def test_antenna_presets_are_physical_and_keep_the_virtual_arrays():
+    for name in ("paper", "awr1843boost"):
+        ant = Antennas.preset(name, LAM)
+        virtual = ant.virtual_array(fc_hz=77e9, bandwidth_hz=1e9)
+        preset = rs.VirtualArray.preset(name)
+        np.testing.assert_allclose(virtual.y_m, preset.y_m, atol=1e-15)
+        np.testing.assert_allclose(virtual.z_m, preset.z_m, atol=1e-15)
+        # The reference point is the virtual array's centroid: TX and RX centroids opposite.
+        assert ant.tx_y_m.mean() + ant.rx_y_m.mean() == pytest.approx(0.0, abs=1e-15)
+        assert ant.tx_z_m.mean() + ant.rx_z_m.mean() == pytest.approx(0.0, abs=1e-15)
+    awr = Antennas.preset("awr1843boost", LAM)
+    # TX group beside the RX group: centroids 10 mm apart; TX0, TX2 at the RX row's height.
+    assert awr.rx_y_m.mean() - awr.tx_y_m.mean() == pytest.approx(0.010, abs=1e-12)
+    assert awr.tx_z_m[[0, 2]].tolist() == pytest.approx(awr.rx_z_m[:2].tolist(), abs=1e-15)
+
+
+def test_cascade_preset_is_tis_12_by_16_layout():
+    ant = Antennas.preset("cascade-12x16", LAM)
+    assert (ant.n_tx, ant.n_rx) == (12, 16)
+    virtual = ant.virtual_array(fc_hz=77e9, bandwidth_hz=1e9)
+    assert virtual.n_elements == 192
+    half = LAM / 2
+    azimuth_row = np.isclose(virtual.z_m, virtual.z_m.min())
+    cells = np.unique(np.round(virtual.y_m[azimuth_row] / half, 6))
+    # 9 TX 2 lambda apart, RX groups at 0..3, 11..14, 46..49, 50..53: 86 contiguous positions.
+    assert cells.size == 86 and np.all(np.diff(cells) == pytest.approx(1.0))
+    rows = np.unique(np.round((virtual.z_m - virtual.z_m.min()) / half, 6))
+    assert rows.tolist() == [0.0, 1.0, 4.0, 6.0]
+    assert ant.extent_m > 50 * half
+
+
+def test_antennas_reject_bad_positions():
+    with pytest.raises(rs.ArrayError, match="same length"):
+        Antennas([0.0, 1.0], [0.0], [0.0], [0.0])
+    with pytest.raises(rs.ArrayError, match="unknown antenna preset 'x'.*cascade-12x16"):
+        Antennas.preset("x", LAM)

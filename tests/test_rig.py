@@ -60,6 +60,27 @@ def test_rig_file_keeps_calibration_and_limits():
     assert rig.reference.attenuation_db == 42.0
 
 
+def test_fe_antenna_offsets_and_delay_model_from_a_file(tmp_path):
+    path = tmp_path / "fe.rig.yaml"
+    path.write_text(
+        "rts_rig: 1\nname: fe\nrts: {delay_model: rf}\nfront_ends:\n"
+        "  - {az_deg: -5, el_deg: -5, rx_offset_m: [0.03, -0.01], tx_offset_m: [-0.03, 0.0]}\n"
+        "  - {az_deg: 5, el_deg: -5}\n  - {az_deg: -5, el_deg: 5}\n  - {az_deg: 5, el_deg: 5}\n")
+    rig = rs.Rig.from_file(path)
+    np.testing.assert_array_equal(rig.rx_offset_m, [[0.03, -0.01], [0, 0], [0, 0], [0, 0]])
+    np.testing.assert_array_equal(rig.tx_offset_m, [[-0.03, 0.0], [0, 0], [0, 0], [0, 0]])
+    assert rig.rts.delay_model == "rf" and rig.rts.delayed_frequency_hz(77e9) == 77e9
+    with pytest.raises(ValueError, match="read-only"):
+        rig.rx_offset_m[0, 0] = 1.0
+    # Defaults: antennas at the nominal point, the paper's digital RTS at a 500 MHz IF.
+    kit = rs.Rig.preset("kit-table1")
+    np.testing.assert_array_equal(kit.rx_offset_m, np.zeros((4, 2)))
+    np.testing.assert_array_equal(kit.tx_offset_m, np.zeros((4, 2)))
+    assert kit.rts.delay_model == "if" and kit.rts.delayed_frequency_hz(77e9) == 500e6
+    with pytest.raises(rs.RigError, match="one per FE"):
+        rs.Rig.from_angles(*TABLE_I, rx_offset_m=np.zeros((3, 2)))
+
+
 def test_from_angles_rejects_wrong_order():
     with pytest.raises(rs.RigError, match="increasing azimuth"):
         rs.Rig.from_angles([4.5, -5.4, -3.4, 3.8], TABLE_I[1])
@@ -97,6 +118,11 @@ BAD_RIGS = [
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\ndistance_m: 0\n",
      4, "distance_m", "must be > 0"),
     ("rts_rig: 1\nname: x\n", None, "", "exactly one of 'front_ends'"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nrts:\n"
+     "  delay_model: fibre\n", 5, "rts.delay_model", "allowed values: 'if', 'rf'"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, rx_offset_m: [0.1]}\n"
+     "  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
+     4, "front_ends[0].rx_offset_m", "must have at least 2 items"),
     ("rts_rig: 1\nname: x\nname: y\n", 3, "name", "duplicate key"),
     ("rts_rig: 1\nname: [x\n", 3, "", "invalid YAML"),
     ("rts_rig: 1\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n", 1, "", "'name' is required"),

@@ -87,7 +87,7 @@ BAD = [
     (edit("duration_s: 5.0", "duration_s: five"), 3, "duration_s", "must be of type number"),
     (edit("frame_rate_hz: 20.0\n", ""), 1, "", "'frame_rate_hz' is required"),
     (edit("profile: awr1843boost", "profile: awr9999"), 6, "radar.profile",
-     "unknown preset 'awr9999'; valid presets: awr1843boost, paper"),
+     "unknown preset 'awr9999'; valid presets: awr1843boost, cascade-12x16, paper"),
     (edit("mount: {x_m: 3.7, z_m: 0.5}", "mount: {x_m: 3.7, yaw_deg: 270}"), 7,
      "radar.mount.yaw_deg", "must be <= 180"),
     (edit("rig: wide-3x5", "rig: narrow"), 8, "rig", "valid presets: kit-table1, wide-3x5"),

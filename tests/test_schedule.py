@@ -8,6 +8,7 @@ from rts_scenario.evaluation import evaluation_grid
 from rts_scenario.kinematics import Tracks
 from rts_scenario.peak_search import find_peak, snapshot
 from rts_scenario.radar import RadarProfile
+from rts_scenario.rig import RtsDelayModel
 from rts_scenario.schedule import ScheduleError, Status, build_schedule
 
 C0 = 299_792_458.0
@@ -75,9 +76,25 @@ def test_delay_quantization_is_compensated_in_phase():
     exact = 2 * 10.3 / C0 - 2 * 1.0 / C0
     quantized = np.round(exact / 1e-9) * 1e-9
     np.testing.assert_allclose(sch.delay_s[0, 0], quantized)
-    carrier = C0 / LAMBDA
-    expected = np.mod(2 * np.pi * carrier * (exact - quantized) + np.pi, 2 * np.pi) - np.pi
-    np.testing.assert_allclose(sch.phase_rad[0, 0], expected, atol=1e-6)
+    # The delay turns the echo's beat phase by -2 pi [f_x tau + S t_c T - S T^2 / 2]
+    # (T = air + RTS delay, t_c the centre of the sampled sweep, f_x the frequency the RTS
+    # delays at: the IF of the default digital RTS, 500 MHz): the channel phase gives the
+    # quantization's share back.
+    slope = RADAR.bandwidth_hz / RADAR.ramp_time_s
+    t_c = (RADAR.adc_samples - 1) / 2 / RADAR.sample_rate_hz
+    for model, f_x in (("if", 500e6), ("rf", RADAR.fc_hz)):
+        rig = rs.Rig.from_angles([-5, 5, -5, 5], [-8, -8, 8, 8],
+                                 limits=rs.HardwareLimits(delay_step_s=1e-9),
+                                 rts=RtsDelayModel(delay_model=model))
+        sch = build_schedule(tracks([1.0], [1.0], range_m=10.3), rig, RADAR)
+
+        def delay_phase(tau, f_x=f_x):
+            total = 2 * 1.0 / C0 + tau
+            return -2 * np.pi * (f_x * tau + slope * t_c * total - slope * total**2 / 2)
+
+        expected = delay_phase(exact) - delay_phase(quantized)
+        expected = np.mod(expected + np.pi, 2 * np.pi) - np.pi
+        np.testing.assert_allclose(sch.phase_rad[0, 0], expected, atol=1e-6)
 
 
 def test_status_flags():

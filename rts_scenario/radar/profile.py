@@ -1,7 +1,10 @@
 """Radar profiles: FMCW chirp sequence, TDM-MIMO timing and the virtual array, as data.
 
-A profile file (``*.radar.yaml``) names an array preset or gives TX/RX positions; everything
-else the product needs (wavelength, resolutions, unambiguous range and velocity) derives from it.
+A profile file (``*.radar.yaml``) names an antenna preset or gives the TX/RX positions; everything
+else the product needs (wavelength, resolutions, unambiguous range and velocity, the virtual array)
+derives from it. TX/RX positions are the antennas' physical phase centres in the radar's face
+plane (x = 0), relative to the radar's **reference point**: the point from which the rig's FE
+azimuths, elevations and distances are measured and the mount pose is given.
 """
 
 from __future__ import annotations
@@ -13,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from ..arrays import PRESETS, VirtualArray
-from ..errors import ScenarioError
+from ..arrays import ANTENNA_PRESETS, Antennas, VirtualArray
+from ..errors import ArrayError, ScenarioError
 from ..located_yaml import Document, load_yaml, validate
 from ..propagation import C0_MPS
 
@@ -31,6 +34,9 @@ class RadarProfile:
         Chirp ramp and idle time; one chirp slot lasts their sum.
     adc_samples : int
         Samples per chirp, taken at ``sample_rate_hz`` (complex baseband).
+    adc_start_s : float
+        Time from the start of the ramp to the first ADC sample (default 0: sampling starts
+        with the ramp when the profile does not say).
     chirp_loops : int
         Chirps per TX per frame.
     tx_order : tuple of int
@@ -41,7 +47,11 @@ class RadarProfile:
         Thermal noise per complex ADC sample, dB relative to the full-scale amplitude 1 that an
         echo through a 0 dB attenuator produces.
     array : VirtualArray
-        The virtual array at this profile's wavelength.
+        The virtual array at this profile's nominal wavelength, centred on its centroid: what
+        the radar's estimator assumes and the solver uses.
+    antennas : Antennas
+        The physical TX and RX phase centres, relative to the radar's reference point (the
+        point the rig's FE angles and distances are measured from).
     tx_index : tuple of int
         The TX of each virtual element (elements are TX-major: TX t, RX r is t * n_rx + r).
     """
@@ -58,12 +68,25 @@ class RadarProfile:
     frame_period_s: float
     noise_level_db: float
     array: VirtualArray
+    antennas: Antennas
     tx_index: tuple[int, ...] = ()
+    adc_start_s: float = 0.0
 
     @property
     def wavelength_m(self) -> float:
         """``c0 / (fc + B/2)``."""
         return C0_MPS / (self.fc_hz + self.bandwidth_hz / 2.0)
+
+    @property
+    def sampled_centre_frequency_hz(self) -> float:
+        """Transmit frequency at the centre of the sampled sweep (sample ``(N - 1) / 2``)."""
+        centre_s = self.adc_start_s + (self.adc_samples - 1) / (2.0 * self.sample_rate_hz)
+        return self.fc_hz + self.slope_hz_per_s * centre_s
+
+    @property
+    def steering_wavelength_m(self) -> float:
+        """Wavelength at the centre of the sampled sweep: what a well-designed radar steers with."""
+        return C0_MPS / self.sampled_centre_frequency_hz
 
     @property
     def slope_hz_per_s(self) -> float:
@@ -128,20 +151,16 @@ class RadarProfile:
         fc, bw = float(d["fc_hz"]), float(d["bandwidth_hz"])
         spec = d["array"]
         if isinstance(spec, str):
-            preset = VirtualArray.preset(spec)
-            # The preset's geometry is in wavelengths: scale it to this profile's wavelength.
-            lam = C0_MPS / (fc + bw / 2.0)
-            scale = lam / preset.wavelength_m
-            array = VirtualArray.from_positions(
-                preset.y_m * scale, preset.z_m * scale, wavelength_m=lam, name=spec
-            )
-            n_tx = {"paper": 3, "awr1843boost": 3}[spec]
+            # The preset's geometry is in wavelengths: at this profile's nominal wavelength.
+            antennas = Antennas.preset(spec, C0_MPS / (fc + bw / 2.0))
         else:
-            array = VirtualArray.from_tx_rx(
-                spec["tx_y_m"], spec["tx_z_m"], spec["rx_y_m"], spec["rx_z_m"],
-                fc_hz=fc, bandwidth_hz=bw, name=d["name"],
-            )
-            n_tx = len(spec["tx_y_m"])
+            try:
+                antennas = Antennas(spec["tx_y_m"], spec["tx_z_m"], spec["rx_y_m"],
+                                    spec["rx_z_m"], name=d["name"])
+            except ArrayError as exc:
+                raise doc.error(("array",), str(exc)) from None
+        array = antennas.virtual_array(fc_hz=fc, bandwidth_hz=bw)
+        n_tx = antennas.n_tx
         tx_order = tuple(int(t) for t in d["tx_order"])
         if sorted(tx_order) != list(range(n_tx)):
             raise doc.error(
@@ -150,11 +169,12 @@ class RadarProfile:
                 f"got {list(tx_order)}",
             )
         slot = d["ramp_time_s"] + d["idle_time_s"]
-        if d["adc_samples"] / d["sample_rate_hz"] > d["ramp_time_s"]:
+        adc_start = float(d.get("adc_start_s", 0.0))
+        if adc_start + d["adc_samples"] / d["sample_rate_hz"] > d["ramp_time_s"]:
             raise doc.error(
                 ("adc_samples",),
-                f"sampling takes {d['adc_samples'] / d['sample_rate_hz']:.3g} s, longer than "
-                f"ramp_time_s = {d['ramp_time_s']:.3g} s",
+                f"sampling takes {d['adc_samples'] / d['sample_rate_hz']:.3g} s from "
+                f"adc_start_s = {adc_start:.3g} s, beyond ramp_time_s = {d['ramp_time_s']:.3g} s",
             )
         if n_tx * d["chirp_loops"] * slot > d["frame_period_s"]:
             raise doc.error(
@@ -168,7 +188,9 @@ class RadarProfile:
             sample_rate_hz=float(d["sample_rate_hz"]), chirp_loops=int(d["chirp_loops"]),
             tx_order=tx_order, frame_period_s=float(d["frame_period_s"]),
             noise_level_db=float(d.get("noise_level_db", -75.0)), array=array,
-            tx_index=tuple(int(t) for t in np.repeat(np.arange(n_tx), array.n_elements // n_tx)),
+            antennas=antennas,
+            tx_index=tuple(int(t) for t in np.repeat(np.arange(n_tx), antennas.n_rx)),
+            adc_start_s=adc_start,
         )
 
 
@@ -197,6 +219,7 @@ PROFILE_SCHEMA: dict[str, Any] = {
         "ramp_time_s": _POSITIVE,
         "idle_time_s": {"type": "number", "minimum": 0},
         "adc_samples": {"type": "integer", "minimum": 2},
+        "adc_start_s": {"type": "number", "minimum": 0},
         "sample_rate_hz": _POSITIVE,
         "chirp_loops": {"type": "integer", "minimum": 1},
         "tx_order": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 0}},
@@ -204,7 +227,7 @@ PROFILE_SCHEMA: dict[str, Any] = {
         "noise_level_db": {"type": "number", "minimum": -300, "maximum": 0},
         "array": {
             "oneOf": [
-                {"enum": list(PRESETS)},
+                {"enum": list(ANTENNA_PRESETS)},
                 {
                     "type": "object",
                     "additionalProperties": False,

@@ -1,26 +1,44 @@
 """The simulated radar under test: FMCW TDM-MIMO, fed by exactly what the RTS emits.
 
-Each scheduled channel echo reaches the radar as a point echo from its FE's physical direction
-and distance, with the scheduled delay, level, Doppler and phase (plus any injected channel
-errors). Beat signal of echo e on virtual element v (TX t fired in slot i_t of each loop), loop
-l, sample n::
+The bench is modelled from its physics, independently of the solver's plane-wave picture
+(DESIGN.md 5.5b, 5.6). Each scheduled channel echo travels radar TX element t -> its FE's
+receive antenna -> RTS (delay tau, Doppler fD, level A, phase phi, plus any injected channel
+errors) -> the FE's transmit antenna -> radar RX element r along straight spherical paths
+(``d_up``, ``d_down``), with free-space amplitude loss per leg normalised to the FE's nominal
+distance D: ``A (D / d_up) (D / d_down)``. The radar's antennas are the profile's physical ones
+(`rts_scenario.arrays.Antennas`, relative to its reference point); an FE sits at its rig
+direction and distance from that point (moved by any injected position error), its antennas
+offset from there by the rig's ``rx_offset_m``/``tx_offset_m``. With
+``T_air = (d_up + d_down) / c0`` and ``T = T_air + tau``, the radar mixes the received signal
+with the conjugate of its own chirp (start frequency f0, slope S) and samples, for virtual
+element v (TX t fired in slot i_t of each loop), loop l, fast time ``t_f = t_adc + n / fs``::
 
-    x = A_e exp(j [2 pi (f0 tau_e + S tau_e n / fs) + phi_e
-                   + 2 pi fD_e (l T_loop + i_t T_slot) + k (y_v u_e + z_v s_e)])
+    x = A_v exp(j [phi - 2 pi (f0 T_air + f_x tau + S t_f T - S T^2 / 2)
+                   + 2 pi fD (l T_loop + i_t T_slot + t_f - d_down / c0)])
+
+``f_x`` is the frequency the RTS delays at: its IF for a digital RTS (the carrier phase comes
+from the air paths alone), ``f0`` for an RF delay line (`rts_scenario.rig.RtsDelayModel`). The
+phase is exact at each sample's true frequency: range-Doppler coupling (beat frequency
+``-(S T - fD)``) and the wavelength of the sampled sweep come out by themselves. The estimators
+steer the profile's (centred) virtual array with the wavelength at the centre of the sampled
+sweep, as a well-designed radar does; a plane wave from direction u then gives the steering
+vector ``exp(+j k u.p_v)`` and a receding target a negative Doppler, the package's conventions.
 
 Fidelity ``adc`` builds that cube (one matrix product over the echoes) and processes it like a
 real radar: Hann-windowed range FFT, Doppler FFT, non-coherent sum over channels, CA- or
 OS-CFAR, local-maximum peak grouping, sub-bin interpolation, TDM-Doppler compensation and angle
-estimation. Fidelity ``analytic`` evaluates the same superposition at each target's
-range-Doppler cell without the cube (and draws the noise from the SNR); ``auto`` uses the cube
+estimation (the range spectrum is read at ``S T - fD``, where a positive range lies).
+Fidelity ``analytic`` evaluates the same superposition at each target's range-Doppler cell (the
+beat phasors at the centre of the sampled sweep, which is what a symmetric window's FFT peak
+gives) without the cube (and draws the noise from the SNR); ``auto`` uses the cube
 only for frames where targets share a range-Doppler neighbourhood (within 2.5 bins), where the
 analytic model cannot tell them apart. Interactions between separate cells (a strong target
 masking a weak one in the CFAR's training cells) and false alarms exist only in ``adc``: force it
 when a test is about them.
 
 Both FFTs are circular, so in every fidelity range and velocity fold as a real radar's do: the
-sampled beat frequency ``S tau`` aliases modulo the (complex) sample rate, so the range bin
-``S tau N / fs`` wraps into [0, N) and the range into [0, ``c0 fs / (2 S)``); the Doppler
+sampled beat frequency ``S T - fD`` aliases modulo the (complex) sample rate, so the range bin
+``(S T - fD) N / fs`` wraps into [0, N) and the range into [0, ``c0 fs / (2 S)``); the Doppler
 sampled once per TDM loop wraps into [-1 / (2 T_loop), 1 / (2 T_loop)), i.e. the Doppler bin
 into [-L/2, L/2). The radar knows only the folded Doppler: its TDM-MIMO compensation uses it,
 so a target folded by a number of loops that is not a multiple of the TX count keeps a
@@ -29,14 +47,14 @@ phase ramp over the TX slots and its angles come out wrong, as on the real radar
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from ..arrays import direction_cosines
+from ..arrays import VirtualArray, direction_cosines
 from ..detections import Detections
 from ..errors import RtsError
 from ..propagation import C0_MPS
@@ -110,16 +128,25 @@ class ChannelErrors:
 
 @dataclass(frozen=True)
 class Echoes:
-    """Echoes as the radar receives them, shape (E,) each (``frame``: position in the batch)."""
+    """Echoes as the radar receives them (``frame``: position in the batch).
+
+    Per echo, shape (E,): ``frame``, ``target``, ``delay_s`` (air and RTS, mean over the virtual
+    elements: what the range FFT sees) and ``doppler_hz``. Per echo and virtual element, shape
+    (E, M): ``channel``, the complex beat amplitude without its fast- and slow-time ramps (level
+    with spreading loss, RTS phase, carrier and delay phase, TDM-slot and output-time Doppler
+    phase), and ``channel_delay_s``, the total delay T of that element's path.
+    """
 
     frame: NDArray[np.int64]
     target: NDArray[np.int64]
-    amplitude: FloatArray
     delay_s: FloatArray
     doppler_hz: FloatArray
-    phase_rad: FloatArray
-    u: FloatArray
-    s: FloatArray
+    channel: ComplexArray
+    channel_delay_s: FloatArray
+
+    def select(self, pick: NDArray[np.bool_] | NDArray[np.int64]) -> Echoes:
+        """Return the echoes at ``pick`` (mask or indices)."""
+        return Echoes(**{f.name: getattr(self, f.name)[pick] for f in fields(self)})
 
 
 @dataclass
@@ -165,7 +192,16 @@ class SimulatedRadar:
         p = self.profile
         if self.errors is None:
             self.errors = ChannelErrors.none(self.rig.n_front_ends)
-        self._angles = make_estimator(self.estimator, p.array)
+        # The estimators steer the profile's virtual array at the sampled sweep's centre.
+        self._steering_array = VirtualArray.from_positions(
+            p.array.y_m, p.array.z_m, wavelength_m=p.steering_wavelength_m, name=p.array.name)
+        self._angles = make_estimator(self.estimator, self._steering_array)
+        ant = p.antennas
+        self._tx_m = np.column_stack([np.zeros(ant.n_tx), ant.tx_y_m, ant.tx_z_m])
+        self._rx_m = np.column_stack([np.zeros(ant.n_rx), ant.rx_y_m, ant.rx_z_m])
+        self._delayed_hz = self.rig.rts.delayed_frequency_hz(p.fc_hz)
+        # Fast time of the centre of the sampled sweep (what the windowed FFT peak refers to).
+        self._t_centre_s = p.adc_start_s + (p.adc_samples - 1) / (2.0 * p.sample_rate_hz)
         self._n, self._loops = p.adc_samples, p.chirp_loops
         self._range_bin_m = C0_MPS * p.sample_rate_hz / (2.0 * p.slope_hz_per_s * self._n)
         self._win_r = np.hanning(self._n + 2)[1:-1]
@@ -184,23 +220,85 @@ class SimulatedRadar:
     def echoes(self, schedule: Schedule, frames: slice | None = None) -> Echoes:
         """Return the echoes the radar receives in ``schedule`` (all frames, or a slice)."""
         assert self.errors is not None
-        err, rig, p = self.errors, self.rig, self.profile
+        err = self.errors
         active = schedule.active if frames is None else schedule.active[frames]
         offset = 0 if frames is None else (frames.start or 0)
         f, k, c = np.nonzero(active)
         f = f + offset
         fe = schedule.fe[f, k, c]
+        return self.propagate(
+            fe, frame=f, target=k,
+            amplitude=10.0 ** (-(schedule.attenuation_db[f, k, c] - err.gain_db[fe]) / 20.0),
+            rts_delay_s=self.rig.limits.latency_s + schedule.delay_s[f, k, c] + err.delay_s[fe],
+            doppler_hz=schedule.doppler_hz[f, k, c],
+            phase_rad=schedule.phase_rad[f, k, c] + np.radians(err.phase_deg[fe]))
+
+    def propagate(self, fe: NDArray[np.int64], *, frame: NDArray[np.int64],
+                  target: NDArray[np.int64], amplitude: FloatArray, rts_delay_s: FloatArray,
+                  doppler_hz: FloatArray, phase_rad: FloatArray) -> Echoes:
+        """Echoes through FEs ``fe`` with these RTS settings (arrays of shape (E,))."""
+        rig, p = self.rig, self.profile
+        d_up, d_down = self._legs(fe)  # (E, T), (E, R)
+        shape = (fe.size, p.array.n_elements)  # element t * n_rx + r: TX t, RX r
+        t_air = ((d_up[:, :, None] + d_down[:, None, :]) / C0_MPS).reshape(shape)
+        t_down = np.broadcast_to(d_down[:, None, :] / C0_MPS,
+                                 (fe.size, d_up.shape[1], d_down.shape[1])).reshape(shape)
+        nominal = rig.distance_m[fe][:, None]
+        spread = ((nominal / d_up)[:, :, None] * (nominal / d_down)[:, None, :]).reshape(shape)
+        total = t_air + rts_delay_s[:, None]
+        slope = p.slope_hz_per_s
+        # In cycles, each term reduced before it is summed (they reach 1e5 cycles).
+        cycles = (_frac(-p.fc_hz * t_air) + _frac(-self._delayed_hz * rts_delay_s)[:, None]
+                  + _frac(0.5 * slope * total**2)
+                  + _frac(doppler_hz[:, None] * (self._slot[None, :] * p.chirp_slot_s - t_down)))
+        channel = (amplitude[:, None] * spread) * np.exp(
+            1j * (phase_rad[:, None] + 2.0 * np.pi * cycles))
+        return Echoes(frame=frame, target=target, delay_s=total.mean(axis=1),
+                      doppler_hz=doppler_hz, channel=channel, channel_delay_s=total)
+
+    def _legs(self, fe: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
+        """Spherical path lengths radar TX -> FE receive and FE transmit -> radar RX antenna."""
+        assert self.errors is not None
+        err, rig = self.errors, self.rig
         az = np.radians(rig.az_deg[fe] + err.az_deg[fe])
         el = np.radians(rig.el_deg[fe] + err.el_deg[fe])
-        u, s = direction_cosines(az, el)
         distance = rig.distance_m[fe] + err.distance_m[fe]
-        delay = (2.0 * distance / C0_MPS + rig.limits.latency_s + schedule.delay_s[f, k, c]
-                 + err.delay_s[fe])
-        phase = (schedule.phase_rad[f, k, c] + np.radians(err.phase_deg[fe])
-                 + 2.0 * np.pi * p.fc_hz * delay)
-        amplitude = 10.0 ** (-(schedule.attenuation_db[f, k, c] - err.gain_db[fe]) / 20.0)
-        return Echoes(frame=f, target=k, amplitude=amplitude, delay_s=delay,
-                      doppler_hz=schedule.doppler_hz[f, k, c], phase_rad=phase, u=u, s=s)
+        centre = distance[:, None] * np.column_stack(
+            [np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        e_az = np.column_stack([-np.sin(az), np.cos(az), np.zeros_like(az)])
+        e_el = np.column_stack([-np.sin(el) * np.cos(az), -np.sin(el) * np.sin(az), np.cos(el)])
+
+        def antenna(offset: FloatArray) -> FloatArray:
+            return centre + offset[:, :1] * e_az + offset[:, 1:] * e_el
+
+        fe_rx, fe_tx = antenna(rig.rx_offset_m[fe]), antenna(rig.tx_offset_m[fe])
+        d_up = np.linalg.norm(fe_rx[:, None, :] - self._tx_m[None, :, :], axis=2)
+        d_down = np.linalg.norm(fe_tx[:, None, :] - self._rx_m[None, :, :], axis=2)
+        return d_up, d_down
+
+    def fe_directions(self) -> tuple[FloatArray, FloatArray]:
+        """Where this radar sees each FE of the rig alone (no noise, no RTS delay): az, el deg.
+
+        The directions differ from the rig's nominal ones where the FEs are inside the radar's
+        near field or their antennas are offset.
+        """
+        fe = np.arange(self.rig.n_front_ends)
+        zero = np.zeros(fe.size)
+        echoes = self.propagate(fe, frame=fe, target=zero.astype(np.int64),
+                                amplitude=np.ones(fe.size), rts_delay_s=zero, doppler_hz=zero,
+                                phase_rad=zero)
+        est = self._angles(self._snapshot_at_peak(echoes))
+        first = np.unique(est.source, return_index=True)[1]
+        return est.az_deg[first], est.el_deg[first]
+
+    def _snapshot_at_peak(self, echoes: Echoes) -> ComplexArray:
+        """Each echo's value on every virtual element at its range-Doppler peak, (E, M).
+
+        The beat phasor at the centre of the sampled sweep (a symmetric window's FFT peak refers
+        to it), the slow-time ramp left out (it is common to a target's echoes).
+        """
+        beat_hz = self.profile.slope_hz_per_s * echoes.channel_delay_s - echoes.doppler_hz[:, None]
+        return echoes.channel * np.exp(-2j * np.pi * _frac(beat_hz * self._t_centre_s))
 
     # -- the radar -----------------------------------------------------------------------------
 
@@ -225,7 +323,9 @@ class SimulatedRadar:
     def _bins(self, echoes: Echoes) -> tuple[FloatArray, FloatArray]:
         """Fractional range and (centred) Doppler bins of each echo, before folding."""
         p = self.profile
-        range_bin = p.slope_hz_per_s * echoes.delay_s / p.sample_rate_hz * self._n
+        # The beat frequency is -(S T - fD): the range spectrum is read where S T - fD lies.
+        range_bin = ((p.slope_hz_per_s * echoes.delay_s - echoes.doppler_hz) / p.sample_rate_hz
+                     * self._n)
         doppler_bin = echoes.doppler_hz * p.loop_time_s * self._loops
         return range_bin, doppler_bin
 
@@ -261,19 +361,15 @@ class SimulatedRadar:
     def cube(self, echoes: Echoes) -> ComplexArray:
         """Beat-signal cube ``[loop, virtual element, sample]`` of the echoes plus noise."""
         p = self.profile
-        n = np.arange(self._n)
-        loops = np.arange(self._loops)
-        arr = p.array
-        k = arr.wavenumber_rad_per_m
-        fast = np.exp(2j * np.pi * np.outer(p.slope_hz_per_s * echoes.delay_s / p.sample_rate_hz,
-                                            n))  # (E, N)
-        slow = np.exp(2j * np.pi * np.outer(loops * p.loop_time_s, echoes.doppler_hz))  # (L, E)
-        chan = (echoes.amplitude * np.exp(1j * echoes.phase_rad))[None, :] * np.exp(1j * (
-            k * (np.outer(arr.y_m, echoes.u) + np.outer(arr.z_m, echoes.s))
-            + 2.0 * np.pi * np.outer(self._slot * p.chirp_slot_s, echoes.doppler_hz)))  # (M, E)
-        lm = (slow[:, None, :] * chan[None, :, :]).reshape(self._loops * arr.n_elements,
-                                                           echoes.amplitude.size)
-        cube = (lm @ fast).reshape(self._loops, arr.n_elements, self._n)
+        m = p.array.n_elements
+        t_fast = p.adc_start_s + np.arange(self._n) / p.sample_rate_hz  # (N,)
+        beat_hz = p.slope_hz_per_s * echoes.channel_delay_s - echoes.doppler_hz[:, None]  # (E, M)
+        fast = echoes.channel[:, :, None] * np.exp(
+            -2j * np.pi * _frac(beat_hz[:, :, None] * t_fast))  # (E, M, N)
+        slow = np.exp(2j * np.pi * _frac(np.outer(np.arange(self._loops) * p.loop_time_s,
+                                                  echoes.doppler_hz)))  # (L, E)
+        cube = (slow @ fast.reshape(echoes.doppler_hz.size, m * self._n)).reshape(
+            self._loops, m, self._n)
         if self._sigma > 0.0:
             noise = self.rng.standard_normal((2, *cube.shape)) * (self._sigma / np.sqrt(2.0))
             cube = cube + noise[0] + 1j * noise[1]
@@ -282,7 +378,8 @@ class SimulatedRadar:
     def _detect_adc(self, echoes: Echoes, frame: int, t_s: float) -> Detections:
         p = self.profile
         cube = self.cube(echoes)
-        spec = np.fft.fft(cube * self._win_r, axis=2)
+        # The beat frequency is -(S T - fD): read the range spectrum at positive S T - fD.
+        spec = np.fft.ifft(cube * self._win_r, axis=2) * self._n
         spec = np.fft.fftshift(np.fft.fft(spec * self._win_d[:, None, None], axis=0), axes=0)
         power = (np.abs(spec) ** 2).sum(axis=1)  # (L, N): non-coherent over channels
         noise = self._noise_floor(power)
@@ -339,26 +436,18 @@ class SimulatedRadar:
         """Detect the selected frames with the superposition model (None for the others)."""
         p = self.profile
         arr = p.array
-        k = arr.wavenumber_rad_per_m
         out: list[Detections | None] = [None] * schedule.n_frames
-        pick = frames[echoes.frame]
-        e = {name: getattr(echoes, name)[pick] for name in ("frame", "target", "amplitude",
-                                                          "delay_s", "doppler_hz", "phase_rad",
-                                                          "u", "s")}
+        e = echoes.select(frames[echoes.frame])
         width = schedule.status.shape[1]
-        entry, inverse = np.unique(e["frame"] * width + e["target"], return_inverse=True)
-        # The snapshot at a target's peak cell: each echo's windowed FFT peak, phased by its
-        # direction and TDM slot (echoes of one target share delay and Doppler, so the rest of
-        # the phase is common to them and does not move the angle).
-        level = e["amplitude"] * self._gain * np.exp(1j * e["phase_rad"])
-        contrib = level[:, None] * np.exp(1j * (
-            k * (np.outer(e["u"], arr.y_m) + np.outer(e["s"], arr.z_m))
-            + 2.0 * np.pi * np.outer(e["doppler_hz"], self._slot * p.chirp_slot_s)))
+        entry, inverse = np.unique(e.frame * width + e.target, return_inverse=True)
+        # The snapshot at a target's peak cell: each echo's windowed FFT peak (echoes of one
+        # target share its range-Doppler cell: the slow-time ramp is common to them).
+        contrib = self._gain * self._snapshot_at_peak(e)
         snap = np.zeros((entry.size, arr.n_elements), dtype=complex)
         np.add.at(snap, inverse, contrib)
         first = np.unique(inverse, return_index=True)[1]
-        frame_of = e["frame"][first]
-        range_bin, doppler_bin = self._bins(Echoes(**{name: v[first] for name, v in e.items()}))
+        frame_of = e.frame[first]
+        range_bin, doppler_bin = self._bins(e.select(first))
         noise_power = self._sigma**2 * self._noise_gain  # per channel, after both FFTs
         if self._sigma > 0.0:
             noise = self.rng.standard_normal((2, *snap.shape)) * np.sqrt(noise_power / 2.0)
@@ -398,7 +487,7 @@ class SimulatedRadar:
         est = self._angles(snap)
         src = est.source
         # Level: the full array's beam towards the estimated angle, whatever the estimator.
-        arr = p.array
+        arr = self._steering_array
         u, s = direction_cosines(np.radians(est.az_deg), np.radians(est.el_deg))
         steer = np.exp(1j * arr.wavenumber_rad_per_m * (np.outer(u, arr.y_m)
                                                         + np.outer(s, arr.z_m)))
@@ -412,6 +501,11 @@ class SimulatedRadar:
                 "az_deg": est.az_deg, "el_deg": est.el_deg, "snr_db": snr_db[src],
                 "rcs_dbsm": rcs}
 
+def _frac(cycles: FloatArray) -> FloatArray:
+    """Cycles less their nearest whole number (exact in the phase, keeps its precision)."""
+    return cycles - np.round(cycles)
+
+
 def _hann_response(offset: FloatArray) -> FloatArray:
     """Relative amplitude of a Hann-windowed DFT ``offset`` bins from a tone (|offset| < 1)."""
     x = np.clip(np.abs(offset), 0.0, 0.999)
@@ -420,3 +514,35 @@ def _hann_response(offset: FloatArray) -> FloatArray:
 
 def _empty(frame: int, t_s: float) -> Detections:
     return Detections.empty(frame, t_s)
+
+
+def near_field_warning(profile: RadarProfile, rig: Rig, *,
+                       threshold_deg: float = 0.05) -> str | None:
+    """Warn when the rig's FEs are inside the radar's near field; None when they are not.
+
+    The near field ends at the Fraunhofer distance ``2 D^2 / lambda``, D the largest extent of
+    the radar's physical antenna layout. Inside it the paths to the FEs are not plane waves: the
+    radar sees each FE away from its nominal direction. The warning names the size of that
+    effect: the largest such deviation of one FE alone as this module's simulated radar sees it
+    (no noise, no RTS delay). The Fraunhofer criterion (a pi/8 path difference) is coarse: FEs
+    beyond it that the radar still sees ``threshold_deg`` or more off their nominal direction
+    (a TX group beside the RX group, FE antenna offsets) are warned about too.
+    """
+    fraunhofer_m = 2.0 * profile.antennas.extent_m**2 / profile.wavelength_m
+    radar = SimulatedRadar(profile, rig, fidelity="analytic", noise=False)
+    az, el = radar.fe_directions()
+    off_deg = np.hypot((az - rig.az_deg) * np.cos(np.radians(rig.el_deg)), el - rig.el_deg)
+    inside = rig.distance_m < fraunhofer_m
+    if not inside.any() and off_deg.max() < threshold_deg:
+        return None
+
+    def distances(d: FloatArray) -> str:
+        return f"{d.min():.3g} m" if np.ptp(d) == 0.0 else f"{d.min():.3g}-{d.max():.3g} m"
+
+    if inside.any():
+        return (f"FEs at {distances(rig.distance_m[inside])} are inside radar {profile.name}'s "
+                f"near field (Fraunhofer distance {fraunhofer_m:.3g} m): expect "
+                f"~{off_deg.max():.2g} deg direction errors")
+    return (f"FEs at {distances(rig.distance_m)} are beyond radar {profile.name}'s Fraunhofer "
+            f"distance ({fraunhofer_m:.3g} m) but not in its far field: it sees them up to "
+            f"~{off_deg.max():.2g} deg off their nominal directions")

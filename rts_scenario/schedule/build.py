@@ -162,9 +162,16 @@ def build_schedule(
         delay = np.round(exact_delay / limits.delay_step_s) * limits.delay_step_s
     too_close = (active & (delay < limits.delay_min_s - DELAY_SLACK_S)).any(axis=-1)
     status |= np.where(too_close, Status.TOO_CLOSE, 0).astype(np.uint16)
-    # A quantized delay shifts the carrier phase: give it back in the channel phase.
-    carrier_hz = C0_MPS / radar.wavelength_m
-    phase = (np.radians(rig.cal_phase_deg[fe0]) + 2.0 * np.pi * carrier_hz * (exact_delay - delay))
+    # A quantized delay turns the echo's phase by -2 pi f (delay - exact): give it back in the
+    # channel phase. f is the frequency of the signal the RTS delays (the IF of a digital RTS,
+    # the carrier for an RF delay line) where the radar reads the phase, at the centre of its
+    # sampled sweep, less the sweep over the echo's lateness (its beat frequency).
+    quantum = delay - exact_delay
+    late_s = 2.0 * tracks.range_m[..., None] / C0_MPS + 0.5 * quantum
+    delayed_hz = (rig.rts.delayed_frequency_hz(radar.fc_hz)
+                  + radar.sampled_centre_frequency_hz - radar.fc_hz
+                  - radar.slope_hz_per_s * late_s)
+    phase = np.radians(rig.cal_phase_deg[fe0]) + 2.0 * np.pi * delayed_hz * quantum
     phase = np.mod(phase + np.pi, 2.0 * np.pi) - np.pi
 
     doppler = np.broadcast_to(tracks.doppler_hz[..., None], (*shape, 4)).copy()
