@@ -22,12 +22,10 @@ the pipeline (`rts_scenario.pipeline.Pipeline.play`: an output plus the radar's 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from itertools import combinations
-from pathlib import Path
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from .detections import Detections
@@ -309,20 +307,6 @@ def simulated_measure(radar: RadarProfile, rig: Rig, errors: ChannelErrors, *,
     sim = SimulatedRadar(radar, rig, fidelity=fidelity, noise=noise, errors=errors,
                          rng=rng or np.random.default_rng(0))
     return sim.process
-
-
-def write_rig(rig: Rig, path: str | Path) -> None:
-    """Write ``rig`` as a ``*.rig.yaml`` file, calibration offsets included."""
-    fes = []
-    for i in range(rig.n_front_ends):  # one entry per FE
-        fes.append({"az_deg": float(rig.az_deg[i]), "el_deg": float(rig.el_deg[i]),
-                    "distance_m": float(rig.distance_m[i]),
-                    "calibration": {"delay_s": float(rig.cal_delay_s[i]),
-                                    "phase_deg": round(float(rig.cal_phase_deg[i]), 4),
-                                    "gain_db": round(float(rig.cal_gain_db[i]), 4)}})
-    data = {"rts_rig": 1, "name": rig.name, "rows": rig.rows, "columns": rig.columns,
-            "front_ends": fes, "limits": asdict(rig.limits), "reference": asdict(rig.reference)}
-    Path(path).write_text(yaml.safe_dump(data, sort_keys=False, width=100))
 
 
 def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,

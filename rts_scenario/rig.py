@@ -13,12 +13,13 @@ rig says how its RTS delays the signal (`RtsDelayModel`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import RigError
@@ -101,6 +102,8 @@ class Rig:
         Grid shape; ``rows * columns == F``.
     quads : ndarray, shape (Q, 4)
         FE indices of every quad, paper order.
+    seen : ndarray, shape (F, 3), or None
+        Where a survey saw each FE alone: ``az_deg, el_deg, level_db`` (NaN: not seen).
     rx_offset_m, tx_offset_m : ndarray, shape (F, 2)
         Each FE's receive and transmit antenna relative to its nominal point, ``[dy, dz]``,
         perpendicular to its line of sight: ``dy`` along increasing azimuth
@@ -124,6 +127,7 @@ class Rig:
     rx_offset_m: FloatArray = field(default_factory=lambda: np.zeros(2))
     tx_offset_m: FloatArray = field(default_factory=lambda: np.zeros(2))
     rts: RtsDelayModel = RtsDelayModel()
+    seen: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = self.rows * self.columns
@@ -157,6 +161,13 @@ class Rig:
                 raise RigError(f"{name}: offsets must be finite")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        if self.seen is not None:
+            seen = np.array(self.seen, dtype=np.float64)
+            if seen.shape != (n, 3):
+                raise RigError(f"seen: needs [az_deg, el_deg, level_db] per FE ({n}), got shape "
+                               f"{seen.shape}")
+            seen.setflags(write=False)
+            object.__setattr__(self, "seen", seen)
         if np.any(self.distance_m <= 0):
             raise RigError(f"distance_m: must be > 0, got {self.distance_m.min()}")
         if np.any(np.abs(self.az_deg) >= 90) or np.any(np.abs(self.el_deg) > 90):
@@ -292,6 +303,7 @@ class Rig:
             dist = np.full(rows * columns, float(distance))
             cal = {k: np.zeros(rows * columns) for k in ("delay_s", "phase_deg", "gain_db")}
             offsets = {k: np.zeros((rows * columns, 2)) for k in ("rx_offset_m", "tx_offset_m")}
+            seen = None
         else:
             rows = data.get("rows", 2)
             columns = data.get("columns", len(fes) // rows if rows else 0)
@@ -310,6 +322,10 @@ class Rig:
             }
             offsets = {k: np.array([fe.get(k, (0.0, 0.0)) for fe in fes], dtype=float)
                        for k in ("rx_offset_m", "tx_offset_m")}
+            seen = None
+            if any("seen" in fe for fe in fes):
+                seen = np.array([[fe.get("seen", {}).get(k, np.nan) for k in SEEN_KEYS]
+                                 for fe in fes], dtype=float)
         rts = data.get("rts", {})
         try:
             delay_model = RtsDelayModel(
@@ -325,11 +341,43 @@ class Rig:
                 limits=HardwareLimits(**data.get("limits", {})),
                 reference=Reference(**data.get("reference", {})),
                 rx_offset_m=offsets["rx_offset_m"], tx_offset_m=offsets["tx_offset_m"],
-                rts=delay_model,
+                rts=delay_model, seen=seen,
             )
         except RigError as exc:
             key = "layout" if layout is not None else "front_ends"
             raise doc.error((key,), str(exc)) from None
+
+
+    def to_document(self) -> dict[str, Any]:
+        """Return the rig as ``*.rig.yaml`` data: every FE, its calibration, offsets, survey."""
+        fes = []
+        for i in range(self.n_front_ends):  # one entry per FE
+            fe: dict[str, Any] = {
+                "az_deg": float(self.az_deg[i]), "el_deg": float(self.el_deg[i]),
+                "distance_m": float(self.distance_m[i]),
+                "calibration": {"delay_s": float(self.cal_delay_s[i]),
+                                "phase_deg": round(float(self.cal_phase_deg[i]), 4),
+                                "gain_db": round(float(self.cal_gain_db[i]), 4)}}
+            for name in ("rx_offset_m", "tx_offset_m"):
+                offset = getattr(self, name)[i]
+                if np.any(offset != 0.0):
+                    fe[name] = [float(v) for v in offset]
+            if self.seen is not None and np.isfinite(self.seen[i]).any():
+                fe["seen"] = {k: round(float(v), 5) for k, v in zip(SEEN_KEYS, self.seen[i],
+                                                                      strict=True)
+                              if np.isfinite(v)}
+            fes.append(fe)
+        return {"rts_rig": 1, "name": self.name, "rows": self.rows, "columns": self.columns,
+                "front_ends": fes, "rts": asdict(self.rts), "limits": asdict(self.limits),
+                "reference": asdict(self.reference)}
+
+    def write(self, path: str | Path) -> None:
+        """Write the rig as a ``*.rig.yaml`` file (`from_file` reads it back)."""
+        Path(path).write_text(yaml.safe_dump(self.to_document(), sort_keys=False, width=100))
+
+
+# What a survey stores per FE: where the radar saw it alone and its level (`rts_scenario.survey`).
+SEEN_KEYS = ("az_deg", "el_deg", "level_db")
 
 
 def preset_names() -> list[str]:
@@ -381,6 +429,12 @@ RIG_SCHEMA: dict[str, Any] = {
                             "phase_deg": {"type": "number"},
                             "gain_db": {"type": "number"},
                         },
+                    },
+                    "seen": {
+                        "type": "object",
+                        "additionalProperties": False,
+                        "properties": {"az_deg": _ANGLE, "el_deg": _ANGLE,
+                                       "level_db": {"type": "number"}},
                     },
                 },
             },

@@ -8,7 +8,6 @@ from rts_scenario.calibration import (
     grid_errors,
     pairs_of,
     simulated_measure,
-    write_rig,
 )
 from rts_scenario.radar import RadarProfile
 from rts_scenario.radar.simulate import ChannelErrors
@@ -70,7 +69,7 @@ def test_calibrated_rig_file_round_trip(tmp_path):
     errors = ChannelErrors.random(4, np.random.default_rng(2), phase_deg=180.0, gain_db=1.0)
     result = calibrate(KIT, PAPER, simulated_measure(PAPER, KIT, errors))
     path = tmp_path / "lab.rig.yaml"
-    write_rig(result.apply(KIT), path)
+    result.apply(KIT).write(path)
     back = rs.Rig.from_file(path)
     np.testing.assert_allclose(back.cal_phase_deg, wrapped(-result.phase_deg), atol=1e-3)
     np.testing.assert_allclose(back.cal_gain_db, result.gain_db, atol=1e-3)

@@ -156,3 +156,22 @@ def test_yaml_tags_are_not_executed(tmp_path):
     path.write_text("rts_rig: 1\nname: !!python/object/apply:os.system ['true']\n")
     with pytest.raises(rs.ScenarioError, match="invalid YAML"):
         rs.Rig.from_file(path)
+
+
+def test_write_keeps_offsets_delay_model_calibration_and_survey(tmp_path):
+    import dataclasses
+
+    from rts_scenario.rig import RtsDelayModel
+
+    rig = rs.Rig.preset("kit-table1")
+    rig = dataclasses.replace(
+        rig, rx_offset_m=np.array([[0.01, 0.0], [0.0, 0.0], [0.0, -0.02], [0.0, 0.0]]),
+        tx_offset_m=np.array([0.0, 0.015]), rts=RtsDelayModel("rf"),
+        cal_phase_deg=np.array([0.0, 12.5, -40.0, 3.0]),
+        seen=np.array([[1.0, 2.0, 0.5], [np.nan] * 3, [3.0, 4.0, -0.5], [5.0, 6.0, 0.0]]))
+    rig.write(tmp_path / "r.rig.yaml")
+    back = rs.Rig.from_file(tmp_path / "r.rig.yaml")
+    for name in ("az_deg", "el_deg", "distance_m", "cal_phase_deg", "rx_offset_m", "tx_offset_m",
+                 "seen"):
+        np.testing.assert_allclose(getattr(back, name), getattr(rig, name), err_msg=name)
+    assert back.rts == rig.rts and back.limits == rig.limits

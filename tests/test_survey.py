@@ -37,3 +37,47 @@ def test_survey_command_writes_the_front_ends_as_json(tmp_path, capsys):
     assert set(first) == {"index", "az_deg", "el_deg", "seen_az_deg", "seen_el_deg", "level_db"}
     assert first["seen_az_deg"] == pytest.approx(first["az_deg"], abs=0.006)
     assert "seen az" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("fidelity", ["analytic", "adc"])
+def test_survey_sees_the_near_field_direction_of_the_independent_reference(fidelity):
+    from nearfield_reference import FmcwChirp, seen_direction_of_fe
+
+    from rts_scenario.calibration import pattern_schedule
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity=fidelity, noise=False)) as b:
+        result = survey(rig, radar, b.play, repeats=1)
+    ref = rig.reference
+    tau = pattern_schedule(rig, radar, [[(q, 1.0, 0.0)] for q in range(4)], ref.range_m,
+                           ref.attenuation_db).delay_s[:, 0, 0]
+    slot = {t: i for i, t in enumerate(radar.tx_order)}
+    chirp = FmcwChirp(fc_hz=radar.fc_hz, bandwidth_hz=radar.bandwidth_hz,
+                      ramp_time_s=radar.ramp_time_s, sample_rate_hz=radar.sample_rate_hz,
+                      n_samples=radar.adc_samples, adc_start_s=radar.adc_start_s,
+                      idle_time_s=radar.idle_time_s,
+                      tx_slot=tuple(slot[t] for t in range(len(radar.tx_order))))
+    a = radar.antennas
+    want = np.array([seen_direction_of_fe(rig.az_deg[q], rig.el_deg[q], rig.distance_m[q],
+                                          a.tx_y_m, a.tx_z_m, a.rx_y_m, a.rx_z_m, chirp=chirp,
+                                          tau_s=tau[q]) for q in range(4)])
+    # Through CAN: angles travel at 0.005 deg steps.
+    np.testing.assert_allclose(result.seen_az_deg, want[:, 0], atol=0.005)
+    np.testing.assert_allclose(result.seen_el_deg, want[:, 1], atol=0.005)
+    # ... and the near field is visible: ~0.2 deg off the mechanical elevation.
+    assert np.all(np.abs(result.seen_el_deg - rig.el_deg) > 0.1)
+
+
+def test_survey_write_stores_the_seen_directions_in_the_rig_file(tmp_path):
+    out = tmp_path / "surveyed.rig.yaml"
+    assert cli.main(["survey", "kit-table1", "--radar", "awr1843boost", "--write", str(out),
+                     "--json", str(tmp_path / "s.json")]) == 0
+    rig = Rig.from_file(out)
+    fes = json.loads((tmp_path / "s.json").read_text())["front_ends"]
+    np.testing.assert_allclose(rig.seen[:, 0], [fe["seen_az_deg"] for fe in fes], atol=1e-5)
+    np.testing.assert_allclose(rig.seen[:, 1], [fe["seen_el_deg"] for fe in fes], atol=1e-5)
+    np.testing.assert_allclose(rig.seen[:, 2], [fe["level_db"] for fe in fes], atol=1e-5)
+    # Everything else of the rig comes back as it was.
+    kit = Rig.preset("kit-table1")
+    np.testing.assert_array_equal(rig.az_deg, kit.az_deg)
+    assert rig.limits == kit.limits and rig.rts == kit.rts

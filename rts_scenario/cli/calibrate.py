@@ -91,7 +91,7 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     print(f"angle error after:  {summary(after)}")
     if args.write:
         with writing("--write", args.write):
-            cal.write_rig(calibrated, args.write)
+            calibrated.write(args.write)
         print(f"wrote {args.write}")
     if args.plot:
         from ..plots import write_calibration_plot

@@ -31,6 +31,8 @@ def _do_survey(args: argparse.Namespace) -> int:
     check_can_interface("--can-interface", args.can_interface)
     if args.json:
         check_writable_file("--json", args.json)
+    if args.write:
+        check_writable_file("--write", args.write)
     rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
@@ -41,11 +43,25 @@ def _do_survey(args: argparse.Namespace) -> int:
                   radar_options=RadarOptions(fidelity=args.fidelity, noise=args.noise)) as bench:
         result = survey(rig, radar, bench.play)
     print(result.table())
+    from ..radar.simulate import near_field_warning
+
+    note = near_field_warning(radar, rig)
+    if note:
+        print(f"note: {note}")
     if args.json:
         with writing("--json", args.json):
             Path(args.json).write_text(json.dumps(result.to_dict(), indent=2, allow_nan=False)
                                        + "\n")
         print(f"wrote {args.json}")
+    if args.write:
+        import dataclasses
+
+        import numpy as np
+
+        seen = np.stack([result.seen_az_deg, result.seen_el_deg, result.level_db], axis=1)
+        with writing("--write", args.write):
+            dataclasses.replace(rig, seen=seen).write(args.write)
+        print(f"wrote {args.write}")
     return EXIT_OK
 
 
@@ -69,4 +85,6 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--json", metavar="OUT",
                         help='write {"front_ends": [{"index", "az_deg", "el_deg", "seen_az_deg", '
                              '"seen_el_deg", "level_db"}, ...]}')
+    parser.add_argument("--write", metavar="RIG_OUT",
+                        help="write the rig with each FE's seen direction and level ('seen')")
     parser.set_defaults(handler=_do_survey)

@@ -12,6 +12,7 @@ from .common import EXIT_BAD_INPUT, EXIT_OK, located
 def _do_validate(args: argparse.Namespace) -> int:
     from ..errors import RtsError
     from ..preflight import preflight
+    from ..radar.simulate import near_field_warning
     from ..scenario import load_scenario, parametrizations
 
     bad = 0
@@ -45,6 +46,10 @@ def _do_validate(args: argparse.Namespace) -> int:
             for line in pre.expected_lines():
                 print(f"note: {label}: {line}")
             bad += args.strict and bool(unexpected)
+            near = near_field_warning(scene.radar, scene.rig)
+            if near and near not in reported:  # once per rig and radar
+                reported.add(near)
+                print(f"note: {label}: {near}")
             if not (args.strict and unexpected):
                 print(f"ok: {label}: {scene.n_frames} frames, {len(scene.targets)} targets, "
                       f"schedule built")
