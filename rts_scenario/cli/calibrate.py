@@ -8,12 +8,11 @@ from typing import Any
 from .common import (
     EXIT_OK,
     Progress,
-    check_can_interface,
+    add_bench_arguments,
+    bench_of,
     check_number,
-    check_output,
     check_writable_file,
     check_writable_folder,
-    preset_or_file,
     writing,
 )
 
@@ -26,19 +25,15 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     from .. import calibration as cal
     from ..errors import RtsError
     from ..pipeline import Pipeline, RunOptions
-    from ..radar.profile import RadarProfile
-    from ..radar.profile import preset_names as radar_presets
     from ..radar.simulate import ChannelErrors
     from ..rig import Rig
-    from ..rig import preset_names as rig_presets
     from ..scenario.model import RadarOptions
 
     check_number("--inject-phase-deg", args.inject_phase_deg, low=0.0, high=180.0)
     check_number("--inject-gain-db", args.inject_gain_db, low=0.0, high=MAX_INJECT_GAIN_DB)
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
-    check_output("--output", args.output, run=True)
-    check_can_interface("--can-interface", args.can_interface)
+    rig, radar = bench_of(args)
     if args.write:
         check_writable_file("--write", args.write)
     if args.plot:
@@ -46,10 +41,6 @@ def _do_calibrate(args: argparse.Namespace) -> int:
 
         require_matplotlib()
         check_writable_folder("--plot", args.plot)
-    rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
-                         ".rig.yaml")
-    radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
-                           RadarProfile.from_file, ".radar.yaml")
     rng = np.random.default_rng(args.seed)
     errors = ChannelErrors.random(rig.n_front_ends, rng, phase_deg=args.inject_phase_deg,
                                   gain_db=args.inject_gain_db)
@@ -111,14 +102,7 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                     "phase and gain offsets. On the simulated radar, --inject-* adds random "
                     "channel errors to recover.",
     )
-    parser.add_argument("rig", metavar="RIG", help="rig preset or *.rig.yaml")
-    parser.add_argument("--radar", default="paper", help="radar profile (default paper)")
-    parser.add_argument("--output", default="simulated-radar",
-                        help="simulated-radar (default) or udp://HOST:PORT")
-    parser.add_argument("--can-interface", default="virtual")
-    parser.add_argument("--can-channel", default=None)
-    parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
-    parser.add_argument("--noise", action="store_true", help="thermal noise (simulated)")
+    add_bench_arguments(parser, "paper")
     parser.add_argument("--inject-phase-deg", type=float, default=0.0,
                         help="simulated radar: random channel phase errors within +-this "
                              "(0..180)")

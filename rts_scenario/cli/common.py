@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import sys
@@ -186,3 +187,35 @@ def located(path: str, exc: BaseException) -> str:
     if isinstance(exc, ScenarioError) and exc.file is not None:
         return message
     return f"{path}: {message}"
+
+
+def add_bench_arguments(parser: argparse.ArgumentParser, radar_default: str) -> None:
+    """Add the arguments of a command that drives a bench without a scene.
+
+    Rig, radar, output, CAN, and the simulated radar's fidelity and noise.
+    """
+    parser.add_argument("rig", metavar="RIG", help="rig preset or *.rig.yaml")
+    parser.add_argument("--radar", default=radar_default,
+                        help=f"radar profile (default {radar_default})")
+    parser.add_argument("--output", default="simulated-radar",
+                        help="simulated-radar (default) or udp://HOST:PORT")
+    parser.add_argument("--can-interface", default="virtual")
+    parser.add_argument("--can-channel", default=None)
+    parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
+    parser.add_argument("--noise", action="store_true", help="thermal noise (simulated)")
+
+
+def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
+    """Check the bench arguments (`add_bench_arguments`); return ``(rig, radar profile)``."""
+    from ..radar.profile import RadarProfile
+    from ..radar.profile import preset_names as radar_presets
+    from ..rig import Rig
+    from ..rig import preset_names as rig_presets
+
+    check_output("--output", args.output, run=True)
+    check_can_interface("--can-interface", args.can_interface)
+    rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
+                         ".rig.yaml")
+    radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
+                           RadarProfile.from_file, ".radar.yaml")
+    return rig, radar
