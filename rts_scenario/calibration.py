@@ -31,11 +31,11 @@ from numpy.typing import NDArray
 from .detections import Detections
 from .errors import RtsError
 from .peak_search import find_peak, snapshot
-from .propagation import C0_MPS
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors, SimulatedRadar
 from .rig import Rig
 from .schedule import Schedule
+from .schedule.build import channel_delays
 
 FloatArray = NDArray[np.float64]
 Measure = Callable[[Schedule], list[Detections]]
@@ -181,12 +181,12 @@ def pattern_schedule(rig: Rig, radar: RadarProfile, rows: list[list[tuple[int, f
             fe[f, 0, c], weight[f, 0, c], extra[f, 0, c] = item
     active = fe >= 0
     fe0 = np.maximum(fe, 0)
-    delay = (2.0 * range_m / C0_MPS - 2.0 * rig.distance_m[fe0] / C0_MPS - rig.limits.latency_s
-             + rig.cal_delay_s[fe0])
+    # Delays on the RTS's grid, their rounding given back in phase as the rig's delay model says.
+    delay, phase = channel_delays(rig, radar, np.asarray(range_m, dtype=np.float64), fe0)
     doppler = np.full(fe.shape, 2.0 * 1.0 / radar.wavelength_m)  # approaching at 1 m/s
     with np.errstate(divide="ignore"):
         attenuation = level_db - 20.0 * np.log10(weight) + rig.cal_gain_db[fe0]
-    phase = np.radians(rig.cal_phase_deg[fe0] + extra)
+    phase = phase + np.radians(extra)
     nan = np.nan
     schedule = Schedule(
         t_s=np.arange(n, dtype=np.float64) * 0.05, frame_index=np.arange(n), names=("calibration",),

@@ -89,3 +89,29 @@ def test_cli_calibrate_over_can(tmp_path, capsys):
     after = float(text.split("angle error after:")[1].split("max")[1].split("deg")[0])
     assert after <= 0.02
     assert rs.Rig.from_file(out).cal_phase_deg.any()
+
+
+def test_calibration_patterns_play_on_the_rts_delay_grid_with_the_rig_s_delay_model():
+    import dataclasses
+
+    from rts_scenario.calibration import pattern_schedule
+    from rts_scenario.rig import RtsDelayModel
+
+    step = 1e-10
+    rig = dataclasses.replace(KIT, limits=dataclasses.replace(KIT.limits, delay_step_s=step),
+                              distance_m=np.array([1.0, 1.013, 0.991, 1.004]))
+    rows = [[(q, 1.0, 0.0)] for q in range(4)]
+    phases = {}
+    for model in ("if", "rf"):
+        on = dataclasses.replace(rig, rts=RtsDelayModel(model))
+        sch = pattern_schedule(on, PAPER, rows, 10.0, 40.0)
+        delay = sch.delay_s[:, 0, 0]
+        np.testing.assert_allclose(delay / step, np.round(delay / step), atol=1e-6)
+        phases[model] = sch.phase_rad[:, 0, 0]
+    # The rounding is given back at the frequency the RTS delays: an IF (500 MHz) or the carrier.
+    exact = 2 * 10.0 / 299792458.0 - 2 * rig.distance_m / 299792458.0
+    quantum = delay - exact
+    turn = np.angle(np.exp(1j * (phases["rf"] - phases["if"])))
+    want = np.angle(np.exp(2j * np.pi * (PAPER.fc_hz - 500e6) * quantum))
+    np.testing.assert_allclose(turn, want, atol=1e-6)
+    assert np.abs(want).max() > 0.1  # the two models really differ here

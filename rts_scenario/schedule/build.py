@@ -32,6 +32,7 @@ from .model import BLOCKING, Schedule, ScheduleError, Status
 from .quantization import QUANTIZATION_MODES, attenuator_settings, predicted_angle_error
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 # The scene's frame rate may equal the rig's update rate up to rounding (relative).
 RATE_SLACK = 1e-9
@@ -152,27 +153,10 @@ def build_schedule(
     attenuation[~active] = np.nan
     status |= np.where(clipped, Status.ATTENUATION_CLIPPED, 0).astype(np.uint16)
 
-    # Delays: the echo through FE q must arrive 2R/c0 after transmission.
     fe0 = np.maximum(fe, 0)
-    exact_delay = (2.0 * tracks.range_m[..., None] / C0_MPS
-                   - 2.0 * rig.distance_m[fe0] / C0_MPS - limits.latency_s
-                   + rig.cal_delay_s[fe0])
-    delay = exact_delay
-    if limits.delay_step_s > 0.0:
-        delay = np.round(exact_delay / limits.delay_step_s) * limits.delay_step_s
+    delay, phase = channel_delays(rig, radar, tracks.range_m[..., None], fe0)
     too_close = (active & (delay < limits.delay_min_s - DELAY_SLACK_S)).any(axis=-1)
     status |= np.where(too_close, Status.TOO_CLOSE, 0).astype(np.uint16)
-    # A quantized delay turns the echo's phase by -2 pi f (delay - exact): give it back in the
-    # channel phase. f is the frequency of the signal the RTS delays (the IF of a digital RTS,
-    # the carrier for an RF delay line) where the radar reads the phase, at the centre of its
-    # sampled sweep, less the sweep over the echo's lateness (its beat frequency).
-    quantum = delay - exact_delay
-    late_s = 2.0 * tracks.range_m[..., None] / C0_MPS + 0.5 * quantum
-    delayed_hz = (rig.rts.delayed_frequency_hz(radar.fc_hz)
-                  + radar.sampled_centre_frequency_hz - radar.fc_hz
-                  - radar.slope_hz_per_s * late_s)
-    phase = np.radians(rig.cal_phase_deg[fe0]) + 2.0 * np.pi * delayed_hz * quantum
-    phase = np.mod(phase + np.pi, 2.0 * np.pi) - np.pi
 
     doppler = np.broadcast_to(tracks.doppler_hz[..., None], (*shape, 4)).copy()
     off_range = (tracks.doppler_hz < limits.doppler_min_hz) | (
@@ -218,4 +202,43 @@ def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatA
             predicted_angle_error(resp, new_w, u, s), clipped)
 
 
-__all__ = ["build_schedule"]
+def channel_delays(rig: Rig, radar: RadarProfile, range_m: FloatArray,
+                   fe: IntArray) -> tuple[FloatArray, FloatArray]:
+    """Return the RTS delay and channel phase of echoes at ``range_m`` through FEs ``fe``.
+
+    The echo through FE q must arrive ``2R/c0`` after transmission: the RTS delays it by
+    ``2R/c0 - 2 R_c,q/c0 - latency + calibration delay``, on the delay step's grid. A quantized
+    delay turns the echo's phase by ``-2 pi f (delay - exact)``: it is given back in the channel
+    phase (with the calibration phase), f the frequency of the signal the RTS delays (the IF of
+    a digital RTS, the carrier for an RF delay line: ``rig.rts``) where the radar reads the
+    phase, at the centre of its sampled sweep, less the sweep over the echo's lateness.
+
+    Parameters
+    ----------
+    rig, radar : Rig, RadarProfile
+    range_m : ndarray
+        Target range, broadcast against ``fe``.
+    fe : ndarray of int
+        Rig FE index of each channel.
+
+    Returns
+    -------
+    delay_s, phase_rad : ndarray
+        Shape of the broadcast inputs; the phase wrapped to [-pi, pi).
+    """
+    limits = rig.limits
+    exact = (2.0 * range_m / C0_MPS - 2.0 * rig.distance_m[fe] / C0_MPS - limits.latency_s
+             + rig.cal_delay_s[fe])
+    delay = exact
+    if limits.delay_step_s > 0.0:
+        delay = np.round(exact / limits.delay_step_s) * limits.delay_step_s
+    quantum = delay - exact
+    late_s = 2.0 * range_m / C0_MPS + 0.5 * quantum
+    delayed_hz = (rig.rts.delayed_frequency_hz(radar.fc_hz)
+                  + radar.sampled_centre_frequency_hz - radar.fc_hz
+                  - radar.slope_hz_per_s * late_s)
+    phase = np.radians(rig.cal_phase_deg[fe]) + 2.0 * np.pi * delayed_hz * quantum
+    return delay, np.mod(phase + np.pi, 2.0 * np.pi) - np.pi
+
+
+__all__ = ["build_schedule", "channel_delays"]
