@@ -136,12 +136,18 @@ class GlobalMaxCheck:
         while active.size:
             stop = start + max(_MIN_BLOCK, BLOCK_ELEMENTS // active.size)
             w = weights[active]
-            re = w @ self.probe_re[:, start:stop]
+            power = w @ self.probe_re[:, start:stop]
+            power *= power
             im = w @ self.probe_im[:, start:stop]
-            far = (((self.probe_u[start:stop] - u[active, None]) / self.cell_u) ** 2
-                   + ((self.probe_s[start:stop] - s[active, None]) / self.cell_s) ** 2
+            power += im * im
+            # Few probes reach the limit (mostly the target's own main lobe): measure distances
+            # only for those.
+            rows, cols = np.nonzero(power >= (limit[active] ** 2)[:, None])
+            far = (((self.probe_u[start + cols] - u[active[rows]]) / self.cell_u) ** 2
+                   + ((self.probe_s[start + cols] - s[active[rows]]) / self.cell_s) ** 2
                    ) > EXCLUSION_CELLS**2
-            hit = np.any(far & (re * re + im * im >= (limit[active] ** 2)[:, None]), axis=1)
+            hit = np.zeros(active.size, dtype=bool)
+            hit[rows[far]] = True
             split[active[hit]] = True
             active = active[~hit & (reach[active] > stop)]
             start = stop
