@@ -52,7 +52,9 @@ CLEAR_MAXIMUM = 0.1
 # A quad gets the run-time global-maximum check when a node's strongest far direction comes
 # within this fraction more of splitting: targets between the nodes may come closer still.
 SURVEY_MARGIN = 0.1
-# Plans kept in memory (a sweep over a few rigs and arrays; each is at most a few MB).
+# Plans kept in memory (a sweep over a few rigs and arrays; each is a few MB, up to ~20 MB for
+# a 12 TX x 16 RX cascade on an 8-quad rig, mostly the split check's probes over the field of
+# view).
 MEMORY_PLANS = 16
 # Environment variable naming the disk cache directory; "off" or empty disables it.
 CACHE_DIR_ENV = "RTS_SCENARIO_CACHE_DIR"
