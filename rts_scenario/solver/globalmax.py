@@ -1,10 +1,20 @@
 """Check that the synthesized peak is the global maximum of |B| (else the echoes split).
 
-For each quad a grid of probe directions is laid over the FEs' region, extended by one
-resolution cell, and the FEs' responses at the probes are precomputed. A solution splits when a
-probe farther than half a resolution cell from the set direction sees ``|B|`` within the probe
-grid's sampling loss of the set direction's ``|B|`` (closer than that, a second peak could not
-be resolved by the radar and the local-maximum test of the method applies).
+The radar's estimator searches its whole field of view, so a second peak anywhere in it counts:
+for a sparse or large array (grating lobes, high sidelobes) it can lie far from the quad. For
+each quad a grid of probe directions covers the field of view `FIELD_OF_VIEW` (and the quad's
+FEs extended by one resolution cell, should they lie outside it), and the FEs' responses at the
+probes are precomputed. A solution splits when a probe farther than half a resolution cell from
+the set direction sees ``|B|`` within the probe grid's sampling loss of the set direction's
+``|B|`` (closer than that, a second peak could not be resolved by the radar and the
+local-maximum test of the method applies).
+
+Evaluating every probe for every target would cost ``probes x 4`` per target, tens of thousands
+on a large array. Since ``|B(p)| <= sum_q w_q |f_q(p)| <= sum(w) * max_q |f_q(p)|``, a probe
+whose bound ``max_q |f_q(p)|`` is below ``limit / sum(w)`` cannot reach the target's limit. The
+probes are stored by decreasing bound, so each target needs only a prefix of them: the FEs' main
+lobes and grating lobes, evaluated in blocks until the target splits or its prefix ends. The
+result is the same as evaluating every probe.
 """
 
 from __future__ import annotations
@@ -20,54 +30,125 @@ from ..rig import Rig
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
+# Direction cosines (u = cos el sin az, s = sin el) the radar's estimator searches, |u| <= u_max
+# and |s| <= s_max: the default search region of `rts_scenario.radar.angle.Bartlett2D`.
+FIELD_OF_VIEW = (0.8, 0.6)
 PROBES_PER_CELL = 8
 EXCLUSION_CELLS = 0.5
-# A peak between probes is at most this much higher than the best probe near it (a sinc main
-# lobe sampled every 1/8 cell, worst case half a diagonal step off).
+# A peak between probes is at most this much higher than the best probe near it: a main lobe
+# ``1 - k^2 sigma^2 d^2 / 2`` (sigma the rms element offset along the axis) half a step ``d`` off
+# along each axis. Every 1/8 cell is fine enough for a filled row (a sinc main lobe); sparse rows
+# (elements bunched at the ends) get a finer step from this budget.
 SAMPLING_LOSS = 0.015
+# Targets x probes evaluated at once (bounds the temporary arrays to a few tens of MB).
+BLOCK_ELEMENTS = 1 << 20
+_MIN_BLOCK = 64
 
 
 @dataclass(frozen=True)
 class GlobalMaxCheck:
-    """Precomputed probe responses of one quad."""
+    """Precomputed probe responses of one quad, probes sorted by decreasing bound.
+
+    Attributes
+    ----------
+    response : SourceResponse
+        Response of the quad's four FEs (paper order).
+    probe_u, probe_s : ndarray, shape (P,)
+        Probe directions (direction cosines).
+    probe_re, probe_im : ndarray, shape (4, P)
+        Real and imaginary parts of ``f_q`` at the probes.
+    bound : ndarray, shape (P,)
+        ``max_q |f_q|`` at each probe, non-increasing.
+    cell_u, cell_s : float
+        Resolution cell (wavelength / aperture) along u and s.
+    """
 
     response: SourceResponse
     probe_u: FloatArray
     probe_s: FloatArray
-    probe_f: ComplexArray
+    probe_re: FloatArray
+    probe_im: FloatArray
+    bound: FloatArray
     cell_u: float
     cell_s: float
 
     @classmethod
     def build(cls, rig: Rig, array: VirtualArray, fes: NDArray[np.int64]) -> GlobalMaxCheck:
-        """Lay the probe grid over the quad's FEs for ``array``."""
+        """Lay the probe grid over the field of view for the quad ``fes`` and ``array``."""
         u, s = direction_cosines(np.radians(rig.az_deg[fes]), np.radians(rig.el_deg[fes]))
         ap_y, ap_z = array.sinc_aperture_m()
         cell_u = array.wavelength_m / ap_y if ap_y > 0 else 2.0
         cell_s = array.wavelength_m / ap_z if ap_z > 0 else 2.0
+        k = array.wavenumber_rad_per_m
         grids = []
-        for pos, cell in ((u, cell_u), (s, cell_s)):
-            lo, hi = pos.min() - cell, pos.max() + cell
-            count = int(np.ceil((hi - lo) / cell * PROBES_PER_CELL)) + 1
-            grids.append(np.linspace(max(lo, -1.0), min(hi, 1.0), count))
-        pu, ps = (g.ravel() for g in np.meshgrid(*grids))
+        for pos, cell, half, rms in (
+            (u, cell_u, FIELD_OF_VIEW[0], np.sqrt(np.mean(array.y_m**2))),
+            (s, cell_s, FIELD_OF_VIEW[1], np.sqrt(np.mean(array.z_m**2))),
+        ):
+            step = cell / PROBES_PER_CELL
+            if rms > 0:
+                step = min(step, 2.0 * np.sqrt(SAMPLING_LOSS) / (k * rms))
+            lo = max(min(-half, pos.min() - cell), -1.0)
+            hi = min(max(half, pos.max() + cell), 1.0)
+            grids.append(np.linspace(lo, hi, int(np.ceil((hi - lo) / step)) + 1))
+        # On a grid the steering vector factors into a row along u and a column along s, so
+        # the response at all probes is one matrix product per FE.
+        src = np.exp(1j * k * (np.outer(array.y_m, u) + np.outer(array.z_m, s)))
+        look_u = np.exp(-1j * k * np.outer(grids[0], array.y_m))
+        look_s = np.exp(-1j * k * np.outer(array.z_m, grids[1]))
+        f = np.stack([((look_u * src[:, q]) @ look_s).ravel() for q in range(src.shape[1])])
+        pu, ps = (g.ravel() for g in np.meshgrid(*grids, indexing="ij"))
         visible = pu * pu + ps * ps < 1.0
-        pu, ps = pu[visible], ps[visible]
-        response = array.source_response(u, s)
+        pu, ps, f = pu[visible], ps[visible], f[:, visible]
+        bound = np.abs(f).max(axis=0)
+        order = np.argsort(-bound, kind="stable")
+        f = f[:, order]
         return cls(
-            response=response, probe_u=pu, probe_s=ps,
-            probe_f=response.evaluate(pu, ps, terms=1)[0].T,
-            cell_u=cell_u, cell_s=cell_s,
+            response=array.source_response(u, s), probe_u=pu[order], probe_s=ps[order],
+            probe_re=np.ascontiguousarray(f.real), probe_im=np.ascontiguousarray(f.imag),
+            bound=bound[order], cell_u=cell_u, cell_s=cell_s,
         )
 
+    @property
+    def n_probes(self) -> int:
+        """Number of probe directions P."""
+        return int(self.probe_u.size)
+
     def splits(
-        self, az_rad: FloatArray, el_rad: FloatArray, weights: FloatArray
+        self, az_rad: FloatArray, el_rad: FloatArray, weights: FloatArray, margin: float = 0.0
     ) -> NDArray[np.bool_]:
-        """Whether another direction out-shines the set one, shape ``(N,)``."""
+        """Whether another direction out-shines the set one, shape ``(N,)``.
+
+        ``weights`` has shape ``(N, 4)``, >= 0. With ``margin`` a direction counts already
+        when it comes within that fraction more of the set direction's ``|B|``.
+        """
         u, s = direction_cosines(az_rad, el_rad)
         at_target = np.abs(np.einsum("qn,nq->n", self.response.evaluate(u, s, terms=1)[0], weights))
-        at_probes = np.abs(weights @ self.probe_f.T)
-        far = (((self.probe_u[None, :] - u[:, None]) / self.cell_u) ** 2
-               + ((self.probe_s[None, :] - s[:, None]) / self.cell_s) ** 2) > EXCLUSION_CELLS**2
-        strongest_far = np.where(far, at_probes, 0.0).max(axis=1, initial=0.0)
-        return strongest_far >= at_target * (1.0 - SAMPLING_LOSS)
+        limit = at_target * (1.0 - SAMPLING_LOSS - margin)
+        total = weights.sum(axis=1)
+        # Probes below the bound cannot reach the limit; a hair of slack covers the rounding
+        # of the products below, so pruning never changes the outcome.
+        floor = np.where(total > 0.0, limit / np.where(total > 0.0, total, 1.0), 0.0)
+        reach = np.searchsorted(-self.bound, -floor * (1.0 - 1e-9), side="right")
+        split = np.zeros(u.shape, dtype=bool)
+        active = np.flatnonzero(reach > 0)
+        start = 0
+        while active.size:
+            stop = start + max(_MIN_BLOCK, BLOCK_ELEMENTS // active.size)
+            w = weights[active]
+            power = w @ self.probe_re[:, start:stop]
+            power *= power
+            im = w @ self.probe_im[:, start:stop]
+            power += im * im
+            # Few probes reach the limit (mostly the target's own main lobe): measure distances
+            # only for those.
+            rows, cols = np.nonzero(power >= (limit[active] ** 2)[:, None])
+            far = (((self.probe_u[start + cols] - u[active[rows]]) / self.cell_u) ** 2
+                   + ((self.probe_s[start + cols] - s[active[rows]]) / self.cell_s) ** 2
+                   ) > EXCLUSION_CELLS**2
+            hit = np.zeros(active.size, dtype=bool)
+            hit[rows[far]] = True
+            split[active[hit]] = True
+            active = active[~hit & (reach[active] > stop)]
+            start = stop
+        return split

@@ -49,7 +49,12 @@ SPLIT_MAP_NODES = 17
 # The per-target local-maximum test is skipped in quads whose nodes all curve downward by at
 # least this fraction of a single FE's main-lobe curvature.
 CLEAR_MAXIMUM = 0.1
-# Plans kept in memory (a sweep over a few rigs and arrays; each is at most a few MB).
+# A quad gets the run-time global-maximum check when a node's strongest far direction comes
+# within this fraction more of splitting: targets between the nodes may come closer still.
+SURVEY_MARGIN = 0.1
+# Plans kept in memory (a sweep over a few rigs and arrays; each is a few MB, up to ~20 MB for
+# a 12 TX x 16 RX cascade on an 8-quad rig, mostly the split check's probes over the field of
+# view).
 MEMORY_PLANS = 16
 # Environment variable naming the disk cache directory; "off" or empty disables it.
 CACHE_DIR_ENV = "RTS_SCENARIO_CACHE_DIR"
@@ -215,7 +220,8 @@ def _survey_quad(
     """Solve a grid of nodes over the quad to learn which run-time checks it needs.
 
     Returns the kernel (the exact one without its per-target local-maximum test where every
-    node is a clear local maximum) and whether any node's peak is not the global maximum.
+    node is a clear local maximum) and whether any node's peak is not, or is only just (see
+    `SURVEY_MARGIN`), the global maximum over the field of view.
     """
     t = np.linspace(0.0, 1.0, SPLIT_MAP_NODES)
     a, b = (g.ravel() for g in np.meshgrid(t, t))
@@ -237,14 +243,15 @@ def _survey_quad(
     if np.any(reason == Reason.SPLIT):
         return kernel, True
     ok = reason == Reason.OK
-    return kernel, bool(np.any(check.splits(az[ok], el[ok], weights[ok])))
+    return kernel, bool(np.any(check.splits(az[ok], el[ok], weights[ok], SURVEY_MARGIN)))
 
 
 def _tuning() -> tuple[float | int, ...]:
     """Return the constants that shape a plan, read at call time (changed: a new plan)."""
     return (
-        SPLIT_MAP_NODES, CLEAR_MAXIMUM,
-        globalmax.PROBES_PER_CELL, globalmax.EXCLUSION_CELLS, globalmax.SAMPLING_LOSS,
+        SPLIT_MAP_NODES, CLEAR_MAXIMUM, SURVEY_MARGIN,
+        *globalmax.FIELD_OF_VIEW, globalmax.PROBES_PER_CELL, globalmax.EXCLUSION_CELLS,
+        globalmax.SAMPLING_LOSS,
         PhaseMap.NODES, exact._NEGATIVE_TOL, exact._RANK_TOL, exact._MAX_ITERATIONS,
         exact._PHASE_TOL, exact._GAIN_TOL, exact._RESIDUAL_TOL,
         quads_module.DEGENERATE_AREA_DEG2,
