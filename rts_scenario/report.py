@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import math
 import tempfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -253,8 +253,6 @@ class Report:
 
 def _without_record(report: Report) -> Report:
     # asdict deep-copies every field; the record is a handle, not data.
-    from dataclasses import replace
-
     return replace(report, record=None)
 
 

@@ -32,6 +32,9 @@ def _do_bench(args: argparse.Namespace) -> int:
     quantized = bench.quantization(rig_name=args.rig)
     print()
     print(bench.format_quantization(quantized))
+    honest_rows = bench.honest(rig_name=args.rig)
+    print()
+    print(bench.format_honest(honest_rows))
     end = None
     if args.scene_s > 0:
         end = bench.end_to_end(args.scene_s)
@@ -39,7 +42,7 @@ def _do_bench(args: argparse.Namespace) -> int:
         print(bench.format_end_to_end(end))
     if args.json:
         with writing("--json", args.json):
-            bench.write_json(rows, quantized, args.json, end)
+            bench.write_json(rows, quantized, args.json, end, honest_rows)
         print(f"wrote {args.json}")
     return EXIT_OK
 
