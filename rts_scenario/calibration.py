@@ -302,10 +302,11 @@ def _close(n_fe: int, pairs: list[PairMeasurement], field: str,
 
 def simulated_measure(radar: RadarProfile, rig: Rig, errors: ChannelErrors, *,
                       fidelity: str = "analytic", noise: bool = False,
-                      rng: np.random.Generator | None = None) -> Measure:
+                      rng: np.random.Generator | None = None,
+                      estimator: str = "bartlett") -> Measure:
     """Play schedules on the simulated radar with injected channel errors (a `measure`)."""
     sim = SimulatedRadar(radar, rig, fidelity=fidelity, noise=noise, errors=errors,
-                         rng=rng or np.random.default_rng(0))
+                         rng=rng or np.random.default_rng(0), estimator=estimator)
     return sim.process
 
 

@@ -202,7 +202,7 @@ class Report:
         """Plain data for JSON (per-frame arrays and the worst frames left out)."""
         out = {k: v for k, v in asdict(_without_record(self)).items()
                if k not in ("record", "worst_frames")}
-        return dict(_strict(out))
+        return dict(strict(out))
 
     def to_json(self) -> str:
         """Render the report as strict JSON (keys documented in docs/report.md; NaN: null)."""
@@ -256,12 +256,12 @@ def _without_record(report: Report) -> Report:
     return replace(report, record=None)
 
 
-def _strict(value: Any) -> Any:
+def strict(value: Any) -> Any:
     """Non-finite floats become None (strict JSON)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _strict(v) for k, v in value.items()}
+        return {k: strict(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_strict(v) for v in value]
+        return [strict(v) for v in value]
     return value
