@@ -35,6 +35,7 @@ from .rig import Rig
 from .scenario import Scenario, load_scenario
 from .scenario.model import RadarOptions
 from .schedule import Schedule, build_schedule
+from .schedule.build import FE_RESPONSES, solver_inputs
 from .solver import solver_plan
 
 # Frames per batch: large enough to amortize per-call costs, small enough for bounded memory.
@@ -239,7 +240,8 @@ class Pipeline:
         t_all = scene.t_s
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
         # read from disk instead of being built again.
-        plan = solver_plan(scene.rig, scene.radar.array, options.method)
+        array, model = solver_inputs(scene.radar, FE_RESPONSES[0])
+        plan = solver_plan(scene.rig, array, options.method, model)
         mark = clock.add("plan_s", mark)
         if on_preflight is not None:
             on_preflight(preflight(scene, options.method))
