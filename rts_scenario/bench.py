@@ -18,7 +18,7 @@ import numpy as np
 
 from .arrays import PRESETS, VirtualArray
 from .evaluation import GRID_AZ_DEG, GRID_EL_DEG, angle_errors, evaluation_grid
-from .peak_search import find_peak, snapshot
+from .peak_search import find_peak
 from .rig import Rig
 from .solver import METHODS, solve_weights
 
@@ -112,9 +112,12 @@ def quantization(step_db: float = 0.5, rig_name: str = "kit-table1") -> list[Qua
                         present=ones, in_coverage=ones, in_range=ones, in_velocity=ones)
         for mode in QUANTIZATION_MODES[::-1]:
             sch = build_schedule(tracks, rig, radar, quantization=mode)
-            fes = rig.quads[sch.quad[0]]
-            x = snapshot(radar.array, sch.weight[0], rig.az_deg[fes], rig.el_deg[fes])
-            p_az, p_el = find_peak(radar.array, x)
+            # The schedule solves for the FEs' echoes as the radar receives them on the bench:
+            # superpose those (the model of `rts_scenario.responses`) to see the quantization.
+            array = radar.steering_array
+            vectors = radar.front_end_model.vectors(rig, np.arange(rig.n_front_ends), array)
+            x = np.einsum("nc,mnc->nm", sch.weight[0], vectors[:, rig.quads[sch.quad[0]]])
+            p_az, p_el = find_peak(array, x)
             err = np.hypot(p_az - az, p_el - el)
             rows.append(QuantizationRow(array=array_name, step_db=step_db, mode=mode,
                                         rms_deg=float(np.sqrt(np.mean(err**2))),

@@ -37,7 +37,7 @@ IntArray = NDArray[np.int64]
 
 # The scene's frame rate may equal the rig's update rate up to rounding (relative).
 # What the solver takes the FEs' echoes to be (`solver_inputs`); the first is the default.
-FE_RESPONSES = ("plane-wave", "modeled")
+FE_RESPONSES = ("modeled", "plane-wave")
 RATE_SLACK = 1e-9
 # A delay that rounds to the minimum is not too close: far below any delay step.
 DELAY_SLACK_S = 1e-18
@@ -78,7 +78,7 @@ def build_schedule(
         How attenuations snap to the attenuator's step (no effect without a step).
     frame_rate_hz : float, optional
         Scene frame rate, checked against the rig's update rate.
-    fe_responses : {"plane-wave", "modeled"}
+    fe_responses : {"modeled", "plane-wave"}
         What the solver takes each FE's echo on the radar's array to be (`solver_inputs`).
 
     Raises
