@@ -181,6 +181,9 @@ def test_cascade_on_the_honest_bench_is_exact_or_says_why():
     az, el = evaluation_grid()
     sol = rs.solve_weights(az, el, rig=rig, array=profile.steering_array,
                            model=profile.front_end_model)
+    # Measured: at 1 m the 12x16 cascade (aperture ~17 cm, far field from ~15 m) cannot be
+    # given any grid target by these FEs: each gets NO_SOLUTION or SPLIT, and nothing is played.
+    assert set(sol.counts()) <= {"NO_SOLUTION", "SPLIT", "OK"}
     ok, detected, reference = bench_errors(profile, rig, "analytic")
     np.testing.assert_array_equal(ok, sol.feasible)
     assert np.all(detected[ok] <= 0.01), detected[ok].max(axis=0)
