@@ -354,9 +354,23 @@ class VirtualArray:
         f = self.response(az_deg, el_deg, source_az_deg, source_el_deg)
         return np.einsum("nq,nq->n", f, np.asarray(weights).reshape(f.shape))
 
-    def source_response(self, source_u: ArrayLike, source_s: ArrayLike) -> SourceResponse:
-        """Precompute the response kernel for fixed sources given by direction cosines."""
-        return SourceResponse(self, np.ravel(source_u), np.ravel(source_s))
+    def source_response(
+        self, source_u: ArrayLike, source_s: ArrayLike, vectors: ComplexArray | None = None
+    ) -> SourceResponse:
+        """Precompute the response kernel for fixed sources given by direction cosines.
+
+        ``vectors`` (shape ``(M, Q)``), when given, are the sources' response vectors on the
+        array (e.g. near-field FEs, `rts_scenario.responses`) in place of their plane-wave
+        steering vectors.
+        """
+        return SourceResponse(self, np.ravel(source_u), np.ravel(source_s), vectors)
+
+
+def plane_waves(array: VirtualArray, source_u: ArrayLike, source_s: ArrayLike) -> ComplexArray:
+    """Steering vectors of sources at direction cosines ``(u, s)``, shape ``(M, Q)``."""
+    k = array.wavenumber_rad_per_m
+    return np.exp(1j * k * (np.outer(array.y_m, np.ravel(source_u))
+                            + np.outer(array.z_m, np.ravel(source_s))))
 
 
 def _distinct(values: FloatArray, tol: float) -> FloatArray:
@@ -368,12 +382,21 @@ def _distinct(values: FloatArray, tol: float) -> FloatArray:
 class SourceResponse:
     """Response ``f_q(u, s)`` and its derivatives for a fixed set of Q sources, vectorized over N.
 
+    ``f_q(u, s) = a(u, s)^H r_q``, with ``r_q`` the source's steering vector ``a(u_q, s_q)``
+    or, when ``vectors`` is given (shape ``(M, Q)``), its column q.
+
     Exploits the layout: with ``ny`` distinct y and ``nz`` distinct z positions, the steering
     vector factors into ``ny + nz`` complex exponentials per look direction (fewer for symmetric
     or evenly spaced positions); the sum over elements is one small matrix product.
     """
 
-    def __init__(self, array: VirtualArray, source_u: FloatArray, source_s: FloatArray) -> None:
+    def __init__(
+        self,
+        array: VirtualArray,
+        source_u: FloatArray,
+        source_s: FloatArray,
+        vectors: ComplexArray | None = None,
+    ) -> None:
         k = array.wavenumber_rad_per_m
         tol = 1e-9 * array.wavelength_m
         self.k = k
@@ -382,7 +405,15 @@ class SourceResponse:
         self.z_distinct = _distinct(array.z_m, tol)
         iy = np.abs(array.y_m[:, None] - self.y_distinct[None, :]).argmin(axis=1)
         iz = np.abs(array.z_m[:, None] - self.z_distinct[None, :]).argmin(axis=1)
-        a_src = np.exp(1j * k * (np.outer(array.y_m, source_u) + np.outer(array.z_m, source_s)))
+        if vectors is None:
+            a_src = plane_waves(array, source_u, source_s)
+        else:
+            a_src = np.asarray(vectors, dtype=np.complex128)
+            if a_src.shape != (array.n_elements, source_u.size):
+                raise ArrayError(
+                    f"vectors: need shape (elements, sources) = "
+                    f"({array.n_elements}, {source_u.size}), got {a_src.shape}"
+                )
         dy = -1j * k * array.y_m[:, None]
         dz = -1j * k * array.z_m[:, None]
         stacked = np.stack(

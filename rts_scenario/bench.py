@@ -18,7 +18,7 @@ import numpy as np
 
 from .arrays import PRESETS, VirtualArray
 from .evaluation import GRID_AZ_DEG, GRID_EL_DEG, angle_errors, evaluation_grid
-from .peak_search import find_peak, snapshot
+from .peak_search import find_peak
 from .report import strict
 from .rig import Rig
 from .solver import METHODS, solve_weights
@@ -113,9 +113,12 @@ def quantization(step_db: float = 0.5, rig_name: str = "kit-table1") -> list[Qua
                         present=ones, in_coverage=ones, in_range=ones, in_velocity=ones)
         for mode in QUANTIZATION_MODES[::-1]:
             sch = build_schedule(tracks, rig, radar, quantization=mode)
-            fes = rig.quads[sch.quad[0]]
-            x = snapshot(radar.array, sch.weight[0], rig.az_deg[fes], rig.el_deg[fes])
-            p_az, p_el = find_peak(radar.array, x)
+            # The schedule solves for the FEs' echoes as the radar receives them on the bench:
+            # superpose those (the model of `rts_scenario.responses`) to see the quantization.
+            array = radar.steering_array
+            vectors = radar.front_end_model.vectors(rig, np.arange(rig.n_front_ends), array)
+            x = np.einsum("nc,mnc->nm", sch.weight[0], vectors[:, rig.quads[sch.quad[0]]])
+            p_az, p_el = find_peak(array, x)
             err = np.hypot(p_az - az, p_el - el)
             rows.append(QuantizationRow(array=array_name, step_db=step_db, mode=mode,
                                         rms_deg=float(np.sqrt(np.mean(err**2))),
@@ -203,8 +206,8 @@ def honest(rig_name: str = "kit-table1",
         radar = RadarProfile.preset(radar_name)
         measure = simulated_measure(radar, rig, ChannelErrors.none(rig.n_front_ends),
                                     fidelity=fidelity, estimator=estimator)
-        for method in METHODS:
-            err = grid_errors(rig, radar, measure, method=method)
+        for method in (*METHODS, "estimator"):
+            err = grid_errors(rig, radar, measure, method=method, estimator=estimator)
             az, el = np.abs(err[:, 0]), np.abs(err[:, 1])
             seen = np.isfinite(az) & np.isfinite(el)
             any_seen = bool(seen.any())
@@ -221,11 +224,11 @@ def honest(rig_name: str = "kit-table1",
 
 def format_honest(rows: list[HonestRow]) -> str:
     """Render the honest-bench rows for people."""
-    head = (f"{'method':<7} {'radar':<13} {'estimator':<9} {'fidelity':<9} {'rms az':>8} "
+    head = (f"{'method':<9} {'radar':<13} {'estimator':<9} {'fidelity':<9} {'rms az':>8} "
             f"{'max az':>8} {'rms el':>8} {'max el':>8} {'missed':>6}")
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r.method:<7} {r.radar:<13} {r.estimator:<9} {r.fidelity:<9} "
+        lines.append(f"{r.method:<9} {r.radar:<13} {r.estimator:<9} {r.fidelity:<9} "
                      f"{r.rms_az_deg:>8.4f} "
                      f"{r.max_az_deg:>8.4f} {r.rms_el_deg:>8.4f} {r.max_el_deg:>8.4f} "
                      f"{r.missed:>6}")

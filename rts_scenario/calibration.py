@@ -311,7 +311,7 @@ def simulated_measure(radar: RadarProfile, rig: Rig, errors: ChannelErrors, *,
 
 
 def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
-                method: str = "exact") -> FloatArray:
+                method: str = "exact", estimator: str = "bartlett") -> FloatArray:
     """Measure detected minus set angle (deg, (G, 2)) over a grid inside the rig's quads.
 
     The grid is the paper's (azimuth -3..3 deg x elevation -6..6 deg) for kit-table1, and a
@@ -340,7 +340,7 @@ def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
                     rcs_dbsm=np.full((n, 1), 10.0), az_deg=az[:, None], el_deg=el[:, None],
                     position_m=np.zeros((n, 1, 3)), present=one, in_coverage=one, in_range=one,
                     in_velocity=one)
-    schedule = build_schedule(tracks, rig, radar, method=method)
+    schedule = build_schedule(tracks, rig, radar, method=method, estimator=estimator)
     dets = measure(schedule)
     out = np.full((n, 2), np.nan)
     for i, d in enumerate(dets):  # one target per frame

@@ -35,7 +35,9 @@ from .rig import Rig
 from .scenario import Scenario, load_scenario
 from .scenario.model import RadarOptions
 from .schedule import Schedule, build_schedule
+from .schedule.build import FE_RESPONSES, solver_inputs
 from .solver import solver_plan
+from .solver.estimator_aware import plan_method
 
 # Frames per batch: large enough to amortize per-call costs, small enough for bounded memory.
 BATCH_FRAMES = 500
@@ -57,7 +59,7 @@ class RunOptions:
         default.
     mapping : str, optional
         ``*.mapping.yaml`` of a third-party radar's DBC.
-    method : {"exact", "paper"}
+    method : {"exact", "paper", "estimator"}
         Weight solver.
     drain_s : float
         Longest wait for the radar's last detections after the last frame.
@@ -239,7 +241,8 @@ class Pipeline:
         t_all = scene.t_s
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
         # read from disk instead of being built again.
-        plan = solver_plan(scene.rig, scene.radar.array, options.method)
+        array, model = solver_inputs(scene.radar, FE_RESPONSES[0])
+        plan = solver_plan(scene.rig, array, plan_method(options.method), model)
         mark = clock.add("plan_s", mark)
         if on_preflight is not None:
             on_preflight(preflight(scene, options.method))
@@ -250,6 +253,7 @@ class Pipeline:
             tracks = compute_tracks(scene, t_all[frames], frames)
             mark = clock.add("kinematics_s", mark)
             schedule = build_schedule(tracks, scene.rig, scene.radar, method=options.method,
+                                      estimator=scene.radar_options.estimator,
                                       frame_rate_hz=scene.frame_rate_hz)
             schedule = replace(schedule, frame_index=frames)
             mark = clock.add("schedule_s", mark)

@@ -90,6 +90,7 @@ def preflight(scene: Scenario, method: str = "exact",
         frames = np.arange(first, min(first + batch_frames, scene.n_frames))
         tracks = compute_tracks(scene, t_all[frames], frames)
         schedule = build_schedule(tracks, scene.rig, scene.radar, method=method,
+                                  estimator=scene.radar_options.estimator,
                                   frame_rate_hz=scene.frame_rate_hz)
         for lim, mask in limit_masks(tracks, schedule.status).items():
             counts[lim] += mask.sum(axis=0)

@@ -83,7 +83,9 @@ def test_one_fe_is_seen_where_the_reference_says(fidelity, raised):
     dets = []
     want = []
     for fe in (0, 3):
-        sch = build_schedule(tracks(KIT.az_deg[fe], KIT.el_deg[fe], radar=profile), KIT, profile)
+        # Plane-wave responses: a target at the FE's nominal direction is that FE alone.
+        sch = build_schedule(tracks(KIT.az_deg[fe], KIT.el_deg[fe], radar=profile), KIT, profile,
+                             fe_responses="plane-wave")
         assert sch.active[0, 0].sum() == 1  # that FE alone, at full level
         dets.append(SimulatedRadar(profile, KIT, fidelity=fidelity, noise=False).process(sch)[0])
         want.append(seen_direction_of_fe(

@@ -49,8 +49,10 @@ def first(dets, field):
 @pytest.mark.parametrize("fidelity", ["adc", "analytic"])
 @pytest.mark.parametrize("fe", range(4))
 def test_single_echo_on_an_fe(fidelity, fe):
+    # Plane-wave FE responses: the set angle is then the FE's own direction, played by that FE
+    # alone (with the bench's modeled responses that FE alone is seen slightly elsewhere).
     sch = build_schedule(tracks(KIT.az_deg[fe], KIT.el_deg[fe], range_m=20.0, v=3.0), KIT,
-                         PAPER)
+                         PAPER, fe_responses="plane-wave")
     assert sch.active[0, 0].sum() == 1  # one channel: a plain point echo from that FE
     det = SimulatedRadar(PAPER, KIT, fidelity=fidelity, noise=False).process(sch)[0]
     assert det.count == 1
@@ -115,7 +117,8 @@ def test_noise_statistics_follow_the_snr():
     spreads = {}
     for rcs in (-15.0, 5.0):
         sch = build_schedule(tracks(np.full(n, KIT.az_deg[3]), np.full(n, KIT.el_deg[3]),
-                                    range_m=25.0, rcs=rcs), KIT, PAPER)
+                                    range_m=25.0, rcs=rcs), KIT, PAPER,
+                             fe_responses="plane-wave")
         assert sch.status[0, 0] == 0 and sch.active[0, 0].tolist() == [False] * 3 + [True]
         sim = SimulatedRadar(PAPER, KIT, fidelity="analytic", rng=np.random.default_rng(3))
         dets = sim.process(sch)

@@ -47,7 +47,8 @@ def test_attenuation_for_known_rcs_and_range_on_an_fe():
     rig = rs.Rig.from_angles([-5, 5, -5, 5], [-8, -8, 8, 8], cal_gain_db=[0, 0, 0.7, 0],
                              reference=rs.Reference(range_m=10, rcs_dbsm=10, attenuation_db=40))
     # On FE 2: that channel alone, full weight, gain 1: A = 40 - (0 - 10) + 40 log10(2) + 0.7.
-    sch = build_schedule(tracks([-5.0], [8.0], range_m=20.0, rcs=0.0), rig, RADAR)
+    sch = build_schedule(tracks([-5.0], [8.0], range_m=20.0, rcs=0.0), rig, RADAR,
+                         fe_responses="plane-wave")
     assert sch.active[0, 0].tolist() == [False, False, True, False]
     assert sch.attenuation_db[0, 0, 2] == pytest.approx(40 + 10 + 40 * np.log10(2) + 0.7,
                                                         abs=1e-9)
@@ -55,7 +56,7 @@ def test_attenuation_for_known_rcs_and_range_on_an_fe():
 
 def test_attenuation_with_superposition_gain_at_quad_centre():
     rig = rs.Rig.from_angles([-5, 5, -5, 5], [-8, -8, 8, 8])
-    sch = build_schedule(tracks([0.0], [0.0]), rig, RADAR)
+    sch = build_schedule(tracks([0.0], [0.0]), rig, RADAR, fe_responses="plane-wave")
     # Equal weights: the peak gain is |sum_q f_q(0, 0)| / M, computed here from the array.
     f = RADAR.array.response(0.0, 0.0, rig.az_deg, rig.el_deg)[0]
     gain = abs(f.sum()) / RADAR.array.n_elements
@@ -148,8 +149,11 @@ def test_quantization_aware_beats_naive_rounding(profile):
     radar = RadarProfile.preset(profile)
     rig = rig_with(attenuation_step_db=0.5, echoes_per_channel=64)
     az, el = evaluation_grid()
-    naive = build_schedule(tracks(az, el), rig, radar, quantization="naive")
-    aware = build_schedule(tracks(az, el), rig, radar, quantization="aware")
+    # Measured with plane-wave FEs, the model the peak search below superposes.
+    naive = build_schedule(tracks(az, el), rig, radar, quantization="naive",
+                           fe_responses="plane-wave")
+    aware = build_schedule(tracks(az, el), rig, radar, quantization="aware",
+                           fe_responses="plane-wave")
     for sch in (naive, aware):  # settings on the attenuator's grid
         att = sch.attenuation_db[sch.active]
         np.testing.assert_allclose(att / 0.5, np.round(att / 0.5), atol=1e-9)

@@ -40,7 +40,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                     help="CAN channel (default: a private one per test)")
     group.addoption("--rts-can-fd", action="store_true", help="CAN FD detection messages")
     group.addoption("--rts-mapping", default=None, help="*.mapping.yaml of a third-party radar")
-    group.addoption("--rts-method", default="exact", choices=["exact", "paper"],
+    group.addoption("--rts-method", default="exact", choices=["exact", "paper", "estimator"],
                     help="weight solver (default exact)")
     parser.addini("rts_scenario_pattern", "glob of the scene files to collect",
                   default=DEFAULT_PATTERN)

@@ -14,6 +14,9 @@ from typing import Any
 
 from ..errors import RtsError
 
+# Weight solver methods a command line can choose (``--method``).
+METHODS = ("exact", "paper", "estimator")
+
 EXIT_OK = 0
 EXIT_FAIL = 1
 EXIT_BAD_INPUT = 2

@@ -13,6 +13,7 @@ from .common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_RUNTIME_ERROR,
+    METHODS,
     Progress,
     check_can_interface,
     check_output,
@@ -172,8 +173,9 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--can-fd", action="store_true", help="CAN FD detection messages")
     parser.add_argument("--mapping", default=None,
                         help="*.mapping.yaml for a third-party radar's DBC")
-    parser.add_argument("--method", default="exact", choices=["exact", "paper"],
-                        help="weight solver (default exact)")
+    parser.add_argument("--method", default="exact", choices=METHODS,
+                        help="weight solver (default exact; estimator: aimed so that the scene's "
+                             "radar.estimator reads the set angle)")
     parser.add_argument("--json", metavar="REPORT", help="write the report as JSON")
     parser.add_argument("--plot", metavar="DIR", help="write PNG plots (needs matplotlib)")
     parser.add_argument("--detections", metavar="CSV",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import EXIT_OK, check_output
+from .common import EXIT_OK, METHODS, check_output
 
 # Target-frames per batch: the schedule streams to the output like a run does.
 _BATCH_TARGET_FRAMES = 200_000
@@ -30,6 +30,7 @@ def _do_schedule(args: argparse.Namespace) -> int:
             frames = np.arange(first, min(first + step, scene.n_frames))
             schedule = build_schedule(compute_tracks(scene, scene.t_s[frames], frames),
                                       scene.rig, scene.radar, method=args.method,
+                                      estimator=scene.radar_options.estimator,
                                       frame_rate_hz=scene.frame_rate_hz)
             out.write(replace(schedule, frame_index=frames))
             emitted += int(schedule.emitted.sum())
@@ -47,5 +48,5 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     )
     parser.add_argument("scene", metavar="SCENE")
     parser.add_argument("--output", required=True, help="file:PATH (.npz, .csv) or udp://...")
-    parser.add_argument("--method", default="exact", choices=["exact", "paper"])
+    parser.add_argument("--method", default="exact", choices=METHODS)
     parser.set_defaults(handler=_do_schedule)

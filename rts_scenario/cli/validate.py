@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from .common import EXIT_BAD_INPUT, EXIT_OK, located
+from .common import EXIT_BAD_INPUT, EXIT_OK, METHODS, located
 
 
 def _do_validate(args: argparse.Namespace) -> int:
@@ -69,6 +69,6 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="*.scenario.yaml files")
     parser.add_argument("--strict", action="store_true",
                         help="a limit the scene does not declare is an error (exit 2)")
-    parser.add_argument("--method", default="exact", choices=["exact", "paper"],
+    parser.add_argument("--method", default="exact", choices=METHODS,
                         help="weight solver the schedule is built with (default exact)")
     parser.set_defaults(handler=_do_validate)

@@ -10,6 +10,7 @@ azimuths, elevations and distances are measured and the mount pose is given.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from ..arrays import ANTENNA_PRESETS, Antennas, VirtualArray
 from ..errors import ArrayError, ScenarioError
 from ..located_yaml import Document, load_yaml, validate
 from ..propagation import C0_MPS
+from ..responses import FrontEndModel
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,6 +89,21 @@ class RadarProfile:
     def steering_wavelength_m(self) -> float:
         """Wavelength at the centre of the sampled sweep: what a well-designed radar steers with."""
         return C0_MPS / self.sampled_centre_frequency_hz
+
+    @cached_property
+    def steering_array(self) -> VirtualArray:
+        """The virtual array at `steering_wavelength_m`: what the radar's estimators steer.
+
+        The schedule solves the weights on it, so that the solver's beamformer is the radar's.
+        """
+        return VirtualArray.from_positions(self.array.y_m, self.array.z_m,
+                                           wavelength_m=self.steering_wavelength_m,
+                                           name=self.array.name)
+
+    @property
+    def front_end_model(self) -> FrontEndModel:
+        """The model of the FEs' echoes on this radar's antennas (`rts_scenario.responses`)."""
+        return FrontEndModel(self.antennas)
 
     @property
     def slope_hz_per_s(self) -> float:

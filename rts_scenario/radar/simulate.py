@@ -54,7 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from ..arrays import VirtualArray, direction_cosines
+from ..arrays import direction_cosines
 from ..detections import Detections
 from ..errors import RtsError
 from ..propagation import C0_MPS
@@ -193,8 +193,7 @@ class SimulatedRadar:
         if self.errors is None:
             self.errors = ChannelErrors.none(self.rig.n_front_ends)
         # The estimators steer the profile's virtual array at the sampled sweep's centre.
-        self._steering_array = VirtualArray.from_positions(
-            p.array.y_m, p.array.z_m, wavelength_m=p.steering_wavelength_m, name=p.array.name)
+        self._steering_array = p.steering_array
         self._angles = make_estimator(self.estimator, self._steering_array)
         ant = p.antennas
         self._tx_m = np.column_stack([np.zeros(ant.n_tx), ant.tx_y_m, ant.tx_z_m])

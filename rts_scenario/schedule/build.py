@@ -21,12 +21,14 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..arrays import direction_cosines
+from ..arrays import VirtualArray, direction_cosines
 from ..kinematics import Tracks
 from ..propagation import C0_MPS
 from ..radar.profile import RadarProfile
+from ..responses import FrontEndModel
 from ..rig import HardwareLimits, Rig
 from ..solver import Reason, solve_weights, solver_plan
+from ..solver.estimator_aware import estimator_weights, plan_method
 from .echo_slots import assign_echo_slots
 from .model import BLOCKING, Schedule, ScheduleError, Status
 from .quantization import QUANTIZATION_MODES, attenuator_settings, predicted_angle_error
@@ -35,6 +37,8 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 # The scene's frame rate may equal the rig's update rate up to rounding (relative).
+# What the solver takes the FEs' echoes to be (`solver_inputs`); the first is the default.
+FE_RESPONSES = ("modeled", "plane-wave")
 RATE_SLACK = 1e-9
 # A delay that rounds to the minimum is not too close: far below any delay step.
 DELAY_SLACK_S = 1e-18
@@ -57,6 +61,8 @@ def build_schedule(
     method: str = "exact",
     quantization: str = "aware",
     frame_rate_hz: float | None = None,
+    fe_responses: str = FE_RESPONSES[0],
+    estimator: str = "bartlett",
 ) -> Schedule:
     """Turn per-frame target tracks into channel settings for the rig.
 
@@ -67,19 +73,25 @@ def build_schedule(
     rig : Rig
         The RTS rig, with its calibration and hardware limits.
     radar : RadarProfile
-        The radar under test (array and wavelength).
-    method : {"exact", "paper"}
-        Weight solver method.
+        The radar under test (array, wavelength and physical antennas).
+    method : {"exact", "paper", "estimator"}
+        Weight solver method; ``"estimator"``: exact weights aimed so that the radar's
+        ``estimator`` reads the set angle (`rts_scenario.solver.estimator_aware`).
     quantization : {"aware", "naive"}
         How attenuations snap to the attenuator's step (no effect without a step).
     frame_rate_hz : float, optional
         Scene frame rate, checked against the rig's update rate.
+    fe_responses : {"modeled", "plane-wave"}
+        What the solver takes each FE's echo on the radar's array to be (`solver_inputs`).
+    estimator : str
+        The radar's angle estimator (a registered name), for ``method="estimator"``.
 
     Raises
     ------
     ScheduleError
         If the scene's frame rate exceeds the rig's update rate or a mode is unknown.
     """
+    array, model = solver_inputs(radar, fe_responses)
     limits = rig.limits
     if quantization not in QUANTIZATION_MODES:
         raise ScheduleError(f"quantization: unknown mode {quantization!r}; valid modes: "
@@ -89,7 +101,6 @@ def build_schedule(
             f"frame_rate_hz: the scene runs at {frame_rate_hz:g} Hz but rig {rig.name!r} "
             f"updates at most {limits.update_rate_hz:g} Hz (limits.update_rate_hz)"
         )
-    array = radar.array
     shape = tracks.range_m.shape
     status = np.where(tracks.present, Status.OK, Status.NOT_PRESENT).astype(np.uint16)
     status |= np.where(tracks.present & ~tracks.in_coverage, Status.OUT_OF_COVERAGE,
@@ -104,8 +115,12 @@ def build_schedule(
     solve = todo & ~steady[None, :]
     solve[first[steady], np.flatnonzero(steady)] = todo[first[steady], np.flatnonzero(steady)]
     flat = np.flatnonzero(solve.ravel())
-    sol = solve_weights(tracks.az_deg.ravel()[flat], tracks.el_deg.ravel()[flat], rig=rig,
-                        array=array, method=method)
+    if method == "estimator":
+        sol = estimator_weights(tracks.az_deg.ravel()[flat], tracks.el_deg.ravel()[flat],
+                                rig=rig, array=array, estimator=estimator, model=model)
+    else:
+        sol = solve_weights(tracks.az_deg.ravel()[flat], tracks.el_deg.ravel()[flat], rig=rig,
+                            array=array, method=method, model=model)
     # Broadcast each steady target's solution to all its frames.
     source = np.full(shape, -1, dtype=np.int64)
     source.ravel()[flat] = np.arange(flat.size)
@@ -131,7 +146,8 @@ def build_schedule(
     attenuation = np.full((*shape, 4), np.nan)
     angle_error = np.zeros((*shape, 2))
     clipped = np.zeros(shape, dtype=bool)
-    responses = solver_plan(rig, array, method).responses
+    # The FEs' responses on the array (estimator-aware weights are exact weights re-aimed).
+    responses = solver_plan(rig, array, plan_method(method), model).responses
     for q in range(len(rig.quads)):  # per quad of the rig, vectorized over its entries
         sel = np.flatnonzero((quad.ravel() == q) & ok.ravel())
         if sel.size == 0:
@@ -202,6 +218,25 @@ def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatA
             predicted_angle_error(resp, new_w, u, s), clipped)
 
 
+def solver_inputs(
+    radar: RadarProfile, fe_responses: str
+) -> tuple[VirtualArray, FrontEndModel | None]:
+    """Return the array and FE response model the schedule solves the weights with.
+
+    ``"plane-wave"``: the profile's virtual array at its nominal wavelength, each FE's echo the
+    steering vector of its direction (DESIGN.md 5.1). ``"modeled"``: the array the radar's
+    estimator steers (`RadarProfile.steering_array`) and each FE's echo modeled on the bench
+    from the radar's physical antennas, the FE distances and antenna offsets (DESIGN.md 5.5b,
+    `rts_scenario.responses`): the synthesized peak is then where the radar looks for it.
+    """
+    if fe_responses == "plane-wave":
+        return radar.array, None
+    if fe_responses == "modeled":
+        return radar.steering_array, radar.front_end_model
+    raise ScheduleError(f"fe_responses: unknown model {fe_responses!r}; valid models: "
+                        f"{', '.join(FE_RESPONSES)}")
+
+
 def channel_delays(rig: Rig, radar: RadarProfile, range_m: FloatArray,
                    fe: IntArray) -> tuple[FloatArray, FloatArray]:
     """Return the RTS delay and channel phase of echoes at ``range_m`` through FEs ``fe``.
@@ -241,4 +276,4 @@ def channel_delays(rig: Rig, radar: RadarProfile, range_m: FloatArray,
     return delay, np.mod(phase + np.pi, 2.0 * np.pi) - np.pi
 
 
-__all__ = ["build_schedule", "channel_delays"]
+__all__ = ["FE_RESPONSES", "build_schedule", "channel_delays", "solver_inputs"]

@@ -22,6 +22,7 @@ from threadpoolctl import ThreadpoolController
 from ..arrays import VirtualArray
 from ..errors import SolverError
 from ..quads import assign_quads
+from ..responses import FrontEndModel
 from ..rig import Rig
 from .plan import (
     METHODS,
@@ -86,6 +87,7 @@ def solve_weights(
     array: VirtualArray,
     method: str = "exact",
     plan: SolverPlan | None = None,
+    model: FrontEndModel | None = None,
 ) -> WeightSolution:
     """Weights of the four FEs of the enclosing quad that synthesize each target's angle.
 
@@ -103,6 +105,11 @@ def solve_weights(
     plan : SolverPlan, optional
         The plan of ``rig``, ``array`` and ``method`` from `solver_plan`, when the caller has
         it already (default: get it from `solver_plan`).
+    model : FrontEndModel, optional
+        The radar's physical antennas: the FEs' responses on ``array`` are then modeled from
+        the bench geometry (FE distances and antenna offsets, spherical paths; see
+        `rts_scenario.responses`) instead of plane waves from the FEs' directions. ``array``
+        must be the antennas' virtual array, at the wavelength the radar steers with.
 
     Returns
     -------
@@ -121,14 +128,14 @@ def solve_weights(
             f"az_deg and el_deg: must have the same length, got {az.size} and {el.size}"
         )
     if plan is None:
-        plan = solver_plan(rig, array, method)
-    elif plan.key != plan_key(rig, array, method):
+        plan = solver_plan(rig, array, method, model)
+    elif plan.key != plan_key(rig, array, method, model):
         # Weights from a plan of other values synthesize other angles, silently.
         raise SolverError(
             f"plan: was built for other values than rig {rig.name!r}, array {array.name!r}, "
             f"method {method!r} (its method: {plan.method!r}); a plan is made for one set of FE "
-            f"angles, grid shape, element positions, wavelength and method: get it from "
-            f"solver_plan(rig, array, method)"
+            f"angles, grid shape, element positions, wavelength, method and FE response model: "
+            f"get it from solver_plan(rig, array, method, model)"
         )
     n = az.size
     weights = np.zeros((n, 4))
@@ -248,6 +255,7 @@ def _retry_neighbours(
 
 __all__ = [
     "METHODS",
+    "FrontEndModel",
     "Reason",
     "SolverPlan",
     "WeightSolution",

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from ..arrays import VirtualArray
 from ..radar.angle import make_estimator
+from ..responses import FrontEndModel
 from ..rig import Rig
 from . import WeightSolution, solve_weights
 from .reasons import Reason
@@ -30,6 +31,11 @@ ITERATIONS = 6
 TOLERANCE_DEG = 1e-4
 
 
+def plan_method(method: str) -> str:
+    """Return the solver method whose plan a schedule method uses (estimator-aware: exact)."""
+    return "exact" if method == "estimator" else method
+
+
 def front_end_vectors(rig: Rig, array: VirtualArray) -> ComplexArray:
     """Each FE's plane-wave response on the virtual array, shape (F, M)."""
     az, el = np.radians(rig.az_deg), np.radians(rig.el_deg)
@@ -39,7 +45,7 @@ def front_end_vectors(rig: Rig, array: VirtualArray) -> ComplexArray:
 
 
 def estimator_weights(az_deg: FloatArray, el_deg: FloatArray, *, rig: Rig, array: VirtualArray,
-                      estimator: str, responses: ComplexArray | None = None,
+                      estimator: str, model: FrontEndModel | None = None,
                       iterations: int = ITERATIONS) -> WeightSolution:
     """Weights that make ``estimator`` report each target at its set angle.
 
@@ -51,8 +57,9 @@ def estimator_weights(az_deg: FloatArray, el_deg: FloatArray, *, rig: Rig, array
         The rig and the radar's virtual array.
     estimator : str
         A registered angle estimator (`rts_scenario.radar.angle.ESTIMATORS` or a plugin).
-    responses : ndarray, shape (F, M), optional
-        Each FE's response on the array (default: plane waves from the FE directions).
+    model : FrontEndModel, optional
+        The FEs' echoes as the radar receives them (near field, antenna offsets); default:
+        plane waves from the FE directions. The exact weights are solved with the same model.
     iterations : int
         Fixed-point steps.
 
@@ -64,11 +71,12 @@ def estimator_weights(az_deg: FloatArray, el_deg: FloatArray, *, rig: Rig, array
     """
     az = np.asarray(az_deg, dtype=np.float64).reshape(-1)
     el = np.asarray(el_deg, dtype=np.float64).reshape(-1)
-    vectors = front_end_vectors(rig, array) if responses is None else responses
+    vectors = (front_end_vectors(rig, array) if model is None
+               else model.vectors(rig, np.arange(rig.n_front_ends), array).T)
     read = make_estimator(estimator, array)
     aim_az, aim_el = az.copy(), el.copy()
     miss = np.full(az.size, np.inf)
-    sol = solve_weights(aim_az, aim_el, rig=rig, array=array, method="exact")
+    sol = solve_weights(aim_az, aim_el, rig=rig, array=array, method="exact", model=model)
     for _ in range(iterations):
         seen_az, seen_el = _seen(read, sol, rig, vectors)
         miss = np.hypot(seen_az - az, seen_el - el)
@@ -77,7 +85,7 @@ def estimator_weights(az_deg: FloatArray, el_deg: FloatArray, *, rig: Rig, array
             break
         aim_az = np.where(step, aim_az + az - seen_az, aim_az)
         aim_el = np.where(step, aim_el + el - seen_el, aim_el)
-        sol = solve_weights(aim_az, aim_el, rig=rig, array=array, method="exact")
+        sol = solve_weights(aim_az, aim_el, rig=rig, array=array, method="exact", model=model)
     else:
         seen_az, seen_el = _seen(read, sol, rig, vectors)
         miss = np.hypot(seen_az - az, seen_el - el)
@@ -105,4 +113,4 @@ def _seen(read: object, sol: WeightSolution, rig: Rig,
     return seen_az, seen_el
 
 
-__all__ = ["estimator_weights", "front_end_vectors"]
+__all__ = ["estimator_weights", "front_end_vectors", "plan_method"]

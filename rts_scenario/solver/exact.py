@@ -5,10 +5,14 @@ With coherent channels the Bartlett output of the superposition is
 direction is linear in the weights. Working in direction cosines ``(u, s)`` rather than angles is
 a change of variables with the same maxima, and stays well conditioned near el = +-90 deg.
 
-Centro-symmetric arrays have a real ``f``: the two stationarity equations leave a 2-D null space
-in which the weights that maximize the peak gain ``f . w / |w|`` with ``w >= 0`` are the projection
-of ``f`` onto it, or, when that has a negative entry, the projection onto the boundary ray where
-one weight is zero. Other arrays make ``f`` complex; the condition ``Re(conj(B) dB) = 0`` is
+On the bench the FEs' echoes are not plane waves: the plan can give each FE's modeled response
+vector ``r_q`` (`rts_scenario.responses`), and then ``f_q = a(u, s)^H r_q`` (DESIGN.md 5.5b).
+
+Centro-symmetric arrays with plane-wave FEs have a real ``f``: the two stationarity equations
+leave a 2-D null space in which the weights that maximize the peak gain ``f . w / |w|`` with
+``w >= 0`` are the projection of ``f`` onto it, or, when that has a negative entry, the
+projection onto the boundary ray where one weight is zero. Other arrays and modeled responses
+make ``f`` complex; the condition ``Re(conj(B) dB) = 0`` is
 linear once ``conj(B)`` is frozen, and the same step, iterated, converges in a few passes.
 
 Every solution is checked to be a local maximum of ``|B|`` (negative definite Hessian); the
@@ -148,9 +152,23 @@ class ExactQuad:
     check_local_max: bool = True
     phase_map: PhaseMap | None = None
 
+    # The plan passes the FEs' modeled response vectors (`rts_scenario.responses`) to `build`.
+    uses_response_vectors = True
+
     @classmethod
-    def build(cls, rig: Rig, array: VirtualArray, fes: NDArray[np.int64]) -> ExactQuad:
-        """Precompute the response of the quad's four FEs for ``array``."""
+    def build(
+        cls,
+        rig: Rig,
+        array: VirtualArray,
+        fes: NDArray[np.int64],
+        vectors: ComplexArray | None = None,
+    ) -> ExactQuad:
+        """Precompute the response of the quad's four FEs for ``array``.
+
+        ``vectors`` (shape ``(M, 4)``): the FEs' response vectors on the array, when modeled;
+        default their plane-wave steering vectors. Modeled vectors make ``f`` complex whatever
+        the layout (a near-field wavefront is not symmetric about the centroid).
+        """
         extent = max(np.ptp(array.y_m), np.ptp(array.z_m))
         if np.ptp(array.y_m) == 0.0 or np.ptp(array.z_m) == 0.0:
             raise SolverError(
@@ -159,8 +177,8 @@ class ExactQuad:
             )
         u, s = direction_cosines(np.radians(rig.az_deg[fes]), np.radians(rig.el_deg[fes]))
         quad = cls(
-            response=array.source_response(u, s),
-            centrosymmetric=array.is_centrosymmetric,
+            response=array.source_response(u, s, vectors),
+            centrosymmetric=array.is_centrosymmetric and vectors is None,
             row_scale=array.wavenumber_rad_per_m * extent * array.n_elements,
         )
         if quad.centrosymmetric:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..arrays import SourceResponse, VirtualArray, direction_cosines
+from ..arrays import SourceResponse, VirtualArray, direction_cosines, plane_waves
 from ..rig import Rig
 
 FloatArray = NDArray[np.float64]
@@ -73,8 +73,18 @@ class GlobalMaxCheck:
     cell_s: float
 
     @classmethod
-    def build(cls, rig: Rig, array: VirtualArray, fes: NDArray[np.int64]) -> GlobalMaxCheck:
-        """Lay the probe grid over the field of view for the quad ``fes`` and ``array``."""
+    def build(
+        cls,
+        rig: Rig,
+        array: VirtualArray,
+        fes: NDArray[np.int64],
+        vectors: ComplexArray | None = None,
+    ) -> GlobalMaxCheck:
+        """Lay the probe grid over the field of view for the quad ``fes`` and ``array``.
+
+        ``vectors`` (shape ``(M, 4)``): the FEs' response vectors on the array, when modeled
+        (`rts_scenario.responses`); default their plane-wave steering vectors.
+        """
         u, s = direction_cosines(np.radians(rig.az_deg[fes]), np.radians(rig.el_deg[fes]))
         ap_y, ap_z = array.sinc_aperture_m()
         cell_u = array.wavelength_m / ap_y if ap_y > 0 else 2.0
@@ -93,7 +103,7 @@ class GlobalMaxCheck:
             grids.append(np.linspace(lo, hi, int(np.ceil((hi - lo) / step)) + 1))
         # On a grid the steering vector factors into a row along u and a column along s, so
         # the response at all probes is one matrix product per FE.
-        src = np.exp(1j * k * (np.outer(array.y_m, u) + np.outer(array.z_m, s)))
+        src = plane_waves(array, u, s) if vectors is None else vectors
         look_u = np.exp(-1j * k * np.outer(grids[0], array.y_m))
         look_s = np.exp(-1j * k * np.outer(array.z_m, grids[1]))
         f = np.stack([((look_u * src[:, q]) @ look_s).ravel() for q in range(src.shape[1])])
@@ -104,7 +114,7 @@ class GlobalMaxCheck:
         order = np.argsort(-bound, kind="stable")
         f = f[:, order]
         return cls(
-            response=array.source_response(u, s), probe_u=pu[order], probe_s=ps[order],
+            response=array.source_response(u, s, vectors), probe_u=pu[order], probe_s=ps[order],
             probe_re=np.ascontiguousarray(f.real), probe_im=np.ascontiguousarray(f.imag),
             bound=bound[order], cell_u=cell_u, cell_s=cell_s,
         )

@@ -36,6 +36,7 @@ from ..arrays import SourceResponse, VirtualArray, direction_cosines
 from ..errors import SolverError
 from ..quads import QuadGeometry
 from ..registry import Registry
+from ..responses import FrontEndModel
 from ..rig import Rig
 from . import exact, globalmax
 from .exact import ExactQuad, PhaseMap
@@ -82,7 +83,7 @@ METHODS = Registry("method", {
 
 @dataclass(frozen=True, eq=False)
 class SolverPlan:
-    """Precomputed solver state for one (rig FE geometry, array, method).
+    """Precomputed solver state for one (rig FE geometry, array, method, FE response model).
 
     Plans compare by identity; ``key`` names the values a plan stands for.
 
@@ -120,8 +121,13 @@ class SolverPlan:
         return f"plan {self.seconds * 1e3:.0f} ms ({self.origin})"
 
 
-def solver_plan(rig: Rig, array: VirtualArray, method: str) -> SolverPlan:
+def solver_plan(
+    rig: Rig, array: VirtualArray, method: str, model: FrontEndModel | None = None
+) -> SolverPlan:
     """Return the plan for ``rig``, ``array`` and ``method``, from a cache when possible.
+
+    With ``model`` (the radar's physical antennas) the FEs' responses are modeled from the
+    bench geometry (`rts_scenario.responses`) instead of plane waves.
 
     Looks in memory, then on disk (see `plan_cache_dir`), else builds it with `build_plan`
     and stores it in both. The returned plan's ``origin`` and ``seconds`` say which and how long
@@ -133,7 +139,7 @@ def solver_plan(rig: Rig, array: VirtualArray, method: str) -> SolverPlan:
         The method cannot solve on this array (raised by the method's kernel).
     """
     start = time.perf_counter()
-    key = plan_key(rig, array, method)
+    key = plan_key(rig, array, method, model)
     with _key_lock(key):
         origin: Origin = "memory"
         plan = _MEMORY.get(key)
@@ -143,45 +149,64 @@ def solver_plan(rig: Rig, array: VirtualArray, method: str) -> SolverPlan:
             plan = _load(directory, key)
             if plan is None:
                 origin = "built"
-                plan = build_plan(rig, array, method, key=key)
+                plan = build_plan(rig, array, method, model, key=key)
                 _store(directory, key, plan)
             _MEMORY.put(key, plan)
     return replace(plan, origin=origin, seconds=time.perf_counter() - start)
 
 
-def build_plan(rig: Rig, array: VirtualArray, method: str, *, key: str | None = None) -> SolverPlan:
-    """Build the plan from the values of ``rig``, ``array`` and ``method`` (no cache).
+def build_plan(
+    rig: Rig,
+    array: VirtualArray,
+    method: str,
+    model: FrontEndModel | None = None,
+    *,
+    key: str | None = None,
+) -> SolverPlan:
+    """Build the plan from the values of ``rig``, ``array``, ``method`` and ``model`` (no cache).
 
     Every quad's kernel is surveyed on a grid of nodes to learn which run-time checks it needs.
+    With ``model``, the FEs' modeled response vectors serve the global-maximum checks, the
+    plan's responses and the methods that take them (``uses_response_vectors``).
     """
-    build: Callable[[Rig, VirtualArray, NDArray[np.int64]], QuadKernel] = METHODS.get(method).build
+    method_class = METHODS.get(method)
+    build: Callable[..., QuadKernel] = method_class.build
+    takes_vectors = bool(getattr(method_class, "uses_response_vectors", False))
+    if model is not None:
+        model.check(array)
     geometry = QuadGeometry.of(rig)
     kernels: list[QuadKernel] = []
     checks: list[GlobalMaxCheck | None] = []
     responses = []
     for q, fes in enumerate(rig.quads):
-        check = GlobalMaxCheck.build(rig, array, fes)
-        kernel, can_split = _survey_quad(build(rig, array, fes), check, geometry.polygons[q], array)
+        vectors = None if model is None else model.vectors(rig, fes, array)
+        check = GlobalMaxCheck.build(rig, array, fes, vectors)
+        kernel = build(rig, array, fes, vectors) if takes_vectors else build(rig, array, fes)
+        kernel, can_split = _survey_quad(kernel, check, geometry.polygons[q], array)
         kernels.append(kernel)
         checks.append(check if can_split else None)
         u, s = direction_cosines(np.radians(rig.az_deg[fes]), np.radians(rig.el_deg[fes]))
-        responses.append(array.source_response(u, s))
+        responses.append(array.source_response(u, s, vectors))
     return SolverPlan(
-        key=plan_key(rig, array, method) if key is None else key, method=method,
+        key=plan_key(rig, array, method, model) if key is None else key, method=method,
         geometry=geometry, kernels=tuple(kernels), checks=tuple(checks),
         responses=tuple(responses),
     )
 
 
-def plan_key(rig: Rig, array: VirtualArray, method: str) -> str:
+def plan_key(
+    rig: Rig, array: VirtualArray, method: str, model: FrontEndModel | None = None
+) -> str:
     """Name of the plan for these values: hex sha256 of everything the plan depends on.
 
-    That is the rig's FE angles and grid shape (not distances or calibration: the plan does not
-    use them), the array's element positions and wavelength, the method, the solver's tuning
-    constants, and the package version and code.
+    That is the rig's FE angles and grid shape, the array's element positions and wavelength,
+    the method, the solver's tuning constants, and the package version and code; with a
+    ``model``, also the radar's physical antennas and the FEs' distances and antenna offsets
+    (never the calibration: the plan does not use it).
     """
+    modeled = () if model is None else (*model.key, *model.rig_key(rig))
     digest = hashlib.sha256()
-    for part in (*rig.key, *array.key, method, repr(_tuning()), _code_fingerprint()):
+    for part in (*rig.key, *array.key, *modeled, method, repr(_tuning()), _code_fingerprint()):
         data = part if isinstance(part, bytes) else repr(part).encode()
         digest.update(len(data).to_bytes(8, "little"))
         digest.update(data)
@@ -271,7 +296,7 @@ def _code_fingerprint() -> str:
         version = "unknown"
     package = Path(__file__).resolve().parent.parent
     sources = sorted(package.joinpath("solver").glob("*.py"))
-    sources += [package / name for name in ("arrays.py", "quads.py", "rig.py")]
+    sources += [package / name for name in ("arrays.py", "quads.py", "responses.py", "rig.py")]
     digest = hashlib.sha256()
     for path in sources:
         try:

@@ -77,3 +77,21 @@ def test_plan_cascade(benchmark, rig_name, make_array):
     benchmark.extra_info["probe_bytes"] = sum(
         c.probe_re.nbytes + c.probe_im.nbytes + c.probe_u.nbytes + c.probe_s.nbytes
         + c.bound.nbytes for c in checks)
+
+
+@pytest.mark.parametrize("fe_responses", ["plane-wave", "modeled"])
+def test_solve_weights_modeled_responses_1e6(benchmark, targets, fe_responses):
+    """Exact method on the honest bench's FE responses (awr1843boost, kit-table1 at 1 m)."""
+    from rts_scenario.radar import RadarProfile
+    from rts_scenario.schedule.build import solver_inputs
+
+    rig = rs.Rig.preset("kit-table1")
+    array, model = solver_inputs(RadarProfile.preset("awr1843boost"), fe_responses)
+    az, el = targets
+    kwargs = {"rig": rig, "array": array, "model": model}
+    rs.solve_weights(az[:64], el[:64], **kwargs)
+    benchmark.group = "solve_weights N=1e6 awr1843boost FE responses"
+    sol = benchmark.pedantic(rs.solve_weights, args=(az, el), kwargs=kwargs, rounds=3,
+                             iterations=1)
+    assert sol.feasible.all()
+    benchmark.extra_info["target_frames_per_s"] = N / benchmark.stats.stats.min
