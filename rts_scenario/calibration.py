@@ -1,18 +1,33 @@
-"""Phase and gain coherence of the RTS channels: pairwise sweeps, closed by least squares.
+"""Phase and gain coherence of the RTS channels for any radar: fitted delay sweeps, closed.
 
-The paper calibrates two FEs at a time: with both on, it sweeps one channel's delay (that is,
-its carrier phase) and keeps the setting where the superimposed target's angle error is
-smallest. Here each pair plays a target with unequal weights (1 and ``weight_ratio``), so the
-synthesized angle moves along the pair's line with the pair's phase difference; that shift is
-an even function of the phase error around coherence, so the first harmonic of the sweep puts
-coherence at its phase exactly (no search on a grid, robust to noise). Where the coherent pair
-peaks then gives the gain ratio, by inverting the array model (detected levels, also recorded,
-are too coarse on classic CAN).
+Pairwise delay sweeps, each fitted with the radar's own array and estimator, closed by least
+squares over all pairs.
+
+The paper calibrates two FEs at a time: with both on, it sweeps one channel's *delay* and
+watches the angle of the superimposed target. Here each pair plays a target with unequal weights
+(1 and ``weight_ratio``) while the weak channel's delay steps over one turn of the phase the RTS
+gives a delay: ``2 pi f_if tau`` for a digital RTS that delays at an intermediate frequency,
+``2 pi f_c tau`` for an RF delay line (the rig's ``rts.delay_model``), on the RTS's delay grid.
+
+Each sweep is fitted with a model of what the radar reports, which assumes neither a symmetric
+array nor a Bartlett radar:
+
+- the two FEs' response vectors on the radar's virtual array, modeled from the bench's geometry
+  (physical antennas, FE distances and antenna offsets, near field: `rts_scenario.responses`,
+  the vectors the exact method solves with);
+- the swept echo's phase from the delay model, and its amplitude through the radar's range
+  window (Hann) at the range offset the delay makes (a turn at 500 MHz is 2 ns, 0.3 m), read at
+  the range cell the radar reports;
+- the radar's own angle estimator (`bartlett`, `ti` or one registered in the estimator registry).
+
+The fit's two unknowns per pair are the channels' phase and gain difference. Calibration results
+are channel phase and gain offsets, applied by the RTS per channel (the schedule's ``phase_rad``
+and attenuation), so calibrated channels keep their ranges.
 
 Phase coherence is only measurable in pairs but needed between all channels at once: the
 differences of all pairs (6 per quad) are solved together by least squares for one offset per
-channel (the first FE is the reference). A pair whose residual stands out reveals a bad channel
-or a moved FE.
+channel (the first FE is the reference). A pair whose closure residual stands out, or whose sweep
+the model does not fit, reveals a bad channel or a moved FE.
 
 Measurements run through `measure` - schedule in, one `Detections` per frame out - so the same
 procedure drives the built-in simulated radar directly (`simulated_measure`) or any bench through
@@ -21,48 +36,60 @@ the pipeline (`rts_scenario.pipeline.Pipeline.play`: an output plus the radar's 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from itertools import combinations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import least_squares
 
 from .detections import Detections
 from .errors import RtsError
-from .peak_search import find_peak, snapshot
+from .propagation import C0_MPS
+from .radar.angle import make_estimator
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors, SimulatedRadar
 from .rig import Rig
 from .schedule import Schedule
-from .schedule.build import channel_delays
+from .schedule.build import channel_delays, solver_inputs
 
 FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
 Measure = Callable[[Schedule], list[Detections]]
+# One frame of a test pattern: (fe, weight, extra phase deg[, extra delay s]) per channel.
+Row = Sequence[tuple[float, ...]]
 
-# A pair whose phase residual exceeds this (deg), or gain residual this (dB), is suspect.
+# A pair whose closure residual exceeds this (deg), or gain residual this (dB), or whose sweep
+# the model misses by more than this rms (deg), is suspect.
 SUSPECT_PHASE_DEG = 3.0
 SUSPECT_GAIN_DB = 0.3
-# Frames per pair at its coherence point, averaged for the gain.
-GAIN_REPEATS = 4
+SUSPECT_FIT_DEG = 0.05
 
 
 @dataclass(frozen=True)
 class PairMeasurement:
-    """One pair's measurement: FE ``a`` (strong) and ``b`` (weak, swept).
+    """One pair's measurement: FE ``a`` (strong) and ``b`` (weak, its delay swept).
 
+    ``delay_s`` are the delays added to b, ``sweep_deg`` the phases they give b's echo (the
+    rig's delay model); ``az_deg``/``el_deg`` what the radar reported, ``shift_deg`` its
+    projection on the pair's axis and ``model_shift_deg`` the fitted model's.
     ``phase_deg`` and ``gain_db`` are a minus b; ``level_db`` is the difference of the detected
-    single-channel levels (coarse, for the record).
+    single-channel levels (coarse, for the record); ``fit_rms_deg`` how well the model fits.
     """
 
     a: int
     b: int
+    delay_s: FloatArray
     sweep_deg: FloatArray
+    az_deg: FloatArray
+    el_deg: FloatArray
     shift_deg: FloatArray
+    model_shift_deg: FloatArray
     phase_deg: float
     gain_db: float
     level_db: float
-    swing_deg: float
+    fit_rms_deg: float
 
 
 @dataclass(frozen=True)
@@ -77,12 +104,14 @@ class CalibrationResult:
 
     @property
     def suspects(self) -> list[str]:
-        """Pairs whose measurements do not fit the others (bad channel, moved FE)."""
+        """Pairs whose measurements do not fit the others or the model (bad channel, moved FE)."""
         out = []
         for p, rp, rg in zip(self.pairs, self.phase_residual_deg, self.gain_residual_db,
                              strict=True):
-            if abs(rp) > SUSPECT_PHASE_DEG or abs(rg) > SUSPECT_GAIN_DB:
-                out.append(f"FE {p.a}-{p.b}: residual {rp:+.1f} deg, {rg:+.2f} dB")
+            if (abs(rp) > SUSPECT_PHASE_DEG or abs(rg) > SUSPECT_GAIN_DB
+                    or not p.fit_rms_deg <= SUSPECT_FIT_DEG):
+                out.append(f"FE {p.a}-{p.b}: residual {rp:+.1f} deg, {rg:+.2f} dB, sweep "
+                           f"fit {p.fit_rms_deg:.3f} deg rms")
         return out
 
     def apply(self, rig: Rig) -> Rig:
@@ -104,85 +133,117 @@ def pairs_of(rig: Rig) -> list[tuple[int, int]]:
     return sorted(found)
 
 
-def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, sweep_step_deg: float = 15.0,
-              weight_ratio: float = 0.5, range_m: float = 10.0, attenuation_db: float = 40.0,
+def delayed_frequency_hz(rig: Rig, radar: RadarProfile, range_m: float) -> float:
+    """Frequency at which an extra RTS delay turns an echo at ``range_m`` (Hz).
+
+    The rig's delay model (IF or carrier), read where the radar reads the phase: at the centre
+    of its sampled sweep, less the sweep over the echo's lateness (as `channel_delays`).
+    """
+    return (rig.rts.delayed_frequency_hz(radar.fc_hz) + radar.sampled_centre_frequency_hz
+            - radar.fc_hz - radar.slope_hz_per_s * 2.0 * range_m / C0_MPS)
+
+
+def sweep_delays(rig: Rig, radar: RadarProfile, steps: int,
+                 range_m: float) -> tuple[FloatArray, FloatArray]:
+    """Delays to add to a channel for a sweep over one phase turn, and their phases (deg).
+
+    The wanted phases are ``steps`` equal steps of a turn; each delay is the shortest one on the
+    RTS's delay grid (the least range offset) whose phase is within half a step of the wanted
+    one, else the one whose phase comes nearest. A grid coarser than a phase step repeats
+    phases; the fit uses the phases obtained.
+    """
+    f_hz = delayed_frequency_hz(rig, radar, range_m)
+    turn_s = 1.0 / f_hz
+    wanted = (np.arange(steps) / steps - 0.5) * turn_s
+    step = rig.limits.delay_step_s
+    if step > 0.0:
+        reach = int(np.ceil(max(turn_s, step) / step)) * 2
+        grid = np.arange(-reach, reach + 1) * step
+        grid_turns = np.mod(-grid * f_hz + 0.5, 1.0) - 0.5
+        want_turns = -wanted * f_hz
+        miss = np.abs(np.mod(grid_turns[None, :] - want_turns[:, None] + 0.5, 1.0) - 0.5)
+        # The shortest delay within half a phase step of the wanted phase, else the nearest.
+        score = (np.where(miss <= 0.5 / steps, 0.0, miss * 1e6)
+                 + np.abs(grid)[None, :] / (np.abs(grid).max() + step))
+        wanted = grid[np.argmin(score, axis=1)]
+    phase = -360.0 * f_hz * wanted
+    return wanted, _wrap(phase)
+
+
+def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str = "bartlett",
+              steps: int = 24, weight_ratio: float = 0.5, range_m: float = 10.0,
+              attenuation_db: float = 40.0,
               progress: Callable[[int, int], None] | None = None) -> CalibrationResult:
-    """Measure every pair and solve for per-channel phase and gain offsets.
+    """Measure every pair with a delay sweep and solve for per-channel phase and gain offsets.
 
     Parameters
     ----------
     rig : Rig
         The rig; its current calibration is the starting point.
     radar : RadarProfile
-        The radar (wavelength and array for the expected angles).
+        The radar: its antennas, chirp and array for the model of what it reports.
     measure : callable
         Plays a schedule, returns one `Detections` per frame.
-    sweep_step_deg : float
-        Phase step of the sweep (a full turn is swept).
+    estimator : str
+        The radar's angle estimator (a name in the estimator registry).
+    steps : int
+        Delay steps per sweep (over one phase turn).
     weight_ratio : float
         Amplitude of the swept channel relative to the other (unequal weights make the angle
         depend on the phase).
     """
+    if steps < 8:
+        raise RtsError(f"calibration: steps must be >= 8, got {steps}")
     pairs = pairs_of(rig)
-    sweep = np.arange(0.0, 360.0, sweep_step_deg)
-    # Round 1: each pair alone, then with the weak channel's phase swept.
-    rows: list[list[tuple[int, float, float]]] = []
+    delays, sweep_deg = sweep_delays(rig, radar, steps, range_m)
+    rows: list[Row] = []
     for a, b in pairs:
         rows += [[(a, 1.0, 0.0)], [(b, 1.0, 0.0)]]
-        rows += [[(a, 1.0, 0.0), (b, weight_ratio, s)] for s in sweep]
-    batch = len(sweep) + 2
-    dets = _measure_pairs(rig, radar, measure, rows, batch, range_m, attenuation_db, progress)
-    fitted = [_fit_phase(rig, radar, a, b, sweep, weight_ratio, dets[i * batch : (i + 1) * batch])
-              for i, (a, b) in enumerate(pairs)]
-    # Round 2: each pair at its coherence point; where it peaks gives the gain ratio.
-    rows = [[(a, 1.0, 0.0), (b, weight_ratio, f.phase_deg)] for (a, b), f in zip(pairs, fitted,
-                                                                                strict=True)
-            for _ in range(GAIN_REPEATS)]
-    dets = _measure_pairs(rig, radar, measure, rows, GAIN_REPEATS, range_m, attenuation_db,
-                          None)
-    measured = [_fit_gain(rig, radar, f, weight_ratio,
-                          dets[i * GAIN_REPEATS : (i + 1) * GAIN_REPEATS])
-                for i, f in enumerate(fitted)]
+        rows += [[(a, 1.0, 0.0, 0.0), (b, weight_ratio, 0.0, float(d))] for d in delays]
+    batch = steps + 2
+    schedule = pattern_schedule(rig, radar, rows, range_m, attenuation_db)
+    dets: list[Detections] = []
+    for i in range(len(pairs)):  # one pair at a time, like on the bench
+        dets += measure(schedule.frames(i * batch, (i + 1) * batch))
+        if progress is not None:
+            progress(i + 1, len(pairs))
+    model = _PairModel(rig, radar, estimator, weight_ratio)
+    measured = []
+    for i, (a, b) in enumerate(pairs):
+        frames = slice(i * batch + 2, (i + 1) * batch)
+        measured.append(model.fit(a, b, delays, sweep_deg, schedule.frames(frames.start,
+                                                                          frames.stop),
+                                  dets[i * batch : (i + 1) * batch]))
     phase, phase_res = _close(rig.n_front_ends, measured, "phase_deg", circular=True)
     gain, gain_res = _close(rig.n_front_ends, measured, "gain_db", circular=False)
     return CalibrationResult(phase_deg=phase, gain_db=gain, pairs=tuple(measured),
                              phase_residual_deg=phase_res, gain_residual_db=gain_res)
 
 
-def _measure_pairs(rig: Rig, radar: RadarProfile, measure: Measure,
-                   rows: list[list[tuple[int, float, float]]], batch: int, range_m: float,
-                   level_db: float, progress: Callable[[int, int], None] | None
-                   ) -> list[Detections]:
-    """Play the frames, one pair's batch at a time (like on the bench)."""
-    schedule = pattern_schedule(rig, radar, rows, range_m, level_db)
-    dets: list[Detections] = []
-    total = len(rows) // batch
-    for i in range(total):  # one pair at a time
-        dets += measure(schedule.frames(i * batch, (i + 1) * batch))
-        if progress is not None:
-            progress(i + 1, total)
-    return dets
-
-
-def pattern_schedule(rig: Rig, radar: RadarProfile, rows: list[list[tuple[int, float, float]]],
-                     range_m: float, level_db: float) -> Schedule:
+def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m: float,
+                     level_db: float) -> Schedule:
     """Return a test pattern: one frame per row, the listed FEs of each row on.
 
-    Each row item is ``(fe, weight, extra phase deg)``; the target is at ``range_m``,
-    approaching at 1 m/s, with ``level_db`` of attenuation at weight 1 (plus each channel's
-    calibration).
+    Each row item is ``(fe, weight, extra phase deg)`` or ``(fe, weight, extra phase deg,
+    extra delay s)``; the target is at ``range_m``, approaching at 1 m/s, with ``level_db`` of
+    attenuation at weight 1 (plus each channel's calibration). An extra delay is added to the
+    channel's delay as it is (on the RTS's grid if it is on it), its phase not given back.
     """
     n = len(rows)
     fe = np.full((n, 1, 4), -1, dtype=np.int64)
     weight = np.zeros((n, 1, 4))
     extra = np.zeros((n, 1, 4))
+    extra_delay = np.zeros((n, 1, 4))
     for f, row in enumerate(rows):  # building the test pattern, not a hot path
         for c, item in enumerate(row):
-            fe[f, 0, c], weight[f, 0, c], extra[f, 0, c] = item
+            fe[f, 0, c], weight[f, 0, c], extra[f, 0, c] = item[:3]
+            if len(item) > 3:
+                extra_delay[f, 0, c] = item[3]
     active = fe >= 0
     fe0 = np.maximum(fe, 0)
     # Delays on the RTS's grid, their rounding given back in phase as the rig's delay model says.
     delay, phase = channel_delays(rig, radar, np.asarray(range_m, dtype=np.float64), fe0)
+    delay = delay + extra_delay
     doppler = np.full(fe.shape, 2.0 * 1.0 / radar.wavelength_m)  # approaching at 1 m/s
     with np.errstate(divide="ignore"):
         attenuation = level_db - 20.0 * np.log10(weight) + rig.cal_gain_db[fe0]
@@ -207,67 +268,104 @@ def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
     return float(values[k])
 
 
+def _range_window(offset_bins: FloatArray, n: int) -> FloatArray:
+    """Amplitude of an n-point Hann-windowed DFT ``offset_bins`` from a tone, re its peak.
+
+    Summed over the window (``hanning(n + 2)[1:-1]``, the phase referred to its centre, where
+    the DFT of a symmetric window is real).
+    """
+    w = np.hanning(n + 2)[1:-1]
+    m = np.arange(n) - (n - 1) / 2.0
+    offset = np.atleast_1d(np.asarray(offset_bins, dtype=np.float64))
+    return np.cos(2.0 * np.pi * np.outer(offset, m) / n) @ w / w.sum()
+
+
+class _PairModel:
+    """What the radar reports for a pair (a at weight 1, b at ``ratio``), given a - b."""
+
+    def __init__(self, rig: Rig, radar: RadarProfile, estimator: str, ratio: float) -> None:
+        array, fe_model = solver_inputs(radar, "modeled")
+        assert fe_model is not None
+        self.rig, self.radar, self.ratio = rig, radar, ratio
+        self.vectors = fe_model.vectors(rig, np.arange(rig.n_front_ends), array)  # (M, F)
+        self.estimate = make_estimator(estimator, array)
+        self.n = radar.adc_samples
+        self.bin_m = C0_MPS * radar.sample_rate_hz / (2.0 * radar.slope_hz_per_s * self.n)
+
+    def _echo_bins(self, schedule: Schedule) -> FloatArray:
+        """Fractional range bin of each channel's echo (frames, 4), from its total delay."""
+        rig, p = self.rig, self.radar
+        fe = np.maximum(schedule.fe[:, 0, :], 0)
+        total = (schedule.delay_s[:, 0, :] + 2.0 * rig.distance_m[fe] / C0_MPS
+                 + rig.limits.latency_s)
+        return ((p.slope_hz_per_s * total - schedule.doppler_hz[:, 0, :]) / p.sample_rate_hz
+                * self.n)
+
+    def predict(self, a: int, b: int, theta_deg: FloatArray, level: FloatArray,
+                phase_deg: FloatArray, gain_db: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Return the reported (az, el) for candidates ``phase_deg``/``gain_db`` (P,): (P, S).
+
+        ``level`` (S, 2) is each echo's amplitude through the range window at the cell read.
+        """
+        rel = (self.ratio * 10.0 ** (-np.asarray(gain_db)[:, None] / 20.0)
+               * np.exp(1j * np.radians(theta_deg[None, :] - np.asarray(phase_deg)[:, None])))
+        x = (level[None, :, 0, None] * self.vectors[:, a][None, None, :]
+             + (rel * level[None, :, 1])[..., None] * self.vectors[:, b][None, None, :])
+        shape = x.shape[:2]
+        est = self.estimate(x.reshape(-1, x.shape[-1]))
+        first = np.unique(est.source, return_index=True)[1]
+        az = np.full(shape[0] * shape[1], np.nan)
+        el = np.full(shape[0] * shape[1], np.nan)
+        az[est.source[first]] = est.az_deg[first]
+        el[est.source[first]] = est.el_deg[first]
+        return az.reshape(shape), el.reshape(shape)
+
+    def fit(self, a: int, b: int, delays: FloatArray, sweep_deg: FloatArray,
+            schedule: Schedule, dets: list[Detections]) -> PairMeasurement:
+        """Fit phase and gain difference (a - b) to one pair's sweep."""
+        pair = (a, b)
+        if len(dets) != len(delays) + 2:
+            raise RtsError(f"calibration: FE pair {a}-{b}: {len(dets)} cycles reported for "
+                           f"{len(delays) + 2} frames played; the radar must report every frame")
+        level_db = _strongest(dets[0], "rcs_dbsm", pair) - _strongest(dets[1], "rcs_dbsm", pair)
+        sweep = dets[2:]
+        az = np.array([_strongest(d, "az_deg", pair) for d in sweep])
+        el = np.array([_strongest(d, "el_deg", pair) for d in sweep])
+        rng = np.array([_strongest(d, "range_m", pair) for d in sweep])
+        # Each echo through the range window at the cell the radar read (folding included).
+        cell = np.round(rng / self.bin_m)
+        bins = self._echo_bins(schedule)
+        channel = [int(np.flatnonzero(schedule.fe[0, 0] == q)[0]) for q in pair]
+        offset = bins[:, channel] - cell[:, None]
+        offset = np.mod(offset + self.n / 2.0, self.n) - self.n / 2.0
+        level = _range_window(offset.ravel(), self.n).reshape(offset.shape)
+
+        def residual(x: FloatArray) -> FloatArray:
+            p_az, p_el = self.predict(a, b, sweep_deg, level, x[:1], x[1:])
+            out = np.concatenate([p_az[0] - az, p_el[0] - el])
+            return np.where(np.isfinite(out), out, 10.0)
+
+        # Start from the best phase on a coarse grid at equal gains, then fit both.
+        coarse = np.arange(0.0, 360.0, 5.0)
+        c_az, c_el = self.predict(a, b, sweep_deg, level, coarse, np.zeros_like(coarse))
+        cost = np.nansum(np.minimum((c_az - az) ** 2 + (c_el - el) ** 2, 100.0), axis=1)
+        start = np.array([coarse[np.argmin(cost)], 0.0])
+        fit = least_squares(residual, start, x_scale=np.array([1.0, 0.1]), diff_step=1e-7,
+                            loss="soft_l1", f_scale=0.05, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        phase, gain = float(_wrap(fit.x[0])), float(fit.x[1])
+        m_az, m_el = self.predict(a, b, sweep_deg, level, np.array([phase]), np.array([gain]))
+        axis = _axis(self.rig, a, b)
+        return PairMeasurement(
+            a=a, b=b, delay_s=delays, sweep_deg=sweep_deg, az_deg=az, el_deg=el,
+            shift_deg=az * axis[0] + el * axis[1],
+            model_shift_deg=m_az[0] * axis[0] + m_el[0] * axis[1], phase_deg=phase,
+            gain_db=gain, level_db=level_db,
+            fit_rms_deg=float(np.sqrt(np.mean((m_az[0] - az) ** 2 + (m_el[0] - el) ** 2))))
+
+
 def _axis(rig: Rig, a: int, b: int) -> FloatArray:
     axis = np.array([rig.az_deg[b] - rig.az_deg[a], rig.el_deg[b] - rig.el_deg[a]])
     return axis / np.linalg.norm(axis)
-
-
-def _shift(rig: Rig, a: int, b: int, dets: list[Detections]) -> FloatArray:
-    """Project each frame's detection on the pair's axis (deg)."""
-    axis = _axis(rig, a, b)
-    az = np.array([_strongest(d, "az_deg", (a, b)) for d in dets])
-    el = np.array([_strongest(d, "el_deg", (a, b)) for d in dets])
-    return az * axis[0] + el * axis[1]
-
-
-def _model_shift(rig: Rig, radar: RadarProfile, a: int, b: int, weight: float) -> float:
-    """Where a coherent pair with weights (1, weight) peaks along its axis (nominal geometry)."""
-    x = snapshot(radar.array, [[1.0, weight]], rig.az_deg[[a, b]], rig.el_deg[[a, b]])
-    az_win = (min(rig.az_deg[[a, b]]) - 3.0, max(rig.az_deg[[a, b]]) + 3.0)
-    el_win = (min(rig.el_deg[[a, b]]) - 3.0, max(rig.el_deg[[a, b]]) + 3.0)
-    p_az, p_el = find_peak(radar.array, x, az_range_deg=az_win, el_range_deg=el_win,
-                           grid_step_deg=0.1)
-    axis = _axis(rig, a, b)
-    return float(p_az[0] * axis[0] + p_el[0] * axis[1])
-
-
-def _fit_phase(rig: Rig, radar: RadarProfile, a: int, b: int, sweep: FloatArray, ratio: float,
-               dets: list[Detections]) -> PairMeasurement:
-    """Phase difference (a - b): the first-harmonic phase of the sweep's shift."""
-    level_a = _strongest(dets[0], "rcs_dbsm", (a, b))
-    level_b = _strongest(dets[1], "rcs_dbsm", (a, b))
-    shift = _shift(rig, a, b, dets[2:]) - _model_shift(rig, radar, a, b, ratio)
-    # The shift towards the weak FE is largest when coherent and even around that point.
-    theta = np.radians(sweep)
-    design = np.column_stack([np.ones_like(theta), np.cos(theta), np.sin(theta)])
-    _, p1, p2 = np.linalg.lstsq(design, shift, rcond=None)[0]
-    # Applying phase s to b is coherent when s = phi_a - phi_b.
-    return PairMeasurement(a=a, b=b, sweep_deg=sweep, shift_deg=shift,
-                           phase_deg=float(_wrap(np.degrees(np.arctan2(p2, p1)))),
-                           gain_db=float("nan"), level_db=level_a - level_b,
-                           swing_deg=float(np.hypot(p1, p2)))
-
-
-def _fit_gain(rig: Rig, radar: RadarProfile, pair: PairMeasurement, ratio: float,
-              dets: list[Detections]) -> PairMeasurement:
-    """Gain difference (a - b): b's strength that puts the coherent peak where it was seen.
-
-    Secant steps on the array model (the detected levels are too coarse on classic CAN).
-    """
-    a, b = pair.a, pair.b
-    seen = float(np.mean(_shift(rig, a, b, dets)))
-
-    def miss(gain_b_db: float) -> float:
-        return _model_shift(rig, radar, a, b, ratio * 10.0 ** (gain_b_db / 20.0)) - seen
-
-    x0, x1 = 0.0, 0.5
-    f0, f1 = miss(x0), miss(x1)
-    for _ in range(10):  # secant steps: a handful converge
-        if abs(f1) < 1e-7 or f1 == f0:
-            break
-        x0, x1 = x1, x1 - f1 * (x1 - x0) / (f1 - f0)
-        f0, f1 = f1, miss(x1)
-    return replace(pair, gain_db=-x1)
 
 
 def _close(n_fe: int, pairs: list[PairMeasurement], field: str,

@@ -135,7 +135,10 @@ def _save(fig: Any, path: Path) -> Path:
 
 
 def write_calibration_plot(result: Any, folder: str | Path, name: str) -> Path:
-    """Plot every pair's sweep (shift along the pair against the applied phase) and its fit."""
+    """Plot every pair's delay sweep and its fitted model.
+
+    The position along the pair against the phase each delay step gives.
+    """
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -144,10 +147,13 @@ def write_calibration_plot(result: Any, folder: str | Path, name: str) -> Path:
     rows = int(np.ceil(len(pairs) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
     for ax, p in zip(axes.ravel(), pairs, strict=False):
-        ax.plot(p.sweep_deg, p.shift_deg, "o", ms=3)
-        ax.axvline(np.mod(p.phase_deg, 360.0), color="k", lw=0.8)
-        ax.set(title=f"FE {p.a}-{p.b}: coherent at {p.phase_deg:+.1f} deg",
-               xlabel="phase applied to FE b (deg)", ylabel="shift towards b (deg)")
+        order = np.argsort(p.sweep_deg)
+        ax.plot(p.sweep_deg[order], p.model_shift_deg[order], "-", lw=1, label="model fit")
+        ax.plot(p.sweep_deg, p.shift_deg, "o", ms=3, label="radar")
+        ax.axvline(p.phase_deg, color="k", lw=0.8)
+        ax.set(title=f"FE {p.a}-{p.b}: {p.phase_deg:+.2f} deg, {p.gain_db:+.3f} dB",
+               xlabel="phase of FE b's delay step (deg)", ylabel="along the pair (deg)")
+        ax.legend(fontsize=7)
     for ax in axes.ravel()[len(pairs):]:
         ax.axis("off")
     return _save(fig, folder / f"{safe_stem(name)}-calibration.png")

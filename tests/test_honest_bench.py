@@ -147,7 +147,7 @@ def test_analytic_and_adc_agree_with_folding_and_range_doppler_coupling():
     assert shift[0] == pytest.approx(0.058, abs=0.001)
 
 
-def test_100_ps_delay_step_keeps_the_angle_on_a_2x3_rig():
+def test_100_ps_delay_step_is_compensated_at_the_rts_delay_model_s_frequency():
     # Targets over both quads at ranges that quantize differently; FE 2 is 1 cm further and
     # FE 1 has a 1.2 ps calibration delay, so the channels' quantization errors differ.
     az, el = np.meshgrid([-8.0, -3.5, 1.0, 5.5, 9.0], [-5.0, 0.0, 5.0])
@@ -174,10 +174,40 @@ def test_100_ps_delay_step_keeps_the_angle_on_a_2x3_rig():
             moved = np.hypot(first(bad, "az_deg") - seen[name][0],
                              first(bad, "el_deg") - seen[name][1])
             assert moved.max() > 0.1
-    for quantized, continuous in (("100 ps", "continuous"), ("rf 100 ps", "rf continuous")):
-        error = np.hypot(seen[quantized][0] - seen[continuous][0],
-                         seen[quantized][1] - seen[continuous][1])
-        assert error.max() <= 0.02, quantized
+
+
+@pytest.mark.parametrize("model", ["if", "rf"])
+def test_100_ps_delay_step_keeps_the_angle_on_a_calibrated_rig(model, monkeypatch):
+    # FEs at different distances quantize differently; the rig is calibrated (the carrier
+    # phases of the different air paths are channel phase offsets). Each channel's echo then
+    # arrives up to a step from the others: the schedule gives its rounding back in phase (at
+    # the IF or the carrier) and in level (the range window weighs the channels differently).
+    import rts_scenario.schedule.build as build
+    from rts_scenario.calibration import calibrate, simulated_measure
+    from rts_scenario.evaluation import evaluation_grid
+    from rts_scenario.radar.simulate import ChannelErrors
+
+    az, el = evaluation_grid()
+    r = 10.0 + 0.0137 * np.arange(az.size)
+    kit = dataclasses.replace(KIT, distance_m=np.array([1.0, 1.013, 0.991, 1.004]),
+                              rts=RtsDelayModel(delay_model=model))
+
+    def errors(step, fidelity="analytic"):
+        rig = dataclasses.replace(kit, limits=dataclasses.replace(kit.limits,
+                                                                  delay_step_s=step))
+        rig = calibrate(rig, AWR, simulated_measure(AWR, rig, ChannelErrors.none(4))).apply(rig)
+        sch = build_schedule(tracks(az, el, radar=AWR, range_m=r), rig, AWR)
+        dets = SimulatedRadar(AWR, rig, fidelity=fidelity, noise=False).process(sch)
+        return np.hypot(first(dets, "az_deg") - az, first(dets, "el_deg") - el)
+
+    assert errors(0.0).max() <= 0.002
+    assert errors(1e-10).max() <= 0.002
+    if model == "if":
+        assert errors(1e-10, "adc").max() <= 0.005
+        # Without the level correction the window's weighting moves the angle.
+        monkeypatch.setattr(build, "_straddle_db", lambda rig, radar, tracks, delay, fe:
+                            np.zeros(delay.shape))
+        assert errors(1e-10).max() > 0.03
 
 
 def test_near_field_warning_names_the_effect():

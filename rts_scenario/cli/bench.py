@@ -32,9 +32,10 @@ def _do_bench(args: argparse.Namespace) -> int:
     quantized = bench.quantization(rig_name=args.rig)
     print()
     print(bench.format_quantization(quantized))
-    honest_rows = bench.honest(rig_name=args.rig)
-    print()
-    print(bench.format_honest(honest_rows))
+    honest_rows = [] if args.no_honest else bench.honest(rig_name=args.rig)
+    if honest_rows:
+        print()
+        print(bench.format_honest(honest_rows))
     end = None
     if args.scene_s > 0:
         end = bench.end_to_end(args.scene_s)
@@ -62,4 +63,7 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                         help="targets per throughput run (default 1,000,000)")
     parser.add_argument("--repeats", type=int, default=3, help="throughput runs, best kept")
     parser.add_argument("--rig", default="kit-table1", help="rig preset (default kit-table1)")
+    parser.add_argument("--no-honest", action="store_true",
+                        help="skip the honest-bench rows (method x radar x estimator x "
+                             "fidelity on the simulated radar)")
     parser.set_defaults(handler=_do_bench)

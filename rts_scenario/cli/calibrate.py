@@ -20,6 +20,9 @@ MAX_INJECT_GAIN_DB = 20.0
 
 
 def _do_calibrate(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
     import numpy as np
 
     from .. import calibration as cal
@@ -33,7 +36,14 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     check_number("--inject-gain-db", args.inject_gain_db, low=0.0, high=MAX_INJECT_GAIN_DB)
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
+    from ..radar.angle import estimator_names
+
+    if args.estimator not in estimator_names():
+        raise RtsError(f"--estimator: unknown estimator {args.estimator!r}; valid: "
+                       f"{', '.join(estimator_names())}")
     rig, radar = bench_of(args)
+    if args.json:
+        check_writable_file("--json", args.json)
     if args.write:
         check_writable_file("--write", args.write)
     if args.plot:
@@ -46,18 +56,22 @@ def _do_calibrate(args: argparse.Namespace) -> int:
                                   gain_db=args.inject_gain_db)
     options = RunOptions(output=args.output, can_interface=args.can_interface,
                          can_channel=args.can_channel or f"rts-calibrate-{args.seed}")
-    radar_options = RadarOptions(fidelity=args.fidelity, noise=args.noise)
+    radar_options = RadarOptions(fidelity=args.fidelity, noise=args.noise,
+                                 estimator=args.estimator)
+    # The check grid's weights: exact for a Bartlett radar, aimed at any other estimator.
+    method = "exact" if args.estimator == "bartlett" else "estimator"
 
     def bench(on: Rig) -> Pipeline:
         # The same physical bench (injected errors included) driven with the rig's settings.
         return Pipeline(on, radar, options, radar_options=radar_options, errors=errors, rng=rng)
 
     with bench(rig) as pipeline:
-        before = cal.grid_errors(rig, radar, pipeline.play)
-        result = cal.calibrate(rig, radar, pipeline.play, progress=Progress("calibrate"))
+        before = cal.grid_errors(rig, radar, pipeline.play, method, args.estimator)
+        result = cal.calibrate(rig, radar, pipeline.play, estimator=args.estimator,
+                               progress=Progress("calibrate"))
     calibrated = result.apply(rig)
     with bench(calibrated) as pipeline:
-        after = cal.grid_errors(calibrated, radar, pipeline.play)
+        after = cal.grid_errors(calibrated, radar, pipeline.play, method, args.estimator)
     injected = args.output == "simulated-radar" and (args.inject_phase_deg or args.inject_gain_db)
     print(f"{'FE':>3} {'phase deg':>10} {'gain dB':>8}"
           + (f" {'injected phase':>15} {'injected gain':>14}" if injected else ""))
@@ -80,6 +94,13 @@ def _do_calibrate(args: argparse.Namespace) -> int:
 
     print(f"angle error before: {summary(before)}")
     print(f"angle error after:  {summary(after)}")
+    if args.json:
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(
+                calibration_report(result, errors if injected else None, before, after,
+                                   args.estimator, method),
+                indent=2, allow_nan=False) + "\n")
+        print(f"wrote {args.json}")
     if args.write:
         with writing("--write", args.write):
             calibrated.write(args.write)
@@ -93,16 +114,64 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def calibration_report(result: Any, errors: Any, before: Any, after: Any, estimator: str,
+                       method: str) -> dict[str, Any]:
+    """Return the ``--json`` document (docs/cli.md).
+
+    Per channel the injected and recovered offsets (relative to FE 0; injected ones null on a
+    real bench), the pair residuals and the grid errors before and after.
+    """
+    import numpy as np
+
+    def wrap(deg: float) -> float:
+        return float((deg + 180.0) % 360.0 - 180.0)
+
+    def number(x: float) -> float | None:
+        return float(x) if np.isfinite(x) else None
+
+    def grid(err: Any) -> dict[str, Any]:
+        mag = np.hypot(err[:, 0], err[:, 1])
+        seen = np.isfinite(mag)
+        return {"max_error_deg": number(np.max(mag[seen])) if seen.any() else None,
+                "rms_error_deg": number(np.sqrt(np.mean(mag[seen] ** 2))) if seen.any() else None,
+                "points": int(mag.size), "missed": int((~seen).sum())}
+
+    channels = []
+    for q in range(result.phase_deg.size):
+        channels.append({
+            "fe": q,
+            "injected_phase_deg": None if errors is None
+            else wrap(errors.phase_deg[q] - errors.phase_deg[0]),
+            "recovered_phase_deg": wrap(result.phase_deg[q]),
+            "injected_gain_db": None if errors is None
+            else float(errors.gain_db[q] - errors.gain_db[0]),
+            "recovered_gain_db": float(result.gain_db[q]),
+        })
+    pairs = [{"fe_a": p.a, "fe_b": p.b, "phase_deg": p.phase_deg, "gain_db": p.gain_db,
+              "phase_residual_deg": float(rp), "gain_residual_db": float(rg),
+              "fit_rms_deg": number(p.fit_rms_deg)}
+             for p, rp, rg in zip(result.pairs, result.phase_residual_deg,
+                                  result.gain_residual_db, strict=True)]
+    return {"estimator": estimator, "method": method, "channels": channels, "pairs": pairs,
+            "suspects": result.suspects, "before": grid(before), "after": grid(after)}
+
+
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     """Add the ``calibrate`` subcommand."""
     parser = subparsers.add_parser(
         "calibrate", help="calibrate the phase and gain of the RTS channels", parents=parents,
-        description="Pairwise phase sweeps, then each pair at its coherence point, through the "
-                    "output and the CAN checker; least squares over all pairs gives per-channel "
-                    "phase and gain offsets. On the simulated radar, --inject-* adds random "
-                    "channel errors to recover.",
+        description="Pairwise delay sweeps (converted to phase by the rig's RTS delay model) "
+                    "through the output and the CAN checker, each fitted with the radar's "
+                    "array, its modeled FE responses and its estimator; least squares over all "
+                    "pairs gives per-channel phase and gain offsets. On the simulated radar, "
+                    "--inject-* adds random channel errors to recover.",
     )
     add_bench_arguments(parser, "paper")
+    parser.add_argument("--estimator", default="bartlett",
+                        help="the radar's angle estimator, which the calibration model uses: "
+                             "bartlett (default), ti or an installed one")
+    parser.add_argument("--json", metavar="OUT",
+                        help="write channels, pair residuals and grid errors as JSON")
     parser.add_argument("--inject-phase-deg", type=float, default=0.0,
                         help="simulated radar: random channel phase errors within +-this "
                              "(0..180)")

@@ -19,11 +19,19 @@ from ..registry import Registry
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
+# A user estimator: a class (or factory) called with the `VirtualArray`, whose instances map
+# snapshots (D, M) to an `AngleEstimate`, installed in this entry-point group.
+ESTIMATOR_ENTRY_POINT_GROUP = "rts_scenario.estimators"
 _ESTIMATOR_REGISTRY = Registry("angle estimator", {
     "bartlett": "rts_scenario.radar.angle:Bartlett2D",
     "ti": "rts_scenario.radar.angle:TiStyle",
-})
-ESTIMATORS = tuple(_ESTIMATOR_REGISTRY.names())
+}, entry_point_group=ESTIMATOR_ENTRY_POINT_GROUP)
+
+
+def estimator_names() -> list[str]:
+    """Every angle estimator: the built-ins, then those installed as entry points."""
+    return _ESTIMATOR_REGISTRY.names()
+ESTIMATORS = ("bartlett", "ti")  # the built-ins; `estimator_names` adds installed ones
 
 
 @dataclass(frozen=True)

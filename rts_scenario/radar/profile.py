@@ -16,12 +16,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..arrays import ANTENNA_PRESETS, Antennas, VirtualArray
 from ..errors import ArrayError, ScenarioError
 from ..located_yaml import Document, load_yaml, validate
 from ..propagation import C0_MPS
 from ..responses import FrontEndModel
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,6 +87,43 @@ class RadarProfile:
         """Transmit frequency at the centre of the sampled sweep (sample ``(N - 1) / 2``)."""
         centre_s = self.adc_start_s + (self.adc_samples - 1) / (2.0 * self.sample_rate_hz)
         return self.fc_hz + self.slope_hz_per_s * centre_s
+
+    @property
+    def range_bin_m(self) -> float:
+        """Range per bin of the range FFT: ``c0 fs / (2 S N)``."""
+        return C0_MPS * self.sample_rate_hz / (2.0 * self.slope_hz_per_s * self.adc_samples)
+
+    def range_bin(self, delay_s: FloatArray | float, doppler_hz: FloatArray | float = 0.0
+                  ) -> FloatArray:
+        """Fractional range bin (unfolded) of an echo with total delay ``delay_s``.
+
+        Where the range spectrum shows it: the beat frequency ``S T - fD`` in bins.
+        """
+        return ((self.slope_hz_per_s * np.asarray(delay_s) - np.asarray(doppler_hz))
+                / self.sample_rate_hz * self.adc_samples)
+
+    def range_response(self, offset_bins: FloatArray | float) -> FloatArray:
+        """Response of the Hann-windowed range DFT ``offset_bins`` from a tone, re its peak.
+
+        The radar windows its ``N = adc_samples`` samples with ``hanning(N + 2)[1:-1]``, which
+        is ``1/2 + 1/2 cos(2 pi (m - c) / (N + 1))`` about its centre ``c``; its DFT (real, the
+        phase referred to the centre) is a sum of three Dirichlet kernels
+        ``sin(N t / 2) / sin(t / 2)``, ``t = 2 pi offset / N`` and shifted by ``+-2 pi / (N + 1)``.
+        """
+        n = self.adc_samples
+        t = 2.0 * np.pi * np.asarray(offset_bins, dtype=np.float64) / n
+        shift = 2.0 * np.pi / (n + 1)
+
+        def dirichlet(x: FloatArray) -> FloatArray:
+            half = np.sin(0.5 * x)
+            small = np.abs(half) < 1e-12
+            return np.where(small, float(n), np.sin(0.5 * n * x) / np.where(small, 1.0, half))
+
+        def window(x: FloatArray) -> FloatArray:
+            return 0.5 * dirichlet(x) + 0.25 * (dirichlet(x - shift) + dirichlet(x + shift))
+
+        out: FloatArray = window(t) / window(np.zeros(1))
+        return out
 
     @property
     def steering_wavelength_m(self) -> float:

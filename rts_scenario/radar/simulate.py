@@ -440,13 +440,25 @@ class SimulatedRadar:
         width = schedule.status.shape[1]
         entry, inverse = np.unique(e.frame * width + e.target, return_inverse=True)
         # The snapshot at a target's peak cell: each echo's windowed FFT peak (echoes of one
-        # target share its range-Doppler cell: the slow-time ramp is common to them).
+        # target share its Doppler: the slow-time ramp is common to them). Echoes of one target
+        # at different ranges (channel delays apart) are read at the target's range cell k,
+        # each through the range window's response at its offset from k, relative to the
+        # response at the target's position (what the straddle correction of `adc` undoes).
         contrib = self._gain * self._snapshot_at_peak(e)
+        echo_bin = self._bins(e)[0]
+        level = np.abs(contrib).mean(axis=1)
+        total = np.bincount(inverse, weights=level, minlength=entry.size)
+        target_bin = np.bincount(inverse, weights=level * echo_bin, minlength=entry.size) / \
+            np.where(total > 0, total, 1.0)
+        cell = np.round(target_bin)
+        factor = (self.profile.range_response(echo_bin - cell[inverse])
+                  / self.profile.range_response(target_bin - cell)[inverse])
         snap = np.zeros((entry.size, arr.n_elements), dtype=complex)
-        np.add.at(snap, inverse, contrib)
+        np.add.at(snap, inverse, contrib * factor[:, None])
         first = np.unique(inverse, return_index=True)[1]
         frame_of = e.frame[first]
-        range_bin, doppler_bin = self._bins(e.select(first))
+        range_bin = target_bin
+        doppler_bin = self._bins(e.select(first))[1]
         noise_power = self._sigma**2 * self._noise_gain  # per channel, after both FFTs
         if self._sigma > 0.0:
             noise = self.rng.standard_normal((2, *snap.shape)) * np.sqrt(noise_power / 2.0)

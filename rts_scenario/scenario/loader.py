@@ -46,9 +46,18 @@ MAX_TARGET_FRAMES = 50_000_000
 
 @lru_cache(maxsize=1)
 def scenario_schema() -> dict[str, Any]:
-    """Return the JSON Schema of scene files (also shipped for editors)."""
+    """Return the JSON Schema of scene files (also shipped for editors).
+
+    ``radar.estimator`` admits the built-in estimators (the shipped file's enum) and any
+    installed in the ``rts_scenario.estimators`` entry-point group.
+    """
+    from ..radar.angle import estimator_names
+
     text = resources.files("rts_scenario").joinpath("data/scenario.schema.json").read_text()
     schema: dict[str, Any] = json.loads(text)
+    estimator = schema["properties"]["radar"]["properties"]["estimator"]
+    estimator["enum"] = [*estimator["enum"],
+                         *(n for n in estimator_names() if n not in estimator["enum"])]
     return schema
 
 

@@ -146,6 +146,9 @@ def build_schedule(
     attenuation = np.full((*shape, 4), np.nan)
     angle_error = np.zeros((*shape, 2))
     clipped = np.zeros(shape, dtype=bool)
+    fe0 = np.maximum(fe, 0)
+    delay, phase = channel_delays(rig, radar, tracks.range_m[..., None], fe0)
+    straddle_db = _straddle_db(rig, radar, tracks, delay, fe0)
     # The FEs' responses on the array (estimator-aware weights are exact weights re-aimed).
     responses = solver_plan(rig, array, plan_method(method), model).responses
     for q in range(len(rig.quads)):  # per quad of the rig, vectorized over its entries
@@ -156,7 +159,8 @@ def build_schedule(
                                  np.radians(tracks.el_deg.ravel()[sel]))
         resp = responses[q].evaluate(u, s)
         # A channel's calibration gain offset is part of its setting, so it is quantized too.
-        offset = rig.cal_gain_db[rig.quads[q]][None, :]
+        # So is the level that makes up for the channel's delay rounding (`_straddle_db`).
+        offset = rig.cal_gain_db[rig.quads[q]][None, :] + straddle_db.reshape(-1, 4)[sel]
         w, att, err, clip = _levels(resp, weight.reshape(-1, 4)[sel],
                                     single_db.ravel()[sel][:, None] + offset,
                                     array.n_elements, limits, quantization, u, s)
@@ -169,8 +173,6 @@ def build_schedule(
     attenuation[~active] = np.nan
     status |= np.where(clipped, Status.ATTENUATION_CLIPPED, 0).astype(np.uint16)
 
-    fe0 = np.maximum(fe, 0)
-    delay, phase = channel_delays(rig, radar, tracks.range_m[..., None], fe0)
     too_close = (active & (delay < limits.delay_min_s - DELAY_SLACK_S)).any(axis=-1)
     status |= np.where(too_close, Status.TOO_CLOSE, 0).astype(np.uint16)
 
@@ -193,6 +195,30 @@ def build_schedule(
         phase_rad=np.where(emitted, phase, nan), active=emitted, status=status,
         angle_error_deg=np.where(emitted.any(-1)[..., None], angle_error, nan),
     )
+
+
+def _straddle_db(rig: Rig, radar: RadarProfile, tracks: Tracks, delay: FloatArray,
+                 fe: IntArray) -> FloatArray:
+    """Level (dB, added to the attenuation) that makes up for each channel's delay rounding.
+
+    On a delay grid the channels of one target arrive up to a step apart, so the radar's range
+    FFT reads them at slightly different offsets from the target's range cell and the window
+    weighs them differently (about 3 % between channels 100 ps apart on a 40 MHz/us chirp,
+    0.1 deg of angle). Each channel is set ``W(b - k) / W(b_q - k)`` stronger, ``b`` the
+    target's range bin, ``b_q`` the channel's, ``k = round(b)`` the cell the radar reads (a
+    target within the channels' spread of a cell border may be read at the other cell).
+    """
+    if rig.limits.delay_step_s <= 0.0:
+        return np.zeros(delay.shape)
+    exact = (2.0 * tracks.range_m[..., None] / C0_MPS - 2.0 * rig.distance_m[fe] / C0_MPS
+             - rig.limits.latency_s + rig.cal_delay_s[fe])
+    target = radar.range_bin(2.0 * tracks.range_m / C0_MPS, tracks.doppler_hz)
+    channel = target[..., None] + radar.range_bin(delay - exact)
+    cell = np.round(target)[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out: FloatArray = 20.0 * np.log10(radar.range_response(channel - cell)
+                                          / radar.range_response(target[..., None] - cell))
+    return np.where(np.isfinite(out), out, 0.0)
 
 
 def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatArray,
