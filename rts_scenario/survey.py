@@ -94,4 +94,47 @@ def survey(rig: Rig, radar: RadarProfile, measure: Measure, repeats: int = REPEA
                         seen_el_deg=per_fe[:, 1], level_db=per_fe[:, 2] - ref.rcs_dbsm)
 
 
-__all__ = ["SurveyResult", "survey"]
+def modeled_directions(rig: Rig, radar: RadarProfile, estimator: str = "bartlett"
+                       ) -> tuple[FloatArray, FloatArray]:
+    """Where the solver's model expects the radar to see each FE alone: az, el deg, (F,) each.
+
+    Each FE's modeled response on the radar's virtual array (`rts_scenario.responses`: physical
+    antennas, distances, antenna offsets, near field) read by the radar's estimator.
+    """
+    from .radar.angle import make_estimator
+    from .schedule.build import solver_inputs
+
+    array, model = solver_inputs(radar, "modeled")
+    assert model is not None
+    vectors = model.vectors(rig, np.arange(rig.n_front_ends), array)
+    est = make_estimator(estimator, array)(vectors.T)
+    first = np.unique(est.source, return_index=True)[1]
+    return est.az_deg[first], est.el_deg[first]
+
+
+def placed_by_survey(rig: Rig, radar: RadarProfile, result: SurveyResult, *,
+                     estimator: str = "bartlett", steps: int = 4) -> Rig:
+    """Return the rig with FE directions moved so that its model shows what the survey saw.
+
+    An FE that is not where the rig file says (mounting, a bent bracket) is seen elsewhere; the
+    exact method solves with modeled responses, so the rig's direction of each FE is moved until
+    its modeled response is seen where the radar saw it (fixed-point steps on the difference;
+    the near field and antenna offsets stay in the model). FEs the survey did not see keep their
+    directions. The survey's ``seen`` values are kept in the rig.
+    """
+    import dataclasses
+
+    seen_az, seen_el = result.seen_az_deg, result.seen_el_deg
+    ok = np.isfinite(seen_az) & np.isfinite(seen_el)
+    az, el = rig.az_deg.copy(), rig.el_deg.copy()
+    placed = rig
+    for _ in range(steps):  # each step leaves a small fraction of the miss
+        model_az, model_el = modeled_directions(placed, radar, estimator)
+        az = np.where(ok, az + seen_az - model_az, az)
+        el = np.where(ok, el + seen_el - model_el, el)
+        placed = dataclasses.replace(placed, az_deg=az, el_deg=el)
+    seen = np.stack([seen_az, seen_el, result.level_db], axis=1)
+    return dataclasses.replace(placed, seen=seen)
+
+
+__all__ = ["SurveyResult", "modeled_directions", "placed_by_survey", "survey"]

@@ -36,11 +36,6 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     check_number("--inject-gain-db", args.inject_gain_db, low=0.0, high=MAX_INJECT_GAIN_DB)
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
-    from ..radar.angle import estimator_names
-
-    if args.estimator not in estimator_names():
-        raise RtsError(f"--estimator: unknown estimator {args.estimator!r}; valid: "
-                       f"{', '.join(estimator_names())}")
     rig, radar = bench_of(args)
     if args.json:
         check_writable_file("--json", args.json)
@@ -167,9 +162,6 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                     "--inject-* adds random channel errors to recover.",
     )
     add_bench_arguments(parser, "paper")
-    parser.add_argument("--estimator", default="bartlett",
-                        help="the radar's angle estimator, which the calibration model uses: "
-                             "bartlett (default), ti or an installed one")
     parser.add_argument("--json", metavar="OUT",
                         help="write channels, pair residuals and grid errors as JSON")
     parser.add_argument("--inject-phase-deg", type=float, default=0.0,

@@ -206,15 +206,22 @@ def add_bench_arguments(parser: argparse.ArgumentParser, radar_default: str) -> 
     parser.add_argument("--can-channel", default=None)
     parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
     parser.add_argument("--noise", action="store_true", help="thermal noise (simulated)")
+    parser.add_argument("--estimator", default="bartlett",
+                        help="the radar's angle estimator (the simulated radar's, and the one "
+                             "the model reads with): bartlett (default), ti or an installed one")
 
 
 def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
     """Check the bench arguments (`add_bench_arguments`); return ``(rig, radar profile)``."""
+    from ..radar.angle import estimator_names
     from ..radar.profile import RadarProfile
     from ..radar.profile import preset_names as radar_presets
     from ..rig import Rig
     from ..rig import preset_names as rig_presets
 
+    if args.estimator not in estimator_names():
+        raise RtsError(f"--estimator: unknown estimator {args.estimator!r}; valid: "
+                       f"{', '.join(estimator_names())}")
     check_output("--output", args.output, run=True)
     check_can_interface("--can-interface", args.can_interface)
     rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
