@@ -8,6 +8,12 @@ snapshot the weights synthesize) reports where the target appears, the aim moves
 and a few fixed-point steps later the estimator reports the set angle. All targets are iterated
 together (vectorized); a target whose miss does not fall below `TOLERANCE_DEG` keeps the reason
 ``NOT_CONVERGED``.
+
+The weights stay real (amplitudes only, the channel phases stay at their calibration): re-aiming
+real weights reaches every angle the quad covers, and an RTS that only attenuates and delays
+can play them. Complex weights (a per-channel phase beyond calibration) would add freedom to
+shape the wavefront for an estimator whose reading depends on more than the peak, but would
+bind the schedule to an RTS with per-channel phase control; they are not used.
 """
 
 from __future__ import annotations
