@@ -268,18 +268,6 @@ def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
     return float(values[k])
 
 
-def _range_window(offset_bins: FloatArray, n: int) -> FloatArray:
-    """Amplitude of an n-point Hann-windowed DFT ``offset_bins`` from a tone, re its peak.
-
-    Summed over the window (``hanning(n + 2)[1:-1]``, the phase referred to its centre, where
-    the DFT of a symmetric window is real).
-    """
-    w = np.hanning(n + 2)[1:-1]
-    m = np.arange(n) - (n - 1) / 2.0
-    offset = np.atleast_1d(np.asarray(offset_bins, dtype=np.float64))
-    return np.cos(2.0 * np.pi * np.outer(offset, m) / n) @ w / w.sum()
-
-
 class _PairModel:
     """What the radar reports for a pair (a at weight 1, b at ``ratio``), given a - b."""
 
@@ -290,16 +278,14 @@ class _PairModel:
         self.vectors = fe_model.vectors(rig, np.arange(rig.n_front_ends), array)  # (M, F)
         self.estimate = make_estimator(estimator, array)
         self.n = radar.adc_samples
-        self.bin_m = C0_MPS * radar.sample_rate_hz / (2.0 * radar.slope_hz_per_s * self.n)
 
     def _echo_bins(self, schedule: Schedule) -> FloatArray:
         """Fractional range bin of each channel's echo (frames, 4), from its total delay."""
-        rig, p = self.rig, self.radar
+        rig = self.rig
         fe = np.maximum(schedule.fe[:, 0, :], 0)
         total = (schedule.delay_s[:, 0, :] + 2.0 * rig.distance_m[fe] / C0_MPS
                  + rig.limits.latency_s)
-        return ((p.slope_hz_per_s * total - schedule.doppler_hz[:, 0, :]) / p.sample_rate_hz
-                * self.n)
+        return self.radar.range_bin(total, schedule.doppler_hz[:, 0, :])
 
     def predict(self, a: int, b: int, theta_deg: FloatArray, level: FloatArray,
                 phase_deg: FloatArray, gain_db: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -333,12 +319,12 @@ class _PairModel:
         el = np.array([_strongest(d, "el_deg", pair) for d in sweep])
         rng = np.array([_strongest(d, "range_m", pair) for d in sweep])
         # Each echo through the range window at the cell the radar read (folding included).
-        cell = np.round(rng / self.bin_m)
+        cell = np.round(rng / self.radar.range_bin_m)
         bins = self._echo_bins(schedule)
         channel = [int(np.flatnonzero(schedule.fe[0, 0] == q)[0]) for q in pair]
         offset = bins[:, channel] - cell[:, None]
         offset = np.mod(offset + self.n / 2.0, self.n) - self.n / 2.0
-        level = _range_window(offset.ravel(), self.n).reshape(offset.shape)
+        level = self.radar.range_response(offset)
 
         def residual(x: FloatArray) -> FloatArray:
             p_az, p_el = self.predict(a, b, sweep_deg, level, x[:1], x[1:])

@@ -106,18 +106,19 @@ def test_sweeps_delay_on_the_rts_grid_converted_by_its_delay_model(model, step):
     recovered_within(result, errors, 0.5, 0.05)
 
 
-def test_range_window_of_the_model_is_the_hann_dft():
-    from rts_scenario.calibration import _range_window
-
-    n = 256
-    x = np.zeros(n * 16, dtype=complex)
+@pytest.mark.parametrize("name", ["awr1843boost", "cascade-12x16"])
+def test_range_response_of_the_radar_is_its_hann_window_s_dft(name):
+    # What calibration and the analytic radar weigh an echo with, off the range cell: the DFT
+    # of the windowed samples of a tone, from first principles.
+    radar = RadarProfile.preset(name)
+    n = radar.adc_samples
     w = np.hanning(n + 2)[1:-1]
-    for offset in (0.0, 0.25, 0.5, 1.0):
-        tone = np.exp(2j * np.pi * (3.0 + offset) * np.arange(n) / n) * w
-        x = np.fft.fft(tone)
-        # The DFT at bin 3 relative to a tone on the bin (magnitude: the phase is common).
-        want = abs(x[3]) / w.sum()
-        assert _range_window(np.array([offset]), n)[0] == pytest.approx(want, rel=1e-9)
+    for offset in (0.0, 0.013, 0.25, 0.5, 0.77, 1.0, 1.4):
+        x = np.fft.fft(np.exp(2j * np.pi * (3.0 + offset) * np.arange(n) / n) * w)
+        want = abs(x[3]) / w.sum()  # at bin 3, relative to a tone on the bin
+        got = radar.range_response(np.array([offset]))[0]
+        assert abs(got) == pytest.approx(want, rel=1e-9, abs=1e-12)
+        assert got > 0.0  # the main lobe: no sign flip between channels
 
 
 def test_noisy_adc_radar():

@@ -210,8 +210,7 @@ def _straddle_db(rig: Rig, radar: RadarProfile, tracks: Tracks, delay: FloatArra
     """
     if rig.limits.delay_step_s <= 0.0:
         return np.zeros(delay.shape)
-    exact = (2.0 * tracks.range_m[..., None] / C0_MPS - 2.0 * rig.distance_m[fe] / C0_MPS
-             - rig.limits.latency_s + rig.cal_delay_s[fe])
+    exact = _exact_delays(rig, tracks.range_m[..., None], fe)
     target = radar.range_bin(2.0 * tracks.range_m / C0_MPS, tracks.doppler_hz)
     channel = target[..., None] + radar.range_bin(delay - exact)
     cell = np.round(target)[..., None]
@@ -263,6 +262,12 @@ def solver_inputs(
                         f"{', '.join(FE_RESPONSES)}")
 
 
+def _exact_delays(rig: Rig, range_m: FloatArray, fe: IntArray) -> FloatArray:
+    """RTS delay that puts echoes through FEs ``fe`` at ``range_m``, before the delay grid."""
+    return (2.0 * range_m / C0_MPS - 2.0 * rig.distance_m[fe] / C0_MPS - rig.limits.latency_s
+            + rig.cal_delay_s[fe])
+
+
 def channel_delays(rig: Rig, radar: RadarProfile, range_m: FloatArray,
                    fe: IntArray) -> tuple[FloatArray, FloatArray]:
     """Return the RTS delay and channel phase of echoes at ``range_m`` through FEs ``fe``.
@@ -288,8 +293,7 @@ def channel_delays(rig: Rig, radar: RadarProfile, range_m: FloatArray,
         Shape of the broadcast inputs; the phase wrapped to [-pi, pi).
     """
     limits = rig.limits
-    exact = (2.0 * range_m / C0_MPS - 2.0 * rig.distance_m[fe] / C0_MPS - limits.latency_s
-             + rig.cal_delay_s[fe])
+    exact = _exact_delays(rig, range_m, fe)
     delay = exact
     if limits.delay_step_s > 0.0:
         delay = np.round(exact / limits.delay_step_s) * limits.delay_step_s
