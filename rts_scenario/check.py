@@ -124,6 +124,9 @@ class Checker:
         Tolerances and required rates.
     counter_modulus : int
         The radar's cycle counter wraps at this value.
+    counter_start : int
+        The counter of the radar's cycle 0 (`rts_scenario.radar.clock.RadarClock`): truth
+        blocks are numbered by cycle (0 at the radar clock's start), cycles by their counter.
     record : FrameRecord, optional
         Where per-frame arrays go (none kept without it).
     expected_limits : sequence of frozenset of str, optional
@@ -135,7 +138,8 @@ class Checker:
     """
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
-                 counter_modulus: int = COUNTER_MODULUS, record: FrameRecord | None = None,
+                 counter_modulus: int = COUNTER_MODULUS, counter_start: int = 0,
+                 record: FrameRecord | None = None,
                  expected_limits: Sequence[frozenset[str]] | None = None,
                  scene_limits: Mapping[str, str] | None = None,
                  detections_out: TextIO | None = None) -> None:
@@ -143,6 +147,8 @@ class Checker:
         self.names = names
         self.expectations = expectations
         self.modulus = counter_modulus
+        self.counter_start = counter_start
+        self._started = False
         self.record = record
         n = len(names)
         self._expected = [expectations.expected_limits | (expected_limits[k] if expected_limits
@@ -171,6 +177,9 @@ class Checker:
 
         Blocks must follow each other without a gap.
         """
+        if not self._started:  # the radar's first cycle in the scene may be any
+            self._started = True
+            self._settled = first_frame
         expected = self._blocks[-1].end if self._blocks else self._settled
         if first_frame != expected:
             raise ValueError(f"truth block starts at frame {first_frame}, expected {expected}")
@@ -183,7 +192,9 @@ class Checker:
             return
         end = self._blocks[-1].end if self._blocks else self._settled
         near = (self._settled + end) // 2
-        frames = unwrap_counter(np.array([c.cycle for c in cycles]), near, self.modulus)
+        counters = np.array([c.cycle for c in cycles], dtype=np.int64)
+        frames = unwrap_counter((counters - self.counter_start) % self.modulus, near,
+                                self.modulus)
         for frame, cycle in zip(frames.tolist(), cycles, strict=True):  # one per radar cycle
             if frame < self._settled:
                 self.frames["late"] += 1

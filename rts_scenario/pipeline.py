@@ -28,6 +28,7 @@ from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .preflight import Preflight, preflight, scene_limits
+from .radar.clock import held_frames
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report
@@ -207,15 +208,21 @@ class Pipeline:
         incomplete.
         """
         self.receiver.reset()
-        self.write(schedule)
+        # Each frame is held for exactly one cycle of the radar's clock.
+        clock = self.radar.radar_clock
+        n = np.arange(schedule.n_frames, dtype=np.int64)
+        self.write(replace(schedule, t_s=clock.time_of(n)))
         cycles = [c for c in self.receive(final=True) if c.complete]
-        frames = schedule.frame_index
-        near = int(frames[frames.size // 2]) if frames.size else 0
-        found = dict(zip(unwrap_counter(np.array([c.cycle for c in cycles], dtype=np.int64),
-                                        near, self.counter_modulus).tolist(), cycles,
-                         strict=True))
-        return [found.get(int(f), Detections.empty(int(f), float(t), (), complete=False))
-                for f, t in zip(frames, schedule.t_s, strict=True)]
+        found = dict(zip(self._cycle_numbers(cycles, n.size // 2).tolist(), cycles, strict=True))
+        return [found.get(int(i), Detections.empty(int(f), float(t), (), complete=False))
+                for i, f, t in zip(n, schedule.frame_index, schedule.t_s, strict=True)]
+
+    def _cycle_numbers(self, cycles: list[Detections], near: int) -> np.ndarray:
+        """Return the radar's cycle numbers (0 at its clock's start) of received cycles."""
+        clock = self.radar.radar_clock
+        counters = np.array([c.cycle for c in cycles], dtype=np.int64)
+        return unwrap_counter((counters - clock.counter_start) % self.counter_modulus, near,
+                              self.counter_modulus)
 
     def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
             timing: dict[str, float] | None = None,
@@ -230,46 +237,58 @@ class Pipeline:
         scene's `Preflight` before anything plays.
         """
         options = self.options
-        clock = _Timing(dict(timing or {}))
+        timer = _Timing(dict(timing or {}))
         start = mark = time.perf_counter()
         record = FrameRecord() if options.record else None
+        clock = self.radar.radar_clock
         checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
-                          counter_modulus=self.counter_modulus, record=record,
+                          counter_modulus=self.counter_modulus,
+                          counter_start=clock.counter_start, record=record,
                           expected_limits=[t.expected_limits for t in scene.targets],
                           scene_limits=scene_limits(scene), detections_out=detections_out)
         n_frames = scene.n_frames
         t_all = scene.t_s
+        scene_end_s = float(t_all[-1]) + 1.0 / scene.frame_rate_hz if n_frames else 0.0
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
         # read from disk instead of being built again.
         array, model = solver_inputs(scene.radar, FE_RESPONSES[0])
         plan = solver_plan(scene.rig, array, plan_method(options.method), model)
-        mark = clock.add("plan_s", mark)
+        mark = timer.add("plan_s", mark)
         if on_preflight is not None:
             on_preflight(preflight(scene, options.method))
-            mark = clock.add("preflight_s", mark)
+            mark = timer.add("preflight_s", mark)
         self.receiver.reset()
         for first in range(0, n_frames, options.batch_frames):
             frames = np.arange(first, min(first + options.batch_frames, n_frames))
             tracks = compute_tracks(scene, t_all[frames], frames)
-            mark = clock.add("kinematics_s", mark)
+            mark = timer.add("kinematics_s", mark)
             schedule = build_schedule(tracks, scene.rig, scene.radar, method=options.method,
                                       estimator=scene.radar_options.estimator,
                                       frame_rate_hz=scene.frame_rate_hz)
             schedule = replace(schedule, frame_index=frames)
-            mark = clock.add("schedule_s", mark)
-            checker.add_truth(first, tracks, schedule.status)
+            mark = timer.add("schedule_s", mark)
+            # The radar's cycles while the RTS holds this batch: ground truth at their
+            # measurement times, the limits of the frame each one measures.
+            end_s = float(t_all[frames[-1] + 1]) if frames[-1] + 1 < n_frames else scene_end_s
+            n, t_cycles = clock.cycles_between(float(t_all[first]), end_s)
+            if n.size:
+                held = held_frames(t_all[frames], t_cycles)
+                checker.add_truth(int(n[0]), compute_tracks(scene, t_cycles, frames[held]),
+                                  schedule.status[held])
+            mark = timer.add("kinematics_s", mark)
             self.write(schedule)
-            mark = clock.add("play_s", mark)
+            mark = timer.add("play_s", mark)
             cycles = self.receive()
-            mark = clock.add("receive_s", mark)
+            mark = timer.add("receive_s", mark)
             checker.add_cycles(cycles)
             # The batch before this one is due: its cycles had a whole batch to arrive.
-            checker.settle(before_frame=first)
-            mark = clock.add("check_s", mark)
+            if n.size:
+                checker.settle(before_frame=int(n[0]))
+            mark = timer.add("check_s", mark)
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
         checker.add_cycles(self.receive(final=True))
-        mark = clock.add("receive_s", mark)
+        mark = timer.add("receive_s", mark)
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
         if self._publisher is not None:
@@ -277,9 +296,9 @@ class Pipeline:
             # signal's range): the checker never saw them.
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
-        clock.add("check_s", mark)
-        clock.stages["total_s"] = clock.stages.get("load_s", 0.0) + time.perf_counter() - start
-        report.timing = clock.stages
+        timer.add("check_s", mark)
+        timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
+        report.timing = timer.stages
         report.solver_plan = plan.origin
         return RunResult(scene=scene, report=report)
 

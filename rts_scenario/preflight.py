@@ -71,12 +71,13 @@ class Preflight:
 def scene_limits(scene: Scenario) -> dict[str, str]:
     """Limits the whole scene hits, with why (see `rts_scenario.scenario.model.LIMITS`)."""
     out = {}
-    radar_hz = 1.0 / scene.radar.frame_period_s
+    cycle_s = scene.radar.radar_clock.cycle_s
+    radar_hz = 1.0 / cycle_s
     if scene.frame_rate_hz > radar_hz * (1.0 + 1e-9):
         out["frame_rate_above_radar"] = (
             f"the scene runs at {scene.frame_rate_hz:g} frames/s but radar "
-            f"{scene.radar.name!r} measures {radar_hz:g} cycles/s (frame_period_s "
-            f"{scene.radar.frame_period_s:g}): it cannot report every frame")
+            f"{scene.radar.name!r} measures {radar_hz:g} cycles/s (cycle {cycle_s:g} s): "
+            f"it cannot report every frame")
     return out
 
 

@@ -237,11 +237,11 @@ class Report:
                                  f"{lim} {n}{'' if lim in t.unexpected_limits else ' (expected)'}"
                                  for lim, n in t.limits.items()) for t in limited]))
         f = self.frames
-        lines.append(f"frames: {f['total']} in the scene, {f['checked']} checked, "
+        lines.append(f"radar cycles: {f['total']} during the scene, {f['checked']} checked, "
                      f"{f.get('unmatched', 0)} with unmatched targets, "
                      f"{f['missing']} missing, {f['incomplete']} incomplete; "
                      f"false detections: {self.false_detections} "
-                     f"({self.false_detections_per_frame:.3f} per frame)")
+                     f"({self.false_detections_per_frame:.3f} per cycle)")
         problems = {k: v for k, v in self.bus.items() if k != "messages" and v}
         if problems:
             lines.append("bus: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in

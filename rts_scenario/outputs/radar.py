@@ -5,8 +5,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from ..detections import Detections
 from ..errors import OutputError
+from ..radar.clock import RadarClock
 from ..radar.profile import RadarProfile
 from ..radar.simulate import SimulatedRadar
 from ..rig import Rig
@@ -15,20 +18,28 @@ from .base import Output, RunContext
 
 
 class SimulatedRadarOutput(Output):
-    """Play each batch on a `SimulatedRadar`; hand every frame's detections to ``sink``.
+    """Play each batch on a `SimulatedRadar` on its own clock; hand every cycle to ``sink``.
 
-    Without a sink the detections collect in `detections`. Keyword options go to
-    `SimulatedRadar` (fidelity, estimator, cfar, noise, errors, rng, threshold_db).
+    The radar measures at its clock's times (`rts_scenario.radar.clock.RadarClock`, the
+    profile's unless ``clock`` is given), not at the scene's frames: each cycle sees the frame
+    the RTS holds at that time, and carries the radar's counter and measurement time. A batch
+    of frames is held from its first frame's time until one frame spacing after its last (the
+    next batch's first frame). Without a sink the cycles collect in `detections`. Keyword
+    options go to `SimulatedRadar` (fidelity, estimator, cfar, noise, errors, rng,
+    threshold_db).
     """
 
     name = "simulated-radar"
 
     def __init__(self, *, profile: RadarProfile, rig: Rig,
-                 sink: Callable[[Detections], None] | None = None, **options: Any) -> None:
+                 sink: Callable[[Detections], None] | None = None,
+                 clock: RadarClock | None = None, **options: Any) -> None:
         super().__init__()
         self.radar = SimulatedRadar(profile, rig, **options)
+        self.clock = clock or profile.radar_clock
         self.detections: list[Detections] = []
         self._sink = sink or self.detections.append
+        self._spacing_s: float | None = None
 
     @classmethod
     def for_run(cls, argument: str, context: RunContext) -> SimulatedRadarOutput:
@@ -41,5 +52,13 @@ class SimulatedRadarOutput(Output):
                    noise=opts.noise, errors=context.errors, rng=context.rng)
 
     def _write(self, batch: Schedule) -> None:
-        for frame in self.radar.process(batch):  # frames leave the radar one by one
+        if batch.n_frames == 0:
+            return
+        t = batch.t_s
+        if batch.n_frames > 1:
+            self._spacing_s = float(np.median(np.diff(t)))
+        spacing = self._spacing_s if self._spacing_s is not None else self.clock.cycle_s
+        n, t_cycles = self.clock.cycles_between(float(t[0]), float(t[-1]) + spacing)
+        cycles = batch.held(t_cycles, self.clock.counter_of(n))
+        for frame in self.radar.process(cycles):  # cycles leave the radar one by one
             self._sink(frame)

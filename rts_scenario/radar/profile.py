@@ -23,6 +23,7 @@ from ..errors import ArrayError, ScenarioError
 from ..located_yaml import Document, load_yaml, validate
 from ..propagation import C0_MPS
 from ..responses import FrontEndModel
+from .clock import RadarClock
 
 FloatArray = NDArray[np.float64]
 
@@ -48,6 +49,10 @@ class RadarProfile:
         TX firing order within a loop (TDM-MIMO).
     frame_period_s : float
         Frame repetition period.
+    clock : RadarClock
+        When it measures and reports (`rts_scenario.radar.clock`): its cycle (default
+        ``frame_period_s``), start offset, latency, jitter and counter start (profile key
+        ``clock``).
     noise_level_db : float
         Thermal noise per complex ADC sample, dB relative to the full-scale amplitude 1 that an
         echo through a 0 dB attenuator produces.
@@ -76,6 +81,17 @@ class RadarProfile:
     antennas: Antennas
     tx_index: tuple[int, ...] = ()
     adc_start_s: float = 0.0
+    clock: RadarClock | None = None
+
+    def __post_init__(self) -> None:
+        if self.clock is None:
+            object.__setattr__(self, "clock", RadarClock(cycle_s=self.frame_period_s))
+
+    @property
+    def radar_clock(self) -> RadarClock:
+        """The radar's clock (typed: never None after construction)."""
+        assert self.clock is not None
+        return self.clock
 
     @property
     def wavelength_m(self) -> float:
@@ -239,6 +255,17 @@ class RadarProfile:
                 f"the chirps of a frame take {n_tx * d['chirp_loops'] * slot:.3g} s, longer "
                 f"than the frame period {d['frame_period_s']:.3g} s",
             )
+        c = d.get("clock", {})
+        try:
+            clock = RadarClock(cycle_s=float(c.get("cycle_s", d["frame_period_s"])),
+                               start_offset_s=float(c.get("start_offset_s", 0.0)),
+                               latency_s=float(c.get("latency_s", 0.0)),
+                               jitter_s=float(c.get("jitter_s", 0.0)),
+                               counter_start=int(c.get("counter_start", 0)))
+        except ValueError as exc:
+            key = str(exc).split(":")[0].split(".")[-1]
+            raise doc.error(("clock", key) if key in c else ("clock",),
+                            str(exc).split(": ", 1)[1]) from None
         return cls(
             name=d["name"], fc_hz=fc, bandwidth_hz=bw, ramp_time_s=float(d["ramp_time_s"]),
             idle_time_s=float(d["idle_time_s"]), adc_samples=int(d["adc_samples"]),
@@ -247,7 +274,7 @@ class RadarProfile:
             noise_level_db=float(d.get("noise_level_db", -75.0)), array=array,
             antennas=antennas,
             tx_index=tuple(int(t) for t in np.repeat(np.arange(n_tx), antennas.n_rx)),
-            adc_start_s=adc_start,
+            adc_start_s=adc_start, clock=clock,
         )
 
 
@@ -282,6 +309,17 @@ PROFILE_SCHEMA: dict[str, Any] = {
         "tx_order": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 0}},
         "frame_period_s": _POSITIVE,
         "noise_level_db": {"type": "number", "minimum": -300, "maximum": 0},
+        "clock": {
+            "type": "object",
+            "additionalProperties": False,
+            "properties": {
+                "cycle_s": _POSITIVE,
+                "start_offset_s": {"type": "number", "minimum": 0},
+                "latency_s": {"type": "number", "minimum": 0},
+                "jitter_s": {"type": "number", "minimum": 0},
+                "counter_start": {"type": "integer", "minimum": 0},
+            },
+        },
         "array": {
             "oneOf": [
                 {"enum": list(ANTENNA_PRESETS)},

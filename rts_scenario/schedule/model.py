@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from enum import IntFlag
 
 import numpy as np
@@ -95,6 +95,28 @@ class Schedule:
             f.name: getattr(self, f.name) if f.name == "names" else getattr(self, f.name)[part]
             for f in fields(self)
         })
+
+    def take(self, index: IntArray) -> Schedule:
+        """Return the frames ``index`` (any order, repeats allowed) as a schedule (copies)."""
+        return Schedule(**{
+            f.name: getattr(self, f.name) if f.name == "names" else getattr(self, f.name)[index]
+            for f in fields(self)
+        })
+
+    def held(self, clock_t_s: FloatArray, counters: IntArray) -> Schedule:
+        """Return what a radar measures at ``clock_t_s``: the frames held then.
+
+        The RTS holds each frame until the next (`rts_scenario.radar.clock.held_frames`); each
+        row of the result is the frame current at a cycle's time, with that time as ``t_s`` and
+        the cycle's counter as ``frame_index``. Cycles before the first frame are left out.
+        """
+        from ..radar.clock import held_frames
+
+        index = held_frames(self.t_s, clock_t_s)
+        keep = index >= 0
+        out = self.take(index[keep])
+        return replace(out, t_s=np.asarray(clock_t_s, dtype=np.float64)[keep],
+                       frame_index=np.asarray(counters, dtype=np.int64)[keep])
 
     def changed(self) -> BoolArray:
         """Entries (F, K) that differ from the previous frame (all of frame 0).

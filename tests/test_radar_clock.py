@@ -1,0 +1,146 @@
+"""The radar on its own clock: cycles, counters, the RTS's hold, time-aligned checking."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from rts_scenario.detections import Detections
+from rts_scenario.errors import RtsError
+from rts_scenario.kinematics import compute_tracks
+from rts_scenario.pipeline import Pipeline, RunOptions
+from rts_scenario.radar.clock import RadarClock, held_frames
+from rts_scenario.radar.profile import RadarProfile
+from rts_scenario.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+AWR = ROOT / "rts_scenario" / "data" / "radars" / "awr1843boost.radar.yaml"
+
+
+def test_cycles_and_their_times():
+    clock = RadarClock(cycle_s=0.072, start_offset_s=0.013, counter_start=4242)
+    n, t = clock.cycles_between(0.0, 1.0)
+    # 0.013 + 13 * 0.072 = 0.949 < 1 <= 0.013 + 14 * 0.072
+    np.testing.assert_array_equal(n, np.arange(14))
+    np.testing.assert_allclose(t, 0.013 + 0.072 * np.arange(14))
+    np.testing.assert_array_equal(clock.counter_of(n)[:2], [4242, 4243])
+    # Consecutive spans share no cycle and lose none.
+    a, _ = clock.cycles_between(0.0, 0.5)
+    b, _ = clock.cycles_between(0.5, 1.0)
+    np.testing.assert_array_equal(np.concatenate([a, b]), n)
+
+
+def test_a_cycle_at_a_frame_s_time_sees_that_frame():
+    frames = np.arange(5) * 0.05
+    got = held_frames(frames, np.array([-0.01, 0.0, 0.049, 0.05, 0.05 * 3, 0.3]))
+    np.testing.assert_array_equal(got, [-1, 0, 0, 1, 3, 4])
+    # Float round-off of equal times does not slip a frame.
+    assert held_frames(np.arange(100) / 20.0, np.array([0.1 * 3]))[0] == 6
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [
+    ("cycle_s", 0.0, "cycle_s"), ("latency_s", -1.0, "latency_s"),
+    ("counter_start", -3, "counter_start")])
+def test_bad_clock_values_are_refused(field, value, message):
+    with pytest.raises(ValueError, match=message):
+        RadarClock(**{"cycle_s": 0.05, field: value})
+    with pytest.raises(ValueError, match="jitter_s"):
+        RadarClock(cycle_s=0.05, latency_s=0.01, jitter_s=0.02)
+
+
+def write_radar(folder: Path, **clock) -> str:
+    data = yaml.safe_load(AWR.read_text())
+    data["name"] = "own-clock"
+    data["clock"] = clock
+    (folder / "radars").mkdir(exist_ok=True)
+    (folder / "radars" / "own.radar.yaml").write_text(yaml.safe_dump(data))
+    return "radars/own.radar.yaml"
+
+
+def test_profile_clock_key_and_its_located_errors(tmp_path):
+    profile = RadarProfile.from_file(tmp_path / write_radar(tmp_path, cycle_s=0.072,
+                                                             latency_s=0.13, counter_start=4242))
+    assert profile.radar_clock == RadarClock(cycle_s=0.072, latency_s=0.13, counter_start=4242)
+    assert RadarProfile.preset("awr1843boost").radar_clock.cycle_s == 0.05  # frame_period_s
+    bad = tmp_path / write_radar(tmp_path, cycle_s=0.05, latency_s=0.01, jitter_s=0.5)
+    with pytest.raises(RtsError, match=r"own.radar.yaml:\d+:\d+: clock.jitter_s"):
+        RadarProfile.from_file(bad)
+
+
+def scene_with_clock(tmp_path, **clock):
+    shutil.copy(ROOT / "scenarios" / "cut_in.scenario.yaml", tmp_path / "cut_in.scenario.yaml")
+    for sub in ("rigs",):
+        if (ROOT / "scenarios" / sub).exists():
+            shutil.copytree(ROOT / "scenarios" / sub, tmp_path / sub, dirs_exist_ok=True)
+    radar = write_radar(tmp_path, **clock)
+    # The RTS plays 20 frames/s, the radar measures fewer: the scene says it expects that.
+    return load_scenario(tmp_path / "cut_in.scenario.yaml",
+                         {"radar.profile": radar, "radar.noise": False,
+                          "radar.fidelity": "analytic",
+                          "expectations.expected_limits": ["frame_rate_above_radar"]})
+
+
+def run(scene, tamper=None):
+    with Pipeline.for_scene(scene, RunOptions()) as pipeline:
+        if tamper is not None:
+            sink = pipeline.output._sink
+            pipeline.output._sink = lambda cycle: tamper(cycle, sink)
+        return pipeline.run(scene).report
+
+
+def test_a_radar_on_its_own_clock_is_checked_at_its_measurement_times(tmp_path):
+    scene = scene_with_clock(tmp_path, cycle_s=0.072, start_offset_s=0.013, latency_s=0.13,
+                             counter_start=4242)
+    seen: list[Detections] = []
+
+    def keep(cycle, sink):
+        seen.append(cycle)
+        sink(cycle)
+
+    report = run(scene, keep)
+    assert report.passed, report.reasons
+    n = int(np.ceil((scene.duration_s - 0.013) / 0.072))
+    assert report.frames["total"] == report.frames["checked"] == n
+    assert [c.cycle for c in seen] == list(range(4242, 4242 + n))
+    t = np.array([c.t_s for c in seen])
+    np.testing.assert_allclose(t, 0.013 + 0.072 * np.arange(n), atol=1e-12)
+    # Each cycle measured the frame the RTS held: the range the scene had at that frame's
+    # time (20 Hz frames), not at the measurement time.
+    held_t = np.floor(t * scene.frame_rate_hz + 1e-9) / scene.frame_rate_hz
+    truth = compute_tracks(scene, held_t)
+    got = np.array([c.range_m[0] for c in seen])
+    np.testing.assert_allclose(got, truth.range_m[:, 0], atol=0.02)
+    # ... which differs from the truth at the measurement time by the hold; the checker
+    # compares with the latter, and reports it.
+    moved = np.abs(compute_tracks(scene, t).range_m[:, 0] - truth.range_m[:, 0])
+    assert report.errors["range_m"].max == pytest.approx(
+        np.max(np.abs(got - compute_tracks(scene, t).range_m[:, 0])), abs=0.01)
+    assert moved.max() > 0.02
+
+
+@pytest.mark.parametrize(("fault", "reason"), [
+    ("drop_target", "detection rate"), ("az_bias", "detection rate"),
+    ("lose_cycles", "missing")])
+def test_faults_of_a_radar_on_its_own_clock_fail_with_their_reason(tmp_path, fault, reason):
+    scene = scene_with_clock(tmp_path, cycle_s=0.072, latency_s=0.13, counter_start=4242)
+    rng = np.random.default_rng(3)
+
+    def tamper(cycle, sink):
+        if fault == "lose_cycles" and rng.random() < 0.3:
+            return
+        if fault == "drop_target":
+            cycle = Detections.empty(cycle.cycle, cycle.t_s)
+        if fault == "az_bias" and cycle.az_deg is not None:
+            cycle = Detections(cycle=cycle.cycle, t_s=cycle.t_s, range_m=cycle.range_m,
+                               radial_velocity_mps=cycle.radial_velocity_mps,
+                               az_deg=cycle.az_deg + 1.0, el_deg=cycle.el_deg,
+                               snr_db=cycle.snr_db, rcs_dbsm=cycle.rcs_dbsm)
+        sink(cycle)
+
+    report = run(scene, tamper)
+    assert not report.passed
+    assert any(reason in r for r in report.reasons), report.reasons
+    if fault == "lose_cycles":
+        assert 0.2 < report.frames["missing"] / report.frames["total"] < 0.4
