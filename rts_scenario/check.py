@@ -371,11 +371,12 @@ class Checker:
         frames = self.frames
         per_frame = self._false / max(frames["received"], 1)
         if per_frame > exp.max_false_detections_per_frame:
-            reasons.append(f"{per_frame:.3f} false detections per frame > "
+            reasons.append(f"{per_frame:.3f} false detections per radar cycle > "
                            f"{exp.max_false_detections_per_frame:g}")
         if self._unchecked:
-            reasons.append(f"{frames['missing']} frames missing and {frames['incomplete']} "
-                           f"incomplete: {self._unchecked} target-frames could not be checked")
+            reasons.append(f"{frames['missing']} radar cycles missing and "
+                           f"{frames['incomplete']} incomplete: {self._unchecked} target-cycles "
+                           f"could not be checked")
         if bus is not None:
             if bus.get("messages", 0) == 0:
                 reasons.append("the bus was silent: no message received")

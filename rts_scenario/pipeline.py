@@ -10,6 +10,7 @@ calibration all run through it.
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -28,7 +29,7 @@ from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .preflight import Preflight, preflight, scene_limits
-from .radar.clock import held_frames
+from .radar.clock import RadarClock, held_frames
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report
@@ -68,6 +69,10 @@ class RunOptions:
         Frames per streamed batch.
     record : bool
         Keep every frame's check arrays (on disk) for plots and post-processing.
+    bus_log : str, optional
+        Record the detection bus to this file with python-can's ``Logger`` (format by
+        extension: .blf, .asc, .csv, .log, .trc, .mf4 with asammdf), plus ``LOG.rts.json``
+        (`write_log_sidecar`) for ``rts-scenario check --log``.
     """
 
     output: str = "simulated-radar"
@@ -79,6 +84,7 @@ class RunOptions:
     drain_s: float = 2.0
     batch_frames: int = BATCH_FRAMES
     record: bool = False
+    bus_log: str | None = None
 
 
 @dataclass
@@ -129,13 +135,19 @@ class Pipeline:
         self._buses: list[can.BusABC] = []
         self._publisher: DetectionPublisher | None = None
         self._notifier: can.Notifier | None = None
+        self._logger: can.Listener | None = None
         self.output: Output | None = None
-        self.channel = options.can_channel or f"rts-scenario-{id(self):x}"
+        # A private name that does not end in digits (MF4 logs read those as a channel number).
+        self.channel = options.can_channel or f"rts-scenario-{id(self):x}-detections"
         try:
             self.mapping = CanMapping.from_file(options.mapping) if options.mapping else None
             self.receiver = DetectionReceiver(self.mapping)
             listen = self._open_bus()
-            self._notifier = can.Notifier(listen, [self.receiver], timeout=0.05)
+            listeners: list[can.Listener] = [self.receiver]
+            if options.bus_log:
+                self._logger = can.Logger(options.bus_log)
+                listeners.append(self._logger)
+            self._notifier = can.Notifier(listen, listeners, timeout=0.05)
             name, argument = split_spec(options.output)
             context = RunContext(rig=rig, radar=radar, radar_options=radar_options
                                  or RadarOptions(), open_publisher=self._open_publisher,
@@ -248,7 +260,7 @@ class Pipeline:
                           scene_limits=scene_limits(scene), detections_out=detections_out)
         n_frames = scene.n_frames
         t_all = scene.t_s
-        scene_end_s = float(t_all[-1]) + 1.0 / scene.frame_rate_hz if n_frames else 0.0
+        digest = hashlib.sha256() if options.bus_log else None
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
         # read from disk instead of being built again.
         array, model = solver_inputs(scene.radar, FE_RESPONSES[0])
@@ -269,12 +281,9 @@ class Pipeline:
             mark = timer.add("schedule_s", mark)
             # The radar's cycles while the RTS holds this batch: ground truth at their
             # measurement times, the limits of the frame each one measures.
-            end_s = float(t_all[frames[-1] + 1]) if frames[-1] + 1 < n_frames else scene_end_s
-            n, t_cycles = clock.cycles_between(float(t_all[first]), end_s)
-            if n.size:
-                held = held_frames(t_all[frames], t_cycles)
-                checker.add_truth(int(n[0]), compute_tracks(scene, t_cycles, frames[held]),
-                                  schedule.status[held])
+            n = add_cycle_truth(checker, scene, clock, frames, schedule.status)
+            if digest is not None:
+                digest.update(schedule.status.tobytes())
             mark = timer.add("kinematics_s", mark)
             self.write(schedule)
             mark = timer.add("play_s", mark)
@@ -296,6 +305,8 @@ class Pipeline:
             # signal's range): the checker never saw them.
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
+        if options.bus_log and digest is not None:
+            write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest())
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -311,8 +322,11 @@ class Pipeline:
                 self.output.close()
         finally:
             if self._notifier is not None:
-                self._notifier.stop()
+                self._notifier.stop()  # stops its listeners too: the log is complete
                 self._notifier = None
+            elif self._logger is not None:
+                self._logger.stop()
+            self._logger = None
             while self._buses:
                 self._buses.pop().shutdown()
 
@@ -322,6 +336,59 @@ class Pipeline:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         self.close()
+
+
+def add_cycle_truth(checker: Checker, scene: Scenario, clock: RadarClock,
+                    frames: np.ndarray, status: np.ndarray) -> np.ndarray:
+    """Give ``checker`` the ground truth of the radar cycles while the RTS holds ``frames``.
+
+    The cycles measured from the first frame's time until the next frame after the last (the
+    scene's end for its last frame), each compared with the truth at its measurement time and
+    with the limits of the frame it measured (``status``, the schedule's, per frame of
+    ``frames``). Returns the cycles' numbers.
+    """
+    t_all = scene.t_s
+    last = int(frames[-1]) + 1
+    end_s = float(t_all[last]) if last < scene.n_frames else (
+        float(t_all[-1]) + 1.0 / scene.frame_rate_hz)
+    n, t_cycles = clock.cycles_between(float(t_all[frames[0]]), end_s)
+    if n.size:
+        held = held_frames(t_all[frames], t_cycles)
+        checker.add_truth(int(n[0]), compute_tracks(scene, t_cycles, frames[held]),
+                          status[held])
+    return n
+
+
+LOG_SIDECAR_SUFFIX = ".rts.json"
+
+
+def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
+                      options: RunOptions, status_digest: str) -> Path:
+    """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
+
+    The radar's clock (which counter is which cycle, measured when), the mapping the bus speaks,
+    the solver method, and a digest of the statuses the RTS played, so that a re-check that
+    rebuilds the schedule can tell whether it plays the same.
+    """
+    import json
+
+    from . import __version__
+
+    c = radar.radar_clock
+    path = Path(str(log) + LOG_SIDECAR_SUFFIX)
+    data = {
+        "rts_scenario_log": 1, "version": __version__, "scene": scene.name,
+        "frames": scene.n_frames, "frame_rate_hz": scene.frame_rate_hz,
+        "radar": radar.name,
+        "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,
+                  "latency_s": c.latency_s, "jitter_s": c.jitter_s,
+                  "counter_start": c.counter_start},
+        "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
+        "can_fd": options.can_fd, "method": options.method, "output": options.output,
+        "status_sha256": status_digest,
+    }
+    path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
+    return path
 
 
 def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
@@ -345,4 +412,5 @@ def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
 
 
 
-__all__ = ["BATCH_FRAMES", "Pipeline", "RunOptions", "RunResult", "run_scene"]
+__all__ = ["BATCH_FRAMES", "LOG_SIDECAR_SUFFIX", "Pipeline", "RunOptions", "RunResult",
+           "add_cycle_truth", "run_scene", "write_log_sidecar"]

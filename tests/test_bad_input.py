@@ -190,6 +190,7 @@ def places(tmp_path):
     folder.mkdir()
     plain = tmp_path / "plain.txt"
     plain.write_text("x")
+    (tmp_path / "junk.blf").write_text("not a BLF log")
     return {"scene": str(scene), "dir": str(folder), "file": str(plain),
             "missing": str(tmp_path / "missing" / "out.json"), "tmp": str(tmp_path)}
 
@@ -264,6 +265,21 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
      r"^--json {dir}: cannot write: is a folder"),
     ("bench-json-under-file", ["bench", "--targets", "10", "--scene-s", "0", "--json",
                                "{file}/b.json"], 2, r"^--json {file}/b.json: cannot write"),
+    ("check-log-missing", ["check", "{scene}", "--log", "{tmp}/none.blf"], 2,
+     r"^--log {tmp}/none.blf: no such file"),
+    ("check-log-format", ["check", "{scene}", "--log", "{file}"], 2,
+     r"^--log {file}: unknown log format '.*'; valid: .asc, .blf"),
+    ("check-log-not-a-log", ["check", "{scene}", "--log", "{tmp}/junk.blf"], 2,
+     r"^--log {tmp}/junk.blf: cannot read"),
+    ("check-offset-nan", ["check", "{scene}", "--log", "{tmp}/none.blf", "--time-offset-s",
+                          "nan"], 2, r"^--time-offset-s: must be a finite number"),
+    ("check-without-log", ["check", "{scene}"], 2, r"--log"),
+    ("run-record-two-scenes", ["run", "{scene}", "{scene}", "--record", "{tmp}/r.blf"], 2,
+     r"^--record: records the bus of one scene, got 2 scenes"),
+    ("run-record-format", ["run", "{scene}", "--record", "{tmp}/r.txtx"], 2,
+     r"^--record {tmp}/r.txtx: unknown log format '.txtx'; valid"),
+    ("run-record-folder", ["run", "{scene}", "--record", "{dir}/x/r.blf"], 2,
+     r"^--record {dir}/x/r.blf: cannot write"),
     ("survey-place-without-write", ["survey", "kit-table1", "--place"], 2,
      r"^--place: needs --write RIG_OUT"),
     ("survey-estimator", ["survey", "kit-table1", "--estimator", "music"], 2,
@@ -329,7 +345,13 @@ def test_alias_bomb_fails_fast_in_little_memory(tmp_path):
         except ScenarioError as exc:
             message = str(exc)
         print(time.perf_counter() - start)
-        print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+        # Peak RSS of this process: VmHWM resets at exec (ru_maxrss may carry the peak of
+        # the parent that forked it).
+        try:
+            with open("/proc/self/status") as status:
+                print(next(line.split()[1] for line in status if line.startswith("VmHWM")))
+        except OSError:
+            print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
         print(message)
     """)
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -18,6 +18,7 @@ from ..errors import RtsError
 from . import (
     bench,
     calibrate,
+    check,
     list_outputs,
     list_scenes,
     listen,
@@ -29,8 +30,8 @@ from . import (
 from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK, EXIT_RUNTIME_ERROR, one_line
 
 # In the order `--help` lists them.
-_SUBCOMMANDS = (bench, validate, run, schedule, calibrate, survey, list_scenes, list_outputs,
-                listen)
+_SUBCOMMANDS = (bench, validate, run, check, schedule, calibrate, survey, list_scenes,
+                list_outputs, listen)
 
 
 def build_parser() -> argparse.ArgumentParser:

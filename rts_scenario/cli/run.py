@@ -47,6 +47,23 @@ def _do_run(args: argparse.Namespace) -> int:
         check_writable_file("--json", args.json)
     if args.detections:
         check_writable_file("--detections", args.detections)
+    if args.record:
+        from ..recheck import LOG_SUFFIXES
+
+        if len(args.scenes) > 1:
+            raise RtsError(f"--record: records the bus of one scene, got {len(args.scenes)} "
+                           f"scenes")
+        suffix = Path(args.record).suffix.lower()
+        if suffix not in LOG_SUFFIXES:
+            raise RtsError(f"--record {args.record}: unknown log format {suffix!r}; valid: "
+                           f"{', '.join(LOG_SUFFIXES)}")
+        if suffix == ".mf4":
+            try:
+                import asammdf  # noqa: F401 - python-can writes MF4 through it
+            except ImportError:
+                raise RtsError("--record: .mf4 logs need asammdf (pip install "
+                               "'rts-scenario[mf4]')") from None
+        check_writable_file("--record", args.record)
     if args.plot:
         from ..plots import require_matplotlib
 
@@ -55,7 +72,8 @@ def _do_run(args: argparse.Namespace) -> int:
 
     options = RunOptions(output=args.output, can_interface=args.can_interface,
                          can_channel=args.can_channel, can_fd=args.can_fd,
-                         mapping=args.mapping, method=args.method, record=bool(args.plot))
+                         mapping=args.mapping, method=args.method, record=bool(args.plot),
+                         bus_log=args.record)
     entries: list[dict[str, Any]] = []
     stems: set[str] = set()
     bad_input = runtime_error = False
@@ -97,6 +115,8 @@ def _do_run(args: argparse.Namespace) -> int:
                                detections_out=detections, on_preflight=warn, timing=loaded)
             report = result.report
             print(report.table())
+            if args.record:
+                print(f"wrote {args.record} and {args.record}.rts.json")
             print("timing: " + ", ".join(
                 f"{k.removesuffix('_s')} {v * 1e3:.0f} ms"
                 + (f" ({report.solver_plan})" if k == "plan_s" else "")
@@ -178,6 +198,9 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                              "radar.estimator reads the set angle)")
     parser.add_argument("--json", metavar="REPORT", help="write the report as JSON")
     parser.add_argument("--plot", metavar="DIR", help="write PNG plots (needs matplotlib)")
+    parser.add_argument("--record", metavar="LOG",
+                        help="record the detection bus (.blf, .asc, .csv, .log, .trc, .mf4) "
+                             "and LOG.rts.json for `rts-scenario check SCENE --log LOG`")
     parser.add_argument("--detections", metavar="CSV",
                         help="write every detection, with the target it was assigned to, as CSV "
                              "(columns in docs/report.md)")

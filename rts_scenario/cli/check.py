@@ -1,0 +1,73 @@
+"""``rts-scenario check``: re-check a recorded CAN log against its scene."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from .common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    METHODS,
+    check_number,
+    check_writable_file,
+    named_file,
+    writing,
+)
+
+
+def _do_check(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from ..canbus.mapping import CanMapping
+    from ..recheck import check_log
+    from ..scenario import load_scenario
+
+    if args.mapping:
+        named_file("--mapping", CanMapping.from_file, args.mapping)
+    if args.time_offset_s is not None:
+        check_number("--time-offset-s", args.time_offset_s)
+    if args.json:
+        check_writable_file("--json", args.json)
+    scene = load_scenario(args.scene)
+    result = check_log(scene, args.log, mapping=args.mapping, time_offset_s=args.time_offset_s,
+                       method=args.method)
+    report = result.report
+    print(f"log {args.log}: {result.alignment.describe()}")
+    for note in result.alignment.notes:
+        print(f"note: {note}")
+    print(report.table())
+    if args.json:
+        entry = {"file": args.scene, "log": args.log,
+                 "status": "pass" if report.passed else "fail", **report.to_dict(),
+                 "alignment": result.alignment.to_dict()}
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(entry, indent=2, allow_nan=False) + "\n")
+        print(f"wrote {args.json}")
+    return EXIT_OK if report.passed else EXIT_FAIL
+
+
+def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """Add the ``check`` subcommand."""
+    parser = subparsers.add_parser(
+        "check", help="re-check a recorded CAN log against its scene", parents=parents,
+        description="Decode a CAN log (.blf, .asc, .csv, .log, .trc, .mf4 with asammdf) and check "
+                    "its detections against the scene, aligned by time. A log recorded by "
+                    "`run --record` is aligned by its sidecar (LOG.rts.json) and gives the live "
+                    "verdict; any other log is aligned by its timestamps (offset estimated "
+                    "unless --time-offset-s). Exit 0 pass, 1 fail, 2 bad input, 3 runtime "
+                    "error.",
+    )
+    parser.add_argument("scene", metavar="SCENE", help="the *.scenario.yaml that was played")
+    parser.add_argument("--log", required=True, metavar="LOG", help="the recorded CAN log")
+    parser.add_argument("--mapping", default=None,
+                        help="*.mapping.yaml of the radar's DBC (default: the sidecar's, else "
+                             "rts-scenario's messages)")
+    parser.add_argument("--time-offset-s", type=float, default=None, metavar="S",
+                        help="log time of the scene's time 0 (default: estimated from the data)")
+    parser.add_argument("--method", default=None, choices=METHODS,
+                        help="solver method of the played schedule (default: the sidecar's, "
+                             "else exact)")
+    parser.add_argument("--json", metavar="REPORT", help="write the report as JSON")
+    parser.set_defaults(handler=_do_check)

@@ -1,0 +1,429 @@
+"""Re-check a recorded CAN log against a scene: offline, aligned by time.
+
+A log recorded by ``rts-scenario run --record LOG`` has a sidecar (``LOG.rts.json``,
+`rts_scenario.pipeline.write_log_sidecar`) with the radar's clock: its counters name the cycles
+exactly as they did live, so the re-check gives the live verdict. A log recorded by any other
+tool has only timestamps. Then the cycles are numbered from their counters (gaps are missing
+cycles), the radar's cycle time is fitted to the header timestamps, and the scene time of the
+log is ``log time - latency - offset``: ``offset`` (the log time of the scene's time 0) is given
+(``--time-offset-s``) or estimated by matching the detections to the ground truth over
+candidate offsets. The estimate and its uncertainty are reported.
+
+The ground truth and the played schedule are rebuilt from the scene (the same solver as live);
+with a sidecar, a digest of the statuses the RTS played tells whether the rebuilt schedule
+plays the same.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+from numpy.typing import NDArray
+
+from .canbus import DetectionReceiver
+from .canbus.mapping import CanMapping
+from .check import Checker
+from .detections import Detections
+from .errors import RtsError
+from .kinematics import compute_tracks
+from .pipeline import BATCH_FRAMES, LOG_SIDECAR_SUFFIX, add_cycle_truth
+from .preflight import scene_limits
+from .radar.clock import TIME_EPS_S, RadarClock
+from .report import Report
+from .scenario import Scenario
+from .schedule import build_schedule
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+# Log formats python-can reads (``can.LogReader``), by extension.
+LOG_SUFFIXES = (".asc", ".blf", ".csv", ".db", ".log", ".mf4", ".trc")
+# Coarse offset search: step (s).
+COARSE_STEP_S = 0.01
+# Fine search: +- this around the coarse minimum, in steps of FINE_STEP_S.
+FINE_SPAN_S = 0.05
+FINE_STEP_S = 0.001
+# Resamplings for the uncertainty of an estimated offset.
+BOOTSTRAP_ROUNDS = 30
+# A detection farther than this (normalized by the tolerances) from every target counts this.
+GATE2 = 9.0
+
+
+class LogError(RtsError):
+    """A log that cannot be read or re-checked."""
+
+
+@dataclass
+class Alignment:
+    """How the log's cycles were placed in scene time."""
+
+    source: str  # "sidecar", "given" or "estimated"
+    cycle_s: float
+    offset_s: float | None = None
+    uncertainty_s: float | None = None
+    latency_s: float = 0.0
+    cycles_in_log: int = 0
+    cycles_outside_scene: int = 0
+    schedule_matches_recording: bool | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def describe(self) -> str:
+        """One line for people."""
+        if self.source == "sidecar":
+            text = (f"aligned by the recording's sidecar: counters name the cycles "
+                    f"({self.cycle_s * 1e3:.1f} ms cycle)")
+        else:
+            how = "given" if self.source == "given" else "estimated"
+            pm = (f" +- {self.uncertainty_s * 1e3:.1f} ms" if self.uncertainty_s is not None
+                  else "")
+            text = (f"aligned by timestamps: scene time 0 at log time {self.offset_s:.4f} s "
+                    f"({how}{pm}), latency {self.latency_s * 1e3:.0f} ms, cycle "
+                    f"{self.cycle_s * 1e3:.2f} ms fitted")
+        text += f"; {self.cycles_in_log} cycles in the log"
+        if self.cycles_outside_scene:
+            text += f", {self.cycles_outside_scene} outside the scene"
+        return text
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data for JSON."""
+        return {"source": self.source, "cycle_s": self.cycle_s, "offset_s": self.offset_s,
+                "uncertainty_s": self.uncertainty_s, "latency_s": self.latency_s,
+                "cycles_in_log": self.cycles_in_log,
+                "cycles_outside_scene": self.cycles_outside_scene,
+                "schedule_matches_recording": self.schedule_matches_recording,
+                "notes": list(self.notes)}
+
+
+@dataclass
+class RecheckResult:
+    """The verdict on a recorded log and how its cycles were aligned."""
+
+    scene: Scenario
+    report: Report
+    alignment: Alignment
+
+
+@dataclass
+class _LoggedCycle:
+    detections: Detections
+    bus_t_s: float
+
+
+def read_sidecar(log: str | Path) -> dict[str, Any] | None:
+    """Return the ``LOG.rts.json`` of a log recorded by rts-scenario, None without one."""
+    path = Path(str(log) + LOG_SIDECAR_SUFFIX)
+    if not path.exists():
+        return None
+    try:
+        data = json.loads(path.read_text())
+        if data.get("rts_scenario_log") != 1 or "clock" not in data:
+            raise ValueError("not an rts-scenario log sidecar (rts_scenario_log: 1)")
+        return dict(data)
+    except (OSError, ValueError) as exc:
+        raise LogError(f"{path}: {exc}") from None
+
+
+def read_cycles(log: str | Path, mapping: CanMapping | None) -> tuple[list[_LoggedCycle],
+                                                                      dict[str, int]]:
+    """Decode a log's radar cycles, each with the bus time of its header message."""
+    path = Path(log)
+    if path.suffix.lower() not in LOG_SUFFIXES:
+        raise LogError(f"--log {log}: unknown log format {path.suffix!r}; valid: "
+                       f"{', '.join(LOG_SUFFIXES)}")
+    if not path.is_file():
+        raise LogError(f"--log {log}: no such file")
+    receiver = DetectionReceiver(mapping)
+    m = receiver.mapping
+    header = m.db.get_message_by_name(m.header)
+    header_times: dict[int, deque[float]] = {}
+    out: list[_LoggedCycle] = []
+
+    def take(cycles: list[Detections]) -> None:
+        for cycle in cycles:  # one per radar cycle
+            times = header_times.get(cycle.cycle)
+            t = times.popleft() if times else float("nan")
+            out.append(_LoggedCycle(cycle, t))
+
+    for msg in _messages(path):  # one per logged message
+        if msg.arbitration_id == header.frame_id and not msg.is_error_frame:
+            try:
+                decoded = header.decode(bytes(msg.data), decode_choices=False)
+                assert isinstance(decoded, dict)
+                counter: int | None = int(decoded[m.counter])  # type: ignore[arg-type]
+            except Exception:  # noqa: BLE001 - the receiver counts undecodable ones
+                counter = None
+            if counter is not None:
+                header_times.setdefault(counter, deque()).append(float(msg.timestamp))
+        receiver.on_message_received(msg)
+        take(receiver.pop())
+    take(receiver.flush())
+    return out, {k: int(v) for k, v in vars(receiver.stats).items()}
+
+
+def _messages(path: Path) -> Iterator[can.Message]:
+    """Yield the log's messages; a file python-can cannot parse is a `LogError`."""
+    try:
+        reader = can.LogReader(str(path))
+    except ImportError as exc:
+        raise LogError(f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "
+                       f"'rts-scenario[mf4]')") from None
+    except Exception as exc:  # noqa: BLE001 - each format fails in its own way
+        raise LogError(f"--log {path}: cannot read: {type(exc).__name__}: {exc}") from None
+    with reader:
+        iterator = iter(reader)
+        while True:
+            try:
+                msg = next(iterator)
+            except StopIteration:
+                return
+            except Exception as exc:  # noqa: BLE001 - a damaged log, in the format's words
+                raise LogError(f"--log {path}: cannot read: {type(exc).__name__}: "
+                               f"{exc}") from None
+            yield msg
+
+
+def _sequential_numbers(counters: IntArray, modulus: int) -> IntArray:
+    """Return cycle numbers from counters in log order: each step forward modulo the wrap."""
+    if counters.size == 0:
+        return counters
+    step = np.mod(np.diff(counters), modulus)
+    # A step back (reordered) is small and negative once re-centred.
+    step = np.where(step > modulus // 2, step - modulus, step)
+    return np.concatenate([[0], np.cumsum(step)]).astype(np.int64)
+
+
+class _TruthTable:
+    """What the RTS plays, on a fine time grid, read at any time by linear interpolation.
+
+    Built once, it prices an offset in a few array operations (every candidate of the search
+    reads it instead of evaluating the scene again).
+    """
+
+    QUANTITIES = (("range_m", "range_m"), ("radial_velocity_mps", "radial_velocity_mps"),
+                  ("az_deg", "az_deg"))
+
+    def __init__(self, scene: Scenario, dets: list[Detections]) -> None:
+        self.frame_s = 1.0 / scene.frame_rate_hz
+        self.step = max(0.002, scene.duration_s / 20000.0)
+        self.t = np.arange(0.0, scene.duration_s + self.step, self.step)
+        tracks = compute_tracks(scene, self.t)
+        self.present = tracks.present
+        self.values = {q: getattr(tracks, q) for q, _ in self.QUANTITIES}
+        self.tol = scene.expectations.tolerances
+        counts = np.array([d.count for d in dets], dtype=np.int64)
+        self.owner = np.repeat(np.arange(len(dets)), counts)  # detection -> cycle
+
+        def column(q: str) -> FloatArray:
+            parts = [getattr(d, q) if getattr(d, q) is not None else np.full(d.count, np.nan)
+                     for d in dets]
+            return np.concatenate(parts) if parts else np.zeros(0)
+
+        self.det = {q: column(q) for q, _ in self.QUANTITIES}
+
+    def at(self, t_s: FloatArray) -> tuple[dict[str, FloatArray], NDArray[np.bool_]]:
+        """Truth (C, K) the RTS plays at times ``t_s``: the frame it holds then.
+
+        Targets are absent outside the scene.
+        """
+        held = np.floor(np.asarray(t_s) / self.frame_s + TIME_EPS_S) * self.frame_s
+        x = (held - self.t[0]) / self.step
+        inside = (x >= 0) & (x <= self.t.size - 1)
+        i0 = np.clip(np.floor(x).astype(np.int64), 0, self.t.size - 2)
+        w = np.clip(x - i0, 0.0, 1.0)[:, None]
+        values = {q: v[i0] * (1 - w) + v[i0 + 1] * w for q, v in self.values.items()}
+        present = self.present[i0] & self.present[i0 + 1] & inside[:, None]
+        return values, present
+
+    def cost(self, t_s: FloatArray, weight: FloatArray | None = None) -> float:
+        """Mean over detections of the normalized distance to the nearest present target.
+
+        ``weight`` (per detection) weighs the mean (a bootstrap's resampled cycles).
+        """
+        if self.owner.size == 0:
+            return float("inf")
+        values, present = self.at(t_s)
+        total = np.zeros((self.owner.size, present.shape[1]))
+        for q, key in self.QUANTITIES:
+            diff = (self.det[q][:, None] - values[q][self.owner]) / self.tol[key]
+            total += np.nan_to_num(diff, nan=0.0) ** 2
+        total = np.where(present[self.owner], total, np.inf)
+        return float(np.average(np.minimum(total.min(axis=1), GATE2), weights=weight))
+
+
+def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections],
+                    latency_s: float) -> tuple[float, float | None]:
+    """Log time of scene time 0 that best matches detections to the truth, and its uncertainty.
+
+    A coarse search over every offset that puts the log inside the scene, then a fine one
+    around its minimum; the uncertainty comes from each matched detection's range error over
+    its target's range rate (the time shift that would explain it).
+    """
+    ok = np.isfinite(bus_t_s)
+    bus, usable = bus_t_s[ok], [d for d, k in zip(dets, ok, strict=True) if k]
+    if bus.size == 0:
+        raise LogError("the log has no radar cycle with a timestamp to align")
+    table = _TruthTable(scene, usable)
+    lo, hi = bus.min() - latency_s - scene.duration_s, bus.max() - latency_s
+    grid = np.arange(lo, hi + COARSE_STEP_S, COARSE_STEP_S)
+    coarse = np.array([table.cost(bus - latency_s - s) for s in grid])
+    best = float(grid[int(np.argmin(coarse))])
+    fine = np.arange(best - FINE_SPAN_S, best + FINE_SPAN_S + FINE_STEP_S / 2, FINE_STEP_S)
+    costs = np.array([table.cost(bus - latency_s - s) for s in fine])
+    i = int(np.argmin(costs))
+    offset = float(fine[i])
+    if 0 < i < fine.size - 1:  # parabola through the minimum and its neighbours
+        a, b, c = costs[i - 1 : i + 2]
+        den = a - 2 * b + c
+        if den > 0:
+            offset += 0.5 * (a - c) / den * FINE_STEP_S
+    return offset, _offset_uncertainty(table, bus - latency_s, fine)
+
+
+def _offset_uncertainty(table: _TruthTable, t_log: FloatArray, fine: FloatArray,
+                        rounds: int = BOOTSTRAP_ROUNDS) -> float | None:
+    """Spread of the offset found again on cycles drawn with replacement (a bootstrap).
+
+    It covers what limits the estimate: the latency's jitter, the measurement noise and the
+    RTS's hold (a cycle tells the offset only to within a frame; many cycles narrow it).
+    """
+    n_cycles = t_log.size
+    if n_cycles < 3:
+        return None
+    rng = np.random.default_rng(0)
+    found = []
+    for _ in range(rounds):  # a few dozen resamplings, each a vectorized search
+        pick = np.zeros(n_cycles, dtype=np.int64)
+        np.add.at(pick, rng.integers(0, n_cycles, n_cycles), 1)
+        weight = pick[table.owner].astype(np.float64)
+        costs = [table.cost(t_log - s, weight) for s in fine]
+        found.append(float(fine[int(np.argmin(costs))]))
+    return float(np.std(found, ddof=1))
+
+
+def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
+              time_offset_s: float | None = None, method: str | None = None,
+              batch_frames: int = BATCH_FRAMES) -> RecheckResult:
+    """Check a recorded log's detections against ``scene``.
+
+    Parameters
+    ----------
+    scene : Scenario
+        The scene that was played.
+    log : str or Path
+        A CAN log python-can reads (.blf, .asc, .csv, .log, .trc, .mf4 with asammdf).
+    mapping : str, optional
+        ``*.mapping.yaml`` of the radar's DBC (default: the sidecar's, else rts-scenario's).
+    time_offset_s : float, optional
+        Log time of the scene's time 0 (a log without a sidecar); estimated when not given.
+    method : str, optional
+        Solver method of the played schedule (default: the sidecar's, else ``exact``).
+    """
+    sidecar = read_sidecar(log)
+    if mapping is None and sidecar is not None and sidecar.get("mapping"):
+        mapping = sidecar["mapping"]
+    can_mapping = CanMapping.from_file(mapping) if mapping else None
+    method = method or (sidecar or {}).get("method") or "exact"
+    logged, bus = read_cycles(log, can_mapping)
+    receiver_mapping = (can_mapping or CanMapping.builtin())
+    header = receiver_mapping.db.get_message_by_name(receiver_mapping.header)
+    modulus = 1 << int(header.get_signal_by_name(receiver_mapping.counter).length)
+    profile_clock = scene.radar.radar_clock
+    counters = np.array([c.detections.cycle for c in logged], dtype=np.int64)
+    numbers = _sequential_numbers(counters, modulus)
+    if sidecar is not None:
+        c = sidecar["clock"]
+        clock = RadarClock(cycle_s=float(c["cycle_s"]),
+                           start_offset_s=float(c["start_offset_s"]),
+                           latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
+                           counter_start=int(c["counter_start"]))
+        alignment = Alignment("sidecar", clock.cycle_s, latency_s=clock.latency_s)
+        if sidecar.get("scene") != scene.name:
+            alignment.notes.append(f"the log was recorded for scene {sidecar.get('scene')!r}, "
+                                   f"not {scene.name!r}")
+    else:
+        latency = profile_clock.latency_s
+        bus_t = np.array([c.bus_t_s for c in logged])
+        dets = [c.detections for c in logged]
+        if time_offset_s is None:
+            offset, uncertainty = estimate_offset(scene, bus_t, dets, latency)
+            source = "estimated"
+        else:
+            offset, uncertainty, source = float(time_offset_s), None, "given"
+        clock = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
+                              profile_clock.cycle_s)
+        alignment = Alignment(source, clock.cycle_s, offset, uncertainty, latency)
+    alignment.cycles_in_log = len(logged)
+    result = _check(scene, logged, clock, modulus, method, batch_frames, bus, alignment,
+                    sidecar)
+    return RecheckResult(scene=scene, report=result, alignment=alignment)
+
+
+def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
+                  offset_s: float, modulus: int, nominal_cycle_s: float) -> RadarClock:
+    """Return the radar's clock in scene time fitted to the header timestamps."""
+    ok = np.isfinite(bus_t)
+    if ok.sum() >= 2 and np.ptp(numbers[ok]) > 0:
+        cycle_s, first_s = np.polyfit(numbers[ok].astype(float), bus_t[ok], 1)
+    elif ok.any():
+        cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - numbers[ok][0]
+                                                  * nominal_cycle_s)
+    else:
+        raise LogError("the log has no radar cycle with a timestamp to align")
+    start = first_s - latency_s - offset_s  # scene time of the log's first cycle
+    # Number cycles from the first one measured at or after the scene's start.
+    shift = int(np.ceil(-start / cycle_s - 1e-9)) if start < 0 else 0
+    return RadarClock(cycle_s=float(cycle_s), start_offset_s=float(start + shift * cycle_s),
+                      latency_s=latency_s,
+                      counter_start=int((counters[0] + shift) % modulus) if counters.size else 0)
+
+
+def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modulus: int,
+           method: str, batch_frames: int, bus: dict[str, int], alignment: Alignment,
+           sidecar: dict[str, Any] | None) -> Report:
+    checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
+                      counter_modulus=modulus, counter_start=clock.counter_start,
+                      expected_limits=[t.expected_limits for t in scene.targets],
+                      scene_limits=scene_limits(scene))
+    total = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
+    counters = np.array([c.detections.cycle for c in logged], dtype=np.int64)
+    # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
+    first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
+                - modulus // 2) if counters.size else 0
+    rel = _sequential_numbers(counters, modulus) + first
+    inside = (rel >= 0) & (rel < total)
+    alignment.cycles_outside_scene = int((~inside).sum())
+    digest = hashlib.sha256()
+    order = np.argsort(rel, kind="stable")
+    rel_sorted = rel[order]
+    t_all = scene.t_s
+    for first in range(0, scene.n_frames, batch_frames):
+        frames = np.arange(first, min(first + batch_frames, scene.n_frames))
+        tracks = compute_tracks(scene, t_all[frames], frames)
+        schedule = build_schedule(tracks, scene.rig, scene.radar, method=method,
+                                  estimator=scene.radar_options.estimator,
+                                  frame_rate_hz=scene.frame_rate_hz)
+        digest.update(schedule.status.tobytes())
+        n = add_cycle_truth(checker, scene, clock, frames, schedule.status)
+        if n.size:
+            lo, hi = np.searchsorted(rel_sorted, [n[0], n[-1] + 1])
+            checker.add_cycles(logged[i].detections for i in order[lo:hi])
+            checker.settle(before_frame=int(n[-1]) + 1)
+    checker.settle()
+    if sidecar is not None and sidecar.get("status_sha256"):
+        alignment.schedule_matches_recording = digest.hexdigest() == sidecar["status_sha256"]
+        if not alignment.schedule_matches_recording:
+            alignment.notes.append("the rebuilt schedule differs from the one recorded (another "
+                                   "version, rig or radar file): limits are those rebuilt")
+    return checker.report(bus)
+
+
+__all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "RecheckResult", "check_log",
+           "estimate_offset", "read_cycles", "read_sidecar"]
