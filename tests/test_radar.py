@@ -315,3 +315,21 @@ def test_auto_takes_the_cube_for_targets_folded_onto_one_cell():
     assert sim.frames_adc == 1
     assert det.count == 2
     np.testing.assert_allclose(det.range_m, 20.0, atol=0.05)
+
+
+def test_ca_cfar_box_sums_equal_the_2d_correlation_of_the_training_window():
+    from scipy import ndimage
+
+    from rts_scenario.radar.simulate import _box_sum
+
+    rng = np.random.default_rng(0)
+    power = rng.exponential(1.0, (64, 256))
+    power[30, 100], power[10, 5] = 1e8, 1e5  # strong peaks next to noise cells
+    guard, train = 2, 8
+    half = guard + train
+    window = np.ones((2 * half + 1, 2 * half + 1))
+    window[train : train + 2 * guard + 1, train : train + 2 * guard + 1] = 0.0
+    padded = np.pad(power, half, mode="reflect")
+    want = ndimage.correlate(padded, window, mode="constant")[half:-half, half:-half]
+    got = _box_sum(padded, half) - _box_sum(padded[train:-train, train:-train], guard)
+    np.testing.assert_allclose(got, want, rtol=1e-8)
