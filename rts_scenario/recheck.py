@@ -70,6 +70,8 @@ class Alignment:
     offset_s: float | None = None
     uncertainty_s: float | None = None
     latency_s: float = 0.0
+    latency_source: str = "profile"  # or "estimated" (the offset given, the latency not)
+    latency_uncertainty_s: float | None = None
     cycles_in_log: int = 0
     cycles_outside_scene: int = 0
     schedule_matches_recording: bool | None = None
@@ -84,9 +86,14 @@ class Alignment:
             how = "given" if self.source == "given" else "estimated"
             pm = (f" +- {self.uncertainty_s * 1e3:.1f} ms" if self.uncertainty_s is not None
                   else "")
+            if self.latency_source == "estimated":
+                lat = (f"latency {self.latency_s * 1e3:.1f} ms estimated"
+                       + (f" +- {self.latency_uncertainty_s * 1e3:.1f} ms"
+                          if self.latency_uncertainty_s is not None else ""))
+            else:
+                lat = f"latency {self.latency_s * 1e3:.0f} ms (profile)"
             text = (f"aligned by timestamps: scene time 0 at log time {self.offset_s:.4f} s "
-                    f"({how}{pm}), latency {self.latency_s * 1e3:.0f} ms, cycle "
-                    f"{self.cycle_s * 1e3:.2f} ms fitted")
+                    f"({how}{pm}), {lat}, cycle {self.cycle_s * 1e3:.2f} ms fitted")
         text += f"; {self.cycles_in_log} cycles in the log"
         if self.cycles_outside_scene:
             text += f", {self.cycles_outside_scene} outside the scene"
@@ -96,6 +103,8 @@ class Alignment:
         """Plain data for JSON."""
         return {"source": self.source, "cycle_s": self.cycle_s, "offset_s": self.offset_s,
                 "uncertainty_s": self.uncertainty_s, "latency_s": self.latency_s,
+                "latency_source": self.latency_source,
+                "latency_uncertainty_s": self.latency_uncertainty_s,
                 "cycles_in_log": self.cycles_in_log,
                 "cycles_outside_scene": self.cycles_outside_scene,
                 "schedule_matches_recording": self.schedule_matches_recording,
@@ -353,13 +362,29 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         bus_t = np.array([c.bus_t_s for c in logged])
         dets = [c.detections for c in logged]
         if time_offset_s is None:
+            # The profile's latency, the offset from the data.
             offset, uncertainty = estimate_offset(scene, bus_t, dets, latency)
-            source = "estimated"
+            alignment = Alignment("estimated", 0.0, offset, uncertainty, latency)
         else:
-            offset, uncertainty, source = float(time_offset_s), None, "given"
+            # With the scene's start known in the log's time, the data tell the latency: the
+            # same search, over latency + offset.
+            offset = float(time_offset_s)
+            total, spread = estimate_offset(scene, bus_t, dets, 0.0)
+            latency = total - offset
+            if latency < -3 * (spread or 0.0) - 0.005:
+                raise LogError(f"--time-offset-s {offset:g}: the log's cycles would reach the "
+                               f"bus {-latency * 1e3:.0f} ms before the radar measured them; "
+                               f"the scene's start is later in the log's time")
+            latency = max(latency, 0.0)
+            alignment = Alignment("given", 0.0, offset, None, latency, latency_source="estimated",
+                                  latency_uncertainty_s=spread)
+            if abs(latency - profile_clock.latency_s) > 3 * (spread or 0.0) + 0.005:
+                alignment.notes.append(
+                    f"the radar's latency from the data, {latency * 1e3:.1f} ms, differs from "
+                    f"its profile's {profile_clock.latency_s * 1e3:.1f} ms")
         clock = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
                               profile_clock.cycle_s)
-        alignment = Alignment(source, clock.cycle_s, offset, uncertainty, latency)
+        alignment.cycle_s = clock.cycle_s
     alignment.cycles_in_log = len(logged)
     result = _check(scene, logged, clock, modulus, method, batch_frames, bus, alignment,
                     sidecar)

@@ -15,7 +15,7 @@ from rts_scenario.detections import Detections
 from rts_scenario.kinematics import compute_tracks
 from rts_scenario.outputs.radar import SimulatedRadarOutput
 from rts_scenario.pipeline import Pipeline, RunOptions, run_scene
-from rts_scenario.recheck import check_log
+from rts_scenario.recheck import LogError, check_log
 from rts_scenario.scenario import load_scenario
 from rts_scenario.schedule import build_schedule
 
@@ -127,12 +127,21 @@ def test_a_log_of_another_tool_is_aligned_within_20_ms(tmp_path, seed, suffix):
     assert result.report.frames["missing"] == 0
 
 
-def test_a_given_time_offset_is_used_and_a_wrong_one_fails(tmp_path):
+def test_a_given_time_offset_tells_the_latency(tmp_path):
     scene, log, origin = foreign_log(tmp_path, 1.7e9 + 55.5)
     right = check_log(scene, log, time_offset_s=origin)
     assert right.alignment.source == "given" and right.report.passed
-    wrong = check_log(scene, log, time_offset_s=origin + 0.6)
-    assert not wrong.report.passed
+    # Given the scene's start, the data tell the radar's latency (130 ms +- 4 ms jitter).
+    assert right.alignment.latency_source == "estimated"
+    assert right.alignment.latency_s == pytest.approx(0.13, abs=0.01)
+    assert right.alignment.latency_uncertainty_s is not None
+    # An offset too late makes the radar report before it measured: refused.
+    with pytest.raises(LogError, match="before the radar measured them"):
+        check_log(scene, log, time_offset_s=origin + 0.6)
+    # One too early shows as a latency far from the radar's profile.
+    early = check_log(scene, log, time_offset_s=origin - 0.6)
+    assert early.alignment.latency_s == pytest.approx(0.73, abs=0.01)
+    assert any("differs from its profile's 130.0 ms" in n for n in early.alignment.notes)
 
 
 def test_a_biased_radar_in_another_tool_s_log_fails(tmp_path):
