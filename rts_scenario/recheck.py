@@ -161,8 +161,16 @@ def read_cycles(log: str | Path, mapping: CanMapping | None) -> tuple[list[_Logg
             t = times.popleft() if times else float("nan")
             out.append(_LoggedCycle(cycle, t))
 
+    started = False
+    skipped = 0
     for msg in _messages(path):  # one per logged message
-        if msg.arbitration_id == header.frame_id and not msg.is_error_frame:
+        is_header = msg.arbitration_id == header.frame_id and not msg.is_error_frame
+        if not (started or is_header):
+            # The log began inside a cycle: its tail before the first header is no cycle.
+            skipped += 1
+            continue
+        started = True
+        if is_header:
             try:
                 decoded = header.decode(bytes(msg.data), decode_choices=False)
                 assert isinstance(decoded, dict)
@@ -174,7 +182,9 @@ def read_cycles(log: str | Path, mapping: CanMapping | None) -> tuple[list[_Logg
         receiver.on_message_received(msg)
         take(receiver.pop())
     take(receiver.flush())
-    return out, {k: int(v) for k, v in vars(receiver.stats).items()}
+    stats = {k: int(v) for k, v in vars(receiver.stats).items()}
+    stats["before_first_cycle"] = skipped
+    return out, stats
 
 
 def _messages(path: Path) -> Iterator[can.Message]:

@@ -71,7 +71,8 @@ def write_radar(folder: Path, **clock) -> str:
     return "radars/own.radar.yaml"
 
 
-def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suffix=".blf"):
+def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suffix=".blf",
+                busy=False):
     """A log as another tool writes it: the radar on its own clock, timestamps in that tool's
     time base (scene time 0 at ``origin_s``), latency and jitter on every cycle, no sidecar."""
     shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
@@ -102,6 +103,16 @@ def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suf
     radar.write(build_schedule(compute_tracks(scene), scene.rig, scene.radar,
                                frame_rate_hz=scene.frame_rate_hz))
     radar.close()
+    if busy:
+        # A real bus: the logger started inside a cycle (detections before the first header)
+        # and other ECUs talk in between.
+        tail = [can.Message(arbitration_id=m.arbitration_id, data=m.data,
+                            timestamp=messages[0].timestamp - 0.01, is_extended_id=False)
+                for m in messages[1:4]]
+        chatter = [can.Message(arbitration_id=0x3F0 + i % 3, data=bytes([i % 256] * 8),
+                               timestamp=messages[0].timestamp + 0.001 * i,
+                               is_extended_id=False) for i in range(0, 12000, 7)]
+        messages = sorted(tail + messages + chatter, key=lambda m: m.timestamp)
     log = tmp_path / f"other{suffix}"
     with can.Logger(str(log)) as writer:
         for msg in messages:
@@ -113,10 +124,13 @@ def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suf
     return scene, log, origin_s - messages[0].timestamp + first_read
 
 
-@pytest.mark.parametrize(("seed", "suffix"), [(0, ".blf"), (1, ".asc"), (2, ".csv")])
-def test_a_log_of_another_tool_is_aligned_within_20_ms(tmp_path, seed, suffix):
+@pytest.mark.parametrize(("seed", "suffix", "busy"), [(0, ".blf", False), (1, ".asc", True),
+                                                     (2, ".csv", False), (3, ".mf4", True)])
+def test_a_log_of_another_tool_is_aligned_within_20_ms(tmp_path, seed, suffix, busy):
+    if suffix == ".mf4":
+        pytest.importorskip("asammdf")
     origin = 1.7e9 + 1000.0 * np.random.default_rng(seed).random()
-    scene, log, origin = foreign_log(tmp_path, origin, seed, suffix=suffix)
+    scene, log, origin = foreign_log(tmp_path, origin, seed, suffix=suffix, busy=busy)
     result = check_log(scene, log)
     a = result.alignment
     assert a.source == "estimated"
@@ -125,6 +139,9 @@ def test_a_log_of_another_tool_is_aligned_within_20_ms(tmp_path, seed, suffix):
     assert a.cycle_s == pytest.approx(0.072, abs=1e-4)
     assert result.report.passed, result.report.reasons
     assert result.report.frames["missing"] == 0
+    if busy:
+        assert result.report.bus["unknown_ids"] > 1000
+        assert result.report.bus["before_first_cycle"] >= 2  # the cycle the log began in
 
 
 def test_a_given_time_offset_tells_the_latency(tmp_path):
