@@ -43,7 +43,8 @@ from .solver.estimator_aware import plan_method
 
 # Frames per batch: large enough to amortize per-call costs, small enough for bounded memory.
 BATCH_FRAMES = 500
-# Without a known message count (a real radar), the bus is drained once it was quiet this long.
+# Without a known message count (a real radar), the bus is drained this long after the radar's
+# latency, jitter and one cycle.
 QUIET_S = 0.2
 
 
@@ -192,23 +193,25 @@ class Pipeline:
         """Return the radar cycles received so far.
 
         With the simulated radar, waits until every message it published has arrived. For a
-        real radar, returns what is there, except at the end (``final``): then waits until the
-        bus has been quiet for `QUIET_S` (at most ``drain_s``) and hands on the cycles still
-        being assembled, as incomplete where parts are missing.
+        real radar, returns what is there, except at the end (``final``): then waits the radar
+        clock's latency, jitter and one cycle plus `QUIET_S` (at most ``drain_s``) and hands on
+        the cycles still being assembled, as incomplete where parts are missing.
         """
-        deadline = time.perf_counter() + self.options.drain_s
+        start = time.perf_counter()
+        deadline = start + self.options.drain_s
         expected = self._publisher.sent if self._publisher is not None else None
+        # A real radar's last cycles come one latency (and its jitter) after they were measured,
+        # and it may never fall quiet (it keeps measuring what the RTS holds): wait that long.
+        clock = self.radar.radar_clock
+        settle_s = clock.latency_s + clock.jitter_s + clock.cycle_s + QUIET_S
         stats = self.receiver.stats
-        seen, quiet_since = -1, time.perf_counter()
         while time.perf_counter() < deadline:
             count = stats.messages
             if expected is not None and count >= expected:
                 break
             if expected is None and not final:
                 break
-            if count != seen:
-                seen, quiet_since = count, time.perf_counter()
-            elif expected is None and time.perf_counter() - quiet_since > QUIET_S:
+            if expected is None and time.perf_counter() - start > settle_s:
                 break
             time.sleep(0.002)
         return self.receiver.flush() if final else self.receiver.pop()

@@ -19,6 +19,7 @@ from . import (
     bench,
     calibrate,
     check,
+    emulate,
     list_outputs,
     list_scenes,
     listen,
@@ -30,8 +31,8 @@ from . import (
 from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK, EXIT_RUNTIME_ERROR, one_line
 
 # In the order `--help` lists them.
-_SUBCOMMANDS = (bench, validate, run, check, schedule, calibrate, survey, list_scenes,
-                list_outputs, listen)
+_SUBCOMMANDS = (bench, validate, run, check, schedule, calibrate, survey, emulate,
+                list_scenes, list_outputs, listen)
 
 
 def build_parser() -> argparse.ArgumentParser:

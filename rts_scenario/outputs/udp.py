@@ -212,6 +212,20 @@ class UdpReceiver:
         self._synced = True
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        # The receiving thread applies frames while others read the state (`snapshot`).
+        self._lock = threading.Lock()
+        self.current: tuple[int, float, float] | None = None  # frame, t_s, arrival (perf)
+
+    def snapshot(self) -> tuple[int, float, float, np.ndarray] | None:
+        """Return the frame applied last, its scene time and arrival, and the entries it holds.
+
+        Consistent while the receiving thread applies frames (None before the first frame).
+        """
+        with self._lock:
+            if self.current is None:
+                return None
+            frame, t_s, arrival = self.current
+            return frame, t_s, arrival, self._table[self._live].copy()
 
     def start(self) -> UdpReceiver:
         """Receive in a background thread until `stop`."""
@@ -295,6 +309,10 @@ class UdpReceiver:
             self._apply(frame)
 
     def _apply(self, frame: int) -> None:
+        with self._lock:
+            self._apply_locked(frame)
+
+    def _apply_locked(self, frame: int) -> None:
         kind, parts, t_s = self._pending_meta.pop(frame)
         chunks = self._pending.pop(frame)
         entries = np.concatenate([chunks[p] for p in range(parts)])
@@ -319,8 +337,10 @@ class UdpReceiver:
         self._table[target[on], channel[on]] = entries[on]
         self._live[target, channel] = on
         self._last_frame = frame
+        arrival = time.perf_counter()
+        self.current = (frame, t_s, arrival)
         self.applied.append((frame, t_s, entries))
-        self.arrival_s.append(time.perf_counter())
+        self.arrival_s.append(arrival)
         self.stats.frames_applied += 1
         self.stats.entries_applied += entries.size
 

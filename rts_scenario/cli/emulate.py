@@ -1,0 +1,96 @@
+"""``rts-scenario emulate``: a simulated RTS and radar behind a real bench's interfaces."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+from .common import EXIT_OK, check_can_interface, check_number
+
+
+def _do_emulate(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from ..emulator import Emulator
+    from ..errors import RtsError
+    from ..radar.angle import estimator_names
+    from ..radar.profile import RadarProfile
+    from ..radar.profile import preset_names as radar_presets
+    from ..rig import Rig
+    from ..rig import preset_names as rig_presets
+    from .common import preset_or_file
+    from .listen import _address
+
+    host, port = _address(args.listen)
+    check_can_interface("--can-interface", args.can_interface)
+    check_number("--seconds", args.seconds, low=0.001, high=86400.0)
+    if args.seed < 0:
+        raise RtsError(f"--seed: must be >= 0, got {args.seed}")
+    if args.estimator not in estimator_names():
+        raise RtsError(f"--estimator: unknown estimator {args.estimator!r}; valid: "
+                       f"{', '.join(estimator_names())}")
+    rig = preset_or_file("--rig", args.rig, rig_presets(), Rig.preset, Rig.from_file,
+                         ".rig.yaml")
+    radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
+                           RadarProfile.from_file, ".radar.yaml")
+    try:
+        emulator = Emulator(rig, radar, host=host, port=port, can_interface=args.can_interface,
+                            can_channel=args.can_channel, fidelity=args.fidelity,
+                            estimator=args.estimator, noise=args.noise,
+                            rng=np.random.default_rng(args.seed))
+    except OSError as exc:
+        raise RtsError(f"{args.listen}: cannot listen: {exc.strerror or exc}") from None
+    emulator.start()
+    bound_host, bound_port = emulator.address
+    clock = radar.radar_clock
+    print(f"listening on udp://{bound_host}:{bound_port}; radar {radar.name!r} measures every "
+          f"{clock.cycle_s * 1e3:g} ms, reports {clock.latency_s * 1e3:g} ms later on "
+          f"{args.can_interface}:{args.can_channel}", flush=True)
+    datagrams, quiet_since = 0, time.monotonic()
+    try:
+        while time.monotonic() - quiet_since < args.seconds:  # until the stream stops
+            if emulator.receiver.stats.datagrams != datagrams:
+                datagrams = emulator.receiver.stats.datagrams
+                quiet_since = time.monotonic()
+            time.sleep(0.01)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        stats = emulator.stop()
+    udp, measured = stats["udp"], stats["radar"]
+    print(f"rts: {udp['frames_applied']} frames applied, {udp['datagrams']} datagrams, "
+          f"{udp['lost_frames']} frames lost, {udp['corrupted']} corrupted, "
+          f"{udp['malformed']} malformed", flush=True)
+    print(f"radar: {measured['cycles']} cycles measured, {measured['published']} published "
+          f"({measured['detections']} detections, {stats['can_messages']} CAN messages), "
+          f"worst {measured['worst_late_ms']} ms behind its clock", flush=True)
+    return EXIT_OK
+
+
+def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """Add the ``emulate`` subcommand."""
+    parser = subparsers.add_parser(
+        "emulate", help="a simulated RTS (UDP in) and radar (CAN out) for bench rehearsals",
+        parents=parents,
+        description="Receive the schedule stream like an RTS (udp-protocol.md), hold each frame "
+                    "until the next, and run the simulated radar on its own clock in real time "
+                    "(the profile's clock: cycle, offset, latency, jitter, counter), publishing "
+                    "its detections on CAN. Run `rts-scenario run SCENE --output "
+                    "udp://HOST:PORT --can-interface I --can-channel C` against it. Stops after "
+                    "--seconds without a datagram, or on Ctrl-C.",
+    )
+    parser.add_argument("--listen", required=True, metavar="udp://HOST:PORT",
+                        help="where the RTS listens (port 0: any free port)")
+    parser.add_argument("--rig", required=True, help="rig preset or *.rig.yaml")
+    parser.add_argument("--radar", required=True, help="radar profile or *.radar.yaml")
+    parser.add_argument("--can-interface", default="virtual")
+    parser.add_argument("--can-channel", default="rts-emulator")
+    parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
+    parser.add_argument("--estimator", default="bartlett",
+                        help="the radar's angle estimator (default bartlett)")
+    parser.add_argument("--noise", action="store_true", help="thermal noise")
+    parser.add_argument("--seed", type=int, default=0, help="noise seed (>= 0)")
+    parser.add_argument("--seconds", type=float, default=10.0,
+                        help="stop after this long without datagrams (default 10)")
+    parser.set_defaults(handler=_do_emulate)

@@ -1,0 +1,223 @@
+"""A bench rehearsal: a simulated RTS and radar behind the interfaces of a real bench.
+
+`Emulator` listens for the schedule stream on UDP (`rts_scenario.outputs.udp.UdpReceiver`, the
+reference RTS endpoint: frames are applied when complete and held until the next), and runs
+the simulated radar on its own clock in wall time: cycle n is measured at the scene-time origin
+(fixed by the first frame that arrives) plus ``start_offset_s + n * cycle_s``, sees the frame
+the RTS holds at that moment, and its detections go out on CAN ``latency_s`` (+- ``jitter_s``)
+later, with the radar's counter. `rts-scenario run SCENE --output udp://HOST:PORT` against it
+exercises the path a bench uses: UDP to the RTS, a radar on its own clock, CAN back.
+"""
+
+from __future__ import annotations
+
+import heapq
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+import numpy as np
+
+from .canbus import DetectionPublisher, open_bus
+from .detections import Detections
+from .outputs.udp import UdpReceiver
+from .radar.profile import RadarProfile
+from .radar.simulate import SimulatedRadar
+from .rig import Rig
+from .schedule import Schedule, Status
+
+# How often the radar thread looks at the clock while waiting (s).
+TICK_S = 0.0005
+
+
+@dataclass
+class EmulatorStats:
+    """What the emulated radar did."""
+
+    cycles: int = 0
+    published: int = 0
+    detections: int = 0
+    idle_cycles: int = 0  # measured while the RTS held no frame yet
+    late_s: list[float] = field(default_factory=list)  # measurement later than its time
+
+    @property
+    def worst_late_s(self) -> float:
+        """Largest delay of a measurement behind its cycle time (s)."""
+        return max(self.late_s, default=0.0)
+
+
+def schedule_of_entries(entries: np.ndarray, frame: int, t_s: float) -> Schedule:
+    """Return the one-frame `Schedule` an RTS state holds (entries of the UDP protocol)."""
+    target = entries["target"].astype(np.int64)
+    channel = entries["channel"].astype(np.int64)
+    k = int(target.max()) + 1 if target.size else 0
+    shape = (1, k, 4)
+    active = np.zeros(shape, dtype=bool)
+    fe = np.full(shape, -1, dtype=np.int64)
+    nan = np.full(shape, np.nan)
+    att, delay, doppler, phase = nan.copy(), nan.copy(), nan.copy(), nan.copy()
+    active[0, target, channel] = True
+    fe[0, target, channel] = entries["fe"].astype(np.int64)
+    att[0, target, channel] = entries["attenuation_db"].astype(np.float64)
+    delay[0, target, channel] = entries["delay_s"].astype(np.float64)
+    doppler[0, target, channel] = entries["doppler_hz"].astype(np.float64)
+    phase[0, target, channel] = entries["phase_rad"].astype(np.float64)
+    return Schedule(
+        t_s=np.array([t_s]), frame_index=np.array([frame]),
+        names=tuple(f"target {i}" for i in range(k)), quad=np.full((1, k), -1),
+        fe=fe, weight=active.astype(np.float64), attenuation_db=att, delay_s=delay,
+        doppler_hz=doppler, phase_rad=phase, active=active,
+        status=np.full((1, k), Status.OK, dtype=np.uint16), angle_error_deg=np.zeros((1, k, 2)))
+
+
+class Emulator:
+    """A simulated RTS (UDP in) and radar on its own clock (CAN out), in wall time.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Where to listen for the schedule stream (port 0: any free port; see `address`).
+    rig, radar : Rig, RadarProfile
+        The rig the RTS plays through and the radar (its clock: `RadarProfile.clock`).
+    bus : can.BusABC, optional
+        Where detections go; else ``open_bus(can_interface, can_channel)`` (closed on `stop`).
+    fidelity, estimator, cfar, noise, rng :
+        The simulated radar's options (`SimulatedRadar`).
+    tamper : callable, optional
+        Fault injection for tests: maps each cycle's `Detections` to what is published (None
+        publishes nothing: a lost cycle).
+    """
+
+    def __init__(self, rig: Rig, radar: RadarProfile, *, host: str = "127.0.0.1",
+                 port: int = 0, bus: can.BusABC | None = None,
+                 can_interface: str = "virtual", can_channel: str = "rts-emulator",
+                 fidelity: str = "analytic", estimator: str = "bartlett", cfar: str = "ca",
+                 noise: bool = True, rng: np.random.Generator | None = None,
+                 tamper: Callable[[Detections], Detections | None] | None = None) -> None:
+        self.rig, self.radar = rig, radar
+        self.clock = radar.radar_clock
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.receiver = UdpReceiver(host, port)
+        self._own_bus = bus is None
+        try:
+            self.bus = bus if bus is not None else open_bus(can_interface, can_channel)
+        except BaseException:
+            self.receiver.stop(drain_s=0.0)
+            raise
+        self.publisher = DetectionPublisher(self.bus)
+        self.simulated = SimulatedRadar(radar, rig, fidelity=fidelity, estimator=estimator,
+                                        cfar=cfar, noise=noise, rng=self.rng)
+        self.tamper = tamper
+        self.stats = EmulatorStats()
+        self._stop = threading.Event()
+        self._due: list[tuple[float, int, Detections]] = []  # (publish at, order, cycle)
+        self._due_lock = threading.Condition()
+        self._threads: list[threading.Thread] = []
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """Where the RTS listens."""
+        return self.receiver.address
+
+    def start(self) -> Emulator:
+        """Start receiving, measuring and publishing in background threads."""
+        self.receiver.start()
+        for target in (self._measure, self._publish):
+            thread = threading.Thread(target=target, daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        return self
+
+    def stop(self) -> dict[str, Any]:
+        """Stop everything (cycles not yet published are dropped); return the statistics."""
+        self._stop.set()
+        with self._due_lock:
+            self._due_lock.notify_all()
+        for thread in self._threads:
+            thread.join()
+        self._threads.clear()
+        udp = self.receiver.stop(drain_s=0.0)
+        if self._own_bus:
+            self.bus.shutdown()
+        return {"udp": dict(vars(udp)), "radar": {
+            "cycles": self.stats.cycles, "published": self.stats.published,
+            "detections": self.stats.detections, "idle_cycles": self.stats.idle_cycles,
+            "worst_late_ms": round(self.stats.worst_late_s * 1e3, 2)},
+            "can_messages": self.publisher.sent,
+            "unsendable_detections": self.publisher.unsendable_detections}
+
+    def __enter__(self) -> Emulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- the radar ---------------------------------------------------------------------------
+
+    def _measure(self) -> None:
+        """Measure on the radar's clock from the first frame on; queue each cycle's report."""
+        origin = None
+        n = 0
+        while not self._stop.is_set():
+            if origin is None:
+                snap = self.receiver.snapshot()
+                if snap is None:
+                    time.sleep(TICK_S)
+                    continue
+                _, t_s, arrival, _ = snap
+                origin = arrival - t_s  # scene time 0 in perf_counter time
+            due = origin + float(self.clock.time_of(np.array([n]))[0])
+            while not self._stop.is_set() and time.perf_counter() < due:
+                time.sleep(min(TICK_S, max(due - time.perf_counter(), 0.0)))
+            if self._stop.is_set():
+                return
+            self.stats.late_s.append(time.perf_counter() - due)
+            if len(self.stats.late_s) > 10000:  # keep the worst, bounded
+                self.stats.late_s = [max(self.stats.late_s)]
+            self._measure_cycle(n, due)
+            n += 1
+
+    def _measure_cycle(self, n: int, due: float) -> None:
+        snap = self.receiver.snapshot()
+        assert snap is not None
+        frame, _, _, entries = snap
+        t_cycle = float(self.clock.time_of(np.array([n]))[0])
+        counter = int(self.clock.counter_of(np.array([n]))[0])
+        self.stats.cycles += 1
+        schedule = schedule_of_entries(entries, counter, t_cycle)
+        if schedule.active.any():
+            cycle = self.simulated.process(schedule)[0]
+        else:
+            self.stats.idle_cycles += 1
+            cycle = Detections.empty(counter, t_cycle)
+        report = self.tamper(cycle) if self.tamper is not None else cycle
+        if report is None:
+            return
+        at = due + float(self.clock.bus_delay(1, self.rng)[0])
+        with self._due_lock:
+            heapq.heappush(self._due, (at, n, report))
+            self._due_lock.notify()
+
+    def _publish(self) -> None:
+        """Put each cycle on the bus when its latency has passed."""
+        while not self._stop.is_set():
+            with self._due_lock:
+                while not self._due and not self._stop.is_set():
+                    self._due_lock.wait(0.05)
+                if self._stop.is_set():
+                    return
+                at, _, report = self._due[0]
+                wait = at - time.perf_counter()
+                if wait > 0:
+                    self._due_lock.wait(min(wait, 0.05))
+                    continue
+                heapq.heappop(self._due)
+            self.publisher.publish(report)
+            self.stats.published += 1
+            self.stats.detections += report.count
+
+
+__all__ = ["Emulator", "EmulatorStats", "schedule_of_entries"]

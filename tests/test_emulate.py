@@ -1,0 +1,138 @@
+"""Bench rehearsal: the schedule over UDP to an emulated RTS, a radar on its own clock, CAN back.
+
+Each test runs a few seconds of scene in real time on loopback.
+"""
+
+import itertools
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import rts_scenario.cli as cli
+from rts_scenario.detections import Detections
+from rts_scenario.emulator import Emulator, schedule_of_entries
+from rts_scenario.outputs.udp import FaultInjector, frame_entries
+from rts_scenario.pipeline import Pipeline, RunOptions
+from rts_scenario.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+_channels = itertools.count()
+
+
+def bench_scene(tmp_path: Path, duration_s: float = 4.0):
+    """cut-in, shortened, on a radar that measures every 72 ms, reports 130 ms later and
+    counts from 4242."""
+    shutil.copy(ROOT / "scenarios" / "cut_in.scenario.yaml", tmp_path)
+    data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
+                          .read_text())
+    data["name"] = "bench-radar"
+    data["clock"] = {"cycle_s": 0.072, "latency_s": 0.13, "jitter_s": 0.003,
+                     "counter_start": 4242}
+    (tmp_path / "radars").mkdir()
+    (tmp_path / "radars" / "bench.radar.yaml").write_text(yaml.safe_dump(data))
+    return load_scenario(tmp_path / "cut_in.scenario.yaml", {
+        "radar.profile": "radars/bench.radar.yaml", "radar.noise": False,
+        "radar.fidelity": "analytic", "duration_s": duration_s,
+        "expectations.expected_limits": ["frame_rate_above_radar"]})
+
+
+def rehearse(scene, tamper=None, udp_faults=None):
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False,
+                        tamper=tamper).start()
+    try:
+        host, port = emulator.address
+        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
+                             can_channel=channel)
+        with Pipeline.for_scene(scene, options) as pipeline:
+            if udp_faults is not None:
+                injector = FaultInjector(pipeline.output.transmit, np.random.default_rng(2),
+                                         **udp_faults)
+                pipeline.output.send = injector
+            report = pipeline.run(scene).report
+    finally:
+        stats = emulator.stop()
+    return report, stats
+
+
+def test_a_scene_over_udp_to_a_radar_on_its_own_clock_passes(tmp_path):
+    scene = bench_scene(tmp_path)
+    report, stats = rehearse(scene)
+    assert report.passed, report.reasons
+    cycles = int(np.ceil(scene.duration_s / 0.072))
+    assert report.frames["total"] == report.frames["checked"] == cycles
+    assert stats["udp"]["frames_applied"] == scene.n_frames
+    assert stats["radar"]["worst_late_ms"] < 20.0  # measured on its clock
+
+
+def lose_30_percent():
+    rng = np.random.default_rng(7)
+    return lambda cycle: None if rng.random() < 0.3 else cycle
+
+
+def drop_target(cycle: Detections) -> Detections:
+    return Detections.empty(cycle.cycle, cycle.t_s)
+
+
+def azimuth_bias(cycle: Detections) -> Detections:
+    az = None if cycle.az_deg is None else cycle.az_deg + 1.0
+    return Detections(cycle=cycle.cycle, t_s=cycle.t_s, range_m=cycle.range_m,
+                      radial_velocity_mps=cycle.radial_velocity_mps, az_deg=az,
+                      el_deg=cycle.el_deg, snr_db=cycle.snr_db, rcs_dbsm=cycle.rcs_dbsm)
+
+
+@pytest.mark.parametrize(("fault", "reason"), [
+    ("drop_target", "detection rate"), ("azimuth_bias", "detection rate"),
+    ("lose_cycles", "radar cycles missing")])
+def test_a_faulty_radar_fails_with_the_right_reason(tmp_path, fault, reason):
+    scene = bench_scene(tmp_path)
+    tamper = {"drop_target": drop_target, "azimuth_bias": azimuth_bias,
+              "lose_cycles": lose_30_percent()}[fault]
+    report, _ = rehearse(scene, tamper)
+    assert not report.passed
+    assert any(reason in r for r in report.reasons), report.reasons
+    if fault == "lose_cycles":
+        assert 0.15 < report.frames["missing"] / report.frames["total"] < 0.45
+    if fault == "azimuth_bias":
+        assert report.errors["az_deg"].max == pytest.approx(1.0, abs=0.2)
+
+
+def test_udp_losses_show_in_the_rts_statistics_and_in_the_detections(tmp_path):
+    # Lost datagrams: the RTS holds the frame before a lost one for another frame; the radar
+    # measures that older state, which the checker sees as a larger range error.
+    scene = bench_scene(tmp_path)
+    clean, _ = rehearse(scene)
+    lossy, stats = rehearse(scene, udp_faults={"drop": 0.3})
+    assert stats["udp"]["frames_applied"] < 0.85 * scene.n_frames
+    assert lossy.errors["range_m"].max > clean.errors["range_m"].max
+    corrupt, stats = rehearse(scene, udp_faults={"corrupt": 0.2})
+    assert stats["udp"]["corrupted"] > 0  # a corrupted datagram is never applied
+
+
+def test_the_rts_state_is_the_schedule_s_frame():
+    from rts_scenario.kinematics import compute_tracks
+    from rts_scenario.schedule import build_schedule
+
+    scene = load_scenario(ROOT / "scenarios" / "dense_traffic.scenario.yaml")
+    schedule = build_schedule(compute_tracks(scene), scene.rig, scene.radar).frames(10, 11)
+    state = schedule_of_entries(frame_entries(schedule, 0, None), 4242, 0.5)
+    k = state.active.shape[1]
+    np.testing.assert_array_equal(state.active[0], schedule.active[0, :k])
+    on = state.active[0]
+    np.testing.assert_allclose(state.delay_s[0][on], schedule.delay_s[0, :k][on], rtol=0,
+                               atol=1e-18)
+    np.testing.assert_allclose(state.attenuation_db[0][on], schedule.attenuation_db[0, :k][on],
+                               atol=1e-4)
+    np.testing.assert_array_equal(state.fe[0][on], schedule.fe[0, :k][on])
+    assert state.frame_index[0] == 4242 and state.t_s[0] == 0.5
+
+
+def test_emulate_command_stops_when_frames_stop(tmp_path, capsys):
+    code = cli.main(["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1",
+                     "--radar", "awr1843boost", "--seconds", "0.3"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "listening on udp://127.0.0.1:" in out and "cycles" in out
