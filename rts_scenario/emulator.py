@@ -22,6 +22,7 @@ import can
 import numpy as np
 
 from .canbus import DetectionPublisher, open_bus
+from .canbus.mapping import CanMapping
 from .detections import Detections
 from .outputs.udp import UdpReceiver
 from .radar.profile import RadarProfile
@@ -89,6 +90,9 @@ class Emulator:
     tamper : callable, optional
         Fault injection for tests: maps each cycle's `Detections` to what is published (None
         publishes nothing: a lost cycle).
+    mapping, fd : CanMapping, bool, optional
+        The radar's protocol (a third-party DBC through its mapping; rts-scenario's messages by
+        default) and whether it speaks CAN FD.
     """
 
     def __init__(self, rig: Rig, radar: RadarProfile, *, host: str = "127.0.0.1",
@@ -96,7 +100,8 @@ class Emulator:
                  can_interface: str = "virtual", can_channel: str = "rts-emulator",
                  fidelity: str = "analytic", estimator: str = "bartlett", cfar: str = "ca",
                  noise: bool = True, rng: np.random.Generator | None = None,
-                 tamper: Callable[[Detections], Detections | None] | None = None) -> None:
+                 tamper: Callable[[Detections], Detections | None] | None = None,
+                 mapping: CanMapping | None = None, fd: bool = False) -> None:
         self.rig, self.radar = rig, radar
         self.clock = radar.radar_clock
         self.rng = rng if rng is not None else np.random.default_rng(0)
@@ -107,7 +112,7 @@ class Emulator:
         except BaseException:
             self.receiver.stop(drain_s=0.0)
             raise
-        self.publisher = DetectionPublisher(self.bus)
+        self.publisher = DetectionPublisher(self.bus, fd=fd, mapping=mapping)
         self.simulated = SimulatedRadar(radar, rig, fidelity=fidelity, estimator=estimator,
                                         cfar=cfar, noise=noise, rng=self.rng)
         self.tamper = tamper

@@ -173,7 +173,9 @@ class Pipeline:
 
     def _open_publisher(self) -> Callable[[Detections], None]:
         if self._publisher is None:
-            self._publisher = DetectionPublisher(self._open_bus(), fd=self.options.can_fd)
+            # The run's mapping (a third-party radar's DBC) makes the simulated radar speak it.
+            self._publisher = DetectionPublisher(self._open_bus(), fd=self.options.can_fd,
+                                                 mapping=self.mapping)
         return self._publisher.publish
 
     @property

@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 import rts_scenario.cli as cli
+from rts_scenario.canbus.mapping import CanMapping
 from rts_scenario.detections import Detections
 from rts_scenario.emulator import Emulator, schedule_of_entries
 from rts_scenario.outputs.udp import FaultInjector, frame_entries
@@ -39,14 +40,20 @@ def bench_scene(tmp_path: Path, duration_s: float = 4.0):
         "expectations.expected_limits": ["frame_rate_above_radar"]})
 
 
-def rehearse(scene, tamper=None, udp_faults=None):
+OBJECT_LIST = ROOT / "scenarios" / "can" / "object_list.mapping.yaml"
+
+
+def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST):
+    """Play ``scene`` over UDP to the emulator; its radar speaks ``mapping``'s protocol (the
+    object list with Motorola signals by default) on a virtual CAN bus."""
     channel = f"rts-emulate-test-{next(_channels)}-bus"
     emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False,
-                        tamper=tamper).start()
+                        tamper=tamper,
+                        mapping=CanMapping.from_file(mapping) if mapping else None).start()
     try:
         host, port = emulator.address
         options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
-                             can_channel=channel)
+                             can_channel=channel, mapping=str(mapping) if mapping else None)
         with Pipeline.for_scene(scene, options) as pipeline:
             if udp_faults is not None:
                 injector = FaultInjector(pipeline.output.transmit, np.random.default_rng(2),
@@ -58,9 +65,10 @@ def rehearse(scene, tamper=None, udp_faults=None):
     return report, stats
 
 
-def test_a_scene_over_udp_to_a_radar_on_its_own_clock_passes(tmp_path):
+@pytest.mark.parametrize("mapping", [OBJECT_LIST, None], ids=["object-list", "rts"])
+def test_a_scene_over_udp_to_a_radar_on_its_own_clock_passes(tmp_path, mapping):
     scene = bench_scene(tmp_path)
-    report, stats = rehearse(scene)
+    report, stats = rehearse(scene, mapping=mapping)
     assert report.passed, report.reasons
     cycles = int(np.ceil(scene.duration_s / 0.072))
     assert report.frames["total"] == report.frames["checked"] == cycles

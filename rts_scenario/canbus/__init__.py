@@ -84,10 +84,17 @@ class DetectionPublisher:
         One line on the first detection left out: cycle, detection, signal, value, range.
     """
 
-    def __init__(self, bus: can.BusABC, *, fd: bool = False) -> None:
+    def __init__(self, bus: can.BusABC, *, fd: bool = False,
+                 mapping: CanMapping | None = None) -> None:
         self.bus = bus
         self.fd = fd
-        self.mapping = CanMapping.builtin()
+        self.sent = 0
+        self.unsendable: Counter[str] = Counter()
+        self.unsendable_reason: str | None = None
+        self._mapped = _MappedLayout(mapping, fd) if mapping is not None else None
+        self.mapping = mapping or CanMapping.builtin()
+        if self._mapped is not None:
+            return
         db = self.mapping.db
         self._header = db.get_message_by_name("RTS_FrameHeader")
         names = ["RTS_DetectionFD"] if fd else ["RTS_DetectionA", "RTS_DetectionB"]
@@ -99,9 +106,6 @@ class DetectionPublisher:
         self._capacity, self._capacity_signal = min((int(index) + 1, "Index"),
                                                     (int(count), "DetectionCount"))
         self._latest_time_s = _limits(self._header.get_signal_by_name("TimeStamp"))[1]
-        self.sent = 0
-        self.unsendable: Counter[str] = Counter()
-        self.unsendable_reason: str | None = None
 
     @property
     def unsendable_detections(self) -> int:
@@ -128,6 +132,9 @@ class DetectionPublisher:
 
     def publish(self, frame: Detections) -> None:
         """Send one cycle: header, then every detection the messages can carry."""
+        if self._mapped is not None:
+            self._publish_mapped(frame, self._mapped)
+            return
         absent = [q for q in QUANTITIES if getattr(frame, q) is None]
         if absent:
             raise OutputError(f"CAN: rts-scenario's messages carry every quantity; cycle "
@@ -169,6 +176,153 @@ class DetectionPublisher:
             for message in self._parts:
                 wanted = {s.name for s in message.signals}
                 self._send(message, {k: v for k, v in values.items() if k in wanted})
+
+
+    def _send_raw(self, message: cantools.database.can.Message, values: dict[str, float],
+                  checksum: str | None) -> None:
+        try:
+            data = bytearray(message.encode(values, strict=True))
+        except (cantools.database.EncodeError, KeyError, ValueError) as exc:
+            raise OutputError(f"CAN {message.name}: {exc}") from None
+        if checksum is not None and checksum in {sg.name for sg in message.signals}:
+            pos = _checksum_byte(message, checksum)
+            data[pos] = _checksum(bytes(data), pos)
+        self.bus.send(can.Message(arbitration_id=message.frame_id, data=bytes(data),
+                                  is_extended_id=message.is_extended_frame,
+                                  is_fd=message.is_fd or len(data) > 8))
+        self.sent += 1
+
+    def _publish_mapped(self, frame: Detections, layout: _MappedLayout) -> None:
+        """Send one cycle in a mapping's protocol (a third-party radar's DBC)."""
+        m = layout.mapping
+        signal_values = layout.signal_values(frame)  # signal -> (D,) values
+        # Metadata saturates at the DBC's limits; measured quantities must fit as they are.
+        for q in ("rcs_dbsm", "snr_db"):
+            if q in m.fields:
+                name = m.fields[q].signal
+                low, high = _range_of(layout.signals[name])
+                signal_values[name] = np.clip(np.nan_to_num(signal_values[name], nan=low,
+                                                             neginf=low, posinf=high), low, high)
+        fits = np.ones(frame.count, dtype=bool)
+        for name, column in signal_values.items():
+            sig = layout.signals[name]
+            low, high = _range_of(sig)
+            inside = (column >= low) & (column <= high)  # NaN is outside
+            if not inside.all():
+                for i in np.flatnonzero(fits & ~inside):
+                    self._leave_out(frame.cycle, int(i), name, float(column[i]),
+                                    f"[{low:g}, {high:g}] {sig.unit or ''}".rstrip())
+                fits &= inside
+        send = np.flatnonzero(fits)
+        for i in send[layout.capacity :]:
+            self._leave_out(frame.cycle, int(i), layout.capacity_signal, float(layout.capacity),
+                            f"the {layout.capacity} detections per cycle it numbers")
+        send = send[: layout.capacity]
+        header = layout.header
+        values = layout.defaults(header)
+        values[m.counter] = frame.cycle % layout.counter_modulus
+        left = int(send.size)
+        for name in m.count:  # the count, spread over the count signals in order
+            top = int(_range_of(layout.signals_of(header)[name])[1])
+            part = min(left, top)
+            values[name] = part
+            left -= part
+        if m.timestamp is not None:
+            low, high = _range_of(layout.signals_of(header)[m.timestamp])
+            values[m.timestamp] = float(np.clip(frame.t_s or 0.0, low, high))
+        self._send_raw(header, values, m.header_checksum)
+        for index, i in enumerate(send):  # one encoded message (or page) each
+            for message, page in layout.parts:
+                wanted = layout.signals_of(message, page)
+                values = layout.defaults(message, page)
+                values.update({k: float(v[i]) for k, v in signal_values.items() if k in wanted})
+                values[m.index] = index
+                if m.frame_counter is not None and m.frame_counter in wanted:
+                    values[m.frame_counter] = frame.cycle % layout.frame_counter_modulus
+                self._send_raw(message, values, m.checksum)
+
+
+def _range_of(sig: cantools.database.can.Signal) -> tuple[float, float]:
+    """Return a signal's physical range: the DBC's, else what its bits and scale carry."""
+    if sig.minimum is not None and sig.maximum is not None:
+        return float(sig.minimum), float(sig.maximum)
+    raw_low = -(1 << (sig.length - 1)) if sig.is_signed else 0
+    raw_high = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
+    ends = sorted((raw_low * sig.scale + sig.offset, raw_high * sig.scale + sig.offset))
+    return float(ends[0]), float(ends[1])
+
+
+class _MappedLayout:
+    """How a mapping's messages carry a cycle: which signal gets which value."""
+
+    def __init__(self, mapping: CanMapping, fd: bool) -> None:
+        self.mapping = m = mapping
+        db = m.db
+        self.header = db.get_message_by_name(m.header)
+        names = [m.fd_message] if fd and m.fd_message else list(m.messages)
+        self.parts: list[tuple[cantools.database.can.Message, int | None]] = []
+        for name in names:
+            message = db.get_message_by_name(name)
+            self.parts += [(message, page) for page in _pages(message)]
+        self.signals = {sg.name: sg for message, _ in self.parts for sg in message.signals}
+        self.counter_modulus = 1 << self.header.get_signal_by_name(m.counter).length
+        self.frame_counter_modulus = (1 << self.signals[m.frame_counter].length
+                                      if m.frame_counter in self.signals else 1)
+        index_top = int(_range_of(self.signals[m.index])[1]) + 1
+        count_top = sum(int(_range_of(self.header.get_signal_by_name(c))[1]) for c in m.count)
+        self.capacity, self.capacity_signal = min((index_top, m.index),
+                                                  (count_top, "+".join(m.count)))
+
+    @staticmethod
+    def signals_of(message: cantools.database.can.Message,
+                   page: int | None = None) -> dict[str, cantools.database.can.Signal]:
+        """Return the signals a message (one multiplexer page of it) carries."""
+        return {sg.name: sg for sg in message.signals
+                if page is None or sg.multiplexer_ids is None or page in sg.multiplexer_ids}
+
+    def defaults(self, message: cantools.database.can.Message,
+                 page: int | None = None) -> dict[str, float]:
+        """Return a value for every signal: the multiplexer's page, else 0 or its nearest end."""
+        out: dict[str, float] = {}
+        for name, sg in self.signals_of(message, page).items():
+            if sg.is_multiplexer and page is not None:
+                out[name] = page
+                continue
+            low, high = _range_of(sg)
+            out[name] = float(min(max(0.0, low), high))
+        return out
+
+    def signal_values(self, frame: Detections) -> dict[str, np.ndarray]:
+        """Each mapped signal's value per detection (the mapping's scale and offset undone)."""
+        m = self.mapping
+        rng = _column(frame.range_m, frame.count)
+        az = np.radians(_column(frame.az_deg, frame.count))
+        el = np.radians(_column(frame.el_deg, frame.count, 0.0))
+        vr = _column(frame.radial_velocity_mps, frame.count)
+        if m.form == "polar":
+            quantities = {"range_m": rng, "azimuth_deg": np.degrees(az),
+                          "elevation_deg": np.degrees(el), "radial_velocity_mps": vr}
+        else:
+            x = rng * np.cos(el) * np.cos(az)
+            y = rng * np.cos(el) * np.sin(az)
+            horizontal = np.where(x * x + y * y > 0, x * x + y * y, 1.0)
+            # Velocities along the line of sight, scaled so that the receiver's projection
+            # (x vx + y vy) / range gives the radial velocity back.
+            quantities = {"x_m": x, "y_m": y, "z_m": rng * np.sin(el),
+                          "vx_mps": vr * rng * x / horizontal, "vy_mps": vr * rng * y / horizontal}
+        quantities["rcs_dbsm"] = _column(frame.rcs_dbsm, frame.count, 0.0)
+        quantities["snr_db"] = _column(frame.snr_db, frame.count, 0.0)
+        return {f.signal: (quantities[q] - f.offset) / f.scale for q, f in m.fields.items()}
+
+
+def _pages(message: cantools.database.can.Message) -> list[int | None]:
+    """Return a message's multiplexer pages in order ([None] for a plain message)."""
+    ids = sorted({i for sg in message.signals for i in (sg.multiplexer_ids or [])})
+    return list(ids) if message.is_multiplexed() and ids else [None]
+
+
+def _column(values: np.ndarray | None, n: int, absent: float = np.nan) -> np.ndarray:
+    return np.full(n, absent) if values is None else np.asarray(values, dtype=np.float64)
 
 
 @dataclass
@@ -229,6 +383,15 @@ class DetectionReceiver(can.Listener):
                                          *([self.mapping.fd_message]
                                            if self.mapping.fd_message else []))}
         self.stats = BusStats()
+        m = self.mapping
+        self._counter_modulus = 1 << self._header.get_signal_by_name(m.counter).length
+        detection = {sg.name: sg for n in m.messages for sg in db.get_message_by_name(n).signals}
+        # Detection messages carry the low bits of the cycle counter (if any).
+        self._low_modulus = (1 << detection[m.frame_counter].length
+                             if m.frame_counter in detection else 256)
+        self._parts_per_detection = sum(len(_pages(db.get_message_by_name(n)))
+                                        for n in m.messages)
+        self._multiplexers = {sg.name for sg in detection.values() if sg.is_multiplexer}
         # The notifier's thread feeds messages while the run's thread takes cycles.
         self._lock = threading.Lock()
         self.reset()
@@ -314,7 +477,7 @@ class DetectionReceiver(can.Listener):
         if counter in self._open or counter in self._recent:
             self.stats.duplicates += 1
             return
-        if self._latest >= 0 and _behind(counter, self._latest):
+        if self._latest >= 0 and _behind(counter, self._latest, self._counter_modulus):
             self.stats.reordered += 1
         else:
             self._latest = counter
@@ -323,7 +486,7 @@ class DetectionReceiver(can.Listener):
             timestamp_s=values.get(m.timestamp) if m.timestamp else None)
         self._open[counter] = frame
         self._current = frame
-        for message, early in self._waiting.pop(counter & 0xFF, []):
+        for message, early in self._waiting.pop(counter % self._low_modulus, []):
             self.stats.orphans -= 1
             self._attach(frame, message, early)
         if frame.complete(self.halves_per_detection):
@@ -337,14 +500,15 @@ class DetectionReceiver(can.Listener):
         frame = self._current
         if m.frame_counter is not None and m.frame_counter in values:
             low = int(values[m.frame_counter])
-            if frame is None or (frame.counter & 0xFF) != low:
+            if frame is None or (frame.counter % self._low_modulus) != low:
                 # Late part of an earlier cycle, or early part of one whose header is late.
                 self.stats.reordered += 1
-                frame = next((f for c, f in reversed(self._open.items()) if c & 0xFF == low),
+                frame = next((f for c, f in reversed(self._open.items())
+                              if c % self._low_modulus == low),
                              None)
                 if frame is None:
                     done = next((whole for c, whole in reversed(self._recent.items())
-                                 if c & 0xFF == low), None)
+                                 if c % self._low_modulus == low), None)
                     if done is not None:
                         # Its cycle was handed on: a copy if it was whole, else too late.
                         if done:
@@ -374,13 +538,14 @@ class DetectionReceiver(can.Listener):
         m = self.mapping
         index = int(values[m.index])
         part = frame.parts.setdefault(index, {})
-        if set(values) & set(part) - {m.index, m.frame_counter, m.checksum}:
+        if set(values) & set(part) - {m.index, m.frame_counter, m.checksum, *self._multiplexers}:
             self.stats.duplicates += 1
             return
         part.update(values)
         # A CAN FD detection is whole in one message; classic ones come in halves.
         whole = message.name == m.fd_message
-        frame.halves[index] = frame.halves.get(index, 0) + (len(m.messages) if whole else 1)
+        frame.halves[index] = frame.halves.get(index, 0) + (
+            self.halves_per_detection if whole else 1)
 
     def _finish(self, counter: int) -> None:
         """Hand on an open cycle as `Detections`."""
@@ -428,13 +593,13 @@ class DetectionReceiver(can.Listener):
 
     @property
     def halves_per_detection(self) -> int:
-        """Messages per detection: 1 (one message or CAN FD) or 2 (two classic halves)."""
-        return len(self.mapping.messages)
+        """Messages per detection: each classic message or multiplexer page (CAN FD: one)."""
+        return self._parts_per_detection
 
 
-def _behind(counter: int, latest: int) -> bool:
-    """Whether a 16-bit frame counter is older than the latest seen (with wrap-around)."""
-    return 0 < (latest - counter) % 65536 < 32768
+def _behind(counter: int, latest: int, modulus: int) -> bool:
+    """Whether a cycle counter is older than the latest seen (with wrap-around)."""
+    return 0 < (latest - counter) % modulus < modulus // 2
 
 
 __all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "open_bus"]

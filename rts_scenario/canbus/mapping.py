@@ -175,11 +175,12 @@ class CanMapping:
             have = {s.name for s in names.get(m, self.db.messages[0]).signals}
             need(("detection", "messages"), m,
                  [s for s in detection_signals if s in have or s == self.index])
-        carried = set().union(*({s.name for s in names[m].signals} for m in self.messages))
+        carriers = [*self.messages, *([self.fd_message] if self.fd_message else [])]
+        carried = set().union(*({s.name for s in names[m].signals} for m in carriers))
         for q, f in self.fields.items():
             if f.signal not in carried:
                 raise doc.error(("detection", q), f"signal {f.signal!r} is not in the detection "
-                                                  f"message(s) {', '.join(self.messages)}")
+                                                  f"message(s) {', '.join(carriers)}")
         required = {"polar": ("range_m", "azimuth_deg"), "cartesian": ("x_m", "y_m")}[self.form]
         missing = [q for q in required if q not in self.fields]
         if missing:

@@ -12,6 +12,7 @@ from .common import EXIT_OK, check_can_interface, check_number
 def _do_emulate(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from ..canbus.mapping import CanMapping
     from ..emulator import Emulator
     from ..errors import RtsError
     from ..radar.angle import estimator_names
@@ -19,7 +20,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
     from ..radar.profile import preset_names as radar_presets
     from ..rig import Rig
     from ..rig import preset_names as rig_presets
-    from .common import preset_or_file
+    from .common import named_file, preset_or_file
     from .listen import _address
 
     host, port = _address(args.listen)
@@ -30,6 +31,8 @@ def _do_emulate(args: argparse.Namespace) -> int:
     if args.estimator not in estimator_names():
         raise RtsError(f"--estimator: unknown estimator {args.estimator!r}; valid: "
                        f"{', '.join(estimator_names())}")
+    mapping = named_file("--mapping", CanMapping.from_file, args.mapping) if args.mapping \
+        else None
     rig = preset_or_file("--rig", args.rig, rig_presets(), Rig.preset, Rig.from_file,
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
@@ -38,7 +41,8 @@ def _do_emulate(args: argparse.Namespace) -> int:
         emulator = Emulator(rig, radar, host=host, port=port, can_interface=args.can_interface,
                             can_channel=args.can_channel, fidelity=args.fidelity,
                             estimator=args.estimator, noise=args.noise,
-                            rng=np.random.default_rng(args.seed))
+                            rng=np.random.default_rng(args.seed), mapping=mapping,
+                            fd=args.can_fd)
     except OSError as exc:
         raise RtsError(f"{args.listen}: cannot listen: {exc.strerror or exc}") from None
     emulator.start()
@@ -86,6 +90,10 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--radar", required=True, help="radar profile or *.radar.yaml")
     parser.add_argument("--can-interface", default="virtual")
     parser.add_argument("--can-channel", default="rts-emulator")
+    parser.add_argument("--can-fd", action="store_true", help="CAN FD detection messages")
+    parser.add_argument("--mapping", default=None,
+                        help="*.mapping.yaml: speak a third-party radar's DBC (default: "
+                             "rts-scenario's messages)")
     parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
     parser.add_argument("--estimator", default="bartlett",
                         help="the radar's angle estimator (default bartlett)")
