@@ -368,6 +368,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             alignment.notes.append(f"the log was recorded for scene {sidecar.get('scene')!r}, "
                                    f"not {scene.name!r}")
     else:
+        if not logged:
+            raise LogError(f"--log {log}: no radar cycle in it ({bus['messages']} messages, "
+                           f"none a {receiver_mapping.header} header of mapping "
+                           f"{receiver_mapping.name!r}); is --mapping the radar's?")
         latency = profile_clock.latency_s
         bus_t = np.array([c.bus_t_s for c in logged])
         dets = [c.detections for c in logged]

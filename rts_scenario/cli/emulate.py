@@ -51,6 +51,9 @@ def _do_emulate(args: argparse.Namespace) -> int:
     print(f"listening on udp://{bound_host}:{bound_port}; radar {radar.name!r} measures every "
           f"{clock.cycle_s * 1e3:g} ms, reports {clock.latency_s * 1e3:g} ms later on "
           f"{args.can_interface}:{args.can_channel}", flush=True)
+    if args.can_interface == "virtual":
+        print("note: the virtual CAN bus is heard only inside this process; run SCENE in "
+              "another one needs a shared interface (socketcan vcan, udp_multicast)", flush=True)
     datagrams, quiet_since = 0, time.monotonic()
     try:
         while time.monotonic() - quiet_since < args.seconds:  # until the stream stops
