@@ -21,7 +21,7 @@ import can
 import cantools
 import numpy as np
 
-from ..detections import QUANTITIES, Detections
+from ..detections import Detections
 from ..errors import CheckError, OutputError
 from .mapping import CanMapping
 
@@ -62,14 +62,17 @@ def _checksum_byte(message: cantools.database.can.Message, name: str) -> int:
 
 
 class DetectionPublisher:
-    """Encode radar frames with rts-scenario's DBC and send them on a bus.
+    """Encode radar cycles in a radar's protocol (rts-scenario's own by default) and send them.
 
-    A detection is sent only if every value fits its signal: a value outside a signal's range
-    (a negative range from sub-bin interpolation, a range or velocity beyond what the DBC
-    scales to, NaN) cannot be carried, and neither can a detection past the last index or
-    count the layout has (classic CAN indexes 256 detections per cycle, CAN FD 1023). Such a
-    detection is left out of its cycle (the header announces only the ones sent, so the cycle
-    still arrives complete) and counted, never an error.
+    ``mapping`` names the protocol (a DBC and what its signals mean, `CanMapping`): the header
+    that opens a cycle, then each detection's message(s), multiplexer pages or CAN FD message
+    (with ``fd``). A detection is sent only if every value fits its signal: a value outside a
+    signal's range (a negative range from sub-bin interpolation, a range or velocity beyond what
+    the DBC scales to, NaN) cannot be carried, and neither can a detection past the last index
+    or count the layout has (rts-scenario's classic messages index 256 detections per cycle,
+    CAN FD 1023). Such a detection is left out of its cycle (the header announces only the ones
+    sent, so the cycle still arrives complete) and counted, never an error. RCS and SNR saturate
+    at their signals' limits instead.
 
     Attributes
     ----------
@@ -88,40 +91,16 @@ class DetectionPublisher:
                  mapping: CanMapping | None = None) -> None:
         self.bus = bus
         self.fd = fd
+        self.mapping = mapping or CanMapping.builtin()
+        self._layout = _MappedLayout(self.mapping, fd)
         self.sent = 0
         self.unsendable: Counter[str] = Counter()
         self.unsendable_reason: str | None = None
-        self._mapped = _MappedLayout(mapping, fd) if mapping is not None else None
-        self.mapping = mapping or CanMapping.builtin()
-        if self._mapped is not None:
-            return
-        db = self.mapping.db
-        self._header = db.get_message_by_name("RTS_FrameHeader")
-        names = ["RTS_DetectionFD"] if fd else ["RTS_DetectionA", "RTS_DetectionB"]
-        self._parts = [db.get_message_by_name(n) for n in names]
-        self._signals = {s.name: s for m in self._parts for s in m.signals}
-        # Detections per cycle the layout can number and announce.
-        index = _limits(self._signals["Index"])[1]
-        count = _limits(self._header.get_signal_by_name("DetectionCount"))[1]
-        self._capacity, self._capacity_signal = min((int(index) + 1, "Index"),
-                                                    (int(count), "DetectionCount"))
-        self._latest_time_s = _limits(self._header.get_signal_by_name("TimeStamp"))[1]
 
     @property
     def unsendable_detections(self) -> int:
         """Detections left out because no signal could carry them."""
         return sum(self.unsendable.values())
-
-    def _send(self, message: cantools.database.can.Message, values: dict[str, float]) -> None:
-        try:
-            data = bytearray(message.encode({**values, "Checksum": 0}, strict=True))
-        except (cantools.database.EncodeError, KeyError) as exc:
-            raise OutputError(f"CAN {message.name}: {exc}") from None
-        pos = _checksum_byte(message, "Checksum")
-        data[pos] = _checksum(bytes(data), pos)
-        self.bus.send(can.Message(arbitration_id=message.frame_id, data=bytes(data),
-                                  is_extended_id=False, is_fd=self.fd))
-        self.sent += 1
 
     def _leave_out(self, cycle: int, index: int, signal: str, value: float,
                    allowed: str) -> None:
@@ -130,56 +109,8 @@ class DetectionPublisher:
             self.unsendable_reason = (f"CAN: cycle {cycle} detection {index} not sent: {signal} "
                                       f"{value:g} outside {allowed}")
 
-    def publish(self, frame: Detections) -> None:
-        """Send one cycle: header, then every detection the messages can carry."""
-        if self._mapped is not None:
-            self._publish_mapped(frame, self._mapped)
-            return
-        absent = [q for q in QUANTITIES if getattr(frame, q) is None]
-        if absent:
-            raise OutputError(f"CAN: rts-scenario's messages carry every quantity; cycle "
-                              f"{frame.cycle} lacks {', '.join(absent)}")
-        assert frame.snr_db is not None and frame.rcs_dbsm is not None
-        # Metadata saturates at the DBC's limits; measured quantities must fit as they are.
-        rcs_min, rcs_max = _limits(self._signals["RCS"])
-        snr_min, snr_max = _limits(self._signals["SNR"])
-        columns: dict[str, np.ndarray] = {
-            "Range": np.asarray(frame.range_m, dtype=float),
-            "RadialVelocity": np.asarray(frame.radial_velocity_mps, dtype=float),
-            "Azimuth": np.asarray(frame.az_deg, dtype=float),
-            "Elevation": np.asarray(frame.el_deg, dtype=float),
-            "RCS": np.clip(np.nan_to_num(frame.rcs_dbsm, nan=rcs_min, neginf=rcs_min),
-                           rcs_min, rcs_max),
-            "SNR": np.clip(frame.snr_db, snr_min, snr_max)}
-        fits = np.ones(frame.count, dtype=bool)
-        for name, column in columns.items():
-            sig = self._signals[name]
-            low, high = _limits(sig)
-            inside = (column >= low) & (column <= high)  # NaN is outside
-            if not inside.all():
-                for i in np.flatnonzero(fits & ~inside):
-                    self._leave_out(frame.cycle, int(i), name, float(column[i]),
-                                    f"[{low:g}, {high:g}] {sig.unit or ''}".rstrip())
-                fits &= inside
-        send = np.flatnonzero(fits)
-        for i in send[self._capacity :]:
-            self._leave_out(frame.cycle, int(i), self._capacity_signal, float(self._capacity),
-                            f"the {self._capacity} detections per cycle it numbers")
-        send = send[: self._capacity]
-        self._send(self._header, {"FrameCounter": frame.cycle & 0xFFFF,
-                                  "DetectionCount": send.size,
-                                  "TimeStamp": min(frame.t_s or 0.0, self._latest_time_s)})
-        counter8 = frame.cycle & 0xFF
-        for index, i in enumerate(send):  # one encoded message each (cantools encodes one)
-            values = {"FrameCounter8": counter8, "Index": index,
-                      **{name: float(column[i]) for name, column in columns.items()}}
-            for message in self._parts:
-                wanted = {s.name for s in message.signals}
-                self._send(message, {k: v for k, v in values.items() if k in wanted})
-
-
-    def _send_raw(self, message: cantools.database.can.Message, values: dict[str, float],
-                  checksum: str | None) -> None:
+    def _send(self, message: cantools.database.can.Message, values: dict[str, float],
+              checksum: str | None) -> None:
         try:
             data = bytearray(message.encode(values, strict=True))
         except (cantools.database.EncodeError, KeyError, ValueError) as exc:
@@ -189,11 +120,12 @@ class DetectionPublisher:
             data[pos] = _checksum(bytes(data), pos)
         self.bus.send(can.Message(arbitration_id=message.frame_id, data=bytes(data),
                                   is_extended_id=message.is_extended_frame,
-                                  is_fd=message.is_fd or len(data) > 8))
+                                  is_fd=self.fd or message.is_fd or len(data) > 8))
         self.sent += 1
 
-    def _publish_mapped(self, frame: Detections, layout: _MappedLayout) -> None:
-        """Send one cycle in a mapping's protocol (a third-party radar's DBC)."""
+    def publish(self, frame: Detections) -> None:
+        """Send one cycle: header, then every detection the messages can carry."""
+        layout = self._layout
         m = layout.mapping
         signal_values = layout.signal_values(frame)  # signal -> (D,) values
         # Metadata saturates at the DBC's limits; measured quantities must fit as they are.
@@ -230,16 +162,16 @@ class DetectionPublisher:
         if m.timestamp is not None:
             low, high = _range_of(layout.signals_of(header)[m.timestamp])
             values[m.timestamp] = float(np.clip(frame.t_s or 0.0, low, high))
-        self._send_raw(header, values, m.header_checksum)
+        self._send(header, values, m.header_checksum)
         for index, i in enumerate(send):  # one encoded message (or page) each
             for message, page in layout.parts:
-                wanted = layout.signals_of(message, page)
+                wanted = layout.names_of(message, page)
                 values = layout.defaults(message, page)
                 values.update({k: float(v[i]) for k, v in signal_values.items() if k in wanted})
                 values[m.index] = index
                 if m.frame_counter is not None and m.frame_counter in wanted:
                     values[m.frame_counter] = frame.cycle % layout.frame_counter_modulus
-                self._send_raw(message, values, m.checksum)
+                self._send(message, values, m.checksum)
 
 
 def _range_of(sig: cantools.database.can.Signal) -> tuple[float, float]:
@@ -258,6 +190,8 @@ class _MappedLayout:
     def __init__(self, mapping: CanMapping, fd: bool) -> None:
         self.mapping = m = mapping
         db = m.db
+        self._defaults: dict[tuple[int, int | None], dict[str, float]] = {}
+        self._signal_sets: dict[tuple[int, int | None], set[str]] = {}
         self.header = db.get_message_by_name(m.header)
         names = [m.fd_message] if fd and m.fd_message else list(m.messages)
         self.parts: list[tuple[cantools.database.can.Message, int | None]] = []
@@ -273,6 +207,14 @@ class _MappedLayout:
         self.capacity, self.capacity_signal = min((index_top, m.index),
                                                   (count_top, "+".join(m.count)))
 
+    def names_of(self, message: cantools.database.can.Message,
+                 page: int | None = None) -> set[str]:
+        """Return the names of the signals a message (page) carries (cached)."""
+        key = (message.frame_id, page)
+        if key not in self._signal_sets:
+            self._signal_sets[key] = set(self.signals_of(message, page))
+        return self._signal_sets[key]
+
     @staticmethod
     def signals_of(message: cantools.database.can.Message,
                    page: int | None = None) -> dict[str, cantools.database.can.Signal]:
@@ -283,6 +225,13 @@ class _MappedLayout:
     def defaults(self, message: cantools.database.can.Message,
                  page: int | None = None) -> dict[str, float]:
         """Return a value for every signal: the multiplexer's page, else 0 or its nearest end."""
+        key = (message.frame_id, page)
+        if key not in self._defaults:
+            self._defaults[key] = self._default_values(message, page)
+        return dict(self._defaults[key])
+
+    def _default_values(self, message: cantools.database.can.Message,
+                        page: int | None) -> dict[str, float]:
         out: dict[str, float] = {}
         for name, sg in self.signals_of(message, page).items():
             if sg.is_multiplexer and page is not None:
