@@ -9,14 +9,15 @@ was never played.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
 from .check import limit_masks
-from .kinematics import compute_tracks
+from .kinematics import Tracks, compute_tracks
 from .scenario.model import LIMITS, Scenario
-from .schedule import build_schedule
+from .schedule import Schedule, build_schedule
 
 BATCH_FRAMES = 2000
 
@@ -81,18 +82,24 @@ def scene_limits(scene: Scenario) -> dict[str, str]:
     return out
 
 
+def schedule_batches(scene: Scenario, method: str = "exact", batch_frames: int = BATCH_FRAMES
+                     ) -> Iterator[tuple[np.ndarray, Tracks, Schedule]]:
+    """Yield the scene batch by batch: frame indices, their tracks and their schedule."""
+    t_all = scene.t_s
+    for first in range(0, scene.n_frames, batch_frames):
+        frames = np.arange(first, min(first + batch_frames, scene.n_frames))
+        tracks = compute_tracks(scene, t_all[frames], frames)
+        yield frames, tracks, build_schedule(tracks, scene.rig, scene.radar, method=method,
+                                             estimator=scene.radar_options.estimator,
+                                             frame_rate_hz=scene.frame_rate_hz)
+
+
 def preflight(scene: Scenario, method: str = "exact",
               batch_frames: int = BATCH_FRAMES) -> Preflight:
     """Count the limits ``scene`` hits with the weight solver ``method``."""
     names = tuple(t.name for t in scene.targets)
     counts = {lim: np.zeros(len(names), dtype=np.int64) for lim in LIMITS}
-    t_all = scene.t_s
-    for first in range(0, scene.n_frames, batch_frames):
-        frames = np.arange(first, min(first + batch_frames, scene.n_frames))
-        tracks = compute_tracks(scene, t_all[frames], frames)
-        schedule = build_schedule(tracks, scene.rig, scene.radar, method=method,
-                                  estimator=scene.radar_options.estimator,
-                                  frame_rate_hz=scene.frame_rate_hz)
+    for _, tracks, schedule in schedule_batches(scene, method, batch_frames):
         for lim, mask in limit_masks(tracks, schedule.status).items():
             counts[lim] += mask.sum(axis=0)
     expected = scene.expectations.expected_limits

@@ -35,11 +35,10 @@ from .detections import Detections
 from .errors import RtsError
 from .kinematics import compute_tracks
 from .pipeline import BATCH_FRAMES, LOG_SIDECAR_SUFFIX, add_cycle_truth
-from .preflight import scene_limits
+from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, RadarClock
 from .report import Report
 from .scenario import Scenario
-from .schedule import build_schedule
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -442,13 +441,7 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]
-    t_all = scene.t_s
-    for first in range(0, scene.n_frames, batch_frames):
-        frames = np.arange(first, min(first + batch_frames, scene.n_frames))
-        tracks = compute_tracks(scene, t_all[frames], frames)
-        schedule = build_schedule(tracks, scene.rig, scene.radar, method=method,
-                                  estimator=scene.radar_options.estimator,
-                                  frame_rate_hz=scene.frame_rate_hz)
+    for frames, _, schedule in schedule_batches(scene, method, batch_frames):
         digest.update(schedule.status.tobytes())
         n = add_cycle_truth(checker, scene, clock, frames, schedule.status)
         if n.size:
