@@ -45,8 +45,12 @@ IntArray = NDArray[np.int64]
 
 # Log formats python-can reads (``can.LogReader``), by extension.
 LOG_SUFFIXES = (".asc", ".blf", ".csv", ".db", ".log", ".mf4", ".trc")
-# Coarse offset search: step (s).
+# Coarse offset search: step (s), cycles it prices at most; beyond FULL_SEARCH_S of candidate
+# offsets, only those within ONSET_WINDOW_S of where the first detections put the scene.
 COARSE_STEP_S = 0.01
+COARSE_CYCLES = 300
+FULL_SEARCH_S = 300.0
+ONSET_WINDOW_S = 30.0
 # Fine search: +- this around the coarse minimum, in steps of FINE_STEP_S.
 FINE_SPAN_S = 0.05
 FINE_STEP_S = 0.001
@@ -218,6 +222,21 @@ def _sequential_numbers(counters: IntArray, modulus: int) -> IntArray:
     return np.concatenate([[0], np.cumsum(step)]).astype(np.int64)
 
 
+class _Detected:
+    """A log's detections as flat arrays, each with the cycle (row) it came in."""
+
+    def __init__(self, dets: list[Detections], quantities: tuple[str, ...]) -> None:
+        counts = np.array([d.count for d in dets], dtype=np.int64)
+        self.owner = np.repeat(np.arange(len(dets)), counts)  # detection -> cycle
+
+        def column(q: str) -> FloatArray:
+            parts = [getattr(d, q) if getattr(d, q) is not None else np.full(d.count, np.nan)
+                     for d in dets]
+            return np.concatenate(parts) if parts else np.zeros(0)
+
+        self.values = {q: column(q) for q in quantities}
+
+
 class _TruthTable:
     """What the RTS plays, on a fine time grid, read at any time by linear interpolation.
 
@@ -228,23 +247,25 @@ class _TruthTable:
     QUANTITIES = (("range_m", "range_m"), ("radial_velocity_mps", "radial_velocity_mps"),
                   ("az_deg", "az_deg"))
 
-    def __init__(self, scene: Scenario, dets: list[Detections]) -> None:
+    def __init__(self, scene: Scenario) -> None:
         self.frame_s = 1.0 / scene.frame_rate_hz
         self.step = max(0.002, scene.duration_s / 20000.0)
         self.t = np.arange(0.0, scene.duration_s + self.step, self.step)
         tracks = compute_tracks(scene, self.t)
-        self.present = tracks.present
+        # What the radar can see: present and played (inside the rig's coverage).
+        self.visible = tracks.present & tracks.in_coverage
         self.values = {q: getattr(tracks, q) for q, _ in self.QUANTITIES}
         self.tol = scene.expectations.tolerances
-        counts = np.array([d.count for d in dets], dtype=np.int64)
-        self.owner = np.repeat(np.arange(len(dets)), counts)  # detection -> cycle
 
-        def column(q: str) -> FloatArray:
-            parts = [getattr(d, q) if getattr(d, q) is not None else np.full(d.count, np.nan)
-                     for d in dets]
-            return np.concatenate(parts) if parts else np.zeros(0)
+    def detected(self, dets: list[Detections]) -> _Detected:
+        """Return the detections ``dets`` in the form `cost` reads."""
+        return _Detected(dets, tuple(q for q, _ in self.QUANTITIES))
 
-        self.det = {q: column(q) for q, _ in self.QUANTITIES}
+    @property
+    def first_visible_s(self) -> float | None:
+        """Scene time at which the radar can first see a target (None: never)."""
+        rows = np.flatnonzero(self.visible.any(axis=1))
+        return float(self.t[rows[0]]) if rows.size else None
 
     def at(self, t_s: FloatArray) -> tuple[dict[str, FloatArray], NDArray[np.bool_]]:
         """Truth (C, K) the RTS plays at times ``t_s``: the frame it holds then.
@@ -257,22 +278,23 @@ class _TruthTable:
         i0 = np.clip(np.floor(x).astype(np.int64), 0, self.t.size - 2)
         w = np.clip(x - i0, 0.0, 1.0)[:, None]
         values = {q: v[i0] * (1 - w) + v[i0 + 1] * w for q, v in self.values.items()}
-        present = self.present[i0] & self.present[i0 + 1] & inside[:, None]
-        return values, present
+        visible = self.visible[i0] & self.visible[i0 + 1] & inside[:, None]
+        return values, visible
 
-    def cost(self, t_s: FloatArray, weight: FloatArray | None = None) -> float:
-        """Mean over detections of the normalized distance to the nearest present target.
+    def cost(self, t_s: FloatArray, det: _Detected, weight: FloatArray | None = None) -> float:
+        """Mean over detections of the normalized distance to the nearest visible target.
 
-        ``weight`` (per detection) weighs the mean (a bootstrap's resampled cycles).
+        ``t_s`` are the cycles' scene times; ``weight`` (per detection) weighs the mean (a
+        bootstrap's resampled cycles).
         """
-        if self.owner.size == 0:
+        if det.owner.size == 0:
             return float("inf")
-        values, present = self.at(t_s)
-        total = np.zeros((self.owner.size, present.shape[1]))
+        values, visible = self.at(t_s)
+        total = np.zeros((det.owner.size, visible.shape[1]))
         for q, key in self.QUANTITIES:
-            diff = (self.det[q][:, None] - values[q][self.owner]) / self.tol[key]
+            diff = (det.values[q][:, None] - values[q][det.owner]) / self.tol[key]
             total += np.nan_to_num(diff, nan=0.0) ** 2
-        total = np.where(present[self.owner], total, np.inf)
+        total = np.where(visible[det.owner], total, np.inf)
         return float(np.average(np.minimum(total.min(axis=1), GATE2), weights=weight))
 
 
@@ -280,21 +302,36 @@ def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections]
                     latency_s: float) -> tuple[float, float | None]:
     """Log time of scene time 0 that best matches detections to the truth, and its uncertainty.
 
-    A coarse search over every offset that puts the log inside the scene, then a fine one
-    around its minimum; the uncertainty comes from each matched detection's range error over
-    its target's range rate (the time shift that would explain it).
+    A coarse search (10 ms steps, on at most `COARSE_CYCLES` cycles with detections) over every
+    offset that puts the log inside the scene - or, for a log much longer than `FULL_SEARCH_S`,
+    within `ONSET_WINDOW_S` of where the first detections put the scene's first visible
+    target - then a fine one (1 ms, every cycle) around its minimum. The uncertainty is the
+    spread of the estimate over resampled cycles (`_offset_uncertainty`).
     """
     ok = np.isfinite(bus_t_s)
     bus, usable = bus_t_s[ok], [d for d, k in zip(dets, ok, strict=True) if k]
     if bus.size == 0:
         raise LogError("the log has no radar cycle with a timestamp to align")
-    table = _TruthTable(scene, usable)
+    table = _TruthTable(scene)
+    every = table.detected(usable)
+    with_detections = np.flatnonzero([d.count > 0 for d in usable])
+    if with_detections.size == 0:
+        raise LogError("the log has no detection to align the scene with; give "
+                       "--time-offset-s")
+    pick = with_detections[np.unique(np.linspace(0, with_detections.size - 1, min(
+        COARSE_CYCLES, with_detections.size)).astype(np.int64))]
+    some = table.detected([usable[i] for i in pick])
+    t_log = bus - latency_s
     lo, hi = bus.min() - latency_s - scene.duration_s, bus.max() - latency_s
+    first_seen = table.first_visible_s
+    if hi - lo > FULL_SEARCH_S and first_seen is not None:
+        onset = float(t_log[with_detections[0]]) - first_seen
+        lo, hi = max(lo, onset - ONSET_WINDOW_S), min(hi, onset + ONSET_WINDOW_S)
     grid = np.arange(lo, hi + COARSE_STEP_S, COARSE_STEP_S)
-    coarse = np.array([table.cost(bus - latency_s - s) for s in grid])
+    coarse = np.array([table.cost(t_log[pick] - s, some) for s in grid])
     best = float(grid[int(np.argmin(coarse))])
     fine = np.arange(best - FINE_SPAN_S, best + FINE_SPAN_S + FINE_STEP_S / 2, FINE_STEP_S)
-    costs = np.array([table.cost(bus - latency_s - s) for s in fine])
+    costs = np.array([table.cost(t_log - s, every) for s in fine])
     i = int(np.argmin(costs))
     offset = float(fine[i])
     if 0 < i < fine.size - 1:  # parabola through the minimum and its neighbours
@@ -302,11 +339,11 @@ def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections]
         den = a - 2 * b + c
         if den > 0:
             offset += 0.5 * (a - c) / den * FINE_STEP_S
-    return offset, _offset_uncertainty(table, bus - latency_s, fine)
+    return offset, _offset_uncertainty(table, every, t_log, fine)
 
 
-def _offset_uncertainty(table: _TruthTable, t_log: FloatArray, fine: FloatArray,
-                        rounds: int = BOOTSTRAP_ROUNDS) -> float | None:
+def _offset_uncertainty(table: _TruthTable, det: _Detected, t_log: FloatArray,
+                        fine: FloatArray, rounds: int = BOOTSTRAP_ROUNDS) -> float | None:
     """Spread of the offset found again on cycles drawn with replacement (a bootstrap).
 
     It covers what limits the estimate: the latency's jitter, the measurement noise and the
@@ -320,8 +357,8 @@ def _offset_uncertainty(table: _TruthTable, t_log: FloatArray, fine: FloatArray,
     for _ in range(rounds):  # a few dozen resamplings, each a vectorized search
         pick = np.zeros(n_cycles, dtype=np.int64)
         np.add.at(pick, rng.integers(0, n_cycles, n_cycles), 1)
-        weight = pick[table.owner].astype(np.float64)
-        costs = [table.cost(t_log - s, weight) for s in fine]
+        weight = pick[det.owner].astype(np.float64)
+        costs = [table.cost(t_log - s, det, weight) for s in fine]
         found.append(float(fine[int(np.argmin(costs))]))
     return float(np.std(found, ddof=1))
 

@@ -72,7 +72,7 @@ def write_radar(folder: Path, **clock) -> str:
 
 
 def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suffix=".blf",
-                busy=False):
+                busy=False, lead_s=0.0):
     """A log as another tool writes it: the radar on its own clock, timestamps in that tool's
     time base (scene time 0 at ``origin_s``), latency and jitter on every cycle, no sidecar."""
     shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
@@ -98,6 +98,11 @@ def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suf
         stamp["t"] = origin_s + cycle.t_s + clock.latency_s + rng.uniform(-0.004, 0.004)
         publisher.publish(tamper(cycle) if tamper else cycle)
 
+    # The radar ran before the RTS played the scene: empty cycles, counters before 4242.
+    for n in range(-int(lead_s / clock.cycle_s), 0):
+        t = clock.start_offset_s + n * clock.cycle_s
+        stamp["t"] = origin_s + t + clock.latency_s
+        publisher.publish(Detections.empty(clock.counter_start + n, t))
     radar = SimulatedRadarOutput(profile=scene.radar, rig=scene.rig, sink=sink,
                                  fidelity="analytic", noise=True, rng=rng)
     radar.write(build_schedule(compute_tracks(scene), scene.rig, scene.radar,
@@ -142,6 +147,16 @@ def test_a_log_of_another_tool_is_aligned_within_20_ms(tmp_path, seed, suffix, b
     if busy:
         assert result.report.bus["unknown_ids"] > 1000
         assert result.report.bus["before_first_cycle"] >= 2  # the cycle the log began in
+
+
+def test_a_long_log_is_aligned_by_where_its_detections_begin(tmp_path):
+    # Ten minutes of radar cycles before the scene: too long to try every offset, the search
+    # starts where the first detections put the scene's first visible target.
+    scene, log, origin = foreign_log(tmp_path, 1.7e9 + 77.7, lead_s=600.0)
+    result = check_log(scene, log)
+    assert abs(result.alignment.offset_s - origin) <= 0.020
+    assert result.report.passed, result.report.reasons
+    assert result.alignment.cycles_outside_scene >= 8000
 
 
 def test_a_given_time_offset_tells_the_latency(tmp_path):
