@@ -173,10 +173,22 @@ class Pipeline:
 
     def _open_publisher(self) -> Callable[[Detections], None]:
         if self._publisher is None:
+            o = self.options
+            # On the virtual bus the messages keep the time the radar would have sent them:
+            # its measurement time after the run's start, plus its latency and jitter.
+            options = {"preserve_timestamps": True} if o.can_interface == "virtual" else {}
+            bus = open_bus(o.can_interface, self.channel, fd=o.can_fd, **options)
+            self._buses.append(bus)
             # The run's mapping (a third-party radar's DBC) makes the simulated radar speak it.
-            self._publisher = DetectionPublisher(self._open_bus(), fd=self.options.can_fd,
-                                                 mapping=self.mapping)
-        return self._publisher.publish
+            self._publisher = DetectionPublisher(bus, fd=o.can_fd, mapping=self.mapping)
+        publisher, clock = self._publisher, self.radar.radar_clock
+        origin, rng = time.time(), np.random.default_rng(0)
+
+        def publish(cycle: Detections) -> None:
+            sent = origin + (cycle.t_s or 0.0) + float(clock.bus_delay(1, rng)[0])
+            publisher.publish(cycle, sent)
+
+        return publish
 
     @property
     def counter_modulus(self) -> int:

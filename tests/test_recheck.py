@@ -193,3 +193,26 @@ def test_check_command_writes_the_report_and_the_alignment(tmp_path, capsys):
     assert data["log"] == str(log)
     text = capsys.readouterr().out
     assert "aligned by the recording's sidecar" in text and "PASS" in text
+
+
+def test_a_simulated_run_stamps_its_messages_on_the_radar_s_clock(tmp_path):
+    # The in-process radar's messages carry when the radar would have sent them, so a
+    # recording of it is a realistic log even without its sidecar.
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    radar = write_radar(tmp_path, cycle_s=0.072, start_offset_s=0.013, latency_s=0.13,
+                        jitter_s=0.004, counter_start=4242)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml", {
+        "radar.profile": radar, "radar.noise": True,
+        "expectations.expected_limits": ["frame_rate_above_radar"]})
+    log = tmp_path / "sim.blf"
+    assert run_scene(scene, RunOptions(bus_log=str(log))).report.passed
+    Path(str(log) + ".rts.json").unlink()
+    with can.LogReader(str(log)) as reader:
+        headers = [m.timestamp for m in reader if m.arbitration_id == 256]
+    gaps = np.diff(headers)
+    assert np.median(gaps) == pytest.approx(0.072, abs=0.001)
+    assert np.all(np.abs(gaps - 0.072) <= 0.008 + 1e-6)  # +-4 ms of jitter on each
+    result = check_log(scene, log)
+    origin = headers[0] - 0.013 - 0.13  # within the first cycle's jitter
+    assert abs(result.alignment.offset_s - origin) <= 0.020
+    assert result.report.passed

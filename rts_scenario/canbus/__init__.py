@@ -110,7 +110,7 @@ class DetectionPublisher:
                                       f"{value:g} outside {allowed}")
 
     def _send(self, message: cantools.database.can.Message, values: dict[str, float],
-              checksum: str | None) -> None:
+              checksum: str | None, timestamp: float = 0.0) -> None:
         try:
             data = bytearray(message.encode(values, strict=True))
         except (cantools.database.EncodeError, KeyError, ValueError) as exc:
@@ -120,11 +120,17 @@ class DetectionPublisher:
             data[pos] = _checksum(bytes(data), pos)
         self.bus.send(can.Message(arbitration_id=message.frame_id, data=bytes(data),
                                   is_extended_id=message.is_extended_frame,
-                                  is_fd=self.fd or message.is_fd or len(data) > 8))
+                                  is_fd=self.fd or message.is_fd or len(data) > 8,
+                                  timestamp=timestamp))
         self.sent += 1
 
-    def publish(self, frame: Detections) -> None:
-        """Send one cycle: header, then every detection the messages can carry."""
+    def publish(self, frame: Detections, bus_time_s: float = 0.0) -> None:
+        """Send one cycle: header, then every detection the messages can carry.
+
+        ``bus_time_s`` stamps the cycle's messages (a bus that keeps senders' timestamps, like
+        python-can's virtual bus with ``preserve_timestamps``, shows when the radar would have
+        sent them).
+        """
         layout = self._layout
         m = layout.mapping
         signal_values = layout.signal_values(frame)  # signal -> (D,) values
@@ -162,7 +168,7 @@ class DetectionPublisher:
         if m.timestamp is not None:
             low, high = _range_of(layout.signals_of(header)[m.timestamp])
             values[m.timestamp] = float(np.clip(frame.t_s or 0.0, low, high))
-        self._send(header, values, m.header_checksum)
+        self._send(header, values, m.header_checksum, bus_time_s)
         for index, i in enumerate(send):  # one encoded message (or page) each
             for message, page in layout.parts:
                 wanted = layout.names_of(message, page)
@@ -171,7 +177,7 @@ class DetectionPublisher:
                 values[m.index] = index
                 if m.frame_counter is not None and m.frame_counter in wanted:
                     values[m.frame_counter] = frame.cycle % layout.frame_counter_modulus
-                self._send(message, values, m.checksum)
+                self._send(message, values, m.checksum, bus_time_s)
 
 
 def _range_of(sig: cantools.database.can.Signal) -> tuple[float, float]:
