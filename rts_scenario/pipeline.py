@@ -29,14 +29,14 @@ from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .preflight import Preflight, preflight, scene_limits
-from .radar.clock import RadarClock, held_frames
+from .radar.clock import RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report
 from .rig import Rig
 from .scenario import Scenario, load_scenario
 from .scenario.model import RadarOptions
-from .schedule import Schedule, build_schedule
+from .schedule import Schedule, build_schedule, held_frames
 from .schedule.build import FE_RESPONSES, solver_inputs
 from .solver import solver_plan
 from .solver.estimator_aware import plan_method

@@ -11,9 +11,10 @@ from rts_scenario.detections import Detections
 from rts_scenario.errors import RtsError
 from rts_scenario.kinematics import compute_tracks
 from rts_scenario.pipeline import Pipeline, RunOptions
-from rts_scenario.radar.clock import RadarClock, held_frames
+from rts_scenario.radar.clock import RadarClock
 from rts_scenario.radar.profile import RadarProfile
 from rts_scenario.scenario import load_scenario
+from rts_scenario.schedule import held_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 AWR = ROOT / "rts_scenario" / "data" / "radars" / "awr1843boost.radar.yaml"

@@ -8,7 +8,8 @@ uniform ``jitter_s``) after it measured. Cycle ``n`` (0, 1, ...) is measured at 
 ``start_offset_s + n * cycle_s`` and carries the counter ``counter_start + n``.
 
 The RTS holds each schedule frame until the next one: a cycle measures the frame current at its
-measurement time (`held_frames`). Ground truth is evaluated at the measurement time itself.
+measurement time (`rts_scenario.schedule.held_frames`). Ground truth is evaluated at the
+measurement time itself.
 """
 
 from __future__ import annotations
@@ -84,13 +85,4 @@ class RadarClock:
         return self.latency_s + rng.uniform(-self.jitter_s, self.jitter_s, n_cycles)
 
 
-def held_frames(frame_t_s: FloatArray, t_s: FloatArray) -> IntArray:
-    """Index of the frame the RTS holds at each time ``t_s`` (-1 before the first frame).
-
-    The RTS applies frame i at ``frame_t_s[i]`` and holds it until the next one.
-    """
-    return np.searchsorted(np.asarray(frame_t_s), np.asarray(t_s) + TIME_EPS_S,
-                           side="right").astype(np.int64) - 1
-
-
-__all__ = ["TIME_EPS_S", "RadarClock", "held_frames"]
+__all__ = ["TIME_EPS_S", "RadarClock"]

@@ -7,8 +7,8 @@
 """
 
 from .build import build_schedule
-from .model import BLOCKING, Schedule, ScheduleError, Status
+from .model import BLOCKING, Schedule, ScheduleError, Status, held_frames
 from .quantization import QUANTIZATION_MODES, predicted_angle_error
 
 __all__ = ["BLOCKING", "QUANTIZATION_MODES", "Schedule", "ScheduleError", "Status",
-           "build_schedule", "predicted_angle_error"]
+           "build_schedule", "held_frames", "predicted_angle_error"]

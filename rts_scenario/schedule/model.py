@@ -106,12 +106,10 @@ class Schedule:
     def held(self, clock_t_s: FloatArray, counters: IntArray) -> Schedule:
         """Return what a radar measures at ``clock_t_s``: the frames held then.
 
-        The RTS holds each frame until the next (`rts_scenario.radar.clock.held_frames`); each
+        The RTS holds each frame until the next (`held_frames`); each
         row of the result is the frame current at a cycle's time, with that time as ``t_s`` and
         the cycle's counter as ``frame_index``. Cycles before the first frame are left out.
         """
-        from ..radar.clock import held_frames
-
         index = held_frames(self.t_s, clock_t_s)
         keep = index >= 0
         out = self.take(index[keep])
@@ -135,4 +133,18 @@ class Schedule:
         return out
 
 
-__all__ = ["BLOCKING", "Schedule", "ScheduleError", "Status"]
+
+# Times this close count as equal (a cycle measured exactly at a frame's time sees that frame).
+SAME_TIME_S = 1e-9
+
+
+def held_frames(frame_t_s: FloatArray, t_s: FloatArray) -> IntArray:
+    """Return the index of the frame the RTS holds at each time ``t_s`` (-1 before the first).
+
+    The RTS applies frame i at ``frame_t_s[i]`` and holds it until the next one.
+    """
+    return np.searchsorted(np.asarray(frame_t_s), np.asarray(t_s) + SAME_TIME_S,
+                           side="right").astype(np.int64) - 1
+
+
+__all__ = ["BLOCKING", "SAME_TIME_S", "Schedule", "ScheduleError", "Status", "held_frames"]
