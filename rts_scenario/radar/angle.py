@@ -66,6 +66,7 @@ class Bartlett2D:
         u, s = (g.ravel() for g in np.meshgrid(gu, gs, indexing="ij"))
         self.grid_u, self.grid_s = u, s
         self.steer = np.exp(1j * self.k * (np.outer(u, array.y_m) + np.outer(s, array.z_m)))
+        self._steer_h = np.ascontiguousarray(self.steer.conj().T)  # (M, G), for the spectra
         self.peak_ratio = peak_ratio
         self.max_peaks = max_peaks
 
@@ -74,15 +75,23 @@ class Bartlett2D:
         x = np.atleast_2d(snapshots)
         if len(x) == 0:
             return _nothing()
-        spectrum = np.abs(x @ self.steer.conj().T) ** 2  # (D, G)
+        beams = x @ self._steer_h  # (D, G)
+        spectrum = beams.real**2 + beams.imag**2
         spec = spectrum.reshape(len(x), *self.shape)
         # Local maxima of each spectrum (3 x 3), strongest first.
         padded = np.pad(spec, ((0, 0), (1, 1), (1, 1)), constant_values=-1.0)
-        neighbours = np.stack([padded[:, 1 + du : padded.shape[1] - 1 + du,
-                                      1 + ds : padded.shape[2] - 1 + ds]
-                               for du in (-1, 0, 1) for ds in (-1, 0, 1) if du or ds])
-        is_peak = np.all(spec >= neighbours, axis=0).reshape(len(x), -1)
-        ranked = np.argsort(-np.where(is_peak, spectrum, -1.0), axis=1)[:, : self.max_peaks]
+        peak = np.ones(spec.shape, dtype=bool)
+        for du, ds in ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)):
+            peak &= spec >= padded[:, 1 + du : padded.shape[1] - 1 + du,
+                                   1 + ds : padded.shape[2] - 1 + ds]
+        is_peak = peak.reshape(len(x), -1)
+        # The strongest few peaks, in order: a partial sort (the grid has thousands of cells).
+        score = np.where(is_peak, spectrum, -1.0)
+        n_top = min(self.max_peaks, score.shape[1])
+        top = np.argpartition(-score, n_top - 1, axis=1)[:, :n_top]
+        ranked = np.take_along_axis(
+            top, np.argsort(-np.take_along_axis(score, top, axis=1), axis=1, kind="stable"),
+            axis=1)
         best = spectrum[np.arange(len(x)), ranked[:, 0]]
         rows, cols = [], []
         for rank in range(ranked.shape[1]):  # a few peaks per snapshot at most

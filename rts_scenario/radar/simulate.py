@@ -361,17 +361,24 @@ class SimulatedRadar:
         """Beat-signal cube ``[loop, virtual element, sample]`` of the echoes plus noise."""
         p = self.profile
         m = p.array.n_elements
-        t_fast = p.adc_start_s + np.arange(self._n) / p.sample_rate_hz  # (N,)
         beat_hz = p.slope_hz_per_s * echoes.channel_delay_s - echoes.doppler_hz[:, None]  # (E, M)
-        fast = echoes.channel[:, :, None] * np.exp(
-            -2j * np.pi * _frac(beat_hz[:, :, None] * t_fast))  # (E, M, N)
+        # The beat phasor at each fast-time sample t_n = adc_start + n / fs: its value at the
+        # first sample times its step to the next, raised to n by a running product (exact to
+        # ~1e-13 over a chirp, a fifth of the cost of an exponential per sample).
+        fast = np.empty((*beat_hz.shape, self._n), dtype=complex)  # (E, M, N)
+        fast[:, :, 0] = echoes.channel * np.exp(-2j * np.pi * _frac(beat_hz * p.adc_start_s))
+        fast[:, :, 1:] = np.exp(-2j * np.pi * _frac(beat_hz / p.sample_rate_hz))[:, :, None]
+        np.cumprod(fast, axis=2, out=fast)
         slow = np.exp(2j * np.pi * _frac(np.outer(np.arange(self._loops) * p.loop_time_s,
                                                   echoes.doppler_hz)))  # (L, E)
         cube = (slow @ fast.reshape(echoes.doppler_hz.size, m * self._n)).reshape(
             self._loops, m, self._n)
         if self._sigma > 0.0:
-            noise = self.rng.standard_normal((2, *cube.shape)) * (self._sigma / np.sqrt(2.0))
-            cube = cube + noise[0] + 1j * noise[1]
+            # Complex white noise: independent real and imaginary parts, drawn interleaved
+            # straight into complex numbers (no temporaries).
+            noise = self.rng.standard_normal(2 * cube.size).view(np.complex128)
+            noise *= self._sigma / np.sqrt(2.0)
+            cube += noise.reshape(cube.shape)
         return cube
 
     def _detect_adc(self, echoes: Echoes, frame: int, t_s: float) -> Detections:

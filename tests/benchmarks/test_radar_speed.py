@@ -42,3 +42,40 @@ def test_radar_frames_per_second(benchmark, eight_targets, fidelity, frames):
     assert len(dets) == frames
     assert np.mean([d.count for d in dets]) >= 7.5
     benchmark.extra_info["frames_per_s"] = frames / benchmark.stats.stats.min
+
+
+def test_adc_frame_against_its_ffts_alone(benchmark, eight_targets):
+    """The adc frame's cost relative to the two windowed FFTs of its cube (same shape, same run).
+
+    ``extra_info["ratio"]`` is the frame's best time over the FFTs' best time.
+    """
+    scene, schedule = eight_targets
+    part = schedule.frames(0, 20)
+    radar = SimulatedRadar(scene.radar, scene.rig, fidelity="adc",
+                           rng=np.random.default_rng(0))
+    p = scene.radar
+    shape = (p.chirp_loops, p.array.n_elements, p.adc_samples)
+    noise = np.random.default_rng(1).standard_normal((2, *shape))
+    cube = noise[0] + 1j * noise[1]
+    win_r, win_d = np.hanning(shape[2] + 2)[1:-1], np.hanning(shape[0] + 2)[1:-1]
+
+    def ffts():
+        spec = np.fft.ifft(cube * win_r, axis=2)
+        return np.fft.fft(spec * win_d[:, None, None], axis=0)
+
+    best_fft = min(_timed(ffts) for _ in range(30))
+    benchmark.group = "simulated radar, awr1843boost, 8 targets: adc frame vs its FFTs"
+    benchmark.pedantic(radar.process, args=(part,), rounds=3, iterations=1, warmup_rounds=1)
+    frame = benchmark.stats.stats.min / part.n_frames
+    benchmark.extra_info.update({"frame_ms": frame * 1e3, "ffts_ms": best_fft * 1e3,
+                                 "ratio": frame / best_fft})
+    print(f"\nadc frame {frame * 1e3:.1f} ms, its FFTs alone {best_fft * 1e3:.1f} ms: "
+          f"{frame / best_fft:.1f}x")
+
+
+def _timed(fn) -> float:
+    import time
+
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
