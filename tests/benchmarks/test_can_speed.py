@@ -37,3 +37,5 @@ def test_can_encode_bus_decode_check(benchmark, eight_targets):  # noqa: F811
     assert result["report"].frames["checked"] == 1200
     benchmark.extra_info["messages"] = result["sent"]
     benchmark.extra_info["messages_per_s"] = result["sent"] / benchmark.stats.stats.min
+    print(f"\nCAN: {result['sent']} messages, "
+          f"{result['sent'] / benchmark.stats.stats.min:,.0f} messages/s")
