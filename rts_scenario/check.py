@@ -124,9 +124,10 @@ class Checker:
         Tolerances and required rates.
     counter_modulus : int
         The radar's cycle counter wraps at this value.
-    counter_start : int
+    counter_start : int or None
         The counter of the radar's cycle 0 (`rts_scenario.radar.clock.RadarClock`): truth
         blocks are numbered by cycle (0 at the radar clock's start), cycles by their counter.
+        None until the caller knows it (set the attribute before the first `add_cycles`).
     record : FrameRecord, optional
         Where per-frame arrays go (none kept without it).
     expected_limits : sequence of frozenset of str, optional
@@ -138,7 +139,7 @@ class Checker:
     """
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
-                 counter_modulus: int = COUNTER_MODULUS, counter_start: int = 0,
+                 counter_modulus: int = COUNTER_MODULUS, counter_start: int | None = 0,
                  record: FrameRecord | None = None,
                  expected_limits: Sequence[frozenset[str]] | None = None,
                  scene_limits: Mapping[str, str] | None = None,
@@ -193,6 +194,8 @@ class Checker:
         end = self._blocks[-1].end if self._blocks else self._settled
         near = (self._settled + end) // 2
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
+        if self.counter_start is None:
+            raise ValueError("the radar's counter start is not known yet (set counter_start)")
         frames = unwrap_counter((counters - self.counter_start) % self.modulus, near,
                                 self.modulus)
         for frame, cycle in zip(frames.tolist(), cycles, strict=True):  # one per radar cycle

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +39,8 @@ class Detections:
     complete : bool
         False when the cycle arrived damaged (detections lost or corrupted on the way): a
         checker must not take it as the radar's whole answer.
+    bus_t_s : float or None
+        When the cycle's first message was on the bus (the bus's clock), if it came over one.
     """
 
     cycle: int
@@ -49,6 +52,7 @@ class Detections:
     rcs_dbsm: FloatArray | None = None
     snr_db: FloatArray | None = None
     complete: bool = True
+    bus_t_s: float | None = None
 
     def __post_init__(self) -> None:
         sizes = set()
@@ -89,8 +93,8 @@ class Detections:
               complete: bool = True) -> Detections:
         """Return a cycle without detections that reports ``quantities``."""
         none = np.zeros(0)
-        return cls(cycle=cycle, t_s=t_s, complete=complete,
-                   **{q: none for q in quantities})
+        reported: dict[str, Any] = {q: none for q in quantities}
+        return cls(cycle=cycle, t_s=t_s, complete=complete, **reported)
 
 
 def unwrap_counter(counter: NDArray[np.int64], near: NDArray[np.int64] | int,

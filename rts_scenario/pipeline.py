@@ -137,6 +137,7 @@ class Pipeline:
         self._publisher: DetectionPublisher | None = None
         self._notifier: can.Notifier | None = None
         self._logger: can.Listener | None = None
+        self.counter_start_learnt: tuple[int, str] | None = None
         self.output: Output | None = None
         # A private name that does not end in digits (MF4 logs read those as a channel number).
         self.channel = options.can_channel or f"rts-scenario-{id(self):x}-detections"
@@ -250,8 +251,31 @@ class Pipeline:
         """Return the radar's cycle numbers (0 at its clock's start) of received cycles."""
         clock = self.radar.radar_clock
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
-        return unwrap_counter((counters - clock.counter_start) % self.counter_modulus, near,
+        start = clock.counter_start if clock.counter_start is not None else (
+            int(counters[0]) if counters.size else 0)  # a measurement: the first is cycle 0
+        return unwrap_counter((counters - start) % self.counter_modulus, near,
                               self.counter_modulus)
+
+    def _learn_counter_start(self, checker: Checker, cycles: list[Detections]) -> None:
+        """Find where the radar's counter starts when its profile does not say.
+
+        The first cycle's bus time, less the radar's latency, is its measurement time on the
+        bus's clock; the output's scene origin on that clock (an RTS paced in real time) makes
+        it a scene time, hence a cycle number. Without those, the first cycle received is
+        taken as the first cycle of the scene.
+        """
+        clock = self.radar.radar_clock
+        first = next((c for c in cycles if c.bus_t_s is not None), None)
+        origin = getattr(self.output, "scene_origin_wall_s", None)
+        if first is not None and origin is not None:
+            assert first.bus_t_s is not None
+            n = clock.cycle_at(first.bus_t_s - clock.latency_s - origin)
+            source = "learnt from the first cycle's bus time"
+        else:
+            first, n = cycles[0], 0
+            source = "assumed: the first cycle received is the scene's first"
+        checker.counter_start = (first.cycle - n) % self.counter_modulus
+        self.counter_start_learnt = (checker.counter_start, source)
 
     def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
             timing: dict[str, float] | None = None,
@@ -306,6 +330,8 @@ class Pipeline:
             mark = timer.add("play_s", mark)
             cycles = self.receive()
             mark = timer.add("receive_s", mark)
+            if checker.counter_start is None and cycles:
+                self._learn_counter_start(checker, cycles)
             checker.add_cycles(cycles)
             # The batch before this one is due: its cycles had a whole batch to arrive.
             if n.size:
@@ -313,7 +339,10 @@ class Pipeline:
             mark = timer.add("check_s", mark)
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
-        checker.add_cycles(self.receive(final=True))
+        last = self.receive(final=True)
+        if checker.counter_start is None and last:
+            self._learn_counter_start(checker, last)
+        checker.add_cycles(last)
         mark = timer.add("receive_s", mark)
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
@@ -323,11 +352,17 @@ class Pipeline:
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
         if options.bus_log and digest is not None:
-            write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest())
+            write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
+                              counter_start=checker.counter_start)
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
         report.solver_plan = plan.origin
+        if clock.counter_start is not None:
+            report.radar_clock = {"counter_start": clock.counter_start, "source": "profile"}
+        elif self.counter_start_learnt is not None:
+            start, source = self.counter_start_learnt
+            report.radar_clock = {"counter_start": start, "source": source}
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -380,12 +415,14 @@ LOG_SIDECAR_SUFFIX = ".rts.json"
 
 
 def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
-                      options: RunOptions, status_digest: str) -> Path:
+                      options: RunOptions, status_digest: str,
+                      counter_start: int | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The radar's clock (which counter is which cycle, measured when), the mapping the bus speaks,
     the solver method, and a digest of the statuses the RTS played, so that a re-check that
-    rebuilds the schedule can tell whether it plays the same.
+    rebuilds the schedule can tell whether it plays the same. ``counter_start`` is the one the
+    run used (learnt, where the profile does not give it).
     """
     import json
 
@@ -399,7 +436,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "radar": radar.name,
         "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
-                  "counter_start": c.counter_start},
+                  "counter_start": c.counter_start if counter_start is None
+                  else counter_start},
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         "status_sha256": status_digest,

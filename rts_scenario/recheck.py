@@ -20,7 +20,7 @@ import hashlib
 import json
 from collections import deque
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -398,7 +398,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         clock = RadarClock(cycle_s=float(c["cycle_s"]),
                            start_offset_s=float(c["start_offset_s"]),
                            latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
-                           counter_start=int(c["counter_start"]))
+                           counter_start=None if c["counter_start"] is None
+                           else int(c["counter_start"]))
+        if clock.counter_start is None:  # the run saw no cycle: count from the log's first
+            clock = replace(clock, counter_start=int(logged[0].detections.cycle) if logged
+                            else 0)
         alignment = Alignment("sidecar", clock.cycle_s, latency_s=clock.latency_s)
         if sidecar.get("scene") != scene.name:
             alignment.notes.append(f"the log was recorded for scene {sidecar.get('scene')!r}, "

@@ -167,6 +167,8 @@ class Report:
 
     ``scene_limits`` names the limits the whole scene hits (``{"why": ..., "expected": ...}``).
     ``solver_plan`` says where the run's solver plan came from (built, memory, disk).
+    ``radar_clock`` is how the radar's cycles were numbered: its counter start and whether the
+    profile gave it or it was learnt from the first cycle's bus time.
     ``worst_frames`` lists the worst target-frames (misses first, then by error over
     tolerance); ``record`` holds every frame's arrays when the run was asked to record them
     (`per_frame` reads them back).
@@ -186,6 +188,7 @@ class Report:
     scene_limits: dict[str, dict[str, Any]] = field(default_factory=dict)
     timing: dict[str, float] = field(default_factory=dict)
     solver_plan: str = ""
+    radar_clock: dict[str, Any] = field(default_factory=dict)
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
     record: FrameRecord | None = field(default=None, repr=False, compare=False)
 

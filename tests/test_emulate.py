@@ -17,25 +17,28 @@ from rts_scenario.detections import Detections
 from rts_scenario.emulator import Emulator, schedule_of_entries
 from rts_scenario.outputs.udp import FaultInjector, frame_entries
 from rts_scenario.pipeline import Pipeline, RunOptions
+from rts_scenario.radar.profile import RadarProfile
 from rts_scenario.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 _channels = itertools.count()
 
 
-def bench_scene(tmp_path: Path, duration_s: float = 4.0):
+def bench_scene(tmp_path: Path, duration_s: float = 4.0, counter_start="4242"):
     """cut-in, shortened, on a radar that measures every 72 ms, reports 130 ms later and
-    counts from 4242."""
+    counts from 4242 (the scene's profile may say ``auto``: not known)."""
     shutil.copy(ROOT / "scenarios" / "cut_in.scenario.yaml", tmp_path)
     data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
                           .read_text())
     data["name"] = "bench-radar"
     data["clock"] = {"cycle_s": 0.072, "latency_s": 0.13, "jitter_s": 0.003,
                      "counter_start": 4242}
-    (tmp_path / "radars").mkdir()
+    (tmp_path / "radars").mkdir(exist_ok=True)
     (tmp_path / "radars" / "bench.radar.yaml").write_text(yaml.safe_dump(data))
+    data["clock"]["counter_start"] = "auto" if counter_start == "auto" else 4242
+    (tmp_path / "radars" / "scene.radar.yaml").write_text(yaml.safe_dump(data))
     return load_scenario(tmp_path / "cut_in.scenario.yaml", {
-        "radar.profile": "radars/bench.radar.yaml", "radar.noise": False,
+        "radar.profile": "radars/scene.radar.yaml", "radar.noise": False,
         "radar.fidelity": "analytic", "duration_s": duration_s,
         "expectations.expected_limits": ["frame_rate_above_radar"]})
 
@@ -43,11 +46,12 @@ def bench_scene(tmp_path: Path, duration_s: float = 4.0):
 OBJECT_LIST = ROOT / "scenarios" / "can" / "object_list.mapping.yaml"
 
 
-def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST):
-    """Play ``scene`` over UDP to the emulator; its radar speaks ``mapping``'s protocol (the
-    object list with Motorola signals by default) on a virtual CAN bus."""
+def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=None):
+    """Play ``scene`` over UDP to the emulator; its radar (``radar``, else the scene's) speaks
+    ``mapping``'s protocol (the object list with Motorola signals by default) on a virtual CAN
+    bus."""
     channel = f"rts-emulate-test-{next(_channels)}-bus"
-    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False,
+    emulator = Emulator(scene.rig, radar or scene.radar, can_channel=channel, noise=False,
                         tamper=tamper,
                         mapping=CanMapping.from_file(mapping) if mapping else None).start()
     try:
@@ -74,6 +78,18 @@ def test_a_scene_over_udp_to_a_radar_on_its_own_clock_passes(tmp_path, mapping):
     assert report.frames["total"] == report.frames["checked"] == cycles
     assert stats["udp"]["frames_applied"] == scene.n_frames
     assert stats["radar"]["worst_late_ms"] < 20.0  # measured on its clock
+
+
+def test_a_radar_whose_counter_start_is_unknown_is_numbered_by_bus_time(tmp_path):
+    # The scene's profile says counter_start: auto; the radar on the bench counts from 4242.
+    scene = bench_scene(tmp_path, counter_start="auto")
+    assert scene.radar.radar_clock.counter_start is None
+    bench_radar = RadarProfile.from_file(tmp_path / "radars" / "bench.radar.yaml")
+    report, _ = rehearse(scene, radar=bench_radar)
+    assert report.passed, report.reasons
+    assert report.radar_clock == {"counter_start": 4242,
+                                  "source": "learnt from the first cycle's bus time"}
+    assert report.frames["checked"] == report.frames["total"]
 
 
 def lose_30_percent():

@@ -307,6 +307,7 @@ class _Assembly:
     counter: int
     expected: int
     timestamp_s: float | None
+    bus_t_s: float | None = None
     parts: dict[int, dict[str, float]] = field(default_factory=dict)
     halves: dict[int, int] = field(default_factory=dict)
 
@@ -400,7 +401,7 @@ class DetectionReceiver(can.Listener):
         if msg.arbitration_id == self._header.frame_id:
             values = self._decode(self._header, msg, self.mapping.header_checksum)
             if values is not None:
-                self._on_header(values)
+                self._on_header(values, float(msg.timestamp))
             return
         message = self._detection_ids.get(msg.arbitration_id)
         if message is None:
@@ -426,7 +427,7 @@ class DetectionReceiver(can.Listener):
             self.stats.decode_errors += 1
             return None
 
-    def _on_header(self, values: dict[str, float]) -> None:
+    def _on_header(self, values: dict[str, float], bus_t_s: float | None = None) -> None:
         m = self.mapping
         counter = int(values[m.counter])
         if counter in self._open or counter in self._recent:
@@ -438,7 +439,7 @@ class DetectionReceiver(can.Listener):
             self._latest = counter
         frame = _Assembly(
             counter=counter, expected=int(sum(values[c] for c in m.count)),
-            timestamp_s=values.get(m.timestamp) if m.timestamp else None)
+            timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s)
         self._open[counter] = frame
         self._current = frame
         for message, early in self._waiting.pop(counter % self._low_modulus, []):
@@ -512,7 +513,7 @@ class DetectionReceiver(can.Listener):
         if self._current is frame and not complete:
             self._current = None
         self._ready.append(Detections(cycle=counter, t_s=frame.timestamp_s, complete=complete,
-                                      **self._quantities(frame)))
+                                      bus_t_s=frame.bus_t_s, **self._quantities(frame)))
 
     def _quantities(self, frame: _Assembly) -> dict[str, np.ndarray]:
         """Arrays of the quantities the mapping carries (polar, rts-scenario's names)."""

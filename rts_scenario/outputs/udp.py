@@ -109,6 +109,7 @@ class UdpOutput(Output):
         self._sequence = 0
         self._start: float | None = None
         self._t0 = 0.0
+        self.scene_origin_wall_s: float | None = None
         self._frames_sent = 0
         self.entries_sent = 0
         self.datagrams_sent = 0
@@ -144,6 +145,8 @@ class UdpOutput(Output):
         now = time.perf_counter()
         if self._start is None:
             self._start, self._t0 = now, t_s
+            # The bus's clock (python-can stamps messages with time.time()) at scene time 0.
+            self.scene_origin_wall_s = time.time() - t_s
         due = self._start + (t_s - self._t0)
         # Sleep most of the way, then spin: sleep alone overshoots by up to a few ms.
         if due - now > 0.002:

@@ -40,15 +40,17 @@ class RadarClock:
         From measurement to the cycle's messages on the bus (>= 0).
     jitter_s : float
         The latency varies uniformly within +- this (>= 0, at most ``latency_s``).
-    counter_start : int
-        Counter of cycle 0 (>= 0).
+    counter_start : int or None
+        Counter of cycle 0 (>= 0); None when it is not known (a real radar counts from when it
+        was switched on): a run learns it from the first cycle's bus time, the simulated radar
+        starts at 0.
     """
 
     cycle_s: float
     start_offset_s: float = 0.0
     latency_s: float = 0.0
     jitter_s: float = 0.0
-    counter_start: int = 0
+    counter_start: int | None = 0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.cycle_s) and self.cycle_s > 0):
@@ -60,7 +62,7 @@ class RadarClock:
         if self.jitter_s > self.latency_s:
             raise ValueError(f"clock.jitter_s: must not exceed latency_s ({self.latency_s:g}), "
                              f"got {self.jitter_s:g}")
-        if self.counter_start < 0:
+        if self.counter_start is not None and self.counter_start < 0:
             raise ValueError(f"clock.counter_start: must be >= 0, got {self.counter_start}")
 
     def cycles_between(self, t_start_s: float, t_end_s: float) -> tuple[IntArray, FloatArray]:
@@ -76,7 +78,11 @@ class RadarClock:
 
     def counter_of(self, n: IntArray) -> IntArray:
         """Return the counters cycles ``n`` carry (before any wrap of the bus signal)."""
-        return self.counter_start + np.asarray(n, dtype=np.int64)
+        return (self.counter_start or 0) + np.asarray(n, dtype=np.int64)
+
+    def cycle_at(self, measured_s: float) -> int:
+        """Return the cycle number measured nearest scene time ``measured_s``."""
+        return int(np.round((measured_s - self.start_offset_s) / self.cycle_s))
 
     def bus_delay(self, n_cycles: int, rng: np.random.Generator) -> FloatArray:
         """Latency of ``n_cycles`` cycles' messages, jitter included (s)."""

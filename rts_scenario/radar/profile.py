@@ -261,7 +261,8 @@ class RadarProfile:
                                start_offset_s=float(c.get("start_offset_s", 0.0)),
                                latency_s=float(c.get("latency_s", 0.0)),
                                jitter_s=float(c.get("jitter_s", 0.0)),
-                               counter_start=int(c.get("counter_start", 0)))
+                               counter_start=None if c.get("counter_start") == "auto"
+                               else int(c.get("counter_start", 0)))
         except ValueError as exc:
             key = str(exc).split(":")[0].split(".")[-1]
             raise doc.error(("clock", key) if key in c else ("clock",),
@@ -317,7 +318,8 @@ PROFILE_SCHEMA: dict[str, Any] = {
                 "start_offset_s": {"type": "number", "minimum": 0},
                 "latency_s": {"type": "number", "minimum": 0},
                 "jitter_s": {"type": "number", "minimum": 0},
-                "counter_start": {"type": "integer", "minimum": 0},
+                "counter_start": {"oneOf": [{"type": "integer", "minimum": 0},
+                                            {"enum": ["auto"]}]},
             },
         },
         "array": {
