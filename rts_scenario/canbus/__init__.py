@@ -23,7 +23,7 @@ import numpy as np
 
 from ..detections import Detections
 from ..errors import CheckError, OutputError
-from .mapping import CanMapping
+from .mapping import CanMapping, PartKey, checksum_byte, multiplexer, page_signals
 
 DEFAULT_INTERFACE = "virtual"
 DEFAULT_CHANNEL = "rts-scenario"
@@ -55,10 +55,9 @@ def _limits(sig: cantools.database.can.Signal) -> tuple[float, float]:
 
 
 def _checksum_byte(message: cantools.database.can.Message, name: str) -> int:
-    sig = message.get_signal_by_name(name)
-    if sig.length != 8 or sig.start % 8 or sig.byte_order != "little_endian":
-        raise CheckError(f"{message.name}.{name}: checksums must be whole little-endian bytes")
-    return int(sig.start // 8)
+    pos = checksum_byte(message, name)
+    assert pos is not None  # the mapping checked it
+    return pos
 
 
 class DetectionPublisher:
@@ -161,12 +160,12 @@ class DetectionPublisher:
         values[m.counter] = frame.cycle % layout.counter_modulus
         left = int(send.size)
         for name in m.count:  # the count, spread over the count signals in order
-            top = int(_range_of(layout.signals_of(header)[name])[1])
+            top = int(_range_of(page_signals(header)[name])[1])
             part = min(left, top)
             values[name] = part
             left -= part
         if m.timestamp is not None:
-            low, high = _range_of(layout.signals_of(header)[m.timestamp])
+            low, high = _range_of(page_signals(header)[m.timestamp])
             values[m.timestamp] = float(np.clip(frame.t_s or 0.0, low, high))
         self._send(header, values, m.header_checksum, bus_time_s)
         for index, i in enumerate(send):  # one encoded message (or page) each
@@ -199,11 +198,7 @@ class _MappedLayout:
         self._defaults: dict[tuple[int, int | None], dict[str, float]] = {}
         self._signal_sets: dict[tuple[int, int | None], set[str]] = {}
         self.header = db.get_message_by_name(m.header)
-        names = [m.fd_message] if fd and m.fd_message else list(m.messages)
-        self.parts: list[tuple[cantools.database.can.Message, int | None]] = []
-        for name in names:
-            message = db.get_message_by_name(name)
-            self.parts += [(message, page) for page in _pages(message)]
+        self.parts = m.parts(fd)
         self.signals = {sg.name: sg for message, _ in self.parts for sg in message.signals}
         self.counter_modulus = 1 << self.header.get_signal_by_name(m.counter).length
         self.frame_counter_modulus = (1 << self.signals[m.frame_counter].length
@@ -218,15 +213,8 @@ class _MappedLayout:
         """Return the names of the signals a message (page) carries (cached)."""
         key = (message.frame_id, page)
         if key not in self._signal_sets:
-            self._signal_sets[key] = set(self.signals_of(message, page))
+            self._signal_sets[key] = set(page_signals(message, page))
         return self._signal_sets[key]
-
-    @staticmethod
-    def signals_of(message: cantools.database.can.Message,
-                   page: int | None = None) -> dict[str, cantools.database.can.Signal]:
-        """Return the signals a message (one multiplexer page of it) carries."""
-        return {sg.name: sg for sg in message.signals
-                if page is None or sg.multiplexer_ids is None or page in sg.multiplexer_ids}
 
     def defaults(self, message: cantools.database.can.Message,
                  page: int | None = None) -> dict[str, float]:
@@ -239,7 +227,7 @@ class _MappedLayout:
     def _default_values(self, message: cantools.database.can.Message,
                         page: int | None) -> dict[str, float]:
         out: dict[str, float] = {}
-        for name, sg in self.signals_of(message, page).items():
+        for name, sg in page_signals(message, page).items():
             if sg.is_multiplexer and page is not None:
                 out[name] = page
                 continue
@@ -252,7 +240,10 @@ class _MappedLayout:
         m = self.mapping
         rng = _column(frame.range_m, frame.count)
         az = np.radians(_column(frame.az_deg, frame.count))
-        el = np.radians(_column(frame.el_deg, frame.count, 0.0))
+        # A radar that reports no height measures no elevation: its x and y are the range
+        # along its azimuth, so the reader gets the range back.
+        flat = m.form == "cartesian" and "z_m" not in m.fields
+        el = np.radians(_column(None if flat else frame.el_deg, frame.count, 0.0))
         vr = _column(frame.radial_velocity_mps, frame.count)
         if m.form == "polar":
             quantities = {"range_m": rng, "azimuth_deg": np.degrees(az),
@@ -268,12 +259,6 @@ class _MappedLayout:
         quantities["rcs_dbsm"] = _column(frame.rcs_dbsm, frame.count, 0.0)
         quantities["snr_db"] = _column(frame.snr_db, frame.count, 0.0)
         return {f.signal: (quantities[q] - f.offset) / f.scale for q, f in m.fields.items()}
-
-
-def _pages(message: cantools.database.can.Message) -> list[int | None]:
-    """Return a message's multiplexer pages in order ([None] for a plain message)."""
-    ids = sorted({i for sg in message.signals for i in (sg.multiplexer_ids or [])})
-    return list(ids) if message.is_multiplexed() and ids else [None]
 
 
 def _column(values: np.ndarray | None, n: int, absent: float = np.nan) -> np.ndarray:
@@ -309,12 +294,12 @@ class _Assembly:
     timestamp_s: float | None
     bus_t_s: float | None = None
     parts: dict[int, dict[str, float]] = field(default_factory=dict)
-    halves: dict[int, int] = field(default_factory=dict)
+    arrived: dict[int, set[PartKey]] = field(default_factory=dict)
 
-    def complete(self, halves_per_detection: int) -> bool:
-        """All announced detections arrived, whole."""
+    def complete(self, needed: tuple[frozenset[PartKey], ...]) -> bool:
+        """All announced detections arrived, each whole in one of the ways it can come."""
         return len(self.parts) == self.expected and all(
-            self.halves.get(i, 0) == halves_per_detection for i in self.parts)
+            any(need <= self.arrived.get(i, set()) for need in needed) for i in self.parts)
 
 
 # Cycles kept open for late or reordered parts; older incomplete ones are handed on as such.
@@ -334,20 +319,19 @@ class DetectionReceiver(can.Listener):
         self.mapping = mapping or CanMapping.builtin()
         db = self.mapping.db
         self._header = db.get_message_by_name(self.mapping.header)
-        self._detection_ids = {db.get_message_by_name(n).frame_id: db.get_message_by_name(n)
-                               for n in (*self.mapping.messages,
-                                         *([self.mapping.fd_message]
-                                           if self.mapping.fd_message else []))}
-        self.stats = BusStats()
         m = self.mapping
+        self._detection_ids = {message.frame_id: message
+                               for fd in (False, True) for message, _ in m.parts(fd)}
+        # A detection is whole with every classic part it needs, or its CAN FD message.
+        self._needed = tuple({m.needed_parts(False), m.needed_parts(True)})
+        self._read = frozenset().union(*self._needed)
+        self._multiplexer = {i: multiplexer(message) for i, message in self._detection_ids.items()}
+        self.stats = BusStats()
         self._counter_modulus = 1 << self._header.get_signal_by_name(m.counter).length
         detection = {sg.name: sg for n in m.messages for sg in db.get_message_by_name(n).signals}
         # Detection messages carry the low bits of the cycle counter (if any).
         self._low_modulus = (1 << detection[m.frame_counter].length
                              if m.frame_counter in detection else 256)
-        self._parts_per_detection = sum(len(_pages(db.get_message_by_name(n)))
-                                        for n in m.messages)
-        self._multiplexers = {sg.name for sg in detection.values() if sg.is_multiplexer}
         # The notifier's thread feeds messages while the run's thread takes cycles.
         self._lock = threading.Lock()
         self.reset()
@@ -364,8 +348,7 @@ class DetectionReceiver(can.Listener):
         self._current: _Assembly | None = None
         self._latest = -1
         # Detections that came before their cycle's header, by counter (low 8 bits).
-        self._waiting: OrderedDict[int, list[tuple[cantools.database.can.Message,
-                                                   dict[str, float]]]] = OrderedDict()
+        self._waiting: OrderedDict[int, list[tuple[PartKey, dict[str, float]]]] = OrderedDict()
 
     @property
     def pending(self) -> int:
@@ -408,8 +391,12 @@ class DetectionReceiver(can.Listener):
             stats.unknown_ids += 1
             return
         values = self._decode(message, msg, self.mapping.checksum)
-        if values is not None:
-            self._on_detection(message, values)
+        if values is None:
+            return
+        mux = self._multiplexer[message.frame_id]
+        part = (message.frame_id, None if mux is None else int(values[mux]))
+        if part in self._read:  # else a page the mapping does not read (extended information)
+            self._on_detection(part, values)
 
     def _decode(self, message: cantools.database.can.Message, msg: can.Message,
                 checksum: str | None) -> dict[str, float] | None:
@@ -442,16 +429,15 @@ class DetectionReceiver(can.Listener):
             timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s)
         self._open[counter] = frame
         self._current = frame
-        for message, early in self._waiting.pop(counter % self._low_modulus, []):
+        for part, early in self._waiting.pop(counter % self._low_modulus, []):
             self.stats.orphans -= 1
-            self._attach(frame, message, early)
-        if frame.complete(self.halves_per_detection):
+            self._attach(frame, part, early)
+        if frame.complete(self._needed):
             self._finish(counter)
         while len(self._open) > OPEN_CYCLES:
             self._finish(next(iter(self._open)))
 
-    def _on_detection(self, message: cantools.database.can.Message,
-                      values: dict[str, float]) -> None:
+    def _on_detection(self, part: PartKey, values: dict[str, float]) -> None:
         m = self.mapping
         frame = self._current
         if m.frame_counter is not None and m.frame_counter in values:
@@ -470,7 +456,7 @@ class DetectionReceiver(can.Listener):
                         if done:
                             self.stats.duplicates += 1
                         return
-                    self._waiting.setdefault(low, []).append((message, values))
+                    self._waiting.setdefault(low, []).append((part, values))
                     self.stats.orphans += 1  # until its header comes
                     while len(self._waiting) > OPEN_CYCLES:
                         self._waiting.popitem(last=False)
@@ -485,28 +471,23 @@ class DetectionReceiver(can.Listener):
             else:
                 self.stats.orphans += 1
             return
-        self._attach(frame, message, values)
-        if frame.complete(self.halves_per_detection):
+        self._attach(frame, part, values)
+        if frame.complete(self._needed):
             self._finish(frame.counter)
 
-    def _attach(self, frame: _Assembly, message: cantools.database.can.Message,
-                values: dict[str, float]) -> None:
-        m = self.mapping
-        index = int(values[m.index])
-        part = frame.parts.setdefault(index, {})
-        if set(values) & set(part) - {m.index, m.frame_counter, m.checksum, *self._multiplexers}:
+    def _attach(self, frame: _Assembly, part: PartKey, values: dict[str, float]) -> None:
+        index = int(values[self.mapping.index])
+        arrived = frame.arrived.setdefault(index, set())
+        if part in arrived:
             self.stats.duplicates += 1
             return
-        part.update(values)
-        # A CAN FD detection is whole in one message; classic ones come in halves.
-        whole = message.name == m.fd_message
-        frame.halves[index] = frame.halves.get(index, 0) + (
-            self.halves_per_detection if whole else 1)
+        arrived.add(part)
+        frame.parts.setdefault(index, {}).update(values)
 
     def _finish(self, counter: int) -> None:
         """Hand on an open cycle as `Detections`."""
         frame = self._open.pop(counter)
-        complete = frame.complete(self.halves_per_detection)
+        complete = frame.complete(self._needed)
         self._recent[counter] = complete
         while len(self._recent) > RECENT_CYCLES:
             self._recent.popitem(last=False)
@@ -546,11 +527,6 @@ class DetectionReceiver(can.Listener):
             if q in m.fields:
                 out[q] = get(q)
         return out
-
-    @property
-    def halves_per_detection(self) -> int:
-        """Messages per detection: each classic message or multiplexer page (CAN FD: one)."""
-        return self._parts_per_detection
 
 
 def _behind(counter: int, latest: int, modulus: int) -> bool:

@@ -5,7 +5,12 @@ detection count) and the detection message(s), and which signal carries which qu
 polar form (range, azimuth, elevation) or cartesian form (distance long/lat/up, relative
 velocity long/lat). Signals are read through the DBC's own scaling; ``scale``/``offset`` per
 quantity convert further units (e.g. km/h). rts-scenario's own messages use the same mechanism
-(``rts_scenario/data/can/rts_detections.mapping.yaml``).
+(``rts_scenario/data/can/rts_detections.mapping.yaml``). docs/can-mapping.md describes the file.
+
+A detection is carried by *parts*: each detection message, or each multiplexer page of a
+multiplexed one. The parts that carry a mapped quantity are the ones a detection needs; the
+others (an extended-information page the mapping does not read) are sent by the simulated radar
+as the protocol has them and skipped by the receiver.
 """
 
 from __future__ import annotations
@@ -21,6 +26,9 @@ from ..located_yaml import Document, load_yaml, validate
 
 QUANTITIES = ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps", "x_m", "y_m",
               "z_m", "vx_mps", "vy_mps", "rcs_dbsm", "snr_db")
+
+# Classic messages per detection (a radar's general, quality and extended-information messages).
+MAX_MESSAGES = 8
 
 _SIGNAL: dict[str, Any] = {
     "oneOf": [
@@ -53,7 +61,7 @@ MAPPING_SCHEMA: dict[str, Any] = {
             "type": "object", "additionalProperties": False,
             "required": ["messages", "index", "form"],
             "properties": {
-                "messages": {"type": "array", "minItems": 1, "maxItems": 2,
+                "messages": {"type": "array", "minItems": 1, "maxItems": MAX_MESSAGES,
                              "items": {"type": "string"}},
                 "fd_message": {"type": "string"},
                 "frame_counter": {"type": "string"},
@@ -67,9 +75,46 @@ MAPPING_SCHEMA: dict[str, Any] = {
 }
 
 
+Message = cantools.database.can.Message
+# A part of a detection: a message's frame id and its multiplexer page (None: not multiplexed).
+PartKey = tuple[int, int | None]
+
+
 def _can_db(db: object) -> cantools.database.can.Database:
     assert isinstance(db, cantools.database.can.Database)
     return db
+
+
+def pages(message: Message) -> list[int | None]:
+    """Return a message's multiplexer pages in order ([None] for a plain message)."""
+    ids = sorted({i for sg in message.signals for i in (sg.multiplexer_ids or [])})
+    return list(ids) if message.is_multiplexed() and ids else [None]
+
+
+def page_signals(message: Message,
+                 page: int | None = None) -> dict[str, cantools.database.can.Signal]:
+    """Return the signals a message (one multiplexer page of it) carries."""
+    return {sg.name: sg for sg in message.signals
+            if page is None or sg.multiplexer_ids is None or page in sg.multiplexer_ids}
+
+
+def multiplexer(message: Message) -> str | None:
+    """Return the name of a message's (top-level) multiplexer signal, if it has one."""
+    return next((sg.name for sg in message.signals
+                 if sg.is_multiplexer and sg.multiplexer_ids is None), None)
+
+
+def checksum_byte(message: Message, name: str) -> int | None:
+    """Return the byte a checksum signal fills, or None if it is not one whole byte.
+
+    A whole byte is 8 bits starting at a byte's bit 0 (Intel) or bit 7 (Motorola: the DBC
+    numbers a big-endian signal from its most significant bit).
+    """
+    sig = message.get_signal_by_name(name)
+    first = 0 if sig.byte_order == "little_endian" else 7
+    if sig.length != 8 or sig.start % 8 != first or sig.is_signed or sig.multiplexer_ids:
+        return None
+    return int(sig.start // 8)
 
 
 @dataclass(frozen=True)
@@ -115,6 +160,24 @@ class CanMapping:
             if {"vx_mps", "vy_mps"} <= have:
                 out.add("radial_velocity_mps")
         return out
+
+    def parts(self, fd: bool = False) -> list[tuple[Message, int | None]]:
+        """Return every message and page of one detection, in sending order.
+
+        ``fd``: the CAN FD message if the mapping has one, else the classic messages.
+        """
+        names = [self.fd_message] if fd and self.fd_message else list(self.messages)
+        out: list[tuple[Message, int | None]] = []
+        for name in names:
+            message = self.db.get_message_by_name(name)
+            out += [(message, page) for page in pages(message)]
+        return out
+
+    def needed_parts(self, fd: bool = False) -> frozenset[PartKey]:
+        """Return the parts a detection needs: those carrying a mapped quantity."""
+        mapped = {f.signal for f in self.fields.values()}
+        return frozenset((message.frame_id, page) for message, page in self.parts(fd)
+                         if mapped & set(page_signals(message, page)))
 
     @classmethod
     def builtin(cls) -> CanMapping:
@@ -181,6 +244,27 @@ class CanMapping:
             if f.signal not in carried:
                 raise doc.error(("detection", q), f"signal {f.signal!r} is not in the detection "
                                                   f"message(s) {', '.join(carriers)}")
+        for key, message_names, checksum in (
+                (("header", "checksum"), [self.header], self.header_checksum),
+                (("detection", "checksum"), carriers, self.checksum)):
+            for m in message_names:
+                if checksum in {s.name for s in names[m].signals} and \
+                        checksum_byte(names[m], checksum) is None:
+                    sig = names[m].get_signal_by_name(checksum)
+                    raise doc.error(key, f"signal {checksum!r} of message {m!r} must fill one "
+                                         f"whole byte to be a checksum (8 unsigned bits from a "
+                                         f"byte's bit 0 Intel or bit 7 Motorola, in every "
+                                         f"page), got {sig.length} bits from bit {sig.start} "
+                                         f"{sig.byte_order.replace('_', '-')}")
+        for fd in (False, True):
+            for message, page in self.parts(fd):
+                if (message.frame_id, page) in self.needed_parts(fd) and \
+                        self.index not in page_signals(message, page):
+                    where = f"page {page} of message" if page is not None else "message"
+                    raise doc.error(("detection", "index"),
+                                    f"signal {self.index!r} is not in {where} "
+                                    f"{message.name!r}: every message and page that carries a "
+                                    f"detection needs the index that joins them")
         required = {"polar": ("range_m", "azimuth_deg"), "cartesian": ("x_m", "y_m")}[self.form]
         missing = [q for q in required if q not in self.fields]
         if missing:
