@@ -8,7 +8,7 @@ import cantools
 import numpy as np
 import pytest
 
-from rts_scenario.canbus import DetectionPublisher, DetectionReceiver
+from rts_scenario.canbus import DetectionPublisher, DetectionReceiver, open_bus
 from rts_scenario.canbus.mapping import CanMapping
 from rts_scenario.detections import Detections
 from rts_scenario.pipeline import RunOptions, run_scene
@@ -178,3 +178,272 @@ def test_a_scene_passes_with_the_simulated_radar_speaking_a_third_party_protocol
     assert report.passed, report.reasons
     assert report.frames["checked"] == report.frames["total"]
     assert report.bus["unsendable_detections"] == 0
+
+
+# A radar protocol written for these tests: every signal Motorola, most of them across byte
+# borders; a negative factor (azimuth counted to the right); objects in a multiplexed message
+# with a page the mapping does not read (extended information); an 8-bit cycle counter; a
+# checksum byte in each message; a CAN FD message with everything; another ECU's message.
+TEST_MUX_DBC = '''VERSION ""
+BU_: RADAR CHECKER BRAKES
+BO_ 768 Head: 8 RADAR
+ SG_ Count : 7|6@0+ (1,0) [0|63] "" CHECKER
+ SG_ Counter : 1|8@0+ (1,0) [0|255] "" CHECKER
+ SG_ MeasTime : 23|16@0+ (0.001,0) [0|65.535] "s" CHECKER
+ SG_ Checksum : 63|8@0+ (1,0) [0|255] "" CHECKER
+BO_ 769 Obj: 8 RADAR
+ SG_ Page M : 7|2@0+ (1,0) [0|3] "" CHECKER
+ SG_ Id : 5|6@0+ (1,0) [0|63] "" CHECKER
+ SG_ Range m0 : 15|13@0+ (0.05,0) [0|409.55] "m" CHECKER
+ SG_ Azimuth m0 : 18|11@0- (-0.1,0) [-102.3|102.4] "deg" CHECKER
+ SG_ VrelRad m1 : 15|12@0- (0.05,0) [-102.4|102.35] "m/s" CHECKER
+ SG_ Elevation m1 : 19|10@0- (0.1,0) [-51.2|51.1] "deg" CHECKER
+ SG_ RCS m1 : 25|8@0+ (0.5,-50) [-50|77.5] "dBsm" CHECKER
+ SG_ Class m2 : 15|4@0+ (1,0) [0|15] "" CHECKER
+ SG_ ProbOfExist m2 : 11|3@0+ (1,0) [0|7] "" CHECKER
+ SG_ Checksum : 63|8@0+ (1,0) [0|255] "" CHECKER
+BO_ 770 ObjFD: 12 RADAR
+ SG_ Id : 7|8@0+ (1,0) [0|255] "" CHECKER
+ SG_ Range : 15|13@0+ (0.05,0) [0|409.55] "m" CHECKER
+ SG_ Azimuth : 18|11@0- (-0.1,0) [-102.3|102.4] "deg" CHECKER
+ SG_ VrelRad : 39|12@0- (0.05,0) [-102.4|102.35] "m/s" CHECKER
+ SG_ Elevation : 43|10@0- (0.1,0) [-51.2|51.1] "deg" CHECKER
+ SG_ RCS : 57|8@0+ (0.5,-50) [-50|77.5] "dBsm" CHECKER
+ SG_ Checksum : 95|8@0+ (1,0) [0|255] "" CHECKER
+BO_ 1280 Brake_Status: 8 BRAKES
+ SG_ BrakePressure : 7|12@0+ (0.1,0) [0|409.5] "bar" RADAR
+'''
+
+TEST_MUX_MAPPING = """rts_can_mapping: 1
+name: mux-test
+dbc: mux.dbc
+header: {message: Head, counter: Counter, count: [Count], timestamp: MeasTime,
+         checksum: Checksum}
+detection:
+  messages: [Obj]
+  fd_message: ObjFD
+  index: Id
+  checksum: Checksum
+  form: polar
+  range_m: Range
+  azimuth_deg: Azimuth
+  elevation_deg: Elevation
+  radial_velocity_mps: VrelRad
+  rcs_dbsm: RCS
+"""
+
+# (quantity, factor, offset) of TEST_MUX_DBC, written out here rather than read through cantools.
+MUX_RESOLUTION = (("range_m", 0.05, 0.0), ("az_deg", -0.1, 0.0), ("el_deg", 0.1, 0.0),
+                  ("radial_velocity_mps", 0.05, 0.0), ("rcs_dbsm", 0.5, -50.0))
+
+
+def motorola(data: bytes, start: int, length: int, signed: bool = False) -> int:
+    """Raw value of a Motorola signal, read by hand: ``start`` is the DBC's bit number of its
+    most significant bit (byte start // 8, bit start % 8 with 7 the byte's top bit)."""
+    msb = (start // 8) * 8 + (7 - start % 8)  # position in the big-endian bit stream
+    raw = int.from_bytes(data, "big") >> (8 * len(data) - msb - length) & ((1 << length) - 1)
+    return raw - (1 << length) if signed and raw >> (length - 1) else raw
+
+
+def quantized(values, factor, offset):
+    return np.round((np.asarray(values) - offset) / factor) * factor + offset
+
+
+@pytest.fixture
+def mux_mapping(tmp_path):
+    (tmp_path / "mux.dbc").write_text(TEST_MUX_DBC)
+    (tmp_path / "mux.mapping.yaml").write_text(TEST_MUX_MAPPING)
+    return CanMapping.from_file(tmp_path / "mux.mapping.yaml")
+
+
+def test_motorola_bytes_are_where_the_dbc_says(mux_mapping):
+    import zlib
+
+    bus = Capture()
+    sent = cycle(2, counter=300)
+    DetectionPublisher(bus, mapping=mux_mapping).publish(sent)
+    head = bus.messages[0].data
+    assert motorola(head, 7, 6) == 2
+    assert motorola(head, 1, 8) == 300 % 256  # wrapped at the counter's 8 bits
+    assert motorola(head, 23, 16) == 12345  # ms
+    assert head[7] == zlib.crc32(bytes(head[:7])) & 0xFF  # checksum in the last byte
+    pages = bus.messages[1:]
+    assert [motorola(m.data, 7, 2) for m in pages] == [0, 1, 2, 0, 1, 2]  # every page is sent
+    assert [motorola(m.data, 5, 6) for m in pages] == [0, 0, 0, 1, 1, 1]
+    for i in range(2):
+        page0, page1 = pages[3 * i].data, pages[3 * i + 1].data
+        assert motorola(page0, 15, 13) * 0.05 == pytest.approx(sent.range_m[i], abs=0.025)
+        # Counted to the right on the bus: the raw value has the opposite sign.
+        assert motorola(page0, 18, 11, signed=True) * -0.1 == pytest.approx(sent.az_deg[i],
+                                                                             abs=0.05)
+        assert np.sign(motorola(page0, 18, 11, signed=True)) == -np.sign(sent.az_deg[i])
+        assert motorola(page1, 15, 12, signed=True) * 0.05 == pytest.approx(
+            sent.radial_velocity_mps[i], abs=0.025)
+        assert motorola(page1, 19, 10, signed=True) * 0.1 == pytest.approx(sent.el_deg[i],
+                                                                           abs=0.05)
+        assert motorola(page1, 25, 8) * 0.5 - 50 == pytest.approx(sent.rcs_dbsm[i], abs=0.25)
+        for page in pages[3 * i : 3 * i + 3]:
+            assert page.data[7] == zlib.crc32(bytes(page.data[:7])) & 0xFF
+
+
+@pytest.mark.parametrize("fd", [False, True])
+def test_virtual_bus_round_trip_with_other_ecus_on_the_bus(mux_mapping, fd):
+    counters = [254, 255, 256, 257]  # the 8-bit counter wraps
+    sent = [cycle(n, counter=c) for n, c in zip((3, 0, 5, 63), counters, strict=True)]
+    brakes = can.Message(arbitration_id=1280, data=bytes(8), is_extended_id=False, is_fd=fd)
+    unknown = can.Message(arbitration_id=0x18FF0001, data=bytes(8), is_extended_id=True,
+                          is_fd=fd)
+    with open_bus(channel="test-real-dbc", fd=fd) as listen, \
+            open_bus(channel="test-real-dbc", fd=fd) as talk:
+        publisher = DetectionPublisher(talk, mapping=mux_mapping, fd=fd)
+        receiver = DetectionReceiver(mux_mapping)
+        for detections in sent:
+            talk.send(brakes)
+            publisher.publish(detections)
+            talk.send(unknown)
+        while (msg := listen.recv(timeout=0.05)) is not None:
+            receiver.on_message_received(msg)
+        got = receiver.flush()
+    assert publisher.unsendable_detections == 0
+    parts = 1 if fd else 3  # classic: three pages per object, one the receiver skips
+    assert publisher.sent == sum(1 + parts * d.count for d in sent)
+    stats = receiver.stats
+    assert stats.unknown_ids == 2 * len(sent)  # other ECUs: ignored and counted
+    assert (stats.checksum_errors, stats.decode_errors, stats.duplicates, stats.orphans,
+            stats.reordered) == (0, 0, 0, 0, 0)
+    assert [d.cycle for d in got] == [c % 256 for c in counters]
+    assert all(d.complete for d in got)
+    assert got[1].count == 0
+    for want, have in zip(sent, got, strict=True):
+        assert have.snr_db is None  # not mapped: not reported
+        assert have.t_s == pytest.approx(want.t_s)
+        for name, factor, offset in MUX_RESOLUTION:
+            np.testing.assert_allclose(getattr(have, name),
+                                       quantized(getattr(want, name), factor, offset),
+                                       atol=1e-9, err_msg=name)
+
+
+def test_pages_the_mapping_does_not_read_may_be_missing_and_faults_are_counted(mux_mapping):
+    bus = Capture()
+    DetectionPublisher(bus, mapping=mux_mapping).publish(cycle(3))
+    receiver = DetectionReceiver(mux_mapping)
+    without_extended = [m for m in bus.messages
+                        if m.arbitration_id != 769 or motorola(m.data, 7, 2) != 2]
+    assert len(without_extended) == 1 + 2 * 3
+    for msg in without_extended:
+        receiver.on_message_received(msg)
+    d, = receiver.flush()
+    assert d.complete and d.count == 3 and receiver.stats.clean
+
+    receiver = DetectionReceiver(mux_mapping)
+    corrupt = bytearray(bus.messages[2].data)  # object 0, page 1
+    corrupt[2] ^= 0x04
+    broken = can.Message(arbitration_id=769, data=bytes(corrupt), is_extended_id=False)
+    for msg in [*bus.messages[:2], broken, *bus.messages[3:], bus.messages[4]]:
+        receiver.on_message_received(msg)
+    d, = receiver.flush()
+    assert not d.complete  # object 0 lacks its second page
+    assert (receiver.stats.checksum_errors, receiver.stats.duplicates) == (1, 1)
+
+
+TEST_CARTESIAN_DBC = '''VERSION ""
+BU_: RADAR CHECKER
+BO_ 1024 Status: 8 RADAR
+ SG_ NofObj : 7|8@0+ (1,0) [0|255] "" CHECKER
+ SG_ Cycle : 15|16@0+ (1,0) [0|65535] "" CHECKER
+BO_ 1025 Object: 8 RADAR
+ SG_ ObjId : 7|6@0+ (1,0) [0|63] "" CHECKER
+ SG_ DistX : 1|13@0+ (0.1,-50) [-50|769.1] "m" CHECKER
+ SG_ DistY : 20|11@0- (-0.1,0) [-102.3|102.4] "m" CHECKER
+ SG_ DistZ : 25|9@0- (0.05,0) [-12.8|12.75] "m" CHECKER
+ SG_ VelX : 32|12@0- (0.1,0) [-204.8|204.7] "m/s" CHECKER
+ SG_ VelY : 52|12@0- (-0.1,0) [-204.7|204.8] "m/s" CHECKER
+'''
+
+
+def test_cartesian_motorola_with_height_and_a_lateral_axis_counted_to_the_right(tmp_path):
+    (tmp_path / "xyz.dbc").write_text(TEST_CARTESIAN_DBC)
+    (tmp_path / "xyz.mapping.yaml").write_text(
+        "rts_can_mapping: 1\nname: xyz\ndbc: xyz.dbc\n"
+        "header: {message: Status, counter: Cycle, count: [NofObj]}\n"
+        "detection: {messages: [Object], index: ObjId, form: cartesian,\n"
+        "  x_m: DistX, y_m: DistY, z_m: DistZ, vx_mps: VelX, vy_mps: VelY}\n")
+    mapping = CanMapping.from_file(tmp_path / "xyz.mapping.yaml")
+    assert mapping.quantities == {"range_m", "azimuth_deg", "elevation_deg",
+                                  "radial_velocity_mps"}
+    sent = cycle(6)
+    _, receiver, got = decode_round_trip(mapping, sent)
+    d, = got
+    assert d.complete and receiver.stats.clean
+    # Reference from the radar frame's definitions: position on the line of sight, velocity
+    # horizontal (a road target) with the measured radial velocity; quantized at the DBC's steps.
+    az, el, r = np.radians(sent.az_deg), np.radians(sent.el_deg), sent.range_m
+    x = quantized(r * np.cos(el) * np.cos(az), 0.1, -50)
+    y = quantized(r * np.cos(el) * np.sin(az), -0.1, 0)
+    z = quantized(r * np.sin(el), 0.05, 0)
+    vx = quantized(sent.radial_velocity_mps * np.cos(az) / np.cos(el), 0.1, 0)
+    vy = quantized(sent.radial_velocity_mps * np.sin(az) / np.cos(el), -0.1, 0)
+    rq = np.sqrt(x * x + y * y + z * z)
+    np.testing.assert_allclose(d.range_m, rq, atol=1e-9)
+    np.testing.assert_allclose(d.az_deg, np.degrees(np.arctan2(y, x)), atol=1e-9)
+    np.testing.assert_allclose(d.el_deg, np.degrees(np.arctan2(z, np.hypot(x, y))), atol=1e-9)
+    np.testing.assert_allclose(d.radial_velocity_mps, (x * vx + y * vy) / rq, atol=1e-9)
+    # And close to what was sent (steps of 0.1 m, 0.05 m, 0.1 m/s).
+    np.testing.assert_allclose(d.range_m, r, atol=0.1)
+    np.testing.assert_allclose(d.radial_velocity_mps, sent.radial_velocity_mps, atol=0.1)
+
+
+def test_a_radar_without_height_reports_the_range_of_an_elevated_target():
+    mapping = CanMapping.from_file(CLUSTER_LIST)
+    sent = cycle(4)
+    sent.range_m[:] = [40.0, 55.0, 70.0, 85.0]
+    sent.el_deg[:] = 8.0  # cos(8 deg) would shorten 85 m by 0.8 m
+    _, _, got = decode_round_trip(mapping, sent)
+    d, = got
+    assert d.el_deg is None
+    # x and y at 0.2 m steps: the range within half a step on each axis.
+    np.testing.assert_allclose(d.range_m, sent.range_m, atol=0.1 * np.sqrt(2))
+
+
+BAD_MAPPINGS = [
+    ("checksum-not-a-byte", ("checksum: Checksum}", "checksum: Count}"), "header.checksum",
+     r"signal 'Count' of message 'Head' must fill one whole byte .* got 6 bits"),
+    ("checksum-motorola-off-byte", ("Checksum : 63|8@0+ (1,0) [0|255] \"\" CHECKER\nBO_ 769",
+                                    "Checksum : 51|8@0+ (1,0) [0|255] \"\" CHECKER\nBO_ 769"),
+     "header.checksum", r"signal 'Checksum' of message 'Head' must fill one whole byte .*bit 7 "
+                        r"Motorola.* got 8 bits from bit 51 big-endian"),
+    ("index-on-one-page", (" SG_ Id : 5|6@0+", " SG_ Id m0 : 5|6@0+"), "detection.index",
+     r"signal 'Id' is not in page 1 of message 'Obj'"),
+    ("unknown-message", ("messages: [Obj]", "messages: [Objects]"), "detection.messages",
+     r"message 'Objects' is not in the DBC; messages: .*Head, Obj"),
+    ("form", ("form: polar", "form: spherical"), "detection.form",
+     r"got 'spherical'; allowed values: 'polar', 'cartesian'"),
+    ("too-many-messages", ("messages: [Obj]", "messages: [Obj" + ", Obj" * 8 + "]"),
+     "detection.messages", r"must have at most 8 items, got 9"),
+    ("missing-dbc", ("dbc: mux.dbc", "dbc: none.dbc"), "dbc", r"cannot load DBC .*none.dbc"),
+]
+
+
+@pytest.mark.parametrize(("change", "key", "pattern"), [c[1:] for c in BAD_MAPPINGS],
+                         ids=[c[0] for c in BAD_MAPPINGS])
+def test_bad_mapping_is_one_located_error_naming_file_and_key(tmp_path, capsys, change, key,
+                                                              pattern):
+    import re
+
+    import rts_scenario.cli as cli
+
+    old, new = change
+    dbc, mapping = TEST_MUX_DBC, TEST_MUX_MAPPING
+    assert old in dbc + mapping, old
+    (tmp_path / "mux.dbc").write_text(dbc.replace(old, new))
+    path = tmp_path / "mux.mapping.yaml"
+    path.write_text(mapping.replace(old, new))
+    code = cli.main(["run", str(ROOT / "scenarios" / "cut_in.scenario.yaml"),
+                     "--mapping", str(path)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    lines = [line for line in err.splitlines() if "error: " in line]
+    assert len(lines) == 1, err
+    message = lines[0].split("error: ", 1)[1]
+    assert re.match(rf"--mapping {re.escape(str(path))}:\d+:\d+: {re.escape(key)}: {pattern}",
+                    message), message
