@@ -1,12 +1,13 @@
 """Detections over CAN: python-can transport, cantools encoding, frame reassembly.
 
-The simulated radar publishes each frame as a header message (frame counter, detection count,
-time) followed by its detections (two classic CAN messages per detection, or one CAN FD
-message), each with an end-to-end checksum; a detection no signal can carry is left out and
-counted (`DetectionPublisher.unsendable`). `DetectionReceiver` is a python-can listener that
-decodes any radar's messages through a `CanMapping` and reassembles them into `Detections`
-(one per radar cycle), counting everything that goes wrong on the way. It keeps only the few
-cycles still being assembled: memory does not grow with the length of a run.
+The simulated radar publishes each frame in a mapping's protocol (rts-scenario's own by
+default: a header message with frame counter, detection count and time, then two classic CAN
+messages per detection or one CAN FD message, each with an end-to-end checksum); a detection no
+signal can carry is left out and counted (`DetectionPublisher.unsendable`).
+`DetectionReceiver` is a python-can listener that decodes any radar's messages through a
+`CanMapping` and reassembles them into `Detections` (one per radar cycle), counting everything
+that goes wrong on the way. It keeps only the few cycles still being assembled: memory does not
+grow with the length of a run.
 """
 
 from __future__ import annotations
