@@ -21,7 +21,7 @@ from typing import TextIO
 import can
 import numpy as np
 
-from .canbus import DetectionPublisher, DetectionReceiver, open_bus
+from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker
 from .detections import Detections, unwrap_counter
@@ -145,11 +145,11 @@ class Pipeline:
             self.mapping = CanMapping.from_file(options.mapping) if options.mapping else None
             self.receiver = DetectionReceiver(self.mapping)
             listen = self._open_bus()
-            listeners: list[can.Listener] = [self.receiver]
+            self._listeners: list[can.Listener] = [self.receiver]
             if options.bus_log:
                 self._logger = can.Logger(options.bus_log)
-                listeners.append(self._logger)
-            self._notifier = can.Notifier(listen, listeners, timeout=0.05)
+                self._listeners.append(self._logger)
+            self._notifier = can.Notifier(listen, self._listeners, timeout=0.05)
             name, argument = split_spec(options.output)
             context = RunContext(rig=rig, radar=radar, radar_options=radar_options
                                  or RadarOptions(), open_publisher=self._open_publisher,
@@ -172,22 +172,25 @@ class Pipeline:
         self._buses.append(bus)
         return bus
 
-    def _open_publisher(self) -> Callable[[Detections], None]:
+    def _open_publisher(self) -> Callable[[list[Detections]], None]:
         if self._publisher is None:
             o = self.options
-            # On the virtual bus the messages keep the time the radar would have sent them:
-            # its measurement time after the run's start, plus its latency and jitter.
-            options = {"preserve_timestamps": True} if o.can_interface == "virtual" else {}
-            bus = open_bus(o.can_interface, self.channel, fd=o.can_fd, **options)
+            if o.can_interface == "virtual":
+                # In process, the simulated radar's messages go straight to the run's listeners
+                # (no copy, no thread) and keep the time the radar would have sent them: its
+                # measurement time after the run's start, plus its latency and jitter.
+                bus: can.BusABC = ListenerBus(self._listeners, self.channel)
+            else:
+                bus = open_bus(o.can_interface, self.channel, fd=o.can_fd)
             self._buses.append(bus)
             # The run's mapping (a third-party radar's DBC) makes the simulated radar speak it.
             self._publisher = DetectionPublisher(bus, fd=o.can_fd, mapping=self.mapping)
         publisher, clock = self._publisher, self.radar.radar_clock
         origin, rng = time.time(), np.random.default_rng(0)
 
-        def publish(cycle: Detections) -> None:
-            sent = origin + (cycle.t_s or 0.0) + float(clock.bus_delay(1, rng)[0])
-            publisher.publish(cycle, sent)
+        def publish(cycles: list[Detections]) -> None:
+            t = np.array([c.t_s or 0.0 for c in cycles], dtype=np.float64)
+            publisher.publish_many(cycles, origin + t + clock.bus_delay(len(cycles), rng))
 
         return publish
 

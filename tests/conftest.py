@@ -44,15 +44,16 @@ def rng() -> np.random.Generator:
 
 @pytest.fixture
 def no_bus_left_open(monkeypatch):
-    """Fail the test if it leaves a virtual CAN bus open; yields the buses it created."""
+    """Fail the test if it leaves a CAN bus open (virtual or in-process); yields the buses."""
+    from rts_scenario.canbus import ListenerBus
+
     created = []
-    original = can.interfaces.virtual.VirtualBus.__init__
+    for cls in (can.interfaces.virtual.VirtualBus, ListenerBus):
+        def init(self, *args, _original=cls.__init__, **kwargs):
+            _original(self, *args, **kwargs)
+            created.append(self)
 
-    def init(self, *args, **kwargs):
-        original(self, *args, **kwargs)
-        created.append(self)
-
-    monkeypatch.setattr(can.interfaces.virtual.VirtualBus, "__init__", init)
+        monkeypatch.setattr(cls, "__init__", init)
     yield created
     left = [b for b in created if not b._is_shutdown]
     for b in left:

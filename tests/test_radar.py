@@ -168,7 +168,7 @@ def test_simulated_radar_output_and_bad_options():
     sch = build_schedule(tracks([0.0, 1.0], [0.0, 2.0]), KIT, PAPER)
     got = []
     with open_output("simulated-radar", profile=PAPER, rig=KIT, noise=False,
-                     sink=got.append) as out:
+                     sink=got.extend) as out:
         out.write(sch)
     assert [d.cycle for d in got] == [0, 1] and all(d.count == 1 for d in got)
     with pytest.raises(rs.RtsError,

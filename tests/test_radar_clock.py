@@ -87,7 +87,7 @@ def run(scene, tamper=None):
     with Pipeline.for_scene(scene, RunOptions()) as pipeline:
         if tamper is not None:
             sink = pipeline.output._sink
-            pipeline.output._sink = lambda cycle: tamper(cycle, sink)
+            pipeline.output._sink = lambda cycles: [tamper(c, sink) for c in cycles]
         return pipeline.run(scene).report
 
 
@@ -98,7 +98,7 @@ def test_a_radar_on_its_own_clock_is_checked_at_its_measurement_times(tmp_path):
 
     def keep(cycle, sink):
         seen.append(cycle)
-        sink(cycle)
+        sink([cycle])
 
     report = run(scene, keep)
     assert report.passed, report.reasons
@@ -138,7 +138,7 @@ def test_faults_of_a_radar_on_its_own_clock_fail_with_their_reason(tmp_path, fau
                                radial_velocity_mps=cycle.radial_velocity_mps,
                                az_deg=cycle.az_deg + 1.0, el_deg=cycle.el_deg,
                                snr_db=cycle.snr_db, rcs_dbsm=cycle.rcs_dbsm)
-        sink(cycle)
+        sink([cycle])
 
     report = run(scene, tamper)
     assert not report.passed

@@ -54,7 +54,7 @@ def test_a_failing_run_re_checks_to_the_same_failure(tmp_path):
     log = tmp_path / "biased.blf"
     with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
         sink = pipeline.output._sink
-        pipeline.output._sink = lambda cycle: sink(biased(cycle))
+        pipeline.output._sink = lambda cycles: sink([biased(c) for c in cycles])
         live = pipeline.run(scene).report
     again = check_log(scene, log).report
     assert not live.passed and not again.passed
@@ -94,9 +94,10 @@ def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suf
     rng = np.random.default_rng(seed)
     clock = scene.radar.radar_clock
 
-    def sink(cycle):
-        stamp["t"] = origin_s + cycle.t_s + clock.latency_s + rng.uniform(-0.004, 0.004)
-        publisher.publish(tamper(cycle) if tamper else cycle)
+    def sink(cycles):
+        for cycle in cycles:
+            stamp["t"] = origin_s + cycle.t_s + clock.latency_s + rng.uniform(-0.004, 0.004)
+            publisher.publish(tamper(cycle) if tamper else cycle)
 
     # The radar ran before the RTS played the scene: empty cycles, counters before 4242.
     for n in range(-int(lead_s / clock.cycle_s), 0):

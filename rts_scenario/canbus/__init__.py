@@ -12,15 +12,18 @@ grow with the length of a run.
 
 from __future__ import annotations
 
+import operator
 import threading
 import zlib
 from collections import Counter, OrderedDict, deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import can
 import cantools
 import numpy as np
+from cantools.database.utils import create_encode_decode_formats
 
 from ..detections import Detections
 from ..errors import CheckError, OutputError
@@ -44,9 +47,36 @@ def open_bus(interface: str = DEFAULT_INTERFACE, channel: str = DEFAULT_CHANNEL,
                          f"{exc}") from None
 
 
-def _checksum(data: bytes, position: int) -> int:
+class ListenerBus(can.BusABC):
+    """An in-process bus: each message sent goes straight to its listeners, in the sender's thread.
+
+    The simulated radar and the receiver live in one process; python-can's virtual bus would
+    copy every message for its queue and hand it over through a notifier's thread. Here the
+    message itself is handed to each listener (the receiver, a logger), marked as received on
+    ``channel`` with the timestamp the sender gave it. Senders must not change a message after
+    sending it (`DetectionPublisher` builds a new one for each).
+    """
+
+    def __init__(self, listeners: list[can.Listener], channel: str = DEFAULT_CHANNEL,
+                 **kwargs: Any) -> None:
+        super().__init__(channel=channel, **kwargs)
+        self.channel_info = channel
+        self._listeners = listeners
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Hand a message to every listener, now, in this thread."""
+        msg.channel = self.channel_info
+        msg.is_rx = True
+        for listener in self._listeners:
+            listener.on_message_received(msg)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        return None, False  # what is sent goes to the listeners, never to a queue
+
+
+def _checksum(data: bytes | bytearray, position: int) -> int:
     """Low 8 bits of the CRC-32 of the payload without its checksum byte."""
-    return zlib.crc32(data[:position] + data[position + 1 :]) & 0xFF
+    return zlib.crc32(data[position + 1 :], zlib.crc32(data[:position])) & 0xFF
 
 
 def _limits(sig: cantools.database.can.Signal) -> tuple[float, float]:
@@ -55,7 +85,10 @@ def _limits(sig: cantools.database.can.Signal) -> tuple[float, float]:
     return float(sig.minimum), float(sig.maximum)
 
 
-def _checksum_byte(message: cantools.database.can.Message, name: str) -> int:
+def _checksum_position(message: cantools.database.can.Message, name: str | None) -> int | None:
+    """Return the byte of a message's checksum signal, None if the message has none."""
+    if name is None or name not in {sg.name for sg in message.signals}:
+        return None
     pos = checksum_byte(message, name)
     assert pos is not None  # the mapping checked it
     return pos
@@ -109,19 +142,20 @@ class DetectionPublisher:
             self.unsendable_reason = (f"CAN: cycle {cycle} detection {index} not sent: {signal} "
                                       f"{value:g} outside {allowed}")
 
-    def _send(self, message: cantools.database.can.Message, values: dict[str, float],
-              checksum: str | None, timestamp: float = 0.0) -> None:
-        try:
-            data = bytearray(message.encode(values, strict=True))
-        except (cantools.database.EncodeError, KeyError, ValueError) as exc:
-            raise OutputError(f"CAN {message.name}: {exc}") from None
-        if checksum is not None and checksum in {sg.name for sg in message.signals}:
-            pos = _checksum_byte(message, checksum)
-            data[pos] = _checksum(bytes(data), pos)
-        self.bus.send(can.Message(arbitration_id=message.frame_id, data=bytes(data),
-                                  is_extended_id=message.is_extended_frame,
-                                  is_fd=self.fd or message.is_fd or len(data) > 8,
-                                  timestamp=timestamp))
+    def _send(self, codec: _Codec, raw: dict[str, int | float], timestamp: float) -> None:
+        """Encode and send one message whose raw values were checked against their signals.
+
+        Every value is inside its signal's range before it gets here (`publish` checks the
+        detections' columns at once; the header, indices and defaults are in range by
+        construction), so cantools' compiled codec packs it without checking it again.
+        """
+        try:  # the packer refuses a value its bits cannot carry: never wrapped, never cut
+            data = codec.encode(raw)
+        except (OverflowError, TypeError, KeyError, ValueError) as exc:
+            raise OutputError(f"CAN {codec.message.name}: {exc}") from None
+        self.bus.send(can.Message(arbitration_id=codec.frame_id, data=data,
+                                  is_extended_id=codec.extended, is_fd=self.fd or codec.is_fd,
+                                  timestamp=timestamp, check=False))
         self.sent += 1
 
     def publish(self, frame: Detections, bus_time_s: float = 0.0) -> None:
@@ -131,63 +165,168 @@ class DetectionPublisher:
         python-can's virtual bus with ``preserve_timestamps``, shows when the radar would have
         sent them).
         """
+        self.publish_many([frame], [bus_time_s])
+
+    def publish_many(self, frames: Sequence[Detections],
+                     bus_times_s: Sequence[float] | np.ndarray | None = None) -> None:
+        """Send cycles one after the other, as `publish` does each (``bus_times_s``: theirs).
+
+        The values of all their detections are checked against their signals and converted to
+        raw values at once; then each message is packed and sent.
+        """
+        if not frames:
+            return
         layout = self._layout
         m = layout.mapping
-        signal_values = layout.signal_values(frame)  # signal -> (D,) values
+        times = (np.zeros(len(frames)) if bus_times_s is None
+                 else np.asarray(bus_times_s, dtype=np.float64))
+        counts = np.array([f.count for f in frames], dtype=np.int64)
+        first = np.concatenate(([0], np.cumsum(counts)[:-1]))
+        values = layout.signal_matrix(frames, int(counts.sum()))  # (signals, detections)
         # Metadata saturates at the DBC's limits; measured quantities must fit as they are.
-        for q in ("rcs_dbsm", "snr_db"):
-            if q in m.fields:
-                name = m.fields[q].signal
-                low, high = _range_of(layout.signals[name])
-                signal_values[name] = np.clip(np.nan_to_num(signal_values[name], nan=low,
-                                                             neginf=low, posinf=high), low, high)
-        fits = np.ones(frame.count, dtype=bool)
-        for name, column in signal_values.items():
-            sig = layout.signals[name]
-            low, high = _range_of(sig)
-            inside = (column >= low) & (column <= high)  # NaN is outside
-            if not inside.all():
-                for i in np.flatnonzero(fits & ~inside):
-                    self._leave_out(frame.cycle, int(i), name, float(column[i]),
-                                    f"[{low:g}, {high:g}] {sig.unit or ''}".rstrip())
-                fits &= inside
-        send = np.flatnonzero(fits)
-        for i in send[layout.capacity :]:
-            self._leave_out(frame.cycle, int(i), layout.capacity_signal, float(layout.capacity),
+        low, high = layout.low[:, None], layout.high[:, None]
+        clipped = np.clip(np.where(np.isnan(values), low, values), low, high)
+        values = np.where(layout.saturates[:, None], clipped, values)
+        inside = (values >= low) & (values <= high)  # NaN is outside
+        fits = inside.all(axis=0)
+        cycle_of = np.repeat(np.arange(len(frames)), counts)
+        if not fits.all():
+            for j in np.flatnonzero(~fits):  # the first signal that cannot carry it
+                s = int(np.argmin(inside[:, j]))
+                sig = layout.signals[layout.names[s]]
+                c = int(cycle_of[j])
+                allowed = f"[{layout.low[s]:g}, {layout.high[s]:g}] {sig.unit or ''}".rstrip()
+                self._leave_out(frames[c].cycle, int(j - first[c]), sig.name,
+                                float(values[s, j]), allowed)
+        # Each cycle sends its fitting detections up to the capacity its index and count have.
+        fitting = np.cumsum(fits)
+        rank = fitting - 1 - np.concatenate(([0], fitting))[first][cycle_of]
+        over = fits & (rank >= layout.capacity)
+        for j in np.flatnonzero(over):
+            c = int(cycle_of[j])
+            self._leave_out(frames[c].cycle, int(j - first[c]), layout.capacity_signal,
+                            float(layout.capacity),
                             f"the {layout.capacity} detections per cycle it numbers")
-        send = send[: layout.capacity]
-        header = layout.header
-        values = layout.defaults(header)
-        values[m.counter] = frame.cycle % layout.counter_modulus
-        left = int(send.size)
-        for name in m.count:  # the count, spread over the count signals in order
-            top = int(_range_of(page_signals(header)[name])[1])
-            part = min(left, top)
-            values[name] = part
-            left -= part
-        if m.timestamp is not None:
-            low, high = _range_of(page_signals(header)[m.timestamp])
-            values[m.timestamp] = float(np.clip(frame.t_s or 0.0, low, high))
-        self._send(header, values, m.header_checksum, bus_time_s)
-        for index, i in enumerate(send):  # one encoded message (or page) each
-            for message, page in layout.parts:
-                wanted = layout.names_of(message, page)
-                values = layout.defaults(message, page)
-                values.update({k: float(v[i]) for k, v in signal_values.items() if k in wanted})
-                values[m.index] = index
-                if m.frame_counter is not None and m.frame_counter in wanted:
-                    values[m.frame_counter] = frame.cycle % layout.frame_counter_modulus
-                self._send(message, values, m.checksum, bus_time_s)
+        send = fits & ~over
+        sent = np.bincount(cycle_of[send], minlength=len(frames))
+        index = rank[send]
+        # Raw values per part, converted at once; then each cycle's header and parts in order.
+        parts = []
+        for codec in layout.part_codecs:
+            columns = [(name, codec.raw_column(name, values[layout.row[name], send]))
+                       for name in codec.carried if name != m.index]
+            columns.append((m.index, codec.raw_column(m.index, index.astype(np.float64))))
+            parts.append((codec, columns))
+        header = layout.header_codec
+        frame_counter = m.frame_counter if m.frame_counter in layout.signals else None
+        done = 0
+        for c, frame in enumerate(frames):
+            bus_time = float(times[c])
+            self._send(header, layout.header_values(frame, int(sent[c])), bus_time)
+            bases = []
+            for codec, columns in parts:
+                base = dict(codec.defaults)
+                if frame_counter in base:
+                    base[frame_counter] = codec.raw(
+                        frame_counter, frame.cycle % layout.frame_counter_modulus)
+                bases.append((codec, base, columns))
+            for i in range(done, done + int(sent[c])):  # one encoded message (or page) each
+                for codec, base, columns in bases:
+                    raw = base.copy()
+                    for name, column in columns:
+                        raw[name] = column[i]
+                    self._send(codec, raw, bus_time)
+            done += int(sent[c])
+
+
+class _Codec:
+    """One message (or one multiplexer page of it), packed by cantools' compiled codec.
+
+    Values are raw (the DBC's scale and offset undone), as cantools packs them.
+    """
+
+    def __init__(self, message: cantools.database.can.Message, page: int | None,
+                 checksum: str | None, mapped: set[str] | frozenset[str] = frozenset()) -> None:
+        self.message = message
+        self.signals = page_signals(message, page)
+        self.signal_list = list(self.signals.values())
+        self.formats = create_encode_decode_formats(self.signal_list, message.length)
+        self.length = message.length
+        self.frame_id = message.frame_id
+        self.extended = message.is_extended_frame
+        self.is_fd = bool(message.is_fd or message.length > 8)
+        self.checksum = _checksum_position(message, checksum)
+        # The mapped signals this part carries, and a value for every other one: the
+        # multiplexer's page, else 0 or the signal's nearest end.
+        self.carried = tuple(sorted(set(self.signals) & set(mapped)))
+        self.defaults: dict[str, int | float] = {}
+        for name, sg in self.signals.items():
+            low, high = _range_of(sg)
+            physical = page if sg.is_multiplexer and page is not None else min(max(0.0, low),
+                                                                               high)
+            self.defaults[name] = self.raw(name, physical)
+
+    def raw(self, name: str, physical: float) -> int | float:
+        """Return a signal's raw value for a physical one (cantools' own conversion)."""
+        return self.signals[name].conversion.numeric_scaled_to_raw(physical)
+
+    def raw_column(self, name: str, physical: np.ndarray) -> list[int] | list[float]:
+        """Return a signal's raw values for physical ones, as Python numbers.
+
+        The same conversion as `raw` (cantools' ``numeric_scaled_to_raw``: offset and scale
+        undone, rounded half to even unless the signal is a float), for a whole column.
+        """
+        conversion = self.signals[name].conversion
+        raw = (np.asarray(physical, dtype=np.float64) - conversion.offset) / conversion.scale
+        if conversion.is_float:
+            floats: list[float] = raw.tolist()
+            return floats
+        ints: list[int] = np.rint(raw).astype(np.int64).tolist()
+        return ints
+
+    def encode(self, raw: dict[str, int | float]) -> bytes:
+        """Pack raw values (every signal's) into the message's bytes, checksum filled in.
+
+        cantools' compiled formats pack the big- and little-endian signals; their union is the
+        message (as `cantools.database.utils.encode_data` combines them).
+        """
+        formats = self.formats
+        packed = (int.from_bytes(formats.big_endian.pack(raw), "big")
+                  | int.from_bytes(formats.little_endian.pack(raw), "little"))
+        data = packed.to_bytes(self.length, "big")
+        if self.checksum is None:
+            return data
+        out = bytearray(data)
+        out[self.checksum] = _checksum(data, self.checksum)
+        return bytes(out)
+
+    def decode(self, data: bytes | bytearray) -> dict[str, int | float]:
+        """Unpack a message's raw values (as `cantools.database.utils.decode_data` does).
+
+        Excess bytes (CAN FD padding) are ignored; a short message is a `DecodeError`.
+        """
+        if len(data) != self.length:
+            if len(data) < self.length:
+                raise cantools.database.DecodeError(
+                    f"Wrong data size: {len(data)} instead of {self.length} bytes")
+            data = data[: self.length]
+        formats = self.formats
+        return {**formats.big_endian.unpack(data), **formats.little_endian.unpack(data[::-1])}
 
 
 def _range_of(sig: cantools.database.can.Signal) -> tuple[float, float]:
-    """Return a signal's physical range: the DBC's, else what its bits and scale carry."""
-    if sig.minimum is not None and sig.maximum is not None:
-        return float(sig.minimum), float(sig.maximum)
-    raw_low = -(1 << (sig.length - 1)) if sig.is_signed else 0
-    raw_high = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
-    ends = sorted((raw_low * sig.scale + sig.offset, raw_high * sig.scale + sig.offset))
-    return float(ends[0]), float(ends[1])
+    """Return a signal's physical range: what its bits carry, within the DBC's stated range."""
+    if sig.conversion.is_float:
+        low, high = -np.inf, np.inf
+    else:
+        raw_low = -(1 << (sig.length - 1)) if sig.is_signed else 0
+        raw_high = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
+        low, high = sorted((raw_low * sig.scale + sig.offset, raw_high * sig.scale + sig.offset))
+    if sig.minimum is not None:
+        low = max(low, float(sig.minimum))
+    if sig.maximum is not None:
+        high = min(high, float(sig.maximum))
+    return float(low), float(high)
 
 
 class _MappedLayout:
@@ -196,8 +335,6 @@ class _MappedLayout:
     def __init__(self, mapping: CanMapping, fd: bool) -> None:
         self.mapping = m = mapping
         db = m.db
-        self._defaults: dict[tuple[int, int | None], dict[str, float]] = {}
-        self._signal_sets: dict[tuple[int, int | None], set[str]] = {}
         self.header = db.get_message_by_name(m.header)
         self.parts = m.parts(fd)
         self.signals = {sg.name: sg for message, _ in self.parts for sg in message.signals}
@@ -208,44 +345,40 @@ class _MappedLayout:
         count_top = sum(int(_range_of(self.header.get_signal_by_name(c))[1]) for c in m.count)
         self.capacity, self.capacity_signal = min((index_top, m.index),
                                                   (count_top, "+".join(m.count)))
+        mapped = {f.signal for f in m.fields.values()}
+        self.header_codec = _Codec(self.header, None, m.header_checksum)
+        self.count_tops = [int(_range_of(self.header.get_signal_by_name(c))[1]) for c in m.count]
+        self.timestamp_range = (_range_of(self.header.get_signal_by_name(m.timestamp))
+                                if m.timestamp is not None else (0.0, 0.0))
+        # The mapped signals (rows of `signal_matrix`), their ranges, which of them saturate.
+        self.names = sorted(mapped)
+        self.row = {name: i for i, name in enumerate(self.names)}
+        ranges = np.array([_range_of(self.signals[name]) for name in self.names]).reshape(-1, 2)
+        self.low, self.high = ranges[:, 0], ranges[:, 1]
+        saturating = {m.fields[q].signal for q in ("rcs_dbsm", "snr_db") if q in m.fields}
+        self.saturates = np.array([name in saturating for name in self.names], dtype=bool)
+        self.part_codecs = [_Codec(message, page, m.checksum, mapped | {m.index})
+                            for message, page in self.parts]
 
-    def names_of(self, message: cantools.database.can.Message,
-                 page: int | None = None) -> set[str]:
-        """Return the names of the signals a message (page) carries (cached)."""
-        key = (message.frame_id, page)
-        if key not in self._signal_sets:
-            self._signal_sets[key] = set(page_signals(message, page))
-        return self._signal_sets[key]
+    def signal_matrix(self, frames: Sequence[Detections], n: int) -> np.ndarray:
+        """Each mapped signal's value (rows: `names`) per detection of the cycles, in order.
 
-    def defaults(self, message: cantools.database.can.Message,
-                 page: int | None = None) -> dict[str, float]:
-        """Return a value for every signal: the multiplexer's page, else 0 or its nearest end."""
-        key = (message.frame_id, page)
-        if key not in self._defaults:
-            self._defaults[key] = self._default_values(message, page)
-        return dict(self._defaults[key])
-
-    def _default_values(self, message: cantools.database.can.Message,
-                        page: int | None) -> dict[str, float]:
-        out: dict[str, float] = {}
-        for name, sg in page_signals(message, page).items():
-            if sg.is_multiplexer and page is not None:
-                out[name] = page
-                continue
-            low, high = _range_of(sg)
-            out[name] = float(min(max(0.0, low), high))
-        return out
-
-    def signal_values(self, frame: Detections) -> dict[str, np.ndarray]:
-        """Each mapped signal's value per detection (the mapping's scale and offset undone)."""
+        The mapping's scale and offset are undone: the values are the DBC's physical ones.
+        """
         m = self.mapping
-        rng = _column(frame.range_m, frame.count)
-        az = np.radians(_column(frame.az_deg, frame.count))
+
+        def column(name: str, absent: float = np.nan) -> np.ndarray:
+            if n == 0:
+                return np.zeros(0)
+            return np.concatenate([_column(getattr(f, name), f.count, absent) for f in frames])
+
+        rng = column("range_m")
+        az = np.radians(column("az_deg"))
         # A radar that reports no height measures no elevation: its x and y are the range
         # along its azimuth, so the reader gets the range back.
         flat = m.form == "cartesian" and "z_m" not in m.fields
-        el = np.radians(_column(None if flat else frame.el_deg, frame.count, 0.0))
-        vr = _column(frame.radial_velocity_mps, frame.count)
+        el = np.zeros(n) if flat else np.radians(column("el_deg", 0.0))
+        vr = column("radial_velocity_mps")
         if m.form == "polar":
             quantities = {"range_m": rng, "azimuth_deg": np.degrees(az),
                           "elevation_deg": np.degrees(el), "radial_velocity_mps": vr}
@@ -257,9 +390,27 @@ class _MappedLayout:
             # (x vx + y vy) / range gives the radial velocity back.
             quantities = {"x_m": x, "y_m": y, "z_m": rng * np.sin(el),
                           "vx_mps": vr * rng * x / horizontal, "vy_mps": vr * rng * y / horizontal}
-        quantities["rcs_dbsm"] = _column(frame.rcs_dbsm, frame.count, 0.0)
-        quantities["snr_db"] = _column(frame.snr_db, frame.count, 0.0)
-        return {f.signal: (quantities[q] - f.offset) / f.scale for q, f in m.fields.items()}
+        quantities["rcs_dbsm"] = column("rcs_dbsm", 0.0)
+        quantities["snr_db"] = column("snr_db", 0.0)
+        out = np.empty((len(self.names), n))
+        for q, f in m.fields.items():
+            out[self.row[f.signal]] = (quantities[q] - f.offset) / f.scale
+        return out
+
+    def header_values(self, frame: Detections, count: int) -> dict[str, int | float]:
+        """Return the header's raw values for a cycle announcing ``count`` detections."""
+        m, header = self.mapping, self.header_codec
+        values = dict(header.defaults)
+        values[m.counter] = header.raw(m.counter, frame.cycle % self.counter_modulus)
+        for name, top in zip(m.count, self.count_tops, strict=True):
+            part = min(count, top)  # the count, spread over the count signals in order
+            values[name] = header.raw(name, part)
+            count -= part
+        if m.timestamp is not None:
+            low, high = self.timestamp_range
+            values[m.timestamp] = header.raw(m.timestamp,
+                                             float(np.clip(frame.t_s or 0.0, low, high)))
+        return values
 
 
 def _column(values: np.ndarray | None, n: int, absent: float = np.nan) -> np.ndarray:
@@ -296,11 +447,26 @@ class _Assembly:
     bus_t_s: float | None = None
     parts: dict[int, dict[str, float]] = field(default_factory=dict)
     arrived: dict[int, set[PartKey]] = field(default_factory=dict)
+    whole: set[int] = field(default_factory=set)  # detections whole so far
 
-    def complete(self, needed: tuple[frozenset[PartKey], ...]) -> bool:
+    def add(self, index: int, part: PartKey, values: dict[str, float],
+            needed: tuple[frozenset[PartKey], ...]) -> bool:
+        """Add one part of a detection; False if that part had already come."""
+        arrived = self.arrived.get(index)
+        if arrived is None:
+            arrived = self.arrived[index] = set()
+            self.parts[index] = {}
+        elif part in arrived:
+            return False
+        arrived.add(part)
+        self.parts[index].update(values)
+        if index not in self.whole and any(need <= arrived for need in needed):
+            self.whole.add(index)
+        return True
+
+    def complete(self) -> bool:
         """All announced detections arrived, each whole in one of the ways it can come."""
-        return len(self.parts) == self.expected and all(
-            any(need <= self.arrived.get(i, set()) for need in needed) for i in self.parts)
+        return len(self.parts) == self.expected == len(self.whole)
 
 
 # Cycles kept open for late or reordered parts; older incomplete ones are handed on as such.
@@ -326,7 +492,38 @@ class DetectionReceiver(can.Listener):
         # A detection is whole with every classic part it needs, or its CAN FD message.
         self._needed = tuple({m.needed_parts(False), m.needed_parts(True)})
         self._read = frozenset().union(*self._needed)
-        self._multiplexer = {i: multiplexer(message) for i, message in self._detection_ids.items()}
+        # Per identifier: the message, its checksum byte and multiplexer signal (if any).
+        layouts = {i: (message, _checksum_position(message, m.checksum), multiplexer(message))
+                   for i, message in self._detection_ids.items()}
+        layouts[self._header.frame_id] = (
+            self._header, _checksum_position(self._header, m.header_checksum), None)
+        # Messages without a multiplexer decode through their compiled codec directly.
+        self._layouts = {i: (message, checksum, mux,
+                             None if mux is not None else _Codec(message, None, None))
+                         for i, (message, checksum, mux) in layouts.items()}
+        self._frame_counter, self._index = m.frame_counter, m.index
+        # Parts keep raw values; quantities are scaled when a cycle is handed on.
+        self._header_signals = {sg.name: sg for sg in self._header.signals}
+        # Control signals (index, low counter) are read by name; they scale alike everywhere.
+        self._signals = {sg.name: sg for message in self._detection_ids.values()
+                         for sg in message.signals}
+        self._identity = {name for name, sg in self._signals.items()
+                          if sg.conversion.scale == 1 and sg.conversion.offset == 0}
+        fields = {f.signal: f for f in m.fields.values()}
+        self._field_names = list(fields)
+        self._field_column = {name: i for i, name in enumerate(self._field_names)}
+        self._field_getter = (operator.itemgetter(*self._field_names) if len(fields) > 1
+                              else lambda row: [row[self._field_names[0]]])
+        scale = np.array([f.scale for f in fields.values()], dtype=np.float64)
+        offset = np.array([f.offset for f in fields.values()], dtype=np.float64)
+        self._to_quantity = (scale, offset)
+        # Per message, the mapped signals whose DBC scale or offset must be applied (messages
+        # may scale a signal of the same name differently, e.g. classic and CAN FD).
+        self._scalings = {
+            i: [(sg.name, sg.conversion.scale, sg.conversion.offset) for sg in message.signals
+                if sg.name in fields and not (sg.conversion.scale == 1
+                                              and sg.conversion.offset == 0)]
+            for i, message in self._detection_ids.items()}
         self.stats = BusStats()
         self._counter_modulus = 1 << self._header.get_signal_by_name(m.counter).length
         detection = {sg.name: sg for n in m.messages for sg in db.get_message_by_name(n).signals}
@@ -336,6 +533,12 @@ class DetectionReceiver(can.Listener):
         # The notifier's thread feeds messages while the run's thread takes cycles.
         self._lock = threading.Lock()
         self.reset()
+
+    def _physical(self, name: str, raw: float) -> float:
+        """Return a detection signal's physical value (the DBC's scale and offset applied)."""
+        if name in self._identity:
+            return raw
+        return float(self._signals[name].conversion.raw_to_scaled(raw, False))  # type: ignore[arg-type]
 
     def reset(self) -> None:
         """Forget the cycles received so far (a new measurement reuses counters)."""
@@ -382,41 +585,36 @@ class DetectionReceiver(can.Listener):
         if msg.is_error_frame:
             stats.error_frames += 1
             return
-        if msg.arbitration_id == self._header.frame_id:
-            values = self._decode(self._header, msg, self.mapping.header_checksum)
-            if values is not None:
-                self._on_header(values, float(msg.timestamp))
-            return
-        message = self._detection_ids.get(msg.arbitration_id)
-        if message is None:
+        known = self._layouts.get(msg.arbitration_id)
+        if known is None:
             stats.unknown_ids += 1
             return
-        values = self._decode(message, msg, self.mapping.checksum)
-        if values is None:
+        message, checksum, mux, codec = known
+        data = msg.data
+        if checksum is not None and (len(data) <= checksum
+                                     or data[checksum] != _checksum(data, checksum)):
+            stats.checksum_errors += 1
             return
-        mux = self._multiplexer[message.frame_id]
-        part = (message.frame_id, None if mux is None else int(values[mux]))
-        if part in self._read:  # else a page the mapping does not read (extended information)
-            self._on_detection(part, values)
-
-    def _decode(self, message: cantools.database.can.Message, msg: can.Message,
-                checksum: str | None) -> dict[str, float] | None:
-        data = bytes(msg.data)
-        if checksum is not None and checksum in {s.name for s in message.signals}:
-            pos = _checksum_byte(message, checksum)
-            if len(data) <= pos or data[pos] != _checksum(data, pos):
-                self.stats.checksum_errors += 1
-                return None
         try:
-            decoded = message.decode(data, decode_choices=False, scaling=True)
-            assert isinstance(decoded, dict)
-            return {k: float(v) for k, v in decoded.items()}  # type: ignore[arg-type]
+            # Raw values: cantools' compiled codec, or (multiplexed) cantools picks the page.
+            values = (codec.decode(data) if codec is not None else
+                      message.decode(bytes(data), decode_choices=False, scaling=False))
         except (cantools.database.DecodeError, ValueError, KeyError, TypeError):
-            self.stats.decode_errors += 1
-            return None
+            stats.decode_errors += 1
+            return
+        if message is self._header:
+            self._on_header(values, float(msg.timestamp))  # type: ignore[arg-type]
+            return
+        page = None if mux is None else int(values[mux])  # type: ignore[call-overload, arg-type]
+        part = (message.frame_id, page)  # the raw page id
+        if part in self._read:  # else a page the mapping does not read (extended information)
+            self._on_detection(part, values)  # type: ignore[arg-type]
 
-    def _on_header(self, values: dict[str, float], bus_t_s: float | None = None) -> None:
+    def _on_header(self, raw: dict[str, float], bus_t_s: float | None = None) -> None:
         m = self.mapping
+        values: dict[str, float] = {
+            name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
+            for name, value in raw.items()}
         counter = int(values[m.counter])
         if counter in self._open or counter in self._recent:
             self.stats.duplicates += 1
@@ -433,16 +631,17 @@ class DetectionReceiver(can.Listener):
         for part, early in self._waiting.pop(counter % self._low_modulus, []):
             self.stats.orphans -= 1
             self._attach(frame, part, early)
-        if frame.complete(self._needed):
+        if frame.complete():
             self._finish(counter)
         while len(self._open) > OPEN_CYCLES:
             self._finish(next(iter(self._open)))
 
     def _on_detection(self, part: PartKey, values: dict[str, float]) -> None:
-        m = self.mapping
         frame = self._current
-        if m.frame_counter is not None and m.frame_counter in values:
-            low = int(values[m.frame_counter])
+        name = self._frame_counter
+        low_counter = values.get(name) if name else None
+        if name and low_counter is not None:
+            low = int(self._physical(name, low_counter))
             if frame is None or (frame.counter % self._low_modulus) != low:
                 # Late part of an earlier cycle, or early part of one whose header is late.
                 self.stats.reordered += 1
@@ -473,22 +672,21 @@ class DetectionReceiver(can.Listener):
                 self.stats.orphans += 1
             return
         self._attach(frame, part, values)
-        if frame.complete(self._needed):
+        if frame.complete():
             self._finish(frame.counter)
 
     def _attach(self, frame: _Assembly, part: PartKey, values: dict[str, float]) -> None:
-        index = int(values[self.mapping.index])
-        arrived = frame.arrived.setdefault(index, set())
-        if part in arrived:
+        index = int(self._physical(self._index, values[self._index]))
+        for name, scale, offset in self._scalings[part[0]]:  # raw -> the DBC's physical
+            if name in values:
+                values[name] = values[name] * scale + offset
+        if not frame.add(index, part, values, self._needed):
             self.stats.duplicates += 1
-            return
-        arrived.add(part)
-        frame.parts.setdefault(index, {}).update(values)
 
     def _finish(self, counter: int) -> None:
         """Hand on an open cycle as `Detections`."""
         frame = self._open.pop(counter)
-        complete = frame.complete(self._needed)
+        complete = frame.complete()
         self._recent[counter] = complete
         while len(self._recent) > RECENT_CYCLES:
             self._recent.popitem(last=False)
@@ -501,10 +699,17 @@ class DetectionReceiver(can.Listener):
         """Arrays of the quantities the mapping carries (polar, rts-scenario's names)."""
         m = self.mapping
         rows = [frame.parts[i] for i in sorted(frame.parts)]
+        try:  # every mapped signal arrived (a whole cycle)
+            raw = np.array([self._field_getter(r) for r in rows], dtype=np.float64)
+        except KeyError:
+            raw = np.array([[r.get(name, np.nan) for name in self._field_names] for r in rows],
+                           dtype=np.float64)
+        # The DBC's physical values -> the mapping's quantities, column by column.
+        values = raw.reshape(len(rows), len(self._field_names)) * self._to_quantity[0] \
+            + self._to_quantity[1]
 
         def get(q: str) -> np.ndarray:
-            f = m.fields[q]
-            return np.array([r.get(f.signal, np.nan) for r in rows]) * f.scale + f.offset
+            return values[:, self._field_column[m.fields[q].signal]]
 
         out: dict[str, np.ndarray] = {}
         if m.form == "polar":
@@ -535,4 +740,5 @@ def _behind(counter: int, latest: int, modulus: int) -> bool:
     return 0 < (latest - counter) % modulus < modulus // 2
 
 
-__all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "open_bus"]
+__all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "ListenerBus",
+           "open_bus"]

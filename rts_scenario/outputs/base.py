@@ -27,14 +27,15 @@ _O = TypeVar("_O", bound="Output")
 class RunContext:
     """What a run offers the output it opens (`Output.for_run`).
 
-    ``open_publisher`` returns a sink for radar cycles that the run's checker will receive (it
+    ``open_publisher`` returns a sink for radar cycles (a list at a time, in order) that the
+    run's checker will receive (it
     opens the publishing side of the detection bus; the run closes it).
     """
 
     rig: Rig
     radar: RadarProfile
     radar_options: RadarOptions
-    open_publisher: Callable[[], Callable[[Detections], None]]
+    open_publisher: Callable[[], Callable[[list[Detections]], None]]
     rng: np.random.Generator
     errors: ChannelErrors | None = None
 

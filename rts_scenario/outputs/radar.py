@@ -18,13 +18,14 @@ from .base import Output, RunContext
 
 
 class SimulatedRadarOutput(Output):
-    """Play each batch on a `SimulatedRadar` on its own clock; hand every cycle to ``sink``.
+    """Play each batch on a `SimulatedRadar` on its own clock; hand its cycles to ``sink``.
 
     The radar measures at its clock's times (`rts_scenario.radar.clock.RadarClock`, the
     profile's unless ``clock`` is given), not at the scene's frames: each cycle sees the frame
     the RTS holds at that time, and carries the radar's counter and measurement time. A batch
     of frames is held from its first frame's time until one frame spacing after its last (the
-    next batch's first frame). Without a sink the cycles collect in `detections`. Keyword
+    next batch's first frame). ``sink`` receives each batch's cycles as a list, in order;
+    without a sink the cycles collect in `detections`. Keyword
     options go to `SimulatedRadar` (fidelity, estimator, cfar, noise, errors, rng,
     threshold_db).
     """
@@ -32,13 +33,13 @@ class SimulatedRadarOutput(Output):
     name = "simulated-radar"
 
     def __init__(self, *, profile: RadarProfile, rig: Rig,
-                 sink: Callable[[Detections], None] | None = None,
+                 sink: Callable[[list[Detections]], None] | None = None,
                  clock: RadarClock | None = None, **options: Any) -> None:
         super().__init__()
         self.radar = SimulatedRadar(profile, rig, **options)
         self.clock = clock or profile.radar_clock
         self.detections: list[Detections] = []
-        self._sink = sink or self.detections.append
+        self._sink = sink or self.detections.extend
         self._spacing_s: float | None = None
 
     @classmethod
@@ -60,5 +61,4 @@ class SimulatedRadarOutput(Output):
         spacing = self._spacing_s if self._spacing_s is not None else self.clock.cycle_s
         n, t_cycles = self.clock.cycles_between(float(t[0]), float(t[-1]) + spacing)
         cycles = batch.held(t_cycles, self.clock.counter_of(n))
-        for frame in self.radar.process(cycles):  # cycles leave the radar one by one
-            self._sink(frame)
+        self._sink(list(self.radar.process(cycles)))
