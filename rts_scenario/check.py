@@ -39,6 +39,8 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .detections import Detections, unwrap_counter
 from .kinematics import Tracks
@@ -241,14 +243,18 @@ class Checker:
         # alarms, whether or not the target-frame can be checked.
         played = (block.status & BLOCKING) == 0
 
-        cost = np.zeros((n_det, n_targets))
-        inside = np.ones((n_det, n_targets), dtype=bool)
+        values = {q: np.concatenate(
+            [getattr(c, q) if getattr(c, q) is not None else np.full(c.count, np.nan)
+             for c in got]) if got else np.zeros(0) for q, _ in QUANTITIES}
+        # Candidate pairs (detection, target): only targets within the gate in range, found by
+        # a sorted search per frame (no detections x targets arrays).
+        det, target = _range_candidates(frame_of, values["range_m"], tracks.range_m,
+                                        GATE * tol["range_m"])
+        cost = np.zeros(det.size)
+        inside = played[frame_of[det], target]
         diffs: dict[str, FloatArray] = {}
         for q, key in QUANTITIES:
-            values = np.concatenate(
-                [getattr(c, q) if getattr(c, q) is not None else np.full(c.count, np.nan)
-                 for c in got]) if got else np.zeros(0)
-            diff = values[:, None] - getattr(tracks, q)[frame_of]
+            diff = values[q][det] - getattr(tracks, q)[frame_of[det], target]
             if q == "az_deg":
                 diff = (diff + 180.0) % 360.0 - 180.0
             diffs[q] = diff
@@ -256,8 +262,11 @@ class Checker:
                 norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
                 cost += norm * norm
                 inside &= np.abs(norm) <= GATE
-        candidates = inside & played[frame_of]
-        match = _assign(frame_of, candidates, cost)
+        det, target, cost = det[inside], target[inside], cost[inside]
+        diffs = {q: d[inside] for q, d in diffs.items()}
+        pair = _assign(frame_of, det, target, cost, n_targets)
+        match = np.full(n_det, -1, dtype=np.int64)
+        match[det[pair]] = target[pair]
         matched = match >= 0
 
         assigned = np.zeros((n_frames, n_targets), dtype=bool)
@@ -266,8 +275,7 @@ class Checker:
         errors = {}
         for q, key in QUANTITIES:
             err = np.full((n_frames, n_targets), np.nan)
-            err[frame_of[matched], match[matched]] = diffs[q][np.flatnonzero(matched),
-                                                               match[matched]]
+            err[frame_of[det[pair]], target[pair]] = diffs[q][pair]
             errors[q] = err
             within &= ~(np.abs(err) > tol[key])
             self._stats[q].add(err, truth)
@@ -280,7 +288,7 @@ class Checker:
         self._missed += (ok[:, None] & truth & ~assigned).sum(axis=0)
         self._unchecked_k += ((~ok)[:, None] & truth).sum(axis=0)
         if self._csv is not None and n_det:
-            self._write_detections(got, counts, block, frame_of, match, diffs)
+            self._write_detections(got, counts, block, frame_of, match)
         whole = ok & ~(truth & ~assigned).any(axis=1)
         self._checkable += truth.sum(axis=0)
         self._detected += detected.sum(axis=0)
@@ -302,8 +310,7 @@ class Checker:
                                 **{f"error_{q}": e for q, e in errors.items()}})
 
     def _write_detections(self, got: list[Detections], counts: list[int], block: _Block,
-                          frame_of: NDArray[np.int64], match: NDArray[np.int64],
-                          diffs: dict[str, FloatArray]) -> None:
+                          frame_of: NDArray[np.int64], match: NDArray[np.int64]) -> None:
         """One CSV row per detection (`DETECTION_COLUMNS`); the target it was assigned to."""
         assert self._csv is not None
         cycle = np.repeat([c.cycle for c in got], counts)
@@ -438,27 +445,71 @@ def check_cycles(scene: str, tracks: Tracks, status: NDArray[np.uint16],
     return checker.report(bus)
 
 
-def _assign(frame_of: NDArray[np.int64], candidates: BoolArray,
-            cost: FloatArray) -> NDArray[np.int64]:
-    """Target assigned to each detection (-1: none), optimal per frame.
+def _range_candidates(frame_of: NDArray[np.int64], range_m: FloatArray, truth_range: FloatArray,
+                      gate_m: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs (detection, target) of one frame whose ranges are at most ``gate_m`` apart.
 
-    Where every detection has at most one candidate and every target at most one detection
-    (the usual case), that is the answer; frames with a choice go to the Hungarian method.
+    The targets of each frame are sorted by range once; each detection takes the run of them
+    within its gate (a detection without a range takes every target of its frame). The cost is
+    the detections and targets times a logarithm, plus the pairs found.
     """
-    out = np.full(frame_of.size, -1, dtype=np.int64)
-    if frame_of.size == 0:
-        return out
-    per_det = candidates.sum(axis=1)
-    targets_hit = np.zeros((int(frame_of.max()) + 1, candidates.shape[1]), dtype=np.int64)
-    np.add.at(targets_hit, frame_of, candidates.astype(np.int64))
-    ambiguous_frames = np.asarray((targets_hit > 1).any(axis=1), dtype=bool)
-    simple = (per_det == 1) & ~ambiguous_frames[frame_of]
-    out[simple] = np.argmax(candidates[simple], axis=1)
-    hard = np.flatnonzero(ambiguous_frames)
-    for f in hard:  # only frames where two detections compete for a target
-        rows = np.flatnonzero(frame_of == f)
-        c = np.where(candidates[rows], cost[rows], 1e9)
-        r, k = linear_sum_assignment(c)
-        ok = candidates[rows[r], k]
-        out[rows[r[ok]]] = k[ok]
-    return out
+    n_frames, n_targets = truth_range.shape
+    if frame_of.size == 0 or n_targets == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    order = np.argsort(truth_range, axis=1, kind="stable")  # targets by range, per frame
+    ranges = np.take_along_axis(truth_range, order, axis=1)
+    # One sorted key over all frames: frame f's ranges shifted past every earlier frame's.
+    finite = np.isfinite(ranges)
+    span = float(np.abs(ranges[finite]).max() if finite.any() else 0.0) + gate_m + 1.0
+    key = (np.arange(n_frames)[:, None] * (4.0 * span) + np.where(finite, ranges, 2.0 * span)
+           ).ravel()
+    base = frame_of * (4.0 * span)
+    slack = 1e-9 * span  # rounding of the key; the gate itself is checked exactly after
+    has = np.isfinite(range_m)
+    low = np.where(has, base + range_m - gate_m - slack, base - span)
+    high = np.where(has, base + range_m + gate_m + slack, base + 3.0 * span)
+    lo = np.searchsorted(key, low, side="left")
+    hi = np.searchsorted(key, high, side="right")
+    n = hi - lo
+    det = np.repeat(np.arange(frame_of.size), n)
+    pos = np.repeat(lo - np.cumsum(n) + n, n) + np.arange(n.sum())
+    return det, order.reshape(-1)[pos]
+
+
+def _assign(frame_of: NDArray[np.int64], det: NDArray[np.int64], target: NDArray[np.int64],
+            cost: FloatArray, n_targets: int) -> NDArray[np.int64]:
+    """Pairs kept by the optimal assignment per frame (indices into the candidate pairs).
+
+    Where a detection has one candidate and that target-frame one detection (the usual case),
+    that pair is the answer; groups with a choice (connected detections and targets) go to the
+    Hungarian method, each on its own small matrix.
+    """
+    keep = np.zeros(det.size, dtype=bool)
+    if det.size == 0:
+        return np.flatnonzero(keep)
+    slot = frame_of[det] * n_targets + target  # the target-frame of each pair
+    per_det = np.bincount(det, minlength=frame_of.size)
+    _, slot_of, per_slot = np.unique(slot, return_inverse=True, return_counts=True)
+    simple = (per_det[det] == 1) & (per_slot[slot_of] == 1)
+    keep[simple] = True
+    hard = np.flatnonzero(~simple)
+    if hard.size:
+        # Connected groups of detections and target-frames among the pairs with a choice.
+        dets, d_of = np.unique(det[hard], return_inverse=True)
+        slots, s_of = np.unique(slot_of[hard], return_inverse=True)
+        graph = coo_matrix((np.ones(hard.size), (d_of, dets.size + s_of)),
+                           shape=(dets.size + slots.size,) * 2)
+        _, group = connected_components(graph, directed=False)
+        by_group = np.argsort(group[d_of], kind="stable")
+        bounds = np.flatnonzero(np.diff(group[d_of][by_group])) + 1
+        for members in np.split(hard[by_group], bounds):  # a few small groups
+            rows, r_of = np.unique(det[members], return_inverse=True)
+            cols, c_of = np.unique(slot[members], return_inverse=True)
+            c = np.full((rows.size, cols.size), 1e9)
+            c[r_of, c_of] = cost[members]
+            where = np.full((rows.size, cols.size), -1)
+            where[r_of, c_of] = members
+            r, k = linear_sum_assignment(c)
+            chosen = where[r, k]
+            keep[chosen[chosen >= 0]] = True
+    return np.flatnonzero(keep)

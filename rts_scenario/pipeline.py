@@ -28,7 +28,7 @@ from .detections import Detections, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
-from .preflight import Preflight, preflight, scene_limits
+from .preflight import Preflight, frames_per_batch, preflight, scene_limits
 from .radar.clock import RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
@@ -66,8 +66,9 @@ class RunOptions:
         Weight solver.
     drain_s : float
         Longest wait for the radar's last detections after the last frame.
-    batch_frames : int
-        Frames per streamed batch.
+    batch_frames : int, optional
+        Frames per streamed batch; default `BATCH_FRAMES`, fewer for scenes with many targets
+        (`rts_scenario.preflight.frames_per_batch`: memory stays bounded).
     record : bool
         Keep every frame's check arrays (on disk) for plots and post-processing.
     bus_log : str, optional
@@ -83,7 +84,7 @@ class RunOptions:
     mapping: str | None = None
     method: str = "exact"
     drain_s: float = 2.0
-    batch_frames: int = BATCH_FRAMES
+    batch_frames: int | None = None
     record: bool = False
     bus_log: str | None = None
 
@@ -314,8 +315,9 @@ class Pipeline:
             on_preflight(preflight(scene, options.method))
             mark = timer.add("preflight_s", mark)
         self.receiver.reset()
-        for first in range(0, n_frames, options.batch_frames):
-            frames = np.arange(first, min(first + options.batch_frames, n_frames))
+        batch = options.batch_frames or frames_per_batch(len(scene.targets), BATCH_FRAMES)
+        for first in range(0, n_frames, batch):
+            frames = np.arange(first, min(first + batch, n_frames))
             tracks = compute_tracks(scene, t_all[frames], frames)
             mark = timer.add("kinematics_s", mark)
             schedule = build_schedule(tracks, scene.rig, scene.radar, method=options.method,

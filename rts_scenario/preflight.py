@@ -20,6 +20,14 @@ from .scenario.model import LIMITS, Scenario
 from .schedule import Schedule, build_schedule
 
 BATCH_FRAMES = 2000
+# Target-frames per streamed batch: large enough to amortize per-call costs, small enough that
+# memory stays bounded however many targets a scene has.
+BATCH_TARGET_FRAMES = 16_384
+
+
+def frames_per_batch(n_targets: int, most: int = BATCH_FRAMES) -> int:
+    """Frames per batch for a scene of ``n_targets``: at most ``most``, `BATCH_TARGET_FRAMES`."""
+    return max(1, min(most, BATCH_TARGET_FRAMES // max(1, n_targets)))
 
 
 @dataclass(frozen=True)
@@ -82,10 +90,15 @@ def scene_limits(scene: Scenario) -> dict[str, str]:
     return out
 
 
-def schedule_batches(scene: Scenario, method: str = "exact", batch_frames: int = BATCH_FRAMES
+def schedule_batches(scene: Scenario, method: str = "exact", batch_frames: int | None = None
                      ) -> Iterator[tuple[np.ndarray, Tracks, Schedule]]:
-    """Yield the scene batch by batch: frame indices, their tracks and their schedule."""
+    """Yield the scene batch by batch: frame indices, their tracks and their schedule.
+
+    ``batch_frames``: frames per batch (default: `frames_per_batch` of the scene's targets).
+    """
     t_all = scene.t_s
+    if batch_frames is None:
+        batch_frames = frames_per_batch(len(scene.targets))
     for first in range(0, scene.n_frames, batch_frames):
         frames = np.arange(first, min(first + batch_frames, scene.n_frames))
         tracks = compute_tracks(scene, t_all[frames], frames)
@@ -95,7 +108,7 @@ def schedule_batches(scene: Scenario, method: str = "exact", batch_frames: int =
 
 
 def preflight(scene: Scenario, method: str = "exact",
-              batch_frames: int = BATCH_FRAMES) -> Preflight:
+              batch_frames: int | None = None) -> Preflight:
     """Count the limits ``scene`` hits with the weight solver ``method``."""
     names = tuple(t.name for t in scene.targets)
     counts = {lim: np.zeros(len(names), dtype=np.int64) for lim in LIMITS}

@@ -34,7 +34,7 @@ from .check import Checker
 from .detections import Detections
 from .errors import RtsError
 from .kinematics import compute_tracks
-from .pipeline import BATCH_FRAMES, LOG_SIDECAR_SUFFIX, add_cycle_truth
+from .pipeline import LOG_SIDECAR_SUFFIX, add_cycle_truth
 from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, RadarClock
 from .report import Report
@@ -365,7 +365,7 @@ def _offset_uncertainty(table: _TruthTable, det: _Detected, t_log: FloatArray,
 
 def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
               time_offset_s: float | None = None, method: str | None = None,
-              batch_frames: int = BATCH_FRAMES) -> RecheckResult:
+              batch_frames: int | None = None) -> RecheckResult:
     """Check a recorded log's detections against ``scene``.
 
     Parameters
@@ -465,7 +465,7 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
 
 
 def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modulus: int,
-           method: str, batch_frames: int, bus: dict[str, int], alignment: Alignment,
+           method: str, batch_frames: int | None, bus: dict[str, int], alignment: Alignment,
            sidecar: dict[str, Any] | None) -> Report:
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,

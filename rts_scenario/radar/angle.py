@@ -71,8 +71,25 @@ class Bartlett2D:
         self.max_peaks = max_peaks
 
     def __call__(self, snapshots: ComplexArray) -> AngleEstimate:
-        """Estimate the angles of every snapshot (shape (D, M))."""
+        """Estimate the angles of every snapshot (shape (D, M)).
+
+        Snapshots go through the grid spectrum in blocks of `BLOCK`: memory stays bounded
+        however many detections a batch of frames has.
+        """
         x = np.atleast_2d(snapshots)
+        if len(x) <= self.BLOCK:
+            return self._estimate(x)
+        parts = [self._estimate(x[i : i + self.BLOCK]) for i in range(0, len(x), self.BLOCK)]
+        return AngleEstimate(
+            np.concatenate([p.az_deg for p in parts]), np.concatenate([p.el_deg for p in parts]),
+            np.concatenate([p.source + i for p, i in zip(parts, range(0, len(x), self.BLOCK),
+                                                         strict=True)]),
+            np.concatenate([p.power for p in parts]))
+
+    # Snapshots per grid-spectrum block: (BLOCK x grid) arrays of a few MB.
+    BLOCK = 1024
+
+    def _estimate(self, x: ComplexArray) -> AngleEstimate:
         if len(x) == 0:
             return _nothing()
         beams = x @ self._steer_h  # (D, G)

@@ -343,18 +343,8 @@ class SimulatedRadar:
         # One echo per (frame, target): its channels share delay and Doppler.
         keys, first = np.unique(echoes.frame * (echoes.target.max() + 1) + echoes.target,
                                 return_index=True)
-        f, r, d = echoes.frame[first], rb[first], db[first]
-        order = np.argsort(f, kind="stable")
-        f, r, d = f[order], r[order], d[order]
-        # Compare every pair within a frame, at their distance on the circular (folded) axes.
-        same = f[:, None] == f[None, :]
-
-        def apart(x: FloatArray, n: int) -> FloatArray:
-            return np.abs(np.mod(x[:, None] - x[None, :] + n / 2, n) - n / 2)
-
-        near = same & (apart(r, self._n) < 2.5) & (apart(d, self._loops) < 2.5)
-        pair = np.triu(near, 1).any(axis=1)
-        crowded[f[pair]] = True
+        f, r, d = echoes.frame[first], *self._fold(rb[first], db[first])
+        crowded[f[_close_pairs(f, r, d, self._n, self._loops, CROWDED_BINS)]] = True
         return crowded
 
     def cube(self, echoes: Echoes) -> ComplexArray:
@@ -519,6 +509,40 @@ class SimulatedRadar:
                 "radial_velocity_mps": -doppler_hz[src] * p.wavelength_m / 2.0,
                 "az_deg": est.az_deg, "el_deg": est.el_deg, "snr_db": snr_db[src],
                 "rcs_dbsm": rcs}
+
+# Two targets closer than this in range and in Doppler bins share a neighbourhood (crowded).
+CROWDED_BINS = 2.5
+
+
+def _close_pairs(frame: NDArray[np.int64], r: FloatArray, d: FloatArray, n_r: int, n_d: int,
+                 within: float) -> NDArray[np.int64]:
+    """Return the entries with another of the same frame within ``within`` bins on both axes.
+
+    ``r`` in [0, n_r) and ``d`` in [-n_d / 2, n_d / 2) are folded bins on circular axes. Sorted
+    by frame and range, each entry is compared with its successors while they are still within
+    reach in range (entries near the end of the range axis also meet those near its start): the
+    cost grows with the entries times the largest group sharing a range neighbourhood, never
+    with the square of the entries.
+    """
+    index = np.arange(frame.size)
+    wrap = r < within  # also seen one axis length further on, next to the end
+    f = np.concatenate([frame, frame[wrap]])
+    rr = np.concatenate([r, r[wrap] + n_r])
+    dd = np.concatenate([d, d[wrap]])
+    who = np.concatenate([index, index[wrap]])
+    order = np.lexsort((rr, f))
+    f, rr, dd, who = f[order], rr[order], dd[order], who[order]
+    close = np.zeros(frame.size, dtype=bool)
+    for lag in range(1, f.size):
+        reach = (f[lag:] == f[:-lag]) & (rr[lag:] - rr[:-lag] < within)
+        if not reach.any():
+            break
+        apart = np.abs(np.mod(dd[lag:] - dd[:-lag] + n_d / 2, n_d) - n_d / 2)
+        pair = reach & (apart < within) & (who[lag:] != who[:-lag])
+        close[who[:-lag][pair]] = True
+        close[who[lag:][pair]] = True
+    return np.flatnonzero(close)
+
 
 def _box_sum(a: FloatArray, r: int) -> FloatArray:
     """Return the sums over every (2r+1) x (2r+1) box of ``a`` that fits in it.
