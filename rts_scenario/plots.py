@@ -183,6 +183,8 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
         fig, ax = plt.subplots(figsize=(max(6.0, 0.6 * len(values) + 3), 1.2 + 0.5 * len(scenes)))
         for status in colors:
             picked = [e for e in entries if e["status"] == status and key in e["parameters"]]
+            if not picked:
+                continue
             ax.plot([values.index(str(e["parameters"][key])) for e in picked],
                     [scenes.index(str(e["scene"])) for e in picked], markers[status], ms=10,
                     color=colors[status], label=status, linestyle="none")

@@ -28,6 +28,8 @@ from .errors import RtsError
 WORST_RUNS = 10
 # ``--scheduler`` value that starts a Dask cluster on this machine.
 LOCAL_SCHEDULER = "local"
+# How long to try reaching a Dask scheduler before giving up.
+CONNECT_TIMEOUT_S = 10.0
 
 Entry = dict[str, Any]
 
@@ -242,7 +244,7 @@ def _run_dask(tasks: Sequence[SweepTask], method: str, scheduler: str, workers: 
             client = distributed.Client(cluster)
         else:
             try:
-                client = distributed.Client(scheduler, timeout="10s")
+                client = distributed.Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
             except (OSError, TimeoutError, ValueError) as exc:
                 from .cli.common import one_line
 
