@@ -218,19 +218,23 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
         ax.set(xlabel=kx, ylabel=ky, title="sweep: runs passed per combination")
         fig.colorbar(image, ax=ax, label="pass rate")
     else:
-        groups = [(key, values_of(key), lambda e, key=key: str(e["parameters"].get(key)))
-                  for key in keys] or [("scene", list(dict.fromkeys(str(e["scene"])
-                                                                   for e in entries)),
-                                        lambda e: str(e["scene"]))]
+        # One panel per parameter; without parameters, one for the scenes.
+        groups: list[tuple[str, list[str], str | None]] = [
+            (key, values_of(key), key) for key in keys] or [
+            ("scene", list(dict.fromkeys(str(e["scene"]) for e in entries)), None)]
+
+        def value_of(entry: dict[str, Any], key: str | None) -> str:
+            return str(entry["parameters"].get(key) if key else entry["scene"])
+
         fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.2 * len(groups)), squeeze=False)
-        for ax, (key, values, value_of) in zip(axes[:, 0], groups, strict=True):
-            runs_of = [[e for e in entries if value_of(e) == v] for v in values]
+        for ax, (label, values, key) in zip(axes[:, 0], groups, strict=True):
+            runs_of = [[e for e in entries if value_of(e, key) == v] for v in values]
             rates = [sum(e["status"] == "pass" for e in r) / len(r) for r in runs_of]
             ax.bar(range(len(values)), rates, color=[plt.cm.RdYlGn(r) for r in rates])
             for i, r in enumerate(runs_of):
                 ax.text(i, 0.02, f"{sum(e['status'] == 'pass' for e in r)}/{len(r)}",
                         ha="center", fontsize=7)
             ax.set_xticks(range(len(values)), values, fontsize=7)
-            ax.set(ylim=(0, 1.05), ylabel="pass rate", xlabel=key)
+            ax.set(ylim=(0, 1.05), ylabel="pass rate", xlabel=label)
         axes[0, 0].set_title("sweep: pass rate per parameter value")
     return _save(fig, Path(path))

@@ -340,7 +340,7 @@ def _count(counts: dict[str, Any], entry: Entry) -> None:
 
 
 def exit_code(entries: Sequence[Entry]) -> int:
-    """The command line's exit code: 3 a runtime error, 2 bad input, 1 a failure, else 0."""
+    """Return the command line's exit code: 3 runtime error, 2 bad input, 1 a failure, else 0."""
     types = {e.get("error_type") for e in entries if e["status"] == "error"}
     if "runtime" in types:
         return 3

@@ -202,14 +202,15 @@ class HtmlReport:
         report = yield
         failure = call.excinfo.value if call.excinfo is not None else None
         if isinstance(failure, ScenarioFailed):
-            report.extras = [*getattr(report, "extras", []), *_html_extras(failure.result)]
+            extras = [*getattr(report, "extras", []), *_html_extras(failure.result)]
+            report.extras = extras  # type: ignore[attr-defined]  # pytest-html reads it
             if failure.result.report.record is not None:
                 failure.result.report.record.close()  # the plots are drawn; free the disk
         return report
 
 
 def _html_extras(result: RunResult) -> list[dict[str, Any]]:
-    """The report table (as the CLI prints it) and every plot of the run, base64 PNG."""
+    """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG."""
     import base64
     import html
     import tempfile

@@ -113,7 +113,7 @@ def _do_sweep(args: argparse.Namespace) -> int:
 
 
 def _summary_text(summary: dict[str, Any], seconds: float) -> str:
-    """The summary for people: totals, pass rate per parameter value, the worst runs."""
+    """Render the summary for people: totals, pass rate per parameter value, worst runs."""
     from ..sweep import run_label
 
     runs = summary["runs"]
