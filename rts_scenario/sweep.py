@@ -225,9 +225,16 @@ def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else None)
     with ProcessPoolExecutor(max_workers=min(workers, max(len(tasks), 1)),
-                             mp_context=context) as pool:
+                             mp_context=context, initializer=_one_blas_thread) as pool:
         futures = {pool.submit(run_task, task, method): task for task in tasks}
         _collect(futures, as_completed(futures), finish)
+
+
+def _one_blas_thread() -> None:
+    """Keep each worker process to one BLAS thread: the processes already fill the CPUs."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
 
 
 def _run_dask(tasks: Sequence[SweepTask], method: str, scheduler: str, workers: int,
