@@ -205,11 +205,14 @@ def run_sweep(tasks: Sequence[SweepTask], *, method: str = "exact", workers: int
     for task in tasks:
         if task.error is not None:
             finish(task, run_task(task, method))
+    # A pool for one run would only cost its start.
+    workers = max(1, min(workers, len(runnable)))
     local = scheduler is None or scheduler == LOCAL_SCHEDULER
     if runnable and local and (workers > 1 or scheduler is not None):
         warm_plans(runnable, method)
     if scheduler is not None:
-        _run_dask(runnable, method, scheduler, workers, finish)
+        if runnable:
+            _run_dask(runnable, method, scheduler, workers, finish)
     elif workers == 1:
         for task in runnable:
             finish(task, run_task(task, method))
@@ -224,8 +227,8 @@ def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
     # exist, the platform's default start method (the plans come from the disk cache then).
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else None)
-    with ProcessPoolExecutor(max_workers=min(workers, max(len(tasks), 1)),
-                             mp_context=context, initializer=_one_blas_thread) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                             initializer=_one_blas_thread) as pool:
         futures = {pool.submit(run_task, task, method): task for task in tasks}
         _collect(futures, as_completed(futures), finish)
 
