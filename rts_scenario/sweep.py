@@ -230,7 +230,11 @@ def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
     with ProcessPoolExecutor(max_workers=workers, mp_context=context,
                              initializer=_one_blas_thread) as pool:
         futures = {pool.submit(run_task, task, method): task for task in tasks}
-        _collect(futures, as_completed(futures), finish)
+        try:
+            _collect(futures, as_completed(futures), finish)
+        except BaseException:  # Ctrl-C: do not wait for the runs not started yet
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
 
 
 def _one_blas_thread() -> None:
