@@ -91,8 +91,9 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     ``reason`` (its one-line message) and ``error_type`` (``bad_input``: the scene does not
     load or its schedule cannot be built; ``runtime``: anything else). Finished runs add
     ``detection_rate``, ``false_detections``, ``errors`` (rms and max per quantity),
-    ``max_error_ratio`` and ``max_error_quantity`` (the largest max error over its tolerance)
-    and ``seconds``.
+    ``max_error_ratio`` and ``max_error_quantity`` (the largest max error over its tolerance),
+    ``solver_plan`` (where its solver plan came from: ``built``, ``memory`` or ``disk``) and
+    ``seconds``.
     """
     from .errors import ScenarioError
     from .pipeline import RunOptions, run_scene
@@ -137,6 +138,7 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
         "max_error_ratio": ratio if worst else None,
         "max_error_quantity": worst,
     }))
+    entry["solver_plan"] = report.solver_plan
     entry["seconds"] = round(time.perf_counter() - start, 3)
     return entry
 

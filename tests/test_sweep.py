@@ -61,8 +61,9 @@ def sweep(capsys, *args):
 
 
 def verdicts(payload):
-    """What must not depend on where a run ran: everything but its duration."""
-    return [{k: v for k, v in run.items() if k != "seconds"} for run in payload["runs"]]
+    """What must not depend on where a run ran: all but its duration and its plan's origin."""
+    return [{k: v for k, v in run.items() if k not in ("seconds", "solver_plan")}
+            for run in payload["runs"]]
 
 
 def test_verdicts_are_identical_in_process_in_a_pool_and_on_dask(scenes, tmp_path, capsys):
@@ -87,6 +88,11 @@ def test_verdicts_are_identical_in_process_in_a_pool_and_on_dask(scenes, tmp_pat
     for payload in payloads[1:]:
         assert verdicts(payload) == first
         assert payload["summary"] == payloads[0]["summary"]
+    # The plan was built (or read) once before the pool started; forked workers inherit it.
+    assert {r["solver_plan"] for r in payloads[1]["runs"]} == {"memory"}
+    # A Dask worker reads it from the disk cache once, then keeps it in memory.
+    for payload in payloads[2:]:
+        assert Counter(r["solver_plan"] for r in payload["runs"]) == {"disk": 1, "memory": 5}
 
 
 def test_json_layout_and_summary_counted_independently(scenes, tmp_path, capsys):
