@@ -251,3 +251,50 @@ def test_plot_of_pass_and_fail_over_two_parameters(scenes, tmp_path, capsys):
                          "--plot", png)
     assert code == 1 and f"wrote {png}" in out
     assert png.read_bytes().startswith(b"\x89PNG")
+
+
+def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
+    import rts_scenario.pipeline
+
+    real = rts_scenario.pipeline.run_scene
+    calls = []
+
+    def interrupted_at_the_third(scene, options):
+        calls.append(scene.name)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", interrupted_at_the_third)
+    out = tmp_path / "partial.json"
+    code, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1",
+                         "--json", out)
+    assert code == 1 and err.endswith("error: interrupted\n")
+    payload = json.loads(out.read_text())
+    assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
+    assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="the pool's workers are forked")
+def test_a_worker_that_dies_loses_no_run(scenes, tmp_path, capsys, monkeypatch):
+    import os
+
+    import rts_scenario.pipeline
+
+    real = rts_scenario.pipeline.run_scene
+
+    def dies_on_plain(scene, options):  # forked workers inherit the patch
+        if scene.name == "plain":
+            os._exit(7)
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", dies_on_plain)
+    out = tmp_path / "died.json"
+    code, stdout, err = sweep(capsys, scenes, "--workers", "2", "--json", out)
+    assert code == 3
+    runs = json.loads(out.read_text())["runs"]
+    assert len(runs) == 8
+    [plain] = [r for r in runs if r["file"].endswith("a_plain.scenario.yaml")]
+    assert plain["status"] == "error" and plain["error_type"] == "runtime"
+    assert "worker failed: BrokenProcessPool" in plain["reason"]
+    assert "Traceback" not in stdout + err

@@ -88,8 +88,27 @@ def _do_sweep(args: argparse.Namespace) -> int:
              + (" (local Dask cluster)" if args.scheduler == LOCAL_SCHEDULER else ""))
     print(f"sweep: {len(tasks)} runs on {where}", file=sys.stderr)
     start = time.perf_counter()
-    entries = run_sweep(tasks, method=args.method, workers=workers, scheduler=args.scheduler,
-                        on_result=SweepProgress(len(tasks)))
+    progress = SweepProgress(len(tasks))
+    finished: list[dict[str, Any]] = []
+
+    def on_result(entry: dict[str, Any]) -> None:
+        finished.append(entry)
+        progress(entry)
+
+    try:
+        entries = run_sweep(tasks, method=args.method, workers=workers,
+                            scheduler=args.scheduler, on_result=on_result)
+    except KeyboardInterrupt:
+        # Keep what finished: the runs done so far, in the sweep's order, and their summary.
+        if args.json:
+            order = {(t.file, t.ident): t.index for t in tasks}
+            done = sorted(finished, key=lambda e: order.get((e["file"], e["id"]), len(order)))
+            summary = {**summarize(done), "interrupted": True}
+            with writing("--json", args.json):
+                Path(args.json).write_text(json.dumps({"runs": done, "summary": summary},
+                                                      indent=2, allow_nan=False) + "\n")
+            print(f"wrote {args.json} ({len(done)} of {len(tasks)} runs)", file=sys.stderr)
+        raise
     seconds = time.perf_counter() - start
     summary = summarize(entries)
 
