@@ -213,20 +213,24 @@ def _html_extras(result: RunResult) -> list[dict[str, Any]]:
     """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG."""
     import base64
     import html
+    import importlib.util
     import tempfile
 
     from pytest_html import extras
 
-    from rts_scenario.errors import RtsError
     from rts_scenario.plots import write_plots
 
     out = [extras.html(f'<pre class="rts-scenario-report">{html.escape(_render(result))}'
                        f"</pre>")]
+    if importlib.util.find_spec("matplotlib") is None:  # say so where the plots would be
+        return [*out, extras.html("<p>No plots: they need matplotlib (pip install "
+                                  "'rts-scenario[plot]').</p>")]
     with tempfile.TemporaryDirectory(prefix="rts-scenario-html-") as folder:
         try:
             written = write_plots(result, folder)
-        except RtsError as exc:  # no matplotlib: say so where the plots would be
-            return [*out, extras.html(f"<p>{html.escape(str(exc))}</p>")]
+        except Exception as exc:  # a report that cannot draw must not break the test session
+            return [*out, extras.html(f"<p>No plots: {html.escape(type(exc).__name__)}: "
+                                      f"{html.escape(str(exc))}</p>")]
         for path in written:
             data = base64.b64encode(path.read_bytes()).decode("ascii")
             out.append(extras.png(data, name=path.stem))
