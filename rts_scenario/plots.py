@@ -157,3 +157,84 @@ def write_calibration_plot(result: Any, folder: str | Path, name: str) -> Path:
     for ax in axes.ravel()[len(pairs):]:
         ax.axis("off")
     return _save(fig, folder / f"{safe_stem(name)}-calibration.png")
+
+
+def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
+    """Plot a sweep's verdicts over its parameters into one PNG; return the file.
+
+    One parameter: each run's verdict (pass, fail, error) against the parameter's value, one
+    row per scene. Two: a grid of the pass rate over both values, each cell marked
+    ``passed/runs``. More (or none): the pass rate per value of each parameter (per scene when
+    no run has a parameter), one panel each.
+    """
+    plt = _pyplot()
+    keys = list(dict.fromkeys(k for e in entries for k in e["parameters"]))
+    colors = {"pass": "tab:green", "fail": "tab:red", "error": "tab:orange"}
+    markers = {"pass": "o", "fail": "X", "error": "s"}
+
+    def values_of(key: str) -> list[str]:
+        return list(dict.fromkeys(str(e["parameters"][key]) for e in entries
+                                  if key in e["parameters"]))
+
+    if len(keys) == 1:
+        key = keys[0]
+        values = values_of(key)
+        scenes = list(dict.fromkeys(str(e["scene"]) for e in entries))
+        fig, ax = plt.subplots(figsize=(max(6.0, 0.6 * len(values) + 3), 1.2 + 0.5 * len(scenes)))
+        for status in colors:
+            picked = [e for e in entries if e["status"] == status and key in e["parameters"]]
+            if not picked:
+                continue
+            ax.plot([values.index(str(e["parameters"][key])) for e in picked],
+                    [scenes.index(str(e["scene"])) for e in picked], markers[status], ms=10,
+                    color=colors[status], label=status, linestyle="none")
+        ax.set_xticks(range(len(values)), values)
+        ax.set_yticks(range(len(scenes)), scenes)
+        ax.set_xlim(-0.5, len(values) - 0.5)
+        ax.set_ylim(-0.5, len(scenes) - 0.5)
+        ax.set(xlabel=key, title="sweep: verdict per run")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    elif len(keys) == 2:
+        (kx, ky), (xs, ys) = keys, (values_of(keys[0]), values_of(keys[1]))
+        runs = np.zeros((len(ys), len(xs)))
+        passed = np.zeros_like(runs)
+        for e in entries:
+            p = e["parameters"]
+            if kx in p and ky in p:
+                cell = (ys.index(str(p[ky])), xs.index(str(p[kx])))
+                runs[cell] += 1
+                passed[cell] += e["status"] == "pass"
+        rate = np.full_like(runs, np.nan)
+        np.divide(passed, runs, out=rate, where=runs > 0)
+        fig, ax = plt.subplots(figsize=(max(5.0, 0.8 * len(xs) + 3), max(3.0, 0.5 * len(ys) + 2)))
+        image = ax.imshow(rate, cmap="RdYlGn", vmin=0.0, vmax=1.0, origin="lower",
+                          aspect="auto")
+        for (i, j), n in np.ndenumerate(runs):
+            if n:
+                ax.text(j, i, f"{passed[i, j]:.0f}/{n:.0f}", ha="center", va="center",
+                        fontsize=8)
+        ax.set_xticks(range(len(xs)), xs)
+        ax.set_yticks(range(len(ys)), ys)
+        ax.set(xlabel=kx, ylabel=ky, title="sweep: runs passed per combination")
+        fig.colorbar(image, ax=ax, label="pass rate")
+    else:
+        # One panel per parameter; without parameters, one for the scenes.
+        groups: list[tuple[str, list[str], str | None]] = [
+            (key, values_of(key), key) for key in keys] or [
+            ("scene", list(dict.fromkeys(str(e["scene"]) for e in entries)), None)]
+
+        def value_of(entry: dict[str, Any], key: str | None) -> str:
+            return str(entry["parameters"].get(key) if key else entry["scene"])
+
+        fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.2 * len(groups)), squeeze=False)
+        for ax, (label, values, key) in zip(axes[:, 0], groups, strict=True):
+            runs_of = [[e for e in entries if value_of(e, key) == v] for v in values]
+            rates = [sum(e["status"] == "pass" for e in r) / len(r) for r in runs_of]
+            ax.bar(range(len(values)), rates, color=[plt.cm.RdYlGn(r) for r in rates])
+            for i, r in enumerate(runs_of):
+                ax.text(i, 0.02, f"{sum(e['status'] == 'pass' for e in r)}/{len(r)}",
+                        ha="center", fontsize=7)
+            ax.set_xticks(range(len(values)), values, fontsize=7)
+            ax.set(ylim=(0, 1.05), ylabel="pass rate", xlabel=label)
+        axes[0, 0].set_title("sweep: pass rate per parameter value")
+    return _save(fig, Path(path))

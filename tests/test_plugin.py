@@ -170,3 +170,44 @@ def test_importing_the_plugin_leaves_the_library_alone():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             env={**os.environ, "PYTHONPATH": os.pathsep.join(path)}, check=True)
     assert result.stdout.strip() == "[]"
+
+
+def test_html_report_embeds_a_failed_scene_s_plots_and_table(pytester):
+    pytest.importorskip("pytest_html")
+    try:
+        # Imported here, once, for the same reason as the library (extension modules).
+        import matplotlib.pyplot  # noqa: F401
+        plots = True
+    except ImportError:
+        plots = False
+    text = scene("strict").replace("detection_rate: 0.9",
+                                   "detection_rate: 0.9\n  tolerances: {az_deg: 0.00001}")
+    pytester.makefile(".scenario.yaml", strict=text, follow=scene("follow"))
+    result = pytester.runpytest("--html", "report.html", "--self-contained-html")
+    result.assert_outcomes(failed=1, passed=1)
+    html = (pytester.path / "report.html").read_text()
+    # The table `rts-scenario run` prints, with the failing target's row.
+    assert html.count("rts-scenario-report") == 1  # the passing scene carries none
+    assert "det. rate" in html and "radar cycles: " in html
+    assert "FAIL: strict" in html
+    if plots:
+        # scene, schedule and errors over time, as base64 PNG inside the page
+        assert html.count("data:image/png;base64,iVBORw0KGgo") == 3
+    else:
+        assert "No plots: they need matplotlib" in html
+
+
+def test_without_an_html_report_nothing_is_recorded_or_added(pytester):
+    pytester.makefile(".scenario.yaml", impossible=scene("impossible").replace(
+        "[30, 0, 0.6]", "[30, 20, 0.6]"))
+    pytester.makeconftest("""
+        import pytest
+
+        @pytest.hookimpl(trylast=True)
+        def pytest_runtest_logreport(report):
+            if report.when == "call":
+                assert not getattr(report, "extras", [])
+    """)
+    result = pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    assert not pytester.parseconfig().pluginmanager.hasplugin("rts-scenario-html")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from fnmatch import fnmatch
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -60,6 +60,8 @@ def pytest_configure(config: pytest.Config) -> None:
             check_output("--rts-output", spec, run=True)
         except RtsError as exc:
             raise pytest.UsageError(str(exc)) from None
+    if config.pluginmanager.hasplugin("html") and config.getoption("htmlpath", None):
+        config.pluginmanager.register(HtmlReport(), "rts-scenario-html")
 
 
 def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> ScenarioFile | None:
@@ -135,7 +137,10 @@ class ScenarioItem(pytest.Item):
         from rts_scenario.pipeline import run_scene
         from rts_scenario.scenario import load_scenario
 
-        result = run_scene(load_scenario(self.path, self.overrides), _options(self.config))
+        # The HTML report's plots need every frame's errors: record them only for it.
+        record = self.config.pluginmanager.hasplugin("rts-scenario-html")
+        result = run_scene(load_scenario(self.path, self.overrides),
+                           _options(self.config, record=record))
         report = result.report
         self.user_properties.extend(_metrics(report))
         if not report.passed:
@@ -180,6 +185,56 @@ def _render(result: RunResult) -> str:
         lines.append(f"{row['frame']:>6} {row['t_s']:>7.2f} {row['target']:<18} "
                      + " ".join(f"{c:>8}" for c in cells))
     return "\n".join(lines)
+
+
+class HtmlReport:
+    """With pytest-html and ``--html``: a failed scene's report carries its table and plots.
+
+    Registered by `pytest_configure` only when pytest-html is installed and writes a report,
+    so without it nothing changes (and no run records its frames).
+    """
+
+    @pytest.hookimpl(wrapper=True)
+    def pytest_runtest_makereport(self, item: pytest.Item,
+                                  call: pytest.CallInfo[None]
+                                  ) -> Generator[None, pytest.TestReport, pytest.TestReport]:
+        """Add the failed scene's table and plots to the report's ``extras``."""
+        report = yield
+        failure = call.excinfo.value if call.excinfo is not None else None
+        if isinstance(failure, ScenarioFailed):
+            extras = [*getattr(report, "extras", []), *_html_extras(failure.result)]
+            report.extras = extras  # type: ignore[attr-defined]  # pytest-html reads it
+            if failure.result.report.record is not None:
+                failure.result.report.record.close()  # the plots are drawn; free the disk
+        return report
+
+
+def _html_extras(result: RunResult) -> list[dict[str, Any]]:
+    """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG."""
+    import base64
+    import html
+    import importlib.util
+    import tempfile
+
+    from pytest_html import extras
+
+    from rts_scenario.plots import write_plots
+
+    out = [extras.html(f'<pre class="rts-scenario-report">{html.escape(_render(result))}'
+                       f"</pre>")]
+    if importlib.util.find_spec("matplotlib") is None:  # say so where the plots would be
+        return [*out, extras.html("<p>No plots: they need matplotlib (pip install "
+                                  "'rts-scenario[plot]').</p>")]
+    with tempfile.TemporaryDirectory(prefix="rts-scenario-html-") as folder:
+        try:
+            written = write_plots(result, folder)
+        except Exception as exc:  # a report that cannot draw must not break the test session
+            return [*out, extras.html(f"<p>No plots: {html.escape(type(exc).__name__)}: "
+                                      f"{html.escape(str(exc))}</p>")]
+        for path in written:
+            data = base64.b64encode(path.read_bytes()).decode("ascii")
+            out.append(extras.png(data, name=path.stem))
+    return out
 
 
 @pytest.fixture

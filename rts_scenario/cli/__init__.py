@@ -26,12 +26,13 @@ from . import (
     run,
     schedule,
     survey,
+    sweep,
     validate,
 )
 from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK, EXIT_RUNTIME_ERROR, one_line
 
 # In the order `--help` lists them.
-_SUBCOMMANDS = (bench, validate, run, check, schedule, calibrate, survey, emulate,
+_SUBCOMMANDS = (bench, validate, run, sweep, check, schedule, calibrate, survey, emulate,
                 list_scenes, list_outputs, listen)
 
 

@@ -1,0 +1,196 @@
+"""``rts-scenario sweep``: every parametrized combination of many scenes, in parallel."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+from typing import IO, Any
+
+from .common import METHODS, check_writable_file, writing
+
+# Without a terminal, a progress line each time another tenth of the runs is done.
+PLAIN_PROGRESS_STEPS = 10
+
+
+class SweepProgress:
+    """Runs done so far: a bar on a terminal, a plain line per tenth of the runs otherwise."""
+
+    def __init__(self, total: int, stream: IO[str] | None = None) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = self.stream.isatty()
+        self.total = total
+        self.done = self.failed = self.errors = 0
+        self.start = time.perf_counter()
+        self.step = max(1, math.ceil(total / PLAIN_PROGRESS_STEPS))
+        self.next_line = self.step
+
+    def __call__(self, entry: dict[str, Any]) -> None:
+        """Count one finished run and show the progress."""
+        self.done += 1
+        self.failed += entry["status"] == "fail"
+        self.errors += entry["status"] == "error"
+        elapsed = time.perf_counter() - self.start
+        rate = self.done / elapsed if elapsed > 0 else 0.0
+        counts = (f"{self.done}/{self.total} runs, {self.failed} failed, {self.errors} errors, "
+                  f"{rate:.2f} runs/s")
+        if self.tty:
+            width = 30
+            filled = int(width * self.done / max(self.total, 1))
+            line = f"sweep [{'#' * filled}{'.' * (width - filled)}] {counts}"
+            end = "\r" + " " * len(line) + "\r" if self.done >= self.total else ""
+            self.stream.write("\r" + line + end)
+        elif self.done >= self.next_line or self.done >= self.total:
+            self.stream.write(f"sweep: {counts}\n")
+            while self.next_line <= self.done:
+                self.next_line += self.step
+        self.stream.flush()
+
+
+def _do_sweep(args: argparse.Namespace) -> int:
+    import json
+
+    from ..errors import RtsError
+    from ..sweep import (
+        LOCAL_SCHEDULER,
+        collect_tasks,
+        default_workers,
+        exit_code,
+        require_dask,
+        run_label,
+        run_sweep,
+        summarize,
+    )
+
+    workers = args.workers if args.workers is not None else default_workers()
+    if workers < 1:
+        raise RtsError(f"--workers: must be >= 1, got {workers}")
+    if args.scheduler is not None:
+        require_dask()
+        if args.scheduler == "":
+            raise RtsError(f"--scheduler: needs an address (tcp://HOST:PORT) or "
+                           f"{LOCAL_SCHEDULER!r}, got an empty one")
+    if args.json:
+        check_writable_file("--json", args.json)
+    if args.plot:
+        from ..plots import require_matplotlib
+
+        require_matplotlib()
+        if Path(args.plot).suffix.lower() != ".png":
+            raise RtsError(f"--plot {args.plot}: must name a .png file")
+        check_writable_file("--plot", args.plot)
+
+    tasks = collect_tasks(args.scenes)
+    where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, LOCAL_SCHEDULER)
+             else f"{workers} worker{'s' if workers > 1 else ''}"
+             + (" (local Dask cluster)" if args.scheduler == LOCAL_SCHEDULER else ""))
+    print(f"sweep: {len(tasks)} runs on {where}", file=sys.stderr)
+    start = time.perf_counter()
+    progress = SweepProgress(len(tasks))
+    finished: list[dict[str, Any]] = []
+
+    def on_result(entry: dict[str, Any]) -> None:
+        finished.append(entry)
+        progress(entry)
+
+    try:
+        entries = run_sweep(tasks, method=args.method, workers=workers,
+                            scheduler=args.scheduler, on_result=on_result)
+    except KeyboardInterrupt:
+        # Keep what finished: the runs done so far, in the sweep's order, and their summary.
+        if args.json:
+            order = {(t.file, t.ident): t.index for t in tasks}
+            done = sorted(finished, key=lambda e: order.get((e["file"], e["id"]), len(order)))
+            summary = {**summarize(done), "interrupted": True}
+            with writing("--json", args.json):
+                Path(args.json).write_text(json.dumps({"runs": done, "summary": summary},
+                                                      indent=2, allow_nan=False) + "\n")
+            print(f"wrote {args.json} ({len(done)} of {len(tasks)} runs)", file=sys.stderr)
+        raise
+    seconds = time.perf_counter() - start
+    summary = summarize(entries)
+
+    for entry in entries:
+        line = f"{entry['status'].upper()} {run_label(entry)} ({entry['file']})"
+        print(line + (f": {entry['reason']}" if entry["status"] != "pass" else ""))
+    print()
+    print(_summary_text(summary, seconds))
+    if args.json:
+        payload = {"runs": entries, "summary": summary}
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+        print(f"wrote {args.json}")
+    if args.plot:
+        from ..plots import write_sweep_plot
+
+        with writing("--plot", args.plot):
+            write_sweep_plot(entries, args.plot)
+        print(f"wrote {args.plot}")
+    return exit_code(entries)
+
+
+def _summary_text(summary: dict[str, Any], seconds: float) -> str:
+    """Render the summary for people: totals, pass rate per parameter value, worst runs."""
+    from ..sweep import run_label
+
+    runs = summary["runs"]
+    lines = [f"sweep: {runs} runs, {summary['passed']} passed, {summary['failed']} failed, "
+             f"{summary['errors']} errors; pass rate {summary['pass_rate']:.1%} "
+             f"({seconds:.1f} s, {runs / seconds if seconds > 0 else 0.0:.2f} runs/s)"]
+    by_parameter = summary["by_parameter"]
+    if by_parameter:
+        # The key path's last part names a parameter, unless it is a list index or two
+        # parameters share it.
+        short = [key.rsplit(".", 1)[-1] for key in by_parameter]
+        short = [key if name.isdigit() else name for key, name in zip(by_parameter, short,
+                                                                        strict=True)]
+        lines.append("pass rate by parameter:")
+        for key, name in zip(by_parameter, short, strict=True):
+            label = name if short.count(name) == 1 else key
+            for value, counts in by_parameter[key].items():
+                extra = f" ({counts['errors']} errors)" if counts["errors"] else ""
+                lines.append(f"  {label}={value}: {counts['passed']}/{counts['runs']}{extra}")
+    worst = [w for w in summary["worst"] if w["status"] != "pass"
+             or w.get("max_error_ratio") is not None]
+    if worst:
+        lines.append("worst runs:")
+    for w in worst:
+        ratio = w.get("max_error_ratio")
+        error = (f" largest error {w['max_error_quantity']} at {ratio:.0%} of tolerance"
+                 if ratio is not None else "")
+        reason = f": {w['reason']}" if w["status"] != "pass" else ""
+        lines.append(f"  {w['status'].upper()} {run_label(w)} ({w['file']}){reason}"
+                     + (f" -{error}" if error and reason else error))
+    return "\n".join(lines)
+
+
+def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """Add the ``sweep`` subcommand."""
+    parser = subparsers.add_parser(
+        "sweep", help="run every parametrized combination of scenes, in parallel",
+        parents=parents,
+        description="Run every combination of each scene's parametrize block (a scene without "
+                    "one runs once; a folder means every *.scenario.yaml in it, recursively) on "
+                    "the simulated radar, in parallel, and print the pass rate overall and per "
+                    "parameter value and the worst runs. Every run is reported, even if others "
+                    "err. Exit 0 if every run passes, 1 if one fails, 2 on bad input, 3 on a "
+                    "runtime error.",
+    )
+    parser.add_argument("scenes", nargs="+", metavar="SCENE",
+                        help="*.scenario.yaml files or folders of them")
+    parser.add_argument("--json", metavar="OUT", help="write every run and the summary as JSON")
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="worker processes (default: the number of CPUs); 1 runs in this "
+                             "process, one run after the other; with --scheduler local, the "
+                             "local Dask cluster's workers")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="run on a Dask cluster: its scheduler's address (tcp://HOST:PORT), "
+                             "or 'local' for a cluster of --workers processes on this machine "
+                             "(needs pip install 'rts-scenario[sweep]')")
+    parser.add_argument("--method", default="exact", choices=METHODS,
+                        help="weight solver (default exact)")
+    parser.add_argument("--plot", metavar="FILE.png",
+                        help="plot pass/fail over the parameters (needs matplotlib)")
+    parser.set_defaults(handler=_do_sweep)

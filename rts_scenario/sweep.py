@@ -1,0 +1,370 @@
+"""Sweeps: every parametrized combination of many scenes, run in parallel, and their summary.
+
+A sweep is a list of `SweepTask` (one scene file and one combination of its ``parametrize``
+block). `run_task` runs one of them end to end on the simulated radar and returns a plain,
+JSON-ready entry; it depends only on the scene file and its overrides (every random effect is
+seeded from the scene), so it gives the same verdict in this process, in a process pool or on
+a Dask worker. `run_sweep` runs a whole list in one of those three places and never loses a
+result: a run that raises, or a worker that dies, becomes an entry with status ``error`` and a
+one-line message. `summarize` counts the verdicts overall and per parameter value and picks
+the worst runs.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .errors import RtsError
+
+# Runs the summary lists as the worst ones (failed and erred runs first).
+WORST_RUNS = 10
+# ``--scheduler`` value that starts a Dask cluster on this machine.
+LOCAL_SCHEDULER = "local"
+# How long to try reaching a Dask scheduler before giving up.
+CONNECT_TIMEOUT_S = 10.0
+
+Entry = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class SweepTask:
+    """One run of a sweep: a scene file and one combination of its ``parametrize`` block.
+
+    ``error`` is set when the file could not even be expanded into combinations (missing,
+    not a scene, invalid ``parametrize``); the task then runs nothing and reports it.
+    """
+
+    index: int
+    file: str
+    ident: str = ""
+    parameters: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+
+
+def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
+    """Expand folders (every scene file in them, recursively, sorted) and parametrize blocks.
+
+    A path that is neither a scene file nor a folder holding one, or a scene whose
+    ``parametrize`` block is invalid, becomes one task carrying its error.
+    """
+    from .scenario import SCENE_SUFFIX, parametrizations
+
+    tasks: list[SweepTask] = []
+    for given in paths:
+        path = Path(given)
+        if path.is_dir():
+            files = sorted((p for p in path.rglob(f"*{SCENE_SUFFIX}") if p.is_file()), key=str)
+            if not files:
+                tasks.append(SweepTask(len(tasks), str(given),
+                                       error=f"{given}: no *{SCENE_SUFFIX} files in this folder"))
+        elif path.is_file():
+            files = [path]
+        else:
+            tasks.append(SweepTask(len(tasks), str(given),
+                                   error=f"{given}: no such file or folder"))
+            continue
+        for file in files:
+            name = str(given) if file is path else str(file)
+            try:
+                combos = parametrizations(file)
+            except RtsError as exc:
+                tasks.append(SweepTask(len(tasks), name, error=_message(name, exc)))
+                continue
+            tasks += [SweepTask(len(tasks) + i, name, ident, overrides)
+                      for i, (ident, overrides) in enumerate(combos)]
+    return tasks
+
+
+def run_task(task: SweepTask, method: str = "exact") -> Entry:
+    """Run one task end to end on the simulated radar; never raises.
+
+    Returns the entry ``{"scene", "file", "id", "parameters", "passed", "status", ...}``:
+    ``status`` is ``pass``, ``fail`` or ``error``; a failed run adds ``reason``; an erred one
+    ``reason`` (its one-line message) and ``error_type`` (``bad_input``: the scene does not
+    load or its schedule cannot be built; ``runtime``: anything else). Finished runs add
+    ``detection_rate``, ``false_detections``, ``errors`` (rms and max per quantity),
+    ``max_error_ratio`` and ``max_error_quantity`` (the largest max error over its tolerance),
+    ``solver_plan`` (where its solver plan came from: ``built``, ``memory`` or ``disk``) and
+    ``seconds``.
+    """
+    from .errors import ScenarioError
+    from .pipeline import RunOptions, run_scene
+    from .scenario import SCENE_SUFFIX, load_scenario
+    from .schedule import ScheduleError
+
+    start = time.perf_counter()
+    entry: Entry = {"scene": Path(task.file).name.removesuffix(SCENE_SUFFIX), "file": task.file,
+                    "id": task.ident, "parameters": dict(task.parameters)}
+    if task.error is not None:
+        return error_entry(entry, task.error, "bad_input")
+    try:
+        scene = load_scenario(task.file, task.parameters)
+    except Exception as exc:
+        return error_entry(entry, _message(task.file, exc),
+                           "bad_input" if isinstance(exc, RtsError) else "runtime")
+    entry["scene"] = scene.name
+    try:
+        report = run_scene(scene, RunOptions(method=method)).report
+    except Exception as exc:
+        # As in `rts-scenario run`: a schedule the scene asks for and the bench cannot build is
+        # the scene's fault; anything else is a runtime error.
+        bad = isinstance(exc, ScenarioError | ScheduleError)
+        return error_entry(entry, _message(task.file, exc), "bad_input" if bad else "runtime")
+    from .check import QUANTITIES
+    from .report import strict
+
+    entry.update(passed=report.passed, status="pass" if report.passed else "fail")
+    if not report.passed:
+        entry["reason"] = "; ".join(report.reasons)
+    ratio, worst = -1.0, None
+    for quantity, tolerance_key in QUANTITIES:
+        stats = report.errors[quantity]
+        tolerance = scene.expectations.tolerances.get(tolerance_key)
+        if stats.count and tolerance and stats.max / tolerance > ratio:
+            ratio, worst = stats.max / tolerance, quantity
+    entry.update(strict({
+        "detection_rate": report.detection_rate,
+        "false_detections": report.false_detections,
+        "errors": {q: {"rms": s.rms, "max": s.max} for q, s in report.errors.items()
+                   if s.count},
+        "max_error_ratio": ratio if worst else None,
+        "max_error_quantity": worst,
+    }))
+    entry["solver_plan"] = report.solver_plan
+    entry["seconds"] = round(time.perf_counter() - start, 3)
+    return entry
+
+
+def error_entry(entry: Entry, message: str, error_type: str) -> Entry:
+    """Complete ``entry`` as a run that erred with ``message`` (one line)."""
+    return {**entry, "passed": False, "status": "error", "reason": message,
+            "error_type": error_type}
+
+
+def _message(path: str, exc: BaseException) -> str:
+    from .cli.common import located, one_line
+
+    if isinstance(exc, RtsError):
+        return located(path, exc)
+    return f"{path}: {type(exc).__name__}: {one_line(exc)} (a runtime error)"
+
+
+def warm_plans(tasks: Sequence[SweepTask], method: str = "exact") -> int:
+    """Build (or load) the solver plan of every distinct rig and radar the tasks use, once.
+
+    The plans land in this process's memory cache, which worker processes forked afterwards
+    inherit, and in the disk cache (``$RTS_SCENARIO_CACHE_DIR``), which any other worker on
+    this machine reads in milliseconds: no two workers build the same plan. A scene that
+    fails here is left to its run, which reports it. Returns the number of distinct plans.
+    """
+    from .scenario import load_scenario
+    from .schedule.build import FE_RESPONSES, solver_inputs
+    from .solver import plan_key, solver_plan
+    from .solver.estimator_aware import plan_method
+
+    seen: set[str] = set()
+    for task in tasks:
+        if task.error is not None:
+            continue
+        try:
+            scene = load_scenario(task.file, task.parameters)
+            array, model = solver_inputs(scene.radar, FE_RESPONSES[0])
+            key = plan_key(scene.rig, array, plan_method(method), model)
+            if key not in seen:
+                seen.add(key)
+                solver_plan(scene.rig, array, plan_method(method), model)
+        except Exception:  # the task's own run reports what is wrong
+            continue
+    return len(seen)
+
+
+def run_sweep(tasks: Sequence[SweepTask], *, method: str = "exact", workers: int = 1,
+              scheduler: str | None = None,
+              on_result: Callable[[Entry], None] | None = None) -> list[Entry]:
+    """Run every task; return their entries in task order.
+
+    ``workers == 1`` without ``scheduler`` runs in this process, one task after the other;
+    ``workers > 1`` in a pool of that many processes; ``scheduler`` on a Dask cluster: its
+    address, or ``"local"`` for a `distributed.LocalCluster` of ``workers`` processes on this
+    machine. ``on_result(entry)`` is called as each run finishes (in completion order).
+    """
+    done: dict[int, Entry] = {}
+
+    def finish(task: SweepTask, entry: Entry) -> None:
+        done[task.index] = entry
+        if on_result is not None:
+            on_result(entry)
+
+    runnable = [t for t in tasks if t.error is None]
+    for task in tasks:
+        if task.error is not None:
+            finish(task, run_task(task, method))
+    # A pool for one run would only cost its start.
+    workers = max(1, min(workers, len(runnable)))
+    local = scheduler is None or scheduler == LOCAL_SCHEDULER
+    if runnable and local and (workers > 1 or scheduler is not None):
+        warm_plans(runnable, method)
+    if scheduler is not None:
+        if runnable:
+            _run_dask(runnable, method, scheduler, workers, finish)
+    elif workers == 1:
+        for task in runnable:
+            finish(task, run_task(task, method))
+    else:
+        _run_pool(runnable, method, workers, finish)
+    return [done[t.index] for t in tasks]
+
+
+def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
+              finish: Callable[[SweepTask, Entry], None]) -> None:
+    # Forked workers start at once and inherit the plans `warm_plans` built; where fork does not
+    # exist, the platform's default start method (the plans come from the disk cache then).
+    methods = multiprocessing.get_all_start_methods()
+    context = multiprocessing.get_context("fork" if "fork" in methods else None)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                             initializer=_one_blas_thread) as pool:
+        futures = {pool.submit(run_task, task, method): task for task in tasks}
+        try:
+            _collect(futures, as_completed(futures), finish)
+        except BaseException:  # Ctrl-C: do not wait for the runs not started yet
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def _one_blas_thread() -> None:
+    """Keep each worker process to one BLAS thread: the processes already fill the CPUs."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
+
+
+def _run_dask(tasks: Sequence[SweepTask], method: str, scheduler: str, workers: int,
+              finish: Callable[[SweepTask, Entry], None]) -> None:
+    distributed = require_dask()
+    cluster = None
+    try:
+        if scheduler == LOCAL_SCHEDULER:
+            import logging
+
+            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1,
+                                               processes=True, dashboard_address=None,
+                                               silence_logs=logging.ERROR)
+            client = distributed.Client(cluster)
+        else:
+            try:
+                client = distributed.Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                from .cli.common import one_line
+
+                raise RtsError(f"--scheduler {scheduler}: cannot connect: {one_line(exc)}"
+                               ) from None
+        with client:
+            # Each run is deterministic, not pure in Dask's sense (it times itself).
+            futures = dict(zip(client.map(run_task, tasks, method=method, pure=False), tasks,
+                               strict=True))
+            _collect(futures, distributed.as_completed(futures), finish)
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def _collect(futures: dict[Any, SweepTask], completed: Iterable[Future[Entry]],
+             finish: Callable[[SweepTask, Entry], None]) -> None:
+    """Hand on each finished future's entry; a worker's failure becomes an erred entry."""
+    from .cli.common import one_line
+
+    for future in completed:
+        task = futures[future]
+        try:
+            entry = future.result()
+        except Exception as exc:  # the worker died or the task could not be shipped to it
+            entry = error_entry(
+                {"scene": Path(task.file).name, "file": task.file, "id": task.ident,
+                 "parameters": dict(task.parameters)},
+                f"{task.file}: worker failed: {type(exc).__name__}: {one_line(exc)} "
+                f"(a runtime error)", "runtime")
+        finish(task, entry)
+
+
+def require_dask() -> Any:
+    """Return `distributed`, or raise the one-line error that says how to install it."""
+    try:
+        import distributed
+    except ImportError:
+        raise RtsError("--scheduler needs dask.distributed: pip install "
+                       "'rts-scenario[sweep]'") from None
+    return distributed
+
+
+def default_workers() -> int:
+    """Worker processes by default: the CPUs this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
+
+
+def run_label(entry: Entry) -> str:
+    """``scene[id]`` (``scene`` when the scene has no parametrize block)."""
+    return f"{entry['scene']}[{entry['id']}]" if entry.get("id") else str(entry["scene"])
+
+
+def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, Any]:
+    """Count verdicts overall and per parameter value; pick the worst runs.
+
+    ``by_parameter`` maps each parameter's key path to its values (as text, in the order they
+    first appear) and each value to ``{"runs", "passed", "failed", "errors", "pass_rate"}``.
+    ``worst`` lists erred runs, then failed ones, then passing ones, each by their largest
+    error over tolerance, at most ``worst`` runs.
+    """
+    by_parameter: dict[str, dict[str, dict[str, Any]]] = {}
+    for entry in entries:
+        for key, value in entry["parameters"].items():
+            counts = by_parameter.setdefault(key, {}).setdefault(
+                str(value), {"runs": 0, "passed": 0, "failed": 0, "errors": 0})
+            _count(counts, entry)
+    for values in by_parameter.values():
+        for counts in values.values():
+            counts["pass_rate"] = counts["passed"] / counts["runs"]
+    totals = {"runs": 0, "passed": 0, "failed": 0, "errors": 0}
+    for entry in entries:
+        _count(totals, entry)
+    order = {"error": 0, "fail": 1}
+
+    def badness(entry: Entry) -> tuple[int, float]:
+        ratio = entry.get("max_error_ratio")
+        return order.get(entry["status"], 2), -(ratio if ratio is not None else math.inf)
+
+    ranked = sorted(entries, key=badness)[:worst]
+    keys = ("scene", "file", "id", "status", "reason", "max_error_ratio", "max_error_quantity")
+    return {**totals, "pass_rate": totals["passed"] / totals["runs"] if totals["runs"] else 0.0,
+            "by_parameter": by_parameter,
+            "worst": [{k: e[k] for k in keys if k in e} for e in ranked]}
+
+
+def _count(counts: dict[str, Any], entry: Entry) -> None:
+    counts["runs"] += 1
+    key = {"pass": "passed", "fail": "failed"}.get(entry["status"], "errors")
+    counts[key] += 1
+
+
+def exit_code(entries: Sequence[Entry]) -> int:
+    """Return the command line's exit code: 3 runtime error, 2 bad input, 1 a failure, else 0."""
+    types = {e.get("error_type") for e in entries if e["status"] == "error"}
+    if "runtime" in types:
+        return 3
+    if types:
+        return 2
+    return 0 if all(e["status"] == "pass" for e in entries) else 1
+
+
+__all__ = ["LOCAL_SCHEDULER", "WORST_RUNS", "SweepTask", "collect_tasks", "default_workers",
+           "error_entry", "exit_code", "require_dask", "run_label", "run_sweep", "run_task",
+           "summarize", "warm_plans"]

@@ -1,0 +1,300 @@
+"""``rts-scenario sweep``: combinations, verdicts in every place they run, summary, JSON."""
+
+import io
+import json
+import sys
+import textwrap
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from rts_scenario.cli import main
+from rts_scenario.cli.sweep import SweepProgress
+from rts_scenario.sweep import collect_tasks, run_sweep, summarize
+
+# Two of the six combinations put the car 20 m to the side, outside the rig's coverage, and the
+# scene does not declare that limit: those runs fail by design.
+OFFSETS_M = [0.0, 2.0, 20.0]
+RCS_DBSM = [5.0, 10.0]
+
+
+def tiny_scene(name: str, parametrize: str = "") -> str:
+    """Half a second at 20 Hz on the analytic simulated radar: a run takes a few 10 ms."""
+    return textwrap.dedent(f"""\
+        rts_scenario: 1
+        name: {name}
+        duration_s: 0.5
+        frame_rate_hz: 20.0
+        radar: {{profile: awr1843boost, mount: {{x_m: 3.7, z_m: 0.5}}, fidelity: analytic}}
+        rig: wide-3x5
+        ego:
+          motion: {{type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}}
+        targets:
+          - name: car
+            motion: {{type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}}
+            rcs: {{rcs_dbsm: 10.0}}
+        """) + parametrize
+
+
+SWEPT = tiny_scene("swept", "parametrize:\n"
+                            f"  targets.0.motion.position_m.1: {OFFSETS_M}\n"
+                            f"  targets.0.rcs.rcs_dbsm: {RCS_DBSM}\n")
+OFFSET_KEY = "targets.0.motion.position_m.1"
+RCS_KEY = "targets.0.rcs.rcs_dbsm"
+
+
+@pytest.fixture
+def scenes(tmp_path):
+    """A folder: the swept scene, a plain one in a subfolder and a scene that does not load."""
+    (tmp_path / "b_swept.scenario.yaml").write_text(SWEPT)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "a_plain.scenario.yaml").write_text(tiny_scene("plain"))
+    (tmp_path / "c_broken.scenario.yaml").write_text(tiny_scene("broken") + "colour: red\n")
+    return tmp_path
+
+
+def sweep(capsys, *args):
+    code = main(["sweep", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def verdicts(payload):
+    """What must not depend on where a run ran: all but its duration and its plan's origin."""
+    return [{k: v for k, v in run.items() if k not in ("seconds", "solver_plan")}
+            for run in payload["runs"]]
+
+
+def test_verdicts_are_identical_in_process_in_a_pool_and_on_dask(scenes, tmp_path, capsys):
+    swept = scenes / "b_swept.scenario.yaml"
+    payloads = []
+    places = [["--workers", "1"], ["--workers", "2"]]
+    try:
+        import distributed  # noqa: F401
+
+        # One worker process: the cluster starts in a few seconds and runs the same
+        # `run_task` in another process, as a remote worker would.
+        places.append(["--scheduler", "local", "--workers", "1"])
+    except ImportError:
+        pass
+    for i, place in enumerate(places):
+        out = tmp_path / f"sweep-{i}.json"
+        code, _, _ = sweep(capsys, swept, "--json", out, *place)
+        assert code == 1  # two runs fail by design
+        payloads.append(json.loads(out.read_text()))
+    first = verdicts(payloads[0])
+    assert [r["status"] for r in first] == ["pass", "pass", "pass", "pass", "fail", "fail"]
+    for payload in payloads[1:]:
+        assert verdicts(payload) == first
+        assert payload["summary"] == payloads[0]["summary"]
+    # The plan was built (or read) once before the pool started; forked workers inherit it.
+    assert {r["solver_plan"] for r in payloads[1]["runs"]} == {"memory"}
+    # A Dask worker reads it from the disk cache once, then keeps it in memory.
+    for payload in payloads[2:]:
+        assert Counter(r["solver_plan"] for r in payload["runs"]) == {"disk": 1, "memory": 5}
+
+
+def test_json_layout_and_summary_counted_independently(scenes, tmp_path, capsys):
+    out = tmp_path / "sweep.json"
+    code, stdout, _ = sweep(capsys, scenes, "--json", out, "--workers", "1")
+    assert code == 2  # the broken scene is bad input; the others still ran
+    payload = json.loads(out.read_text())
+    assert set(payload) == {"runs", "summary"}
+    runs = payload["runs"]
+    # Folder order: sorted paths, recursively; combinations in parametrize order.
+    assert [(Path(r["file"]).name, r["id"]) for r in runs] == (
+        [("b_swept.scenario.yaml", f"1={y}-rcs_dbsm={rcs}") for y in OFFSETS_M
+         for rcs in RCS_DBSM]
+        + [("c_broken.scenario.yaml", ""), ("a_plain.scenario.yaml", "")])
+    for run in runs:
+        assert {"scene", "file", "parameters", "passed", "status"} <= set(run)
+        assert run["status"] in ("pass", "fail", "error")
+        assert run["passed"] == (run["status"] == "pass")
+    swept = [r for r in runs if r["scene"] == "swept"]
+    assert [r["parameters"] for r in swept] == [{OFFSET_KEY: y, RCS_KEY: rcs}
+                                                for y in OFFSETS_M for rcs in RCS_DBSM]
+    for r in swept:
+        assert r["status"] == ("fail" if r["parameters"][OFFSET_KEY] == 20.0 else "pass")
+        if r["status"] == "fail":
+            assert "out_of_coverage" in r["reason"]
+        else:
+            assert r["errors"]["az_deg"]["max"] < 0.5
+    broken = runs[6]
+    assert broken["status"] == "error" and broken["error_type"] == "bad_input"
+    assert "c_broken.scenario.yaml:" in broken["reason"] and "colour" in broken["reason"]
+    assert "\n" not in broken["reason"]
+    assert runs[7]["scene"] == "plain" and runs[7]["status"] == "pass"
+
+    summary = payload["summary"]
+    statuses = Counter(r["status"] for r in runs)
+    assert (summary["runs"], summary["passed"], summary["failed"], summary["errors"]) == (
+        8, statuses["pass"], statuses["fail"], statuses["error"])
+    assert summary["pass_rate"] == pytest.approx(5 / 8)
+    expected: dict = {}
+    for r in runs:
+        for key, value in r["parameters"].items():
+            counts = expected.setdefault(key, {}).setdefault(str(value), Counter())
+            counts["runs"] += 1
+            counts[{"pass": "passed", "fail": "failed"}.get(r["status"], "errors")] += 1
+    got = {key: {value: Counter({k: v for k, v in c.items() if k != "pass_rate" and v})
+                 for value, c in values.items()} for key, values in summary["by_parameter"].items()}
+    assert got == expected
+    assert summary["by_parameter"][OFFSET_KEY]["20.0"]["pass_rate"] == 0.0
+    # The worst runs: the error, then the failures, then the passes by error over tolerance.
+    assert [w["status"] for w in summary["worst"][:3]] == ["error", "fail", "fail"]
+    ratios = [w["max_error_ratio"] for w in summary["worst"][3:]]
+    assert ratios == sorted(ratios, reverse=True)
+
+    assert f"{OFFSET_KEY}=20.0: 0/2" in stdout
+    assert "rcs_dbsm=5.0: 2/3" in stdout
+    assert "pass rate 62.5%" in stdout
+    assert "ERROR broken" not in stdout  # it never loaded: named after its file
+    assert "ERROR c_broken (" in stdout
+
+
+def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
+    plain = scenes / "sub" / "a_plain.scenario.yaml"
+    assert sweep(capsys, plain, "--workers", "1")[0] == 0
+    assert sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")[0] == 1
+    assert sweep(capsys, scenes / "c_broken.scenario.yaml", plain, "--workers", "1")[0] == 2
+    assert sweep(capsys, tmp_path / "missing.scenario.yaml", "--workers", "1")[0] == 2
+    code, _, err = sweep(capsys, plain, "--workers", "0")
+    assert code == 2 and err.strip() == "error: --workers: must be >= 1, got 0"
+
+    import rts_scenario.pipeline
+
+    real = rts_scenario.pipeline.run_scene
+
+    def flaky(scene, options):
+        if scene.name == "plain":
+            raise RuntimeError("the bench fell over")
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", flaky)
+    out = tmp_path / "flaky.json"
+    code, stdout, err = sweep(capsys, scenes, "--workers", "1", "--json", out)
+    assert code == 3
+    runs = json.loads(out.read_text())["runs"]
+    assert len(runs) == 8  # nothing lost
+    [crashed] = [r for r in runs if r["scene"] == "plain"]
+    assert crashed["status"] == "error" and crashed["error_type"] == "runtime"
+    assert "RuntimeError: the bench fell over" in crashed["reason"]
+    assert "Traceback" not in stdout + err
+
+
+def test_progress_lines_without_a_terminal(scenes, capsys):
+    _, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")
+    lines = err.splitlines()
+    assert lines[0] == "sweep: 6 runs on 1 worker"
+    assert [line.split(",")[0] for line in lines[1:]] == [f"sweep: {n}/6 runs"
+                                                          for n in range(1, 7)]
+    assert lines[-1].startswith("sweep: 6/6 runs, 2 failed, 0 errors, ")
+
+
+def test_progress_bar_on_a_terminal_and_tenths_otherwise():
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    tty = Terminal()
+    bar = SweepProgress(4, tty)
+    for status in ("pass", "fail", "pass", "error"):
+        bar({"status": status})
+    assert "\n" not in tty.getvalue()
+    assert "sweep [###############...............] 2/4 runs, 1 failed, 0 errors" in tty.getvalue()
+    assert tty.getvalue().endswith("\r")  # the bar is wiped when done
+
+    plain = io.StringIO()
+    progress = SweepProgress(100, plain)
+    for _ in range(100):
+        progress({"status": "pass"})
+    assert [line.split(",")[0] for line in plain.getvalue().splitlines()] == [
+        f"sweep: {n}/100 runs" for n in range(10, 101, 10)]
+
+
+def test_the_library_runs_the_same_as_the_command_line(scenes):
+    tasks = collect_tasks([scenes / "b_swept.scenario.yaml"])
+    seen = []
+    entries = run_sweep(tasks, workers=1, on_result=seen.append)
+    assert len(seen) == len(entries) == 6
+    assert summarize(entries)["by_parameter"][RCS_KEY]["10.0"]["passed"] == 2
+
+
+def test_scheduler_without_dask_is_one_clear_line(scenes, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    code, out, err = sweep(capsys, scenes, "--scheduler", "local")
+    assert code == 2
+    assert err == ("error: --scheduler needs dask.distributed: pip install "
+                   "'rts-scenario[sweep]'\n")
+    assert out == ""
+
+
+def test_unreachable_scheduler_is_one_clear_line(scenes, capsys, monkeypatch):
+    pytest.importorskip("distributed")
+    monkeypatch.setattr("rts_scenario.sweep.CONNECT_TIMEOUT_S", 1.0)
+    code, _, err = sweep(capsys, scenes / "sub", "--scheduler", "tcp://127.0.0.1:9")
+    assert code == 2
+    assert err.count("\n") == 2 and "error: --scheduler tcp://127.0.0.1:9: cannot connect" in err
+
+
+def test_plot_of_pass_and_fail_over_two_parameters(scenes, tmp_path, capsys):
+    png = tmp_path / "sweep.png"
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        code, _, err = sweep(capsys, scenes, "--plot", png)
+        assert code == 2 and err == ("error: --plot needs matplotlib: pip install "
+                                     "'rts-scenario[plot]'\n")
+        return
+    code, out, _ = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1",
+                         "--plot", png)
+    assert code == 1 and f"wrote {png}" in out
+    assert png.read_bytes().startswith(b"\x89PNG")
+
+
+def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
+    import rts_scenario.pipeline
+
+    real = rts_scenario.pipeline.run_scene
+    calls = []
+
+    def interrupted_at_the_third(scene, options):
+        calls.append(scene.name)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", interrupted_at_the_third)
+    out = tmp_path / "partial.json"
+    code, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1",
+                         "--json", out)
+    assert code == 1 and err.endswith("error: interrupted\n")
+    payload = json.loads(out.read_text())
+    assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
+    assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="the pool's workers are forked")
+def test_a_worker_that_dies_loses_no_run(scenes, tmp_path, capsys, monkeypatch):
+    import os
+
+    import rts_scenario.pipeline
+
+    real = rts_scenario.pipeline.run_scene
+
+    def dies_on_plain(scene, options):  # forked workers inherit the patch
+        if scene.name == "plain":
+            os._exit(7)
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", dies_on_plain)
+    out = tmp_path / "died.json"
+    code, stdout, err = sweep(capsys, scenes, "--workers", "2", "--json", out)
+    assert code == 3
+    runs = json.loads(out.read_text())["runs"]
+    assert len(runs) == 8
+    [plain] = [r for r in runs if r["file"].endswith("a_plain.scenario.yaml")]
+    assert plain["status"] == "error" and plain["error_type"] == "runtime"
+    assert "worker failed: BrokenProcessPool" in plain["reason"]
+    assert "Traceback" not in stdout + err
