@@ -44,6 +44,11 @@ class AngleEstimate:
     power: FloatArray
 
 
+# The Newton refinement stops when every step is below this fraction of a grid cell (~1e-14
+# deg on the shipped arrays): one more step would not change the estimate.
+CONVERGED_CELLS = 1e-11
+
+
 class Bartlett2D:
     """Conventional beamformer over (u, s): coarse grid, then Newton steps on the peak.
 
@@ -66,7 +71,17 @@ class Bartlett2D:
         u, s = (g.ravel() for g in np.meshgrid(gu, gs, indexing="ij"))
         self.grid_u, self.grid_s = u, s
         self.steer = np.exp(1j * self.k * (np.outer(u, array.y_m) + np.outer(s, array.z_m)))
-        self._steer_h = np.ascontiguousarray(self.steer.conj().T)  # (M, G), for the spectra
+        # The grid spectrum factors by the array's height levels: per level a beam over the u
+        # axis, then one phase per level along s (M n_u + L G products instead of M G).
+        tol = 1e-9 * array.wavelength_m
+        _, self._level_of = np.unique(np.round(array.z_m / tol), return_inverse=True)
+        levels = np.bincount(self._level_of, weights=array.z_m) / np.bincount(self._level_of)
+        self._row_beams = np.zeros((array.n_elements, levels.size * gu.size), dtype=complex)
+        for level in range(levels.size):  # (M, L n_u): element m's term on its level's beam
+            rows = np.flatnonzero(self._level_of == level)
+            self._row_beams[rows, level * gu.size : (level + 1) * gu.size] = np.exp(
+                -1j * self.k * np.outer(array.y_m[rows], gu))
+        self._level_phase = np.exp(-1j * self.k * np.outer(levels, gs))  # (L, n_s)
         self.peak_ratio = peak_ratio
         self.max_peaks = max_peaks
 
@@ -92,23 +107,30 @@ class Bartlett2D:
     def _estimate(self, x: ComplexArray) -> AngleEstimate:
         if len(x) == 0:
             return _nothing()
-        beams = x @ self._steer_h  # (D, G)
-        spectrum = beams.real**2 + beams.imag**2
-        spec = spectrum.reshape(len(x), *self.shape)
-        # Local maxima of each spectrum (3 x 3), strongest first.
-        padded = np.pad(spec, ((0, 0), (1, 1), (1, 1)), constant_values=-1.0)
-        peak = np.ones(spec.shape, dtype=bool)
-        for du, ds in ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)):
-            peak &= spec >= padded[:, 1 + du : padded.shape[1] - 1 + du,
-                                   1 + ds : padded.shape[2] - 1 + ds]
-        is_peak = peak.reshape(len(x), -1)
-        # The strongest few peaks, in order: a partial sort (the grid has thousands of cells).
+        n_u, n_s = self.shape
+        level_beams = (x @ self._row_beams).reshape(len(x), -1, n_u)  # (D, L, n_u)
+        beams = np.matmul(level_beams.transpose(0, 2, 1), self._level_phase)  # (D, n_u, n_s)
+        spec = beams.real**2 + beams.imag**2
+        spectrum = spec.reshape(len(x), -1)  # (D, G)
+        # Local maxima of each spectrum: at least the largest of its 3 x 3 neighbourhood (the
+        # neighbourhood's maximum taken along u, then along s).
+        along_u = spec.copy()
+        np.maximum(along_u[:, 1:], spec[:, :-1], out=along_u[:, 1:])
+        np.maximum(along_u[:, :-1], spec[:, 1:], out=along_u[:, :-1])
+        around = along_u.copy()
+        np.maximum(around[:, :, 1:], along_u[:, :, :-1], out=around[:, :, 1:])
+        np.maximum(around[:, :, :-1], along_u[:, :, 1:], out=around[:, :, :-1])
+        is_peak = (spec >= around).reshape(len(x), -1)
+        # The strongest few peaks, in order: one maximum search per peak wanted.
         score = np.where(is_peak, spectrum, -1.0)
         n_top = min(self.max_peaks, score.shape[1])
-        top = np.argpartition(-score, n_top - 1, axis=1)[:, :n_top]
-        ranked = np.take_along_axis(
-            top, np.argsort(-np.take_along_axis(score, top, axis=1), axis=1, kind="stable"),
-            axis=1)
+        every = np.arange(len(x))
+        picks = []
+        for _ in range(n_top):
+            pick = np.argmax(score, axis=1)
+            picks.append(pick)
+            score[every, pick] = -np.inf
+        ranked = np.stack(picks, axis=1)
         best = spectrum[np.arange(len(x)), ranked[:, 0]]
         rows, cols = [], []
         for rank in range(ranked.shape[1]):  # a few peaks per snapshot at most
@@ -152,6 +174,8 @@ class Bartlett2D:
             cells = np.hypot(du / self.step_u, ds / self.step_s)
             scale = np.minimum(1.0, 1.0 / np.maximum(cells, 1e-300))
             u, s = u + du * scale, s + ds * scale
+            if cells.size == 0 or cells.max() < CONVERGED_CELLS:  # Newton has converged
+                break
         return u, s
 
 

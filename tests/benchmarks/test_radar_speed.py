@@ -27,6 +27,12 @@ def eight_targets(tmp_path_factory):
     return scene, schedule
 
 
+# Acceptance: the analytic radar's rate with 8 targets; an adc frame against its FFTs alone.
+ANALYTIC_FRAMES_PER_S = 5000
+ADC_OVER_FFTS = 3.0
+ROUNDS = 30
+
+
 @pytest.mark.parametrize("fidelity, frames", [("adc", 40), ("analytic", 1200)])
 def test_radar_frames_per_second(benchmark, eight_targets, fidelity, frames):
     scene, schedule = eight_targets
@@ -38,10 +44,14 @@ def test_radar_frames_per_second(benchmark, eight_targets, fidelity, frames):
                                rng=np.random.default_rng(0))
         return radar.process(part)
 
-    dets = benchmark.pedantic(run, rounds=3, iterations=1, warmup_rounds=1)
+    dets = benchmark.pedantic(run, rounds=5, iterations=1, warmup_rounds=1)
     assert len(dets) == frames
     assert np.mean([d.count for d in dets]) >= 7.5
-    benchmark.extra_info["frames_per_s"] = frames / benchmark.stats.stats.min
+    rate = frames / benchmark.stats.stats.min
+    benchmark.extra_info["frames_per_s"] = rate
+    print(f"\n{fidelity}: {rate:,.0f} frames/s with 8 targets")
+    if fidelity == "analytic":
+        assert rate >= ANALYTIC_FRAMES_PER_S
 
 
 def test_adc_frame_against_its_ffts_alone(benchmark, eight_targets):
@@ -63,14 +73,20 @@ def test_adc_frame_against_its_ffts_alone(benchmark, eight_targets):
         spec = np.fft.ifft(cube * win_r, axis=2)
         return np.fft.fft(spec * win_d[:, None, None], axis=0)
 
-    best_fft = min(_timed(ffts) for _ in range(30))
     benchmark.group = "simulated radar, awr1843boost, 8 targets: adc frame vs its FFTs"
-    benchmark.pedantic(radar.process, args=(part,), rounds=3, iterations=1, warmup_rounds=1)
-    frame = benchmark.stats.stats.min / part.n_frames
+    # Alternating rounds: both see the same machine; each takes its best.
+    radar.process(part.frames(0, 2))  # warm-up
+    frame, best_fft = np.inf, np.inf
+    for i in range(ROUNDS):
+        one = part.frames(i % part.n_frames, i % part.n_frames + 1)
+        frame = min(frame, _timed(lambda one=one: radar.process(one)))
+        best_fft = min(best_fft, _timed(ffts))
+    benchmark.pedantic(radar.process, args=(part.frames(0, 1),), rounds=1, iterations=1)
     benchmark.extra_info.update({"frame_ms": frame * 1e3, "ffts_ms": best_fft * 1e3,
                                  "ratio": frame / best_fft})
     print(f"\nadc frame {frame * 1e3:.1f} ms, its FFTs alone {best_fft * 1e3:.1f} ms: "
-          f"{frame / best_fft:.1f}x")
+          f"{frame / best_fft:.1f}x (best of {ROUNDS} alternating rounds)")
+    assert frame / best_fft <= ADC_OVER_FFTS
 
 
 def _timed(fn) -> float:
