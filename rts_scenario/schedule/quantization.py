@@ -177,22 +177,26 @@ def _search_grid(resp: NDArray[np.complex128], weights: FloatArray, full: FloatA
     on = np.isfinite(naive)
     fine = FINE_STEPS
     steps = np.arange(-fine, fine + 1)
-    # Per channel and step count: the peak shift it causes (a step beyond the range: off).
-    setting = naive[:, :, None] + steps * grid.step  # (N, 4, S)
-    valid = on[:, :, None] & grid.holds(setting)
+    per_step = 10.0 ** (-steps * grid.step / 20.0)  # amplitude factor of k steps
     amp = np.where(on, 10.0 ** (-(np.where(on, naive, 0.0) - full) / 20.0), 0.0)
-    amp = np.where(valid, amp[:, :, None] * 10.0 ** (-steps * grid.step / 20.0), 0.0)
-    shift = sens[:, :, :, None] * (amp - weights[:, :, None])[:, None]  # (N, 2, 4, S)
-    shift = np.where(on[:, None, :, None], shift, 0.0)
     # Roles by weight: reference (fixed), two searched, the weakest solved.
     ranked = np.argsort(-weights, axis=1)
     ref, qa, qb, qc = ranked.T
+
+    def shifts(q: NDArray[np.int64], k: NDArray[np.int64]) -> FloatArray:
+        """Peak shift (N, 2, len(k)) of channel q moved k steps (beyond the range: off)."""
+        setting = naive[rows, q][:, None] + steps[k] * grid.step
+        valid = on[rows, q][:, None] & grid.holds(setting)
+        moved = np.where(valid, amp[rows, q][:, None] * per_step[k], 0.0)
+        change = np.where(on[rows, q][:, None], moved - weights[rows, q][:, None], 0.0)
+        return sens[rows, :, q][:, :, None] * change[:, None, :]
+
     span = np.arange(fine - reach, fine + reach + 1)
-    base = shift[rows, :, ref, fine][:, :, None, None]  # (N, 2, 1, 1)
-    resid = (base + shift[rows, :, qa][:, :, span][:, :, :, None]
-             + shift[rows, :, qb][:, :, span][:, :, None, :]).reshape(n, 2, -1)  # (N, 2, C)
+    base = shifts(ref, np.array([fine]))[:, :, :, None]  # (N, 2, 1, 1)
+    resid = (base + shifts(qa, span)[:, :, :, None]
+             + shifts(qb, span)[:, :, None, :]).reshape(n, 2, -1)  # (N, 2, C)
     # Weakest channel: continuous step count along its per-step direction, then both neighbours.
-    table_c = shift[rows, :, qc]  # (N, 2, S)
+    table_c = shifts(qc, np.arange(steps.size))  # (N, 2, S)
     direction = 0.5 * (table_c[:, :, fine + 1] - table_c[:, :, fine - 1])
     dd = np.maximum((direction * direction).sum(1), NORM_FLOOR)[:, None]
     t_star = -((resid + table_c[:, :, fine][:, :, None]) * direction[:, :, None]).sum(1) / dd
