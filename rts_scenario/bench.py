@@ -13,6 +13,7 @@ import tempfile
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -321,12 +322,17 @@ def format_end_to_end(row: EndToEndRow) -> str:
 
 
 def write_json(rows: list[BenchRow], quantized: list[QuantizationRow], path: str | Path,
-               end: EndToEndRow | None = None, honest_rows: list[HonestRow] | None = None
-               ) -> None:
-    """Write the tables as JSON: ``{"solver", "quantization", "honest", "end_to_end"}``."""
+               end: EndToEndRow | None = None, honest_rows: list[HonestRow] | None = None,
+               figures: list[Any] | None = None) -> None:
+    """Write the tables as JSON.
+
+    ``{"solver", "quantization", "honest", "end_to_end", "performance"}``; ``performance``
+    holds `rts_scenario.perf.Figure` records.
+    """
     data: dict[str, object] = {"solver": [asdict(r) for r in rows],
                                "quantization": [asdict(r) for r in quantized],
-                               "honest": [asdict(r) for r in honest_rows or []]}
+                               "honest": [asdict(r) for r in honest_rows or []],
+                               "performance": [asdict(f) for f in figures or []]}
     if end is not None:
         data["end_to_end"] = asdict(end)
     Path(path).write_text(json.dumps(strict(data), indent=2, allow_nan=False) + "\n")

@@ -561,7 +561,8 @@ def test_random_command_lines_never_raise(places, capsys, data):
             # Only the tiny scene runs; everything else fails before a run.
             argv[-1] = data.draw(st.sampled_from(["{scene}", "{file}", "{dir}"]))
     if command == "bench":  # a small bench; the options below may override these
-        argv += ["--targets", "5", "--repeats", "1", "--scene-s", "0", "--no-honest"]
+        argv += ["--targets", "5", "--repeats", "1", "--scene-s", "0", "--no-honest",
+                 "--no-performance"]
     for _ in range(data.draw(st.integers(0, 2))):
         argv += data.draw(st.sampled_from(_OPTIONS[command]))
     argv = [a.format(**places) for a in argv]

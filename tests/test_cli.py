@@ -8,10 +8,32 @@ import rts_scenario.cli as cli
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def test_bench_reports_performance_figures_in_text_and_json(tmp_path, capsys, monkeypatch):
+    """The performance section: each figure with its comparison, goal and whether it is met."""
+    from rts_scenario import perf
+
+    calls = []
+
+    def quick(cut_in, scale_s):  # the real start-up figure only; the others take minutes
+        calls.append((cut_in, scale_s))
+        return perf.startup(None, rounds=1)
+
+    monkeypatch.setattr(perf, "all_figures", quick)
+    out = tmp_path / "bench.json"
+    code = cli.main(["bench", "--targets", "200", "--repeats", "1", "--scene-s", "0",
+                     "--no-honest", "--scale-s", "0", "--json", str(out)])
+    assert code == 0 and calls and calls[0][1] == 0.0
+    text = capsys.readouterr().out
+    assert "import rts_scenario (fresh interpreter)" in text and "vs import numpy" in text
+    (figure,) = json.loads(out.read_text())["performance"]
+    assert figure["unit"] == "ms" and figure["value"] > 0 and figure["comparison_value"] > 0
+    assert figure["met"] == (figure["value"] <= 150.0)
+
+
 def test_bench_prints_table_and_writes_json(tmp_path, capsys):
     out = tmp_path / "bench.json"
     code = cli.main(["bench", "--targets", "2000", "--repeats", "1", "--scene-s", "10",
-                     "--json", str(out)])
+                     "--no-performance", "--json", str(out)])
     assert code == 0
     text = capsys.readouterr().out
     assert "target-frames/s" in text and "exact" in text and "awr1843boost" in text

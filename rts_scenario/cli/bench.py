@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from ..errors import RtsError
@@ -22,6 +23,7 @@ def _do_bench(args: argparse.Namespace) -> int:
     if not 1 <= args.repeats <= MAX_REPEATS:
         raise RtsError(f"--repeats: must be within 1..{MAX_REPEATS}, got {args.repeats}")
     check_number("--scene-s", args.scene_s, low=0.0, high=86400.0)
+    check_number("--scale-s", args.scale_s, low=0.0, high=3600.0)
     if args.rig not in preset_names():
         raise RtsError(f"unknown rig preset {args.rig!r}; valid presets: "
                        f"{', '.join(preset_names())} (--rig)")
@@ -41,9 +43,17 @@ def _do_bench(args: argparse.Namespace) -> int:
         end = bench.end_to_end(args.scene_s)
         print()
         print(bench.format_end_to_end(end))
+    figures = []
+    if not args.no_performance:
+        from .. import perf
+
+        cut_in = Path("scenarios") / "cut_in.scenario.yaml"
+        figures = perf.all_figures(cut_in if cut_in.is_file() else None, args.scale_s)
+        print()
+        print(perf.format_figures(figures))
     if args.json:
         with writing("--json", args.json):
-            bench.write_json(rows, quantized, args.json, end, honest_rows)
+            bench.write_json(rows, quantized, args.json, end, honest_rows, figures)
         print(f"wrote {args.json}")
     return EXIT_OK
 
@@ -63,6 +73,13 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                         help="targets per throughput run (default 1,000,000)")
     parser.add_argument("--repeats", type=int, default=3, help="throughput runs, best kept")
     parser.add_argument("--rig", default="kit-table1", help="rig preset (default kit-table1)")
+    parser.add_argument("--no-performance", action="store_true",
+                        help="skip the performance figures (CAN, solver against the paper "
+                             "method, radar, quantization, 512 targets, start-up), each "
+                             "measured beside its comparison")
+    parser.add_argument("--scale-s", type=float, default=60.0,
+                        help="length of the 8- and 512-target runs of the performance "
+                             "figures (default 60; 0 skips them)")
     parser.add_argument("--no-honest", action="store_true",
                         help="skip the honest-bench rows (method x radar x estimator x "
                              "fidelity on the simulated radar)")

@@ -47,7 +47,9 @@ phase ramp over the TX slots and its angles come out wrong, as on the real radar
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -209,6 +211,8 @@ class SimulatedRadar:
         self._gain = self._win_r.sum() * self._win_d.sum()
         self._noise_gain = (self._win_r**2).sum() * (self._win_d**2).sum()
         self._sigma = 10.0 ** (p.noise_level_db / 20.0) if self.noise else 0.0
+        # The ADC cube's noise comes from its own stream (spawned from ``rng``), drawn ahead.
+        self._noise = _NoiseAhead(self.rng)
         slot_of_tx = {t: i for i, t in enumerate(p.tx_order)}
         self._slot = np.array([slot_of_tx[t] for t in p.tx_index], dtype=float)
         ref = self.rig.reference
@@ -359,14 +363,20 @@ class SimulatedRadar:
         fast[:, :, 0] = echoes.channel * np.exp(-2j * np.pi * _frac(beat_hz * p.adc_start_s))
         fast[:, :, 1:] = np.exp(-2j * np.pi * _frac(beat_hz / p.sample_rate_hz))[:, :, None]
         np.cumprod(fast, axis=2, out=fast)
+        # Echoes with the same Doppler (a target's channels) share the slow-time ramp: sum
+        # their fast-time rows first, then one ramp per Doppler value.
+        doppler, group = np.unique(echoes.doppler_hz, return_inverse=True)
+        order = np.argsort(group, kind="stable")
+        starts = np.searchsorted(group[order], np.arange(doppler.size))
+        rows = fast.reshape(group.size, m * self._n)
+        summed = np.add.reduceat(rows[order], starts, axis=0) if group.size else rows
         slow = np.exp(2j * np.pi * _frac(np.outer(np.arange(self._loops) * p.loop_time_s,
-                                                  echoes.doppler_hz)))  # (L, E)
-        cube = (slow @ fast.reshape(echoes.doppler_hz.size, m * self._n)).reshape(
-            self._loops, m, self._n)
+                                                  doppler)))  # (L, U)
+        cube = (slow @ summed).reshape(self._loops, m, self._n)
         if self._sigma > 0.0:
             # Complex white noise: independent real and imaginary parts, drawn interleaved
-            # straight into complex numbers (no temporaries).
-            noise = self.rng.standard_normal(2 * cube.size).view(np.complex128)
+            # straight into complex numbers, the next frame's while this one is processed.
+            noise = self._noise.take(2 * cube.size).view(np.complex128)
             noise *= self._sigma / np.sqrt(2.0)
             cube += noise.reshape(cube.shape)
         return cube
@@ -542,6 +552,42 @@ def _close_pairs(frame: NDArray[np.int64], r: FloatArray, d: FloatArray, n_r: in
         close[who[:-lag][pair]] = True
         close[who[lag:][pair]] = True
     return np.flatnonzero(close)
+
+
+class _NoiseAhead:
+    """Standard normal draws for the ADC cubes, drawn one frame ahead.
+
+    Each frame's noise is drawn while the frame before is processed (numpy's generators
+    release the GIL: on a second core the draw is free). The draws come from a generator spawned from the radar's, one after the other in the order
+    frames ask for them, whatever the timing: a seed gives the same noise.
+    """
+
+    def __init__(self, parent: np.random.Generator) -> None:
+        self._parent = parent
+        self._rng: np.random.Generator | None = None
+        self._next: Future[FloatArray] | None = None
+        self._size = 0
+
+    def take(self, size: int) -> FloatArray:
+        """Return ``size`` draws (the ones drawn ahead if the size matches) and draw ahead."""
+        if self._rng is None:
+            self._rng = self._parent.spawn(1)[0]
+        ahead = self._next
+        if ahead is not None and self._size == size:
+            out = ahead.result()
+        else:
+            if ahead is not None:
+                ahead.result()  # drawn for another size: the stream moves on past it
+            out = self._rng.standard_normal(size)
+        self._size = size
+        self._next = _drawing_pool().submit(self._rng.standard_normal, size)
+        return out
+
+
+@lru_cache(maxsize=1)
+def _drawing_pool() -> ThreadPoolExecutor:
+    """One background thread for noise drawn ahead (tasks run in the order they come)."""
+    return ThreadPoolExecutor(1, thread_name_prefix="rts-noise")
 
 
 def _box_sum(a: FloatArray, r: int) -> FloatArray:

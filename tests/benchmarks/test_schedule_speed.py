@@ -7,6 +7,7 @@ import pytest
 from scene_helpers import write_scene
 from test_kinematics_speed import mixed_targets
 
+from rts_scenario import perf
 from rts_scenario.kinematics import compute_tracks
 from rts_scenario.outputs import open_output
 from rts_scenario.outputs.udp import UdpReceiver
@@ -85,3 +86,10 @@ def test_udp_paced_jitter(benchmark, schedule):
     recv_jitter = np.abs((arrival - arrival[0]) - (part.t_s - part.t_s[0]))
     benchmark.extra_info["send_jitter_p99_ms"] = float(np.percentile(sent_jitter, 99) * 1e3)
     benchmark.extra_info["receive_jitter_p99_ms"] = float(np.percentile(recv_jitter, 99) * 1e3)
+
+
+def test_quantization_aware_against_continuous():
+    """The quantization-aware schedule against the continuous one, alternating rounds."""
+    figure = perf.quantization_ratio()
+    print("\n" + figure.line())
+    assert figure.met

@@ -1,0 +1,393 @@
+"""Performance figures, each measured beside its comparison in the same run.
+
+`rts-scenario bench` prints them and the benchmarks in ``tests/benchmarks`` assert them. Every
+figure has a comparison measured in the same process, alternating with it where both are short
+(best of several rounds each), because the machine may be shared and noisy: a ratio measured
+in one run means more than two absolute figures from different runs.
+
+- CAN: messages per second from cycles to checked detections, in process, against python-can's
+  virtual bus with a reader (a copy of each message and a queue).
+- Solver: the exact method's target-frames per second against the paper method's; its memory
+  traffic against a large copy (the streaming bandwidth).
+- Radar: an `adc` frame against its two windowed FFTs alone; `analytic` frames per second.
+- Quantization: the quantization-aware schedule against the continuous one.
+- Scale: time per target-frame of a 60 s run with 512 targets against 8 targets; peak memory.
+- Start-up: ``import rts_scenario`` in a fresh interpreter against ``import numpy``; a repeated
+  run of the cut-in scene in process.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One measured figure, its comparison from the same run, and the goal it is held to."""
+
+    name: str
+    value: float
+    unit: str
+    comparison: str
+    comparison_value: float
+    ratio: float
+    goal: str
+    met: bool
+
+    def line(self) -> str:
+        """Render the figure for people."""
+        return (f"{self.name:44s} {self.value:>14,.4g} {self.unit:15s} vs {self.comparison} "
+                f"{self.comparison_value:,.4g}: {self.ratio:.2f}x  goal {self.goal}  "
+                f"{'met' if self.met else 'NOT met'}")
+
+
+def best_of(fn: Callable[[], Any], rounds: int) -> float:
+    """Return the shortest of ``rounds`` timed calls (s)."""
+    out = np.inf
+    for _ in range(rounds):
+        start = time.perf_counter()
+        fn()
+        out = min(out, time.perf_counter() - start)
+    return float(out)
+
+
+def alternating(first: Callable[[], Any], second: Callable[[], Any],
+                rounds: int) -> tuple[float, float]:
+    """Return each one's best time over ``rounds`` rounds taken in turn (s)."""
+    a = b = np.inf
+    for _ in range(rounds):
+        a = min(a, best_of(first, 1))
+        b = min(b, best_of(second, 1))
+    return float(a), float(b)
+
+
+# -- the shared scene: 60 s at 20 Hz, awr1843boost, 8 targets around the ego -------------------
+
+def eight_target_scene(folder: Path, targets: int = 8, duration_s: float = 60.0) -> Path:
+    """Write the scene the radar, CAN and scale figures use (targets on the wide grid)."""
+    import yaml
+
+    rng = np.random.default_rng(4)
+    scene = {"rts_scenario": 1, "name": f"perf-{targets}", "duration_s": duration_s,
+             "frame_rate_hz": 20.0, "radar": {"profile": "awr1843boost"},
+             "rig": "wide-3x5", "seed": 1,
+             "ego": {"motion": {"type": "constant_velocity", "position_m": [0, 0, 0],
+                                "speed_mps": 22.0}},
+             "targets": [{"name": f"car{i}", "frame": "ego",
+                          "rcs": {"rcs_dbsm": float(rng.uniform(0, 20))},
+                          "motion": {"type": "constant_velocity",
+                                     "position_m": [float(20 + 5 * i),
+                                                    float(rng.uniform(-4, 4)), 0.6],
+                                     "speed_mps": float(rng.uniform(0.0, 0.3))}}
+                         for i in range(targets)]}
+    path = folder / "perf.scenario.yaml"
+    path.write_text(yaml.safe_dump(scene, sort_keys=False))
+    return path
+
+
+# -- CAN --------------------------------------------------------------------------------------
+
+CAN_GOAL_PER_S = 100_000
+
+
+def can_rate(rounds: int = 5) -> Figure:
+    """Messages per second: cycles -> encode -> bus -> decode -> check, in process."""
+    from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
+    from .check import check_cycles
+    from .kinematics import compute_tracks
+    from .radar.simulate import SimulatedRadar
+    from .scenario import load_scenario
+    from .schedule import build_schedule
+
+    with tempfile.TemporaryDirectory() as folder:
+        scene = load_scenario(eight_target_scene(Path(folder)))
+    tracks = compute_tracks(scene)
+    schedule = build_schedule(tracks, scene.rig, scene.radar)
+    frames = SimulatedRadar(scene.radar, scene.rig, fidelity="analytic",
+                            rng=np.random.default_rng(0)).process(schedule)
+    sent: list[int] = []
+
+    def check(receiver: DetectionReceiver) -> None:
+        report = check_cycles(scene.name, tracks, schedule.status, receiver.flush(),
+                              scene.expectations, bus=vars(receiver.stats))
+        if not (receiver.stats.clean and report.frames["checked"] == schedule.n_frames):
+            raise RuntimeError("CAN figure: the cycles did not come through clean")
+
+    def in_process() -> None:
+        receiver = DetectionReceiver()
+        with ListenerBus([receiver]) as bus:
+            publisher = DetectionPublisher(bus)
+            publisher.publish_many(frames)
+        sent.append(publisher.sent)
+        check(receiver)
+
+    def virtual_bus() -> None:
+        receiver = DetectionReceiver()
+        with open_bus(channel="perf") as listen, open_bus(channel="perf") as talk:
+            publisher = DetectionPublisher(talk)
+            for frame in frames:
+                publisher.publish(frame)
+                while (msg := listen.recv(timeout=0)) is not None:
+                    receiver.on_message_received(msg)
+            while (msg := listen.recv(timeout=0.01)) is not None:
+                receiver.on_message_received(msg)
+        check(receiver)
+
+    fast, slow = alternating(in_process, virtual_bus, rounds)
+    n = sent[-1]
+    return Figure("CAN cycles -> encode -> bus -> decode -> check", n / fast, "messages/s",
+                  "python-can virtual bus", n / slow, slow / fast,
+                  f">= {CAN_GOAL_PER_S:,} messages/s", n / fast >= CAN_GOAL_PER_S)
+
+
+# -- solver -----------------------------------------------------------------------------------
+
+def solver_speed(array_name: str, rig_name: str = "kit-table1", targets: int = 1_000_000,
+                 rounds: int = 3) -> list[Figure]:
+    """Exact against paper (target-frames/s), and the exact method against a streaming copy."""
+    from .arrays import VirtualArray
+    from .rig import Rig
+    from .solver import solve_weights
+
+    rig, array = Rig.preset(rig_name), VirtualArray.preset(array_name)
+    rng = np.random.default_rng(0)
+    if rig_name == "wide-3x5":
+        az, el = rng.uniform(-20, 20, targets), rng.uniform(-8, 8, targets)
+    else:
+        az, el = rng.uniform(-3, 3, targets), rng.uniform(-6, 6, targets)
+    for method in ("paper", "exact"):  # plans built (or read) before timing
+        solve_weights(az[:64], el[:64], rig=rig, array=array, method=method)
+    exact_s, paper_s = alternating(
+        lambda: solve_weights(az, el, rig=rig, array=array, method="exact"),
+        lambda: solve_weights(az, el, rig=rig, array=array, method="paper"), rounds)
+    source = np.ones(targets * 8)
+    sink = np.empty_like(source)
+    copy_s = best_of(lambda: np.copyto(sink, source), rounds * 2)
+    bandwidth = 2 * source.nbytes / copy_s  # read + write
+    # The solver's traffic: az and el in, weights (4 x float64), quad (int64) and reason out.
+    solver_bytes = targets * (8 + 8 + 32 + 8 + 1)
+    rate = targets / exact_s
+    name = f"exact solver {array_name} on {rig_name}"
+    return [
+        Figure(name, rate, "target-frames/s", "paper method", targets / paper_s,
+               paper_s / exact_s, ">= 1.0x the paper method", exact_s <= paper_s),
+        Figure(f"{name}: memory traffic", solver_bytes / exact_s / 1e9, "GB/s",
+               "streaming copy", bandwidth / 1e9, solver_bytes / exact_s / bandwidth,
+               ">= 0.10x the streaming copy", solver_bytes / exact_s >= 0.1 * bandwidth),
+    ]
+
+
+# -- radar ------------------------------------------------------------------------------------
+
+ANALYTIC_GOAL_FRAMES_PER_S = 5000
+ADC_GOAL_OVER_FFTS = 3.0
+
+
+def radar_rates(rounds: int = 20) -> list[Figure]:
+    """Time an adc frame against its windowed FFTs; analytic frames per second (8 targets)."""
+    from .kinematics import compute_tracks
+    from .radar.simulate import SimulatedRadar
+    from .scenario import load_scenario
+    from .schedule import build_schedule
+
+    with tempfile.TemporaryDirectory() as folder:
+        scene = load_scenario(eight_target_scene(Path(folder)))
+    schedule = build_schedule(compute_tracks(scene), scene.rig, scene.radar)
+    adc = SimulatedRadar(scene.radar, scene.rig, fidelity="adc", rng=np.random.default_rng(0))
+    p = scene.radar
+    shape = (p.chirp_loops, p.array.n_elements, p.adc_samples)
+    noise = np.random.default_rng(1).standard_normal((2, *shape))
+    cube = noise[0] + 1j * noise[1]
+    win_r, win_d = np.hanning(shape[2] + 2)[1:-1], np.hanning(shape[0] + 2)[1:-1]
+
+    def ffts() -> None:
+        spec = np.fft.ifft(cube * win_r, axis=2)
+        np.fft.fft(spec * win_d[:, None, None], axis=0)
+
+    one = schedule.frames(0, 1)
+    adc.process(one)
+    frame_s, fft_s = alternating(lambda: adc.process(one), ffts, rounds)
+    part = schedule.frames(0, 1200)
+
+    def analytic() -> None:
+        SimulatedRadar(scene.radar, scene.rig, fidelity="analytic",
+                       rng=np.random.default_rng(0)).process(part)
+
+    analytic_s = best_of(analytic, 5)
+    rate = part.n_frames / analytic_s
+    return [
+        Figure("adc frame, awr1843boost, 8 targets", frame_s * 1e3, "ms",
+               "its two windowed FFTs", fft_s * 1e3, frame_s / fft_s,
+               f"<= {ADC_GOAL_OVER_FFTS:g}x its FFTs", frame_s <= ADC_GOAL_OVER_FFTS * fft_s),
+        Figure("analytic radar, awr1843boost, 8 targets", rate, "frames/s",
+               "the goal", ANALYTIC_GOAL_FRAMES_PER_S, rate / ANALYTIC_GOAL_FRAMES_PER_S,
+               f">= {ANALYTIC_GOAL_FRAMES_PER_S:,} frames/s",
+               rate >= ANALYTIC_GOAL_FRAMES_PER_S),
+    ]
+
+
+# -- quantization -----------------------------------------------------------------------------
+
+QUANTIZATION_GOAL = 1.5
+
+
+def quantization_ratio(rounds: int = 5) -> Figure:
+    """Time the quantization-aware schedule (0.5 dB steps) against the continuous one."""
+    from .kinematics import compute_tracks
+    from .scenario import load_scenario
+    from .schedule import build_schedule
+
+    with tempfile.TemporaryDirectory() as folder:
+        scene = load_scenario(eight_target_scene(Path(folder), targets=32))
+    tracks = compute_tracks(scene)
+
+    def rig_for(step_db: float) -> Any:
+        limits = dataclasses.replace(scene.rig.limits, attenuation_step_db=step_db,
+                                     echoes_per_channel=64)
+        return dataclasses.replace(scene.rig, limits=limits)
+
+    continuous, stepped = rig_for(0.0), rig_for(0.5)
+    build_schedule(tracks, continuous, scene.radar)
+    build_schedule(tracks, stepped, scene.radar, quantization="aware")
+    aware_s, continuous_s = alternating(
+        lambda: build_schedule(tracks, stepped, scene.radar, quantization="aware"),
+        lambda: build_schedule(tracks, continuous, scene.radar), rounds)
+    ratio = aware_s / continuous_s
+    return Figure("quantization-aware schedule, 1200 x 32", aware_s * 1e3, "ms",
+                  "continuous schedule", continuous_s * 1e3, ratio,
+                  f"<= {QUANTIZATION_GOAL:g}x continuous", ratio <= QUANTIZATION_GOAL)
+
+
+# -- scale ------------------------------------------------------------------------------------
+
+SCALE_GOAL = 2.0
+_SCALE_RUN = textwrap.dedent("""
+    import json, sys, tempfile, time
+    from pathlib import Path
+    import numpy as np, yaml
+    from importlib import resources
+    from rts_scenario.pipeline import RunOptions, run_scene
+    from rts_scenario.scenario import load_scenario
+
+    k, duration = int(sys.argv[1]), float(sys.argv[2])
+    folder = Path(tempfile.mkdtemp())
+    rig = yaml.safe_load(resources.files("rts_scenario").joinpath(
+        "data/rigs/wide-3x5.rig.yaml").read_text())
+    rig["name"] = "wide-many"
+    rig.setdefault("limits", {})["echoes_per_channel"] = 1024
+    (folder / "wide.rig.yaml").write_text(yaml.safe_dump(rig))
+    rng = np.random.default_rng(5)
+    targets = []
+    for i in range(k):  # 12..60 m, +-15 deg, each in its own range-Doppler neighbourhood
+        x, az = 12 + 48 * i / k, np.radians(rng.uniform(-15, 15))
+        targets.append({"name": f"t{i}", "frame": "ego", "rcs": {"rcs_dbsm": 10.0},
+                        "motion": {"type": "constant_velocity",
+                                   "position_m": [float(x), float(x * np.tan(az)), 0.6],
+                                   "speed_mps": float(rng.uniform(0, 0.2))}})
+    scene = {"rts_scenario": 1, "name": f"scale-{k}", "duration_s": duration,
+             "frame_rate_hz": 20.0, "rig": "wide.rig.yaml", "seed": 1,
+             "radar": {"profile": "awr1843boost", "fidelity": "analytic"},
+             "ego": {"motion": {"type": "constant_velocity", "position_m": [0, 0, 0],
+                                "speed_mps": 22.0}},
+             "targets": targets}
+    path = folder / "scale.scenario.yaml"
+    path.write_text(yaml.safe_dump(scene, sort_keys=False))
+    loaded = load_scenario(path)
+    start = time.perf_counter()
+    result = run_scene(loaded, RunOptions(can_fd=True))
+    seconds = time.perf_counter() - start
+    peak = next(int(line.split()[1]) for line in open("/proc/self/status")
+                if line.startswith("VmHWM"))
+    print(json.dumps({"targets": k, "frames": loaded.n_frames, "seconds": seconds,
+                      "peak_mb": peak / 1024, "passed": result.report.passed}))
+""")
+
+
+def scale_run(targets: int, duration_s: float = 60.0) -> dict[str, Any]:
+    """Run the scale scene with ``targets`` in a fresh process: time, frames, peak memory."""
+    out = subprocess.run([sys.executable, "-c", _SCALE_RUN, str(targets), str(duration_s)],
+                         capture_output=True, text=True, check=True, timeout=3600)
+    result: dict[str, Any] = json.loads(out.stdout.strip().splitlines()[-1])
+    return result
+
+
+def scale(duration_s: float = 60.0, many: int = 512) -> list[Figure]:
+    """Time per target-frame and peak memory: ``many`` targets against 8 (fresh processes)."""
+    few, lots = scale_run(8, duration_s), scale_run(many, duration_s)
+    per = {k: r["seconds"] / (k * r["frames"]) for k, r in ((8, few), (many, lots))}
+    ratio = per[many] / per[8]
+    return [
+        Figure(f"run, {many} targets x {duration_s:g} s, per target-frame", per[many] * 1e6,
+               "us", "8 targets", per[8] * 1e6, ratio, f"<= {SCALE_GOAL:g}x 8 targets",
+               ratio <= SCALE_GOAL and few["passed"] and lots["passed"]),
+        Figure(f"run, {many} targets x {duration_s:g} s, peak memory", lots["peak_mb"], "MB",
+               "8 targets", few["peak_mb"], lots["peak_mb"] / few["peak_mb"],
+               "linear in targets", True),
+    ]
+
+
+# -- start-up ---------------------------------------------------------------------------------
+
+IMPORT_GOAL_S = 0.150
+REPEAT_RUN_GOAL_S = 0.35
+
+
+def import_seconds(module: str, rounds: int = 5) -> float:
+    """Best time of ``import module`` in a fresh interpreter (s)."""
+    code = (f"import time; t = time.perf_counter(); import {module}; "
+            f"print(time.perf_counter() - t)")
+    return min(float(subprocess.run([sys.executable, "-c", code], capture_output=True,
+                                    text=True, check=True).stdout) for _ in range(rounds))
+
+
+def startup(scene: str | Path | None = None, rounds: int = 5) -> list[Figure]:
+    """``import rts_scenario`` against ``import numpy``; a repeated cut-in run in process."""
+    from .pipeline import run_scene
+
+    package, numpy = import_seconds("rts_scenario"), import_seconds("numpy")
+    out = [Figure("import rts_scenario (fresh interpreter)", package * 1e3, "ms",
+                  "import numpy", numpy * 1e3, package / numpy,
+                  f"<= {IMPORT_GOAL_S * 1e3:.0f} ms", package <= IMPORT_GOAL_S)]
+    if scene is not None:
+        run_scene(scene)  # the solver plan is built (or read) once
+        repeat = best_of(lambda: run_scene(scene), rounds)
+        out.append(Figure("repeated cut-in run, in process", repeat * 1e3, "ms",
+                          "the goal", REPEAT_RUN_GOAL_S * 1e3, repeat / REPEAT_RUN_GOAL_S,
+                          f"<= {REPEAT_RUN_GOAL_S * 1e3:.0f} ms", repeat <= REPEAT_RUN_GOAL_S))
+    return out
+
+
+def all_figures(cut_in: str | Path | None = None, scale_s: float = 60.0) -> list[Figure]:
+    """Every figure, in the order of the list above (``scale_s`` 0 skips the scale runs)."""
+    figures = [can_rate()]
+    for array_name, rig_name in (("paper", "kit-table1"), ("awr1843boost", "kit-table1"),
+                                 ("awr1843boost", "wide-3x5")):
+        figures += solver_speed(array_name, rig_name)
+    figures += radar_rates()
+    figures.append(quantization_ratio())
+    if scale_s > 0:
+        figures += scale(scale_s)
+    figures += startup(cut_in)
+    return figures
+
+
+def format_figures(figures: list[Figure]) -> str:
+    """Render the figures as a table for people."""
+    return "\n".join(["performance (each against its comparison, same run)",
+                      *(f.line() for f in figures)])
+
+
+__all__ = ["Figure", "all_figures", "can_rate", "format_figures", "quantization_ratio",
+           "radar_rates", "scale", "solver_speed", "startup"]
