@@ -558,8 +558,9 @@ class _NoiseAhead:
     """Standard normal draws for the ADC cubes, drawn one frame ahead.
 
     Each frame's noise is drawn while the frame before is processed (numpy's generators
-    release the GIL: on a second core the draw is free). The draws come from a generator spawned from the radar's, one after the other in the order
-    frames ask for them, whatever the timing: a seed gives the same noise.
+    release the GIL: on a second core the draw is free). The draws come from a generator
+    spawned from the radar's, one after the other in the order frames ask for them, whatever
+    the timing: a seed gives the same noise.
     """
 
     def __init__(self, parent: np.random.Generator) -> None:
