@@ -8,7 +8,11 @@ predicted remaining error is kept per entry. Without a step only the attenuator'
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +47,11 @@ SEARCH_ABOVE_DEG = (0.005, 0.03)
 FINE_STEPS = 8
 # Entries go in blocks of SEARCH_BLOCK: the (entries x candidates) temporaries stay in cache.
 SEARCH_BLOCK = 1024
+# With numba installed, searches of at least this many entries run compiled (`compiled_search`);
+# fewer are not worth loading it for. RTS_SCENARIO_JIT=0 keeps the numpy search.
+COMPILED_FROM = 256
+# Entries per compiled call: parts run on threads, one per core.
+COMPILED_PART = 8192
 
 
 def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: FloatArray,
@@ -118,6 +127,12 @@ def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full:
             amps = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
             err = predicted_angle_error(resp, amps, u, s)
             todo = np.flatnonzero(np.hypot(err[:, 0], err[:, 1]) > above)
+            kernel = compiled_search() if todo.size >= COMPILED_FROM else None
+            if kernel is not None:
+                chosen[todo] = _search_compiled(kernel, resp[:, :, todo], weights[todo],
+                                                full[todo], grid, u[todo], s[todo],
+                                                chosen[todo], reach)
+                continue
             for start in range(0, todo.size, SEARCH_BLOCK):
                 b = todo[start : start + SEARCH_BLOCK]
                 chosen[b] = _search_grid(resp[:, :, b], weights[b], full[b], grid, u[b],
@@ -254,6 +269,53 @@ def _search_grid(resp: NDArray[np.complex128], weights: FloatArray, full: FloatA
     err = predicted_angle_error(resp, amps, u, s)
     keep = np.argmin(np.hypot(err[..., 0], err[..., 1]), axis=1)
     return options[rows, keep]
+
+
+@lru_cache(maxsize=1)
+def compiled_search() -> Callable[..., None] | None:
+    """Return the compiled search (`_search_kernel.search`), or None without numba.
+
+    Loaded on first use; numba caches the machine code on disk, so later processes skip the
+    compilation. ``RTS_SCENARIO_JIT=0`` in the environment keeps the numpy search.
+    """
+    if os.environ.get("RTS_SCENARIO_JIT", "1") == "0":
+        return None
+    try:
+        from ._search_kernel import search
+
+        # Compile (or load from numba's cache) now, on one entry: a machine where numba
+        # cannot compile or cache keeps the numpy search instead of failing a run.
+        one = np.zeros((1, 4))
+        search(np.ones((1, 6, 4), dtype=complex), one + 1.0, one, one, np.zeros((1, 2, 4)),
+               np.zeros(1), np.zeros(1), 0.0, 0.5, 60.0, GRID_SLACK_DB, 1, FINE_STEPS,
+               SHORTLIST, NORM_FLOOR, np.empty((1, 4)))
+    except Exception:  # noqa: BLE001 - numba is optional: the numpy search does the same
+        return None
+    kernel: Callable[..., None] = search
+    return kernel
+
+
+def _search_compiled(kernel: Callable[..., None], resp: NDArray[np.complex128],
+                     weights: FloatArray, full: FloatArray, grid: _Grid, u: FloatArray,
+                     s: FloatArray, naive: FloatArray, reach: int) -> FloatArray:
+    """`_search_grid` for all the entries at once, compiled."""
+    sens = _sensitivity(resp, weights) * _degree_scale(u, s)[:, :, None]
+    out = np.empty_like(naive)
+    args = [np.ascontiguousarray(a) for a in (resp.transpose(2, 0, 1), weights, full, naive,
+                                              sens, u, s)]
+
+    def run(part: slice) -> None:  # the kernel releases the GIL: parts run on all cores
+        kernel(*(a[part] for a in args), grid.low, grid.step, grid.high, GRID_SLACK_DB,
+               reach, FINE_STEPS, SHORTLIST, NORM_FLOOR, out[part])
+
+    parts = [slice(i, i + COMPILED_PART) for i in range(0, len(out), COMPILED_PART)]
+    if len(parts) > 1 and (os.cpu_count() or 1) > 1:
+        with ThreadPoolExecutor(min(len(parts), os.cpu_count() or 1)) as pool:
+            list(pool.map(run, parts))
+    else:
+        for part in parts:
+            run(part)
+    return out
 
 
 def _sensitivity(resp: NDArray[np.complex128], weights: FloatArray) -> FloatArray:

@@ -1,0 +1,210 @@
+"""Compiled quantization-aware search (numba): `quantization._search_grid`, entry by entry.
+
+Imported only when numba is installed and the search first runs (`quantization`), so
+``import rts_scenario`` never pays for it. Each step mirrors the numpy search: the linear model
+of the peak shift per channel step, the reference channel fixed, two channels over ``reach``
+steps, the weakest solved, an idle channel brought in weakly, the best ``shortlist`` by the
+linear model, then the exact prediction (one Newton step on the response) picking among them
+and the naive setting. tests/test_quantization_kernel.py compares the two.
+
+Constants are arguments, not globals: numba freezes globals into its cached machine code.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# An amplitude ratio of x dB is exp(x * DB_TO_NEPER): ln(10) / 20.
+DB_TO_NEPER = math.log(10.0) / 20.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _nearest(att, low, step, high, slack):  # pragma: no cover
+    """Nearest attenuator setting (the minimum below it; inf above the maximum)."""
+    if not math.isfinite(att):
+        return math.inf
+    snapped = low + np.rint((att - low) / step) * step
+    snapped = max(snapped, low)
+    return snapped if snapped <= high + slack else math.inf
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _angles(u, s):  # pragma: no cover
+    """`arrays.angles_from_cosines` for one direction: ``(az_rad, el_rad)``."""
+    s = min(max(s, -1.0), 1.0)
+    el = math.asin(s)
+    cos_el = math.sqrt(1.0 - s * s)
+    az = math.atan2(u, math.sqrt(max(cos_el * cos_el - u * u, 0.0)))
+    return az, el
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _error(resp, i, amps, u, s, az0, el0):  # pragma: no cover
+    """Predicted angle error (deg, norm of az and el) of channel amplitudes ``amps``.
+
+    ``az0``, ``el0``: the set direction ``(u, s)`` as angles (rad).
+    """
+    a0, a1, a2, a3 = amps[0], amps[1], amps[2], amps[3]
+
+    def beam(t):  # B or one of its derivatives: the channels' responses, weighted
+        return (resp[i, t, 0] * a0 + resp[i, t, 1] * a1 + resp[i, t, 2] * a2
+                + resp[i, t, 3] * a3)
+
+    b, b_u, b_s, b_uu, b_us, b_ss = beam(0), beam(1), beam(2), beam(3), beam(4), beam(5)
+    cb = b.conjugate()
+    g_u = (cb * b_u).real
+    g_s = (cb * b_s).real
+    h_uu = (cb * b_uu).real + b_u.real * b_u.real + b_u.imag * b_u.imag
+    h_us = (cb * b_us).real + (b_u.conjugate() * b_s).real
+    h_ss = (cb * b_ss).real + b_s.real * b_s.real + b_s.imag * b_s.imag
+    det = h_uu * h_ss - h_us * h_us
+    du = ds = 0.0
+    if det > 0.0:
+        du = -(h_ss * g_u - h_us * g_s) / det
+        ds = -(h_uu * g_s - h_us * g_u) / det
+    az1, el1 = _angles(u + du, s + ds)
+    return math.hypot(math.degrees(az1 - az0), math.degrees(el1 - el0))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _shift(on, naive, amp, factor, weight, sens_u, sens_s, offset, low, high,
+           slack):  # pragma: no cover
+    """Peak shift of one channel moved ``offset`` dB from its naive setting.
+
+    Beyond the attenuator's range the channel goes off; a channel that is off stays so.
+    """
+    if not on:
+        return 0.0, 0.0
+    setting = naive + offset
+    valid = setting >= low - slack and setting <= high + slack
+    change = (amp * factor if valid else 0.0) - weight
+    return sens_u * change, sens_s * change
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def search(resp, weights, full, naive, sens, u, s, low, step, high, slack, reach, fine,
+           shortlist, norm_floor, out):  # pragma: no cover
+    """Write the chosen settings of every entry into ``out`` (N, 4); inf where off.
+
+    ``resp`` (N, 6, 4) complex, ``weights``, ``full``, ``naive`` (N, 4), ``sens`` (N, 2, 4) in
+    degrees per unit amplitude, ``u``, ``s`` (N,).
+    """
+    n = weights.shape[0]
+    n_steps = 2 * fine + 1
+    side = 2 * reach + 1
+    n_cand = side * side
+    per_step = np.empty(n_steps)
+    for k in range(n_steps):
+        per_step[k] = 10.0 ** (-(k - fine) * step / 20.0)
+    on = np.empty(4, dtype=np.bool_)
+    amp = np.empty(4)
+    order = np.empty(4, dtype=np.int64)
+    resid = np.empty((n_cand, 2))
+    moves = np.empty((4, n_steps, 2))
+    cost = np.empty(n_cand)
+    final = np.empty((n_cand, 2))
+    best_k = np.empty(n_cand, dtype=np.int64)
+    extra_q = np.empty(n_cand, dtype=np.int64)
+    extra_att = np.empty(n_cand)
+    taken = np.empty(n_cand, dtype=np.bool_)
+    option = np.empty(4)
+    amps = np.empty(4)
+    best = np.empty(4)
+    for i in range(n):
+        for q in range(4):
+            on[q] = math.isfinite(naive[i, q])
+            amp[q] = math.exp((full[i, q] - naive[i, q]) * DB_TO_NEPER) if on[q] else 0.0
+        # Roles by weight, strongest first (a stable sort, as numpy's for four entries).
+        for q in range(4):
+            order[q] = q
+        for a in range(1, 4):
+            j = a
+            while j > 0 and -weights[i, order[j]] < -weights[i, order[j - 1]]:
+                order[j], order[j - 1] = order[j - 1], order[j]
+                j -= 1
+        # Per role and step count: the peak shift it causes.
+        for k in range(n_steps):
+            for role in range(4):
+                q = order[role]
+                moves[role, k, 0], moves[role, k, 1] = _shift(
+                    on[q], naive[i, q], amp[q], per_step[k], weights[i, q], sens[i, 0, q],
+                    sens[i, 1, q], (k - fine) * step, low, high, slack)
+        for ia in range(side):
+            for ib in range(side):
+                for axis in range(2):
+                    resid[ia * side + ib, axis] = (moves[0, fine, axis]
+                                                   + moves[1, fine - reach + ia, axis]
+                                                   + moves[2, fine - reach + ib, axis])
+        table = moves[3]
+        d0 = 0.5 * (table[fine + 1, 0] - table[fine - 1, 0])
+        d1 = 0.5 * (table[fine + 1, 1] - table[fine - 1, 1])
+        dd = max(d0 * d0 + d1 * d1, norm_floor)
+        for c in range(n_cand):
+            t_star = -((resid[c, 0] + table[fine, 0]) * d0
+                       + (resid[c, 1] + table[fine, 1]) * d1) / dd
+            lower = int(min(max(np.floor(t_star), -fine), fine))  # a float until clipped
+            upper = min(max(lower + 1, -fine), fine)
+            m0 = resid[c, 0] + table[lower + fine, 0]
+            m1 = resid[c, 1] + table[lower + fine, 1]
+            cost[c] = m0 * m0 + m1 * m1  # squared: compared, never reported
+            final[c, 0], final[c, 1] = m0, m1
+            best_k[c] = lower
+            m0 = resid[c, 0] + table[upper + fine, 0]
+            m1 = resid[c, 1] + table[upper + fine, 1]
+            if m0 * m0 + m1 * m1 < cost[c]:
+                cost[c] = m0 * m0 + m1 * m1
+                final[c, 0], final[c, 1] = m0, m1
+                best_k[c] = upper
+            extra_q[c] = -1
+            extra_att[c] = 0.0
+        # An idle channel may come on weakly to cancel what is left along its own direction.
+        for q in range(4):
+            if on[q]:
+                continue
+            g0, g1 = sens[i, 0, q], sens[i, 1, q]
+            gg = max(g0 * g0 + g1 * g1, norm_floor)
+            for c in range(n_cand):
+                a_star = -(g0 * final[c, 0] + g1 * final[c, 1]) / gg
+                level = -math.inf if a_star <= 0.0 else math.log10(a_star)
+                att = _nearest(full[i, q] - 20.0 * level, low, step, high, slack)
+                a = math.exp((full[i, q] - att) * DB_TO_NEPER) if math.isfinite(att) else 0.0
+                m0, m1 = final[c, 0] + a * g0, final[c, 1] + a * g1
+                new_cost = m0 * m0 + m1 * m1
+                if a > 0.0 and new_cost < cost[c]:
+                    cost[c] = new_cost
+                    extra_q[c] = q
+                    extra_att[c] = att
+        # The linear model shortlists; the exact prediction decides (the naive one too).
+        for q in range(4):
+            best[q] = naive[i, q]
+            amps[q] = amp[q]
+        az0, el0 = _angles(u[i], s[i])
+        best_err = _error(resp, i, amps, u[i], s[i], az0, el0)
+        taken[:] = False
+        for _ in range(min(shortlist, n_cand)):
+            pick = -1
+            for c in range(n_cand):
+                if not taken[c] and (pick < 0 or cost[c] < cost[pick]):
+                    pick = c
+            taken[pick] = True
+            counts = (0, pick // side - reach, pick % side - reach, best_k[pick])
+            for role in range(4):
+                q = order[role]
+                setting = naive[i, q] + counts[role] * step
+                ok = on[q] and setting >= low - slack and setting <= high + slack
+                option[q] = setting if ok else math.inf
+            if extra_q[pick] >= 0:
+                option[extra_q[pick]] = extra_att[pick]
+            for q in range(4):
+                amps[q] = (math.exp((full[i, q] - option[q]) * DB_TO_NEPER)
+                           if math.isfinite(option[q]) else 0.0)
+            err = _error(resp, i, amps, u[i], s[i], az0, el0)
+            if err < best_err:
+                best_err = err
+                for q in range(4):
+                    best[q] = option[q]
+        for q in range(4):
+            out[i, q] = best[q]
