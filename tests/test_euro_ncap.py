@@ -96,8 +96,8 @@ def test_every_combination_validates_with_only_declared_limits(path):
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.name)
 def test_limits_only_in_the_final_metres(path):
-    """Frames not checked (a bench or radar limit) are the last ones, within 1.6 m of the radar,
-    except where a crossing target starts outside the radar's field (out of coverage)."""
+    """Frames not checked (a bench or radar limit) are the last ones, within 1.6 m of the radar
+    (measured: 1.4 m at most)."""
     for ident, overrides in parametrizations(path):
         scene = load_scenario(path, overrides)
         tracks = compute_tracks(scene)
