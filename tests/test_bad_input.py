@@ -148,6 +148,11 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:15:1: parametrize: radar.nothing.here: no such key path in the scene"),
     ("parametrize-combination-fails", TINY + "parametrize: {frame_rate_hz: [10, 400]}\n",
      r"^{f}: frame_rate_hz: the scene runs at 400 Hz .*\[frame_rate_hz=400\]$"),
+    ("parametrize-group-short", TINY + "parametrize:\n  duration_s, seed: [[1.0, 2], [2.0]]\n",
+     r"^{f}:16:\d+: parametrize.duration_s, seed\[1\]: needs a list of 2 values \(one per "
+     r"key path: duration_s, seed\), got \[2.0\]"),
+    ("parametrize-group-empty-path", TINY + "parametrize:\n  'duration_s,': [[1.0, 2]]\n",
+     r"^{f}:16:\d+: parametrize.duration_s,: 'duration_s,': an empty key path"),
 ]
 
 

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 import rts_scenario.cli as cli
 from rts_scenario import ScenarioError
 from rts_scenario.kinematics import compute_tracks
-from rts_scenario.scenario import load_scenario
+from rts_scenario.scenario import load_scenario, parametrizations
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = sorted((ROOT / "scenarios").glob("*.scenario.yaml"))
@@ -294,3 +294,22 @@ def test_fuzz_raw_text(tmp_path, text):
         load_scenario(path)
     except ScenarioError:
         pass
+
+
+def test_key_paths_joined_by_commas_vary_together(tmp_path):
+    text = (ROOT / "scenarios" / "approaching_target.scenario.yaml").read_text()
+    path = tmp_path / "grouped.scenario.yaml"
+    path.write_text(text + "parametrize:\n"
+                    "  ego.motion.position_m.0, duration_s: [[0.0, 7.5], [-10.0, 8.0]]\n"
+                    "  radar.estimator: [bartlett, ti]\n")
+    combos = parametrizations(path)
+    assert [overrides for _, overrides in combos] == [
+        {"ego.motion.position_m.0": 0.0, "duration_s": 7.5, "radar.estimator": "bartlett"},
+        {"ego.motion.position_m.0": 0.0, "duration_s": 7.5, "radar.estimator": "ti"},
+        {"ego.motion.position_m.0": -10.0, "duration_s": 8.0, "radar.estimator": "bartlett"},
+        {"ego.motion.position_m.0": -10.0, "duration_s": 8.0, "radar.estimator": "ti"},
+    ]
+    assert combos[2][0] == "0=-10.0-duration_s=8.0-estimator=bartlett"
+    scene = load_scenario(path, combos[2][1])
+    assert scene.duration_s == 8.0
+    assert scene.radar_options.estimator == "bartlett"

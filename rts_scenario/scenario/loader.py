@@ -160,19 +160,45 @@ def _check_size(doc: Document, duration_s: float, frame_rate_hz: float, n_target
 
 
 def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
-    """List the scene's test combinations: ``(id, overrides)``; one ``("", {})`` if none."""
+    """List the scene's test combinations: ``(id, overrides)``; one ``("", {})`` if none.
+
+    A key of the ``parametrize`` block is one key path, or several joined by commas that vary
+    together (as in ``pytest.mark.parametrize("a,b", ...)``): each of its values is then a list
+    with one value per path. The combinations are the product over the keys.
+    """
     doc = load_yaml(path)
     block = doc.data.get("parametrize") if isinstance(doc.data, dict) else None
     if not block:
         return [("", {})]
     validate(doc, scenario_schema())
-    keys = list(block)
+    axes = [_parameter_axis(doc, key, values) for key, values in block.items()]
     combos = []
-    for values in itertools.product(*(block[k] for k in keys)):
-        overrides = dict(zip(keys, values, strict=True))
+    for choice in itertools.product(*axes):
+        overrides = {path: value for group in choice for path, value in group}
         ident = "-".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in overrides.items())
         combos.append((ident, overrides))
     return combos
+
+
+def _parameter_axis(doc: Document, key: str,
+                    values: list[Any]) -> list[list[tuple[str, Any]]]:
+    """One axis of the product: per value, the (key path, value) pairs it sets."""
+    paths = [p.strip() for p in key.split(",")]
+    if len(paths) == 1:
+        return [[(key, value)] for value in values]
+    if not all(paths):
+        raise doc.error(("parametrize", key),
+                        f"{key!r}: an empty key path between commas; write 'a.b, c.d'")
+    axis = []
+    for i, value in enumerate(values):
+        if not isinstance(value, list) or len(value) != len(paths):
+            raise doc.error(
+                ("parametrize", key, i),
+                f"needs a list of {len(paths)} values (one per key path: {', '.join(paths)}), "
+                f"got {value!r}",
+            )
+        axis.append(list(zip(paths, value, strict=True)))
+    return axis
 
 
 def _override(doc: Document, key: str, value: Any) -> None:
