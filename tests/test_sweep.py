@@ -298,3 +298,30 @@ def test_a_worker_that_dies_loses_no_run(scenes, tmp_path, capsys, monkeypatch):
     assert plain["status"] == "error" and plain["error_type"] == "runtime"
     assert "worker failed: BrokenProcessPool" in plain["reason"]
     assert "Traceback" not in stdout + err
+
+
+def test_the_euro_ncap_catalogue_sweeps_to_the_same_verdicts_everywhere(tmp_path, capsys):
+    """More than 100 combinations of the shipped catalogue, in process, in a pool of two and
+    on a local Dask cluster: the same verdicts run by run, every one a pass."""
+    catalogue = Path(__file__).resolve().parents[1] / "scenarios" / "euro-ncap"
+    scenes = [catalogue / f"{name}.scenario.yaml" for name in ("ccrs", "ccrb", "cpna-25",
+                                                                "cmrs")]
+    places = [["--workers", "1"], ["--workers", "2"]]
+    try:
+        import distributed  # noqa: F401
+
+        places.append(["--scheduler", "local", "--workers", "2"])
+    except ImportError:
+        pass
+    payloads = []
+    for i, place in enumerate(places):
+        out = tmp_path / f"catalogue-{i}.json"
+        code, _, _ = sweep(capsys, *scenes, "--json", out, *place)
+        payloads.append(json.loads(out.read_text()))
+        assert code == 0, [r for r in payloads[-1]["runs"] if r["status"] != "pass"][:3]
+    first = verdicts(payloads[0])
+    assert len(first) >= 100 and all(r["passed"] for r in first)
+    assert len({(r["file"], json.dumps(r["parameters"], sort_keys=True)) for r in first}) == \
+        len(first)
+    for payload in payloads[1:]:
+        assert verdicts(payload) == first
