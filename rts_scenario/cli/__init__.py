@@ -20,6 +20,7 @@ from . import (
     calibrate,
     check,
     emulate,
+    import_,
     list_outputs,
     list_scenes,
     listen,
@@ -31,7 +32,7 @@ from . import (
 from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK, EXIT_RUNTIME_ERROR, one_line
 
 # In the order `--help` lists them.
-_SUBCOMMANDS = (bench, validate, run, check, schedule, calibrate, survey, emulate,
+_SUBCOMMANDS = (bench, validate, run, check, schedule, calibrate, survey, emulate, import_,
                 list_scenes, list_outputs, listen)
 
 
