@@ -1157,10 +1157,10 @@ class _Importer:
                 i = int(hit[0])
                 if i == 0:
                     return float(grid[0])
-                # The rule turns true between grid[i-1] and grid[i]: at the distance itself.
-                root = float(brentq(lambda x: distance(np.array([x]))[0] - value,
+                # The rule turns true between grid[i-1] and grid[i], where the distance
+                # passes the value: that instant (for a strict rule, the limit of its times).
+                return float(brentq(lambda x: distance(np.array([x]))[0] - value,
                                     grid[i - 1], grid[i], xtol=XTOL_S))
-                return root if rule(distance(np.array([root]))[0], value) else float(grid[i])
             start = float(grid[-1])
         return math.inf
 
