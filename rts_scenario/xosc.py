@@ -99,7 +99,7 @@ DEFAULT_HEIGHT_M = {"car": 0.6, "truck": 1.2, "motorcycle": 0.8, "bicycle": 0.8,
                     "pedestrian": 1.0}
 
 SUPPORTED_ACTIONS = ("TeleportAction (Init only)", "SpeedAction", "LaneChangeAction",
-                     "LaneOffsetAction")
+                     "LaneOffsetAction", "LateralDistanceAction")
 SUPPORTED_CONDITIONS = ("SimulationTimeCondition", "RelativeDistanceCondition",
                         "StoryboardElementStateCondition")
 SUPPORTED_POSITIONS = ("WorldPosition", "RelativeWorldPosition", "RelativeObjectPosition")
@@ -694,10 +694,11 @@ class _Importer:
         if action.tag == "LongitudinalAction":
             action = action.pick("actions", ("SpeedAction",), SUPPORTED_ACTIONS)
         elif action.tag == "LateralAction":
-            action = action.pick("actions", ("LaneChangeAction", "LaneOffsetAction"),
-                                 SUPPORTED_ACTIONS)
+            action = action.pick("actions", ("LaneChangeAction", "LaneOffsetAction",
+                                             "LateralDistanceAction"), SUPPORTED_ACTIONS)
         reader = {"TeleportAction": self._teleport, "SpeedAction": self._speed_action,
-                  "LaneChangeAction": self._lane_change, "LaneOffsetAction": self._lane_offset}
+                  "LaneChangeAction": self._lane_change, "LaneOffsetAction": self._lane_offset,
+                  "LateralDistanceAction": self._lateral_distance}
         if action.tag == "TeleportAction" and not init:
             raise action.error("<TeleportAction> is supported in <Init> only (a jump in the "
                                "storyboard has no counterpart in a scene's motion)")
@@ -785,6 +786,33 @@ class _Importer:
         if target.tag == "RelativeTargetLaneOffset":
             params["ref"] = self._entity(target, target.text("entityRef"))
         return "lane_offset", params
+
+    def _lateral_distance(self, action: _El) -> tuple[str, dict[str, Any]]:
+        if action.boolean("freespace", False):
+            raise action.error("<LateralDistanceAction freespace=\"true\"> is not supported by "
+                               "import; distances are between reference points")
+        if action.has("coordinateSystem"):
+            action.choice("coordinateSystem", ("entity",))
+        side = action.choice("displacement", ("any", "leftToReferencedEntity",
+                                              "rightToReferencedEntity"), "any")
+        distance = action.number("distance", 0.0)
+        if distance < 0.0:
+            raise action.error("<LateralDistanceAction distance> must be >= 0")
+        constraints = action.child("DynamicConstraints", required=False)
+        max_acc = math.inf
+        if constraints is not None:
+            for limit in ("maxAcceleration", "maxDeceleration", "maxSpeed",
+                          "maxAccelerationRate", "maxDecelerationRate"):
+                if constraints.has(limit):
+                    constraints.number(limit)  # longitudinal limits: the speed is not changed
+            if constraints.has("maxLateralAcc"):
+                max_acc = constraints.number("maxLateralAcc")
+                if max_acc <= 0.0:
+                    raise constraints.error("<DynamicConstraints maxLateralAcc> must be > 0")
+        return "lateral_distance", {
+            "ref": self._entity(action, action.text("entityRef")), "distance_m": distance,
+            "side": side, "max_acc_mps2": max_acc,
+            "continuous": action.boolean("continuous", False)}
 
     def _trigger(self, trigger: _El) -> list[list[_Condition]]:
         trigger.used = True
@@ -1020,6 +1048,22 @@ class _Importer:
                 QUINTIC_PEAK_ACCEL * abs(shift) / p["max_acc_mps2"])
             self._shift(action, body, t, shift, duration, p["shape"])
             return math.inf if p["continuous"] else duration
+        if action.kind == "lateral_distance":
+            ref = self.bodies[p["ref"]]
+            gap = self._lateral_gap(body, ref, t)  # ref left of body's final lateral place
+            left = {"leftToReferencedEntity": True, "rightToReferencedEntity": False}.get(
+                p["side"], gap <= 0.0)
+            shift = gap + (p["distance_m"] if left else -p["distance_m"])
+            body.lane_offset_m += shift
+            duration = 0.0 if math.isinf(p["max_acc_mps2"]) else math.sqrt(
+                QUINTIC_PEAK_ACCEL * abs(shift) / p["max_acc_mps2"])
+            self._shift(action, body, t, shift, duration, "LateralDistanceAction")
+            if p["continuous"]:
+                self.notes.append(f"{where}: continuous lateral distance of {action.actor!r} "
+                                  f"set once at {t:g} s; later lateral moves of {p['ref']!r} "
+                                  f"are not followed")
+                return math.inf
+            return duration
         raise AssertionError(action.kind)
 
     def _speed_duration(self, action: _Action, dyn: _Dynamics, v0: float,
@@ -1254,7 +1298,7 @@ def _parse(path: Path) -> Any:
         return etree.parse(str(path), parser).getroot()
     except etree.XMLSyntaxError as exc:
         line = exc.position[0] if exc.position else None
-        message = re.sub(r",? line \d+, column \d+.*$", "", str(exc.msg))
+        message = re.sub(r",? line \d+(, column \d+)?\s*$", "", str(exc.msg))
         raise ScenarioError(f"malformed XML: {message}", file=str(path), line=line) from None
     except OSError as exc:
         raise RtsError(f"{path}: cannot read: {exc}") from None

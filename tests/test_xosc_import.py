@@ -173,6 +173,23 @@ def test_lane_offset_uses_max_lateral_acceleration(tmp_path):
                                               abs=1e-9)
 
 
+def test_lateral_distance_to_the_ego(tmp_path):
+    path = variant(
+        tmp_path, "cut_in",
+        """<LaneChangeAction>
+                      <LaneChangeActionDynamics dynamicsShape="sinusoidal" value="$LaneChangeTime" dynamicsDimension="time"/>
+                      <LaneChangeTarget><RelativeTargetLane entityRef="Ego" value="0"/></LaneChangeTarget>
+                    </LaneChangeAction>""",
+        """<LateralDistanceAction entityRef="Ego" distance="0.5" freespace="false"
+                        continuous="false" displacement="leftToReferencedEntity">
+                      <DynamicConstraints maxLateralAcc="1.0" maxSpeed="30"/>
+                    </LateralDistanceAction>""")
+    _, scene = imported(tmp_path, path)
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.offset_m == pytest.approx(-3.0)  # from 3.5 m left of the ego to 0.5 m
+    assert change.duration_s == pytest.approx(math.sqrt(10 / math.sqrt(3) * 3.0 / 1.0))
+
+
 def test_expression_and_relative_speed(tmp_path):
     path = variant(tmp_path, "braking_lead", '<AbsoluteTargetSpeed value="$TargetSpeed"/>',
                    '<AbsoluteTargetSpeed value="${$EgoSpeed / 2 - 1}"/>')
