@@ -555,7 +555,10 @@ class _Importer:
             for decl in block.kids("ParameterDeclaration"):
                 decl.skip()
         for block in root.kids("CatalogLocations"):
-            block.empty()
+            if block.children:  # only a CatalogReference would use them, and that is an error
+                self.notes.append(f"{self.file}:{block.line}: <CatalogLocations> not used: "
+                                  f"catalogs are not read")
+            block.skip()
         network = root.child("RoadNetwork", required=False)
         if network is not None:
             if network.children:
