@@ -44,6 +44,15 @@ def variant(tmp_path, name, old, new, filename=None):
     return path
 
 
+def replace_lane_change(tmp_path, new):
+    """A copy of the cut-in with its LaneChangeAction replaced by ``new``."""
+    text = (DATA / "cut_in.xosc").read_text()
+    path = tmp_path / "cut_in.xosc"
+    path.write_text(re.sub(r"<LaneChangeAction>.*?</LaneChangeAction>", new, text,
+                           flags=re.DOTALL))
+    return path
+
+
 def line_of(path, needle):
     return next(i for i, line in enumerate(path.read_text().splitlines(), 1) if needle in line)
 
@@ -154,12 +163,8 @@ def test_cubic_speed_transition_within_stated_tolerance(tmp_path):
 
 
 def test_lane_offset_uses_max_lateral_acceleration(tmp_path):
-    path = variant(
-        tmp_path, "cut_in",
-        """<LaneChangeAction>
-                      <LaneChangeActionDynamics dynamicsShape="sinusoidal" value="$LaneChangeTime" dynamicsDimension="time"/>
-                      <LaneChangeTarget><RelativeTargetLane entityRef="Ego" value="0"/></LaneChangeTarget>
-                    </LaneChangeAction>""",
+    path = replace_lane_change(
+        tmp_path,
         """<LaneOffsetAction continuous="false">
                       <LaneOffsetActionDynamics maxLateralAcc="0.5" dynamicsShape="cubic"/>
                       <LaneOffsetTarget><AbsoluteTargetLaneOffset value="-1.2"/></LaneOffsetTarget>
@@ -174,12 +179,8 @@ def test_lane_offset_uses_max_lateral_acceleration(tmp_path):
 
 
 def test_lateral_distance_to_the_ego(tmp_path):
-    path = variant(
-        tmp_path, "cut_in",
-        """<LaneChangeAction>
-                      <LaneChangeActionDynamics dynamicsShape="sinusoidal" value="$LaneChangeTime" dynamicsDimension="time"/>
-                      <LaneChangeTarget><RelativeTargetLane entityRef="Ego" value="0"/></LaneChangeTarget>
-                    </LaneChangeAction>""",
+    path = replace_lane_change(
+        tmp_path,
         """<LateralDistanceAction entityRef="Ego" distance="0.5" freespace="false"
                         continuous="false" displacement="leftToReferencedEntity">
                       <DynamicConstraints maxLateralAcc="1.0" maxSpeed="30"/>
@@ -190,7 +191,7 @@ def test_lateral_distance_to_the_ego(tmp_path):
     assert change.duration_s == pytest.approx(math.sqrt(10 / math.sqrt(3) * 3.0 / 1.0))
 
 
-def test_expression_and_relative_speed(tmp_path):
+def test_expressions(tmp_path):
     path = variant(tmp_path, "braking_lead", '<AbsoluteTargetSpeed value="$TargetSpeed"/>',
                    '<AbsoluteTargetSpeed value="${$EgoSpeed / 2 - 1}"/>')
     _, scene = imported(tmp_path, path, parameters={"EgoSpeed": "24"})
@@ -200,6 +201,30 @@ def test_expression_and_relative_speed(tmp_path):
                   '<AbsoluteTargetSpeed value="${$EgoSpeed ** 2}"/>', "bad_expr.xosc")
     with pytest.raises(ScenarioError, match=r"bad_expr\.xosc:\d+: .*only numbers"):
         imported(tmp_path, bad)
+
+
+def test_storyboard_features(tmp_path):
+    result, scene = imported(tmp_path, "storyboard")
+    assert result.ego == "ego" and scene.mount.x_m == pytest.approx(4.0)
+    truck, cone = scene.targets
+    assert (truck.name, truck.kind, cone.name, cone.kind) == ("truck_1", "truck", "cone", "other")
+    # The ego accelerates at 2 m/s^2 to 20 m/s (10 s); the truck starts 50 m ahead along the
+    # common heading and 3.5 m to its right at 10 m/s. Their 3-D distance falls below 30 m when
+    # the gap along the heading is sqrt(30^2 - 3.5^2): after 10 s the gap is 150 - 10 t.
+    t_close = (150.0 - math.sqrt(30.0**2 - 3.5**2)) / 10.0
+    t_slow = t_close + 0.5  # the condition's delay
+    # Slowing to 5 m/s over 30 m takes 2 * 30 / (10 + 5) = 4 s; then the lane change (one lane
+    # left of itself plus 0.2 m, over 40 m at 5 m/s = 8 s); the scene stops when it ends.
+    law = truck.trajectory.law
+    assert law.knots_s[1] == pytest.approx(t_slow, abs=1e-8)
+    assert law.v0_mps[-1] == pytest.approx(5.0)
+    (change,) = truck.trajectory.lane_changes
+    assert (change.start_s, change.duration_s, change.offset_m) == pytest.approx(
+        (t_slow + 4.0, 8.0, 3.7), abs=1e-8)
+    assert scene.duration_s == pytest.approx(t_slow + 12.0, abs=1e-8)
+    assert any("'never' never starts" in note for note in result.notes)
+    assert any("is target 'truck_1'" in note for note in result.notes)
+    assert any("<RoadNetwork> not used" in note for note in result.notes)
 
 
 # ------------------------------------------------------------------------------- parameters
@@ -234,14 +259,10 @@ def test_undeclared_reference_is_located(tmp_path):
 # ------------------------------------------------------------------------------- bad input
 
 def test_unsupported_action_names_element_and_line(tmp_path):
-    path = variant(tmp_path, "braking_lead", """<LongitudinalAction>
-                    <SpeedAction>
-                      <SpeedActionDynamics dynamicsShape="linear" value="$Deceleration" dynamicsDimension="rate"/>""",
-                   """<RoutingAction>
-                    <SpeedAction>
-                      <SpeedActionDynamics dynamicsShape="linear" value="$Deceleration" dynamicsDimension="rate"/>""")
-    path.write_text(path.read_text().replace("</LongitudinalAction>\n                </PrivateAction>\n              </Action>",
-                                             "</RoutingAction>\n                </PrivateAction>\n              </Action>"))
+    text = (DATA / "braking_lead.xosc").read_text()
+    brake = re.search(r'<Action name="Brake">.*?</Action>', text, flags=re.DOTALL).group(0)
+    path = tmp_path / "braking_lead.xosc"
+    path.write_text(text.replace(brake, brake.replace("LongitudinalAction", "RoutingAction")))
     line = line_of(path, "<RoutingAction>")
     with pytest.raises(ScenarioError) as info:
         imported(tmp_path, path)
