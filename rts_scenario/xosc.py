@@ -293,8 +293,10 @@ def _evaluate(expression: str, params: dict[str, Parameter]) -> str:
         result = value(ast.parse(_PARAM_REF.sub(r"\1", expression).strip(), mode="eval"))
     except SyntaxError:
         raise ValueError("not a valid expression") from None
-    except (ZeroDivisionError, OverflowError, TypeError) as exc:
-        raise ValueError(str(exc)) from None
+    except RecursionError:
+        raise ValueError("expression nested too deeply") from None
+    except (ZeroDivisionError, OverflowError, TypeError, ValueError) as exc:
+        raise ValueError(str(exc) or type(exc).__name__) from None
     if isinstance(result, bool):
         return "true" if result else "false"
     return repr(result) if isinstance(result, float) else str(result)
