@@ -372,3 +372,19 @@ def test_cli_errors_are_one_line_exit_2(tmp_path, capsys):
     assert main(["import", *base[:2], "nowhere", *base[3:]]) == 2
     assert "--radar 'nowhere'" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_cli_profile_files_are_written_relative_to_the_scene(tmp_path, capsys):
+    profiles = Path(__file__).parents[1] / "scenarios" / "radars"
+    (tmp_path / "radars").mkdir()
+    profile = tmp_path / "radars" / "long.radar.yaml"
+    profile.write_text((profiles / "awr1843boost-long.radar.yaml").read_text())
+    out = tmp_path / "lead.scenario.yaml"
+    assert main(["import", str(DATA / "braking_lead.xosc"), "--radar", str(profile),
+                 "--rig", "wide-3x5", "--output", str(out)]) == 0
+    assert "profile: radars/long.radar.yaml" in out.read_text()
+    elsewhere = tmp_path / "sub" / "lead.scenario.yaml"
+    elsewhere.parent.mkdir()
+    assert main(["import", str(DATA / "braking_lead.xosc"), "--radar", str(profile),
+                 "--rig", "wide-3x5", "--output", str(elsewhere)]) == 2
+    assert "inside its own folder tree" in capsys.readouterr().err

@@ -47,7 +47,7 @@ def _do_import(args: argparse.Namespace) -> int:
     from ..rig import preset_names as rig_presets
     from ..scenario import SCENE_SUFFIX, load_scenario
     from ..xosc import import_xosc
-    from .common import writing
+    from .common import one_line, writing
 
     output = Path(args.output)
     if not args.output.endswith(SCENE_SUFFIX):
@@ -63,7 +63,11 @@ def _do_import(args: argparse.Namespace) -> int:
                          frame_rate_hz=args.frame_rate_hz, lane_width_m=args.lane_width_m)
     with writing("--output", output):
         output.write_text(result.text, encoding="utf-8")
-    scene = load_scenario(output)  # what validate and run will read
+    try:
+        scene = load_scenario(output)  # what validate and run will read
+    except RtsError as exc:
+        raise RtsError(f"{args.file}: the scene written to {output} does not load (a value "
+                       f"beyond the scene format's limits): {one_line(exc)}") from None
     for note in result.notes:
         print(f"note: {note}")
     print(f"imported {args.file} -> {output}: ego {result.ego}, {len(scene.targets)} targets, "
