@@ -420,7 +420,7 @@ class _Condition:
 class _Event:
     el: _El
     name: str
-    act: str
+    act: int  # index in the importer's acts
     story: str
     maneuver_group: str
     maneuver: str
@@ -533,7 +533,7 @@ class _Importer:
         self.stop: list[list[_Condition]] = []
         self.names: dict[str, set[str]] = {}  # storyboard element type -> names
         self.description = ""
-        self.act_start: dict[str, float] = {}
+        self.act_start: dict[int, float] = {}  # by index in self.acts
         self.event_start: dict[int, float] = {}
         self.event_end: dict[int, float] = {}
         self.action_times: dict[str, tuple[float, float]] = {}
@@ -648,9 +648,9 @@ class _Importer:
             self.acts.append(_Act(act, act_name, story_name,
                                   self._trigger(start) if start is not None else None))
             for group in act.kids("ManeuverGroup"):
-                self._read_group(group, act_name, story_name)
+                self._read_group(group, len(self.acts) - 1, story_name)
 
-    def _read_group(self, group: _El, act: str, story: str) -> None:
+    def _read_group(self, group: _El, act: int, story: str) -> None:
         group_name = group.text("name", "")
         self._named("maneuverGroup", group_name)
         if group.number("maximumExecutionCount", 1.0) != 1.0:
@@ -926,7 +926,7 @@ class _Importer:
                 break
             if order == 0:
                 pending_acts.remove(item)
-                self.act_start[item.name] = t
+                self.act_start[self.acts.index(item)] = t
             else:
                 pending.remove(item)
                 self._start_event(item, t)
@@ -1159,12 +1159,16 @@ class _Importer:
             index = [i for i, e in enumerate(self.events) if e.name == name]
             table = self.event_end if end else self.event_start
             return min((table.get(i, math.inf) for i in index), default=math.inf)
-        key = {"story": "story", "act": "act", "maneuverGroup": "maneuver_group",
-               "maneuver": "maneuver"}[kind]
-        events = [i for i, e in enumerate(self.events) if getattr(e, key) == name]
+
+        def inside(e: _Event) -> bool:
+            return {"story": e.story, "act": self.acts[e.act].name,
+                    "maneuverGroup": e.maneuver_group, "maneuver": e.maneuver}[kind] == name
+
+        events = [i for i, e in enumerate(self.events) if inside(e)]
         if end:
             return max((self.event_end.get(i, math.inf) for i in events), default=math.inf)
-        acts = [a.name for a in self.acts if (a.story if kind == "story" else a.name) == name] \
+        acts = [i for i, a in enumerate(self.acts)
+                if (a.story if kind == "story" else a.name) == name] \
             if kind in ("story", "act") else [self.events[i].act for i in events]
         return min((self.act_start.get(a, math.inf) for a in acts), default=math.inf)
 

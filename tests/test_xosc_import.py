@@ -227,6 +227,31 @@ def test_storyboard_features(tmp_path):
     assert any("<RoadNetwork> not used" in note for note in result.notes)
 
 
+@pytest.mark.parametrize("condition, start_s", [
+    ('storyboardElementType="action" storyboardElementRef="CutIn" state="completeState"', 5.0),
+    ('storyboardElementType="act" storyboardElementRef="CutInAct" state="runningState"', 0.0),
+    ('storyboardElementType="story" storyboardElementRef="CutInStory" state="startTransition"',
+     0.0),
+])
+def test_state_conditions(tmp_path, condition, start_s):
+    path = variant(tmp_path, "cut_in", 'storyboardElementType="event" '
+                   'storyboardElementRef="CutInEvent" state="endTransition"', condition)
+    _, scene = imported(tmp_path, path)
+    law = scene.targets[0].trajectory.law
+
+    def speed(t):
+        k = np.searchsorted(law.knots_s, t, side="right") - 1
+        return law.v0_mps[k] + law.a_mps2[k] * (t - law.knots_s[k])
+
+    # The speed-up (20 to 25 m/s in 2 s, linear) starts at start_s.
+    assert [speed(start_s + dt) for dt in (0.0, 1.0, 2.5)] == pytest.approx([20.0, 22.5, 25.0])
+    bad = variant(tmp_path, "cut_in", 'storyboardElementRef="CutInEvent"',
+                  'storyboardElementRef="CutOutEvent"', "bad_ref.xosc")
+    with pytest.raises(ScenarioError, match=r"no event named 'CutOutEvent'; events: CutInEvent, "
+                                            r"SpeedUpEvent"):
+        imported(tmp_path, bad)
+
+
 # ------------------------------------------------------------------------------- parameters
 
 def test_parameter_override_changes_the_trigger_and_the_header(tmp_path):
