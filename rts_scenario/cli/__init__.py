@@ -20,6 +20,7 @@ from . import (
     calibrate,
     check,
     emulate,
+    import_,
     list_outputs,
     list_scenes,
     listen,
@@ -33,7 +34,7 @@ from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK, EXIT_RUNTIME_ERROR, one_
 
 # In the order `--help` lists them.
 _SUBCOMMANDS = (bench, validate, run, sweep, check, schedule, calibrate, survey, emulate,
-                list_scenes, list_outputs, listen)
+                import_, list_scenes, list_outputs, listen)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -322,16 +322,7 @@ def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]])
         if times[i] <= times[i - 1]:
             raise doc.error((*key, i, "t_s"),
                             f"times must increase, got {times[i]:g} after {times[i - 1]:g}")
-    knots, v0, acc = [0.0], [speeds[0]], [0.0]
-    for i, t in enumerate(times):
-        nxt = (speeds[i + 1] - speeds[i]) / (times[i + 1] - t) if i + 1 < len(times) else 0.0
-        if t == 0.0:
-            acc[0] = nxt
-        else:
-            knots.append(t)
-            v0.append(speeds[i])
-            acc.append(nxt)
-    return TravelLaw.pieces(knots, v0, acc)
+    return TravelLaw.speed_profile(times, speeds)
 
 
 def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],

@@ -108,6 +108,21 @@ class TravelLaw:
         return cls(knots_s=np.asarray(knots_s, float), s0_m=np.asarray(s0),
                    v0_mps=np.asarray(speeds_mps, float), a_mps2=np.asarray(accels_mps2, float))
 
+    @classmethod
+    def speed_profile(cls, times_s: list[float], speeds_mps: list[float]) -> TravelLaw:
+        """Speed linear between points at increasing times, constant before and after them."""
+        knots, v0, acc = [0.0], [speeds_mps[0]], [0.0]
+        for i, t in enumerate(times_s):
+            nxt = ((speeds_mps[i + 1] - speeds_mps[i]) / (times_s[i + 1] - t)
+                   if i + 1 < len(times_s) else 0.0)
+            if t == 0.0:
+                acc[0] = nxt
+            else:
+                knots.append(t)
+                v0.append(speeds_mps[i])
+                acc.append(nxt)
+        return cls.pieces(knots, v0, acc)
+
 
 @dataclass(frozen=True)
 class LaneChange:

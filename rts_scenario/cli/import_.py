@@ -1,0 +1,101 @@
+"""``rts-scenario import``: an OpenSCENARIO 1.x file (a documented subset) as a scene file."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from typing import Any
+
+from .common import EXIT_OK, check_number, check_writable_file
+
+
+def _scene_reference(option: str, name: str, presets: list[str], suffix: str,
+                     output: Path) -> str:
+    """How the scene written to ``output`` names a preset or a file an option gives."""
+    from ..errors import RtsError
+
+    if name in presets:
+        return name
+    path = Path(name)
+    if not name.endswith(suffix) or not path.is_file():
+        raise RtsError(f"{option} {name!r}: unknown preset and no such *{suffix} file; valid "
+                       f"presets: {', '.join(presets)}")
+    folder = output.resolve().parent
+    resolved = path.resolve()
+    if not resolved.is_relative_to(folder):
+        raise RtsError(f"{option} {name}: a scene refers to files inside its own folder tree; "
+                       f"put the file under {folder} or write the scene next to it")
+    return Path(os.path.relpath(resolved, folder)).as_posix()
+
+
+def _parameters(values: list[str]) -> dict[str, str]:
+    from ..errors import RtsError
+
+    out = {}
+    for item in values:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise RtsError(f"--param {item!r}: expected NAME=VALUE")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def _do_import(args: argparse.Namespace) -> int:
+    from ..errors import RtsError
+    from ..radar.profile import preset_names as radar_presets
+    from ..rig import preset_names as rig_presets
+    from ..scenario import SCENE_SUFFIX, load_scenario
+    from ..xosc import import_xosc
+    from .common import one_line, writing
+
+    output = Path(args.output)
+    if not args.output.endswith(SCENE_SUFFIX):
+        raise RtsError(f"--output {args.output}: a scene file's name ends in {SCENE_SUFFIX}")
+    check_writable_file("--output", output)
+    check_number("--frame-rate-hz", args.frame_rate_hz, low=0.001, high=1000.0)
+    check_number("--lane-width-m", args.lane_width_m, low=0.5, high=10.0)
+    radar = _scene_reference("--radar", args.radar, radar_presets(), ".radar.yaml", output)
+    rig = _scene_reference("--rig", args.rig, rig_presets(), ".rig.yaml", output)
+    result = import_xosc(args.file, radar=radar, rig=rig, ego=args.ego,
+                         parameters=_parameters(args.param or []),
+                         name=output.name.removesuffix(SCENE_SUFFIX),
+                         frame_rate_hz=args.frame_rate_hz, lane_width_m=args.lane_width_m)
+    with writing("--output", output):
+        output.write_text(result.text, encoding="utf-8")
+    try:
+        scene = load_scenario(output)  # what validate and run will read
+    except RtsError as exc:
+        raise RtsError(f"{args.file}: the scene written to {output} does not load (a value "
+                       f"beyond the scene format's limits): {one_line(exc)}") from None
+    for note in result.notes:
+        print(f"note: {note}")
+    print(f"imported {args.file} -> {output}: ego {result.ego}, {len(scene.targets)} targets, "
+          f"{scene.duration_s:g} s")
+    return EXIT_OK
+
+
+def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """Add the ``import`` subcommand."""
+    parser = subparsers.add_parser(
+        "import", help="convert an OpenSCENARIO 1.x file to a scene file", parents=parents,
+        description="Convert an OpenSCENARIO 1.x file (the subset in docs/import.md: world "
+                    "positions, speed and lateral actions, time and distance triggers; no road "
+                    "network) to a *.scenario.yaml scene with the ego as the radar carrier. "
+                    "Anything outside the subset is one error naming the element and its line.",
+    )
+    parser.add_argument("file", metavar="FILE.xosc", help="OpenSCENARIO file")
+    parser.add_argument("--radar", required=True, help="radar profile preset or *.radar.yaml")
+    parser.add_argument("--rig", required=True, help="rig preset or *.rig.yaml")
+    parser.add_argument("--ego", default=None,
+                        help="entity carrying the radar (default: the one named Ego, any case, "
+                             "else the first)")
+    parser.add_argument("--param", action="append", metavar="NAME=VALUE",
+                        help="override a declared parameter (repeatable)")
+    parser.add_argument("--output", required=True, metavar="OUT.scenario.yaml",
+                        help="scene file to write")
+    parser.add_argument("--frame-rate-hz", type=float, default=20.0,
+                        help="the scene's frame rate (default 20)")
+    parser.add_argument("--lane-width-m", type=float, default=3.5,
+                        help="lane width for RelativeTargetLane (default 3.5)")
+    parser.set_defaults(handler=_do_import)

@@ -1,0 +1,415 @@
+"""OpenSCENARIO import: imported tracks against closed-form kinematics, parameters, errors.
+
+The truth is written here from first principles: positions and velocities of the radar (the
+ego's reference point plus the mount) and of each target as closed-form functions of time, then
+range, radial velocity, azimuth and elevation from their difference. The imported scene is
+evaluated by the package's kinematics, so the test covers the import and the scene's meaning.
+"""
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rts_scenario.cli import main
+from rts_scenario.errors import RtsError, ScenarioError
+from rts_scenario.kinematics import compute_tracks
+from rts_scenario.scenario import load_scenario
+from rts_scenario.xosc import import_xosc
+
+DATA = Path(__file__).parent / "data" / "xosc"
+# Front of the ego's bounding box (centre x 1.4 m + length 4.5 m / 2) at 0.5 m: the mount.
+RADAR_X_M, RADAR_Z_M = 3.65, 0.5
+# Closed-form positions need no tolerance beyond float rounding and the file's 1e-9 rounding.
+ATOL = 1e-6
+
+
+def imported(tmp_path, source, **options):
+    """Import a file (a name in tests/data/xosc or a path) and load the scene it writes."""
+    path = source if isinstance(source, Path) else DATA / f"{source}.xosc"
+    result = import_xosc(path, radar="awr1843boost", rig="wide-3x5", **options)
+    out = tmp_path / f"{path.stem}.scenario.yaml"
+    out.write_text(result.text)
+    return result, load_scenario(out)
+
+
+def variant(tmp_path, name, old, new, filename=None):
+    """A copy of a test file with one piece of text replaced; returns the path."""
+    text = (DATA / f"{name}.xosc").read_text()
+    assert old in text
+    path = tmp_path / (filename or f"{name}.xosc")
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def replace_lane_change(tmp_path, new):
+    """A copy of the cut-in with its LaneChangeAction replaced by ``new``."""
+    text = (DATA / "cut_in.xosc").read_text()
+    path = tmp_path / "cut_in.xosc"
+    path.write_text(re.sub(r"<LaneChangeAction>.*?</LaneChangeAction>", new, text,
+                           flags=re.DOTALL))
+    return path
+
+
+def line_of(path, needle):
+    return next(i for i, line in enumerate(path.read_text().splitlines(), 1) if needle in line)
+
+
+def assert_tracks(scene, t, radar_p, radar_v, target_p, target_v, k=0, atol=ATOL):
+    """Compare the scene's track of target k at times t with the closed-form truth."""
+    line = target_p - radar_p
+    range_m = np.linalg.norm(line, axis=1)
+    radial = np.einsum("ti,ti->t", line, target_v - radar_v) / range_m
+    az = np.degrees(np.arctan2(line[:, 1], line[:, 0]))
+    el = np.degrees(np.arctan2(line[:, 2], np.hypot(line[:, 0], line[:, 1])))
+    tracks = compute_tracks(scene, t)
+    np.testing.assert_allclose(tracks.range_m[:, k], range_m, rtol=0, atol=atol)
+    np.testing.assert_allclose(tracks.radial_velocity_mps[:, k], radial, rtol=0, atol=atol)
+    np.testing.assert_allclose(tracks.az_deg[:, k], az, rtol=0, atol=atol)
+    np.testing.assert_allclose(tracks.el_deg[:, k], el, rtol=0, atol=atol)
+
+
+def straight(x_m, vx_mps, y_m=0.0, vy_mps=0.0, z_m=0.0):
+    """Stack per-time x (and optional y) into (T, 3) positions and velocities."""
+    x, vx = np.asarray(x_m, float), np.asarray(vx_mps, float)
+    p = np.stack([x, np.broadcast_to(y_m, x.shape), np.full_like(x, z_m)], axis=1)
+    v = np.stack([vx, np.broadcast_to(vy_mps, x.shape), np.zeros_like(x)], axis=1)
+    return p, v
+
+
+def ego_radar(t, speed_mps):
+    """The radar on an ego driving straight along x from the origin at constant speed."""
+    return straight(RADAR_X_M + speed_mps * t, np.full_like(t, speed_mps), z_m=RADAR_Z_M)
+
+
+def quintic(u):
+    """The scene format's lane change ramp and its derivative over u in [0, 1]."""
+    u = np.clip(u, 0.0, 1.0)
+    return u**3 * (10 - 15 * u + 6 * u**2), 30 * u**2 * (1 - u) ** 2
+
+
+# ----------------------------------------------------------------------------- the three scenes
+
+def test_braking_lead_tracks_match_closed_form(tmp_path):
+    result, scene = imported(tmp_path, "braking_lead")
+    assert result.ego == "Ego" and scene.duration_s == 6.0
+    assert [tg.name for tg in scene.targets] == ["Lead"] and scene.targets[0].kind == "car"
+    t = np.array([0.0, 0.7, 1.95, 2.0, 2.3, 3.1, 4.4, 4.5, 5.2, 5.95])
+    # Lead: 40 m ahead at 20 m/s; from 2 s it brakes at 4 m/s^2 to 10 m/s (reached at 4.5 s).
+    dt = np.clip(t - 2.0, 0.0, 2.5)
+    x = 40.0 + 20.0 * t - 2.0 * dt**2 - 10.0 * np.clip(t - 4.5, 0.0, None)
+    v = 20.0 - 4.0 * dt
+    lead_p, lead_v = straight(x, v, z_m=0.75)  # lifted to its bounding box's centre
+    assert_tracks(scene, t, *ego_radar(t, 20.0), lead_p, lead_v)
+
+
+def test_cut_in_tracks_match_closed_form(tmp_path):
+    result, scene = imported(tmp_path, "cut_in")
+    assert scene.duration_s == 10.0 and scene.targets[0].kind == "car"  # a van
+    assert any("quintic" in note for note in result.notes)
+    t = np.array([0.0, 1.0, 1.99, 2.0, 2.6, 3.5, 4.2, 5.0, 5.7, 6.9, 7.0, 9.5])
+    # The gap (longitudinal, reference points) is 30 - 5 t: below 20 m from 2 s on. The lane
+    # change into the ego's lane takes 3 s; when it ends (5 s) the cutter speeds up linearly
+    # to the ego's 25 m/s in 2 s (2.5 m/s^2).
+    acc = np.clip(t - 5.0, 0.0, 2.0)
+    x = 30.0 + 20.0 * t + 1.25 * acc**2 + 5.0 * np.clip(t - 7.0, 0.0, None)
+    vx = 20.0 + 2.5 * acc
+    ramp, slope = quintic((t - 2.0) / 3.0)
+    cut_p, cut_v = straight(x, vx, y_m=3.5 - 3.5 * ramp, vy_mps=-3.5 * slope / 3.0, z_m=1.0)
+    assert_tracks(scene, t, *ego_radar(t, 25.0), cut_p, cut_v)
+
+
+def test_pedestrian_crossing_tracks_match_closed_form(tmp_path):
+    result, scene = imported(tmp_path, "pedestrian_crossing", ego="Hero")
+    assert result.ego == "Hero"
+    assert [(tg.name, tg.kind) for tg in scene.targets] == [("Pedestrian", "pedestrian")]
+    # The pedestrian stands at (60, -4) facing +y and walks at 1.4 m/s from 1.5 s on. (A step
+    # is played as a 1 ms ramp centred on its time: positions after it are exact.)
+    t = np.array([0.0, 0.5, 1.49, 1.51, 2.0, 3.3, 4.75, 5.95])
+    walked = np.clip(t - 1.5, 0.0, None)
+    ped_p = np.stack([np.full_like(t, 60.0), -4.0 + 1.4 * walked, np.full_like(t, 0.9)], 1)
+    ped_v = np.stack([np.zeros_like(t), np.where(t > 1.5, 1.4, 0.0), np.zeros_like(t)], 1)
+    assert_tracks(scene, t, *ego_radar(t, 6.0), ped_p, ped_v)
+
+
+def test_ego_defaults_to_entity_named_ego_else_the_first(tmp_path):
+    result, _ = imported(tmp_path, "pedestrian_crossing")
+    assert result.ego == "Pedestrian"  # no entity named Ego: the first one
+    renamed = variant(tmp_path, "braking_lead", 'name="Ego"', 'name="EGO"')
+    text = renamed.read_text().replace('"Ego"', '"EGO"')
+    renamed.write_text(text)
+    result, _ = imported(tmp_path, renamed)
+    assert result.ego == "EGO"
+
+
+# ------------------------------------------------------------------------- other dynamics
+
+def test_cubic_speed_transition_within_stated_tolerance(tmp_path):
+    path = variant(tmp_path, "braking_lead",
+                   'dynamicsShape="linear" value="$Deceleration" dynamicsDimension="rate"',
+                   'dynamicsShape="cubic" value="2.5" dynamicsDimension="time"')
+    result, scene = imported(tmp_path, path)
+    assert any("linear pieces" in note for note in result.notes)
+    t = np.linspace(0.0, 5.9, 60)
+    u = np.clip((t - 2.0) / 2.5, 0.0, 1.0)
+    v_true = 20.0 - 10.0 * u * u * (3 - 2 * u)
+    # Integral of the cubic ramp: u^3 - u^4 / 2, times the duration. The import plays it as
+    # linear pieces within 2 mm/s (its stated tolerance) and so within a millimetre.
+    x_true = 40.0 + 20.0 * t - 10.0 * 2.5 * (u**3 - u**4 / 2) - 10.0 * np.clip(t - 4.5, 0, None)
+    lead_p, lead_v = straight(x_true, v_true, z_m=0.75)
+    assert_tracks(scene, t, *ego_radar(t, 20.0), lead_p, lead_v, atol=2.5e-3)
+
+
+def test_lane_offset_uses_max_lateral_acceleration(tmp_path):
+    path = replace_lane_change(
+        tmp_path,
+        """<LaneOffsetAction continuous="false">
+                      <LaneOffsetActionDynamics maxLateralAcc="0.5" dynamicsShape="cubic"/>
+                      <LaneOffsetTarget><AbsoluteTargetLaneOffset value="-1.2"/></LaneOffsetTarget>
+                    </LaneOffsetAction>""")
+    _, scene = imported(tmp_path, path)
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.start_s == pytest.approx(2.0, abs=1e-9)
+    assert change.offset_m == pytest.approx(-1.2)
+    # Quintic peak lateral acceleration 10 / sqrt(3) * offset / duration^2 = maxLateralAcc.
+    assert change.duration_s == pytest.approx(math.sqrt(10 / math.sqrt(3) * 1.2 / 0.5),
+                                              abs=1e-9)
+
+
+def test_lateral_distance_to_the_ego(tmp_path):
+    path = replace_lane_change(
+        tmp_path,
+        """<LateralDistanceAction entityRef="Ego" distance="0.5" freespace="false"
+                        continuous="false" displacement="leftToReferencedEntity">
+                      <DynamicConstraints maxLateralAcc="1.0" maxSpeed="30"/>
+                    </LateralDistanceAction>""")
+    _, scene = imported(tmp_path, path)
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.offset_m == pytest.approx(-3.0)  # from 3.5 m left of the ego to 0.5 m
+    assert change.duration_s == pytest.approx(math.sqrt(10 / math.sqrt(3) * 3.0 / 1.0))
+
+
+def test_expressions(tmp_path):
+    path = variant(tmp_path, "braking_lead", '<AbsoluteTargetSpeed value="$TargetSpeed"/>',
+                   '<AbsoluteTargetSpeed value="${$EgoSpeed / 2 - 1}"/>')
+    _, scene = imported(tmp_path, path, parameters={"EgoSpeed": "24"})
+    speeds = scene.targets[0].trajectory.law.v0_mps
+    assert speeds[-1] == pytest.approx(11.0)  # 24 / 2 - 1, after the braking
+    bad = variant(tmp_path, "braking_lead", '<AbsoluteTargetSpeed value="$TargetSpeed"/>',
+                  '<AbsoluteTargetSpeed value="${$EgoSpeed ** 2}"/>', "bad_expr.xosc")
+    with pytest.raises(ScenarioError, match=r"bad_expr\.xosc:\d+: .*only numbers"):
+        imported(tmp_path, bad)
+
+
+def test_storyboard_features(tmp_path):
+    result, scene = imported(tmp_path, "storyboard")
+    assert result.ego == "ego" and scene.mount.x_m == pytest.approx(4.0)
+    truck, cone = scene.targets
+    assert (truck.name, truck.kind, cone.name, cone.kind) == ("truck_1", "truck", "cone", "other")
+    # The ego accelerates at 2 m/s^2 to 20 m/s (10 s); the truck starts 50 m ahead along the
+    # common heading and 3.5 m to its right at 10 m/s. Their 3-D distance falls below 30 m when
+    # the gap along the heading is sqrt(30^2 - 3.5^2): after 10 s the gap is 150 - 10 t.
+    t_close = (150.0 - math.sqrt(30.0**2 - 3.5**2)) / 10.0
+    t_slow = t_close + 0.5  # the condition's delay
+    # Slowing to 5 m/s over 30 m takes 2 * 30 / (10 + 5) = 4 s; then the lane change (one lane
+    # left of itself plus 0.2 m, over 40 m at 5 m/s = 8 s); the scene stops when it ends.
+    law = truck.trajectory.law
+    assert law.knots_s[1] == pytest.approx(t_slow, abs=1e-8)
+    assert law.v0_mps[-1] == pytest.approx(5.0)
+    (change,) = truck.trajectory.lane_changes
+    assert (change.start_s, change.duration_s, change.offset_m) == pytest.approx(
+        (t_slow + 4.0, 8.0, 3.7), abs=1e-8)
+    assert scene.duration_s == pytest.approx(t_slow + 12.0, abs=1e-8)
+    assert any("'never' never starts" in note for note in result.notes)
+    assert any("is target 'truck_1'" in note for note in result.notes)
+    assert any("<RoadNetwork> not used" in note for note in result.notes)
+
+
+@pytest.mark.parametrize("condition, start_s", [
+    ('storyboardElementType="action" storyboardElementRef="CutIn" state="completeState"', 5.0),
+    ('storyboardElementType="act" storyboardElementRef="CutInAct" state="runningState"', 0.0),
+    ('storyboardElementType="story" storyboardElementRef="CutInStory" state="startTransition"',
+     0.0),
+])
+def test_state_conditions(tmp_path, condition, start_s):
+    path = variant(tmp_path, "cut_in", 'storyboardElementType="event" '
+                   'storyboardElementRef="CutInEvent" state="endTransition"', condition)
+    _, scene = imported(tmp_path, path)
+    law = scene.targets[0].trajectory.law
+
+    def speed(t):
+        k = np.searchsorted(law.knots_s, t, side="right") - 1
+        return law.v0_mps[k] + law.a_mps2[k] * (t - law.knots_s[k])
+
+    # The speed-up (20 to 25 m/s in 2 s, linear) starts at start_s.
+    assert [speed(start_s + dt) for dt in (0.0, 1.0, 2.5)] == pytest.approx([20.0, 22.5, 25.0])
+    bad = variant(tmp_path, "cut_in", 'storyboardElementRef="CutInEvent"',
+                  'storyboardElementRef="CutOutEvent"', "bad_ref.xosc")
+    with pytest.raises(ScenarioError, match=r"no event named 'CutOutEvent'; events: CutInEvent, "
+                                            r"SpeedUpEvent"):
+        imported(tmp_path, bad)
+
+
+# ------------------------------------------------------------------------------- parameters
+
+def test_parameter_override_changes_the_trigger_and_the_header(tmp_path):
+    result, scene = imported(tmp_path, "cut_in", parameters={"TriggerDistance": "17.5",
+                                                             "$LaneChangeTime": "4"})
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert (change.start_s, change.duration_s) == pytest.approx((2.5, 4.0), abs=1e-9)
+    assert "# Parameters: EgoSpeed=25, CutterSpeed=20, TriggerDistance=17.5 (--param), " \
+           "LaneChangeTime=4 (--param)." in result.text
+    assert result.text.startswith("# Imported by rts-scenario import from cut_in.xosc")
+
+
+def test_unknown_parameter_lists_the_declared_ones(tmp_path):
+    with pytest.raises(RtsError, match=r"--param Speed=3: no such parameter in .*cut_in\.xosc; "
+                                       r"declared: EgoSpeed, CutterSpeed, TriggerDistance, "
+                                       r"LaneChangeTime"):
+        imported(tmp_path, "cut_in", parameters={"Speed": "3"})
+    with pytest.raises(RtsError, match="EgoSpeed is a double, got 'fast'"):
+        imported(tmp_path, "cut_in", parameters={"EgoSpeed": "fast"})
+
+
+def test_undeclared_reference_is_located(tmp_path):
+    path = variant(tmp_path, "cut_in", 'value="$CutterSpeed"', 'value="$CutterSped"')
+    line = line_of(path, "$CutterSped")
+    with pytest.raises(ScenarioError, match=rf"cut_in\.xosc:{line}: .*unknown parameter "
+                                            r"\$CutterSped; declared: EgoSpeed"):
+        imported(tmp_path, path)
+
+
+# ------------------------------------------------------------------------------- bad input
+
+def test_unsupported_action_names_element_and_line(tmp_path):
+    text = (DATA / "braking_lead.xosc").read_text()
+    brake = re.search(r'<Action name="Brake">.*?</Action>', text, flags=re.DOTALL).group(0)
+    path = tmp_path / "braking_lead.xosc"
+    path.write_text(text.replace(brake, brake.replace("LongitudinalAction", "RoutingAction")))
+    line = line_of(path, "<RoutingAction>")
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(
+        f"{path}:{line}: <RoutingAction> is not supported by import; supported actions: "
+        "TeleportAction (Init only), SpeedAction, LaneChangeAction, LaneOffsetAction")
+
+
+@pytest.mark.parametrize("old, new, needle, message", [
+    ('<Properties/>\n      </Vehicle>\n    </ScenarioObject>\n    <ScenarioObject name="Lead">',
+     '<Properties/>\n      </Vehicle>\n      <ObjectController/>\n    </ScenarioObject>\n'
+     '    <ScenarioObject name="Lead">', "<ObjectController/>",
+     "<ObjectController> in <ScenarioObject> is not supported by import"),
+    ('<SimulationTimeCondition value="2" rule="greaterThan"/>',
+     '<SpeedCondition value="2" rule="greaterThan"/>', "<SpeedCondition",
+     "<SpeedCondition> is not supported by import; supported conditions: "
+     "SimulationTimeCondition, RelativeDistanceCondition"),
+    ('<RelativeObjectPosition entityRef="Ego" dx="$LeadGap" dy="0"/>',
+     '<LanePosition roadId="1" laneId="-1" s="40"/>', "<LanePosition",
+     "<LanePosition> is not supported by import; supported positions: WorldPosition"),
+    ('dynamicsShape="linear" value="$Deceleration"',
+     'dynamicsShape="linear" value="$Deceleration" extra="1"', 'extra="1"',
+     'attribute extra is not supported by import'),
+    ('<Properties/>\n      </Vehicle>\n    </ScenarioObject>\n    <ScenarioObject name="Lead">',
+     '<Properties/>\n        <Trailer/>\n      </Vehicle>\n    </ScenarioObject>\n'
+     '    <ScenarioObject name="Lead">', "<Trailer/>",
+     "<Trailer> in <Vehicle> is not supported by import"),
+    ('dynamicsShape="linear" value="$Deceleration"',
+     'dynamicsShape="exponential" value="$Deceleration"', 'dynamicsShape="exponential"',
+     'dynamicsShape="exponential"> is not supported by import; supported: step, linear'),
+])
+def test_unsupported_input_is_one_located_error(tmp_path, old, new, needle, message):
+    path = variant(tmp_path, "braking_lead", old, new)
+    line = line_of(path, needle)
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(f"{path}:{line}: ")
+    assert message in str(info.value)
+
+
+def test_malformed_xml_is_located(tmp_path):
+    text = (DATA / "cut_in.xosc").read_text()
+    path = tmp_path / "broken.xosc"
+    path.write_text(text.replace("</Actors>", "</Actor>", 1))
+    line = line_of(path, "</Actor>")
+    with pytest.raises(ScenarioError, match=rf"broken\.xosc:{line}: malformed XML: "):
+        imported(tmp_path, path)
+    path.write_text(text[: len(text) // 2])
+    with pytest.raises(ScenarioError, match=r"broken\.xosc:\d+: malformed XML"):
+        imported(tmp_path, path)
+
+
+def test_entities_are_not_expanded(tmp_path):
+    path = tmp_path / "entities.xosc"
+    path.write_text('<?xml version="1.0"?>\n<!DOCTYPE OpenSCENARIO [<!ENTITY x SYSTEM '
+                    '"file:///etc/passwd">]>\n<OpenSCENARIO><FileHeader description="&x;"/>'
+                    '</OpenSCENARIO>')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert "root:" not in str(info.value)
+
+
+def test_missing_ego_lists_the_entities(tmp_path):
+    with pytest.raises(RtsError, match=r"--ego Nobody: no such entity in .*braking_lead\.xosc; "
+                                       r"entities: Ego, Lead"):
+        imported(tmp_path, "braking_lead", ego="Nobody")
+
+
+def test_unplaced_entity_and_missing_stop_trigger(tmp_path):
+    path = variant(tmp_path, "pedestrian_crossing", '<Private entityRef="Pedestrian">',
+                   '<Private entityRef="Nobody">')
+    path.write_text(re.sub(r'<Private entityRef="Nobody">.*?</Private>', "",
+                           path.read_text(), flags=re.DOTALL))
+    with pytest.raises(ScenarioError, match=r"entity 'Pedestrian' is never placed"):
+        imported(tmp_path, path)
+    path = variant(tmp_path, "pedestrian_crossing", '<StopTrigger>', '<StopTriggerX>')
+    path.write_text(re.sub(r"<StopTriggerX>.*</StopTrigger>", "", path.read_text(),
+                           flags=re.DOTALL))
+    with pytest.raises(ScenarioError, match="needs a <StopTrigger>"):
+        imported(tmp_path, path)
+
+
+# ----------------------------------------------------------------------------- command line
+
+def test_cli_import_then_validate_and_run(tmp_path, capsys):
+    out = tmp_path / "lead.scenario.yaml"
+    code = main(["import", str(DATA / "braking_lead.xosc"), "--radar", "awr1843boost",
+                 "--rig", "wide-3x5", "--param", "TargetSpeed=12", "--output", str(out)])
+    assert code == 0
+    assert "-> " in capsys.readouterr().out
+    assert "TargetSpeed=12 (--param)" in out.read_text()
+    assert main(["validate", str(out)]) == 0
+    assert main(["run", str(out)]) == 0
+    assert "PASS: lead" in capsys.readouterr().out
+
+
+def test_cli_errors_are_one_line_exit_2(tmp_path, capsys):
+    out = tmp_path / "x.scenario.yaml"
+    base = [str(DATA / "cut_in.xosc"), "--radar", "awr1843boost", "--rig", "wide-3x5",
+            "--output", str(out)]
+    for extra in (["--param", "Nope=1"], ["--ego", "Nobody"], ["--param", "EgoSpeed"]):
+        assert main(["import", *base, *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1, err
+    assert main(["import", *base[:-1], str(tmp_path / "x.yaml")]) == 2
+    assert "ends in .scenario.yaml" in capsys.readouterr().err
+    assert main(["import", *base[:2], "nowhere", *base[3:]]) == 2
+    assert "--radar 'nowhere'" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_cli_profile_files_are_written_relative_to_the_scene(tmp_path, capsys):
+    profiles = Path(__file__).parents[1] / "scenarios" / "radars"
+    (tmp_path / "radars").mkdir()
+    profile = tmp_path / "radars" / "long.radar.yaml"
+    profile.write_text((profiles / "awr1843boost-long.radar.yaml").read_text())
+    out = tmp_path / "lead.scenario.yaml"
+    assert main(["import", str(DATA / "braking_lead.xosc"), "--radar", str(profile),
+                 "--rig", "wide-3x5", "--output", str(out)]) == 0
+    assert "profile: radars/long.radar.yaml" in out.read_text()
+    elsewhere = tmp_path / "sub" / "lead.scenario.yaml"
+    elsewhere.parent.mkdir()
+    assert main(["import", str(DATA / "braking_lead.xosc"), "--radar", str(profile),
+                 "--rig", "wide-3x5", "--output", str(elsewhere)]) == 2
+    assert "inside its own folder tree" in capsys.readouterr().err
