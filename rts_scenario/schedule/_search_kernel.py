@@ -86,8 +86,10 @@ def _shift(on, naive, amp, factor, weight, sens_u, sens_s, offset, low, high,
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def search(resp, weights, full, naive, sens, u, s, low, step, high, slack, reach, fine,
-           shortlist, norm_floor, out):  # pragma: no cover
-    """Write the chosen settings of every entry into ``out`` (N, 4); inf where off.
+           shortlist, norm_floor, out, out_error):  # pragma: no cover
+    """Write every entry's chosen settings and their predicted angle error.
+
+    ``out`` (N, 4) gets the settings (inf where off), ``out_error`` (N,) the error in degrees.
 
     ``resp`` (N, 6, 4) complex, ``weights``, ``full``, ``naive`` (N, 4), ``sens`` (N, 2, 4) in
     degrees per unit amplitude, ``u``, ``s`` (N,).
@@ -208,3 +210,4 @@ def search(resp, weights, full, naive, sens, u, s, low, step, high, slack, reach
                     best[q] = option[q]
         for q in range(4):
             out[i, q] = best[q]
+        out_error[i] = best_err
