@@ -57,3 +57,16 @@ class OutputError(RtsError):
 
 class CheckError(RtsError):
     """Detections cannot be checked against ground truth."""
+
+
+def one_line(exc: BaseException) -> str:
+    """Return an exception's message on one line (the CLI prints one ``error:`` line)."""
+    return " ".join(part.strip() for part in str(exc).splitlines() if part.strip()) or repr(exc)
+
+
+def located(path: str, exc: BaseException) -> str:
+    """Return the error's message, starting with the scene file when the error does not name it."""
+    message = one_line(exc)
+    if isinstance(exc, ScenarioError) and exc.file is not None:
+        return message
+    return f"{path}: {message}"

@@ -150,7 +150,7 @@ def error_entry(entry: Entry, message: str, error_type: str) -> Entry:
 
 
 def _message(path: str, exc: BaseException) -> str:
-    from .cli.common import located, one_line
+    from .errors import located, one_line
 
     if isinstance(exc, RtsError):
         return located(path, exc)
@@ -262,7 +262,7 @@ def _run_dask(tasks: Sequence[SweepTask], method: str, scheduler: str, workers: 
             try:
                 client = distributed.Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
             except (OSError, TimeoutError, ValueError) as exc:
-                from .cli.common import one_line
+                from .errors import one_line
 
                 raise RtsError(f"--scheduler {scheduler}: cannot connect: {one_line(exc)}"
                                ) from None
@@ -279,7 +279,7 @@ def _run_dask(tasks: Sequence[SweepTask], method: str, scheduler: str, workers: 
 def _collect(futures: dict[Any, SweepTask], completed: Iterable[Future[Entry]],
              finish: Callable[[SweepTask, Entry], None]) -> None:
     """Hand on each finished future's entry; a worker's failure becomes an erred entry."""
-    from .cli.common import one_line
+    from .errors import one_line
 
     for future in completed:
         task = futures[future]

@@ -12,7 +12,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ..errors import RtsError
+from ..errors import RtsError, one_line
 
 # Weight solver methods a command line can choose (``--method``).
 METHODS = ("exact", "paper", "estimator")
@@ -175,21 +175,6 @@ def check_readable_file(option: str, path: str) -> None:
     if not Path(path).is_file():
         what = "is a folder" if Path(path).is_dir() else "file not found"
         raise RtsError(f"{option} {path}: {what}")
-
-
-def one_line(exc: BaseException) -> str:
-    """Return an exception's message on one line (the CLI prints one ``error:`` line)."""
-    return " ".join(part.strip() for part in str(exc).splitlines() if part.strip()) or repr(exc)
-
-
-def located(path: str, exc: BaseException) -> str:
-    """Return the error's message, starting with the scene file when the error does not name it."""
-    from ..errors import ScenarioError
-
-    message = one_line(exc)
-    if isinstance(exc, ScenarioError) and exc.file is not None:
-        return message
-    return f"{path}: {message}"
 
 
 def add_bench_arguments(parser: argparse.ArgumentParser, radar_default: str) -> None:

@@ -6,7 +6,8 @@ import argparse
 import sys
 from typing import Any
 
-from .common import EXIT_BAD_INPUT, EXIT_OK, METHODS, located
+from ..errors import located
+from .common import EXIT_BAD_INPUT, EXIT_OK, METHODS
 
 
 def _do_validate(args: argparse.Namespace) -> int:
