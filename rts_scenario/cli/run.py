@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..errors import located, one_line
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_FAIL,
@@ -19,9 +20,7 @@ from .common import (
     check_output,
     check_writable_file,
     check_writable_folder,
-    located,
     named_file,
-    one_line,
     writing,
 )
 
