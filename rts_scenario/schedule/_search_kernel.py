@@ -70,6 +70,34 @@ def _error(resp, i, amps, u, s, az0, el0):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _sensitivity(resp, i, weights, az0, el0, out):  # pragma: no cover
+    """`quantization._sensitivity` times `_degree_scale` for entry ``i`` into ``out`` (2, 4).
+
+    The peak shift in degrees (azimuth, elevation) per unit change of each channel's amplitude,
+    from the Newton step of the gradient's change at the solved weights.
+    """
+    w0, w1, w2, w3 = weights[i, 0], weights[i, 1], weights[i, 2], weights[i, 3]
+    b = [resp[i, t, 0] * w0 + resp[i, t, 1] * w1 + resp[i, t, 2] * w2 + resp[i, t, 3] * w3
+         for t in range(6)]
+    cb = b[0].conjugate()
+    h_uu = (cb * b[3]).real + b[1].real * b[1].real + b[1].imag * b[1].imag
+    h_us = (cb * b[4]).real + (b[1].conjugate() * b[2]).real
+    h_ss = (cb * b[5]).real + b[2].real * b[2].real + b[2].imag * b[2].imag
+    det = h_uu * h_ss - h_us * h_us
+    deg_u = math.degrees(1.0 / (math.cos(el0) * math.cos(az0)))
+    deg_s = math.degrees(1.0 / math.cos(el0))
+    for q in range(4):
+        d_u = (cb * resp[i, 1, q]).real
+        d_s = (cb * resp[i, 2, q]).real
+        if det > 0.0:
+            out[0, q] = -(h_ss * d_u - h_us * d_s) / det * deg_u
+            out[1, q] = -(h_uu * d_s - h_us * d_u) / det * deg_s
+        else:
+            out[0, q] = 0.0
+            out[1, q] = 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _shift(on, naive, amp, factor, weight, sens_u, sens_s, offset, low, high,
            slack):  # pragma: no cover
     """Peak shift of one channel moved ``offset`` dB from its naive setting.
@@ -85,14 +113,14 @@ def _shift(on, naive, amp, factor, weight, sens_u, sens_s, offset, low, high,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def search(resp, weights, full, naive, sens, u, s, low, step, high, slack, reach, fine,
+def search(resp, weights, full, naive, u, s, above, low, step, high, slack, reach, fine,
            shortlist, norm_floor, out, out_error):  # pragma: no cover
     """Write every entry's chosen settings and their predicted angle error.
 
-    ``out`` (N, 4) gets the settings (inf where off), ``out_error`` (N,) the error in degrees.
-
-    ``resp`` (N, 6, 4) complex, ``weights``, ``full``, ``naive`` (N, 4), ``sens`` (N, 2, 4) in
-    degrees per unit amplitude, ``u``, ``s`` (N,).
+    Entries whose current settings ``naive`` err by at most ``above`` degrees keep them; the
+    others are searched. ``out`` (N, 4) gets the settings (inf where off), ``out_error`` (N,)
+    the error in degrees. ``resp`` (N, 6, 4) complex, ``weights``, ``full``, ``naive`` (N, 4),
+    ``u``, ``s`` (N,).
     """
     n = weights.shape[0]
     n_steps = 2 * fine + 1
@@ -115,10 +143,21 @@ def search(resp, weights, full, naive, sens, u, s, low, step, high, slack, reach
     option = np.empty(4)
     amps = np.empty(4)
     best = np.empty(4)
+    sens = np.empty((2, 4))
     for i in range(n):
         for q in range(4):
             on[q] = math.isfinite(naive[i, q])
             amp[q] = math.exp((full[i, q] - naive[i, q]) * DB_TO_NEPER) if on[q] else 0.0
+            best[q] = naive[i, q]
+            amps[q] = amp[q]
+        az0, el0 = _angles(u[i], s[i])
+        best_err = _error(resp, i, amps, u[i], s[i], az0, el0)
+        if not best_err > above:  # close enough already (or not predictable): kept
+            for q in range(4):
+                out[i, q] = best[q]
+            out_error[i] = best_err
+            continue
+        _sensitivity(resp, i, weights, az0, el0, sens)
         # Roles by weight, strongest first (a stable sort, as numpy's for four entries).
         for q in range(4):
             order[q] = q
@@ -132,8 +171,8 @@ def search(resp, weights, full, naive, sens, u, s, low, step, high, slack, reach
             for role in range(4):
                 q = order[role]
                 moves[role, k, 0], moves[role, k, 1] = _shift(
-                    on[q], naive[i, q], amp[q], per_step[k], weights[i, q], sens[i, 0, q],
-                    sens[i, 1, q], (k - fine) * step, low, high, slack)
+                    on[q], naive[i, q], amp[q], per_step[k], weights[i, q], sens[0, q],
+                    sens[1, q], (k - fine) * step, low, high, slack)
         for ia in range(side):
             for ib in range(side):
                 for axis in range(2):
@@ -166,7 +205,7 @@ def search(resp, weights, full, naive, sens, u, s, low, step, high, slack, reach
         for q in range(4):
             if on[q]:
                 continue
-            g0, g1 = sens[i, 0, q], sens[i, 1, q]
+            g0, g1 = sens[0, q], sens[1, q]
             gg = max(g0 * g0 + g1 * g1, norm_floor)
             for c in range(n_cand):
                 a_star = -(g0 * final[c, 0] + g1 * final[c, 1]) / gg
@@ -180,11 +219,6 @@ def search(resp, weights, full, naive, sens, u, s, low, step, high, slack, reach
                     extra_q[c] = q
                     extra_att[c] = att
         # The linear model shortlists; the exact prediction decides (the naive one too).
-        for q in range(4):
-            best[q] = naive[i, q]
-            amps[q] = amp[q]
-        az0, el0 = _angles(u[i], s[i])
-        best_err = _error(resp, i, amps, u[i], s[i], az0, el0)
         taken[:] = False
         for _ in range(min(shortlist, n_cand)):
             pick = -1

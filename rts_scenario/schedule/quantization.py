@@ -124,20 +124,16 @@ def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full:
         exact <= grid.high + GRID_SLACK_DB, np.maximum(exact, grid.low), np.inf)
     if step > 0.0 and mode == "aware":
         # A wider search follows only where the narrow one leaves a noticeable error.
-        error: FloatArray | None = None  # the current settings' predicted error (deg)
+        kernel = compiled_search() if len(weights) >= COMPILED_FROM else None
+        by_entry = np.ascontiguousarray(resp.transpose(2, 0, 1)) if kernel else resp
         for reach, above in zip(SEARCH_STEPS, SEARCH_ABOVE_DEG, strict=True):
-            if error is None:
-                amps = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
-                err = predicted_angle_error(resp, amps, u, s)
-                error = np.hypot(err[:, 0], err[:, 1])
-            todo = np.flatnonzero(error > above)
-            kernel = compiled_search() if todo.size >= COMPILED_FROM else None
-            if kernel is not None:  # it also gives the chosen settings' predicted error
-                chosen[todo], error[todo] = _search_compiled(
-                    kernel, resp[:, :, todo], weights[todo], full[todo], grid, u[todo],
-                    s[todo], chosen[todo], reach)
+            if kernel is not None:  # every entry: it predicts, keeps or searches each itself
+                chosen = _search_compiled(kernel, by_entry, weights, full, grid, u, s, chosen,
+                                          reach, above)
                 continue
-            error = None
+            amps = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
+            err = predicted_angle_error(resp, amps, u, s)
+            todo = np.flatnonzero(np.hypot(err[:, 0], err[:, 1]) > above)
             for start in range(0, todo.size, SEARCH_BLOCK):
                 b = todo[start : start + SEARCH_BLOCK]
                 chosen[b] = _search_grid(resp[:, :, b], weights[b], full[b], grid, u[b],
@@ -291,28 +287,29 @@ def compiled_search() -> Callable[..., None] | None:
         # Compile (or load from numba's cache) now, on one entry: a machine where numba
         # cannot compile or cache keeps the numpy search instead of failing a run.
         one = np.zeros((1, 4))
-        search(np.ones((1, 6, 4), dtype=complex), one + 1.0, one, one, np.zeros((1, 2, 4)),
-               np.zeros(1), np.zeros(1), 0.0, 0.5, 60.0, GRID_SLACK_DB, 1, FINE_STEPS,
-               SHORTLIST, NORM_FLOOR, np.empty((1, 4)), np.empty(1))
+        search(np.ones((1, 6, 4), dtype=complex), one + 1.0, one, one, np.zeros(1),
+               np.zeros(1), 0.0, 0.0, 0.5, 60.0, GRID_SLACK_DB, 1, FINE_STEPS, SHORTLIST,
+               NORM_FLOOR, np.empty((1, 4)), np.empty(1))
     except Exception:  # noqa: BLE001 - numba is optional: the numpy search does the same
         return None
     kernel: Callable[..., None] = search
     return kernel
 
 
-def _search_compiled(kernel: Callable[..., None], resp: NDArray[np.complex128],
+def _search_compiled(kernel: Callable[..., None], by_entry: NDArray[np.complex128],
                      weights: FloatArray, full: FloatArray, grid: _Grid, u: FloatArray,
-                     s: FloatArray, naive: FloatArray, reach: int) -> tuple[FloatArray, FloatArray]:
-    """`_search_grid` for all the entries at once, compiled; also the predicted errors."""
-    sens = _sensitivity(resp, weights) * _degree_scale(u, s)[:, :, None]
+                     s: FloatArray, naive: FloatArray, reach: int, above: float) -> FloatArray:
+    """`_search_grid`, compiled, for every entry whose settings err by more than ``above``.
+
+    ``by_entry``: the response, shape (N, 6, 4).
+    """
     out = np.empty_like(naive)
     error = np.empty(len(naive))
-    args = [np.ascontiguousarray(a) for a in (resp.transpose(2, 0, 1), weights, full, naive,
-                                              sens, u, s)]
+    args = [np.ascontiguousarray(a) for a in (by_entry, weights, full, naive, u, s)]
 
     def run(part: slice) -> None:  # the kernel releases the GIL: parts run on all cores
-        kernel(*(a[part] for a in args), grid.low, grid.step, grid.high, GRID_SLACK_DB,
-               reach, FINE_STEPS, SHORTLIST, NORM_FLOOR, out[part], error[part])
+        kernel(*(a[part] for a in args), above, grid.low, grid.step, grid.high,
+               GRID_SLACK_DB, reach, FINE_STEPS, SHORTLIST, NORM_FLOOR, out[part], error[part])
 
     parts = [slice(i, i + COMPILED_PART) for i in range(0, len(out), COMPILED_PART)]
     if len(parts) > 1 and (os.cpu_count() or 1) > 1:
@@ -321,7 +318,7 @@ def _search_compiled(kernel: Callable[..., None], resp: NDArray[np.complex128],
     else:
         for part in parts:
             run(part)
-    return out, error
+    return out
 
 
 def _sensitivity(resp: NDArray[np.complex128], weights: FloatArray) -> FloatArray:
