@@ -350,3 +350,23 @@ def test_adc_noise_drawn_ahead_is_seeded_independent_and_white():
     a, b = sim._noise.take(200_000), sim._noise.take(200_000)
     assert a.var() == pytest.approx(1.0, abs=0.02) and abs(a.mean()) < 0.01
     assert abs(np.corrcoef(a, b)[0, 1]) < 0.01
+
+
+@pytest.mark.parametrize("loops", [64, 63])
+def test_windowed_cube_gives_the_windowed_centred_spectrum(loops):
+    """The cube weighted for the FFTs (windows, 1/N, zero Doppler moved to the middle) gives
+    what windowing the plain cube, transforming it and centring it (fftshift) gives."""
+    import dataclasses
+
+    profile = dataclasses.replace(PAPER, chirp_loops=loops)
+    sch = build_schedule(tracks([0.5, -1.0], [1.0, 2.0], range_m=20.0, v=3.0), KIT, profile)
+    sim = SimulatedRadar(profile, KIT, fidelity="adc", noise=False)
+    echoes = sim.echoes(sch, slice(0, 1))
+    plain = sim.cube(echoes)
+    win_r = np.hanning(plain.shape[2] + 2)[1:-1]
+    win_d = np.hanning(loops + 2)[1:-1]
+    expected = np.fft.fftshift(np.fft.fft(
+        np.fft.ifft(plain * win_r, axis=2) * plain.shape[2] * win_d[:, None, None], axis=0),
+        axes=0)
+    got = np.fft.fft(np.fft.ifft(sim.cube(echoes, windowed=True), axis=2), axis=0)
+    np.testing.assert_allclose(got, expected, atol=1e-9 * np.abs(expected).max())

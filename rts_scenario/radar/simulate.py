@@ -207,10 +207,21 @@ class SimulatedRadar:
         self._range_bin_m = C0_MPS * p.sample_rate_hz / (2.0 * p.slope_hz_per_s * self._n)
         self._win_r = np.hanning(self._n + 2)[1:-1]
         self._win_d = np.hanning(self._loops + 2)[1:-1]
+        # What the FFTs' inputs are weighted by: the range window times N (the inverse FFT
+        # divides by it); the Doppler window times exp(2 pi j l c / L), c = L // 2, which
+        # moves zero Doppler to the middle of the spectrum (an fftshift; (-1)^l for even L).
+        self._fft_r = self._win_r * self._n
+        loop = np.arange(self._loops)
+        self._fft_d = self._win_d * (np.where(loop % 2 == 0, 1.0, -1.0)
+                                     if self._loops % 2 == 0 else
+                                     np.exp(2j * np.pi * loop * (self._loops // 2)
+                                            / self._loops))
         # Amplitude of a unit tone after both windowed FFTs, and the noise power there.
         self._gain = self._win_r.sum() * self._win_d.sum()
         self._noise_gain = (self._win_r**2).sum() * (self._win_d**2).sum()
         self._sigma = 10.0 ** (p.noise_level_db / 20.0) if self.noise else 0.0
+        self._noise_weight = (self._sigma / np.sqrt(2.0) * self._fft_d[:, None, None]
+                              * self._fft_r[None, None, :])
         # The ADC cube's noise comes from its own stream (spawned from ``rng``), drawn ahead.
         self._noise = _NoiseAhead(self.rng)
         slot_of_tx = {t: i for i, t in enumerate(p.tx_order)}
@@ -351,8 +362,13 @@ class SimulatedRadar:
         crowded[f[_close_pairs(f, r, d, self._n, self._loops, CROWDED_BINS)]] = True
         return crowded
 
-    def cube(self, echoes: Echoes) -> ComplexArray:
-        """Beat-signal cube ``[loop, virtual element, sample]`` of the echoes plus noise."""
+    def cube(self, echoes: Echoes, *, windowed: bool = False) -> ComplexArray:
+        """Beat-signal cube ``[loop, virtual element, sample]`` of the echoes plus noise.
+
+        ``windowed``: weighted as the FFTs take it (`_fft_r` along fast time, `_fft_d` along
+        slow time), the weights folded into the small factors of the signal and into the
+        noise's scale instead of passing over the cube again.
+        """
         p = self.profile
         m = p.array.n_elements
         beat_hz = p.slope_hz_per_s * echoes.channel_delay_s - echoes.doppler_hz[:, None]  # (E, M)
@@ -372,22 +388,28 @@ class SimulatedRadar:
         summed = np.add.reduceat(rows[order], starts, axis=0) if group.size else rows
         slow = np.exp(2j * np.pi * _frac(np.outer(np.arange(self._loops) * p.loop_time_s,
                                                   doppler)))  # (L, U)
-        cube = (slow @ summed).reshape(self._loops, m, self._n)
+        if windowed:
+            slow *= self._fft_d[:, None]
+            summed = summed.reshape(-1, m, self._n) * self._fft_r
+        cube = (slow @ summed.reshape(-1, m * self._n)).reshape(self._loops, m, self._n)
         if self._sigma > 0.0:
             # Complex white noise: independent real and imaginary parts, drawn interleaved
             # straight into complex numbers, the next frame's while this one is processed.
-            noise = self._noise.take(2 * cube.size).view(np.complex128)
-            noise *= self._sigma / np.sqrt(2.0)
-            cube += noise.reshape(cube.shape)
+            noise = self._noise.take(2 * cube.size).view(np.complex128).reshape(cube.shape)
+            noise *= self._noise_weight if windowed else self._sigma / np.sqrt(2.0)
+            cube += noise
         return cube
 
     def _detect_adc(self, echoes: Echoes, frame: int, t_s: float) -> Detections:
         p = self.profile
-        cube = self.cube(echoes)
+        spec = self.cube(echoes, windowed=True)
         # The beat frequency is -(S T - fD): read the range spectrum at positive S T - fD.
-        spec = np.fft.ifft(cube * self._win_r, axis=2) * self._n
-        spec = np.fft.fftshift(np.fft.fft(spec * self._win_d[:, None, None], axis=0), axes=0)
-        power = (np.abs(spec) ** 2).sum(axis=1)  # (L, N): non-coherent over channels
+        # Range then Doppler FFT, in place; the windows, the inverse FFT's 1 / N and the
+        # centring of zero Doppler are in the cube's weights.
+        np.fft.ifft(spec, axis=2, out=spec)
+        np.fft.fft(spec, axis=0, out=spec)
+        power = np.einsum("lmn,lmn->ln", spec.real, spec.real)  # (L, N): non-coherent over
+        power += np.einsum("lmn,lmn->ln", spec.imag, spec.imag)  # the channels
         noise = self._noise_floor(power)
         # Both FFTs are circular: a peak's neighbours wrap around in range and Doppler alike.
         hits = (power > noise * 10.0 ** (self.threshold_db / 10.0)) & (
