@@ -113,135 +113,143 @@ def _shift(on, naive, amp, factor, weight, sens_u, sens_s, offset, low, high,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def search(resp, weights, full, naive, u, s, above, low, step, high, slack, reach, fine,
+def search(resp, weights, full, naive, u, s, reaches, aboves, low, step, high, slack, fine,
            shortlist, norm_floor, out, out_error):  # pragma: no cover
     """Write every entry's chosen settings and their predicted angle error.
 
-    Entries whose current settings ``naive`` err by at most ``above`` degrees keep them; the
-    others are searched. ``out`` (N, 4) gets the settings (inf where off), ``out_error`` (N,)
-    the error in degrees. ``resp`` (N, 6, 4) complex, ``weights``, ``full``, ``naive`` (N, 4),
-    ``u``, ``s`` (N,).
+    Pass p searches ``reaches[p]`` steps either side where the settings so far err by more
+    than ``aboves[p]`` degrees (the first pass starts from ``naive``); the others keep them.
+    ``out`` (N, 4) gets the settings (inf where off), ``out_error`` (N,) the error in degrees.
+    ``resp`` (N, 6, 4) complex, ``weights``, ``full``, ``naive`` (N, 4), ``u``, ``s`` (N,).
     """
     n = weights.shape[0]
     n_steps = 2 * fine + 1
-    side = 2 * reach + 1
-    n_cand = side * side
+    most = 2 * reaches.max() + 1
     per_step = np.empty(n_steps)
     for k in range(n_steps):
         per_step[k] = 10.0 ** (-(k - fine) * step / 20.0)
     on = np.empty(4, dtype=np.bool_)
     amp = np.empty(4)
     order = np.empty(4, dtype=np.int64)
-    resid = np.empty((n_cand, 2))
+    resid = np.empty((most * most, 2))
     moves = np.empty((4, n_steps, 2))
-    cost = np.empty(n_cand)
-    final = np.empty((n_cand, 2))
-    best_k = np.empty(n_cand, dtype=np.int64)
-    extra_q = np.empty(n_cand, dtype=np.int64)
-    extra_att = np.empty(n_cand)
-    taken = np.empty(n_cand, dtype=np.bool_)
+    cost = np.empty(most * most)
+    final = np.empty((most * most, 2))
+    best_k = np.empty(most * most, dtype=np.int64)
+    extra_q = np.empty(most * most, dtype=np.int64)
+    extra_att = np.empty(most * most)
+    taken = np.empty(most * most, dtype=np.bool_)
     option = np.empty(4)
     amps = np.empty(4)
     best = np.empty(4)
     sens = np.empty((2, 4))
+    start = np.empty(4)
     for i in range(n):
         for q in range(4):
-            on[q] = math.isfinite(naive[i, q])
-            amp[q] = math.exp((full[i, q] - naive[i, q]) * DB_TO_NEPER) if on[q] else 0.0
             best[q] = naive[i, q]
-            amps[q] = amp[q]
+            amps[q] = (math.exp((full[i, q] - best[q]) * DB_TO_NEPER)
+                       if math.isfinite(best[q]) else 0.0)
         az0, el0 = _angles(u[i], s[i])
         best_err = _error(resp, i, amps, u[i], s[i], az0, el0)
-        if not best_err > above:  # close enough already (or not predictable): kept
-            for q in range(4):
-                out[i, q] = best[q]
-            out_error[i] = best_err
-            continue
-        _sensitivity(resp, i, weights, az0, el0, sens)
-        # Roles by weight, strongest first (a stable sort, as numpy's for four entries).
-        for q in range(4):
-            order[q] = q
-        for a in range(1, 4):
-            j = a
-            while j > 0 and -weights[i, order[j]] < -weights[i, order[j - 1]]:
-                order[j], order[j - 1] = order[j - 1], order[j]
-                j -= 1
-        # Per role and step count: the peak shift it causes.
-        for k in range(n_steps):
-            for role in range(4):
-                q = order[role]
-                moves[role, k, 0], moves[role, k, 1] = _shift(
-                    on[q], naive[i, q], amp[q], per_step[k], weights[i, q], sens[0, q],
-                    sens[1, q], (k - fine) * step, low, high, slack)
-        for ia in range(side):
-            for ib in range(side):
-                for axis in range(2):
-                    resid[ia * side + ib, axis] = (moves[0, fine, axis]
-                                                   + moves[1, fine - reach + ia, axis]
-                                                   + moves[2, fine - reach + ib, axis])
-        table = moves[3]
-        d0 = 0.5 * (table[fine + 1, 0] - table[fine - 1, 0])
-        d1 = 0.5 * (table[fine + 1, 1] - table[fine - 1, 1])
-        dd = max(d0 * d0 + d1 * d1, norm_floor)
-        for c in range(n_cand):
-            t_star = -((resid[c, 0] + table[fine, 0]) * d0
-                       + (resid[c, 1] + table[fine, 1]) * d1) / dd
-            lower = int(min(max(np.floor(t_star), -fine), fine))  # a float until clipped
-            upper = min(max(lower + 1, -fine), fine)
-            m0 = resid[c, 0] + table[lower + fine, 0]
-            m1 = resid[c, 1] + table[lower + fine, 1]
-            cost[c] = m0 * m0 + m1 * m1  # squared: compared, never reported
-            final[c, 0], final[c, 1] = m0, m1
-            best_k[c] = lower
-            m0 = resid[c, 0] + table[upper + fine, 0]
-            m1 = resid[c, 1] + table[upper + fine, 1]
-            if m0 * m0 + m1 * m1 < cost[c]:
-                cost[c] = m0 * m0 + m1 * m1
-                final[c, 0], final[c, 1] = m0, m1
-                best_k[c] = upper
-            extra_q[c] = -1
-            extra_att[c] = 0.0
-        # An idle channel may come on weakly to cancel what is left along its own direction.
-        for q in range(4):
-            if on[q]:
+        have_sens = False
+        for p in range(reaches.size):
+            if not best_err > aboves[p]:  # close enough already (or not predictable): kept
                 continue
-            g0, g1 = sens[0, q], sens[1, q]
-            gg = max(g0 * g0 + g1 * g1, norm_floor)
-            for c in range(n_cand):
-                a_star = -(g0 * final[c, 0] + g1 * final[c, 1]) / gg
-                level = -math.inf if a_star <= 0.0 else math.log10(a_star)
-                att = _nearest(full[i, q] - 20.0 * level, low, step, high, slack)
-                a = math.exp((full[i, q] - att) * DB_TO_NEPER) if math.isfinite(att) else 0.0
-                m0, m1 = final[c, 0] + a * g0, final[c, 1] + a * g1
-                new_cost = m0 * m0 + m1 * m1
-                if a > 0.0 and new_cost < cost[c]:
-                    cost[c] = new_cost
-                    extra_q[c] = q
-                    extra_att[c] = att
-        # The linear model shortlists; the exact prediction decides (the naive one too).
-        taken[:] = False
-        for _ in range(min(shortlist, n_cand)):
-            pick = -1
-            for c in range(n_cand):
-                if not taken[c] and (pick < 0 or cost[c] < cost[pick]):
-                    pick = c
-            taken[pick] = True
-            counts = (0, pick // side - reach, pick % side - reach, best_k[pick])
-            for role in range(4):
-                q = order[role]
-                setting = naive[i, q] + counts[role] * step
-                ok = on[q] and setting >= low - slack and setting <= high + slack
-                option[q] = setting if ok else math.inf
-            if extra_q[pick] >= 0:
-                option[extra_q[pick]] = extra_att[pick]
+            if not have_sens:  # it depends on the solved weights only
+                _sensitivity(resp, i, weights, az0, el0, sens)
+                have_sens = True
+            reach = reaches[p]
+            side = 2 * reach + 1
+            n_cand = side * side
+            # This pass starts from the settings so far.
             for q in range(4):
-                amps[q] = (math.exp((full[i, q] - option[q]) * DB_TO_NEPER)
-                           if math.isfinite(option[q]) else 0.0)
-            err = _error(resp, i, amps, u[i], s[i], az0, el0)
-            if err < best_err:
-                best_err = err
+                on[q] = math.isfinite(best[q])
+                amp[q] = math.exp((full[i, q] - best[q]) * DB_TO_NEPER) if on[q] else 0.0
+                start[q] = best[q]
+            # Roles by weight, strongest first (a stable sort, as numpy's for four entries).
+            for q in range(4):
+                order[q] = q
+            for a in range(1, 4):
+                j = a
+                while j > 0 and -weights[i, order[j]] < -weights[i, order[j - 1]]:
+                    order[j], order[j - 1] = order[j - 1], order[j]
+                    j -= 1
+            # Per role and step count: the peak shift it causes.
+            for k in range(n_steps):
+                for role in range(4):
+                    q = order[role]
+                    moves[role, k, 0], moves[role, k, 1] = _shift(
+                        on[q], start[q], amp[q], per_step[k], weights[i, q], sens[0, q],
+                        sens[1, q], (k - fine) * step, low, high, slack)
+            for ia in range(side):
+                for ib in range(side):
+                    for axis in range(2):
+                        resid[ia * side + ib, axis] = (moves[0, fine, axis]
+                                                       + moves[1, fine - reach + ia, axis]
+                                                       + moves[2, fine - reach + ib, axis])
+            table = moves[3]
+            d0 = 0.5 * (table[fine + 1, 0] - table[fine - 1, 0])
+            d1 = 0.5 * (table[fine + 1, 1] - table[fine - 1, 1])
+            dd = max(d0 * d0 + d1 * d1, norm_floor)
+            for c in range(n_cand):
+                t_star = -((resid[c, 0] + table[fine, 0]) * d0
+                           + (resid[c, 1] + table[fine, 1]) * d1) / dd
+                lower = int(min(max(np.floor(t_star), -fine), fine))  # a float until clipped
+                upper = min(max(lower + 1, -fine), fine)
+                m0 = resid[c, 0] + table[lower + fine, 0]
+                m1 = resid[c, 1] + table[lower + fine, 1]
+                cost[c] = m0 * m0 + m1 * m1  # squared: compared, never reported
+                final[c, 0], final[c, 1] = m0, m1
+                best_k[c] = lower
+                m0 = resid[c, 0] + table[upper + fine, 0]
+                m1 = resid[c, 1] + table[upper + fine, 1]
+                if m0 * m0 + m1 * m1 < cost[c]:
+                    cost[c] = m0 * m0 + m1 * m1
+                    final[c, 0], final[c, 1] = m0, m1
+                    best_k[c] = upper
+                extra_q[c] = -1
+                extra_att[c] = 0.0
+            # An idle channel may come on weakly to cancel what is left along its own direction.
+            for q in range(4):
+                if on[q]:
+                    continue
+                g0, g1 = sens[0, q], sens[1, q]
+                gg = max(g0 * g0 + g1 * g1, norm_floor)
+                for c in range(n_cand):
+                    a_star = -(g0 * final[c, 0] + g1 * final[c, 1]) / gg
+                    level = -math.inf if a_star <= 0.0 else math.log10(a_star)
+                    att = _nearest(full[i, q] - 20.0 * level, low, step, high, slack)
+                    a = math.exp((full[i, q] - att) * DB_TO_NEPER) if math.isfinite(att) else 0.0
+                    m0, m1 = final[c, 0] + a * g0, final[c, 1] + a * g1
+                    new_cost = m0 * m0 + m1 * m1
+                    if a > 0.0 and new_cost < cost[c]:
+                        cost[c] = new_cost
+                        extra_q[c] = q
+                        extra_att[c] = att
+            # The linear model shortlists; the exact prediction decides (the naive one too).
+            taken[:] = False
+            for _ in range(min(shortlist, n_cand)):
+                pick = -1
+                for c in range(n_cand):
+                    if not taken[c] and (pick < 0 or cost[c] < cost[pick]):
+                        pick = c
+                taken[pick] = True
+                counts = (0, pick // side - reach, pick % side - reach, best_k[pick])
+                for role in range(4):
+                    q = order[role]
+                    setting = start[q] + counts[role] * step
+                    ok = on[q] and setting >= low - slack and setting <= high + slack
+                    option[q] = setting if ok else math.inf
+                if extra_q[pick] >= 0:
+                    option[extra_q[pick]] = extra_att[pick]
                 for q in range(4):
-                    best[q] = option[q]
+                    amps[q] = (math.exp((full[i, q] - option[q]) * DB_TO_NEPER)
+                               if math.isfinite(option[q]) else 0.0)
+                err = _error(resp, i, amps, u[i], s[i], az0, el0)
+                if err < best_err:
+                    best_err = err
+                    for q in range(4):
+                        best[q] = option[q]
         for q in range(4):
             out[i, q] = best[q]
         out_error[i] = best_err

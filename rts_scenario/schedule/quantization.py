@@ -125,12 +125,11 @@ def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full:
     if step > 0.0 and mode == "aware":
         # A wider search follows only where the narrow one leaves a noticeable error.
         kernel = compiled_search() if len(weights) >= COMPILED_FROM else None
-        by_entry = np.ascontiguousarray(resp.transpose(2, 0, 1)) if kernel else resp
+        if kernel is not None:  # every entry: it predicts, keeps or searches each itself
+            chosen = _search_compiled(kernel, resp, weights, full, grid, u, s, chosen)
         for reach, above in zip(SEARCH_STEPS, SEARCH_ABOVE_DEG, strict=True):
-            if kernel is not None:  # every entry: it predicts, keeps or searches each itself
-                chosen = _search_compiled(kernel, by_entry, weights, full, grid, u, s, chosen,
-                                          reach, above)
-                continue
+            if kernel is not None:
+                break
             amps = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
             err = predicted_angle_error(resp, amps, u, s)
             todo = np.flatnonzero(np.hypot(err[:, 0], err[:, 1]) > above)
@@ -288,28 +287,28 @@ def compiled_search() -> Callable[..., None] | None:
         # cannot compile or cache keeps the numpy search instead of failing a run.
         one = np.zeros((1, 4))
         search(np.ones((1, 6, 4), dtype=complex), one + 1.0, one, one, np.zeros(1),
-               np.zeros(1), 0.0, 0.0, 0.5, 60.0, GRID_SLACK_DB, 1, FINE_STEPS, SHORTLIST,
-               NORM_FLOOR, np.empty((1, 4)), np.empty(1))
+               np.zeros(1), np.array([1]), np.array([0.0]), 0.0, 0.5, 60.0, GRID_SLACK_DB,
+               FINE_STEPS, SHORTLIST, NORM_FLOOR, np.empty((1, 4)), np.empty(1))
     except Exception:  # noqa: BLE001 - numba is optional: the numpy search does the same
         return None
     kernel: Callable[..., None] = search
     return kernel
 
 
-def _search_compiled(kernel: Callable[..., None], by_entry: NDArray[np.complex128],
+def _search_compiled(kernel: Callable[..., None], resp: NDArray[np.complex128],
                      weights: FloatArray, full: FloatArray, grid: _Grid, u: FloatArray,
-                     s: FloatArray, naive: FloatArray, reach: int, above: float) -> FloatArray:
-    """`_search_grid`, compiled, for every entry whose settings err by more than ``above``.
-
-    ``by_entry``: the response, shape (N, 6, 4).
-    """
+                     s: FloatArray, naive: FloatArray) -> FloatArray:
+    """Both passes of `_search_grid`, compiled, entry by entry (parts on threads)."""
     out = np.empty_like(naive)
     error = np.empty(len(naive))
-    args = [np.ascontiguousarray(a) for a in (by_entry, weights, full, naive, u, s)]
+    args = [np.ascontiguousarray(a) for a in (resp.transpose(2, 0, 1), weights, full, naive,
+                                              u, s)]
+    reaches = np.array(SEARCH_STEPS, dtype=np.int64)
+    aboves = np.array(SEARCH_ABOVE_DEG, dtype=np.float64)
 
     def run(part: slice) -> None:  # the kernel releases the GIL: parts run on all cores
-        kernel(*(a[part] for a in args), above, grid.low, grid.step, grid.high,
-               GRID_SLACK_DB, reach, FINE_STEPS, SHORTLIST, NORM_FLOOR, out[part], error[part])
+        kernel(*(a[part] for a in args), reaches, aboves, grid.low, grid.step, grid.high,
+               GRID_SLACK_DB, FINE_STEPS, SHORTLIST, NORM_FLOOR, out[part], error[part])
 
     parts = [slice(i, i + COMPILED_PART) for i in range(0, len(out), COMPILED_PART)]
     if len(parts) > 1 and (os.cpu_count() or 1) > 1:
