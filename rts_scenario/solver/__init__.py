@@ -14,6 +14,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import lru_cache
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -24,6 +25,7 @@ from ..errors import SolverError
 from ..quads import assign_quads
 from ..responses import FrontEndModel
 from ..rig import Rig
+from . import compiled
 from .plan import (
     METHODS,
     SolverPlan,
@@ -137,6 +139,8 @@ def solve_weights(
             f"angles, grid shape, element positions, wavelength, method and FE response model: "
             f"get it from solver_plan(rig, array, method, model)"
         )
+    # Compile (or load) the kernel here, not in the pool's threads.
+    kernel = compiled.exact_kernel() if plan.exact_tables is not None else None
     n = az.size
     weights = np.zeros((n, 4))
     quad = np.full(n, -1, dtype=np.int64)
@@ -148,7 +152,7 @@ def solve_weights(
 
     def run(start: int) -> None:
         part = slice(start, start + chunk)
-        _solve_chunk(plan, az[part], el[part], weights[part], quad[part], reason[part])
+        _solve_chunk(plan, kernel, az[part], el[part], weights[part], quad[part], reason[part])
 
     starts = range(0, n, chunk)
     if len(starts) > 1 and WORKERS > 1:
@@ -192,16 +196,33 @@ def _angles(name: str, values: ArrayLike) -> FloatArray:
 
 def _solve_chunk(
     plan: SolverPlan,
+    kernel: ModuleType | None,
     az_deg: FloatArray,
     el_deg: FloatArray,
     weights: FloatArray,
     quad: NDArray[np.int64],
     reason: NDArray[np.uint8],
 ) -> None:
-    """Solve one chunk into the given output views (weights zeroed, reason OUTSIDE)."""
-    az, el = np.radians(az_deg), np.radians(el_deg)
+    """Solve one chunk into the given output views (weights zeroed, reason OUTSIDE).
+
+    With the compiled ``kernel`` every quad's targets are solved in one pass, in place.
+    """
     quad[:], off_line = plan.geometry.assign(az_deg, el_deg)
     reason[off_line] = Reason.DEGENERATE
+    if kernel is not None and plan.exact_tables is not None:
+        plan.exact_tables.solve(kernel, az_deg, el_deg, np.pi / 180.0, quad, weights, reason,
+                                _NO_MARGIN)
+        for q, check in enumerate(plan.checks):
+            if check is not None:
+                idx = np.flatnonzero((quad == q) & (reason == Reason.OK))
+                split = idx[check.splits(np.radians(az_deg[idx]), np.radians(el_deg[idx]),
+                                         weights[idx])]
+                reason[split] = Reason.SPLIT
+                weights[split] = 0.0
+        if len(plan.kernels) > 1:
+            _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
+        return
+    az, el = np.radians(az_deg), np.radians(el_deg)
     first = quad[0] if quad.size else -1
     if first >= 0 and np.all(quad == first):
         weights[:], reason[:] = _solve_in(plan, int(first), az, el)
@@ -215,6 +236,9 @@ def _solve_chunk(
                 weights[idx], reason[idx] = _solve_in(plan, q, az[idx], el[idx])
     if len(plan.kernels) > 1:
         _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
+
+
+_NO_MARGIN = np.empty(0)
 
 
 def _solve_in(

@@ -1,0 +1,432 @@
+"""Compiled per-target kernel of the exact method (numba), the same algorithm as `exact`.
+
+Imported only through `rts_scenario.solver.compiled`, which compiles it on first use (and
+caches the machine code on disk), so neither ``import rts_scenario`` nor a machine without
+numba pays for it. Every function mirrors a numpy function of `rts_scenario.solver.exact` and
+`rts_scenario.arrays` step for step (same tests, same order of operations where it matters), so
+weights agree with the numpy path to rounding and reasons are identical; tests/test_solver_kernel.py
+checks that. One target at a time, without temporaries: the scratch arrays are allocated once per
+call.
+
+Constants and reason codes are arguments, not globals: numba freezes globals into the cached
+machine code, and its cache only watches this file.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# Indices into the ``tol`` argument.
+_NEGATIVE, _RANK, _GAIN, _RESIDUAL, _PHASE, _ITERATIONS = range(6)
+# Indices into the ``codes`` argument.
+_OK, _NO_SOLUTION, _NOT_CONVERGED, _SPLIT = range(4)
+
+
+# pi/2 in three parts (the first two with trailing zero bits, so n * part is exact for the
+# n < 2^20 quadrants reached here) and 2/pi, for the argument reduction of `_sincos`.
+_PIO2_HI = 1.5707963267341256
+_PIO2_MID = 6.077100506303966e-11
+_PIO2_LO = 2.0222662487959506e-21
+_TWO_OVER_PI = 0.6366197723675814
+# Taylor coefficients of sin and cos on |r| <= pi/4: the first term left out is below 1e-19.
+_S1, _S2, _S3, _S4, _S5, _S6, _S7, _S8 = (
+    (-1.0) ** i / math.factorial(2 * i + 1) for i in range(1, 9))
+_C1, _C2, _C3, _C4, _C5, _C6, _C7, _C8, _C9 = (
+    (-1.0) ** i / math.factorial(2 * i) for i in range(1, 10))
+
+
+@njit(cache=True, nogil=True)
+def _sincos(x):  # pragma: no cover
+    """``(sin x, cos x)`` to about 1 ulp for |x| < 1e5, several times faster than libm's pair.
+
+    The solver's phases reach a few hundred radians at most (k times the aperture).
+    """
+    n = round(x * _TWO_OVER_PI)
+    r = ((x - n * _PIO2_HI) - n * _PIO2_MID) - n * _PIO2_LO
+    z = r * r
+    sin_r = _S8 * z + _S7
+    sin_r = ((((((sin_r * z + _S6) * z + _S5) * z + _S4) * z + _S3) * z + _S2) * z + _S1)
+    sin_r = r + r * z * sin_r
+    cos_r = _C9 * z + _C8
+    cos_r = (((((((cos_r * z + _C7) * z + _C6) * z + _C5) * z + _C4) * z + _C3) * z + _C2)
+             * z + _C1)
+    cos_r = 1.0 + z * cos_r
+    # x = r + quadrant pi/2: rotate by quadrants without branches (random quadrants mispredict).
+    quadrant = int(n)
+    odd = quadrant & 1
+    sin_x = cos_r if odd else sin_r
+    cos_x = sin_r if odd else cos_r
+    return sin_x * (1 - (quadrant & 2)), cos_x * (1 - ((quadrant + 1) & 2))
+
+
+@njit(cache=True, nogil=True)
+def _atan2(y, x):  # pragma: no cover
+    """``atan2(y, x)``; a converged phase residual (|y| << x) by its series, exact to rounding."""
+    if x > 0.0 and abs(y) <= 1e-3 * x:
+        t = y / x
+        t2 = t * t
+        return t * (1.0 - t2 * (1.0 / 3.0 - t2 * (0.2 - t2 * (1.0 / 7.0 - t2 / 9.0))))
+    return math.atan2(y, x)
+
+
+@njit(cache=True, nogil=True)
+def _exp_rows(out_re, out_im, step_re, step_im, k, coords, direct, indirect, mirror,
+              progression, x, nb):  # pragma: no cover
+    """``exp(-j k c x[b])`` for every coordinate ``c`` and target ``b < nb`` (`arrays._exp_rows`).
+
+    ``out_re, out_im``: shape ``(len(coords), B)``; ``step_re, step_im``: scratch ``(B,)``.
+    """
+    if progression:
+        first = direct[0]
+        phase = -k * coords[first]
+        step = -k * (coords[direct[1]] - coords[first])
+        for b in range(nb):
+            sin_t, cos_t = _sincos(phase * x[b])
+            out_re[first, b] = cos_t
+            out_im[first, b] = sin_t
+            sin_t, cos_t = _sincos(step * x[b])
+            step_re[b] = cos_t
+            step_im[b] = sin_t
+        for i in range(1, direct.size):
+            prev, cur = direct[i - 1], direct[i]
+            for b in range(nb):
+                re, im = out_re[prev, b], out_im[prev, b]
+                out_re[cur, b] = re * step_re[b] - im * step_im[b]
+                out_im[cur, b] = re * step_im[b] + im * step_re[b]
+    else:
+        for i in direct:
+            phase = -k * coords[i]
+            for b in range(nb):
+                sin_t, cos_t = _sincos(phase * x[b])
+                out_re[i, b] = cos_t
+                out_im[i, b] = sin_t
+    for i in indirect:
+        m = mirror[i]
+        for b in range(nb):
+            out_re[i, b] = out_re[m, b]
+            out_im[i, b] = -out_im[m, b]
+
+
+@njit(cache=True, nogil=True)
+def _catmull_rom(t, out):  # pragma: no cover
+    t2 = t * t
+    t3 = t * t * t
+    out[0] = 0.5 * (-t3 + 2 * t2 - t)
+    out[1] = 0.5 * (3 * t3 - 5 * t2 + 2)
+    out[2] = 0.5 * (-3 * t3 + 4 * t2 + t)
+    out[3] = 0.5 * (t3 - t2)
+
+
+@njit(cache=True, nogil=True)
+def _phase_at(u, s, origin, table, wx, wy):  # pragma: no cover
+    """Bicubic phase map at ``(u, s)`` (`exact.PhaseMap.__call__`)."""
+    nodes = table.shape[0]
+    last = nodes - 1
+    x = min(max((u - origin[0]) / origin[2], 0.0), float(last))
+    y = min(max((s - origin[1]) / origin[3], 0.0), float(last))
+    i = min(int(x), last - 1)
+    j = min(int(y), last - 1)
+    _catmull_rom(x - i, wx)
+    _catmull_rom(y - j, wy)
+    out = 0.0
+    for a in range(4):
+        row = min(max(i + a - 1, 0), last)
+        inner = 0.0
+        for b in range(4):
+            inner += wy[b] * table[row, min(max(j + b - 1, 0), last)]
+        out += wx[a] * inner
+    return out
+
+
+# The per-target algebra works on 4-tuples (one entry per FE): they stay in registers.
+
+
+@njit(cache=True, nogil=True)
+def _dot(a, b):  # pragma: no cover
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+
+
+@njit(cache=True, nogil=True)
+def _sub_scaled(y, a, x):  # pragma: no cover
+    """``y - a * x``."""
+    return (y[0] - a * x[0], y[1] - a * x[1], y[2] - a * x[2], y[3] - a * x[3])
+
+
+@njit(cache=True, nogil=True)
+def _unit(v, floor):  # pragma: no cover
+    norm = math.sqrt(_dot(v, v))
+    scale = 1.0 / norm if norm > floor else 0.0
+    return (v[0] * scale, v[1] * scale, v[2] * scale, v[3] * scale)
+
+
+@njit(cache=True, nogil=True)
+def _accept(cand, gain_floor, negative_tol):  # pragma: no cover
+    """Norm of a candidate and whether it is feasible (no weight clearly below 0, real gain)."""
+    norm = math.sqrt(_dot(cand, cand))
+    low = min(min(cand[0], cand[1]), min(cand[2], cand[3]))
+    return norm, (low >= -negative_tol * norm) and (norm > gain_floor)
+
+
+@njit(cache=True, nogil=True)
+def _ray(w, e1, e2, k, p_kk):  # pragma: no cover
+    """``w - w_k / P_kk * P e_k``: the projection with weight ``k`` forced to 0."""
+    ratio = w[k] / p_kk
+    p = (-(e1[0] * e1[k] + e2[0] * e2[k]), -(e1[1] * e1[k] + e2[1] * e2[k]),
+         -(e1[2] * e1[k] + e2[2] * e2[k]), -(e1[3] * e1[k] + e2[3] * e2[k]))
+    return (w[0] - (p[0] + (k == 0)) * ratio, w[1] - (p[1] + (k == 1)) * ratio,
+            w[2] - (p[2] + (k == 2)) * ratio, w[3] - (p[3] + (k == 3)) * ratio)
+
+
+@njit(cache=True, nogil=True)
+def _boundary(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
+    """`exact._boundary_ray` then, if needed, `exact._boundary_rays`: ``(w, feasible)``."""
+    # Fast path: zero the most negative weight (the first on ties, as argmin).
+    k = 0
+    for q in range(1, 4):
+        if w[q] < w[k]:
+            k = q
+    p_kk = -(e1[k] * e1[k] + e2[k] * e2[k]) + 1.0
+    if p_kk > 1e-12:
+        cand = _ray(w, e1, e2, k, p_kk)
+        _, good = _accept(cand, gain_floor, negative_tol)
+        if good:
+            return cand, True
+    # Every boundary ray; the feasible one of largest norm (gain) wins, the first on ties.
+    best = w
+    best_score = -2.0
+    found = False
+    for k in range(4):
+        p_kk = 1.0 - e1[k] * e1[k] - e2[k] * e2[k]
+        usable = p_kk > 1e-12
+        cand = _ray(w, e1, e2, k, p_kk) if usable else w
+        norm, good = _accept(cand, gain_floor, negative_tol)
+        valid = usable and good
+        score = norm if valid else -1.0
+        if score > best_score:
+            best, best_score = cand, score
+        found = found or valid
+    return best, found
+
+
+@njit(cache=True, nogil=True)
+def _max_gain_weights(f, r1, r2, row_scale, tol):  # pragma: no cover
+    """`exact.max_gain_weights` for one target: ``(w >= 0, whether it is a solution)``."""
+    negative_tol = tol[_NEGATIVE]
+    rank_floor = tol[_RANK] * row_scale
+    e1 = _unit(r1, rank_floor)
+    e2 = _unit(_sub_scaled(r2, _dot(r2, e1), e1), rank_floor)
+    w = _sub_scaled(_sub_scaled(f, _dot(f, e1), e1), _dot(f, e2), e2)
+    gain_floor = tol[_GAIN] * math.sqrt(_dot(f, f))
+    _, ok = _accept(w, gain_floor, negative_tol)
+    if not ok:
+        w, ok = _boundary(w, e1, e2, gain_floor, negative_tol)
+    w = (max(w[0], 0.0), max(w[1], 0.0), max(w[2], 0.0), max(w[3], 0.0))
+    w_norm = math.sqrt(_dot(w, w))
+    bound = max(tol[_RESIDUAL] * math.sqrt(_dot(r1, r1)), rank_floor)
+    ok = ok and abs(_dot(r1, w)) <= bound * w_norm
+    bound = max(tol[_RESIDUAL] * math.sqrt(_dot(r2, r2)), rank_floor)
+    ok = ok and abs(_dot(r2, w)) <= bound * w_norm
+    return w, ok
+
+
+@njit(cache=True, nogil=True)
+def _row(acc, first, b):  # pragma: no cover
+    return (acc[first, b], acc[first + 1, b], acc[first + 2, b], acc[first + 3, b])
+
+
+@njit(cache=True, nogil=True)
+def _rotated(acc_re, acc_im, first, b, c, s):  # pragma: no cover
+    """``Re(exp(-j phi) g)`` of the response rows ``first..first+3`` (c, s: cos, sin phi)."""
+    return (c * acc_re[first, b] + s * acc_im[first, b],
+            c * acc_re[first + 1, b] + s * acc_im[first + 1, b],
+            c * acc_re[first + 2, b] + s * acc_im[first + 2, b],
+            c * acc_re[first + 3, b] + s * acc_im[first + 3, b])
+
+
+@njit(cache=True, nogil=True)
+def _phase_residual(f_re, f_im, w, c, s):  # pragma: no cover
+    """``arg(f . w exp(-j phi))`` with ``c, s = cos(phi), sin(phi)`` (`exact._phase_residual`)."""
+    b_re = _dot(f_re, w)
+    b_im = _dot(f_im, w)
+    return _atan2(b_im * c - b_re * s, b_re * c + b_im * s)
+
+
+# Targets evaluated together: long enough for vector instructions, short enough for L1.
+_BLOCK = 32
+
+
+@njit(cache=True, nogil=True)
+def solve_targets(  # pragma: no cover
+    angle, other, scale, quad, tab_re, tab_im, k, iy, iz,
+    y_coords, y_direct, y_indirect, y_mirror, y_progression,
+    z_coords, z_direct, z_indirect, z_mirror, z_progression,
+    phase_origin, phase_table, centrosymmetric, row_scale, curvature, tol, codes,
+    weights, reason, margin,
+):
+    """Solve every target whose ``quad`` is >= 0; other rows are left as they are.
+
+    ``angle, other``: azimuth and elevation (times ``scale`` gives radians), shape ``(N,)``.
+    ``tab_re, tab_im``: per quad, the response table (`arrays.SourceResponse.table`) as
+    ``(Q, 24, M)``, row ``term * 4 + fe``, column element ``v``; ``iy, iz`` the elements'
+    distinct-coordinate indices, and the exponential plans of both coordinates. Per quad:
+    ``phase_origin`` ``(Q, 4)`` (u0, s0, du, ds) and ``phase_table`` ``(Q, n, n)`` of the phase
+    map (``phase_table.shape[1] == 0``: none), ``curvature`` ``(Q,)`` whether to test for a
+    local maximum. Writes ``weights`` ``(N, 4)`` (normalized, 0 unless OK), ``reason`` and,
+    where tested, ``margin`` (NaN elsewhere; an empty ``margin``: not wanted).
+
+    Targets are taken quad by quad (a counting sort) in blocks: the exponentials and the
+    response sums run over a block at once (vector instructions), the weights per target.
+    """
+    n_quads = tab_re.shape[0]
+    n_elements = iy.size
+    # Counting sort of the targets by quad (each quad's table is then read for whole blocks).
+    count = np.zeros(n_quads + 1, dtype=np.int64)
+    for n in range(angle.size):
+        if quad[n] >= 0:
+            count[quad[n] + 1] += 1
+    for q in range(n_quads):
+        count[q + 1] += count[q]
+    order = np.empty(count[n_quads], dtype=np.int64)
+    fill = count[:n_quads].copy()
+    for n in range(angle.size):
+        if quad[n] >= 0:
+            order[fill[quad[n]]] = n
+            fill[quad[n]] += 1
+    has_phase = phase_table.shape[1] > 0
+    us = np.empty(_BLOCK)
+    ss = np.empty(_BLOCK)
+    step_re = np.empty(_BLOCK)
+    step_im = np.empty(_BLOCK)
+    ey_re = np.empty((y_coords.size, _BLOCK))
+    ey_im = np.empty((y_coords.size, _BLOCK))
+    ez_re = np.empty((z_coords.size, _BLOCK))
+    ez_im = np.empty((z_coords.size, _BLOCK))
+    look_re = np.empty((n_elements, _BLOCK))
+    look_im = np.empty((n_elements, _BLOCK))
+    acc_re = np.zeros((24, _BLOCK))
+    acc_im = np.zeros((24, _BLOCK))
+    wx = np.empty(4)
+    wy = np.empty(4)
+    for qd in range(n_quads):
+        test = curvature[qd]
+        rows = 24 if test else 12
+        # Real-valued responses need only the real part (centro-symmetric, no curvature).
+        real_only = centrosymmetric and not test
+        table_re = tab_re[qd]
+        table_im = tab_im[qd]
+        for start in range(count[qd], count[qd + 1], _BLOCK):
+            nb = min(_BLOCK, count[qd + 1] - start)
+            for b in range(nb):
+                n = order[start + b]
+                sin_az, _ = _sincos(angle[n] * scale)
+                sin_el, cos_el = _sincos(other[n] * scale)
+                us[b] = cos_el * sin_az
+                ss[b] = sin_el
+            _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct, y_indirect,
+                      y_mirror, y_progression, us, nb)
+            _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
+                      z_mirror, z_progression, ss, nb)
+            if has_phase:
+                # Evaluate in the frame rotated by the expected phase of B (see `exact`).
+                for b in range(nb):
+                    phi0 = _phase_at(us[b], ss[b], phase_origin[qd], phase_table[qd], wx, wy)
+                    sin_p, cos_p = _sincos(phi0)
+                    step_re[b] = cos_p
+                    step_im[b] = -sin_p
+                for i in range(z_coords.size):
+                    for b in range(nb):
+                        re, im = ez_re[i, b], ez_im[i, b]
+                        ez_re[i, b] = re * step_re[b] - im * step_im[b]
+                        ez_im[i, b] = re * step_im[b] + im * step_re[b]
+            for v in range(n_elements):
+                jy, jz = iy[v], iz[v]
+                for b in range(nb):
+                    yr, yi, zr, zi = ey_re[jy, b], ey_im[jy, b], ez_re[jz, b], ez_im[jz, b]
+                    look_re[v, b] = yr * zr - yi * zi
+                    look_im[v, b] = yr * zi + yi * zr
+            for r in range(rows):
+                for b in range(nb):
+                    acc_re[r, b] = 0.0
+                    acc_im[r, b] = 0.0
+                for v in range(n_elements):
+                    tr, ti = table_re[r, v], table_im[r, v]
+                    if real_only:
+                        for b in range(nb):
+                            acc_re[r, b] += tr * look_re[v, b] - ti * look_im[v, b]
+                    else:
+                        for b in range(nb):
+                            acc_re[r, b] += tr * look_re[v, b] - ti * look_im[v, b]
+                            acc_im[r, b] += tr * look_im[v, b] + ti * look_re[v, b]
+            for b in range(nb):
+                _solve_one(order[start + b], acc_re, acc_im, b, centrosymmetric, test,
+                           row_scale, tol, codes, weights, reason, margin)
+
+
+@njit(cache=True, nogil=True)
+def _solve_one(n, acc_re, acc_im, b, centrosymmetric, test, row_scale, tol, codes, weights,
+               reason, margin):  # pragma: no cover
+    """Weights of target ``n`` from column ``b`` of its responses (rows ``term * 4 + fe``)."""
+    w, ok = _max_gain_weights(_row(acc_re, 0, b), _row(acc_re, 4, b), _row(acc_re, 8, b),
+                              row_scale, tol)
+    converged = True
+    if not centrosymmetric:
+        # `exact.ExactQuad._iterate`: secant steps on the phase fixed point.
+        f_re, f_im = _row(acc_re, 0, b), _row(acc_im, 0, b)
+        res = _phase_residual(f_re, f_im, w, 1.0, 0.0)
+        prev_phi = 0.0
+        prev_res = res
+        phi = res
+        converged = abs(res) <= tol[_PHASE]
+        if ok and not converged:
+            for _ in range(int(tol[_ITERATIONS])):
+                sn, c = _sincos(phi)
+                w, ok = _max_gain_weights(_rotated(acc_re, acc_im, 0, b, c, sn),
+                                          _rotated(acc_re, acc_im, 4, b, c, sn),
+                                          _rotated(acc_re, acc_im, 8, b, c, sn), row_scale, tol)
+                res = _phase_residual(f_re, f_im, w, c, sn)
+                done = abs(res) <= tol[_PHASE]
+                if done:
+                    converged = True
+                slope = (res - prev_res) / (phi - prev_phi + 1e-300)
+                # Secant step on g(phi) = arg(B(w(phi))) - phi; fixed-point step if flat.
+                step = -res / slope if abs(slope) > 1e-3 else res
+                prev_phi = phi
+                prev_res = res
+                phi += step
+                if done or not ok:
+                    break
+        converged = converged or not ok
+    code = codes[_OK]
+    if not converged:
+        code = codes[_NOT_CONVERGED]
+    if not ok:
+        code = codes[_NO_SOLUTION]
+    if test:
+        # `exact._curvature_margin`: largest Hessian eigenvalue of |B|^2 / 2 over |B|^2.
+        bs = [complex(_dot(_row(acc_re, 4 * term, b), w), _dot(_row(acc_im, 4 * term, b), w))
+              for term in range(6)]
+        cb = bs[0].conjugate()
+        h_uu = (cb * bs[3]).real + abs(bs[1]) ** 2
+        h_us = (cb * bs[4]).real + (bs[1].conjugate() * bs[2]).real
+        h_ss = (cb * bs[5]).real + abs(bs[2]) ** 2
+        largest = 0.5 * (h_uu + h_ss) + math.sqrt(0.25 * (h_uu - h_ss) ** 2 + h_us**2)
+        power = abs(bs[0]) ** 2
+        value = largest / (power if power > 0.0 else 1.0)
+        if margin.size:
+            margin[n] = value
+        if code == codes[_OK] and not (value < 0.0):
+            code = codes[_SPLIT]
+    elif margin.size:
+        margin[n] = np.nan
+    reason[n] = code
+    if code == codes[_OK]:
+        top = max(max(w[0], w[1]), max(w[2], w[3]))
+        top = top if top > 0.0 else 1.0
+        for q in range(4):
+            weights[n, q] = w[q] / top
+    else:
+        for q in range(4):
+            weights[n, q] = 0.0
