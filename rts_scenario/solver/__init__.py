@@ -207,11 +207,22 @@ def _solve_chunk(
 
     With the compiled ``kernel`` every quad's targets are solved in one pass, in place.
     """
-    quad[:], off_line = plan.geometry.assign(az_deg, el_deg)
-    reason[off_line] = Reason.DEGENERATE
     if kernel is not None and plan.exact_tables is not None:
-        plan.exact_tables.solve(kernel, az_deg, el_deg, np.pi / 180.0, quad, weights, reason,
-                                _NO_MARGIN)
+        tables = plan.exact_tables
+        # The kernel finds the quad of targets in their candidate cell; the rest are scanned.
+        tables.solve(kernel, az_deg, el_deg, _DEGREES, quad, weights, reason, _NO_MARGIN,
+                     geometry=plan.geometry)
+        missed = np.flatnonzero(quad < 0)
+        if missed.size:
+            found, off_line = plan.geometry.assign(az_deg[missed], el_deg[missed])
+            quad[missed] = found
+            reason[missed[off_line]] = Reason.DEGENERATE
+            hit = missed[found >= 0]
+            if hit.size:
+                w, r = np.zeros((hit.size, 4)), np.empty(hit.size, dtype=np.uint8)
+                tables.solve(kernel, az_deg[hit], el_deg[hit], _DEGREES, quad[hit], w, r,
+                             _NO_MARGIN)
+                weights[hit], reason[hit] = w, r
         for q, check in enumerate(plan.checks):
             if check is not None:
                 idx = np.flatnonzero((quad == q) & (reason == Reason.OK))
@@ -222,6 +233,8 @@ def _solve_chunk(
         if len(plan.kernels) > 1:
             _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
         return
+    quad[:], off_line = plan.geometry.assign(az_deg, el_deg)
+    reason[off_line] = Reason.DEGENERATE
     az, el = np.radians(az_deg), np.radians(el_deg)
     first = quad[0] if quad.size else -1
     if first >= 0 and np.all(quad == first):
@@ -239,6 +252,7 @@ def _solve_chunk(
 
 
 _NO_MARGIN = np.empty(0)
+_DEGREES = np.pi / 180.0
 
 
 def _solve_in(

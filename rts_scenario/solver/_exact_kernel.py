@@ -19,6 +19,11 @@ import math
 import numpy as np
 from numba import njit
 
+# nogil: the solver's thread pool runs chunks in parallel. IEEE division (no zero check) keeps
+# the loops over a block free of branches, so they compile to vector instructions; every
+# division by a possible zero is guarded by a select, as in the numpy code.
+_jit = njit(cache=True, nogil=True, error_model="numpy")
+
 # Indices into the ``tol`` argument.
 _NEGATIVE, _RANK, _GAIN, _RESIDUAL, _PHASE, _ITERATIONS = range(6)
 # Indices into the ``codes`` argument.
@@ -38,7 +43,7 @@ _C1, _C2, _C3, _C4, _C5, _C6, _C7, _C8, _C9 = (
     (-1.0) ** i / math.factorial(2 * i) for i in range(1, 10))
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _sincos(x):  # pragma: no cover
     """``(sin x, cos x)`` to about 1 ulp for |x| < 1e5, several times faster than libm's pair.
 
@@ -62,17 +67,25 @@ def _sincos(x):  # pragma: no cover
     return sin_x * (1 - (quadrant & 2)), cos_x * (1 - ((quadrant + 1) & 2))
 
 
-@njit(cache=True, nogil=True)
+@_jit
+def _atan_small(y, x):  # pragma: no cover
+    """``atan2(y, x)`` by its series where ``|y| <= 1e-3 x`` (exact to rounding), else NaN.
+
+    Branch-free, so a block of converged phase residuals is one vector loop.
+    """
+    t = y / x
+    t2 = t * t
+    series = t * (1.0 - t2 * (1.0 / 3.0 - t2 * (0.2 - t2 * (1.0 / 7.0 - t2 / 9.0))))
+    return series if (x > 0.0) & (abs(y) <= 1e-3 * x) else np.nan
+
+
+@_jit
 def _atan2(y, x):  # pragma: no cover
-    """``atan2(y, x)``; a converged phase residual (|y| << x) by its series, exact to rounding."""
-    if x > 0.0 and abs(y) <= 1e-3 * x:
-        t = y / x
-        t2 = t * t
-        return t * (1.0 - t2 * (1.0 / 3.0 - t2 * (0.2 - t2 * (1.0 / 7.0 - t2 / 9.0))))
-    return math.atan2(y, x)
+    small = _atan_small(y, x)
+    return small if small == small else math.atan2(y, x)
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _exp_rows(out_re, out_im, step_re, step_im, k, coords, direct, indirect, mirror,
               progression, x, nb):  # pragma: no cover
     """``exp(-j k c x[b])`` for every coordinate ``c`` and target ``b < nb`` (`arrays._exp_rows`).
@@ -110,33 +123,41 @@ def _exp_rows(out_re, out_im, step_re, step_im, k, coords, direct, indirect, mir
             out_im[i, b] = -out_im[m, b]
 
 
-@njit(cache=True, nogil=True)
-def _catmull_rom(t, out):  # pragma: no cover
+@_jit
+def _catmull_rom(t):  # pragma: no cover
     t2 = t * t
     t3 = t * t * t
-    out[0] = 0.5 * (-t3 + 2 * t2 - t)
-    out[1] = 0.5 * (3 * t3 - 5 * t2 + 2)
-    out[2] = 0.5 * (-3 * t3 + 4 * t2 + t)
-    out[3] = 0.5 * (t3 - t2)
+    return (0.5 * (-t3 + 2 * t2 - t), 0.5 * (3 * t3 - 5 * t2 + 2),
+            0.5 * (-3 * t3 + 4 * t2 + t), 0.5 * (t3 - t2))
 
 
-@njit(cache=True, nogil=True)
-def _phase_at(u, s, origin, table, wx, wy):  # pragma: no cover
+@_jit
+def _clamp(i, last):  # pragma: no cover
+    return 0 if i < 0 else (last if i > last else i)
+
+
+@_jit
+def _phase_at(u, s, u0, s0, du, ds, table):  # pragma: no cover
     """Bicubic phase map at ``(u, s)`` (`exact.PhaseMap.__call__`)."""
-    nodes = table.shape[0]
-    last = nodes - 1
-    x = min(max((u - origin[0]) / origin[2], 0.0), float(last))
-    y = min(max((s - origin[1]) / origin[3], 0.0), float(last))
-    i = min(int(x), last - 1)
-    j = min(int(y), last - 1)
-    _catmull_rom(x - i, wx)
-    _catmull_rom(y - j, wy)
+    last = table.shape[0] - 1
+    x = (u - u0) / du
+    x = 0.0 if x < 0.0 else (float(last) if x > last else x)
+    y = (s - s0) / ds
+    y = 0.0 if y < 0.0 else (float(last) if y > last else y)
+    i = int(x)
+    i = i if i < last - 1 else last - 1
+    j = int(y)
+    j = j if j < last - 1 else last - 1
+    wx = _catmull_rom(x - i)
+    wy = _catmull_rom(y - j)
+    c0, c1, c2, c3 = _clamp(j - 1, last), _clamp(j, last), _clamp(j + 1, last), _clamp(j + 2, last)
     out = 0.0
     for a in range(4):
-        row = min(max(i + a - 1, 0), last)
-        inner = 0.0
-        for b in range(4):
-            inner += wy[b] * table[row, min(max(j + b - 1, 0), last)]
+        row = _clamp(i + a - 1, last)
+        inner = 0.0 + wy[0] * table[row, c0]
+        inner += wy[1] * table[row, c1]
+        inner += wy[2] * table[row, c2]
+        inner += wy[3] * table[row, c3]
         out += wx[a] * inner
     return out
 
@@ -144,33 +165,38 @@ def _phase_at(u, s, origin, table, wx, wy):  # pragma: no cover
 # The per-target algebra works on 4-tuples (one entry per FE): they stay in registers.
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _dot(a, b):  # pragma: no cover
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _sub_scaled(y, a, x):  # pragma: no cover
     """``y - a * x``."""
     return (y[0] - a * x[0], y[1] - a * x[1], y[2] - a * x[2], y[3] - a * x[3])
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _unit(v, floor):  # pragma: no cover
     norm = math.sqrt(_dot(v, v))
     scale = 1.0 / norm if norm > floor else 0.0
     return (v[0] * scale, v[1] * scale, v[2] * scale, v[3] * scale)
 
 
-@njit(cache=True, nogil=True)
+@_jit
+def _smaller(a, b):  # pragma: no cover
+    return a if a < b else b
+
+
+@_jit
 def _accept(cand, gain_floor, negative_tol):  # pragma: no cover
     """Norm of a candidate and whether it is feasible (no weight clearly below 0, real gain)."""
     norm = math.sqrt(_dot(cand, cand))
-    low = min(min(cand[0], cand[1]), min(cand[2], cand[3]))
-    return norm, (low >= -negative_tol * norm) and (norm > gain_floor)
+    low = _smaller(_smaller(cand[0], cand[1]), _smaller(cand[2], cand[3]))
+    return norm, (low >= -negative_tol * norm) & (norm > gain_floor)
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _ray(w, e1, e2, k, p_kk):  # pragma: no cover
     """``w - w_k / P_kk * P e_k``: the projection with weight ``k`` forced to 0."""
     ratio = w[k] / p_kk
@@ -180,7 +206,7 @@ def _ray(w, e1, e2, k, p_kk):  # pragma: no cover
             w[2] - (p[2] + (k == 2)) * ratio, w[3] - (p[3] + (k == 3)) * ratio)
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _boundary(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
     """`exact._boundary_ray` then, if needed, `exact._boundary_rays`: ``(w, feasible)``."""
     # Fast path: zero the most negative weight (the first on ties, as argmin).
@@ -211,33 +237,85 @@ def _boundary(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
     return best, found
 
 
-@njit(cache=True, nogil=True)
-def _max_gain_weights(f, r1, r2, row_scale, tol):  # pragma: no cover
-    """`exact.max_gain_weights` for one target: ``(w >= 0, whether it is a solution)``."""
-    negative_tol = tol[_NEGATIVE]
-    rank_floor = tol[_RANK] * row_scale
+# Inlined by numba: LLVM alone does not inline it, and the call would keep the loop over a
+# block from being vectorized.
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _project(f, r1, r2, rank_floor, gain_tol, negative_tol):  # pragma: no cover
+    """Projection of ``f`` onto the null space of ``r1, r2``: ``(w, e1, e2, gain_floor, ok)``."""
     e1 = _unit(r1, rank_floor)
     e2 = _unit(_sub_scaled(r2, _dot(r2, e1), e1), rank_floor)
     w = _sub_scaled(_sub_scaled(f, _dot(f, e1), e1), _dot(f, e2), e2)
-    gain_floor = tol[_GAIN] * math.sqrt(_dot(f, f))
+    gain_floor = gain_tol * math.sqrt(_dot(f, f))
     _, ok = _accept(w, gain_floor, negative_tol)
-    if not ok:
-        w, ok = _boundary(w, e1, e2, gain_floor, negative_tol)
-    w = (max(w[0], 0.0), max(w[1], 0.0), max(w[2], 0.0), max(w[3], 0.0))
+    return w, e1, e2, gain_floor, ok
+
+
+@_jit
+def _finish(w, ok, r1, r2, rank_floor, residual_tol):  # pragma: no cover
+    """Clip rounding negatives and check that stationarity still holds."""
+    w = (_larger(w[0], 0.0), _larger(w[1], 0.0), _larger(w[2], 0.0), _larger(w[3], 0.0))
     w_norm = math.sqrt(_dot(w, w))
-    bound = max(tol[_RESIDUAL] * math.sqrt(_dot(r1, r1)), rank_floor)
-    ok = ok and abs(_dot(r1, w)) <= bound * w_norm
-    bound = max(tol[_RESIDUAL] * math.sqrt(_dot(r2, r2)), rank_floor)
-    ok = ok and abs(_dot(r2, w)) <= bound * w_norm
-    return w, ok
+    bound = _larger(residual_tol * math.sqrt(_dot(r1, r1)), rank_floor)
+    ok = ok & (abs(_dot(r1, w)) <= bound * w_norm)
+    bound = _larger(residual_tol * math.sqrt(_dot(r2, r2)), rank_floor)
+    return w, ok & (abs(_dot(r2, w)) <= bound * w_norm)
 
 
-@njit(cache=True, nogil=True)
+@_jit
+def _larger(a, b):  # pragma: no cover
+    return a if a > b else b
+
+
+@_jit
+def _max_gain_weights(f, r1, r2, row_scale, tol):  # pragma: no cover
+    """`exact.max_gain_weights` for one target: ``(w >= 0, whether it is a solution)``."""
+    rank_floor = tol[_RANK] * row_scale
+    w, e1, e2, gain_floor, ok = _project(f, r1, r2, rank_floor, tol[_GAIN], tol[_NEGATIVE])
+    if not ok:
+        w, ok = _boundary(w, e1, e2, gain_floor, tol[_NEGATIVE])
+    return _finish(w, ok, r1, r2, rank_floor, tol[_RESIDUAL])
+
+
+@_jit
+def _max_gain_weights_block(acc_re, nb, row_scale, tol, work):  # pragma: no cover
+    """`_max_gain_weights` of the unrotated responses of a block of targets, into ``work``.
+
+    Rows of ``work``: 0-3 ``w``, 4 ``ok`` (1.0 or 0.0), 5 left to the caller. The common case
+    runs over the whole block (vector instructions: scalar constants, few output rows, no
+    branches); only targets whose projection leaves the cone take the boundary rays, one by
+    one.
+    """
+    rank_floor = tol[_RANK] * row_scale
+    gain_tol, negative_tol, residual_tol = tol[_GAIN], tol[_NEGATIVE], tol[_RESIDUAL]
+    for b in range(nb):
+        w, _, _, _, ok = _project(_row(acc_re, 0, b), _row(acc_re, 4, b), _row(acc_re, 8, b),
+                                  rank_floor, gain_tol, negative_tol)
+        for q in range(4):
+            work[q, b] = w[q]
+        work[4, b] = 1.0 if ok else 0.0
+    for b in range(nb):
+        if work[4, b] == 0.0:
+            w, e1, e2, gain_floor, _ = _project(_row(acc_re, 0, b), _row(acc_re, 4, b),
+                                                _row(acc_re, 8, b), rank_floor, gain_tol,
+                                                negative_tol)
+            w, ok = _boundary(w, e1, e2, gain_floor, negative_tol)
+            for q in range(4):
+                work[q, b] = w[q]
+            work[4, b] = 1.0 if ok else 0.0
+    for b in range(nb):
+        w, ok = _finish(_row(work, 0, b), work[4, b] != 0.0, _row(acc_re, 4, b),
+                        _row(acc_re, 8, b), rank_floor, residual_tol)
+        for q in range(4):
+            work[q, b] = w[q]
+        work[4, b] = 1.0 if ok else 0.0
+
+
+@_jit
 def _row(acc, first, b):  # pragma: no cover
     return (acc[first, b], acc[first + 1, b], acc[first + 2, b], acc[first + 3, b])
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _rotated(acc_re, acc_im, first, b, c, s):  # pragma: no cover
     """``Re(exp(-j phi) g)`` of the response rows ``first..first+3`` (c, s: cos, sin phi)."""
     return (c * acc_re[first, b] + s * acc_im[first, b],
@@ -246,7 +324,7 @@ def _rotated(acc_re, acc_im, first, b, c, s):  # pragma: no cover
             c * acc_re[first + 3, b] + s * acc_im[first + 3, b])
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def _phase_residual(f_re, f_im, w, c, s):  # pragma: no cover
     """``arg(f . w exp(-j phi))`` with ``c, s = cos(phi), sin(phi)`` (`exact._phase_residual`)."""
     b_re = _dot(f_re, w)
@@ -254,19 +332,48 @@ def _phase_residual(f_re, f_im, w, c, s):  # pragma: no cover
     return _atan2(b_im * c - b_re * s, b_re * c + b_im * s)
 
 
+@_jit
+def _locate(az, el, column_az, row_el, lines, boxes, slack, quad):  # pragma: no cover
+    """`quads.candidate_quads`, kept where `quads.inside_quads` holds, else -1."""
+    columns, rows = column_az.size, row_el.size
+    for n in range(az.size):
+        a, e = az[n], el[n]
+        col = 0  # searchsorted (left) minus one, clipped to the cells
+        while col < columns and column_az[col] < a:
+            col += 1
+        col = min(max(col - 1, 0), columns - 2)
+        row = 0
+        while row < rows and row_el[row] < e:
+            row += 1
+        row = min(max(row - 1, 0), rows - 2)
+        q = row * (columns - 1) + col
+        inside = (a >= boxes[q, 0] - slack) and (a <= boxes[q, 1] + slack)
+        inside = inside and (e >= boxes[q, 2] - slack) and (e <= boxes[q, 3] + slack)
+        for i in range(4):
+            inside = inside and lines[q, i, 0] * a + lines[q, i, 1] * e + lines[q, i, 2] >= -slack
+        quad[n] = q if inside else -1
+
+
 # Targets evaluated together: long enough for vector instructions, short enough for L1.
 _BLOCK = 32
+# Targets sorted by quad at a time: their inputs and outputs stay in the L2 cache.
+_SPAN = 4096
 
 
-@njit(cache=True, nogil=True)
+@_jit
 def solve_targets(  # pragma: no cover
     angle, other, scale, quad, tab_re, tab_im, k, iy, iz,
     y_coords, y_direct, y_indirect, y_mirror, y_progression,
     z_coords, z_direct, z_indirect, z_mirror, z_progression,
     phase_origin, phase_table, centrosymmetric, row_scale, curvature, tol, codes,
-    weights, reason, margin,
+    weights, reason, margin, locate, column_az, row_el, lines, boxes, edge_tol,
 ):
     """Solve every target whose ``quad`` is >= 0; other rows are left as they are.
+
+    With ``locate`` the quads are found first (``angle, other`` in degrees): the candidate
+    quad from the grid's mean ``column_az`` and ``row_el`` when the target lies in it
+    (``lines, boxes, edge_tol`` as `quads.inside_quads`), else -1 (`quads.QuadGeometry.assign`
+    scans the others for those few).
 
     ``angle, other``: azimuth and elevation (times ``scale`` gives radians), shape ``(N,)``.
     ``tab_re, tab_im``: per quad, the response table (`arrays.SourceResponse.table`) as
@@ -282,19 +389,8 @@ def solve_targets(  # pragma: no cover
     """
     n_quads = tab_re.shape[0]
     n_elements = iy.size
-    # Counting sort of the targets by quad (each quad's table is then read for whole blocks).
-    count = np.zeros(n_quads + 1, dtype=np.int64)
-    for n in range(angle.size):
-        if quad[n] >= 0:
-            count[quad[n] + 1] += 1
-    for q in range(n_quads):
-        count[q + 1] += count[q]
-    order = np.empty(count[n_quads], dtype=np.int64)
-    fill = count[:n_quads].copy()
-    for n in range(angle.size):
-        if quad[n] >= 0:
-            order[fill[quad[n]]] = n
-            fill[quad[n]] += 1
+    if locate:
+        _locate(angle, other, column_az, row_el, lines, boxes, edge_tol, quad)
     has_phase = phase_table.shape[1] > 0
     us = np.empty(_BLOCK)
     ss = np.empty(_BLOCK)
@@ -308,74 +404,104 @@ def solve_targets(  # pragma: no cover
     look_im = np.empty((n_elements, _BLOCK))
     acc_re = np.zeros((24, _BLOCK))
     acc_im = np.zeros((24, _BLOCK))
-    wx = np.empty(4)
-    wy = np.empty(4)
-    for qd in range(n_quads):
-        test = curvature[qd]
-        rows = 24 if test else 12
-        # Real-valued responses need only the real part (centro-symmetric, no curvature).
-        real_only = centrosymmetric and not test
-        table_re = tab_re[qd]
-        table_im = tab_im[qd]
-        for start in range(count[qd], count[qd + 1], _BLOCK):
-            nb = min(_BLOCK, count[qd + 1] - start)
-            for b in range(nb):
-                n = order[start + b]
-                sin_az, _ = _sincos(angle[n] * scale)
-                sin_el, cos_el = _sincos(other[n] * scale)
-                us[b] = cos_el * sin_az
-                ss[b] = sin_el
-            _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct, y_indirect,
-                      y_mirror, y_progression, us, nb)
-            _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
-                      z_mirror, z_progression, ss, nb)
-            if has_phase:
-                # Evaluate in the frame rotated by the expected phase of B (see `exact`).
+    work = np.empty((6, _BLOCK))
+    # Spans of targets small enough for the caches; in each, a counting sort by quad (each
+    # quad's table is then read for whole blocks).
+    count = np.zeros(n_quads + 1, dtype=np.int64)
+    fill = np.zeros(n_quads, dtype=np.int64)
+    order = np.empty(min(_SPAN, angle.size), dtype=np.int64)
+    for span in range(0, angle.size, _SPAN):
+        end = min(span + _SPAN, angle.size)
+        count[:] = 0
+        for n in range(span, end):
+            if quad[n] >= 0:
+                count[quad[n] + 1] += 1
+        for q in range(n_quads):
+            count[q + 1] += count[q]
+        fill[:] = count[:n_quads]
+        for n in range(span, end):
+            if quad[n] >= 0:
+                order[fill[quad[n]]] = n
+                fill[quad[n]] += 1
+        for qd in range(n_quads):
+            test = curvature[qd]
+            rows = 24 if test else 12
+            # Real-valued responses need only the real part (centro-symmetric, no curvature).
+            real_only = centrosymmetric and not test
+            table_re = tab_re[qd]
+            table_im = tab_im[qd]
+            for start in range(count[qd], count[qd + 1], _BLOCK):
+                nb = min(_BLOCK, count[qd + 1] - start)
                 for b in range(nb):
-                    phi0 = _phase_at(us[b], ss[b], phase_origin[qd], phase_table[qd], wx, wy)
-                    sin_p, cos_p = _sincos(phi0)
-                    step_re[b] = cos_p
-                    step_im[b] = -sin_p
-                for i in range(z_coords.size):
+                    n = order[start + b]
+                    sin_az, _ = _sincos(angle[n] * scale)
+                    sin_el, cos_el = _sincos(other[n] * scale)
+                    us[b] = cos_el * sin_az
+                    ss[b] = sin_el
+                _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct, y_indirect,
+                          y_mirror, y_progression, us, nb)
+                _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
+                          z_mirror, z_progression, ss, nb)
+                if has_phase:
+                    # Evaluate in the frame rotated by the expected phase of B (see `exact`).
+                    origin = phase_origin[qd]
+                    u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
+                    table = phase_table[qd]
                     for b in range(nb):
-                        re, im = ez_re[i, b], ez_im[i, b]
-                        ez_re[i, b] = re * step_re[b] - im * step_im[b]
-                        ez_im[i, b] = re * step_im[b] + im * step_re[b]
-            for v in range(n_elements):
-                jy, jz = iy[v], iz[v]
-                for b in range(nb):
-                    yr, yi, zr, zi = ey_re[jy, b], ey_im[jy, b], ez_re[jz, b], ez_im[jz, b]
-                    look_re[v, b] = yr * zr - yi * zi
-                    look_im[v, b] = yr * zi + yi * zr
-            for r in range(rows):
-                for b in range(nb):
-                    acc_re[r, b] = 0.0
-                    acc_im[r, b] = 0.0
+                        sin_p, cos_p = _sincos(_phase_at(us[b], ss[b], u0, s0, du, ds, table))
+                        step_re[b] = cos_p
+                        step_im[b] = -sin_p
+                    for i in range(z_coords.size):
+                        for b in range(nb):
+                            re, im = ez_re[i, b], ez_im[i, b]
+                            ez_re[i, b] = re * step_re[b] - im * step_im[b]
+                            ez_im[i, b] = re * step_im[b] + im * step_re[b]
                 for v in range(n_elements):
-                    tr, ti = table_re[r, v], table_im[r, v]
-                    if real_only:
-                        for b in range(nb):
-                            acc_re[r, b] += tr * look_re[v, b] - ti * look_im[v, b]
-                    else:
-                        for b in range(nb):
-                            acc_re[r, b] += tr * look_re[v, b] - ti * look_im[v, b]
-                            acc_im[r, b] += tr * look_im[v, b] + ti * look_re[v, b]
-            for b in range(nb):
-                _solve_one(order[start + b], acc_re, acc_im, b, centrosymmetric, test,
-                           row_scale, tol, codes, weights, reason, margin)
+                    jy, jz = iy[v], iz[v]
+                    for b in range(nb):
+                        yr, yi, zr, zi = ey_re[jy, b], ey_im[jy, b], ez_re[jz, b], ez_im[jz, b]
+                        look_re[v, b] = yr * zr - yi * zi
+                        look_im[v, b] = yr * zi + yi * zr
+                for r in range(rows):
+                    for b in range(nb):
+                        acc_re[r, b] = 0.0
+                        acc_im[r, b] = 0.0
+                    for v in range(n_elements):
+                        tr, ti = table_re[r, v], table_im[r, v]
+                        if real_only:
+                            for b in range(nb):
+                                acc_re[r, b] += tr * look_re[v, b] - ti * look_im[v, b]
+                        else:
+                            for b in range(nb):
+                                acc_re[r, b] += tr * look_re[v, b] - ti * look_im[v, b]
+                                acc_im[r, b] += tr * look_im[v, b] + ti * look_re[v, b]
+                _max_gain_weights_block(acc_re, nb, row_scale, tol, work)
+                if not centrosymmetric:
+                    # Phase residual at phase 0; NaN where the series does not apply.
+                    for b in range(nb):
+                        w = _row(work, 0, b)
+                        work[5, b] = _atan_small(_dot(_row(acc_im, 0, b), w),
+                                                 _dot(_row(acc_re, 0, b), w))
+                for b in range(nb):
+                    _solve_one(order[start + b], acc_re, acc_im, b, _row(work, 0, b),
+                               work[4, b] != 0.0, work[5, b], centrosymmetric, test, row_scale, tol,
+                               codes, weights, reason, margin)
 
 
-@njit(cache=True, nogil=True)
-def _solve_one(n, acc_re, acc_im, b, centrosymmetric, test, row_scale, tol, codes, weights,
-               reason, margin):  # pragma: no cover
-    """Weights of target ``n`` from column ``b`` of its responses (rows ``term * 4 + fe``)."""
-    w, ok = _max_gain_weights(_row(acc_re, 0, b), _row(acc_re, 4, b), _row(acc_re, 8, b),
-                              row_scale, tol)
+@_jit
+def _solve_one(n, acc_re, acc_im, b, w, ok, res, centrosymmetric, test, row_scale, tol, codes,
+               weights, reason, margin):  # pragma: no cover
+    """Weights of target ``n`` from column ``b`` of its responses (rows ``term * 4 + fe``).
+
+    ``w, ok``: `_max_gain_weights` of its unrotated responses; ``res`` their phase residual
+    (NaN: not computed yet).
+    """
     converged = True
     if not centrosymmetric:
         # `exact.ExactQuad._iterate`: secant steps on the phase fixed point.
         f_re, f_im = _row(acc_re, 0, b), _row(acc_im, 0, b)
-        res = _phase_residual(f_re, f_im, w, 1.0, 0.0)
+        if res != res:
+            res = _phase_residual(f_re, f_im, w, 1.0, 0.0)
         prev_phi = 0.0
         prev_res = res
         phi = res

@@ -19,6 +19,7 @@ import sys
 import tempfile
 import threading
 from types import ModuleType
+from typing import Any
 
 # Environment variable that turns the compiled kernels off ("off", "0", "no" or "false").
 JIT_ENV = "RTS_SCENARIO_JIT"
@@ -55,7 +56,8 @@ def _load() -> ModuleType | None:
         # directory of our own (no reuse across processes, but no failure).
         sys.modules.pop(_KERNEL_MODULE, None)
     try:
-        numba.config.CACHE_DIR = tempfile.mkdtemp(prefix="rts-scenario-numba-")
+        config: Any = numba.config
+        config.CACHE_DIR = tempfile.mkdtemp(prefix="rts-scenario-numba-")
         return importlib.import_module(_KERNEL_MODULE)
     except (RuntimeError, OSError):
         sys.modules.pop(_KERNEL_MODULE, None)

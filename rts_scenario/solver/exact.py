@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from ..arrays import SourceResponse, VirtualArray, _ExpPlan, direction_cosines
 from ..beamformer import power_curvature
 from ..errors import SolverError
+from ..quads import EDGE_TOL_DEG, QuadGeometry
 from ..rig import Rig
 from . import compiled
 from .reasons import Reason
@@ -407,15 +408,23 @@ class ExactTables:
         reason: NDArray[np.uint8],
         margin: FloatArray,
         curvature: NDArray[np.bool_] | None = None,
+        geometry: QuadGeometry | None = None,
     ) -> None:
         """Solve the targets with ``quad >= 0`` in place (see `ExactQuad.solve_with_curvature`).
 
         ``az, el`` times ``scale`` are radians; ``quad`` indexes the packed quads;
         ``weights (N, 4)``, ``reason (N,)`` and ``margin`` (``(N,)``, or empty: not wanted)
-        receive the results. ``curvature`` overrides the quads' local-maximum test.
+        receive the results. ``curvature`` overrides the quads' local-maximum test. With the
+        rig's ``geometry`` (``az, el`` in degrees, quads packed in the rig's order) ``quad`` is
+        an output: each target's enclosing quad when it is the candidate cell of
+        `rts_scenario.quads.candidate_quads`, else -1 (left unsolved: see
+        `QuadGeometry.assign`).
         """
         resp = self.response
         y_plan, z_plan = resp._y_plan, resp._z_plan
+        locate = geometry is not None
+        if geometry is None:
+            geometry = _NO_GEOMETRY
         kernel.solve_targets(
             np.ascontiguousarray(az, dtype=np.float64), np.ascontiguousarray(el, dtype=np.float64),
             scale, quad, self.tab_re, self.tab_im, resp.k, resp._iy, resp._iz,
@@ -423,7 +432,11 @@ class ExactTables:
             resp.z_distinct, z_plan.direct, _indirect(z_plan), z_plan.mirror, z_plan.progression,
             self.phase_origin, self.phase_table, self.centrosymmetric, self.row_scale,
             self.curvature if curvature is None else curvature, _TOLERANCES, _CODES,
-            weights, reason, margin,
+            weights, reason, margin, locate,
+            # Copies (tiny): one type for every geometry, so the kernel compiles once.
+            *(np.array(a, dtype=np.float64, order="C") for a in (
+                geometry.column_az_deg, geometry.row_el_deg, geometry.lines, geometry.boxes)),
+            EDGE_TOL_DEG,
         )
 
 
@@ -431,6 +444,11 @@ def _indirect(plan: _ExpPlan) -> NDArray[np.int64]:
     return np.setdiff1d(np.arange(plan.mirror.size), plan.direct)
 
 
+# Stands in for the geometry when the quads are given (same types, never read).
+_NO_GEOMETRY = QuadGeometry(
+    polygons=np.zeros((1, 4, 2)), lines=np.zeros((1, 4, 3)), boxes=np.zeros((1, 4)),
+    degenerate=np.zeros(1, dtype=bool), column_az_deg=np.zeros(2), row_el_deg=np.zeros(2),
+)
 # The kernel's constants, in the order it reads them.
 _TOLERANCES = np.array([_NEGATIVE_TOL, _RANK_TOL, _GAIN_TOL, _RESIDUAL_TOL, _PHASE_TOL,
                         _MAX_ITERATIONS], dtype=np.float64)
