@@ -5,8 +5,9 @@ every method runs its numpy code, which stays the reference: same weights to rou
 reasons (tests/test_solver_kernel.py). The kernel module is imported, and numba with it, only
 when a solver first asks for it, so ``import rts_scenario`` stays cheap. Its machine code is
 cached on disk by numba (``cache=True``: ``__pycache__`` beside the source, else numba's user
-cache directory, else ``$NUMBA_CACHE_DIR``); where none of those can be written, the kernels are
-compiled into a temporary directory for the process instead, so a read-only install never fails.
+cache directory; ``$NUMBA_CACHE_DIR`` first when set). Compiling takes several seconds, once;
+where no cache location can be written the numpy code runs instead (set ``NUMBA_CACHE_DIR`` to
+a writable directory to get the kernel there), so a read-only install never fails.
 
 Set ``RTS_SCENARIO_JIT=off`` to run the numpy code even where numba is installed.
 """
@@ -16,10 +17,8 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-import tempfile
 import threading
 from types import ModuleType
-from typing import Any
 
 # Environment variable that turns the compiled kernels off ("off", "0", "no" or "false").
 JIT_ENV = "RTS_SCENARIO_JIT"
@@ -46,20 +45,14 @@ def exact_kernel() -> ModuleType | None:
 
 def _load() -> ModuleType | None:
     try:
-        import numba
+        import numba  # noqa: F401
     except ImportError:  # not installed, or a numba that does not support this numpy
         return None
     try:
         return importlib.import_module(_KERNEL_MODULE)
     except RuntimeError:
-        # numba raises this when it finds no writable place for its cache: compile into a
-        # directory of our own (no reuse across processes, but no failure).
-        sys.modules.pop(_KERNEL_MODULE, None)
-    try:
-        config: Any = numba.config
-        config.CACHE_DIR = tempfile.mkdtemp(prefix="rts-scenario-numba-")
-        return importlib.import_module(_KERNEL_MODULE)
-    except (RuntimeError, OSError):
+        # numba raises this when no cache location is writable. Compiling in every process
+        # (seconds) would cost more than the kernel saves on most runs: use the numpy code.
         sys.modules.pop(_KERNEL_MODULE, None)
         return None
 
