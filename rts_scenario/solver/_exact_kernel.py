@@ -389,6 +389,7 @@ def solve_targets(  # pragma: no cover
     """
     n_quads = tab_re.shape[0]
     n_elements = iy.size
+    phase_tol = tol[_PHASE]
     if locate:
         _locate(angle, other, column_az, row_el, lines, boxes, edge_tol, quad)
     has_phase = phase_table.shape[1] > 0
@@ -483,9 +484,18 @@ def solve_targets(  # pragma: no cover
                         work[5, b] = _atan_small(_dot(_row(acc_im, 0, b), w),
                                                  _dot(_row(acc_re, 0, b), w))
                 for b in range(nb):
-                    _solve_one(order[start + b], acc_re, acc_im, b, _row(work, 0, b),
-                               work[4, b] != 0.0, work[5, b], centrosymmetric, test, row_scale, tol,
-                               codes, weights, reason, margin)
+                    n = order[start + b]
+                    ok = work[4, b] != 0.0
+                    if test or (not centrosymmetric and ok and not abs(work[5, b]) <= phase_tol):
+                        _solve_one(n, acc_re, acc_im, b, _row(work, 0, b), ok, work[5, b],
+                                   centrosymmetric, test, row_scale, tol, codes, weights, reason,
+                                   margin)
+                    else:
+                        # Solved at phase 0 (or not at all), no curvature test: the common case.
+                        _store(n, _row(work, 0, b), codes[_OK] if ok else codes[_NO_SOLUTION],
+                               codes[_OK], weights, reason)
+                        if margin.size:
+                            margin[n] = np.nan
 
 
 @_jit
@@ -532,14 +542,16 @@ def _solve_one(n, acc_re, acc_im, b, w, ok, res, centrosymmetric, test, row_scal
         code = codes[_NO_SOLUTION]
     if test:
         # `exact._curvature_margin`: largest Hessian eigenvalue of |B|^2 / 2 over |B|^2.
-        bs = [complex(_dot(_row(acc_re, 4 * term, b), w), _dot(_row(acc_im, 4 * term, b), w))
-              for term in range(6)]
-        cb = bs[0].conjugate()
-        h_uu = (cb * bs[3]).real + abs(bs[1]) ** 2
-        h_us = (cb * bs[4]).real + (bs[1].conjugate() * bs[2]).real
-        h_ss = (cb * bs[5]).real + abs(bs[2]) ** 2
+        b0, b_u, b_s = _term(acc_re, acc_im, 0, b, w), _term(acc_re, acc_im, 1, b, w), \
+            _term(acc_re, acc_im, 2, b, w)
+        b_uu, b_us, b_ss = _term(acc_re, acc_im, 3, b, w), _term(acc_re, acc_im, 4, b, w), \
+            _term(acc_re, acc_im, 5, b, w)
+        cb = b0.conjugate()
+        h_uu = (cb * b_uu).real + abs(b_u) ** 2
+        h_us = (cb * b_us).real + (b_u.conjugate() * b_s).real
+        h_ss = (cb * b_ss).real + abs(b_s) ** 2
         largest = 0.5 * (h_uu + h_ss) + math.sqrt(0.25 * (h_uu - h_ss) ** 2 + h_us**2)
-        power = abs(bs[0]) ** 2
+        power = abs(b0) ** 2
         value = largest / (power if power > 0.0 else 1.0)
         if margin.size:
             margin[n] = value
@@ -547,9 +559,21 @@ def _solve_one(n, acc_re, acc_im, b, w, ok, res, centrosymmetric, test, row_scal
             code = codes[_SPLIT]
     elif margin.size:
         margin[n] = np.nan
+    _store(n, w, code, codes[_OK], weights, reason)
+
+
+@_jit
+def _term(acc_re, acc_im, term, b, w):  # pragma: no cover
+    """``sum_q w_q`` times response ``term`` (f, f_u, f_s, f_uu, f_us, f_ss) of column ``b``."""
+    return complex(_dot(_row(acc_re, 4 * term, b), w), _dot(_row(acc_im, 4 * term, b), w))
+
+
+@_jit
+def _store(n, w, code, ok_code, weights, reason):  # pragma: no cover
+    """Write target ``n``: its reason and weights scaled to a largest of 1 (0 unless OK)."""
     reason[n] = code
-    if code == codes[_OK]:
-        top = max(max(w[0], w[1]), max(w[2], w[3]))
+    if code == ok_code:
+        top = _larger(_larger(w[0], w[1]), _larger(w[2], w[3]))
         top = top if top > 0.0 else 1.0
         for q in range(4):
             weights[n, q] = w[q] / top
