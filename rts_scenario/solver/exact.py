@@ -363,6 +363,8 @@ class ExactTables:
         The first quad's response (the layout and exponential plans all quads share).
     centrosymmetric : bool
     row_scale : float
+    y_indirect, z_indirect : ndarray of int
+        Coordinates whose exponential is the conjugate of another's (see `arrays._ExpPlan`).
     """
 
     tab_re: FloatArray
@@ -373,6 +375,8 @@ class ExactTables:
     response: SourceResponse
     centrosymmetric: bool
     row_scale: float
+    y_indirect: NDArray[np.int64]
+    z_indirect: NDArray[np.int64]
 
     @classmethod
     def of(cls, quads: Sequence[ExactQuad]) -> ExactTables:
@@ -395,6 +399,8 @@ class ExactTables:
             phase_origin=origin, phase_table=np.ascontiguousarray(phase),
             curvature=np.array([q.check_local_max for q in quads]), response=first.response,
             centrosymmetric=first.centrosymmetric, row_scale=first.row_scale,
+            y_indirect=_indirect(first.response._y_plan),
+            z_indirect=_indirect(first.response._z_plan),
         )
 
     def solve(
@@ -428,8 +434,8 @@ class ExactTables:
         kernel.solve_targets(
             np.ascontiguousarray(az, dtype=np.float64), np.ascontiguousarray(el, dtype=np.float64),
             scale, quad, self.tab_re, self.tab_im, resp.k, resp._iy, resp._iz,
-            resp.y_distinct, y_plan.direct, _indirect(y_plan), y_plan.mirror, y_plan.progression,
-            resp.z_distinct, z_plan.direct, _indirect(z_plan), z_plan.mirror, z_plan.progression,
+            resp.y_distinct, y_plan.direct, self.y_indirect, y_plan.mirror, y_plan.progression,
+            resp.z_distinct, z_plan.direct, self.z_indirect, z_plan.mirror, z_plan.progression,
             self.phase_origin, self.phase_table, self.centrosymmetric, self.row_scale,
             self.curvature if curvature is None else curvature, _TOLERANCES, _CODES,
             weights, reason, margin, locate,
