@@ -179,6 +179,23 @@ def test_no_writable_cache_falls_back_to_numpy():
     subprocess.run([sys.executable, "-c", code], check=True, env=env, timeout=120)
 
 
+def test_auto_mode_loads_the_kernel_after_enough_targets():
+    code = (
+        "import sys, numpy as np, rts_scenario as rs\n"
+        "from rts_scenario.solver import compiled\n"
+        "rig, array = rs.Rig.preset('kit-table1'), rs.VirtualArray.preset('awr1843boost')\n"
+        "compiled.LOAD_AFTER_TARGETS = 1500\n"
+        "az = np.linspace(-2, 2, 1000)\n"
+        "first = rs.solve_weights(az, az, rig=rig, array=array)\n"
+        "assert 'numba' not in sys.modules\n"
+        "second = rs.solve_weights(az, az, rig=rig, array=array)\n"
+        "assert compiled._loaded and compiled._loaded[0] is not None\n"
+        "assert np.abs(first.weights - second.weights).max() < 1e-12\n"
+    )
+    env = {**os.environ, compiled.JIT_ENV: "auto"}
+    subprocess.run([sys.executable, "-c", code], check=True, env=env, timeout=120)
+
+
 def test_import_does_not_load_numba():
     code = ("import sys, rts_scenario, rts_scenario.solver\n"
             "assert 'numba' not in sys.modules\n")

@@ -139,9 +139,9 @@ def solve_weights(
             f"angles, grid shape, element positions, wavelength, method and FE response model: "
             f"get it from solver_plan(rig, array, method, model)"
         )
-    # Compile (or load) the kernel here, not in the pool's threads.
-    kernel = compiled.exact_kernel() if plan.exact_tables is not None else None
+    # Load (or compile) the kernel here, not in the pool's threads.
     n = az.size
+    kernel = compiled.exact_kernel(n) if plan.exact_tables is not None else None
     weights = np.zeros((n, 4))
     quad = np.full(n, -1, dtype=np.int64)
     reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)

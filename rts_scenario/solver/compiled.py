@@ -9,7 +9,11 @@ cache directory; ``$NUMBA_CACHE_DIR`` first when set). Compiling takes several s
 where no cache location can be written the numpy code runs instead (set ``NUMBA_CACHE_DIR`` to
 a writable directory to get the kernel there), so a read-only install never fails.
 
-Set ``RTS_SCENARIO_JIT=off`` to run the numpy code even where numba is installed.
+Loading numba and the cached kernel takes about half a second, what the numpy code needs for
+about a million targets, so by default (``RTS_SCENARIO_JIT=auto``) a process loads the kernel
+only once it has solved `LOAD_AFTER_TARGETS` targets: a scene of a few thousand target-frames
+never pays for it, a sweep over millions soon does. ``RTS_SCENARIO_JIT=on`` loads it at the
+first solve, ``off`` never.
 """
 
 from __future__ import annotations
@@ -20,23 +24,40 @@ import sys
 import threading
 from types import ModuleType
 
-# Environment variable that turns the compiled kernels off ("off", "0", "no" or "false").
+# Environment variable choosing when to use the compiled kernels: "auto" (default), "on", "off".
 JIT_ENV = "RTS_SCENARIO_JIT"
+# With "auto", targets a process solves with the numpy code before it loads the kernel.
+LOAD_AFTER_TARGETS = 1_000_000
 _KERNEL_MODULE = f"{__package__}._exact_kernel"
 _LOCK = threading.Lock()
 _loaded: list[ModuleType | None] = []
+_solved_targets = [0]
 
 
-def enabled() -> bool:
-    """Whether the compiled kernels may be used (``$RTS_SCENARIO_JIT`` is not off)."""
-    return os.environ.get(JIT_ENV, "").strip().lower() not in ("off", "0", "no", "false")
+def mode() -> str:
+    """``$RTS_SCENARIO_JIT`` as one of "auto", "on", "off" (unknown values count as "auto")."""
+    value = os.environ.get(JIT_ENV, "").strip().lower()
+    if value in ("off", "0", "no", "false"):
+        return "off"
+    return "on" if value in ("on", "1", "yes", "true") else "auto"
 
 
-def exact_kernel() -> ModuleType | None:
-    """Return the exact method's compiled kernel module, or ``None`` (no numba, or off)."""
-    if not enabled():
+def exact_kernel(n_targets: int | None = None) -> ModuleType | None:
+    """Return the exact method's compiled kernel module for a solve, or ``None`` (numpy).
+
+    ``n_targets``: the solve's size, counted towards `LOAD_AFTER_TARGETS` in "auto" mode
+    (0: the kernel if it is loaded already); ``None`` asks for the kernel now (loading it
+    unless turned off). ``None`` is returned
+    where numba is missing, turned off, or has nowhere to cache the kernel.
+    """
+    chosen = mode()
+    if chosen == "off":
         return None
     if not _loaded:
+        if n_targets is not None and chosen == "auto":
+            _solved_targets[0] += n_targets
+            if _solved_targets[0] < LOAD_AFTER_TARGETS:
+                return None
         with _LOCK:
             if not _loaded:
                 _loaded.append(_load())
@@ -57,4 +78,4 @@ def _load() -> ModuleType | None:
         return None
 
 
-__all__ = ["JIT_ENV", "enabled", "exact_kernel"]
+__all__ = ["JIT_ENV", "LOAD_AFTER_TARGETS", "exact_kernel", "mode"]

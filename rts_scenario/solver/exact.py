@@ -206,10 +206,11 @@ class ExactQuad:
         ``|B|^2``; negative at a strict local maximum. Runs the compiled kernel when it is
         available (`rts_scenario.solver.compiled`), else `solve_numpy`.
         """
-        kernel = compiled.exact_kernel()
+        n = np.size(az_rad)
+        # Counted by `solve_weights` (the driver) already, not again per quad.
+        kernel = compiled.exact_kernel(0)
         if kernel is None:
             return self.solve_numpy(az_rad, el_rad, curvature)
-        n = np.size(az_rad)
         weights = np.empty((n, 4))
         reason = np.empty(n, dtype=np.uint8)
         margin = np.empty(n if curvature else 0)
