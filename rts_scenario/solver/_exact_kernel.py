@@ -435,10 +435,14 @@ def solve_targets(  # pragma: no cover
             table_im = tab_im[qd]
             for start in range(count[qd], count[qd + 1], _BLOCK):
                 nb = min(_BLOCK, count[qd + 1] - start)
+                # Gather the block's angles first: the sines and cosines then vectorize.
                 for b in range(nb):
                     n = order[start + b]
-                    sin_az, _ = _sincos(angle[n] * scale)
-                    sin_el, cos_el = _sincos(other[n] * scale)
+                    us[b] = angle[n] * scale
+                    ss[b] = other[n] * scale
+                for b in range(nb):
+                    sin_az, _ = _sincos(us[b])
+                    sin_el, cos_el = _sincos(ss[b])
                     us[b] = cos_el * sin_az
                     ss[b] = sin_el
                 _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct, y_indirect,
@@ -451,7 +455,9 @@ def solve_targets(  # pragma: no cover
                     u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
                     table = phase_table[qd]
                     for b in range(nb):
-                        sin_p, cos_p = _sincos(_phase_at(us[b], ss[b], u0, s0, du, ds, table))
+                        step_re[b] = _phase_at(us[b], ss[b], u0, s0, du, ds, table)
+                    for b in range(nb):  # apart from the table look-ups: vectorizes
+                        sin_p, cos_p = _sincos(step_re[b])
                         step_re[b] = cos_p
                         step_im[b] = -sin_p
                     for i in range(z_coords.size):
