@@ -148,7 +148,8 @@ def solve_weights(
 
     # Each quad's share of a chunk should stay large enough to amortize the per-call overhead
     # (threads share the GIL between numpy calls: fewer, larger calls run more in parallel).
-    chunk = CHUNK * min(len(plan.kernels), 8)
+    # The compiled kernel takes every quad in one call: chunks of CHUNK balance the threads.
+    chunk = CHUNK if kernel is not None else CHUNK * min(len(plan.kernels), 8)
 
     def run(start: int) -> None:
         part = slice(start, start + chunk)
