@@ -23,8 +23,7 @@ from numba import njit
 # the loops over a block free of branches, so they compile to vector instructions; every
 # division by a possible zero is guarded by a select, as in the numpy code. "contract" allows
 # fused multiply-adds (one rounding instead of two; no reordering of sums).
-_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy", "fastmath": {"contract"}}
-_jit = njit(**_OPTIONS)
+_jit = njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 
 # Indices into the ``tol`` argument.
 _NEGATIVE, _RANK, _GAIN, _RESIDUAL, _PHASE, _ITERATIONS = range(6)
@@ -241,7 +240,7 @@ def _boundary(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
 
 # Inlined by numba: LLVM alone does not inline it, and the call would keep the loop over a
 # block from being vectorized.
-@njit(**_OPTIONS, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _project(f, r1, r2, rank_floor, gain_tol, negative_tol):  # pragma: no cover
     """Projection of ``f`` onto the null space of ``r1, r2``: ``(w, e1, e2, gain_floor, ok)``."""
     e1 = _unit(r1, rank_floor)
