@@ -26,6 +26,7 @@ from ..quads import assign_quads
 from ..responses import FrontEndModel
 from ..rig import Rig
 from . import compiled
+from .globalmax import GlobalMaxCheck
 from .plan import (
     METHODS,
     SolverPlan,
@@ -226,11 +227,8 @@ def _solve_chunk(
                 weights[hit], reason[hit] = w, r
         for q, check in enumerate(plan.checks):
             if check is not None:
-                idx = np.flatnonzero((quad == q) & (reason == Reason.OK))
-                split = idx[check.splits(np.radians(az_deg[idx]), np.radians(el_deg[idx]),
-                                         weights[idx])]
-                reason[split] = Reason.SPLIT
-                weights[split] = 0.0
+                _mark_splits(check, np.flatnonzero((quad == q) & (reason == Reason.OK)),
+                             np.radians(az_deg), np.radians(el_deg), weights, reason)
         if len(plan.kernels) > 1:
             _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
         return
@@ -262,10 +260,23 @@ def _solve_in(
     weights, reason = plan.kernels[q].solve(az, el)
     check = plan.checks[q]
     if check is not None:
-        ok = np.flatnonzero(reason == Reason.OK)
-        reason[ok[check.splits(az[ok], el[ok], weights[ok])]] = Reason.SPLIT
+        _mark_splits(check, np.flatnonzero(reason == Reason.OK), az, el, weights, reason)
     weights[reason != Reason.OK] = 0.0
     return weights, reason
+
+
+def _mark_splits(
+    check: GlobalMaxCheck,
+    rows: NDArray[np.intp],
+    az: FloatArray,
+    el: FloatArray,
+    weights: FloatArray,
+    reason: NDArray[np.uint8],
+) -> None:
+    """Targets ``rows`` whose echoes would split get reason SPLIT and weights 0 (angles: rad)."""
+    split = rows[check.splits(az[rows], el[rows], weights[rows])]
+    reason[split] = Reason.SPLIT
+    weights[split] = 0.0
 
 
 def _retry_neighbours(
