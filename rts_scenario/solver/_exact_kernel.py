@@ -4,9 +4,13 @@ Imported only through `rts_scenario.solver.compiled`, which compiles it on first
 caches the machine code on disk), so neither ``import rts_scenario`` nor a machine without
 numba pays for it. Every function mirrors a numpy function of `rts_scenario.solver.exact` and
 `rts_scenario.arrays` step for step (same tests, same order of operations where it matters), so
-weights agree with the numpy path to rounding and reasons are identical; tests/test_solver_kernel.py
-checks that. One target at a time, without temporaries: the scratch arrays are allocated once per
-call.
+weights agree with the numpy path to rounding and reasons are identical
+(tests/test_solver_kernel.py). Targets go in blocks of `_BLOCK`: sines and cosines (a
+polynomial with Cody-Waite reduction, ~1 ulp, instead of libm's ~20 ns calls), exponentials,
+phase map, response sums and the common case of the weights run as loops over the block that
+compile to vector instructions; the rest (boundary rays, the phase iteration, the curvature
+test) per target on 4-tuples held in registers. No temporaries: the scratch arrays are
+allocated once per call.
 
 Constants and reason codes are arguments, not globals: numba freezes globals into the cached
 machine code, and its cache only watches this file.
