@@ -78,6 +78,31 @@ def test_kernel_matches_numpy_path(case, monkeypatch):
     assert fast.feasible.sum() >= 30  # the comparison covers solved targets, not only misses
 
 
+SQUARE = rs.Rig.from_angles([-5.0, 5.0, -5.0, 5.0], [-8.0, -8.0, 8.0, 8.0])
+EQUAL_AZ = rs.Rig.from_angles([2.0, 2.0, 2.0, 2.0], [-8.0, -8.0, 8.0, 8.0])
+EQUAL_EL = rs.Rig.from_angles([-5.0, 5.0, -5.0, 5.0], [3.0, 3.0, 3.0, 3.0])
+
+
+@pytest.mark.parametrize("array_name", ["paper", "awr1843boost"])
+@pytest.mark.parametrize("rig, az, el", [
+    # Corners, edge midpoints (two FEs reach them; a side edge no superposition reaches).
+    (SQUARE, [-5.0, 5.0, 0.0, 0.0, -5.0, 5.0, -4.9, 4.9], [-8.0, 8.0, -8.0, 8.0, 0, 0, 0, 0]),
+    # Collapsed quads: on the line they span, beside it (degenerate), far away (outside).
+    (EQUAL_AZ, [2.0, 2.0, 2.0, 1.0, 3.0, 2.5, 30.0], [-4.0, 0.0, 7.0, 0.0, 0.0, -4.0, 0.0]),
+    (EQUAL_EL, [-4.0, 0.0, 3.0, 0.0, 0.0, 4.0, 0.0], [3.0, 3.0, 3.0, 2.0, 4.0, 3.5, -30.0]),
+], ids=["square-edges", "equal-azimuths", "equal-elevations"])
+def test_kernel_matches_numpy_path_on_edges_and_degenerate_quads(array_name, rig, az, el,
+                                                                 monkeypatch):
+    kernel_or_skip()
+    array = rs.VirtualArray.preset(array_name)
+    fast = rs.solve_weights(az, el, rig=rig, array=array)
+    monkeypatch.setenv(compiled.JIT_ENV, "off")
+    reference = rs.solve_weights(az, el, rig=rig, array=array)
+    np.testing.assert_array_equal(fast.reason, reference.reason)
+    np.testing.assert_array_equal(fast.quad, reference.quad)
+    np.testing.assert_allclose(fast.weights, reference.weights, rtol=0, atol=WEIGHT_TOL)
+
+
 def test_kernel_differs_only_among_failures_where_the_iteration_is_chaotic(monkeypatch):
     """A quad far wider than the array's beam: almost nothing can be synthesized, and the
     phase iteration hops between weight patterns for many steps. There rounding can end it
