@@ -14,6 +14,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import lru_cache
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -24,6 +25,8 @@ from ..errors import SolverError
 from ..quads import assign_quads
 from ..responses import FrontEndModel
 from ..rig import Rig
+from . import compiled
+from .globalmax import GlobalMaxCheck
 from .plan import (
     METHODS,
     SolverPlan,
@@ -137,18 +140,21 @@ def solve_weights(
             f"angles, grid shape, element positions, wavelength, method and FE response model: "
             f"get it from solver_plan(rig, array, method, model)"
         )
+    # Load (or compile) the kernel here, not in the pool's threads.
     n = az.size
+    kernel = compiled.exact_kernel(n) if plan.exact_tables is not None else None
     weights = np.zeros((n, 4))
     quad = np.full(n, -1, dtype=np.int64)
     reason = np.full(n, Reason.OUTSIDE, dtype=np.uint8)
 
     # Each quad's share of a chunk should stay large enough to amortize the per-call overhead
     # (threads share the GIL between numpy calls: fewer, larger calls run more in parallel).
-    chunk = CHUNK * min(len(plan.kernels), 8)
+    # The compiled kernel takes every quad in one call: chunks of CHUNK balance the threads.
+    chunk = CHUNK if kernel is not None else CHUNK * min(len(plan.kernels), 8)
 
     def run(start: int) -> None:
         part = slice(start, start + chunk)
-        _solve_chunk(plan, az[part], el[part], weights[part], quad[part], reason[part])
+        _solve_chunk(plan, kernel, az[part], el[part], weights[part], quad[part], reason[part])
 
     starts = range(0, n, chunk)
     if len(starts) > 1 and WORKERS > 1:
@@ -192,16 +198,43 @@ def _angles(name: str, values: ArrayLike) -> FloatArray:
 
 def _solve_chunk(
     plan: SolverPlan,
+    kernel: ModuleType | None,
     az_deg: FloatArray,
     el_deg: FloatArray,
     weights: FloatArray,
     quad: NDArray[np.int64],
     reason: NDArray[np.uint8],
 ) -> None:
-    """Solve one chunk into the given output views (weights zeroed, reason OUTSIDE)."""
-    az, el = np.radians(az_deg), np.radians(el_deg)
+    """Solve one chunk into the given output views (weights zeroed, reason OUTSIDE).
+
+    With the compiled ``kernel`` every quad's targets are solved in one pass, in place.
+    """
+    if kernel is not None and plan.exact_tables is not None:
+        tables = plan.exact_tables
+        # The kernel finds the quad of targets in their candidate cell; the rest are scanned.
+        tables.solve(kernel, az_deg, el_deg, _DEGREES, quad, weights, reason, _NO_MARGIN,
+                     geometry=plan.geometry)
+        missed = np.flatnonzero(quad < 0)
+        if missed.size:
+            found, off_line = plan.geometry.assign(az_deg[missed], el_deg[missed])
+            quad[missed] = found
+            reason[missed[off_line]] = Reason.DEGENERATE
+            hit = missed[found >= 0]
+            if hit.size:
+                w, r = np.zeros((hit.size, 4)), np.empty(hit.size, dtype=np.uint8)
+                tables.solve(kernel, az_deg[hit], el_deg[hit], _DEGREES, quad[hit], w, r,
+                             _NO_MARGIN)
+                weights[hit], reason[hit] = w, r
+        for q, check in enumerate(plan.checks):
+            if check is not None:
+                _mark_splits(check, np.flatnonzero((quad == q) & (reason == Reason.OK)),
+                             np.radians(az_deg), np.radians(el_deg), weights, reason)
+        if len(plan.kernels) > 1:
+            _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
+        return
     quad[:], off_line = plan.geometry.assign(az_deg, el_deg)
     reason[off_line] = Reason.DEGENERATE
+    az, el = np.radians(az_deg), np.radians(el_deg)
     first = quad[0] if quad.size else -1
     if first >= 0 and np.all(quad == first):
         weights[:], reason[:] = _solve_in(plan, int(first), az, el)
@@ -217,16 +250,33 @@ def _solve_chunk(
         _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
 
 
+_NO_MARGIN = np.empty(0)
+_DEGREES = np.pi / 180.0
+
+
 def _solve_in(
     plan: SolverPlan, q: int, az: FloatArray, el: FloatArray
 ) -> tuple[FloatArray, NDArray[np.uint8]]:
     weights, reason = plan.kernels[q].solve(az, el)
     check = plan.checks[q]
     if check is not None:
-        ok = np.flatnonzero(reason == Reason.OK)
-        reason[ok[check.splits(az[ok], el[ok], weights[ok])]] = Reason.SPLIT
+        _mark_splits(check, np.flatnonzero(reason == Reason.OK), az, el, weights, reason)
     weights[reason != Reason.OK] = 0.0
     return weights, reason
+
+
+def _mark_splits(
+    check: GlobalMaxCheck,
+    rows: NDArray[np.intp],
+    az: FloatArray,
+    el: FloatArray,
+    weights: FloatArray,
+    reason: NDArray[np.uint8],
+) -> None:
+    """Targets ``rows`` whose echoes would split get reason SPLIT and weights 0 (angles: rad)."""
+    split = rows[check.splits(az[rows], el[rows], weights[rows])]
+    reason[split] = Reason.SPLIT
+    weights[split] = 0.0
 
 
 def _retry_neighbours(

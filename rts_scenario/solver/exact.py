@@ -21,15 +21,20 @@ driver checks that it is the global one.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..arrays import SourceResponse, VirtualArray, direction_cosines
+from ..arrays import SourceResponse, VirtualArray, _ExpPlan, direction_cosines
 from ..beamformer import power_curvature
 from ..errors import SolverError
+from ..quads import EDGE_TOL_DEG, QuadGeometry
 from ..rig import Rig
+from . import compiled
 from .reasons import Reason
 
 FloatArray = NDArray[np.float64]
@@ -198,8 +203,29 @@ class ExactQuad:
         """Solve; with ``curvature``, also test for a local maximum and return its margin.
 
         The margin is the Hessian eigenvalue of ``|B|^2 / 2`` closest to zero, relative to
-        ``|B|^2``; negative at a strict local maximum.
+        ``|B|^2``; negative at a strict local maximum. Runs the compiled kernel when it is
+        available (`rts_scenario.solver.compiled`), else `solve_numpy`.
         """
+        n = np.size(az_rad)
+        # Counted by `solve_weights` (the driver) already, not again per quad.
+        kernel = compiled.exact_kernel(0)
+        if kernel is None:
+            return self.solve_numpy(az_rad, el_rad, curvature)
+        weights = np.empty((n, 4))
+        reason = np.empty(n, dtype=np.uint8)
+        margin = np.empty(n if curvature else 0)
+        self._tables.solve(kernel, az_rad, el_rad, 1.0, np.zeros(n, dtype=np.int64), weights,
+                           reason, margin, curvature=np.array([curvature]))
+        return weights, reason, margin if curvature else None
+
+    @cached_property
+    def _tables(self) -> ExactTables:
+        return ExactTables.of([self])
+
+    def solve_numpy(
+        self, az_rad: FloatArray, el_rad: FloatArray, curvature: bool
+    ) -> tuple[FloatArray, NDArray[np.uint8], FloatArray | None]:
+        """`solve_with_curvature` in numpy, vectorized over the targets (the reference)."""
         u, s = direction_cosines(az_rad, el_rad)
         # For complex responses, evaluate in the frame rotated by the expected phase of B, where
         # the solution is (nearly) the real one; |B| and the weights do not depend on the frame.
@@ -318,6 +344,123 @@ class PhaseMap:
             row = np.clip(i + a - 1, 0, last) * self.NODES
             out += wx[a] * sum(wy[b] * flat[row + cols[b]] for b in range(4))
         return out
+
+
+@dataclass(frozen=True)
+class ExactTables:
+    """The exact quads of one array packed for the compiled kernel, one entry per quad.
+
+    Attributes
+    ----------
+    tab_re, tab_im : ndarray, shape (Q, 24, M)
+        ``SourceResponse.table`` of each quad as ``[term * 4 + fe, v]``, real and imaginary.
+    phase_origin : ndarray, shape (Q, 4)
+        ``u0, s0, du, ds`` of each quad's `PhaseMap`.
+    phase_table : ndarray, shape (Q, n, n)
+        Each quad's `PhaseMap` table; ``n = 0`` for real responses (no phase map).
+    curvature : ndarray, shape (Q,), bool
+        ``check_local_max`` of each quad.
+    response : SourceResponse
+        The first quad's response (the layout and exponential plans all quads share).
+    centrosymmetric : bool
+    row_scale : float
+    y_indirect, z_indirect : ndarray of int
+        Coordinates whose exponential is the conjugate of another's (see `arrays._ExpPlan`).
+    """
+
+    tab_re: FloatArray
+    tab_im: FloatArray
+    phase_origin: FloatArray
+    phase_table: FloatArray
+    curvature: NDArray[np.bool_]
+    response: SourceResponse
+    centrosymmetric: bool
+    row_scale: float
+    y_indirect: NDArray[np.int64]
+    z_indirect: NDArray[np.int64]
+
+    @classmethod
+    def of(cls, quads: Sequence[ExactQuad]) -> ExactTables:
+        """Pack ``quads`` (built for the same array and kind of FE response)."""
+        first = quads[0]
+        if any(q.centrosymmetric != first.centrosymmetric or q.row_scale != first.row_scale
+               or q.response.table.shape != first.response.table.shape for q in quads):
+            raise SolverError("exact quads of different arrays cannot be packed together")
+        # table[term, fe, v] -> [term * 4 + fe, v]
+        tables = np.stack([q.response.table.reshape(-1, q.response.table.shape[-1])
+                           for q in quads])
+        maps = [q.phase_map for q in quads]
+        if all(m is not None for m in maps):
+            origin = np.array([[m.u0, m.s0, m.du, m.ds] for m in maps if m is not None])
+            phase = np.stack([m.table for m in maps if m is not None])
+        else:
+            origin, phase = np.zeros((len(quads), 4)), np.zeros((len(quads), 0, 0))
+        return cls(
+            tab_re=np.ascontiguousarray(tables.real), tab_im=np.ascontiguousarray(tables.imag),
+            phase_origin=origin, phase_table=np.ascontiguousarray(phase),
+            curvature=np.array([q.check_local_max for q in quads]), response=first.response,
+            centrosymmetric=first.centrosymmetric, row_scale=first.row_scale,
+            y_indirect=_indirect(first.response._y_plan),
+            z_indirect=_indirect(first.response._z_plan),
+        )
+
+    def solve(
+        self,
+        kernel: ModuleType,
+        az: FloatArray,
+        el: FloatArray,
+        scale: float,
+        quad: NDArray[np.int64],
+        weights: FloatArray,
+        reason: NDArray[np.uint8],
+        margin: FloatArray,
+        curvature: NDArray[np.bool_] | None = None,
+        geometry: QuadGeometry | None = None,
+    ) -> None:
+        """Solve the targets with ``quad >= 0`` in place (see `ExactQuad.solve_with_curvature`).
+
+        ``az, el`` times ``scale`` are radians; ``quad`` indexes the packed quads;
+        ``weights (N, 4)``, ``reason (N,)`` and ``margin`` (``(N,)``, or empty: not wanted)
+        receive the results. ``curvature`` overrides the quads' local-maximum test. With the
+        rig's ``geometry`` (``az, el`` in degrees, quads packed in the rig's order) ``quad`` is
+        an output: each target's enclosing quad when it is the candidate cell of
+        `rts_scenario.quads.candidate_quads`, else -1 (left unsolved: see
+        `QuadGeometry.assign`).
+        """
+        resp = self.response
+        y_plan, z_plan = resp._y_plan, resp._z_plan
+        locate = geometry is not None
+        if geometry is None:
+            geometry = _NO_GEOMETRY
+        kernel.solve_targets(
+            np.ascontiguousarray(az, dtype=np.float64), np.ascontiguousarray(el, dtype=np.float64),
+            scale, quad, self.tab_re, self.tab_im, resp.k, resp._iy, resp._iz,
+            resp.y_distinct, y_plan.direct, self.y_indirect, y_plan.mirror, y_plan.progression,
+            resp.z_distinct, z_plan.direct, self.z_indirect, z_plan.mirror, z_plan.progression,
+            self.phase_origin, self.phase_table, self.centrosymmetric, self.row_scale,
+            self.curvature if curvature is None else curvature, _TOLERANCES, _CODES,
+            weights, reason, margin, locate,
+            # Copies (tiny): one type for every geometry, so the kernel compiles once.
+            *(np.array(a, dtype=np.float64, order="C") for a in (
+                geometry.column_az_deg, geometry.row_el_deg, geometry.lines, geometry.boxes)),
+            EDGE_TOL_DEG,
+        )
+
+
+def _indirect(plan: _ExpPlan) -> NDArray[np.int64]:
+    return np.setdiff1d(np.arange(plan.mirror.size), plan.direct)
+
+
+# Stands in for the geometry when the quads are given (same types, never read).
+_NO_GEOMETRY = QuadGeometry(
+    polygons=np.zeros((1, 4, 2)), lines=np.zeros((1, 4, 3)), boxes=np.zeros((1, 4)),
+    degenerate=np.zeros(1, dtype=bool), column_az_deg=np.zeros(2), row_el_deg=np.zeros(2),
+)
+# The kernel's constants, in the order it reads them.
+_TOLERANCES = np.array([_NEGATIVE_TOL, _RANK_TOL, _GAIN_TOL, _RESIDUAL_TOL, _PHASE_TOL,
+                        _MAX_ITERATIONS], dtype=np.float64)
+_CODES = np.array([Reason.OK, Reason.NO_SOLUTION, Reason.NOT_CONVERGED, Reason.SPLIT],
+                  dtype=np.uint8)
 
 
 def _catmull_rom(t: FloatArray) -> list[FloatArray]:

@@ -39,7 +39,7 @@ from ..registry import Registry
 from ..responses import FrontEndModel
 from ..rig import Rig
 from . import exact, globalmax
-from .exact import ExactQuad, PhaseMap
+from .exact import ExactQuad, ExactTables, PhaseMap
 from .globalmax import GlobalMaxCheck
 from .reasons import Reason
 
@@ -101,6 +101,8 @@ class SolverPlan:
         Global-maximum check per quad, ``None`` where the survey found no possible split.
     responses : tuple of SourceResponse, length Q
         Response ``f_q`` of each quad's four FEs (paper order) on the array, with derivatives.
+    exact_tables : ExactTables or None
+        The exact method's quads packed for its compiled kernel (other methods: ``None``).
     origin : {"built", "memory", "disk"}
         Where `solver_plan` got this plan from (not part of the plan's value).
     seconds : float
@@ -113,6 +115,7 @@ class SolverPlan:
     kernels: tuple[QuadKernel, ...]
     checks: tuple[GlobalMaxCheck | None, ...]
     responses: tuple[SourceResponse, ...]
+    exact_tables: ExactTables | None = None
     origin: Origin = "built"
     seconds: float = 0.0
 
@@ -187,10 +190,12 @@ def build_plan(
         checks.append(check if can_split else None)
         u, s = direction_cosines(np.radians(rig.az_deg[fes]), np.radians(rig.el_deg[fes]))
         responses.append(array.source_response(u, s, vectors))
+    exact = [k for k in kernels if isinstance(k, ExactQuad)]
     return SolverPlan(
         key=plan_key(rig, array, method, model) if key is None else key, method=method,
         geometry=geometry, kernels=tuple(kernels), checks=tuple(checks),
         responses=tuple(responses),
+        exact_tables=ExactTables.of(exact) if exact and len(exact) == len(kernels) else None,
     )
 
 

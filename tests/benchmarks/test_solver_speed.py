@@ -1,13 +1,30 @@
-"""Solver throughput (run: pytest tests/benchmarks --benchmark-json=benchmarks.json)."""
+"""Solver throughput (run: pytest tests/benchmarks --benchmark-json=benchmarks.json).
+
+``test_exact_against_paper`` prints, per case and from one run (methods alternated, best of
+`ROUNDS`), the paper and exact methods' throughput and their ratio, the exact method's memory
+traffic against the copy bandwidth measured alongside, and the exact method's numpy path (the
+reference the compiled kernel replaces): ``pytest tests/benchmarks/test_solver_speed.py -s``.
+"""
+
+import os
+import time
 
 import numpy as np
 import pytest
 from cascade_arrays import compact_cascade, ti_cascade
 
 import rts_scenario as rs
+import rts_scenario.solver as solver_module
+from rts_scenario.solver import compiled
 from rts_scenario.solver.plan import build_plan
 
 N = 1_000_000
+ROUNDS = 5
+# Bytes a solve streams per target: az and el in (float64), weights (4 x float64), quad (int64)
+# and reason (uint8) out.
+BYTES_PER_TARGET = 8 + 8 + 4 * 8 + 8 + 1
+# Acceptance: the exact method at least as fast as the paper's closed form, same run.
+EXACT_OVER_PAPER = 1.0
 
 
 @pytest.fixture(scope="module")
@@ -95,3 +112,105 @@ def test_solve_weights_modeled_responses_1e6(benchmark, targets, fe_responses):
                              iterations=1)
     assert sol.feasible.all()
     benchmark.extra_info["target_frames_per_s"] = N / benchmark.stats.stats.min
+
+
+def _copy_bandwidth_bytes_per_s(rounds=ROUNDS, size=1 << 25):
+    """Streaming bandwidth: bytes read plus written per second by a large ``np.copyto``."""
+    src, dst = np.ones(size), np.empty(size)
+    best = np.inf
+    for _ in range(rounds):
+        start = time.perf_counter()
+        np.copyto(dst, src)
+        best = min(best, time.perf_counter() - start)
+    return 2 * src.nbytes / best
+
+
+def _best_alternating(runs, rounds=ROUNDS):
+    """Best wall time of each callable, the callables alternated round by round."""
+    best = [np.inf] * len(runs)
+    for _ in range(rounds):
+        for i, run in enumerate(runs):
+            start = time.perf_counter()
+            run()
+            best[i] = min(best[i], time.perf_counter() - start)
+    return best
+
+
+def _numpy_path(solve):
+    def run():
+        os.environ[compiled.JIT_ENV] = "off"
+        try:
+            solve()
+        finally:
+            del os.environ[compiled.JIT_ENV]
+    return run
+
+
+def _modeled():
+    from rts_scenario.radar import RadarProfile
+    from rts_scenario.schedule.build import solver_inputs
+
+    return solver_inputs(RadarProfile.preset("awr1843boost"), "modeled")
+
+
+SPEED_CASES = {
+    "kit-table1 paper": ("kit-table1", lambda: (rs.VirtualArray.preset("paper"), None)),
+    "kit-table1 awr1843boost": ("kit-table1",
+                                lambda: (rs.VirtualArray.preset("awr1843boost"), None)),
+    "wide-3x5 awr1843boost": ("wide-3x5", lambda: (rs.VirtualArray.preset("awr1843boost"), None)),
+    "kit-table1 modeled awr1843boost": ("kit-table1", _modeled),
+}
+
+
+@pytest.mark.parametrize("case", list(SPEED_CASES))
+def test_exact_against_paper(benchmark, case, monkeypatch):
+    """Exact (compiled kernel) vs paper vs exact's numpy path, one run, alternated.
+
+    The paper method has no modeled-response variant: that case compares the exact method
+    with its own numpy path only.
+    """
+    if compiled.exact_kernel() is None:
+        pytest.skip("numba (the 'fast' extra) is not installed: nothing to compare")
+    monkeypatch.delenv(compiled.JIT_ENV, raising=False)
+    rig_name, inputs = SPEED_CASES[case]
+    rig = rs.Rig.preset(rig_name)
+    array, model = inputs()
+    rng = np.random.default_rng(0 if rig_name == "kit-table1" else 1)
+    half_az, half_el = (3.0, 6.0) if rig_name == "kit-table1" else (20.0, 8.0)
+    az, el = rng.uniform(-half_az, half_az, N), rng.uniform(-half_el, half_el, N)
+
+    def exact():
+        return rs.solve_weights(az, el, rig=rig, array=array, model=model)
+
+    def paper():
+        return rs.solve_weights(az, el, rig=rig, array=array, method="paper")
+
+    runs = [exact, _numpy_path(exact)] + ([paper] if model is None else [])
+    for run in runs:  # plans built or loaded, the kernel compiled or loaded
+        run()
+    assert exact().feasible.all()
+    copy_bps = _copy_bandwidth_bytes_per_s()
+    times = _best_alternating(runs)
+    copy_bps = max(copy_bps, _copy_bandwidth_bytes_per_s())
+    exact_s, numpy_s = times[0], times[1]
+    solver_bps = BYTES_PER_TARGET * N / exact_s
+    line = (f"\n{case}: exact {N / exact_s / 1e6:.2f} M/s (numpy path {N / numpy_s / 1e6:.2f}, "
+            f"kernel {numpy_s / exact_s:.1f}x)")
+    if model is None:
+        paper_s = times[2]
+        line += (f"; paper {N / paper_s / 1e6:.2f} M/s; exact/paper {paper_s / exact_s:.2f}x")
+    line += (f"; exact streams {solver_bps / 1e9:.2f} GB/s ({BYTES_PER_TARGET} B/target) = "
+             f"{100 * solver_bps / copy_bps:.1f} % of copy bandwidth {copy_bps / 1e9:.1f} GB/s "
+             f"(np.copyto, read + written); {solver_module.WORKERS} threads")
+    print(line)
+    benchmark.group = f"solve_weights N=1e6 {case}: exact vs paper"
+    benchmark.extra_info.update(
+        exact_targets_per_s=N / exact_s, exact_numpy_targets_per_s=N / numpy_s,
+        solver_bytes_per_s=solver_bps, copy_bytes_per_s=copy_bps,
+    )
+    if model is None:
+        benchmark.extra_info["paper_targets_per_s"] = N / times[2]
+    benchmark.pedantic(exact, rounds=1, iterations=1)
+    assert numpy_s / exact_s >= 1.0  # the kernel never loses to the numpy code
+    if model is None:
+        assert times[2] / exact_s >= EXACT_OVER_PAPER

@@ -1,0 +1,593 @@
+"""Compiled per-target kernel of the exact method (numba), the same algorithm as `exact`.
+
+Imported only through `rts_scenario.solver.compiled`, which compiles it on first use (and
+caches the machine code on disk), so neither ``import rts_scenario`` nor a machine without
+numba pays for it. Every function mirrors a numpy function of `rts_scenario.solver.exact` and
+`rts_scenario.arrays` step for step (same tests, same order of operations where it matters), so
+weights agree with the numpy path to rounding and reasons are identical
+(tests/test_solver_kernel.py). Targets go in blocks of `_BLOCK`: sines and cosines (a
+polynomial with Cody-Waite reduction, ~1 ulp, instead of libm's ~20 ns calls), exponentials,
+phase map, response sums and the common case of the weights run as loops over the block that
+compile to vector instructions; the rest (boundary rays, the phase iteration, the curvature
+test) per target on 4-tuples held in registers. No temporaries: the scratch arrays are
+allocated once per call.
+
+Constants and reason codes are arguments, not globals: numba freezes globals into the cached
+machine code, and its cache only watches this file.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# nogil: the solver's thread pool runs chunks in parallel. IEEE division (no zero check) keeps
+# the loops over a block free of branches, so they compile to vector instructions; every
+# division by a possible zero is guarded by a select, as in the numpy code. "contract" allows
+# fused multiply-adds (one rounding instead of two; no reordering of sums).
+_jit = njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
+
+# Indices into the ``tol`` argument.
+_NEGATIVE, _RANK, _GAIN, _RESIDUAL, _PHASE, _ITERATIONS = range(6)
+# Indices into the ``codes`` argument.
+_OK, _NO_SOLUTION, _NOT_CONVERGED, _SPLIT = range(4)
+
+
+# pi/2 in three parts (the first two with trailing zero bits, so n * part is exact for the
+# n < 2^20 quadrants reached here) and 2/pi, for the argument reduction of `_sincos`.
+_PIO2_HI = 1.5707963267341256
+_PIO2_MID = 6.077100506303966e-11
+_PIO2_LO = 2.0222662487959506e-21
+_TWO_OVER_PI = 0.6366197723675814
+# Taylor coefficients of sin and cos on |r| <= pi/4: the first term left out is below 1e-19.
+_S1, _S2, _S3, _S4, _S5, _S6, _S7, _S8 = (
+    (-1.0) ** i / math.factorial(2 * i + 1) for i in range(1, 9))
+_C1, _C2, _C3, _C4, _C5, _C6, _C7, _C8, _C9 = (
+    (-1.0) ** i / math.factorial(2 * i) for i in range(1, 10))
+
+
+@_jit
+def _sincos(x):  # pragma: no cover
+    """``(sin x, cos x)`` to about 1 ulp for |x| < 1e5, several times faster than libm's pair.
+
+    The solver's phases reach a few hundred radians at most (k times the aperture).
+    """
+    n = round(x * _TWO_OVER_PI)
+    r = ((x - n * _PIO2_HI) - n * _PIO2_MID) - n * _PIO2_LO
+    z = r * r
+    sin_r = _S8 * z + _S7
+    sin_r = ((((((sin_r * z + _S6) * z + _S5) * z + _S4) * z + _S3) * z + _S2) * z + _S1)
+    sin_r = r + r * z * sin_r
+    cos_r = _C9 * z + _C8
+    cos_r = (((((((cos_r * z + _C7) * z + _C6) * z + _C5) * z + _C4) * z + _C3) * z + _C2)
+             * z + _C1)
+    cos_r = 1.0 + z * cos_r
+    # x = r + quadrant pi/2: rotate by quadrants without branches (random quadrants mispredict).
+    quadrant = int(n)
+    odd = quadrant & 1
+    sin_x = cos_r if odd else sin_r
+    cos_x = sin_r if odd else cos_r
+    return sin_x * (1 - (quadrant & 2)), cos_x * (1 - ((quadrant + 1) & 2))
+
+
+@_jit
+def _atan_small(y, x):  # pragma: no cover
+    """``atan2(y, x)`` by its series where ``|y| <= 1e-3 x`` (exact to rounding), else NaN.
+
+    Branch-free, so a block of converged phase residuals is one vector loop.
+    """
+    t = y / x
+    t2 = t * t
+    series = t * (1.0 - t2 * (1.0 / 3.0 - t2 * (0.2 - t2 * (1.0 / 7.0 - t2 / 9.0))))
+    return series if (x > 0.0) & (abs(y) <= 1e-3 * x) else np.nan
+
+
+@_jit
+def _atan2(y, x):  # pragma: no cover
+    small = _atan_small(y, x)
+    return small if small == small else math.atan2(y, x)
+
+
+@_jit
+def _exp_rows(out_re, out_im, step_re, step_im, k, coords, direct, indirect, mirror,
+              progression, x, nb):  # pragma: no cover
+    """``exp(-j k c x[b])`` for every coordinate ``c`` and target ``b < nb`` (`arrays._exp_rows`).
+
+    ``out_re, out_im``: shape ``(len(coords), B)``; ``step_re, step_im``: scratch ``(B,)``.
+    """
+    if progression:
+        first = direct[0]
+        phase = -k * coords[first]
+        step = -k * (coords[direct[1]] - coords[first])
+        for b in range(nb):
+            sin_t, cos_t = _sincos(phase * x[b])
+            out_re[first, b] = cos_t
+            out_im[first, b] = sin_t
+            sin_t, cos_t = _sincos(step * x[b])
+            step_re[b] = cos_t
+            step_im[b] = sin_t
+        for i in range(1, direct.size):
+            prev, cur = direct[i - 1], direct[i]
+            for b in range(nb):
+                re, im = out_re[prev, b], out_im[prev, b]
+                out_re[cur, b] = re * step_re[b] - im * step_im[b]
+                out_im[cur, b] = re * step_im[b] + im * step_re[b]
+    else:
+        for i in direct:
+            phase = -k * coords[i]
+            for b in range(nb):
+                sin_t, cos_t = _sincos(phase * x[b])
+                out_re[i, b] = cos_t
+                out_im[i, b] = sin_t
+    for i in indirect:
+        m = mirror[i]
+        for b in range(nb):
+            out_re[i, b] = out_re[m, b]
+            out_im[i, b] = -out_im[m, b]
+
+
+@_jit
+def _catmull_rom(t):  # pragma: no cover
+    t2 = t * t
+    t3 = t * t * t
+    return (0.5 * (-t3 + 2 * t2 - t), 0.5 * (3 * t3 - 5 * t2 + 2),
+            0.5 * (-3 * t3 + 4 * t2 + t), 0.5 * (t3 - t2))
+
+
+@_jit
+def _clamp(i, last):  # pragma: no cover
+    return 0 if i < 0 else (last if i > last else i)
+
+
+@_jit
+def _phase_at(u, s, u0, s0, du, ds, table):  # pragma: no cover
+    """Bicubic phase map at ``(u, s)`` (`exact.PhaseMap.__call__`)."""
+    last = table.shape[0] - 1
+    x = (u - u0) / du
+    x = 0.0 if x < 0.0 else (float(last) if x > last else x)
+    y = (s - s0) / ds
+    y = 0.0 if y < 0.0 else (float(last) if y > last else y)
+    i = int(x)
+    i = i if i < last - 1 else last - 1
+    j = int(y)
+    j = j if j < last - 1 else last - 1
+    wx = _catmull_rom(x - i)
+    wy = _catmull_rom(y - j)
+    c0, c1, c2, c3 = _clamp(j - 1, last), _clamp(j, last), _clamp(j + 1, last), _clamp(j + 2, last)
+    out = 0.0
+    for a in range(4):
+        row = _clamp(i + a - 1, last)
+        inner = 0.0 + wy[0] * table[row, c0]
+        inner += wy[1] * table[row, c1]
+        inner += wy[2] * table[row, c2]
+        inner += wy[3] * table[row, c3]
+        out += wx[a] * inner
+    return out
+
+
+# The per-target algebra works on 4-tuples (one entry per FE): they stay in registers.
+
+
+@_jit
+def _dot(a, b):  # pragma: no cover
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+
+
+@_jit
+def _sub_scaled(y, a, x):  # pragma: no cover
+    """``y - a * x``."""
+    return (y[0] - a * x[0], y[1] - a * x[1], y[2] - a * x[2], y[3] - a * x[3])
+
+
+@_jit
+def _unit(v, floor):  # pragma: no cover
+    norm = math.sqrt(_dot(v, v))
+    scale = 1.0 / norm if norm > floor else 0.0
+    return (v[0] * scale, v[1] * scale, v[2] * scale, v[3] * scale)
+
+
+@_jit
+def _smaller(a, b):  # pragma: no cover
+    return a if a < b else b
+
+
+@_jit
+def _accept(cand, gain_floor, negative_tol):  # pragma: no cover
+    """Norm of a candidate and whether it is feasible (no weight clearly below 0, real gain)."""
+    norm = math.sqrt(_dot(cand, cand))
+    low = _smaller(_smaller(cand[0], cand[1]), _smaller(cand[2], cand[3]))
+    return norm, (low >= -negative_tol * norm) & (norm > gain_floor)
+
+
+@_jit
+def _ray(w, e1, e2, k, p_kk):  # pragma: no cover
+    """``w - w_k / P_kk * P e_k``: the projection with weight ``k`` forced to 0."""
+    ratio = w[k] / p_kk
+    p = (-(e1[0] * e1[k] + e2[0] * e2[k]), -(e1[1] * e1[k] + e2[1] * e2[k]),
+         -(e1[2] * e1[k] + e2[2] * e2[k]), -(e1[3] * e1[k] + e2[3] * e2[k]))
+    return (w[0] - (p[0] + (k == 0)) * ratio, w[1] - (p[1] + (k == 1)) * ratio,
+            w[2] - (p[2] + (k == 2)) * ratio, w[3] - (p[3] + (k == 3)) * ratio)
+
+
+@_jit
+def _boundary(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
+    """`exact._boundary_ray` then, if needed, `exact._boundary_rays`: ``(w, feasible)``."""
+    # Fast path: zero the most negative weight (the first on ties, as argmin).
+    k = 0
+    for q in range(1, 4):
+        if w[q] < w[k]:
+            k = q
+    p_kk = -(e1[k] * e1[k] + e2[k] * e2[k]) + 1.0
+    if p_kk > 1e-12:
+        cand = _ray(w, e1, e2, k, p_kk)
+        _, good = _accept(cand, gain_floor, negative_tol)
+        if good:
+            return cand, True
+    # Every boundary ray; the feasible one of largest norm (gain) wins, the first on ties.
+    best = w
+    best_score = -2.0
+    found = False
+    for k in range(4):
+        p_kk = 1.0 - e1[k] * e1[k] - e2[k] * e2[k]
+        usable = p_kk > 1e-12
+        cand = _ray(w, e1, e2, k, p_kk) if usable else w
+        norm, good = _accept(cand, gain_floor, negative_tol)
+        valid = usable and good
+        score = norm if valid else -1.0
+        if score > best_score:
+            best, best_score = cand, score
+        found = found or valid
+    return best, found
+
+
+# Inlined by numba: LLVM alone does not inline it, and the call would keep the loop over a
+# block from being vectorized.
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _project(f, r1, r2, rank_floor, gain_tol, negative_tol):  # pragma: no cover
+    """Projection of ``f`` onto the null space of ``r1, r2``: ``(w, e1, e2, gain_floor, ok)``."""
+    e1 = _unit(r1, rank_floor)
+    e2 = _unit(_sub_scaled(r2, _dot(r2, e1), e1), rank_floor)
+    w = _sub_scaled(_sub_scaled(f, _dot(f, e1), e1), _dot(f, e2), e2)
+    gain_floor = gain_tol * math.sqrt(_dot(f, f))
+    _, ok = _accept(w, gain_floor, negative_tol)
+    return w, e1, e2, gain_floor, ok
+
+
+@_jit
+def _finish(w, ok, r1, r2, rank_floor, residual_tol):  # pragma: no cover
+    """Clip rounding negatives and check that stationarity still holds."""
+    w = (_larger(w[0], 0.0), _larger(w[1], 0.0), _larger(w[2], 0.0), _larger(w[3], 0.0))
+    w_norm = math.sqrt(_dot(w, w))
+    bound = _larger(residual_tol * math.sqrt(_dot(r1, r1)), rank_floor)
+    ok = ok & (abs(_dot(r1, w)) <= bound * w_norm)
+    bound = _larger(residual_tol * math.sqrt(_dot(r2, r2)), rank_floor)
+    return w, ok & (abs(_dot(r2, w)) <= bound * w_norm)
+
+
+@_jit
+def _larger(a, b):  # pragma: no cover
+    return a if a > b else b
+
+
+@_jit
+def _max_gain_weights(f, r1, r2, row_scale, tol):  # pragma: no cover
+    """`exact.max_gain_weights` for one target: ``(w >= 0, whether it is a solution)``."""
+    rank_floor = tol[_RANK] * row_scale
+    w, e1, e2, gain_floor, ok = _project(f, r1, r2, rank_floor, tol[_GAIN], tol[_NEGATIVE])
+    if not ok:
+        w, ok = _boundary(w, e1, e2, gain_floor, tol[_NEGATIVE])
+    return _finish(w, ok, r1, r2, rank_floor, tol[_RESIDUAL])
+
+
+@_jit
+def _max_gain_weights_block(acc_re, nb, row_scale, tol, work):  # pragma: no cover
+    """`_max_gain_weights` of the unrotated responses of a block of targets, into ``work``.
+
+    Rows of ``work``: 0-3 ``w``, 4 ``ok`` (1.0 or 0.0), 5 left to the caller. The common case
+    runs over the whole block (vector instructions: scalar constants, few output rows, no
+    branches); only targets whose projection leaves the cone take the boundary rays, one by
+    one.
+    """
+    rank_floor = tol[_RANK] * row_scale
+    gain_tol, negative_tol, residual_tol = tol[_GAIN], tol[_NEGATIVE], tol[_RESIDUAL]
+    for b in range(nb):
+        w, _, _, _, ok = _project(_row(acc_re, 0, b), _row(acc_re, 4, b), _row(acc_re, 8, b),
+                                  rank_floor, gain_tol, negative_tol)
+        for q in range(4):
+            work[q, b] = w[q]
+        work[4, b] = 1.0 if ok else 0.0
+    for b in range(nb):
+        if work[4, b] == 0.0:
+            w, e1, e2, gain_floor, _ = _project(_row(acc_re, 0, b), _row(acc_re, 4, b),
+                                                _row(acc_re, 8, b), rank_floor, gain_tol,
+                                                negative_tol)
+            w, ok = _boundary(w, e1, e2, gain_floor, negative_tol)
+            for q in range(4):
+                work[q, b] = w[q]
+            work[4, b] = 1.0 if ok else 0.0
+    for b in range(nb):
+        w, ok = _finish(_row(work, 0, b), work[4, b] != 0.0, _row(acc_re, 4, b),
+                        _row(acc_re, 8, b), rank_floor, residual_tol)
+        for q in range(4):
+            work[q, b] = w[q]
+        work[4, b] = 1.0 if ok else 0.0
+
+
+@_jit
+def _row(acc, first, b):  # pragma: no cover
+    return (acc[first, b], acc[first + 1, b], acc[first + 2, b], acc[first + 3, b])
+
+
+@_jit
+def _rotated(acc_re, acc_im, first, b, c, s):  # pragma: no cover
+    """``Re(exp(-j phi) g)`` of the response rows ``first..first+3`` (c, s: cos, sin phi)."""
+    return (c * acc_re[first, b] + s * acc_im[first, b],
+            c * acc_re[first + 1, b] + s * acc_im[first + 1, b],
+            c * acc_re[first + 2, b] + s * acc_im[first + 2, b],
+            c * acc_re[first + 3, b] + s * acc_im[first + 3, b])
+
+
+@_jit
+def _phase_residual(f_re, f_im, w, c, s):  # pragma: no cover
+    """``arg(f . w exp(-j phi))`` with ``c, s = cos(phi), sin(phi)`` (`exact._phase_residual`)."""
+    b_re = _dot(f_re, w)
+    b_im = _dot(f_im, w)
+    return _atan2(b_im * c - b_re * s, b_re * c + b_im * s)
+
+
+@_jit
+def _locate(az, el, column_az, row_el, lines, boxes, slack, quad):  # pragma: no cover
+    """`quads.candidate_quads`, kept where `quads.inside_quads` holds, else -1."""
+    columns, rows = column_az.size, row_el.size
+    for n in range(az.size):
+        a, e = az[n], el[n]
+        col = 0  # searchsorted (left) minus one, clipped to the cells
+        while col < columns and column_az[col] < a:
+            col += 1
+        col = min(max(col - 1, 0), columns - 2)
+        row = 0
+        while row < rows and row_el[row] < e:
+            row += 1
+        row = min(max(row - 1, 0), rows - 2)
+        q = row * (columns - 1) + col
+        inside = (a >= boxes[q, 0] - slack) and (a <= boxes[q, 1] + slack)
+        inside = inside and (e >= boxes[q, 2] - slack) and (e <= boxes[q, 3] + slack)
+        for i in range(4):
+            inside = inside and lines[q, i, 0] * a + lines[q, i, 1] * e + lines[q, i, 2] >= -slack
+        quad[n] = q if inside else -1
+
+
+# Targets evaluated together: long enough for vector instructions, short enough for L1.
+_BLOCK = 32
+# Targets sorted by quad at a time: their inputs and outputs stay in the L2 cache.
+_SPAN = 4096
+
+
+@_jit
+def solve_targets(  # pragma: no cover
+    angle, other, scale, quad, tab_re, tab_im, k, iy, iz,
+    y_coords, y_direct, y_indirect, y_mirror, y_progression,
+    z_coords, z_direct, z_indirect, z_mirror, z_progression,
+    phase_origin, phase_table, centrosymmetric, row_scale, curvature, tol, codes,
+    weights, reason, margin, locate, column_az, row_el, lines, boxes, edge_tol,
+):
+    """Solve every target whose ``quad`` is >= 0; other rows are left as they are.
+
+    With ``locate`` the quads are found first (``angle, other`` in degrees): the candidate
+    quad from the grid's mean ``column_az`` and ``row_el`` when the target lies in it
+    (``lines, boxes, edge_tol`` as `quads.inside_quads`), else -1 (`quads.QuadGeometry.assign`
+    scans the others for those few).
+
+    ``angle, other``: azimuth and elevation (times ``scale`` gives radians), shape ``(N,)``.
+    ``tab_re, tab_im``: per quad, the response table (`arrays.SourceResponse.table`) as
+    ``(Q, 24, M)``, row ``term * 4 + fe``, column element ``v``; ``iy, iz`` the elements'
+    distinct-coordinate indices, and the exponential plans of both coordinates. Per quad:
+    ``phase_origin`` ``(Q, 4)`` (u0, s0, du, ds) and ``phase_table`` ``(Q, n, n)`` of the phase
+    map (``phase_table.shape[1] == 0``: none), ``curvature`` ``(Q,)`` whether to test for a
+    local maximum. Writes ``weights`` ``(N, 4)`` (normalized, 0 unless OK), ``reason`` and,
+    where tested, ``margin`` (NaN elsewhere; an empty ``margin``: not wanted).
+
+    Targets are taken quad by quad (a counting sort) in blocks: the exponentials and the
+    response sums run over a block at once (vector instructions), the weights per target.
+    """
+    n_quads = tab_re.shape[0]
+    n_elements = iy.size
+    phase_tol = tol[_PHASE]
+    if locate:
+        _locate(angle, other, column_az, row_el, lines, boxes, edge_tol, quad)
+    has_phase = phase_table.shape[1] > 0
+    us = np.empty(_BLOCK)
+    ss = np.empty(_BLOCK)
+    step_re = np.empty(_BLOCK)
+    step_im = np.empty(_BLOCK)
+    ey_re = np.empty((y_coords.size, _BLOCK))
+    ey_im = np.empty((y_coords.size, _BLOCK))
+    ez_re = np.empty((z_coords.size, _BLOCK))
+    ez_im = np.empty((z_coords.size, _BLOCK))
+    look_re = np.empty((n_elements, _BLOCK))
+    look_im = np.empty((n_elements, _BLOCK))
+    acc_re = np.zeros((24, _BLOCK))
+    acc_im = np.zeros((24, _BLOCK))
+    work = np.empty((6, _BLOCK))
+    # Spans of targets small enough for the caches; in each, a counting sort by quad (each
+    # quad's table is then read for whole blocks).
+    count = np.zeros(n_quads + 1, dtype=np.int64)
+    fill = np.zeros(n_quads, dtype=np.int64)
+    order = np.empty(min(_SPAN, angle.size), dtype=np.int64)
+    for span in range(0, angle.size, _SPAN):
+        end = min(span + _SPAN, angle.size)
+        count[:] = 0
+        for n in range(span, end):
+            if quad[n] >= 0:
+                count[quad[n] + 1] += 1
+        for q in range(n_quads):
+            count[q + 1] += count[q]
+        fill[:] = count[:n_quads]
+        for n in range(span, end):
+            if quad[n] >= 0:
+                order[fill[quad[n]]] = n
+                fill[quad[n]] += 1
+        for qd in range(n_quads):
+            test = curvature[qd]
+            rows = 24 if test else 12
+            # Real-valued responses need only the real part (centro-symmetric, no curvature).
+            real_only = centrosymmetric and not test
+            table_re = tab_re[qd]
+            table_im = tab_im[qd]
+            for start in range(count[qd], count[qd + 1], _BLOCK):
+                nb = min(_BLOCK, count[qd + 1] - start)
+                # Gather the block's angles first: the sines and cosines then vectorize.
+                for b in range(nb):
+                    n = order[start + b]
+                    us[b] = angle[n] * scale
+                    ss[b] = other[n] * scale
+                for b in range(nb):
+                    sin_az, _ = _sincos(us[b])
+                    sin_el, cos_el = _sincos(ss[b])
+                    us[b] = cos_el * sin_az
+                    ss[b] = sin_el
+                _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct, y_indirect,
+                          y_mirror, y_progression, us, nb)
+                _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
+                          z_mirror, z_progression, ss, nb)
+                if has_phase:
+                    # Evaluate in the frame rotated by the expected phase of B (see `exact`).
+                    origin = phase_origin[qd]
+                    u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
+                    table = phase_table[qd]
+                    for b in range(nb):
+                        step_re[b] = _phase_at(us[b], ss[b], u0, s0, du, ds, table)
+                    for b in range(nb):  # apart from the table look-ups: vectorizes
+                        sin_p, cos_p = _sincos(step_re[b])
+                        step_re[b] = cos_p
+                        step_im[b] = -sin_p
+                    for i in range(z_coords.size):
+                        for b in range(nb):
+                            re, im = ez_re[i, b], ez_im[i, b]
+                            ez_re[i, b] = re * step_re[b] - im * step_im[b]
+                            ez_im[i, b] = re * step_im[b] + im * step_re[b]
+                for v in range(n_elements):
+                    jy, jz = iy[v], iz[v]
+                    for b in range(nb):
+                        yr, yi, zr, zi = ey_re[jy, b], ey_im[jy, b], ez_re[jz, b], ez_im[jz, b]
+                        look_re[v, b] = yr * zr - yi * zi
+                        look_im[v, b] = yr * zi + yi * zr
+                for r in range(rows):
+                    for b in range(nb):
+                        acc_re[r, b] = 0.0
+                        acc_im[r, b] = 0.0
+                    for v in range(n_elements):
+                        tr, ti = table_re[r, v], table_im[r, v]
+                        if real_only:
+                            for b in range(nb):
+                                acc_re[r, b] += tr * look_re[v, b] - ti * look_im[v, b]
+                        else:
+                            for b in range(nb):
+                                acc_re[r, b] += tr * look_re[v, b] - ti * look_im[v, b]
+                                acc_im[r, b] += tr * look_im[v, b] + ti * look_re[v, b]
+                _max_gain_weights_block(acc_re, nb, row_scale, tol, work)
+                if not centrosymmetric:
+                    # Phase residual at phase 0; NaN where the series does not apply.
+                    for b in range(nb):
+                        w = _row(work, 0, b)
+                        work[5, b] = _atan_small(_dot(_row(acc_im, 0, b), w),
+                                                 _dot(_row(acc_re, 0, b), w))
+                for b in range(nb):
+                    n = order[start + b]
+                    ok = work[4, b] != 0.0
+                    if test or (not centrosymmetric and ok and not abs(work[5, b]) <= phase_tol):
+                        _solve_one(n, acc_re, acc_im, b, _row(work, 0, b), ok, work[5, b],
+                                   centrosymmetric, test, row_scale, tol, codes, weights, reason,
+                                   margin)
+                    else:
+                        # Solved at phase 0 (or not at all), no curvature test: the common case.
+                        _store(n, _row(work, 0, b), codes[_OK] if ok else codes[_NO_SOLUTION],
+                               codes[_OK], weights, reason)
+                        if margin.size:
+                            margin[n] = np.nan
+
+
+@_jit
+def _solve_one(n, acc_re, acc_im, b, w, ok, res, centrosymmetric, test, row_scale, tol, codes,
+               weights, reason, margin):  # pragma: no cover
+    """Weights of target ``n`` from column ``b`` of its responses (rows ``term * 4 + fe``).
+
+    ``w, ok``: `_max_gain_weights` of its unrotated responses; ``res`` their phase residual
+    (NaN: not computed yet).
+    """
+    converged = True
+    if not centrosymmetric:
+        # `exact.ExactQuad._iterate`: secant steps on the phase fixed point.
+        f_re, f_im = _row(acc_re, 0, b), _row(acc_im, 0, b)
+        if res != res:
+            res = _phase_residual(f_re, f_im, w, 1.0, 0.0)
+        prev_phi = 0.0
+        prev_res = res
+        phi = res
+        converged = abs(res) <= tol[_PHASE]
+        if ok and not converged:
+            for _ in range(int(tol[_ITERATIONS])):
+                sn, c = _sincos(phi)
+                w, ok = _max_gain_weights(_rotated(acc_re, acc_im, 0, b, c, sn),
+                                          _rotated(acc_re, acc_im, 4, b, c, sn),
+                                          _rotated(acc_re, acc_im, 8, b, c, sn), row_scale, tol)
+                res = _phase_residual(f_re, f_im, w, c, sn)
+                done = abs(res) <= tol[_PHASE]
+                if done:
+                    converged = True
+                slope = (res - prev_res) / (phi - prev_phi + 1e-300)
+                # Secant step on g(phi) = arg(B(w(phi))) - phi; fixed-point step if flat.
+                step = -res / slope if abs(slope) > 1e-3 else res
+                prev_phi = phi
+                prev_res = res
+                phi += step
+                if done or not ok:
+                    break
+        converged = converged or not ok
+    code = codes[_OK]
+    if not converged:
+        code = codes[_NOT_CONVERGED]
+    if not ok:
+        code = codes[_NO_SOLUTION]
+    if test:
+        # `exact._curvature_margin`: largest Hessian eigenvalue of |B|^2 / 2 over |B|^2.
+        b0, b_u, b_s = _term(acc_re, acc_im, 0, b, w), _term(acc_re, acc_im, 1, b, w), \
+            _term(acc_re, acc_im, 2, b, w)
+        b_uu, b_us, b_ss = _term(acc_re, acc_im, 3, b, w), _term(acc_re, acc_im, 4, b, w), \
+            _term(acc_re, acc_im, 5, b, w)
+        cb = b0.conjugate()
+        h_uu = (cb * b_uu).real + abs(b_u) ** 2
+        h_us = (cb * b_us).real + (b_u.conjugate() * b_s).real
+        h_ss = (cb * b_ss).real + abs(b_s) ** 2
+        largest = 0.5 * (h_uu + h_ss) + math.sqrt(0.25 * (h_uu - h_ss) ** 2 + h_us**2)
+        power = abs(b0) ** 2
+        value = largest / (power if power > 0.0 else 1.0)
+        if margin.size:
+            margin[n] = value
+        if code == codes[_OK] and not (value < 0.0):
+            code = codes[_SPLIT]
+    elif margin.size:
+        margin[n] = np.nan
+    _store(n, w, code, codes[_OK], weights, reason)
+
+
+@_jit
+def _term(acc_re, acc_im, term, b, w):  # pragma: no cover
+    """``sum_q w_q`` times response ``term`` (f, f_u, f_s, f_uu, f_us, f_ss) of column ``b``."""
+    return complex(_dot(_row(acc_re, 4 * term, b), w), _dot(_row(acc_im, 4 * term, b), w))
+
+
+@_jit
+def _store(n, w, code, ok_code, weights, reason):  # pragma: no cover
+    """Write target ``n``: its reason and weights scaled to a largest of 1 (0 unless OK)."""
+    reason[n] = code
+    if code == ok_code:
+        top = _larger(_larger(w[0], w[1]), _larger(w[2], w[3]))
+        top = top if top > 0.0 else 1.0
+        for q in range(4):
+            weights[n, q] = w[q] / top
+    else:
+        for q in range(4):
+            weights[n, q] = 0.0

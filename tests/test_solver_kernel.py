@@ -1,0 +1,227 @@
+"""The exact method's compiled kernel against its numpy reference, and the peak it puts.
+
+The kernel (rts_scenario/solver/_exact_kernel.py) follows the numpy code step for step, so the
+weights agree to rounding (~1e-15; the bound 1e-12 leaves room for the secant iteration, which
+amplifies rounding by its conditioning) and every reason is the same. Targets are spread over
+each rig and a margin around it, so infeasible, split and retried targets are compared too.
+"""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from cascade_arrays import compact_cascade, ti_cascade
+
+import rts_scenario as rs
+from rts_scenario.arrays import direction_cosines
+from rts_scenario.radar import RadarProfile
+from rts_scenario.schedule.build import solver_inputs
+from rts_scenario.solver import compiled, solver_plan
+
+numba = pytest.importorskip(
+    "numba", reason="numba (the 'fast' extra) is not installed: the compiled kernel is not used"
+)
+
+# Weights are normalized to a largest weight of 1: an absolute bound is a relative one.
+WEIGHT_TOL = 1e-12
+
+
+def kernel_or_skip():
+    kernel = compiled.exact_kernel()
+    if kernel is None:
+        pytest.skip("the compiled kernel is unavailable here (RTS_SCENARIO_JIT off, or no "
+                    "writable numba cache)")
+    return kernel
+
+
+def modeled():
+    return solver_inputs(RadarProfile.preset("awr1843boost"), "modeled")
+
+
+# A quad 4 deg x 6 deg wide (the benchmark's): narrow enough for the cascades' sharp beams.
+NARROW = rs.Rig.from_angles([-2.0, 2.0, -2.0, 2.0], [-3.0, -3.0, 3.0, 3.0], name="narrow")
+
+CASES = {
+    "paper": lambda: (rs.Rig.preset("kit-table1"), rs.VirtualArray.preset("paper"), None),
+    "awr1843boost": lambda: (rs.Rig.preset("kit-table1"), rs.VirtualArray.preset("awr1843boost"),
+                             None),
+    "ti-cascade": lambda: (NARROW, ti_cascade(), None),
+    "compact-cascade": lambda: (NARROW, compact_cascade(), None),
+    "modeled": lambda: (rs.Rig.preset("kit-table1"), *modeled()),
+    "wide-3x5 awr1843boost": lambda: (rs.Rig.preset("wide-3x5"),
+                                      rs.VirtualArray.preset("awr1843boost"), None),
+    "wide-3x5 paper": lambda: (rs.Rig.preset("wide-3x5"), rs.VirtualArray.preset("paper"), None),
+}
+
+
+def targets(rig, n, seed, margin_deg=2.0):
+    rng = np.random.default_rng(seed)
+    az = rng.uniform(rig.az_deg.min() - margin_deg, rig.az_deg.max() + margin_deg, n)
+    el = rng.uniform(rig.el_deg.min() - margin_deg, rig.el_deg.max() + margin_deg, n)
+    return az, el
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_kernel_matches_numpy_path(case, monkeypatch):
+    kernel_or_skip()
+    rig, array, model = CASES[case]()
+    az, el = targets(rig, 3000, seed=len(case), margin_deg=0.5)
+    kwargs = {"rig": rig, "array": array, "model": model}
+    fast = rs.solve_weights(az, el, **kwargs)
+    monkeypatch.setenv(compiled.JIT_ENV, "off")
+    reference = rs.solve_weights(az, el, **kwargs)
+    np.testing.assert_array_equal(fast.reason, reference.reason)
+    np.testing.assert_array_equal(fast.quad, reference.quad)
+    np.testing.assert_allclose(fast.weights, reference.weights, rtol=0, atol=WEIGHT_TOL)
+    assert fast.feasible.sum() >= 30  # the comparison covers solved targets, not only misses
+
+
+SQUARE = rs.Rig.from_angles([-5.0, 5.0, -5.0, 5.0], [-8.0, -8.0, 8.0, 8.0])
+EQUAL_AZ = rs.Rig.from_angles([2.0, 2.0, 2.0, 2.0], [-8.0, -8.0, 8.0, 8.0])
+EQUAL_EL = rs.Rig.from_angles([-5.0, 5.0, -5.0, 5.0], [3.0, 3.0, 3.0, 3.0])
+
+
+@pytest.mark.parametrize("array_name", ["paper", "awr1843boost"])
+@pytest.mark.parametrize("rig, az, el", [
+    # Corners, edge midpoints (two FEs reach them; a side edge no superposition reaches).
+    (SQUARE, [-5.0, 5.0, 0.0, 0.0, -5.0, 5.0, -4.9, 4.9], [-8.0, 8.0, -8.0, 8.0, 0, 0, 0, 0]),
+    # Collapsed quads: on the line they span, beside it (degenerate), far away (outside).
+    (EQUAL_AZ, [2.0, 2.0, 2.0, 1.0, 3.0, 2.5, 30.0], [-4.0, 0.0, 7.0, 0.0, 0.0, -4.0, 0.0]),
+    (EQUAL_EL, [-4.0, 0.0, 3.0, 0.0, 0.0, 4.0, 0.0], [3.0, 3.0, 3.0, 2.0, 4.0, 3.5, -30.0]),
+], ids=["square-edges", "equal-azimuths", "equal-elevations"])
+def test_kernel_matches_numpy_path_on_edges_and_degenerate_quads(array_name, rig, az, el,
+                                                                 monkeypatch):
+    kernel_or_skip()
+    array = rs.VirtualArray.preset(array_name)
+    fast = rs.solve_weights(az, el, rig=rig, array=array)
+    monkeypatch.setenv(compiled.JIT_ENV, "off")
+    reference = rs.solve_weights(az, el, rig=rig, array=array)
+    np.testing.assert_array_equal(fast.reason, reference.reason)
+    np.testing.assert_array_equal(fast.quad, reference.quad)
+    np.testing.assert_allclose(fast.weights, reference.weights, rtol=0, atol=WEIGHT_TOL)
+
+
+def test_kernel_differs_only_among_failures_where_the_iteration_is_chaotic(monkeypatch):
+    """A quad far wider than the array's beam: almost nothing can be synthesized, and the
+    phase iteration hops between weight patterns for many steps. There rounding can end it
+    differently (no solution, split or not converged: all infeasible), rarely; the feasible
+    targets and their weights are the same."""
+    kernel_or_skip()
+    rig, array = rs.Rig.preset("kit-table1"), compact_cascade()
+    az, el = targets(rig, 3000, seed=11)
+    fast = rs.solve_weights(az, el, rig=rig, array=array)
+    monkeypatch.setenv(compiled.JIT_ENV, "off")
+    reference = rs.solve_weights(az, el, rig=rig, array=array)
+    np.testing.assert_array_equal(fast.feasible, reference.feasible)
+    np.testing.assert_allclose(fast.weights, reference.weights, rtol=0, atol=WEIGHT_TOL)
+    assert np.mean(fast.reason != reference.reason) < 2e-3
+
+
+@pytest.mark.parametrize("case", ["awr1843boost", "compact-cascade", "modeled"])
+def test_kernel_curvature_matches_numpy_path(case):
+    """With the local-maximum test on (as the plan's survey runs it) margins agree too."""
+    kernel_or_skip()
+    rig, array, model = CASES[case]()
+    quad = solver_plan(rig, array, "exact", model).kernels[0]
+    az, el = targets(rig, 2000, seed=7, margin_deg=0.0)
+    w, reason, margin = quad.solve_with_curvature(np.radians(az), np.radians(el), True)
+    w_ref, reason_ref, margin_ref = quad.solve_numpy(np.radians(az), np.radians(el), True)
+    np.testing.assert_array_equal(reason, reason_ref)
+    np.testing.assert_allclose(w, w_ref, rtol=0, atol=WEIGHT_TOL)
+    # Where the iteration stopped without a solution the margin is of an arbitrary iterate.
+    solved = np.isin(reason_ref, [rs.Reason.OK, rs.Reason.SPLIT])
+    # The margin is a difference of curvatures: relative to the curvature scale, not itself.
+    scale = np.abs(margin_ref[solved]).max()
+    np.testing.assert_allclose(margin[solved], margin_ref[solved], rtol=0, atol=1e-10 * scale)
+
+
+def bartlett(array, sources, weights, u, s):
+    """``|a(u, s)^H sum_q w_q r_q|`` by a direct sum over the elements."""
+    k = array.wavenumber_rad_per_m
+    look = np.exp(-1j * k * (array.y_m * u + array.z_m * s))
+    return np.abs(look @ (sources @ weights))
+
+
+@pytest.mark.parametrize("case", ["paper", "awr1843boost", "modeled", "wide-3x5 awr1843boost"])
+def test_kernel_weights_put_the_bartlett_peak_on_the_set_angle(case):
+    """Independent check: the Bartlett spectrum of the weighted FE responses peaks on target.
+
+    The peak is located by a Newton step on a quadratic fitted to ``|B|`` around the set
+    angle (step 1e-3 deg: |B| changes by ~1e-7 there, so rounding moves the fit ~1e-9 deg).
+    """
+    kernel_or_skip()
+    rig, array, model = CASES[case]()
+    az, el = targets(rig, 60, seed=3, margin_deg=-0.5)
+    sol = rs.solve_weights(az, el, rig=rig, array=array, model=model)
+    assert sol.feasible.mean() > 0.8
+    h = 1e-3
+    k = array.wavenumber_rad_per_m
+    for i in np.flatnonzero(sol.feasible):
+        fes = rig.quads[sol.quad[i]]
+        if model is None:
+            u_q, s_q = direction_cosines(np.radians(rig.az_deg[fes]), np.radians(rig.el_deg[fes]))
+            sources = np.exp(1j * k * (np.outer(array.y_m, u_q) + np.outer(array.z_m, s_q)))
+        else:
+            sources = model.vectors(rig, fes, array)
+
+        def level(d_az, d_el, i=i, sources=sources):
+            u, s = direction_cosines(np.radians(az[i] + d_az), np.radians(el[i] + d_el))
+            return bartlett(array, sources, sol.weights[i], u, s)
+
+        b0 = level(0, 0)
+        g = np.array([level(h, 0) - level(-h, 0), level(0, h) - level(0, -h)]) / (2 * h)
+        h_aa = (level(h, 0) - 2 * b0 + level(-h, 0)) / h**2
+        h_ee = (level(0, h) - 2 * b0 + level(0, -h)) / h**2
+        h_ae = (level(h, h) - level(h, -h) - level(-h, h) + level(-h, -h)) / (4 * h**2)
+        hessian = np.array([[h_aa, h_ae], [h_ae, h_ee]])
+        assert np.all(np.linalg.eigvalsh(hessian) < 0), "not a maximum"
+        offset = -np.linalg.solve(hessian, g)
+        assert np.abs(offset).max() < 1e-6, (case, i, offset)
+
+
+def test_turned_off_by_environment(monkeypatch):
+    monkeypatch.setenv(compiled.JIT_ENV, "off")
+    assert compiled.exact_kernel() is None
+
+
+def test_no_writable_cache_falls_back_to_numpy():
+    """Where numba finds no place for its cache, the numpy code runs: no error, same weights."""
+    if not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"):
+        pytest.skip("this numba cannot be told to find no cache locator")
+    code = (
+        "import numpy as np, rts_scenario as rs\n"
+        "from rts_scenario.solver import compiled\n"
+        "assert compiled.exact_kernel() is None\n"
+        "sol = rs.solve_weights([1.0, 30.0], [2.0, 0.0], rig=rs.Rig.preset('kit-table1'),\n"
+        "                       array=rs.VirtualArray.preset('awr1843boost'))\n"
+        "assert sol.feasible.tolist() == [True, False]\n"
+    )
+    # Only the zip-file locator: none applies to a source file, as when nothing is writable.
+    env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "ZipCacheLocator"}
+    env.pop("NUMBA_CACHE_DIR", None)
+    subprocess.run([sys.executable, "-c", code], check=True, env=env, timeout=120)
+
+
+def test_auto_mode_loads_the_kernel_after_enough_targets():
+    code = (
+        "import sys, numpy as np, rts_scenario as rs\n"
+        "from rts_scenario.solver import compiled\n"
+        "rig, array = rs.Rig.preset('kit-table1'), rs.VirtualArray.preset('awr1843boost')\n"
+        "compiled.LOAD_AFTER_TARGETS = 1500\n"
+        "az = np.linspace(-2, 2, 1000)\n"
+        "first = rs.solve_weights(az, az, rig=rig, array=array)\n"
+        "assert 'numba' not in sys.modules\n"
+        "second = rs.solve_weights(az, az, rig=rig, array=array)\n"
+        "assert compiled._loaded and compiled._loaded[0] is not None\n"
+        "assert np.abs(first.weights - second.weights).max() < 1e-12\n"
+    )
+    env = {**os.environ, compiled.JIT_ENV: "auto"}
+    subprocess.run([sys.executable, "-c", code], check=True, env=env, timeout=120)
+
+
+def test_import_does_not_load_numba():
+    code = ("import sys, rts_scenario, rts_scenario.solver\n"
+            "assert 'numba' not in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
