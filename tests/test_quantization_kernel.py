@@ -23,7 +23,7 @@ def test_compiled_search_matches_the_numpy_search(profile, monkeypatch):
     az, el = rng.uniform(-2.9, 2.9, 300), rng.uniform(-5.9, 5.9, 300)
 
     def schedule(compiled):
-        monkeypatch.setattr(quantization, "COMPILED_FROM", 1 if compiled else 10**9)
+        monkeypatch.setenv("RTS_SCENARIO_JIT", "on" if compiled else "off")
         return build_schedule(tracks(az[:, None], el[:, None]), rig, radar,
                               quantization="aware",
                               fe_responses="plane-wave")

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from ..arrays import angles_from_cosines
 from ..beamformer import hessian_step, newton_step, power_curvature
 from ..rig import HardwareLimits
+from ..solver.compiled import mode
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -48,9 +49,10 @@ SEARCH_ABOVE_DEG = (0.005, 0.03)
 FINE_STEPS = 8
 # Entries go in blocks of SEARCH_BLOCK: the (entries x candidates) temporaries stay in cache.
 SEARCH_BLOCK = 1024
-# With numba installed, searches of at least this many entries run compiled (`compiled_search`);
-# fewer are not worth loading it for. RTS_SCENARIO_JIT=0 keeps the numpy search.
-COMPILED_FROM = 256
+# With numba installed, searches of at least this many entries run compiled (`compiled_search`):
+# loading numba and the kernel costs about what the numpy search needs for 100,000 entries.
+# RTS_SCENARIO_JIT=on compiles any search, off none (`rts_scenario.solver.compiled.mode`).
+COMPILED_FROM = 20_000
 # Entries per compiled call: parts run on threads, one per core.
 COMPILED_PART = 8192
 
@@ -124,7 +126,7 @@ def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full:
         exact <= grid.high + GRID_SLACK_DB, np.maximum(exact, grid.low), np.inf)
     if step > 0.0 and mode == "aware":
         # A wider search follows only where the narrow one leaves a noticeable error.
-        kernel = compiled_search() if len(weights) >= COMPILED_FROM else None
+        kernel = compiled_search() if _compile(len(weights)) else None
         if kernel is not None:  # every entry: it predicts, keeps or searches each itself
             chosen = _search_compiled(kernel, resp, weights, full, grid, u, s, chosen)
         for reach, above in zip(SEARCH_STEPS, SEARCH_ABOVE_DEG, strict=True):
@@ -271,15 +273,28 @@ def _search_grid(resp: NDArray[np.complex128], weights: FloatArray, full: FloatA
     return options[rows, keep]
 
 
+_searched = [0]  # entries this process has searched, towards COMPILED_FROM
+
+
+def _compile(entries: int) -> bool:
+    """Whether a search of ``entries`` runs compiled (``RTS_SCENARIO_JIT``, the searches so far).
+
+    With "auto", once the process has searched `COMPILED_FROM` entries (or loaded the kernel).
+    """
+    chosen = mode()
+    if chosen != "auto":
+        return chosen == "on"
+    _searched[0] += entries
+    return _searched[0] >= COMPILED_FROM or compiled_search.cache_info().currsize > 0
+
+
 @lru_cache(maxsize=1)
 def compiled_search() -> Callable[..., None] | None:
     """Return the compiled search (`_search_kernel.search`), or None without numba.
 
     Loaded on first use; numba caches the machine code on disk, so later processes skip the
-    compilation. ``RTS_SCENARIO_JIT=0`` in the environment keeps the numpy search.
+    compilation. Where numba is missing or cannot compile or cache, the numpy search runs.
     """
-    if os.environ.get("RTS_SCENARIO_JIT", "1") == "0":
-        return None
     try:
         from ._search_kernel import search
 
