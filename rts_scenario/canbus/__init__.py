@@ -251,6 +251,9 @@ class _Codec:
         self.signals = page_signals(message, page)
         self.signal_list = list(self.signals.values())
         self.formats = create_encode_decode_formats(self.signal_list, message.length)
+        # Which byte orders the message uses (a format without signals packs nothing).
+        orders = {sg.byte_order for sg in self.signal_list}
+        self._big, self._little = "big_endian" in orders, "little_endian" in orders
         self.length = message.length
         self.frame_id = message.frame_id
         self.extended = message.is_extended_frame
@@ -291,9 +294,14 @@ class _Codec:
         message (as `cantools.database.utils.encode_data` combines them).
         """
         formats = self.formats
-        packed = (int.from_bytes(formats.big_endian.pack(raw), "big")
-                  | int.from_bytes(formats.little_endian.pack(raw), "little"))
-        data = packed.to_bytes(self.length, "big")
+        if not self._big:  # the little-endian format packs the bytes in reverse
+            data = formats.little_endian.pack(raw)[::-1]
+        elif not self._little:
+            data = formats.big_endian.pack(raw)
+        else:
+            packed = (int.from_bytes(formats.big_endian.pack(raw), "big")
+                      | int.from_bytes(formats.little_endian.pack(raw), "little"))
+            data = packed.to_bytes(self.length, "big")
         if self.checksum is None:
             return data
         out = bytearray(data)
@@ -311,6 +319,10 @@ class _Codec:
                     f"Wrong data size: {len(data)} instead of {self.length} bytes")
             data = data[: self.length]
         formats = self.formats
+        if not self._big:
+            return formats.little_endian.unpack(data[::-1])  # type: ignore[no-any-return]
+        if not self._little:
+            return formats.big_endian.unpack(data)  # type: ignore[no-any-return]
         return {**formats.big_endian.unpack(data), **formats.little_endian.unpack(data[::-1])}
 
 
