@@ -320,9 +320,9 @@ class _Codec:
             data = data[: self.length]
         formats = self.formats
         if not self._big:
-            return formats.little_endian.unpack(data[::-1])  # type: ignore[no-any-return]
+            return formats.little_endian.unpack(data[::-1])
         if not self._little:
-            return formats.big_endian.unpack(data)  # type: ignore[no-any-return]
+            return formats.big_endian.unpack(data)
         return {**formats.big_endian.unpack(data), **formats.little_endian.unpack(data[::-1])}
 
 
