@@ -413,3 +413,35 @@ def test_cli_profile_files_are_written_relative_to_the_scene(tmp_path, capsys):
     assert main(["import", str(DATA / "braking_lead.xosc"), "--radar", str(profile),
                  "--rig", "wide-3x5", "--output", str(elsewhere)]) == 2
     assert "inside its own folder tree" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_corrupted_files_give_one_error_never_a_traceback(tmp_path, seed):
+    """Files of the test set with elements dropped, attributes garbled or the text cut short:
+    each imports or fails with the package's one-line error, nothing else."""
+    from lxml import etree
+
+    rng = np.random.default_rng(seed)
+    sources = sorted((Path(__file__).parent / "data" / "xosc").glob("*.xosc"))
+    for case in range(60):
+        source = sources[case % len(sources)]
+        text = source.read_bytes()
+        kind = rng.integers(3)
+        if kind == 2:  # cut short
+            text = text[: int(rng.integers(1, len(text)))]
+        else:
+            tree = etree.fromstring(text)
+            nodes = [n for n in tree.iter() if isinstance(n.tag, str)][1:]
+            node = nodes[int(rng.integers(len(nodes)))]
+            if kind == 0 or not node.attrib:
+                node.getparent().remove(node)
+            else:
+                key = list(node.attrib)[int(rng.integers(len(node.attrib)))]
+                node.set(key, str(rng.choice(["", "-1e400", "nan", "$missing", "x", "1e9"])))
+            text = etree.tostring(tree)
+        path = tmp_path / f"case{case}.xosc"
+        path.write_bytes(text)
+        try:
+            import_xosc(path, radar="awr1843boost", rig="wide-3x5")
+        except RtsError as exc:  # anything else fails the test with its traceback
+            assert str(exc).strip()

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from scene_helpers import write_scene
 
 from rts_scenario import perf
 from rts_scenario.kinematics import compute_tracks
@@ -14,14 +13,7 @@ from rts_scenario.schedule import build_schedule
 @pytest.fixture(scope="module")
 def eight_targets(tmp_path_factory):
     """60 s at 20 Hz, awr1843boost, 8 targets drifting around the ego over the wide rig."""
-    rng = np.random.default_rng(4)
-    targets = [{"name": f"car{i}", "frame": "ego", "rcs": {"rcs_dbsm": float(rng.uniform(0, 20))},
-                "motion": {"type": "constant_velocity",
-                           "position_m": [float(20 + 5 * i), float(rng.uniform(-4, 4)), 0.6],
-                           "speed_mps": float(rng.uniform(0.0, 0.3))}} for i in range(8)]
-    ego = {"motion": {"type": "constant_velocity", "position_m": [0, 0, 0], "speed_mps": 22.0}}
-    path = write_scene(tmp_path_factory.mktemp("radar"), targets, duration_s=60.0,
-                       frame_rate_hz=20.0, ego=ego, radar={"profile": "awr1843boost"})
+    path = perf.eight_target_scene(tmp_path_factory.mktemp("radar"))
     scene = load_scenario(path)
     schedule = build_schedule(compute_tracks(scene), scene.rig, scene.radar)
     assert schedule.emitted.sum(axis=1).min() == 8
