@@ -49,13 +49,13 @@ from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from .. import workers
 from ..arrays import direction_cosines
 from ..detections import Detections
 from ..errors import RtsError
@@ -607,10 +607,9 @@ class _NoiseAhead:
         return out
 
 
-@lru_cache(maxsize=1)
 def _drawing_pool() -> ThreadPoolExecutor:
     """One background thread for noise drawn ahead (tasks run in the order they come)."""
-    return ThreadPoolExecutor(1, thread_name_prefix="rts-noise")
+    return workers.pool("rts-noise", threads=1)
 
 
 def _box_sum(a: FloatArray, r: int) -> FloatArray:

@@ -7,6 +7,12 @@ steps, the weakest solved, an idle channel brought in weakly, the best ``shortli
 linear model, then the exact prediction (one Newton step on the response) picking among them
 and the naive setting. tests/test_quantization_kernel.py compares the two.
 
+It skips only work whose outcome is known, so it chooses as the numpy search does: an idle
+channel is priced only for candidates that could then enter the shortlist (its best
+continuous level is a bound); an option already predicted is not predicted again; a pass whose
+candidates are the last pass's, from the same settings, is not run. Amplitudes of grid
+settings come from tables, and the angle changes from the sines of the differences.
+
 Constants are arguments, not globals: numba freezes globals into its cached machine code.
 """
 
@@ -42,10 +48,31 @@ def _angles(u, s):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _error(resp, i, amps, u, s, az0, el0):  # pragma: no cover
+def _asin_small(x):  # pragma: no cover
+    """``asin x``: its series where ``|x| <= 0.02`` (the next term is 1e-22 of it), else libm."""
+    if not abs(x) <= 0.02:
+        return math.asin(x)
+    x2 = x * x
+    return x * (1.0 + x2 * (1.0 / 6.0 + x2 * (3.0 / 40.0 + x2 * (5.0 / 112.0 + x2 * (
+        35.0 / 1152.0 + x2 * (63.0 / 2816.0))))))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _direction(u, s):  # pragma: no cover
+    """Return the set direction for `_error`: az, el (rad), sin and cos of both."""
+    az, el = _angles(u, s)
+    cos_el = math.sqrt(1.0 - s * s)
+    sin_az = u / cos_el
+    return az, el, sin_az, math.sqrt(1.0 - sin_az * sin_az), s, cos_el
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _error(resp, i, amps, u, s, direction):  # pragma: no cover
     """Predicted angle error (deg, norm of az and el) of channel amplitudes ``amps``.
 
-    ``az0``, ``el0``: the set direction ``(u, s)`` as angles (rad).
+    ``direction``: `_direction` of the set direction ``(u, s)``. The angles' changes come
+    from the sines of the differences (``sin(a1 - a0) = sin a1 cos a0 - cos a1 sin a0``): no
+    arcsine or arctangent of the angles themselves, the same values to rounding.
     """
     a0, a1, a2, a3 = amps[0], amps[1], amps[2], amps[3]
 
@@ -65,27 +92,43 @@ def _error(resp, i, amps, u, s, az0, el0):  # pragma: no cover
     if det > 0.0:
         du = -(h_ss * g_u - h_us * g_s) / det
         ds = -(h_uu * g_s - h_us * g_u) / det
-    az1, el1 = _angles(u + du, s + ds)
-    return math.hypot(math.degrees(az1 - az0), math.degrees(el1 - el0))
+    az0, el0, sin_az0, cos_az0, sin_el0, cos_el0 = direction
+    s1 = s + ds
+    u1 = u + du
+    cos_el1 = math.sqrt(1.0 - s1 * s1)  # NaN beyond the sphere: the exact path below
+    sin_az1 = u1 / cos_el1
+    cos_az1 = math.sqrt(1.0 - sin_az1 * sin_az1)
+    d_el = _asin_small(s1 * cos_el0 - cos_el1 * sin_el0)
+    d_az = _asin_small(sin_az1 * cos_az0 - cos_az1 * sin_az0)
+    if not (abs(d_el) <= 0.02 and abs(d_az) <= 0.02):  # far off (or beyond the sphere)
+        az1, el1 = _angles(u1, s1)
+        d_az, d_el = az1 - az0, el1 - el0
+    return math.degrees(math.sqrt(d_az * d_az + d_el * d_el))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _sensitivity(resp, i, weights, az0, el0, out):  # pragma: no cover
+def _sensitivity(resp, i, weights, direction, out):  # pragma: no cover
     """`quantization._sensitivity` times `_degree_scale` for entry ``i`` into ``out`` (2, 4).
 
     The peak shift in degrees (azimuth, elevation) per unit change of each channel's amplitude,
-    from the Newton step of the gradient's change at the solved weights.
+    from the Newton step of the gradient's change at the solved weights. ``direction``:
+    `_direction` of the set direction.
     """
     w0, w1, w2, w3 = weights[i, 0], weights[i, 1], weights[i, 2], weights[i, 3]
-    b = [resp[i, t, 0] * w0 + resp[i, t, 1] * w1 + resp[i, t, 2] * w2 + resp[i, t, 3] * w3
-         for t in range(6)]
-    cb = b[0].conjugate()
-    h_uu = (cb * b[3]).real + b[1].real * b[1].real + b[1].imag * b[1].imag
-    h_us = (cb * b[4]).real + (b[1].conjugate() * b[2]).real
-    h_ss = (cb * b[5]).real + b[2].real * b[2].real + b[2].imag * b[2].imag
+
+    def beam(t):  # B or one of its derivatives at the solved weights
+        return (resp[i, t, 0] * w0 + resp[i, t, 1] * w1 + resp[i, t, 2] * w2
+                + resp[i, t, 3] * w3)
+
+    b, b_u, b_s, b_uu, b_us, b_ss = beam(0), beam(1), beam(2), beam(3), beam(4), beam(5)
+    cb = b.conjugate()
+    h_uu = (cb * b_uu).real + b_u.real * b_u.real + b_u.imag * b_u.imag
+    h_us = (cb * b_us).real + (b_u.conjugate() * b_s).real
+    h_ss = (cb * b_ss).real + b_s.real * b_s.real + b_s.imag * b_s.imag
     det = h_uu * h_ss - h_us * h_us
-    deg_u = math.degrees(1.0 / (math.cos(el0) * math.cos(az0)))
-    deg_s = math.degrees(1.0 / math.cos(el0))
+    cos_az, cos_el = direction[3], direction[5]
+    deg_u = math.degrees(1.0 / (cos_el * cos_az))
+    deg_s = math.degrees(1.0 / cos_el)
     for q in range(4):
         d_u = (cb * resp[i, 1, q]).real
         d_s = (cb * resp[i, 2, q]).real
@@ -110,6 +153,32 @@ def _shift(on, naive, amp, factor, weight, sens_u, sens_s, offset, low, high,
     valid = setting >= low - slack and setting <= high + slack
     change = (amp * factor if valid else 0.0) - weight
     return sens_u * change, sens_s * change
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _same(a, b):  # pragma: no cover
+    return a[0] == b[0] and a[1] == b[1] and a[2] == b[2] and a[3] == b[3]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _kth_smallest(cost, n, k, top):  # pragma: no cover
+    """Write the indices of the ``k`` smallest of ``cost[:n]`` into ``top[:k]``, smallest first.
+
+    Returns the k-th smallest cost (inf when ``n < k``). Ties keep the lower index first.
+    """
+    filled = 0
+    for c in range(n):
+        value = cost[c]
+        if filled == k and not value < cost[top[k - 1]]:
+            continue
+        j = filled if filled < k else k - 1
+        while j > 0 and value < cost[top[j - 1]]:
+            top[j] = top[j - 1]
+            j -= 1
+        top[j] = c
+        if filled < k:
+            filled += 1
+    return cost[top[k - 1]] if filled == k else math.inf
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -138,7 +207,16 @@ def search(resp, weights, full, naive, u, s, reaches, aboves, low, step, high, s
     best_k = np.empty(most * most, dtype=np.int64)
     extra_q = np.empty(most * most, dtype=np.int64)
     extra_att = np.empty(most * most)
-    taken = np.empty(most * most, dtype=np.bool_)
+    extra_amp = np.empty(most * most)
+    top = np.empty(shortlist, dtype=np.int64)
+    tried = np.empty((shortlist * reaches.size, 4))
+    best_amp = np.empty(4)
+    prev_start = np.empty(4)
+    dn = step * DB_TO_NEPER
+    n_levels = int(math.floor((high - low) / step + 1e-6)) + 2
+    level_amp = np.empty(n_levels)
+    for k in range(n_levels):
+        level_amp[k] = math.exp(-k * dn)
     option = np.empty(4)
     amps = np.empty(4)
     best = np.empty(4)
@@ -147,46 +225,57 @@ def search(resp, weights, full, naive, u, s, reaches, aboves, low, step, high, s
     for i in range(n):
         for q in range(4):
             best[q] = naive[i, q]
-            amps[q] = (math.exp((full[i, q] - best[q]) * DB_TO_NEPER)
-                       if math.isfinite(best[q]) else 0.0)
-        az0, el0 = _angles(u[i], s[i])
-        best_err = _error(resp, i, amps, u[i], s[i], az0, el0)
+            best_amp[q] = (math.exp((full[i, q] - best[q]) * DB_TO_NEPER)
+                           if math.isfinite(best[q]) else 0.0)
+        direction = _direction(u[i], s[i])
+        best_err = _error(resp, i, best_amp, u[i], s[i], direction)
         have_sens = False
+        n_tried = 0  # options predicted so far (none is predicted twice)
+        single = False  # the last pass had one candidate per searched channel
         for p in range(reaches.size):
             if not best_err > aboves[p]:  # close enough already (or not predictable): kept
                 continue
-            if not have_sens:  # it depends on the solved weights only
-                _sensitivity(resp, i, weights, az0, el0, sens)
+            if not have_sens:  # sensitivities and roles depend on the solved weights only
+                _sensitivity(resp, i, weights, direction, sens)
                 have_sens = True
+                # Roles by weight, strongest first (a stable sort, as numpy's for four entries).
+                for q in range(4):
+                    order[q] = q
+                for a in range(1, 4):
+                    j = a
+                    while j > 0 and -weights[i, order[j]] < -weights[i, order[j - 1]]:
+                        order[j], order[j - 1] = order[j - 1], order[j]
+                        j -= 1
             reach = reaches[p]
-            side = 2 * reach + 1
-            n_cand = side * side
             # This pass starts from the settings so far.
             for q in range(4):
                 on[q] = math.isfinite(best[q])
-                amp[q] = math.exp((full[i, q] - best[q]) * DB_TO_NEPER) if on[q] else 0.0
+                amp[q] = best_amp[q]
                 start[q] = best[q]
-            # Roles by weight, strongest first (a stable sort, as numpy's for four entries).
+            # A searched channel that is off stays off: one candidate for it, not 2 reach + 1.
+            reach_a = reach if on[order[1]] else 0
+            reach_b = reach if on[order[2]] else 0
+            side_b = 2 * reach_b + 1
+            n_cand = (2 * reach_a + 1) * side_b
+            if n_cand == 1 and single and _same(start, prev_start):
+                continue  # the last pass's candidates from the same settings: nothing new
+            single = n_cand == 1
             for q in range(4):
-                order[q] = q
-            for a in range(1, 4):
-                j = a
-                while j > 0 and -weights[i, order[j]] < -weights[i, order[j - 1]]:
-                    order[j], order[j - 1] = order[j - 1], order[j]
-                    j -= 1
-            # Per role and step count: the peak shift it causes.
-            for k in range(n_steps):
-                for role in range(4):
-                    q = order[role]
+                prev_start[q] = start[q]
+            # Per role and step count: the peak shift it causes (where a candidate uses it).
+            for role in range(4):
+                q = order[role]
+                span = (0, reach_a, reach_b, fine)[role]
+                for k in range(fine - span, fine + span + 1):
                     moves[role, k, 0], moves[role, k, 1] = _shift(
                         on[q], start[q], amp[q], per_step[k], weights[i, q], sens[0, q],
                         sens[1, q], (k - fine) * step, low, high, slack)
-            for ia in range(side):
-                for ib in range(side):
+            for ia in range(2 * reach_a + 1):
+                for ib in range(side_b):
                     for axis in range(2):
-                        resid[ia * side + ib, axis] = (moves[0, fine, axis]
-                                                       + moves[1, fine - reach + ia, axis]
-                                                       + moves[2, fine - reach + ib, axis])
+                        resid[ia * side_b + ib, axis] = (moves[0, fine, axis]
+                                                         + moves[1, fine - reach_a + ia, axis]
+                                                         + moves[2, fine - reach_b + ib, axis])
             table = moves[3]
             d0 = 0.5 * (table[fine + 1, 0] - table[fine - 1, 0])
             d1 = 0.5 * (table[fine + 1, 1] - table[fine - 1, 1])
@@ -210,46 +299,66 @@ def search(resp, weights, full, naive, u, s, reaches, aboves, low, step, high, s
                 extra_q[c] = -1
                 extra_att[c] = 0.0
             # An idle channel may come on weakly to cancel what is left along its own direction.
+            # Only candidates that could then enter the shortlist are priced: at best the
+            # channel cancels the residual's component along its direction (``bound``), so a
+            # candidate whose bound is no better than the shortlist's worst keeps its cost.
             for q in range(4):
                 if on[q]:
                     continue
                 g0, g1 = sens[0, q], sens[1, q]
                 gg = max(g0 * g0 + g1 * g1, norm_floor)
+                worst = _kth_smallest(cost, n_cand, shortlist, top)
+                # The grid level nearest (in dB) to amplitude a: k = rint(base - ln(a) / dn).
+                base = (full[i, q] - low) / step
+                a_low = math.exp((full[i, q] - low) * DB_TO_NEPER)
                 for c in range(n_cand):
-                    a_star = -(g0 * final[c, 0] + g1 * final[c, 1]) / gg
-                    level = -math.inf if a_star <= 0.0 else math.log10(a_star)
-                    att = _nearest(full[i, q] - 20.0 * level, low, step, high, slack)
-                    a = math.exp((full[i, q] - att) * DB_TO_NEPER) if math.isfinite(att) else 0.0
+                    along = g0 * final[c, 0] + g1 * final[c, 1]
+                    if along >= 0.0 or cost[c] - along * along / gg >= worst:
+                        continue
+                    a_star = -along / gg
+                    k = np.rint(base - math.log(a_star) / dn)
+                    k = max(k, 0.0)
+                    if low + k * step > high + slack:
+                        continue
+                    a = a_low * level_amp[int(k)]
                     m0, m1 = final[c, 0] + a * g0, final[c, 1] + a * g1
                     new_cost = m0 * m0 + m1 * m1
-                    if a > 0.0 and new_cost < cost[c]:
+                    if new_cost < cost[c]:
                         cost[c] = new_cost
                         extra_q[c] = q
-                        extra_att[c] = att
+                        extra_att[c] = low + k * step
+                        extra_amp[c] = a
             # The linear model shortlists; the exact prediction decides (the naive one too).
-            taken[:] = False
-            for _ in range(min(shortlist, n_cand)):
-                pick = -1
-                for c in range(n_cand):
-                    if not taken[c] and (pick < 0 or cost[c] < cost[pick]):
-                        pick = c
-                taken[pick] = True
-                counts = (0, pick // side - reach, pick % side - reach, best_k[pick])
+            n_short = min(shortlist, n_cand)
+            _kth_smallest(cost, n_cand, n_short, top)
+            for j in range(n_short):
+                pick = top[j]
+                counts = (0, pick // side_b - reach_a, pick % side_b - reach_b, best_k[pick])
                 for role in range(4):
                     q = order[role]
                     setting = start[q] + counts[role] * step
                     ok = on[q] and setting >= low - slack and setting <= high + slack
                     option[q] = setting if ok else math.inf
+                    amps[q] = amp[q] * per_step[counts[role] + fine] if ok else 0.0
                 if extra_q[pick] >= 0:
                     option[extra_q[pick]] = extra_att[pick]
+                    amps[extra_q[pick]] = extra_amp[pick]
+                # The settings this pass started from (their error is known), or an option
+                # already predicted (off channels make candidates alike): skipped.
+                seen = _same(option, start)
+                for prev in range(n_tried):
+                    seen = seen or _same(option, tried[prev])
+                if seen:
+                    continue
                 for q in range(4):
-                    amps[q] = (math.exp((full[i, q] - option[q]) * DB_TO_NEPER)
-                               if math.isfinite(option[q]) else 0.0)
-                err = _error(resp, i, amps, u[i], s[i], az0, el0)
+                    tried[n_tried, q] = option[q]
+                n_tried += 1
+                err = _error(resp, i, amps, u[i], s[i], direction)
                 if err < best_err:
                     best_err = err
                     for q in range(4):
                         best[q] = option[q]
+                        best_amp[q] = amps[q]
         for q in range(4):
             out[i, q] = best[q]
         out_error[i] = best_err

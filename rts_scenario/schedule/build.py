@@ -29,6 +29,7 @@ from ..responses import FrontEndModel
 from ..rig import HardwareLimits, Rig
 from ..solver import Reason, solve_weights, solver_plan
 from ..solver.estimator_aware import estimator_weights, plan_method
+from ..workers import with_one_blas_thread
 from .echo_slots import assign_echo_slots
 from .model import BLOCKING, Schedule, ScheduleError, Status
 from .quantization import QUANTIZATION_MODES, attenuator_settings, predicted_angle_error
@@ -53,6 +54,7 @@ _REASON_STATUS = {
 }
 
 
+@with_one_blas_thread
 def build_schedule(
     tracks: Tracks,
     rig: Rig,

@@ -8,9 +8,7 @@ predicted remaining error is kept per entry. Without a step only the attenuator'
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -21,6 +19,7 @@ from ..arrays import angles_from_cosines
 from ..beamformer import hessian_step, newton_step, power_curvature
 from ..rig import HardwareLimits
 from ..solver.compiled import mode
+from ..workers import run_parts
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -53,8 +52,9 @@ SEARCH_BLOCK = 1024
 # loading numba and the kernel costs about what the numpy search needs for 100,000 entries.
 # RTS_SCENARIO_JIT=on compiles any search, off none (`rts_scenario.solver.compiled.mode`).
 COMPILED_FROM = 20_000
-# Entries per compiled call: parts run on threads, one per core.
-COMPILED_PART = 8192
+# Entries per compiled call at most: parts run on threads, one per core, several parts per
+# thread so that a core slowed by other work does not hold the others up.
+COMPILED_PART = 2048
 
 
 def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: FloatArray,
@@ -251,6 +251,12 @@ def _search_grid(resp: NDArray[np.complex128], weights: FloatArray, full: FloatA
         cost[idle] = np.where(better, new_cost, cost[idle])
         extra_q[idle] = np.where(better, q, extra_q[idle])
         extra_att[idle] = np.where(better, att, extra_att[idle])
+    # A searched channel that is off stays off: its candidates are all alike, so only its
+    # centre one competes (the shortlist then holds distinct settings).
+    ia_all, ib_all = np.unravel_index(np.arange(cost.shape[1]), (span.size, span.size))
+    centre = span.size // 2
+    cost[(~on[rows, qa])[:, None] & (ia_all != centre)[None, :]] = np.inf
+    cost[(~on[rows, qb])[:, None] & (ib_all != centre)[None, :]] = np.inf
     # The linear model shortlists; the exact prediction decides (the naive setting included).
     keep_n = min(SHORTLIST, cost.shape[1])
     shortlist = np.argpartition(cost, keep_n - 1, axis=1)[:, :keep_n]  # (N, S)
@@ -325,13 +331,7 @@ def _search_compiled(kernel: Callable[..., None], resp: NDArray[np.complex128],
         kernel(*(a[part] for a in args), reaches, aboves, grid.low, grid.step, grid.high,
                GRID_SLACK_DB, FINE_STEPS, SHORTLIST, NORM_FLOOR, out[part], error[part])
 
-    parts = [slice(i, i + COMPILED_PART) for i in range(0, len(out), COMPILED_PART)]
-    if len(parts) > 1 and (os.cpu_count() or 1) > 1:
-        with ThreadPoolExecutor(min(len(parts), os.cpu_count() or 1)) as pool:
-            list(pool.map(run, parts))
-    else:
-        for part in parts:
-            run(part)
+    run_parts(run, [slice(i, i + COMPILED_PART) for i in range(0, len(out), COMPILED_PART)])
     return out
 
 

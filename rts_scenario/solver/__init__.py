@@ -10,21 +10,18 @@ on disk (see `rts_scenario.solver.plan`).
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from functools import lru_cache
 from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from threadpoolctl import ThreadpoolController
 
 from ..arrays import VirtualArray
 from ..errors import SolverError
 from ..quads import assign_quads
 from ..responses import FrontEndModel
 from ..rig import Rig
+from ..workers import THREADS, one_blas_thread, run_parts
 from . import compiled
 from .globalmax import GlobalMaxCheck
 from .plan import (
@@ -40,7 +37,7 @@ from .reasons import Reason
 FloatArray = NDArray[np.float64]
 
 CHUNK = 32768
-WORKERS = min(4, os.cpu_count() or 1)
+WORKERS = THREADS
 # Targets a quad cannot synthesize are retried in quads within this distance (deg) of them.
 RETRY_MARGIN_DEG = 1.0
 
@@ -160,19 +157,12 @@ def solve_weights(
     if len(starts) > 1 and WORKERS > 1:
         # numpy releases the GIL inside its kernels, so chunks run in parallel on threads; the
         # chunks' small matrix products must not spawn BLAS threads of their own on top.
-        with _blas_controller().limit(limits=1, user_api="blas"), ThreadPoolExecutor(
-            WORKERS
-        ) as pool:
-            list(pool.map(run, starts))
+        with one_blas_thread():
+            run_parts(run, starts)
     else:
         for start in starts:
             run(start)
     return WeightSolution(weights=weights, quad=quad, reason=reason, method=method)
-
-
-@lru_cache(maxsize=1)
-def _blas_controller() -> ThreadpoolController:
-    return ThreadpoolController()
 
 
 def _angles(name: str, values: ArrayLike) -> FloatArray:

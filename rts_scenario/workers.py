@@ -1,0 +1,94 @@
+"""The process's worker threads, started once and kept.
+
+One per core, for compiled kernels and numpy calls that release the GIL (the solver's chunks,
+the quantization search's parts).
+
+Starting threads for every call costs milliseconds on a busy machine, as much as a small
+solve. The pools are made on first use; a process forked from one that had them (a sweep's
+pool workers) gets new ones, not the parent's, whose threads do not exist in the child.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import threading
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+F = TypeVar("F", bound=Callable[..., Any])
+
+# Threads of the shared pool: one per core, at most 4 (the kernels are compute-bound).
+THREADS = min(4, os.cpu_count() or 1)
+
+_LOCK = threading.Lock()
+_pools: dict[str, ThreadPoolExecutor] = {}
+
+
+def pool(name: str = "rts-worker", threads: int = THREADS) -> ThreadPoolExecutor:
+    """Return the process's pool called ``name`` (made with ``threads`` threads on first use)."""
+    found = _pools.get(name)
+    if found is None:
+        with _LOCK:
+            found = _pools.get(name)
+            if found is None:
+                found = _pools[name] = ThreadPoolExecutor(threads, thread_name_prefix=name)
+    return found
+
+
+def run_parts(fn: Callable[[T], object], parts: Iterable[T]) -> None:
+    """Call ``fn`` on every part, on the shared pool's threads when there are several.
+
+    ``fn`` must not itself wait for the shared pool. Exceptions propagate.
+    """
+    parts = list(parts)
+    if len(parts) > 1 and THREADS > 1:
+        for _ in pool().map(fn, parts):
+            pass
+    else:
+        for part in parts:
+            fn(part)
+
+
+@functools.lru_cache(maxsize=1)
+def _controller() -> Any:
+    from threadpoolctl import ThreadpoolController  # loaded on first use: ~10 ms
+
+    return ThreadpoolController()
+
+
+def one_blas_thread() -> Any:
+    """Return a context in which BLAS runs on one thread (`threadpoolctl`).
+
+    The matrices here are small: more BLAS threads do not help them, and after each call they
+    keep spinning for a while, taking the cores from the worker threads (a quarter to a half
+    of a compiled kernel's time on two cores, measured).
+    """
+    return _controller().limit(limits=1, user_api="blas")
+
+
+def with_one_blas_thread(fn: F) -> F:
+    """Decorate ``fn`` to run in `one_blas_thread`."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with one_blas_thread():
+            return fn(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+def _forget_pools() -> None:
+    # In a forked child the parent's threads are gone: pools start afresh when first used.
+    global _LOCK
+    _LOCK = threading.Lock()
+    _pools.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pools)
+
+
+__all__ = ["THREADS", "one_blas_thread", "pool", "run_parts", "with_one_blas_thread"]
