@@ -10,6 +10,7 @@ from test_schedule import RADAR, rig_with, tracks
 
 from rts_scenario.peak_search import find_peak, snapshot
 from rts_scenario.radar import RadarProfile
+from rts_scenario.rig import Rig
 from rts_scenario.schedule import build_schedule, quantization
 
 pytest.importorskip("numba", reason="the compiled search needs numba (pip install numba)")
@@ -47,3 +48,31 @@ def test_compiled_search_matches_the_numpy_search(profile, monkeypatch):
     p_az, p_el = find_peak(radar.array, x)
     np.testing.assert_allclose(np.hypot(p_az - az[pick], p_el - el[pick]), err_fast[pick],
                                atol=2e-3)
+
+
+def test_compiled_search_matches_with_channels_off_on_a_grid_rig(monkeypatch):
+    # Weak targets on the wide grid: channels that would need more attenuation than the
+    # attenuator has are off, so the searches take their one-candidate and idle-channel paths.
+    radar = RadarProfile.preset("awr1843boost")
+    rig = rig_with(Rig.preset("wide-3x5"), attenuation_step_db=0.5, echoes_per_channel=64,
+                   attenuation_max_db=75.0)
+    rng = np.random.default_rng(5)
+    n = 600
+    az, el = rng.uniform(-19, 19, n), rng.uniform(-7.5, 7.5, n)
+    ranges = rng.uniform(5.0, 120.0, n)
+
+    def schedule(compiled):
+        monkeypatch.setenv("RTS_SCENARIO_JIT", "on" if compiled else "off")
+        return build_schedule(tracks(az[None, :], el[None, :], range_m=ranges[None, :]), rig,
+                              radar, quantization="aware")
+
+    fast, slow = schedule(True), schedule(False)
+    played = fast.active[0].any(-1)
+    some_off = played & (fast.active[0].sum(-1) < 4)
+    assert some_off.mean() > 0.2  # the paths this test is for are taken
+    err_fast = np.hypot(*fast.angle_error_deg[0].T)[played]
+    err_slow = np.hypot(*slow.angle_error_deg[0].T)[played]
+    same = np.all(np.isclose(fast.attenuation_db[0], slow.attenuation_db[0], equal_nan=True),
+                  axis=1)[played]
+    assert same.mean() >= 0.98
+    assert np.all(err_fast <= err_slow + 1e-9)
