@@ -66,7 +66,38 @@ def _direction(u, s):  # pragma: no cover
     return az, el, sin_az, math.sqrt(1.0 - sin_az * sin_az), s, cos_el
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _beam(resp, i, t, a0, a1, a2, a3):  # pragma: no cover
+    """``(Re, Im)`` of B (``t = 0``) or one of its derivatives: the responses, weighted.
+
+    Real arithmetic (the amplitudes are real): a third of a complex product's work, the same
+    values. Inlined by numba.
+    """
+    r0, r1, r2, r3 = resp[i, t, 0], resp[i, t, 1], resp[i, t, 2], resp[i, t, 3]
+    return (r0.real * a0 + r1.real * a1 + r2.real * a2 + r3.real * a3,
+            r0.imag * a0 + r1.imag * a1 + r2.imag * a2 + r3.imag * a3)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _curvature(resp, i, a0, a1, a2, a3):  # pragma: no cover
+    """B, its first derivatives and the Hessian of ``|B|^2 / 2`` for amplitudes ``a0..a3``.
+
+    ``(b, b_u, b_s, h_uu, h_us, h_ss)`` with ``b, b_u, b_s`` as ``(Re, Im)`` pairs.
+    """
+    b = _beam(resp, i, 0, a0, a1, a2, a3)
+    b_u = _beam(resp, i, 1, a0, a1, a2, a3)
+    b_s = _beam(resp, i, 2, a0, a1, a2, a3)
+    b_uu = _beam(resp, i, 3, a0, a1, a2, a3)
+    b_us = _beam(resp, i, 4, a0, a1, a2, a3)
+    b_ss = _beam(resp, i, 5, a0, a1, a2, a3)
+    # Re(conj(x) y) = x.re y.re + x.im y.im
+    h_uu = (b[0] * b_uu[0] + b[1] * b_uu[1]) + b_u[0] * b_u[0] + b_u[1] * b_u[1]
+    h_us = (b[0] * b_us[0] + b[1] * b_us[1]) + (b_u[0] * b_s[0] + b_u[1] * b_s[1])
+    h_ss = (b[0] * b_ss[0] + b[1] * b_ss[1]) + b_s[0] * b_s[0] + b_s[1] * b_s[1]
+    return b, b_u, b_s, h_uu, h_us, h_ss
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _error(resp, i, amps, u, s, direction):  # pragma: no cover
     """Predicted angle error (deg, norm of az and el) of channel amplitudes ``amps``.
 
@@ -74,19 +105,9 @@ def _error(resp, i, amps, u, s, direction):  # pragma: no cover
     from the sines of the differences (``sin(a1 - a0) = sin a1 cos a0 - cos a1 sin a0``): no
     arcsine or arctangent of the angles themselves, the same values to rounding.
     """
-    a0, a1, a2, a3 = amps[0], amps[1], amps[2], amps[3]
-
-    def beam(t):  # B or one of its derivatives: the channels' responses, weighted
-        return (resp[i, t, 0] * a0 + resp[i, t, 1] * a1 + resp[i, t, 2] * a2
-                + resp[i, t, 3] * a3)
-
-    b, b_u, b_s, b_uu, b_us, b_ss = beam(0), beam(1), beam(2), beam(3), beam(4), beam(5)
-    cb = b.conjugate()
-    g_u = (cb * b_u).real
-    g_s = (cb * b_s).real
-    h_uu = (cb * b_uu).real + b_u.real * b_u.real + b_u.imag * b_u.imag
-    h_us = (cb * b_us).real + (b_u.conjugate() * b_s).real
-    h_ss = (cb * b_ss).real + b_s.real * b_s.real + b_s.imag * b_s.imag
+    b, b_u, b_s, h_uu, h_us, h_ss = _curvature(resp, i, amps[0], amps[1], amps[2], amps[3])
+    g_u = b[0] * b_u[0] + b[1] * b_u[1]
+    g_s = b[0] * b_s[0] + b[1] * b_s[1]
     det = h_uu * h_ss - h_us * h_us
     du = ds = 0.0
     if det > 0.0:
@@ -106,7 +127,7 @@ def _error(resp, i, amps, u, s, direction):  # pragma: no cover
     return math.degrees(math.sqrt(d_az * d_az + d_el * d_el))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _sensitivity(resp, i, weights, direction, out):  # pragma: no cover
     """`quantization._sensitivity` times `_degree_scale` for entry ``i`` into ``out`` (2, 4).
 
@@ -114,24 +135,15 @@ def _sensitivity(resp, i, weights, direction, out):  # pragma: no cover
     from the Newton step of the gradient's change at the solved weights. ``direction``:
     `_direction` of the set direction.
     """
-    w0, w1, w2, w3 = weights[i, 0], weights[i, 1], weights[i, 2], weights[i, 3]
-
-    def beam(t):  # B or one of its derivatives at the solved weights
-        return (resp[i, t, 0] * w0 + resp[i, t, 1] * w1 + resp[i, t, 2] * w2
-                + resp[i, t, 3] * w3)
-
-    b, b_u, b_s, b_uu, b_us, b_ss = beam(0), beam(1), beam(2), beam(3), beam(4), beam(5)
-    cb = b.conjugate()
-    h_uu = (cb * b_uu).real + b_u.real * b_u.real + b_u.imag * b_u.imag
-    h_us = (cb * b_us).real + (b_u.conjugate() * b_s).real
-    h_ss = (cb * b_ss).real + b_s.real * b_s.real + b_s.imag * b_s.imag
+    b, _, _, h_uu, h_us, h_ss = _curvature(resp, i, weights[i, 0], weights[i, 1],
+                                           weights[i, 2], weights[i, 3])
     det = h_uu * h_ss - h_us * h_us
     cos_az, cos_el = direction[3], direction[5]
     deg_u = math.degrees(1.0 / (cos_el * cos_az))
     deg_s = math.degrees(1.0 / cos_el)
     for q in range(4):
-        d_u = (cb * resp[i, 1, q]).real
-        d_s = (cb * resp[i, 2, q]).real
+        d_u = b[0] * resp[i, 1, q].real + b[1] * resp[i, 1, q].imag  # Re(conj(B) f_u,q)
+        d_s = b[0] * resp[i, 2, q].real + b[1] * resp[i, 2, q].imag
         if det > 0.0:
             out[0, q] = -(h_ss * d_u - h_us * d_s) / det * deg_u
             out[1, q] = -(h_uu * d_s - h_us * d_u) / det * deg_s
@@ -140,7 +152,7 @@ def _sensitivity(resp, i, weights, direction, out):  # pragma: no cover
             out[1, q] = 0.0
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _shift(on, naive, amp, factor, weight, sens_u, sens_s, offset, low, high,
            slack):  # pragma: no cover
     """Peak shift of one channel moved ``offset`` dB from its naive setting.
@@ -155,12 +167,12 @@ def _shift(on, naive, amp, factor, weight, sens_u, sens_s, offset, low, high,
     return sens_u * change, sens_s * change
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _same(a, b):  # pragma: no cover
     return a[0] == b[0] and a[1] == b[1] and a[2] == b[2] and a[3] == b[3]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _kth_smallest(cost, n, k, top):  # pragma: no cover
     """Write the indices of the ``k`` smallest of ``cost[:n]`` into ``top[:k]``, smallest first.
 

@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 import pytest
+from benchmark_rates import record_rate
 from cascade_arrays import compact_cascade, ti_cascade
 
 import rts_scenario as rs
@@ -47,7 +48,7 @@ def test_solve_weights_1e6(benchmark, targets, method, array_name):
         rounds=3, iterations=1,
     )
     assert sol.feasible.all()
-    benchmark.extra_info["target_frames_per_s"] = N / benchmark.stats.stats.min
+    record_rate(benchmark, "target_frames_per_s", N)
 
 
 def test_solve_weights_wide_grid(benchmark):
@@ -60,7 +61,7 @@ def test_solve_weights_wide_grid(benchmark):
     sol = benchmark.pedantic(rs.solve_weights, args=(az, el),
                              kwargs={"rig": rig, "array": array}, rounds=3, iterations=1)
     assert sol.feasible.all()
-    benchmark.extra_info["target_frames_per_s"] = N / benchmark.stats.stats.min
+    record_rate(benchmark, "target_frames_per_s", N)
 
 
 # A quad 4 deg x 6 deg wide: narrow enough for the compact cascade to synthesize most targets,
@@ -79,7 +80,7 @@ def test_solve_weights_compact_cascade(benchmark):
     sol = benchmark.pedantic(rs.solve_weights, args=(az, el),
                              kwargs={"rig": rig, "array": array}, rounds=3, iterations=1)
     assert sol.feasible.any() and (sol.reason == rs.Reason.SPLIT).any()
-    benchmark.extra_info["target_frames_per_s"] = N_CASCADE / benchmark.stats.stats.min
+    record_rate(benchmark, "target_frames_per_s", N_CASCADE)
 
 
 @pytest.mark.parametrize("rig_name", ["kit-table1", "wide-3x5"])
@@ -111,7 +112,7 @@ def test_solve_weights_modeled_responses_1e6(benchmark, targets, fe_responses):
     sol = benchmark.pedantic(rs.solve_weights, args=(az, el), kwargs=kwargs, rounds=3,
                              iterations=1)
     assert sol.feasible.all()
-    benchmark.extra_info["target_frames_per_s"] = N / benchmark.stats.stats.min
+    record_rate(benchmark, "target_frames_per_s", N)
 
 
 def _copy_bandwidth_bytes_per_s(rounds=ROUNDS, size=1 << 25):
