@@ -76,3 +76,30 @@ def test_compiled_search_matches_with_channels_off_on_a_grid_rig(monkeypatch):
                   axis=1)[played]
     assert same.mean() >= 0.98
     assert np.all(err_fast <= err_slow + 1e-9)
+
+
+@pytest.mark.parametrize("profile, rig_name, az_max, el_max", [
+    ("paper", "kit-table1", 2.9, 5.9), ("awr1843boost", "kit-table1", 2.9, 5.9),
+    ("awr1843boost", "wide-3x5", 19.0, 7.5)])
+def test_the_shortlist_chooses_as_well_as_a_longer_one(profile, rig_name, az_max, el_max,
+                                                       monkeypatch):
+    # The exact prediction is what costs; `SHORTLIST` candidates of the linear model get it.
+    # A longer shortlist must not find noticeably better settings.
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "on")
+    radar = RadarProfile.preset(profile)
+    rig = rig_with(Rig.preset(rig_name), attenuation_step_db=0.5, echoes_per_channel=4096)
+    rng = np.random.default_rng(3)
+    n = 3000
+    az, el = rng.uniform(-az_max, az_max, n), rng.uniform(-el_max, el_max, n)
+    trk = tracks(az[None], el[None], range_m=rng.uniform(3.0, 60.0, n)[None])
+
+    def errors(shortlist):
+        monkeypatch.setattr(quantization, "SHORTLIST", shortlist)
+        e = np.hypot(*build_schedule(trk, rig, radar, quantization="aware").angle_error_deg[0].T)
+        return e[np.isfinite(e)]
+
+    short, long = errors(quantization.SHORTLIST), errors(8)
+    assert short.size == long.size > 0.9 * n
+    assert np.sqrt(np.mean(short**2)) <= np.sqrt(np.mean(long**2)) + 1e-4
+    for q in (90, 99, 100):
+        assert np.percentile(short, q) <= np.percentile(long, q) + 2e-4
