@@ -10,10 +10,12 @@ pool workers) gets new ones, not the parent's, whose threads do not exist in the
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import sys
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
@@ -52,21 +54,41 @@ def run_parts(fn: Callable[[T], object], parts: Iterable[T]) -> None:
             fn(part)
 
 
-@functools.lru_cache(maxsize=1)
+_controllers: dict[int, Any] = {}
+
+
 def _controller() -> Any:
-    from threadpoolctl import ThreadpoolController  # loaded on first use: ~10 ms
+    """Return the BLAS libraries loaded now (`threadpoolctl`; about 1 ms to find).
 
-    return ThreadpoolController()
+    Found again when modules were imported since (a module may bring its own BLAS, as scipy
+    does), else reused.
+    """
+    key = len(sys.modules)
+    found = _controllers.get(key)
+    if found is None:
+        from threadpoolctl import ThreadpoolController  # loaded on first use: ~10 ms
+
+        _controllers.clear()
+        found = _controllers[key] = ThreadpoolController()
+    return found
 
 
-def one_blas_thread() -> Any:
-    """Return a context in which BLAS runs on one thread (`threadpoolctl`).
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Run the body with BLAS on one thread (`threadpoolctl`), when called on the main thread.
 
     The matrices here are small: more BLAS threads do not help them, and after each call they
     keep spinning for a while, taking the cores from the worker threads (a quarter to a half
-    of a compiled kernel's time on two cores, measured).
+    of a compiled kernel's time on two cores, measured). The limit is the process's, and
+    threadpoolctl lets one thread set it; bodies on other threads overlapping in time would
+    restore each other's limits and could leave BLAS on one thread for good, so on any thread
+    but the main one the body runs as it is. Nested bodies restore the limits they found.
     """
-    return _controller().limit(limits=1, user_api="blas")
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    with _controller().limit(limits=1, user_api="blas"):
+        yield
 
 
 def with_one_blas_thread(fn: F) -> F:

@@ -70,3 +70,41 @@ def test_blas_runs_on_one_thread_inside_and_as_before_after():
     after = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
     assert inside and all(n == 1 for n in inside)
     assert after == before
+
+
+def test_blas_limits_from_other_threads_leave_the_process_as_it_was():
+    # threadpoolctl lets one thread set the process's BLAS limits: bodies on two other threads
+    # overlapping in time (A in, B in, A out, B out) would otherwise leave BLAS on one thread.
+    def blas_threads():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    np.ones((4, 4)) @ np.ones((4, 4))
+    with workers.one_blas_thread():  # the main thread first, as a run does
+        pass
+    before = blas_threads()
+    a_in, b_in, a_out = threading.Event(), threading.Event(), threading.Event()
+
+    def a():
+        with workers.one_blas_thread():
+            a_in.set()
+            b_in.wait(10)
+        a_out.set()
+
+    def b():
+        a_in.wait(10)
+        with workers.one_blas_thread():
+            b_in.set()
+            a_out.wait(10)
+
+    threads = [threading.Thread(target=a), threading.Thread(target=b)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(20)
+    assert blas_threads() == before
+    with workers.one_blas_thread():  # and the main thread still limits it
+        assert all(n == 1 for n in blas_threads())
+        with workers.one_blas_thread():
+            assert all(n == 1 for n in blas_threads())
+        assert all(n == 1 for n in blas_threads())
+    assert blas_threads() == before
