@@ -28,16 +28,6 @@ DB_TO_NEPER = math.log(10.0) / 20.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _nearest(att, low, step, high, slack):  # pragma: no cover
-    """Nearest attenuator setting (the minimum below it; inf above the maximum)."""
-    if not math.isfinite(att):
-        return math.inf
-    snapped = low + np.rint((att - low) / step) * step
-    snapped = max(snapped, low)
-    return snapped if snapped <= high + slack else math.inf
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def _angles(u, s):  # pragma: no cover
     """`arrays.angles_from_cosines` for one direction: ``(az_rad, el_rad)``."""
     s = min(max(s, -1.0), 1.0)
