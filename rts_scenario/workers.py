@@ -27,6 +27,11 @@ THREADS = min(4, os.cpu_count() or 1)
 
 _LOCK = threading.Lock()
 _pools: dict[str, ThreadPoolExecutor] = {}
+_local = threading.local()  # .worker: this thread is one of the shared pool's
+
+
+def _mark_worker() -> None:
+    _local.worker = True
 
 
 def pool(name: str = "rts-worker", threads: int = THREADS) -> ThreadPoolExecutor:
@@ -36,17 +41,20 @@ def pool(name: str = "rts-worker", threads: int = THREADS) -> ThreadPoolExecutor
         with _LOCK:
             found = _pools.get(name)
             if found is None:
-                found = _pools[name] = ThreadPoolExecutor(threads, thread_name_prefix=name)
+                found = _pools[name] = ThreadPoolExecutor(threads, thread_name_prefix=name,
+                                                          initializer=_mark_worker)
     return found
 
 
 def run_parts(fn: Callable[[T], object], parts: Iterable[T]) -> None:
     """Call ``fn`` on every part, on the shared pool's threads when there are several.
 
-    ``fn`` must not itself wait for the shared pool. Exceptions propagate.
+    Called from one of those threads (``fn`` running parts of its own), the parts run on it,
+    one after another: waiting for the pool from inside it could wait for ever. Exceptions
+    propagate.
     """
     parts = list(parts)
-    if len(parts) > 1 and THREADS > 1:
+    if len(parts) > 1 and THREADS > 1 and not getattr(_local, "worker", False):
         for _ in pool().map(fn, parts):
             pass
     else:

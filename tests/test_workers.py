@@ -108,3 +108,27 @@ def test_blas_limits_from_other_threads_leave_the_process_as_it_was():
             assert all(n == 1 for n in blas_threads())
         assert all(n == 1 for n in blas_threads())
     assert blas_threads() == before
+
+
+def test_parts_of_parts_run_without_waiting_for_the_pool():
+    # Every pool thread running a part that itself runs parts: waiting for the pool from
+    # inside it would wait for ever.
+    done = []
+    lock = threading.Lock()
+
+    def inner(part):
+        with lock:
+            done.append(part)
+
+    def outer(part):
+        workers.run_parts(inner, [(part, k) for k in range(3)])
+
+    finished = threading.Event()
+
+    def main():
+        workers.run_parts(outer, range(2 * workers.THREADS))
+        finished.set()
+
+    threading.Thread(target=main, daemon=True).start()
+    assert finished.wait(30), "parts of parts never finished"
+    assert sorted(done) == [(p, k) for p in range(2 * workers.THREADS) for k in range(3)]
