@@ -16,7 +16,7 @@ import os
 import sys
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -24,9 +24,12 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 # Threads of the shared pool: one per core, at most 4 (the kernels are compute-bound).
 THREADS = min(4, os.cpu_count() or 1)
+# The shared pool's name: `run_parts` runs its parts there.
+SHARED = "rts-worker"
 
 _LOCK = threading.Lock()
 _pools: dict[str, ThreadPoolExecutor] = {}
+_sizes: dict[str, int] = {}
 _local = threading.local()  # .worker: this thread is one of the shared pool's
 
 
@@ -34,15 +37,27 @@ def _mark_worker() -> None:
     _local.worker = True
 
 
-def pool(name: str = "rts-worker", threads: int = THREADS) -> ThreadPoolExecutor:
-    """Return the process's pool called ``name`` (made with ``threads`` threads on first use)."""
+def pool(name: str = SHARED, threads: int = THREADS) -> ThreadPoolExecutor:
+    """Return the process's pool called ``name`` (made with ``threads`` threads on first use).
+
+    Raises
+    ------
+    ValueError
+        The pool exists with another number of threads (a pool of one thread keeps its tasks
+        in order; its users rely on that).
+    """
     found = _pools.get(name)
     if found is None:
         with _LOCK:
             found = _pools.get(name)
             if found is None:
-                found = _pools[name] = ThreadPoolExecutor(threads, thread_name_prefix=name,
-                                                          initializer=_mark_worker)
+                _sizes[name] = threads  # first: a pool is seen only with its size known
+                found = _pools[name] = ThreadPoolExecutor(
+                    threads, thread_name_prefix=name,
+                    initializer=_mark_worker if name == SHARED else None)
+    if _sizes[name] != threads:
+        raise ValueError(f"threads: pool {name!r} has {_sizes[name]} thread(s), "
+                         f"asked for {threads}")
     return found
 
 
@@ -50,13 +65,23 @@ def run_parts(fn: Callable[[T], object], parts: Iterable[T]) -> None:
     """Call ``fn`` on every part, on the shared pool's threads when there are several.
 
     Called from one of those threads (``fn`` running parts of its own), the parts run on it,
-    one after another: waiting for the pool from inside it could wait for ever. Exceptions
-    propagate.
+    one after another: waiting for the pool from inside it could wait for ever.
+
+    When a part raises, the parts not started yet are not started, the running ones finish,
+    and then the exception of the first failing part (in the order given) is raised: no part
+    still writes into the caller's arrays once the caller hears of the error.
     """
     parts = list(parts)
     if len(parts) > 1 and THREADS > 1 and not getattr(_local, "worker", False):
-        for _ in pool().map(fn, parts):
-            pass
+        futures = [pool().submit(fn, part) for part in parts]
+        _, pending = wait(futures, return_when=FIRST_EXCEPTION)
+        if pending:  # a part failed
+            for future in pending:
+                future.cancel()
+            wait(pending)
+        for future in futures:
+            if not future.cancelled() and (error := future.exception()) is not None:
+                raise error
     else:
         for part in parts:
             fn(part)
@@ -87,10 +112,14 @@ def one_blas_thread() -> Iterator[None]:
 
     The matrices here are small: more BLAS threads do not help them, and after each call they
     keep spinning for a while, taking the cores from the worker threads (a quarter to a half
-    of a compiled kernel's time on two cores, measured). The limit is the process's, and
-    threadpoolctl lets one thread set it; bodies on other threads overlapping in time would
-    restore each other's limits and could leave BLAS on one thread for good, so on any thread
-    but the main one the body runs as it is. Nested bodies restore the limits they found.
+    of a compiled kernel's time on two cores, measured). The limit is the process's, and only
+    the main thread can set it reliably: OpenBLAS ignores a limit set from another thread once
+    the main thread has set one, and bodies overlapping on other threads would restore each
+    other's limits, leaving BLAS on one thread for good. So on any thread but the main one the
+    body runs as it is: a program that solves from other threads and wants the cores for the
+    solver's own threads limits BLAS itself (``threadpoolctl.threadpool_limits(1, "blas")``
+    on its main thread, or ``OPENBLAS_NUM_THREADS=1``). Nested bodies restore the limits they
+    found.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -111,14 +140,17 @@ def with_one_blas_thread(fn: F) -> F:
 
 
 def _forget_pools() -> None:
-    # In a forked child the parent's threads are gone: pools start afresh when first used.
-    global _LOCK
+    # In a forked child the parent's threads are gone: pools start afresh when first used, and
+    # the thread that forked (maybe one of the pool's) is no pool thread there.
+    global _LOCK, _local
     _LOCK = threading.Lock()
     _pools.clear()
+    _sizes.clear()
+    _local = threading.local()
 
 
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_forget_pools)
 
 
-__all__ = ["THREADS", "one_blas_thread", "pool", "run_parts", "with_one_blas_thread"]
+__all__ = ["SHARED", "THREADS", "one_blas_thread", "pool", "run_parts", "with_one_blas_thread"]

@@ -34,11 +34,11 @@ def test_compiled_search_matches_the_numpy_search(profile, monkeypatch):
     err_fast = np.hypot(*fast.angle_error_deg[:, 0].T)
     err_slow = np.hypot(*slow.angle_error_deg[:, 0].T)
     assert np.isfinite(err_fast).all()
-    # The same choice nearly everywhere; where ties of the linear model order the shortlist
-    # differently, never a worse predicted angle.
+    # The same choice (its prunings skip only work whose outcome is known): a difference is
+    # allowed only where rounding breaks a tie of the linear model, and is never worse.
     same = np.all(np.isclose(fast.attenuation_db[:, 0], slow.attenuation_db[:, 0],
                              equal_nan=True), axis=1)
-    assert same.mean() >= 0.98
+    assert same.mean() >= 0.995
     assert np.all(err_fast <= err_slow + 1e-9)
     # What the radar sees (independent peak search, on a sample) is what was predicted.
     pick = rng.choice(az.size, 20, replace=False)
@@ -74,7 +74,7 @@ def test_compiled_search_matches_with_channels_off_on_a_grid_rig(monkeypatch):
     err_slow = np.hypot(*slow.angle_error_deg[0].T)[played]
     same = np.all(np.isclose(fast.attenuation_db[0], slow.attenuation_db[0], equal_nan=True),
                   axis=1)[played]
-    assert same.mean() >= 0.98
+    assert same.mean() >= 0.995
     assert np.all(err_fast <= err_slow + 1e-9)
 
 
@@ -103,3 +103,23 @@ def test_the_shortlist_chooses_as_well_as_a_longer_one(profile, rig_name, az_max
     assert np.sqrt(np.mean(short**2)) <= np.sqrt(np.mean(long**2)) + 1e-4
     for q in (90, 99, 100):
         assert np.percentile(short, q) <= np.percentile(long, q) + 2e-4
+
+
+def test_the_shortlist_selection_puts_nan_last_as_numpy_does():
+    from rts_scenario.schedule._search_kernel import _kth_smallest
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n, k = int(rng.integers(1, 12)), int(rng.integers(1, 5))
+        cost = rng.choice([0.5, 1.0, 2.0, 3.0, np.nan, np.inf], n) + rng.uniform(0, 1e-3, n) * (
+            rng.random(n) < 0.5)
+        top = np.full(k, -1, dtype=np.int64)
+        kth = _kth_smallest(cost, n, k, top)
+        ranked = np.argsort(np.where(np.isnan(cost), np.inf, cost), kind="stable")
+        if n >= k:
+            np.testing.assert_array_equal(top, ranked[:k])
+            expected = cost[ranked[k - 1]]
+            assert kth == (np.inf if np.isnan(expected) else expected)
+        else:
+            np.testing.assert_array_equal(top[:n], ranked)
+            assert kth == np.inf

@@ -3,10 +3,11 @@
 import multiprocessing
 import os
 import threading
+import time
 
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_info
+from threadpoolctl import threadpool_info, threadpool_limits
 
 from rts_scenario import workers
 
@@ -34,9 +35,58 @@ def test_an_error_in_a_part_reaches_the_caller():
         workers.run_parts(fail, range(6))
 
 
+def test_after_an_error_no_part_is_still_running():
+    # The caller hears of the error only once the parts already running have finished (they
+    # write into the caller's arrays); parts not started are not started.
+    running = []
+    finished = []
+    lock = threading.Lock()
+
+    def part(p):
+        with lock:
+            running.append(p)
+        if p == 0:
+            time.sleep(0.05)  # the others start meanwhile
+            raise ValueError("part 0")
+        time.sleep(0.3)
+        with lock:
+            finished.append(p)
+
+    with pytest.raises(ValueError, match="part 0"):
+        workers.run_parts(part, range(8))
+    with lock:
+        assert sorted(finished) == sorted(p for p in running if p != 0)
+        assert len(running) < 8  # the rest were never started
+
+
+def test_the_first_failing_part_is_the_one_reported():
+    def fail(part):
+        if part in (1, 5):
+            time.sleep(0.2 if part == 1 else 0.0)
+            raise ValueError(f"part {part}")
+
+    with pytest.raises(ValueError, match="part 1"):
+        workers.run_parts(fail, range(2))
+
+
 def test_the_pool_is_kept_between_calls():
     assert workers.pool() is workers.pool()
     assert workers.pool("other", threads=1) is not workers.pool()
+
+
+def test_a_pool_is_not_handed_out_with_another_size():
+    workers.pool("single", threads=1)
+    with pytest.raises(ValueError, match="pool 'single' has 1 thread"):
+        workers.pool("single", threads=2)
+
+
+def test_threads_of_other_pools_still_run_parts_on_the_shared_pool():
+    names = []
+    workers.pool("other", threads=1).submit(
+        workers.run_parts, lambda p: names.append(threading.current_thread().name),
+        range(4)).result(timeout=30)
+    if workers.THREADS > 1:
+        assert all(name.startswith(workers.SHARED) for name in names)
 
 
 def _child(queue):
@@ -62,12 +112,47 @@ def test_a_forked_child_gets_its_own_threads():
     assert queue.get(timeout=5) == list(range(8))
 
 
+def _blas_threads():
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def _fork_and_run_parts(queue):
+    # Runs on a pool thread: the child it forks has that thread as its main one, and is no
+    # pool thread there, so its parts go to a pool of its own.
+    ctx = multiprocessing.get_context("fork")
+    inner = ctx.Queue()
+    child = ctx.Process(target=_child_names, args=(inner,))
+    child.start()
+    child.join(60)
+    if child.is_alive():
+        child.kill()
+        return None
+    return inner.get(timeout=5)
+
+
+def _child_names(queue):
+    names = []
+    workers.run_parts(lambda part: names.append(threading.current_thread().name), range(6))
+    queue.put(names)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork only")
+@pytest.mark.skipif(workers.THREADS < 2, reason="one core: parts run inline anyway")
+def test_a_child_forked_from_a_pool_thread_uses_a_pool():
+    names = workers.pool().submit(_fork_and_run_parts, None).result(timeout=90)
+    assert names is not None, "the forked child's parts never ran"
+    assert len(names) == 6 and all(n.startswith(workers.SHARED) for n in names)
+
+
 def test_blas_runs_on_one_thread_inside_and_as_before_after():
     np.ones((4, 4)) @ np.ones((4, 4))  # BLAS loaded
-    before = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
-    with workers.one_blas_thread():
-        inside = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
-    after = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    with threadpool_limits(limits=2, user_api="blas"):  # more than one thread to begin with
+        before = _blas_threads()
+        if not any(n > 1 for n in before):
+            pytest.skip("BLAS here runs on one thread only: nothing to limit")
+        with workers.one_blas_thread():
+            inside = _blas_threads()
+        after = _blas_threads()
     assert inside and all(n == 1 for n in inside)
     assert after == before
 
@@ -75,9 +160,7 @@ def test_blas_runs_on_one_thread_inside_and_as_before_after():
 def test_blas_limits_from_other_threads_leave_the_process_as_it_was():
     # threadpoolctl lets one thread set the process's BLAS limits: bodies on two other threads
     # overlapping in time (A in, B in, A out, B out) would otherwise leave BLAS on one thread.
-    def blas_threads():
-        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
-
+    blas_threads = _blas_threads
     np.ones((4, 4)) @ np.ones((4, 4))
     with workers.one_blas_thread():  # the main thread first, as a run does
         pass

@@ -166,21 +166,29 @@ def _same(a, b):  # pragma: no cover
 def _kth_smallest(cost, n, k, top):  # pragma: no cover
     """Write the indices of the ``k`` smallest of ``cost[:n]`` into ``top[:k]``, smallest first.
 
-    Returns the k-th smallest cost (inf when ``n < k``). Ties keep the lower index first.
+    Returns the k-th smallest cost (inf when ``n < k``). Ties keep the lower index first; NaN
+    counts as infinite (last, as numpy's partition puts it), so it never takes a place from a
+    number.
     """
     filled = 0
     for c in range(n):
-        value = cost[c]
-        if filled == k and not value < cost[top[k - 1]]:
+        value = cost[c] if cost[c] == cost[c] else math.inf
+        if filled == k and not value < _finite_or_inf(cost[top[k - 1]]):
             continue
         j = filled if filled < k else k - 1
-        while j > 0 and value < cost[top[j - 1]]:
+        while j > 0 and value < _finite_or_inf(cost[top[j - 1]]):
             top[j] = top[j - 1]
             j -= 1
         top[j] = c
         if filled < k:
             filled += 1
-    return cost[top[k - 1]] if filled == k else math.inf
+    return _finite_or_inf(cost[top[k - 1]]) if filled == k else math.inf
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _finite_or_inf(x):  # pragma: no cover
+    """``x``, or inf for NaN (the ordering `_kth_smallest` uses)."""
+    return x if x == x else math.inf
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -369,6 +369,8 @@ def _response_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, rows, n
     the same order as row by row.
     """
     group = 4 if real_only else 2
+    if rows % group:  # the groups would reach past the table's rows (no bounds checks here)
+        raise ValueError("_response_sums: rows must be a multiple of 4")
     for r0 in range(0, rows, group):
         for r in range(r0, r0 + group):
             for b in range(nb):
