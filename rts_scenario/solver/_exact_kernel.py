@@ -225,7 +225,13 @@ def _boundary(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
         _, good = _accept(cand, gain_floor, negative_tol)
         if good:
             return cand, True
-    # Every boundary ray; the feasible one of largest norm (gain) wins, the first on ties.
+    return _boundary_rays(w, e1, e2, gain_floor, negative_tol)
+
+
+@_jit
+def _boundary_rays(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
+    """`exact._boundary_rays`: every boundary ray; the feasible one of largest norm (gain)
+    wins, the first on ties. ``(w, feasible)``."""
     best = w
     best_score = -2.0
     found = False
@@ -281,38 +287,65 @@ def _max_gain_weights(f, r1, r2, row_scale, tol):  # pragma: no cover
     return _finish(w, ok, r1, r2, rank_floor, tol[_RESIDUAL])
 
 
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _first_ray(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
+    """`_boundary`'s fast path without branches: ``(candidate, whether it is the solution)``.
+
+    The most negative weight (the first on ties) forced to 0 by selects, not indexing, so a
+    loop over a block of targets stays one vector loop.
+    """
+    k1 = w[1] < w[0]
+    low = w[1] if k1 else w[0]
+    k2 = w[2] < low
+    low = w[2] if k2 else low
+    k3 = w[3] < low
+    k = 3 if k3 else (2 if k2 else (1 if k1 else 0))
+    e1k = e1[3] if k == 3 else (e1[2] if k == 2 else (e1[1] if k == 1 else e1[0]))
+    e2k = e2[3] if k == 3 else (e2[2] if k == 2 else (e2[1] if k == 1 else e2[0]))
+    wk = w[3] if k == 3 else (w[2] if k == 2 else (w[1] if k == 1 else w[0]))
+    p_kk = -(e1k * e1k + e2k * e2k) + 1.0
+    ratio = wk / p_kk  # as `_ray`; unused where p_kk is not usable
+    cand = (w[0] - (-(e1[0] * e1k + e2[0] * e2k) + (k == 0)) * ratio,
+            w[1] - (-(e1[1] * e1k + e2[1] * e2k) + (k == 1)) * ratio,
+            w[2] - (-(e1[2] * e1k + e2[2] * e2k) + (k == 2)) * ratio,
+            w[3] - (-(e1[3] * e1k + e2[3] * e2k) + (k == 3)) * ratio)
+    _, good = _accept(cand, gain_floor, negative_tol)
+    return cand, good & (p_kk > 1e-12)
+
+
 @_jit
 def _max_gain_weights_block(acc_re, nb, row_scale, tol, work):  # pragma: no cover
     """`_max_gain_weights` of the unrotated responses of a block of targets, into ``work``.
 
-    Rows of ``work``: 0-3 ``w``, 4 ``ok`` (1.0 or 0.0), 5 left to the caller. The common case
-    runs over the whole block (vector instructions: scalar constants, few output rows, no
-    branches); only targets whose projection leaves the cone take the boundary rays, one by
-    one.
+    Rows of ``work``: 0-3 ``w``, 4 ``ok`` (1.0 or 0.0), 5 left to the caller, 6 scratch. The
+    projection, the boundary's fast path and the final checks run over the whole block (vector
+    instructions: scalar constants, selects, no branches, and ``work`` only written); the few
+    targets whose fast path fails search every boundary ray, one by one.
     """
     rank_floor = tol[_RANK] * row_scale
     gain_tol, negative_tol, residual_tol = tol[_GAIN], tol[_NEGATIVE], tol[_RESIDUAL]
     for b in range(nb):
-        w, _, _, _, ok = _project(_row(acc_re, 0, b), _row(acc_re, 4, b), _row(acc_re, 8, b),
-                                  rank_floor, gain_tol, negative_tol)
+        r1, r2 = _row(acc_re, 4, b), _row(acc_re, 8, b)
+        w, e1, e2, gain_floor, ok = _project(_row(acc_re, 0, b), r1, r2, rank_floor, gain_tol,
+                                             negative_tol)
+        cand, good = _first_ray(w, e1, e2, gain_floor, negative_tol)
+        w = (w[0] if ok else cand[0], w[1] if ok else cand[1], w[2] if ok else cand[2],
+             w[3] if ok else cand[3])
+        w, done = _finish(w, ok | good, r1, r2, rank_floor, residual_tol)
         for q in range(4):
             work[q, b] = w[q]
-        work[4, b] = 1.0 if ok else 0.0
+        work[4, b] = 1.0 if done else 0.0
+        work[6, b] = 0.0 if ok | good else 1.0
     for b in range(nb):
-        if work[4, b] == 0.0:
-            w, e1, e2, gain_floor, _ = _project(_row(acc_re, 0, b), _row(acc_re, 4, b),
-                                                _row(acc_re, 8, b), rank_floor, gain_tol,
-                                                negative_tol)
-            w, ok = _boundary(w, e1, e2, gain_floor, negative_tol)
+        if work[6, b] != 0.0:  # every boundary ray (the fast path's failed)
+            r1, r2 = _row(acc_re, 4, b), _row(acc_re, 8, b)
+            w, e1, e2, gain_floor, _ = _project(_row(acc_re, 0, b), r1, r2, rank_floor,
+                                                gain_tol, negative_tol)
+            w, ok = _boundary_rays(w, e1, e2, gain_floor, negative_tol)
+            w, ok = _finish(w, ok, r1, r2, rank_floor, residual_tol)
             for q in range(4):
                 work[q, b] = w[q]
             work[4, b] = 1.0 if ok else 0.0
-    for b in range(nb):
-        w, ok = _finish(_row(work, 0, b), work[4, b] != 0.0, _row(acc_re, 4, b),
-                        _row(acc_re, 8, b), rank_floor, residual_tol)
-        for q in range(4):
-            work[q, b] = w[q]
-        work[4, b] = 1.0 if ok else 0.0
 
 
 @_jit
@@ -450,7 +483,7 @@ def solve_targets(  # pragma: no cover
     look_im = np.empty((n_elements, _BLOCK))
     acc_re = np.zeros((24, _BLOCK))
     acc_im = np.zeros((24, _BLOCK))
-    work = np.empty((6, _BLOCK))
+    work = np.empty((7, _BLOCK))
     # Spans of targets small enough for the caches; in each, a counting sort by quad (each
     # quad's table is then read for whole blocks).
     count = np.zeros(n_quads + 1, dtype=np.int64)
