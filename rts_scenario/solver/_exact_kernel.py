@@ -137,34 +137,37 @@ def _catmull_rom(t):  # pragma: no cover
 
 
 @_jit
-def _clamp(i, last):  # pragma: no cover
-    return 0 if i < 0 else (last if i > last else i)
+def _phase_block(us, ss, u0, s0, du, ds, table, out, nb):  # pragma: no cover
+    """Bicubic phase map (`exact.PhaseMap.__call__`) of targets ``b < nb`` into ``out``.
 
-
-@_jit
-def _phase_at(u, s, u0, s0, du, ds, table):  # pragma: no cover
-    """Bicubic phase map at ``(u, s)`` (`exact.PhaseMap.__call__`)."""
-    last = table.shape[0] - 1
-    x = (u - u0) / du
-    x = 0.0 if x < 0.0 else (float(last) if x > last else x)
-    y = (s - s0) / ds
-    y = 0.0 if y < 0.0 else (float(last) if y > last else y)
-    i = int(x)
-    i = i if i < last - 1 else last - 1
-    j = int(y)
-    j = j if j < last - 1 else last - 1
-    wx = _catmull_rom(x - i)
-    wy = _catmull_rom(y - j)
-    c0, c1, c2, c3 = _clamp(j - 1, last), _clamp(j, last), _clamp(j + 1, last), _clamp(j + 2, last)
-    out = 0.0
-    for a in range(4):
-        row = _clamp(i + a - 1, last)
-        inner = 0.0 + wy[0] * table[row, c0]
-        inner += wy[1] * table[row, c1]
-        inner += wy[2] * table[row, c2]
-        inner += wy[3] * table[row, c3]
-        out += wx[a] * inner
-    return out
+    Indices are clamped as floats and taken unsigned (no negative-index wraparound), the
+    table read through its flat view: the loop compiles to gathers.
+    """
+    n = table.shape[0]
+    last = float(n - 1)
+    flat = table.reshape(-1)
+    for b in range(nb):
+        x = (us[b] - u0) / du
+        x = 0.0 if x < 0.0 else (last if x > last else x)
+        y = (ss[b] - s0) / ds
+        y = 0.0 if y < 0.0 else (last if y > last else y)
+        i = min(np.floor(x), last - 1.0)
+        j = min(np.floor(y), last - 1.0)
+        wx = _catmull_rom(x - i)
+        wy = _catmull_rom(y - j)
+        c0 = np.uint64(max(j - 1.0, 0.0))
+        c1 = np.uint64(j)
+        c2 = np.uint64(j + 1.0)
+        c3 = np.uint64(min(j + 2.0, last))
+        total = 0.0
+        for a in range(4):
+            row = np.uint64(min(max(i + (a - 1), 0.0), last)) * np.uint64(n)
+            inner = 0.0 + wy[0] * flat[row + c0]
+            inner += wy[1] * flat[row + c1]
+            inner += wy[2] * flat[row + c2]
+            inner += wy[3] * flat[row + c3]
+            total += wx[a] * inner
+        out[b] = total
 
 
 # The per-target algebra works on 4-tuples (one entry per FE): they stay in registers.
@@ -375,20 +378,22 @@ def _locate(az, el, column_az, row_el, lines, boxes, slack, quad):  # pragma: no
     """`quads.candidate_quads`, kept where `quads.inside_quads` holds, else -1."""
     columns, rows = column_az.size, row_el.size
     for n in range(az.size):
+        # Without branches (random targets would mispredict them): searchsorted (left) as a
+        # count of the sorted means below, minus one, clipped to the cells.
         a, e = az[n], el[n]
-        col = 0  # searchsorted (left) minus one, clipped to the cells
-        while col < columns and column_az[col] < a:
-            col += 1
+        col = 0
+        for c in range(columns):
+            col += column_az[c] < a
         col = min(max(col - 1, 0), columns - 2)
         row = 0
-        while row < rows and row_el[row] < e:
-            row += 1
+        for r in range(rows):
+            row += row_el[r] < e
         row = min(max(row - 1, 0), rows - 2)
         q = row * (columns - 1) + col
-        inside = (a >= boxes[q, 0] - slack) and (a <= boxes[q, 1] + slack)
-        inside = inside and (e >= boxes[q, 2] - slack) and (e <= boxes[q, 3] + slack)
+        inside = (a >= boxes[q, 0] - slack) & (a <= boxes[q, 1] + slack)
+        inside &= (e >= boxes[q, 2] - slack) & (e <= boxes[q, 3] + slack)
         for i in range(4):
-            inside = inside and lines[q, i, 0] * a + lines[q, i, 1] * e + lines[q, i, 2] >= -slack
+            inside &= lines[q, i, 0] * a + lines[q, i, 1] * e + lines[q, i, 2] >= -slack
         quad[n] = q if inside else -1
 
 
@@ -432,8 +437,10 @@ def _response_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, rows, n
                     acc_im[r0 + 1, b] += t1r * li + t1i * lr
 
 
-# Targets evaluated together: long enough for vector instructions, short enough for L1.
-_BLOCK = 32
+# Targets evaluated together: each loop over a block amortizes its set-up (alias checks,
+# remainders) over more targets; 128 ran 1.2-1.4x faster than 32 (the block's rows then live
+# in L2, not L1: measured, 32 to 512).
+_BLOCK = 128
 # Targets sorted by quad at a time: their inputs and outputs stay in the L2 cache.
 _SPAN = 4096
 
@@ -530,8 +537,7 @@ def solve_targets(  # pragma: no cover
                     origin = phase_origin[qd]
                     u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
                     table = phase_table[qd]
-                    for b in range(nb):
-                        step_re[b] = _phase_at(us[b], ss[b], u0, s0, du, ds, table)
+                    _phase_block(us, ss, u0, s0, du, ds, table, step_re, nb)
                     for b in range(nb):  # apart from the table look-ups: vectorizes
                         sin_p, cos_p = _sincos(step_re[b])
                         step_re[b] = cos_p
