@@ -233,8 +233,10 @@ def _boundary(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
 
 @_jit
 def _boundary_rays(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
-    """`exact._boundary_rays`: every boundary ray; the feasible one of largest norm (gain)
-    wins, the first on ties. ``(w, feasible)``."""
+    """`exact._boundary_rays`: ``(w, feasible)`` of every boundary ray.
+
+    The feasible one of largest norm (gain) wins, the first on ties.
+    """
     best = w
     best_score = -2.0
     found = False
