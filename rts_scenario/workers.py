@@ -71,9 +71,24 @@ def run_parts(fn: Callable[[T], object], parts: Iterable[T]) -> None:
     and then the exception of the first failing part (in the order given) is raised: no part
     still writes into the caller's arrays once the caller hears of the error.
     """
+    start_parts(fn, parts)()
+
+
+def start_parts(fn: Callable[[T], object], parts: Iterable[T]) -> Callable[[], None]:
+    """Start `run_parts` and return the function that waits for it (and raises its error).
+
+    The caller works on meanwhile (the parts run on the pool's threads); it must call the
+    returned function before it uses what the parts write. Where `run_parts` would run the
+    parts on the calling thread they have run when this returns.
+    """
     parts = list(parts)
-    if len(parts) > 1 and THREADS > 1 and not getattr(_local, "worker", False):
-        futures = [pool().submit(fn, part) for part in parts]
+    if not (len(parts) > 1 and THREADS > 1 and not getattr(_local, "worker", False)):
+        for part in parts:
+            fn(part)
+        return _nothing
+    futures = [pool().submit(fn, part) for part in parts]
+
+    def finish() -> None:
         _, pending = wait(futures, return_when=FIRST_EXCEPTION)
         if pending:  # a part failed
             for future in pending:
@@ -82,9 +97,12 @@ def run_parts(fn: Callable[[T], object], parts: Iterable[T]) -> None:
         for future in futures:
             if not future.cancelled() and (error := future.exception()) is not None:
                 raise error
-    else:
-        for part in parts:
-            fn(part)
+
+    return finish
+
+
+def _nothing() -> None:
+    pass
 
 
 _controllers: dict[int, Any] = {}
@@ -153,4 +171,5 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_forget_pools)
 
 
-__all__ = ["SHARED", "THREADS", "one_blas_thread", "pool", "run_parts", "with_one_blas_thread"]
+__all__ = ["SHARED", "THREADS", "one_blas_thread", "pool", "run_parts", "start_parts",
+           "with_one_blas_thread"]

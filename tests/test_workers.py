@@ -69,6 +69,32 @@ def test_the_first_failing_part_is_the_one_reported():
         workers.run_parts(fail, range(2))
 
 
+def test_started_parts_run_while_the_caller_works_on():
+    if workers.THREADS < 2:
+        pytest.skip("one core: parts run on the calling thread")
+    release = threading.Event()
+    done = []
+
+    def part(p):
+        release.wait(30)
+        done.append(p)
+
+    finish = workers.start_parts(part, range(4))
+    assert done == []  # the caller is back before any part could finish
+    release.set()
+    finish()
+    assert sorted(done) == [0, 1, 2, 3]
+
+
+def test_started_parts_report_their_error_when_waited_for():
+    def fail(part):
+        if part == 2:
+            raise ValueError("part 2")
+
+    with pytest.raises(ValueError, match="part 2"):  # when waited for (at once on one core)
+        workers.start_parts(fail, range(4))()
+
+
 def test_the_pool_is_kept_between_calls():
     assert workers.pool() is workers.pool()
     assert workers.pool("other", threads=1) is not workers.pool()

@@ -63,7 +63,7 @@ def _beam(resp, i, t, a0, a1, a2, a3):  # pragma: no cover
     Real arithmetic (the amplitudes are real): a third of a complex product's work, the same
     values. Inlined by numba.
     """
-    r0, r1, r2, r3 = resp[i, t, 0], resp[i, t, 1], resp[i, t, 2], resp[i, t, 3]
+    r0, r1, r2, r3 = resp[t, 0, i], resp[t, 1, i], resp[t, 2, i], resp[t, 3, i]
     return (r0.real * a0 + r1.real * a1 + r2.real * a2 + r3.real * a3,
             r0.imag * a0 + r1.imag * a1 + r2.imag * a2 + r3.imag * a3)
 
@@ -132,8 +132,8 @@ def _sensitivity(resp, i, weights, direction, out):  # pragma: no cover
     deg_u = math.degrees(1.0 / (cos_el * cos_az))
     deg_s = math.degrees(1.0 / cos_el)
     for q in range(4):
-        d_u = b[0] * resp[i, 1, q].real + b[1] * resp[i, 1, q].imag  # Re(conj(B) f_u,q)
-        d_s = b[0] * resp[i, 2, q].real + b[1] * resp[i, 2, q].imag
+        d_u = b[0] * resp[1, q, i].real + b[1] * resp[1, q, i].imag  # Re(conj(B) f_u,q)
+        d_s = b[0] * resp[2, q, i].real + b[1] * resp[2, q, i].imag
         if det > 0.0:
             out[0, q] = -(h_ss * d_u - h_us * d_s) / det * deg_u
             out[1, q] = -(h_uu * d_s - h_us * d_u) / det * deg_s
@@ -193,15 +193,16 @@ def _finite_or_inf(x):  # pragma: no cover
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def search(resp, weights, full, naive, u, s, reaches, aboves, low, step, high, slack, fine,
-           shortlist, norm_floor, out, out_error):  # pragma: no cover
+           shortlist, norm_floor, out, out_error, first, stop):  # pragma: no cover
     """Write every entry's chosen settings and their predicted angle error.
 
     Pass p searches ``reaches[p]`` steps either side where the settings so far err by more
     than ``aboves[p]`` degrees (the first pass starts from ``naive``); the others keep them.
     ``out`` (N, 4) gets the settings (inf where off), ``out_error`` (N,) the error in degrees.
-    ``resp`` (N, 6, 4) complex, ``weights``, ``full``, ``naive`` (N, 4), ``u``, ``s`` (N,).
+    ``resp`` (6, 4, N) complex (as `SourceResponse.evaluate` gives it), ``weights``, ``full``,
+    ``naive`` (N, 4), ``u``, ``s`` (N,). Entries ``first <= i < stop`` are searched (a part of
+    the arrays, without copying or slicing them).
     """
-    n = weights.shape[0]
     n_steps = 2 * fine + 1
     most = 2 * reaches.max() + 1
     per_step = np.empty(n_steps)
@@ -232,7 +233,7 @@ def search(resp, weights, full, naive, u, s, reaches, aboves, low, step, high, s
     best = np.empty(4)
     sens = np.empty((2, 4))
     start = np.empty(4)
-    for i in range(n):
+    for i in range(first, stop):
         for q in range(4):
             best[q] = naive[i, q]
             best_amp[q] = (math.exp((full[i, q] - best[q]) * DB_TO_NEPER)

@@ -18,6 +18,8 @@ flags. Formulas (DESIGN.md 5.4):
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -32,10 +34,16 @@ from ..solver.estimator_aware import estimator_weights, plan_method
 from ..workers import with_one_blas_thread
 from .echo_slots import assign_echo_slots
 from .model import BLOCKING, Schedule, ScheduleError, Status
-from .quantization import QUANTIZATION_MODES, attenuator_settings, predicted_angle_error
+from .quantization import (
+    QUANTIZATION_MODES,
+    predicted_angle_error,
+    start_attenuator_settings,
+)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+# A quad's levels: weights, attenuations, predicted angle errors, clipping.
+Levels = tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]
 
 # The scene's frame rate may equal the rig's update rate up to rounding (relative).
 # What the solver takes the FEs' echoes to be (`solver_inputs`); the first is the default.
@@ -153,7 +161,10 @@ def build_schedule(
     straddle_db = _straddle_db(rig, radar, tracks, delay, fe0)
     # The FEs' responses on the array (estimator-aware weights are exact weights re-aimed).
     responses = solver_plan(rig, array, plan_method(method), model).responses
-    for q in range(len(rig.quads)):  # per quad of the rig, vectorized over its entries
+    # Per quad of the rig, vectorized over its entries. A quad's quantization search runs on the
+    # worker threads while the next quad's responses are evaluated here (one quad pending).
+    pending: list[tuple[NDArray[np.intp], Callable[[], Levels]]] = []
+    for q in range(len(rig.quads)):
         sel = np.flatnonzero((quad.ravel() == q) & ok.ravel())
         if sel.size == 0:
             continue
@@ -163,13 +174,13 @@ def build_schedule(
         # A channel's calibration gain offset is part of its setting, so it is quantized too.
         # So is the level that makes up for the channel's delay rounding (`_straddle_db`).
         offset = rig.cal_gain_db[rig.quads[q]][None, :] + straddle_db.reshape(-1, 4)[sel]
-        w, att, err, clip = _levels(resp, weight.reshape(-1, 4)[sel],
-                                    single_db.ravel()[sel][:, None] + offset,
-                                    array.n_elements, limits, quantization, u, s)
-        clipped.ravel()[sel] = clip
-        weight.reshape(-1, 4)[sel] = w
-        attenuation.reshape(-1, 4)[sel] = att
-        angle_error.reshape(-1, 2)[sel] = err
+        pending.append((sel, _start_levels(resp, weight.reshape(-1, 4)[sel],
+                                           single_db.ravel()[sel][:, None] + offset,
+                                           array.n_elements, limits, quantization, u, s)))
+        if len(pending) > 1:
+            _store_levels(*pending.pop(0), weight, attenuation, angle_error, clipped)
+    for done in pending:
+        _store_levels(*done, weight, attenuation, angle_error, clipped)
     # Quantization may switch an idle channel on (weakly) to hold the angle.
     active = ok[..., None] & (weight > 0.0)
     attenuation[~active] = np.nan
@@ -222,13 +233,15 @@ def _straddle_db(rig: Rig, radar: RadarProfile, tracks: Tracks, delay: FloatArra
     return np.where(np.isfinite(out), out, 0.0)
 
 
-def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatArray,
-            n_elements: int, limits: HardwareLimits, mode: str, u: FloatArray,
-            s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
-    """Weights, channel attenuations (N, 4), predicted angle errors (N, 2) and clipping (N,).
+def _start_levels(
+    resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatArray, n_elements: int,
+    limits: HardwareLimits, mode: str, u: FloatArray, s: FloatArray,
+) -> Callable[[], Levels]:
+    """Start fitting a quad's levels; the returned function waits and gives the result.
 
-    ``single_db`` (N, 4) is each channel's attenuation for full weight (calibration included).
-    The attenuations are fitted to the attenuator's range and step
+    The result: weights, channel attenuations (N, 4), predicted angle errors (N, 2) and
+    clipping (N,). ``single_db`` (N, 4) is each channel's attenuation for full weight
+    (calibration included). The attenuations are fitted to the attenuator's range and step
     (`rts_scenario.schedule.quantization.attenuator_settings`, which also says what clipped
     means); the weights follow from the settings.
     """
@@ -237,12 +250,28 @@ def _levels(resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatA
     full = single_db + 20.0 * np.log10(gain)[:, None]  # attenuation at weight 1
     with np.errstate(divide="ignore"):
         exact = np.where(on, full - 20.0 * np.log10(np.where(on, weights, 1.0)), np.inf)
-    chosen, clipped = attenuator_settings(resp, weights, full, exact, limits, mode, u, s)
-    new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
-    top = new_w.max(axis=1, keepdims=True)
-    new_w = new_w / np.where(top > 0.0, top, 1.0)
-    return (new_w, np.where(np.isfinite(chosen), chosen, np.nan),
-            predicted_angle_error(resp, new_w, u, s), clipped)
+    settings = start_attenuator_settings(resp, weights, full, exact, limits, mode, u, s)
+
+    def finish() -> Levels:
+        chosen, clipped = settings()
+        new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
+        top = new_w.max(axis=1, keepdims=True)
+        new_w = new_w / np.where(top > 0.0, top, 1.0)
+        return (new_w, np.where(np.isfinite(chosen), chosen, np.nan),
+                predicted_angle_error(resp, new_w, u, s), clipped)
+
+    return finish
+
+
+def _store_levels(sel: NDArray[np.intp], finish: Callable[[], Levels],
+                  weight: FloatArray, attenuation: FloatArray, angle_error: FloatArray,
+                  clipped: NDArray[np.bool_]) -> None:
+    """Wait for a quad's levels (`_start_levels`) and write them at its entries ``sel``."""
+    w, att, err, clip = finish()
+    clipped.ravel()[sel] = clip
+    weight.reshape(-1, 4)[sel] = w
+    attenuation.reshape(-1, 4)[sel] = att
+    angle_error.reshape(-1, 2)[sel] = err
 
 
 def solver_inputs(

@@ -19,7 +19,7 @@ from ..arrays import angles_from_cosines
 from ..beamformer import hessian_step, newton_step, power_curvature
 from ..rig import HardwareLimits
 from ..solver.compiled import mode
-from ..workers import run_parts
+from ..workers import start_parts
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -120,6 +120,18 @@ def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full:
         A channel needed less attenuation than the attenuator's minimum (the echo stays too
         weak), or every channel needed more than its maximum (too strong).
     """
+    return start_attenuator_settings(resp, weights, full, exact, limits, mode, u, s)()
+
+
+def start_attenuator_settings(
+    resp: NDArray[np.complex128], weights: FloatArray, full: FloatArray, exact: FloatArray,
+    limits: HardwareLimits, mode: str, u: FloatArray, s: FloatArray,
+) -> Callable[[], tuple[FloatArray, BoolArray]]:
+    """Start `attenuator_settings`; return the function that waits for it and returns its result.
+
+    The compiled search runs on the worker threads while the caller goes on (the schedule
+    prepares the next quad meanwhile); without it everything is done before this returns.
+    """
     on = weights > 0.0
     step = limits.attenuation_step_db
     grid = _Grid(limits.attenuation_min_db, step, limits.attenuation_max_db)
@@ -127,11 +139,13 @@ def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full:
     # weight is tiny, and playing it too loud would move the angle more than leaving it out.
     chosen = grid.nearest(exact) if step > 0.0 else np.where(
         exact <= grid.high + GRID_SLACK_DB, np.maximum(exact, grid.low), np.inf)
+    searched: Callable[[], None] | None = None
     if step > 0.0 and mode == "aware":
         # A wider search follows only where the narrow one leaves a noticeable error.
         kernel = compiled_search() if _compile(len(weights)) else None
         if kernel is not None:  # every entry: it predicts, keeps or searches each itself
-            chosen = _search_compiled(kernel, resp, weights, full, grid, u, s, chosen)
+            chosen, searched = _start_search_compiled(kernel, resp, weights, full, grid, u, s,
+                                                      chosen)
         for reach, above in zip(SEARCH_STEPS, SEARCH_ABOVE_DEG, strict=True):
             if kernel is not None:
                 break
@@ -142,17 +156,23 @@ def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full:
                 b = todo[start : start + SEARCH_BLOCK]
                 chosen[b] = _search_grid(resp[:, :, b], weights[b], full[b], grid, u[b],
                                          s[b], chosen[b], reach)
-    # A target too weak for every channel is played as weak as possible: its strongest channel
-    # at the attenuator's maximum, the others kept in proportion where they fit (flagged as
-    # clipped).
-    dark = on.any(axis=1) & ~np.isfinite(chosen).any(axis=1)
-    if dark.any():
-        lifted = exact[dark] - (exact[dark].min(axis=1, keepdims=True) - grid.high)
-        chosen[dark] = grid.nearest(lifted) if step > 0.0 else np.where(
-            lifted <= grid.high + GRID_SLACK_DB, lifted, np.inf)
-    clipped = np.asarray(dark | (on & (exact < grid.low - GRID_SLACK_DB)).any(axis=1),
-                         dtype=bool)
-    return chosen, clipped
+
+    def finish() -> tuple[FloatArray, BoolArray]:
+        if searched is not None:
+            searched()
+        # A target too weak for every channel is played as weak as possible: its strongest
+        # channel at the attenuator's maximum, the others kept in proportion where they fit
+        # (flagged as clipped).
+        dark = on.any(axis=1) & ~np.isfinite(chosen).any(axis=1)
+        if dark.any():
+            lifted = exact[dark] - (exact[dark].min(axis=1, keepdims=True) - grid.high)
+            chosen[dark] = grid.nearest(lifted) if step > 0.0 else np.where(
+                lifted <= grid.high + GRID_SLACK_DB, lifted, np.inf)
+        clipped = np.asarray(dark | (on & (exact < grid.low - GRID_SLACK_DB)).any(axis=1),
+                             dtype=bool)
+        return chosen, clipped
+
+    return finish
 
 
 @dataclass(frozen=True)
@@ -310,32 +330,36 @@ def compiled_search() -> Callable[..., None] | None:
         # Compile (or load from numba's cache) now, on one entry: a machine where numba
         # cannot compile or cache keeps the numpy search instead of failing a run.
         one = np.zeros((1, 4))
-        search(np.ones((1, 6, 4), dtype=complex), one + 1.0, one, one, np.zeros(1),
+        search(np.ones((6, 4, 1), dtype=complex), one + 1.0, one, one, np.zeros(1),
                np.zeros(1), np.array([1]), np.array([0.0]), 0.0, 0.5, 60.0, GRID_SLACK_DB,
-               FINE_STEPS, SHORTLIST, NORM_FLOOR, np.empty((1, 4)), np.empty(1))
+               FINE_STEPS, SHORTLIST, NORM_FLOOR, np.empty((1, 4)), np.empty(1), 0, 1)
     except Exception:  # noqa: BLE001 - numba is optional: the numpy search does the same
         return None
     kernel: Callable[..., None] = search
     return kernel
 
 
-def _search_compiled(kernel: Callable[..., None], resp: NDArray[np.complex128],
-                     weights: FloatArray, full: FloatArray, grid: _Grid, u: FloatArray,
-                     s: FloatArray, naive: FloatArray) -> FloatArray:
-    """Both passes of `_search_grid`, compiled, entry by entry (parts on threads)."""
+def _start_search_compiled(
+    kernel: Callable[..., None], resp: NDArray[np.complex128], weights: FloatArray,
+    full: FloatArray, grid: _Grid, u: FloatArray, s: FloatArray, naive: FloatArray,
+) -> tuple[FloatArray, Callable[[], None]]:
+    """Start both passes of `_search_grid`, compiled, entry by entry (parts on threads).
+
+    Returns the array the settings are written into and the function that waits for them.
+    """
     out = np.empty_like(naive)
     error = np.empty(len(naive))
-    args = [np.ascontiguousarray(a) for a in (resp.transpose(2, 0, 1), weights, full, naive,
-                                              u, s)]
+    # resp stays as it is, (6, 4, N): the kernel reads each entry's 24 values from 24 rows.
+    args = [np.ascontiguousarray(a) for a in (resp, weights, full, naive, u, s)]
     reaches = np.array(SEARCH_STEPS, dtype=np.int64)
     aboves = np.array(SEARCH_ABOVE_DEG, dtype=np.float64)
 
-    def run(part: slice) -> None:  # the kernel releases the GIL: parts run on all cores
-        kernel(*(a[part] for a in args), reaches, aboves, grid.low, grid.step, grid.high,
-               GRID_SLACK_DB, FINE_STEPS, SHORTLIST, NORM_FLOOR, out[part], error[part])
+    def run(first: int) -> None:  # the kernel releases the GIL: parts run on all cores
+        kernel(*args, reaches, aboves, grid.low, grid.step, grid.high, GRID_SLACK_DB,
+               FINE_STEPS, SHORTLIST, NORM_FLOOR, out, error, first,
+               min(first + COMPILED_PART, len(out)))
 
-    run_parts(run, [slice(i, i + COMPILED_PART) for i in range(0, len(out), COMPILED_PART)])
-    return out
+    return out, start_parts(run, range(0, len(out), COMPILED_PART))
 
 
 def _sensitivity(resp: NDArray[np.complex128], weights: FloatArray) -> FloatArray:
@@ -357,4 +381,5 @@ def _degree_scale(u: FloatArray, s: FloatArray) -> FloatArray:
     return np.degrees(np.stack([1.0 / (np.cos(el) * np.cos(az)), 1.0 / np.cos(el)], axis=-1))
 
 
-__all__ = ["QUANTIZATION_MODES", "attenuator_settings", "predicted_angle_error"]
+__all__ = ["QUANTIZATION_MODES", "attenuator_settings", "predicted_angle_error",
+           "start_attenuator_settings"]
