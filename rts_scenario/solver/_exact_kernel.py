@@ -217,17 +217,9 @@ def _ray(w, e1, e2, k, p_kk):  # pragma: no cover
 @_jit
 def _boundary(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
     """`exact._boundary_ray` then, if needed, `exact._boundary_rays`: ``(w, feasible)``."""
-    # Fast path: zero the most negative weight (the first on ties, as argmin).
-    k = 0
-    for q in range(1, 4):
-        if w[q] < w[k]:
-            k = q
-    p_kk = -(e1[k] * e1[k] + e2[k] * e2[k]) + 1.0
-    if p_kk > 1e-12:
-        cand = _ray(w, e1, e2, k, p_kk)
-        _, good = _accept(cand, gain_floor, negative_tol)
-        if good:
-            return cand, True
+    cand, good = _first_ray(w, e1, e2, gain_floor, negative_tol)
+    if good:
+        return cand, True
     return _boundary_rays(w, e1, e2, gain_floor, negative_tol)
 
 
@@ -294,7 +286,7 @@ def _max_gain_weights(f, r1, r2, row_scale, tol):  # pragma: no cover
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _first_ray(w, e1, e2, gain_floor, negative_tol):  # pragma: no cover
-    """`_boundary`'s fast path without branches: ``(candidate, whether it is the solution)``.
+    """`exact._boundary_ray` without branches: ``(candidate, whether it is the solution)``.
 
     The most negative weight (the first on ties) forced to 0 by selects, not indexing, so a
     loop over a block of targets stays one vector loop.
