@@ -37,25 +37,29 @@ def _mark_worker() -> None:
     _local.worker = True
 
 
-def pool(name: str = SHARED, threads: int = THREADS) -> ThreadPoolExecutor:
-    """Return the process's pool called ``name`` (made with ``threads`` threads on first use).
+def pool(name: str = SHARED, threads: int | None = None) -> ThreadPoolExecutor:
+    """Return the process's pool called ``name``, made on first use.
+
+    ``threads``: its size when it is made (default `THREADS`); given for a pool that exists,
+    it must be the pool's size.
 
     Raises
     ------
     ValueError
-        The pool exists with another number of threads (a pool of one thread keeps its tasks
-        in order; its users rely on that).
+        ``threads`` is given and the pool exists with another number of threads (a pool of one
+        thread keeps its tasks in order; its users rely on that).
     """
     found = _pools.get(name)
     if found is None:
         with _LOCK:
             found = _pools.get(name)
             if found is None:
-                _sizes[name] = threads  # first: a pool is seen only with its size known
+                size = THREADS if threads is None else threads
+                _sizes[name] = size  # first: a pool is seen only with its size known
                 found = _pools[name] = ThreadPoolExecutor(
-                    threads, thread_name_prefix=name,
+                    size, thread_name_prefix=name,
                     initializer=_mark_worker if name == SHARED else None)
-    if _sizes[name] != threads:
+    if threads is not None and _sizes[name] != threads:
         raise ValueError(f"threads: pool {name!r} has {_sizes[name]} thread(s), "
                          f"asked for {threads}")
     return found

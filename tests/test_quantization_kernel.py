@@ -4,13 +4,18 @@ Reference: the numpy search (`quantization._search_grid`), on the same entries; 
 independent peak search (`rts_scenario.peak_search`) for the angle the chosen settings give.
 """
 
+import threading
+import time
+
 import numpy as np
 import pytest
 from test_schedule import RADAR, rig_with, tracks
 
+from rts_scenario import workers
 from rts_scenario.peak_search import find_peak, snapshot
 from rts_scenario.radar import RadarProfile
 from rts_scenario.rig import Rig
+from rts_scenario.schedule import build as schedule_build
 from rts_scenario.schedule import build_schedule, quantization
 
 pytest.importorskip("numba", reason="the compiled search needs numba (pip install numba)")
@@ -123,3 +128,70 @@ def test_the_shortlist_selection_puts_nan_last_as_numpy_does():
         else:
             np.testing.assert_array_equal(top[:n], ranked)
             assert kth == np.inf
+
+
+def _grid_scene(n, seed):
+    radar = RadarProfile.preset("awr1843boost")
+    rig = rig_with(Rig.preset("wide-3x5"), attenuation_step_db=0.5, echoes_per_channel=n)
+    rng = np.random.default_rng(seed)
+    return tracks(rng.uniform(-19, 19, n)[None], rng.uniform(-7.5, 7.5, n)[None]), rig, radar
+
+
+@pytest.mark.skipif(workers.THREADS < 2, reason="one core: every search runs on this thread")
+def test_searches_in_the_background_give_what_searching_here_gives(monkeypatch):
+    # Parts small enough that every quad's search runs in several parts on the worker threads
+    # while the next quad is prepared; against the same searches run here, one by one.
+    trk, rig, radar = _grid_scene(1500, 8)
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "on")
+    monkeypatch.setattr(quantization, "COMPILED_PART", 64)
+    started = []
+    real_start = quantization.start_parts
+
+    def spy(fn, parts):
+        parts = list(parts)
+        started.append(len(parts))
+        return real_start(fn, parts)
+
+    monkeypatch.setattr(quantization, "start_parts", spy)
+    background = build_schedule(trk, rig, radar, quantization="aware")
+    assert sum(n > 1 for n in started) >= 2  # several quads, each in several parts
+    monkeypatch.setattr(workers, "THREADS", 1)
+    here = build_schedule(trk, rig, radar, quantization="aware")
+    for field in ("attenuation_db", "weight", "angle_error_deg", "status", "active"):
+        np.testing.assert_array_equal(getattr(background, field), getattr(here, field))
+
+
+@pytest.mark.skipif(workers.THREADS < 2, reason="one core: every search runs on this thread")
+def test_an_error_while_a_search_runs_leaves_no_part_running(monkeypatch):
+    # The second quad fails while the first quad's search still runs: the caller hears of the
+    # error only once that search is over.
+    trk, rig, radar = _grid_scene(1500, 9)
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "on")
+    monkeypatch.setattr(quantization, "COMPILED_PART", 64)
+    kernel = quantization.compiled_search()
+    running = []
+    lock = threading.Lock()
+
+    def slow(*args):
+        with lock:
+            running.append(True)
+        time.sleep(0.02)
+        kernel(*args)
+        with lock:
+            running.pop()
+
+    monkeypatch.setattr(quantization, "compiled_search", lambda: slow)
+    real_levels = schedule_build._start_levels
+    calls = []
+
+    def failing_second(*args):
+        calls.append(True)
+        if len(calls) == 2:
+            raise RuntimeError("the second quad failed")
+        return real_levels(*args)
+
+    monkeypatch.setattr(schedule_build, "_start_levels", failing_second)
+    with pytest.raises(RuntimeError, match="second quad"):
+        build_schedule(trk, rig, radar, quantization="aware")
+    with lock:
+        assert running == []

@@ -18,6 +18,7 @@ flags. Formulas (DESIGN.md 5.4):
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 
 import numpy as np
@@ -164,23 +165,31 @@ def build_schedule(
     # Per quad of the rig, vectorized over its entries. A quad's quantization search runs on the
     # worker threads while the next quad's responses are evaluated here (one quad pending).
     pending: list[tuple[NDArray[np.intp], Callable[[], Levels]]] = []
-    for q in range(len(rig.quads)):
-        sel = np.flatnonzero((quad.ravel() == q) & ok.ravel())
-        if sel.size == 0:
-            continue
-        u, s = direction_cosines(np.radians(tracks.az_deg.ravel()[sel]),
-                                 np.radians(tracks.el_deg.ravel()[sel]))
-        resp = responses[q].evaluate(u, s)
-        # A channel's calibration gain offset is part of its setting, so it is quantized too.
-        # So is the level that makes up for the channel's delay rounding (`_straddle_db`).
-        offset = rig.cal_gain_db[rig.quads[q]][None, :] + straddle_db.reshape(-1, 4)[sel]
-        pending.append((sel, _start_levels(resp, weight.reshape(-1, 4)[sel],
-                                           single_db.ravel()[sel][:, None] + offset,
-                                           array.n_elements, limits, quantization, u, s)))
-        if len(pending) > 1:
+    try:
+        for q in range(len(rig.quads)):
+            sel = np.flatnonzero((quad.ravel() == q) & ok.ravel())
+            if sel.size == 0:
+                continue
+            u, s = direction_cosines(np.radians(tracks.az_deg.ravel()[sel]),
+                                     np.radians(tracks.el_deg.ravel()[sel]))
+            resp = responses[q].evaluate(u, s)
+            # A channel's calibration gain offset is part of its setting, so it is quantized
+            # too. So is the level that makes up for the channel's delay rounding
+            # (`_straddle_db`).
+            offset = rig.cal_gain_db[rig.quads[q]][None, :] + straddle_db.reshape(-1, 4)[sel]
+            pending.append((sel, _start_levels(resp, weight.reshape(-1, 4)[sel],
+                                               single_db.ravel()[sel][:, None] + offset,
+                                               array.n_elements, limits, quantization, u, s)))
+            if len(pending) > 1:
+                _store_levels(*pending.pop(0), weight, attenuation, angle_error, clipped)
+        while pending:
             _store_levels(*pending.pop(0), weight, attenuation, angle_error, clipped)
-    for done in pending:
-        _store_levels(*done, weight, attenuation, angle_error, clipped)
+    except BaseException:
+        # No search goes on behind the caller's back once it hears of the error.
+        for _, finish in pending:
+            with contextlib.suppress(Exception):
+                finish()
+        raise
     # Quantization may switch an idle channel on (weakly) to hold the angle.
     active = ok[..., None] & (weight > 0.0)
     attenuation[~active] = np.nan
