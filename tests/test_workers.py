@@ -2,6 +2,8 @@
 
 import multiprocessing
 import os
+import subprocess
+import sys
 import threading
 import time
 
@@ -222,25 +224,34 @@ def test_blas_limits_from_other_threads_leave_the_process_as_it_was():
     assert blas_threads() == before
 
 
+_PARTS_OF_PARTS = """
+import threading
+from rts_scenario import workers
+
+done = []
+lock = threading.Lock()
+
+def inner(part):
+    with lock:
+        done.append(part)
+
+def outer(part):
+    workers.run_parts(inner, [(part, k) for k in range(3)])
+
+workers.run_parts(outer, range(2 * workers.THREADS))
+assert sorted(done) == [(p, k) for p in range(2 * workers.THREADS) for k in range(3)]
+print("ok")
+"""
+
+
 def test_parts_of_parts_run_without_waiting_for_the_pool():
     # Every pool thread running a part that itself runs parts: waiting for the pool from
-    # inside it would wait for ever.
-    done = []
-    lock = threading.Lock()
-
-    def inner(part):
-        with lock:
-            done.append(part)
-
-    def outer(part):
-        workers.run_parts(inner, [(part, k) for k in range(3)])
-
-    finished = threading.Event()
-
-    def main():
-        workers.run_parts(outer, range(2 * workers.THREADS))
-        finished.set()
-
-    threading.Thread(target=main, daemon=True).start()
-    assert finished.wait(30), "parts of parts never finished"
-    assert sorted(done) == [(p, k) for p in range(2 * workers.THREADS) for k in range(3)]
+    # inside it would wait for ever. In a process of its own, so that a hang fails this test
+    # (the pool's threads, blocked, would keep the test session from exiting).
+    try:
+        result = subprocess.run([sys.executable, "-c", _PARTS_OF_PARTS], capture_output=True,
+                                text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("parts of parts never finished")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "ok"
