@@ -7,9 +7,10 @@ numba pays for it. Every function mirrors a numpy function of `rts_scenario.solv
 weights agree with the numpy path to rounding and reasons are identical
 (tests/test_solver_kernel.py). Targets go in blocks of `_BLOCK`: sines and cosines (a
 polynomial with Cody-Waite reduction, ~1 ulp, instead of libm's ~20 ns calls), exponentials,
-phase map, response sums and the common case of the weights run as loops over the block that
-compile to vector instructions; the rest (boundary rays, the phase iteration, the curvature
-test) per target on 4-tuples held in registers. No temporaries: the scratch arrays are
+response sums and the weights up to the boundary's fast path run as loops over the block that
+compile to vector instructions, the phase map as one scalar loop (its table reads do not
+vectorize here); the rest (every boundary ray, the phase iteration, the curvature test) per
+target on 4-tuples held in registers. No temporaries: the scratch arrays are
 allocated once per call.
 
 Constants and reason codes are arguments, not globals: numba freezes globals into the cached
@@ -140,8 +141,9 @@ def _catmull_rom(t):  # pragma: no cover
 def _phase_block(us, ss, u0, s0, du, ds, table, out, nb):  # pragma: no cover
     """Bicubic phase map (`exact.PhaseMap.__call__`) of targets ``b < nb`` into ``out``.
 
-    Indices are clamped as floats and taken unsigned (no negative-index wraparound), the
-    table read through its flat view: the loop compiles to gathers.
+    Indices are clamped as floats and taken unsigned, so no negative-index wraparound code is
+    generated; the table is read through its flat view. Same sums as the map's per-target
+    evaluation, in the same order.
     """
     n = table.shape[0]
     last = float(n - 1)
@@ -418,7 +420,7 @@ def _response_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, rows, n
     """
     group = 4 if real_only else 2
     if rows % group:  # the groups would reach past the table's rows (no bounds checks here)
-        raise ValueError("_response_sums: rows must be a multiple of 4")
+        raise ValueError("_response_sums: rows must be a multiple of the row group (4 or 2)")
     for r0 in range(0, rows, group):
         for r in range(r0, r0 + group):
             for b in range(nb):
@@ -448,8 +450,8 @@ def _response_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, rows, n
 
 
 # Targets evaluated together: each loop over a block amortizes its set-up (alias checks,
-# remainders) over more targets; 128 ran 1.2-1.4x faster than 32 (the block's rows then live
-# in L2, not L1: measured, 32 to 512).
+# remainders) over more targets. 128 ran 1.2-1.4x faster than 32 (32 to 512 measured, one
+# thread, alternating in one process); the block's scratch rows then outgrow L1 for L2.
 _BLOCK = 128
 # Targets sorted by quad at a time: their inputs and outputs stay in the L2 cache.
 _SPAN = 4096
