@@ -9,8 +9,9 @@ weights agree with the numpy path to rounding and reasons are identical
 polynomial with Cody-Waite reduction, ~1 ulp, instead of libm's ~20 ns calls), exponentials,
 response sums and the weights up to the boundary's fast path run as loops over the block that
 compile to vector instructions, the phase map as one scalar loop (its table reads do not
-vectorize here); the rest (every boundary ray, the phase iteration, the curvature test) per
-target on 4-tuples held in registers. No temporaries: the scratch arrays are
+vectorize here). Targets whose phase iterates are gathered per quad and iterate together, in
+vector loops as well. The rest (every boundary ray, the curvature test) runs per target on
+4-tuples held in registers. No temporaries: the scratch arrays are
 allocated once per call.
 
 Constants and reason codes are arguments, not globals: numba freezes globals into the cached
@@ -409,44 +410,134 @@ def _locate(az, el, column_az, row_el, lines, boxes, slack, quad):  # pragma: no
         quad[n] = q if inside else -1
 
 
-@_jit
-def _response_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, rows, n_elements, nb,
-                   real_only):  # pragma: no cover
-    """Set ``acc[r, b] = sum_v table[r, v] look[v, b]`` (complex; its real part if ``real_only``).
+# Inlined by numba (helpers of the response sums' loops over a block).
+_inline = njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"},
+               inline="always")
 
-    Rows go in groups (``rows`` is a multiple of 4), so that each element's ``look`` is loaded
-    once per group, not once per row (13-15 % of the kernel's time, measured); the same sums in
-    the same order as row by row.
+
+@_inline
+def _four(a, r, v):  # pragma: no cover
+    """``a[r, v:v + 4]`` as a tuple."""
+    return a[r, v], a[r, v + 1], a[r, v + 2], a[r, v + 3]
+
+
+@_inline
+def _three(a, r, v):  # pragma: no cover
+    """``a[r, v:v + 3]`` as a tuple."""
+    return a[r, v], a[r, v + 1], a[r, v + 2]
+
+
+@_inline
+def _down3(a, v, b):  # pragma: no cover
+    """``a[v:v + 3, b]`` as a tuple."""
+    return a[v, b], a[v + 1, b], a[v + 2, b]
+
+
+@_inline
+def _down4(a, v, b):  # pragma: no cover
+    """``a[v:v + 4, b]`` as a tuple."""
+    return a[v, b], a[v + 1, b], a[v + 2, b], a[v + 3, b]
+
+
+@_inline
+def _re_mac(x, tr, ti, lr, li):  # pragma: no cover
+    """``x + Re(t l)`` as two fused multiply-adds."""
+    x = x + tr * lr
+    return x - ti * li
+
+
+@_inline
+def _im_mac(y, tr, ti, lr, li):  # pragma: no cover
+    """``y + Im(t l)`` as two fused multiply-adds."""
+    y = y + tr * li
+    return y + ti * lr
+
+
+@_jit
+def _complex_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, first, stop,
+                  n_elements, nb):  # pragma: no cover
+    """``acc[r, b] = sum_v table[r, v] look[v, b]`` (complex) for rows ``first <= r < stop``.
+
+    Rows in pairs and elements in fours: each pass over the block loads and stores a row's
+    sums once per four elements, not once per element, and each term is two fused
+    multiply-adds into the sum, so the loop is bound by its multiply-adds (1.7x the speed of
+    row pairs element by element, measured on 12 rows of 12 elements). Every sum adds its
+    terms in element order.
     """
-    group = 4 if real_only else 2
-    if rows % group:  # the groups would reach past the table's rows (no bounds checks here)
-        raise ValueError("_response_sums: rows must be a multiple of the row group (4 or 2)")
-    for r0 in range(0, rows, group):
-        for r in range(r0, r0 + group):
+    if (stop - first) % 2:  # the pairs would reach past the rows asked for (no bounds checks)
+        raise ValueError("_complex_sums: an even number of rows is required")
+    for r0 in range(first, stop, 2):
+        r1 = r0 + 1
+        for b in range(nb):
+            acc_re[r0, b] = 0.0
+            acc_im[r0, b] = 0.0
+            acc_re[r1, b] = 0.0
+            acc_im[r1, b] = 0.0
+        v = 0
+        while v + 3 < n_elements:
+            p, q = _four(table_re, r0, v), _four(table_im, r0, v)
+            s, t = _four(table_re, r1, v), _four(table_im, r1, v)
+            for b in range(nb):
+                lr, li = _down4(look_re, v, b), _down4(look_im, v, b)
+                x, y = acc_re[r0, b], acc_im[r0, b]
+                for i in range(4):
+                    x = _re_mac(x, p[i], q[i], lr[i], li[i])
+                    y = _im_mac(y, p[i], q[i], lr[i], li[i])
+                acc_re[r0, b], acc_im[r0, b] = x, y
+                x, y = acc_re[r1, b], acc_im[r1, b]
+                for i in range(4):
+                    x = _re_mac(x, s[i], t[i], lr[i], li[i])
+                    y = _im_mac(y, s[i], t[i], lr[i], li[i])
+                acc_re[r1, b], acc_im[r1, b] = x, y
+            v += 4
+        for u in range(v, n_elements):
+            p0, q0, s0, t0 = table_re[r0, u], table_im[r0, u], table_re[r1, u], table_im[r1, u]
+            for b in range(nb):
+                lr, li = look_re[u, b], look_im[u, b]
+                acc_re[r0, b] = _re_mac(acc_re[r0, b], p0, q0, lr, li)
+                acc_im[r0, b] = _im_mac(acc_im[r0, b], p0, q0, lr, li)
+                acc_re[r1, b] = _re_mac(acc_re[r1, b], s0, t0, lr, li)
+                acc_im[r1, b] = _im_mac(acc_im[r1, b], s0, t0, lr, li)
+
+
+@_jit
+def _real_sums(acc_re, table_re, table_im, look_re, look_im, first, stop, n_elements,
+               nb):  # pragma: no cover
+    """``acc_re[r, b] = Re(sum_v table[r, v] look[v, b])`` for rows ``first <= r < stop``.
+
+    Rows in fours and elements in threes (as `_complex_sums`; 1.9x the speed of row fours
+    element by element, measured on 12 rows of 12 elements). Every sum adds its terms in
+    element order.
+    """
+    if (stop - first) % 4:  # the fours would reach past the rows asked for (no bounds checks)
+        raise ValueError("_real_sums: a multiple of 4 rows is required")
+    for r0 in range(first, stop, 4):
+        for r in range(r0, r0 + 4):
             for b in range(nb):
                 acc_re[r, b] = 0.0
-                acc_im[r, b] = 0.0
-        for v in range(n_elements):
-            if real_only:
-                t0r, t0i = table_re[r0, v], table_im[r0, v]
-                t1r, t1i = table_re[r0 + 1, v], table_im[r0 + 1, v]
-                t2r, t2i = table_re[r0 + 2, v], table_im[r0 + 2, v]
-                t3r, t3i = table_re[r0 + 3, v], table_im[r0 + 3, v]
+        v = 0
+        while v + 2 < n_elements:
+            p0, q0 = _three(table_re, r0, v), _three(table_im, r0, v)
+            p1, q1 = _three(table_re, r0 + 1, v), _three(table_im, r0 + 1, v)
+            p2, q2 = _three(table_re, r0 + 2, v), _three(table_im, r0 + 2, v)
+            p3, q3 = _three(table_re, r0 + 3, v), _three(table_im, r0 + 3, v)
+            for b in range(nb):
+                lr, li = _down3(look_re, v, b), _down3(look_im, v, b)
+                x0, x1 = acc_re[r0, b], acc_re[r0 + 1, b]
+                x2, x3 = acc_re[r0 + 2, b], acc_re[r0 + 3, b]
+                for i in range(3):
+                    x0 = _re_mac(x0, p0[i], q0[i], lr[i], li[i])
+                    x1 = _re_mac(x1, p1[i], q1[i], lr[i], li[i])
+                    x2 = _re_mac(x2, p2[i], q2[i], lr[i], li[i])
+                    x3 = _re_mac(x3, p3[i], q3[i], lr[i], li[i])
+                acc_re[r0, b], acc_re[r0 + 1, b] = x0, x1
+                acc_re[r0 + 2, b], acc_re[r0 + 3, b] = x2, x3
+            v += 3
+        for u in range(v, n_elements):
+            for r in range(r0, r0 + 4):
+                tr, ti = table_re[r, u], table_im[r, u]
                 for b in range(nb):
-                    lr, li = look_re[v, b], look_im[v, b]
-                    acc_re[r0, b] += t0r * lr - t0i * li
-                    acc_re[r0 + 1, b] += t1r * lr - t1i * li
-                    acc_re[r0 + 2, b] += t2r * lr - t2i * li
-                    acc_re[r0 + 3, b] += t3r * lr - t3i * li
-            else:
-                t0r, t0i = table_re[r0, v], table_im[r0, v]
-                t1r, t1i = table_re[r0 + 1, v], table_im[r0 + 1, v]
-                for b in range(nb):
-                    lr, li = look_re[v, b], look_im[v, b]
-                    acc_re[r0, b] += t0r * lr - t0i * li
-                    acc_im[r0, b] += t0r * li + t0i * lr
-                    acc_re[r0 + 1, b] += t1r * lr - t1i * li
-                    acc_im[r0 + 1, b] += t1r * li + t1i * lr
+                    acc_re[r, b] = _re_mac(acc_re[r, b], tr, ti, look_re[u, b], look_im[u, b])
 
 
 # Targets evaluated together: each loop over a block amortizes its set-up (alias checks,
@@ -482,7 +573,8 @@ def solve_targets(  # pragma: no cover
     where tested, ``margin`` (NaN elsewhere; an empty ``margin``: not wanted).
 
     Targets are taken quad by quad (a counting sort) in blocks: the exponentials and the
-    response sums run over a block at once (vector instructions), the weights per target.
+    response sums and the weights run over a block at once (vector instructions); targets
+    whose phase iterates are solved in batches per quad (`_iterate_batch`).
     """
     n_quads = tab_re.shape[0]
     n_elements = iy.size
@@ -503,6 +595,13 @@ def solve_targets(  # pragma: no cover
     acc_re = np.zeros((24, _BLOCK))
     acc_im = np.zeros((24, _BLOCK))
     work = np.empty((7, _BLOCK))
+    # Targets whose phase iterates, gathered per quad and solved together (`_iterate_batch`):
+    # their index, looks, and weights, ok and phase residual at the map's phase.
+    pend_n = np.empty(_BLOCK, dtype=np.int64)
+    pend_look_re = np.empty((n_elements, _BLOCK))
+    pend_look_im = np.empty((n_elements, _BLOCK))
+    pend_state = np.empty((6, _BLOCK))
+    batch = np.empty((5, 12, _BLOCK))
     # Spans of targets small enough for the caches; in each, a counting sort by quad (each
     # quad's table is then read for whole blocks).
     count = np.zeros(n_quads + 1, dtype=np.int64)
@@ -523,11 +622,11 @@ def solve_targets(  # pragma: no cover
                 fill[quad[n]] += 1
         for qd in range(n_quads):
             test = curvature[qd]
-            rows = 24 if test else 12
             # Real-valued responses need only the real part (centro-symmetric, no curvature).
             real_only = centrosymmetric and not test
             table_re = tab_re[qd]
             table_im = tab_im[qd]
+            pending = 0
             for start in range(count[qd], count[qd + 1], _BLOCK):
                 nb = min(_BLOCK, count[qd + 1] - start)
                 # Gather the block's angles first: the sines and cosines then vectorize.
@@ -565,8 +664,19 @@ def solve_targets(  # pragma: no cover
                         yr, yi, zr, zi = ey_re[jy, b], ey_im[jy, b], ez_re[jz, b], ez_im[jz, b]
                         look_re[v, b] = yr * zr - yi * zi
                         look_im[v, b] = yr * zi + yi * zr
-                _response_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, rows,
-                               n_elements, nb, real_only)
+                if real_only:
+                    _real_sums(acc_re, table_re, table_im, look_re, look_im, 0, 12, n_elements,
+                               nb)
+                elif test:
+                    _complex_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, 0, 24,
+                                  n_elements, nb)
+                else:
+                    # f complex (its phase residual), the derivatives' real parts only (the
+                    # weights); `_solve_one` gets their imaginary parts where it iterates.
+                    _complex_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, 0, 4,
+                                  n_elements, nb)
+                    _real_sums(acc_re, table_re, table_im, look_re, look_im, 4, 12, n_elements,
+                               nb)
                 _max_gain_weights_block(acc_re, nb, row_scale, tol, work)
                 if not centrosymmetric:
                     # Phase residual at phase 0; NaN where the series does not apply.
@@ -577,7 +687,21 @@ def solve_targets(  # pragma: no cover
                 for b in range(nb):
                     n = order[start + b]
                     ok = work[4, b] != 0.0
-                    if test or (not centrosymmetric and ok and not abs(work[5, b]) <= phase_tol):
+                    if not test and not centrosymmetric and ok and not abs(work[5, b]) <= phase_tol:
+                        # The phase iterates: solved with the quad's other such targets.
+                        if pending == _BLOCK:
+                            _iterate_batch(pend_n, pend_look_re, pend_look_im, pend_state,
+                                           pending, table_re, table_im, n_elements, batch,
+                                           row_scale, tol, codes, weights, reason, margin)
+                            pending = 0
+                        pend_n[pending] = n
+                        for v in range(n_elements):
+                            pend_look_re[v, pending] = look_re[v, b]
+                            pend_look_im[v, pending] = look_im[v, b]
+                        for i in range(6):
+                            pend_state[i, pending] = work[i, b]
+                        pending += 1
+                    elif test:
                         _solve_one(n, acc_re, acc_im, b, _row(work, 0, b), ok, work[5, b],
                                    centrosymmetric, test, row_scale, tol, codes, weights, reason,
                                    margin)
@@ -587,6 +711,110 @@ def solve_targets(  # pragma: no cover
                                codes[_OK], weights, reason)
                         if margin.size:
                             margin[n] = np.nan
+            if pending:
+                _iterate_batch(pend_n, pend_look_re, pend_look_im, pend_state, pending,
+                               table_re, table_im, n_elements, batch, row_scale, tol, codes,
+                               weights, reason, margin)
+
+
+@_jit
+def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_elements, batch,
+                   row_scale, tol, codes, weights, reason, margin):  # pragma: no cover
+    """`_solve_one` (no curvature test) of ``m`` targets of one quad, together.
+
+    ``pend_n`` the targets' indices, ``look_re, look_im`` their looks (columns ``< m``),
+    ``state`` rows 0-3 their weights, 4 ok (1.0 or 0.0) and 5 their phase residual at the
+    map's phase (NaN: not computed). Their responses are summed again from the looks (all 12
+    rows complex), and each secant step runs over the targets still iterating as vector loops
+    (rotation, `_max_gain_weights_block`, phase residual); a target leaves (and is stored) when
+    `_solve_one` would leave, and the rest move down to keep the columns contiguous. Same steps
+    and same results as `_solve_one` target by target, several times faster (it ran one
+    scalar step after another, ~250 ns per target).
+
+    ``batch``: scratch ``(5, 12, B)``.
+    """
+    f_re, f_im, rot, work, per = batch[0], batch[1], batch[2], batch[3], batch[4]
+    phi, prev_phi, prev_res, cos_phi, sin_phi, y, x = (per[0], per[1], per[2], per[3], per[4],
+                                                       per[5], per[6])
+    phase_tol = tol[_PHASE]
+    _complex_sums(f_re, f_im, table_re, table_im, look_re, look_im, 0, 12, n_elements, m)
+    # The start, as `_solve_one`: targets converged once their residual is computed leave.
+    active = 0
+    for j in range(m):
+        w = _row(state, 0, j)
+        res = state[5, j]
+        if res != res:
+            res = _phase_residual(_row(f_re, 0, j), _row(f_im, 0, j), w, 1.0, 0.0)
+        if abs(res) <= phase_tol or state[4, j] == 0.0:
+            _leave(pend_n[j], w, state[4, j] != 0.0, True, codes, weights, reason, margin)
+            continue
+        _move(f_re, f_im, state, j, active, pend_n)
+        prev_phi[active] = 0.0
+        prev_res[active] = res
+        phi[active] = res
+        for q in range(4):
+            work[q, active] = w[q]
+        active += 1
+    for _ in range(int(tol[_ITERATIONS])):
+        if active == 0:
+            return
+        for k in range(active):  # vector loops over the targets still iterating
+            sin_p, cos_p = _sincos(phi[k])
+            cos_phi[k], sin_phi[k] = cos_p, sin_p
+            for r in range(12):
+                rot[r, k] = cos_p * f_re[r, k] + sin_p * f_im[r, k]
+        _max_gain_weights_block(rot, active, row_scale, tol, work)
+        for k in range(active):
+            w = _row(work, 0, k)
+            b_re, b_im = _dot(_row(f_re, 0, k), w), _dot(_row(f_im, 0, k), w)
+            c, sn = cos_phi[k], sin_phi[k]
+            y[k] = b_im * c - b_re * sn
+            x[k] = b_re * c + b_im * sn
+            work[5, k] = _atan_small(y[k], x[k])
+        kept = 0
+        for k in range(active):
+            res = work[5, k]
+            if res != res:
+                res = math.atan2(y[k], x[k])
+            ok = work[4, k] != 0.0
+            done = abs(res) <= phase_tol
+            if done or not ok:  # `_solve_one` breaks: converged, or no solution
+                _leave(pend_n[k], _row(work, 0, k), ok, done, codes, weights, reason, margin)
+                continue
+            slope = (res - prev_res[k]) / (phi[k] - prev_phi[k] + 1e-300)
+            # Secant step on g(phi) = arg(B(w(phi))) - phi; fixed-point step if flat.
+            step = -res / slope if abs(slope) > 1e-3 else res
+            prev_phi[kept], prev_res[kept], phi[kept] = phi[k], res, phi[k] + step
+            _move(f_re, f_im, work, k, kept, pend_n)
+            kept += 1
+        active = kept
+    for k in range(active):  # out of iterations: not converged
+        _leave(pend_n[k], _row(work, 0, k), True, False, codes, weights, reason, margin)
+
+
+@_jit
+def _move(f_re, f_im, state, src, dst, pend_n):  # pragma: no cover
+    """Column ``src`` of ``f_re, f_im``, ``state[:4]`` and ``pend_n`` to column ``dst``."""
+    if src != dst:
+        for r in range(f_re.shape[0]):
+            f_re[r, dst] = f_re[r, src]
+            f_im[r, dst] = f_im[r, src]
+        for q in range(4):
+            state[q, dst] = state[q, src]
+        pend_n[dst] = pend_n[src]
+
+
+@_jit
+def _leave(n, w, ok, converged, codes, weights, reason, margin):  # pragma: no cover
+    """Store target ``n`` as `_solve_one` does without a curvature test."""
+    code = codes[_OK]
+    if not (converged or not ok):
+        code = codes[_NOT_CONVERGED]
+    if not ok:
+        code = codes[_NO_SOLUTION]
+    _store(n, w, code, codes[_OK], weights, reason)
+    if margin.size:
+        margin[n] = np.nan
 
 
 @_jit
