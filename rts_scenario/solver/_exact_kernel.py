@@ -139,16 +139,17 @@ def _catmull_rom(t):  # pragma: no cover
 
 
 @_jit
-def _phase_block(us, ss, u0, s0, du, ds, table, out, nb):  # pragma: no cover
+def _phase_block(us, ss, u0, s0, du, ds, padded, out, patch, nb):  # pragma: no cover
     """Bicubic phase map (`exact.PhaseMap.__call__`) of targets ``b < nb`` into ``out``.
 
-    Indices are clamped as floats and taken unsigned, so no negative-index wraparound code is
-    generated; the table is read through its flat view. Same sums as the map's per-target
-    evaluation, in the same order.
+    ``padded``: the map's table with its edge nodes repeated once around it, so a target's
+    4 x 4 nodes are one patch at fixed offsets, with no clamping. The cells and weights are
+    one vector loop over the block (into ``patch``, shape ``(9, B)``), the table reads one
+    scalar loop (they do not vectorize here). Same sums in the same order as the map's
+    per-target evaluation.
     """
-    n = table.shape[0]
-    last = float(n - 1)
-    flat = table.reshape(-1)
+    stride = padded.shape[1]
+    last = float(stride - 3)  # the last node of the map itself
     for b in range(nb):
         x = (us[b] - u0) / du
         x = 0.0 if x < 0.0 else (last if x > last else x)
@@ -158,18 +159,22 @@ def _phase_block(us, ss, u0, s0, du, ds, table, out, nb):  # pragma: no cover
         j = min(np.floor(y), last - 1.0)
         wx = _catmull_rom(x - i)
         wy = _catmull_rom(y - j)
-        c0 = np.uint64(max(j - 1.0, 0.0))
-        c1 = np.uint64(j)
-        c2 = np.uint64(j + 1.0)
-        c3 = np.uint64(min(j + 2.0, last))
+        # Node (i - 1, j - 1) of the map is (i, j) of the padded table.
+        patch[0, b] = i * stride + j
+        for a in range(4):
+            patch[1 + a, b] = wx[a]
+            patch[5 + a, b] = wy[a]
+    flat = padded.reshape(-1)
+    for b in range(nb):
+        row = np.uint64(patch[0, b])
         total = 0.0
         for a in range(4):
-            row = np.uint64(min(max(i + (a - 1), 0.0), last)) * np.uint64(n)
-            inner = 0.0 + wy[0] * flat[row + c0]
-            inner += wy[1] * flat[row + c1]
-            inner += wy[2] * flat[row + c2]
-            inner += wy[3] * flat[row + c3]
-            total += wx[a] * inner
+            inner = 0.0 + patch[5, b] * flat[row]
+            inner += patch[6, b] * flat[row + 1]
+            inner += patch[7, b] * flat[row + 2]
+            inner += patch[8, b] * flat[row + 3]
+            total += patch[1 + a, b] * inner
+            row += np.uint64(stride)
         out[b] = total
 
 
@@ -567,10 +572,11 @@ def solve_targets(  # pragma: no cover
     ``tab_re, tab_im``: per quad, the response table (`arrays.SourceResponse.table`) as
     ``(Q, 24, M)``, row ``term * 4 + fe``, column element ``v``; ``iy, iz`` the elements'
     distinct-coordinate indices, and the exponential plans of both coordinates. Per quad:
-    ``phase_origin`` ``(Q, 4)`` (u0, s0, du, ds) and ``phase_table`` ``(Q, n, n)`` of the phase
-    map (``phase_table.shape[1] == 0``: none), ``curvature`` ``(Q,)`` whether to test for a
-    local maximum. Writes ``weights`` ``(N, 4)`` (normalized, 0 unless OK), ``reason`` and,
-    where tested, ``margin`` (NaN elsewhere; an empty ``margin``: not wanted).
+    ``phase_origin`` ``(Q, 4)`` (u0, s0, du, ds) and ``phase_table`` ``(Q, n + 2, n + 2)`` of
+    the phase map, padded (`exact.ExactTables`; ``phase_table.shape[1] == 0``: none),
+    ``curvature`` ``(Q,)`` whether to test for a local maximum. Writes ``weights`` ``(N, 4)``
+    (normalized, 0 unless OK), ``reason`` and, where tested, ``margin`` (NaN elsewhere; an
+    empty ``margin``: not wanted).
 
     Targets are taken quad by quad (a counting sort) in blocks: the exponentials and the
     response sums and the weights run over a block at once (vector instructions); targets
@@ -595,6 +601,7 @@ def solve_targets(  # pragma: no cover
     acc_re = np.zeros((24, _BLOCK))
     acc_im = np.zeros((24, _BLOCK))
     work = np.empty((7, _BLOCK))
+    patch = np.empty((9, _BLOCK))
     # Targets whose phase iterates, gathered per quad and solved together (`_iterate_batch`):
     # their index, looks, and weights, ok and phase residual at the map's phase.
     pend_n = np.empty(_BLOCK, dtype=np.int64)
@@ -648,7 +655,7 @@ def solve_targets(  # pragma: no cover
                     origin = phase_origin[qd]
                     u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
                     table = phase_table[qd]
-                    _phase_block(us, ss, u0, s0, du, ds, table, step_re, nb)
+                    _phase_block(us, ss, u0, s0, du, ds, table, step_re, patch, nb)
                     for b in range(nb):  # apart from the table look-ups: vectorizes
                         sin_p, cos_p = _sincos(step_re[b])
                         step_re[b] = cos_p

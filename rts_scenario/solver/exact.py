@@ -356,8 +356,10 @@ class ExactTables:
         ``SourceResponse.table`` of each quad as ``[term * 4 + fe, v]``, real and imaginary.
     phase_origin : ndarray, shape (Q, 4)
         ``u0, s0, du, ds`` of each quad's `PhaseMap`.
-    phase_table : ndarray, shape (Q, n, n)
-        Each quad's `PhaseMap` table; ``n = 0`` for real responses (no phase map).
+    phase_table : ndarray, shape (Q, n + 2, n + 2)
+        Each quad's `PhaseMap` table with its edge nodes repeated once around it (the kernel
+        then reads every target's 4 x 4 nodes without clamping); shape ``(Q, 0, 0)`` for real
+        responses (no phase map).
     curvature : ndarray, shape (Q,), bool
         ``check_local_max`` of each quad.
     response : SourceResponse
@@ -392,7 +394,7 @@ class ExactTables:
         maps = [q.phase_map for q in quads]
         if all(m is not None for m in maps):
             origin = np.array([[m.u0, m.s0, m.du, m.ds] for m in maps if m is not None])
-            phase = np.stack([m.table for m in maps if m is not None])
+            phase = np.stack([np.pad(m.table, 1, mode="edge") for m in maps if m is not None])
         else:
             origin, phase = np.zeros((len(quads), 4)), np.zeros((len(quads), 0, 0))
         return cls(
