@@ -252,6 +252,8 @@ def test_other_bad_calls(kit_rig):
         rs.solve_weights([0.0, 1.0], [0.0], rig=kit_rig, array=array)
     with pytest.raises(rs.SolverError, match="within -90..90"):
         rs.solve_weights([0.0], [91.0], rig=kit_rig, array=array)
+    with pytest.raises(rs.SolverError, match=r"az_deg\[1\]: must be within -90..90"):
+        rs.solve_weights([90.0, -90.5], [0.0, -90.0], rig=kit_rig, array=array)
     with pytest.raises(rs.SolverError, match="must be numbers"):
         rs.solve_weights(["left"], [0.0], rig=kit_rig, array=array)
     line = rs.VirtualArray.from_positions([0.0, 0.002, 0.004], [0.0, 0.0, 0.0], wavelength_m=0.004)

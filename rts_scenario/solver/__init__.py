@@ -162,6 +162,10 @@ def solve_weights(
     else:
         for start in starts:
             run(start)
+    if len(plan.kernels) > 1:
+        # Once over all targets, not per chunk: it costs a few numpy calls per quad whatever
+        # the number of targets (it was a sixth of the wide-3x5 grid's time per chunk).
+        _retry_neighbours(plan, az, el, weights, quad, reason)
     return WeightSolution(weights=weights, quad=quad, reason=reason, method=method)
 
 
@@ -173,6 +177,10 @@ def _angles(name: str, values: ArrayLike) -> FloatArray:
     if out.ndim > 1:
         raise SolverError(f"{name}: must be a scalar or 1-D, got shape {out.shape}")
     out = out.reshape(-1)
+    # Two reading passes for the common case (NaN propagates through min and max); the
+    # element at fault is looked for only when there is one.
+    if out.size == 0 or (-90.0 <= out.min() and out.max() <= 90.0):
+        return out
     bad = ~np.isfinite(out)
     if bad.any():
         i = int(np.argmax(bad))
@@ -197,7 +205,9 @@ def _solve_chunk(
 ) -> None:
     """Solve one chunk into the given output views (weights zeroed, reason OUTSIDE).
 
-    With the compiled ``kernel`` every quad's targets are solved in one pass, in place.
+    Targets their quad cannot synthesize are retried in its neighbours afterwards, over all
+    chunks at once (`_retry_neighbours`). With the compiled ``kernel`` every quad's targets
+    are solved in one pass, in place.
     """
     if kernel is not None and plan.exact_tables is not None:
         tables = plan.exact_tables
@@ -219,8 +229,6 @@ def _solve_chunk(
             if check is not None:
                 _mark_splits(check, np.flatnonzero((quad == q) & (reason == Reason.OK)),
                              np.radians(az_deg), np.radians(el_deg), weights, reason)
-        if len(plan.kernels) > 1:
-            _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
         return
     quad[:], off_line = plan.geometry.assign(az_deg, el_deg)
     reason[off_line] = Reason.DEGENERATE
@@ -236,8 +244,6 @@ def _solve_chunk(
             idx = order[bounds[q] : bounds[q + 1]]
             if idx.size:
                 weights[idx], reason[idx] = _solve_in(plan, q, az[idx], el[idx])
-    if len(plan.kernels) > 1:
-        _retry_neighbours(plan, az_deg, el_deg, weights, quad, reason)
 
 
 _NO_MARGIN = np.empty(0)
