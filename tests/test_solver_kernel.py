@@ -80,17 +80,83 @@ def test_kernel_matches_numpy_path(case, monkeypatch):
 
 @pytest.mark.parametrize("case", ["awr1843boost", "wide-3x5 awr1843boost"])
 def test_kernel_matches_numpy_path_with_many_iterating_targets(case, monkeypatch):
-    """Enough targets per quad that those whose phase iterates fill several batches (about 6 %
-    of 4,096 targets per span on the AWR1843BOOST, against batches of 128)."""
+    """Targets whose phase iterates are solved in batches of up to a block per quad and span.
+    40,000 targets cross span boundaries (16,384 targets each), and their iterating targets
+    (about 15 % on the AWR1843BOOST's quad) fill batches to the brim on one quad."""
     kernel_or_skip()
     rig, array, model = CASES[case]()
-    az, el = targets(rig, 12_000, seed=5, margin_deg=0.0)
+    az, el = targets(rig, 40_000, seed=5, margin_deg=0.0)
     fast = rs.solve_weights(az, el, rig=rig, array=array)
     monkeypatch.setenv(compiled.JIT_ENV, "off")
     reference = rs.solve_weights(az, el, rig=rig, array=array)
     np.testing.assert_array_equal(fast.reason, reference.reason)
     np.testing.assert_allclose(fast.weights, reference.weights, rtol=0, atol=WEIGHT_TOL)
     assert fast.feasible.mean() > 0.5
+
+
+@pytest.mark.parametrize("elements", [12, 13])
+@pytest.mark.parametrize("iterations", [1, 2, 60])
+@pytest.mark.parametrize("imaginary", [1e-2, 0.3, 1.0])
+def test_batched_iteration_is_the_target_by_target_iteration(elements, iterations, imaginary):
+    """`_iterate_batch` against `_solve_one` on the same random responses, bit for bit: every
+    way out of the iteration (converged, no solution, out of iterations) and every reason."""
+    kernel = kernel_or_skip()
+    from rts_scenario.solver.exact import _CODES, _TOLERANCES
+
+    rng = np.random.default_rng(elements * 100 + iterations)
+    block, m = kernel._BLOCK, elements
+    table = rng.normal(size=(24, m)) + 1j * imaginary * rng.normal(size=(24, m))
+    look = np.exp(1j * rng.uniform(-np.pi, np.pi, size=(m, block)))
+    t_re, t_im = np.ascontiguousarray(table.real), np.ascontiguousarray(table.imag)
+    l_re, l_im = np.ascontiguousarray(look.real), np.ascontiguousarray(look.imag)
+    tol = _TOLERANCES.copy()
+    tol[kernel._ITERATIONS] = iterations
+    # What `_solve_one` reads: every row complex. What the kernel's block pass has: f complex,
+    # the derivatives' real parts, and the weights and phase residual at phase 0 from them.
+    acc_re, acc_im = np.zeros((24, block)), np.zeros((24, block))
+    kernel._complex_sums(acc_re, acc_im, t_re, t_im, l_re, l_im, 0, 12, m, block)
+    part_re, part_im = np.zeros((24, block)), np.zeros((24, block))
+    kernel._complex_sums(part_re, part_im, t_re, t_im, l_re, l_im, 0, 4, m, block)
+    kernel._real_sums(part_re, t_re, t_im, l_re, l_im, 4, 12, m, block)
+    np.testing.assert_array_equal(part_re[:12], acc_re[:12])
+    work = np.empty((7, block))
+    kernel._max_gain_weights_block(part_re, block, 1.0, tol, work)
+    iterating = []
+    for b in range(block):
+        w = tuple(work[:4, b])
+        work[5, b] = kernel._atan_small(kernel._dot(tuple(part_im[:4, b]), w),
+                                        kernel._dot(tuple(part_re[:4, b]), w))
+        if work[4, b] != 0.0 and not abs(work[5, b]) <= tol[kernel._PHASE]:
+            iterating.append(b)
+    n = len(iterating)
+    assert n > 20
+
+    def outputs():
+        return np.full((block, 4), -1.0), np.full(block, 255, np.uint8), np.full(block, 5.0)
+
+    w_one, r_one, m_one = outputs()
+    for b in iterating:
+        kernel._solve_one(b, acc_re, acc_im, b, tuple(work[:4, b]), True, work[5, b], False,
+                          False, 1.0, tol, _CODES, w_one, r_one, m_one)
+    w_all, r_all, m_all = outputs()
+    index = np.array(iterating, dtype=np.int64)
+    pend_n = np.zeros(block, dtype=np.int64)
+    pend_n[:n] = index
+    pend_re, pend_im = np.zeros((m, block)), np.zeros((m, block))
+    pend_re[:, :n], pend_im[:, :n] = l_re[:, index], l_im[:, index]
+    state = np.zeros((6, block))
+    state[:, :n] = work[:6, index]
+    kernel._iterate_batch(pend_n, pend_re, pend_im, state, n, t_re, t_im, m,
+                          np.empty((5, 12, block)), 1.0, tol, _CODES, w_all, r_all, m_all)
+    np.testing.assert_array_equal(w_all, w_one)
+    np.testing.assert_array_equal(r_all, r_one)
+    np.testing.assert_array_equal(m_all, m_one)
+    assert (r_all[index] != 255).all()  # every iterating target written, no other
+    assert (np.delete(r_all, index) == 255).all()
+    if iterations == 1:
+        assert (r_all == _CODES[kernel._NOT_CONVERGED]).any()
+    if iterations == 60:
+        assert (r_all == _CODES[kernel._OK]).any()
 
 
 SQUARE = rs.Rig.from_angles([-5.0, 5.0, -5.0, 5.0], [-8.0, -8.0, 8.0, 8.0])

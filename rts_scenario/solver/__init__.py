@@ -153,19 +153,23 @@ def solve_weights(
         part = slice(start, start + chunk)
         _solve_chunk(plan, kernel, az[part], el[part], weights[part], quad[part], reason[part])
 
+    def retry() -> None:
+        # Once over all targets, not per chunk: it costs a few numpy calls per quad whatever
+        # the number of targets (per chunk they were a sixth of the wide-3x5 grid's time).
+        if len(plan.kernels) > 1:
+            _retry_neighbours(plan, az, el, weights, quad, reason)
+
     starts = range(0, n, chunk)
     if len(starts) > 1 and WORKERS > 1:
         # numpy releases the GIL inside its kernels, so chunks run in parallel on threads; the
         # chunks' small matrix products must not spawn BLAS threads of their own on top.
         with one_blas_thread():
             run_parts(run, starts)
+            retry()
     else:
         for start in starts:
             run(start)
-    if len(plan.kernels) > 1:
-        # Once over all targets, not per chunk: it costs a few numpy calls per quad whatever
-        # the number of targets (it was a sixth of the wide-3x5 grid's time per chunk).
-        _retry_neighbours(plan, az, el, weights, quad, reason)
+        retry()
     return WeightSolution(weights=weights, quad=quad, reason=reason, method=method)
 
 
@@ -205,9 +209,9 @@ def _solve_chunk(
 ) -> None:
     """Solve one chunk into the given output views (weights zeroed, reason OUTSIDE).
 
-    Targets their quad cannot synthesize are retried in its neighbours afterwards, over all
-    chunks at once (`_retry_neighbours`). With the compiled ``kernel`` every quad's targets
-    are solved in one pass, in place.
+    Targets their quad cannot synthesize are not retried here: `solve_weights` retries them
+    in the neighbouring quads once all chunks are solved (`_retry_neighbours`). With the
+    compiled ``kernel`` every quad's targets are solved in one pass, in place.
     """
     if kernel is not None and plan.exact_tables is not None:
         tables = plan.exact_tables

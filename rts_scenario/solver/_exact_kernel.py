@@ -8,11 +8,11 @@ weights agree with the numpy path to rounding and reasons are identical
 (tests/test_solver_kernel.py). Targets go in blocks of `_BLOCK`: sines and cosines (a
 polynomial with Cody-Waite reduction, ~1 ulp, instead of libm's ~20 ns calls), exponentials,
 response sums and the weights up to the boundary's fast path run as loops over the block that
-compile to vector instructions, the phase map as one scalar loop (its table reads do not
-vectorize here). Targets whose phase iterates are gathered per quad and iterate together, in
-vector loops as well. The rest (every boundary ray, the curvature test) runs per target on
-4-tuples held in registers. No temporaries: the scratch arrays are
-allocated once per call.
+compile to vector instructions, and so do the phase map's cells and weights (its table reads
+stay a scalar loop: they do not vectorize here). Targets whose phase iterates are gathered
+per quad and iterate together, in vector loops as well. The rest (every boundary ray, the
+curvature test) runs per target on 4-tuples held in registers. No temporaries: the scratch
+arrays are allocated once per call.
 
 Constants and reason codes are arguments, not globals: numba freezes globals into the cached
 machine code, and its cache only watches this file.
@@ -551,9 +551,10 @@ def _real_sums(acc_re, table_re, table_im, look_re, look_im, first, stop, n_elem
 # than 128 on the AWR1843BOOST and equal on the paper array (64 to 512 measured, one thread,
 # alternating in one process). The block's scratch rows then live in L2, not L1.
 _BLOCK = 256
-# Targets sorted by quad at a time: their inputs and outputs stay in the L2 cache, and on a
-# grid each quad's share fills fuller batches (16,384 ran 7-9 % faster than 4,096 on the
-# wide-3x5 grid, equal on one quad; 4,096 to 32,768 measured as above).
+# Targets sorted by quad at a time (their angles, quads, order and weights come to about
+# 1 MiB, this machine's L2 per core), so that on a grid each quad's share fills fuller
+# batches: 16,384 ran 7-9 % faster than 4,096 on the wide-3x5 grid, equal on one quad
+# (4,096 to 32,768 measured as above).
 _SPAN = 16384
 
 
@@ -683,7 +684,8 @@ def solve_targets(  # pragma: no cover
                                   n_elements, nb)
                 else:
                     # f complex (its phase residual), the derivatives' real parts only (the
-                    # weights); `_solve_one` gets their imaginary parts where it iterates.
+                    # weights); `_iterate_batch` sums every row complex again for the targets
+                    # whose phase iterates (acc_im's rows 4-11 are not written here).
                     _complex_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, 0, 4,
                                   n_elements, nb)
                     _real_sums(acc_re, table_re, table_im, look_re, look_im, 4, 12, n_elements,
