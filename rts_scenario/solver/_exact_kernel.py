@@ -741,8 +741,9 @@ def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_ele
     rows complex), and each secant step runs over the targets still iterating as vector loops
     (rotation, `_max_gain_weights_block`, phase residual); a target leaves (and is stored) when
     `_solve_one` would leave, and the rest move down to keep the columns contiguous. Same steps
-    and same results as `_solve_one` target by target, several times faster (it ran one
-    scalar step after another, ~250 ns per target).
+    and same results as `_solve_one` target by target, which ran one scalar step after
+    another: on the AWR1843BOOST (6 % of targets iterate) the iteration and the stores took
+    14 ns per target that way and take 1.5 now (measured by running that part twice).
 
     ``batch``: scratch ``(5, 12, B)``.
     """
