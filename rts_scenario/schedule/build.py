@@ -46,9 +46,9 @@ IntArray = NDArray[np.int64]
 # A quad's levels: weights, attenuations, predicted angle errors, clipping.
 Levels = tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]
 
-# The scene's frame rate may equal the rig's update rate up to rounding (relative).
 # What the solver takes the FEs' echoes to be (`solver_inputs`); the first is the default.
 FE_RESPONSES = ("modeled", "plane-wave")
+# The scene's frame rate may equal the rig's update rate up to rounding (relative).
 RATE_SLACK = 1e-9
 # A delay that rounds to the minimum is not too close: far below any delay step.
 DELAY_SLACK_S = 1e-18
