@@ -606,6 +606,9 @@ def solve_targets(  # pragma: no cover
     acc_re = np.zeros((24, _BLOCK))
     acc_im = np.zeros((24, _BLOCK))
     work = np.empty((7, _BLOCK))
+    out = np.empty((4, _BLOCK))
+    code = np.empty(_BLOCK, dtype=np.uint8)
+    ok_code, fail_code = codes[_OK], codes[_NO_SOLUTION]
     patch = np.empty((9, _BLOCK))
     # Targets whose phase iterates, gathered per quad and solved together (`_iterate_batch`):
     # their index, looks, and weights, ok and phase residual at the map's phase.
@@ -697,33 +700,48 @@ def solve_targets(  # pragma: no cover
                         w = _row(work, 0, b)
                         work[5, b] = _atan_small(_dot(_row(acc_im, 0, b), w),
                                                  _dot(_row(acc_re, 0, b), w))
+                if test:
+                    for b in range(nb):
+                        _solve_one(order[start + b], acc_re, acc_im, b, _row(work, 0, b),
+                                   work[4, b] != 0.0, work[5, b], centrosymmetric, test,
+                                   row_scale, tol, codes, weights, reason, margin)
+                    continue
+                # Solved at phase 0 (or not at all), no curvature test: the common case. What
+                # `_store` writes, for every target at once (a vector loop), then written out;
+                # targets whose phase iterates are overwritten when their batch is solved.
+                for b in range(nb):
+                    ok = work[4, b] != 0.0
+                    w = _row(work, 0, b)
+                    top = _larger(_larger(w[0], w[1]), _larger(w[2], w[3]))
+                    top = top if top > 0.0 else 1.0
+                    for q in range(4):
+                        out[q, b] = w[q] / top if ok else 0.0
+                    code[b] = ok_code if ok else fail_code
                 for b in range(nb):
                     n = order[start + b]
-                    ok = work[4, b] != 0.0
-                    if not test and not centrosymmetric and ok and not abs(work[5, b]) <= phase_tol:
+                    for q in range(4):
+                        weights[n, q] = out[q, b]
+                    reason[n] = code[b]
+                if margin.size:
+                    for b in range(nb):
+                        margin[order[start + b]] = np.nan
+                if centrosymmetric:
+                    continue
+                for b in range(nb):
+                    if work[4, b] != 0.0 and not abs(work[5, b]) <= phase_tol:
                         # The phase iterates: solved with the quad's other such targets.
                         if pending == _BLOCK:
                             _iterate_batch(pend_n, pend_look_re, pend_look_im, pend_state,
                                            pending, table_re, table_im, n_elements, batch,
                                            row_scale, tol, codes, weights, reason, margin)
                             pending = 0
-                        pend_n[pending] = n
+                        pend_n[pending] = order[start + b]
                         for v in range(n_elements):
                             pend_look_re[v, pending] = look_re[v, b]
                             pend_look_im[v, pending] = look_im[v, b]
                         for i in range(6):
                             pend_state[i, pending] = work[i, b]
                         pending += 1
-                    elif test:
-                        _solve_one(n, acc_re, acc_im, b, _row(work, 0, b), ok, work[5, b],
-                                   centrosymmetric, test, row_scale, tol, codes, weights, reason,
-                                   margin)
-                    else:
-                        # Solved at phase 0 (or not at all), no curvature test: the common case.
-                        _store(n, _row(work, 0, b), codes[_OK] if ok else codes[_NO_SOLUTION],
-                               codes[_OK], weights, reason)
-                        if margin.size:
-                            margin[n] = np.nan
             if pending:
                 _iterate_batch(pend_n, pend_look_re, pend_look_im, pend_state, pending,
                                table_re, table_im, n_elements, batch, row_scale, tol, codes,
