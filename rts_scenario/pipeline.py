@@ -431,7 +431,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     """
     import json
 
-    from . import __version__
+    from ._version import __version__
 
     c = radar.radar_clock
     path = Path(str(log) + LOG_SIDECAR_SUFFIX)
