@@ -171,6 +171,7 @@ class Checker:
         self._matched = 0
         self._unchecked = 0
         self._false = 0
+        self._invalid = 0
         self._worst: list[tuple[float, int, int, dict[str, Any]]] = []
         self.frames = {"total": 0, "checked": 0, "received": 0, "unmatched": 0, "missing": 0,
                        "incomplete": 0, "late": 0, "repeated": 0}
@@ -246,12 +247,22 @@ class Checker:
         values = {q: np.concatenate(
             [getattr(c, q) if getattr(c, q) is not None else np.full(c.count, np.nan)
              for c in got]) if got else np.zeros(0) for q, _ in QUANTITIES}
+        # A reported quantity that is not a number (NaN, infinite) is no measurement: such a
+        # detection matches no target, and the run fails (absent quantities are not checked).
+        invalid = np.zeros(n_det, dtype=bool)
+        for q, _ in QUANTITIES:
+            reported = np.repeat(np.array([getattr(c, q) is not None for c in got], dtype=bool),
+                                 counts)
+            invalid |= reported & ~np.isfinite(values[q])
+        if invalid.any():  # out of the search and the costs (an infinite value overflows)
+            for q, _ in QUANTITIES:
+                values[q][invalid] = np.nan
         # Candidate pairs (detection, target): only targets within the gate in range, found by
         # a sorted search per frame (no detections x targets arrays).
         det, target = _range_candidates(frame_of, values["range_m"], tracks.range_m,
                                         GATE * tol["range_m"])
         cost = np.zeros(det.size)
-        inside = played[frame_of[det], target]
+        inside = played[frame_of[det], target] & ~invalid[det]
         diffs: dict[str, FloatArray] = {}
         for q, key in QUANTITIES:
             diff = values[q][det] - getattr(tracks, q)[frame_of[det], target]
@@ -294,7 +305,8 @@ class Checker:
         self._detected += detected.sum(axis=0)
         self._matched += int((assigned & truth).sum())
         self._unchecked += int(((~ok)[:, None] & truth).sum())
-        self._false += int((~matched).sum())
+        self._false += int((~matched & ~invalid).sum())
+        self._invalid += int(invalid.sum())
         tally = self.frames
         tally["total"] += n_frames
         tally["received"] += int(ok.sum())
@@ -383,6 +395,9 @@ class Checker:
         if per_frame > exp.max_false_detections_per_frame:
             reasons.append(f"{per_frame:.3f} false detections per radar cycle > "
                            f"{exp.max_false_detections_per_frame:g}")
+        if self._invalid:
+            reasons.append(f"{self._invalid} detections with a reported quantity that is not a "
+                           f"number (NaN or infinite): they match no target")
         if self._unchecked:
             reasons.append(f"{frames['missing']} radar cycles missing and "
                            f"{frames['incomplete']} incomplete: {self._unchecked} target-cycles "
@@ -392,7 +407,9 @@ class Checker:
                 reasons.append("the bus was silent: no message received")
             lost = {"checksum errors": bus.get("checksum_errors", 0),
                     "undecodable messages": bus.get("decode_errors", 0),
-                    "detections without a frame header": bus.get("orphans", 0)}
+                    "detections without a frame header": bus.get("orphans", 0),
+                    "conflicting messages (a cycle's header or detections came again with other "
+                    "values, or beyond the count its header announced)": bus.get("conflicts", 0)}
             reasons += [f"{v} {k}" for k, v in lost.items() if v]
         n_truth = int(self._checkable.sum())
         if n_truth == 0:
@@ -404,6 +421,7 @@ class Checker:
             targets=targets, errors={q: self._stats[q].result() for q, _ in QUANTITIES},
             detection_rate=float(self._detected.sum() / n_truth) if n_truth else float("nan"),
             false_detections=self._false, false_detections_per_frame=per_frame,
+            invalid_detections=self._invalid,
             bus=dict(bus or {}),
             target_frames={"checkable": n_truth, "matched": self._matched,
                            "unmatched": n_truth - self._matched - self._unchecked,

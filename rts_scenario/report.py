@@ -184,6 +184,7 @@ class Report:
     false_detections: int
     false_detections_per_frame: float
     bus: dict[str, int]
+    invalid_detections: int = 0
     target_frames: dict[str, int] = field(default_factory=dict)
     scene_limits: dict[str, dict[str, Any]] = field(default_factory=dict)
     timing: dict[str, float] = field(default_factory=dict)
@@ -244,7 +245,9 @@ class Report:
                      f"{f.get('unmatched', 0)} with unmatched targets, "
                      f"{f['missing']} missing, {f['incomplete']} incomplete; "
                      f"false detections: {self.false_detections} "
-                     f"({self.false_detections_per_frame:.3f} per cycle)")
+                     f"({self.false_detections_per_frame:.3f} per cycle)"
+                     + (f"; invalid detections (not a number): {self.invalid_detections}"
+                        if self.invalid_detections else ""))
         problems = {k: v for k, v in self.bus.items() if k != "messages" and v}
         if problems:
             lines.append("bus: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in

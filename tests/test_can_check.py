@@ -308,3 +308,65 @@ def test_cycles_beyond_the_counters_wrap_keep_their_own_values():
                                atol=1e-9)
     np.testing.assert_allclose([c.az_deg[0] for c in got], 0.005 * (cycles % 30_000) - 75.0,
                                atol=1e-9)
+
+
+class Recorder(list):
+    """A ``send`` target that keeps the messages."""
+
+    send = list.append
+
+
+def _messages(frame):
+    recorder = Recorder()
+    DetectionPublisher(recorder).publish(frame)
+    return list(recorder)
+
+
+def _receive(messages):
+    receiver = DetectionReceiver()
+    for msg in messages:
+        receiver.on_message_received(msg)
+    return receiver
+
+
+def test_a_copy_of_a_whole_cycle_is_a_duplicate_not_a_conflict():
+    frame = one_cycle(3, [10.0, 20.0], az_deg=[1.0, -2.0])
+    messages = _messages(frame)
+    receiver = _receive(messages + messages[1:] + messages[:1])  # detections again, header again
+    assert (receiver.stats.duplicates, receiver.stats.conflicts) == (len(messages), 0)
+    (cycle,) = receiver.flush()
+    assert cycle.complete and cycle.count == 2
+
+
+def test_a_detection_beyond_the_announced_count_after_the_cycle_is_a_conflict(cut_in):
+    # The radar's cycle holds one more detection than its header announced: the receiver has
+    # handed the cycle on once the announced ones came, but the extra one must not vanish as
+    # a "duplicate" (the cycle checked would not be the one the radar sent).
+    scene, tracks, schedule, frames = cut_in
+    header_id = CanMapping.builtin().db.get_message_by_name(CanMapping.builtin().header).frame_id
+    messages = []
+    for frame in frames:
+        ghost = one_cycle(frame.cycle, np.append(frame.range_m, 10.0),
+                          az_deg=np.append(frame.az_deg, -20.0))
+        messages += _messages(frame)
+        messages += [m for m in _messages(ghost) if m.arbitration_id != header_id][-1:]
+    receiver = _receive(messages)
+    assert receiver.stats.conflicts == len(frames)
+    assert receiver.stats.duplicates == 0
+    report = check(scene.name, tracks, schedule.status, receiver.flush(), scene.expectations,
+                   bus=vars(receiver.stats))
+    assert not report.passed
+    assert any(f"{len(frames)} conflicting messages" in r for r in report.reasons)
+    assert "conflicts" in report.table()
+
+
+def test_a_second_cycle_with_the_same_counter_is_a_conflict():
+    first = one_cycle(5, [10.0, 20.0])
+    # Another header (count 1) and another detection 0: its range message differs, its
+    # angle message (azimuth, elevation, RCS 0 in both) is a copy.
+    second = one_cycle(5, [33.0])
+    receiver = _receive(_messages(first) + _messages(second))
+    assert (receiver.stats.duplicates, receiver.stats.conflicts) == (1, 2)
+    (cycle,) = receiver.flush()
+    np.testing.assert_allclose(cycle.range_m, [10.0, 20.0])  # the first stays; the run fails
+

@@ -158,6 +158,40 @@ def test_absent_quantities_are_not_checked():
     assert report.errors["el_deg"].count == 0 and report.errors["range_m"].count == 40
 
 
+
+@pytest.mark.parametrize("quantity", ["range_m", "az_deg", "radial_velocity_mps", "rcs_dbsm"])
+def test_a_detection_whose_reported_value_is_not_a_number_matches_nothing_and_fails(quantity):
+    # Every cycle: both targets reported correctly, plus one detection equal to target 0 but
+    # with one reported quantity NaN (or infinite). It must neither count as target 0's match
+    # (zero error) nor hide among the false detections.
+    tr = truth(20)
+    cycles = []
+    for c in cycles_from(tr):
+        extra = {q: np.append(getattr(c, q), getattr(c, q)[0])
+                 for q in ("range_m", "radial_velocity_mps", "az_deg", "el_deg", "rcs_dbsm",
+                           "snr_db")}
+        extra[quantity][-1] = np.nan if c.cycle % 2 else np.inf
+        cycles.append(dataclasses.replace(c, **extra))
+    report = check("s", tr, OK(20, 2), cycles, EXPECT)
+    assert not report.passed
+    assert report.invalid_detections == 20
+    assert report.false_detections == 0
+    assert report.target_frames["detected"] == 40  # the real detections still match
+    assert any("20 detections with a reported quantity that is not a number" in r
+               for r in report.reasons)
+    assert "invalid detections (not a number): 20" in report.table()
+
+
+def test_an_all_nan_cycle_does_not_detect_anything():
+    tr = truth(10, n_targets=1)
+    nan = np.array([np.nan])
+    cycles = [Detections(cycle=i, t_s=0.05 * i, range_m=nan, radial_velocity_mps=nan,
+                         az_deg=nan, el_deg=nan, rcs_dbsm=nan, snr_db=nan) for i in range(10)]
+    report = check("s", tr, OK(10, 1), cycles, EXPECT)
+    assert not report.passed
+    assert report.detection_rate == 0.0 and report.invalid_detections == 10
+
+
 def test_cycles_for_frames_the_scene_never_had_are_late_not_lost():
     tr = truth(10)
     cycles = cycles_from(tr) + cycles_from(truth(3, first=9000), first=9000)

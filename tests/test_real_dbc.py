@@ -447,3 +447,19 @@ def test_bad_mapping_is_one_located_error_naming_file_and_key(tmp_path, capsys, 
     message = lines[0].split("error: ", 1)[1]
     assert re.match(rf"--mapping {re.escape(str(path))}:\d+:\d+: {re.escape(key)}: {pattern}",
                     message), message
+
+
+def test_an_8_bit_counter_that_comes_round_again_is_a_new_cycle(mux_mapping):
+    # Cycle 256 has counter 0 again, with the same content here: a new cycle, not a copy of
+    # the first (the receiver remembers cycles for half the counter's range at most).
+    bus = Capture()
+    publisher = DetectionPublisher(bus, mapping=mux_mapping)
+    for n in range(300):
+        publisher.publish(cycle(1, counter=n))
+    receiver = DetectionReceiver(mux_mapping)
+    for msg in bus.messages:
+        receiver.on_message_received(msg)
+    got = receiver.flush()
+    assert (receiver.stats.duplicates, receiver.stats.conflicts) == (0, 0)
+    assert [d.cycle for d in got] == [n % 256 for n in range(300)]
+    assert all(d.complete for d in got)

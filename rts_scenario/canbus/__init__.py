@@ -441,12 +441,14 @@ class BusStats:
     duplicates: int = 0
     reordered: int = 0
     orphans: int = 0
+    conflicts: int = 0
 
     @property
     def clean(self) -> bool:
         """Nothing went wrong."""
         return not (self.error_frames or self.unknown_ids or self.checksum_errors
-                    or self.decode_errors or self.duplicates or self.reordered or self.orphans)
+                    or self.decode_errors or self.duplicates or self.reordered or self.orphans
+                    or self.conflicts)
 
 
 @dataclass
@@ -457,28 +459,42 @@ class _Assembly:
     expected: int
     timestamp_s: float | None
     bus_t_s: float | None = None
+    header: dict[str, float] = field(default_factory=dict)  # its raw values
     parts: dict[int, dict[str, float]] = field(default_factory=dict)
-    arrived: dict[int, set[PartKey]] = field(default_factory=dict)
+    arrived: dict[int, dict[PartKey, dict[str, float]]] = field(default_factory=dict)
     whole: set[int] = field(default_factory=set)  # detections whole so far
 
     def add(self, index: int, part: PartKey, values: dict[str, float],
-            needed: tuple[frozenset[PartKey], ...]) -> bool:
-        """Add one part of a detection; False if that part had already come."""
+            needed: tuple[frozenset[PartKey], ...]) -> bool | None:
+        """Add one part of a detection.
+
+        Returns True if it is new, False if that part had come already with the same values
+        (a copy), None if it had come with other values (the first ones are kept).
+        """
         arrived = self.arrived.get(index)
         if arrived is None:
-            arrived = self.arrived[index] = set()
+            arrived = self.arrived[index] = {}
             self.parts[index] = {}
         elif part in arrived:
-            return False
-        arrived.add(part)
+            return False if _same(arrived[part], values) else None
+        arrived[part] = values
         self.parts[index].update(values)
-        if index not in self.whole and any(need <= arrived for need in needed):
+        if index not in self.whole and any(arrived.keys() >= need for need in needed):
             self.whole.add(index)
         return True
 
     def complete(self) -> bool:
         """All announced detections arrived, each whole in one of the ways it can come."""
         return len(self.parts) == self.expected == len(self.whole)
+
+
+def _same(known: dict[str, float], values: dict[str, float]) -> bool:
+    """Whether every value in ``values`` is the one ``known`` has (NaN equals NaN)."""
+    for name, value in values.items():
+        old = known.get(name)
+        if old is None or not (old == value or (old != old and value != value)):
+            return False
+    return True
 
 
 # Cycles kept open for late or reordered parts; older incomplete ones are handed on as such.
@@ -560,7 +576,7 @@ class DetectionReceiver(can.Listener):
     def _reset(self) -> None:
         self._open: OrderedDict[int, _Assembly] = OrderedDict()
         self._ready: deque[Detections] = deque()
-        self._recent: OrderedDict[int, bool] = OrderedDict()  # counter -> handed on complete
+        self._recent: OrderedDict[int, _Assembly] = OrderedDict()  # cycles handed on
         self._current: _Assembly | None = None
         self._latest = -1
         # Detections that came before their cycle's header, by counter (low 8 bits).
@@ -628,8 +644,14 @@ class DetectionReceiver(can.Listener):
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
             for name, value in raw.items()}
         counter = int(values[m.counter])
-        if counter in self._open or counter in self._recent:
-            self.stats.duplicates += 1
+        known = self._open.get(counter) or self._recent.get(counter)
+        if known is not None:
+            # The same header again is a copy; another one with this counter is a conflict
+            # (the cycle's content is in doubt: it fails the verdict).
+            if _same(known.header, raw):
+                self.stats.duplicates += 1
+            else:
+                self.stats.conflicts += 1
             return
         if self._latest >= 0 and _behind(counter, self._latest, self._counter_modulus):
             self.stats.reordered += 1
@@ -637,7 +659,8 @@ class DetectionReceiver(can.Listener):
             self._latest = counter
         frame = _Assembly(
             counter=counter, expected=int(sum(values[c] for c in m.count)),
-            timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s)
+            timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s,
+            header=dict(raw))
         self._open[counter] = frame
         self._current = frame
         for part, early in self._waiting.pop(counter % self._low_modulus, []):
@@ -661,12 +684,13 @@ class DetectionReceiver(can.Listener):
                               if c % self._low_modulus == low),
                              None)
                 if frame is None:
-                    done = next((whole for c, whole in reversed(self._recent.items())
+                    done = next((f for c, f in reversed(self._recent.items())
                                  if c % self._low_modulus == low), None)
                     if done is not None:
-                        # Its cycle was handed on: a copy if it was whole, else too late.
-                        if done:
-                            self.stats.duplicates += 1
+                        # Its cycle was handed on: a copy, a conflict, or (the cycle went on
+                        # incomplete) too late.
+                        if done.complete():
+                            self._after(done, part, values)
                         return
                     self._waiting.setdefault(low, []).append((part, values))
                     self.stats.orphans += 1  # until its header comes
@@ -677,9 +701,11 @@ class DetectionReceiver(can.Listener):
             self.stats.orphans += 1
             return
         if frame.counter not in self._open:
-            # Its cycle was handed on: a copy if it was whole, else too late to count.
-            if self._recent.get(frame.counter, False):
-                self.stats.duplicates += 1
+            # Its cycle was handed on: a copy or a conflict if it was whole, else too late to
+            # count.
+            done = self._recent.get(frame.counter)
+            if done is not None and done.complete():
+                self._after(done, part, values)
             else:
                 self.stats.orphans += 1
             return
@@ -687,20 +713,40 @@ class DetectionReceiver(can.Listener):
         if frame.complete():
             self._finish(frame.counter)
 
-    def _attach(self, frame: _Assembly, part: PartKey, values: dict[str, float]) -> None:
-        index = int(self._physical(self._index, values[self._index]))
+    def _scaled(self, part: PartKey, values: dict[str, float]) -> int:
+        """Scale a part's mapped signals to the DBC's physical values; return its index."""
         for name, scale, offset in self._scalings[part[0]]:  # raw -> the DBC's physical
             if name in values:
                 values[name] = values[name] * scale + offset
-        if not frame.add(index, part, values, self._needed):
+        return int(self._physical(self._index, values[self._index]))
+
+    def _attach(self, frame: _Assembly, part: PartKey, values: dict[str, float]) -> None:
+        added = frame.add(self._scaled(part, values), part, values, self._needed)
+        if added is False:
             self.stats.duplicates += 1
+        elif added is None:
+            self.stats.conflicts += 1
+
+    def _after(self, frame: _Assembly, part: PartKey, values: dict[str, float]) -> None:
+        """Count a part of a whole cycle already handed on: a copy, or a conflict.
+
+        A conflict (another value, or a detection beyond the count its header announced)
+        means the cycle that was checked is not the one the radar sent: it fails the verdict.
+        """
+        index = self._scaled(part, values)
+        known = frame.arrived.get(index, {}).get(part)
+        if known is not None and _same(known, values):
+            self.stats.duplicates += 1
+        else:
+            self.stats.conflicts += 1
 
     def _finish(self, counter: int) -> None:
         """Hand on an open cycle as `Detections`."""
         frame = self._open.pop(counter)
         complete = frame.complete()
-        self._recent[counter] = complete
-        while len(self._recent) > RECENT_CYCLES:
+        self._recent[counter] = frame
+        # Half the counter's range at most: a wrapped counter is a new cycle, not a copy.
+        while len(self._recent) > min(RECENT_CYCLES, self._counter_modulus // 2):
             self._recent.popitem(last=False)
         if self._current is frame and not complete:
             self._current = None
