@@ -37,12 +37,13 @@ from dataclasses import dataclass
 from typing import Any, TextIO
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .detections import Detections, unwrap_counter
+from .errors import CheckError
 from .kinematics import Tracks
 from .report import FrameRecord, Report, RunningStats, TargetResult
 from .scenario.model import LIMITS, Expectations
@@ -187,7 +188,7 @@ class Checker:
         expected = self._blocks[-1].end if self._blocks else self._settled
         if first_frame != expected:
             raise ValueError(f"truth block starts at frame {first_frame}, expected {expected}")
-        self._blocks.append(_Block(first_frame, tracks, np.asarray(status, dtype=np.uint16)))
+        self._blocks.append(_Block(first_frame, tracks, _status_flags(status, tracks)))
 
     def add_cycles(self, cycles: Iterable[Detections]) -> None:
         """Take radar cycles; each is filed under the frame its counter names."""
@@ -429,6 +430,21 @@ class Checker:
             scene_limits={name: {"why": why, "expected": name in exp.expected_limits}
                           for name, why in self._scene_limits.items()},
             worst_frames=worst, record=self.record)
+
+
+def _status_flags(status: ArrayLike, tracks: Tracks) -> NDArray[np.uint16]:
+    """Return the `Status` flags of a truth block, checked: (frames, targets) integers.
+
+    Booleans (e.g. ``Schedule.emitted``) or another shape would silently read as other flags.
+    """
+    out = np.asarray(status)
+    shape = tracks.range_m.shape
+    if out.dtype.kind not in "ui" or out.shape != shape:
+        raise CheckError(
+            f"status: must be the schedule's Status flags (Schedule.status, unsigned integers "
+            f"of shape {shape}: frames x targets), got {out.dtype} of shape {out.shape}"
+        )
+    return out.astype(np.uint16, copy=False)
 
 
 def check_cycles(scene: str, tracks: Tracks, status: NDArray[np.uint16],

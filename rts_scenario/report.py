@@ -243,7 +243,9 @@ class Report:
         f = self.frames
         lines.append(f"radar cycles: {f['total']} during the scene, {f['checked']} checked, "
                      f"{f.get('unmatched', 0)} with unmatched targets, "
-                     f"{f['missing']} missing, {f['incomplete']} incomplete; "
+                     f"{f['missing']} missing, {f['incomplete']} incomplete"
+                     + "".join(f", {f[k]} {k}" for k in ("late", "repeated") if f.get(k))
+                     + "; "
                      f"false detections: {self.false_detections} "
                      f"({self.false_detections_per_frame:.3f} per cycle)"
                      + (f"; invalid detections (not a number): {self.invalid_detections}"

@@ -197,6 +197,7 @@ def test_cycles_for_frames_the_scene_never_had_are_late_not_lost():
     cycles = cycles_from(tr) + cycles_from(truth(3, first=9000), first=9000)
     report = check("s", tr, OK(10, 2), cycles, EXPECT)
     assert report.frames["late"] == 3 and report.frames["checked"] == 10
+    assert "0 incomplete, 3 late;" in report.table()  # shown, not only in the JSON
 
 
 def test_detections_reject_quantities_of_different_lengths():
@@ -241,3 +242,16 @@ def test_frame_record_round_trip(tmp_path):
     back = record.load()
     np.testing.assert_array_equal(back["t_s"], np.arange(5.0))
     assert back["ok"].shape == (5, 2) and record.frames == 5
+
+
+def test_status_must_be_the_schedules_flags_not_booleans():
+    # Schedule.emitted (booleans, per channel) passed for Schedule.status would read as
+    # limit flags and turn every played target-frame into "not checked".
+    from rts_scenario.errors import CheckError
+    tr = truth(5)
+    with pytest.raises(CheckError, match=r"status: must be the schedule's Status flags .*"
+                                         r"got bool of shape \(5, 2\)"):
+        check("s", tr, np.ones((5, 2), dtype=bool), cycles_from(tr), EXPECT)
+    with pytest.raises(CheckError, match=r"of shape \(5, 2\): frames x targets\), got uint16 "
+                                         r"of shape \(5, 2, 4\)"):
+        check("s", tr, np.zeros((5, 2, 4), dtype=np.uint16), cycles_from(tr), EXPECT)
