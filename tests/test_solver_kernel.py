@@ -90,6 +90,7 @@ def test_kernel_matches_numpy_path_with_many_iterating_targets(case, monkeypatch
     monkeypatch.setenv(compiled.JIT_ENV, "off")
     reference = rs.solve_weights(az, el, rig=rig, array=array)
     np.testing.assert_array_equal(fast.reason, reference.reason)
+    np.testing.assert_array_equal(fast.quad, reference.quad)  # located span by span
     np.testing.assert_allclose(fast.weights, reference.weights, rtol=0, atol=WEIGHT_TOL)
     assert fast.feasible.mean() > 0.5
 
