@@ -80,7 +80,7 @@ _LIMIT_FLAGS = {
 }
 # Columns of the detections CSV (``run --detections``), in order.
 DETECTION_COLUMNS = ("scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
-                     "el_deg", "snr_db", "rcs_dbsm", "target")
+                     "el_deg", "snr_db", "rcs_dbsm", "target", "variant")
 
 
 def limit_masks(tracks: Tracks, status: NDArray[np.uint16]) -> dict[str, BoolArray]:
@@ -139,6 +139,9 @@ class Checker:
         Limits the whole scene hits (e.g. ``frame_rate_above_radar``) and why.
     detections_out : text file, optional
         Every detection is written there as a CSV row (`DETECTION_COLUMNS`, no header).
+    variant, parameters : str, mapping of str to any, optional
+        The combination of the scene's ``parametrize`` block that runs (`Scenario.variant`,
+        `Scenario.parameters`): the report and every detection row name it.
     """
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
@@ -146,8 +149,11 @@ class Checker:
                  record: FrameRecord | None = None,
                  expected_limits: Sequence[frozenset[str]] | None = None,
                  scene_limits: Mapping[str, str] | None = None,
-                 detections_out: TextIO | None = None) -> None:
+                 detections_out: TextIO | None = None, variant: str = "",
+                 parameters: Mapping[str, Any] | None = None) -> None:
         self.scene = scene
+        self.variant = variant
+        self.parameters = dict(parameters or {})
         self.names = names
         self.expectations = expectations
         self.modulus = counter_modulus
@@ -338,6 +344,7 @@ class Checker:
             columns.append(["" if np.isnan(v) else f"{v:.6g}" for v in values.tolist()])
         names = np.array(("", *self.names), dtype=object)
         columns.append(names[match + 1].tolist())
+        columns.append([self.variant] * frame_of.size)
         self._csv.writerows(zip(*columns, strict=True))
 
     def _keep_worst(self, block: _Block, truth: BoolArray, assigned: BoolArray,
@@ -429,6 +436,7 @@ class Checker:
                            "unchecked": self._unchecked, "detected": int(self._detected.sum())},
             scene_limits={name: {"why": why, "expected": name in exp.expected_limits}
                           for name, why in self._scene_limits.items()},
+            variant=self.variant, parameters=dict(self.parameters),
             worst_frames=worst, record=self.record)
 
 

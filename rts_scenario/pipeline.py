@@ -302,7 +302,8 @@ class Pipeline:
                           counter_modulus=self.counter_modulus,
                           counter_start=clock.counter_start, record=record,
                           expected_limits=[t.expected_limits for t in scene.targets],
-                          scene_limits=scene_limits(scene), detections_out=detections_out)
+                          scene_limits=scene_limits(scene), detections_out=detections_out,
+                          variant=scene.variant, parameters=scene.parameters)
         n_frames = scene.n_frames
         t_all = scene.t_s
         digest = hashlib.sha256() if options.bus_log else None
@@ -424,7 +425,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       counter_start: int | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
-    The radar's clock (which counter is which cycle, measured when), the mapping the bus speaks,
+    The variant of the scene that played (`Scenario.variant`, its ``parametrize``
+    combination), the radar's clock (which counter is which cycle, measured when), the mapping
+    the bus speaks,
     the solver method, and a digest of the statuses the RTS played, so that a re-check that
     rebuilds the schedule can tell whether it plays the same. ``counter_start`` is the one the
     run used (learnt, where the profile does not give it).
@@ -437,6 +440,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     path = Path(str(log) + LOG_SIDECAR_SUFFIX)
     data = {
         "rts_scenario_log": 1, "version": __version__, "scene": scene.name,
+        "variant": scene.variant, "parameters": scene.parameters,
         "frames": scene.n_frames, "frame_rate_hz": scene.frame_rate_hz,
         "radar": radar.name,
         "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,

@@ -32,11 +32,13 @@ def require_matplotlib() -> None:
 
 
 def safe_stem(name: str) -> str:
-    """Return a file name stem for a scene or rig name: only ``[A-Za-z0-9._-]``, no leading dot.
+    """Return a file name stem for a scene or rig name: only ``[A-Za-z0-9._=[]-]``, no leading dot.
 
-    Names come from files anyone may write; a stem never leaves the plot folder.
+    Names come from files anyone may write; a stem never leaves the plot folder. ``=`` and
+    brackets are kept so that a run of a parametrized scene keeps the name pytest gives it
+    (``cut-in[estimator=ti]``).
     """
-    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).lstrip(".")
+    stem = re.sub(r"[^A-Za-z0-9._=\[\]-]+", "_", name).lstrip(".")
     return stem or "scene"
 
 

@@ -38,7 +38,7 @@ from .pipeline import LOG_SIDECAR_SUFFIX, add_cycle_truth
 from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, RadarClock
 from .report import Report
-from .scenario import Scenario
+from .scenario import Scenario, parametrizations, select_variant
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -143,15 +143,54 @@ def read_sidecar(log: str | Path) -> dict[str, Any] | None:
         raise LogError(f"{path}: {exc}") from None
 
 
-def read_cycles(log: str | Path, mapping: CanMapping | None) -> tuple[list[_LoggedCycle],
-                                                                      dict[str, int]]:
-    """Decode a log's radar cycles, each with the bus time of its header message."""
+def check_log_file(log: str | Path) -> None:
+    """Refuse a log of a format python-can does not read, or one that is not there."""
     path = Path(log)
     if path.suffix.lower() not in LOG_SUFFIXES:
         raise LogError(f"--log {log}: unknown log format {path.suffix!r}; valid: "
                        f"{', '.join(LOG_SUFFIXES)}")
     if not path.is_file():
         raise LogError(f"--log {log}: no such file")
+
+
+def log_variant(scene: str | Path, log: str | Path,
+                variant: str | None = None) -> tuple[str, dict[str, Any]]:
+    """Return the combination ``(id, overrides)`` of the scene file that ``log`` records.
+
+    A log records one run. ``variant`` (``--variant``) names it; otherwise the log's sidecar
+    does (``run --record`` writes it). Given both, they must agree.
+
+    Raises
+    ------
+    RtsError
+        The scene is parametrized and neither says which variant the log is of, or the
+        variant is not one of the scene's; the message lists the scene's variants.
+    """
+    recorded = (read_sidecar(log) or {}).get("variant")
+    if variant is not None and recorded is not None and variant != recorded:
+        raise LogError(f"--variant {variant}: the log {log} was recorded for "
+                       f"{_variant_text(recorded)} (its sidecar)")
+    if variant is None and recorded is not None:
+        combos = dict(parametrizations(scene))
+        if recorded in combos:
+            return recorded, combos[recorded]
+        has = ("it has no parametrize block" if list(combos) == [""]
+               else f"its variants: {', '.join(combos)}")
+        raise LogError(f"--log {log}: recorded for {_variant_text(recorded)} (its sidecar), "
+                       f"which {scene} does not have; {has}")
+    return select_variant(scene, variant, unnamed=f" and no sidecar of the log {log} names the "
+                                                  f"one it records")
+
+
+def _variant_text(variant: str) -> str:
+    return f"variant {variant!r}" if variant else "the scene without parametrize"
+
+
+def read_cycles(log: str | Path, mapping: CanMapping | None) -> tuple[list[_LoggedCycle],
+                                                                      dict[str, int]]:
+    """Decode a log's radar cycles, each with the bus time of its header message."""
+    check_log_file(log)
+    path = Path(log)
     receiver = DetectionReceiver(mapping)
     m = receiver.mapping
     header = m.db.get_message_by_name(m.header)
@@ -404,6 +443,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             clock = replace(clock, counter_start=int(logged[0].detections.cycle) if logged
                             else 0)
         alignment = Alignment("sidecar", clock.cycle_s, latency_s=clock.latency_s)
+        recorded = sidecar.get("variant")
+        if recorded is not None and recorded != scene.variant:
+            raise LogError(f"--log {log}: recorded for {_variant_text(recorded)} (its "
+                           f"sidecar), not {_variant_text(scene.variant)}")
         if sidecar.get("scene") != scene.name:
             alignment.notes.append(f"the log was recorded for scene {sidecar.get('scene')!r}, "
                                    f"not {scene.name!r}")
@@ -470,7 +513,8 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
                       expected_limits=[t.expected_limits for t in scene.targets],
-                      scene_limits=scene_limits(scene))
+                      scene_limits=scene_limits(scene), variant=scene.variant,
+                      parameters=scene.parameters)
     total = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
     counters = np.array([c.detections.cycle for c in logged], dtype=np.int64)
     # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
@@ -499,4 +543,4 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
 
 
 __all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "RecheckResult", "check_log",
-           "estimate_offset", "read_cycles", "read_sidecar"]
+           "check_log_file", "estimate_offset", "log_variant", "read_cycles", "read_sidecar"]

@@ -16,6 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .scenario.model import run_label
+
 FloatArray = NDArray[np.float64]
 
 # Percentiles come from a histogram of |error| with bins this much wider than the one below
@@ -169,6 +171,8 @@ class Report:
     ``solver_plan`` says where the run's solver plan came from (built, memory, disk).
     ``radar_clock`` is how the radar's cycles were numbered: its counter start and whether the
     profile gave it or it was learnt from the first cycle's bus time.
+    ``variant`` names the combination of the scene's ``parametrize`` block that ran, as the
+    pytest plugin names it (``""`` for a scene without one), ``parameters`` holds its values.
     ``worst_frames`` lists the worst target-frames (misses first, then by error over
     tolerance); ``record`` holds every frame's arrays when the run was asked to record them
     (`per_frame` reads them back).
@@ -190,8 +194,15 @@ class Report:
     timing: dict[str, float] = field(default_factory=dict)
     solver_plan: str = ""
     radar_clock: dict[str, Any] = field(default_factory=dict)
+    variant: str = ""
+    parameters: dict[str, Any] = field(default_factory=dict)
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
     record: FrameRecord | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def label(self) -> str:
+        """``scene[variant]``, as the pytest plugin names the run (``scene`` without one)."""
+        return run_label(self.scene, self.variant)
 
     @property
     def per_frame(self) -> dict[str, np.ndarray]:
@@ -254,7 +265,7 @@ class Report:
         if problems:
             lines.append("bus: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in
                                              problems.items()))
-        lines.append(("PASS" if self.passed else "FAIL") + f": {self.scene}"
+        lines.append(("PASS" if self.passed else "FAIL") + f": {self.label}"
                      + ("" if self.passed else " - " + "; ".join(self.reasons)))
         return "\n".join(lines)
 

@@ -116,7 +116,7 @@ def test_schedule_and_list_outputs(tmp_path, capsys):
     root = Path(__file__).resolve().parents[1]
     target = tmp_path / "s.npz"
     assert cli.main(["schedule", str(root / "scenarios" / "cut_in.scenario.yaml"), "--output",
-                     f"file:{target}"]) == 0
+                     f"file:{target}", "--variant", "estimator=ti"]) == 0
     assert read_schedule(target).n_frames == 240
     assert cli.main(["list-outputs"]) == 0
     assert set(capsys.readouterr().out.split()) >= {"file", "udp", "simulated-radar"}
@@ -150,11 +150,149 @@ def test_run_writes_every_detection_as_csv(tmp_path, capsys):
     assert code == 0
     rows = list(csv.DictReader(out.open()))
     report = json.loads((tmp_path / "r.json").read_text())
+    # cut_in runs once per estimator: the variant tells its two runs apart.
+    assert [(e["scene"], e["variant"]) for e in report] == [
+        ("cut-in", "estimator=bartlett"), ("cut-in", "estimator=ti"), ("overtaking", "")]
     for entry in report:
-        mine = [r for r in rows if r["scene"] == entry["scene"]]
+        mine = [r for r in rows
+                if r["scene"] == entry["scene"] and r["variant"] == entry["variant"]]
         detected = sum(t["detected_frames"] + t["out_of_tolerance_frames"]
                        for t in entry["targets"])
         assert len(mine) == detected + entry["false_detections"]
     assert list(rows[0]) == ["scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
-                             "el_deg", "snr_db", "rcs_dbsm", "target"]
+                             "el_deg", "snr_db", "rcs_dbsm", "target", "variant"]
     assert {r["target"] for r in rows} <= {"cutting-car", "overtaker", ""}
+
+
+def two_variant_scene(folder: Path) -> Path:
+    """cut_in, 4 s long, once in the rig's coverage (passes) and once far outside it (fails)."""
+    text = (ROOT / "scenarios" / "cut_in.scenario.yaml").read_text()
+    text = text.replace("duration_s: 12.0", "duration_s: 4.0").replace(
+        "radar.estimator: [bartlett, ti]", "targets.0.motion.position_m.1: [3.5, 40.0]")
+    path = folder / "two.scenario.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_run_runs_every_variant_of_a_parametrized_scene(tmp_path, capsys):
+    import csv
+
+    scene = two_variant_scene(tmp_path)
+    report, detections, log = tmp_path / "r.json", tmp_path / "d.csv", tmp_path / "bus.blf"
+    code = cli.main(["run", str(scene), "--json", str(report), "--detections", str(detections),
+                     "--record", str(log)])
+    assert code == 1  # one variant fails: the run fails, whatever the other does
+    captured = capsys.readouterr()
+    text = captured.out
+    assert "PASS: cut-in[1=3.5]" in text and "FAIL: cut-in[1=40.0] - " in text
+    assert f"PASS cut-in[1=3.5] ({scene})" in text and f"FAIL cut-in[1=40.0] ({scene})" in text
+    assert f"warning: {scene}[1=40.0]: cutting-car: out_of_coverage" in captured.err
+    entries = json.loads(report.read_text())
+    assert [(e["scene"], e["variant"], e["parameters"], e["status"], e["passed"])
+            for e in entries] == [
+        ("cut-in", "1=3.5", {"targets.0.motion.position_m.1": 3.5}, "pass", True),
+        ("cut-in", "1=40.0", {"targets.0.motion.position_m.1": 40.0}, "fail", False)]
+    assert entries[1]["targets"][0]["limits"] == {"out_of_coverage": 80}
+    rows = list(csv.DictReader(detections.open()))
+    assert rows and {r["variant"] for r in rows} <= {"1=3.5", "1=40.0"}
+    passing = [r for r in rows if r["variant"] == "1=3.5"]
+    assert len(passing) == entries[0]["targets"][0]["detected_frames"] + entries[0][
+        "targets"][0]["out_of_tolerance_frames"] + entries[0]["false_detections"]
+    # One bus log per variant, its sidecar naming the variant; none under the name given.
+    assert not log.exists()
+    for variant, value in (("1=3.5", 3.5), ("1=40.0", 40.0)):
+        sidecar = json.loads((tmp_path / f"bus[{variant}].blf.rts.json").read_text())
+        assert sidecar["variant"] == variant
+        assert sidecar["parameters"] == {"targets.0.motion.position_m.1": value}
+        assert f"wrote {tmp_path / f'bus[{variant}].blf'} and " in text
+
+
+def test_run_names_each_variant_s_plots_and_logs(tmp_path):
+    from rts_scenario.cli.run import variant_logs
+
+    assert variant_logs("d/bus.blf", [""]) == {}
+    assert variant_logs("d/bus.blf", ["speed_mps=10.0-1=-0.5", "x=a/b", "x=a:b"]) == {
+        "speed_mps=10.0-1=-0.5": "d/bus[speed_mps=10.0-1=-0.5].blf",
+        "x=a/b": "d/bus[x=a_b].blf", "x=a:b": "d/bus[x=a_b-2].blf"}
+    pytest.importorskip("matplotlib")
+    scene = two_variant_scene(tmp_path)
+    assert cli.main(["run", str(scene), "--plot", str(tmp_path / "plots")]) == 1
+    names = sorted(p.name for p in (tmp_path / "plots").iterdir())
+    assert names and len(names) % 2 == 0  # every plot names its run
+    assert sum(n.startswith("cut-in[1=3.5]-") for n in names) == len(names) // 2
+    assert sum(n.startswith("cut-in[1=40.0]-") for n in names) == len(names) // 2
+
+
+def test_check_takes_the_variant_from_the_sidecar_or_refuses(tmp_path, capsys):
+    import shutil
+
+    scene = two_variant_scene(tmp_path)
+    assert cli.main(["run", str(scene), "--record", str(tmp_path / "bus.blf")]) == 1
+    capsys.readouterr()
+    failing, passing = tmp_path / "bus[1=40.0].blf", tmp_path / "bus[1=3.5].blf"
+    out = tmp_path / "c.json"
+    # The sidecar says which variant the log is of: the live verdict again, for that variant.
+    assert cli.main(["check", str(scene), "--log", str(failing), "--json", str(out)]) == 1
+    text = capsys.readouterr().out
+    assert "variant cut-in[1=40.0] (from the log's sidecar)" in text
+    assert "FAIL: cut-in[1=40.0] - " in text
+    data = json.loads(out.read_text())
+    assert (data["variant"], data["status"]) == ("1=40.0", "fail")
+    # Without a sidecar nothing says which run the log is: refused, naming the choices.
+    bare = tmp_path / "bare.blf"
+    shutil.copy(passing, bare)
+    assert cli.main(["check", str(scene), "--log", str(bare)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"error: {scene}: a parametrized scene (2 variants) and no sidecar of the log "
+                   f"{bare} names the one it records: choose one with --variant ID: 1=3.5, "
+                   f"1=40.0\n")
+    assert cli.main(["check", str(scene), "--log", str(bare), "--variant", "1=3.5"]) == 0
+    assert "PASS: cut-in[1=3.5]" in capsys.readouterr().out
+    assert cli.main(["check", str(scene), "--log", str(bare), "--variant", "1=7"]) == 2
+    assert capsys.readouterr().err == (f"error: --variant 1=7: not a variant of {scene}; valid: "
+                                       f"1=3.5, 1=40.0\n")
+    # --variant and the sidecar disagree: refused, not checked against either.
+    assert cli.main(["check", str(scene), "--log", str(passing), "--variant", "1=40.0"]) == 2
+    assert capsys.readouterr().err == (f"error: --variant 1=40.0: the log {passing} was recorded "
+                                       f"for variant '1=3.5' (its sidecar)\n")
+    # A log of a variant is no log of another scene.
+    other = ROOT / "scenarios" / "highway_following.scenario.yaml"
+    assert cli.main(["check", str(other), "--log", str(passing)]) == 2
+    assert "which " + str(other) + " does not have; it has no parametrize block" in (
+        capsys.readouterr().err)
+
+
+def test_check_log_refuses_a_scene_other_than_the_recorded_variant(tmp_path):
+    from rts_scenario.recheck import LogError, check_log
+    from rts_scenario.scenario import load_scenario
+
+    scene = two_variant_scene(tmp_path)
+    assert cli.main(["run", str(scene), "--record", str(tmp_path / "bus.blf")]) == 1
+    log = tmp_path / "bus[1=3.5].blf"
+    with pytest.raises(LogError, match=r"recorded for variant '1=3.5' \(its sidecar\), not the "
+                                       r"scene without parametrize"):
+        check_log(load_scenario(scene), log)
+    with pytest.raises(LogError, match="not variant '1=40.0'"):
+        check_log(load_scenario(scene, {"targets.0.motion.position_m.1": 40.0}), log)
+    assert check_log(load_scenario(scene, {"targets.0.motion.position_m.1": 3.5}),
+                     log).report.passed
+
+
+def test_list_validate_and_schedule_show_the_variants(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    assert cli.main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert ("  scenarios/cut_in.scenario.yaml\n    [estimator=bartlett]\n    [estimator=ti]\n"
+            in out)
+    scene = two_variant_scene(tmp_path)
+    assert cli.main(["validate", str(scene)]) == 0
+    out = capsys.readouterr().out
+    assert f"ok: {scene}[1=3.5]: " in out and f"ok: {scene}[1=40.0]: " in out
+    target = tmp_path / "s.npz"
+    assert cli.main(["schedule", str(scene), "--output", f"file:{target}"]) == 2
+    assert capsys.readouterr().err == (f"error: {scene}: a parametrized scene (2 variants): "
+                                       f"choose one with --variant ID: 1=3.5, 1=40.0\n")
+    assert not target.exists()
+    assert cli.main(["schedule", str(scene), "--output", f"file:{target}", "--variant",
+                     "1=40.0"]) == 0
+    assert capsys.readouterr().out.startswith(f"{scene}[1=40.0]: 80 frames")

@@ -185,13 +185,14 @@ def test_a_biased_radar_in_another_tool_s_log_fails(tmp_path):
 
 
 def test_check_command_writes_the_report_and_the_alignment(tmp_path, capsys):
+    scene = ROOT / "scenarios" / "highway_following.scenario.yaml"
     log = tmp_path / "run.blf"
-    assert cli.main(["run", str(CUT_IN), "--record", str(log)]) == 0
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
     out = tmp_path / "check.json"
-    assert cli.main(["check", str(CUT_IN), "--log", str(log), "--json", str(out)]) == 0
+    assert cli.main(["check", str(scene), "--log", str(log), "--json", str(out)]) == 0
     data = json.loads(out.read_text())
     assert data["status"] == "pass" and data["alignment"]["source"] == "sidecar"
-    assert data["log"] == str(log)
+    assert data["log"] == str(log) and data["variant"] == "" and data["parameters"] == {}
     text = capsys.readouterr().out
     assert "aligned by the recording's sidecar" in text and "PASS" in text
 

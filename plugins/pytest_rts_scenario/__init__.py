@@ -98,19 +98,17 @@ class ScenarioFile(pytest.File):
 
         try:
             combos = parametrizations(self.path)
-            scenes = [(ident, overrides, load_scenario(self.path, overrides))
-                      for ident, overrides in combos]
+            scenes = [(overrides, load_scenario(self.path, overrides)) for _, overrides in combos]
         except RtsError as exc:
             raise self.CollectError(str(exc)) from None
         known = {line.split(":", 1)[0].split("(", 1)[0].strip()
                  for line in self.config.getini("markers")}
-        for ident, overrides, scene in scenes:
+        for overrides, scene in scenes:
             # A scene's own marks are registered, so --strict-markers accepts them.
             for mark in set(scene.marks) - known:
                 self.config.addinivalue_line("markers", f"{mark}: a mark of scene files")
                 known.add(mark)
-            name = f"{scene.name}[{ident}]" if ident else scene.name
-            yield ScenarioItem.from_parent(self, name=name, overrides=overrides,
+            yield ScenarioItem.from_parent(self, name=scene.label, overrides=overrides,
                                            marks=scene.marks)
 
 
@@ -175,7 +173,7 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
 def _render(result: RunResult) -> str:
     """Render the report table and the worst frames (misses first, then largest errors)."""
     report = result.report
-    lines = [f"FAIL: {report.scene} - {'; '.join(report.reasons)}", "", report.table(), "",
+    lines = [f"FAIL: {report.label} - {'; '.join(report.reasons)}", "", report.table(), "",
              "worst frames (error / tolerance):",
              f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
              f"{'el':>8}"]

@@ -21,7 +21,7 @@ def _do_check(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..canbus.mapping import CanMapping
-    from ..recheck import check_log
+    from ..recheck import check_log, check_log_file, log_variant
     from ..scenario import load_scenario
 
     if args.mapping:
@@ -30,7 +30,13 @@ def _do_check(args: argparse.Namespace) -> int:
         check_number("--time-offset-s", args.time_offset_s)
     if args.json:
         check_writable_file("--json", args.json)
-    scene = load_scenario(args.scene)
+    check_log_file(args.log)
+    # A log records one run: of a parametrized scene, the variant --variant or the log's
+    # sidecar names, never the file as written.
+    variant, overrides = log_variant(args.scene, args.log, args.variant)
+    scene = load_scenario(args.scene, overrides)
+    if variant:
+        print(f"variant {scene.label}" + ("" if args.variant else " (from the log's sidecar)"))
     result = check_log(scene, args.log, mapping=args.mapping, time_offset_s=args.time_offset_s,
                        method=args.method)
     report = result.report
@@ -56,8 +62,9 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                     "its detections against the scene, aligned by time. A log recorded by "
                     "`run --record` is aligned by its sidecar (LOG.rts.json) and gives the live "
                     "verdict; any other log is aligned by its timestamps (offset estimated "
-                    "unless --time-offset-s). Exit 0 pass, 1 fail, 2 bad input, 3 runtime "
-                    "error.",
+                    "unless --time-offset-s). A log is one run: of a parametrized scene, the "
+                    "variant its sidecar or --variant names. Exit 0 pass, 1 fail, 2 bad input, "
+                    "3 runtime error.",
     )
     parser.add_argument("scene", metavar="SCENE", help="the *.scenario.yaml that was played")
     parser.add_argument("--log", required=True, metavar="LOG", help="the recorded CAN log")
@@ -69,5 +76,9 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--method", default=None, choices=METHODS,
                         help="solver method of the played schedule (default: the sidecar's, "
                              "else exact)")
+    parser.add_argument("--variant", default=None, metavar="ID",
+                        help="the combination of the scene's parametrize block the log is of, "
+                             "as pytest names it (default: the sidecar's; a parametrized scene "
+                             "needs one of them)")
     parser.add_argument("--json", metavar="REPORT", help="write the report as JSON")
     parser.set_defaults(handler=_do_check)

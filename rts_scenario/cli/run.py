@@ -34,8 +34,19 @@ def _do_run(args: argparse.Namespace) -> int:
     from ..pipeline import RunOptions, run_scene
     from ..plots import safe_stem
     from ..preflight import Preflight
-    from ..scenario import SCENE_SUFFIX, load_scenario
+    from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
     from ..schedule import ScheduleError
+
+    # Every combination of a scene's parametrize block is one run, as in the pytest plugin;
+    # a file whose block cannot be expanded is reported in its turn, like one that does not load.
+    expanded: list[tuple[str, list[tuple[str, dict[str, Any]]] | Exception]] = []
+    for path in args.scenes:
+        try:
+            expanded.append((path, parametrizations(path)))
+        except Exception as exc:
+            if args.debug:
+                raise
+            expanded.append((path, exc))
 
     # Everything the options name is checked before the first scene runs, not after it.
     check_output("--output", args.output, run=True)
@@ -46,6 +57,7 @@ def _do_run(args: argparse.Namespace) -> int:
         check_writable_file("--json", args.json)
     if args.detections:
         check_writable_file("--detections", args.detections)
+    logs: dict[str, str] = {}  # variant -> the file its bus is recorded to
     if args.record:
         from ..recheck import LOG_SUFFIXES
 
@@ -62,17 +74,17 @@ def _do_run(args: argparse.Namespace) -> int:
             except ImportError:
                 raise RtsError("--record: .mf4 logs need asammdf (pip install "
                                "'rts-scenario[mf4]')") from None
-        check_writable_file("--record", args.record)
+        combos = expanded[0][1]
+        logs = variant_logs(args.record, [] if isinstance(combos, Exception)
+                            else [ident for ident, _ in combos])
+        for log in logs.values() or [args.record]:
+            check_writable_file("--record", log)
     if args.plot:
         from ..plots import require_matplotlib
 
         require_matplotlib()
         check_writable_folder("--plot", args.plot)
 
-    options = RunOptions(output=args.output, can_interface=args.can_interface,
-                         can_channel=args.can_channel, can_fd=args.can_fd,
-                         mapping=args.mapping, method=args.method, record=bool(args.plot),
-                         bus_log=args.record)
     entries: list[dict[str, Any]] = []
     stems: set[str] = set()
     bad_input = runtime_error = False
@@ -82,74 +94,94 @@ def _do_run(args: argparse.Namespace) -> int:
             detections = open(args.detections, "w", newline="")  # closed after the last scene
         detections.write(",".join(DETECTION_COLUMNS) + "\n")
 
-    def failed(scene: str, path: str, exc: BaseException) -> None:
+    def failed(scene: str, path: str, exc: BaseException, variant: str = "",
+               parameters: dict[str, Any] | None = None) -> None:
         message = located(path, exc)
         if not isinstance(exc, RtsError):
             message = (f"{path}: {type(exc).__name__}: {one_line(exc)} (a runtime error; "
                        f"--debug shows where)")
+        if variant:
+            message += f" [{variant}]"
         print(f"error: {message}", file=sys.stderr)
-        entries.append({"scene": scene, "file": path, "status": "error", "error": message})
+        entries.append({"scene": scene, "file": path, "status": "error", "error": message,
+                        "variant": variant, "parameters": dict(parameters or {})})
 
-    for path in args.scenes:
-        start = time.perf_counter()
-        try:
-            scene = load_scenario(path)
-        except Exception as exc:
-            if args.debug:
-                raise
-            failed(Path(path).name.removesuffix(SCENE_SUFFIX), path, exc)
+    for path, combos in expanded:
+        file_name = Path(path).name.removesuffix(SCENE_SUFFIX)
+        if isinstance(combos, Exception):
+            failed(file_name, path, combos)
             # A file that does not load is bad input; anything else is a runtime error.
-            bad_input = bad_input or isinstance(exc, RtsError)
-            runtime_error = runtime_error or not isinstance(exc, RtsError)
+            bad_input = bad_input or isinstance(combos, RtsError)
+            runtime_error = runtime_error or not isinstance(combos, RtsError)
             continue
-        try:
-            loaded = {"load_s": time.perf_counter() - start}
+        for variant, overrides in combos:
+            label = f"{path}[{variant}]" if variant else path
+            start = time.perf_counter()
+            try:
+                scene = load_scenario(path, overrides)
+            except Exception as exc:
+                if args.debug:
+                    raise
+                failed(file_name, path, exc, variant, overrides)
+                bad_input = bad_input or isinstance(exc, RtsError)
+                runtime_error = runtime_error or not isinstance(exc, RtsError)
+                continue
+            try:
+                loaded = {"load_s": time.perf_counter() - start}
 
-            def warn(pre: Preflight, path: str = path) -> None:
-                # Before anything plays: what the bench or the radar will not do as specified.
-                for line in pre.unexpected():
-                    print(f"warning: {path}: {line}", file=sys.stderr)
+                def warn(pre: Preflight, label: str = label) -> None:
+                    # Before anything plays: what the bench or the radar will not do as
+                    # specified.
+                    for line in pre.unexpected():
+                        print(f"warning: {label}: {line}", file=sys.stderr)
 
-            result = run_scene(scene, options, progress=Progress(Path(path).name),
-                               detections_out=detections, on_preflight=warn, timing=loaded)
-            report = result.report
-            print(report.table())
-            if args.record:
-                print(f"wrote {args.record} and {args.record}.rts.json")
-            print("timing: " + ", ".join(
-                f"{k.removesuffix('_s')} {v * 1e3:.0f} ms"
-                + (f" ({report.solver_plan})" if k == "plan_s" else "")
-                for k, v in report.timing.items()))
-            if args.plot:
-                from ..plots import write_plots
+                log = logs.get(variant, args.record)
+                options = RunOptions(output=args.output, can_interface=args.can_interface,
+                                     can_channel=args.can_channel, can_fd=args.can_fd,
+                                     mapping=args.mapping, method=args.method,
+                                     record=bool(args.plot), bus_log=log)
+                result = run_scene(scene, options,
+                                   progress=Progress(run_label(Path(path).name, variant)),
+                                   detections_out=detections, on_preflight=warn, timing=loaded)
+                report = result.report
+                print(report.table())
+                if log:
+                    print(f"wrote {log} and {log}.rts.json")
+                print("timing: " + ", ".join(
+                    f"{k.removesuffix('_s')} {v * 1e3:.0f} ms"
+                    + (f" ({report.solver_plan})" if k == "plan_s" else "")
+                    for k, v in report.timing.items()))
+                if args.plot:
+                    from ..plots import write_plots
 
-                stem = _unique(safe_stem(scene.name), stems)
-                with writing("--plot", args.plot):
-                    written_plots = write_plots(result, args.plot, stem)
-                for written in written_plots:
-                    print(f"wrote {written}")
-        except Exception as exc:
-            if args.debug:
-                raise
-            failed(scene.name, path, exc)
-            # The scene loaded but its schedule cannot be built (e.g. the rig's update rate):
-            # still the scene's fault, not the run's.
-            if isinstance(exc, ScenarioError | ScheduleError):
-                bad_input = True
-            else:
-                runtime_error = True
-            continue
-        finally:
-            print()
-        entries.append({"file": path, "status": "pass" if report.passed else "fail",
-                        **report.to_dict()})
+                    stem = _unique(safe_stem(scene.label), stems)
+                    with writing("--plot", args.plot):
+                        written_plots = write_plots(result, args.plot, stem)
+                    for written in written_plots:
+                        print(f"wrote {written}")
+            except Exception as exc:
+                if args.debug:
+                    raise
+                failed(scene.name, path, exc, variant, overrides)
+                # The scene loaded but its schedule cannot be built (e.g. the rig's update
+                # rate): still the scene's fault, not the run's.
+                if isinstance(exc, ScenarioError | ScheduleError):
+                    bad_input = True
+                else:
+                    runtime_error = True
+                continue
+            finally:
+                print()
+            entries.append({"file": path, "status": "pass" if report.passed else "fail",
+                            **report.to_dict()})
 
     if detections is not None:
         detections.close()
         print(f"wrote {args.detections}")
-    if len(args.scenes) > 1:
+    if len(entries) > 1:
         for entry in entries:
-            line = f"{entry['status'].upper()} {entry['scene']} ({entry['file']})"
+            name = run_label(entry["scene"], entry["variant"])
+            line = f"{entry['status'].upper()} {name} ({entry['file']})"
             print(line + (f": {entry['error']}" if entry["status"] == "error" else ""))
     if args.json:
         payload = entries[0] if len(entries) == 1 else entries
@@ -161,6 +193,24 @@ def _do_run(args: argparse.Namespace) -> int:
     if bad_input:
         return EXIT_BAD_INPUT
     return EXIT_OK if all(e["status"] == "pass" for e in entries) else EXIT_FAIL
+
+
+def variant_logs(log: str, variants: list[str]) -> dict[str, str]:
+    """Name the bus log of each variant of a parametrized scene: ``LOG`` -> ``STEM[ID].SUFFIX``.
+
+    ``ID`` is the variant's id made safe for a file name (`rts_scenario.plots.safe_stem`), with
+    ``-2``, ``-3``, ... when two variants' ids become the same; empty for a scene without
+    ``parametrize`` (its log is ``LOG`` itself).
+    """
+    from ..plots import safe_stem
+
+    if variants in ([], [""]):
+        return {}
+    path = Path(log)
+    taken: set[str] = set()
+    return {variant: str(path.with_name(f"{path.stem}[{_unique(safe_stem(variant), taken)}]"
+                                        f"{path.suffix}"))
+            for variant in variants}
 
 
 def _unique(stem: str, taken: set[str]) -> str:
@@ -178,10 +228,11 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         "run", help="run scenes end to end and check the radar", parents=parents,
         description="Load each scene, build its schedule, play it (by default on the built-in "
-                    "simulated radar), read the detections over CAN and check them. Every scene "
-                    "runs even if another errs. Exit 0 if every scene passes, 1 if one fails, 2 "
-                    "on bad input (arguments, a scene that does not load), 3 on a runtime "
-                    "error.",
+                    "simulated radar), read the detections over CAN and check them. Every "
+                    "combination of a scene's parametrize block is its own run, named as pytest "
+                    "names it (SCENE[ID]). Every run happens even if another errs. Exit 0 if "
+                    "every run passes, 1 if one fails, 2 on bad input (arguments, a scene that "
+                    "does not load), 3 on a runtime error.",
     )
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="*.scenario.yaml files")
     parser.add_argument("--output", default="simulated-radar",
@@ -199,7 +250,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--plot", metavar="DIR", help="write PNG plots (needs matplotlib)")
     parser.add_argument("--record", metavar="LOG",
                         help="record the detection bus (.blf, .asc, .csv, .log, .trc, .mf4) "
-                             "and LOG.rts.json for `rts-scenario check SCENE --log LOG`")
+                             "and LOG.rts.json for `rts-scenario check SCENE --log LOG`; a "
+                             "parametrized scene's variants to STEM[ID].SUFFIX each")
     parser.add_argument("--detections", metavar="CSV",
                         help="write every detection, with the target it was assigned to, as CSV "
                              "(columns in docs/report.md)")

@@ -18,11 +18,12 @@ def _do_schedule(args: argparse.Namespace) -> int:
 
     from ..kinematics import compute_tracks
     from ..outputs import open_output
-    from ..scenario import load_scenario
+    from ..scenario import load_scenario, select_variant
     from ..schedule import build_schedule
 
     check_output("--output", args.output, run=False)
-    scene = load_scenario(args.scene)
+    _, overrides = select_variant(args.scene, args.variant)
+    scene = load_scenario(args.scene, overrides)
     step = max(1, _BATCH_TARGET_FRAMES // max(1, len(scene.targets)))
     emitted = total = 0
     with open_output(args.output) as out:
@@ -35,7 +36,8 @@ def _do_schedule(args: argparse.Namespace) -> int:
             out.write(replace(schedule, frame_index=frames))
             emitted += int(schedule.emitted.sum())
             total += schedule.emitted.size
-    print(f"{args.scene}: {scene.n_frames} frames x {len(scene.targets)} targets, "
+    label = f"{args.scene}[{scene.variant}]" if scene.variant else args.scene
+    print(f"{label}: {scene.n_frames} frames x {len(scene.targets)} targets, "
           f"{emitted / max(total, 1):.0%} of entries emitted -> {args.output}")
     return EXIT_OK
 
@@ -49,4 +51,7 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("scene", metavar="SCENE")
     parser.add_argument("--output", required=True, help="file:PATH (.npz, .csv) or udp://...")
     parser.add_argument("--method", default="exact", choices=METHODS)
+    parser.add_argument("--variant", default=None, metavar="ID",
+                        help="the combination of the scene's parametrize block, as pytest names "
+                             "it (a parametrized scene needs one)")
     parser.set_defaults(handler=_do_schedule)

@@ -1,7 +1,14 @@
 """Traffic scenes: the ``*.scenario.yaml`` format, its loader and the typed model."""
 
-from .loader import SCENE_SUFFIX, load_scenario, parametrizations, scenario_schema
-from .model import Effects, Expectations, Mount, RcsModel, Scenario, TargetSpec
+from .loader import (
+    SCENE_SUFFIX,
+    load_scenario,
+    parametrizations,
+    scenario_schema,
+    select_variant,
+    variant_id,
+)
+from .model import Effects, Expectations, Mount, RcsModel, Scenario, TargetSpec, run_label
 
 __all__ = [
     "SCENE_SUFFIX",
@@ -13,5 +20,8 @@ __all__ = [
     "TargetSpec",
     "load_scenario",
     "parametrizations",
+    "run_label",
     "scenario_schema",
+    "select_variant",
+    "variant_id",
 ]

@@ -127,6 +127,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     _check_size(doc, float(data["duration_s"]), float(data["frame_rate_hz"]), len(targets))
     expect = data.get("expectations", {})
     return Scenario(
+        variant=variant_id(overrides or {}), parameters=dict(overrides or {}),
         name=data["name"], description=data.get("description", ""), file=str(path),
         duration_s=float(data["duration_s"]), frame_rate_hz=float(data["frame_rate_hz"]),
         seed=int(data.get("seed", 0)), radar=radar,
@@ -175,9 +176,46 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     combos = []
     for choice in itertools.product(*axes):
         overrides = {path: value for group in choice for path, value in group}
-        ident = "-".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in overrides.items())
-        combos.append((ident, overrides))
+        combos.append((variant_id(overrides), overrides))
     return combos
+
+
+def variant_id(overrides: dict[str, Any]) -> str:
+    """Name a combination as the pytest plugin names its item: ``speed_mps=10.0-1=-0.5``.
+
+    Each value by the last part of its key path, in the block's order; ``""`` for none.
+    """
+    return "-".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in overrides.items())
+
+
+def select_variant(path: str | Path, variant: str | None, option: str = "--variant",
+                   unnamed: str = "") -> tuple[str, dict[str, Any]]:
+    """Return the combination ``(id, overrides)`` of the scene named ``variant``.
+
+    For a command that plays or checks one run of a scene: a scene without ``parametrize``
+    has the one combination ``("", {})``, taken when ``variant`` is None; a parametrized scene
+    has no default (its file as written is none of its runs). ``unnamed`` says, in the error,
+    where else the variant could have come from.
+
+    Raises
+    ------
+    RtsError
+        ``variant`` is None and the scene is parametrized, or it names no combination of the
+        scene; the message lists the combinations to choose from.
+    """
+    combos = dict(parametrizations(path))
+    if variant is None and list(combos) == [""]:
+        return "", {}
+    if variant is not None and variant in combos:
+        return variant, combos[variant]
+    if list(combos) == [""]:
+        raise RtsError(f"{option} {variant}: {path} has no parametrize block, so no variants; "
+                       f"leave {option} out")
+    choices = ", ".join(combos)
+    if variant is None:
+        raise RtsError(f"{path}: a parametrized scene ({len(combos)} variants){unnamed}: choose "
+                       f"one with {option} ID: {choices}")
+    raise RtsError(f"{option} {variant}: not a variant of {path}; valid: {choices}")
 
 
 def _parameter_axis(doc: Document, key: str,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -128,7 +129,12 @@ class Effects:
 
 @dataclass(frozen=True, eq=False)
 class Scenario:
-    """A loaded scene."""
+    """A loaded scene.
+
+    ``variant`` names the combination of the file's ``parametrize`` block it was loaded with,
+    as the pytest plugin names its item (``estimator=ti``; ``""`` for the file as written), and
+    ``parameters`` holds that combination (key path to value).
+    """
 
     name: str
     description: str
@@ -145,6 +151,13 @@ class Scenario:
     effects: Effects = Effects()
     marks: tuple[str, ...] = ()
     radar_options: RadarOptions = RadarOptions()
+    variant: str = ""
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        """``name[variant]``, the pytest plugin's name for this run (``name`` without one)."""
+        return run_label(self.name, self.variant)
 
     @property
     def n_frames(self) -> int:
@@ -155,3 +168,8 @@ class Scenario:
     def t_s(self) -> FloatArray:
         """Frame times from 0, shape (F,)."""
         return np.arange(self.n_frames) / self.frame_rate_hz
+
+
+def run_label(scene: str, variant: str) -> str:
+    """``scene[variant]`` as pytest names a parametrized item; ``scene`` without a variant."""
+    return f"{scene}[{variant}]" if variant else scene
