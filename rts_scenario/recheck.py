@@ -7,7 +7,9 @@ tool has only timestamps. Then the cycles are numbered from their counters (gaps
 cycles), the radar's cycle time is fitted to the header timestamps, and the scene time of the
 log is ``log time - latency - offset``: ``offset`` (the log time of the scene's time 0) is given
 (``--time-offset-s``) or estimated by matching the detections to the ground truth over
-candidate offsets. The estimate and its uncertainty are reported.
+candidate offsets. The estimate and its uncertainty are reported. Either way the scene's whole
+time counts: cycles the radar measured before the log's first one or after its last are
+missing.
 
 The ground truth and the played schedule are rebuilt from the scene (the same solver as live);
 with a sidecar, a digest of the statuses the RTS played tells whether the rebuilt schedule
@@ -19,7 +21,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -51,9 +53,20 @@ COARSE_STEP_S = 0.01
 COARSE_CYCLES = 300
 FULL_SEARCH_S = 300.0
 ONSET_WINDOW_S = 30.0
-# Fine search: +- this around the coarse minimum, in steps of FINE_STEP_S.
+# Fine search: from this before the coarse minima to this after them, in steps of FINE_STEP_S
+# (coarser where the minima span more than MAX_FINE_POINTS steps).
 FINE_SPAN_S = 0.05
 FINE_STEP_S = 0.001
+MAX_FINE_POINTS = 2000
+# The edges of the best offsets are found to this (log timestamps carry microseconds) and the
+# estimate kept this far inside them, so that no cycle sits on a frame change by rounding.
+EDGE_RESOLUTION_S = 1e-6
+EDGE_GUARD_S = 1e-5
+# A cycle measured this close before the scene's time 0 counts as measured at it.
+START_TOLERANCE_S = 1e-5
+# Fitting the radar's cycle time, a stamp this far off the line (or five times the stamps'
+# spread, if more) is a cycle held up on the bus and left out.
+FIT_OUTLIER_FLOOR_S = 0.001
 # Resamplings for the uncertainty of an estimated offset.
 BOOTSTRAP_ROUNDS = 30
 # A detection farther than this (normalized by the tolerances) from every target counts this.
@@ -72,6 +85,7 @@ class Alignment:
     cycle_s: float
     offset_s: float | None = None
     uncertainty_s: float | None = None
+    plateau_s: float | None = None  # offsets up to this much earlier fit the data as well
     latency_s: float = 0.0
     latency_source: str = "profile"  # or "estimated" (the offset given, the latency not)
     latency_uncertainty_s: float | None = None
@@ -89,13 +103,21 @@ class Alignment:
             how = "given" if self.source == "given" else "estimated"
             pm = (f" +- {self.uncertainty_s * 1e3:.1f} ms" if self.uncertainty_s is not None
                   else "")
+            plateau_s = self.plateau_s or 0.0
+            flat = plateau_s >= FINE_STEP_S
+            if flat and self.latency_source != "estimated":
+                pm += (f"; the data fit as well up to {plateau_s * 1e3:.1f} ms earlier, "
+                       f"the latest is taken")
             if self.latency_source == "estimated":
                 lat = (f"latency {self.latency_s * 1e3:.1f} ms estimated"
                        + (f" +- {self.latency_uncertainty_s * 1e3:.1f} ms"
                           if self.latency_uncertainty_s is not None else ""))
+                if flat:
+                    lat += (f" (the data fit as well up to {plateau_s * 1e3:.1f} ms "
+                            f"shorter, the longest is taken)")
             else:
                 lat = f"latency {self.latency_s * 1e3:.0f} ms (profile)"
-            text = (f"aligned by timestamps: scene time 0 at log time {self.offset_s:.4f} s "
+            text = (f"aligned by timestamps: scene time 0 at log time {self.offset_s:.6f} s "
                     f"({how}{pm}), {lat}, cycle {self.cycle_s * 1e3:.2f} ms fitted")
         text += f"; {self.cycles_in_log} cycles in the log"
         if self.cycles_outside_scene:
@@ -105,7 +127,8 @@ class Alignment:
     def to_dict(self) -> dict[str, Any]:
         """Plain data for JSON."""
         return {"source": self.source, "cycle_s": self.cycle_s, "offset_s": self.offset_s,
-                "uncertainty_s": self.uncertainty_s, "latency_s": self.latency_s,
+                "uncertainty_s": self.uncertainty_s, "plateau_s": self.plateau_s,
+                "latency_s": self.latency_s,
                 "latency_source": self.latency_source,
                 "latency_uncertainty_s": self.latency_uncertainty_s,
                 "cycles_in_log": self.cycles_in_log,
@@ -337,15 +360,52 @@ class _TruthTable:
         return float(np.average(np.minimum(total.min(axis=1), GATE2), weights=weight))
 
 
+@dataclass(frozen=True)
+class OffsetEstimate:
+    """Log time of the scene's time 0 that matches the detections to the truth best.
+
+    Attributes
+    ----------
+    offset_s : float
+        The latest of the best offsets (see `estimate_offset`).
+    plateau_s : float
+        Offsets up to this much earlier match the detections as well (>= 0).
+    spread_s : float or None
+        Spread of ``offset_s`` over resampled cycles (None: too few cycles to tell).
+    """
+
+    offset_s: float
+    plateau_s: float
+    spread_s: float | None
+
+    @property
+    def uncertainty_s(self) -> float:
+        """The plateau and the spread together (the true offset lies within this)."""
+        return float(np.hypot(self.plateau_s, self.spread_s or 0.0))
+
+
 def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections],
-                    latency_s: float) -> tuple[float, float | None]:
+                    latency_s: float) -> OffsetEstimate:
     """Log time of scene time 0 that best matches detections to the truth, and its uncertainty.
 
     A coarse search (10 ms steps, on at most `COARSE_CYCLES` cycles with detections) over every
     offset that puts the log inside the scene - or, for a log much longer than `FULL_SEARCH_S`,
     within `ONSET_WINDOW_S` of where the first detections put the scene's first visible
-    target - then a fine one (1 ms, every cycle) around its minimum. The uncertainty is the
-    spread of the estimate over resampled cycles (`_offset_uncertainty`).
+    target - then a fine one (1 ms, every cycle) over the coarse minima and `FINE_SPAN_S` on
+    either side, and the edges of the best offsets to `EDGE_RESOLUTION_S`.
+
+    The cost is flat between frame changes: a radar sees the frame the RTS holds, so moving
+    the offset changes nothing until some cycle crosses into another frame. A radar whose cycle
+    is the frame period, in step with the frames, crosses with all its cycles at once: every
+    offset over a whole frame fits equally (a plateau). The data cannot tell where in the hold
+    the radar measured; causality bounds it: a cycle cannot measure a frame before the RTS
+    applies it, so the latest offset of the plateau is the latest possible one. That one is
+    taken: the radar measured each frame as it was applied, so the detections are checked
+    against the state the RTS played and the hold (the bench's frame rate, not the radar) adds
+    no error. The plateau's width is reported with it (`OffsetEstimate.plateau_s`): the true
+    offset may be that much earlier. A radar on its own cycle time measures at shifting
+    points of the frames and narrows the plateau to a sliver. The spread over resampled cycles
+    (`_offset_uncertainty`) adds what noise and jitter leave uncertain.
     """
     ok = np.isfinite(bus_t_s)
     bus, usable = bus_t_s[ok], [d for d, k in zip(dets, ok, strict=True) if k]
@@ -368,25 +428,53 @@ def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections]
         lo, hi = max(lo, onset - ONSET_WINDOW_S), min(hi, onset + ONSET_WINDOW_S)
     grid = np.arange(lo, hi + COARSE_STEP_S, COARSE_STEP_S)
     coarse = np.array([table.cost(t_log[pick] - s, some) for s in grid])
-    best = float(grid[int(np.argmin(coarse))])
-    fine = np.arange(best - FINE_SPAN_S, best + FINE_SPAN_S + FINE_STEP_S / 2, FINE_STEP_S)
+    best = grid[_best(coarse)]
+    span = float(best[-1] - best[0]) + 2 * FINE_SPAN_S
+    step = max(FINE_STEP_S, span / MAX_FINE_POINTS)
+    fine = best[0] - FINE_SPAN_S + step * np.arange(int(np.ceil(span / step)) + 1)
     costs = np.array([table.cost(t_log - s, every) for s in fine])
-    i = int(np.argmin(costs))
-    offset = float(fine[i])
-    if 0 < i < fine.size - 1:  # parabola through the minimum and its neighbours
-        a, b, c = costs[i - 1 : i + 2]
-        den = a - 2 * b + c
-        if den > 0:
-            offset += 0.5 * (a - c) / den * FINE_STEP_S
-    return offset, _offset_uncertainty(table, every, t_log, fine)
+    tied = _best(costs)
+    least = float(costs.min())
+
+    def fits(s: float) -> bool:
+        return bool(np.isclose(table.cost(t_log - s, every), least, rtol=1e-9, atol=0.0))
+
+    first, last = int(tied[0]), int(tied[-1])
+    top = _edge(fits, float(fine[last]), float(fine[last + 1])) if last + 1 < fine.size \
+        else float(fine[last])
+    bottom = _edge(fits, float(fine[first]), float(fine[first - 1])) if first > 0 \
+        else float(fine[first])
+    plateau = top - bottom
+    offset = top - min(EDGE_GUARD_S, plateau / 2)
+    return OffsetEstimate(offset, plateau, _offset_uncertainty(table, every, t_log, fine))
+
+
+def _best(costs: FloatArray) -> IntArray:
+    """Return the indices of the least cost and of every cost tied with it (same frames matched)."""
+    return np.flatnonzero(np.isclose(costs, costs.min(), rtol=1e-9, atol=0.0))
+
+
+def _edge(fits: Callable[[float], bool], inside_s: float, outside_s: float) -> float:
+    """Offset where ``fits`` ends between ``inside_s`` (fits) and ``outside_s`` (does not).
+
+    Bisection to `EDGE_RESOLUTION_S`; returns the last offset found to fit.
+    """
+    while abs(outside_s - inside_s) > EDGE_RESOLUTION_S:
+        middle = 0.5 * (inside_s + outside_s)
+        if fits(middle):
+            inside_s = middle
+        else:
+            outside_s = middle
+    return inside_s
 
 
 def _offset_uncertainty(table: _TruthTable, det: _Detected, t_log: FloatArray,
                         fine: FloatArray, rounds: int = BOOTSTRAP_ROUNDS) -> float | None:
     """Spread of the offset found again on cycles drawn with replacement (a bootstrap).
 
-    It covers what limits the estimate: the latency's jitter, the measurement noise and the
-    RTS's hold (a cycle tells the offset only to within a frame; many cycles narrow it).
+    It covers what noise leaves uncertain: the latency's jitter, the measurement noise and,
+    for a slow scene, which frame fits best. Each round takes the latest of its best offsets
+    on the grid ``fine``, as `estimate_offset` does.
     """
     n_cycles = t_log.size
     if n_cycles < 3:
@@ -397,8 +485,8 @@ def _offset_uncertainty(table: _TruthTable, det: _Detected, t_log: FloatArray,
         pick = np.zeros(n_cycles, dtype=np.int64)
         np.add.at(pick, rng.integers(0, n_cycles, n_cycles), 1)
         weight = pick[det.owner].astype(np.float64)
-        costs = [table.cost(t_log - s, det, weight) for s in fine]
-        found.append(float(fine[int(np.argmin(costs))]))
+        costs = np.array([table.cost(t_log - s, det, weight) for s in fine])
+        found.append(float(fine[_best(costs)[-1]]))
     return float(np.std(found, ddof=1))
 
 
@@ -460,22 +548,32 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         dets = [c.detections for c in logged]
         if time_offset_s is None:
             # The profile's latency, the offset from the data.
-            offset, uncertainty = estimate_offset(scene, bus_t, dets, latency)
-            alignment = Alignment("estimated", 0.0, offset, uncertainty, latency)
+            found = estimate_offset(scene, bus_t, dets, latency)
+            offset = found.offset_s
+            alignment = Alignment("estimated", 0.0, offset, found.uncertainty_s,
+                                  found.plateau_s, latency)
         else:
             # With the scene's start known in the log's time, the data tell the latency: the
-            # same search, over latency + offset.
+            # same search, over latency + offset. Its latest fit is the longest latency the
+            # data allow (the radar measuring each frame as it was applied); a shorter one by
+            # up to the plateau fits as well (measuring later in each frame).
             offset = float(time_offset_s)
-            total, spread = estimate_offset(scene, bus_t, dets, 0.0)
-            latency = total - offset
-            if latency < -3 * (spread or 0.0) - 0.005:
-                raise LogError(f"--time-offset-s {offset:g}: the log's cycles would reach the "
-                               f"bus {-latency * 1e3:.0f} ms before the radar measured them; "
-                               f"the scene's start is later in the log's time")
+            found = estimate_offset(scene, bus_t, dets, 0.0)
+            latency = found.offset_s - offset
+            slack = 3 * (found.spread_s or 0.0) + 0.005
+            if latency < -slack:
+                raise LogError(f"--time-offset-s {offset:.6f}: the log's cycles would reach the "
+                               f"bus {-latency * 1e3:.1f} ms before the radar measured them; "
+                               f"the scene starts at log time {found.offset_s:.6f} s or "
+                               f"earlier")
             latency = max(latency, 0.0)
-            alignment = Alignment("given", 0.0, offset, None, latency, latency_source="estimated",
-                                  latency_uncertainty_s=spread)
-            if abs(latency - profile_clock.latency_s) > 3 * (spread or 0.0) + 0.005:
+            # Shorter by the plateau, but never below 0: a latency the data put at 0 is 0.
+            plateau = min(found.plateau_s, latency)
+            alignment = Alignment("given", 0.0, offset, None, plateau, latency,
+                                  latency_source="estimated",
+                                  latency_uncertainty_s=replace(
+                                      found, plateau_s=plateau).uncertainty_s)
+            if not (latency - plateau - slack <= profile_clock.latency_s <= latency + slack):
                 alignment.notes.append(
                     f"the radar's latency from the data, {latency * 1e3:.1f} ms, differs from "
                     f"its profile's {profile_clock.latency_s * 1e3:.1f} ms")
@@ -490,19 +588,35 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
 
 def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
                   offset_s: float, modulus: int, nominal_cycle_s: float) -> RadarClock:
-    """Return the radar's clock in scene time fitted to the header timestamps."""
+    """Return the radar's clock in scene time fitted to the header timestamps.
+
+    Its cycle 0 is the first one measured at or after the scene's time 0, whether the log
+    holds it or not: a log that begins after the scene did lacks the cycles before, and those
+    are missing.
+    """
     ok = np.isfinite(bus_t)
-    if ok.sum() >= 2 and np.ptp(numbers[ok]) > 0:
-        cycle_s, first_s = np.polyfit(numbers[ok].astype(float), bus_t[ok], 1)
-    elif ok.any():
-        cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - numbers[ok][0]
-                                                  * nominal_cycle_s)
-    else:
+    if not ok.any():
         raise LogError("the log has no radar cycle with a timestamp to align")
-    start = first_s - latency_s - offset_s  # scene time of the log's first cycle
-    # Number cycles from the first one measured at or after the scene's start.
-    shift = int(np.ceil(-start / cycle_s - 1e-9)) if start < 0 else 0
-    return RadarClock(cycle_s=float(cycle_s), start_offset_s=float(start + shift * cycle_s),
+    # Relative to the log's own first stamp: a log time of 1.7e9 s keeps only 0.2 us in a
+    # float, and the fit's intercept less.
+    t0 = float(bus_t[ok][0])
+    if ok.sum() >= 2 and np.ptp(numbers[ok]) > 0:
+        n, t = numbers[ok].astype(float), bus_t[ok] - t0
+        cycle_s, first_s = np.polyfit(n, t, 1)
+        # A cycle held up on the bus (one late stamp) must not tilt the cycle time: fit again
+        # without the stamps far outside the others' spread.
+        residual = t - (first_s + cycle_s * n)
+        spread = 1.4826 * np.median(np.abs(residual - np.median(residual)))
+        keep = np.abs(residual) <= max(5.0 * spread, FIT_OUTLIER_FLOOR_S)
+        if not keep.all() and np.ptp(n[keep]) > 0:
+            cycle_s, first_s = np.polyfit(n[keep], t[keep], 1)
+    else:
+        cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - t0 - numbers[ok][0]
+                                                  * nominal_cycle_s)
+    start = (t0 - offset_s) - latency_s + first_s  # scene time of the log's cycle number 0
+    shift = int(np.ceil((-start - START_TOLERANCE_S) / cycle_s))
+    return RadarClock(cycle_s=float(cycle_s),
+                      start_offset_s=max(0.0, float(start + shift * cycle_s)),
                       latency_s=latency_s,
                       counter_start=int((counters[0] + shift) % modulus) if counters.size else 0)
 
@@ -542,5 +656,6 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
     return checker.report(bus)
 
 
-__all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "RecheckResult", "check_log",
-           "check_log_file", "estimate_offset", "log_variant", "read_cycles", "read_sidecar"]
+__all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "OffsetEstimate", "RecheckResult",
+           "check_log", "check_log_file", "estimate_offset", "log_variant", "read_cycles",
+           "read_sidecar"]

@@ -71,13 +71,17 @@ def write_radar(folder: Path, **clock) -> str:
     return "radars/own.radar.yaml"
 
 
+OWN_CLOCK = {"cycle_s": 0.072, "start_offset_s": 0.013, "latency_s": 0.13, "jitter_s": 0.004,
+             "counter_start": 4242}
+
+
 def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suffix=".blf",
-                busy=False, lead_s=0.0):
-    """A log as another tool writes it: the radar on its own clock, timestamps in that tool's
-    time base (scene time 0 at ``origin_s``), latency and jitter on every cycle, no sidecar."""
+                busy=False, lead_s=0.0, clock=None):
+    """A log as another tool writes it: the radar on its own clock (``clock``, default
+    `OWN_CLOCK`), timestamps in that tool's time base (scene time 0 at ``origin_s``), latency
+    and jitter on every cycle, no sidecar."""
     shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
-    radar = write_radar(tmp_path, cycle_s=0.072, start_offset_s=0.013, latency_s=0.13,
-                        jitter_s=0.004, counter_start=4242)
+    radar = write_radar(tmp_path, **(clock or OWN_CLOCK))
     scene = load_scenario(tmp_path / "cut_in.scenario.yaml",
                           {"radar.profile": radar, "radar.noise": True,
                            "radar.fidelity": "analytic",
@@ -96,7 +100,8 @@ def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suf
 
     def sink(cycles):
         for cycle in cycles:
-            stamp["t"] = origin_s + cycle.t_s + clock.latency_s + rng.uniform(-0.004, 0.004)
+            stamp["t"] = origin_s + cycle.t_s + clock.latency_s + rng.uniform(-clock.jitter_s,
+                                                                              clock.jitter_s)
             publisher.publish(tamper(cycle) if tamper else cycle)
 
     # The radar ran before the RTS played the scene: empty cycles, counters before 4242.
@@ -218,3 +223,120 @@ def test_a_simulated_run_stamps_its_messages_on_the_radar_s_clock(tmp_path):
     origin = headers[0] - 0.013 - 0.13  # within the first cycle's jitter
     assert abs(result.alignment.offset_s - origin) <= 0.020
     assert result.report.passed
+
+
+def radar_cycles(log: Path) -> list[list[can.Message]]:
+    """The log's messages, one list per radar cycle (its header first)."""
+    with can.LogReader(str(log)) as reader:
+        messages = list(reader)
+    cycles: list[list[can.Message]] = []
+    for msg in messages:
+        if msg.arbitration_id == 256:
+            cycles.append([msg])
+        elif cycles:
+            cycles[-1].append(msg)
+    return cycles
+
+
+def write_log(path: Path, cycles: list[list[can.Message]]) -> Path:
+    with can.Logger(str(path)) as writer:
+        for cycle in cycles:
+            for msg in cycle:
+                writer.on_message_received(msg)
+    return path
+
+
+def desk_log(tmp_path: Path) -> tuple[object, Path, float]:
+    """A desk recording of the cut-in scene without its sidecar, and its scene start.
+
+    The built-in radar measures every 50 ms from the scene's start, in step with the frames,
+    and reports at once: the first header's stamp is the log time of scene time 0.
+    """
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "desk.blf"
+    assert run_scene(scene, RunOptions(bus_log=str(log))).report.passed
+    Path(str(log) + ".rts.json").unlink()
+    return scene, log, radar_cycles(log)[0][0].timestamp
+
+
+@pytest.mark.parametrize(("start_offset_s", "jitter_s"), [(0.0, 0.0), (0.0, 0.004),
+                                                          (0.02, 0.0)])
+def test_a_radar_in_step_with_the_frames_is_aligned_to_the_frame_it_saw(tmp_path, start_offset_s,
+                                                                         jitter_s):
+    # Cycle = frame period: every offset over a frame fits the detections equally. The latest
+    # (each frame measured as it was applied) is taken; the rest of the frame is the stated
+    # uncertainty, never +- 0.
+    clock = {"cycle_s": 0.05, "start_offset_s": start_offset_s, "latency_s": 0.03,
+             "jitter_s": jitter_s, "counter_start": 7}
+    scene, log, origin = foreign_log(tmp_path, 1.7e9 + 321.0, seed=5, clock=clock)
+    result = check_log(scene, log)
+    a = result.alignment
+    assert a.source == "estimated"
+    # Measured start_offset_s into each frame, reported 30 +- jitter ms later: the latest
+    # offset that fits is origin + start_offset_s, less the earliest jitter.
+    assert origin + start_offset_s - jitter_s - 2e-4 <= a.offset_s <= origin + start_offset_s
+    assert a.plateau_s == pytest.approx(0.05 - 2 * jitter_s, abs=0.002)
+    assert (a.offset_s - a.plateau_s - 1e-3 <= origin + start_offset_s
+            <= a.offset_s + jitter_s + 2e-4)
+    assert a.uncertainty_s is not None and a.uncertainty_s >= a.plateau_s
+    assert abs(a.offset_s - origin) <= a.uncertainty_s
+    assert "+- 0.0 ms" not in a.describe()
+    assert result.report.passed, result.report.reasons
+    assert result.report.frames["missing"] == 0
+    assert result.report.frames["total"] == 240
+    # The true start given: the delay from each frame to its report is the latency plus
+    # start_offset_s; as long as it, or shorter (not below 0), fits as well.
+    given = check_log(scene, log, time_offset_s=origin).alignment
+    assert given.latency_s == pytest.approx(0.03 + start_offset_s, abs=jitter_s + 2e-4)
+    assert given.plateau_s == pytest.approx(min(given.latency_s, 0.05 - 2 * jitter_s),
+                                            abs=0.002)
+    assert given.notes == []
+
+
+def test_a_desk_recording_without_sidecar_re_checks_like_live(tmp_path):
+    scene, log, origin = desk_log(tmp_path)
+    estimated = check_log(scene, log)
+    assert abs(estimated.alignment.offset_s - origin) <= 2e-4
+    assert estimated.alignment.uncertainty_s >= 0.045
+    assert estimated.report.passed and estimated.report.frames["total"] == 240
+    # The true start given: accepted, and the data tell the radar reports at once.
+    given = check_log(scene, log, time_offset_s=origin)
+    assert given.alignment.source == "given" and given.report.passed
+    assert given.alignment.latency_s == pytest.approx(0.0, abs=2e-4)
+    assert given.alignment.notes == []
+    # A start later than the first cycle is refused, the value in full.
+    with pytest.raises(LogError, match=rf"--time-offset-s {origin + 0.06:.6f}: .* 60\.0 ms "
+                                       rf"before"):
+        check_log(scene, log, time_offset_s=origin + 0.06)
+
+
+@pytest.mark.parametrize("desk", [True, False])
+def test_a_log_cut_at_the_start_misses_the_cycles_before_it(tmp_path, desk):
+    if desk:
+        scene, log, origin = desk_log(tmp_path)
+    else:
+        scene, log, origin = foreign_log(tmp_path, 1.7e9 + 12.3)
+    cycles = radar_cycles(log)
+    cut = len(cycles) // 2
+    late = write_log(tmp_path / "late.blf", cycles[cut:])
+    for offset in (None, origin):
+        report = check_log(scene, late, time_offset_s=offset).report
+        assert not report.passed
+        assert report.frames["total"] == len(cycles)
+        assert report.frames["missing"] == cut
+        assert report.frames["checked"] == len(cycles) - cut
+
+
+def test_a_first_cycle_held_up_on_the_bus_is_still_the_scene_s_first(tmp_path):
+    # The first cycle reaches the bus after the second (50 ms late): all 240 cycles are still
+    # the scene's, none missing, none outside.
+    scene, log, _ = desk_log(tmp_path)
+    cycles = radar_cycles(log)
+    second_t = cycles[1][0].timestamp
+    held = [can.Message(arbitration_id=m.arbitration_id, data=m.data, is_extended_id=False,
+                        timestamp=second_t + 0.001 * (i + 1)) for i, m in enumerate(cycles[0])]
+    result = check_log(scene, write_log(tmp_path / "held.blf", [cycles[1], held, *cycles[2:]]))
+    assert result.alignment.cycles_outside_scene == 0
+    assert result.report.frames["total"] == 240
+    assert result.report.frames["missing"] == 0
+    assert result.report.passed, result.report.reasons
