@@ -89,17 +89,21 @@ def write_plots(result: RunResult, folder: str | Path, stem: str | None = None) 
     written.append(_save(fig, folder / f"{stem}-scene.png"))
 
     fig, (att, delay) = plt.subplots(2, 1, figsize=(12, 7), sharex=True)
+    played = []
     for k, name in enumerate(names):
         for c in range(4):
             on = schedule.active[:, k, c]
-            if on.any():
+            if on.any():  # each target named once, on its first channel that plays
                 att.plot(schedule.t_s[on], schedule.attenuation_db[on, k, c], ".", ms=2,
-                         color=colors[k], label=name if c == 0 else None)
+                         color=colors[k], label=None if name in played else name)
+                played.append(name)
         on = np.asarray(schedule.active[:, k].any(axis=1), dtype=bool)
         delay.plot(schedule.t_s[on], np.nanmean(schedule.delay_s[on, k], axis=1) * 1e9, ".",
                    ms=2, color=colors[k])
-    att.set(ylabel="attenuation per channel (dB)", title="schedule")
-    att.legend(fontsize=7, loc="best", markerscale=4)
+    att.set(ylabel="attenuation per channel (dB)",
+            title="schedule" if played else "schedule: no target played")
+    if played:
+        att.legend(fontsize=7, loc="best", markerscale=4)
     delay.set(xlabel="time (s)", ylabel="RTS delay (ns)")
     written.append(_save(fig, folder / f"{stem}-schedule.png"))
 
