@@ -17,10 +17,13 @@ from .common import (
     METHODS,
     Progress,
     check_can_interface,
+    check_distinct_paths,
+    check_fd_mapping,
     check_output,
     check_writable_file,
     check_writable_folder,
     named_file,
+    show_traceback,
     writing,
 )
 
@@ -41,7 +44,13 @@ def _do_run(args: argparse.Namespace) -> int:
     check_output("--output", args.output, run=True)
     check_can_interface("--can-interface", args.can_interface)
     if args.mapping:
-        named_file("--mapping", CanMapping.from_file, args.mapping)
+        mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
+        check_fd_mapping(args.can_fd, args.mapping, mapping)
+    check_distinct_paths(
+        [("--json", args.json), ("--detections", args.detections), ("--record", args.record),
+         ("--record's sidecar", f"{args.record}.rts.json" if args.record else None),
+         ("--plot", args.plot)],
+        [*(("SCENE", scene) for scene in args.scenes), ("--mapping", args.mapping)])
     if args.json:
         check_writable_file("--json", args.json)
     if args.detections:
@@ -95,8 +104,7 @@ def _do_run(args: argparse.Namespace) -> int:
         try:
             scene = load_scenario(path)
         except Exception as exc:
-            if args.debug:
-                raise
+            show_traceback(args)
             failed(Path(path).name.removesuffix(SCENE_SUFFIX), path, exc)
             # A file that does not load is bad input; anything else is a runtime error.
             bad_input = bad_input or isinstance(exc, RtsError)
@@ -129,8 +137,7 @@ def _do_run(args: argparse.Namespace) -> int:
                 for written in written_plots:
                     print(f"wrote {written}")
         except Exception as exc:
-            if args.debug:
-                raise
+            show_traceback(args)
             failed(scene.name, path, exc)
             # The scene loaded but its schedule cannot be built (e.g. the rig's update rate):
             # still the scene's fault, not the run's.
@@ -185,7 +192,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     )
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="*.scenario.yaml files")
     parser.add_argument("--output", default="simulated-radar",
-                        help="simulated-radar (default), udp://HOST:PORT or file:PATH")
+                        help="simulated-radar (default), udp://HOST:PORT or an installed RTS "
+                             "output (a schedule file: rts-scenario schedule)")
     parser.add_argument("--can-interface", default="virtual",
                         help="python-can interface (default virtual)")
     parser.add_argument("--can-channel", default=None, help="CAN channel (default: private)")
