@@ -196,6 +196,11 @@ def places(tmp_path):
     plain = tmp_path / "plain.txt"
     plain.write_text("x")
     (tmp_path / "junk.blf").write_text("not a BLF log")
+    # rts-scenario's own mapping without its CAN FD message.
+    can = ROOT / "rts_scenario" / "data" / "can"
+    (tmp_path / "rts_detections.dbc").write_text((can / "rts_detections.dbc").read_text())
+    mapping = (can / "rts_detections.mapping.yaml").read_text()
+    (tmp_path / "m.mapping.yaml").write_text(re.sub(r"\n *fd_message:.*", "", mapping))
     return {"scene": str(scene), "dir": str(folder), "file": str(plain),
             "missing": str(tmp_path / "missing" / "out.json"), "tmp": str(tmp_path)}
 
@@ -212,8 +217,9 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
      r"^--plot (needs matplotlib|{file}: cannot write: not a folder)"),
     ("run-output-unknown", ["run", "{scene}", "--output", "carrier-pigeon"], 2,
      r"^--output 'carrier-pigeon': unknown output 'carrier-pigeon'; valid outputs: .*udp"),
-    ("run-output-file-empty", ["run", "{scene}", "--output", "file:"], 2,
-     r"^--output 'file:': file needs a path"),
+    ("run-output-file", ["run", "{scene}", "--output", "file:{tmp}/x.npz"], 2,
+     r"^--output file:{tmp}/x.npz: a file output only stores the schedule, .* no radar sees it "
+     r".*; valid here: simulated-radar, udp://HOST:PORT"),
     ("run-output-udp-no-port", ["run", "{scene}", "--output", "udp://localhost"], 2,
      r"^--output udp://localhost: expected udp://HOST:PORT"),
     ("run-output-simulated-radar-argument", ["run", "{scene}", "--output", "simulated-radar:x"],
@@ -253,8 +259,16 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
      r"^--seed: must be >= 0, got -1"),
     ("calibrate-write-folder", ["calibrate", "kit-table1", "--write", "{dir}"], 2,
      r"^--write {dir}: cannot write: is a folder"),
-    ("calibrate-write-missing-folder", ["calibrate", "kit-table1", "--write", "{missing}"], 2,
-     r"^--write {missing}: cannot write: folder .* does not exist"),
+    ("calibrate-write-missing-folder", ["calibrate", "kit-table1", "--write",
+                                        "{tmp}/missing/c.rig.yaml"], 2,
+     r"^--write {tmp}/missing/c.rig.yaml: cannot write: folder .* does not exist"),
+    ("calibrate-write-not-a-rig", ["calibrate", "kit-table1", "--write", "{tmp}/cal.txt"], 2,
+     r"^--write {tmp}/cal.txt: a rig file's name ends in .rig.yaml"),
+    ("calibrate-output-file", ["calibrate", "kit-table1", "--output", "file:{tmp}/x.npz"], 2,
+     r"^--output file:{tmp}/x.npz: a file output only stores the schedule"),
+    ("calibrate-json-is-write", ["calibrate", "kit-table1", "--json", "{tmp}/c.rig.yaml",
+                                 "--write", "{tmp}/c.rig.yaml"], 2,
+     r"^--json {tmp}/c.rig.yaml and --write {tmp}/c.rig.yaml: the same file"),
     ("calibrate-plot-file", ["calibrate", "kit-table1", "--plot", "{file}"], 2,
      r"^--plot (needs matplotlib|{file}: cannot write: not a folder)"),
     ("calibrate-unknown-rig", ["calibrate", "kit-table9"], 2,
@@ -296,6 +310,45 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
      r"^--record {dir}/x/r.blf: cannot write"),
     ("survey-place-without-write", ["survey", "kit-table1", "--place"], 2,
      r"^--place: needs --write RIG_OUT"),
+    ("survey-write-not-a-rig", ["survey", "kit-table1", "--write", "{scene}"], 2,
+     r"^--write {scene}: a rig file's name ends in .rig.yaml"),
+    ("survey-output-file", ["survey", "kit-table1", "--output", "file:{tmp}/x.npz"], 2,
+     r"^--output file:{tmp}/x.npz: a file output only stores the schedule"),
+    ("survey-json-is-write", ["survey", "kit-table1", "--json", "{tmp}/s.rig.yaml", "--write",
+                              "{tmp}/s.rig.yaml"], 2,
+     r"^--json {tmp}/s.rig.yaml and --write {tmp}/s.rig.yaml: the same file"),
+    ("run-detections-is-scene", ["run", "{scene}", "--detections", "{scene}"], 2,
+     r"^--detections {scene}: the same file as SCENE {scene}, which this command reads; "
+     r"writing it would destroy the input"),
+    ("run-json-is-scene", ["run", "{scene}", "--json", "{tmp}/./tiny.scenario.yaml"], 2,
+     r"^--json {tmp}/./tiny.scenario.yaml: the same file as SCENE {scene}"),
+    ("run-json-is-detections", ["run", "{scene}", "--json", "{tmp}/x", "--detections",
+                                "{tmp}/x"], 2,
+     r"^--json {tmp}/x and --detections {tmp}/x: the same file; one would overwrite the other"),
+    ("run-json-is-record", ["run", "{scene}", "--record", "{tmp}/x.csv", "--json",
+                            "{tmp}/x.csv"], 2, r"^--json {tmp}/x.csv and --record {tmp}/x.csv"),
+    ("run-json-is-record-sidecar", ["run", "{scene}", "--record", "{tmp}/x.blf", "--json",
+                                    "{tmp}/x.blf.rts.json"], 2,
+     r"^--json {tmp}/x.blf.rts.json and --record's sidecar {tmp}/x.blf.rts.json"),
+    ("run-json-is-mapping", ["run", "{scene}", "--mapping", "{tmp}/m.mapping.yaml", "--json",
+                             "{tmp}/m.mapping.yaml"], 2,
+     r"^--json {tmp}/m.mapping.yaml: the same file as --mapping {tmp}/m.mapping.yaml"),
+    ("run-can-fd-without-fd-message", ["run", "{scene}", "--can-fd", "--mapping",
+                                       "{tmp}/m.mapping.yaml"], 2,
+     r"^--can-fd: the mapping {tmp}/m.mapping.yaml has no fd_message"),
+    ("emulate-can-fd-without-fd-message", ["emulate", "--listen", "udp://127.0.0.1:0", "--rig",
+                                           "kit-table1", "--radar", "paper", "--can-fd",
+                                           "--mapping", "{tmp}/m.mapping.yaml"], 2,
+     r"^--can-fd: the mapping {tmp}/m.mapping.yaml has no fd_message"),
+    ("check-json-is-log", ["check", "{scene}", "--log", "{tmp}/junk.blf", "--json",
+                           "{tmp}/junk.blf"], 2,
+     r"^--json {tmp}/junk.blf: the same file as --log {tmp}/junk.blf"),
+    ("check-json-is-scene", ["check", "{scene}", "--log", "{tmp}/junk.blf", "--json",
+                             "{scene}"], 2, r"^--json {scene}: the same file as SCENE {scene}"),
+    ("sweep-json-is-scene-in-folder", ["sweep", "{tmp}", "--json", "{scene}"], 2,
+     r"^--json {scene}: the same file as SCENE {scene}"),
+    ("schedule-output-is-scene", ["schedule", "{tmp}/s.csv", "--output", "file:{tmp}/s.csv"], 2,
+     r"^--output {tmp}/s.csv: the same file as SCENE {tmp}/s.csv"),
     ("survey-estimator", ["survey", "kit-table1", "--estimator", "music"], 2,
      r"^--estimator: unknown estimator 'music'; valid: bartlett, ti"),
     ("calibrate-estimator", ["calibrate", "kit-table1", "--estimator", "music"], 2,
@@ -468,10 +521,14 @@ def test_runtime_error_does_not_stop_the_batch(tmp_path, capsys, monkeypatch):
     assert "RuntimeError: the bench caught fire" in one_error(err)
     assert [e["status"] for e in json.loads(report.read_text())] == ["error", "pass"]
     assert f"PASS beta ({second})" in out
-    with pytest.raises(RuntimeError, match="caught fire"):
-        cli.main(["--debug", "run", first, second])
-    with pytest.raises(RuntimeError, match="caught fire"):
-        cli.main(["run", first, "--debug"])
+    # --debug adds the traceback; the batch goes on and the exit code stays the same.
+    for argv in (["--debug", "run", first, second], ["run", first, second, "--debug"]):
+        assert call(argv) == 3
+        out, err = capsys.readouterr()
+        assert "Traceback (most recent call last)" in err
+        errors = [line for line in err.splitlines() if line.startswith("error: ")]
+        assert len(errors) == 1 and "RuntimeError: the bench caught fire" in errors[0], err
+        assert f"PASS beta ({second})" in out
 
 
 def test_plot_file_names_are_safe_and_unique():
@@ -577,3 +634,42 @@ def test_random_command_lines_never_raise(places, capsys, data):
     assert "Traceback" not in err
     if code == 2:
         assert one_error(err)
+
+
+@pytest.mark.parametrize(("argv", "code", "pattern"), [
+    (["run", "{scene}", "--output", "bogus"], 2, r"^--output 'bogus': unknown output"),
+    (["run", "{tmp}/none.scenario.yaml"], 2, r"^{tmp}/none.scenario.yaml: cannot read file"),
+    (["check", "{scene}", "--log", "{tmp}/none.blf"], 2, r"^--log {tmp}/none.blf: no such file"),
+], ids=["run-output", "run-missing-scene", "check-missing-log"])
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_debug_adds_the_traceback_and_keeps_the_exit_code(places, capsys, argv, code, pattern,
+                                                          where):
+    argv = [a.format(**places) for a in argv]
+    argv = ["--debug", *argv] if where == "before" else [argv[0], "--debug", *argv[1:]]
+    assert call(argv) == code
+    err = capsys.readouterr().err
+    assert "Traceback (most recent call last)" in err
+    errors = [line for line in err.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1, err
+    expected = pattern
+    for key, value in places.items():
+        expected = expected.replace("{" + key + "}", re.escape(value))
+    assert re.search(expected, errors[0].removeprefix("error: ")), errors[0]
+
+
+def test_an_output_that_clashes_leaves_every_file_as_it_was(tmp_path, capsys):
+    scene = Path(write_scene(tmp_path, "v.scenario.yaml", "victim"))
+    text = scene.read_text()
+    report = tmp_path / "r.json"
+    report.write_text("{}")
+    for extra in (["--detections", str(scene)], ["--json", str(scene)],
+                  ["--json", str(report), "--detections", str(report)],
+                  ["--record", str(report), "--json", str(report)]):
+        assert call(["run", str(scene), *extra]) == 2
+        assert "the same file" in one_error(capsys.readouterr().err)
+        assert scene.read_text() == text and report.read_text() == "{}"
+    link = tmp_path / "link.scenario.yaml"
+    link.symlink_to(scene)
+    assert call(["run", str(scene), "--json", str(link)]) == 2
+    assert f"the same file as SCENE {scene}" in one_error(capsys.readouterr().err)
+    assert scene.read_text() == text

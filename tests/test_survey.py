@@ -120,3 +120,47 @@ def test_survey_place_writes_the_placed_rig(tmp_path, capsys):
     assert np.abs(placed.az_deg - kit.az_deg).max() <= 0.01
     assert placed.seen is not None
     assert "placed at" in capsys.readouterr().out
+
+
+def test_survey_that_sees_nothing_fails_and_writes_nothing(tmp_path, capsys):
+    # Nothing listens on the UDP port and no radar reports on the bus.
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    json_out, rig_out = tmp_path / "sv.json", tmp_path / "placed.rig.yaml"
+    code = cli.main(["survey", "kit-table1", "--radar", "awr1843boost", "--output",
+                     f"udp://127.0.0.1:{port}", "--json", str(json_out), "--place", "--write",
+                     str(rig_out)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: survey: the radar saw none of the 4 front ends")
+    assert err.count("\n") == 1 and "nothing written" in err
+    assert not json_out.exists() and not rig_out.exists()
+
+
+def test_survey_that_misses_a_front_end_reports_it_and_writes_no_rig(tmp_path, capsys,
+                                                                       monkeypatch):
+    import dataclasses
+
+    import rts_scenario.survey as survey_module
+
+    real = survey_module.survey
+
+    def one_unseen(*args, **kwargs):
+        result = real(*args, **kwargs)
+        az = result.seen_az_deg.copy()
+        az[2] = np.nan
+        return dataclasses.replace(result, seen_az_deg=az)
+
+    monkeypatch.setattr(survey_module, "survey", one_unseen)
+    json_out, rig_out = tmp_path / "sv.json", tmp_path / "placed.rig.yaml"
+    code = cli.main(["survey", "kit-table1", "--radar", "paper", "--json", str(json_out),
+                     "--place", "--write", str(rig_out)])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert err == (f"error: the radar did not see FE 2; --write {rig_out}: not written (a rig "
+                   f"is written only from a survey that saw every front end)\n")
+    assert json.loads(json_out.read_text())["front_ends"][2]["seen_az_deg"] is None
+    assert not rig_out.exists()

@@ -445,3 +445,44 @@ def test_corrupted_files_give_one_error_never_a_traceback(tmp_path, seed):
             import_xosc(path, radar="awr1843boost", rig="wide-3x5")
         except RtsError as exc:  # anything else fails the test with its traceback
             assert str(exc).strip()
+
+
+def test_cli_import_rejects_a_parameter_given_twice(tmp_path, capsys):
+    out = tmp_path / "lead.scenario.yaml"
+    code = main(["import", str(DATA / "braking_lead.xosc"), "--radar", "awr1843boost", "--rig",
+                 "wide-3x5", "--param", "TargetSpeed=12", "--param", "TargetSpeed=14",
+                 "--output", str(out)])
+    assert code == 2
+    assert capsys.readouterr().err == ("error: --param TargetSpeed: given twice (TargetSpeed=12 "
+                                       "and TargetSpeed=14); give each parameter once\n")
+    assert not out.exists()
+
+
+def test_cli_import_that_does_not_load_leaves_no_file_and_keeps_the_old_one(tmp_path, capsys,
+                                                                            monkeypatch):
+    import dataclasses
+
+    import rts_scenario.xosc as xosc
+
+    real = xosc.import_xosc
+
+    def beyond_limits(*args, **kwargs):
+        result = real(*args, **kwargs)
+        return dataclasses.replace(result, text=result.text.replace("duration_s:",
+                                                                    "duration_s: -1 #"))
+
+    monkeypatch.setattr(xosc, "import_xosc", beyond_limits)
+    out = tmp_path / "lead.scenario.yaml"
+    argv = ["import", str(DATA / "braking_lead.xosc"), "--radar", "awr1843boost", "--rig",
+            "wide-3x5", "--output", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {DATA / 'braking_lead.xosc'}: the scene it converts to does "
+                          f"not load") and err.count("\n") == 1
+    assert f"{out} not written: {out}:" in err and "duration_s" in err
+    assert list(tmp_path.iterdir()) == []
+    out.write_text("earlier: scene\n")
+    assert main(argv) == 2
+    capsys.readouterr()
+    assert out.read_text() == "earlier: scene\n"
+    assert list(tmp_path.iterdir()) == [out]

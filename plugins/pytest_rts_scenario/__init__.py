@@ -32,8 +32,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     """Options mirroring ``rts-scenario run``."""
     group = parser.getgroup("rts-scenario", "scene files as tests")
     group.addoption("--rts-output", default="simulated-radar",
-                    help="where schedules go: simulated-radar (default), udp://HOST:PORT, "
-                         "file:PATH")
+                    help="where schedules go: simulated-radar (default), udp://HOST:PORT "
+                         "or an installed RTS output")
     group.addoption("--rts-can-interface", default="virtual",
                     help="python-can interface for detections (default virtual)")
     group.addoption("--rts-can-channel", default=None,

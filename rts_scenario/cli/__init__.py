@@ -4,7 +4,8 @@ Each subcommand module has ``add_parser(subparsers)`` and a ``_do_<name>(args)``
 imports the library only when it runs, so ``rts-scenario --help`` stays fast.
 
 Exit codes: 0 success, 1 a check failed, 2 bad input (arguments or files), 3 runtime error.
-Errors print one ``error: ...`` line without a traceback unless ``--debug`` is given.
+Errors print one ``error: ...`` line; ``--debug`` adds the traceback before it (the exit code
+stays the same).
 """
 
 from __future__ import annotations
@@ -30,7 +31,14 @@ from . import (
     sweep,
     validate,
 )
-from .common import EXIT_BAD_INPUT, EXIT_FAIL, EXIT_OK, EXIT_RUNTIME_ERROR, one_line
+from .common import (
+    EXIT_BAD_INPUT,
+    EXIT_FAIL,
+    EXIT_OK,
+    EXIT_RUNTIME_ERROR,
+    one_line,
+    show_traceback,
+)
 
 # In the order `--help` lists them.
 _SUBCOMMANDS = (bench, validate, run, sweep, check, schedule, calibrate, survey, emulate,
@@ -69,18 +77,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         code: int = args.handler(args)
         return code
     except RtsError as exc:
-        if args.debug:
-            raise
+        show_traceback(args)
         print(f"error: {one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return EXIT_FAIL
     except Exception as exc:
-        if args.debug:
-            raise
-        print(f"error: {type(exc).__name__}: {one_line(exc)} (a runtime error; --debug shows "
-              f"the traceback)", file=sys.stderr)
+        show_traceback(args)
+        hint = "" if args.debug else "; --debug shows the traceback"
+        print(f"error: {type(exc).__name__}: {one_line(exc)} (a runtime error{hint})",
+              file=sys.stderr)
         return EXIT_RUNTIME_ERROR
 
 

@@ -10,7 +10,9 @@ from .common import (
     Progress,
     add_bench_arguments,
     bench_of,
+    check_bench_paths,
     check_number,
+    check_rig_out,
     check_writable_file,
     check_writable_folder,
     writing,
@@ -37,10 +39,12 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
     rig, radar = bench_of(args)
+    check_bench_paths(args, [("--json", args.json), ("--write", args.write),
+                             ("--plot", args.plot)])
     if args.json:
         check_writable_file("--json", args.json)
     if args.write:
-        check_writable_file("--write", args.write)
+        check_rig_out("--write", args.write)
     if args.plot:
         from ..plots import require_matplotlib
 

@@ -9,6 +9,7 @@ from .common import (
     EXIT_FAIL,
     EXIT_OK,
     METHODS,
+    check_distinct_paths,
     check_number,
     check_writable_file,
     named_file,
@@ -28,6 +29,9 @@ def _do_check(args: argparse.Namespace) -> int:
         named_file("--mapping", CanMapping.from_file, args.mapping)
     if args.time_offset_s is not None:
         check_number("--time-offset-s", args.time_offset_s)
+    check_distinct_paths([("--json", args.json)],
+                         [("SCENE", args.scene), ("--log", args.log),
+                          ("--log's sidecar", f"{args.log}.rts.json"), ("--mapping", args.mapping)])
     if args.json:
         check_writable_file("--json", args.json)
     check_log_file(args.log)

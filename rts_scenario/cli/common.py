@@ -7,7 +7,8 @@ import math
 import os
 import sys
 import tempfile
-from collections.abc import Iterator
+import traceback
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -76,6 +77,55 @@ def check_writable_file(option: str, path: str | Path) -> None:
             target.unlink()
 
 
+def show_traceback(args: argparse.Namespace) -> None:
+    """With ``--debug``, print the traceback of the exception being handled (and nothing else).
+
+    The error line and the exit code stay those of a run without ``--debug``.
+    """
+    if getattr(args, "debug", False):
+        traceback.print_exc()
+
+
+def _same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name one file: the same path once resolved, or one file on disk."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)  # hard links
+    except OSError:
+        return False
+
+
+Paths = Iterable[tuple[str, str | Path | None]]
+
+
+def check_distinct_paths(outputs: Paths, inputs: Paths = ()) -> None:
+    """Refuse, before anything is written, an output that would overwrite an input or output.
+
+    ``outputs`` and ``inputs`` are ``(option, path)`` pairs (``None`` paths are skipped); the
+    option names the argument in the message (``--json``, ``SCENE``, ...).
+    """
+    written = [(option, path) for option, path in outputs if path]
+    read = [(option, path) for option, path in inputs if path]
+    for i, (option, path) in enumerate(written):
+        for source, source_path in read:
+            if _same_file(path, source_path):
+                raise RtsError(f"{option} {path}: the same file as {source} {source_path}, "
+                               f"which this command reads; writing it would destroy the input; "
+                               f"give {option} another file")
+        for other, other_path in written[:i]:
+            if _same_file(path, other_path):
+                raise RtsError(f"{other} {other_path} and {option} {path}: the same file; one "
+                               f"would overwrite the other; give each option its own file")
+
+
+def check_rig_out(option: str, path: str) -> None:
+    """Reject a rig file to write whose name does not end in ``.rig.yaml``."""
+    if not path.endswith(".rig.yaml") and not Path(path).is_dir():  # a folder: say so
+        raise RtsError(f"{option} {path}: a rig file's name ends in .rig.yaml")
+    check_writable_file(option, path)
+
+
 def check_writable_folder(option: str, path: str | Path) -> None:
     """Fail now if the folder ``option`` names (created when missing) could not be written."""
     if str(path) == "":
@@ -109,15 +159,15 @@ def check_output(option: str, spec: str, *, run: bool) -> None:
     """Check an output spec before anything runs: a known name and a usable argument.
 
     ``run`` says whether the output is opened by a run (which provides the rig and radar the
-    simulated radar needs) or on its own (``schedule``).
+    simulated radar needs, and needs a radar that answers: no file) or on its own
+    (``schedule``).
     """
     from ..outputs import available_outputs, split_spec
 
     name, argument = split_spec(spec)
     valid = available_outputs()
-    usage = "simulated-radar, udp://HOST:PORT, file:PATH (.npz or .csv)"
-    if not run:
-        usage = "udp://HOST:PORT, file:PATH (.npz or .csv)"
+    usage = ("simulated-radar, udp://HOST:PORT" if run
+             else "udp://HOST:PORT, file:PATH (.npz or .csv)")
     if name not in valid:
         raise RtsError(f"{option} {spec!r}: unknown output {name!r}; valid outputs: "
                        f"{', '.join(valid)} (as {usage})")
@@ -126,6 +176,12 @@ def check_output(option: str, spec: str, *, run: bool) -> None:
                        f"a schedule goes to {usage}")
     if name == "simulated-radar" and argument:
         raise RtsError(f"{option} {spec!r}: simulated-radar takes no argument")
+    if name == "file" and run:
+        # A file output is written when everything has played: no radar ever sees it.
+        raise RtsError(f"{option} {spec}: a file output only stores the schedule, after "
+                       f"everything has played, so no radar sees it and nothing can be measured "
+                       f"or checked; valid here: {usage} (or an installed RTS output); "
+                       f"rts-scenario schedule SCENE --output {spec} exports a schedule")
     if name == "file":
         if not argument:
             raise RtsError(f"{option} {spec!r}: file needs a path: file:PATH (.npz or .csv)")
@@ -214,3 +270,18 @@ def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
                            RadarProfile.from_file, ".radar.yaml")
     return rig, radar
+
+
+def check_bench_paths(args: argparse.Namespace, outputs: Paths) -> None:
+    """`check_distinct_paths` for a bench command: its outputs against its rig and radar files."""
+    check_distinct_paths(outputs, [("RIG", args.rig if Path(args.rig).is_file() else None),
+                                   ("--radar", args.radar if Path(args.radar).is_file()
+                                    else None)])
+
+
+def check_fd_mapping(can_fd: bool, path: str | None, mapping: Any) -> None:
+    """Refuse ``--can-fd`` with a mapping that has no CAN FD message (it would go unused)."""
+    if can_fd and mapping is not None and mapping.fd_message is None:
+        raise RtsError(f"--can-fd: the mapping {path} has no fd_message (the radar's CAN FD "
+                       f"detection message) for --can-fd to use; add fd_message to the mapping "
+                       f"or leave out --can-fd")

@@ -20,7 +20,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
     from ..radar.profile import preset_names as radar_presets
     from ..rig import Rig
     from ..rig import preset_names as rig_presets
-    from .common import named_file, preset_or_file
+    from .common import check_fd_mapping, named_file, preset_or_file
     from .listen import _address
 
     host, port = _address(args.listen)
@@ -33,6 +33,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
                        f"{', '.join(estimator_names())}")
     mapping = named_file("--mapping", CanMapping.from_file, args.mapping) if args.mapping \
         else None
+    check_fd_mapping(args.can_fd, args.mapping, mapping)
     rig = preset_or_file("--rig", args.rig, rig_presets(), Rig.preset, Rig.from_file,
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,

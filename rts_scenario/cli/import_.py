@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from .common import EXIT_OK, check_number, check_writable_file
+from .common import EXIT_OK, check_distinct_paths, check_number, check_writable_file
 
 
 def _scene_reference(option: str, name: str, presets: list[str], suffix: str,
@@ -32,12 +32,16 @@ def _scene_reference(option: str, name: str, presets: list[str], suffix: str,
 def _parameters(values: list[str]) -> dict[str, str]:
     from ..errors import RtsError
 
-    out = {}
+    out: dict[str, str] = {}
     for item in values:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
             raise RtsError(f"--param {item!r}: expected NAME=VALUE")
-        out[name.strip()] = value.strip()
+        name, value = name.strip(), value.strip()
+        if name in out:
+            raise RtsError(f"--param {name}: given twice ({name}={out[name]} and "
+                           f"{name}={value}); give each parameter once")
+        out[name] = value
     return out
 
 
@@ -52,6 +56,8 @@ def _do_import(args: argparse.Namespace) -> int:
     output = Path(args.output)
     if not args.output.endswith(SCENE_SUFFIX):
         raise RtsError(f"--output {args.output}: a scene file's name ends in {SCENE_SUFFIX}")
+    check_distinct_paths([("--output", output)], [("FILE.xosc", args.file),
+                                                   ("--radar", args.radar), ("--rig", args.rig)])
     check_writable_file("--output", output)
     check_number("--frame-rate-hz", args.frame_rate_hz, low=0.001, high=1000.0)
     check_number("--lane-width-m", args.lane_width_m, low=0.5, high=10.0)
@@ -61,13 +67,24 @@ def _do_import(args: argparse.Namespace) -> int:
                          parameters=_parameters(args.param or []),
                          name=output.name.removesuffix(SCENE_SUFFIX),
                          frame_rate_hz=args.frame_rate_hz, lane_width_m=args.lane_width_m)
-    with writing("--output", output):
-        output.write_text(result.text, encoding="utf-8")
+    # Written next to the output (its relative references hold there) and loaded first: a
+    # scene that does not load neither replaces the output nor stays on disk.
+    draft = output.with_name(f".{output.name}.{os.getpid()}.draft{SCENE_SUFFIX}")
     try:
-        scene = load_scenario(output)  # what validate and run will read
-    except RtsError as exc:
-        raise RtsError(f"{args.file}: the scene written to {output} does not load (a value "
-                       f"beyond the scene format's limits): {one_line(exc)}") from None
+        with writing("--output", output):
+            with open(draft, "w", encoding="utf-8") as file:
+                file.write(result.text)
+        try:
+            scene = load_scenario(draft)  # what validate and run will read
+        except RtsError as exc:
+            reason = one_line(exc).replace(str(draft), str(output))
+            raise RtsError(f"{args.file}: the scene it converts to does not load (a value "
+                           f"beyond the scene format's limits); {output} not written: "
+                           f"{reason}") from None
+        with writing("--output", output):
+            os.replace(draft, output)
+    finally:
+        draft.unlink(missing_ok=True)
     for note in result.notes:
         print(f"note: {note}")
     print(f"imported {args.file} -> {output}: ego {result.ego}, {len(scene.targets)} targets, "

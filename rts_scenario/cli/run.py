@@ -17,10 +17,13 @@ from .common import (
     METHODS,
     Progress,
     check_can_interface,
+    check_distinct_paths,
+    check_fd_mapping,
     check_output,
     check_writable_file,
     check_writable_folder,
     named_file,
+    show_traceback,
     writing,
 )
 
@@ -44,15 +47,20 @@ def _do_run(args: argparse.Namespace) -> int:
         try:
             expanded.append((path, parametrizations(path)))
         except Exception as exc:
-            if args.debug:
-                raise
+            show_traceback(args)
             expanded.append((path, exc))
 
     # Everything the options name is checked before the first scene runs, not after it.
     check_output("--output", args.output, run=True)
     check_can_interface("--can-interface", args.can_interface)
     if args.mapping:
-        named_file("--mapping", CanMapping.from_file, args.mapping)
+        mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
+        check_fd_mapping(args.can_fd, args.mapping, mapping)
+    check_distinct_paths(
+        [("--json", args.json), ("--detections", args.detections), ("--record", args.record),
+         ("--record's sidecar", f"{args.record}.rts.json" if args.record else None),
+         ("--plot", args.plot)],
+        [*(("SCENE", scene) for scene in args.scenes), ("--mapping", args.mapping)])
     if args.json:
         check_writable_file("--json", args.json)
     if args.detections:
@@ -120,8 +128,7 @@ def _do_run(args: argparse.Namespace) -> int:
             try:
                 scene = load_scenario(path, overrides)
             except Exception as exc:
-                if args.debug:
-                    raise
+                show_traceback(args)
                 failed(file_name, path, exc, variant, overrides)
                 bad_input = bad_input or isinstance(exc, RtsError)
                 runtime_error = runtime_error or not isinstance(exc, RtsError)
@@ -160,8 +167,7 @@ def _do_run(args: argparse.Namespace) -> int:
                     for written in written_plots:
                         print(f"wrote {written}")
             except Exception as exc:
-                if args.debug:
-                    raise
+                show_traceback(args)
                 failed(scene.name, path, exc, variant, overrides)
                 # The scene loaded but its schedule cannot be built (e.g. the rig's update
                 # rate): still the scene's fault, not the run's.
@@ -236,7 +242,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     )
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="*.scenario.yaml files")
     parser.add_argument("--output", default="simulated-radar",
-                        help="simulated-radar (default), udp://HOST:PORT or file:PATH")
+                        help="simulated-radar (default), udp://HOST:PORT or an installed RTS "
+                             "output (a schedule file: rts-scenario schedule)")
     parser.add_argument("--can-interface", default="virtual",
                         help="python-can interface (default virtual)")
     parser.add_argument("--can-channel", default=None, help="CAN channel (default: private)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import EXIT_OK, METHODS, check_output
+from .common import EXIT_OK, METHODS, check_distinct_paths, check_output
 
 # Target-frames per batch: the schedule streams to the output like a run does.
 _BATCH_TARGET_FRAMES = 200_000
@@ -17,11 +17,14 @@ def _do_schedule(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ..kinematics import compute_tracks
-    from ..outputs import open_output
+    from ..outputs import open_output, split_spec
     from ..scenario import load_scenario, select_variant
     from ..schedule import build_schedule
 
     check_output("--output", args.output, run=False)
+    name, argument = split_spec(args.output)
+    if name == "file":
+        check_distinct_paths([("--output", argument)], [("SCENE", args.scene)])
     _, overrides = select_variant(args.scene, args.variant)
     scene = load_scenario(args.scene, overrides)
     step = max(1, _BATCH_TARGET_FRAMES // max(1, len(scene.targets)))

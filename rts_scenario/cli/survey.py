@@ -3,33 +3,53 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from ..errors import RtsError
-from .common import EXIT_OK, add_bench_arguments, bench_of, check_writable_file, writing
+from .common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    add_bench_arguments,
+    bench_of,
+    check_bench_paths,
+    check_rig_out,
+    check_writable_file,
+    writing,
+)
 
 
 def _do_survey(args: argparse.Namespace) -> int:
     import json
     from pathlib import Path
 
+    import numpy as np
+
     from ..pipeline import Pipeline, RunOptions
     from ..scenario.model import RadarOptions
     from ..survey import placed_by_survey, survey
 
     rig, radar = bench_of(args)
+    if args.place and not args.write:
+        raise RtsError("--place: needs --write RIG_OUT (the rig file to write the placed FEs to)")
+    check_bench_paths(args, [("--json", args.json), ("--write", args.write)])
     if args.json:
         check_writable_file("--json", args.json)
     if args.write:
-        check_writable_file("--write", args.write)
-    if args.place and not args.write:
-        raise RtsError("--place: needs --write RIG_OUT (the rig file to write the placed FEs to)")
+        check_rig_out("--write", args.write)
     options = RunOptions(output=args.output, can_interface=args.can_interface,
                          can_channel=args.can_channel)
     with Pipeline(rig, radar, options,
                   radar_options=RadarOptions(fidelity=args.fidelity, noise=args.noise,
                                              estimator=args.estimator)) as bench:
         result = survey(rig, radar, bench.play)
+    seen = np.isfinite(result.seen_az_deg) & np.isfinite(result.seen_el_deg)
+    if not seen.any():
+        channel = f":{args.can_channel}" if args.can_channel else ""
+        raise RtsError(f"survey: the radar saw none of the {rig.n_front_ends} front ends (no "
+                       f"detection came over CAN {args.can_interface}{channel} while "
+                       f"{args.output} played them); check that the radar sees the rig and "
+                       f"reports on that bus; nothing written")
     print(result.table())
     from ..radar.simulate import near_field_warning
 
@@ -41,13 +61,19 @@ def _do_survey(args: argparse.Namespace) -> int:
             Path(args.json).write_text(json.dumps(result.to_dict(), indent=2, allow_nan=False)
                                        + "\n")
         print(f"wrote {args.json}")
+    missed = [str(q) for q in np.flatnonzero(~seen)]
+    if missed:
+        # Printed and in the JSON (null), but never stored in a rig as if it had been measured.
+        fes = f"FE{'s' if len(missed) > 1 else ''} {', '.join(missed)}"
+        print(f"error: the radar did not see {fes}" + (
+            f"; --write {args.write}: not written (a rig is written only from a survey that saw "
+            f"every front end)" if args.write else ""), file=sys.stderr)
+        return EXIT_FAIL
     if args.write:
         import dataclasses
 
-        import numpy as np
-
-        seen = np.stack([result.seen_az_deg, result.seen_el_deg, result.level_db], axis=1)
-        out = dataclasses.replace(rig, seen=seen)
+        measured = np.stack([result.seen_az_deg, result.seen_el_deg, result.level_db], axis=1)
+        out = dataclasses.replace(rig, seen=measured)
         if args.place:
             out = placed_by_survey(rig, radar, result, estimator=args.estimator)
             for q in range(rig.n_front_ends):

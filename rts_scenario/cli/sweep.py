@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-from .common import METHODS, check_writable_file, writing
+from .common import METHODS, check_distinct_paths, check_writable_file, writing
 
 # Without a terminal, a progress line each time another tenth of the runs is done.
 PLAIN_PROGRESS_STEPS = 10
@@ -53,6 +53,7 @@ def _do_sweep(args: argparse.Namespace) -> int:
     import json
 
     from ..errors import RtsError
+    from ..scenario import SCENE_SUFFIX
     from ..sweep import (
         LOCAL_SCHEDULER,
         collect_tasks,
@@ -72,6 +73,11 @@ def _do_sweep(args: argparse.Namespace) -> int:
         if args.scheduler == "":
             raise RtsError(f"--scheduler: needs an address (tcp://HOST:PORT) or "
                            f"{LOCAL_SCHEDULER!r}, got an empty one")
+    scene_files: list[Path] = []
+    for given in map(Path, args.scenes):  # a folder: the scene files it holds
+        scene_files += sorted(given.rglob(f"*{SCENE_SUFFIX}")) if given.is_dir() else [given]
+    check_distinct_paths([("--json", args.json), ("--plot", args.plot)],
+                         [("SCENE", scene) for scene in scene_files])
     if args.json:
         check_writable_file("--json", args.json)
     if args.plot:
