@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import can
+import jsonschema
 import numpy as np
 from numpy.typing import NDArray
 
@@ -41,6 +42,7 @@ from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, RadarClock
 from .report import Report
 from .scenario import Scenario, parametrizations, select_variant
+from .solver.estimator_aware import SCHEDULE_METHODS
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -152,18 +154,72 @@ class _LoggedCycle:
     bus_t_s: float
 
 
+def _number(**bounds: float) -> dict[str, Any]:
+    return {"type": "number", **bounds}
+
+
+# What `run --record` writes beside a log (`pipeline.write_sidecar`); read back by `check`.
+SIDECAR_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "required": ["rts_scenario_log", "clock"],
+    "properties": {
+        "rts_scenario_log": {"const": 1},
+        "version": {"type": "string"},
+        "scene": {"type": "string"},
+        "variant": {"type": ["string", "null"]},
+        "parameters": {"type": "object"},
+        "frames": {"type": "integer", "minimum": 0},
+        "frame_rate_hz": _number(exclusiveMinimum=0),
+        "radar": {"type": "string"},
+        "clock": {
+            "type": "object",
+            "required": ["cycle_s", "start_offset_s", "latency_s", "jitter_s", "counter_start"],
+            "properties": {
+                "cycle_s": _number(exclusiveMinimum=0), "start_offset_s": _number(),
+                "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
+                "counter_start": {"type": ["integer", "null"], "minimum": 0},
+            },
+        },
+        "mapping": {"type": ["string", "null"]},
+        "can_fd": {"type": "boolean"},
+        "method": {"type": ["string", "null"]},
+        "output": {"type": ["string", "null"]},
+        "status_sha256": {"type": ["string", "null"]},
+    },
+}
+
+
 def read_sidecar(log: str | Path) -> dict[str, Any] | None:
-    """Return the ``LOG.rts.json`` of a log recorded by rts-scenario, None without one."""
+    """Return the ``LOG.rts.json`` of a log recorded by rts-scenario, None without one.
+
+    Raises
+    ------
+    LogError
+        The sidecar is not valid JSON, or not what ``run --record`` writes (`SIDECAR_SCHEMA`):
+        the message names the file, the key and what is allowed.
+    """
     path = Path(str(log) + LOG_SIDECAR_SUFFIX)
     if not path.exists():
         return None
+
+    def finite_only(name: str) -> float:
+        raise ValueError(f"{name} is not a number a sidecar holds")
+
     try:
-        data = json.loads(path.read_text())
-        if data.get("rts_scenario_log") != 1 or "clock" not in data:
-            raise ValueError("not an rts-scenario log sidecar (rts_scenario_log: 1)")
-        return dict(data)
-    except (OSError, ValueError) as exc:
-        raise LogError(f"{path}: {exc}") from None
+        data = json.loads(path.read_text(encoding="utf-8"), parse_constant=finite_only)
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise LogError(f"{path}: not an rts-scenario log sidecar: {exc}") from None
+    validator = jsonschema.Draft202012Validator(SIDECAR_SCHEMA)
+    error = jsonschema.exceptions.best_match(validator.iter_errors(data))
+    if error is not None:
+        key = ".".join(str(k) for k in error.absolute_path) or "(the document)"
+        raise LogError(f"{path}: {key}: {error.message} (not what `rts-scenario run --record` "
+                       f"writes; a log without its sidecar is aligned by its timestamps)")
+    method = data.get("method")
+    if method is not None and method not in SCHEDULE_METHODS:
+        raise LogError(f"{path}: method: got {method!r}; allowed values: "
+                       f"{', '.join(SCHEDULE_METHODS)}")
+    return dict(data)
 
 
 def check_log_file(log: str | Path) -> None:
@@ -535,9 +591,13 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if recorded is not None and recorded != scene.variant:
             raise LogError(f"--log {log}: recorded for {_variant_text(recorded)} (its "
                            f"sidecar), not {_variant_text(scene.variant)}")
-        if sidecar.get("scene") != scene.name:
-            alignment.notes.append(f"the log was recorded for scene {sidecar.get('scene')!r}, "
-                                   f"not {scene.name!r}")
+        if sidecar.get("scene", scene.name) != scene.name:
+            raise LogError(f"--log {log}: recorded for scene {sidecar.get('scene')!r} (its "
+                           f"sidecar), not {scene.name!r}: check it against that scene's file")
+        if time_offset_s is not None:
+            raise LogError(f"--time-offset-s {time_offset_s!r}: the log's sidecar aligns it by "
+                           f"the radar's counters, so a time offset would not be used; leave "
+                           f"it out, or check a copy of the log without its sidecar")
     else:
         if not logged:
             raise LogError(f"--log {log}: no radar cycle in it ({bus['messages']} messages, "

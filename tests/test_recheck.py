@@ -1,6 +1,7 @@
 """Recording the bus and re-checking logs: the live verdict again, or aligned by timestamps."""
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -200,6 +201,68 @@ def test_check_command_writes_the_report_and_the_alignment(tmp_path, capsys):
     assert data["log"] == str(log) and data["variant"] == "" and data["parameters"] == {}
     text = capsys.readouterr().out
     assert "aligned by the recording's sidecar" in text and "PASS" in text
+
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A recording of the highway-following scene by `run --record`, with its sidecar."""
+    folder = tmp_path_factory.mktemp("recorded")
+    log = folder / "run.blf"
+    assert cli.main(["run", str(ROOT / "scenarios" / "highway_following.scenario.yaml"),
+                     "--record", str(log)]) == 0
+    return log
+
+
+def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
+    copy = folder / log.name
+    shutil.copy(log, copy)
+    text = Path(str(log) + ".rts.json").read_text() if sidecar is None else sidecar
+    Path(str(copy) + ".rts.json").write_text(text)
+    return copy
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: [], r"\(the document\): \[\] is not of type 'object'"),
+    (lambda d: {**d, "clock": {**d["clock"], "cycle_s": 0}},
+     r"clock\.cycle_s: 0 is less than or equal to the minimum of 0"),
+    (lambda d: {**d, "clock": {**d["clock"], "cycle_s": "x"}},
+     r"clock\.cycle_s: 'x' is not of type 'number'"),
+    (lambda d: {**d, "clock": {**d["clock"], "latency_s": -0.05}},
+     r"clock\.latency_s: -0\.05 is less than the minimum of 0"),
+    (lambda d: {k: v for k, v in d.items() if k != "clock"}, r"\(the document\): 'clock' is a"),
+    (lambda d: {**d, "method": "bogus"},
+     r"method: got 'bogus'; allowed values: exact, paper, estimator"),
+])
+def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
+                                                         message):
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    log = _copy(recorded, tmp_path, json.dumps(edit(data)))
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert cli.main(["check", scene, "--log", str(log)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert f"{log}.rts.json: " in err
+    assert re.search(message, err), err
+
+
+def test_a_sidecar_with_nan_is_bad_input(recorded, tmp_path, capsys):
+    text = Path(str(recorded) + ".rts.json").read_text()
+    log = _copy(recorded, tmp_path, text.replace('"jitter_s": 0.0', '"jitter_s": NaN'))
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert cli.main(["check", scene, "--log", str(log)]) == 2
+    assert "NaN is not a number a sidecar holds" in capsys.readouterr().err
+
+
+def test_a_log_of_another_scene_or_a_time_offset_beside_the_sidecar_is_refused(recorded,
+                                                                               capsys):
+    other = str(ROOT / "scenarios" / "cut_out.scenario.yaml")
+    assert cli.main(["check", other, "--log", str(recorded)]) == 2
+    assert "recorded for scene 'highway-following' (its sidecar), not 'cut-out'" in \
+        capsys.readouterr().err
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert cli.main(["check", scene, "--log", str(recorded), "--time-offset-s", "1e9"]) == 2
+    assert "the log's sidecar aligns it by the radar's counters" in capsys.readouterr().err
 
 
 def test_a_simulated_run_stamps_its_messages_on_the_radar_s_clock(tmp_path):

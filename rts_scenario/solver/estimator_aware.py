@@ -37,6 +37,11 @@ ITERATIONS = 6
 TOLERANCE_DEG = 1e-4
 
 
+# Methods a schedule is built with: the solver's, and "estimator" (aimed at the radar's
+# estimator, on the exact method's plan).
+SCHEDULE_METHODS = ("exact", "paper", "estimator")
+
+
 def plan_method(method: str) -> str:
     """Return the solver method whose plan a schedule method uses (estimator-aware: exact)."""
     return "exact" if method == "estimator" else method
@@ -119,4 +124,4 @@ def _seen(read: object, sol: WeightSolution, rig: Rig,
     return seen_az, seen_el
 
 
-__all__ = ["estimator_weights", "front_end_vectors", "plan_method"]
+__all__ = ["SCHEDULE_METHODS", "estimator_weights", "front_end_vectors", "plan_method"]
