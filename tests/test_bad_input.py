@@ -330,6 +330,11 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("run-json-is-record-sidecar", ["run", "{scene}", "--record", "{tmp}/x.blf", "--json",
                                     "{tmp}/x.blf.rts.json"], 2,
      r"^--json {tmp}/x.blf.rts.json and --record's sidecar {tmp}/x.blf.rts.json"),
+    ("run-json-named-like-a-scene", ["run", "{scene}", "--json", "{tmp}/other.scenario.yaml"],
+     2, r"^--json {tmp}/other.scenario.yaml: named like a scene \(.scenario.yaml\), which "
+        r"--json would overwrite"),
+    ("run-detections-named-like-a-dbc", ["run", "{scene}", "--detections", "{tmp}/radar.DBC"],
+     2, r"^--detections {tmp}/radar.DBC: named like a DBC file \(.dbc\)"),
     ("run-json-is-mapping", ["run", "{scene}", "--mapping", "{tmp}/m.mapping.yaml", "--json",
                              "{tmp}/m.mapping.yaml"], 2,
      r"^--json {tmp}/m.mapping.yaml: the same file as --mapping {tmp}/m.mapping.yaml"),

@@ -54,15 +54,28 @@ def writing(option: str, path: str | Path) -> Iterator[None]:
         raise RtsError(f"{option} {path}: cannot write: {reason}") from exc
 
 
-def check_writable_file(option: str, path: str | Path) -> None:
+# File kinds the tool reads: never an output's name.
+_INPUT_KINDS = {".scenario.yaml": "scene", ".rig.yaml": "rig", ".radar.yaml": "radar profile",
+                ".mapping.yaml": "CAN mapping", ".dbc": "DBC file", ".xosc": "OpenSCENARIO file"}
+
+
+def check_writable_file(option: str, path: str | Path, kind: str | None = None) -> None:
     """Fail now, before a long run, if the file ``option`` names could not be written later.
 
     The probe opens the file for appending (and removes it again if it did not exist), so
-    read-only file systems and missing permissions are found whoever runs it.
+    read-only file systems and missing permissions are found whoever runs it. An output is
+    never named like a file the tool reads (a scene, rig, DBC, ...), unless it is one:
+    ``kind``, the suffix of what ``option`` writes (e.g. ``".rig.yaml"``).
     """
     target = Path(path)
     if str(path) == "":
         raise RtsError(f"{option}: needs a file path, got an empty one")
+    named = next((k for k in _INPUT_KINDS if target.name.lower().endswith(k)), None)
+    if named is not None and named != kind:
+        # An output named like one of the files the tool reads would replace a scene, a rig or
+        # a radar's DBC that another run needs.
+        raise RtsError(f"{option} {path}: named like a {_INPUT_KINDS[named]} ({named}), which "
+                       f"{option} would overwrite; give the output another name")
     if target.is_dir():
         raise RtsError(f"{option} {path}: cannot write: is a folder; give a file path")
     parent = target.parent
@@ -123,7 +136,7 @@ def check_rig_out(option: str, path: str) -> None:
     """Reject a rig file to write whose name does not end in ``.rig.yaml``."""
     if not path.endswith(".rig.yaml") and not Path(path).is_dir():  # a folder: say so
         raise RtsError(f"{option} {path}: a rig file's name ends in .rig.yaml")
-    check_writable_file(option, path)
+    check_writable_file(option, path, ".rig.yaml")
 
 
 def check_writable_folder(option: str, path: str | Path) -> None:

@@ -58,7 +58,7 @@ def _do_import(args: argparse.Namespace) -> int:
         raise RtsError(f"--output {args.output}: a scene file's name ends in {SCENE_SUFFIX}")
     check_distinct_paths([("--output", output)], [("FILE.xosc", args.file),
                                                    ("--radar", args.radar), ("--rig", args.rig)])
-    check_writable_file("--output", output)
+    check_writable_file("--output", output, ".scenario.yaml")
     check_number("--frame-rate-hz", args.frame_rate_hz, low=0.001, high=1000.0)
     check_number("--lane-width-m", args.lane_width_m, low=0.5, high=10.0)
     radar = _scene_reference("--radar", args.radar, radar_presets(), ".radar.yaml", output)
