@@ -91,6 +91,18 @@ def test_bad_rts_output_stops_the_session_once(pytester):
     assert "Traceback" not in text
 
 
+def test_bad_rts_mapping_or_can_fd_stops_the_session_up_front(pytester):
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    result = pytester.runpytest("--rts-mapping", "nowhere.mapping.yaml")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert "--rts-mapping nowhere.mapping.yaml" in text and "Traceback" not in text
+    mapping = ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml"
+    result = pytester.runpytest("--rts-mapping", str(mapping), "--rts-can-fd")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert f"--rts-can-fd: the mapping {mapping} has no fd_message" in text
+
 def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):
     sub = pytester.mkdir("sub")
     (sub / "data").mkdir()

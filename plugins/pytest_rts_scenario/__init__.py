@@ -47,19 +47,26 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the marks shipped scenes use; refuse a bad ``--rts-output`` once, up front."""
+    """Register the marks shipped scenes use; refuse bad ``--rts-*`` options once, up front."""
     for line in ("slow: a long scene", "hardware: needs a real RTS and radar",
                  "hard: a hard numerical or physical case"):
         config.addinivalue_line("markers", line)
     spec = config.getoption("--rts-output")
-    if spec != "simulated-radar":  # the default needs no check (nor the library's import)
-        from rts_scenario.cli.common import check_output
+    mapping_path = config.getoption("--rts-mapping")
+    can_fd = config.getoption("--rts-can-fd")
+    # The defaults need no check (nor the library's import).
+    if spec != "simulated-radar" or mapping_path or can_fd:
+        from rts_scenario.canbus.mapping import CanMapping
+        from rts_scenario.cli.common import check_fd_mapping, check_output, named_file
         from rts_scenario.errors import RtsError
 
         try:
             check_output("--rts-output", spec, run=True)
+            if mapping_path:
+                mapping = named_file("--rts-mapping", CanMapping.from_file, mapping_path)
+                check_fd_mapping(can_fd, mapping_path, mapping)
         except RtsError as exc:
-            raise pytest.UsageError(str(exc)) from None
+            raise pytest.UsageError(str(exc).replace("--can-fd", "--rts-can-fd")) from None
     if config.pluginmanager.hasplugin("html") and config.getoption("htmlpath", None):
         config.pluginmanager.register(HtmlReport(), "rts-scenario-html")
 
