@@ -313,3 +313,33 @@ def test_key_paths_joined_by_commas_vary_together(tmp_path):
     scene = load_scenario(path, combos[2][1])
     assert scene.duration_s == 8.0
     assert scene.radar_options.estimator == "bartlett"
+
+
+def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):
+    # YAML 1.1 reads 76.5e9 and 1e6 as strings; YAML 1.2 (and engineers) as numbers.
+    from rts_scenario.canbus.mapping import CanMapping
+    from rts_scenario.located_yaml import load_yaml
+    from rts_scenario.radar.profile import RadarProfile
+    from rts_scenario.rig import Rig
+
+    assert load_yaml("x.yaml", "[1e6, 76.5e9, -2.5E-3, .5e1, 7.65e+10, 10, 1.5, '1e6', 1e]\n"
+                     ).data == [1e6, 76.5e9, -2.5e-3, 5.0, 7.65e10, 10, 1.5, "1e6", "1e"]
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    assert "fc_hz: 76.5e+9" in radar
+    (tmp_path / "r.radar.yaml").write_text(radar.replace("fc_hz: 76.5e+9", "fc_hz: 76.5e9"))
+    assert RadarProfile.from_file(tmp_path / "r.radar.yaml").fc_hz == 76.5e9
+    rig = (ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml").read_text()
+    (tmp_path / "r.rig.yaml").write_text(rig.replace("delay_step_s: 1.0e-10",
+                                                     "delay_step_s: 1e-10"))
+    assert Rig.from_file(tmp_path / "r.rig.yaml").limits.delay_step_s == 1e-10
+    can = ROOT / "scenarios" / "can"
+    shutil.copy(can / "cluster_list.dbc", tmp_path)
+    (tmp_path / "m.mapping.yaml").write_text((can / "cluster_list.mapping.yaml").read_text()
+                                             .replace("rcs_dbsm: RCS",
+                                                      "rcs_dbsm: {signal: RCS, scale: 1e0}"))
+    assert CanMapping.from_file(tmp_path / "m.mapping.yaml").fields["rcs_dbsm"].scale == 1.0
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("speed_mps: 19.0", "speed_mps: 1.9e1").replace(
+        "duration_s: 5.0", "duration_s: 5e0"))
+    loaded = load_scenario(scene)
+    assert loaded.duration_s == 5.0
