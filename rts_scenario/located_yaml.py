@@ -289,7 +289,13 @@ def _describe(error: jsonschema.ValidationError) -> str:
     if kind == "type":
         return f"must be of type {schema_value}, got {value!r}"
     if kind == "required":
-        return error.message.replace("is a required property", "is required but missing")
+        message = error.message.replace("is a required property", "is required but missing")
+        missing = next((k for k in schema_value if isinstance(value, dict) and k not in value),
+                       None)
+        allowed = error.schema.get("properties", {}).get(missing, {}).get("enum")
+        if allowed:
+            message += f"; allowed values: {', '.join(map(repr, allowed))}"
+        return message
     if kind in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
         op = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
               "exclusiveMaximum": "<"}[str(kind)]

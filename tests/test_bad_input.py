@@ -123,6 +123,9 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("unknown-motion", sub("type: constant_velocity, position_m: [30",
                            "type: teleport, position_m: [30"),
      r"^{f}:13:\d+: targets\[0\].motion"),
+    ("motion-without-type", sub("type: constant_velocity, position_m: [30", "position_m: [30"),
+     r"^{f}:13:\d+: targets\[0\].motion: 'type' is required but missing; allowed values: "
+     r"'stationary', 'constant_velocity'"),
     ("position-wrong-length", sub("position_m: [30, 0, 0.6]", "position_m: [30, 0]"),
      r"^{f}:13:\d+: targets\[0\].motion.*(position_m|items)"),
     ("speed-profile-not-increasing", sub(

@@ -103,6 +103,13 @@ BAD = [
     (edit("speed_mps: 20.0}", "speed_mps: 20.0, acceleration_mps2: 1}"), 10,
      "ego.motion.acceleration_mps2", "unknown key 'acceleration_mps2'"),
     (edit("speed_mps: 20.0}", "speed_mps: -20.0}"), 10, "ego.motion.speed_mps", "must be >= 0"),
+    (edit("{type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "{position_m: [30, 0, 0.6]}"), 13, "targets[0].motion",
+     "'type' is required but missing; allowed values: 'stationary', 'constant_velocity', "
+     "'constant_acceleration', 'speed_profile', 'waypoints'"),
+    (edit("{type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "{position_m: [30, 0, 0.6], speed_mps: 22}"), 13, "targets[0].motion",
+     "'type' is required but missing; allowed values: 'stationary'"),
     (edit("  - name: car\n", "  - name: car!\n"), 12, "targets[0].name", "does not match"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0, fluctuation: swerling2}"),
      14, "targets[0].rcs.fluctuation", "allowed values: 'none', 'swerling1', 'swerling3'"),
