@@ -121,6 +121,18 @@ BAD = [
      14, "targets[0].rcs.aspect_deg", "distinct modulo 360"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 4\n"
           "    disappear_s: 2"), 16, "targets[0].disappear_s", "must be later than appear_s"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 100"), 15,
+     "targets[0].appear_s", "the target appears at 100 s, after the scene's last frame at "
+     "4.95 s (duration_s = 5 s at 20 Hz): it would be present in no frame"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 1.01\n"
+          "    disappear_s: 1.04"), 16, "targets[0].disappear_s",
+     "no frame falls between appear_s = 1.01 s and disappear_s = 1.04 s (frames every 0.05 s"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
+          "      - {start_s: 300, duration_s: 2, offset_m: 3}"), 16,
+     "targets[0].lane_changes[0].start_s", "the lane change starts at 300 s, at or after the "
+     "scene's end (duration_s = 5 s at 20 Hz): it would never happen"),
+    (edit("speed_mps: 20.0}\n", "speed_mps: 20.0}\n  lane_changes: [{start_s: 5, duration_s: 1, "
+          "offset_m: 3}]\n"), 11, "ego.lane_changes[0].start_s", "start_s must be < 5"),
     (edit("    rcs: {rcs_dbsm: 10.0}\n",
           "    rcs: {rcs_dbsm: 10.0}\n" + GOOD.split("targets:\n")[1]),
      15, "targets[1].name", "duplicate target name 'car'"),
