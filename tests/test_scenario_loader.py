@@ -121,6 +121,8 @@ BAD = [
      14, "targets[0].rcs.aspect_deg", "distinct modulo 360"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 4\n"
           "    disappear_s: 2"), 16, "targets[0].disappear_s", "must be later than appear_s"),
+    (GOOD.split("  - name: car")[0].replace("targets:", "targets: []"), 11, "targets",
+     "the scene has no targets (none here and none in an included fragment)"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 100"), 15,
      "targets[0].appear_s", "the target appears at 100 s, after the scene's last frame at "
      "4.95 s (duration_s = 5 s at 20 Hz): it would be present in no frame"),

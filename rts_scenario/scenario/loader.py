@@ -101,6 +101,14 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         target_sources += [(fragment, ("targets", j), t)
                            for j, t in enumerate(fragment.data["targets"])]
     target_sources += [(doc, ("targets", j), t) for j, t in enumerate(data["targets"])]
+    if not target_sources:
+        # The verdict fails a run with no checkable target-frame ("nothing to check"), and
+        # counting only false detections would need a verdict of its own.
+        raise doc.error(("targets",),
+                        "the scene has no targets (none here and none in an included "
+                        "fragment): a run checks detections against targets and would have "
+                        "nothing to check; scenes without targets (false alarms on an empty "
+                        "bench) are not supported, give at least one target")
 
     radar = _load_referenced(doc, ("radar", "profile"), root, data["radar"]["profile"],
                              radar_presets(), RadarProfile.preset, RadarProfile.from_file,
