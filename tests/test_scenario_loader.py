@@ -216,6 +216,22 @@ def test_errors_in_included_and_referenced_files_point_into_them(tmp_path):
     assert info.value.file.endswith("bad.rig.yaml") and info.value.line == 3
 
 
+def test_a_fragment_included_twice_is_named_once(tmp_path):
+    (tmp_path / "fr").mkdir()
+    (tmp_path / "fr" / "ok.yaml").write_text(
+        "targets:\n  - {name: p1, motion: {type: stationary, position_m: [20, 0, 0]}, "
+        "rcs: {rcs_dbsm: 10}}\n")
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("targets:", "include:\n  - fr/ok.yaml\n  - ./fr/../fr/ok.yaml\n"
+                                      "targets:"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    err = info.value
+    assert (err.file, err.line, err.key_path) == (str(scene), 13, "include[1]")
+    assert str(err).endswith("include[1]: './fr/../fr/ok.yaml' is included twice (first as "
+                             "include[0] 'fr/ok.yaml'); include each fragment once")
+
+
 def test_relative_rig_and_profile_files_inside_the_tree(tmp_path):
     (tmp_path / "rigs").mkdir()
     shutil.copy(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml", tmp_path / "rigs")

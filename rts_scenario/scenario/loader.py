@@ -93,8 +93,16 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     root = path.resolve().parent
 
     target_sources: list[tuple[Document, KeyPath, dict[str, Any]]] = []
+    included: dict[Path, int] = {}
     for i, name in enumerate(data.get("include", [])):
-        fragment = load_yaml(_inside(doc, ("include", i), root, name))
+        fragment_path = _inside(doc, ("include", i), root, name)
+        if fragment_path in included:
+            first = included[fragment_path]
+            raise doc.error(("include", i),
+                            f"{name!r} is included twice (first as include[{first}] "
+                            f"{data['include'][first]!r}); include each fragment once")
+        included[fragment_path] = i
+        fragment = load_yaml(fragment_path)
         if not isinstance(fragment.data, dict):
             raise fragment.error((), "a fragment must be a mapping with a 'targets' list")
         validate(fragment, _fragment_schema())
