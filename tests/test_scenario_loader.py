@@ -239,6 +239,32 @@ def test_relative_rig_and_profile_files_inside_the_tree(tmp_path):
     scene.write_text(edit("rig: wide-3x5", "rig: rigs/lab-2x3.rig.yaml"))
     assert load_scenario(scene).rig.name == "lab-2x3"
 
+    # A file not named *.rig.yaml is a file, not an unknown preset; so is a bare name that exists.
+    shutil.copy(tmp_path / "rigs" / "lab-2x3.rig.yaml", tmp_path / "rigs" / "x.yaml")
+    shutil.copy(tmp_path / "rigs" / "lab-2x3.rig.yaml", tmp_path / "lab")
+    for name in ("rigs/x.yaml", "lab"):
+        scene.write_text(edit("rig: wide-3x5", f"rig: {name}"))
+        assert load_scenario(scene).rig.name == "lab-2x3"
+    scene.write_text(edit("rig: wide-3x5", "rig: rigs/y.yaml"))
+    with pytest.raises(ScenarioError, match=r":8:1: rig: file not found: 'rigs/y.yaml'"):
+        load_scenario(scene)
+
+
+def test_an_inconsistent_rig_is_reported_in_the_rig_file_not_as_the_scene(tmp_path):
+    (tmp_path / "rigs").mkdir()
+    rig = (ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml").read_text()
+    bad = tmp_path / "rigs" / "bad.rig.yaml"
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("rig: wide-3x5", "rig: rigs/bad.rig.yaml"))
+    for old, new, key in [("update_rate_hz: 50.0", "update_rate_hz: 0", "limits.update_rate_hz"),
+                          ("{az_deg: 0.1, el_deg: -7.9,", "{az_deg: -10.2, el_deg: -8.1,",
+                           "front_ends[1]")]:
+        assert old in rig
+        bad.write_text(rig.replace(old, new))
+        with pytest.raises(ScenarioError) as info:
+            load_scenario(scene)
+        assert info.value.file == str(bad) and info.value.key_path == key, str(info.value)
+
 
 def test_cli_validate_exit_codes(tmp_path, capsys):
     good = tmp_path / "good.scenario.yaml"

@@ -254,7 +254,9 @@ def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets
                      preset: Any, from_file: Any, suffix: str) -> Any:
     if name in presets:
         return preset(name)
-    if not name.endswith(suffix):
+    # A name that is no preset is a file when it looks like one or one exists by that name.
+    looks_like_file = name.endswith((suffix, ".yaml", ".yml")) or "/" in name
+    if not looks_like_file and not (root / name).is_file():
         raise doc.error(
             key, f"unknown preset {name!r}; valid presets: {', '.join(presets)}, or a relative "
                  f"path to a *{suffix} file",
