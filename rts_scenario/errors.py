@@ -44,7 +44,16 @@ class ArrayError(RtsError):
 
 
 class RigError(RtsError):
-    """An RTS rig definition is invalid."""
+    """An RTS rig definition is invalid.
+
+    ``key`` names the offending field (``az_deg``, ``limits.doppler_min_hz``) and ``fe`` the
+    front end (row-major index), when the error is about one, so that a rig file can point at it.
+    """
+
+    def __init__(self, message: str, *, key: str | None = None, fe: int | None = None) -> None:
+        self.key = key
+        self.fe = fe
+        super().__init__(message)
 
 
 class SolverError(RtsError):

@@ -7,6 +7,7 @@ Every error names the file, line, column and key path of the offending value, as
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -67,6 +68,13 @@ _SafeBase: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 class _Loader(_SafeBase):
     """Safe loader; duplicate keys are errors instead of silently overwriting."""
+
+
+# YAML 1.1 (PyYAML's rules) reads a float only with a dot and a signed exponent, so ``1e6`` and
+# ``76.5e9`` would be strings; YAML 1.2's core schema reads them as the numbers engineers mean.
+# Plain integers and YAML 1.1 floats keep their resolvers, which come first.
+_FLOAT_12 = re.compile(r"^[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)[eE][-+]?[0-9]+$")
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+.0123456789"))
 
 
 _MAP_TAG = "tag:yaml.org,2002:map"
@@ -281,7 +289,13 @@ def _describe(error: jsonschema.ValidationError) -> str:
     if kind == "type":
         return f"must be of type {schema_value}, got {value!r}"
     if kind == "required":
-        return error.message.replace("is a required property", "is required but missing")
+        message = error.message.replace("is a required property", "is required but missing")
+        missing = next((k for k in schema_value if isinstance(value, dict) and k not in value),
+                       None)
+        allowed = error.schema.get("properties", {}).get(missing, {}).get("enum")
+        if allowed:
+            message += f"; allowed values: {', '.join(map(repr, allowed))}"
+        return message
     if kind in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
         op = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
               "exclusiveMaximum": "<"}[str(kind)]

@@ -44,6 +44,21 @@ class HardwareLimits:
     echoes_per_channel: int = 8
     update_rate_hz: float = 100.0
 
+    def __post_init__(self) -> None:
+        for low, high in (("attenuation_min_db", "attenuation_max_db"),
+                          ("doppler_min_hz", "doppler_max_hz")):
+            if not getattr(self, low) < getattr(self, high):
+                raise RigError(f"limits.{low}: must be below {high} = {getattr(self, high):g}, "
+                               f"got {getattr(self, low):g}", key=f"limits.{low}")
+        span = self.attenuation_max_db - self.attenuation_min_db
+        if not 0.0 <= self.attenuation_step_db <= span:
+            raise RigError(f"limits.attenuation_step_db: must be within 0 (continuous) .. "
+                           f"{span:g} (attenuation_max_db - attenuation_min_db), got "
+                           f"{self.attenuation_step_db:g}", key="limits.attenuation_step_db")
+        if not self.update_rate_hz > 0.0:
+            raise RigError(f"limits.update_rate_hz: must be > 0, got {self.update_rate_hz:g}",
+                           key="limits.update_rate_hz")
+
 
 @dataclass(frozen=True)
 class Reference:
@@ -179,16 +194,18 @@ class Rig:
         if np.any(np.diff(grid_az, axis=1) < 0):
             r, c = np.argwhere(np.diff(grid_az, axis=1) < 0)[0]
             raise RigError(
-                f"az_deg: FEs must be ordered by increasing azimuth within a row (paper order: "
-                f"FE 0 and 2 smaller azimuth than 1 and 3); row {r}: column {c} at "
-                f"{grid_az[r, c]} deg, column {c + 1} at {grid_az[r, c + 1]} deg"
+                f"az_deg: FEs must be ordered by increasing azimuth within a row "
+                f"(paper order: FE 0 and 2 smaller azimuth than 1 and 3); row {r}: column {c} "
+                f"at {grid_az[r, c]:g} deg, column {c + 1} at {grid_az[r, c + 1]:g} deg",
+                key="az_deg", fe=int(r * self.columns + c + 1),
             )
         if np.any(np.diff(grid_el, axis=0) < 0):
             r, c = np.argwhere(np.diff(grid_el, axis=0) < 0)[0]
             raise RigError(
-                f"el_deg: FEs must be ordered by increasing elevation between rows (paper order: "
-                f"FE 0 and 1 lower than 2 and 3); column {c}: row {r} at {grid_el[r, c]} deg, "
-                f"row {r + 1} at {grid_el[r + 1, c]} deg"
+                f"el_deg: FEs must be ordered by increasing elevation between rows "
+                f"(paper order: FE 0 and 1 lower than 2 and 3); column {c}: row {r} at "
+                f"{grid_el[r, c]:g} deg, row {r + 1} at {grid_el[r + 1, c]:g} deg",
+                key="el_deg", fe=int((r + 1) * self.columns + c),
             )
 
     @property
@@ -334,18 +351,23 @@ class Rig:
         except RigError as exc:
             raise doc.error(("rts",), str(exc)) from None
         try:
+            limits = HardwareLimits(**data.get("limits", {}))
+        except RigError as exc:
+            key = tuple((exc.key or "limits").split("."))
+            raise doc.error(key, str(exc).removeprefix(f"{exc.key}: ")) from None
+        _check_distinct_directions(doc, az_grid, el_grid, columns, layout is not None)
+        try:
             return cls(
                 name=data["name"], az_deg=az_grid, el_deg=el_grid, distance_m=dist, rows=rows,
                 columns=columns, cal_delay_s=cal["delay_s"], cal_phase_deg=cal["phase_deg"],
-                cal_gain_db=cal["gain_db"],
-                limits=HardwareLimits(**data.get("limits", {})),
+                cal_gain_db=cal["gain_db"], limits=limits,
                 reference=Reference(**data.get("reference", {})),
                 rx_offset_m=offsets["rx_offset_m"], tx_offset_m=offsets["tx_offset_m"],
                 rts=delay_model, seen=seen,
             )
         except RigError as exc:
-            key = "layout" if layout is not None else "front_ends"
-            raise doc.error((key,), str(exc)) from None
+            message = str(exc).removeprefix(f"{exc.key}: ") if exc.fe is not None else str(exc)
+            raise doc.error(_fe_key(exc, layout is not None, columns), message) from None
 
 
     def to_document(self) -> dict[str, Any]:
@@ -374,6 +396,41 @@ class Rig:
     def write(self, path: str | Path) -> None:
         """Write the rig as a ``*.rig.yaml`` file (`from_file` reads it back)."""
         Path(path).write_text(yaml.safe_dump(self.to_document(), sort_keys=False, width=100))
+
+
+def _fe_key(exc: RigError, layout: bool, columns: int) -> tuple[str | int, ...]:
+    """Where in a rig file the FE an error names is: its entry, or its layout row or column."""
+    if exc.fe is None or exc.key not in ("az_deg", "el_deg"):
+        return ("layout",) if layout else ("front_ends",)
+    if not layout:
+        return ("front_ends", exc.fe, exc.key)
+    return ("layout", exc.key, exc.fe % columns if exc.key == "az_deg" else exc.fe // columns)
+
+
+def _check_distinct_directions(doc: Document, az_deg: FloatArray, el_deg: FloatArray,
+                               columns: int, layout: bool) -> None:
+    """Refuse a rig file with two FEs in one direction.
+
+    No bench has two FE antennas in one place: such a file is a typing or copying mistake, and
+    its quads would fail every target as if the radar missed it. (`Rig` itself accepts
+    degenerate quads, whose FEs share an azimuth or an elevation; the solver flags them.)
+    """
+    same = np.triu((az_deg[:, None] == az_deg) & (el_deg[:, None] == el_deg), k=1)
+    if not same.any():
+        return
+    first, second = (int(i) for i in np.argwhere(same)[0])
+    where = (f"az_deg {az_deg[first]:g}, el_deg {el_deg[first]:g}; every FE needs its own "
+             f"direction")
+    if not layout:
+        raise doc.error(("front_ends", second),
+                        f"FE {second} is in the same direction as FE {first} ({where})")
+    if first % columns != second % columns:
+        raise doc.error(("layout", "az_deg", second % columns),
+                        f"column {second % columns} repeats the azimuth of column "
+                        f"{first % columns} ({where})")
+    raise doc.error(("layout", "el_deg", second // columns),
+                    f"row {second // columns} repeats the elevation of row "
+                    f"{first // columns} ({where})")
 
 
 # What a survey stores per FE: where the radar saw it alone and its level (`rts_scenario.survey`).

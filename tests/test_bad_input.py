@@ -123,6 +123,9 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("unknown-motion", sub("type: constant_velocity, position_m: [30",
                            "type: teleport, position_m: [30"),
      r"^{f}:13:\d+: targets\[0\].motion"),
+    ("motion-without-type", sub("type: constant_velocity, position_m: [30", "position_m: [30"),
+     r"^{f}:13:\d+: targets\[0\].motion: 'type' is required but missing; allowed values: "
+     r"'stationary', 'constant_velocity'"),
     ("position-wrong-length", sub("position_m: [30, 0, 0.6]", "position_m: [30, 0]"),
      r"^{f}:13:\d+: targets\[0\].motion.*(position_m|items)"),
     ("speed-profile-not-increasing", sub(
@@ -135,6 +138,16 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:13:\d+: targets\[0\].motion.points\[1\].position_m: repeats waypoint 0"),
     ("disappear-before-appear", TINY + "    appear_s: 2\n    disappear_s: 1\n",
      r"^{f}:16:5: targets\[0\].disappear_s: must be later than appear_s = 2, got 1"),
+    ("no-targets", TINY.split(TARGET)[0].replace("targets:", "targets: []"),
+     r"^{f}:11:1: targets: the scene has no targets .* scenes without targets \(false alarms "
+     r"on an empty bench\) are not supported"),
+    ("target-never-present", TINY + "    appear_s: 100\n",
+     r"^{f}:15:5: targets\[0\].appear_s: the target appears at 100 s, after the scene's last "
+     r"frame at 0.4 s"),
+    ("lane-change-after-the-end", TINY + "    lane_changes: [{start_s: 300, duration_s: 1, "
+     "offset_m: 3}]\n",
+     r"^{f}:15:\d+: targets\[0\].lane_changes\[0\].start_s: the lane change starts at 300 s, "
+     r"at or after the scene's end"),
     ("rcs-table-mismatch", sub("rcs: {rcs_dbsm: 10.0}",
                                "rcs: {aspect_deg: [0, 90], rcs_dbsm: [1, 2, 3]}"),
      r"^{f}:14:\d+: targets\[0\].rcs.rcs_dbsm: needs one value per aspect_deg entry"),

@@ -421,6 +421,21 @@ BAD_MAPPINGS = [
     ("too-many-messages", ("messages: [Obj]", "messages: [Obj" + ", Obj" * 8 + "]"),
      "detection.messages", r"must have at most 8 items, got 9"),
     ("missing-dbc", ("dbc: mux.dbc", "dbc: none.dbc"), "dbc", r"cannot load DBC .*none.dbc"),
+    ("one-signal-two-quantities", ("elevation_deg: Elevation", "elevation_deg: Azimuth"),
+     "detection.elevation_deg",
+     r"signal 'Azimuth' is already mapped as detection.azimuth_deg; each signal carries one"),
+    ("counter-is-the-count", ("counter: Counter", "counter: Count"), "header.count[0]",
+     r"signal 'Count' is already mapped as header.counter"),
+    ("scale-zero", ("rcs_dbsm: RCS", "rcs_dbsm: {signal: RCS, scale: 0}"),
+     "detection.rcs_dbsm.scale", r"must not be 0: rcs_dbsm would read 0 whatever the radar"),
+    ("shared-frame-id", ("BO_ 770 ObjFD", "BO_ 769 ObjFD"), "dbc",
+     r"DBC mux.dbc: messages 'Obj' and 'ObjFD' have the same frame ID 0x301; a receiver could "
+     r"not tell them apart"),
+    ("dbc-factor-zero", ("(0.001,0) [0|65.535]", "(0,0) [0|65.535]"), "header.timestamp",
+     r"signal 'MeasTime' of message 'Head' in DBC mux.dbc has factor 0: every raw value reads 0"),
+    ("dbc-factor-zero-unmapped", ("ProbOfExist m2 : 11|3@0+ (1,0)",
+                                  "ProbOfExist m2 : 11|3@0+ (0,0)"), "dbc",
+     r"signal 'ProbOfExist' of message 'Obj' in DBC mux.dbc has factor 0"),
 ]
 
 
@@ -441,7 +456,7 @@ def test_bad_mapping_is_one_located_error_naming_file_and_key(tmp_path, capsys, 
     code = cli.main(["run", str(ROOT / "scenarios" / "cut_in.scenario.yaml"),
                      "--mapping", str(path)])
     err = capsys.readouterr().err
-    assert code == 2 and "Traceback" not in err
+    assert code == 2 and "Traceback" not in err and "Overwriting" not in err
     lines = [line for line in err.splitlines() if "error: " in line]
     assert len(lines) == 1, err
     message = lines[0].split("error: ", 1)[1]

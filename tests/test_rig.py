@@ -112,11 +112,38 @@ BAD_RIGS = [
      3, "front_ends", "rows x columns"),
     ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 5, el_deg: 1}\n  - {az_deg: 2, el_deg: 1}\n"
      "  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
-     3, "front_ends", "increasing azimuth"),
+     5, "front_ends[1].az_deg", "increasing azimuth"),
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
      "  echoes_per_channel: 0\n", 5, "limits.echoes_per_channel", "must be >= 1"),
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\ndistance_m: 0\n",
      4, "distance_m", "must be > 0"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1}\n  - {az_deg: 1, el_deg: 1}\n"
+     "  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
+     5, "front_ends[1]", "FE 1 is in the same direction as FE 0 (az_deg 1, el_deg 1; every FE "
+     "needs its own direction)"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1}\n  - {az_deg: 2, el_deg: 1}\n"
+     "  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 0.5}\n",
+     7, "front_ends[3].el_deg", "increasing elevation between rows (paper order: FE 0 and 1 "
+     "lower than 2 and 3); column 1: row 0 at 1 deg, row 1 at 0.5 deg"),
+    ("rts_rig: 1\nname: x\nrows: 2\ncolumns: 3\nfront_ends:\n  - {az_deg: -10, el_deg: -8}\n"
+     "  - {az_deg: 0, el_deg: -8}\n  - {az_deg: 10, el_deg: 8}\n  - {az_deg: -9, el_deg: 0}\n"
+     "  - {az_deg: 10, el_deg: 8}\n  - {az_deg: 11, el_deg: 9}\n",
+     10, "front_ends[4]", "FE 4 is in the same direction as FE 2 (az_deg 10, el_deg 8"),
+    ("rts_rig: 1\nname: x\nlayout:\n  az_deg: [-21, -21, 0, 10.5, 21]\n  el_deg: [-9, 0, 9]\n",
+     4, "layout.az_deg[1]", "column 1 repeats the azimuth of column 0 (az_deg -21, el_deg -9;"),
+    ("rts_rig: 1\nname: x\nlayout:\n  az_deg: [-5, 5]\n  el_deg: [-9, 0, 0]\n",
+     5, "layout.el_deg[2]", "row 2 repeats the elevation of row 1 (az_deg -5, el_deg 0;"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  attenuation_min_db: 90\n  attenuation_max_db: 80\n", 5, "limits.attenuation_min_db",
+     "must be below attenuation_max_db = 80, got 90"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  doppler_max_hz: 1000\n  doppler_min_hz: 2000\n", 6, "limits.doppler_min_hz",
+     "must be below doppler_max_hz = 1000, got 2000"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  attenuation_max_db: 80\n  attenuation_step_db: 500\n", 6, "limits.attenuation_step_db",
+     "must be within 0 (continuous) .. 80 (attenuation_max_db - attenuation_min_db), got 500"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  update_rate_hz: 0\n", 5, "limits.update_rate_hz", "must be > 0, got 0"),
     ("rts_rig: 1\nname: x\n", None, "", "exactly one of 'front_ends'"),
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nrts:\n"
      "  delay_model: fibre\n", 5, "rts.delay_model", "allowed values: 'if', 'rf'"),

@@ -103,6 +103,13 @@ BAD = [
     (edit("speed_mps: 20.0}", "speed_mps: 20.0, acceleration_mps2: 1}"), 10,
      "ego.motion.acceleration_mps2", "unknown key 'acceleration_mps2'"),
     (edit("speed_mps: 20.0}", "speed_mps: -20.0}"), 10, "ego.motion.speed_mps", "must be >= 0"),
+    (edit("{type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "{position_m: [30, 0, 0.6]}"), 13, "targets[0].motion",
+     "'type' is required but missing; allowed values: 'stationary', 'constant_velocity', "
+     "'constant_acceleration', 'speed_profile', 'waypoints'"),
+    (edit("{type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "{position_m: [30, 0, 0.6], speed_mps: 22}"), 13, "targets[0].motion",
+     "'type' is required but missing; allowed values: 'stationary'"),
     (edit("  - name: car\n", "  - name: car!\n"), 12, "targets[0].name", "does not match"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0, fluctuation: swerling2}"),
      14, "targets[0].rcs.fluctuation", "allowed values: 'none', 'swerling1', 'swerling3'"),
@@ -114,6 +121,20 @@ BAD = [
      14, "targets[0].rcs.aspect_deg", "distinct modulo 360"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 4\n"
           "    disappear_s: 2"), 16, "targets[0].disappear_s", "must be later than appear_s"),
+    (GOOD.split("  - name: car")[0].replace("targets:", "targets: []"), 11, "targets",
+     "the scene has no targets (none here and none in an included fragment)"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 100"), 15,
+     "targets[0].appear_s", "the target appears at 100 s, after the scene's last frame at "
+     "4.95 s (duration_s = 5 s at 20 Hz): it would be present in no frame"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 1.01\n"
+          "    disappear_s: 1.04"), 16, "targets[0].disappear_s",
+     "no frame falls between appear_s = 1.01 s and disappear_s = 1.04 s (frames every 0.05 s"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
+          "      - {start_s: 300, duration_s: 2, offset_m: 3}"), 16,
+     "targets[0].lane_changes[0].start_s", "the lane change starts at 300 s, at or after the "
+     "scene's end (duration_s = 5 s at 20 Hz): it would never happen"),
+    (edit("speed_mps: 20.0}\n", "speed_mps: 20.0}\n  lane_changes: [{start_s: 5, duration_s: 1, "
+          "offset_m: 3}]\n"), 11, "ego.lane_changes[0].start_s", "start_s must be < 5"),
     (edit("    rcs: {rcs_dbsm: 10.0}\n",
           "    rcs: {rcs_dbsm: 10.0}\n" + GOOD.split("targets:\n")[1]),
      15, "targets[1].name", "duplicate target name 'car'"),
@@ -195,12 +216,54 @@ def test_errors_in_included_and_referenced_files_point_into_them(tmp_path):
     assert info.value.file.endswith("bad.rig.yaml") and info.value.line == 3
 
 
+def test_a_fragment_included_twice_is_named_once(tmp_path):
+    (tmp_path / "fr").mkdir()
+    (tmp_path / "fr" / "ok.yaml").write_text(
+        "targets:\n  - {name: p1, motion: {type: stationary, position_m: [20, 0, 0]}, "
+        "rcs: {rcs_dbsm: 10}}\n")
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("targets:", "include:\n  - fr/ok.yaml\n  - ./fr/../fr/ok.yaml\n"
+                                      "targets:"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    err = info.value
+    assert (err.file, err.line, err.key_path) == (str(scene), 13, "include[1]")
+    assert str(err).endswith("include[1]: './fr/../fr/ok.yaml' is included twice (first as "
+                             "include[0] 'fr/ok.yaml'); include each fragment once")
+
+
 def test_relative_rig_and_profile_files_inside_the_tree(tmp_path):
     (tmp_path / "rigs").mkdir()
     shutil.copy(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml", tmp_path / "rigs")
     scene = tmp_path / "s.scenario.yaml"
     scene.write_text(edit("rig: wide-3x5", "rig: rigs/lab-2x3.rig.yaml"))
     assert load_scenario(scene).rig.name == "lab-2x3"
+
+    # A file not named *.rig.yaml is a file, not an unknown preset; so is a bare name that exists.
+    shutil.copy(tmp_path / "rigs" / "lab-2x3.rig.yaml", tmp_path / "rigs" / "x.yaml")
+    shutil.copy(tmp_path / "rigs" / "lab-2x3.rig.yaml", tmp_path / "lab")
+    for name in ("rigs/x.yaml", "lab"):
+        scene.write_text(edit("rig: wide-3x5", f"rig: {name}"))
+        assert load_scenario(scene).rig.name == "lab-2x3"
+    scene.write_text(edit("rig: wide-3x5", "rig: rigs/y.yaml"))
+    with pytest.raises(ScenarioError, match=r":8:1: rig: file not found: 'rigs/y.yaml'"):
+        load_scenario(scene)
+
+
+def test_an_inconsistent_rig_is_reported_in_the_rig_file_not_as_the_scene(tmp_path):
+    (tmp_path / "rigs").mkdir()
+    rig = (ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml").read_text()
+    bad = tmp_path / "rigs" / "bad.rig.yaml"
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("rig: wide-3x5", "rig: rigs/bad.rig.yaml"))
+    for old, new, key in [("update_rate_hz: 50.0", "update_rate_hz: 0", "limits.update_rate_hz"),
+                          ("{az_deg: 0.1, el_deg: -7.9,", "{az_deg: -10.2, el_deg: -8.1,",
+                           "front_ends[1]")]:
+        assert old in rig
+        bad.write_text(rig.replace(old, new))
+        with pytest.raises(ScenarioError) as info:
+            load_scenario(scene)
+        assert info.value.file == str(bad) and info.value.key_path == key, str(info.value)
 
 
 def test_cli_validate_exit_codes(tmp_path, capsys):
@@ -313,3 +376,33 @@ def test_key_paths_joined_by_commas_vary_together(tmp_path):
     scene = load_scenario(path, combos[2][1])
     assert scene.duration_s == 8.0
     assert scene.radar_options.estimator == "bartlett"
+
+
+def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):
+    # YAML 1.1 reads 76.5e9 and 1e6 as strings; YAML 1.2 (and engineers) as numbers.
+    from rts_scenario.canbus.mapping import CanMapping
+    from rts_scenario.located_yaml import load_yaml
+    from rts_scenario.radar.profile import RadarProfile
+    from rts_scenario.rig import Rig
+
+    assert load_yaml("x.yaml", "[1e6, 76.5e9, -2.5E-3, .5e1, 7.65e+10, 10, 1.5, '1e6', 1e]\n"
+                     ).data == [1e6, 76.5e9, -2.5e-3, 5.0, 7.65e10, 10, 1.5, "1e6", "1e"]
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    assert "fc_hz: 76.5e+9" in radar
+    (tmp_path / "r.radar.yaml").write_text(radar.replace("fc_hz: 76.5e+9", "fc_hz: 76.5e9"))
+    assert RadarProfile.from_file(tmp_path / "r.radar.yaml").fc_hz == 76.5e9
+    rig = (ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml").read_text()
+    (tmp_path / "r.rig.yaml").write_text(rig.replace("delay_step_s: 1.0e-10",
+                                                     "delay_step_s: 1e-10"))
+    assert Rig.from_file(tmp_path / "r.rig.yaml").limits.delay_step_s == 1e-10
+    can = ROOT / "scenarios" / "can"
+    shutil.copy(can / "cluster_list.dbc", tmp_path)
+    (tmp_path / "m.mapping.yaml").write_text((can / "cluster_list.mapping.yaml").read_text()
+                                             .replace("rcs_dbsm: RCS",
+                                                      "rcs_dbsm: {signal: RCS, scale: 1e0}"))
+    assert CanMapping.from_file(tmp_path / "m.mapping.yaml").fields["rcs_dbsm"].scale == 1.0
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("speed_mps: 19.0", "speed_mps: 1.9e1").replace(
+        "duration_s: 5.0", "duration_s: 5e0"))
+    loaded = load_scenario(scene)
+    assert loaded.duration_s == 5.0

@@ -15,6 +15,9 @@ as the protocol has them and skipped by the receiver.
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -22,7 +25,7 @@ from typing import Any
 
 import cantools
 
-from ..located_yaml import Document, load_yaml, validate
+from ..located_yaml import Document, format_key_path, load_yaml, validate
 
 QUANTITIES = ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps", "x_m", "y_m",
               "z_m", "vx_mps", "vy_mps", "rcs_dbsm", "snr_db")
@@ -83,6 +86,23 @@ PartKey = tuple[int, int | None]
 def _can_db(db: object) -> cantools.database.can.Database:
     assert isinstance(db, cantools.database.can.Database)
     return db
+
+
+@contextmanager
+def _quiet_cantools() -> Iterator[None]:
+    """Hold back cantools' "Overwriting message" warnings: `CanMapping` reports the clash."""
+    logger = logging.getLogger("cantools.database.can.database")
+    before = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(before)
+
+
+def _load_dbc(load: Callable[[], object]) -> cantools.database.can.Database:
+    with _quiet_cantools():
+        return _can_db(load())
 
 
 def pages(message: Message) -> list[int | None]:
@@ -186,7 +206,8 @@ class CanMapping:
         text = folder.joinpath("rts_detections.mapping.yaml").read_text()
         doc = load_yaml("<mapping rts-detections>", text)
         dbc = folder.joinpath("rts_detections.dbc").read_text()
-        return cls._build(doc, _can_db(cantools.database.load_string(dbc, database_format="dbc")))
+        return cls._build(doc, _load_dbc(
+            lambda: cantools.database.load_string(dbc, database_format="dbc")))
 
     @classmethod
     def from_file(cls, path: str | Path) -> CanMapping:
@@ -196,7 +217,7 @@ class CanMapping:
         validate(doc, MAPPING_SCHEMA)
         dbc_path = path.parent / doc.data["dbc"]
         try:
-            db = _can_db(cantools.database.load_file(dbc_path, database_format="dbc"))
+            db = _load_dbc(lambda: cantools.database.load_file(dbc_path, database_format="dbc"))
         except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
             raise doc.error(("dbc",), f"cannot load DBC {dbc_path}: {exc}") from None
         return cls._build(doc, db)
@@ -221,6 +242,7 @@ class CanMapping:
 
     def _check(self, doc: Document) -> None:
         """Every named message and signal exists in the DBC; the form has what it needs."""
+        _check_dbc(doc, self.db)
         names = {m.name: m for m in self.db.messages}
         def need(key: tuple[str | int, ...], message: str, signals: list[str | None]) -> None:
             if message not in names:
@@ -270,3 +292,62 @@ class CanMapping:
         if missing:
             raise doc.error(("detection", "form"),
                             f"form {self.form!r} needs {', '.join(missing)}")
+        self._check_roles(doc)
+        for q, f in self.fields.items():
+            if f.scale == 0.0:
+                raise doc.error(("detection", q, "scale"),
+                                f"must not be 0: {q} would read {f.offset:g} whatever the radar "
+                                f"sends, and could not be written; got 0")
+        dbc = doc.data["dbc"]
+        for m in (self.header, *carriers):
+            for sig in names[m].signals:
+                if sig.scale == 0:
+                    group = "header" if m == self.header else "detection"
+                    mapped = next((k for k, name in self._named()
+                                   if name == sig.name and k[0] == group), ("dbc",))
+                    raise doc.error(mapped, f"signal {sig.name!r} of message {m!r} in DBC {dbc} "
+                                            f"has factor 0: every raw value reads "
+                                            f"{sig.offset:g}, so it carries nothing and cannot "
+                                            f"be written; give it a factor other than 0")
+
+    def _named(self) -> list[tuple[tuple[str | int, ...], str]]:
+        """Every (mapping key, signal) pair, header roles first, in file order."""
+        head: list[tuple[tuple[str | int, ...], str | None]] = [
+            (("header", "counter"), self.counter),
+            *((("header", "count", i), c) for i, c in enumerate(self.count)),
+            (("header", "timestamp"), self.timestamp),
+            (("header", "checksum"), self.header_checksum)]
+        det: list[tuple[tuple[str | int, ...], str | None]] = [
+            (("detection", "index"), self.index),
+            (("detection", "frame_counter"), self.frame_counter),
+            (("detection", "checksum"), self.checksum),
+            *((("detection", q), f.signal) for q, f in self.fields.items())]
+        return [(k, n) for k, n in (*head, *det) if n is not None]
+
+    def _check_roles(self, doc: Document) -> None:
+        """Refuse two keys of the header (or of the detection) naming one signal."""
+        seen: dict[tuple[str, str], tuple[str | int, ...]] = {}
+        for key, name in self._named():
+            first = seen.setdefault((str(key[0]), name), key)
+            if first != key:
+                raise doc.error(key, f"signal {name!r} is already mapped as "
+                                     f"{format_key_path(first)}; each signal carries one "
+                                     f"quantity")
+
+
+def _check_dbc(doc: Document, db: cantools.database.can.Database) -> None:
+    """Every message of the DBC has its own name and its own frame ID."""
+    by_id: dict[tuple[int, bool], str] = {}
+    by_name: set[str] = set()
+    for message in db.messages:
+        if message.name in by_name:
+            raise doc.error(("dbc",), f"DBC {doc.data['dbc']} defines message "
+                                      f"{message.name!r} twice; message names must be unique")
+        by_name.add(message.name)
+        ident = (message.frame_id, bool(message.is_extended_frame))
+        if ident in by_id:
+            raise doc.error(("dbc",), f"DBC {doc.data['dbc']}: messages {by_id[ident]!r} and "
+                                      f"{message.name!r} have the same frame ID "
+                                      f"0x{message.frame_id:X}; a receiver could not tell them "
+                                      f"apart, every message needs its own ID")
+        by_id[ident] = message.name

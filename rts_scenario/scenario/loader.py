@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
@@ -92,14 +93,30 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     root = path.resolve().parent
 
     target_sources: list[tuple[Document, KeyPath, dict[str, Any]]] = []
+    included: dict[Path, int] = {}
     for i, name in enumerate(data.get("include", [])):
-        fragment = load_yaml(_inside(doc, ("include", i), root, name))
+        fragment_path = _inside(doc, ("include", i), root, name)
+        if fragment_path in included:
+            first = included[fragment_path]
+            raise doc.error(("include", i),
+                            f"{name!r} is included twice (first as include[{first}] "
+                            f"{data['include'][first]!r}); include each fragment once")
+        included[fragment_path] = i
+        fragment = load_yaml(fragment_path)
         if not isinstance(fragment.data, dict):
             raise fragment.error((), "a fragment must be a mapping with a 'targets' list")
         validate(fragment, _fragment_schema())
         target_sources += [(fragment, ("targets", j), t)
                            for j, t in enumerate(fragment.data["targets"])]
     target_sources += [(doc, ("targets", j), t) for j, t in enumerate(data["targets"])]
+    if not target_sources:
+        # The verdict fails a run with no checkable target-frame ("nothing to check"), and
+        # counting only false detections would need a verdict of its own.
+        raise doc.error(("targets",),
+                        "the scene has no targets (none here and none in an included "
+                        "fragment): a run checks detections against targets and would have "
+                        "nothing to check; scenes without targets (false alarms on an empty "
+                        "bench) are not supported, give at least one target")
 
     radar = _load_referenced(doc, ("radar", "profile"), root, data["radar"]["profile"],
                              radar_presets(), RadarProfile.preset, RadarProfile.from_file,
@@ -107,8 +124,9 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     rig = _load_referenced(doc, ("rig",), root, data["rig"], rig_presets(), Rig.preset,
                            Rig.from_file, ".rig.yaml")
     effects = Effects(rcs_fluctuation=data.get("effects", {}).get("rcs_fluctuation", "none"))
+    frames = _Frames(float(data["duration_s"]), float(data["frame_rate_hz"]))
     ego_spec = data.get("ego", {"motion": {"type": "stationary", "position_m": [0, 0, 0]}})
-    ego = _trajectory(doc, ("ego",), ego_spec)
+    ego = _trajectory(doc, ("ego",), ego_spec, frames)
 
     targets = []
     seen: dict[str, tuple[Document, KeyPath]] = {}
@@ -122,9 +140,9 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                 f"{f':{line}' if line else ''}); names must be unique",
             )
         seen[spec["name"]] = (source, key)
-        targets.append(_target(source, key, spec, effects.rcs_fluctuation))
+        targets.append(_target(source, key, spec, effects.rcs_fluctuation, frames))
 
-    _check_size(doc, float(data["duration_s"]), float(data["frame_rate_hz"]), len(targets))
+    _check_size(doc, frames, len(targets))
     expect = data.get("expectations", {})
     return Scenario(
         variant=variant_id(overrides or {}), parameters=dict(overrides or {}),
@@ -148,14 +166,15 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     )
 
 
-def _check_size(doc: Document, duration_s: float, frame_rate_hz: float, n_targets: int) -> None:
+def _check_size(doc: Document, frames: _Frames, n_targets: int) -> None:
     """Refuse scenes with more target-frames than a run can stream (`MAX_TARGET_FRAMES`)."""
-    n_frames = max(1, int(round(duration_s * frame_rate_hz)))
+    n_frames = frames.n
     if n_frames * max(1, n_targets) > MAX_TARGET_FRAMES:
         raise doc.error(
             ("duration_s",),
-            f"duration_s x frame_rate_hz = {duration_s:g} s x {frame_rate_hz:g} Hz = {n_frames:,} "
-            f"frames x {n_targets} targets = {n_frames * max(1, n_targets):,} target-frames; "
+            f"duration_s x frame_rate_hz = {frames.duration_s:g} s x {frames.rate_hz:g} Hz = "
+            f"{n_frames:,} frames x {n_targets} targets = {n_frames * max(1, n_targets):,} "
+            f"target-frames; "
             f"the limit is {MAX_TARGET_FRAMES:,} (shorten duration_s or lower frame_rate_hz)",
         )
 
@@ -273,7 +292,9 @@ def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets
                      preset: Any, from_file: Any, suffix: str) -> Any:
     if name in presets:
         return preset(name)
-    if not name.endswith(suffix):
+    # A name that is no preset is a file when it looks like one or one exists by that name.
+    looks_like_file = name.endswith((suffix, ".yaml", ".yml")) or "/" in name
+    if not looks_like_file and not (root / name).is_file():
         raise doc.error(
             key, f"unknown preset {name!r}; valid presets: {', '.join(presets)}, or a relative "
                  f"path to a *{suffix} file",
@@ -286,17 +307,58 @@ def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets
         raise doc.error(key, f"{name}: {exc}") from None
 
 
-def _target(doc: Document, key: KeyPath, spec: dict[str, Any], default_fluct: str) -> TargetSpec:
+class _Frames:
+    """The scene's frame times, ``f / frame_rate_hz`` for ``f < n``, as the kinematics uses them."""
+
+    def __init__(self, duration_s: float, frame_rate_hz: float) -> None:
+        self.duration_s = duration_s
+        self.rate_hz = frame_rate_hz
+        self.n = max(1, int(round(duration_s * frame_rate_hz)))
+
+    @property
+    def last_s(self) -> float:
+        return (self.n - 1) / self.rate_hz
+
+    def first_at_or_after(self, t_s: float) -> int:
+        """Index of the first frame at or after ``t_s`` (may be ``n``: none)."""
+        f = max(0, math.ceil(t_s * self.rate_hz))
+        # The product rounds: step to the exact boundary the kinematics' comparison draws.
+        while f > 0 and (f - 1) / self.rate_hz >= t_s:
+            f -= 1
+        while f / self.rate_hz < t_s:
+            f += 1
+        return f
+
+    def describe(self) -> str:
+        return f"duration_s = {self.duration_s:g} s at {self.rate_hz:g} Hz"
+
+
+def _target(doc: Document, key: KeyPath, spec: dict[str, Any], default_fluct: str,
+            frames: _Frames) -> TargetSpec:
     appear = float(spec.get("appear_s", 0.0))
     disappear = float(spec.get("disappear_s", np.inf))
     if disappear <= appear:
         raise doc.error((*key, "disappear_s"),
                         f"must be later than appear_s = {appear:g}, got {disappear:g}")
+    # A target present in no frame has nothing to check and would pass with 0 frames.
+    first = frames.first_at_or_after(appear)
+    if first >= frames.n:
+        raise doc.error((*key, "appear_s"),
+                        f"the target appears at {appear:g} s, after the scene's last frame at "
+                        f"{frames.last_s:g} s ({frames.describe()}): it would be present in no "
+                        f"frame and nothing could be checked; appear_s must be <= "
+                        f"{frames.last_s:g}")
+    if first / frames.rate_hz >= disappear:
+        raise doc.error((*key, "disappear_s"),
+                        f"no frame falls between appear_s = {appear:g} s and disappear_s = "
+                        f"{disappear:g} s (frames every {1 / frames.rate_hz:g} s, the first "
+                        f"after appear_s at {first / frames.rate_hz:g} s): the target would be "
+                        f"present in no frame and nothing could be checked")
     frame = spec.get("frame", "world")
     return TargetSpec(
         name=spec["name"], kind=spec.get("kind", "other"), frame=frame,
-        trajectory=_trajectory(doc, key, spec), rcs=_rcs(doc, (*key, "rcs"), spec["rcs"],
-                                                         default_fluct),
+        trajectory=_trajectory(doc, key, spec, frames),
+        rcs=_rcs(doc, (*key, "rcs"), spec["rcs"], default_fluct),
         appear_s=appear, disappear_s=disappear,
         expected_limits=frozenset(spec.get("expected_limits", ())),
     )
@@ -326,10 +388,17 @@ def _rcs(doc: Document, key: KeyPath, spec: dict[str, Any], default_fluct: str) 
                     fluctuation=fluctuation)
 
 
-def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any]) -> Trajectory:
+def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
+                frames: _Frames) -> Trajectory:
     motion = spec["motion"]
     mkey = (*key, "motion")
     kind = motion["type"]
+    for i, lc in enumerate(spec.get("lane_changes", [])):
+        if lc["start_s"] >= frames.duration_s:
+            raise doc.error((*key, "lane_changes", i, "start_s"),
+                            f"the lane change starts at {lc['start_s']:g} s, at or after the "
+                            f"scene's end ({frames.describe()}): it would never happen; "
+                            f"start_s must be < {frames.duration_s:g}")
     lane_changes = tuple(
         LaneChange(float(lc["start_s"]), float(lc["duration_s"]), float(lc["offset_m"]))
         for lc in spec.get("lane_changes", [])
