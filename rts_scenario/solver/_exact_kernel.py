@@ -375,23 +375,34 @@ def _phase_residual(f_re, f_im, w, c, s):  # pragma: no cover
     return _atan2(b_im * c - b_re * s, b_re * c + b_im * s)
 
 
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _quad_bounds(lines, boxes, q, slack):  # pragma: no cover
+    """Quad ``q``'s box widened by ``slack`` and its four edge lines, hoisted as one tuple."""
+    return (boxes[q, 0] - slack, boxes[q, 1] + slack, boxes[q, 2] - slack,
+            boxes[q, 3] + slack, -slack,
+            lines[q, 0, 0], lines[q, 0, 1], lines[q, 0, 2],
+            lines[q, 1, 0], lines[q, 1, 1], lines[q, 1, 2],
+            lines[q, 2, 0], lines[q, 2, 1], lines[q, 2, 2],
+            lines[q, 3, 0], lines[q, 3, 1], lines[q, 3, 2])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _inside(a, e, bd):  # pragma: no cover
+    """`quads.inside_quads` of one target (``bd``: `_quad_bounds`), without branches."""
+    inside = (a >= bd[0]) & (a <= bd[1]) & (e >= bd[2]) & (e <= bd[3])
+    inside &= bd[5] * a + bd[6] * e + bd[7] >= bd[4]
+    inside &= bd[8] * a + bd[9] * e + bd[10] >= bd[4]
+    inside &= bd[11] * a + bd[12] * e + bd[13] >= bd[4]
+    inside &= bd[14] * a + bd[15] * e + bd[16] >= bd[4]
+    return inside
+
+
 @_jit
 def _locate_one_quad(az, el, lines, boxes, slack, quad):  # pragma: no cover
     """`quads.inside_quads` of the only quad (four FEs): 0 inside, else -1 (a vector loop)."""
-    a_lo, a_hi = boxes[0, 0] - slack, boxes[0, 1] + slack
-    e_lo, e_hi = boxes[0, 2] - slack, boxes[0, 3] + slack
-    l00, l01, l02 = lines[0, 0, 0], lines[0, 0, 1], lines[0, 0, 2]
-    l10, l11, l12 = lines[0, 1, 0], lines[0, 1, 1], lines[0, 1, 2]
-    l20, l21, l22 = lines[0, 2, 0], lines[0, 2, 1], lines[0, 2, 2]
-    l30, l31, l32 = lines[0, 3, 0], lines[0, 3, 1], lines[0, 3, 2]
+    bd = _quad_bounds(lines, boxes, 0, slack)
     for n in range(az.size):
-        a, e = az[n], el[n]
-        inside = (a >= a_lo) & (a <= a_hi) & (e >= e_lo) & (e <= e_hi)
-        inside &= l00 * a + l01 * e + l02 >= -slack
-        inside &= l10 * a + l11 * e + l12 >= -slack
-        inside &= l20 * a + l21 * e + l22 >= -slack
-        inside &= l30 * a + l31 * e + l32 >= -slack
-        quad[n] = 0 if inside else -1
+        quad[n] = 0 if _inside(az[n], el[n], bd) else -1
 
 
 @_jit
@@ -425,21 +436,11 @@ def _keep_inside(az, el, order, lo, hi, q, lines, boxes, slack, quad):  # pragma
     The others get ``quad`` -1 (`quads.QuadGeometry.assign` scans the other quads for them).
     Returns the end of the targets kept, which move down in their order.
     """
-    a_lo, a_hi = boxes[q, 0] - slack, boxes[q, 1] + slack
-    e_lo, e_hi = boxes[q, 2] - slack, boxes[q, 3] + slack
-    l00, l01, l02 = lines[q, 0, 0], lines[q, 0, 1], lines[q, 0, 2]
-    l10, l11, l12 = lines[q, 1, 0], lines[q, 1, 1], lines[q, 1, 2]
-    l20, l21, l22 = lines[q, 2, 0], lines[q, 2, 1], lines[q, 2, 2]
-    l30, l31, l32 = lines[q, 3, 0], lines[q, 3, 1], lines[q, 3, 2]
+    bd = _quad_bounds(lines, boxes, q, slack)
     kept = lo
     for i in range(lo, hi):
         n = order[i]
-        a, e = az[n], el[n]
-        inside = (a >= a_lo) & (a <= a_hi) & (e >= e_lo) & (e <= e_hi)
-        inside &= l00 * a + l01 * e + l02 >= -slack
-        inside &= l10 * a + l11 * e + l12 >= -slack
-        inside &= l20 * a + l21 * e + l22 >= -slack
-        inside &= l30 * a + l31 * e + l32 >= -slack
+        inside = _inside(az[n], el[n], bd)
         order[kept] = n  # without branches: written always, kept only if inside
         kept += inside
         quad[n] = q if inside else -1
