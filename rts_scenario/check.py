@@ -417,7 +417,9 @@ class Checker:
                     "undecodable messages": bus.get("decode_errors", 0),
                     "detections without a frame header": bus.get("orphans", 0),
                     "conflicting messages (a cycle's header or detections came again with other "
-                    "values, or beyond the count its header announced)": bus.get("conflicts", 0)}
+                    "values, or beyond the count its header announced)": bus.get("conflicts", 0),
+                    "detections the radar could not put on the bus (a value its protocol's "
+                    "signals cannot carry)": bus.get("unsendable_detections", 0)}
             reasons += [f"{v} {k}" for k, v in lost.items() if v]
         n_truth = int(self._checkable.sum())
         if n_truth == 0:

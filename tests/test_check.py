@@ -255,3 +255,16 @@ def test_status_must_be_the_schedules_flags_not_booleans():
     with pytest.raises(CheckError, match=r"of shape \(5, 2\): frames x targets\), got uint16 "
                                          r"of shape \(5, 2, 4\)"):
         check("s", tr, np.zeros((5, 2, 4), dtype=np.uint16), cycles_from(tr), EXPECT)
+
+
+def test_detections_the_radar_could_not_send_fail_the_run():
+    # The simulated radar leaves out detections its protocol cannot carry (a range beyond the
+    # DBC's); they were never seen by the checker, even if the rate still passes.
+    tr = truth(20)
+    bus = {"messages": 60, "unsendable_detections": 3}
+    report = check("s", tr, OK(20, 2), cycles_from(tr), EXPECT, bus=bus)
+    assert not report.passed
+    assert any(r.startswith("3 detections the radar could not put on the bus")
+               for r in report.reasons)
+    assert check("s", tr, OK(20, 2), cycles_from(tr), EXPECT,
+                 bus={"messages": 60, "unsendable_detections": 0}).passed

@@ -82,6 +82,9 @@ def edit(replace: str, by: str) -> str:
 # (scene text, expected line, expected key path, expected message fragment)
 BAD = [
     (edit("rts_scenario: 1", "rts_scenario: 2"), 1, "rts_scenario", "allowed values: 1"),
+    # A rate of 0 would pass a radar that detects nothing.
+    (GOOD + "expectations: {detection_rate: 0}\n", 15, "expectations.detection_rate",
+     "must be > 0, got 0"),
     (edit("name: good", "name: good\ncolour: red"), 3, "colour", "unknown key 'colour'"),
     (edit("duration_s: 5.0", "duration_s: -1"), 3, "duration_s", "must be > 0"),
     (edit("duration_s: 5.0", "duration_s: five"), 3, "duration_s", "must be of type number"),
@@ -377,6 +380,16 @@ def test_key_paths_joined_by_commas_vary_together(tmp_path):
     assert scene.duration_s == 8.0
     assert scene.radar_options.estimator == "bartlett"
 
+
+def test_combinations_with_the_same_id_are_refused(tmp_path):
+    # Runs are told apart by their id: two alike would share a pytest item, a report entry
+    # and a recorded log.
+    path = tmp_path / "twice.scenario.yaml"
+    path.write_text(GOOD + "parametrize:\n  targets.0.rcs.rcs_dbsm: [10, 12, 10]\n")
+    with pytest.raises(ScenarioError, match=r"twice.scenario.yaml:15:\d+: parametrize: "
+                                            r"combinations 1 and 3 have the same id "
+                                            r"'rcs_dbsm=10'"):
+        parametrizations(path)
 
 def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):
     # YAML 1.1 reads 76.5e9 and 1e6 as strings; YAML 1.2 (and engineers) as numbers.

@@ -192,10 +192,19 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
         return [("", {})]
     validate(doc, scenario_schema())
     axes = [_parameter_axis(doc, key, values) for key, values in block.items()]
-    combos = []
+    combos: list[tuple[str, dict[str, Any]]] = []
+    seen: dict[str, int] = {}
     for choice in itertools.product(*axes):
         overrides = {path: value for group in choice for path, value in group}
-        combos.append((variant_id(overrides), overrides))
+        name = variant_id(overrides)
+        if name in seen:
+            # Runs are told apart by their id (pytest items, run reports, recorded logs).
+            raise doc.error(("parametrize",),
+                            f"combinations {seen[name] + 1} and {len(combos) + 1} have the same "
+                            f"id {name!r}: list each value once; keys whose paths end alike "
+                            f"need values that differ")
+        seen[name] = len(combos)
+        combos.append((name, overrides))
     return combos
 
 
