@@ -401,9 +401,11 @@ def add_cycle_truth(checker: Checker, scene: Scenario, clock: RadarClock,
     """Give ``checker`` the ground truth of the radar cycles while the RTS holds ``frames``.
 
     The cycles measured from the first frame's time until the next frame after the last (the
-    scene's end for its last frame), each compared with the truth at its measurement time and
-    with the limits of the frame it measured (``status``, the schedule's, per frame of
-    ``frames``). Returns the cycles' numbers.
+    scene's end for its last frame). Each is compared with the frame the RTS held at its
+    measurement time, as the scene has it at that frame's time, and with that frame's limits
+    (``status``, the schedule's, per frame of ``frames``): the radar is judged on what was
+    played, not on the scene's motion during the hold, which the bench's frame rate decides
+    (the truth's ``t_s`` stay the measurement times). Returns the cycles' numbers.
     """
     t_all = scene.t_s
     last = int(frames[-1]) + 1
@@ -412,8 +414,8 @@ def add_cycle_truth(checker: Checker, scene: Scenario, clock: RadarClock,
     n, t_cycles = clock.cycles_between(float(t_all[frames[0]]), end_s)
     if n.size:
         held = held_frames(t_all[frames], t_cycles)
-        checker.add_truth(int(n[0]), compute_tracks(scene, t_cycles, frames[held]),
-                          status[held])
+        truth = compute_tracks(scene, t_all[frames[held]], frames[held])
+        checker.add_truth(int(n[0]), replace(truth, t_s=t_cycles), status[held])
     return n
 
 
