@@ -65,6 +65,11 @@ Row = Sequence[tuple[float, ...]]
 SUSPECT_PHASE_DEG = 3.0
 SUSPECT_GAIN_DB = 0.3
 SUSPECT_FIT_DEG = 0.05
+# After calibration, the check grid may be seen at most this far (deg) off the angle the schedule
+# predicts (its attenuator and delay steps). A calibrated simulated bench stays below 0.01 deg
+# (0.005 deg steps on classic CAN); one channel left 0.3 dB off costs 0.08-0.13 deg on the shipped
+# rigs, 10 deg of phase 0.13-0.24 deg on the awr1843boost.
+MAX_EXCESS_ERROR_DEG = 0.1
 
 
 @dataclass(frozen=True)
@@ -399,8 +404,51 @@ def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
     """Measure detected minus set angle (deg, (G, 2)) over a grid inside the rig's quads.
 
     The grid is the paper's (azimuth -3..3 deg x elevation -6..6 deg) for kit-table1, and a
-    6 x 5 grid over the middle of every quad otherwise.
+    6 x 5 grid over the middle of every quad otherwise. NaN where the radar reported nothing.
     """
+    return check_grid(rig, radar, measure, method, estimator).error_deg
+
+
+@dataclass(frozen=True)
+class GridCheck:
+    """The angle errors over the check grid (`grid_errors`), and what the schedule expected.
+
+    ``error_deg`` (G, 2) is detected minus set angle, NaN where the radar reported nothing;
+    ``predicted_deg`` (G, 2) the error the schedule predicts from the rig's attenuator and delay
+    steps (the bench's own limit, not the calibration's) for a Bartlett radar, zero for other
+    estimators (the schedule's prediction is the beamformer's), NaN where nothing was played;
+    ``played`` (G,) whether any channel played the point and ``status`` (G,) the schedule's
+    flags (`rts_scenario.schedule.model.Status`), which say why a point was not played.
+    """
+
+    error_deg: FloatArray
+    predicted_deg: FloatArray
+    played: NDArray[np.bool_]
+    status: NDArray[np.uint16]
+
+    def summary(self) -> dict[str, float | int | None]:
+        """Return the statistics ``--json`` reports (docs/cli.md); ``None`` where undefined.
+
+        ``max_excess_error_deg`` is the largest angle by which a detection is off the angle the
+        schedule predicted: the error the bench's steps do not explain.
+        """
+        mag = np.hypot(self.error_deg[:, 0], self.error_deg[:, 1])
+        excess = np.hypot(*(self.error_deg - self.predicted_deg).T)
+        seen = np.isfinite(mag)
+
+        def largest(x: FloatArray) -> float | None:
+            return float(np.max(x[seen])) if seen.any() else None
+
+        return {"max_error_deg": largest(mag),
+                "rms_error_deg": float(np.sqrt(np.mean(mag[seen] ** 2))) if seen.any() else None,
+                "max_excess_error_deg": largest(excess),
+                "points": int(mag.size), "missed": int((~seen).sum()),
+                "not_played": int(np.count_nonzero(~self.played))}
+
+
+def check_grid(rig: Rig, radar: RadarProfile, measure: Measure, method: str = "exact",
+               estimator: str = "bartlett") -> GridCheck:
+    """Play the check grid of `grid_errors` once; return the errors and the schedule's view."""
     from .evaluation import evaluation_grid
     from .kinematics import Tracks
     from .schedule import build_schedule
@@ -431,4 +479,48 @@ def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
         k = d.strongest()
         if k is not None and d.az_deg is not None and d.el_deg is not None:
             out[i] = d.az_deg[k] - az[i], d.el_deg[k] - el[i]
+    played: NDArray[np.bool_] = np.any(schedule.active[:, 0], axis=1)
+    # The schedule predicts the beamformer's peak: a Bartlett radar's angle, not another's.
+    predicted = schedule.angle_error_deg[:, 0] if estimator == "bartlett" else 0.0
+    return GridCheck(error_deg=out, predicted_deg=np.where(played[:, None], predicted, np.nan),
+                     played=played, status=schedule.status[:, 0].copy())
+
+
+def failures(result: CalibrationResult, before: GridCheck, after: GridCheck,
+             max_excess_deg: float = MAX_EXCESS_ERROR_DEG) -> list[str]:
+    """Return why a calibration cannot be trusted, one sentence per reason (none: it passed).
+
+    It fails when a pair is suspect (its measurement contradicts the others or the model),
+    when a point of the check grid could not be played or was not detected after calibration
+    (the calibrated rig is unverified there), or when the angle error after calibration exceeds
+    what the rig's attenuator and delay steps predict by more than ``max_excess_deg``.
+    """
+    from .schedule.model import BLOCKING, Status
+
+    out = []
+    if result.suspects:
+        out.append(f"{len(result.suspects)} of {len(result.pairs)} FE pairs are suspect "
+                   f"(closure residual above {SUSPECT_PHASE_DEG:g} deg or {SUSPECT_GAIN_DB:g} "
+                   f"dB, or sweep fit worse than {SUSPECT_FIT_DEG:g} deg rms): a bad channel, a "
+                   f"moved FE or the wrong estimator")
+    stats, was = after.summary(), before.summary()
+    points = stats["points"]
+    blocked = int(stats["not_played"] or 0)
+    if blocked:
+        flags = int(np.bitwise_or.reduce(after.status[~after.played] & BLOCKING))
+        why = ", ".join((s.name or "").lower().replace("_", " ") for s in Status
+                        if s and flags & s) or "no channel on"
+        out.append(f"{blocked} of {points} check-grid points could not be played on this rig "
+                   f"for this radar ({why}): the calibration is not verified there")
+    unseen = int(np.count_nonzero(after.played & np.isnan(after.error_deg).any(axis=1)))
+    if unseen:
+        out.append(f"the radar reported no target at {unseen} of {points} played check-grid "
+                   f"points after calibration")
+    excess = stats["max_excess_error_deg"]
+    if excess is not None and excess > max_excess_deg:
+        worse = ("" if was["max_error_deg"] is None else
+                 f"; max angle error {was['max_error_deg']:.4f} deg before, "
+                 f"{stats['max_error_deg']:.4f} deg after")
+        out.append(f"after calibration the radar sees the check grid up to {excess:.4f} deg off "
+                   f"the predicted angle (tolerance {max_excess_deg:g} deg){worse}")
     return out

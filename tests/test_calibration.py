@@ -1,3 +1,6 @@
+import warnings
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -189,3 +192,114 @@ def test_calibration_patterns_play_on_the_rts_delay_grid_with_the_rig_s_delay_mo
     want = np.angle(np.exp(2j * np.pi * (PAPER.fc_hz - 500e6) * quantum))
     np.testing.assert_allclose(turn, want, atol=1e-6)
     assert np.abs(want).max() > 0.1  # the two models really differ here
+
+
+@pytest.mark.parametrize("estimator", ["bartlett", "ti"])
+def test_cli_calibrate_passes_and_reports_its_verdict_in_the_json(tmp_path, capsys, estimator):
+    # For the TI-style radar the grid's reference is the set angle (the schedule predicts the
+    # beamformer's peak, 0.1 deg off what `method: estimator` weights make a TI radar see).
+    import json
+
+    out, report = tmp_path / "cal.rig.yaml", tmp_path / "cal.json"
+    code = cli.main(["calibrate", "kit-table1", "--radar", "awr1843boost", "--estimator",
+                     estimator, "--inject-phase-deg", "180", "--inject-gain-db", "1", "--seed",
+                     "1", "--json", str(report), "--write", str(out)])
+    assert code == 0
+    captured = capsys.readouterr()
+    assert "calibration passed" in captured.out and "error" not in captured.err
+    assert out.exists()
+    data = json.loads(report.read_text())
+    assert data["passed"] is True and data["reasons"] == []
+    assert set(data["after"]) == {"max_error_deg", "rms_error_deg", "max_excess_error_deg",
+                                  "points", "missed", "not_played"}
+    assert data["after"]["max_excess_error_deg"] <= 0.01  # classic CAN: 0.005 deg steps
+    assert data["after"]["missed"] == data["after"]["not_played"] == 0
+
+
+def test_cli_calibrate_fails_when_the_check_grid_cannot_be_played(tmp_path, capsys):
+    # The cascade radar resolves the kit-table1 FEs (9 deg apart) as separate targets: no grid
+    # point can be synthesized, so nothing verifies the calibration.
+    import json
+
+    out, report = tmp_path / "casc.rig.yaml", tmp_path / "casc.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy RuntimeWarning on all-NaN statistics
+        code = cli.main(["calibrate", "kit-table1", "--radar", "cascade-12x16", "--json",
+                         str(report), "--write", str(out)])
+    assert code == 1
+    captured = capsys.readouterr()
+    assert "nan" not in captured.out
+    assert "angle error after:  none measured, 30 missed (30 not played)" in captured.out
+    assert ("error: calibration failed: 30 of 30 check-grid points could not be played on this "
+            "rig for this radar (not synthesizable, split)") in captured.err
+    assert f"--write {out}: not written" in captured.err
+    assert "calibration passed" not in captured.out
+    assert not out.exists()
+    data = json.loads(report.read_text())
+    assert data["passed"] is False and len(data["reasons"]) == 1
+    assert data["after"] == {"max_error_deg": None, "rms_error_deg": None,
+                             "max_excess_error_deg": None, "points": 30, "missed": 30,
+                             "not_played": 30}
+
+
+def test_cli_calibrate_fails_on_suspect_pairs_and_a_worse_grid(tmp_path, capsys):
+    # 20 dB of channel gain error: the weak channel of some sweeps drowns, the pairs contradict
+    # each other and the "calibrated" rig misses the grid by more than the uncalibrated one.
+    import json
+
+    out, report = tmp_path / "bad.rig.yaml", tmp_path / "bad.json"
+    code = cli.main(["calibrate", "kit-table1", "--radar", "awr1843boost", "--inject-phase-deg",
+                     "180", "--inject-gain-db", "20", "--seed", "3", "--json", str(report),
+                     "--write", str(out)])
+    assert code == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("error: calibration failed: 6 of 6 FE pairs are suspect")
+    assert err[1].startswith("error: calibration failed: after calibration the radar sees the "
+                             "check grid up to ")
+    assert "(tolerance 0.1 deg); max angle error" in err[1]
+    assert err[2].startswith(f"error: --write {out}: not written")
+    assert not out.exists()
+    data = json.loads(report.read_text())
+    assert data["passed"] is False and len(data["reasons"]) == 2 and len(data["suspects"]) == 6
+    assert data["after"]["max_error_deg"] > data["before"]["max_error_deg"]
+
+
+def test_a_calibration_that_leaves_a_channel_off_fails_the_tolerance(tmp_path):
+    # The verdict from a pair sweep that did its job, against a grid after calibration on a
+    # bench whose channel 2 is left 0.3 dB off: the grid shows it, the calibration fails.
+    from rts_scenario.calibration import MAX_EXCESS_ERROR_DEG, check_grid, failures
+
+    errors = ChannelErrors.random(4, np.random.default_rng(0), phase_deg=180.0, gain_db=1.0)
+    result = calibrate(KIT, AWR, simulated_measure(AWR, KIT, errors))
+    calibrated = result.apply(KIT)
+    before = check_grid(KIT, AWR, simulated_measure(AWR, KIT, errors))
+    after = check_grid(calibrated, AWR, simulated_measure(AWR, calibrated, errors))
+    assert failures(result, before, after) == []
+    off = ChannelErrors(errors.gain_db + np.array([0.0, 0.0, 0.3, 0.0]), errors.phase_deg,
+                        errors.delay_s, errors.az_deg, errors.el_deg, errors.distance_m)
+    left = check_grid(calibrated, AWR, simulated_measure(AWR, calibrated, off))
+    reasons = failures(result, before, left)
+    assert len(reasons) == 1 and f"(tolerance {MAX_EXCESS_ERROR_DEG:g} deg)" in reasons[0]
+    assert failures(result, before, left, max_excess_deg=0.2) == []
+
+
+def test_the_check_grid_subtracts_the_error_the_attenuator_steps_predict():
+    # lab-2x3 has a 0.5 dB attenuator: a perfect calibration still leaves ~0.05 deg, which the
+    # schedule predicts; what the calibration must answer for is the rest.
+    from rts_scenario.calibration import check_grid
+
+    lab = rs.Rig.from_file(Path(__file__).parents[1] / "scenarios/rigs/lab-2x3.rig.yaml")
+    errors = ChannelErrors.random(6, np.random.default_rng(0), phase_deg=180.0, gain_db=1.0)
+    calibrated = calibrate(lab, AWR, simulated_measure(AWR, lab, errors)).apply(lab)
+    stats = check_grid(calibrated, AWR, simulated_measure(AWR, calibrated, errors)).summary()
+    assert stats["max_error_deg"] > 0.02
+    assert stats["max_excess_error_deg"] < 0.002
+
+
+def test_cli_calibrate_tolerance_must_be_positive(capsys):
+    from rts_scenario.calibration import MAX_EXCESS_ERROR_DEG
+    from rts_scenario.cli.calibrate import MAX_EXCESS_ERROR_DEG as CLI_DEFAULT
+
+    assert CLI_DEFAULT == MAX_EXCESS_ERROR_DEG
+    assert cli.main(["calibrate", "kit-table1", "--max-error-deg", "0"]) == 2
+    assert "--max-error-deg: must be > 0" in capsys.readouterr().err

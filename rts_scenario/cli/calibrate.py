@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from .common import (
+    EXIT_FAIL,
     EXIT_OK,
     Progress,
     add_bench_arguments,
@@ -19,6 +21,8 @@ from .common import (
 )
 
 MAX_INJECT_GAIN_DB = 20.0
+# The library's default, without importing numpy and scipy to build the parser.
+MAX_EXCESS_ERROR_DEG = 0.1
 
 
 def _do_calibrate(args: argparse.Namespace) -> int:
@@ -38,6 +42,9 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     check_number("--inject-gain-db", args.inject_gain_db, low=0.0, high=MAX_INJECT_GAIN_DB)
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
+    check_number("--max-error-deg", args.max_error_deg, low=0.0)
+    if args.max_error_deg == 0.0:
+        raise RtsError("--max-error-deg: must be > 0, got 0.0")
     rig, radar = bench_of(args)
     check_bench_paths(args, [("--json", args.json), ("--write", args.write),
                              ("--plot", args.plot)])
@@ -65,12 +72,13 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         return Pipeline(on, radar, options, radar_options=radar_options, errors=errors, rng=rng)
 
     with bench(rig) as pipeline:
-        before = cal.grid_errors(rig, radar, pipeline.play, method, args.estimator)
+        before = cal.check_grid(rig, radar, pipeline.play, method, args.estimator)
         result = cal.calibrate(rig, radar, pipeline.play, estimator=args.estimator,
                                progress=Progress("calibrate"))
     calibrated = result.apply(rig)
     with bench(calibrated) as pipeline:
-        after = cal.grid_errors(calibrated, radar, pipeline.play, method, args.estimator)
+        after = cal.check_grid(calibrated, radar, pipeline.play, method, args.estimator)
+    failed = cal.failures(result, before, after, args.max_error_deg)
     injected = args.output == "simulated-radar" and (args.inject_phase_deg or args.inject_gain_db)
     print(f"{'FE':>3} {'phase deg':>10} {'gain dB':>8}"
           + (f" {'injected phase':>15} {'injected gain':>14}" if injected else ""))
@@ -86,10 +94,14 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     for suspect in result.suspects:
         print(f"suspect: {suspect}")
 
-    def summary(err: np.ndarray) -> str:
-        mag = np.hypot(err[:, 0], err[:, 1])
-        return (f"rms {np.sqrt(np.nanmean(mag**2)):.4f} deg, max {np.nanmax(mag):.4f} deg, "
-                f"{int(np.isnan(mag).sum())} missed")
+    def summary(grid: cal.GridCheck) -> str:
+        stats = grid.summary()
+        played = f" ({stats['not_played']} not played)" if stats["not_played"] else ""
+        if stats["max_error_deg"] is None:
+            return f"none measured, {stats['missed']} missed{played}"
+        return (f"rms {stats['rms_error_deg']:.4f} deg, max {stats['max_error_deg']:.4f} deg "
+                f"({stats['max_excess_error_deg']:.4f} off the predicted angle), "
+                f"{stats['missed']} missed{played}")
 
     print(f"angle error before: {summary(before)}")
     print(f"angle error after:  {summary(after)}")
@@ -97,28 +109,38 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         with writing("--json", args.json):
             Path(args.json).write_text(json.dumps(
                 calibration_report(result, errors if injected else None, before, after,
-                                   args.estimator, method),
+                                   args.estimator, method, failed),
                 indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
-    if args.write:
-        with writing("--write", args.write):
-            calibrated.write(args.write)
-        print(f"wrote {args.write}")
     if args.plot:
         from ..plots import write_calibration_plot
 
         with writing("--plot", args.plot):
             written = write_calibration_plot(result, args.plot, rig.name)
         print(f"wrote {written}")
+    if failed:
+        # A rig is a promise that its offsets were measured and verified: none from a failure.
+        for reason in failed:
+            print(f"error: calibration failed: {reason}", file=sys.stderr)
+        if args.write:
+            print(f"error: --write {args.write}: not written (a rig is written only from a "
+                  f"calibration that passed)", file=sys.stderr)
+        return EXIT_FAIL
+    print("calibration passed")
+    if args.write:
+        with writing("--write", args.write):
+            calibrated.write(args.write)
+        print(f"wrote {args.write}")
     return EXIT_OK
 
 
 def calibration_report(result: Any, errors: Any, before: Any, after: Any, estimator: str,
-                       method: str) -> dict[str, Any]:
+                       method: str, failed: list[str]) -> dict[str, Any]:
     """Return the ``--json`` document (docs/cli.md).
 
-    Per channel the injected and recovered offsets (relative to FE 0; injected ones null on a
-    real bench), the pair residuals and the grid errors before and after.
+    The verdict (``passed`` and the ``reasons`` it failed), per channel the injected and
+    recovered offsets (relative to FE 0; injected ones null on a real bench), the pair residuals
+    and the check grid's errors (`GridCheck.summary`) before and after.
     """
     import numpy as np
 
@@ -127,13 +149,6 @@ def calibration_report(result: Any, errors: Any, before: Any, after: Any, estima
 
     def number(x: float) -> float | None:
         return float(x) if np.isfinite(x) else None
-
-    def grid(err: Any) -> dict[str, Any]:
-        mag = np.hypot(err[:, 0], err[:, 1])
-        seen = np.isfinite(mag)
-        return {"max_error_deg": number(np.max(mag[seen])) if seen.any() else None,
-                "rms_error_deg": number(np.sqrt(np.mean(mag[seen] ** 2))) if seen.any() else None,
-                "points": int(mag.size), "missed": int((~seen).sum())}
 
     channels = []
     for q in range(result.phase_deg.size):
@@ -151,8 +166,9 @@ def calibration_report(result: Any, errors: Any, before: Any, after: Any, estima
               "fit_rms_deg": number(p.fit_rms_deg)}
              for p, rp, rg in zip(result.pairs, result.phase_residual_deg,
                                   result.gain_residual_db, strict=True)]
-    return {"estimator": estimator, "method": method, "channels": channels, "pairs": pairs,
-            "suspects": result.suspects, "before": grid(before), "after": grid(after)}
+    return {"passed": not failed, "reasons": failed, "estimator": estimator, "method": method,
+            "channels": channels, "pairs": pairs, "suspects": result.suspects,
+            "before": before.summary(), "after": after.summary()}
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
@@ -175,6 +191,11 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                         help="simulated radar: random channel gain errors within +-this "
                              f"(0..{MAX_INJECT_GAIN_DB:g})")
     parser.add_argument("--seed", type=int, default=0, help="seed of the injected errors (>= 0)")
-    parser.add_argument("--write", metavar="RIG_OUT", help="write the calibrated rig file")
+    parser.add_argument("--max-error-deg", type=float, default=MAX_EXCESS_ERROR_DEG,
+                        help="fail when, after calibration, the radar sees a check-grid point "
+                             "further than this off the angle the schedule predicts (default "
+                             f"{MAX_EXCESS_ERROR_DEG:g})")
+    parser.add_argument("--write", metavar="RIG_OUT",
+                        help="write the calibrated rig file (only if the calibration passed)")
     parser.add_argument("--plot", metavar="DIR", help="plot the sweeps (needs matplotlib)")
     parser.set_defaults(handler=_do_calibrate)
