@@ -7,7 +7,9 @@ forgets them, keeping running statistics, the worst frames and (on request) a pe
 on disk. Memory does not grow with the length of a run.
 
 A cycle belongs to the scene frame its counter names; the counter may wrap (16 bits on the
-bus), the nearest frame of the open window resolves it.
+bus), the nearest frame of the open window resolves it. A cycle measured within the ambiguity
+window of a frame change (`rts_scenario.pipeline.CycleTruth`) is judged against whichever of
+the two frames it matches better, and counted.
 
 Per frame, detections are associated with the targets the RTS played (gated at 3x each
 quantity's tolerance, then an optimal assignment on the normalized distance). A checkable
@@ -103,15 +105,64 @@ def checkable(tracks: Tracks, status: NDArray[np.uint16]) -> BoolArray:
 
 @dataclass(frozen=True)
 class _Block:
-    """Ground truth of consecutive frames ``first .. first + len(t_s)``."""
+    """Ground truth of consecutive cycles ``first .. first + len(t_s)``.
+
+    ``other`` is the truth of the frame across the nearest frame change, for the cycles
+    flagged ``ambiguous`` (measured within the ambiguity window of that change).
+    """
 
     first: int
     tracks: Tracks
     status: NDArray[np.uint16]
+    other: tuple[Tracks, NDArray[np.uint16]] | None = None
+    ambiguous: BoolArray | None = None
 
     @property
     def end(self) -> int:
         return self.first + int(self.tracks.t_s.size)
+
+
+@dataclass(frozen=True)
+class _Judged:
+    """A block's detections associated with one candidate truth of its cycles.
+
+    Per target-cycle (F, K): ``truth`` (checkable), ``assigned`` (a detection assigned),
+    ``within`` (every quantity within tolerance), ``errors`` per quantity, ``limits`` per
+    limit; per detection: ``match`` (its target, -1 for none); per cycle: ``cost`` (sum of the
+    assigned pairs' normalized squared distances).
+    """
+
+    truth: BoolArray
+    assigned: BoolArray
+    within: BoolArray
+    errors: dict[str, FloatArray]
+    match: NDArray[np.int64]
+    limits: dict[str, BoolArray]
+    cost: FloatArray
+
+    def better_than(self, other: _Judged) -> BoolArray:
+        """Return the cycles this candidate explains better than ``other``.
+
+        More targets detected, then more matched, then closer; a tie keeps ``other``.
+        """
+        detected = (self.assigned & self.within & self.truth).sum(axis=1)
+        detected_other = (other.assigned & other.within & other.truth).sum(axis=1)
+        matched = (self.assigned & self.truth).sum(axis=1)
+        matched_other = (other.assigned & other.truth).sum(axis=1)
+        return (detected > detected_other) | ((detected == detected_other) & (
+            (matched > matched_other) | ((matched == matched_other) & (self.cost < other.cost))))
+
+    def where(self, cycles: BoolArray, other: _Judged, frame_of: NDArray[np.int64]) -> _Judged:
+        """Return this judgement where ``cycles`` is False, ``other``'s where it is True."""
+        rows = cycles[:, None]
+        return _Judged(
+            np.where(rows, other.truth, self.truth),
+            np.where(rows, other.assigned, self.assigned),
+            np.where(rows, other.within, self.within),
+            {q: np.where(rows, other.errors[q], e) for q, e in self.errors.items()},
+            np.where(cycles[frame_of], other.match, self.match),
+            {name: np.where(rows, other.limits[name], m) for name, m in self.limits.items()},
+            np.where(cycles, other.cost, self.cost))
 
 
 class Checker:
@@ -181,12 +232,21 @@ class Checker:
         self._invalid = 0
         self._worst: list[tuple[float, int, int, dict[str, Any]]] = []
         self.frames = {"total": 0, "checked": 0, "received": 0, "unmatched": 0, "missing": 0,
-                       "incomplete": 0, "late": 0, "repeated": 0}
+                       "incomplete": 0, "late": 0, "repeated": 0, "after_scene": 0,
+                       "ambiguous": 0, "adjacent_frame": 0}
 
-    def add_truth(self, first_frame: int, tracks: Tracks, status: NDArray[np.uint16]) -> None:
+    def add_truth(self, first_frame: int, tracks: Tracks, status: NDArray[np.uint16], *,
+                  other: tuple[Tracks, NDArray[np.uint16]] | None = None,
+                  ambiguous: ArrayLike | None = None) -> None:
         """Ground truth of frames ``first_frame ..`` and the schedule's `Status` of each.
 
-        Blocks must follow each other without a gap.
+        Blocks must follow each other without a gap. A cycle measured close to a frame change
+        may show the frame on the other side of it (the radar's chirps straddle the change, or
+        the RTS applied it a little earlier or later than the run knows): ``ambiguous`` (one
+        bool per cycle) flags those cycles and ``other`` (tracks and status, like ``tracks``
+        and ``status``) gives that other frame for each; such a cycle is judged against
+        whichever of the two it matches better, and both counts are reported
+        (``frames["ambiguous"]``, ``frames["adjacent_frame"]``).
         """
         if not self._started:  # the radar's first cycle in the scene may be any
             self._started = True
@@ -194,7 +254,15 @@ class Checker:
         expected = self._blocks[-1].end if self._blocks else self._settled
         if first_frame != expected:
             raise ValueError(f"truth block starts at frame {first_frame}, expected {expected}")
-        self._blocks.append(_Block(first_frame, tracks, _status_flags(status, tracks)))
+        window = None
+        if other is not None and ambiguous is not None:
+            window = np.asarray(ambiguous, dtype=bool)
+            if window.shape != tracks.t_s.shape:
+                raise ValueError(f"ambiguous: one flag per cycle {tracks.t_s.shape}, "
+                                 f"got {window.shape}")
+            other = (other[0], _status_flags(other[1], other[0]))
+        self._blocks.append(_Block(first_frame, tracks, _status_flags(status, tracks),
+                                   other if window is not None else None, window))
 
     def add_cycles(self, cycles: Iterable[Detections]) -> None:
         """Take radar cycles; each is filed under the frame its counter names."""
@@ -223,13 +291,13 @@ class Checker:
             self._check_block(block)
             self._settled = block.end
         if before_frame is None:
-            self.frames["late"] += len(self._cycles)  # cycles for frames the scene never had
+            # Every cycle of the scene is settled: the rest were measured after its end (a radar
+            # keeps measuring what the RTS holds) or carry a counter the scene does not have.
+            self.frames["after_scene"] += len(self._cycles)
             self._cycles.clear()
 
     def _check_block(self, block: _Block) -> None:
-        tracks, n_frames = block.tracks, block.end - block.first
-        n_targets = len(self.names)
-        tol = self.expectations.tolerances
+        n_frames = block.end - block.first
         status = np.full(n_frames, _MISSING, dtype=np.int8)
         got: list[Detections] = []
         rows: list[int] = []
@@ -246,10 +314,6 @@ class Checker:
         counts = [c.count for c in got]
         frame_of = np.repeat(np.array(rows, dtype=np.int64), counts).astype(np.int64)
         n_det = frame_of.size
-        truth = checkable(tracks, block.status)
-        # Echoes the RTS sent (a clipped one too, distorted): detections of them are no false
-        # alarms, whether or not the target-frame can be checked.
-        played = (block.status & BLOCKING) == 0
 
         values = {q: np.concatenate(
             [getattr(c, q) if getattr(c, q) is not None else np.full(c.count, np.nan)
@@ -264,43 +328,26 @@ class Checker:
         if invalid.any():  # out of the search and the costs (an infinite value overflows)
             for q, _ in QUANTITIES:
                 values[q][invalid] = np.nan
-        # Candidate pairs (detection, target): only targets within the gate in range, found by
-        # a sorted search per frame (no detections x targets arrays).
-        det, target = _range_candidates(frame_of, values["range_m"], tracks.range_m,
-                                        GATE * tol["range_m"])
-        cost = np.zeros(det.size)
-        inside = played[frame_of[det], target] & ~invalid[det]
-        diffs: dict[str, FloatArray] = {}
-        for q, key in QUANTITIES:
-            diff = values[q][det] - getattr(tracks, q)[frame_of[det], target]
-            if q == "az_deg":
-                diff = (diff + 180.0) % 360.0 - 180.0
-            diffs[q] = diff
-            if q != "rcs_dbsm":  # RCS fluctuates: it does not decide who is who
-                norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
-                cost += norm * norm
-                inside &= np.abs(norm) <= GATE
-        det, target, cost = det[inside], target[inside], cost[inside]
-        diffs = {q: d[inside] for q, d in diffs.items()}
-        pair = _assign(frame_of, det, target, cost, n_targets)
-        match = np.full(n_det, -1, dtype=np.int64)
-        match[det[pair]] = target[pair]
+        judged = self._judge(block.tracks, block.status, frame_of, values, invalid)
+        ok = status == _OK
+        use_other = np.zeros(n_frames, dtype=bool)
+        if block.other is not None and block.ambiguous is not None:
+            self.frames["ambiguous"] += int(block.ambiguous.sum())
+            window = block.ambiguous & ok
+            if window.any():
+                other = self._judge(*block.other, frame_of, values, invalid)
+                use_other = window & other.better_than(judged)
+                if use_other.any():
+                    judged = judged.where(use_other, other, frame_of)
+            self.frames["adjacent_frame"] += int(use_other.sum())
+        truth, assigned, within = judged.truth, judged.assigned, judged.within
+        errors, match = judged.errors, judged.match
         matched = match >= 0
-
-        assigned = np.zeros((n_frames, n_targets), dtype=bool)
-        assigned[frame_of[matched], match[matched]] = True
-        within = np.ones((n_frames, n_targets), dtype=bool)
-        errors = {}
-        for q, key in QUANTITIES:
-            err = np.full((n_frames, n_targets), np.nan)
-            err[frame_of[det[pair]], target[pair]] = diffs[q][pair]
-            errors[q] = err
-            within &= ~(np.abs(err) > tol[key])
-            self._stats[q].add(err, truth)
+        for q, _ in QUANTITIES:
+            self._stats[q].add(errors[q], truth)
         detected = assigned & within & truth
 
-        ok = status == _OK
-        for name, mask in limit_masks(tracks, block.status).items():
+        for name, mask in judged.limits.items():
             self._limits[name] += mask.sum(axis=0)
         self._out_of_tolerance += (assigned & ~within & truth).sum(axis=0)
         self._missed += (ok[:, None] & truth & ~assigned).sum(axis=0)
@@ -323,10 +370,57 @@ class Checker:
         tally["incomplete"] += int((status == _INCOMPLETE).sum())
         self._keep_worst(block, truth, assigned, errors)
         if self.record is not None:
-            self.record.append({"frame": np.arange(block.first, block.end), "t_s": tracks.t_s,
-                                "detected": detected, "checkable": truth,
-                                "frame_status": status,
+            self.record.append({"frame": np.arange(block.first, block.end),
+                                "t_s": block.tracks.t_s, "detected": detected,
+                                "checkable": truth, "frame_status": status,
+                                "adjacent_frame": use_other,
                                 **{f"error_{q}": e for q, e in errors.items()}})
+
+    def _judge(self, tracks: Tracks, flags: NDArray[np.uint16], frame_of: NDArray[np.int64],
+               values: dict[str, FloatArray], invalid: BoolArray) -> _Judged:
+        """Associate a block's detections with one candidate truth of its cycles."""
+        n_frames, n_targets = tracks.range_m.shape
+        tol = self.expectations.tolerances
+        n_det = frame_of.size
+        truth = checkable(tracks, flags)
+        # Echoes the RTS sent (a clipped one too, distorted): detections of them are no false
+        # alarms, whether or not the target-frame can be checked.
+        played = (flags & BLOCKING) == 0
+        # Candidate pairs (detection, target): only targets within the gate in range, found by
+        # a sorted search per frame (no detections x targets arrays).
+        det, target = _range_candidates(frame_of, values["range_m"], tracks.range_m,
+                                        GATE * tol["range_m"])
+        cost = np.zeros(det.size)
+        inside = played[frame_of[det], target] & ~invalid[det]
+        diffs: dict[str, FloatArray] = {}
+        for q, key in QUANTITIES:
+            diff = values[q][det] - getattr(tracks, q)[frame_of[det], target]
+            if q == "az_deg":
+                diff = (diff + 180.0) % 360.0 - 180.0
+            diffs[q] = diff
+            if q != "rcs_dbsm":  # RCS fluctuates: it does not decide who is who
+                norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
+                cost += norm * norm
+                inside &= np.abs(norm) <= GATE
+        det, target, cost = det[inside], target[inside], cost[inside]
+        diffs = {q: d[inside] for q, d in diffs.items()}
+        pair = _assign(frame_of, det, target, cost, n_targets)
+        match = np.full(n_det, -1, dtype=np.int64)
+        match[det[pair]] = target[pair]
+        matched = match >= 0
+        assigned = np.zeros((n_frames, n_targets), dtype=bool)
+        assigned[frame_of[matched], match[matched]] = True
+        within = np.ones((n_frames, n_targets), dtype=bool)
+        errors = {}
+        for q, key in QUANTITIES:
+            err = np.full((n_frames, n_targets), np.nan)
+            err[frame_of[det[pair]], target[pair]] = diffs[q][pair]
+            errors[q] = err
+            within &= ~(np.abs(err) > tol[key])
+        cost_sum = np.bincount(frame_of[det[pair]], weights=cost[pair],
+                               minlength=n_frames).astype(np.float64)
+        return _Judged(truth, assigned, within, errors, match, limit_masks(tracks, flags),
+                       cost_sum)
 
     def _write_detections(self, got: list[Detections], counts: list[int], block: _Block,
                           frame_of: NDArray[np.int64], match: NDArray[np.int64]) -> None:

@@ -28,6 +28,7 @@ from .detections import Detections, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
+from .playback import Playback
 from .preflight import Preflight, frames_per_batch, preflight, scene_limits
 from .radar.clock import RadarClock
 from .radar.profile import RadarProfile
@@ -316,6 +317,9 @@ class Pipeline:
             on_preflight(preflight(scene, options.method))
             mark = timer.add("preflight_s", mark)
         self.receiver.reset()
+        window_s = ambiguity_window_s(self.radar, self.rig)
+        truths = CycleTruth(checker, scene, clock, window_s)
+        playback = Playback(1.0 / scene.frame_rate_hz, window_s)
         batch = options.batch_frames or frames_per_batch(len(scene.targets), BATCH_FRAMES)
         for first in range(0, n_frames, batch):
             frames = np.arange(first, min(first + batch, n_frames))
@@ -325,26 +329,31 @@ class Pipeline:
                                       estimator=scene.radar_options.estimator,
                                       frame_rate_hz=scene.frame_rate_hz)
             schedule = replace(schedule, frame_index=frames)
-            mark = timer.add("schedule_s", mark)
-            # The radar's cycles while the RTS holds this batch: ground truth at their
-            # measurement times, the limits of the frame each one measures.
-            n = add_cycle_truth(checker, scene, clock, frames, schedule.status)
             if digest is not None:
                 digest.update(schedule.status.tobytes())
-            mark = timer.add("kinematics_s", mark)
+            mark = timer.add("schedule_s", mark)
             self.write(schedule)
+            assert self.output is not None
+            sent_s = self.output.sent_t_s(schedule)
+            playback.add(schedule.t_s, sent_s)
             mark = timer.add("play_s", mark)
+            # The radar's cycles while the RTS held the batch before: it was held until this
+            # batch's first frame went out.
+            n = truths.add(frames, schedule.status, sent_s)
+            mark = timer.add("kinematics_s", mark)
             cycles = self.receive()
             mark = timer.add("receive_s", mark)
             if checker.counter_start is None and cycles:
                 self._learn_counter_start(checker, cycles)
             checker.add_cycles(cycles)
-            # The batch before this one is due: its cycles had a whole batch to arrive.
+            # The batch before that one is due: its cycles had a whole batch to arrive.
             if n.size:
                 checker.settle(before_frame=int(n[0]))
             mark = timer.add("check_s", mark)
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
+        truths.finish()
+        mark = timer.add("kinematics_s", mark)
         last = self.receive(final=True)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
@@ -357,6 +366,13 @@ class Pipeline:
             # signal's range): the checker never saw them.
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
+        assert self.output is not None
+        playback.rts = self.output.rts_status()
+        report.playback = playback.to_dict()
+        failures = playback.reasons(scene.expectations.expected_limits)
+        if failures:
+            report.reasons += failures
+            report.passed = False
         if options.bus_log and digest is not None:
             write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
                               counter_start=checker.counter_start)
@@ -396,27 +412,122 @@ class Pipeline:
         self.close()
 
 
-def add_cycle_truth(checker: Checker, scene: Scenario, clock: RadarClock,
-                    frames: np.ndarray, status: np.ndarray) -> np.ndarray:
-    """Give ``checker`` the ground truth of the radar cycles while the RTS holds ``frames``.
+class CycleTruth:
+    """Give a `Checker` the ground truth of the radar's cycles, batch of frames by batch.
 
-    The cycles measured from the first frame's time until the next frame after the last (the
-    scene's end for its last frame). Each is compared with the frame the RTS held at its
-    measurement time, as the scene has it at that frame's time, and with that frame's limits
-    (``status``, the schedule's, per frame of ``frames``): the radar is judged on what was
-    played, not on the scene's motion during the hold, which the bench's frame rate decides
-    (the truth's ``t_s`` stay the measurement times). Returns the cycles' numbers.
+    Each cycle is compared with the frame the RTS held at its measurement time, as the scene
+    has it at that frame's time, and with that frame's limits (the schedule's statuses): the
+    radar is judged on what was played, not on the scene's motion during the hold, which the
+    bench's frame rate decides (the truth's ``t_s`` stay the measurement times).
+
+    The RTS holds a frame from when it was applied, not from its nominal time: the frame
+    cannot be applied before the sender put it out (`Output.sent_t_s`: nominal for the
+    simulated radar, the real send times of a paced UDP stream), so a batch's cycles are
+    known only once the next batch's first frame went out, and each batch's truth is handed
+    on one batch later (`add` returns the cycles of the batch before; `finish` the last's).
+
+    Even then a cycle measured just after a frame change may legitimately show the frame
+    before: the radar's chirp sequence (`RadarProfile.measurement_s`; its measurement time
+    marks the end of the chirps) can straddle the change, and the RTS may apply a frame up
+    to ``limits.update_latency_s`` after it arrives. Cycles measured within ``window_s``
+    (those two together) after the frame they hold was applied are judged against whichever
+    of that frame and the one before they match better, and counted (`Checker.add_truth`).
+    A radar one frame behind outside the window, or two frames behind, still fails.
+
+    Parameters
+    ----------
+    checker : Checker
+        Receives the truth.
+    scene : Scenario
+        The scene (frame times, targets).
+    clock : RadarClock
+        When the radar measures.
+    window_s : float
+        The ambiguity window after a frame change (s); `ambiguity_window_s` gives it.
     """
-    t_all = scene.t_s
-    last = int(frames[-1]) + 1
-    end_s = float(t_all[last]) if last < scene.n_frames else (
-        float(t_all[-1]) + 1.0 / scene.frame_rate_hz)
-    n, t_cycles = clock.cycles_between(float(t_all[frames[0]]), end_s)
-    if n.size:
-        held = held_frames(t_all[frames], t_cycles)
+
+    def __init__(self, checker: Checker, scene: Scenario, clock: RadarClock,
+                 window_s: float) -> None:
+        self.checker, self.scene, self.clock = checker, scene, clock
+        self.window_s = float(window_s)
+        # The batch whose truth waits for the next one's first send time.
+        self._pending: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        # The last frame of the batch before the pending one: (frame, status row, applied s).
+        self._before: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def add(self, frames: np.ndarray, status: np.ndarray,
+            applied_s: np.ndarray | None = None) -> np.ndarray:
+        """Take a batch: its frames, their statuses and when they went out (nominal if None).
+
+        Returns the numbers of the cycles whose truth the checker got: the batch before's
+        (empty for the first batch).
+        """
+        t_all = self.scene.t_s
+        applied = t_all[frames] if applied_s is None else np.asarray(applied_s, dtype=np.float64)
+        # A frame is never applied before its time, nor before the frame ahead of it.
+        applied = np.maximum.accumulate(np.maximum(applied, t_all[frames]))
+        batch = (np.asarray(frames)[:], np.asarray(status), applied)
+        done = np.zeros(0, dtype=np.int64)
+        if self._pending is not None:
+            done = self._give(float(applied[0]), (batch[0][:1], batch[1][:1], applied[:1]))
+        self._pending = batch
+        return done
+
+    def finish(self) -> np.ndarray:
+        """Hand on the last batch (held until the scene's end); return its cycles' numbers."""
+        if self._pending is None:
+            return np.zeros(0, dtype=np.int64)
+        scene = self.scene
+        return self._give(float(scene.t_s[-1]) + 1.0 / scene.frame_rate_hz, None)
+
+    def _give(self, end_s: float,
+              after: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> np.ndarray:
+        """Hand on the pending batch's cycles, measured until ``end_s``.
+
+        ``after`` is the next batch's first frame (frame, status row, applied), None at the
+        scene's end.
+        """
+        assert self._pending is not None
+        parts = [p for p in (self._before, self._pending, after) if p is not None]
+        frames, status, applied = (np.concatenate([p[i] for p in parts]) for i in range(3))
+        first = 0 if self._before is None else 1
+        last = first + self._pending[0].size - 1
+        # The scene's first cycle may come before its first frame reached the RTS: it counts.
+        start_s = float(applied[first]) if self._before is not None else float(
+            self.scene.t_s[self._pending[0][0]])
+        self._before = tuple(p[-1:] for p in self._pending)  # type: ignore[assignment]
+        self._pending = None
+        n, t_cycles = self.clock.cycles_between(start_s, max(end_s, start_s))
+        if not n.size:
+            return n
+        held = np.clip(held_frames(applied, t_cycles), first, last)
+        # The frame change nearest each cycle, and whether it lies within the window.
+        since = t_cycles - applied[held]
+        has_next = held + 1 < frames.size
+        until = np.where(has_next, applied[np.minimum(held + 1, frames.size - 1)] - t_cycles,
+                         np.inf)
+        to_before = (since < self.window_s) & (held > 0) & (since <= until)
+        to_after = (until <= self.window_s) & has_next & ~to_before
+        ambiguous = to_before | to_after
+        t_all, scene = self.scene.t_s, self.scene
         truth = compute_tracks(scene, t_all[frames[held]], frames[held])
-        checker.add_truth(int(n[0]), replace(truth, t_s=t_cycles), status[held])
-    return n
+        other = None
+        if ambiguous.any():
+            alt = held - to_before + to_after
+            other = (replace(compute_tracks(scene, t_all[frames[alt]], frames[alt]),
+                             t_s=t_cycles), status[alt])
+        self.checker.add_truth(int(n[0]), replace(truth, t_s=t_cycles), status[held],
+                               other=other, ambiguous=ambiguous)
+        return n
+
+
+def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:
+    """Return how long after a frame change a radar cycle may still show the frame before.
+
+    The radar's chirp sequence (its measurement time marks their end) plus the RTS's stated
+    update latency (`HardwareLimits.update_latency_s`); see `CycleTruth`.
+    """
+    return radar.measurement_s + rig.limits.update_latency_s
 
 
 LOG_SIDECAR_SUFFIX = ".rts.json"
@@ -479,4 +590,4 @@ def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
 
 
 __all__ = ["BATCH_FRAMES", "LOG_SIDECAR_SUFFIX", "Pipeline", "RunOptions", "RunResult",
-           "add_cycle_truth", "run_scene", "write_log_sidecar"]
+           "CycleTruth", "ambiguity_window_s", "run_scene", "write_log_sidecar"]

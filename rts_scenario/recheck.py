@@ -37,7 +37,7 @@ from .check import Checker
 from .detections import Detections
 from .errors import RtsError
 from .kinematics import compute_tracks
-from .pipeline import LOG_SIDECAR_SUFFIX, add_cycle_truth
+from .pipeline import LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
 from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, RadarClock
 from .report import Report
@@ -700,13 +700,20 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]
-    for frames, _, schedule in schedule_batches(scene, method, batch_frames):
-        digest.update(schedule.status.tobytes())
-        n = add_cycle_truth(checker, scene, clock, frames, schedule.status)
+    # The log holds no send times: frames are taken as applied at their times (the ambiguity
+    # window around each change covers the transport, as it does live).
+    truths = CycleTruth(checker, scene, clock, ambiguity_window_s(scene.radar, scene.rig))
+
+    def check_cycles(n: IntArray) -> None:
         if n.size:
             lo, hi = np.searchsorted(rel_sorted, [n[0], n[-1] + 1])
             checker.add_cycles(logged[i].detections for i in order[lo:hi])
             checker.settle(before_frame=int(n[-1]) + 1)
+
+    for frames, _, schedule in schedule_batches(scene, method, batch_frames):
+        digest.update(schedule.status.tobytes())
+        check_cycles(truths.add(frames, schedule.status))
+    check_cycles(truths.finish())
     checker.settle()
     if sidecar is not None and sidecar.get("status_sha256"):
         alignment.schedule_matches_recording = digest.hexdigest() == sidecar["status_sha256"]

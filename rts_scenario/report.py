@@ -171,6 +171,8 @@ class Report:
     ``solver_plan`` says where the run's solver plan came from (built, memory, disk).
     ``radar_clock`` is how the radar's cycles were numbered: its counter start and whether the
     profile gave it or it was learnt from the first cycle's bus time.
+    ``playback`` is how the schedule went out (`rts_scenario.playback.Playback`: frames sent,
+    their lateness, the ambiguity window, the RTS's counters where it reports them).
     ``variant`` names the combination of the scene's ``parametrize`` block that ran, as the
     pytest plugin names it (``""`` for a scene without one), ``parameters`` holds its values.
     ``worst_frames`` lists the worst target-frames (misses first, then by error over
@@ -194,6 +196,7 @@ class Report:
     timing: dict[str, float] = field(default_factory=dict)
     solver_plan: str = ""
     radar_clock: dict[str, Any] = field(default_factory=dict)
+    playback: dict[str, Any] = field(default_factory=dict)
     variant: str = ""
     parameters: dict[str, Any] = field(default_factory=dict)
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
@@ -256,11 +259,22 @@ class Report:
                      f"{f.get('unmatched', 0)} with unmatched targets, "
                      f"{f['missing']} missing, {f['incomplete']} incomplete"
                      + "".join(f", {f[k]} {k}" for k in ("late", "repeated") if f.get(k))
+                     + (f", {f['after_scene']} after the scene's end (not checked)"
+                        if f.get("after_scene") else "")
                      + "; "
                      f"false detections: {self.false_detections} "
                      f"({self.false_detections_per_frame:.3f} per cycle)"
                      + (f"; invalid detections (not a number): {self.invalid_detections}"
                         if self.invalid_detections else ""))
+        if f.get("ambiguous"):
+            window = self.playback.get("ambiguity_window_s")
+            lines.append(f"frame changes: {f['ambiguous']} cycles measured within "
+                         + (f"{window * 1e3:.3g} ms" if window is not None
+                            else "the ambiguity window")
+                         + f" of a frame change, {f.get('adjacent_frame', 0)} of them judged "
+                         f"against the frame across it (it matched better)")
+        if self.playback:
+            lines.append(_playback_line(self.playback))
         problems = {k: v for k, v in self.bus.items() if k != "messages" and v}
         if problems:
             lines.append("bus: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in
@@ -268,6 +282,23 @@ class Report:
         lines.append(("PASS" if self.passed else "FAIL") + f": {self.label}"
                      + ("" if self.passed else " - " + "; ".join(self.reasons)))
         return "\n".join(lines)
+
+
+def _playback_line(p: dict[str, Any]) -> str:
+    """One line on how the schedule went out and what the RTS says it applied."""
+    late = p["lateness_s"]
+    text = f"playback: {p['frames_sent']} frames sent"
+    if late.get("max") is not None and math.isfinite(late["max"]):
+        text += (f", late by {late['p50'] * 1e3:.3g} ms median, {late['max'] * 1e3:.3g} ms "
+                 f"worst ({p['late_frames']} later than a frame period)")
+    rts = p.get("rts")
+    if rts is None:
+        text += ("; the RTS reports no counters: frames lost on the way show only as radar "
+                 "misses")
+    else:
+        text += "; RTS: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in rts.items()
+                                      if v or k == "frames_applied")
+    return text
 
 
 def _without_record(report: Report) -> Report:

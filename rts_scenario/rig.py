@@ -31,7 +31,13 @@ IntArray = NDArray[np.int64]
 
 @dataclass(frozen=True)
 class HardwareLimits:
-    """What the RTS hardware can set, per channel."""
+    """What the RTS hardware can set, per channel.
+
+    ``latency_s`` is the signal path's delay (subtracted from every echo's delay);
+    ``update_latency_s`` is how long the RTS may take, after a schedule frame reaches it, to
+    play it (transport and its own update): cycles the radar measures within it may still see
+    the frame before (`rts_scenario.pipeline.CycleTruth`).
+    """
 
     attenuation_min_db: float = 0.0
     attenuation_max_db: float = 120.0
@@ -43,6 +49,7 @@ class HardwareLimits:
     doppler_max_hz: float = 100e3
     echoes_per_channel: int = 8
     update_rate_hz: float = 100.0
+    update_latency_s: float = 0.0
 
     def __post_init__(self) -> None:
         for low, high in (("attenuation_min_db", "attenuation_max_db"),

@@ -192,12 +192,14 @@ def test_an_all_nan_cycle_does_not_detect_anything():
     assert report.detection_rate == 0.0 and report.invalid_detections == 10
 
 
-def test_cycles_for_frames_the_scene_never_had_are_late_not_lost():
+def test_cycles_for_frames_the_scene_never_had_are_counted_not_lost():
     tr = truth(10)
     cycles = cycles_from(tr) + cycles_from(truth(3, first=9000), first=9000)
     report = check("s", tr, OK(10, 2), cycles, EXPECT)
-    assert report.frames["late"] == 3 and report.frames["checked"] == 10
-    assert "0 incomplete, 3 late;" in report.table()  # shown, not only in the JSON
+    assert report.frames["after_scene"] == 3 and report.frames["checked"] == 10
+    assert report.frames["late"] == 0 and report.passed
+    # Shown, not only in the JSON.
+    assert "0 incomplete, 3 after the scene's end (not checked);" in report.table()
 
 
 def test_detections_reject_quantities_of_different_lengths():
@@ -268,3 +270,102 @@ def test_detections_the_radar_could_not_send_fail_the_run():
                for r in report.reasons)
     assert check("s", tr, OK(20, 2), cycles_from(tr), EXPECT,
                  bus={"messages": 60, "unsendable_detections": 0}).passed
+
+
+# -- cycles measured at a frame change (`rts_scenario.pipeline.CycleTruth`) ------------------
+
+def _radar_run(scene, clock, window_s, lag_frames, radar_window_s=None, applied_delay_s=0.0):
+    """Check a noise-free radar on ``clock`` that shows the frame ``lag_frames`` before the
+    one the RTS holds when measured within ``radar_window_s`` (default: the checker's
+    ``window_s``) after the change, the held frame otherwise; the RTS applies every frame
+    ``applied_delay_s`` after its time, and the checker is told so."""
+    from rts_scenario.kinematics import compute_tracks
+    from rts_scenario.pipeline import CycleTruth
+
+    radar_window_s = window_s if radar_window_s is None else radar_window_s
+    checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations)
+    truths = CycleTruth(checker, scene, clock, window_s)
+    frames = np.arange(scene.n_frames)
+    status = np.zeros((scene.n_frames, len(scene.targets)), dtype=np.uint16)
+    half = scene.n_frames // 2  # two batches: the window works across a batch's border
+    applied = scene.t_s + applied_delay_s
+    n = np.concatenate([truths.add(frames[:half], status[:half], applied[:half]),
+                        truths.add(frames[half:], status[half:], applied[half:]),
+                        truths.finish()])
+    t = clock.time_of(n)
+    held = np.maximum(np.searchsorted(applied, t + 1e-9, side="right") - 1, 0)
+    near = t - applied[held] < radar_window_s
+    shown = np.maximum(np.where(near, held - lag_frames, held), 0)
+    seen = compute_tracks(scene, scene.t_s[shown], shown)
+    checker.add_cycles(
+        Detections(cycle=int(c), t_s=float(tc), range_m=seen.range_m[i],
+                   radial_velocity_mps=seen.radial_velocity_mps[i], az_deg=seen.az_deg[i],
+                   el_deg=seen.el_deg[i], rcs_dbsm=seen.rcs_dbsm[i],
+                   snr_db=np.full(len(scene.targets), 30.0))
+        for i, (c, tc) in enumerate(zip(n, t, strict=True)))
+    checker.settle()
+    return checker.report(), n.size
+
+
+@pytest.fixture(scope="module")
+def closing_scene():
+    from pathlib import Path
+
+    from rts_scenario.scenario import load_scenario
+    root = Path(__file__).resolve().parents[1]
+    # 3 s at 20 frames/s; the target closes fast enough that one frame's motion is beyond
+    # the range tolerance (checked below: a radar one frame behind fails).
+    return load_scenario(root / "scenarios" / "approaching_target.scenario.yaml",
+                         {"duration_s": 3.0})
+
+
+def test_a_cycle_measured_at_a_frame_change_may_show_the_frame_before(closing_scene):
+    from rts_scenario.radar.clock import RadarClock
+
+    # In step with the frames (every shipped profile): each cycle is measured exactly when
+    # the next frame is due, and this radar always shows the frame before.
+    report, n = _radar_run(closing_scene, RadarClock(cycle_s=0.05), window_s=0.006,
+                           lag_frames=1)
+    assert report.passed, report.reasons
+    assert report.frames["checked"] == report.frames["total"] == n == 60
+    # Every cycle but the first (no frame before it) is measured at a change; all of those
+    # matched the frame before, and the report says so.
+    assert report.frames["ambiguous"] == 59 and report.frames["adjacent_frame"] == 59
+    assert ("59 cycles measured within the ambiguity window of a frame change, 59 of them "
+            "judged against the frame across it") in report.table()
+
+
+def test_a_radar_two_frames_behind_fails(closing_scene):
+    from rts_scenario.radar.clock import RadarClock
+
+    report, n = _radar_run(closing_scene, RadarClock(cycle_s=0.05), window_s=0.006,
+                           lag_frames=2)
+    assert not report.passed
+    # Only cycles 0 and 1 (nothing two frames before them) show a frame the checker accepts.
+    assert report.detection_rate == pytest.approx(2 / n)
+    assert any("detection rate" in r for r in report.reasons)
+
+
+def test_a_radar_a_frame_behind_outside_the_window_fails(closing_scene):
+    from rts_scenario.radar.clock import RadarClock
+
+    # Measured 20 ms into each frame, far from any change: showing the frame before is an
+    # error of the radar, not the bench's race.
+    clock = RadarClock(cycle_s=0.05, start_offset_s=0.02)
+    report, _ = _radar_run(closing_scene, clock, window_s=0.006, lag_frames=1,
+                           radar_window_s=1.0)
+    assert not report.passed and report.frames["ambiguous"] == 0
+    assert report.detection_rate < 0.05
+    right, _ = _radar_run(closing_scene, clock, window_s=0.006, lag_frames=0)
+    assert right.passed, right.reasons
+
+
+def test_frames_applied_late_are_found_by_their_send_times(closing_scene):
+    from rts_scenario.radar.clock import RadarClock
+
+    # Every frame reached the RTS 30 ms after its time (beyond the 6 ms window); a radar in
+    # step with the frames saw the frame before at each cycle: right, by the send times.
+    report, _ = _radar_run(closing_scene, RadarClock(cycle_s=0.05), window_s=0.006,
+                           lag_frames=0, applied_delay_s=0.03)
+    assert report.passed, report.reasons
+    assert report.frames["adjacent_frame"] == 0

@@ -5,6 +5,7 @@ Each test runs a few seconds of scene in real time on loopback.
 
 import itertools
 import shutil
+import time
 from pathlib import Path
 
 import numpy as np
@@ -162,3 +163,62 @@ def test_emulate_command_stops_when_frames_stop(tmp_path, capsys):
     assert code == 0
     out = capsys.readouterr().out
     assert "listening on udp://127.0.0.1:" in out and "cycles" in out
+
+
+def test_a_perfect_radar_in_step_with_the_frames_passes_the_rehearsal(tmp_path):
+    # Every shipped profile measures each cycle exactly when the next frame is due: the
+    # emulated RTS may or may not have it yet. The checker takes either frame within the
+    # radar's chirp time of a change, and says how many cycles it judged so.
+    shutil.copy(ROOT / "scenarios" / "approaching_target.scenario.yaml", tmp_path)
+    scene = load_scenario(tmp_path / "approaching_target.scenario.yaml",
+                          {"duration_s": 3.0, "radar.noise": False})
+    report, stats = rehearse(scene, mapping=None)
+    assert report.passed, report.reasons
+    assert report.frames["checked"] == report.frames["total"] == 60
+    # Every cycle after the first is measured at a change (fewer if the sender was late by
+    # more than the window, on a loaded machine: then the send times decide alone).
+    assert 50 <= report.frames["ambiguous"] <= 59
+    assert report.playback["rts"]["frames_applied"] == 60  # the emulated RTS reported
+    assert stats["udp"]["lost_frames"] == 0
+
+
+def test_frames_the_rts_lost_fail_the_run_with_the_rts_s_count(tmp_path):
+    scene = bench_scene(tmp_path)
+    report, stats = rehearse(scene, udp_faults={"drop": 0.5})
+    lost = stats["udp"]["lost_frames"]
+    assert lost > 0.3 * scene.n_frames
+    assert not report.passed
+    assert report.playback["rts"]["lost_frames"] >= lost - 1  # the last reply may precede
+    assert any(r.startswith("frames_lost: the RTS reports") for r in report.reasons)
+    assert "lost frames" in report.table()
+
+
+def test_a_late_sender_is_reported_and_fails_unless_expected(tmp_path, monkeypatch):
+    from rts_scenario.outputs.udp import UdpOutput
+
+    wait = UdpOutput._wait_for
+
+    def late(self, t_s):  # every frame after the first goes out 60 ms late (> 50 ms frames)
+        lateness = wait(self, t_s)
+        if t_s > 0:
+            time.sleep(0.06)
+            lateness = time.perf_counter() - self._start - (t_s - self._t0)
+            self.lateness_s[-1] = lateness
+        return lateness
+
+    monkeypatch.setattr(UdpOutput, "_wait_for", late)
+    scene = bench_scene(tmp_path, duration_s=3.2)
+    report, _ = rehearse(scene)
+    # The emulated RTS applied the frames late and its radar measured them so: judged by
+    # the send times, the radar is right; the scene was not played as timed.
+    assert report.targets[0].detection_rate == 1.0
+    assert report.playback["late_frames"] == scene.n_frames - 1
+    assert report.playback["lateness_s"]["max"] >= 0.06
+    assert any(r.startswith("frames_sent_late: 63 of 64 frames") for r in report.reasons)
+    expected = load_scenario(tmp_path / "cut_in.scenario.yaml", {
+        "radar.profile": "radars/scene.radar.yaml", "radar.noise": False,
+        "radar.fidelity": "analytic", "duration_s": 3.2,
+        "expectations.expected_limits": ["frame_rate_above_radar", "frames_sent_late"]})
+    report, _ = rehearse(expected)
+    assert report.passed, report.reasons
+    assert report.playback["late_frames"] == expected.n_frames - 1

@@ -72,6 +72,25 @@ class Output(ABC):
             raise OutputError(f"{self.name}: write after close")
         self._write(batch)
 
+    def sent_t_s(self, batch: Schedule) -> np.ndarray:
+        """Return the scene times at which the frames of ``batch`` (just written) went out.
+
+        An output that delivers each frame exactly at its time (the simulated radar, a file
+        replayed by its times) returns ``batch.t_s``, the default; one that paces frames
+        in real time returns when it really sent each (`rts_scenario.outputs.udp.UdpOutput`):
+        the RTS cannot apply a frame before it has it, and the checker finds the frame each
+        radar cycle saw by these times.
+        """
+        return batch.t_s
+
+    def rts_status(self) -> dict[str, int] | None:
+        """Return the RTS's own counters of what it received and applied, if it reports them.
+
+        None (the default) when the output has no RTS that reports: a lost frame then shows
+        only in what the radar measured.
+        """
+        return None
+
     def close(self) -> None:
         """Flush and release resources; further calls do nothing."""
         if not self._closed:

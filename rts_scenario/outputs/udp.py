@@ -41,6 +41,13 @@ TRAILER = struct.Struct("!I")
 ENTRY = np.dtype([("target", ">u2"), ("channel", "u1"), ("flags", "u1"), ("fe", ">i2"),
                   ("status", ">u2"), ("attenuation_db", ">f4"), ("delay_s", ">f8"),
                   ("doppler_hz", ">f4"), ("phase_rad", ">f4")])
+# The RTS's status reply (optional): its counters after each datagram it handled.
+STATUS_MAGIC = b"RTSR"
+STATUS_COUNTERS = ("datagrams", "corrupted", "malformed", "duplicates", "reordered", "stale",
+                   "frames_applied", "lost_frames", "unsynced_frames")
+STATUS = struct.Struct("!4sB" + "I" * len(STATUS_COUNTERS))
+# The sender reads the replies every this many frames (they would fill its socket's buffer).
+STATUS_DRAIN_FRAMES = 32
 MAX_DATAGRAM = 1400
 MAX_ENTRIES = (MAX_DATAGRAM - HEADER.size - TRAILER.size) // ENTRY.itemsize
 
@@ -114,6 +121,8 @@ class UdpOutput(Output):
         self.entries_sent = 0
         self.datagrams_sent = 0
         self.lateness_s: list[float] = []
+        self._sent_t_s = np.zeros(0)
+        self._rts_status: dict[str, int] | None = None
 
     def transmit(self, datagram: bytes) -> None:
         """Put one datagram on the network."""
@@ -125,6 +134,7 @@ class UdpOutput(Output):
 
     def _write(self, batch: Schedule) -> None:
         changed = batch.changed() if self.mode == "delta" else None
+        self._sent_t_s = batch.t_s.astype(np.float64, copy=True)
         for pos in range(batch.n_frames):  # frames go out one by one, at their own time
             keyframe = changed is None or self._frames_sent % self.keyframe_every == 0
             entries = frame_entries(batch, pos, None if keyframe else changed)
@@ -133,15 +143,52 @@ class UdpOutput(Output):
                 frame=int(batch.frame_index[pos]), t_s=float(batch.t_s[pos]),
                 first_sequence=self._sequence)
             if self.pacing == "realtime":
-                self._wait_for(float(batch.t_s[pos]))
+                self._sent_t_s[pos] += self._wait_for(float(batch.t_s[pos]))
             for datagram in datagrams:
                 self.send(datagram)
             self._sequence += len(datagrams)
             self.datagrams_sent += len(datagrams)
             self.entries_sent += entries.size
             self._frames_sent += 1
+            if self._frames_sent % STATUS_DRAIN_FRAMES == 0:
+                self.rts_status()  # the socket's buffer holds a few hundred replies at most
 
-    def _wait_for(self, t_s: float) -> None:
+    def sent_t_s(self, batch: Schedule) -> np.ndarray:
+        """Return when the frames of ``batch`` went out, in scene time (see `Output.sent_t_s`).
+
+        Paced in real time: each frame's time plus how late it went out (its `lateness_s`;
+        the first frame sets the scene's origin). Not paced (``fast``): the frames' times (an
+        RTS that buffers the stream plays it by the times in its headers).
+        """
+        if self._sent_t_s.size != batch.n_frames:
+            raise OutputError(f"udp: sent_t_s of a batch of {batch.n_frames} frames, the last "
+                              f"written had {self._sent_t_s.size}")
+        return self._sent_t_s
+
+    def rts_status(self) -> dict[str, int] | None:
+        """Return the RTS's latest status reply (docs/udp-protocol.md), None without any.
+
+        Replies are read off the socket without waiting; anything that is not a valid status
+        datagram is ignored.
+        """
+        self._socket.setblocking(False)
+        try:
+            while True:
+                try:
+                    data = self._socket.recv(65536)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:  # e.g. an ICMP error of an earlier datagram: nothing to read
+                    continue
+                status = decode_status(data)
+                if status is not None:
+                    self._rts_status = status
+        finally:
+            self._socket.setblocking(True)
+        return self._rts_status
+
+    def _wait_for(self, t_s: float) -> float:
+        """Wait until scene time ``t_s``; return how late that is (s)."""
         now = time.perf_counter()
         if self._start is None:
             self._start, self._t0 = now, t_s
@@ -154,9 +201,31 @@ class UdpOutput(Output):
         while (now := time.perf_counter()) < due:
             pass
         self.lateness_s.append(now - due)
+        return now - due
 
     def _close(self) -> None:
         self._socket.close()
+
+
+def encode_status(counters: dict[str, int]) -> bytes:
+    """Return the status datagram carrying an RTS's ``counters`` (`STATUS_COUNTERS`)."""
+    body = STATUS.pack(STATUS_MAGIC, VERSION,
+                       *(min(max(int(counters.get(k, 0)), 0), 0xFFFFFFFF)
+                         for k in STATUS_COUNTERS))
+    return body + TRAILER.pack(zlib.crc32(body))
+
+
+def decode_status(datagram: bytes) -> dict[str, int] | None:
+    """Return the counters of a status datagram; None if it is not a valid one."""
+    if len(datagram) != STATUS.size + TRAILER.size:
+        return None
+    body, (crc,) = datagram[:STATUS.size], TRAILER.unpack(datagram[STATUS.size:])
+    if zlib.crc32(body) != crc:
+        return None
+    magic, version, *values = STATUS.unpack(body)
+    if magic != STATUS_MAGIC or version != VERSION:
+        return None
+    return dict(zip(STATUS_COUNTERS, values, strict=True))
 
 
 @dataclass
@@ -212,6 +281,8 @@ class UdpReceiver:
         self._pending_meta: dict[int, tuple[int, int, float]] = {}
         self._last_frame = -1
         self._frames_seen: set[int] = set()
+        self._first_frame: int | None = None
+        self._top_frame = -1
         self._synced = True
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -269,12 +340,36 @@ class UdpReceiver:
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                datagram = self._socket.recv(65536)
+                datagram, sender = self._socket.recvfrom(65536)
             except TimeoutError:
+                continue
+            except ConnectionRefusedError:  # a status reply's sender is gone: keep listening
                 continue
             except OSError:
                 break
             self.handle(datagram)
+            self._reply(sender)
+
+    def _reply(self, sender: tuple[str, int]) -> None:
+        """Tell the sender what this RTS has received and applied so far (a status datagram).
+
+        A UDP sender cannot see loss; these replies let it report lost frames. A sender that
+        does not read them loses nothing.
+        """
+        counters = dict(vars(self.stats))
+        counters["lost_frames"] = self._lost_frames_now()
+        try:
+            self._socket.sendto(encode_status(counters), sender)
+        except OSError:
+            pass
+
+    def _lost_frames_now(self) -> int:
+        """Frames lost so far: between the first and last seen, neither applied nor pending."""
+        if self._first_frame is None:
+            return 0
+        span = self._top_frame - self._first_frame + 1
+        return max(0, span - self.stats.frames_applied - self.stats.unsynced_frames
+                   - len(self._pending))
 
     def handle(self, datagram: bytes) -> None:
         """Validate and process one datagram."""
@@ -302,6 +397,8 @@ class UdpReceiver:
         self._max_sequence = max(self._max_sequence, seq)
         self._min_sequence = seq if self._min_sequence is None else min(self._min_sequence, seq)
         self._frames_seen.add(frame)
+        self._first_frame = frame if self._first_frame is None else min(self._first_frame, frame)
+        self._top_frame = max(self._top_frame, frame)
         if frame <= self._last_frame:
             stats.stale += 1
             return

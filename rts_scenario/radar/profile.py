@@ -177,6 +177,11 @@ class RadarProfile:
         return len(self.tx_order) * self.chirp_slot_s
 
     @property
+    def measurement_s(self) -> float:
+        """How long one cycle's chirp sequence lasts (every TX, every loop)."""
+        return self.chirp_loops * self.loop_time_s
+
+    @property
     def range_resolution_m(self) -> float:
         """``c0 / (2 B_sampled)`` with the bandwidth swept while sampling."""
         sampled = self.slope_hz_per_s * self.adc_samples / self.sample_rate_hz

@@ -31,6 +31,8 @@ LIMITS = {
     "beyond_radar_range": "beyond the radar's unambiguous range",
     "beyond_radar_velocity": "beyond the radar's unambiguous radial velocity",
     "frame_rate_above_radar": "the scene's frames come faster than the radar's cycles",
+    "frames_sent_late": "schedule frames went out more than a frame period late",
+    "frames_lost": "the RTS reports schedule frames it lost or could not apply",
 }
 
 DEFAULT_TOLERANCES = {

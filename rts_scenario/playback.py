@@ -1,0 +1,95 @@
+"""How the schedule was played: when each frame went out, and what the RTS says it applied.
+
+A sender paced in real time puts each frame out at its scene time or a little later (the
+operating system's scheduling); the RTS cannot apply a frame before it arrives. The checker
+judges every radar cycle by when frames really went out (`rts_scenario.pipeline.CycleTruth`),
+so a late frame does not make the radar look wrong. Lateness is always reported (median,
+worst). A frame that went out later than its whole slot (the scene's frame period, never
+shorter than the rig's update interval) left the frame before held for another frame: the scene
+was not played as specified, and such frames fail the run unless the scene declares
+``frames_sent_late`` expected. A shorter delay shifts the scene's timeline by less than a frame,
+which the checker already accounts for; failing on it would fail runs on an ordinary loaded
+machine for what the verdict already judges correctly.
+
+A UDP sender cannot see a datagram lost on the way. An RTS that reports its counters
+(``udp-protocol.md``: status datagrams; the reference receiver and ``rts-scenario emulate``
+do) lets the run say how many frames it lost or could not apply; those fail the run unless
+the scene declares ``frames_lost`` expected. Without such reports a lost frame shows only as
+what the radar measured: the frame before held longer (misses, or errors beyond tolerance).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .report import RunningStats
+
+# RTS counters that mean frames were not played as sent.
+LOST_COUNTERS = ("lost_frames", "unsynced_frames", "corrupted", "malformed")
+
+
+class Playback:
+    """Running account of a run's playback (see the module docstring).
+
+    Parameters
+    ----------
+    late_after_s : float
+        A frame that went out later than this after its time is late (the scene's frame
+        period).
+    ambiguity_window_s : float
+        The window after a frame change in which a cycle may show the frame before
+        (`rts_scenario.pipeline.ambiguity_window_s`), reported with the rest.
+    """
+
+    def __init__(self, late_after_s: float, ambiguity_window_s: float) -> None:
+        self.late_after_s = float(late_after_s)
+        self.ambiguity_window_s = float(ambiguity_window_s)
+        self._lateness = RunningStats(1)
+        self.frames = 0
+        self.late_frames = 0
+        self.rts: dict[str, int] | None = None
+
+    def add(self, t_s: ArrayLike, sent_s: ArrayLike) -> None:
+        """Take a batch's frame times and the scene times they went out at."""
+        late = np.asarray(sent_s, dtype=np.float64) - np.asarray(t_s, dtype=np.float64)
+        self.frames += late.size
+        self.late_frames += int((late > self.late_after_s).sum())
+        self._lateness.add(late.reshape(-1, 1))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data for the report's ``playback`` (docs/report.md)."""
+        stats = self._lateness.result()
+        return {"frames_sent": self.frames, "late_frames": self.late_frames,
+                "lateness_s": {"p50": stats.p50, "p95": stats.p95, "max": stats.max},
+                "late_after_s": self.late_after_s,
+                "ambiguity_window_s": self.ambiguity_window_s, "rts": self.rts}
+
+    def reasons(self, expected: frozenset[str] | set[str]) -> list[str]:
+        """Why the playback fails the run (nothing when it does not)."""
+        out = []
+        if self.late_frames and "frames_sent_late" not in expected:
+            out.append(f"frames_sent_late: {self.late_frames} of {self.frames} frames went out "
+                       f"more than a frame period ({self.late_after_s * 1e3:.3g} ms) after "
+                       f"their time: the frame before was held instead (worst "
+                       f"{self._lateness.result().max * 1e3:.3g} ms)")
+        lost = lost_frames(self.rts)
+        if lost and "frames_lost" not in expected:
+            out.append(f"frames_lost: the RTS reports {lost} schedule frames it did not apply "
+                       f"(" + ", ".join(f"{k.replace('_', ' ')} {self.rts[k]}"
+                                        for k in LOST_COUNTERS if self.rts and self.rts.get(k))
+                       + ")")
+        return out
+
+
+def lost_frames(rts: Mapping[str, int] | None) -> int:
+    """Return how many frames an RTS's counters say were lost or not applied (0 for None)."""
+    if not rts:
+        return 0
+    return int(rts.get("lost_frames", 0)) + int(rts.get("unsynced_frames", 0))
+
+
+__all__ = ["LOST_COUNTERS", "Playback", "lost_frames"]
