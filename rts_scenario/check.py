@@ -141,16 +141,14 @@ class _Judged:
     cost: FloatArray
 
     def better_than(self, other: _Judged) -> BoolArray:
-        """Return the cycles this candidate explains better than ``other``.
+        """Return the cycles in which this candidate detects more targets than ``other``.
 
-        More targets detected, then more matched, then closer; a tie keeps ``other``.
+        Only more detections count: where both detect as many, ``other`` (the frame the run
+        knows was held) stays, so the errors reported are against it and a frame across the
+        change never lowers them by matching the noise a little better.
         """
         detected = (self.assigned & self.within & self.truth).sum(axis=1)
-        detected_other = (other.assigned & other.within & other.truth).sum(axis=1)
-        matched = (self.assigned & self.truth).sum(axis=1)
-        matched_other = (other.assigned & other.truth).sum(axis=1)
-        return (detected > detected_other) | ((detected == detected_other) & (
-            (matched > matched_other) | ((matched == matched_other) & (self.cost < other.cost))))
+        return detected > (other.assigned & other.within & other.truth).sum(axis=1)
 
     def where(self, cycles: BoolArray, other: _Judged, frame_of: NDArray[np.int64]) -> _Judged:
         """Return this judgement where ``cycles`` is False, ``other``'s where it is True."""

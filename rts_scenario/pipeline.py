@@ -430,8 +430,8 @@ class CycleTruth:
     before: the radar's chirp sequence (`RadarProfile.measurement_s`; its measurement time
     marks the end of the chirps) can straddle the change, and the RTS may apply a frame up
     to ``limits.update_latency_s`` after it arrives. Cycles measured within ``window_s``
-    (those two together) after the frame they hold was applied are judged against whichever
-    of that frame and the one before they match better, and counted (`Checker.add_truth`).
+    (those two together) of a frame change are judged against the frame across it where
+    that one detects more of their targets, and counted (`Checker.add_truth`).
     A radar one frame behind outside the window, or two frames behind, still fails.
 
     Parameters

@@ -272,7 +272,7 @@ class Report:
                          + (f"{window * 1e3:.3g} ms" if window is not None
                             else "the ambiguity window")
                          + f" of a frame change, {f.get('adjacent_frame', 0)} of them judged "
-                         f"against the frame across it (it matched better)")
+                         f"against the frame across it (more targets detected)")
         if self.playback:
             lines.append(_playback_line(self.playback))
         problems = {k: v for k, v in self.bus.items() if k != "messages" and v}
@@ -289,7 +289,7 @@ def _playback_line(p: dict[str, Any]) -> str:
     late = p["lateness_s"]
     text = f"playback: {p['frames_sent']} frames sent"
     if late.get("max") is not None and math.isfinite(late["max"]):
-        text += (f", late by {late['p50'] * 1e3:.3g} ms median, {late['max'] * 1e3:.3g} ms "
+        text += (f", late by {late['p50'] * 1e3:.2f} ms median, {late['max'] * 1e3:.2f} ms "
                  f"worst ({p['late_frames']} later than a frame period)")
     rts = p.get("rts")
     if rts is None:
