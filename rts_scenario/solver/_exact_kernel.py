@@ -375,76 +375,44 @@ def _phase_residual(f_re, f_im, w, c, s):  # pragma: no cover
     return _atan2(b_im * c - b_re * s, b_re * c + b_im * s)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
-def _quad_bounds(lines, boxes, q, slack):  # pragma: no cover
-    """Quad ``q``'s box widened by ``slack`` and its four edge lines, hoisted as one tuple."""
-    return (boxes[q, 0] - slack, boxes[q, 1] + slack, boxes[q, 2] - slack,
-            boxes[q, 3] + slack, -slack,
-            lines[q, 0, 0], lines[q, 0, 1], lines[q, 0, 2],
-            lines[q, 1, 0], lines[q, 1, 1], lines[q, 1, 2],
-            lines[q, 2, 0], lines[q, 2, 1], lines[q, 2, 2],
-            lines[q, 3, 0], lines[q, 3, 1], lines[q, 3, 2])
-
-
-@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
-def _inside(a, e, bd):  # pragma: no cover
-    """`quads.inside_quads` of one target (``bd``: `_quad_bounds`), without branches."""
-    inside = (a >= bd[0]) & (a <= bd[1]) & (e >= bd[2]) & (e <= bd[3])
-    inside &= bd[5] * a + bd[6] * e + bd[7] >= bd[4]
-    inside &= bd[8] * a + bd[9] * e + bd[10] >= bd[4]
-    inside &= bd[11] * a + bd[12] * e + bd[13] >= bd[4]
-    inside &= bd[14] * a + bd[15] * e + bd[16] >= bd[4]
-    return inside
-
-
 @_jit
-def _locate_one_quad(az, el, lines, boxes, slack, quad):  # pragma: no cover
-    """`quads.inside_quads` of the only quad (four FEs): 0 inside, else -1 (a vector loop)."""
-    bd = _quad_bounds(lines, boxes, 0, slack)
-    for n in range(az.size):
-        quad[n] = 0 if _inside(az[n], el[n], bd) else -1
-
-
-@_jit
-def _candidate_cells(az, el, column_az, row_el, quad, row, lo, hi):  # pragma: no cover
-    """`quads.candidate_quads` of targets ``lo <= n < hi`` into ``quad`` (``row``: scratch).
-
-    searchsorted (left) as a count of the sorted means below, minus one, clipped to the cells:
-    one vector loop per column and row mean over the targets (no branches to mispredict).
-    """
+def _locate(az, el, column_az, row_el, lines, boxes, slack, quad):  # pragma: no cover
+    """`quads.candidate_quads`, kept where `quads.inside_quads` holds, else -1."""
     columns, rows = column_az.size, row_el.size
-    for n in range(lo, hi):
-        quad[n] = -1
-        row[n - lo] = -1
-    for c in range(columns):
-        mean = column_az[c]
-        for n in range(lo, hi):
-            quad[n] += mean < az[n]
-    for r in range(rows):
-        mean = row_el[r]
-        for n in range(lo, hi):
-            row[n - lo] += mean < el[n]
-    for n in range(lo, hi):
-        col = min(max(quad[n], 0), columns - 2)
-        quad[n] = min(max(row[n - lo], 0), rows - 2) * (columns - 1) + col
-
-
-@_jit
-def _keep_inside(az, el, order, lo, hi, q, lines, boxes, slack, quad):  # pragma: no cover
-    """Keep in ``order[lo:hi]`` the targets inside quad ``q`` (`quads.inside_quads`).
-
-    The others get ``quad`` -1 (`quads.QuadGeometry.assign` scans the other quads for them).
-    Returns the end of the targets kept, which move down in their order.
-    """
-    bd = _quad_bounds(lines, boxes, q, slack)
-    kept = lo
-    for i in range(lo, hi):
-        n = order[i]
-        inside = _inside(az[n], el[n], bd)
-        order[kept] = n  # without branches: written always, kept only if inside
-        kept += inside
+    if columns == 2 and rows == 2:  # one quad (four FEs): its constants hoisted, a vector loop
+        a_lo, a_hi = boxes[0, 0] - slack, boxes[0, 1] + slack
+        e_lo, e_hi = boxes[0, 2] - slack, boxes[0, 3] + slack
+        l00, l01, l02 = lines[0, 0, 0], lines[0, 0, 1], lines[0, 0, 2]
+        l10, l11, l12 = lines[0, 1, 0], lines[0, 1, 1], lines[0, 1, 2]
+        l20, l21, l22 = lines[0, 2, 0], lines[0, 2, 1], lines[0, 2, 2]
+        l30, l31, l32 = lines[0, 3, 0], lines[0, 3, 1], lines[0, 3, 2]
+        for n in range(az.size):
+            a, e = az[n], el[n]
+            inside = (a >= a_lo) & (a <= a_hi) & (e >= e_lo) & (e <= e_hi)
+            inside &= l00 * a + l01 * e + l02 >= -slack
+            inside &= l10 * a + l11 * e + l12 >= -slack
+            inside &= l20 * a + l21 * e + l22 >= -slack
+            inside &= l30 * a + l31 * e + l32 >= -slack
+            quad[n] = 0 if inside else -1
+        return
+    for n in range(az.size):
+        # Without branches (random targets would mispredict them): searchsorted (left) as a
+        # count of the sorted means below, minus one, clipped to the cells.
+        a, e = az[n], el[n]
+        col = 0
+        for c in range(columns):
+            col += column_az[c] < a
+        col = min(max(col - 1, 0), columns - 2)
+        row = 0
+        for r in range(rows):
+            row += row_el[r] < e
+        row = min(max(row - 1, 0), rows - 2)
+        q = row * (columns - 1) + col
+        inside = (a >= boxes[q, 0] - slack) & (a <= boxes[q, 1] + slack)
+        inside &= (e >= boxes[q, 2] - slack) & (e <= boxes[q, 3] + slack)
+        for i in range(4):
+            inside &= lines[q, i, 0] * a + lines[q, i, 1] * e + lines[q, i, 2] >= -slack
         quad[n] = q if inside else -1
-    return kept
 
 
 # Inlined by numba (helpers of the response sums' loops over a block).
@@ -622,11 +590,8 @@ def solve_targets(  # pragma: no cover
     n_quads = tab_re.shape[0]
     n_elements = iy.size
     phase_tol = tol[_PHASE]
-    # One quad: located in one pass. On a grid: each span's candidate cells, and then the
-    # targets outside their cell are left out of its sorted targets (`_keep_inside`).
-    grid = locate and not (column_az.size == 2 and row_el.size == 2)
-    if locate and not grid:
-        _locate_one_quad(angle, other, lines, boxes, edge_tol, quad)
+    if locate:
+        _locate(angle, other, column_az, row_el, lines, boxes, edge_tol, quad)
     has_phase = phase_table.shape[1] > 0
     us = np.empty(_BLOCK)
     ss = np.empty(_BLOCK)
@@ -657,11 +622,8 @@ def solve_targets(  # pragma: no cover
     count = np.zeros(n_quads + 1, dtype=np.int64)
     fill = np.zeros(n_quads, dtype=np.int64)
     order = np.empty(min(_SPAN, angle.size), dtype=np.int64)
-    cell_row = np.empty(min(_SPAN, angle.size), dtype=np.int64) if grid else order[:0]
     for span in range(0, angle.size, _SPAN):
         end = min(span + _SPAN, angle.size)
-        if grid:
-            _candidate_cells(angle, other, column_az, row_el, quad, cell_row, span, end)
         count[:] = 0
         for n in range(span, end):
             if quad[n] >= 0:
@@ -674,18 +636,14 @@ def solve_targets(  # pragma: no cover
                 order[fill[quad[n]]] = n
                 fill[quad[n]] += 1
         for qd in range(n_quads):
-            stop = count[qd + 1]
-            if grid:
-                stop = _keep_inside(angle, other, order, count[qd], stop, qd, lines, boxes,
-                                    edge_tol, quad)
             test = curvature[qd]
             # Real-valued responses need only the real part (centro-symmetric, no curvature).
             real_only = centrosymmetric and not test
             table_re = tab_re[qd]
             table_im = tab_im[qd]
             pending = 0
-            for start in range(count[qd], stop, _BLOCK):
-                nb = min(_BLOCK, stop - start)
+            for start in range(count[qd], count[qd + 1], _BLOCK):
+                nb = min(_BLOCK, count[qd + 1] - start)
                 # Gather the block's angles first: the sines and cosines then vectorize.
                 for b in range(nb):
                     n = order[start + b]
