@@ -150,6 +150,29 @@ class _Judged:
         detected = (self.assigned & self.within & self.truth).sum(axis=1)
         return detected > (other.assigned & other.within & other.truth).sum(axis=1)
 
+    def take(self, rows: NDArray[np.intp], detections: BoolArray) -> _Judged:
+        """Return the cycles ``rows`` and the ``detections`` (a mask) that belong to them."""
+        return _Judged(self.truth[rows], self.assigned[rows], self.within[rows],
+                       {q: e[rows] for q, e in self.errors.items()}, self.match[detections],
+                       {name: m[rows] for name, m in self.limits.items()}, self.cost[rows])
+
+    def spread(self, rows: NDArray[np.intp], detections: BoolArray, n_cycles: int) -> _Judged:
+        """Return this judgement of cycles ``rows`` placed among ``n_cycles`` (the rest empty).
+
+        ``detections`` (a mask over all of the block's detections) marks this one's.
+        """
+        def put(a: np.ndarray, fill: Any) -> np.ndarray:
+            out = np.full((n_cycles, *a.shape[1:]), fill, dtype=a.dtype)
+            out[rows] = a
+            return out
+
+        match = np.full(detections.size, -1, dtype=np.int64)
+        match[detections] = self.match
+        return _Judged(put(self.truth, False), put(self.assigned, False),
+                       put(self.within, True), {q: put(e, np.nan) for q, e in self.errors.items()},
+                       match, {name: put(m, False) for name, m in self.limits.items()},
+                       put(self.cost, 0.0))
+
     def where(self, cycles: BoolArray, other: _Judged, frame_of: NDArray[np.int64]) -> _Judged:
         """Return this judgement where ``cycles`` is False, ``other``'s where it is True."""
         rows = cycles[:, None]
@@ -331,12 +354,21 @@ class Checker:
         use_other = np.zeros(n_frames, dtype=bool)
         if block.other is not None and block.ambiguous is not None:
             self.frames["ambiguous"] += int(block.ambiguous.sum())
-            window = block.ambiguous & ok
-            if window.any():
-                other = self._judge(*block.other, frame_of, values, invalid)
-                use_other = window & other.better_than(judged)
+            # Only cycles where the frame across the change has more checkable targets than
+            # this one detected can be judged better against it: those alone are judged again.
+            o_tracks, o_flags = block.other
+            detected_here = (judged.assigned & judged.within & judged.truth).sum(axis=1)
+            again = np.flatnonzero(block.ambiguous & ok
+                                  & (checkable(o_tracks, o_flags).sum(axis=1) > detected_here))
+            if again.size:
+                keep = np.isin(frame_of, again)
+                other = self._judge(o_tracks.take(again), o_flags[again],
+                                    np.searchsorted(again, frame_of[keep]),
+                                    {q: v[keep] for q, v in values.items()}, invalid[keep])
+                use_other[again] = other.better_than(judged.take(again, keep))
                 if use_other.any():
-                    judged = judged.where(use_other, other, frame_of)
+                    judged = judged.where(use_other, other.spread(again, keep, n_frames),
+                                          frame_of)
             self.frames["adjacent_frame"] += int(use_other.sum())
         truth, assigned, within = judged.truth, judged.assigned, judged.within
         errors, match = judged.errors, judged.match

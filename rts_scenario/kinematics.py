@@ -10,7 +10,7 @@ Radial velocity is ``d(range)/dt`` computed from the analytic velocities of targ
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import NDArray
@@ -68,6 +68,14 @@ class Tracks:
     def checkable(self) -> BoolArray:
         """Present, synthesizable and unambiguous: frames a radar result can be checked on."""
         return self.present & self.in_coverage & self.in_range & self.in_velocity
+
+    def take(self, rows: NDArray[np.intp] | NDArray[np.int64], t_s: FloatArray | None = None
+             ) -> Tracks:
+        """Return the frames ``rows`` (indices, repeats allowed), at times ``t_s`` if given."""
+        out = {f.name: getattr(self, f.name)[rows] for f in fields(self) if f.name != "names"}
+        if t_s is not None:
+            out["t_s"] = np.asarray(t_s, dtype=np.float64)
+        return Tracks(names=self.names, **out)
 
 
 def _rotation_z(yaw: FloatArray) -> FloatArray:

@@ -510,14 +510,17 @@ class CycleTruth:
         to_after = (until <= self.window_s) & has_next & ~to_before
         ambiguous = to_before | to_after
         t_all, scene = self.scene.t_s, self.scene
-        truth = compute_tracks(scene, t_all[frames[held]], frames[held])
+        # The scene once at every frame a cycle may be judged against: a radar in step with
+        # the frames has the frame across each change as its neighbour's held one.
+        alt = held - to_before + to_after
+        need = np.union1d(held, alt[ambiguous])
+        base = compute_tracks(scene, t_all[frames[need]], frames[need])
+        truth = base.take(np.searchsorted(need, held), t_cycles)
         other = None
         if ambiguous.any():
-            alt = held - to_before + to_after
-            other = (replace(compute_tracks(scene, t_all[frames[alt]], frames[alt]),
-                             t_s=t_cycles), status[alt])
-        self.checker.add_truth(int(n[0]), replace(truth, t_s=t_cycles), status[held],
-                               other=other, ambiguous=ambiguous)
+            other = (base.take(np.searchsorted(need, alt), t_cycles), status[alt])
+        self.checker.add_truth(int(n[0]), truth, status[held], other=other,
+                               ambiguous=ambiguous)
         return n
 
 
