@@ -576,7 +576,10 @@ class DetectionReceiver(can.Listener):
     def _reset(self) -> None:
         self._open: OrderedDict[int, _Assembly] = OrderedDict()
         self._ready: deque[Detections] = deque()
-        self._recent: OrderedDict[int, _Assembly] = OrderedDict()  # cycles handed on
+        self._recent: OrderedDict[int, bool] = OrderedDict()  # counter -> handed on whole
+        # The last cycles handed on, with their content: a part of one of them that comes
+        # again is told apart as a copy or a conflict (of older ones: counted as a copy).
+        self._content: OrderedDict[int, _Assembly] = OrderedDict()
         self._current: _Assembly | None = None
         self._latest = -1
         # Detections that came before their cycle's header, by counter (low 8 bits).
@@ -644,11 +647,11 @@ class DetectionReceiver(can.Listener):
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
             for name, value in raw.items()}
         counter = int(values[m.counter])
-        known = self._open.get(counter) or self._recent.get(counter)
-        if known is not None:
+        known = self._open.get(counter) or self._content.get(counter)
+        if known is not None or counter in self._recent:
             # The same header again is a copy; another one with this counter is a conflict
             # (the cycle's content is in doubt: it fails the verdict).
-            if _same(known.header, raw):
+            if known is None or _same(known.header, raw):
                 self.stats.duplicates += 1
             else:
                 self.stats.conflicts += 1
@@ -684,12 +687,12 @@ class DetectionReceiver(can.Listener):
                               if c % self._low_modulus == low),
                              None)
                 if frame is None:
-                    done = next((f for c, f in reversed(self._recent.items())
+                    done = next((c for c in reversed(self._recent)
                                  if c % self._low_modulus == low), None)
                     if done is not None:
                         # Its cycle was handed on: a copy, a conflict, or (the cycle went on
                         # incomplete) too late.
-                        if done.complete():
+                        if self._recent[done]:
                             self._after(done, part, values)
                         return
                     self._waiting.setdefault(low, []).append((part, values))
@@ -703,9 +706,8 @@ class DetectionReceiver(can.Listener):
         if frame.counter not in self._open:
             # Its cycle was handed on: a copy or a conflict if it was whole, else too late to
             # count.
-            done = self._recent.get(frame.counter)
-            if done is not None and done.complete():
-                self._after(done, part, values)
+            if self._recent.get(frame.counter, False):
+                self._after(frame.counter, part, values)
             else:
                 self.stats.orphans += 1
             return
@@ -727,12 +729,17 @@ class DetectionReceiver(can.Listener):
         elif added is None:
             self.stats.conflicts += 1
 
-    def _after(self, frame: _Assembly, part: PartKey, values: dict[str, float]) -> None:
+    def _after(self, counter: int, part: PartKey, values: dict[str, float]) -> None:
         """Count a part of a whole cycle already handed on: a copy, or a conflict.
 
         A conflict (another value, or a detection beyond the count its header announced)
         means the cycle that was checked is not the one the radar sent: it fails the verdict.
+        A cycle `OPEN_CYCLES` or more cycles old is no longer held: its part counts as a copy.
         """
+        frame = self._content.get(counter)
+        if frame is None:
+            self.stats.duplicates += 1
+            return
         index = self._scaled(part, values)
         known = frame.arrived.get(index, {}).get(part)
         if known is not None and _same(known, values):
@@ -744,10 +751,13 @@ class DetectionReceiver(can.Listener):
         """Hand on an open cycle as `Detections`."""
         frame = self._open.pop(counter)
         complete = frame.complete()
-        self._recent[counter] = frame
+        self._recent[counter] = complete
         # Half the counter's range at most: a wrapped counter is a new cycle, not a copy.
         while len(self._recent) > min(RECENT_CYCLES, self._counter_modulus // 2):
             self._recent.popitem(last=False)
+        self._content[counter] = frame
+        while len(self._content) > min(OPEN_CYCLES, self._counter_modulus // 2):  # bounded
+            self._content.popitem(last=False)
         if self._current is frame and not complete:
             self._current = None
         self._ready.append(Detections(cycle=counter, t_s=frame.timestamp_s, complete=complete,
