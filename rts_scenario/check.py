@@ -143,12 +143,15 @@ class _Judged:
     def better_than(self, other: _Judged) -> BoolArray:
         """Return the cycles in which this candidate detects more targets than ``other``.
 
-        Only more detections count: where both detect as many, ``other`` (the frame the run
-        knows was held) stays, so the errors reported are against it and a frame across the
-        change never lowers them by matching the noise a little better.
+        Only targets checkable in both frames count (a target under a limit in the frame held
+        is never made checkable by the frame across the change), and only more detections:
+        where both detect as many, ``other`` (the frame the run knows was held) stays, so the
+        errors reported are against it and a frame across the change never lowers them by
+        matching the noise a little better.
         """
-        detected = (self.assigned & self.within & self.truth).sum(axis=1)
-        return detected > (other.assigned & other.within & other.truth).sum(axis=1)
+        both = self.truth & other.truth
+        detected = (self.assigned & self.within & both).sum(axis=1)
+        return detected > (other.assigned & other.within & both).sum(axis=1)
 
     def take(self, rows: NDArray[np.intp], detections: BoolArray) -> _Judged:
         """Return the cycles ``rows`` and the ``detections`` (a mask) that belong to them."""
@@ -174,16 +177,19 @@ class _Judged:
                        put(self.cost, 0.0))
 
     def where(self, cycles: BoolArray, other: _Judged, frame_of: NDArray[np.int64]) -> _Judged:
-        """Return this judgement where ``cycles`` is False, ``other``'s where it is True."""
+        """Return this judgement where ``cycles`` is False, ``other``'s where it is True.
+
+        The limits stay this one's (the frame held: what the RTS played), and a target is
+        checkable in ``cycles`` only where it is in both.
+        """
         rows = cycles[:, None]
         return _Judged(
-            np.where(rows, other.truth, self.truth),
+            np.where(rows, other.truth & self.truth, self.truth),
             np.where(rows, other.assigned, self.assigned),
             np.where(rows, other.within, self.within),
             {q: np.where(rows, other.errors[q], e) for q, e in self.errors.items()},
             np.where(cycles[frame_of], other.match, self.match),
-            {name: np.where(rows, other.limits[name], m) for name, m in self.limits.items()},
-            np.where(cycles, other.cost, self.cost))
+            self.limits, np.where(cycles, other.cost, self.cost))
 
 
 class Checker:
@@ -354,12 +360,13 @@ class Checker:
         use_other = np.zeros(n_frames, dtype=bool)
         if block.other is not None and block.ambiguous is not None:
             self.frames["ambiguous"] += int(block.ambiguous.sum())
-            # Only cycles where the frame across the change has more checkable targets than
-            # this one detected can be judged better against it: those alone are judged again.
+            # Only cycles with a target checkable in both frames and not detected in this one
+            # can be judged better against the frame across the change: those alone are judged
+            # again.
             o_tracks, o_flags = block.other
-            detected_here = (judged.assigned & judged.within & judged.truth).sum(axis=1)
-            again = np.flatnonzero(block.ambiguous & ok
-                                  & (checkable(o_tracks, o_flags).sum(axis=1) > detected_here))
+            undetected = (checkable(o_tracks, o_flags) & judged.truth
+                          & ~(judged.assigned & judged.within))
+            again = np.flatnonzero(block.ambiguous & ok & undetected.any(axis=1))
             if again.size:
                 keep = np.isin(frame_of, again)
                 other = self._judge(o_tracks.take(again), o_flags[again],

@@ -370,3 +370,26 @@ def test_a_second_cycle_with_the_same_counter_is_a_conflict():
     (cycle,) = receiver.flush()
     np.testing.assert_allclose(cycle.range_m, [10.0, 20.0])  # the first stays; the run fails
 
+
+
+def test_a_header_after_its_detections_is_its_cycle_after_hundreds_of_cycles():
+    # Detections carry 8 bits of the counter: a detection whose header is late must wait for
+    # it, not be taken for a copy of the cycle 256 before (which had the same low bits).
+    header_id = CanMapping.builtin().db.get_message_by_name(CanMapping.builtin().header).frame_id
+    messages = []
+    for i in range(400):
+        cycle = _messages(one_cycle(i, [10.0 + 0.01 * i], az_deg=[1.0]))
+        if i == 300:
+            cycle = ([m for m in cycle if m.arbitration_id != header_id]
+                     + [m for m in cycle if m.arbitration_id == header_id])
+        messages += cycle
+    receiver = DetectionReceiver()
+    got = []
+    for msg in messages:
+        receiver.on_message_received(msg)
+        got += receiver.pop()
+    got += receiver.flush()
+    late = next(c for c in got if c.cycle == 300)
+    assert late.complete and late.range_m[0] == pytest.approx(13.0, abs=0.003)
+    assert (receiver.stats.duplicates, receiver.stats.conflicts, receiver.stats.orphans) == \
+        (0, 0, 0)

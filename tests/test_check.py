@@ -369,3 +369,26 @@ def test_frames_applied_late_are_found_by_their_send_times(closing_scene):
                            lag_frames=0, applied_delay_s=0.03)
     assert report.passed, report.reasons
     assert report.frames["adjacent_frame"] == 0
+
+
+def test_a_limit_of_the_frame_held_counts_whatever_frame_across_the_change_is_tried():
+    # A clipped echo (a limit that does not block the channel) is not checkable in its frame;
+    # the frame before has the target checkable, and a radar reporting it matches that frame
+    # too (slow motion). The limit must still count and fail the run, and the cycle must not
+    # be judged against the frame before for it.
+    from rts_scenario.schedule.model import Status
+
+    tr = truth(20)
+    status = OK(20, 2)
+    status[10, 1] |= Status.ATTENUATION_CLIPPED
+    before = np.maximum(np.arange(20) - 1, 0)
+    checker = Checker("s", tr.names, EXPECT, counter_start=0)
+    checker.add_truth(0, tr, status, other=(tr.take(before), status[before]),
+                      ambiguous=np.arange(20) > 0)
+    checker.add_cycles(cycles_from(tr))
+    checker.settle()
+    report = checker.report()
+    assert not report.passed
+    assert report.targets[1].limits == {"attenuation_clipped": 1}
+    assert report.frames["adjacent_frame"] == 0
+    assert report.target_frames["checkable"] == 39

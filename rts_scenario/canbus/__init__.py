@@ -12,6 +12,7 @@ grow with the length of a run.
 
 from __future__ import annotations
 
+import itertools
 import operator
 import threading
 import zlib
@@ -687,7 +688,10 @@ class DetectionReceiver(can.Listener):
                               if c % self._low_modulus == low),
                              None)
                 if frame is None:
-                    done = next((c for c in reversed(self._recent)
+                    # Within half the low counter's range: further back, the same low bits
+                    # name another cycle (the one whose header is still to come).
+                    done = next((c for c in itertools.islice(reversed(self._recent),
+                                                             self._low_modulus // 2)
                                  if c % self._low_modulus == low), None)
                     if done is not None:
                         # Its cycle was handed on: a copy, a conflict, or (the cycle went on
