@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
-from typing import TextIO
+from typing import Any, TextIO
 
 import can
 import numpy as np
@@ -33,7 +33,7 @@ from .preflight import Preflight, frames_per_batch, preflight, scene_limits
 from .radar.clock import RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
-from .report import FrameRecord, Report
+from .report import FrameRecord, Report, strict
 from .rig import Rig
 from .scenario import Scenario, load_scenario
 from .scenario.model import RadarOptions
@@ -375,7 +375,7 @@ class Pipeline:
             report.passed = False
         if options.bus_log and digest is not None:
             write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
-                              counter_start=checker.counter_start)
+                              counter_start=checker.counter_start, playback=report.playback)
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -538,7 +538,8 @@ LOG_SIDECAR_SUFFIX = ".rts.json"
 
 def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       options: RunOptions, status_digest: str,
-                      counter_start: int | None = None) -> Path:
+                      counter_start: int | None = None,
+                      playback: dict[str, Any] | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -566,6 +567,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         "status_sha256": status_digest,
+        # How the schedule went out and what the RTS said it applied (`Playback.to_dict`):
+        # a re-check fails on it as the run did.
+        "playback": strict(playback) if playback is not None else None,
     }
     path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
     return path

@@ -70,19 +70,26 @@ class Playback:
 
     def reasons(self, expected: frozenset[str] | set[str]) -> list[str]:
         """Why the playback fails the run (nothing when it does not)."""
-        out = []
-        if self.late_frames and "frames_sent_late" not in expected:
-            out.append(f"frames_sent_late: {self.late_frames} of {self.frames} frames went out "
-                       f"more than a frame period ({self.late_after_s * 1e3:.3g} ms) after "
-                       f"their time: the frame before was held instead (worst "
-                       f"{self._lateness.result().max * 1e3:.3g} ms)")
-        lost = lost_frames(self.rts)
-        if lost and "frames_lost" not in expected:
-            out.append(f"frames_lost: the RTS reports {lost} schedule frames it did not apply "
-                       f"(" + ", ".join(f"{k.replace('_', ' ')} {self.rts[k]}"
-                                        for k in LOST_COUNTERS if self.rts and self.rts.get(k))
-                       + ")")
-        return out
+        return playback_reasons(self.to_dict(), expected)
+
+
+def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set[str]
+                     ) -> list[str]:
+    """Why a playback (`Playback.to_dict`, e.g. from a log's sidecar) fails the run."""
+    out = []
+    late, frames = int(playback["late_frames"]), int(playback["frames_sent"])
+    rts = playback.get("rts")
+    if late and "frames_sent_late" not in expected:
+        worst = playback["lateness_s"]["max"]
+        out.append(f"frames_sent_late: {late} of {frames} frames went out more than a frame "
+                   f"period ({playback['late_after_s'] * 1e3:.3g} ms) after their time: the "
+                   f"frame before was held instead (worst {worst * 1e3:.3g} ms)")
+    lost = lost_frames(rts)
+    if lost and "frames_lost" not in expected:
+        out.append(f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("
+                   + ", ".join(f"{k.replace('_', ' ')} {rts[k]}"
+                               for k in LOST_COUNTERS if rts and rts.get(k)) + ")")
+    return out
 
 
 def lost_frames(rts: Mapping[str, int] | None) -> int:
@@ -92,4 +99,4 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
     return int(rts.get("lost_frames", 0)) + int(rts.get("unsynced_frames", 0))
 
 
-__all__ = ["LOST_COUNTERS", "Playback", "lost_frames"]
+__all__ = ["LOST_COUNTERS", "Playback", "lost_frames", "playback_reasons"]

@@ -38,6 +38,7 @@ from .detections import Detections
 from .errors import RtsError
 from .kinematics import compute_tracks
 from .pipeline import LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
+from .playback import playback_reasons
 from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, RadarClock
 from .report import Report
@@ -185,6 +186,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         "method": {"type": ["string", "null"]},
         "output": {"type": ["string", "null"]},
         "status_sha256": {"type": ["string", "null"]},
+        "playback": {"type": ["object", "null"]},
     },
 }
 
@@ -643,6 +645,20 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     alignment.cycles_in_log = len(logged)
     result = _check(scene, logged, clock, modulus, method, batch_frames, bus, alignment,
                     sidecar)
+    playback = (sidecar or {}).get("playback")
+    if playback:
+        # The run's playback, as its sidecar recorded it: the re-check fails on it as the run
+        # did. Frames are judged at their nominal times (the sidecar keeps no send times).
+        result.playback = playback
+        failures = playback_reasons(playback, scene.expectations.expected_limits)
+        if failures:
+            result.reasons += failures
+            result.passed = False
+        worst = (playback.get("lateness_s") or {}).get("max")
+        if worst is not None and worst > float(playback.get("ambiguity_window_s") or 0.0):
+            alignment.notes.append(
+                f"frames went out up to {worst * 1e3:.1f} ms late in the run; the re-check "
+                f"judges them at their nominal times (the sidecar keeps no send times)")
     return RecheckResult(scene=scene, report=result, alignment=alignment)
 
 

@@ -265,6 +265,19 @@ def test_a_log_of_another_scene_or_a_time_offset_beside_the_sidecar_is_refused(r
     assert "the log's sidecar aligns it by the radar's counters" in capsys.readouterr().err
 
 
+def test_a_re_check_fails_on_the_playback_the_run_failed_on(recorded, tmp_path, capsys):
+    # The run's playback (frames the RTS reported lost, frames sent late) is in the sidecar:
+    # the re-check of its log fails on it as the run would have.
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    assert data["playback"]["frames_sent"] == 400 and data["playback"]["late_frames"] == 0
+    data["playback"]["rts"] = {"lost_frames": 3, "unsynced_frames": 0, "corrupted": 0}
+    log = _copy(recorded, tmp_path, json.dumps(data))
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert cli.main(["check", scene, "--log", str(log)]) == 1
+    assert "frames_lost: the RTS reports 3 schedule frames it did not apply" in \
+        capsys.readouterr().out
+    assert cli.main(["check", scene, "--log", str(recorded)]) == 0
+
 def test_a_simulated_run_stamps_its_messages_on_the_radar_s_clock(tmp_path):
     # The in-process radar's messages carry when the radar would have sent them, so a
     # recording of it is a realistic log even without its sidecar.
