@@ -47,6 +47,8 @@ BATCH_FRAMES = 500
 # Without a known message count (a real radar), the bus is drained this long after the radar's
 # latency, jitter and one cycle.
 QUIET_S = 0.2
+# At the end of a stream, how long to wait for the RTS's report of its last frames (s).
+RTS_SETTLE_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -367,7 +369,8 @@ class Pipeline:
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
         assert self.output is not None
-        playback.rts = self.output.rts_status()
+        # The stream has ended: its last frames' report may still be on the way.
+        playback.rts = self.output.rts_status(settle_s=RTS_SETTLE_S)
         report.playback = playback.to_dict()
         failures = playback.reasons(scene.expectations.expected_limits)
         if failures:

@@ -83,11 +83,12 @@ class Output(ABC):
         """
         return batch.t_s
 
-    def rts_status(self) -> dict[str, int] | None:
+    def rts_status(self, settle_s: float = 0.0) -> dict[str, int] | None:
         """Return the RTS's own counters of what it received and applied, if it reports them.
 
         None (the default) when the output has no RTS that reports: a lost frame then shows
-        only in what the radar measured.
+        only in what the radar measured. ``settle_s``: at the end of a stream, how long to
+        wait for the RTS's last report.
         """
         return None
 

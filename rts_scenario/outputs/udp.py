@@ -165,12 +165,34 @@ class UdpOutput(Output):
                               f"written had {self._sent_t_s.size}")
         return self._sent_t_s
 
-    def rts_status(self) -> dict[str, int] | None:
+    def rts_status(self, settle_s: float = 0.0) -> dict[str, int] | None:
         """Return the RTS's latest status reply (docs/udp-protocol.md), None without any.
 
-        Replies are read off the socket without waiting; anything that is not a valid status
-        datagram is ignored.
+        Replies are read off the socket; anything that is not a valid status datagram is
+        ignored. ``settle_s``: at the end of a stream, wait up to this long for the reply to
+        the last datagram sent. A frame the RTS has not applied by then (``frames_applied``
+        against the frames sent) counts as lost, whatever its own count says: a frame whose
+        last datagram was lost stays pending in the RTS for ever.
         """
+        deadline = time.perf_counter() + settle_s
+        while True:
+            self._read_replies()
+            status = self._rts_status
+            if status is None and settle_s == 0.0:
+                return None
+            if (status is not None and status.get("datagrams", 0) >= self.datagrams_sent) \
+                    or time.perf_counter() >= deadline:
+                break
+            time.sleep(0.002)
+        if status is None or settle_s == 0.0:
+            return status
+        out = dict(status)
+        unplayed = self._frames_sent - out.get("frames_applied", 0) - out.get("unsynced_frames", 0)
+        out["lost_frames"] = max(out.get("lost_frames", 0), unplayed)
+        return out
+
+    def _read_replies(self) -> None:
+        """Take every status reply waiting on the socket (the last valid one is kept)."""
         self._socket.setblocking(False)
         try:
             while True:
@@ -185,7 +207,6 @@ class UdpOutput(Output):
                     self._rts_status = status
         finally:
             self._socket.setblocking(True)
-        return self._rts_status
 
     def _wait_for(self, t_s: float) -> float:
         """Wait until scene time ``t_s``; return how late that is (s)."""
