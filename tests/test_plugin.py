@@ -115,6 +115,26 @@ def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):
     pytester.runpytest().assert_outcomes(passed=1)
 
 
+def test_rts_run_of_a_parametrized_scene_needs_its_variant(pytester):
+    (pytester.path / "two.scenario.yaml").write_text(scene(
+        "two", extra="parametrize:\n  radar.estimator: [bartlett, ti]\n"))
+    pytester.makepyfile(test_two=textwrap.dedent("""
+        import pytest
+        from rts_scenario.errors import RtsError
+
+        def test_without_variant(rts_run):
+            with pytest.raises(RtsError, match="a parametrized scene [(]2 variants[)]: "
+                                               "choose one with variant= ID: "
+                                               "estimator=bartlett, estimator=ti"):
+                rts_run("two.scenario.yaml")
+
+        def test_with_variant(rts_run):
+            result = rts_run("two.scenario.yaml", variant="estimator=ti")
+            assert result.report.passed and result.report.variant == "estimator=ti"
+    """))
+    pytester.makeini("[pytest]\nrts_scenario_pattern = *.nothing\n")
+    pytester.runpytest().assert_outcomes(passed=2)
+
 def test_failing_detection_rate_lists_worst_frames(pytester):
     pytester.makefile(".scenario.yaml", strict=scene("strict").replace(
         "detection_rate: 0.9", "detection_rate: 0.9\n  tolerances: {az_deg: 0.00001}"))

@@ -247,15 +247,24 @@ def rts_run(request: pytest.FixtureRequest) -> Callable[..., RunResult]:
     """Run a scene (path or loaded `Scenario`) end to end; keyword options as `RunOptions`.
 
     A relative path that does not exist from the current folder is taken relative to the
-    calling test file's folder.
+    calling test file's folder. A parametrized scene file is one of its variants, named by
+    ``variant=`` (its id, as the plugin's items have it): its file as written is none of its
+    runs, so without ``variant`` the call raises, listing them.
     """
-    def run(scene: Any, **options: Any) -> RunResult:
+    def run(scene: Any, variant: str | None = None, **options: Any) -> RunResult:
         from rts_scenario.pipeline import run_scene
+        from rts_scenario.scenario import load_scenario, select_variant
 
-        if isinstance(scene, str | Path) and not Path(scene).is_absolute():
-            beside_test = request.path.parent / scene
-            if not Path(scene).exists() and beside_test.exists():
-                scene = beside_test
+        if isinstance(scene, str | Path):
+            if not Path(scene).is_absolute():
+                beside_test = request.path.parent / scene
+                if not Path(scene).exists() and beside_test.exists():
+                    scene = beside_test
+            _, overrides = select_variant(scene, variant, option="variant=")
+            scene = load_scenario(scene, overrides)
+        elif variant is not None:
+            raise TypeError("rts_run: variant= names a variant of a scene file; a loaded "
+                            "Scenario is one already")
         return run_scene(scene, _options(request.config, **options))
 
     return run
