@@ -128,8 +128,7 @@ class _Judged:
 
     Per target-cycle (F, K): ``truth`` (checkable), ``assigned`` (a detection assigned),
     ``within`` (every quantity within tolerance), ``errors`` per quantity, ``limits`` per
-    limit; per detection: ``match`` (its target, -1 for none); per cycle: ``cost`` (sum of the
-    assigned pairs' normalized squared distances).
+    limit; per detection: ``match`` (its target, -1 for none).
     """
 
     truth: BoolArray
@@ -138,7 +137,6 @@ class _Judged:
     errors: dict[str, FloatArray]
     match: NDArray[np.int64]
     limits: dict[str, BoolArray]
-    cost: FloatArray
 
     def better_than(self, other: _Judged) -> BoolArray:
         """Return the cycles in which this candidate detects more targets than ``other``.
@@ -157,7 +155,7 @@ class _Judged:
         """Return the cycles ``rows`` and the ``detections`` (a mask) that belong to them."""
         return _Judged(self.truth[rows], self.assigned[rows], self.within[rows],
                        {q: e[rows] for q, e in self.errors.items()}, self.match[detections],
-                       {name: m[rows] for name, m in self.limits.items()}, self.cost[rows])
+                       {name: m[rows] for name, m in self.limits.items()})
 
     def spread(self, rows: NDArray[np.intp], detections: BoolArray, n_cycles: int) -> _Judged:
         """Return this judgement of cycles ``rows`` placed among ``n_cycles`` (the rest empty).
@@ -173,8 +171,7 @@ class _Judged:
         match[detections] = self.match
         return _Judged(put(self.truth, False), put(self.assigned, False),
                        put(self.within, True), {q: put(e, np.nan) for q, e in self.errors.items()},
-                       match, {name: put(m, False) for name, m in self.limits.items()},
-                       put(self.cost, 0.0))
+                       match, {name: put(m, False) for name, m in self.limits.items()})
 
     def where(self, cycles: BoolArray, other: _Judged, frame_of: NDArray[np.int64]) -> _Judged:
         """Return this judgement where ``cycles`` is False, ``other``'s where it is True.
@@ -189,7 +186,7 @@ class _Judged:
             np.where(rows, other.within, self.within),
             {q: np.where(rows, other.errors[q], e) for q, e in self.errors.items()},
             np.where(cycles[frame_of], other.match, self.match),
-            self.limits, np.where(cycles, other.cost, self.cost))
+            self.limits)
 
 
 class Checker:
@@ -454,10 +451,7 @@ class Checker:
             err[frame_of[det[pair]], target[pair]] = diffs[q][pair]
             errors[q] = err
             within &= ~(np.abs(err) > tol[key])
-        cost_sum = np.bincount(frame_of[det[pair]], weights=cost[pair],
-                               minlength=n_frames).astype(np.float64)
-        return _Judged(truth, assigned, within, errors, match, limit_masks(tracks, flags),
-                       cost_sum)
+        return _Judged(truth, assigned, within, errors, match, limit_masks(tracks, flags))
 
     def _write_detections(self, got: list[Detections], counts: list[int], block: _Block,
                           frame_of: NDArray[np.int64], match: NDArray[np.int64]) -> None:

@@ -16,6 +16,7 @@ from typing import Any
 from ..errors import RtsError, one_line
 
 # Weight solver methods a command line can choose (``--method``).
+# The schedule's methods (`solver.estimator_aware.SCHEDULE_METHODS`; a test keeps them equal).
 METHODS = ("exact", "paper", "estimator")
 
 EXIT_OK = 0
