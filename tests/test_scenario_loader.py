@@ -146,6 +146,12 @@ BAD = [
           "        - {t_s: 2, speed_mps: 3}\n        - {t_s: 1, speed_mps: 4}"), 18,
      "targets[0].motion.profile[1].t_s", "times must increase, got 1 after 2"),
     (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "    motion:\n      type: waypoints\n      start_s: 5\n      points:\n"
+          "        - {position_m: [30, 0, 0], speed_mps: 3}\n"
+          "        - {position_m: [40, 0, 0], speed_mps: 3}"), 15,
+     "targets[0].motion.start_s", "at or after the scene's end (duration_s = 5 s at 20 Hz): it "
+     "would stand at its first waypoint throughout; start_s must be < 5"),
+    (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
           "    motion:\n      type: waypoints\n      points:\n"
           "        - {position_m: [30, 0, 0], speed_mps: 3}\n"
           "        - {position_m: [30, 0, 0], speed_mps: 3}"), 17,

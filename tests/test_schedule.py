@@ -10,6 +10,7 @@ from rts_scenario.peak_search import find_peak, snapshot
 from rts_scenario.radar import RadarProfile
 from rts_scenario.rig import RtsDelayModel
 from rts_scenario.schedule import ScheduleError, Status, build_schedule
+from rts_scenario.schedule.build import delay_step_note
 
 C0 = 299_792_458.0
 RADAR = RadarProfile.preset("paper")
@@ -68,6 +69,21 @@ def test_doppler_and_phase():
     sch = build_schedule(tracks([1.0], [1.0], v=-3.0), rig, RADAR)
     np.testing.assert_allclose(sch.doppler_hz[0, 0], 6.0 / LAMBDA)
     np.testing.assert_allclose(sch.phase_rad[0, 0], np.radians([0, 90, -45, 10]), atol=1e-12)
+
+
+def test_a_coarse_delay_step_is_noted_with_its_range_cost():
+    slope = RADAR.bandwidth_hz / RADAR.ramp_time_s
+    # One range bin of beat frequency fs / N is a delay of fs / (N S).
+    bin_s = RADAR.sample_rate_hz / (RADAR.adc_samples * slope)
+    fine = rs.Rig.from_angles([-5, 5, -5, 5], [-8, -8, 8, 8],
+                              limits=rs.HardwareLimits(delay_step_s=0.2 * bin_s))
+    assert delay_step_note(fine, RADAR) is None
+    assert delay_step_note(rs.Rig.preset("kit-table1"), RADAR) is None
+    coarse = dataclasses.replace(fine, limits=rs.HardwareLimits(delay_step_s=2 * bin_s))
+    note = delay_step_note(coarse, RADAR)
+    # A channel rounded by half a step of round-trip delay is c0 step / 4 off in range.
+    assert note is not None and "is 2 range bins" in note
+    assert f"up to {C0 * 2 * bin_s / 4:.3g} m off its range" in note
 
 
 def test_delay_quantization_is_compensated_in_phase():

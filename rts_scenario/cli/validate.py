@@ -15,6 +15,7 @@ def _do_validate(args: argparse.Namespace) -> int:
     from ..preflight import preflight
     from ..radar.simulate import near_field_warning
     from ..scenario import load_scenario, parametrizations
+    from ..schedule.build import delay_step_note
 
     bad = 0
     for path in args.scenes:
@@ -47,10 +48,11 @@ def _do_validate(args: argparse.Namespace) -> int:
             for line in pre.expected_lines():
                 print(f"note: {label}: {line}")
             bad += args.strict and bool(unexpected)
-            near = near_field_warning(scene.radar, scene.rig)
-            if near and near not in reported:  # once per rig and radar
-                reported.add(near)
-                print(f"note: {label}: {near}")
+            for note in (near_field_warning(scene.radar, scene.rig),
+                         delay_step_note(scene.rig, scene.radar)):
+                if note and note not in reported:  # once per rig and radar
+                    reported.add(note)
+                    print(f"note: {label}: {note}")
             if not (args.strict and unexpected):
                 print(f"ok: {label}: {scene.n_frames} frames, {len(scene.targets)} targets, "
                       f"schedule built")

@@ -413,7 +413,7 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
         for lc in spec.get("lane_changes", [])
     )
     if kind == "waypoints":
-        return _waypoints(doc, mkey, motion, lane_changes)
+        return _waypoints(doc, mkey, motion, lane_changes, frames)
     start = np.asarray(motion["position_m"], dtype=float)
     path = TrajectoryPath.line(start, np.radians(motion.get("heading_deg", 0.0)))
     if kind == "stationary":
@@ -442,7 +442,13 @@ def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]])
 
 
 def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
-               lane_changes: tuple[LaneChange, ...]) -> Trajectory:
+               lane_changes: tuple[LaneChange, ...], frames: _Frames) -> Trajectory:
+    start = float(motion.get("start_s", 0.0))
+    if start >= frames.duration_s:
+        raise doc.error((*key, "start_s"),
+                        f"the object would start along its waypoints at {start:g} s, at or "
+                        f"after the scene's end ({frames.describe()}): it would stand at its "
+                        f"first waypoint throughout; start_s must be < {frames.duration_s:g}")
     points = np.array([p["position_m"] for p in motion["points"]], dtype=float)
     speeds = [float(p["speed_mps"]) for p in motion["points"]]
     gaps = np.linalg.norm(np.diff(points, axis=0), axis=1)
@@ -460,7 +466,6 @@ def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
         path = TrajectoryPath.polyline(points)
         at_points = path.arc_m
     lengths = np.diff(at_points)
-    start = float(motion.get("start_s", 0.0))
     knots, v0, acc = ([0.0], [0.0], [0.0]) if start > 0.0 else ([], [], [])
     t = start
     for i, length in enumerate(lengths):

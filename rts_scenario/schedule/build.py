@@ -346,4 +346,30 @@ def channel_delays(rig: Rig, radar: RadarProfile, range_m: FloatArray,
     return delay, np.mod(phase + np.pi, 2.0 * np.pi) - np.pi
 
 
-__all__ = ["FE_RESPONSES", "build_schedule", "channel_delays", "solver_inputs"]
+# Delay steps up to this share of the radar's range bin go without a note: the schedule's
+# phase and level corrections leave no error a radar reports (100 ps on kit-table1 is 0.05).
+COARSE_DELAY_STEP_BINS = 0.25
+
+
+def delay_step_note(rig: Rig, radar: RadarProfile) -> str | None:
+    """Say what the rig's delay step costs when it is coarse for ``radar``; None when not.
+
+    Each channel's delay is rounded to the step, so one target's channels reach the radar up to
+    a step apart and its range is off by up to a quarter step times c0 (half a step of
+    round-trip delay). The schedule gives the rounding back in phase and in level at the range
+    cell the radar reads, not at its neighbours, which the radar's range interpolation and
+    level reading also use: range and RCS errors grow with the step.
+    """
+    step_s = rig.limits.delay_step_s
+    bins = float(radar.range_bin(step_s))
+    if not bins > COARSE_DELAY_STEP_BINS:
+        return None
+    return (f"rig {rig.name!r}: limits.delay_step_s = {step_s:g} s is {bins:.2g} range bins of "
+            f"radar {radar.name!r} ({radar.range_bin_m:.3g} m per bin): each channel's delay "
+            f"is rounded by up to {step_s / 2:g} s, so a target's channels are played up to "
+            f"{C0_MPS * step_s / 4:.3g} m off its range; expect range and RCS errors that grow "
+            f"with the step beyond {COARSE_DELAY_STEP_BINS:g} bins")
+
+
+__all__ = ["FE_RESPONSES", "build_schedule", "channel_delays", "delay_step_note",
+           "solver_inputs"]
