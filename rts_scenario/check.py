@@ -19,9 +19,10 @@ A quantity the radar does not report is not checked.
 
 Verdict (pass only if all hold): every target's detection rate reaches the scene's
 ``detection_rate``; false detections per frame stay within ``max_false_detections_per_frame``;
-and no frame that had something to check is missing, incomplete or corrupted - such frames
-count as missed and fail the run, so missing data can never pass. A frame counts as checked
-only when every checkable target in it was matched to a detection.
+and no radar cycle is missing, incomplete or corrupted - its targets count as unchecked and it
+fails the run (a cycle without a checkable target had its false detections to check), so missing
+data can never pass. A scene without targets (an empty bench) checks false detections only. A
+frame counts as checked only when every checkable target in it was matched to a detection.
 
 A target-frame the bench did not play as the scene specifies it, or that the radar cannot measure
 unambiguously (a `LIMITS` entry: outside the rig's coverage, no echo slot, attenuation clipped,
@@ -531,10 +532,11 @@ class Checker:
         if self._invalid:
             reasons.append(f"{self._invalid} detections with a reported quantity that is not a "
                            f"number (NaN or infinite): they match no target")
-        if self._unchecked:
+        if frames["missing"] or frames["incomplete"]:
+            # A cycle with no checkable target still had its false detections to check.
             reasons.append(f"{frames['missing']} radar cycles missing and "
                            f"{frames['incomplete']} incomplete: {self._unchecked} target-cycles "
-                           f"could not be checked")
+                           f"and the cycles' false detections could not be checked")
         if bus is not None:
             if bus.get("messages", 0) == 0:
                 reasons.append("the bus was silent: no message received")
@@ -547,7 +549,10 @@ class Checker:
                     "signals cannot carry)": bus.get("unsendable_detections", 0)}
             reasons += [f"{v} {k}" for k, v in lost.items() if v]
         n_truth = int(self._checkable.sum())
-        if n_truth == 0:
+        if not self.names:  # an empty bench: only false detections are checked
+            if frames["received"] == 0:
+                reasons.append("nothing to check: no radar cycle was received")
+        elif n_truth == 0:
             reasons.append("nothing to check: no target was checkable in any frame")
         worst = [entry for *_, entry in sorted(self._worst, key=lambda w: w[:3], reverse=True)]
         return Report(

@@ -64,6 +64,8 @@ class RunningStats:
     def add(self, errors: FloatArray, mask: NDArray[np.bool_] | None = None) -> None:
         """Take the finite values of ``errors`` (shape ``(..., n)``) where ``mask`` holds."""
         e = np.abs(np.asarray(errors, dtype=np.float64))
+        if self.count.size == 0:  # no series (a scene without targets)
+            return
         e = e.reshape(-1, self.count.size)
         take = np.isfinite(e)
         if mask is not None:
@@ -231,7 +233,9 @@ class Report:
         head = (f"{'target':<18} {'frames':>6} {'det. rate':>9} {'missed':>6} {'out tol':>7}  "
                 f"{'range rms/max m':>15}  {'vel rms/max m/s':>15}  {'az rms/max deg':>14}  "
                 f"{'el rms/max deg':>14}  {'rcs rms/max dB':>14}  verdict")
-        lines = [head, "-" * len(head)]
+        # An empty bench has no target rows: say what its run checks instead.
+        lines = [head, "-" * len(head)] if self.targets else [
+            "no targets: an empty bench, the radar's false detections are all the run checks"]
 
         def pair(s: ErrorStats) -> str:
             return "-" if not s.count else f"{s.rms:.3f}/{s.max:.3f}"

@@ -139,8 +139,9 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("disappear-before-appear", TINY + "    appear_s: 2\n    disappear_s: 1\n",
      r"^{f}:16:5: targets\[0\].disappear_s: must be later than appear_s = 2, got 1"),
     ("no-targets", TINY.split(TARGET)[0].replace("targets:", "targets: []"),
-     r"^{f}:11:1: targets: the scene has no targets .* scenes without targets \(false alarms "
-     r"on an empty bench\) are not supported"),
+     r"^{f}:11:1: targets: the scene has no targets .* it can only test the radar's false "
+     r"detections on an empty bench; to mean that, set "
+     r"expectations.max_false_detections_per_frame"),
     ("target-never-present", TINY + "    appear_s: 100\n",
      r"^{f}:15:5: targets\[0\].appear_s: the target appears at 100 s, after the scene's last "
      r"frame at 0.4 s"),

@@ -11,6 +11,7 @@ from rts_scenario.detections import Detections, unwrap_counter
 from rts_scenario.kinematics import Tracks
 from rts_scenario.report import FrameRecord, RunningStats
 from rts_scenario.scenario.model import Expectations
+from rts_scenario.schedule import Status
 
 
 def OK(n_frames, n_targets):
@@ -148,6 +149,45 @@ def test_missing_and_incomplete_cycles_fail_and_are_counted():
     assert report.frames["missing"] == 1 and report.frames["incomplete"] == 1
     assert report.target_frames["unchecked"] == 4
     assert not report.passed and any("could not be checked" in r for r in report.reasons)
+
+
+def test_a_missing_cycle_fails_even_where_no_target_was_checkable():
+    tr = truth(50)
+    status = OK(50, 2)
+    status[7] = Status.OUT_OF_COVERAGE  # nothing to detect in cycle 7, but false detections
+    cycles = cycles_from(tr)
+    del cycles[7]
+    exp = dataclasses.replace(EXPECT, expected_limits=frozenset({"out_of_coverage"}))
+    report = check("s", tr, status, cycles, exp)
+    assert report.frames["missing"] == 1 and report.target_frames["unchecked"] == 0
+    assert not report.passed
+    assert report.reasons == ["1 radar cycles missing and 0 incomplete: 0 target-cycles and the "
+                              "cycles' false detections could not be checked"]
+
+
+def test_an_empty_bench_checks_false_detections_only():
+    empty = truth(40, n_targets=0)
+    quiet = [Detections.empty(f, float(t)) for f, t in enumerate(empty.t_s)]
+    strict = dataclasses.replace(EXPECT, max_false_detections_per_frame=0.0)
+    report = check("s", empty, OK(40, 0), quiet, strict)
+    assert report.passed, report.reasons
+    assert report.frames["checked"] == report.frames["received"] == 40
+    assert report.targets == [] and report.false_detections == 0
+    # One ghost in 40 cycles: 0.025 per cycle, within the default 0.1 but not within 0.
+    ghost = dataclasses.replace(
+        quiet[5], range_m=np.array([12.0]), radial_velocity_mps=np.array([0.0]),
+        az_deg=np.array([1.0]), el_deg=np.array([0.0]), rcs_dbsm=np.array([5.0]),
+        snr_db=np.array([20.0]))
+    haunted = [*quiet[:5], ghost, *quiet[6:]]
+    assert check("s", empty, OK(40, 0), haunted, EXPECT).passed
+    report = check("s", empty, OK(40, 0), haunted, strict)
+    assert report.false_detections == 1
+    assert report.reasons == ["0.025 false detections per radar cycle > 0"]
+    # Cycles that never came could not be checked; none at all is nothing to check.
+    report = check("s", empty, OK(40, 0), quiet[:30], strict)
+    assert not report.passed and report.frames["missing"] == 10
+    report = check("s", empty, OK(40, 0), [], strict)
+    assert "nothing to check: no radar cycle was received" in report.reasons
 
 
 def test_absent_quantities_are_not_checked():

@@ -47,7 +47,8 @@ def test_shipped_scenes_validate(path):
     scene = load_scenario(path)
     tracks = compute_tracks(scene)
     assert tracks.range_m.shape == (scene.n_frames, len(scene.targets))
-    assert tracks.checkable.any()
+    # A scene's targets are checkable somewhere; an empty bench checks false detections only.
+    assert tracks.checkable.any() or (not scene.targets and scene.radar_options.fidelity == "adc")
 
 
 def test_dense_scene_has_at_least_eight_simultaneous_targets():
@@ -72,6 +73,21 @@ def test_good_scene_loads(tmp_path):
     path.write_text(GOOD)
     scene = load_scenario(path)
     assert scene.n_frames == 100 and scene.targets[0].name == "car"
+
+
+@pytest.mark.parametrize("fidelity, runs", [("", "adc"), ("  fidelity: auto\n", "adc"),
+                                             ("  fidelity: analytic\n", "analytic")])
+def test_an_empty_bench_loads_when_it_says_how_many_false_detections_it_allows(
+        tmp_path, fidelity, runs):
+    text = GOOD.split("  - name: car")[0].replace("targets:", "targets: []")
+    text = text.replace("radar:\n", "radar:\n" + fidelity)
+    path = tmp_path / "empty.scenario.yaml"
+    path.write_text(text + "expectations: {max_false_detections_per_frame: 0}\n")
+    scene = load_scenario(path)
+    assert scene.targets == () and scene.n_frames == 100
+    assert scene.expectations.max_false_detections_per_frame == 0.0
+    # Only the simulated radar's cube has false detections; a forced choice is kept.
+    assert scene.radar_options.fidelity == runs
 
 
 def edit(replace: str, by: str) -> str:
@@ -125,7 +141,9 @@ BAD = [
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 4\n"
           "    disappear_s: 2"), 16, "targets[0].disappear_s", "must be later than appear_s"),
     (GOOD.split("  - name: car")[0].replace("targets:", "targets: []"), 11, "targets",
-     "the scene has no targets (none here and none in an included fragment)"),
+     "the scene has no targets (none here and none in an included fragment): it can only test "
+     "the radar's false detections on an empty bench; to mean that, set "
+     "expectations.max_false_detections_per_frame (e.g. 0), else give at least one target"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 100"), 15,
      "targets[0].appear_s", "the target appears at 100 s, after the scene's last frame at "
      "4.95 s (duration_s = 5 s at 20 Hz): it would be present in no frame"),

@@ -109,15 +109,15 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         target_sources += [(fragment, ("targets", j), t)
                            for j, t in enumerate(fragment.data["targets"])]
     target_sources += [(doc, ("targets", j), t) for j, t in enumerate(data["targets"])]
-    if not target_sources:
-        # The verdict fails a run with no checkable target-frame ("nothing to check"), and
-        # counting only false detections would need a verdict of its own.
+    if not target_sources and "max_false_detections_per_frame" not in data.get(
+            "expectations", {}):
+        # A run of an empty bench checks only the radar's false detections: the scene says how
+        # many it allows, so a scene that lost its targets by mistake does not pass as one.
         raise doc.error(("targets",),
                         "the scene has no targets (none here and none in an included "
-                        "fragment): a run checks detections against targets and would have "
-                        "nothing to check; scenes without targets (false alarms on an empty "
-                        "bench) are not supported, give at least one target")
-
+                        "fragment): it can only test the radar's false detections on an empty "
+                        "bench; to mean that, set expectations.max_false_detections_per_frame "
+                        "(e.g. 0), else give at least one target")
     radar = _load_referenced(doc, ("radar", "profile"), root, data["radar"]["profile"],
                              radar_presets(), RadarProfile.preset, RadarProfile.from_file,
                              ".radar.yaml")
@@ -161,9 +161,16 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         ),
         effects=effects,
         marks=tuple(data.get("marks", [])),
-        radar_options=RadarOptions(**{k: v for k, v in data["radar"].items()
-                                      if k in ("fidelity", "estimator", "cfar", "noise")}),
+        radar_options=_radar_options(data["radar"], empty=not target_sources),
     )
+
+
+def _radar_options(radar: dict[str, Any], empty: bool) -> RadarOptions:
+    options = {k: v for k, v in radar.items() if k in ("fidelity", "estimator", "cfar", "noise")}
+    if empty and options.get("fidelity", "auto") == "auto":
+        # False detections are all an empty bench checks, and only the cube has them.
+        options["fidelity"] = "adc"
+    return RadarOptions(**options)
 
 
 def _check_size(doc: Document, frames: _Frames, n_targets: int) -> None:
