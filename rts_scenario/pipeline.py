@@ -378,7 +378,8 @@ class Pipeline:
             report.passed = False
         if options.bus_log and digest is not None:
             write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
-                              counter_start=checker.counter_start, playback=report.playback)
+                              counter_start=checker.counter_start, playback=report.playback,
+                              send_lateness=playback.send_lateness())
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -542,7 +543,8 @@ LOG_SIDECAR_SUFFIX = ".rts.json"
 def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       options: RunOptions, status_digest: str,
                       counter_start: int | None = None,
-                      playback: dict[str, Any] | None = None) -> Path:
+                      playback: dict[str, Any] | None = None,
+                      send_lateness: dict[str, Any] | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -550,7 +552,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     the bus speaks,
     the solver method, and a digest of the statuses the RTS played, so that a re-check that
     rebuilds the schedule can tell whether it plays the same. ``counter_start`` is the one the
-    run used (learnt, where the profile does not give it).
+    run used (learnt, where the profile does not give it); ``playback`` the run's
+    (`Playback.to_dict`) and ``send_lateness`` when each frame went out
+    (`Playback.send_lateness`).
     """
     import json
 
@@ -573,6 +577,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         # How the schedule went out and what the RTS said it applied (`Playback.to_dict`):
         # a re-check fails on it as the run did.
         "playback": strict(playback) if playback is not None else None,
+        # When each frame went out (`Playback.send_lateness`): a re-check judges the radar's
+        # cycles by the frames the RTS held, as the run did.
+        "send_lateness": send_lateness,
     }
     path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
     return path

@@ -20,11 +20,14 @@ what the radar measured: the frame before held longer (misses, or errors beyond 
 
 from __future__ import annotations
 
+import base64
+import binascii
+import zlib
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .report import RunningStats
 
@@ -52,6 +55,11 @@ class Playback:
         self.frames = 0
         self.late_frames = 0
         self.rts: dict[str, int] | None = None
+        # Every frame's lateness, compressed as it comes (a few bytes per frame where the
+        # sender's timing varies, nearly nothing where it does not): a log's re-check judges
+        # the radar's cycles by the same send times as the run did.
+        self._packer = zlib.compressobj(9)
+        self._packed: list[bytes] = []
 
     def add(self, t_s: ArrayLike, sent_s: ArrayLike) -> None:
         """Take a batch's frame times and the scene times they went out at."""
@@ -59,6 +67,14 @@ class Playback:
         self.frames += late.size
         self.late_frames += int((late > self.late_after_s).sum())
         self._lateness.add(late.reshape(-1, 1))
+        late_us = np.clip(np.round(late.reshape(-1) * 1e6), 0, np.iinfo(np.int32).max)
+        self._packed.append(self._packer.compress(late_us.astype("<i4").tobytes()))
+
+    def send_lateness(self) -> dict[str, Any]:
+        """Every frame's lateness (`SEND_LATENESS_ENCODING`), for a log's sidecar; call once."""
+        data = b"".join([*self._packed, self._packer.flush()])
+        return {"frames": self.frames, "encoding": SEND_LATENESS_ENCODING,
+                "data": base64.b64encode(data).decode("ascii")}
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for the report's ``playback`` (docs/report.md)."""
@@ -92,6 +108,31 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
     return out
 
 
+# How `Playback.send_lateness` packs when each frame went out after its time.
+SEND_LATENESS_ENCODING = "int32 little-endian microseconds per frame, zlib, base64"
+
+
+def unpack_send_lateness(record: Mapping[str, Any], n_frames: int) -> NDArray[np.float64]:
+    """Each frame's lateness (s) from a `Playback.send_lateness` record of ``n_frames`` frames.
+
+    Raises
+    ------
+    ValueError
+        The record is not one `Playback.send_lateness` writes, or not of ``n_frames`` frames.
+    """
+    if record.get("encoding") != SEND_LATENESS_ENCODING:
+        raise ValueError(f"encoding: must be {SEND_LATENESS_ENCODING!r}, got "
+                         f"{record.get('encoding')!r}")
+    try:
+        raw = zlib.decompress(base64.b64decode(str(record.get("data", "")), validate=True))
+    except (binascii.Error, zlib.error) as exc:
+        raise ValueError(f"data: not zlib-compressed base64 ({exc})") from None
+    if len(raw) != 4 * n_frames or record.get("frames") != n_frames:
+        raise ValueError(f"holds {len(raw) // 4} frames (says {record.get('frames')}), the "
+                         f"scene has {n_frames}")
+    return np.frombuffer(raw, dtype="<i4").astype(np.float64) * 1e-6
+
+
 def lost_frames(rts: Mapping[str, int] | None) -> int:
     """Return how many frames an RTS's counters say were lost or not applied (0 for None)."""
     if not rts:
@@ -99,4 +140,5 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
     return int(rts.get("lost_frames", 0)) + int(rts.get("unsynced_frames", 0))
 
 
-__all__ = ["LOST_COUNTERS", "Playback", "lost_frames", "playback_reasons"]
+__all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "lost_frames",
+           "playback_reasons", "unpack_send_lateness"]

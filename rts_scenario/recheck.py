@@ -38,7 +38,7 @@ from .detections import Detections
 from .errors import RtsError
 from .kinematics import compute_tracks
 from .pipeline import LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
-from .playback import playback_reasons
+from .playback import SEND_LATENESS_ENCODING, playback_reasons, unpack_send_lateness
 from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, RadarClock
 from .report import Report
@@ -187,6 +187,13 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         "output": {"type": ["string", "null"]},
         "status_sha256": {"type": ["string", "null"]},
         "playback": {"type": ["object", "null"]},
+        "send_lateness": {
+            "type": ["object", "null"],
+            "required": ["frames", "encoding", "data"],
+            "properties": {"frames": {"type": "integer", "minimum": 0},
+                           "encoding": {"const": SEND_LATENESS_ENCODING},
+                           "data": {"type": "string"}},
+        },
     },
 }
 
@@ -648,17 +655,19 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     playback = (sidecar or {}).get("playback")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run
-        # did. Frames are judged at their nominal times (the sidecar keeps no send times).
+        # did.
         result.playback = playback
         failures = playback_reasons(playback, scene.expectations.expected_limits)
         if failures:
             result.reasons += failures
             result.passed = False
         worst = (playback.get("lateness_s") or {}).get("max")
-        if worst is not None and worst > float(playback.get("ambiguity_window_s") or 0.0):
+        if (worst is not None and worst > float(playback.get("ambiguity_window_s") or 0.0)
+                and not (sidecar or {}).get("send_lateness")):
             alignment.notes.append(
                 f"frames went out up to {worst * 1e3:.1f} ms late in the run; the re-check "
-                f"judges them at their nominal times (the sidecar keeps no send times)")
+                f"judges them at their nominal times (the sidecar, from an older version, "
+                f"keeps no send times)")
     return RecheckResult(scene=scene, report=result, alignment=alignment)
 
 
@@ -716,8 +725,9 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]
-    # The log holds no send times: frames are taken as applied at their times (the ambiguity
-    # window around each change covers the transport, as it does live).
+    # Frames as the run sent them (the sidecar's send times), else as applied at their times:
+    # the ambiguity window around each change covers the transport, as it does live.
+    late = _send_lateness(scene, sidecar)
     truths = CycleTruth(checker, scene, clock, ambiguity_window_s(scene.radar, scene.rig))
 
     def check_cycles(n: IntArray) -> None:
@@ -728,7 +738,8 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
 
     for frames, _, schedule in schedule_batches(scene, method, batch_frames):
         digest.update(schedule.status.tobytes())
-        check_cycles(truths.add(frames, schedule.status))
+        sent = None if late is None else scene.t_s[frames] + late[frames]
+        check_cycles(truths.add(frames, schedule.status, sent))
     check_cycles(truths.finish())
     checker.settle()
     if sidecar is not None and sidecar.get("status_sha256"):
@@ -737,6 +748,18 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
             alignment.notes.append("the rebuilt schedule differs from the one recorded (another "
                                    "version, rig or radar file): limits are those rebuilt")
     return checker.report(bus)
+
+
+def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None) -> FloatArray | None:
+    """Each frame's lateness as the run's sidecar recorded it; None without (nominal times)."""
+    record = (sidecar or {}).get("send_lateness")
+    if record is None:
+        return None
+    try:
+        return unpack_send_lateness(record, scene.n_frames)
+    except ValueError as exc:
+        raise LogError(f"sidecar send_lateness: {exc} (not what `rts-scenario run --record` "
+                       f"wrote for this scene)") from None
 
 
 __all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "OffsetEstimate", "RecheckResult",

@@ -62,6 +62,38 @@ def test_a_failing_run_re_checks_to_the_same_failure(tmp_path):
     assert again.reasons == live.reasons
 
 
+def test_a_re_check_judges_cycles_by_the_send_times_of_the_run(tmp_path):
+    # Every fourth frame went out 20 ms late, beyond the 5.76 ms ambiguity window: the cycle
+    # measured at its time saw the frame before. The sidecar keeps the send times, so the
+    # re-check judges each cycle against the frame the run did; without them it could not.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "late.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.sent_t_s = lambda batch: batch.t_s + np.where(
+            batch.frame_index % 4 == 1, 0.02, 0.0)
+        live = pipeline.run(scene).report
+    assert live.playback["lateness_s"]["max"] == pytest.approx(0.02)
+    sidecar = json.loads(Path(str(log) + ".rts.json").read_text())
+    assert sidecar["send_lateness"]["frames"] == scene.n_frames == 240
+    again = check_log(scene, log)
+    assert again.report.frames == live.frames and again.report.reasons == live.reasons
+    for q, stats in live.errors.items():
+        assert again.report.errors[q].max == pytest.approx(stats.max, abs=1e-9), q
+    assert not any("nominal times" in note for note in again.alignment.notes)
+    # A sidecar without send times (an older version's): judged at the nominal times, and said.
+    del sidecar["send_lateness"]
+    (tmp_path / "old").mkdir()
+    nominal = check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
+    assert nominal.report.frames["ambiguous"] != live.frames["ambiguous"]
+    assert any("judges them at their nominal times" in n for n in nominal.alignment.notes)
+    # Send times of another length are not this run's.
+    sidecar["send_lateness"] = {**json.loads(Path(str(log) + ".rts.json").read_text())[
+        "send_lateness"], "frames": 100}
+    with pytest.raises(LogError, match=r"send_lateness: holds 240 frames \(says 100\), the "
+                                       r"scene has 240"):
+        check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
+
+
 def write_radar(folder: Path, **clock) -> str:
     data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
                           .read_text())
