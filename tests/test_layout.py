@@ -1,6 +1,8 @@
 """The stages import only what comes before them (read from the source, nothing is run)."""
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -63,3 +65,13 @@ def test_the_reader_sees_imports():
     names = imports_of("pipeline")
     assert "rts_scenario.check" in names and "rts_scenario.canbus" in names
     assert "rts_scenario.detections.Detections" in imports_of("canbus")
+
+
+def test_the_simulated_radar_runs_without_the_solver():
+    # The honest bench must not share the solver's assumptions: loading it loads none of the
+    # solver's or the schedule's code (it reads a schedule's arrays, the type only for mypy).
+    code = ("import sys, rts_scenario.radar.simulate; print(sorted(m for m in sys.modules if "
+            "m.startswith(('rts_scenario.solver', 'rts_scenario.schedule'))))")
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            check=True).stdout
+    assert loaded.strip() == "[]"

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,9 +62,11 @@ from ..errors import RtsError
 from ..propagation import C0_MPS
 from ..registry import Registry
 from ..rig import Rig
-from ..schedule import Schedule
 from .angle import make_estimator
 from .profile import RadarProfile
+
+if TYPE_CHECKING:  # the radar reads a schedule's arrays; the schedule is built on its profile
+    from ..schedule import Schedule
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
