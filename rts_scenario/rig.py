@@ -362,13 +362,29 @@ class Rig:
         except RigError as exc:
             key = tuple((exc.key or "limits").split("."))
             raise doc.error(key, str(exc).removeprefix(f"{exc.key}: ")) from None
+        reference = Reference(**data.get("reference", {}))
+        # The reference is the level the bench was measured at, and survey and calibrate play
+        # every FE at it: a level the RTS cannot set is a typing mistake, and played anyway it
+        # gives numbers that look like a measurement.
+        if not (limits.attenuation_min_db <= reference.attenuation_db
+                <= limits.attenuation_max_db):
+            allowed = (f"the RTS's attenuation limits {limits.attenuation_min_db:g}.."
+                       f"{limits.attenuation_max_db:g} dB")
+            if "attenuation_db" in data.get("reference", {}):
+                raise doc.error(("reference", "attenuation_db"),
+                                f"must be within {allowed}, got {reference.attenuation_db:g}")
+            bound = ("attenuation_max_db" if reference.attenuation_db
+                     > limits.attenuation_max_db else "attenuation_min_db")
+            raise doc.error(("limits", bound),
+                            f"the default reference.attenuation_db = "
+                            f"{reference.attenuation_db:g} dB is outside {allowed}; give "
+                            f"reference.attenuation_db (the level the bench was measured at)")
         _check_distinct_directions(doc, az_grid, el_grid, columns, layout is not None)
         try:
             return cls(
                 name=data["name"], az_deg=az_grid, el_deg=el_grid, distance_m=dist, rows=rows,
                 columns=columns, cal_delay_s=cal["delay_s"], cal_phase_deg=cal["phase_deg"],
-                cal_gain_db=cal["gain_db"], limits=limits,
-                reference=Reference(**data.get("reference", {})),
+                cal_gain_db=cal["gain_db"], limits=limits, reference=reference,
                 rx_offset_m=offsets["rx_offset_m"], tx_offset_m=offsets["tx_offset_m"],
                 rts=delay_model, seen=seen,
             )

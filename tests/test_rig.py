@@ -144,6 +144,17 @@ BAD_RIGS = [
      "must be within 0 (continuous) .. 80 (attenuation_max_db - attenuation_min_db), got 500"),
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
      "  update_rate_hz: 0\n", 5, "limits.update_rate_hz", "must be > 0, got 0"),
+    # Survey and calibrate play each FE at the reference level: it must be one the RTS sets.
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  attenuation_max_db: 80\nreference:\n  attenuation_db: 1.0e+6\n", 7,
+     "reference.attenuation_db", "must be within the RTS's attenuation limits 0..80 dB, got 1e+06"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  attenuation_min_db: 10\nreference: {range_m: 5, attenuation_db: -3}\n", 6,
+     "reference.attenuation_db", "must be within the RTS's attenuation limits 10..120 dB, got -3"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  attenuation_max_db: 30\n", 5, "limits.attenuation_max_db",
+     "the default reference.attenuation_db = 40 dB is outside the RTS's attenuation limits "
+     "0..30 dB; give reference.attenuation_db"),
     ("rts_rig: 1\nname: x\n", None, "", "exactly one of 'front_ends'"),
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nrts:\n"
      "  delay_model: fibre\n", 5, "rts.delay_model", "allowed values: 'if', 'rf'"),

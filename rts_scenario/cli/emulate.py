@@ -23,7 +23,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
     from .common import check_fd_mapping, named_file, preset_or_file
     from .listen import _address
 
-    host, port = _address(args.listen)
+    host, port = _address(args.listen, "--listen")
     check_can_interface("--can-interface", args.can_interface)
     check_number("--seconds", args.seconds, low=0.001, high=86400.0)
     if args.seed < 0:

@@ -54,15 +54,16 @@ def _do_listen(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _address(spec: str) -> tuple[str, int]:
+def _address(spec: str, option: str = "ADDRESS") -> tuple[str, int]:
+    """``(host, port)`` of a ``udp://HOST:PORT`` the command listens on, given as ``option``."""
     from ..errors import RtsError
 
     usage = "expected udp://HOST:PORT with a port 0..65535 (0: any free port)"
     if not spec.startswith("udp://"):
-        raise RtsError(f"ADDRESS {spec!r}: {usage}")
+        raise RtsError(f"{option} {spec!r}: {usage}")
     host, _, port = spec[len("udp://"):].rpartition(":")
     if not host or not port.isdigit() or not 0 <= int(port) < 65536:
-        raise RtsError(f"ADDRESS {spec!r}: {usage}")
+        raise RtsError(f"{option} {spec!r}: {usage}")
     return host.strip("[]"), int(port)
 
 

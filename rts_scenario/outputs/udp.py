@@ -91,7 +91,8 @@ class UdpOutput(Output):
 
     name = "udp"
 
-    def __init__(self, address: str, *, pacing: str = "realtime", mode: str = "full",
+    # The address defaults to none so that a spec without one (``udp://``) gets the usage line.
+    def __init__(self, address: str = "", *, pacing: str = "realtime", mode: str = "full",
                  keyframe_every: int = 20) -> None:
         super().__init__()
         if pacing not in PACING:
