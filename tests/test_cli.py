@@ -296,3 +296,34 @@ def test_list_validate_and_schedule_show_the_variants(tmp_path, capsys, monkeypa
     assert cli.main(["schedule", str(scene), "--output", f"file:{target}", "--variant",
                      "1=40.0"]) == 0
     assert capsys.readouterr().out.startswith(f"{scene}[1=40.0]: 80 frames")
+
+
+def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_complete(
+        tmp_path, capsys, monkeypatch):
+    import rts_scenario.pipeline as pipeline
+
+    real = pipeline.run_scene
+    calls = []
+
+    def second_is_interrupted(scene, options, **kwargs):
+        calls.append(scene.name)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(scene, options, **kwargs)
+
+    monkeypatch.setattr(pipeline, "run_scene", second_is_interrupted)
+    scenes = [str(ROOT / "scenarios" / f"{name}.scenario.yaml")
+              for name in ("approaching_target", "cut_out", "motorcycle")]
+    detections, report = tmp_path / "d.csv", tmp_path / "r.json"
+    code = cli.main(["run", *scenes, "--detections", str(detections), "--json", str(report)])
+    out, err = capsys.readouterr()
+    assert code == 1 and calls == ["approaching-target", "cut-out"]
+    assert "cut_out.scenario.yaml: interrupted (Ctrl-C) while running: no verdict" in err
+    entries = json.loads(report.read_text())
+    assert [(e["scene"], e["status"]) for e in entries] == [("approaching-target", "pass"),
+                                                            ("cut_out", "error")]
+    # The detections so far are kept under a name that says they are not the whole run's.
+    assert not detections.exists()
+    rows = (tmp_path / "d.csv.partial").read_text().splitlines()
+    assert len(rows) > 100 and all(r.startswith("approaching-target,") for r in rows[1:])
+    assert f"wrote {detections}.partial (cut short: the run was interrupted)" in out

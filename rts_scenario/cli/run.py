@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -114,76 +115,98 @@ def _do_run(args: argparse.Namespace) -> int:
         entries.append({"scene": scene, "file": path, "status": "error", "error": message,
                         "variant": variant, "parameters": dict(parameters or {})})
 
-    for path, combos in expanded:
-        file_name = Path(path).name.removesuffix(SCENE_SUFFIX)
-        if isinstance(combos, Exception):
-            failed(file_name, path, combos)
-            # A file that does not load is bad input; anything else is a runtime error.
-            bad_input = bad_input or isinstance(combos, RtsError)
-            runtime_error = runtime_error or not isinstance(combos, RtsError)
-            continue
-        for variant, overrides in combos:
-            label = f"{path}[{variant}]" if variant else path
-            start = time.perf_counter()
-            try:
-                scene = load_scenario(path, overrides)
-            except Exception as exc:
-                show_traceback(args)
-                failed(file_name, path, exc, variant, overrides)
-                bad_input = bad_input or isinstance(exc, RtsError)
-                runtime_error = runtime_error or not isinstance(exc, RtsError)
+    # The run under way when Ctrl-C came: (file name, path, variant, overrides, log).
+    current: tuple[str, str, str, dict[str, Any], str | None] | None = None
+    interrupted = False
+    try:
+        for path, combos in expanded:
+            file_name = Path(path).name.removesuffix(SCENE_SUFFIX)
+            if isinstance(combos, Exception):
+                failed(file_name, path, combos)
+                # A file that does not load is bad input; anything else is a runtime error.
+                bad_input = bad_input or isinstance(combos, RtsError)
+                runtime_error = runtime_error or not isinstance(combos, RtsError)
                 continue
-            try:
-                loaded = {"load_s": time.perf_counter() - start}
+            for variant, overrides in combos:
+                label = f"{path}[{variant}]" if variant else path
+                current = (file_name, path, variant, overrides, logs.get(variant, args.record))
+                start = time.perf_counter()
+                try:
+                    scene = load_scenario(path, overrides)
+                except Exception as exc:
+                    show_traceback(args)
+                    failed(file_name, path, exc, variant, overrides)
+                    bad_input = bad_input or isinstance(exc, RtsError)
+                    runtime_error = runtime_error or not isinstance(exc, RtsError)
+                    continue
+                try:
+                    loaded = {"load_s": time.perf_counter() - start}
 
-                def warn(pre: Preflight, label: str = label) -> None:
-                    # Before anything plays: what the bench or the radar will not do as
-                    # specified.
-                    for line in pre.unexpected():
-                        print(f"warning: {label}: {line}", file=sys.stderr)
+                    def warn(pre: Preflight, label: str = label) -> None:
+                        # Before anything plays: what the bench or the radar will not do as
+                        # specified.
+                        for line in pre.unexpected():
+                            print(f"warning: {label}: {line}", file=sys.stderr)
 
-                log = logs.get(variant, args.record)
-                options = RunOptions(output=args.output, can_interface=args.can_interface,
-                                     can_channel=args.can_channel, can_fd=args.can_fd,
-                                     mapping=args.mapping, method=args.method,
-                                     record=bool(args.plot), bus_log=log)
-                result = run_scene(scene, options,
-                                   progress=Progress(run_label(Path(path).name, variant)),
-                                   detections_out=detections, on_preflight=warn, timing=loaded)
-                report = result.report
-                print(report.table())
-                if log:
-                    print(f"wrote {log} and {log}.rts.json")
-                print("timing: " + ", ".join(
-                    f"{k.removesuffix('_s')} {v * 1e3:.0f} ms"
-                    + (f" ({report.solver_plan})" if k == "plan_s" else "")
-                    for k, v in report.timing.items()))
-                if args.plot:
-                    from ..plots import write_plots
+                    log = logs.get(variant, args.record)
+                    options = RunOptions(output=args.output, can_interface=args.can_interface,
+                                         can_channel=args.can_channel, can_fd=args.can_fd,
+                                         mapping=args.mapping, method=args.method,
+                                         record=bool(args.plot), bus_log=log)
+                    result = run_scene(scene, options,
+                                       progress=Progress(run_label(Path(path).name, variant)),
+                                       detections_out=detections, on_preflight=warn, timing=loaded)
+                    report = result.report
+                    print(report.table())
+                    if log:
+                        print(f"wrote {log} and {log}.rts.json")
+                    print("timing: " + ", ".join(
+                        f"{k.removesuffix('_s')} {v * 1e3:.0f} ms"
+                        + (f" ({report.solver_plan})" if k == "plan_s" else "")
+                        for k, v in report.timing.items()))
+                    if args.plot:
+                        from ..plots import write_plots
 
-                    stem = _unique(safe_stem(scene.label), stems)
-                    with writing("--plot", args.plot):
-                        written_plots = write_plots(result, args.plot, stem)
-                    for written in written_plots:
-                        print(f"wrote {written}")
-            except Exception as exc:
-                show_traceback(args)
-                failed(scene.name, path, exc, variant, overrides)
-                # The scene loaded but its schedule cannot be built (e.g. the rig's update
-                # rate): still the scene's fault, not the run's.
-                if isinstance(exc, ScenarioError | ScheduleError):
-                    bad_input = True
-                else:
-                    runtime_error = True
-                continue
-            finally:
-                print()
-            entries.append({"file": path, "status": "pass" if report.passed else "fail",
-                            **report.to_dict()})
-
+                        stem = _unique(safe_stem(scene.label), stems)
+                        with writing("--plot", args.plot):
+                            written_plots = write_plots(result, args.plot, stem)
+                        for written in written_plots:
+                            print(f"wrote {written}")
+                except Exception as exc:
+                    show_traceback(args)
+                    failed(scene.name, path, exc, variant, overrides)
+                    # The scene loaded but its schedule cannot be built (e.g. the rig's update
+                    # rate): still the scene's fault, not the run's.
+                    if isinstance(exc, ScenarioError | ScheduleError):
+                        bad_input = True
+                    else:
+                        runtime_error = True
+                    continue
+                finally:
+                    print()
+                entries.append({"file": path, "status": "pass" if report.passed else "fail",
+                                **report.to_dict()})
+    except KeyboardInterrupt:
+        # What finished is kept and reported; nothing cut short is left looking complete.
+        interrupted = True
+        if current is not None:
+            name, path, variant, overrides, log = current
+            failed(name, path, RtsError("interrupted (Ctrl-C) while running: no verdict"),
+                   variant, overrides)
+            if log:
+                print(f"note: {log} is cut short and has no sidecar: a check of it aligns it "
+                      f"by its timestamps and fails on the cycles it lacks", file=sys.stderr)
+        else:
+            print("error: interrupted", file=sys.stderr)
     if detections is not None:
         detections.close()
-        print(f"wrote {args.detections}")
+        if interrupted:
+            partial = f"{args.detections}.partial"
+            with writing("--detections", args.detections):
+                os.replace(args.detections, partial)
+            print(f"wrote {partial} (cut short: the run was interrupted)")
+        else:
+            print(f"wrote {args.detections}")
     if len(entries) > 1:
         for entry in entries:
             name = run_label(entry["scene"], entry["variant"])
