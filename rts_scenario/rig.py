@@ -475,7 +475,14 @@ def _number(minimum: float | None = None, exclusive: bool = False) -> dict[str, 
 
 
 _ANGLE = {"type": "number", "minimum": -90, "maximum": 90}
-_OFFSET = {"type": "array", "minItems": 2, "maxItems": 2, "items": {"type": "number"}}
+# Bounds of a bench, wide enough for any real one: values beyond them are typing mistakes that
+# would otherwise play (or survey) nonsense without a word. An FE's antennas sit on the FE.
+_OFFSET = {"type": "array", "minItems": 2, "maxItems": 2,
+           "items": {"type": "number", "minimum": -1.0, "maximum": 1.0}}
+_DISTANCE = {"type": "number", "exclusiveMinimum": 0, "maximum": 100.0}
+# Cable and path differences: 1 us is 150 m of range.
+_CAL_DELAY = {"type": "number", "minimum": -1e-6, "maximum": 1e-6}
+_CAL_GAIN = {"type": "number", "minimum": -60.0, "maximum": 60.0}
 
 RIG_SCHEMA: dict[str, Any] = {
     "type": "object",
@@ -485,7 +492,7 @@ RIG_SCHEMA: dict[str, Any] = {
         "rts_rig": {"enum": [1]},
         "name": {"type": "string", "minLength": 1},
         "description": {"type": "string"},
-        "distance_m": _number(0, exclusive=True),
+        "distance_m": _DISTANCE,
         "rows": {"type": "integer", "minimum": 2},
         "columns": {"type": "integer", "minimum": 2},
         "front_ends": {
@@ -498,16 +505,16 @@ RIG_SCHEMA: dict[str, Any] = {
                 "properties": {
                     "az_deg": _ANGLE,
                     "el_deg": _ANGLE,
-                    "distance_m": _number(0, exclusive=True),
+                    "distance_m": _DISTANCE,
                     "rx_offset_m": _OFFSET,
                     "tx_offset_m": _OFFSET,
                     "calibration": {
                         "type": "object",
                         "additionalProperties": False,
                         "properties": {
-                            "delay_s": {"type": "number"},
+                            "delay_s": _CAL_DELAY,
                             "phase_deg": {"type": "number"},
-                            "gain_db": {"type": "number"},
+                            "gain_db": _CAL_GAIN,
                         },
                     },
                     "seen": {

@@ -161,6 +161,18 @@ BAD_RIGS = [
     ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, rx_offset_m: [0.1]}\n"
      "  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
      4, "front_ends[0].rx_offset_m", "must have at least 2 items"),
+    # Beyond any bench: typing mistakes that would survey or play nonsense without a word.
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\ndistance_m: 1.0e+9\n",
+     4, "distance_m", "must be <= 100"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1}\n"
+     "  - {az_deg: 2, el_deg: 1, calibration: {delay_s: -1}}\n  - {az_deg: 1, el_deg: 2}\n"
+     "  - {az_deg: 2, el_deg: 2}\n", 5, "front_ends[1].calibration.delay_s", "must be >= -1e-06"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, calibration: {gain_db: 500}}"
+     "\n  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
+     4, "front_ends[0].calibration.gain_db", "must be <= 60"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, rx_offset_m: [5, 0]}\n"
+     "  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
+     4, "front_ends[0].rx_offset_m[0]", "must be <= 1"),
     ("rts_rig: 1\nname: x\nname: y\n", 3, "name", "duplicate key"),
     ("rts_rig: 1\nname: [x\n", 3, "", "invalid YAML"),
     ("rts_rig: 1\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n", 1, "", "'name' is required"),

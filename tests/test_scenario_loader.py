@@ -415,6 +415,21 @@ def test_combinations_with_the_same_id_are_refused(tmp_path):
                                             r"'rcs_dbsm=10'"):
         parametrizations(path)
 
+@pytest.mark.parametrize("fc", ["1.0e+15", "5.0e+8"])
+def test_a_carrier_outside_the_radar_bands_is_a_located_error(tmp_path, fc):
+    # 1e15 Hz made the estimator's angle grid 349 GiB (MemoryError, exit 3).
+    from rts_scenario.radar.profile import RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar.replace("fc_hz: 76.5e+9", f"fc_hz: {fc}"))
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1)
+                if text.startswith("fc_hz"))
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: fc_hz: must be "
+                                            rf"(<= 300000000000|>= 1000000000)"):
+        RadarProfile.from_file(path)
+
+
 def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):
     # YAML 1.1 reads 76.5e9 and 1e6 as strings; YAML 1.2 (and engineers) as numbers.
     from rts_scenario.canbus.mapping import CanMapping

@@ -304,7 +304,9 @@ PROFILE_SCHEMA: dict[str, Any] = {
         "rts_radar": {"enum": [1]},
         "name": {"type": "string", "minLength": 1},
         "description": {"type": "string"},
-        "fc_hz": _POSITIVE,
+        # Radar bands from 1 to 300 GHz (automotive: 24, 77-81 GHz); beyond them the
+        # estimator's angle grid, which grows with (aperture / wavelength)^2, would not fit.
+        "fc_hz": {"type": "number", "minimum": 1e9, "maximum": 3e11},
         "bandwidth_hz": _POSITIVE,
         "ramp_time_s": _POSITIVE,
         "idle_time_s": {"type": "number", "minimum": 0},
