@@ -1304,13 +1304,23 @@ def _parse(path: Path) -> Any:
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
                              remove_comments=True, remove_pis=True, huge_tree=False)
     try:
-        return etree.parse(str(path), parser).getroot()
+        tree = etree.parse(str(path), parser)
     except etree.XMLSyntaxError as exc:
         line = exc.position[0] if exc.position else None
         message = re.sub(r",? line \d+(, column \d+)?\s*$", "", str(exc.msg))
         raise ScenarioError(f"malformed XML: {message}", file=str(path), line=line) from None
     except OSError as exc:
         raise RtsError(f"{path}: cannot read: {exc}") from None
+    # libxml2 expands internal entities in attribute values whatever the parser's options: a
+    # value would then come from a declaration, not from where it stands. OpenSCENARIO files
+    # declare none.
+    dtd = tree.docinfo.internalDTD
+    declared = [e.name for e in dtd.iterentities()] if dtd is not None else []
+    if declared:
+        raise ScenarioError(f"the DOCTYPE declares entities ({', '.join(declared)}), which "
+                            f"are not supported: write their values where they are used",
+                            file=str(path), line=1)
+    return tree.getroot()
 
 
 def import_xosc(path: str | Path, *, radar: str, rig: str, ego: str | None = None,

@@ -348,6 +348,12 @@ def test_entities_are_not_expanded(tmp_path):
     with pytest.raises(ScenarioError) as info:
         imported(tmp_path, path)
     assert "root:" not in str(info.value)
+    # An internal entity would be expanded in an attribute value: refused, not expanded.
+    path.write_text('<?xml version="1.0"?>\n<!DOCTYPE OpenSCENARIO [<!ENTITY a "25">]>\n'
+                    + (DATA / "braking_lead.xosc").read_text().split("?>", 1)[1])
+    with pytest.raises(ScenarioError, match=r"entities.xosc:1: the DOCTYPE declares entities "
+                                            r"\(a\), which are not supported"):
+        imported(tmp_path, path)
 
 
 def test_missing_ego_lists_the_entities(tmp_path):
