@@ -6,10 +6,11 @@ frames, cycles as they come, and `Checker.settle` checks the frames whose cycles
 forgets them, keeping running statistics, the worst frames and (on request) a per-frame record
 on disk. Memory does not grow with the length of a run.
 
-A cycle belongs to the scene frame its counter names; the counter may wrap (16 bits on the
-bus), the nearest frame of the open window resolves it. A cycle measured within the ambiguity
-window of a frame change (`rts_scenario.pipeline.CycleTruth`) is judged against whichever of
-the two frames it matches better, and counted.
+A cycle belongs to the scene frame its counter names; the counter may wrap (16 bits on
+rts-scenario's own messages, 8 or fewer on some radars'), the cycle before it resolves it. A
+cycle measured within the ambiguity window of a frame change
+(`rts_scenario.pipeline.CycleTruth`) is judged against whichever of the two frames it matches
+better, and counted.
 
 Per frame, detections are associated with the targets the RTS played (gated at 3x each
 quantity's tolerance, then an optimal assignment on the normalized distance). A checkable
@@ -44,7 +45,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .detections import Detections, unwrap_counter
+from .detections import Detections, sequential_numbers, unwrap_counter
 from .errors import CheckError
 from .kinematics import Tracks
 from .report import FrameRecord, Report, RunningStats, TargetResult
@@ -247,6 +248,7 @@ class Checker:
         self._blocks: list[_Block] = []
         self._cycles: dict[int, Detections] = {}
         self._settled = 0  # frames before this one are done
+        self._last_cycle: int | None = None  # the number of the last cycle taken
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
         self._detected = np.zeros(n, dtype=np.int64)
@@ -289,17 +291,21 @@ class Checker:
                                    other if window is not None else None, window))
 
     def add_cycles(self, cycles: Iterable[Detections]) -> None:
-        """Take radar cycles; each is filed under the frame its counter names."""
+        """Take radar cycles, in the order they arrived; each is filed under its counter's frame."""
         cycles = list(cycles)
         if not cycles:
             return
-        end = self._blocks[-1].end if self._blocks else self._settled
-        near = (self._settled + end) // 2
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
         if self.counter_start is None:
             raise ValueError("the radar's counter start is not known yet (set counter_start)")
-        frames = unwrap_counter((counters - self.counter_start) % self.modulus, near,
-                                self.modulus)
+        counters = (counters - self.counter_start) % self.modulus
+        # Cycles come in order, give or take a reordered one: each is a step from the one
+        # before (the first of all from the first frame not settled). Where a frame is
+        # expected is no guide: a batch holds more cycles than an 8-bit counter counts.
+        anchor = self._settled if self._last_cycle is None else self._last_cycle
+        frames = (unwrap_counter(counters[:1], anchor, self.modulus)
+                  + sequential_numbers(counters, self.modulus))
+        self._last_cycle = int(frames[-1])
         for frame, cycle in zip(frames.tolist(), cycles, strict=True):  # one per radar cycle
             if frame < self._settled:
                 self.frames["late"] += 1

@@ -128,6 +128,28 @@ def test_wrapped_counters_are_checked_against_their_own_frames():
     assert report.errors["range_m"].max == 0.0 and report.passed
 
 
+def test_an_8_bit_counter_names_its_cycles_though_a_batch_holds_more():
+    # As a run hands them on: each batch's cycles arrive before its truth (handed on with the
+    # next batch), and a batch holds 500 cycles, an 8-bit counter counts 256.
+    n, step = 1200, 500
+    tr = truth(n, n_targets=1)
+    played = OK(n, 1)
+    cycles = cycles_from(tr, modulus=256)
+    checker = Checker("8-bit", tr.names, EXPECT, counter_modulus=256)
+    for a in range(0, n, step):
+        if a:
+            checker.add_truth(a - step, block(tr, a - step, a), played[a - step:a])
+        checker.add_cycles(cycles[a:a + step])
+        checker.settle(before_frame=a - step)
+    checker.add_truth(a, block(tr, a, n), played[a:])
+    checker.settle()
+    report = checker.report()
+    assert report.frames["checked"] == n
+    assert (report.frames["missing"], report.frames["late"], report.frames["repeated"]) == (
+        0, 0, 0)
+    assert report.errors["range_m"].max == 0.0 and report.passed
+
+
 def test_a_cycle_checked_against_the_wrong_wrap_fails():
     n = 70_000
     tr = truth(n, n_targets=1)
