@@ -251,6 +251,7 @@ class Checker:
         self._last_cycle: int | None = None  # the number of the last cycle taken
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
+        self._played = np.zeros(n, dtype=np.int64)
         self._detected = np.zeros(n, dtype=np.int64)
         self._matched = 0
         self._unchecked = 0
@@ -289,6 +290,16 @@ class Checker:
             other = (other[0], _status_flags(other[1], other[0]))
         self._blocks.append(_Block(first_frame, tracks, _status_flags(status, tracks),
                                    other if window is not None else None, window))
+
+    def add_frames(self, played: ArrayLike) -> None:
+        """Take where each target was checkable in the scene's frames (frames x targets).
+
+        Checkable: played exactly as specified and measurable (`checkable`); in any batches.
+        The truth of the radar's cycles says only what the cycles measured: a target played
+        in frames that no cycle measured (a radar slower than the frames, or starting after
+        them) was never checked, and fails the verdict.
+        """
+        self._played += np.asarray(played, dtype=bool).sum(axis=0)
 
     def add_cycles(self, cycles: Iterable[Detections]) -> None:
         """Take radar cycles, in the order they arrived; each is filed under its counter's frame."""
@@ -509,6 +520,7 @@ class Checker:
         for k, name in enumerate(self.names):  # one summary row per target
             n_check, n_det = int(self._checkable[k]), int(self._detected[k])
             rate = n_det / n_check if n_check else float("nan")
+            unmeasured = n_check == 0 and self._played[k] > 0
             hit = {lim: int(c[k]) for lim, c in self._limits.items() if c[k]}
             unexpected = [lim for lim in hit if lim not in self._expected[k]]
             if unexpected:
@@ -519,16 +531,21 @@ class Checker:
             targets.append(TargetResult(
                 name=name, checkable_frames=n_check, detected_frames=n_det, detection_rate=rate,
                 errors={q: self._stats[q].result(k) for q, _ in QUANTITIES},
-                passed=(n_check == 0 or rate >= exp.detection_rate - 1e-12) and not unexpected,
+                passed=((n_check == 0 or rate >= exp.detection_rate - 1e-12) and not unexpected
+                        and not unmeasured),
                 out_of_tolerance_frames=int(self._out_of_tolerance[k]),
                 missed_frames=int(self._missed[k]), unchecked_frames=int(self._unchecked_k[k]),
-                limits=hit, unexpected_limits=unexpected))
+                limits=hit, unexpected_limits=unexpected, played_frames=int(self._played[k])))
         reasons = [f"{lim}: {why}" for lim, why in self._scene_limits.items()
                    if lim not in exp.expected_limits]
         reasons += [f"{t.name}: detection rate {t.detection_rate:.1%} < "
                     f"{exp.detection_rate:.1%}" for t in targets
                     if t.checkable_frames and t.detection_rate < exp.detection_rate - 1e-12]
         reasons += limit_reasons
+        reasons += [f"{t.name}: never checked: no radar cycle measured the "
+                    + (f"{t.played_frames} frames" if t.played_frames > 1 else "frame")
+                    + " it was played in" for t in targets
+                    if t.played_frames and not t.checkable_frames]
         frames = self.frames
         per_frame = self._false / max(frames["received"], 1)
         if per_frame > exp.max_false_detections_per_frame:
@@ -615,6 +632,7 @@ def check_cycles(scene: str, tracks: Tracks, status: NDArray[np.uint16],
     checker = Checker(scene, tracks.names, expectations, counter_modulus=counter_modulus,
                       expected_limits=expected_limits)
     checker.add_truth(0, tracks, status)
+    checker.add_frames(checkable(tracks, _status_flags(status, tracks)))
     checker.add_cycles(cycles)
     checker.settle()
     return checker.report(bus)

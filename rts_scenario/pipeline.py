@@ -23,7 +23,7 @@ import numpy as np
 
 from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
 from .canbus.mapping import CanMapping
-from .check import Checker
+from .check import Checker, checkable
 from .detections import Detections, sequential_numbers, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
@@ -335,6 +335,7 @@ class Pipeline:
                                       estimator=scene.radar_options.estimator,
                                       frame_rate_hz=scene.frame_rate_hz)
             schedule = replace(schedule, frame_index=frames)
+            checker.add_frames(checkable(tracks, schedule.status))
             if digest is not None:
                 digest.update(schedule.status.tobytes())
             mark = timer.add("schedule_s", mark)

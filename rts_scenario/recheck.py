@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from .canbus import DetectionReceiver
 from .canbus.mapping import CanMapping
-from .check import Checker
+from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
 from .errors import RtsError
 from .kinematics import compute_tracks
@@ -716,8 +716,9 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
             checker.add_cycles(logged[i].detections for i in order[lo:hi])
             checker.settle(before_frame=int(n[-1]) + 1)
 
-    for frames, _, schedule in schedule_batches(scene, method, batch_frames):
+    for frames, tracks, schedule in schedule_batches(scene, method, batch_frames):
         digest.update(schedule.status.tobytes())
+        checker.add_frames(checkable(tracks, schedule.status))
         check_cycles(truths.add(frames, schedule.status))
     check_cycles(truths.finish())
     checker.settle()

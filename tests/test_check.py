@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rts_scenario.check import Checker
+from rts_scenario.check import Checker, checkable
 from rts_scenario.check import check_cycles as check
 from rts_scenario.detections import Detections, unwrap_counter
 from rts_scenario.kinematics import Tracks
@@ -86,6 +86,7 @@ def test_streaming_in_blocks_equals_one_shot():
     edges = [0, 37, 150, 151, 399, 400]
     for i, (a, b) in enumerate(zip(edges, edges[1:], strict=False)):
         checker.add_truth(a, block(tr, a, b), played[a:b])
+        checker.add_frames(checkable(block(tr, a, b), played[a:b]))
         if i:  # cycles of a block arrive one block late, as from a radar with latency
             checker.add_cycles(cycles[edges[i - 1]:a])
         checker.settle(before_frame=edges[i - 1] if i else 0)
