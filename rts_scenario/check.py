@@ -6,10 +6,11 @@ frames, cycles as they come, and `Checker.settle` checks the frames whose cycles
 forgets them, keeping running statistics, the worst frames and (on request) a per-frame record
 on disk. Memory does not grow with the length of a run.
 
-A cycle belongs to the scene frame its counter names; the counter may wrap (16 bits on the
-bus), the nearest frame of the open window resolves it. A cycle measured within the ambiguity
-window of a frame change (`rts_scenario.pipeline.CycleTruth`) is judged against whichever of
-the two frames it matches better, and counted.
+A cycle belongs to the scene frame its counter names; the counter may wrap (16 bits on
+rts-scenario's own messages, 8 or fewer on some radars'), the cycle before it resolves it. A
+cycle measured within the ambiguity window of a frame change
+(`rts_scenario.pipeline.CycleTruth`) is judged against whichever of the two frames it matches
+better, and counted.
 
 Per frame, detections are associated with the targets the RTS played (gated at 3x each
 quantity's tolerance, then an optimal assignment on the normalized distance). A checkable
@@ -45,7 +46,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .detections import Detections, unwrap_counter
+from .detections import Detections, sequential_numbers, unwrap_counter
 from .errors import CheckError
 from .kinematics import Tracks
 from .report import FrameRecord, Report, RunningStats, TargetResult
@@ -248,8 +249,10 @@ class Checker:
         self._blocks: list[_Block] = []
         self._cycles: dict[int, Detections] = {}
         self._settled = 0  # frames before this one are done
+        self._last_cycle: int | None = None  # the number of the last cycle taken
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
+        self._played = np.zeros(n, dtype=np.int64)
         self._detected = np.zeros(n, dtype=np.int64)
         self._matched = 0
         self._unchecked = 0
@@ -289,18 +292,32 @@ class Checker:
         self._blocks.append(_Block(first_frame, tracks, _status_flags(status, tracks),
                                    other if window is not None else None, window))
 
+    def add_frames(self, played: ArrayLike) -> None:
+        """Take where each target was checkable in the scene's frames (frames x targets).
+
+        Checkable: played exactly as specified and measurable (`checkable`); in any batches.
+        The truth of the radar's cycles says only what the cycles measured: a target played
+        in frames that no cycle measured (a radar slower than the frames, or starting after
+        them) was never checked, and fails the verdict.
+        """
+        self._played += np.asarray(played, dtype=bool).sum(axis=0)
+
     def add_cycles(self, cycles: Iterable[Detections]) -> None:
-        """Take radar cycles; each is filed under the frame its counter names."""
+        """Take radar cycles, in the order they arrived; each is filed under its counter's frame."""
         cycles = list(cycles)
         if not cycles:
             return
-        end = self._blocks[-1].end if self._blocks else self._settled
-        near = (self._settled + end) // 2
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
         if self.counter_start is None:
             raise ValueError("the radar's counter start is not known yet (set counter_start)")
-        frames = unwrap_counter((counters - self.counter_start) % self.modulus, near,
-                                self.modulus)
+        counters = (counters - self.counter_start) % self.modulus
+        # Cycles come in order, give or take a reordered one: each is a step from the one
+        # before (the first of all from the first frame not settled). Where a frame is
+        # expected is no guide: a batch holds more cycles than an 8-bit counter counts.
+        anchor = self._settled if self._last_cycle is None else self._last_cycle
+        frames = (unwrap_counter(counters[:1], anchor, self.modulus)
+                  + sequential_numbers(counters, self.modulus))
+        self._last_cycle = int(frames[-1])
         for frame, cycle in zip(frames.tolist(), cycles, strict=True):  # one per radar cycle
             if frame < self._settled:
                 self.frames["late"] += 1
@@ -504,6 +521,7 @@ class Checker:
         for k, name in enumerate(self.names):  # one summary row per target
             n_check, n_det = int(self._checkable[k]), int(self._detected[k])
             rate = n_det / n_check if n_check else float("nan")
+            unmeasured = n_check == 0 and self._played[k] > 0
             hit = {lim: int(c[k]) for lim, c in self._limits.items() if c[k]}
             unexpected = [lim for lim in hit if lim not in self._expected[k]]
             if unexpected:
@@ -514,16 +532,21 @@ class Checker:
             targets.append(TargetResult(
                 name=name, checkable_frames=n_check, detected_frames=n_det, detection_rate=rate,
                 errors={q: self._stats[q].result(k) for q, _ in QUANTITIES},
-                passed=(n_check == 0 or rate >= exp.detection_rate - 1e-12) and not unexpected,
+                passed=((n_check == 0 or rate >= exp.detection_rate - 1e-12) and not unexpected
+                        and not unmeasured),
                 out_of_tolerance_frames=int(self._out_of_tolerance[k]),
                 missed_frames=int(self._missed[k]), unchecked_frames=int(self._unchecked_k[k]),
-                limits=hit, unexpected_limits=unexpected))
+                limits=hit, unexpected_limits=unexpected, played_frames=int(self._played[k])))
         reasons = [f"{lim}: {why}" for lim, why in self._scene_limits.items()
                    if lim not in exp.expected_limits]
         reasons += [f"{t.name}: detection rate {t.detection_rate:.1%} < "
                     f"{exp.detection_rate:.1%}" for t in targets
                     if t.checkable_frames and t.detection_rate < exp.detection_rate - 1e-12]
         reasons += limit_reasons
+        reasons += [f"{t.name}: never checked: no radar cycle measured the "
+                    + (f"{t.played_frames} frames" if t.played_frames > 1 else "frame")
+                    + " it was played in" for t in targets
+                    if t.played_frames and not t.checkable_frames]
         frames = self.frames
         per_frame = self._false / max(frames["received"], 1)
         if per_frame > exp.max_false_detections_per_frame:
@@ -614,6 +637,7 @@ def check_cycles(scene: str, tracks: Tracks, status: NDArray[np.uint16],
     checker = Checker(scene, tracks.names, expectations, counter_modulus=counter_modulus,
                       expected_limits=expected_limits)
     checker.add_truth(0, tracks, status)
+    checker.add_frames(checkable(tracks, _status_flags(status, tracks)))
     checker.add_cycles(cycles)
     checker.settle()
     return checker.report(bus)

@@ -109,4 +109,19 @@ def unwrap_counter(counter: NDArray[np.int64], near: NDArray[np.int64] | int,
     return counter + k * modulus
 
 
-__all__ = ["QUANTITIES", "Detections", "unwrap_counter"]
+def sequential_numbers(counters: NDArray[np.int64], modulus: int) -> NDArray[np.int64]:
+    """Cycle numbers of counters in arrival order, the first 0: each a step from the one before.
+
+    A step is taken modulo the counter's wrap and is less than half of it (a step back is a
+    reordered cycle). A counter narrower than the cycles in flight (an 8-bit one wraps every
+    256 cycles) names its cycle only this way, never by where the cycle is expected.
+    """
+    counters = np.asarray(counters, dtype=np.int64)
+    if counters.size == 0:
+        return counters
+    step = np.mod(np.diff(counters), modulus)
+    step = np.where(step > modulus // 2, step - modulus, step)
+    return np.concatenate([[0], np.cumsum(step)]).astype(np.int64)
+
+
+__all__ = ["QUANTITIES", "Detections", "sequential_numbers", "unwrap_counter"]

@@ -23,8 +23,8 @@ import numpy as np
 
 from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
 from .canbus.mapping import CanMapping
-from .check import Checker
-from .detections import Detections, unwrap_counter
+from .check import Checker, checkable
+from .detections import Detections, sequential_numbers, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
@@ -250,18 +250,22 @@ class Pipeline:
         n = np.arange(schedule.n_frames, dtype=np.int64)
         self.write(replace(schedule, t_s=clock.time_of(n)))
         cycles = [c for c in self.receive(final=True) if c.complete]
-        found = dict(zip(self._cycle_numbers(cycles, n.size // 2).tolist(), cycles, strict=True))
+        found = dict(zip(self._cycle_numbers(cycles).tolist(), cycles, strict=True))
         return [found.get(int(i), Detections.empty(int(f), float(t), (), complete=False))
                 for i, f, t in zip(n, schedule.frame_index, schedule.t_s, strict=True)]
 
-    def _cycle_numbers(self, cycles: list[Detections], near: int) -> np.ndarray:
-        """Return the radar's cycle numbers (0 at its clock's start) of received cycles."""
+    def _cycle_numbers(self, cycles: list[Detections]) -> np.ndarray:
+        """Return the radar's cycle numbers (0 at its clock's start) of received cycles.
+
+        Each is a step from the cycle before (`sequential_numbers`), the first nearest 0.
+        """
         clock = self.radar.radar_clock
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
         start = clock.counter_start if clock.counter_start is not None else (
             int(counters[0]) if counters.size else 0)  # a measurement: the first is cycle 0
-        return unwrap_counter((counters - start) % self.counter_modulus, near,
-                              self.counter_modulus)
+        counters = (counters - start) % self.counter_modulus
+        return (unwrap_counter(counters[:1], 0, self.counter_modulus)
+                + sequential_numbers(counters, self.counter_modulus))
 
     def _learn_counter_start(self, checker: Checker, cycles: list[Detections]) -> None:
         """Find where the radar's counter starts when its profile does not say.
@@ -331,6 +335,7 @@ class Pipeline:
                                       estimator=scene.radar_options.estimator,
                                       frame_rate_hz=scene.frame_rate_hz)
             schedule = replace(schedule, frame_index=frames)
+            checker.add_frames(checkable(tracks, schedule.status))
             if digest is not None:
                 digest.update(schedule.status.tobytes())
             mark = timer.add("schedule_s", mark)

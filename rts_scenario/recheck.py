@@ -33,8 +33,8 @@ from numpy.typing import NDArray
 
 from .canbus import DetectionReceiver
 from .canbus.mapping import CanMapping
-from .check import Checker
-from .detections import Detections
+from .check import Checker, checkable
+from .detections import Detections, sequential_numbers
 from .errors import RtsError
 from .kinematics import compute_tracks
 from .pipeline import LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
@@ -339,16 +339,6 @@ def _messages(path: Path) -> Iterator[can.Message]:
             yield msg
 
 
-def _sequential_numbers(counters: IntArray, modulus: int) -> IntArray:
-    """Return cycle numbers from counters in log order: each step forward modulo the wrap."""
-    if counters.size == 0:
-        return counters
-    step = np.mod(np.diff(counters), modulus)
-    # A step back (reordered) is small and negative once re-centred.
-    step = np.where(step > modulus // 2, step - modulus, step)
-    return np.concatenate([[0], np.cumsum(step)]).astype(np.int64)
-
-
 class _Detected:
     """A log's detections as flat arrays, each with the cycle (row) it came in."""
 
@@ -584,7 +574,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     modulus = 1 << int(header.get_signal_by_name(receiver_mapping.counter).length)
     profile_clock = scene.radar.radar_clock
     counters = np.array([c.detections.cycle for c in logged], dtype=np.int64)
-    numbers = _sequential_numbers(counters, modulus)
+    numbers = sequential_numbers(counters, modulus)
     if sidecar is not None:
         c = sidecar["clock"]
         clock = RadarClock(cycle_s=float(c["cycle_s"]),
@@ -719,7 +709,7 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
     # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
     first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
                 - modulus // 2) if counters.size else 0
-    rel = _sequential_numbers(counters, modulus) + first
+    rel = sequential_numbers(counters, modulus) + first
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
     digest = hashlib.sha256()
@@ -736,8 +726,9 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
             checker.add_cycles(logged[i].detections for i in order[lo:hi])
             checker.settle(before_frame=int(n[-1]) + 1)
 
-    for frames, _, schedule in schedule_batches(scene, method, batch_frames):
+    for frames, tracks, schedule in schedule_batches(scene, method, batch_frames):
         digest.update(schedule.status.tobytes())
+        checker.add_frames(checkable(tracks, schedule.status))
         sent = None if late is None else scene.t_s[frames] + late[frames]
         check_cycles(truths.add(frames, schedule.status, sent))
     check_cycles(truths.finish())

@@ -163,6 +163,7 @@ class TargetResult:
     unchecked_frames: int = 0
     limits: dict[str, int] = field(default_factory=dict)
     unexpected_limits: list[str] = field(default_factory=list)
+    played_frames: int = 0
 
 
 @dataclass

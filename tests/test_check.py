@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rts_scenario.check import Checker
+from rts_scenario.check import Checker, checkable
 from rts_scenario.check import check_cycles as check
 from rts_scenario.detections import Detections, unwrap_counter
 from rts_scenario.kinematics import Tracks
@@ -87,6 +87,7 @@ def test_streaming_in_blocks_equals_one_shot():
     edges = [0, 37, 150, 151, 399, 400]
     for i, (a, b) in enumerate(zip(edges, edges[1:], strict=False)):
         checker.add_truth(a, block(tr, a, b), played[a:b])
+        checker.add_frames(checkable(block(tr, a, b), played[a:b]))
         if i:  # cycles of a block arrive one block late, as from a radar with latency
             checker.add_cycles(cycles[edges[i - 1]:a])
         checker.settle(before_frame=edges[i - 1] if i else 0)
@@ -126,6 +127,28 @@ def test_wrapped_counters_are_checked_against_their_own_frames():
     checker.settle()
     report = checker.report()
     assert report.frames["checked"] == n and report.frames["late"] == 0
+    assert report.errors["range_m"].max == 0.0 and report.passed
+
+
+def test_an_8_bit_counter_names_its_cycles_though_a_batch_holds_more():
+    # As a run hands them on: each batch's cycles arrive before its truth (handed on with the
+    # next batch), and a batch holds 500 cycles, an 8-bit counter counts 256.
+    n, step = 1200, 500
+    tr = truth(n, n_targets=1)
+    played = OK(n, 1)
+    cycles = cycles_from(tr, modulus=256)
+    checker = Checker("8-bit", tr.names, EXPECT, counter_modulus=256)
+    for a in range(0, n, step):
+        if a:
+            checker.add_truth(a - step, block(tr, a - step, a), played[a - step:a])
+        checker.add_cycles(cycles[a:a + step])
+        checker.settle(before_frame=a - step)
+    checker.add_truth(a, block(tr, a, n), played[a:])
+    checker.settle()
+    report = checker.report()
+    assert report.frames["checked"] == n
+    assert (report.frames["missing"], report.frames["late"], report.frames["repeated"]) == (
+        0, 0, 0)
     assert report.errors["range_m"].max == 0.0 and report.passed
 
 

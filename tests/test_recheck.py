@@ -448,3 +448,30 @@ def test_a_first_cycle_held_up_on_the_bus_is_still_the_scene_s_first(tmp_path):
     assert result.report.frames["total"] == 240
     assert result.report.frames["missing"] == 0
     assert result.report.passed, result.report.reasons
+
+
+def test_an_8_bit_counter_names_every_cycle_live_and_in_the_re_checks(tmp_path):
+    # rts-scenario's own messages with an 8-bit cycle counter: 600 cycles wrap it twice and
+    # more, and a batch of 200 frames holds more cycles than it counts.
+    from importlib import resources
+    dbc = resources.files("rts_scenario").joinpath("data/can/rts_detections.dbc").read_text()
+    wide = 'SG_ FrameCounter : 0|16@1+ (1,0) [0|65535] ""'
+    assert wide in dbc
+    (tmp_path / "c8.dbc").write_text(dbc.replace(wide, 'SG_ FrameCounter : 0|8@1+ (1,0) '
+                                                       '[0|255] ""'))
+    mapping = resources.files("rts_scenario").joinpath(
+        "data/can/rts_detections.mapping.yaml").read_text()
+    (tmp_path / "c8.mapping.yaml").write_text(mapping.replace("rts_detections.dbc", "c8.dbc"))
+    scene = load_scenario(CUT_IN, {**QUIET, "duration_s": 30.0,
+                                   "targets.0.motion.speed_mps": 22.0})
+    log = tmp_path / "c8.blf"
+    options = RunOptions(mapping=str(tmp_path / "c8.mapping.yaml"), bus_log=str(log),
+                         batch_frames=200)
+    live = run_scene(scene, options).report
+    copy = shutil.copy(log, tmp_path / "copy.blf")
+    for report in (live, check_log(scene, log, batch_frames=200).report,
+                   check_log(scene, copy, mapping=options.mapping, batch_frames=200).report):
+        assert report.frames["total"] == report.frames["checked"] == 600
+        assert (report.frames["missing"], report.frames["late"], report.frames["repeated"],
+                report.frames["after_scene"]) == (0, 0, 0, 0)
+        assert report.passed, report.reasons

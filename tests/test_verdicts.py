@@ -74,6 +74,27 @@ def test_frames_faster_than_the_radar_fail_unless_expected(tmp_path, expected):
         assert any("100 frames/s" in r and "20 cycles/s" in r for r in report.reasons)
 
 
+@pytest.mark.parametrize("appear_s, measured", [(0.02, False), (0.05, True)])
+def test_a_target_no_radar_cycle_measured_fails(tmp_path, appear_s, measured):
+    # Frames every 10 ms, the radar's cycles every 50 ms from 0 (the scene expects that): a
+    # target played for two frames between two cycles was never checked; one cycle later it
+    # is, once.
+    blink = (f"- {{name: blink, rcs: {{rcs_dbsm: 10.0}}, appear_s: {appear_s}, "
+             f"disappear_s: {appear_s + 0.02}, motion: {{type: stationary, "
+             f"position_m: [30, 2, 1.1]}}}}\n")
+    path = scene(tmp_path, f"blink-{measured}", CAR + blink, rate=100.0,
+                 expectations="  expected_limits: [frame_rate_above_radar]\n")
+    report = run_scene(path, RunOptions(drain_s=1.0)).report
+    car, target = report.targets
+    assert (car.played_frames, car.checkable_frames, car.passed) == (100, 20, True)
+    assert target.played_frames == 2
+    assert target.checkable_frames == (1 if measured else 0)
+    assert target.passed == report.passed == measured
+    if not measured:
+        assert report.reasons == ["blink: never checked: no radar cycle measured the 2 frames "
+                                  "it was played in"]
+
+
 def test_a_clipped_level_is_the_bench_s_limit_not_the_radar_s(tmp_path):
     # 60 dBsm at 5 m needs less attenuation than the attenuator's 0 dB minimum.
     loud = "- {name: wall, rcs: {rcs_dbsm: 60.0}, motion: {type: stationary, " \
