@@ -47,6 +47,30 @@ def test_file_round_trip(tmp_path, schedule, suffix):
     assert_same(read_schedule(path), schedule)
 
 
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_file_output_memory_does_not_grow_with_the_schedule(tmp_path, schedule, suffix):
+    """Four times the frames, the same peak: batches go to disk as they come."""
+    import tracemalloc
+    from dataclasses import replace
+
+    batch = schedule.frames(0, 10)
+
+    def peak_writing(n_batches):
+        tracemalloc.start()
+        with open_output(f"file:{tmp_path / f'{n_batches}{suffix}'}") as out:
+            for i in range(n_batches):
+                out.write(replace(batch, frame_index=batch.frame_index + 10 * i))
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return peak
+
+    short, long = peak_writing(60), peak_writing(240)
+    assert long < 1.25 * short
+    written = read_schedule(tmp_path / f"240{suffix}")
+    assert written.n_frames == 2400 and written.frame_index[-1] == 2399
+    assert_same(written.frames(2390, 2400), replace(batch, frame_index=batch.frame_index + 2390))
+
+
 def test_output_contract(tmp_path, schedule):
     out = open_output(f"file:{tmp_path / 'x.npz'}")
     out.close()
