@@ -191,9 +191,9 @@ def check_output(option: str, spec: str, *, run: bool) -> None:
     if name == "simulated-radar" and argument:
         raise RtsError(f"{option} {spec!r}: simulated-radar takes no argument")
     if name == "file" and run:
-        # A file output is written when everything has played: no radar ever sees it.
-        raise RtsError(f"{option} {spec}: a file output only stores the schedule, after "
-                       f"everything has played, so no radar sees it and nothing can be measured "
+        # A file output only writes the schedule to disk: no radar ever sees it.
+        raise RtsError(f"{option} {spec}: a file output only stores the schedule, on disk: "
+                       f"no radar sees it and nothing can be measured "
                        f"or checked; valid here: {usage} (or an installed RTS output); "
                        f"rts-scenario schedule SCENE --output {spec} exports a schedule")
     if name == "file":

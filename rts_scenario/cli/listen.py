@@ -19,7 +19,7 @@ def _do_listen(args: argparse.Namespace) -> int:
     if args.seconds is not None:
         check_number("--seconds", args.seconds, low=0.001, high=86400.0)
     try:
-        receiver = UdpReceiver(host, port)
+        receiver = UdpReceiver(host, port, keep_applied=True)
     except (OSError, OverflowError) as exc:
         reason = getattr(exc, "strerror", None) or str(exc)
         raise RtsError(f"{args.address}: cannot listen: {reason}") from None
@@ -31,9 +31,11 @@ def _do_listen(args: argparse.Namespace) -> int:
     quiet_since = time.monotonic()
     try:
         while args.count is None or shown < args.count:
+            # Taken as they come, so that they do not pile up over a long stream.
+            receiver.arrival_s.clear()
             applied = receiver.applied
-            while shown < len(applied) and (args.count is None or shown < args.count):
-                frame, t_s, entries = applied[shown]
+            while applied and (args.count is None or shown < args.count):
+                frame, t_s, entries = applied.popleft()
                 shown += 1
                 active = int((entries["flags"] & 1).astype(bool).sum())
                 print(f"frame {frame} t {t_s:.3f} s: {entries.size} entries, {active} active",

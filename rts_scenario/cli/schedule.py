@@ -7,19 +7,13 @@ from typing import Any
 
 from .common import EXIT_OK, METHODS, check_distinct_paths, check_output
 
-# Target-frames per batch: the schedule streams to the output like a run does.
-_BATCH_TARGET_FRAMES = 200_000
-
 
 def _do_schedule(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    import numpy as np
-
-    from ..kinematics import compute_tracks
     from ..outputs import open_output, split_spec
+    from ..preflight import schedule_batches
     from ..scenario import load_scenario, select_variant
-    from ..schedule import build_schedule
 
     check_output("--output", args.output, run=False)
     name, argument = split_spec(args.output)
@@ -27,15 +21,10 @@ def _do_schedule(args: argparse.Namespace) -> int:
         check_distinct_paths([("--output", argument)], [("SCENE", args.scene)])
     _, overrides = select_variant(args.scene, args.variant)
     scene = load_scenario(args.scene, overrides)
-    step = max(1, _BATCH_TARGET_FRAMES // max(1, len(scene.targets)))
     emitted = total = 0
     with open_output(args.output) as out:
-        for first in range(0, scene.n_frames, step):
-            frames = np.arange(first, min(first + step, scene.n_frames))
-            schedule = build_schedule(compute_tracks(scene, scene.t_s[frames], frames),
-                                      scene.rig, scene.radar, method=args.method,
-                                      estimator=scene.radar_options.estimator,
-                                      frame_rate_hz=scene.frame_rate_hz)
+        # In batches of bounded size, as a run streams them: memory does not grow with the scene.
+        for frames, _, schedule in schedule_batches(scene, args.method):
             out.write(replace(schedule, frame_index=frames))
             emitted += int(schedule.emitted.sum())
             total += schedule.emitted.size

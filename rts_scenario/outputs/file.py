@@ -18,9 +18,14 @@ reading a file back gives the same schedule.
 
 from __future__ import annotations
 
+import shutil
+import tempfile
+import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import TextIO
 
 import numpy as np
 
@@ -32,10 +37,17 @@ CSV_COLUMNS = ("frame", "t_s", "target", "channel", "quad", "fe", "active", "sta
                "attenuation_db", "delay_s", "doppler_hz", "phase_rad", "angle_error_az_deg",
                "angle_error_el_deg")
 _MAGIC = "# rts-scenario schedule v1"
+# CSV rows formatted at once: their text, not the schedule's length, bounds the memory.
+CSV_CHUNK_ROWS = 16_384
 
 
 class FileOutput(Output):
-    """Collect the batches and write them to ``path`` on close (``.npz`` or ``.csv``)."""
+    """Write the batches to ``path`` as they come (``.npz`` or ``.csv``).
+
+    Memory does not grow with the schedule: a ``.csv`` is written batch by batch; a ``.npz``
+    (one array per field) goes to a private temporary folder, one raw file per field, and is
+    zipped from there on close.
+    """
 
     name = "file"
 
@@ -48,42 +60,93 @@ class FileOutput(Output):
             )
         if not self.path.parent.is_dir():
             raise OutputError(f"file:{path}: folder {self.path.parent} does not exist")
-        self._batches: list[Schedule] = []
+        self._csv: TextIO | None = None
+        self._spill: _Spill | None = None
 
     def _write(self, batch: Schedule) -> None:
-        self._batches.append(batch)
+        with _writing(self.path):
+            if self.path.suffix == ".csv":
+                if self._csv is None:
+                    self._csv = self.path.open("w", encoding="utf-8")
+                    self._csv.write(f"{_MAGIC}\n# targets: {','.join(batch.names)}\n")
+                    self._csv.write(",".join(CSV_COLUMNS) + "\n")
+                _write_csv_rows(batch, self._csv)
+            else:
+                if self._spill is None:
+                    self._spill = _Spill(batch)
+                self._spill.add(batch)
 
     def _close(self) -> None:
-        if not self._batches:
-            return
-        write_schedule(concatenate(self._batches), self.path)
+        with _writing(self.path):
+            try:
+                if self._csv is not None:
+                    self._csv.close()
+                if self._spill is not None:
+                    self._spill.zip_to(self.path)
+            finally:
+                if self._spill is not None:
+                    self._spill.close()
 
 
-def concatenate(batches: list[Schedule]) -> Schedule:
-    """Join consecutive batches into one schedule."""
-    first = batches[0]
-    values: dict[str, Any] = {
-        f.name: first.names if f.name == "names"
-        else np.concatenate([getattr(b, f.name) for b in batches])
-        for f in fields(Schedule)
-    }
-    return Schedule(**values)
+@contextmanager
+def _writing(path: Path) -> Iterator[None]:
+    """Turn an operating system's error writing ``path`` into an `OutputError`."""
+    try:
+        yield
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+
+class _Spill:
+    """A schedule's arrays, batch after batch, each in a raw file of a temporary folder."""
+
+    def __init__(self, first: Schedule) -> None:
+        self.names = first.names
+        # Each array's type and shape past the frames, as the first batch has them.
+        self.layout = {f.name: (np.asarray(getattr(first, f.name)).dtype,
+                                np.shape(getattr(first, f.name))[1:])
+                       for f in fields(Schedule) if f.name != "names"}
+        self.frames = 0
+        self._tmp = tempfile.TemporaryDirectory(prefix="rts-scenario-schedule-")
+        self._folder = Path(self._tmp.name)
+        self._files = {name: (self._folder / name).open("wb") for name in self.layout}
+
+    def add(self, batch: Schedule) -> None:
+        """Append a batch (its arrays must be of the first batch's types and shapes)."""
+        for name, (dtype, rest) in self.layout.items():
+            values = np.asarray(getattr(batch, name))
+            if values.dtype != dtype or values.shape[1:] != rest:
+                raise OutputError(f"{name}: a batch of {values.dtype} {values.shape[1:]} after "
+                                  f"batches of {dtype} {rest}")
+            self._files[name].write(np.ascontiguousarray(values).tobytes())
+        self.frames += batch.n_frames
+
+    def zip_to(self, path: Path) -> None:
+        """Write the arrays as ``np.savez_compressed`` would, copying from disk."""
+        with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED,
+                             allowZip64=True) as archive:
+            for name, (dtype, rest) in self.layout.items():
+                self._files[name].close()
+                with archive.open(f"{name}.npy", "w", force_zip64=True) as member, \
+                        (self._folder / name).open("rb") as raw:
+                    np.lib.format.write_array_header_1_0(member, {
+                        "descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False,
+                        "shape": (self.frames, *rest)})
+                    shutil.copyfileobj(raw, member, 1 << 16)
+            with archive.open("names.npy", "w") as member:
+                np.lib.format.write_array(member, np.array(self.names, dtype=str))
+
+    def close(self) -> None:
+        """Remove the temporary folder."""
+        for file in self._files.values():
+            file.close()
+        self._tmp.cleanup()
 
 
 def write_schedule(schedule: Schedule, path: str | Path) -> None:
     """Write ``schedule`` to a ``.npz`` or ``.csv`` file."""
-    path = Path(path)
-    try:
-        if path.suffix == ".npz":
-            arrays = {f.name: getattr(schedule, f.name) for f in fields(Schedule)}
-            arrays["names"] = np.array(schedule.names, dtype=str)
-            np.savez_compressed(path, **arrays)
-        elif path.suffix == ".csv":
-            _write_csv(schedule, path)
-        else:
-            raise OutputError(f"{path}: unknown format {path.suffix!r}; valid: .npz, .csv")
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    with FileOutput(path) as out:
+        out.write(schedule)
 
 
 def read_schedule(path: str | Path) -> Schedule:
@@ -104,7 +167,18 @@ def read_schedule(path: str | Path) -> Schedule:
     raise OutputError(f"{path}: unknown format {path.suffix!r}; valid: .npz, .csv")
 
 
-def _write_csv(schedule: Schedule, path: Path) -> None:
+def _write_csv_rows(schedule: Schedule, fh: TextIO) -> None:
+    """Write a schedule's rows (no header), `CSV_CHUNK_ROWS` at a time."""
+    step = max(1, CSV_CHUNK_ROWS // (4 * max(1, len(schedule.names))))
+    for start in range(0, schedule.n_frames, step):  # a few chunks per batch
+        rows = _csv_rows(schedule.frames(start, min(start + step, schedule.n_frames)))
+        if rows.size:
+            fh.write("\n".join(rows.tolist()))
+            fh.write("\n")
+
+
+def _csv_rows(schedule: Schedule) -> np.ndarray:
+    """Return a schedule's CSV rows, one string per frame x target x channel."""
     n_frames, n_targets = schedule.status.shape
     f, k, c = (g.ravel() for g in np.meshgrid(np.arange(n_frames), np.arange(n_targets),
                                                np.arange(4), indexing="ij"))
@@ -130,11 +204,7 @@ def _write_csv(schedule: Schedule, path: Path) -> None:
     rows = columns[0].astype(object)
     for col in columns[1:]:
         rows = rows + "," + col
-    with path.open("w", encoding="utf-8") as fh:
-        fh.write(f"{_MAGIC}\n# targets: {','.join(schedule.names)}\n")
-        fh.write(",".join(CSV_COLUMNS) + "\n")
-        fh.write("\n".join(rows.tolist()))
-        fh.write("\n")
+    return rows
 
 
 def _read_csv(path: Path) -> Schedule:

@@ -22,6 +22,7 @@ import struct
 import threading
 import time
 import zlib
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -48,6 +49,9 @@ STATUS_COUNTERS = ("datagrams", "corrupted", "malformed", "duplicates", "reorder
 STATUS = struct.Struct("!4sB" + "I" * len(STATUS_COUNTERS))
 # The sender reads the replies every this many frames (they would fill its socket's buffer).
 STATUS_DRAIN_FRAMES = 32
+# The receiver tells a duplicate from a new datagram this many sequence numbers back from the
+# newest (bounded memory); an older datagram is dropped as stale.
+SEQUENCE_WINDOW = 4096
 MAX_DATAGRAM = 1400
 MAX_ENTRIES = (MAX_DATAGRAM - HEADER.size - TRAILER.size) // ENTRY.itemsize
 
@@ -121,7 +125,6 @@ class UdpOutput(Output):
         self._frames_sent = 0
         self.entries_sent = 0
         self.datagrams_sent = 0
-        self.lateness_s: list[float] = []
         self._sent_t_s = np.zeros(0)
         self._rts_status: dict[str, int] | None = None
 
@@ -157,8 +160,8 @@ class UdpOutput(Output):
     def sent_t_s(self, batch: Schedule) -> np.ndarray:
         """Return when the frames of ``batch`` went out, in scene time (see `Output.sent_t_s`).
 
-        Paced in real time: each frame's time plus how late it went out (its `lateness_s`;
-        the first frame sets the scene's origin). Not paced (``fast``): the frames' times (an
+        Paced in real time: each frame's time plus how late it went out (the first frame sets
+        the scene's origin). Not paced (``fast``): the frames' times (an
         RTS that buffers the stream plays it by the times in its headers).
         """
         if self._sent_t_s.size != batch.n_frames:
@@ -222,7 +225,6 @@ class UdpOutput(Output):
             time.sleep(due - now - 0.002)
         while (now := time.perf_counter()) < due:
             pass
-        self.lateness_s.append(now - due)
         return now - due
 
     def _close(self) -> None:
@@ -280,10 +282,14 @@ class UdpReceiver:
     Nothing that fails validation is applied; frames are applied complete and in order (a
     datagram of a frame older than one already applied is stale and dropped; a delta after a
     gap waits for the next full frame). `state` holds the applied entry of every
-    ``(target, channel)``.
+    ``(target, channel)``. Memory does not grow with the length of the stream: only with
+    ``keep_applied`` does the receiver keep every applied frame (``applied``: frame, scene
+    time, entries) and its arrival (``arrival_s``), for a consumer that takes them as they
+    come (``rts-listen``) or a test.
     """
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, *,
+                 keep_applied: bool = False) -> None:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._socket = socket.socket(family, socket.SOCK_DGRAM)
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
@@ -294,15 +300,17 @@ class UdpReceiver:
         self._table = np.zeros((0, 4), dtype=ENTRY)
         self._live = np.zeros((0, 4), dtype=bool)
         self._closed = False
-        self.applied: list[tuple[int, float, np.ndarray]] = []
-        self.arrival_s: list[float] = []
+        self.keep_applied = keep_applied
+        self.applied: deque[tuple[int, float, np.ndarray]] = deque()
+        self.arrival_s: deque[float] = deque()
+        # Sequence numbers within `SEQUENCE_WINDOW` of the newest, and how many were ever new.
         self._seen: set[int] = set()
+        self._unique = 0
         self._max_sequence = -1
         self._min_sequence: int | None = None
         self._pending: dict[int, dict[int, np.ndarray]] = {}
         self._pending_meta: dict[int, tuple[int, int, float]] = {}
         self._last_frame = -1
-        self._frames_seen: set[int] = set()
         self._first_frame: int | None = None
         self._top_frame = -1
         self._synced = True
@@ -385,13 +393,17 @@ class UdpReceiver:
         except OSError:
             pass
 
-    def _lost_frames_now(self) -> int:
-        """Frames lost so far: between the first and last seen, neither applied nor pending."""
+    def _lost_frames_now(self, pending: int | None = None) -> int:
+        """Frames lost so far: between the first and last seen, neither applied nor pending.
+
+        Frames are applied in order, each once, so counting them is enough. ``pending``: the
+        frames taken as still being assembled (default: those that are).
+        """
         if self._first_frame is None:
             return 0
         span = self._top_frame - self._first_frame + 1
         return max(0, span - self.stats.frames_applied - self.stats.unsynced_frames
-                   - len(self._pending))
+                   - (len(self._pending) if pending is None else pending))
 
     def handle(self, datagram: bytes) -> None:
         """Validate and process one datagram."""
@@ -413,12 +425,20 @@ class UdpReceiver:
         if seq in self._seen:
             stats.duplicates += 1
             return
+        if seq < self._max_sequence - SEQUENCE_WINDOW:
+            # Too old to tell from a copy: its frame was applied or given up long ago.
+            stats.stale += 1
+            return
         if seq < self._max_sequence:
             stats.reordered += 1
         self._seen.add(seq)
-        self._max_sequence = max(self._max_sequence, seq)
+        self._unique += 1
+        if seq > self._max_sequence:
+            self._max_sequence = seq
+            if len(self._seen) > 2 * SEQUENCE_WINDOW:
+                oldest = seq - SEQUENCE_WINDOW
+                self._seen = {s for s in self._seen if s >= oldest}
         self._min_sequence = seq if self._min_sequence is None else min(self._min_sequence, seq)
-        self._frames_seen.add(frame)
         self._first_frame = frame if self._first_frame is None else min(self._first_frame, frame)
         self._top_frame = max(self._top_frame, frame)
         if frame <= self._last_frame:
@@ -461,19 +481,18 @@ class UdpReceiver:
         self._last_frame = frame
         arrival = time.perf_counter()
         self.current = (frame, t_s, arrival)
-        self.applied.append((frame, t_s, entries))
-        self.arrival_s.append(arrival)
+        if self.keep_applied:
+            self.applied.append((frame, t_s, entries))
+            self.arrival_s.append(arrival)
         self.stats.frames_applied += 1
         self.stats.entries_applied += entries.size
 
     def _finish(self) -> None:
         stats = self.stats
         if self._min_sequence is not None:
-            stats.lost_datagrams = (self._max_sequence - self._min_sequence + 1) - len(self._seen)
-        applied = {frame for frame, _, _ in self.applied}
-        if self._frames_seen:
-            expected = set(range(min(self._frames_seen), max(self._frames_seen) + 1))
-            stats.lost_frames = len(expected - applied) - stats.unsynced_frames
+            stats.lost_datagrams = (self._max_sequence - self._min_sequence + 1) - self._unique
+        # A frame still being assembled when the stream ends is lost too.
+        stats.lost_frames = self._lost_frames_now(pending=0)
 
 
 class FaultInjector:
