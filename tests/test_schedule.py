@@ -153,6 +153,24 @@ def test_update_rate_and_mode_are_checked():
         build_schedule(tracks([0.0], [0.0]), rig, RADAR, quantization="clever")
 
 
+def test_frames_must_outlast_twice_the_window_a_cycle_may_show_either_frame():
+    # The radar's chirps: loops x TX x (ramp + idle); with the RTS's update latency, a cycle
+    # may show the frame before for that long after a change (the checker accepts either).
+    chirps_s = RADAR.chirp_loops * len(RADAR.tx_order) * (RADAR.ramp_time_s + RADAR.idle_time_s)
+    assert RADAR.measurement_s == pytest.approx(chirps_s)
+    rig = rig_with(update_latency_s=0.03)
+    window_s = chirps_s + 0.03
+    assert window_s > 0.5 * RADAR.radar_clock.cycle_s  # beyond half the radar's own cycle
+    build_schedule(tracks([0.0], [0.0]), rig, RADAR, frame_rate_hz=0.49 / window_s)
+    with pytest.raises(ScheduleError, match=rf"frame_rate_hz: a radar cycle may show either frame "
+                                            rf"for {window_s * 1e3:.3g} ms .* lower "
+                                            rf"frame_rate_hz below {0.5 / window_s:.3g} Hz"):
+        build_schedule(tracks([0.0], [0.0]), rig, RADAR, frame_rate_hz=0.51 / window_s)
+    # Frames faster than the radar's cycles: it sees every fifth, and tells those apart.
+    build_schedule(tracks([0.0], [0.0]), rig_with(update_latency_s=0.0), RADAR,
+                   frame_rate_hz=5.0 / RADAR.radar_clock.cycle_s)
+
+
 def _peak_errors(sch, rig, array, az, el):
     w, fes = sch.weight[0], sch.fe[0]
     x = snapshot(array, w, rig.az_deg[np.maximum(fes, 0)], rig.el_deg[np.maximum(fes, 0)])

@@ -100,7 +100,8 @@ def build_schedule(
     Raises
     ------
     ScheduleError
-        If the scene's frame rate exceeds the rig's update rate or a mode is unknown.
+        If the scene's frame rate exceeds the rig's update rate, or its frame period is not more
+        than twice the time a radar cycle may show either frame, or a mode is unknown.
     """
     array, model = solver_inputs(radar, fe_responses)
     limits = rig.limits
@@ -112,6 +113,22 @@ def build_schedule(
             f"frame_rate_hz: the scene runs at {frame_rate_hz:g} Hz but rig {rig.name!r} "
             f"updates at most {limits.update_rate_hz:g} Hz (limits.update_rate_hz)"
         )
+    window_s = radar.measurement_s + limits.update_latency_s
+    # A cycle within this window of a frame change may show either frame
+    # (`rts_scenario.pipeline.CycleTruth`): over half the time between the frames a radar sees
+    # (a frame period, or its cycle where frames come faster), a radar behind by one could pass
+    # for one in step.
+    step_s = None if frame_rate_hz is None else max(1.0 / frame_rate_hz,
+                                                    radar.radar_clock.cycle_s)
+    if step_s is not None and window_s >= 0.5 * step_s:
+        raise ScheduleError(
+            f"frame_rate_hz: a radar cycle may show either frame for {window_s * 1e3:.3g} ms "
+            f"after a frame change (radar {radar.name!r}'s chirps {radar.measurement_s * 1e3:.3g}"
+            f" ms + rig {rig.name!r}'s limits.update_latency_s "
+            f"{limits.update_latency_s * 1e3:.3g} ms), half the {step_s * 1e3:.3g} ms between "
+            f"the frames the radar sees or more: the check could not tell a radar a frame "
+            f"behind from one in step; lower frame_rate_hz below {0.5 / window_s:.3g} Hz "
+            f"(or the update latency)")
     shape = tracks.range_m.shape
     status = np.where(tracks.present, Status.OK, Status.NOT_PRESENT).astype(np.uint16)
     status |= np.where(tracks.present & ~tracks.in_coverage, Status.OUT_OF_COVERAGE,
