@@ -55,6 +55,7 @@ from .schedule.model import BLOCKING, Status
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
 
 # Checked quantity: (name in Tracks and Detections, tolerance key).
 QUANTITIES = (
@@ -302,11 +303,14 @@ class Checker:
         """
         self._played += np.asarray(played, dtype=bool).sum(axis=0)
 
-    def add_cycles(self, cycles: Iterable[Detections]) -> None:
-        """Take radar cycles, in the order they arrived; each is filed under its counter's frame."""
+    def add_cycles(self, cycles: Iterable[Detections]) -> IntArray:
+        """Take radar cycles, in the order they arrived; each is filed under its counter's frame.
+
+        Returns the cycle number each was filed under.
+        """
         cycles = list(cycles)
         if not cycles:
-            return
+            return np.zeros(0, dtype=np.int64)
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
         if self.counter_start is None:
             raise ValueError("the radar's counter start is not known yet (set counter_start)")
@@ -325,6 +329,7 @@ class Checker:
                 self.frames["repeated"] += 1
             else:
                 self._cycles[frame] = cycle
+        return frames
 
     def settle(self, before_frame: int | None = None) -> None:
         """Check every truth block that ends at or before ``before_frame`` (all if None)."""

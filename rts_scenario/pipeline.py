@@ -30,7 +30,7 @@ from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .playback import Playback
 from .preflight import Preflight, frames_per_batch, preflight, scene_limits
-from .radar.clock import RadarClock
+from .radar.clock import CycleTimeFit, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report, strict
@@ -326,6 +326,8 @@ class Pipeline:
         window_s = ambiguity_window_s(self.radar, self.rig)
         truths = CycleTruth(checker, scene, clock, window_s)
         playback = Playback(1.0 / scene.frame_rate_hz, window_s)
+        # The radar's cycle as its messages reach the bus: the check takes its profile's.
+        fit = CycleTimeFit()
         batch = options.batch_frames or frames_per_batch(len(scene.targets), BATCH_FRAMES)
         for first in range(0, n_frames, batch):
             frames = np.arange(first, min(first + batch, n_frames))
@@ -352,7 +354,7 @@ class Pipeline:
             mark = timer.add("receive_s", mark)
             if checker.counter_start is None and cycles:
                 self._learn_counter_start(checker, cycles)
-            checker.add_cycles(cycles)
+            fit.add(checker.add_cycles(cycles), _bus_times(cycles))
             # The batch before that one is due: its cycles had a whole batch to arrive.
             if n.size:
                 checker.settle(before_frame=int(n[0]))
@@ -364,7 +366,7 @@ class Pipeline:
         last = self.receive(final=True)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
-        checker.add_cycles(last)
+        fit.add(checker.add_cycles(last), _bus_times(last))
         mark = timer.add("receive_s", mark)
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
@@ -373,6 +375,10 @@ class Pipeline:
             # signal's range): the checker never saw them.
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
+        drifted = fit.drift_reason(clock.cycle_s, 0.5 * window_s)
+        if drifted:
+            report.reasons.append(drifted)
+            report.passed = False
         assert self.output is not None
         # The stream has ended: its last frames' report may still be on the way.
         playback.rts = self.output.rts_status(settle_s=RTS_SETTLE_S)
@@ -394,6 +400,9 @@ class Pipeline:
         elif self.counter_start_learnt is not None:
             start, source = self.counter_start_learnt
             report.radar_clock = {"counter_start": start, "source": source}
+        measured = fit.cycle_s()
+        if measured is not None:
+            report.radar_clock["bus_cycle_s"] = measured[0]
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -531,6 +540,12 @@ class CycleTruth:
         self.checker.add_truth(int(n[0]), truth, status[held], other=other,
                                ambiguous=ambiguous)
         return n
+
+
+def _bus_times(cycles: list[Detections]) -> np.ndarray:
+    """When each cycle reached the bus (NaN where it did not say)."""
+    return np.array([np.nan if c.bus_t_s is None else c.bus_t_s for c in cycles],
+                    dtype=np.float64)
 
 
 def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:

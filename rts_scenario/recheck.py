@@ -40,7 +40,7 @@ from .kinematics import compute_tracks
 from .pipeline import LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
 from .playback import SEND_LATENESS_ENCODING, playback_reasons, unpack_send_lateness
 from .preflight import scene_limits, schedule_batches
-from .radar.clock import TIME_EPS_S, RadarClock
+from .radar.clock import TIME_EPS_S, CycleTimeFit, RadarClock
 from .report import Report
 from .scenario import Scenario, parametrizations, select_variant
 from .solver.estimator_aware import SCHEDULE_METHODS
@@ -585,7 +585,20 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if clock.counter_start is None:  # the run saw no cycle: count from the log's first
             clock = replace(clock, counter_start=int(logged[0].detections.cycle) if logged
                             else 0)
+        # A radar's crystal is not its profile: where its cycles came on the bus at another
+        # cycle than the run took, the re-check judges them at the bus's (and says so).
+        fit = CycleTimeFit()
+        fit.add(numbers, np.array([c.bus_t_s for c in logged], dtype=float))
+        drifted = fit.drift_reason(clock.cycle_s, 0.5 * ambiguity_window_s(scene.radar,
+                                                                            scene.rig))
+        measured = fit.cycle_s()
+        if drifted and measured is not None:
+            clock = replace(clock, cycle_s=measured[0])
         alignment = Alignment("sidecar", clock.cycle_s, latency_s=clock.latency_s)
+        if drifted:
+            alignment.notes.append(drifted.removeprefix("radar_clock: ").replace(
+                "its profile says", "the run took")
+                + "; this re-check takes the cycle from the bus")
         recorded = sidecar.get("variant")
         if recorded is not None and recorded != scene.variant:
             raise LogError(f"--log {log}: recorded for {_variant_text(recorded)} (its "

@@ -90,6 +90,8 @@ def test_a_radar_whose_counter_start_is_unknown_is_numbered_by_bus_time(tmp_path
     bench_radar = RadarProfile.from_file(tmp_path / "radars" / "bench.radar.yaml")
     report, _ = rehearse(scene, radar=bench_radar)
     assert report.passed, report.reasons
+    # The emulated radar measures every 72 ms of this machine's clock, sent as it goes.
+    assert report.radar_clock.pop("bus_cycle_s") == pytest.approx(0.072, rel=1e-3)
     assert report.radar_clock == {"counter_start": 4242,
                                   "source": "learnt from the first cycle's bus time"}
     assert report.frames["checked"] == report.frames["total"]

@@ -1,5 +1,6 @@
 """The radar on its own clock: cycles, counters, the RTS's hold, time-aligned checking."""
 
+import dataclasses
 import shutil
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from rts_scenario.kinematics import compute_tracks
 from rts_scenario.pipeline import Pipeline, RunOptions
 from rts_scenario.radar.clock import RadarClock
 from rts_scenario.radar.profile import RadarProfile
+from rts_scenario.recheck import check_log
 from rts_scenario.scenario import load_scenario
 from rts_scenario.schedule import held_frames
 
@@ -148,3 +150,50 @@ def test_faults_of_a_radar_on_its_own_clock_fail_with_their_reason(tmp_path, fau
     assert any(reason in r for r in report.reasons), report.reasons
     if fault == "lose_cycles":
         assert 0.2 < report.frames["missing"] / report.frames["total"] < 0.4
+
+
+def test_the_cycle_fit_recovers_a_crystal_off_by_1000_ppm_through_jitter():
+    from rts_scenario.radar.clock import CycleTimeFit
+
+    rng = np.random.default_rng(1)
+    n = np.arange(3600)
+    # Epoch timestamps, 130 ms latency, +-4 ms jitter, a 50.05 ms cycle; fed in batches.
+    bus_t = 1.7e9 + 0.13 + 0.05005 * n + rng.uniform(-0.004, 0.004, n.size)
+    fit = CycleTimeFit()
+    for a in range(0, n.size, 500):
+        fit.add(n[a:a + 500], bus_t[a:a + 500])
+    cycle, error = fit.cycle_s()
+    assert cycle == pytest.approx(0.05005, abs=3 * error) and error < 1e-7
+    # By cycle 3599 the radar measured 3599 x 0.05 ms = 180 ms later than 50 ms cycles say.
+    drift, sigma3 = fit.drift_s(0.05)
+    assert drift == pytest.approx(3599 * 0.00005, abs=sigma3) and sigma3 < 1e-3
+    assert "set clock.cycle_s: 0.05005" in fit.drift_reason(0.05, 0.003)
+    assert fit.drift_reason(0.05005, 0.003) is None
+
+
+@pytest.mark.parametrize("cycle_s, fails", [(0.05005, True), (0.0500005, False)])
+def test_a_radar_whose_crystal_runs_off_its_profile_fails_naming_its_cycle(tmp_path, cycle_s,
+                                                                          fails):
+    # 1000 ppm: cycle 239 is measured 12 ms later than the profile's 50 ms cycles put it,
+    # beyond half the 5.76 ms window in which the check takes either frame; 10 ppm: 0.12 ms.
+    scene = load_scenario(ROOT / "scenarios" / "cut_in.scenario.yaml",
+                          {"radar.noise": False, "radar.fidelity": "analytic",
+                           "radar.estimator": "bartlett"})
+    profile = scene.radar.radar_clock
+    log = tmp_path / "drift.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = dataclasses.replace(profile, cycle_s=cycle_s)
+        report = pipeline.run(scene).report
+    assert report.radar_clock["bus_cycle_s"] == pytest.approx(cycle_s, rel=1e-9)
+    drifted = [r for r in report.reasons if r.startswith("radar_clock:")]
+    assert bool(drifted) == fails
+    if fails:
+        assert "every 50.0500 ms, its profile says 50.0000 ms (+1000 ppm)" in drifted[0]
+        assert not report.passed
+    # A re-check of the log takes the radar's cycle from the bus, and says so where it had to.
+    again = check_log(scene, log)
+    assert again.report.passed, again.report.reasons
+    assert again.report.frames["checked"] == again.report.frames["total"] == 240
+    assert again.alignment.cycle_s == pytest.approx(cycle_s if fails else 0.05, rel=1e-9)
+    assert any("this re-check takes the cycle from the bus" in note
+               for note in again.alignment.notes) == fails

@@ -91,4 +91,76 @@ class RadarClock:
         return self.latency_s + rng.uniform(-self.jitter_s, self.jitter_s, n_cycles)
 
 
-__all__ = ["TIME_EPS_S", "RadarClock"]
+class CycleTimeFit:
+    """Running straight-line fit of when a radar's cycles reached the bus against their numbers.
+
+    Its slope is the radar's cycle on the bus's clock. A radar's crystal is not its profile:
+    a cycle 0.1 % longer than ``cycle_s`` puts cycle 3,600 (three minutes at 50 ms) 180 ms
+    later than a check by the profile assumes, three frames. Latency and its jitter shift the
+    points, not the slope. Memory is constant (sums about the first point, which keep the
+    precision of epoch timestamps).
+    """
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._origin: tuple[int, float] | None = None
+        self._sums = np.zeros(5)  # n, t, n^2, n t, t^2 about the origin
+        self._span = [0, 0]  # smallest and largest n about the origin
+
+    def add(self, n: IntArray, bus_t_s: FloatArray) -> None:
+        """Take cycles ``n`` and when they reached the bus (NaN: not known, left out)."""
+        n = np.asarray(n, dtype=np.int64)
+        t = np.asarray(bus_t_s, dtype=np.float64)
+        keep = np.isfinite(t)
+        n, t = n[keep], t[keep]
+        if not n.size:
+            return
+        if self._origin is None:
+            self._origin = (int(n[0]), float(t[0]))
+        x = (n - self._origin[0]).astype(np.float64)
+        y = t - self._origin[1]
+        self._sums += (x.sum(), y.sum(), (x * x).sum(), (x * y).sum(), (y * y).sum())
+        self._span = [min(self._span[0], int(x.min())), max(self._span[1], int(x.max()))]
+        self.count += int(n.size)
+
+    def cycle_s(self) -> tuple[float, float] | None:
+        """Return the fitted cycle (s) and its standard error; None before three cycles."""
+        k = self.count
+        sx, sy, sxx, sxy, syy = self._sums
+        var_x = sxx - sx * sx / k if k else 0.0
+        if k < 3 or var_x <= 0.0:
+            return None
+        slope = (sxy - sx * sy / k) / var_x
+        residual = max(syy - sy * sy / k - slope * (sxy - sx * sy / k), 0.0)
+        return float(slope), float(np.sqrt(residual / (k - 2) / var_x))
+
+    def drift_s(self, cycle_s: float) -> tuple[float, float] | None:
+        """How far the last cycle lies from where ``cycle_s`` puts it, and 3 sigma of that.
+
+        Over the span of the cycles seen, from the first; None before three cycles.
+        """
+        fit = self.cycle_s()
+        if fit is None:
+            return None
+        span = self._span[1] - self._span[0]
+        return (fit[0] - cycle_s) * span, 3.0 * fit[1] * span
+
+    def drift_reason(self, cycle_s: float, tolerance_s: float) -> str | None:
+        """Why the radar's clock fails a check that assumed ``cycle_s``; None when it does not.
+
+        It fails where its last cycle lies more than ``tolerance_s`` (beyond 3 sigma of the
+        fit) from where ``cycle_s`` puts it: the check judged those cycles at the wrong times.
+        """
+        drift = self.drift_s(cycle_s)
+        fit = self.cycle_s()
+        if drift is None or fit is None or abs(drift[0]) - drift[1] <= tolerance_s:
+            return None
+        return (f"radar_clock: the radar's cycles reached the bus every {fit[0] * 1e3:.4f} ms, "
+                f"its profile says {cycle_s * 1e3:.4f} ms ({(fit[0] / cycle_s - 1) * 1e6:+.0f}"
+                f" ppm): by its last cycle it measured {abs(drift[0]) * 1e3:.1f} ms (+-"
+                f"{drift[1] * 1e3:.1f}) {'later' if drift[0] > 0 else 'earlier'} than the "
+                f"check took it to, more than {tolerance_s * 1e3:.3g} ms; set clock.cycle_s: "
+                f"{fit[0]:.6g} in the radar profile")
+
+
+__all__ = ["TIME_EPS_S", "CycleTimeFit", "RadarClock"]
