@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from array import array
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
@@ -54,6 +55,9 @@ LOG_SUFFIXES = (".asc", ".blf", ".csv", ".db", ".log", ".mf4", ".trc")
 # offsets, only those within ONSET_WINDOW_S of where the first detections put the scene.
 COARSE_STEP_S = 0.01
 COARSE_CYCLES = 300
+# Cycles an offset is estimated on at most (evenly spread over a longer log): an hour at 20 Hz
+# holds 72,000; the fine search's cost is a mean over their detections.
+ALIGN_CYCLES = 20_000
 FULL_SEARCH_S = 300.0
 ONSET_WINDOW_S = 30.0
 # Fine search: from this before the coarse minima to this after them, in steps of FINE_STEP_S
@@ -277,19 +281,27 @@ def _variant_text(variant: str) -> str:
 def read_cycles(log: str | Path, mapping: CanMapping | None) -> tuple[list[_LoggedCycle],
                                                                       dict[str, int]]:
     """Decode a log's radar cycles, each with the bus time of its header message."""
+    stats: dict[str, int] = {}
+    return list(_iter_cycles(log, mapping, stats)), stats
+
+
+def _iter_cycles(log: str | Path, mapping: CanMapping | None,
+                 stats: dict[str, int]) -> Iterator[_LoggedCycle]:
+    """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end."""
     check_log_file(log)
     path = Path(log)
     receiver = DetectionReceiver(mapping)
     m = receiver.mapping
     header = m.db.get_message_by_name(m.header)
     header_times: dict[int, deque[float]] = {}
-    out: list[_LoggedCycle] = []
 
-    def take(cycles: list[Detections]) -> None:
+    def take(cycles: list[Detections]) -> Iterator[_LoggedCycle]:
         for cycle in cycles:  # one per radar cycle
             times = header_times.get(cycle.cycle)
             t = times.popleft() if times else float("nan")
-            out.append(_LoggedCycle(cycle, t))
+            if times is not None and not times:
+                del header_times[cycle.cycle]
+            yield _LoggedCycle(cycle, t)
 
     started = False
     skipped = 0
@@ -310,11 +322,66 @@ def read_cycles(log: str | Path, mapping: CanMapping | None) -> tuple[list[_Logg
             if counter is not None:
                 header_times.setdefault(counter, deque()).append(float(msg.timestamp))
         receiver.on_message_received(msg)
-        take(receiver.pop())
-    take(receiver.flush())
-    stats = {k: int(v) for k, v in vars(receiver.stats).items()}
+        yield from take(receiver.pop())
+    yield from take(receiver.flush())
+    stats.update({k: int(v) for k, v in vars(receiver.stats).items()})
     stats["before_first_cycle"] = skipped
-    return out, stats
+
+
+@dataclass(frozen=True)
+class _LogIndex:
+    """What a first pass over a log keeps of each cycle: 20 bytes, not its detections.
+
+    The checks read the log again for the detections, so memory does not grow with them.
+    """
+
+    counters: IntArray
+    bus_t_s: FloatArray
+    counts: IntArray  # detections per cycle
+    bus: dict[str, int]
+
+    @classmethod
+    def scan(cls, log: str | Path, mapping: CanMapping | None) -> _LogIndex:
+        stats: dict[str, int] = {}
+        counters, times, counts = array("q"), array("d"), array("l")
+        for c in _iter_cycles(log, mapping, stats):  # one per radar cycle
+            counters.append(c.detections.cycle)
+            times.append(c.bus_t_s)
+            counts.append(c.detections.count)
+        return cls(np.frombuffer(counters, dtype=np.int64).copy(),
+                   np.frombuffer(times, dtype=np.float64).copy(),
+                   np.asarray(counts, dtype=np.int64), stats)
+
+    def __len__(self) -> int:
+        return int(self.counters.size)
+
+
+def _cycles_at(log: str | Path, mapping: CanMapping | None,
+               positions: IntArray) -> list[Detections]:
+    """Read the log again for the cycles at ``positions`` (increasing)."""
+    want = set(positions.tolist())
+    return [c.detections for i, c in enumerate(_iter_cycles(log, mapping, {})) if i in want]
+
+
+class _ReadAhead:
+    """Cycles of a log by their position, read once, in order, as far as asked."""
+
+    def __init__(self, log: str | Path, mapping: CanMapping | None,
+                 kept: NDArray[np.bool_]) -> None:
+        self._cycles = enumerate(_iter_cycles(log, mapping, {}))
+        self._kept = kept  # positions ever asked for: the others are not held
+        self._held: dict[int, Detections] = {}
+        self._read = -1
+
+    def take(self, positions: IntArray) -> list[Detections]:
+        """Return the cycles at ``positions``, each once."""
+        if positions.size:
+            last = int(positions.max())
+            while self._read < last:
+                self._read, cycle = next(self._cycles)
+                if self._kept[self._read]:
+                    self._held[self._read] = cycle.detections
+        return [self._held.pop(int(i)) for i in positions]
 
 
 def _messages(path: Path) -> Iterator[can.Message]:
@@ -568,12 +635,13 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         mapping = sidecar["mapping"]
     can_mapping = CanMapping.from_file(mapping) if mapping else None
     method = method or (sidecar or {}).get("method") or "exact"
-    logged, bus = read_cycles(log, can_mapping)
+    index = _LogIndex.scan(log, can_mapping)
+    bus = index.bus
     receiver_mapping = (can_mapping or CanMapping.builtin())
     header = receiver_mapping.db.get_message_by_name(receiver_mapping.header)
     modulus = 1 << int(header.get_signal_by_name(receiver_mapping.counter).length)
     profile_clock = scene.radar.radar_clock
-    counters = np.array([c.detections.cycle for c in logged], dtype=np.int64)
+    counters = index.counters
     numbers = sequential_numbers(counters, modulus)
     if sidecar is not None:
         c = sidecar["clock"]
@@ -583,12 +651,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            counter_start=None if c["counter_start"] is None
                            else int(c["counter_start"]))
         if clock.counter_start is None:  # the run saw no cycle: count from the log's first
-            clock = replace(clock, counter_start=int(logged[0].detections.cycle) if logged
-                            else 0)
+            clock = replace(clock, counter_start=int(counters[0]) if len(index) else 0)
         # A radar's crystal is not its profile: where its cycles came on the bus at another
         # cycle than the run took, the re-check judges them at the bus's (and says so).
         fit = CycleTimeFit()
-        fit.add(numbers, np.array([c.bus_t_s for c in logged], dtype=float))
+        fit.add(numbers, index.bus_t_s)
         drifted = fit.drift_reason(clock.cycle_s, 0.5 * ambiguity_window_s(scene.radar,
                                                                             scene.rig))
         measured = fit.cycle_s()
@@ -611,16 +678,18 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"the radar's counters, so a time offset would not be used; leave "
                            f"it out, or check a copy of the log without its sidecar")
     else:
-        if not logged:
+        if not len(index):
             raise LogError(f"--log {log}: no radar cycle in it ({bus['messages']} messages, "
                            f"none a {receiver_mapping.header} header of mapping "
                            f"{receiver_mapping.name!r}); is --mapping the radar's?")
         latency = profile_clock.latency_s
-        bus_t = np.array([c.bus_t_s for c in logged])
-        dets = [c.detections for c in logged]
+        bus_t = index.bus_t_s
+        # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
+        chosen = _alignment_cycles(index)
+        dets = _cycles_at(log, can_mapping, chosen)
         if time_offset_s is None:
             # The profile's latency, the offset from the data.
-            found = estimate_offset(scene, bus_t, dets, latency)
+            found = estimate_offset(scene, bus_t[chosen], dets, latency)
             offset = found.offset_s
             alignment = Alignment("estimated", 0.0, offset, found.uncertainty_s,
                                   found.plateau_s, latency)
@@ -630,7 +699,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             # data allow (the radar measuring each frame as it was applied); a shorter one by
             # up to the plateau fits as well (measuring later in each frame).
             offset = float(time_offset_s)
-            found = estimate_offset(scene, bus_t, dets, 0.0)
+            found = estimate_offset(scene, bus_t[chosen], dets, 0.0)
             latency = found.offset_s - offset
             slack = 3 * (found.spread_s or 0.0) + 0.005
             if latency < -slack:
@@ -652,9 +721,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         clock = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
                               profile_clock.cycle_s)
         alignment.cycle_s = clock.cycle_s
-    alignment.cycles_in_log = len(logged)
-    result = _check(scene, logged, clock, modulus, method, batch_frames, bus, alignment,
-                    sidecar)
+    alignment.cycles_in_log = len(index)
+    result = _check(scene, log, can_mapping, counters, clock, modulus, method, batch_frames,
+                    bus, alignment, sidecar)
     playback = (sidecar or {}).get("playback")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run
@@ -709,22 +778,24 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
                       counter_start=int((counters[0] + shift) % modulus) if counters.size else 0)
 
 
-def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modulus: int,
-           method: str, batch_frames: int | None, bus: dict[str, int], alignment: Alignment,
-           sidecar: dict[str, Any] | None) -> Report:
+def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counters: IntArray,
+           clock: RadarClock,
+           modulus: int, method: str, batch_frames: int | None, bus: dict[str, int],
+           alignment: Alignment, sidecar: dict[str, Any] | None) -> Report:
+    """Check the log's cycles (``counters`` in log order) batch of frames by batch."""
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
                       expected_limits=[t.expected_limits for t in scene.targets],
                       scene_limits=scene_limits(scene), variant=scene.variant,
                       parameters=scene.parameters)
     total = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
-    counters = np.array([c.detections.cycle for c in logged], dtype=np.int64)
     # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
     first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
                 - modulus // 2) if counters.size else 0
     rel = sequential_numbers(counters, modulus) + first
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
+    logged = _ReadAhead(log, mapping, inside)
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]
@@ -736,7 +807,7 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
     def check_cycles(n: IntArray) -> None:
         if n.size:
             lo, hi = np.searchsorted(rel_sorted, [n[0], n[-1] + 1])
-            checker.add_cycles(logged[i].detections for i in order[lo:hi])
+            checker.add_cycles(logged.take(order[lo:hi]))
             checker.settle(before_frame=int(n[-1]) + 1)
 
     for frames, tracks, schedule in schedule_batches(scene, method, batch_frames):
@@ -752,6 +823,21 @@ def _check(scene: Scenario, logged: list[_LoggedCycle], clock: RadarClock, modul
             alignment.notes.append("the rebuilt schedule differs from the one recorded (another "
                                    "version, rig or radar file): limits are those rebuilt")
     return checker.report(bus)
+
+
+def _alignment_cycles(index: _LogIndex) -> IntArray:
+    """Return the positions of the cycles an offset is estimated on.
+
+    Those with a bus time; of a longer log, `ALIGN_CYCLES` spread evenly over the ones with
+    detections, the first kept.
+    """
+    timed = np.flatnonzero(np.isfinite(index.bus_t_s))
+    if timed.size <= ALIGN_CYCLES:
+        return timed
+    seen = timed[index.counts[timed] > 0]
+    if seen.size <= ALIGN_CYCLES:
+        return seen
+    return seen[np.unique(np.linspace(0, seen.size - 1, ALIGN_CYCLES).astype(np.int64))]
 
 
 def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None) -> FloatArray | None:

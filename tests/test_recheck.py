@@ -475,3 +475,25 @@ def test_an_8_bit_counter_names_every_cycle_live_and_in_the_re_checks(tmp_path):
         assert (report.frames["missing"], report.frames["late"], report.frames["repeated"],
                 report.frames["after_scene"]) == (0, 0, 0, 0)
         assert report.passed, report.reasons
+
+
+def test_a_re_check_holds_a_few_cycles_at_a_time_not_the_log(tmp_path, monkeypatch):
+    # The log is read ahead only as far as the batch being checked needs: memory does not grow
+    # with its length (the first pass keeps 20 bytes per cycle).
+    import rts_scenario.recheck as recheck
+
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    live = run_scene(scene, RunOptions(bus_log=str(log), batch_frames=40)).report
+    most = []
+    take = recheck._ReadAhead.take
+
+    def counting(self, positions):
+        out = take(self, positions)
+        most.append(len(self._held) + len(out))
+        return out
+
+    monkeypatch.setattr(recheck._ReadAhead, "take", counting)
+    again = check_log(scene, log, batch_frames=40)
+    assert again.report.frames == live.frames and again.report.passed
+    assert again.alignment.cycles_in_log == 240 and max(most) <= 45
