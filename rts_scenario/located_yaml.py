@@ -250,6 +250,8 @@ def validate(document: Document, schema: dict[str, Any]) -> None:
     ScenarioError
         Naming file, line, key path, the offending value and what is allowed.
     """
+    if document.data is None:  # a file with nothing (or only comments) in it
+        raise document.error((), "the file is empty: expected a mapping of keys")
     _reject_non_finite(document, document.data, ())
     validator = jsonschema.Draft202012Validator(schema)
     best = jsonschema.exceptions.best_match(validator.iter_errors(document.data))

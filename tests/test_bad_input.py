@@ -77,7 +77,7 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:15:\d+: .*(tag|constructor)"),
     ("custom-tag", TINY + "seed: !custom 3\n", r"^{f}:\d+:\d+: .*tag"),
     ("top-level-list", "- 1\n- 2\n", r"^{f}:1:1: a scene must be a mapping of keys, got list"),
-    ("empty-file", "", r"^{f}: a scene must be a mapping of keys, got NoneType"),
+    ("empty-file", "", r"^{f}: a scene must be a mapping of keys, got an empty file"),
     ("not-utf8", b"name: \xff\xfe\n", r"^{f}: not UTF-8 text"),
     ("missing-name", sub("name: tiny\n", ""), r"^{f}.*'name' is required but missing"),
     ("unknown-key", TINY + "colour: red\n", r"^{f}:15:1: colour: unknown key 'colour'; allowed"),

@@ -176,6 +176,7 @@ BAD_RIGS = [
     ("rts_rig: 1\nname: x\nname: y\n", 3, "name", "duplicate key"),
     ("rts_rig: 1\nname: [x\n", 3, "", "invalid YAML"),
     ("rts_rig: 1\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n", 1, "", "'name' is required"),
+    ("# nothing but a comment\n", None, "", "the file is empty: expected a mapping of keys"),
 ]
 
 

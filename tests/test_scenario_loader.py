@@ -140,6 +140,7 @@ BAD = [
      14, "targets[0].rcs.aspect_deg", "distinct modulo 360"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    appear_s: 4\n"
           "    disappear_s: 2"), 16, "targets[0].disappear_s", "must be later than appear_s"),
+    ("", None, "", "a scene must be a mapping of keys, got an empty file"),
     (GOOD.split("  - name: car")[0].replace("targets:", "targets: []"), 11, "targets",
      "the scene has no targets (none here and none in an included fragment): it can only test "
      "the radar's false detections on an empty bench; to mean that, set "

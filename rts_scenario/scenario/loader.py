@@ -81,7 +81,8 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     path = Path(path)
     doc = load_yaml(path)
     if not isinstance(doc.data, dict):
-        raise doc.error((), f"a scene must be a mapping of keys, got {type(doc.data).__name__}")
+        got = "an empty file" if doc.data is None else type(doc.data).__name__
+        raise doc.error((), f"a scene must be a mapping of keys, got {got}")
     for dotted, value in (overrides or {}).items():
         _override(doc, dotted, value)
     effects_spec = doc.data.get("effects")
