@@ -524,3 +524,27 @@ def test_a_log_without_detections_to_align_by_is_checked_at_a_given_offset(tmp_p
     # A scene with a target whose radar reported nothing fails on it, no longer refused.
     target = check_log(load_scenario(CUT_IN, QUIET), copy, time_offset_s=origin).report
     assert target.detection_rate == 0.0 and not target.passed
+
+
+def test_a_recording_cut_short_keeps_no_sidecar_of_an_earlier_one(tmp_path):
+    # A first recording to the name leaves its sidecar; a second one stopped by Ctrl-C after 50
+    # cycles writes none, and must not be re-checked by the first one's.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    run_scene(scene, RunOptions(bus_log=str(log), batch_frames=40))
+    assert Path(str(log) + ".rts.json").exists()
+    with pytest.raises(KeyboardInterrupt), \
+            Pipeline.for_scene(scene, RunOptions(bus_log=str(log), batch_frames=40)) as pipeline:
+        sink, sent = pipeline.output._sink, []
+
+        def stop(cycles):
+            sent.extend(cycles)
+            if len(sent) > 50:
+                raise KeyboardInterrupt
+            sink(cycles)
+
+        pipeline.output._sink = stop
+        pipeline.run(scene)
+    assert not Path(str(log) + ".rts.json").exists()
+    again = check_log(scene, log)
+    assert again.alignment.source == "estimated" and again.alignment.cycles_in_log <= 50
