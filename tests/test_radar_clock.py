@@ -171,6 +171,23 @@ def test_the_cycle_fit_recovers_a_crystal_off_by_1000_ppm_through_jitter():
     assert fit.drift_reason(0.05005, 0.003) is None
 
 
+def test_cycles_numbered_off_their_bus_times_tell_no_cycle():
+    from rts_scenario.radar.clock import CycleTimeFit
+
+    # 50 ms cycles, +-4 ms jitter; a 150-cycle gap an 8-bit counter reads as 106 back, so the
+    # cycles after it are numbered 256 short: the bus times show no steady cycle to advise.
+    rng = np.random.default_rng(2)
+    n = np.concatenate([np.arange(100), np.arange(250, 600)])
+    bus_t = 0.05 * n + rng.uniform(-0.004, 0.004, n.size)
+    fit = CycleTimeFit()
+    fit.add(np.where(n < 250, n, n - 256), bus_t)
+    assert fit.cycle_s() is None and fit.drift_reason(0.05, 0.003) is None
+    # Numbered right, the same times give the cycle.
+    fit = CycleTimeFit()
+    fit.add(n, bus_t)
+    assert fit.cycle_s()[0] == pytest.approx(0.05, abs=1e-5)
+
+
 @pytest.mark.parametrize("cycle_s, fails", [(0.05005, True), (0.0500005, False)])
 def test_a_radar_whose_crystal_runs_off_its_profile_fails_naming_its_cycle(tmp_path, cycle_s,
                                                                           fails):

@@ -124,7 +124,13 @@ class CycleTimeFit:
         self.count += int(n.size)
 
     def cycle_s(self) -> tuple[float, float] | None:
-        """Return the fitted cycle (s) and its standard error; None before three cycles."""
+        """Return the fitted cycle (s) and its standard error; None when the bus cannot tell.
+
+        None before three cycles, and where the cycles scatter by more than a quarter of the
+        cycle about the line: their numbers do not follow their bus times (a counter that
+        jumped, or a gap longer than half of what a narrow counter counts), and a crystal off
+        its profile leaves them on a straight line.
+        """
         k = self.count
         sx, sy, sxx, sxy, syy = self._sums
         var_x = sxx - sx * sx / k if k else 0.0
@@ -132,7 +138,10 @@ class CycleTimeFit:
             return None
         slope = (sxy - sx * sy / k) / var_x
         residual = max(syy - sy * sy / k - slope * (sxy - sx * sy / k), 0.0)
-        return float(slope), float(np.sqrt(residual / (k - 2) / var_x))
+        scatter = np.sqrt(residual / (k - 2))
+        if scatter > 0.25 * abs(slope):
+            return None
+        return float(slope), float(scatter / np.sqrt(var_x))
 
     def drift_s(self, cycle_s: float) -> tuple[float, float] | None:
         """How far the last cycle lies from where ``cycle_s`` puts it, and 3 sigma of that.
