@@ -220,3 +220,19 @@ def read_schedule_as(path, suffix):
     copy = path.with_name(f"copy{suffix}")
     shutil.copy(path, copy)
     return read_schedule(copy)
+
+
+def test_a_schedule_without_targets_round_trips_as_npz_and_is_refused_as_csv(tmp_path):
+    """An empty bench's 60 frames (3 s at 20 Hz): a .csv, one row per entry, has none."""
+    scene = load_scenario(ROOT / "scenarios" / "empty_bench.scenario.yaml")
+    empty = build_schedule(compute_tracks(scene), scene.rig, scene.radar)
+    with open_output(f"file:{tmp_path / 'e.npz'}") as out:
+        out.write(empty)
+    back = read_schedule(tmp_path / "e.npz")
+    assert (back.n_frames, back.names, back.status.shape) == (60, (), (60, 0))
+    np.testing.assert_allclose(back.t_s, np.arange(60) / 20.0)
+    refused = r"without targets has no rows for a \.csv.*use \.npz"
+    with pytest.raises(OutputError, match=refused), \
+            open_output(f"file:{tmp_path / 'e.csv'}") as out:
+        out.write(empty)
+    assert not list(tmp_path.glob("e.csv*"))

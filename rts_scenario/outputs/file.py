@@ -76,6 +76,10 @@ class FileOutput(Output):
         self.close()
 
     def _write(self, batch: Schedule) -> None:
+        if self.path.suffix == ".csv" and not batch.names:
+            # One row per entry: frames without targets would leave no trace.
+            raise OutputError(f"file:{self.path}: a schedule without targets has no rows for a "
+                              f".csv to hold its frames in; use .npz")
         with _writing(self.path):
             if self._csv is None and self._spill is None:
                 # What PATH held before is not this schedule, whether it ends whole or not.
