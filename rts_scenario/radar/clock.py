@@ -164,12 +164,13 @@ class CycleTimeFit:
         fit = self.cycle_s()
         if drift is None or fit is None or abs(drift[0]) - drift[1] <= tolerance_s:
             return None
-        return (f"radar_clock: the radar's cycles reached the bus every {fit[0] * 1e3:.4f} ms, "
-                f"its profile says {cycle_s * 1e3:.4f} ms ({(fit[0] / cycle_s - 1) * 1e6:+.0f}"
+        # Digits enough for the ppm that fail a long run (1 ppm: 3.6 ms over an hour).
+        return (f"radar_clock: the radar's cycles reached the bus every {fit[0] * 1e3:.6f} ms, "
+                f"its profile says {cycle_s * 1e3:.6f} ms ({(fit[0] / cycle_s - 1) * 1e6:+.1f}"
                 f" ppm): by its last cycle it measured {abs(drift[0]) * 1e3:.1f} ms (+-"
                 f"{drift[1] * 1e3:.1f}) {'later' if drift[0] > 0 else 'earlier'} than the "
                 f"check took it to, more than {tolerance_s * 1e3:.3g} ms; set clock.cycle_s: "
-                f"{fit[0]:.6g} in the radar profile")
+                f"{fit[0]:.10g} in the radar profile")
 
 
 __all__ = ["TIME_EPS_S", "CycleTimeFit", "RadarClock"]
