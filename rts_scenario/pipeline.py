@@ -151,6 +151,9 @@ class Pipeline:
             listen = self._open_bus()
             self._listeners: list[can.Listener] = [self.receiver]
             if options.bus_log:
+                # An earlier recording's sidecar must not pass for this one's, should this one
+                # stop before its own is written (Ctrl-C, an error).
+                Path(str(options.bus_log) + LOG_SIDECAR_SUFFIX).unlink(missing_ok=True)
                 self._logger = can.Logger(options.bus_log)
                 self._listeners.append(self._logger)
             self._notifier = can.Notifier(listen, self._listeners, timeout=0.05)

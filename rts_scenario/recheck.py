@@ -687,12 +687,24 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
         chosen = _alignment_cycles(index)
         dets = _cycles_at(log, can_mapping, chosen)
+        # Detections of targets are what the data align by: an empty bench has none to match.
+        aligned_by_data = bool(scene.targets) and any(d.count for d in dets)
+        if time_offset_s is None and not scene.targets:
+            raise LogError(f"--log {log}: scene {scene.name!r} has no targets, so its log's "
+                           f"detections cannot tell when the scene started; give "
+                           f"--time-offset-s (the log time of the scene's time 0)")
         if time_offset_s is None:
             # The profile's latency, the offset from the data.
             found = estimate_offset(scene, bus_t[chosen], dets, latency)
             offset = found.offset_s
             alignment = Alignment("estimated", 0.0, offset, found.uncertainty_s,
                                   found.plateau_s, latency)
+        elif not aligned_by_data:
+            # The scene's start given, nothing to estimate the latency on: the profile's.
+            offset = float(time_offset_s)
+            alignment = Alignment("given", 0.0, offset, latency_s=latency)
+            alignment.notes.append("the radar's latency cannot be estimated (the scene has no "
+                                   "targets, or the log no detection): its profile's is taken")
         else:
             # With the scene's start known in the log's time, the data tell the latency: the
             # same search, over latency + offset. Its latest fit is the longest latency the

@@ -148,7 +148,7 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("lane-change-after-the-end", TINY + "    lane_changes: [{start_s: 300, duration_s: 1, "
      "offset_m: 3}]\n",
      r"^{f}:15:\d+: targets\[0\].lane_changes\[0\].start_s: the lane change starts at 300 s, "
-     r"at or after the scene's end"),
+     r"at or after the scene's last frame at 0.4 s"),
     ("rcs-table-mismatch", sub("rcs: {rcs_dbsm: 10.0}",
                                "rcs: {aspect_deg: [0, 90], rcs_dbsm: [1, 2, 3]}"),
      r"^{f}:14:\d+: targets\[0\].rcs.rcs_dbsm: needs one value per aspect_deg entry"),

@@ -190,3 +190,49 @@ def test_udp_paced_streaming_follows_the_frame_clock(schedule):
     # Functional check only (the jitter figure is the benchmark's): frames follow the clock.
     assert elapsed == pytest.approx(part.t_s[-1] - part.t_s[0], abs=0.1)
     assert max(out.sent_t_s(part) - part.t_s) < 0.05
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_a_file_output_cut_short_is_not_named_as_the_schedule(tmp_path, schedule, suffix):
+    """An export stopped after 3 of its batches leaves PATH.partial with their 30 frames."""
+    from dataclasses import replace
+
+    path = tmp_path / f"x{suffix}"
+    path.write_text("an earlier export")
+    batch = schedule.frames(0, 10)
+    with pytest.raises(KeyboardInterrupt), open_output(f"file:{path}") as out:
+        for i in range(6):
+            if i == 3:
+                raise KeyboardInterrupt
+            out.write(replace(batch, frame_index=batch.frame_index + 10 * i))
+    assert not path.exists()
+    assert read_schedule_as(tmp_path / f"x{suffix}.partial", suffix).n_frames == 30
+    # Closed whole, it is PATH, and no .partial stays.
+    with open_output(f"file:{path}") as out:
+        out.write(batch)
+    assert read_schedule(path).n_frames == 10 and not (tmp_path / f"x{suffix}.partial").exists()
+
+
+def read_schedule_as(path, suffix):
+    """Read a schedule file whose name does not end in its format's suffix."""
+    import shutil
+
+    copy = path.with_name(f"copy{suffix}")
+    shutil.copy(path, copy)
+    return read_schedule(copy)
+
+
+def test_a_schedule_without_targets_round_trips_as_npz_and_is_refused_as_csv(tmp_path):
+    """An empty bench's 60 frames (3 s at 20 Hz): a .csv, one row per entry, has none."""
+    scene = load_scenario(ROOT / "scenarios" / "empty_bench.scenario.yaml")
+    empty = build_schedule(compute_tracks(scene), scene.rig, scene.radar)
+    with open_output(f"file:{tmp_path / 'e.npz'}") as out:
+        out.write(empty)
+    back = read_schedule(tmp_path / "e.npz")
+    assert (back.n_frames, back.names, back.status.shape) == (60, (), (60, 0))
+    np.testing.assert_allclose(back.t_s, np.arange(60) / 20.0)
+    refused = r"without targets has no rows for a \.csv.*use \.npz"
+    with pytest.raises(OutputError, match=refused), \
+            open_output(f"file:{tmp_path / 'e.csv'}") as out:
+        out.write(empty)
+    assert not list(tmp_path.glob("e.csv*"))

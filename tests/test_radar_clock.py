@@ -167,8 +167,43 @@ def test_the_cycle_fit_recovers_a_crystal_off_by_1000_ppm_through_jitter():
     # By cycle 3599 the radar measured 3599 x 0.05 ms = 180 ms later than 50 ms cycles say.
     drift, sigma3 = fit.drift_s(0.05)
     assert drift == pytest.approx(3599 * 0.00005, abs=sigma3) and sigma3 < 1e-3
-    assert "set clock.cycle_s: 0.05005" in fit.drift_reason(0.05, 0.003)
+    advised = fit.drift_reason(0.05, 0.003).split("set clock.cycle_s: ")[1].split()[0]
+    assert float(advised) == pytest.approx(0.05005, abs=3 * error)
     assert fit.drift_reason(0.05005, 0.003) is None
+
+
+def test_a_radar_1_ppm_off_over_an_hour_is_told_the_cycle_to_set():
+    from rts_scenario.radar.clock import CycleTimeFit
+
+    # 72,000 cycles of 50.00005 ms: the last 3.6 ms late, beyond 2.88 ms. The advice must
+    # differ from the profile's 0.05 (six digits gave 0.05 back).
+    n = np.arange(72_000)
+    fit = CycleTimeFit()
+    fit.add(n, 1.7e9 + 0.05000005 * n + np.random.default_rng(0).uniform(-1e-3, 1e-3, n.size))
+    reason = fit.drift_reason(0.05, 0.00288)
+    assert "every 50.000050 ms, its profile says 50.000000 ms (+1.0 ppm)" in reason
+    assert "set clock.cycle_s: 0.0500000" in reason
+    advised = float(reason.split("set clock.cycle_s: ")[1].split()[0])
+    # (the fit's standard error: 0.58 ms of jitter over 72,000 cycles, 1e-10 s)
+    assert advised == pytest.approx(0.05000005, abs=5e-10)
+    assert fit.drift_reason(advised, 0.00288) is None
+
+
+def test_cycles_numbered_off_their_bus_times_tell_no_cycle():
+    from rts_scenario.radar.clock import CycleTimeFit
+
+    # 50 ms cycles, +-4 ms jitter; a 150-cycle gap an 8-bit counter reads as 106 back, so the
+    # cycles after it are numbered 256 short: the bus times show no steady cycle to advise.
+    rng = np.random.default_rng(2)
+    n = np.concatenate([np.arange(100), np.arange(250, 600)])
+    bus_t = 0.05 * n + rng.uniform(-0.004, 0.004, n.size)
+    fit = CycleTimeFit()
+    fit.add(np.where(n < 250, n, n - 256), bus_t)
+    assert fit.cycle_s() is None and fit.drift_reason(0.05, 0.003) is None
+    # Numbered right, the same times give the cycle.
+    fit = CycleTimeFit()
+    fit.add(n, bus_t)
+    assert fit.cycle_s()[0] == pytest.approx(0.05, abs=1e-5)
 
 
 @pytest.mark.parametrize("cycle_s, fails", [(0.05005, True), (0.0500005, False)])
@@ -188,7 +223,7 @@ def test_a_radar_whose_crystal_runs_off_its_profile_fails_naming_its_cycle(tmp_p
     drifted = [r for r in report.reasons if r.startswith("radar_clock:")]
     assert bool(drifted) == fails
     if fails:
-        assert "every 50.0500 ms, its profile says 50.0000 ms (+1000 ppm)" in drifted[0]
+        assert "every 50.050000 ms, its profile says 50.000000 ms (+1000.0 ppm)" in drifted[0]
         assert not report.passed
     # A re-check of the log takes the radar's cycle from the bus, and says so where it had to.
     again = check_log(scene, log)

@@ -497,3 +497,54 @@ def test_a_re_check_holds_a_few_cycles_at_a_time_not_the_log(tmp_path, monkeypat
     again = check_log(scene, log, batch_frames=40)
     assert again.report.frames == live.frames and again.report.passed
     assert again.alignment.cycles_in_log == 240 and max(most) <= 45
+
+
+def test_a_log_without_detections_to_align_by_is_checked_at_a_given_offset(tmp_path):
+    # An empty bench's log, without its sidecar: no target to align it by, so the scene's
+    # start must be given, and the latency is the profile's (0 ms: the first of the 60 cycles,
+    # 3 s at 20 Hz, reached the bus at the scene's time 0).
+    scene = load_scenario(ROOT / "scenarios" / "empty_bench.scenario.yaml")
+    (tmp_path / "run").mkdir()
+    log = tmp_path / "run" / "bench.blf"
+    assert run_scene(scene, RunOptions(bus_log=str(log))).report.passed
+    copy = Path(shutil.copy(log, tmp_path / "bench.blf"))
+    with can.BLFReader(str(copy)) as reader:
+        origin = next(iter(reader)).timestamp
+    with pytest.raises(LogError, match="has no targets, so its log's detections cannot tell "
+                                       "when the scene started; give --time-offset-s"):
+        check_log(scene, copy)
+    result = check_log(scene, copy, time_offset_s=origin)
+    assert (result.alignment.latency_source, result.alignment.latency_s) == ("profile", 0.0)
+    assert any("its profile's is taken" in n for n in result.alignment.notes)
+    assert result.report.frames["checked"] == result.report.frames["total"] == 60
+    assert result.report.passed, result.report.reasons
+    # Half a second later: the log's first 10 cycles come before the scene, its last 10 lack.
+    late = check_log(scene, copy, time_offset_s=origin + 0.5).report
+    assert late.frames["missing"] == 10 and not late.passed
+    # A scene with a target whose radar reported nothing fails on it, no longer refused.
+    target = check_log(load_scenario(CUT_IN, QUIET), copy, time_offset_s=origin).report
+    assert target.detection_rate == 0.0 and not target.passed
+
+
+def test_a_recording_cut_short_keeps_no_sidecar_of_an_earlier_one(tmp_path):
+    # A first recording to the name leaves its sidecar; a second one stopped by Ctrl-C after 50
+    # cycles writes none, and must not be re-checked by the first one's.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    run_scene(scene, RunOptions(bus_log=str(log), batch_frames=40))
+    assert Path(str(log) + ".rts.json").exists()
+    with pytest.raises(KeyboardInterrupt), \
+            Pipeline.for_scene(scene, RunOptions(bus_log=str(log), batch_frames=40)) as pipeline:
+        sink, sent = pipeline.output._sink, []
+
+        def stop(cycles):
+            sent.extend(cycles)
+            if len(sent) > 50:
+                raise KeyboardInterrupt
+            sink(cycles)
+
+        pipeline.output._sink = stop
+        pipeline.run(scene)
+    assert not Path(str(log) + ".rts.json").exists()
+    again = check_log(scene, log)
+    assert again.alignment.source == "estimated" and again.alignment.cycles_in_log <= 50

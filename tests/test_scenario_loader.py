@@ -154,9 +154,9 @@ BAD = [
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
           "      - {start_s: 300, duration_s: 2, offset_m: 3}"), 16,
      "targets[0].lane_changes[0].start_s", "the lane change starts at 300 s, at or after the "
-     "scene's end (duration_s = 5 s at 20 Hz): it would never happen"),
+     "scene's last frame at 4.95 s (duration_s = 5 s at 20 Hz): it would never happen"),
     (edit("speed_mps: 20.0}\n", "speed_mps: 20.0}\n  lane_changes: [{start_s: 5, duration_s: 1, "
-          "offset_m: 3}]\n"), 11, "ego.lane_changes[0].start_s", "start_s must be < 5"),
+          "offset_m: 3}]\n"), 11, "ego.lane_changes[0].start_s", "start_s must be < 4.95"),
     (edit("    rcs: {rcs_dbsm: 10.0}\n",
           "    rcs: {rcs_dbsm: 10.0}\n" + GOOD.split("targets:\n")[1]),
      15, "targets[1].name", "duplicate target name 'car'"),
@@ -165,11 +165,11 @@ BAD = [
           "        - {t_s: 2, speed_mps: 3}\n        - {t_s: 1, speed_mps: 4}"), 18,
      "targets[0].motion.profile[1].t_s", "times must increase, got 1 after 2"),
     (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
-          "    motion:\n      type: waypoints\n      start_s: 5\n      points:\n"
+          "    motion:\n      type: waypoints\n      start_s: 4.97\n      points:\n"
           "        - {position_m: [30, 0, 0], speed_mps: 3}\n"
           "        - {position_m: [40, 0, 0], speed_mps: 3}"), 15,
-     "targets[0].motion.start_s", "at or after the scene's end (duration_s = 5 s at 20 Hz): it "
-     "would stand at its first waypoint throughout; start_s must be < 5"),
+     "targets[0].motion.start_s", "at or after the scene's last frame at 4.95 s (duration_s = 5 "
+     "s at 20 Hz): it would stand at its first waypoint throughout; start_s must be < 4.95"),
     (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
           "    motion:\n      type: waypoints\n      points:\n"
           "        - {position_m: [30, 0, 0], speed_mps: 3}\n"

@@ -18,6 +18,7 @@ reading a file back gives the same schedule.
 
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 import zipfile
@@ -25,6 +26,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import fields
 from pathlib import Path
+from types import TracebackType
 from typing import TextIO
 
 import numpy as np
@@ -46,7 +48,9 @@ class FileOutput(Output):
 
     Memory does not grow with the schedule: a ``.csv`` is written batch by batch; a ``.npz``
     (one array per field) goes to a private temporary folder, one raw file per field, and is
-    zipped from there on close.
+    zipped from there on close. Either is written as ``PATH.partial`` and named ``PATH`` once
+    closed whole: a schedule cut short (an error or Ctrl-C inside ``with``) stays ``.partial``,
+    and what ``PATH`` held before is removed as the first batch comes.
     """
 
     name = "file"
@@ -60,14 +64,29 @@ class FileOutput(Output):
             )
         if not self.path.parent.is_dir():
             raise OutputError(f"file:{path}: folder {self.path.parent} does not exist")
+        self.partial = self.path.with_name(self.path.name + ".partial")
         self._csv: TextIO | None = None
         self._spill: _Spill | None = None
+        self._cut_short = False
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        # Left by an exception: what was written is not the whole schedule.
+        self._cut_short = exc_type is not None
+        self.close()
 
     def _write(self, batch: Schedule) -> None:
+        if self.path.suffix == ".csv" and not batch.names:
+            # One row per entry: frames without targets would leave no trace.
+            raise OutputError(f"file:{self.path}: a schedule without targets has no rows for a "
+                              f".csv to hold its frames in; use .npz")
         with _writing(self.path):
+            if self._csv is None and self._spill is None:
+                # What PATH held before is not this schedule, whether it ends whole or not.
+                self.path.unlink(missing_ok=True)
             if self.path.suffix == ".csv":
                 if self._csv is None:
-                    self._csv = self.path.open("w", encoding="utf-8")
+                    self._csv = self.partial.open("w", encoding="utf-8")
                     self._csv.write(f"{_MAGIC}\n# targets: {','.join(batch.names)}\n")
                     self._csv.write(",".join(CSV_COLUMNS) + "\n")
                 _write_csv_rows(batch, self._csv)
@@ -82,10 +101,12 @@ class FileOutput(Output):
                 if self._csv is not None:
                     self._csv.close()
                 if self._spill is not None:
-                    self._spill.zip_to(self.path)
+                    self._spill.zip_to(self.partial)
             finally:
                 if self._spill is not None:
                     self._spill.close()
+            if (self._csv is not None or self._spill is not None) and not self._cut_short:
+                os.replace(self.partial, self.path)
 
 
 @contextmanager

@@ -124,7 +124,13 @@ class CycleTimeFit:
         self.count += int(n.size)
 
     def cycle_s(self) -> tuple[float, float] | None:
-        """Return the fitted cycle (s) and its standard error; None before three cycles."""
+        """Return the fitted cycle (s) and its standard error; None when the bus cannot tell.
+
+        None before three cycles, and where the cycles scatter by more than a quarter of the
+        cycle about the line: their numbers do not follow their bus times (a counter that
+        jumped, or a gap longer than half of what a narrow counter counts), and a crystal off
+        its profile leaves them on a straight line.
+        """
         k = self.count
         sx, sy, sxx, sxy, syy = self._sums
         var_x = sxx - sx * sx / k if k else 0.0
@@ -132,7 +138,10 @@ class CycleTimeFit:
             return None
         slope = (sxy - sx * sy / k) / var_x
         residual = max(syy - sy * sy / k - slope * (sxy - sx * sy / k), 0.0)
-        return float(slope), float(np.sqrt(residual / (k - 2) / var_x))
+        scatter = np.sqrt(residual / (k - 2))
+        if scatter > 0.25 * abs(slope):
+            return None
+        return float(slope), float(scatter / np.sqrt(var_x))
 
     def drift_s(self, cycle_s: float) -> tuple[float, float] | None:
         """How far the last cycle lies from where ``cycle_s`` puts it, and 3 sigma of that.
@@ -155,12 +164,13 @@ class CycleTimeFit:
         fit = self.cycle_s()
         if drift is None or fit is None or abs(drift[0]) - drift[1] <= tolerance_s:
             return None
-        return (f"radar_clock: the radar's cycles reached the bus every {fit[0] * 1e3:.4f} ms, "
-                f"its profile says {cycle_s * 1e3:.4f} ms ({(fit[0] / cycle_s - 1) * 1e6:+.0f}"
+        # Digits enough for the ppm that fail a long run (1 ppm: 3.6 ms over an hour).
+        return (f"radar_clock: the radar's cycles reached the bus every {fit[0] * 1e3:.6f} ms, "
+                f"its profile says {cycle_s * 1e3:.6f} ms ({(fit[0] / cycle_s - 1) * 1e6:+.1f}"
                 f" ppm): by its last cycle it measured {abs(drift[0]) * 1e3:.1f} ms (+-"
                 f"{drift[1] * 1e3:.1f}) {'later' if drift[0] > 0 else 'earlier'} than the "
                 f"check took it to, more than {tolerance_s * 1e3:.3g} ms; set clock.cycle_s: "
-                f"{fit[0]:.6g} in the radar profile")
+                f"{fit[0]:.10g} in the radar profile")
 
 
 __all__ = ["TIME_EPS_S", "CycleTimeFit", "RadarClock"]

@@ -349,6 +349,9 @@ class _Frames:
     def describe(self) -> str:
         return f"duration_s = {self.duration_s:g} s at {self.rate_hz:g} Hz"
 
+    def describe_end(self) -> str:
+        return f"the scene's last frame at {self.last_s:g} s ({self.describe()})"
+
 
 def _target(doc: Document, key: KeyPath, spec: dict[str, Any], default_fluct: str,
             frames: _Frames) -> TargetSpec:
@@ -411,11 +414,12 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
     mkey = (*key, "motion")
     kind = motion["type"]
     for i, lc in enumerate(spec.get("lane_changes", [])):
-        if lc["start_s"] >= frames.duration_s:
+        # Frames sample the motion: one starting at the last frame or later shows in none.
+        if lc["start_s"] >= frames.last_s:
             raise doc.error((*key, "lane_changes", i, "start_s"),
-                            f"the lane change starts at {lc['start_s']:g} s, at or after the "
-                            f"scene's end ({frames.describe()}): it would never happen; "
-                            f"start_s must be < {frames.duration_s:g}")
+                            f"the lane change starts at {lc['start_s']:g} s, at or after "
+                            f"{frames.describe_end()}: it would never happen; start_s must "
+                            f"be < {frames.last_s:g}")
     lane_changes = tuple(
         LaneChange(float(lc["start_s"]), float(lc["duration_s"]), float(lc["offset_m"]))
         for lc in spec.get("lane_changes", [])
@@ -452,11 +456,12 @@ def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]])
 def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
                lane_changes: tuple[LaneChange, ...], frames: _Frames) -> Trajectory:
     start = float(motion.get("start_s", 0.0))
-    if start >= frames.duration_s:
+    if start >= frames.last_s:
         raise doc.error((*key, "start_s"),
                         f"the object would start along its waypoints at {start:g} s, at or "
-                        f"after the scene's end ({frames.describe()}): it would stand at its "
-                        f"first waypoint throughout; start_s must be < {frames.duration_s:g}")
+                        f"after {frames.describe_end()}: it would stand at its first waypoint "
+                        f"throughout; start_s must be < "
+                        f"{frames.last_s:g}")
     points = np.array([p["position_m"] for p in motion["points"]], dtype=float)
     speeds = [float(p["speed_mps"]) for p in motion["points"]]
     gaps = np.linalg.norm(np.diff(points, axis=0), axis=1)
