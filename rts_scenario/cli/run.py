@@ -221,6 +221,8 @@ def _do_run(args: argparse.Namespace) -> int:
         return EXIT_RUNTIME_ERROR
     if bad_input:
         return EXIT_BAD_INPUT
+    if interrupted:  # even before the first scene started: never a pass
+        return EXIT_FAIL
     return EXIT_OK if all(e["status"] == "pass" for e in entries) else EXIT_FAIL
 
 

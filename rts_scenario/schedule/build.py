@@ -123,8 +123,8 @@ def build_schedule(
     if step_s is not None and window_s >= 0.5 * step_s:
         raise ScheduleError(
             f"frame_rate_hz: a radar cycle may show either frame for {window_s * 1e3:.3g} ms "
-            f"after a frame change (radar {radar.name!r}'s chirps {radar.measurement_s * 1e3:.3g}"
-            f" ms + rig {rig.name!r}'s limits.update_latency_s "
+            f"after a frame change (the chirps of radar {radar.name!r} "
+            f"{radar.measurement_s * 1e3:.3g} ms + limits.update_latency_s of rig {rig.name!r} "
             f"{limits.update_latency_s * 1e3:.3g} ms), half the {step_s * 1e3:.3g} ms between "
             f"the frames the radar sees or more: the check could not tell a radar a frame "
             f"behind from one in step; lower frame_rate_hz below {0.5 / window_s:.3g} Hz "
