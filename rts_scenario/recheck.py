@@ -368,6 +368,7 @@ class _ReadAhead:
 
     def __init__(self, log: str | Path, mapping: CanMapping | None,
                  kept: NDArray[np.bool_]) -> None:
+        self._log = log
         self._cycles = enumerate(_iter_cycles(log, mapping, {}))
         self._kept = kept  # positions ever asked for: the others are not held
         self._held: dict[int, Detections] = {}
@@ -378,7 +379,12 @@ class _ReadAhead:
         if positions.size:
             last = int(positions.max())
             while self._read < last:
-                self._read, cycle = next(self._cycles)
+                step = next(self._cycles, None)
+                if step is None:  # the first pass read more cycles than this one
+                    raise LogError(f"--log {self._log}: changed while it was checked (it now "
+                                   f"ends after {self._read + 1} radar cycles, not "
+                                   f"{self._kept.size}); check it again")
+                self._read, cycle = step
                 if self._kept[self._read]:
                     self._held[self._read] = cycle.detections
         return [self._held.pop(int(i)) for i in positions]

@@ -548,3 +548,16 @@ def test_a_recording_cut_short_keeps_no_sidecar_of_an_earlier_one(tmp_path):
     assert not Path(str(log) + ".rts.json").exists()
     again = check_log(scene, log)
     assert again.alignment.source == "estimated" and again.alignment.cycles_in_log <= 50
+
+
+def test_a_log_that_shrinks_between_the_passes_is_one_clear_error(tmp_path):
+    import rts_scenario.recheck as recheck
+
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.asc"
+    run_scene(scene, RunOptions(bus_log=str(log)))
+    reader = recheck._ReadAhead(log, None, np.ones(300, dtype=bool))  # as if it had held 300
+    assert len(reader.take(np.arange(240))) == 240
+    with pytest.raises(LogError, match=r"run.asc: changed while it was checked \(it now ends "
+                                       r"after 240 radar cycles, not 300\)"):
+        reader.take(np.array([250]))
