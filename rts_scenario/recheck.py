@@ -330,7 +330,7 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None,
 
 @dataclass(frozen=True)
 class _LogIndex:
-    """What a first pass over a log keeps of each cycle: 20 bytes, not its detections.
+    """What a first pass over a log keeps of each cycle: 24 bytes, not its detections.
 
     The checks read the log again for the detections, so memory does not grow with them.
     """

@@ -479,7 +479,7 @@ def test_an_8_bit_counter_names_every_cycle_live_and_in_the_re_checks(tmp_path):
 
 def test_a_re_check_holds_a_few_cycles_at_a_time_not_the_log(tmp_path, monkeypatch):
     # The log is read ahead only as far as the batch being checked needs: memory does not grow
-    # with its length (the first pass keeps 20 bytes per cycle).
+    # with its length (the first pass keeps 24 bytes per cycle).
     import rts_scenario.recheck as recheck
 
     scene = load_scenario(CUT_IN, QUIET)

@@ -364,8 +364,8 @@ def _target(doc: Document, key: KeyPath, spec: dict[str, Any], default_fluct: st
     first = frames.first_at_or_after(appear)
     if first >= frames.n:
         raise doc.error((*key, "appear_s"),
-                        f"the target appears at {appear:g} s, after the scene's last frame at "
-                        f"{frames.last_s:g} s ({frames.describe()}): it would be present in no "
+                        f"the target appears at {appear:g} s, after {frames.describe_end()}: "
+                        f"it would be present in no "
                         f"frame and nothing could be checked; appear_s must be <= "
                         f"{frames.last_s:g}")
     if first / frames.rate_hz >= disappear:
@@ -414,12 +414,8 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
     mkey = (*key, "motion")
     kind = motion["type"]
     for i, lc in enumerate(spec.get("lane_changes", [])):
-        # Frames sample the motion: one starting at the last frame or later shows in none.
-        if lc["start_s"] >= frames.last_s:
-            raise doc.error((*key, "lane_changes", i, "start_s"),
-                            f"the lane change starts at {lc['start_s']:g} s, at or after "
-                            f"{frames.describe_end()}: it would never happen; start_s must "
-                            f"be < {frames.last_s:g}")
+        _starts_in_scene(doc, (*key, "lane_changes", i, "start_s"), float(lc["start_s"]),
+                         frames, "the lane change starts", "it would never happen")
     lane_changes = tuple(
         LaneChange(float(lc["start_s"]), float(lc["duration_s"]), float(lc["offset_m"]))
         for lc in spec.get("lane_changes", [])
@@ -453,15 +449,23 @@ def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]])
     return TravelLaw.speed_profile(times, speeds)
 
 
+def _starts_in_scene(doc: Document, key: KeyPath, start_s: float, frames: _Frames, what: str,
+                     outcome: str) -> None:
+    """Refuse a change of motion that starts at the last frame or later.
+
+    Frames sample the motion: such a change would show in none of them.
+    """
+    if start_s >= frames.last_s:
+        raise doc.error(key, f"{what} at {start_s:g} s, at or after {frames.describe_end()}: "
+                             f"{outcome}; start_s must be < {frames.last_s:g}")
+
+
 def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
                lane_changes: tuple[LaneChange, ...], frames: _Frames) -> Trajectory:
     start = float(motion.get("start_s", 0.0))
-    if start >= frames.last_s:
-        raise doc.error((*key, "start_s"),
-                        f"the object would start along its waypoints at {start:g} s, at or "
-                        f"after {frames.describe_end()}: it would stand at its first waypoint "
-                        f"throughout; start_s must be < "
-                        f"{frames.last_s:g}")
+    _starts_in_scene(doc, (*key, "start_s"), start, frames,
+                     "the object would start along its waypoints",
+                     "it would stand at its first waypoint throughout")
     points = np.array([p["position_m"] for p in motion["points"]], dtype=float)
     speeds = [float(p["speed_mps"]) for p in motion["points"]]
     gaps = np.linalg.norm(np.diff(points, axis=0), axis=1)
