@@ -25,9 +25,16 @@ ROOT = Path(__file__).resolve().parents[1]
 _channels = itertools.count()
 
 
-def bench_scene(tmp_path: Path, duration_s: float = 4.0, counter_start="4242"):
+def bench_scene(tmp_path: Path, duration_s: float = 4.0, counter_start="4242",
+                late_expected: bool = True):
     """cut-in, shortened, on a radar that measures every 72 ms, reports 130 ms later and
-    counts from 4242 (the scene's profile may say ``auto``: not known)."""
+    counts from 4242 (the scene's profile may say ``auto``: not known).
+
+    The sender is paced in real time on a machine a parallel test run shares, which can hold
+    it past a frame period now and then: the scene declares ``frames_sent_late`` expected
+    unless ``late_expected`` is False (the late frames are still judged by their send times;
+    `test_a_late_sender_is_reported_and_fails_unless_expected` checks that verdict).
+    """
     shutil.copy(ROOT / "scenarios" / "cut_in.scenario.yaml", tmp_path)
     data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
                           .read_text())
@@ -41,7 +48,8 @@ def bench_scene(tmp_path: Path, duration_s: float = 4.0, counter_start="4242"):
     return load_scenario(tmp_path / "cut_in.scenario.yaml", {
         "radar.profile": "radars/scene.radar.yaml", "radar.noise": False,
         "radar.fidelity": "analytic", "duration_s": duration_s,
-        "expectations.expected_limits": ["frame_rate_above_radar"]})
+        "expectations.expected_limits": ["frame_rate_above_radar"]
+        + (["frames_sent_late"] if late_expected else [])})
 
 
 OBJECT_LIST = ROOT / "scenarios" / "can" / "object_list.mapping.yaml"
@@ -172,8 +180,11 @@ def test_a_perfect_radar_in_step_with_the_frames_passes_the_rehearsal(tmp_path):
     # emulated RTS may or may not have it yet. The checker takes either frame within the
     # radar's chirp time of a change, and says how many cycles it judged so.
     shutil.copy(ROOT / "scenarios" / "approaching_target.scenario.yaml", tmp_path)
+    # Late frames are declared expected, as in `bench_scene` (a shared machine may hold the
+    # sender): they are still judged by their send times.
     scene = load_scenario(tmp_path / "approaching_target.scenario.yaml",
-                          {"duration_s": 3.0, "radar.noise": False})
+                          {"duration_s": 3.0, "radar.noise": False,
+                           "expectations.expected_limits": ["frames_sent_late"]})
     report, stats = rehearse(scene, mapping=None)
     assert report.passed, report.reasons
     assert report.frames["checked"] == report.frames["total"] == 60
@@ -237,7 +248,7 @@ def test_a_late_sender_is_reported_and_fails_unless_expected(tmp_path, monkeypat
         return lateness
 
     monkeypatch.setattr(UdpOutput, "_wait_for", late)
-    scene = bench_scene(tmp_path, duration_s=3.2)
+    scene = bench_scene(tmp_path, duration_s=3.2, late_expected=False)
     report, _ = rehearse(scene)
     # The emulated RTS applied the frames late and its radar measured them so: judged by
     # the send times, the radar is right; the scene was not played as timed.
