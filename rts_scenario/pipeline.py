@@ -30,7 +30,7 @@ from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .playback import Playback
 from .preflight import Preflight, frames_per_batch, preflight, scene_limits
-from .radar.clock import CycleTimeFit, RadarClock
+from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report, strict
@@ -142,6 +142,8 @@ class Pipeline:
         self._notifier: can.Notifier | None = None
         self._logger: can.Listener | None = None
         self.counter_start_learnt: tuple[int, str] | None = None
+        # The scene's start on the bus's clock where the simulated radar stamps its messages.
+        self._bus_origin_s: float | None = None
         self.output: Output | None = None
         # A private name that does not end in digits (MF4 logs read those as a channel number).
         self.channel = options.can_channel or f"rts-scenario-{id(self):x}-detections"
@@ -194,6 +196,9 @@ class Pipeline:
             self._publisher = DetectionPublisher(bus, fd=o.can_fd, mapping=self.mapping)
         publisher, clock = self._publisher, self.radar.radar_clock
         origin, rng = time.time(), np.random.default_rng(0)
+        if self.options.can_interface == "virtual":
+            # The messages keep the times given them: the scene's start on the bus's clock.
+            self._bus_origin_s = origin
 
         def publish(cycles: list[Detections]) -> None:
             t = np.array([c.t_s or 0.0 for c in cycles], dtype=np.float64)
@@ -270,25 +275,46 @@ class Pipeline:
         return (unwrap_counter(counters[:1], 0, self.counter_modulus)
                 + sequential_numbers(counters, self.counter_modulus))
 
+    def _scene_origin_s(self) -> float | None:
+        """Return the scene's time 0 on the bus's clock, where the run knows it.
+
+        A stream paced in real time knows when it started the scene; the simulated radar in
+        process stamps its messages from the run's start. None otherwise.
+        """
+        origin = getattr(self.output, "scene_origin_wall_s", None)
+        return origin if origin is not None else self._bus_origin_s
+
     def _learn_counter_start(self, checker: Checker, cycles: list[Detections]) -> None:
         """Find where the radar's counter starts when its profile does not say.
 
-        The first cycle's bus time, less the radar's latency, is its measurement time on the
-        bus's clock; the output's scene origin on that clock (an RTS paced in real time) makes
-        it a scene time, hence a cycle number. Without those, the first cycle received is
-        taken as the first cycle of the scene.
+        A radar whose profile gives no counter start runs free: it was switched on before the
+        scene, at any point of its frames. The cycles' bus times, less the radar's latency,
+        are their measurement times on the bus's clock; the scene's origin on that clock
+        makes them scene times. Cycle 0 is the first measured at or after the scene's start,
+        found on the line through the first cycles received (their jitter averages out).
+        Without those times, the first cycle received is taken as the scene's first.
         """
         clock = self.radar.radar_clock
-        first = next((c for c in cycles if c.bus_t_s is not None), None)
-        origin = getattr(self.output, "scene_origin_wall_s", None)
-        if first is not None and origin is not None:
-            assert first.bus_t_s is not None
-            n = clock.cycle_at(first.bus_t_s - clock.latency_s - origin)
-            source = "learnt from the first cycle's bus time"
+        origin = self._scene_origin_s()
+        timed = [c for c in cycles if c.bus_t_s is not None]
+        if timed and origin is not None:
+            counters = np.array([c.cycle for c in timed], dtype=np.int64)
+            m = sequential_numbers((counters - counters[0]) % self.counter_modulus,
+                                   self.counter_modulus)
+            measured = _bus_times(timed) - clock.latency_s - origin
+            cycle_s = clock.cycle_s
+            if m.size >= 8 and np.ptp(m) > 0:  # the radar's own cycle (a crystal off by 1000
+                cycle_s = float(np.polyfit(m, measured, 1)[0])  # ppm: 25 ms over 500 cycles)
+            residual = measured - m * cycle_s
+            phase = float(np.mean(residual))  # scene time of m = 0
+            # A cycle within three standard errors before the start may have measured at it.
+            tolerance = 3.0 * float(np.std(residual)) / np.sqrt(m.size)
+            m0 = int(np.ceil((-phase - tolerance) / cycle_s - TIME_EPS_S))
+            checker.counter_start = int(counters[0] + m0) % self.counter_modulus
+            source = "learnt from the cycles' bus times"
         else:
-            first, n = cycles[0], 0
+            checker.counter_start = cycles[0].cycle % self.counter_modulus
             source = "assumed: the first cycle received is the scene's first"
-        checker.counter_start = (first.cycle - n) % self.counter_modulus
         self.counter_start_learnt = (checker.counter_start, source)
 
     def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
@@ -327,10 +353,11 @@ class Pipeline:
             mark = timer.add("preflight_s", mark)
         self.receiver.reset()
         window_s = ambiguity_window_s(self.radar, self.rig)
-        truths = CycleTruth(checker, scene, clock, window_s)
+        # When the radar measures: its profile's clock, corrected by its cycles' bus times.
+        track = ClockTrack(clock, self._scene_origin_s(),
+                           free=clock.counter_start is None)
+        truths = CycleTruth(checker, scene, track, window_s)
         playback = Playback(1.0 / scene.frame_rate_hz, window_s)
-        # The radar's cycle as its messages reach the bus: the check takes its profile's.
-        fit = CycleTimeFit()
         batch = options.batch_frames or frames_per_batch(len(scene.targets), BATCH_FRAMES)
         for first in range(0, n_frames, batch):
             frames = np.arange(first, min(first + batch, n_frames))
@@ -345,32 +372,36 @@ class Pipeline:
                 digest.update(schedule.status.tobytes())
             mark = timer.add("schedule_s", mark)
             self.write(schedule)
+            if track.origin_s is None:  # a stream knows the scene's start once it started it
+                track.origin_s = self._scene_origin_s()
             assert self.output is not None
             sent_s = self.output.sent_t_s(schedule)
             playback.add(schedule.t_s, sent_s)
             mark = timer.add("play_s", mark)
-            # The radar's cycles while the RTS held the batch before: it was held until this
-            # batch's first frame went out.
-            n = truths.add(frames, schedule.status, sent_s)
-            mark = timer.add("kinematics_s", mark)
+            # The cycles first, so that the clock knows them before it times the truth.
             cycles = self.receive()
             mark = timer.add("receive_s", mark)
             if checker.counter_start is None and cycles:
                 self._learn_counter_start(checker, cycles)
-            fit.add(checker.add_cycles(cycles), _bus_times(cycles))
+            track.add(checker.add_cycles(cycles), _bus_times(cycles))
+            mark = timer.add("check_s", mark)
+            # The radar's cycles while the RTS held the batch before: it was held until this
+            # batch's first frame went out.
+            n = truths.add(frames, schedule.status, sent_s)
+            mark = timer.add("kinematics_s", mark)
             # The batch before that one is due: its cycles had a whole batch to arrive.
             if n.size:
                 checker.settle(before_frame=int(n[0]))
             mark = timer.add("check_s", mark)
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
-        truths.finish()
-        mark = timer.add("kinematics_s", mark)
         last = self.receive(final=True)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
-        fit.add(checker.add_cycles(last), _bus_times(last))
+        track.add(checker.add_cycles(last), _bus_times(last))
         mark = timer.add("receive_s", mark)
+        truths.finish()
+        mark = timer.add("kinematics_s", mark)
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
         if self._publisher is not None:
@@ -378,7 +409,7 @@ class Pipeline:
             # signal's range): the checker never saw them.
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
-        drifted = fit.drift_reason(clock.cycle_s, 0.5 * window_s)
+        drifted = track.off_profile_reason()
         if drifted:
             report.reasons.append(drifted)
             report.passed = False
@@ -393,7 +424,7 @@ class Pipeline:
         if options.bus_log and digest is not None:
             write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
                               counter_start=checker.counter_start, playback=report.playback,
-                              send_lateness=playback.send_lateness())
+                              send_lateness=playback.send_lateness(), clock=track)
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -403,9 +434,10 @@ class Pipeline:
         elif self.counter_start_learnt is not None:
             start, source = self.counter_start_learnt
             report.radar_clock = {"counter_start": start, "source": source}
-        measured = fit.cycle_s()
+        measured = track.fit.cycle_s()
         if measured is not None:
             report.radar_clock["bus_cycle_s"] = measured[0]
+        report.radar_clock.update(track.to_dict())
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -461,13 +493,14 @@ class CycleTruth:
         Receives the truth.
     scene : Scenario
         The scene (frame times, targets).
-    clock : RadarClock
-        When the radar measures.
+    clock : RadarClock or ClockTrack
+        When the radar measures: its profile's clock, or the clock the run learns from the
+        bus (asked again for every batch).
     window_s : float
         The ambiguity window after a frame change (s); `ambiguity_window_s` gives it.
     """
 
-    def __init__(self, checker: Checker, scene: Scenario, clock: RadarClock,
+    def __init__(self, checker: Checker, scene: Scenario, clock: RadarClock | ClockTrack,
                  window_s: float) -> None:
         self.checker, self.scene, self.clock = checker, scene, clock
         self.window_s = float(window_s)
@@ -475,6 +508,8 @@ class CycleTruth:
         self._pending: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         # The last frame of the batch before the pending one: (frame, status row, applied s).
         self._before: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        # The first cycle not handed on yet (None: the scene's first, found by its time).
+        self._next_n: int | None = None
 
     def add(self, frames: np.ndarray, status: np.ndarray,
             applied_s: np.ndarray | None = None) -> np.ndarray:
@@ -518,10 +553,18 @@ class CycleTruth:
             self.scene.t_s[self._pending[0][0]])
         self._before = tuple(p[-1:] for p in self._pending)  # type: ignore[assignment]
         self._pending = None
-        n, t_cycles = self.clock.cycles_between(start_s, max(end_s, start_s))
+        # Cycle numbers follow on from the batch before's, whatever the clock now says: a
+        # clock learnt from the bus (`ClockTrack`) may have moved a cycle across the batches'
+        # boundary since (judged against the frame before, then).
+        lo = (self.clock.first_at(start_s - self.clock.start_tolerance_s)
+              if self._next_n is None else self._next_n)
+        hi = max(lo, self.clock.first_at(max(end_s, start_s)))
+        self._next_n = hi
+        n = np.arange(lo, hi, dtype=np.int64)
         if not n.size:
             return n
-        held = np.clip(held_frames(applied, t_cycles), first, last)
+        t_cycles = self.clock.time_of(n)
+        held = np.clip(held_frames(applied, t_cycles), 0, last)
         # The frame change nearest each cycle, and whether it lies within the window.
         since = t_cycles - applied[held]
         has_next = held + 1 < frames.size
@@ -567,7 +610,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       options: RunOptions, status_digest: str,
                       counter_start: int | None = None,
                       playback: dict[str, Any] | None = None,
-                      send_lateness: dict[str, Any] | None = None) -> Path:
+                      send_lateness: dict[str, Any] | None = None,
+                      clock: ClockTrack | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -577,13 +621,22 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     rebuilds the schedule can tell whether it plays the same. ``counter_start`` is the one the
     run used (learnt, where the profile does not give it); ``playback`` the run's
     (`Playback.to_dict`) and ``send_lateness`` when each frame went out
-    (`Playback.send_lateness`).
+    (`Playback.send_lateness`). ``clock`` is the clock the run ended with (`ClockTrack`): its
+    cycle and phase are written, cycle 0 renumbered to the first measured in the scene.
     """
     import json
 
     from ._version import __version__
 
     c = radar.radar_clock
+    if clock is not None:
+        cycle_s, offset_s = clock.cycle_s, clock.start_offset_s
+        # Cycle 0 measured before the scene began (a radar running free): renumbered from
+        # the first the scene measured, the counter moved with it.
+        shift = min(0, int(np.floor(offset_s / cycle_s + TIME_EPS_S)))
+        if counter_start is not None:
+            counter_start -= shift
+        c = replace(c, cycle_s=cycle_s, start_offset_s=max(0.0, offset_s - shift * cycle_s))
     path = Path(str(log) + LOG_SIDECAR_SUFFIX)
     data = {
         "rts_scenario_log": 1, "version": __version__, "scene": scene.name,

@@ -41,7 +41,7 @@ from .kinematics import compute_tracks
 from .pipeline import LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
 from .playback import SEND_LATENESS_ENCODING, playback_reasons, unpack_send_lateness
 from .preflight import scene_limits, schedule_batches
-from .radar.clock import TIME_EPS_S, CycleTimeFit, RadarClock
+from .radar.clock import TIME_EPS_S, ClockTrack, CycleTimeFit, RadarClock
 from .report import Report
 from .scenario import Scenario, parametrizations, select_variant
 from .solver.estimator_aware import SCHEDULE_METHODS
@@ -742,6 +742,13 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     alignment.cycles_in_log = len(index)
     result = _check(scene, log, can_mapping, counters, clock, modulus, method, batch_frames,
                     bus, alignment, sidecar)
+    # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
+    track = ClockTrack(profile_clock)
+    track.add(numbers, index.bus_t_s)
+    off_profile = track.off_profile_reason()
+    if off_profile:
+        result.reasons.append(off_profile)
+        result.passed = False
     playback = (sidecar or {}).get("playback")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run

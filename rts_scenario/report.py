@@ -172,8 +172,9 @@ class Report:
 
     ``scene_limits`` names the limits the whole scene hits (``{"why": ..., "expected": ...}``).
     ``solver_plan`` says where the run's solver plan came from (built, memory, disk).
-    ``radar_clock`` is how the radar's cycles were numbered: its counter start and whether the
-    profile gave it or it was learnt from the first cycle's bus time.
+    ``radar_clock`` is when the radar measured, as the check took it: its counter start, cycle
+    and phase, each from the profile or learnt from the cycles' bus times
+    (`rts_scenario.radar.clock.ClockTrack`).
     ``playback`` is how the schedule went out (`rts_scenario.playback.Playback`: frames sent,
     their lateness, the ambiguity window, the RTS's counters where it reports them).
     ``variant`` names the combination of the scene's ``parametrize`` block that ran, as the

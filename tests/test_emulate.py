@@ -101,8 +101,15 @@ def test_a_radar_whose_counter_start_is_unknown_is_numbered_by_bus_time(tmp_path
     assert report.passed, report.reasons
     # The emulated radar measures every 72 ms of this machine's clock, sent as it goes.
     assert report.radar_clock.pop("bus_cycle_s") == pytest.approx(0.072, rel=1e-3)
+    # It runs free: its cycle and phase come from the bus too. Its clock starts as the first
+    # frame arrives (start_offset_s 0 in its profile), so it measures a transport's delay
+    # after the scene's start, or a thread's delay on a loaded machine.
+    assert report.radar_clock.pop("cycle_s") == pytest.approx(0.072, rel=1e-3)
+    assert -0.002 < report.radar_clock.pop("start_offset_s") < 0.05
     assert report.radar_clock == {"counter_start": 4242,
-                                  "source": "learnt from the first cycle's bus time"}
+                                  "source": "learnt from the cycles' bus times",
+                                  "start_from": "bus",
+                                  "cycle_from": report.radar_clock["cycle_from"]}
     assert report.frames["checked"] == report.frames["total"]
 
 

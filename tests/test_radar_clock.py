@@ -206,11 +206,13 @@ def test_cycles_numbered_off_their_bus_times_tell_no_cycle():
     assert fit.cycle_s()[0] == pytest.approx(0.05, abs=1e-5)
 
 
-@pytest.mark.parametrize("cycle_s, fails", [(0.05005, True), (0.0500005, False)])
-def test_a_radar_whose_crystal_runs_off_its_profile_fails_naming_its_cycle(tmp_path, cycle_s,
-                                                                          fails):
-    # 1000 ppm: cycle 239 is measured 12 ms later than the profile's 50 ms cycles put it,
-    # beyond half the 5.76 ms window in which the check takes either frame; 10 ppm: 0.12 ms.
+@pytest.mark.parametrize(("cycle_s", "ppm"), [(0.05, 0.0), (0.0500005, 10.0), (0.050025, 500.0),
+                                            (0.0501, 2000.0)])
+def test_a_run_follows_a_radar_whose_crystal_runs_off_its_profile(tmp_path, cycle_s, ppm):
+    # 500 ppm: cycle 239 is measured 6 ms later than the profile's 50 ms cycles put it, beyond
+    # half the 5.76 ms window in which the check takes either frame (those cycles were judged
+    # against the wrong frame); the run takes the cycle from the bus. 2000 ppm is no crystal:
+    # the profile is another radar's, and the run fails saying so (the cycles judged right).
     scene = load_scenario(ROOT / "scenarios" / "cut_in.scenario.yaml",
                           {"radar.noise": False, "radar.fidelity": "analytic",
                            "radar.estimator": "bartlett"})
@@ -219,16 +221,93 @@ def test_a_radar_whose_crystal_runs_off_its_profile_fails_naming_its_cycle(tmp_p
     with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
         pipeline.output.clock = dataclasses.replace(profile, cycle_s=cycle_s)
         report = pipeline.run(scene).report
-    assert report.radar_clock["bus_cycle_s"] == pytest.approx(cycle_s, rel=1e-9)
+    clock = report.radar_clock
+    assert clock["bus_cycle_s"] == pytest.approx(cycle_s, rel=1e-9)
+    assert clock["cycle_s"] == (profile.cycle_s if ppm == 0 else pytest.approx(cycle_s,
+                                                                                 rel=1e-9))
+    assert clock["cycle_from"] == ("profile" if ppm == 0 else "bus")
+    assert clock["start_offset_s"] == profile.start_offset_s
+    assert clock["start_from"] == "profile"  # the profile gives the counter: started with it
+    assert report.frames["checked"] == report.frames["total"] == 240
     drifted = [r for r in report.reasons if r.startswith("radar_clock:")]
-    assert bool(drifted) == fails
-    if fails:
-        assert "every 50.050000 ms, its profile says 50.000000 ms (+1000.0 ppm)" in drifted[0]
-        assert not report.passed
-    # A re-check of the log takes the radar's cycle from the bus, and says so where it had to.
+    assert report.reasons == drifted
+    assert report.passed == (ppm < 1000)
+    if ppm > 1000:
+        assert f"every 50.100000 ms, its profile says 50.000000 ms (+{ppm:.1f} ppm)" in drifted[0]
+        assert "set clock.cycle_s: 0.0501 " in drifted[0]
+    # A re-check of the log judges the cycles at the cycle the run followed, to the same verdict.
+    again = check_log(scene, log)
+    assert again.report.reasons == report.reasons
+    assert again.report.frames["checked"] == again.report.frames["total"] == 240
+    assert again.alignment.cycle_s == pytest.approx(cycle_s, rel=1e-9)
+    assert again.report.errors["range_m"].max == pytest.approx(report.errors["range_m"].max)
+
+
+def test_a_radar_running_free_is_checked_at_the_phase_its_bus_times_show(tmp_path):
+    # The profile knows the radar's cycle and latency, not when it was switched on: it measures
+    # 31 ms into each 50 ms frame (and runs 300 ppm slow). Its bus times less its latency give
+    # the phase; each cycle is judged against the frame the radar really saw.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.050015, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    seen: list[Detections] = []
+    log = tmp_path / "free.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = radar
+        sink = pipeline.output._sink
+        pipeline.output._sink = lambda cycles: (seen.extend(cycles), sink(cycles))
+        report = pipeline.run(scene).report
+    assert report.passed, report.reasons
+    clock = report.radar_clock
+    assert clock["counter_start"] == 4242 and clock["start_from"] == "bus"
+    # +-4 ms of jitter on 240 cycles: the phase to a fraction of a millisecond, the cycle to
+    # a few microseconds (3 sigma: 2.3 ms / sqrt(240^3 / 12) = 2.6 us).
+    assert clock["start_offset_s"] == pytest.approx(0.031, abs=5e-4)
+    assert clock["cycle_s"] == pytest.approx(0.050015, abs=8e-6)
+    assert clock["cycle_from"] == "bus"
+    # The radar saw the frame held 31 ms into each hold; the check compared it with that frame:
+    # its errors are the bus's 5 mm steps, not the target's motion over a frame.
+    t = np.array([c.t_s for c in seen])
+    held_t = np.floor(t * scene.frame_rate_hz + 1e-9) / scene.frame_rate_hz
+    truth = compute_tracks(scene, held_t)
+    got = np.array([c.range_m[0] for c in seen])
+    np.testing.assert_allclose(got, truth.range_m[:, 0], atol=0.02)
+    moved = np.abs(compute_tracks(scene, held_t + 0.05).range_m[:, 0] - truth.range_m[:, 0])
+    assert report.errors["range_m"].max < 0.01 < moved.max()
+    assert report.frames["checked"] == report.frames["total"] == len(seen)
+    # Measured mid-frame, no cycle lies near a frame change: each is judged against one frame
+    # (taken at the profile's phase, every cycle sat on a change and could match either).
+    assert report.frames["ambiguous"] == 0
+    # Its log re-checked by the sidecar: the same cycles, judged at the same times.
     again = check_log(scene, log)
     assert again.report.passed, again.report.reasons
-    assert again.report.frames["checked"] == again.report.frames["total"] == 240
-    assert again.alignment.cycle_s == pytest.approx(cycle_s if fails else 0.05, rel=1e-9)
-    assert any("this re-check takes the cycle from the bus" in note
-               for note in again.alignment.notes) == fails
+    assert again.report.frames["checked"] == len(seen)
+    assert again.report.errors["range_m"].max == pytest.approx(report.errors["range_m"].max)
+
+
+def test_the_clock_track_keeps_the_profile_until_the_bus_tells_otherwise():
+    from rts_scenario.radar.clock import ClockTrack
+
+    rng = np.random.default_rng(5)
+    profile = RadarClock(cycle_s=0.05, start_offset_s=0.01, latency_s=0.13, jitter_s=0.004)
+    origin = 1.7e9
+    n = np.arange(2000)
+    on_profile = origin + 0.01 + 0.05 * n + 0.13 + rng.uniform(-0.004, 0.004, n.size)
+    track = ClockTrack(profile, origin, free=False)
+    track.add(n, on_profile)
+    assert track.cycle_s == 0.05 and track.start_offset_s == 0.01
+    assert track.to_dict()["cycle_from"] == "profile" and track.off_profile_reason() is None
+    # 100 ppm off, 7 ms into the frames, running free: both from the bus.
+    true_t = 0.007 + 0.050005 * n
+    track = ClockTrack(profile, origin, free=True)
+    track.add(n[:1000], origin + true_t[:1000] + 0.13 + rng.uniform(-0.004, 0.004, 1000))
+    track.add(n[1000:], origin + true_t[1000:] + 0.13 + rng.uniform(-0.004, 0.004, 1000))
+    assert track.cycle_s == pytest.approx(0.050005, rel=2e-6)
+    assert np.abs(track.time_of(n) - true_t).max() < 5e-4
+    assert track.first_at(0.0) == 0 and track.first_at(0.008) == 1
+    assert track.off_profile_reason() is None  # 100 ppm: a crystal
+    # Without the scene's start on the bus's clock, the phase stays the profile's.
+    blind = ClockTrack(profile, None, free=True)
+    blind.add(n, origin + true_t + 0.13)
+    assert blind.start_offset_s == 0.01 and blind.to_dict()["start_from"] == "profile"

@@ -67,8 +67,8 @@ class RadarClock:
 
     def cycles_between(self, t_start_s: float, t_end_s: float) -> tuple[IntArray, FloatArray]:
         """Cycles measured in ``[t_start_s, t_end_s)``: their numbers n and measurement times."""
-        lo = max(0, int(np.ceil((t_start_s - self.start_offset_s) / self.cycle_s - TIME_EPS_S)))
-        hi = max(lo, int(np.ceil((t_end_s - self.start_offset_s) / self.cycle_s - TIME_EPS_S)))
+        lo = self.first_at(t_start_s)
+        hi = max(lo, self.first_at(t_end_s))
         n = np.arange(lo, hi, dtype=np.int64)
         return n, self.time_of(n)
 
@@ -79,6 +79,15 @@ class RadarClock:
     def counter_of(self, n: IntArray) -> IntArray:
         """Return the counters cycles ``n`` carry (before any wrap of the bus signal)."""
         return (self.counter_start or 0) + np.asarray(n, dtype=np.int64)
+
+    def first_at(self, t_s: float) -> int:
+        """Return the first cycle (>= 0) measured at or after scene time ``t_s``."""
+        return max(0, int(np.ceil((t_s - self.start_offset_s) / self.cycle_s - TIME_EPS_S)))
+
+    @property
+    def start_tolerance_s(self) -> float:
+        """How far before the scene's start a cycle may lie and count as its first: 0 (exact)."""
+        return 0.0
 
     def cycle_at(self, measured_s: float) -> int:
         """Return the cycle number measured nearest scene time ``measured_s``."""
@@ -143,6 +152,32 @@ class CycleTimeFit:
             return None
         return float(slope), float(scatter / np.sqrt(var_x))
 
+    @property
+    def span(self) -> int:
+        """Cycles from the first seen to the last (by number)."""
+        return self._span[1] - self._span[0]
+
+    def zero_s(self, cycle_s: float) -> float | None:
+        """Bus time of cycle 0 on the line of slope ``cycle_s`` through the cycles seen.
+
+        The mean of their bus times less ``cycle_s`` times their numbers (the least-squares
+        intercept for that slope); None before the first cycle.
+        """
+        if self._origin is None:
+            return None
+        sx, sy = self._sums[0] / self.count, self._sums[1] / self.count
+        return self._origin[1] + sy - cycle_s * (self._origin[0] + sx)
+
+    def zero_error_s(self, cycle_s: float) -> float:
+        """Return the standard error of `zero_s` for that slope (from the scatter about it)."""
+        k = self.count
+        if k < 2:
+            return np.inf
+        sx, sy, sxx, sxy, syy = self._sums / k
+        mean = sy - cycle_s * sx
+        var = syy - 2.0 * cycle_s * sxy + cycle_s * cycle_s * sxx - mean * mean
+        return float(np.sqrt(max(var, 0.0) / (k - 1)))
+
     def drift_s(self, cycle_s: float) -> tuple[float, float] | None:
         """How far the last cycle lies from where ``cycle_s`` puts it, and 3 sigma of that.
 
@@ -151,8 +186,7 @@ class CycleTimeFit:
         fit = self.cycle_s()
         if fit is None:
             return None
-        span = self._span[1] - self._span[0]
-        return (fit[0] - cycle_s) * span, 3.0 * fit[1] * span
+        return (fit[0] - cycle_s) * self.span, 3.0 * fit[1] * self.span
 
     def drift_reason(self, cycle_s: float, tolerance_s: float) -> str | None:
         """Why the radar's clock fails a check that assumed ``cycle_s``; None when it does not.
@@ -173,4 +207,115 @@ class CycleTimeFit:
                 f"{fit[0]:.10g} in the radar profile")
 
 
-__all__ = ["TIME_EPS_S", "CycleTimeFit", "RadarClock"]
+# A radar's crystal keeps within about 100 ppm of its nominal frequency over temperature and
+# age. A cycle further than this from the profile's is not a crystal: the profile describes
+# another radar or another mode (a run fails with `radar_clock: ...`).
+CLOCK_TOLERANCE_PPM = 1000.0
+# A drift smaller than this over the cycles seen is rounding, not a crystal (s).
+DRIFT_FLOOR_S = 1e-5
+
+
+class ClockTrack:
+    """When a radar measures, as a run learns it from the times its cycles reached the bus.
+
+    It starts as the profile's clock and follows the radar's as its cycles arrive
+    (`add`; constant memory):
+
+    - **Cycle.** A crystal is not its profile: 50 ppm is 90 ms after half an hour of 50 ms
+      cycles, nearly two frames. Once the bus tells a cycle off the profile's beyond three
+      standard errors (`CycleTimeFit`), that cycle is taken. A radar on its profile's cycle
+      keeps it exactly.
+    - **Phase.** A radar that runs free (``counter_start: auto``: switched on before the
+      scene, not started by it) measures at any point of the scene's frames. Where the scene's
+      start is known on the bus's clock (``origin_s``: a paced stream, or the simulated radar
+      in process), cycle ``n`` is measured at its bus time less the profile's latency less
+      ``origin_s``, on the fitted line. Otherwise the profile's ``start_offset_s`` holds.
+
+    ``time_of`` and ``first_at`` answer as `RadarClock`'s do, by the current estimate.
+    """
+
+    def __init__(self, profile: RadarClock, origin_s: float | None = None,
+                 free: bool = False) -> None:
+        self.profile = profile
+        self.origin_s = origin_s  # may be set later: a stream knows it once it has started
+        self.free = free
+        self.fit = CycleTimeFit()
+
+    @property
+    def phase_from_bus(self) -> bool:
+        """Whether the phase comes from the bus (a radar running free, the origin known)."""
+        return self.free and self.origin_s is not None
+
+    def add(self, n: IntArray, bus_t_s: FloatArray) -> None:
+        """Take cycles ``n`` and when they reached the bus (NaN: not known, left out)."""
+        self.fit.add(n, bus_t_s)
+
+    @property
+    def cycle_from_bus(self) -> bool:
+        """Whether the bus told a cycle off the profile's.
+
+        Beyond three standard errors, and by more than `DRIFT_FLOOR_S` over the cycles seen
+        (timestamps rounded to a microsecond, or epoch times in a float, are not a drift).
+        """
+        fit = self.fit.cycle_s()
+        if fit is None:
+            return False
+        off = abs(fit[0] - self.profile.cycle_s)
+        return off > 3.0 * fit[1] and off * self.fit.span > DRIFT_FLOOR_S
+
+    @property
+    def cycle_s(self) -> float:
+        """The radar's cycle: the bus's where it tells one off the profile's, else the profile's."""
+        fit = self.fit.cycle_s()
+        return fit[0] if fit is not None and self.cycle_from_bus else self.profile.cycle_s
+
+    @property
+    def start_offset_s(self) -> float:
+        """Scene time of cycle 0 (negative where it was measured before the scene began)."""
+        zero = self.fit.zero_s(self.cycle_s) if self.phase_from_bus else None
+        if zero is None:
+            return self.profile.start_offset_s
+        assert self.origin_s is not None
+        return zero - self.profile.latency_s - self.origin_s
+
+    def time_of(self, n: IntArray) -> FloatArray:
+        """Measurement time (scene time) of cycles ``n``."""
+        return self.start_offset_s + np.asarray(n, dtype=np.float64) * self.cycle_s
+
+    def first_at(self, t_s: float) -> int:
+        """Return the first cycle (>= 0) measured at or after scene time ``t_s``."""
+        return max(0, int(np.ceil((t_s - self.start_offset_s) / self.cycle_s - TIME_EPS_S)))
+
+    @property
+    def start_tolerance_s(self) -> float:
+        """How far before the scene's start a cycle may lie and count as its first.
+
+        Three standard errors of the phase from the bus (the radar may have measured at the
+        start itself); 0 where the phase is the profile's.
+        """
+        if not self.phase_from_bus or self.fit.count < 2:
+            return 0.0
+        return 3.0 * self.fit.zero_error_s(self.cycle_s)
+
+    def off_profile_reason(self) -> str | None:
+        """Why the radar's clock fails the run (its cycle too far from the profile's), or None."""
+        fit = self.fit.cycle_s()
+        if fit is None or not self.cycle_from_bus:
+            return None
+        ppm = (fit[0] / self.profile.cycle_s - 1.0) * 1e6
+        if abs(ppm) - 3e6 * fit[1] / self.profile.cycle_s <= CLOCK_TOLERANCE_PPM:
+            return None
+        return (f"radar_clock: the radar's cycles reached the bus every {fit[0] * 1e3:.6f} ms, "
+                f"its profile says {self.profile.cycle_s * 1e3:.6f} ms ({ppm:+.1f} ppm), more "
+                f"than a crystal's {CLOCK_TOLERANCE_PPM:.0f} ppm: the profile is not this "
+                f"radar's clock (another radar or mode?); the check followed the bus's cycle; "
+                f"set clock.cycle_s: {fit[0]:.10g} in the radar profile")
+
+    def to_dict(self) -> dict[str, float | str]:
+        """Return the clock the check ended with, for the report's ``radar_clock``."""
+        return {"cycle_s": self.cycle_s, "cycle_from": "bus" if self.cycle_from_bus
+                else "profile", "start_offset_s": self.start_offset_s,
+                "start_from": "bus" if self.phase_from_bus and self.fit.count else "profile"}
+
+
+__all__ = ["CLOCK_TOLERANCE_PPM", "TIME_EPS_S", "ClockTrack", "CycleTimeFit", "RadarClock"]
