@@ -220,6 +220,9 @@ class Checker:
     variant, parameters : str, mapping of str to any, optional
         The combination of the scene's ``parametrize`` block that runs (`Scenario.variant`,
         `Scenario.parameters`): the report and every detection row name it.
+    cycle_s : float, optional
+        The radar's cycle: a gap in its counters longer than half their range is told by the
+        cycles' bus times (`sequential_numbers`). Without it, by the counters alone.
     """
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
@@ -228,7 +231,8 @@ class Checker:
                  expected_limits: Sequence[frozenset[str]] | None = None,
                  scene_limits: Mapping[str, str] | None = None,
                  detections_out: TextIO | None = None, variant: str = "",
-                 parameters: Mapping[str, Any] | None = None) -> None:
+                 parameters: Mapping[str, Any] | None = None,
+                 cycle_s: float | None = None) -> None:
         self.scene = scene
         self.variant = variant
         self.parameters = dict(parameters or {})
@@ -251,6 +255,8 @@ class Checker:
         self._cycles: dict[int, Detections] = {}
         self._settled = 0  # frames before this one are done
         self._last_cycle: int | None = None  # the number of the last cycle taken
+        self._last_bus_t = np.nan  # and when it reached the bus
+        self.cycle_s = cycle_s
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
         self._played = np.zeros(n, dtype=np.int64)
@@ -317,11 +323,18 @@ class Checker:
         counters = (counters - self.counter_start) % self.modulus
         # Cycles come in order, give or take a reordered one: each is a step from the one
         # before (the first of all from the first frame not settled). Where a frame is
-        # expected is no guide: a batch holds more cycles than an 8-bit counter counts.
-        anchor = self._settled if self._last_cycle is None else self._last_cycle
-        frames = (unwrap_counter(counters[:1], anchor, self.modulus)
-                  + sequential_numbers(counters, self.modulus))
+        # expected is no guide: a batch holds more cycles than an 8-bit counter counts. A gap
+        # longer than half the counter's range is told by its bus time (`cycle_s`).
+        bus_t = np.array([np.nan if c.bus_t_s is None else c.bus_t_s for c in cycles])
+        if self._last_cycle is None:
+            frames = (unwrap_counter(counters[:1], self._settled, self.modulus)
+                      + sequential_numbers(counters, self.modulus, bus_t, self.cycle_s))
+        else:
+            frames = self._last_cycle + sequential_numbers(
+                np.r_[self._last_cycle % self.modulus, counters], self.modulus,
+                np.r_[self._last_bus_t, bus_t], self.cycle_s)[1:]
         self._last_cycle = int(frames[-1])
+        self._last_bus_t = float(bus_t[-1])
         for frame, cycle in zip(frames.tolist(), cycles, strict=True):  # one per radar cycle
             if frame < self._settled:
                 self.frames["late"] += 1

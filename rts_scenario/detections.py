@@ -109,19 +109,41 @@ def unwrap_counter(counter: NDArray[np.int64], near: NDArray[np.int64] | int,
     return counter + k * modulus
 
 
-def sequential_numbers(counters: NDArray[np.int64], modulus: int) -> NDArray[np.int64]:
+def sequential_numbers(counters: NDArray[np.int64], modulus: int,
+                       bus_t_s: NDArray[np.float64] | None = None,
+                       cycle_s: float | None = None) -> NDArray[np.int64]:
     """Cycle numbers of counters in arrival order, the first 0: each a step from the one before.
 
     A step is taken modulo the counter's wrap and is less than half of it (a step back is a
     reordered cycle). A counter narrower than the cycles in flight (an 8-bit one wraps every
     256 cycles) names its cycle only this way, never by where the cycle is expected.
+
+    With the cycles' bus times (``bus_t_s``, NaN where not known) and the radar's ``cycle_s``,
+    a gap longer than half the counter's range is told by the time it took: the step is the one
+    the counter allows nearest the gap's time in cycles, where it lies within
+    `GAP_TOLERANCE_CYCLES` of it (or 0.2 % of the gap: a crystal off its profile); times that
+    match no such step (stamps out of step with the cycles) leave the counter's.
     """
     counters = np.asarray(counters, dtype=np.int64)
     if counters.size == 0:
         return counters
     step = np.mod(np.diff(counters), modulus)
     step = np.where(step > modulus // 2, step - modulus, step)
+    if bus_t_s is not None and cycle_s is not None and counters.size > 1:
+        elapsed = np.diff(np.asarray(bus_t_s, dtype=np.float64)) / cycle_s
+        long = np.isfinite(elapsed) & (elapsed > modulus // 2 - GAP_TOLERANCE_CYCLES)
+        if long.any():
+            timed = step + np.round((elapsed - step) / modulus).astype(np.int64) * modulus
+            off = np.abs(elapsed - timed)
+            use = long & (off <= np.maximum(GAP_TOLERANCE_CYCLES, 0.002 * elapsed))
+            step = np.where(use, timed, step)
     return np.concatenate([[0], np.cumsum(step)]).astype(np.int64)
 
 
-__all__ = ["QUANTITIES", "Detections", "sequential_numbers", "unwrap_counter"]
+# How far (cycles) a long gap's time may put it from a step its counters allow: the latency's
+# jitter at both ends, and a crystal off its profile over the gap (1000 ppm: 1 cycle in 1000).
+GAP_TOLERANCE_CYCLES = 2.0
+
+
+__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "Detections", "sequential_numbers",
+           "unwrap_counter"]

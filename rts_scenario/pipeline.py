@@ -149,7 +149,7 @@ class Pipeline:
         self.channel = options.can_channel or f"rts-scenario-{id(self):x}-detections"
         try:
             self.mapping = CanMapping.from_file(options.mapping) if options.mapping else None
-            self.receiver = DetectionReceiver(self.mapping)
+            self.receiver = DetectionReceiver(self.mapping, radar.radar_clock.cycle_s)
             listen = self._open_bus()
             self._listeners: list[can.Listener] = [self.receiver]
             if options.bus_log:
@@ -273,7 +273,8 @@ class Pipeline:
             int(counters[0]) if counters.size else 0)  # a measurement: the first is cycle 0
         counters = (counters - start) % self.counter_modulus
         return (unwrap_counter(counters[:1], 0, self.counter_modulus)
-                + sequential_numbers(counters, self.counter_modulus))
+                + sequential_numbers(counters, self.counter_modulus, _bus_times(cycles),
+                                     clock.cycle_s))
 
     def _scene_origin_s(self) -> float | None:
         """Return the scene's time 0 on the bus's clock, where the run knows it.
@@ -300,7 +301,7 @@ class Pipeline:
         if timed and origin is not None:
             counters = np.array([c.cycle for c in timed], dtype=np.int64)
             m = sequential_numbers((counters - counters[0]) % self.counter_modulus,
-                                   self.counter_modulus)
+                                   self.counter_modulus, _bus_times(timed), clock.cycle_s)
             measured = _bus_times(timed) - clock.latency_s - origin
             cycle_s = clock.cycle_s
             if m.size >= 8 and np.ptp(m) > 0:  # the radar's own cycle (a crystal off by 1000
@@ -339,7 +340,8 @@ class Pipeline:
                           counter_start=clock.counter_start, record=record,
                           expected_limits=[t.expected_limits for t in scene.targets],
                           scene_limits=scene_limits(scene), detections_out=detections_out,
-                          variant=scene.variant, parameters=scene.parameters)
+                          variant=scene.variant, parameters=scene.parameters,
+                          cycle_s=clock.cycle_s)
         n_frames = scene.n_frames
         t_all = scene.t_s
         digest = hashlib.sha256() if options.bus_log else None
@@ -409,7 +411,7 @@ class Pipeline:
             # signal's range): the checker never saw them.
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
-        drifted = track.off_profile_reason()
+        drifted = track.off_profile_reason(0.5 * window_s)
         if drifted:
             report.reasons.append(drifted)
             report.passed = False

@@ -278,19 +278,23 @@ def _variant_text(variant: str) -> str:
     return f"variant {variant!r}" if variant else "the scene without parametrize"
 
 
-def read_cycles(log: str | Path, mapping: CanMapping | None) -> tuple[list[_LoggedCycle],
-                                                                      dict[str, int]]:
-    """Decode a log's radar cycles, each with the bus time of its header message."""
+def read_cycles(log: str | Path, mapping: CanMapping | None, cycle_s: float | None = None,
+                ) -> tuple[list[_LoggedCycle], dict[str, int]]:
+    """Decode a log's radar cycles, each with the bus time of its header message.
+
+    ``cycle_s``: the radar's cycle, so that a counter repeated after a long silence is told
+    from a copy (`DetectionReceiver`).
+    """
     stats: dict[str, int] = {}
-    return list(_iter_cycles(log, mapping, stats)), stats
+    return list(_iter_cycles(log, mapping, stats, cycle_s)), stats
 
 
-def _iter_cycles(log: str | Path, mapping: CanMapping | None,
-                 stats: dict[str, int]) -> Iterator[_LoggedCycle]:
+def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, int],
+                 cycle_s: float | None = None) -> Iterator[_LoggedCycle]:
     """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end."""
     check_log_file(log)
     path = Path(log)
-    receiver = DetectionReceiver(mapping)
+    receiver = DetectionReceiver(mapping, cycle_s)
     m = receiver.mapping
     header = m.db.get_message_by_name(m.header)
     header_times: dict[int, deque[float]] = {}
@@ -341,10 +345,11 @@ class _LogIndex:
     bus: dict[str, int]
 
     @classmethod
-    def scan(cls, log: str | Path, mapping: CanMapping | None) -> _LogIndex:
+    def scan(cls, log: str | Path, mapping: CanMapping | None,
+             cycle_s: float | None = None) -> _LogIndex:
         stats: dict[str, int] = {}
         counters, times, counts = array("q"), array("d"), array("l")
-        for c in _iter_cycles(log, mapping, stats):  # one per radar cycle
+        for c in _iter_cycles(log, mapping, stats, cycle_s):  # one per radar cycle
             counters.append(c.detections.cycle)
             times.append(c.bus_t_s)
             counts.append(c.detections.count)
@@ -356,20 +361,21 @@ class _LogIndex:
         return int(self.counters.size)
 
 
-def _cycles_at(log: str | Path, mapping: CanMapping | None,
-               positions: IntArray) -> list[Detections]:
+def _cycles_at(log: str | Path, mapping: CanMapping | None, positions: IntArray,
+               cycle_s: float | None = None) -> list[Detections]:
     """Read the log again for the cycles at ``positions`` (increasing)."""
     want = set(positions.tolist())
-    return [c.detections for i, c in enumerate(_iter_cycles(log, mapping, {})) if i in want]
+    return [c.detections for i, c in enumerate(_iter_cycles(log, mapping, {}, cycle_s))
+            if i in want]
 
 
 class _ReadAhead:
     """Cycles of a log by their position, read once, in order, as far as asked."""
 
     def __init__(self, log: str | Path, mapping: CanMapping | None,
-                 kept: NDArray[np.bool_]) -> None:
+                 kept: NDArray[np.bool_], cycle_s: float | None = None) -> None:
         self._log = log
-        self._cycles = enumerate(_iter_cycles(log, mapping, {}))
+        self._cycles = enumerate(_iter_cycles(log, mapping, {}, cycle_s))
         self._kept = kept  # positions ever asked for: the others are not held
         self._held: dict[int, Detections] = {}
         self._read = -1
@@ -641,14 +647,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         mapping = sidecar["mapping"]
     can_mapping = CanMapping.from_file(mapping) if mapping else None
     method = method or (sidecar or {}).get("method") or "exact"
-    index = _LogIndex.scan(log, can_mapping)
+    # The profile's cycle: a radar silent for half its counter's range is told by its bus time.
+    index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s)
     bus = index.bus
     receiver_mapping = (can_mapping or CanMapping.builtin())
     header = receiver_mapping.db.get_message_by_name(receiver_mapping.header)
     modulus = 1 << int(header.get_signal_by_name(receiver_mapping.counter).length)
     profile_clock = scene.radar.radar_clock
     counters = index.counters
-    numbers = sequential_numbers(counters, modulus)
+    numbers = sequential_numbers(counters, modulus, index.bus_t_s, profile_clock.cycle_s)
     if sidecar is not None:
         c = sidecar["clock"]
         clock = RadarClock(cycle_s=float(c["cycle_s"]),
@@ -692,7 +699,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         bus_t = index.bus_t_s
         # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
         chosen = _alignment_cycles(index)
-        dets = _cycles_at(log, can_mapping, chosen)
+        dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s)
         # Detections of targets are what the data align by: an empty bench has none to match.
         aligned_by_data = bool(scene.targets) and any(d.count for d in dets)
         if time_offset_s is None and not scene.targets:
@@ -740,12 +747,12 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                               profile_clock.cycle_s)
         alignment.cycle_s = clock.cycle_s
     alignment.cycles_in_log = len(index)
-    result = _check(scene, log, can_mapping, counters, clock, modulus, method, batch_frames,
-                    bus, alignment, sidecar)
+    result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
+                    batch_frames, bus, alignment, sidecar)
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)
-    off_profile = track.off_profile_reason()
+    off_profile = track.off_profile_reason(0.5 * ambiguity_window_s(scene.radar, scene.rig))
     if off_profile:
         result.reasons.append(off_profile)
         result.passed = False
@@ -804,23 +811,23 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
 
 
 def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counters: IntArray,
-           clock: RadarClock,
+           bus_t_s: FloatArray, clock: RadarClock,
            modulus: int, method: str, batch_frames: int | None, bus: dict[str, int],
            alignment: Alignment, sidecar: dict[str, Any] | None) -> Report:
-    """Check the log's cycles (``counters`` in log order) batch of frames by batch."""
+    """Check the log's cycles (``counters`` in log order, their bus times) batch by batch."""
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
                       expected_limits=[t.expected_limits for t in scene.targets],
                       scene_limits=scene_limits(scene), variant=scene.variant,
-                      parameters=scene.parameters)
+                      parameters=scene.parameters, cycle_s=clock.cycle_s)
     total = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
     # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
     first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
                 - modulus // 2) if counters.size else 0
-    rel = sequential_numbers(counters, modulus) + first
+    rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
-    logged = _ReadAhead(log, mapping, inside)
+    logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s)
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]

@@ -189,6 +189,25 @@ def test_a_radar_1_ppm_off_over_an_hour_is_told_the_cycle_to_set():
     assert fit.drift_reason(advised, 0.00288) is None
 
 
+def test_bus_times_number_a_gap_an_8_bit_counter_cannot():
+    from rts_scenario.detections import sequential_numbers
+
+    rng = np.random.default_rng(4)
+    n = np.concatenate([np.arange(100), np.arange(250, 600), np.arange(727, 800)])
+    # Latency jitter of +-4 ms at both ends of each gap, a crystal 1000 ppm fast.
+    bus_t = 1.7e9 + 0.04995 * n + rng.uniform(-0.004, 0.004, n.size)
+    by_time = sequential_numbers(n % 256, 256, bus_t, 0.05)
+    np.testing.assert_array_equal(by_time, n)
+    # Without the times, a gap of 151 reads as 105 back (the one of 128 stays 128).
+    by_counter = sequential_numbers(n % 256, 256)
+    assert by_counter[100] == 99 - 105 and by_counter[450] - by_counter[449] == 128
+    # A time that matches no step the counter allows (stamps 140 cycles apart, counters 60)
+    # is not a gap the counter hid: the counter's step stands.
+    stamps = 1.7e9 + 0.05 * np.array([0, 1, 141, 142])
+    np.testing.assert_array_equal(sequential_numbers(np.array([0, 1, 61, 62]), 256, stamps,
+                                                     0.05), [0, 1, 61, 62])
+
+
 def test_cycles_numbered_off_their_bus_times_tell_no_cycle():
     from rts_scenario.radar.clock import CycleTimeFit
 
@@ -297,7 +316,8 @@ def test_the_clock_track_keeps_the_profile_until_the_bus_tells_otherwise():
     track = ClockTrack(profile, origin, free=False)
     track.add(n, on_profile)
     assert track.cycle_s == 0.05 and track.start_offset_s == 0.01
-    assert track.to_dict()["cycle_from"] == "profile" and track.off_profile_reason() is None
+    assert track.to_dict()["cycle_from"] == "profile"
+    assert track.off_profile_reason(0.003) is None
     # 100 ppm off, 7 ms into the frames, running free: both from the bus.
     true_t = 0.007 + 0.050005 * n
     track = ClockTrack(profile, origin, free=True)
@@ -306,7 +326,12 @@ def test_the_clock_track_keeps_the_profile_until_the_bus_tells_otherwise():
     assert track.cycle_s == pytest.approx(0.050005, rel=2e-6)
     assert np.abs(track.time_of(n) - true_t).max() < 5e-4
     assert track.first_at(0.0) == 0 and track.first_at(0.008) == 1
-    assert track.off_profile_reason() is None  # 100 ppm: a crystal
+    assert track.off_profile_reason(0.003) is None  # 100 ppm: a crystal
+    # A latency that rose by 20 ms halfway (a loaded bus) tilts the line: not followed.
+    held_up = origin + true_t + 0.13 + rng.uniform(-0.004, 0.004, n.size) + 0.02 * (n > 1000)
+    track = ClockTrack(profile, origin, free=False)
+    track.add(n, held_up)
+    assert track.cycle_s == 0.05 and track.off_profile_reason(0.003) is None
     # Without the scene's start on the bus's clock, the phase stays the profile's.
     blind = ClockTrack(profile, None, free=True)
     blind.add(n, origin + true_t + 0.13)

@@ -477,6 +477,46 @@ def test_an_8_bit_counter_names_every_cycle_live_and_in_the_re_checks(tmp_path):
         assert report.passed, report.reasons
 
 
+def eight_bit_mapping(tmp_path):
+    """rts-scenario's own messages with an 8-bit cycle counter (a mapping file's path)."""
+    from importlib import resources
+    dbc = resources.files("rts_scenario").joinpath("data/can/rts_detections.dbc").read_text()
+    wide = 'SG_ FrameCounter : 0|16@1+ (1,0) [0|65535] ""'
+    (tmp_path / "c8.dbc").write_text(dbc.replace(wide, 'SG_ FrameCounter : 0|8@1+ (1,0) '
+                                                       '[0|255] ""'))
+    mapping = resources.files("rts_scenario").joinpath(
+        "data/can/rts_detections.mapping.yaml").read_text()
+    (tmp_path / "c8.mapping.yaml").write_text(mapping.replace("rts_detections.dbc", "c8.dbc"))
+    return str(tmp_path / "c8.mapping.yaml")
+
+
+def test_a_gap_longer_than_half_an_8_bit_counter_is_told_by_bus_time(tmp_path):
+    # 150 cycles lost (7.5 s): an 8-bit counter reads the gap as 106 cycles back. Numbered by
+    # the counter alone, the 290 cycles after it landed 256 early, on cycles already settled
+    # (late) or on others' (repeated), and 256 cycles at the scene's end were missing. The bus
+    # times say how long the gap took: exactly the lost cycles are missing, live and re-checked.
+    scene = load_scenario(CUT_IN, {**QUIET, "duration_s": 30.0,
+                                   "targets.0.motion.speed_mps": 22.0})
+    log = tmp_path / "gap.blf"
+    options = RunOptions(mapping=eight_bit_mapping(tmp_path), bus_log=str(log),
+                         batch_frames=200)
+    lost = range(160, 310)
+    with Pipeline.for_scene(scene, options) as pipeline:
+        sink = pipeline.output._sink
+        pipeline.output._sink = lambda cycles: sink([c for c in cycles if c.cycle not in lost])
+        live = pipeline.run(scene).report
+    copy = shutil.copy(log, tmp_path / "copy.blf")
+    for report in (live, check_log(scene, log, batch_frames=200).report,
+                   check_log(scene, copy, mapping=options.mapping, time_offset_s=None,
+                             batch_frames=200).report):
+        assert report.frames["total"] == 600
+        assert report.frames["checked"] == 450 and report.frames["missing"] == 150
+        assert (report.frames["late"], report.frames["repeated"],
+                report.frames["after_scene"]) == (0, 0, 0)
+        assert not report.passed
+        assert report.errors["range_m"].max < 0.01  # every cycle against its own frame
+
+
 def test_a_re_check_holds_a_few_cycles_at_a_time_not_the_log(tmp_path, monkeypatch):
     # The log is read ahead only as far as the batch being checked needs: memory does not grow
     # with its length (the first pass keeps 24 bytes per cycle).

@@ -26,7 +26,7 @@ import cantools
 import numpy as np
 from cantools.database.utils import create_encode_decode_formats
 
-from ..detections import Detections
+from ..detections import GAP_TOLERANCE_CYCLES, Detections
 from ..errors import CheckError, OutputError
 from .mapping import CanMapping, PartKey, checksum_byte, multiplexer, page_signals
 
@@ -509,10 +509,16 @@ class DetectionReceiver(can.Listener):
 
     Finished cycles queue up until `pop` takes them (`flush` also hands on the ones still
     open, as incomplete). Only `OPEN_CYCLES` cycles are assembled at a time.
+
+    With the radar's ``cycle_s``, a header that reaches the bus more than half the counter's
+    range of cycles after the one before (less `GAP_TOLERANCE_CYCLES`) starts afresh: every
+    counter remembered is from before that silence, so one that comes again is a new cycle,
+    not a copy (an 8-bit counter repeats after 12.8 s of 50 ms cycles).
     """
 
-    def __init__(self, mapping: CanMapping | None = None) -> None:
+    def __init__(self, mapping: CanMapping | None = None, cycle_s: float | None = None) -> None:
         self.mapping = mapping or CanMapping.builtin()
+        self.cycle_s = cycle_s
         db = self.mapping.db
         self._header = db.get_message_by_name(self.mapping.header)
         m = self.mapping
@@ -583,6 +589,7 @@ class DetectionReceiver(can.Listener):
         self._content: OrderedDict[int, _Assembly] = OrderedDict()
         self._current: _Assembly | None = None
         self._latest = -1
+        self._last_header_t = np.nan  # when the last header reached the bus
         # Detections that came before their cycle's header, by counter (low 8 bits).
         self._waiting: OrderedDict[int, list[tuple[PartKey, dict[str, float]]]] = OrderedDict()
 
@@ -648,6 +655,11 @@ class DetectionReceiver(can.Listener):
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
             for name, value in raw.items()}
         counter = int(values[m.counter])
+        if bus_t_s is not None:
+            if self.cycle_s is not None and bus_t_s - self._last_header_t > (
+                    self._counter_modulus // 2 - GAP_TOLERANCE_CYCLES) * self.cycle_s:
+                self._after_silence()
+            self._last_header_t = bus_t_s
         known = self._open.get(counter) or self._content.get(counter)
         if known is not None or counter in self._recent:
             # The same header again is a copy; another one with this counter is a conflict
@@ -750,6 +762,18 @@ class DetectionReceiver(can.Listener):
             self.stats.duplicates += 1
         else:
             self.stats.conflicts += 1
+
+    def _after_silence(self) -> None:
+        """Hand on the open cycles and forget every counter: the bus was silent too long.
+
+        Detections waiting for their header stay: they may have come just before it.
+        """
+        while self._open:
+            self._finish(next(iter(self._open)))
+        self._recent.clear()
+        self._content.clear()
+        self._current = None
+        self._latest = -1
 
     def _finish(self, counter: int) -> None:
         """Hand on an open cycle as `Detections`."""

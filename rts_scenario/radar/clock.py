@@ -140,6 +140,21 @@ class CycleTimeFit:
         jumped, or a gap longer than half of what a narrow counter counts), and a crystal off
         its profile leaves them on a straight line.
         """
+        line = self._line()
+        if line is None:
+            return None
+        slope, scatter, var_x = line
+        if scatter > 0.25 * abs(slope):
+            return None
+        return float(slope), float(scatter / np.sqrt(var_x))
+
+    def scatter_s(self) -> float | None:
+        """Return the cycles' scatter about the fitted line (s); None before three cycles."""
+        line = self._line()
+        return None if line is None else float(line[1])
+
+    def _line(self) -> tuple[float, float, float] | None:
+        """Slope, scatter about the line and the numbers' sum of squares; None before 3."""
         k = self.count
         sx, sy, sxx, sxy, syy = self._sums
         var_x = sxx - sx * sx / k if k else 0.0
@@ -147,10 +162,7 @@ class CycleTimeFit:
             return None
         slope = (sxy - sx * sy / k) / var_x
         residual = max(syy - sy * sy / k - slope * (sxy - sx * sy / k), 0.0)
-        scatter = np.sqrt(residual / (k - 2))
-        if scatter > 0.25 * abs(slope):
-            return None
-        return float(slope), float(scatter / np.sqrt(var_x))
+        return slope, float(np.sqrt(residual / (k - 2))), var_x
 
     @property
     def span(self) -> int:
@@ -213,6 +225,9 @@ class CycleTimeFit:
 CLOCK_TOLERANCE_PPM = 1000.0
 # A drift smaller than this over the cycles seen is rounding, not a crystal (s).
 DRIFT_FLOOR_S = 1e-5
+# Spread of bus times about a radar's line that its profile's jitter need not explain (s): the
+# stamping, a thread's wake-up.
+STAMP_NOISE_S = 1e-3
 
 
 class ClockTrack:
@@ -255,13 +270,20 @@ class ClockTrack:
         """Whether the bus told a cycle off the profile's.
 
         Beyond three standard errors, and by more than `DRIFT_FLOOR_S` over the cycles seen
-        (timestamps rounded to a microsecond, or epoch times in a float, are not a drift).
+        (timestamps rounded to a microsecond, or epoch times in a float, are not a drift);
+        and only where the cycles keep to the line as the profile's jitter lets them (1.5
+        times its spread, at least `STAMP_NOISE_S`): a latency that changed on the way
+        (messages held up by a loaded bus or machine from some cycle on) tilts the line
+        without the radar's clock running off, and is not followed.
         """
         fit = self.fit.cycle_s()
-        if fit is None:
+        scatter = self.fit.scatter_s()
+        if fit is None or scatter is None:
             return False
+        spread = max(self.profile.jitter_s / np.sqrt(3.0), STAMP_NOISE_S)
         off = abs(fit[0] - self.profile.cycle_s)
-        return off > 3.0 * fit[1] and off * self.fit.span > DRIFT_FLOOR_S
+        return (off > 3.0 * fit[1] and off * self.fit.span > DRIFT_FLOOR_S
+                and scatter <= 1.5 * spread)
 
     @property
     def cycle_s(self) -> float:
@@ -297,13 +319,19 @@ class ClockTrack:
             return 0.0
         return 3.0 * self.fit.zero_error_s(self.cycle_s)
 
-    def off_profile_reason(self) -> str | None:
-        """Why the radar's clock fails the run (its cycle too far from the profile's), or None."""
+    def off_profile_reason(self, tolerance_s: float) -> str | None:
+        """Why the radar's clock fails the run (its cycle too far from the profile's), or None.
+
+        Beyond `CLOCK_TOLERANCE_PPM` (and three standard errors), and by more than
+        ``tolerance_s`` over the cycles seen: on a short run a latency that changed on the way
+        tilts the line as much.
+        """
         fit = self.fit.cycle_s()
         if fit is None or not self.cycle_from_bus:
             return None
         ppm = (fit[0] / self.profile.cycle_s - 1.0) * 1e6
-        if abs(ppm) - 3e6 * fit[1] / self.profile.cycle_s <= CLOCK_TOLERANCE_PPM:
+        if (abs(ppm) - 3e6 * fit[1] / self.profile.cycle_s <= CLOCK_TOLERANCE_PPM
+                or abs(fit[0] - self.profile.cycle_s) * self.fit.span <= tolerance_s):
             return None
         return (f"radar_clock: the radar's cycles reached the bus every {fit[0] * 1e3:.6f} ms, "
                 f"its profile says {self.profile.cycle_s * 1e3:.6f} ms ({ppm:+.1f} ppm), more "
