@@ -49,7 +49,7 @@ from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,11 +65,38 @@ from ..rig import Rig
 from .angle import make_estimator
 from .profile import RadarProfile
 
-if TYPE_CHECKING:  # the radar reads a schedule's arrays; the schedule is built on its profile
-    from ..schedule import Schedule
-
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
+
+
+class PlayedFrames(Protocol):
+    """What the radar sees of the RTS: the channel settings it played, frame by frame.
+
+    `rts_scenario.schedule.Schedule` is one (its arrays are frames x targets x channels). The
+    radar reads only these, never how they were computed: the honest bench shares no code with
+    the solver.
+    """
+
+    @property
+    def n_frames(self) -> int: ...  # noqa: D102
+    @property
+    def frame_index(self) -> NDArray[np.int64]: ...  # noqa: D102
+    @property
+    def t_s(self) -> FloatArray: ...  # noqa: D102
+    @property
+    def active(self) -> NDArray[np.bool_]: ...  # noqa: D102
+    @property
+    def fe(self) -> NDArray[np.int64]: ...  # noqa: D102
+    @property
+    def attenuation_db(self) -> FloatArray: ...  # noqa: D102
+    @property
+    def delay_s(self) -> FloatArray: ...  # noqa: D102
+    @property
+    def doppler_hz(self) -> FloatArray: ...  # noqa: D102
+    @property
+    def phase_rad(self) -> FloatArray: ...  # noqa: D102
+    @property
+    def status(self) -> NDArray[np.uint16]: ...  # noqa: D102
 
 def cube_every_frame(radar: SimulatedRadar, echoes: Echoes, n_frames: int) -> NDArray[np.bool_]:
     """Fidelity ``adc``: every frame goes through the beat-signal cube."""
@@ -233,7 +260,7 @@ class SimulatedRadar:
 
     # -- from schedule to echoes ---------------------------------------------------------------
 
-    def echoes(self, schedule: Schedule, frames: slice | None = None) -> Echoes:
+    def echoes(self, schedule: PlayedFrames, frames: slice | None = None) -> Echoes:
         """Return the echoes the radar receives in ``schedule`` (all frames, or a slice)."""
         assert self.errors is not None
         err = self.errors
@@ -318,7 +345,7 @@ class SimulatedRadar:
 
     # -- the radar -----------------------------------------------------------------------------
 
-    def process(self, schedule: Schedule) -> list[Detections]:
+    def process(self, schedule: PlayedFrames) -> list[Detections]:
         """Return the detections of every frame of ``schedule``, in frame order.
 
         Frames that need the ADC cube are processed one by one; all the others go through the
@@ -462,7 +489,7 @@ class SimulatedRadar:
         # Without noise the floor is the echoes' sidelobes: keep it above numerical zero.
         return np.maximum(floor, power.max(initial=0.0) * 1e-12 + 1e-300)
 
-    def _detect_analytic(self, echoes: Echoes, schedule: Schedule,
+    def _detect_analytic(self, echoes: Echoes, schedule: PlayedFrames,
                          frames: NDArray[np.bool_]) -> list[Detections | None]:
         """Detect the selected frames with the superposition model (None for the others)."""
         p = self.profile
