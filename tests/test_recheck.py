@@ -94,6 +94,23 @@ def test_a_re_check_judges_cycles_by_the_send_times_of_the_run(tmp_path):
         check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
 
 
+def test_a_re_check_judges_cycles_against_the_frames_of_a_run_whose_frames_went_out_late_by_ns(
+        tmp_path):
+    # A paced UDP sender puts every frame out some tens of nanoseconds after its time: a radar
+    # in step with the frames measured each cycle just before the frame change, so the run
+    # judged it against the frame before. The sidecar's send times must keep that order.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "udp.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.sent_t_s = lambda batch: batch.t_s + 40e-9
+        live = pipeline.run(scene).report
+    again = check_log(scene, log).report
+    assert again.frames == live.frames and again.reasons == live.reasons
+    for q, stats in live.errors.items():
+        assert again.errors[q].rms == pytest.approx(stats.rms, abs=1e-9), q
+        assert again.errors[q].max == pytest.approx(stats.max, abs=1e-9), q
+
+
 def write_radar(folder: Path, **clock) -> str:
     data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
                           .read_text())
