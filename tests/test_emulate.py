@@ -109,6 +109,41 @@ def test_a_recorded_rehearsal_re_checks_to_the_live_counts(tmp_path):
     assert again.report.passed == live.passed
 
 
+def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
+    # Every frame but the first reaches the RTS 15 ms after its time (transport, the RTS's
+    # own update; beyond the chirp time): a cycle measured at a frame's time still shows the
+    # frame before, the FE surveyed before. The survey measures each FE where the RTS holds it.
+    from rts_scenario import Rig
+    from rts_scenario.outputs.udp import HEADER
+    from rts_scenario.scenario.model import RadarOptions
+    from rts_scenario.survey import survey
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(rig, radar, can_channel=channel, noise=False).start()
+    try:
+        host, port = emulator.address
+        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
+                             can_channel=channel)
+        with Pipeline(rig, radar, options) as bench:
+            transmit = bench.output.transmit
+
+            def late(datagram: bytes) -> None:
+                if HEADER.unpack_from(datagram)[4] > 0:  # the frame's index
+                    time.sleep(0.015)
+                transmit(datagram)
+
+            bench.output.send = late
+            seen = survey(rig, radar, bench.play)
+    finally:
+        emulator.stop()
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic",
+                                                         noise=False)) as desk:
+        reference = survey(rig, radar, desk.play)
+    np.testing.assert_allclose(seen.seen_az_deg, reference.seen_az_deg, atol=0.006)
+    np.testing.assert_allclose(seen.seen_el_deg, reference.seen_el_deg, atol=0.006)
+
+
 def test_a_radar_whose_counter_start_is_unknown_is_numbered_by_bus_time(tmp_path):
     # The scene's profile says counter_start: auto; the radar on the bench counts from 4242.
     scene = bench_scene(tmp_path, counter_start="auto")
