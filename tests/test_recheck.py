@@ -314,6 +314,25 @@ def test_a_log_of_another_scene_or_a_time_offset_beside_the_sidecar_is_refused(r
     assert "the log's sidecar aligns it by the radar's counters" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("send_times", [True, False], ids=["sidecar", "older-sidecar"])
+def test_a_scene_of_other_frames_than_the_recording_is_refused(recorded, tmp_path, capsys,
+                                                               send_times):
+    # The scene file was edited since the recording (here 20 s -> 15 s): it is not the scene
+    # that was played, with or without the send times in the sidecar.
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    if not send_times:
+        del data["send_lateness"]
+    log = _copy(recorded, tmp_path, json.dumps(data))
+    text = (ROOT / "scenarios" / "highway_following.scenario.yaml").read_text()
+    shorter = tmp_path / "highway_following.scenario.yaml"
+    shorter.write_text(re.sub(r"(?m)^duration_s: .*$", "duration_s: 15.0", text))
+    assert cli.main(["check", str(shorter), "--log", str(log)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"error: {log}.rts.json: frames: the recording played {data['frames']} "
+                   f"frames, the scene {shorter} has 300: not the scene file that was "
+                   f"recorded (edited since?)")
+
+
 def test_a_re_check_fails_on_the_playback_the_run_failed_on(recorded, tmp_path, capsys):
     # The run's playback (frames the RTS reported lost, frames sent late) is in the sidecar:
     # the re-check of its log fails on it as the run would have.
