@@ -392,7 +392,8 @@ class Checker:
         ok = status == _OK
         use_other = np.zeros(n_frames, dtype=bool)
         if block.other is not None and block.ambiguous is not None:
-            self.frames["ambiguous"] += int(block.ambiguous.sum())
+            # Counted where the cycle came back: of a missing one, nothing was measured.
+            self.frames["ambiguous"] += int((block.ambiguous & ok).sum())
             # Only cycles with a target checkable in both frames and not detected in this one
             # can be judged better against the frame across the change: those alone are judged
             # again.

@@ -305,4 +305,36 @@ def _describe(error: jsonschema.ValidationError) -> str:
     if kind in ("minItems", "maxItems"):
         bound = "at least" if kind == "minItems" else "at most"
         return f"must have {bound} {schema_value} items, got {len(value)}"
+    if kind in ("oneOf", "anyOf"):
+        return f"got {value!r}; allowed: {' or '.join(_allowed(s) for s in schema_value)}"
     return f"{error.message}"
+
+
+_ARTICLES = {"integer": "an integer", "number": "a number", "string": "a string",
+             "boolean": "true or false", "array": "a list", "object": "a mapping",
+             "null": "nothing"}
+
+
+def _allowed(schema: Any) -> str:
+    """One alternative of a ``oneOf``/``anyOf`` in words: ``an integer >= 0``, ``'auto'``."""
+    if not isinstance(schema, dict):
+        return repr(schema)
+    if "enum" in schema:
+        return " or ".join(map(repr, schema["enum"]))
+    if "const" in schema:
+        return repr(schema["const"])
+    kind = schema.get("type")
+    words = (_ARTICLES.get(kind, f"a {kind}") if isinstance(kind, str)
+             else "a value" if kind is None else " or ".join(_ARTICLES.get(k, k) for k in kind))
+    if "minimum" in schema and "maximum" in schema:
+        words += f" within {schema['minimum']}..{schema['maximum']}"
+    else:
+        words += "".join(f" {op} {schema[key]}" for key, op in (
+            ("minimum", ">="), ("exclusiveMinimum", ">"), ("maximum", "<="),
+            ("exclusiveMaximum", "<")) if key in schema)
+    if "minItems" in schema:
+        words += f" of at least {schema['minItems']} items"
+    if kind == "object" and schema.get("properties"):
+        keys = sorted(schema["properties"])
+        words += f" of {', '.join(keys)}"
+    return words

@@ -252,14 +252,26 @@ class Pipeline:
         A frame whose cycle did not come back, or came back damaged, gets an empty cycle marked
         incomplete.
         """
+        assert self.output is not None
         self.receiver.reset()
-        # Each frame is held for exactly one cycle of the radar's clock.
+        # Each frame is held for one cycle of the radar's clock and measured in it, where the
+        # output applies frames exactly at their times. An RTS applies a frame after its time
+        # (transport, its own update): a cycle measured as the frame is due may still show the
+        # frame before, so there each frame is held for two cycles and measured in the second,
+        # a whole cycle after it was due. Frame numbers keep increasing (an RTS applies only a
+        # frame newer than the last).
         clock = self.radar.radar_clock
+        hold = 1 if self.output.applies_frames_on_time else 2
         n = np.arange(schedule.n_frames, dtype=np.int64)
-        self.write(replace(schedule, t_s=clock.time_of(n)))
+        played = schedule if hold == 1 else replace(
+            schedule.take(np.repeat(n, hold)),
+            frame_index=(np.repeat(schedule.frame_index, hold) * hold
+                         + np.tile(np.arange(hold), schedule.n_frames)))
+        self.write(replace(played, t_s=clock.time_of(np.arange(played.n_frames))))
         cycles = [c for c in self.receive(final=True) if c.complete]
         found = dict(zip(self._cycle_numbers(cycles).tolist(), cycles, strict=True))
-        return [found.get(int(i), Detections.empty(int(f), float(t), (), complete=False))
+        return [found.get(int(i) * hold + hold - 1,
+                          Detections.empty(int(f), float(t), (), complete=False))
                 for i, f, t in zip(n, schedule.frame_index, schedule.t_s, strict=True)]
 
     def _cycle_numbers(self, cycles: list[Detections]) -> np.ndarray:

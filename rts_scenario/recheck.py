@@ -686,6 +686,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if sidecar.get("scene", scene.name) != scene.name:
             raise LogError(f"--log {log}: recorded for scene {sidecar.get('scene')!r} (its "
                            f"sidecar), not {scene.name!r}: check it against that scene's file")
+        if sidecar.get("frames", scene.n_frames) != scene.n_frames:
+            raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: frames: the recording played "
+                           f"{sidecar['frames']} frames, the scene {scene.file} has "
+                           f"{scene.n_frames}: not the scene file that was recorded (edited "
+                           f"since?)")
         if time_offset_s is not None:
             raise LogError(f"--time-offset-s {time_offset_s!r}: the log's sidecar aligns it by "
                            f"the radar's counters, so a time offset would not be used; leave "
@@ -833,7 +838,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     rel_sorted = rel[order]
     # Frames as the run sent them (the sidecar's send times), else as applied at their times:
     # the ambiguity window around each change covers the transport, as it does live.
-    late = _send_lateness(scene, sidecar)
+    late = _send_lateness(scene, sidecar, log)
     truths = CycleTruth(checker, scene, clock, ambiguity_window_s(scene.radar, scene.rig))
 
     def check_cycles(n: IntArray) -> None:
@@ -849,6 +854,9 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         check_cycles(truths.add(frames, schedule.status, sent))
     check_cycles(truths.finish())
     checker.settle()
+    # Cycles measured after the scene's end (a radar keeps measuring what the RTS holds) are
+    # counted as the run counted them; they were never handed to the checker.
+    checker.frames["after_scene"] += int((rel >= total).sum())
     if sidecar is not None and sidecar.get("status_sha256"):
         alignment.schedule_matches_recording = digest.hexdigest() == sidecar["status_sha256"]
         if not alignment.schedule_matches_recording:
@@ -872,7 +880,8 @@ def _alignment_cycles(index: _LogIndex) -> IntArray:
     return seen[np.unique(np.linspace(0, seen.size - 1, ALIGN_CYCLES).astype(np.int64))]
 
 
-def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None) -> FloatArray | None:
+def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None,
+                   log: str | Path) -> FloatArray | None:
     """Each frame's lateness as the run's sidecar recorded it; None without (nominal times)."""
     record = (sidecar or {}).get("send_lateness")
     if record is None:
@@ -880,8 +889,8 @@ def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None) -> FloatArra
     try:
         return unpack_send_lateness(record, scene.n_frames)
     except ValueError as exc:
-        raise LogError(f"sidecar send_lateness: {exc} (not what `rts-scenario run --record` "
-                       f"wrote for this scene)") from None
+        raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: send_lateness: {exc} (not what "
+                       f"`rts-scenario run --record` wrote for this scene)") from None
 
 
 __all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "OffsetEstimate", "RecheckResult",

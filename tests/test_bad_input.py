@@ -240,6 +240,21 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
      2, r"^--output 'simulated-radar:x': simulated-radar takes no argument"),
     ("run-can-interface", ["run", "{scene}", "--can-interface", "carrier-pigeon"], 2,
      r"^--can-interface 'carrier-pigeon': unknown python-can interface; valid: .*virtual"),
+    # udp_multicast's channel is the multicast group both processes join: without it (a
+    # private channel name) python-can fails deep down with "Name or service not known".
+    ("run-udp-multicast-no-channel", ["run", "{scene}", "--can-interface", "udp_multicast"], 2,
+     r"^--can-interface udp_multicast needs --can-channel: a multicast group address both "
+     r"processes join \(e\.g\. 239\.74\.163\.2, "),
+    ("run-udp-multicast-name", ["run", "{scene}", "--can-interface", "udp_multicast",
+                                "--can-channel", "can0"], 2,
+     r"^--can-channel 'can0': udp_multicast needs a multicast group address"),
+    ("emulate-udp-multicast-no-channel", ["emulate", "--listen", "udp://127.0.0.1:0", "--rig",
+                                          "wide-3x5", "--radar", "awr1843boost",
+                                          "--can-interface", "udp_multicast"], 2,
+     r"^--can-interface udp_multicast needs --can-channel: a multicast group address"),
+    ("survey-udp-multicast-unicast", ["survey", "kit-table1", "--can-interface",
+                                      "udp_multicast", "--can-channel", "127.0.0.1"], 2,
+     r"^--can-channel '127.0.0.1': udp_multicast needs a multicast group address"),
     ("run-mapping-missing", ["run", "{scene}", "--mapping", "{tmp}/none.mapping.yaml"], 2,
      r"^--mapping {tmp}/none.mapping.yaml: cannot read file"),
     ("run-missing-scene", ["run", "{tmp}/none.scenario.yaml"], 2,

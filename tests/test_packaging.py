@@ -1,5 +1,8 @@
 """The package's metadata agrees with itself."""
 
+import os
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -20,3 +23,12 @@ def test_the_cli_s_methods_are_the_schedule_s():
     from rts_scenario.solver.estimator_aware import SCHEDULE_METHODS
 
     assert METHODS == SCHEDULE_METHODS
+
+
+def test_the_cli_runs_as_a_module():
+    # `python -m rts_scenario.cli` where the console script is not on PATH.
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-m", "rts_scenario.cli", "--version"],
+                          capture_output=True, text=True, env=env, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == f"rts-scenario {rts_scenario.__version__}"

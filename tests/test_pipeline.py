@@ -109,3 +109,18 @@ def test_detections_csv_has_every_detection_and_its_target():
     assert record["scene"] == "cut-in" and record["cycle"] == "0" and record["t_s"] == "0.0"
     assert record["target"] == "cutting-car" and float(record["range_m"]) > 0
     assert [int(r[1]) for r in rows] == sorted(int(r[1]) for r in rows)
+
+
+def test_cycles_at_a_frame_change_are_counted_only_where_they_came_back():
+    # Every cycle of the built-in radar falls on a frame change (cycle = frame period); half
+    # of them never reach the bus. Only those that came back were measured at a change as far
+    # as the report can tell, and those are what its `frame changes` line counts.
+    scene = load_scenario(CUT_IN, {"radar.noise": False, "radar.fidelity": "analytic",
+                                   "duration_s": 4.0})
+    with Pipeline.for_scene(scene) as pipeline:
+        sink = pipeline.output._sink
+        pipeline.output._sink = lambda cycles: sink([c for c in cycles if c.cycle % 2])
+        report = pipeline.run(scene).report
+    assert report.frames["missing"] == 40 and report.frames["received"] == 40
+    # All received cycles but none of the missing ones (cycle 0 is missing: no change before).
+    assert report.frames["ambiguous"] == 40

@@ -1,6 +1,7 @@
 """The radar on its own clock: cycles, counters, the RTS's hold, time-aligned checking."""
 
 import dataclasses
+import re
 import shutil
 from pathlib import Path
 
@@ -70,6 +71,19 @@ def test_profile_clock_key_and_its_located_errors(tmp_path):
     bad = tmp_path / write_radar(tmp_path, cycle_s=0.05, latency_s=0.01, jitter_s=0.5)
     with pytest.raises(RtsError, match=r"own.radar.yaml:\d+:\d+: clock.jitter_s"):
         RadarProfile.from_file(bad)
+
+
+@pytest.mark.parametrize(("value", "shown"), [("sometimes", "'sometimes'"), (1.5, "1.5"),
+                                            ([0], "[0]")])
+def test_a_bad_counter_start_names_what_is_allowed(tmp_path, value, shown):
+    bad = tmp_path / write_radar(tmp_path, cycle_s=0.05, counter_start=value)
+    with pytest.raises(RtsError, match=r"own.radar.yaml:\d+:\d+: clock.counter_start: got "
+                                       + re.escape(shown) + r"; allowed: an integer >= 0 or "
+                                       r"'auto'$"):
+        RadarProfile.from_file(bad)
+    negative = tmp_path / write_radar(tmp_path, cycle_s=0.05, counter_start=-3)
+    with pytest.raises(RtsError, match=r"clock.counter_start: must be >= 0, got -3$"):
+        RadarProfile.from_file(negative)
 
 
 def scene_with_clock(tmp_path, **clock):

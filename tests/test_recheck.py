@@ -94,6 +94,23 @@ def test_a_re_check_judges_cycles_by_the_send_times_of_the_run(tmp_path):
         check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
 
 
+def test_a_re_check_judges_cycles_against_the_frames_of_a_run_whose_frames_went_out_late_by_ns(
+        tmp_path):
+    # A paced UDP sender puts every frame out some tens of nanoseconds after its time: a radar
+    # in step with the frames measured each cycle just before the frame change, so the run
+    # judged it against the frame before. The sidecar's send times must keep that order.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "udp.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.sent_t_s = lambda batch: batch.t_s + 40e-9
+        live = pipeline.run(scene).report
+    again = check_log(scene, log).report
+    assert again.frames == live.frames and again.reasons == live.reasons
+    for q, stats in live.errors.items():
+        assert again.errors[q].rms == pytest.approx(stats.rms, abs=1e-9), q
+        assert again.errors[q].max == pytest.approx(stats.max, abs=1e-9), q
+
+
 def write_radar(folder: Path, **clock) -> str:
     data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
                           .read_text())
@@ -295,6 +312,25 @@ def test_a_log_of_another_scene_or_a_time_offset_beside_the_sidecar_is_refused(r
     scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
     assert cli.main(["check", scene, "--log", str(recorded), "--time-offset-s", "1e9"]) == 2
     assert "the log's sidecar aligns it by the radar's counters" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("send_times", [True, False], ids=["sidecar", "older-sidecar"])
+def test_a_scene_of_other_frames_than_the_recording_is_refused(recorded, tmp_path, capsys,
+                                                               send_times):
+    # The scene file was edited since the recording (here 20 s -> 15 s): it is not the scene
+    # that was played, with or without the send times in the sidecar.
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    if not send_times:
+        del data["send_lateness"]
+    log = _copy(recorded, tmp_path, json.dumps(data))
+    text = (ROOT / "scenarios" / "highway_following.scenario.yaml").read_text()
+    shorter = tmp_path / "highway_following.scenario.yaml"
+    shorter.write_text(re.sub(r"(?m)^duration_s: .*$", "duration_s: 15.0", text))
+    assert cli.main(["check", str(shorter), "--log", str(log)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"error: {log}.rts.json: frames: the recording played {data['frames']} "
+                   f"frames, the scene {shorter} has 300: not the scene file that was "
+                   f"recorded (edited since?)")
 
 
 def test_a_re_check_fails_on_the_playback_the_run_failed_on(recorded, tmp_path, capsys):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import math
 import os
 import sys
@@ -231,13 +232,33 @@ def preset_or_file(what: str, name: str, presets: list[str], preset: Any, from_f
     return named_file(what, from_file, name)
 
 
-def check_can_interface(option: str, interface: str) -> None:
-    """Reject a python-can interface name python-can does not know."""
+# python-can's own default group of its udp_multicast interface.
+UDP_MULTICAST_EXAMPLE = "239.74.163.2"
+
+
+def check_can_interface(option: str, interface: str, channel: str | None = None) -> None:
+    """Reject an unknown python-can interface, and a udp_multicast channel not a multicast group.
+
+    python-can would fail on such a channel with a name lookup error, and a private channel
+    name would be heard by no other process.
+    """
     from can.interfaces import VALID_INTERFACES
 
     if interface not in VALID_INTERFACES:
         raise RtsError(f"{option} {interface!r}: unknown python-can interface; valid: "
                        f"{', '.join(sorted(VALID_INTERFACES))}")
+    if interface != "udp_multicast":
+        return
+    need = (f"a multicast group address both processes join (e.g. {UDP_MULTICAST_EXAMPLE}, "
+            f"python-can's default; IPv4 224.0.0.0/4 or IPv6 ff00::/8)")
+    if channel is None:
+        raise RtsError(f"{option} udp_multicast needs --can-channel: {need}")
+    try:
+        multicast = ipaddress.ip_address(channel).is_multicast
+    except ValueError:
+        multicast = False
+    if not multicast:
+        raise RtsError(f"--can-channel {channel!r}: udp_multicast needs {need}")
 
 
 def check_readable_file(option: str, path: str) -> None:
@@ -278,7 +299,7 @@ def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
         raise RtsError(f"--estimator: unknown estimator {args.estimator!r}; valid: "
                        f"{', '.join(estimator_names())}")
     check_output("--output", args.output, run=True)
-    check_can_interface("--can-interface", args.can_interface)
+    check_can_interface("--can-interface", args.can_interface, args.can_channel)
     rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,

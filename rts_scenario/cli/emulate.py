@@ -24,7 +24,9 @@ def _do_emulate(args: argparse.Namespace) -> int:
     from .listen import _address
 
     host, port = _address(args.listen, "--listen")
-    check_can_interface("--can-interface", args.can_interface)
+    check_can_interface("--can-interface", args.can_interface, args.can_channel)
+    if args.can_channel is None:
+        args.can_channel = "rts-emulator"
     check_number("--seconds", args.seconds, low=0.001, high=86400.0)
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
@@ -93,7 +95,9 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--rig", required=True, help="rig preset or *.rig.yaml")
     parser.add_argument("--radar", required=True, help="radar profile or *.radar.yaml")
     parser.add_argument("--can-interface", default="virtual")
-    parser.add_argument("--can-channel", default="rts-emulator")
+    parser.add_argument("--can-channel", default=None,
+                        help="CAN channel (default rts-emulator; udp_multicast: a multicast "
+                             "group address, e.g. 239.74.163.2)")
     parser.add_argument("--can-fd", action="store_true", help="CAN FD detection messages")
     parser.add_argument("--mapping", default=None,
                         help="*.mapping.yaml: speak a third-party radar's DBC (default: "

@@ -53,7 +53,7 @@ def _do_run(args: argparse.Namespace) -> int:
 
     # Everything the options name is checked before the first scene runs, not after it.
     check_output("--output", args.output, run=True)
-    check_can_interface("--can-interface", args.can_interface)
+    check_can_interface("--can-interface", args.can_interface, args.can_channel)
     if args.mapping:
         mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
         check_fd_mapping(args.can_fd, args.mapping, mapping)

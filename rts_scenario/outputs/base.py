@@ -48,6 +48,11 @@ class Output(ABC):
     """
 
     name: ClassVar[str] = "output"
+    # Whether a radar cycle measured at a frame's time surely sees that frame: true of an
+    # output that applies each frame exactly at its time (the simulated radar). An RTS
+    # applies a frame after it arrives (transport, its own update), so a cycle measured at the
+    # frame's time may still show the frame before (docs/bench.md, the ambiguity window).
+    applies_frames_on_time: ClassVar[bool] = False
 
     def __init__(self) -> None:
         self._closed = False

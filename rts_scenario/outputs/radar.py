@@ -31,6 +31,7 @@ class SimulatedRadarOutput(Output):
     """
 
     name = "simulated-radar"
+    applies_frames_on_time = True
 
     def __init__(self, *, profile: RadarProfile, rig: Rig,
                  sink: Callable[[list[Detections]], None] | None = None,
