@@ -163,10 +163,20 @@ class Emulator:
     # -- the radar ---------------------------------------------------------------------------
 
     def _measure(self) -> None:
-        """Measure on the radar's clock from the first frame on; queue each cycle's report."""
+        """Measure on the radar's clock from the first frame on; queue each cycle's report.
+
+        The RTS starts the radar: each stream (a run) restarts its clock and counter at the
+        stream's first frame, and the reports of the stream before not yet on the bus are
+        dropped.
+        """
         origin = None
         n = 0
+        stream = -1
         while not self._stop.is_set():
+            if self.receiver.streams != stream:
+                stream, origin, n = self.receiver.streams, None, 0
+                with self._due_lock:
+                    self._due.clear()
             if origin is None:
                 snap = self.receiver.snapshot()
                 if snap is None:
@@ -175,10 +185,13 @@ class Emulator:
                 _, t_s, arrival, _ = snap
                 origin = arrival - t_s  # scene time 0 in perf_counter time
             due = origin + float(self.clock.time_of(np.array([n]))[0])
-            while not self._stop.is_set() and time.perf_counter() < due:
+            while (not self._stop.is_set() and time.perf_counter() < due
+                   and self.receiver.streams == stream):
                 time.sleep(min(TICK_S, max(due - time.perf_counter(), 0.0)))
             if self._stop.is_set():
                 return
+            if self.receiver.streams != stream:
+                continue
             self.stats.late_s.append(time.perf_counter() - due)
             if len(self.stats.late_s) > 10000:  # keep the worst, bounded
                 self.stats.late_s = [max(self.stats.late_s)]
@@ -187,7 +200,8 @@ class Emulator:
 
     def _measure_cycle(self, n: int, due: float) -> None:
         snap = self.receiver.snapshot()
-        assert snap is not None
+        if snap is None:  # a new stream began, its first frame not applied yet
+            return
         frame, _, _, entries = snap
         t_cycle = float(self.clock.time_of(np.array([n]))[0])
         counter = int(self.clock.counter_of(np.array([n]))[0])

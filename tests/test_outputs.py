@@ -179,6 +179,35 @@ def test_udp_receiver_keeps_no_record_of_a_long_stream():
     assert len(receiver._seen) <= 2 * SEQUENCE_WINDOW
 
 
+def test_a_new_sender_s_first_frame_starts_a_new_stream():
+    """Run after run against one RTS: each run's sender opens a stream; counters are per stream."""
+    receiver = UdpReceiver(keep_applied=True)
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = 0, np.arange(4), 1
+
+    def frame(n, sequence, kind=KIND_FULL):
+        return encode_frame(entries, kind=kind, frame=n, t_s=n / 20.0, first_sequence=sequence)[0]
+
+    first, second = ("127.0.0.1", 40001), ("127.0.0.1", 40002)
+    for n in range(5):
+        receiver.handle(frame(n, n), first)
+    assert receiver.streams == 1 and receiver.stats.frames_applied == 5
+    # The next run's frames from another socket: its frame 0 is not a late copy of the first's.
+    receiver.handle(frame(0, 0), second)
+    receiver.handle(frame(1, 1), second)
+    assert receiver.streams == 2
+    assert (receiver.stats.frames_applied, receiver.stats.duplicates) == (2, 0)
+    assert receiver.current is not None and receiver.current[0] == 1
+    # A datagram of the first run that comes late is the stream before's: stale, dropped.
+    receiver.handle(frame(5, 5), first)
+    # Another sender's datagram that opens no stream (not sequence 0) changes nothing.
+    receiver.handle(frame(7, 7), ("127.0.0.1", 40003))
+    stats = receiver.stop(drain_s=0.0)
+    assert receiver.streams == 2 and receiver.current[0] == 1
+    assert (stats.frames_applied, stats.stale, stats.lost_frames) == (2, 2, 0)
+    assert [f for f, _, _ in receiver.applied] == [0, 1, 2, 3, 4, 0, 1]  # for a consumer
+
+
 def test_udp_paced_streaming_follows_the_frame_clock(schedule):
     receiver = UdpReceiver().start()
     part = schedule.frames(0, 20)

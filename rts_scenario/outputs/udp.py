@@ -282,7 +282,9 @@ class UdpReceiver:
     Nothing that fails validation is applied; frames are applied complete and in order (a
     datagram of a frame older than one already applied is stale and dropped; a delta after a
     gap waits for the next full frame). `state` holds the applied entry of every
-    ``(target, channel)``. Memory does not grow with the length of the stream: only with
+    ``(target, channel)``. One stream at a time: a new sender's first datagram starts the
+    next (`handle`), so one receiver serves run after run. Memory does not grow with the
+    length of the stream: only with
     ``keep_applied`` does the receiver keep every applied frame (``applied``: frame, scene
     time, entries) and its arrival (``arrival_s``), for a consumer that takes them as they
     come (``rts-listen``) or a test.
@@ -296,13 +298,26 @@ class UdpReceiver:
         self._socket.bind((host, port))
         self._socket.settimeout(0.02)
         self.address: tuple[str, int] = self._socket.getsockname()[:2]
+        self._closed = False
+        self.keep_applied = keep_applied
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        # The receiving thread applies frames while others read the state (`snapshot`).
+        self._lock = threading.Lock()
+        # Streams begun so far (a new sender's first datagram starts one) and the current
+        # one's sender.
+        self.streams = 0
+        self._sender: tuple[str, int] | None = None
+        # Applied frames for a consumer (``keep_applied``), of every stream in turn.
+        self.applied: deque[tuple[int, float, np.ndarray]] = deque()
+        self.arrival_s: deque[float] = deque()
+        self._new_stream()
+
+    def _new_stream(self) -> None:
+        """Forget the stream before: its frames, sequence numbers, state and counters."""
         self.stats = ReceiverStats()
         self._table = np.zeros((0, 4), dtype=ENTRY)
         self._live = np.zeros((0, 4), dtype=bool)
-        self._closed = False
-        self.keep_applied = keep_applied
-        self.applied: deque[tuple[int, float, np.ndarray]] = deque()
-        self.arrival_s: deque[float] = deque()
         # Sequence numbers within `SEQUENCE_WINDOW` of the newest, and how many were ever new.
         self._seen: set[int] = set()
         self._unique = 0
@@ -314,10 +329,6 @@ class UdpReceiver:
         self._first_frame: int | None = None
         self._top_frame = -1
         self._synced = True
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-        # The receiving thread applies frames while others read the state (`snapshot`).
-        self._lock = threading.Lock()
         self.current: tuple[int, float, float] | None = None  # frame, t_s, arrival (perf)
 
     def snapshot(self) -> tuple[int, float, float, np.ndarray] | None:
@@ -377,7 +388,7 @@ class UdpReceiver:
                 continue
             except OSError:
                 break
-            self.handle(datagram)
+            self.handle(datagram, sender)
             self._reply(sender)
 
     def _reply(self, sender: tuple[str, int]) -> None:
@@ -405,8 +416,26 @@ class UdpReceiver:
         return max(0, span - self.stats.frames_applied - self.stats.unsynced_frames
                    - (len(self._pending) if pending is None else pending))
 
-    def handle(self, datagram: bytes) -> None:
-        """Validate and process one datagram."""
+    def handle(self, datagram: bytes, sender: tuple[str, int] | None = None) -> None:
+        """Validate and process one datagram (from ``sender``, where known).
+
+        Each run opens a stream from a sender of its own: a datagram from another sender
+        than the current stream's that opens a stream (the first datagram of a full frame,
+        sequence 0) starts a new one, and the stream before is forgotten (its frames, state
+        and counters). Any other datagram from another sender is the stream before's, late:
+        counted as stale and dropped.
+        """
+        if sender is not None and sender != self._sender:
+            if self._opens_stream(datagram) or self._sender is None:
+                with self._lock:
+                    if self._sender is not None:
+                        self._new_stream()
+                    self._sender = sender
+                    self.streams += 1
+            else:
+                self.stats.datagrams += 1
+                self.stats.stale += 1
+                return
         stats = self.stats
         stats.datagrams += 1
         if len(datagram) < HEADER.size + TRAILER.size:
@@ -449,6 +478,18 @@ class UdpReceiver:
         self._pending_meta[frame] = (kind, parts, t_s)
         if len(self._pending[frame]) == parts:
             self._apply(frame)
+
+    @staticmethod
+    def _opens_stream(datagram: bytes) -> bool:
+        """Whether a datagram is a valid first datagram of a stream (sequence 0, full frame)."""
+        if len(datagram) < HEADER.size + TRAILER.size:
+            return False
+        body, (crc,) = datagram[:-TRAILER.size], TRAILER.unpack(datagram[-TRAILER.size:])
+        if zlib.crc32(body) != crc:
+            return False
+        magic, version, kind, seq, _, part, _, _, _ = HEADER.unpack(body[:HEADER.size])
+        return magic == MAGIC and version == VERSION and kind == KIND_FULL and seq == 0 \
+            and part == 0
 
     def _apply(self, frame: int) -> None:
         with self._lock:
