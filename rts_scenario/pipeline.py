@@ -30,7 +30,7 @@ from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .playback import Playback
 from .preflight import Preflight, frames_per_batch, preflight, scene_limits
-from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
+from .radar.clock import ClockTrack, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report, strict
@@ -289,29 +289,20 @@ class Pipeline:
         """Find where the radar's counter starts when its profile does not say.
 
         A radar whose profile gives no counter start runs free: it was switched on before the
-        scene, at any point of its frames. The cycles' bus times, less the radar's latency,
-        are their measurement times on the bus's clock; the scene's origin on that clock
-        makes them scene times. Cycle 0 is the first measured at or after the scene's start,
-        found on the line through the first cycles received (their jitter averages out).
+        scene, at any point of its frames. Where the scene's start is known on the bus's
+        clock, the earliest cycle received is numbered 0, and the clock track (`ClockTrack`,
+        from all the cycles' bus times less the radar's latency) tells which cycle is the
+        scene's first (`CycleTruth.first_cycle`); the report gives that cycle's counter.
         Without those times, the first cycle received is taken as the scene's first.
         """
-        clock = self.radar.radar_clock
         origin = self._scene_origin_s()
         timed = [c for c in cycles if c.bus_t_s is not None]
         if timed and origin is not None:
             counters = np.array([c.cycle for c in timed], dtype=np.int64)
             m = sequential_numbers((counters - counters[0]) % self.counter_modulus,
-                                   self.counter_modulus, _bus_times(timed), clock.cycle_s)
-            measured = _bus_times(timed) - clock.latency_s - origin
-            cycle_s = clock.cycle_s
-            if m.size >= 8 and np.ptp(m) > 0:  # the radar's own cycle (a crystal off by 1000
-                cycle_s = float(np.polyfit(m, measured, 1)[0])  # ppm: 25 ms over 500 cycles)
-            residual = measured - m * cycle_s
-            phase = float(np.mean(residual))  # scene time of m = 0
-            # A cycle within three standard errors before the start may have measured at it.
-            tolerance = 3.0 * float(np.std(residual)) / np.sqrt(m.size)
-            m0 = int(np.ceil((-phase - tolerance) / cycle_s - TIME_EPS_S))
-            checker.counter_start = int(counters[0] + m0) % self.counter_modulus
+                                   self.counter_modulus, _bus_times(timed),
+                                   self.radar.radar_clock.cycle_s)
+            checker.counter_start = int(counters[0] + m.min()) % self.counter_modulus
             source = "learnt from the cycles' bus times"
         else:
             checker.counter_start = cycles[0].cycle % self.counter_modulus
@@ -403,6 +394,9 @@ class Pipeline:
         track.add(checker.add_cycles(last), _bus_times(last))
         mark = timer.add("receive_s", mark)
         truths.finish()
+        # The scene's first cycle as the clock ended up taking it, and how many it had.
+        first = truths.first_cycle or 0
+        n_cycles = (truths.end_cycle or first) - first
         mark = timer.add("kinematics_s", mark)
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
@@ -425,8 +419,11 @@ class Pipeline:
             report.passed = False
         if options.bus_log and digest is not None:
             write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
-                              counter_start=checker.counter_start, playback=report.playback,
-                              send_lateness=playback.send_lateness(), clock=track)
+                              counter_start=None if checker.counter_start is None
+                              else (checker.counter_start + first) % self.counter_modulus,
+                              playback=report.playback,
+                              send_lateness=playback.send_lateness(), clock=track,
+                              first_cycle=first, cycles=n_cycles)
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -435,11 +432,12 @@ class Pipeline:
             report.radar_clock = {"counter_start": clock.counter_start, "source": "profile"}
         elif self.counter_start_learnt is not None:
             start, source = self.counter_start_learnt
-            report.radar_clock = {"counter_start": start, "source": source}
+            report.radar_clock = {"counter_start": (start + first) % self.counter_modulus,
+                                  "source": source}
         measured = track.fit.cycle_s()
         if measured is not None:
             report.radar_clock["bus_cycle_s"] = measured[0]
-        report.radar_clock.update(track.to_dict())
+        report.radar_clock.update(track.to_dict(first))
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -500,18 +498,35 @@ class CycleTruth:
         bus (asked again for every batch).
     window_s : float
         The ambiguity window after a frame change (s); `ambiguity_window_s` gives it.
+    cycles : int, optional
+        How many cycles the scene has, from its first: a re-check gives the run's (its
+        sidecar's); by default those the clock puts in the scene.
+
+    The scene's cycles are those measured in it, as far as the clock knows when: its first
+    is the first at or after its start less the clock's `start_tolerance_s` (it may have
+    measured at the start itself), its last the last before its end less that tolerance (the
+    one after it may have measured at the end itself, after the scene). `first_cycle` and
+    `end_cycle` say which they were.
     """
 
     def __init__(self, checker: Checker, scene: Scenario, clock: RadarClock | ClockTrack,
-                 window_s: float) -> None:
+                 window_s: float, cycles: int | None = None) -> None:
         self.checker, self.scene, self.clock = checker, scene, clock
         self.window_s = float(window_s)
+        self.cycles = cycles
+        # The scene's first cycle (None until the first batch's truth is handed on).
+        self.first_cycle: int | None = None
         # The batch whose truth waits for the next one's first send time.
         self._pending: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         # The last frame of the batch before the pending one: (frame, status row, applied s).
         self._before: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         # The first cycle not handed on yet (None: the scene's first, found by its time).
         self._next_n: int | None = None
+
+    @property
+    def end_cycle(self) -> int | None:
+        """The first cycle not handed on (after `finish`: one past the scene's last)."""
+        return self._next_n
 
     def add(self, frames: np.ndarray, status: np.ndarray,
             applied_s: np.ndarray | None = None) -> np.ndarray:
@@ -558,9 +573,17 @@ class CycleTruth:
         # Cycle numbers follow on from the batch before's, whatever the clock now says: a
         # clock learnt from the bus (`ClockTrack`) may have moved a cycle across the batches'
         # boundary since (judged against the frame before, then).
-        lo = (self.clock.first_at(start_s - self.clock.start_tolerance_s)
+        tolerance_s = self.clock.start_tolerance_s
+        lo = (self.clock.first_at(start_s - tolerance_s)
               if self._next_n is None else self._next_n)
-        hi = max(lo, self.clock.first_at(max(end_s, start_s)))
+        if self.first_cycle is None:
+            self.first_cycle = lo
+        # The scene's end: a cycle that may have measured at it is after the scene.
+        end_s = max(end_s, start_s) if after is not None else max(end_s - tolerance_s, start_s)
+        hi = max(lo, self.clock.first_at(end_s))
+        if self.cycles is not None:
+            last = self.first_cycle + self.cycles
+            hi = max(lo, last if after is None else min(hi, last))
         self._next_n = hi
         n = np.arange(lo, hi, dtype=np.int64)
         if not n.size:
@@ -613,7 +636,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       counter_start: int | None = None,
                       playback: dict[str, Any] | None = None,
                       send_lateness: dict[str, Any] | None = None,
-                      clock: ClockTrack | None = None) -> Path:
+                      clock: ClockTrack | None = None, first_cycle: int = 0,
+                      cycles: int | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -624,7 +648,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     run used (learnt, where the profile does not give it); ``playback`` the run's
     (`Playback.to_dict`) and ``send_lateness`` when each frame went out
     (`Playback.send_lateness`). ``clock`` is the clock the run ended with (`ClockTrack`): its
-    cycle and phase are written, cycle 0 renumbered to the first measured in the scene.
+    cycle and phase are written, cycle 0 renumbered to the scene's first as the run took it
+    (``first_cycle`` of the clock's numbers; ``counter_start`` is its counter), and
+    ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones.
     """
     import json
 
@@ -632,13 +658,10 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
 
     c = radar.radar_clock
     if clock is not None:
-        cycle_s, offset_s = clock.cycle_s, clock.start_offset_s
-        # Cycle 0 measured before the scene began (a radar running free): renumbered from
-        # the first the scene measured, the counter moved with it.
-        shift = min(0, int(np.floor(offset_s / cycle_s + TIME_EPS_S)))
-        if counter_start is not None:
-            counter_start -= shift
-        c = replace(c, cycle_s=cycle_s, start_offset_s=max(0.0, offset_s - shift * cycle_s))
+        # The scene's first cycle may lie within the clock's uncertainty before its start (it
+        # may have measured at it): at the start, then.
+        c = replace(c, cycle_s=clock.cycle_s,
+                    start_offset_s=max(0.0, float(clock.time_of(np.array([first_cycle]))[0])))
     path = Path(str(log) + LOG_SIDECAR_SUFFIX)
     data = {
         "rts_scenario_log": 1, "version": __version__, "scene": scene.name,
@@ -648,7 +671,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
                   "counter_start": c.counter_start if counter_start is None
-                  else counter_start},
+                  else counter_start, "cycles": cycles},
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         "status_sha256": status_digest,

@@ -183,6 +183,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "cycle_s": _number(exclusiveMinimum=0), "start_offset_s": _number(),
                 "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
+                "cycles": {"type": ["integer", "null"], "minimum": 0},
             },
         },
         "mapping": {"type": ["string", "null"]},
@@ -820,7 +821,10 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
                       expected_limits=[t.expected_limits for t in scene.targets],
                       scene_limits=scene_limits(scene), variant=scene.variant,
                       parameters=scene.parameters, cycle_s=clock.cycle_s)
-    total = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
+    # The cycles the run judged (its sidecar), else those the clock puts in the scene.
+    cycles = (sidecar or {}).get("clock", {}).get("cycles")
+    total = cycles if cycles is not None else len(
+        clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
     # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
     first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
                 - modulus // 2) if counters.size else 0
@@ -834,7 +838,8 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     # Frames as the run sent them (the sidecar's send times), else as applied at their times:
     # the ambiguity window around each change covers the transport, as it does live.
     late = _send_lateness(scene, sidecar)
-    truths = CycleTruth(checker, scene, clock, ambiguity_window_s(scene.radar, scene.rig))
+    truths = CycleTruth(checker, scene, clock, ambiguity_window_s(scene.radar, scene.rig),
+                        cycles)
 
     def check_cycles(n: IntArray) -> None:
         if n.size:
@@ -849,6 +854,9 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         check_cycles(truths.add(frames, schedule.status, sent))
     check_cycles(truths.finish())
     checker.settle()
+    # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds), as
+    # the run counts them.
+    checker.frames["after_scene"] += int((rel >= total).sum())
     if sidecar is not None and sidecar.get("status_sha256"):
         alignment.schedule_matches_recording = digest.hexdigest() == sidecar["status_sha256"]
         if not alignment.schedule_matches_recording:

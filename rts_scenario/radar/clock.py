@@ -339,10 +339,13 @@ class ClockTrack:
                 f"radar's clock (another radar or mode?); the check followed the bus's cycle; "
                 f"set clock.cycle_s: {fit[0]:.10g} in the radar profile")
 
-    def to_dict(self) -> dict[str, float | str]:
-        """Return the clock the check ended with, for the report's ``radar_clock``."""
+    def to_dict(self, first: int = 0) -> dict[str, float | str]:
+        """Return the clock the check ended with, for the report's ``radar_clock``.
+
+        ``start_offset_s`` is the scene time of cycle ``first``: the scene's first.
+        """
         return {"cycle_s": self.cycle_s, "cycle_from": "bus" if self.cycle_from_bus
-                else "profile", "start_offset_s": self.start_offset_s,
+                else "profile", "start_offset_s": float(self.time_of(np.array([first]))[0]),
                 "start_from": "bus" if self.phase_from_bus and self.fit.count else "profile"}
 
 
