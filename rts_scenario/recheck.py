@@ -71,6 +71,9 @@ EDGE_RESOLUTION_S = 1e-6
 EDGE_GUARD_S = 1e-5
 # A cycle measured this close before the scene's time 0 counts as measured at it.
 START_TOLERANCE_S = 1e-5
+# Timestamps of a log that go back this far from one radar cycle to the next are a clock set
+# back while it logged: the log cannot be aligned by them (s).
+STAMPS_BACK_S = 1.0
 # Fitting the radar's cycle time, a stamp this far off the line (or five times the stamps'
 # spread, if more) is a cycle held up on the bus and left out.
 FIT_OUTLIER_FLOOR_S = 0.001
@@ -698,6 +701,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"{receiver_mapping.name!r}); is --mapping the radar's?")
         latency = profile_clock.latency_s
         bus_t = index.bus_t_s
+        _check_timestamps(log, bus_t, profile_clock.cycle_s)
         # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
         chosen = _alignment_cycles(index)
         dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s)
@@ -776,6 +780,31 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     return RecheckResult(scene=scene, report=result, alignment=alignment)
 
 
+def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float) -> None:
+    """Refuse to align a log by timestamps that do not advance with its cycles.
+
+    All alike or nearly (a logger that wrote one time for every message: distinct cycles
+    span at least a cycle each, a tenth of the profile's for a radar far off it), or going back
+    by more than `STAMPS_BACK_S` between one cycle and the next in the log (a clock set back
+    while it logged; a cycle held up on the bus comes later, not earlier).
+    """
+    timed = bus_t[np.isfinite(bus_t)]
+    advice = ("it cannot be aligned by them; the sidecar `run --record` writes aligns a log by "
+              "the radar's counters")
+    span = float(np.ptp(timed)) if timed.size else 0.0
+    if timed.size >= 2 and not span >= 0.1 * cycle_s * (timed.size - 1):
+        raise LogError(f"--log {log}: its radar cycles' timestamps do not advance: all "
+                       f"{timed.size} of them within {span:.6f} s (cycles of "
+                       f"{cycle_s * 1e3:g} ms take {cycle_s * (timed.size - 1):.3f} s); {advice}")
+    step = np.diff(timed)
+    back = np.flatnonzero(step < -STAMPS_BACK_S)
+    if back.size:
+        i = int(back[0])
+        raise LogError(f"--log {log}: its radar cycles' timestamps go back: by "
+                       f"{-step[i]:.6f} s from cycle {i + 1} to {i + 2} of the {timed.size} "
+                       f"with a timestamp ({back.size} such steps); {advice}")
+
+
 def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
                   offset_s: float, modulus: int, nominal_cycle_s: float) -> RadarClock:
     """Return the radar's clock in scene time fitted to the header timestamps.
@@ -800,6 +829,9 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
         keep = np.abs(residual) <= max(5.0 * spread, FIT_OUTLIER_FLOOR_S)
         if not keep.all() and np.ptp(n[keep]) > 0:
             cycle_s, first_s = np.polyfit(n[keep], t[keep], 1)
+        if not cycle_s > 0:
+            raise LogError(f"the log's timestamps go back as its radar cycles go on (a cycle of "
+                           f"{cycle_s:.6g} s fits them); it cannot be aligned by them")
     else:
         cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - t0 - numbers[ok][0]
                                                   * nominal_cycle_s)

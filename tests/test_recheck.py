@@ -601,3 +601,34 @@ def test_a_log_that_shrinks_between_the_passes_is_one_clear_error(tmp_path):
     with pytest.raises(LogError, match=r"run.asc: changed while it was checked \(it now ends "
                                        r"after 240 radar cycles, not 300\)"):
         reader.take(np.array([250]))
+
+
+@pytest.mark.parametrize(("stamps", "told"), [
+    ("equal", "all 240 of them within"), ("back", "go back"),
+    ("reversed", "(go back|do not advance)")])
+def test_a_log_whose_timestamps_do_not_advance_re_checks_by_its_sidecar_only(
+        tmp_path, stamps, told):
+    # A logger that wrote one time for every message, or whose clock went back 30 s midway
+    # (or ran backwards): its sidecar numbers the cycles by their counters, to the live
+    # verdict; without it, one clear error naming the log, not a traceback.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    messages = list(can.LogReader(str(log)))
+    t0 = messages[0].timestamp
+    restamp = {"equal": lambda t: t0, "back": lambda t: t - 30.0 * (t - t0 > 6.0),
+               "reversed": lambda t: 2 * t0 - t}[stamps]
+    odd = tmp_path / f"{stamps}.blf"
+    with can.Logger(str(odd)) as writer:
+        for m in messages:
+            writer.on_message_received(can.Message(
+                arbitration_id=m.arbitration_id, data=m.data, is_extended_id=False,
+                timestamp=restamp(m.timestamp)))
+    shutil.copy(str(log) + ".rts.json", str(odd) + ".rts.json")
+    again = check_log(scene, odd).report
+    assert again.passed == live.passed is True, again.reasons
+    assert again.frames == live.frames
+    Path(str(odd) + ".rts.json").unlink()
+    with pytest.raises(LogError, match=rf"--log {re.escape(str(odd))}: its radar cycles' "
+                                       rf"timestamps .*{told}"):
+        check_log(scene, odd)

@@ -138,13 +138,14 @@ class CycleTimeFit:
         None before three cycles, and where the cycles scatter by more than a quarter of the
         cycle about the line: their numbers do not follow their bus times (a counter that
         jumped, or a gap longer than half of what a narrow counter counts), and a crystal off
-        its profile leaves them on a straight line.
+        its profile leaves them on a straight line. None too where the times do not advance
+        with the numbers (a logger that stamped every message alike, or whose clock went back).
         """
         line = self._line()
         if line is None:
             return None
         slope, scatter, var_x = line
-        if scatter > 0.25 * abs(slope):
+        if not slope > 0.0 or scatter > 0.25 * slope:
             return None
         return float(slope), float(scatter / np.sqrt(var_x))
 
