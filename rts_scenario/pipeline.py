@@ -290,19 +290,26 @@ class Pipeline:
 
         A radar whose profile gives no counter start runs free: it was switched on before the
         scene, at any point of its frames. Where the scene's start is known on the bus's
-        clock, the earliest cycle received is numbered 0, and the clock track (`ClockTrack`,
-        from all the cycles' bus times less the radar's latency) tells which cycle is the
-        scene's first (`CycleTruth.first_cycle`); the report gives that cycle's counter.
-        Without those times, the first cycle received is taken as the scene's first.
+        clock, the first cycles' bus times less the radar's latency tell roughly how many
+        cycles it measured in the scene before the earliest received (those lost are
+        missing); cycle 0 is numbered a cycle earlier still, and the clock track
+        (`ClockTrack`, from all the cycles' bus times) tells which cycle is the scene's first
+        (`CycleTruth.first_cycle`): a few cycles' jitter decides nothing. The report gives
+        that cycle's counter. Without those times, the first cycle received is taken as the
+        scene's first.
         """
+        clock = self.radar.radar_clock
         origin = self._scene_origin_s()
         timed = [c for c in cycles if c.bus_t_s is not None]
         if timed and origin is not None:
             counters = np.array([c.cycle for c in timed], dtype=np.int64)
             m = sequential_numbers((counters - counters[0]) % self.counter_modulus,
-                                   self.counter_modulus, _bus_times(timed),
-                                   self.radar.radar_clock.cycle_s)
-            checker.counter_start = int(counters[0] + m.min()) % self.counter_modulus
+                                   self.counter_modulus, _bus_times(timed), clock.cycle_s)
+            measured = _bus_times(timed) - clock.latency_s - origin
+            # Scene time of the earliest received, on the line of the profile's cycle.
+            earliest = float(np.mean(measured - m * clock.cycle_s)) + m.min() * clock.cycle_s
+            before = max(0, int(np.floor(earliest / clock.cycle_s))) + 1
+            checker.counter_start = int(counters[0] + m.min() - before) % self.counter_modulus
             source = "learnt from the cycles' bus times"
         else:
             checker.counter_start = cycles[0].cycle % self.counter_modulus
@@ -502,11 +509,12 @@ class CycleTruth:
         How many cycles the scene has, from its first: a re-check gives the run's (its
         sidecar's); by default those the clock puts in the scene.
 
-    The scene's cycles are those measured in it, as far as the clock knows when: its first
-    is the first at or after its start less the clock's `start_tolerance_s` (it may have
-    measured at the start itself), its last the last before its end less that tolerance (the
-    one after it may have measured at the end itself, after the scene). `first_cycle` and
-    `end_cycle` say which they were.
+    The scene's cycles are those measured in it, as far as the clock knows: its first is the
+    first at or after its start less the clock's `start_tolerance_s` (it may have measured at
+    the start itself; the first batches wait until the clock knows which, within a batch of
+    frames), its last the last before its end less that tolerance (the one after it may have
+    measured at the end itself, after the scene). `first_cycle` and `end_cycle` say which
+    they were.
     """
 
     def __init__(self, checker: Checker, scene: Scenario, clock: RadarClock | ClockTrack,
@@ -541,10 +549,32 @@ class CycleTruth:
         applied = np.maximum.accumulate(np.maximum(applied, t_all[frames]))
         batch = (np.asarray(frames)[:], np.asarray(status), applied)
         done = np.zeros(0, dtype=np.int64)
+        if self._pending is not None and self._await_start(batch[0].size):
+            # The scene's first cycle is not known yet: the batch joins the pending one.
+            pending = self._pending
+            self._pending = (np.concatenate([pending[0], batch[0]]),
+                             np.concatenate([pending[1], batch[1]]),
+                             np.maximum.accumulate(np.concatenate([pending[2], applied])))
+            return done
         if self._pending is not None:
             done = self._give(float(applied[0]), (batch[0][:1], batch[1][:1], applied[:1]))
         self._pending = batch
         return done
+
+    def _await_start(self, more: int) -> bool:
+        """Whether to hold the first batches until the clock knows the scene's first cycle.
+
+        A clock learnt from the bus (a radar running free) may not tell it from a few cycles
+        (`ClockTrack.start_known`): its first batches wait for more, as long as they and
+        ``more`` frames stay within one batch of the scene's size (`frames_per_batch`).
+        """
+        assert self._pending is not None
+        known = getattr(self.clock, "start_known", None)
+        if self._next_n is not None or known is None:
+            return False
+        if known(float(self.scene.t_s[self._pending[0][0]])):
+            return False
+        return self._pending[0].size + more <= frames_per_batch(len(self.scene.targets))
 
     def finish(self) -> np.ndarray:
         """Hand on the last batch (held until the scene's end); return its cycles' numbers."""

@@ -338,8 +338,11 @@ def test_the_clock_track_keeps_the_profile_until_the_bus_tells_otherwise():
     assert blind.start_offset_s == 0.01 and blind.to_dict()["start_from"] == "profile"
 
 
-def run_stamped(scene, delay, log, radar=None, batch_frames=None):
-    """Run ``scene`` with its cycles on the bus at measurement + ``delay(counters)`` (s)."""
+def run_stamped(scene, delay, log, radar=None, batch_frames=None, keep=None):
+    """Run ``scene`` with its cycles on the bus at measurement + ``delay(counters)`` (s).
+
+    ``keep(cycle)``: whether a cycle reaches the bus (all by default).
+    """
     with Pipeline.for_scene(scene, RunOptions(bus_log=str(log),
                                               batch_frames=batch_frames)) as pipeline:
         if radar is not None:
@@ -347,6 +350,9 @@ def run_stamped(scene, delay, log, radar=None, batch_frames=None):
         publisher = pipeline._publisher
 
         def stamp(cycles):
+            cycles = [c for c in cycles if keep is None or keep(c)]
+            if not cycles:
+                return
             t = np.array([c.t_s for c in cycles])
             counter = np.array([c.cycle for c in cycles])
             publisher.publish_many(cycles, pipeline._bus_origin_s + t + delay(counter))
@@ -379,25 +385,42 @@ def test_a_free_radar_in_step_with_the_scene_misses_no_cycle_at_its_end(tmp_path
 @pytest.mark.parametrize("batch_frames", [1, 3])
 def test_a_free_radar_just_before_the_frames_is_numbered_by_all_its_cycles(tmp_path,
                                                                             batch_frames):
-    # Switched on at 49.5 ms, the radar measures 0.5 ms before each frame change, its
-    # messages +-4 ms late. With a batch of one or three frames the first batch holds one or
-    # three cycles: the one received first is the scene's first (nothing came before it), not
-    # the cycle before it, which the radar never measured. The last, 0.5 ms before the scene's
-    # end, lies within three standard errors of it (+-3 ms over 240 cycles: 0.6 ms) and may
-    # have measured after it: not judged. Live and re-checked, the same 239 cycles.
+    # Switched on at 49 ms, the radar measures 1 ms before each frame change, its messages
+    # +-3 ms about its latency (the first 3.5 ms late). With a batch of one or three frames
+    # the first batch holds one or three cycles, whose times put the cycle before the first
+    # (at -1 ms, never measured) in the scene: the scene's first is decided once the bus
+    # times tell it (three standard errors of the phase over 240 cycles: 0.6 ms), the same
+    # 240 cycles live and re-checked.
     scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
                              counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.0495, latency_s=0.13, jitter_s=0.004,
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.049, latency_s=0.13, jitter_s=0.004,
                        counter_start=4242)
     log = tmp_path / "free.blf"
-    # The first cycle's message 3.5 ms late, the rest +-3 ms about the latency.
     report = run_stamped(scene, lambda n: 0.13 + np.where(
         n == 4242, 0.0035, np.where(n % 2, 0.003, -0.003)), log, radar, batch_frames)
     assert report.passed, report.reasons
     assert report.radar_clock["counter_start"] == 4242
-    assert report.radar_clock["start_offset_s"] == pytest.approx(0.0495, abs=5e-4)
-    assert report.frames["total"] == report.frames["checked"] == 239
-    assert report.frames["after_scene"] == 1 and report.frames["missing"] == 0
+    assert report.radar_clock["start_offset_s"] == pytest.approx(0.049, abs=5e-4)
+    assert report.frames["total"] == report.frames["checked"] == 240
+    assert report.frames["after_scene"] == report.frames["missing"] == 0
     again = check_log(scene, log, batch_frames=batch_frames).report
     assert again.passed, again.reasons
     assert again.frames == report.frames
+
+
+@pytest.mark.parametrize("batch_frames", [None, 3])
+def test_a_free_radar_that_lost_its_first_cycles_fails_with_them_missing(tmp_path,
+                                                                         batch_frames):
+    # The radar measured from the scene's start (25 ms into each frame), but its first ten
+    # cycles never reached the bus: they are missing, not a later start of the scene's cycles.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.025, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    report = run_stamped(scene, lambda n: 0.13 + np.where(n % 2, 0.003, -0.003),
+                         tmp_path / "lost.blf", radar, batch_frames,
+                         keep=lambda c: c.cycle >= 4252)
+    assert not report.passed
+    assert report.frames["total"] == 240 and report.frames["missing"] == 10
+    assert report.radar_clock["counter_start"] == 4242
+    assert report.radar_clock["start_offset_s"] == pytest.approx(0.025, abs=5e-4)

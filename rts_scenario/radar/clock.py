@@ -229,6 +229,8 @@ DRIFT_FLOOR_S = 1e-5
 # Spread of bus times about a radar's line that its profile's jitter need not explain (s): the
 # stamping, a thread's wake-up.
 STAMP_NOISE_S = 1e-3
+# Cycles a free radar's phase is learnt from before it decides which is the scene's first.
+START_CYCLES = 8
 
 
 class ClockTrack:
@@ -314,11 +316,32 @@ class ClockTrack:
         """How far before the scene's start a cycle may lie and count as its first.
 
         Three standard errors of the phase from the bus (the radar may have measured at the
-        start itself); 0 where the phase is the profile's.
+        start itself), from the cycles' scatter and no less than the profile's jitter gives;
+        0 where the phase is the profile's.
         """
         if not self.phase_from_bus or self.fit.count < 2:
             return 0.0
-        return 3.0 * self.fit.zero_error_s(self.cycle_s)
+        return 3.0 * max(self.fit.zero_error_s(self.cycle_s),
+                         self.profile.jitter_s / np.sqrt(3.0 * self.fit.count))
+
+    def start_known(self, t_s: float) -> bool:
+        """Whether the clock tells which is the first cycle at or after scene time ``t_s``.
+
+        It does where its phase is the profile's. From the bus, once `START_CYCLES` cycles
+        are in and the cycle nearest ``t_s`` lies further from it than `start_tolerance_s`
+        (more cycles will not move it across); a radar that measures at ``t_s`` itself never
+        tells, and the first cycle is then the one within the tolerance before it.
+        """
+        if not self.phase_from_bus:
+            return True
+        if self.fit.count < START_CYCLES:
+            return False
+        nearest = self.time_of(np.array([self.cycle_at(t_s)]))[0]
+        return bool(abs(nearest - t_s) > self.start_tolerance_s)
+
+    def cycle_at(self, measured_s: float) -> int:
+        """Return the cycle number measured nearest scene time ``measured_s``."""
+        return int(np.round((measured_s - self.start_offset_s) / self.cycle_s))
 
     def off_profile_reason(self, tolerance_s: float) -> str | None:
         """Why the radar's clock fails the run (its cycle too far from the profile's), or None.
