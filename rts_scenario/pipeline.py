@@ -310,11 +310,26 @@ class Pipeline:
             earliest = float(np.mean(measured - m * clock.cycle_s)) + m.min() * clock.cycle_s
             before = max(0, int(np.floor(earliest / clock.cycle_s))) + 1
             checker.counter_start = int(counters[0] + m.min() - before) % self.counter_modulus
+            # Cycle 0's bus time on that line: the earliest received is `before` cycles on,
+            # however many an 8-bit counter would read.
+            checker.anchor(0, origin + clock.latency_s + earliest - before * clock.cycle_s)
             source = "learnt from the cycles' bus times"
         else:
             checker.counter_start = cycles[0].cycle % self.counter_modulus
             source = "assumed: the first cycle received is the scene's first"
         self.counter_start_learnt = (checker.counter_start, source)
+
+    def _anchor(self, checker: Checker, cycles: list[Detections]) -> None:
+        """Tell the checker when a profile's radar's cycle 0 reached the bus (`Checker.anchor`).
+
+        Its cycle 0 reaches the bus its latency after the profile's start offset, from the
+        scene's start on the bus's clock (where the run knows it): the first cycle received
+        is numbered on from there (`Checker.anchor`).
+        """
+        clock = self.radar.radar_clock
+        origin = self._scene_origin_s()
+        if cycles and clock.counter_start is not None and origin is not None:
+            checker.anchor(0, origin + clock.latency_s + clock.start_offset_s)
 
     def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
             timing: dict[str, float] | None = None,
@@ -383,6 +398,7 @@ class Pipeline:
             mark = timer.add("receive_s", mark)
             if checker.counter_start is None and cycles:
                 self._learn_counter_start(checker, cycles)
+            self._anchor(checker, cycles)
             track.add(checker.add_cycles(cycles), _bus_times(cycles))
             mark = timer.add("check_s", mark)
             # The radar's cycles while the RTS held the batch before: it was held until this
@@ -398,6 +414,7 @@ class Pipeline:
         last = self.receive(final=True)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
+        self._anchor(checker, last)
         track.add(checker.add_cycles(last), _bus_times(last))
         mark = timer.add("receive_s", mark)
         truths.finish()
@@ -430,7 +447,8 @@ class Pipeline:
                               else (checker.counter_start + first) % self.counter_modulus,
                               playback=report.playback,
                               send_lateness=playback.send_lateness(), clock=track,
-                              first_cycle=first, cycles=n_cycles)
+                              first_cycle=first, cycles=n_cycles,
+                              origin_bus_s=self._scene_origin_s())
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -667,7 +685,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       playback: dict[str, Any] | None = None,
                       send_lateness: dict[str, Any] | None = None,
                       clock: ClockTrack | None = None, first_cycle: int = 0,
-                      cycles: int | None = None) -> Path:
+                      cycles: int | None = None, origin_bus_s: float | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -680,7 +698,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     (`Playback.send_lateness`). ``clock`` is the clock the run ended with (`ClockTrack`): its
     cycle and phase are written, cycle 0 renumbered to the scene's first as the run took it
     (``first_cycle`` of the clock's numbers; ``counter_start`` is its counter), and
-    ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones.
+    ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones;
+    ``origin_bus_s`` the scene's start on the bus's clock, where the run knew it: the log's
+    first cycles are numbered from it by their bus times, as live (`Checker.anchor`).
     """
     import json
 
@@ -701,7 +721,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
                   "counter_start": c.counter_start if counter_start is None
-                  else counter_start, "cycles": cycles},
+                  else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s},
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         "status_sha256": status_digest,

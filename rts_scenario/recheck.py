@@ -187,6 +187,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
                 "cycles": {"type": ["integer", "null"], "minimum": 0},
+                "origin_bus_s": {"type": ["number", "null"]},
             },
         },
         "mapping": {"type": ["string", "null"]},
@@ -858,9 +859,19 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     total = cycles if cycles is not None else len(
         clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
     # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
-    first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
-                - modulus // 2) if counters.size else 0
-    rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
+    origin = (sidecar or {}).get("clock", {}).get("origin_bus_s")
+    if origin is not None and counters.size:
+        # The scene's start on the bus's clock (the run's): the first cycle is a step from
+        # cycle 0 told by its bus time too, as live (`Checker.anchor`).
+        zero_bus_s = float(origin) + clock.latency_s + clock.start_offset_s
+        rel = sequential_numbers(
+            np.r_[0, (counters - (clock.counter_start or 0)) % modulus], modulus,
+            np.r_[zero_bus_s, bus_t_s], clock.cycle_s)[1:]
+        checker.anchor(0, zero_bus_s)
+    else:
+        first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
+                    - modulus // 2) if counters.size else 0
+        rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
     logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s)

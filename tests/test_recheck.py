@@ -632,3 +632,38 @@ def test_a_log_whose_timestamps_do_not_advance_re_checks_by_its_sidecar_only(
     with pytest.raises(LogError, match=rf"--log {re.escape(str(odd))}: its radar cycles' "
                                        rf"timestamps .*{told}"):
         check_log(scene, odd)
+
+
+@pytest.mark.parametrize("free", [True, False])
+def test_an_8_bit_radar_silent_for_its_first_seven_seconds_misses_them(tmp_path, free):
+    # Its first 140 cycles (7 s, more than half of what an 8-bit counter counts) never reached
+    # the bus. Numbered by the counter from the scene's start, the first received read as 116
+    # cycles before it: the run judged the radar from 12.8 s on and passed with 344 cycles of
+    # 600. The bus time from the scene's start tells the 140: they are missing, live and
+    # re-checked by the sidecar.
+    from test_radar_clock import write_radar
+
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                        jitter_s=0.004, counter_start="auto" if free else 100)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml",
+                          {**QUIET, "radar.profile": radar, "duration_s": 30.0,
+                           "targets.0.motion.speed_mps": 22.0})
+    log = tmp_path / "silent.blf"
+    options = RunOptions(mapping=eight_bit_mapping(tmp_path), bus_log=str(log),
+                         batch_frames=200)
+    with Pipeline.for_scene(scene, options) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                                           jitter_s=0.004, counter_start=100)
+        sink = pipeline.output._sink
+        pipeline.output._sink = lambda cycles: sink([c for c in cycles if c.cycle >= 240])
+        live = pipeline.run(scene).report
+    assert live.radar_clock["counter_start"] == 100
+    for report in (live, check_log(scene, log, batch_frames=200).report):
+        assert not report.passed
+        assert report.frames["total"] == 600
+        assert report.frames["checked"] == 460 and report.frames["missing"] == 140
+        assert (report.frames["late"], report.frames["repeated"]) == (0, 0)
