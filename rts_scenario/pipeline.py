@@ -49,6 +49,10 @@ BATCH_FRAMES = 500
 QUIET_S = 0.2
 # At the end of a stream, how long to wait for the RTS's report of its last frames (s).
 RTS_SETTLE_S = 0.2
+# How far outside the scene (plus the radar's latency) the first cycle's bus time may lie and
+# still be on the clock the scene's start was taken on (s): a radar's cycles from just before
+# the stream started, or one silent for a while. Farther, the interface stamps with its own.
+BUS_CLOCK_SLACK_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -144,6 +148,8 @@ class Pipeline:
         self.counter_start_learnt: tuple[int, str] | None = None
         # The scene's start on the bus's clock where the simulated radar stamps its messages.
         self._bus_origin_s: float | None = None
+        # Whether the cycles' bus times were found on another clock than the scene's start.
+        self._bus_clock_checked = self._bus_clock_foreign = False
         self.output: Output | None = None
         # A private name that does not end in digits (MF4 logs read those as a channel number).
         self.channel = options.can_channel or f"rts-scenario-{id(self):x}-detections"
@@ -282,8 +288,32 @@ class Pipeline:
         A stream paced in real time knows when it started the scene; the simulated radar in
         process stamps its messages from the run's start. None otherwise.
         """
+        if self._bus_clock_foreign:
+            return None
         origin = getattr(self.output, "scene_origin_wall_s", None)
         return origin if origin is not None else self._bus_origin_s
+
+    def _check_bus_clock(self, cycles: list[Detections], duration_s: float,
+                         track: ClockTrack) -> None:
+        """Forget the scene's start on the bus's clock where the cycles are not on that clock.
+
+        python-can stamps messages with the wall clock, the one the scene's start is taken
+        on; an interface that stamps them with its own (seconds since it was plugged in) puts
+        the first cycle received far outside the scene (`BUS_CLOCK_SLACK_S`). Its bus times
+        then number and time the cycles only relative to each other: the counters and the
+        profile's phase place them in the scene.
+        """
+        origin = self._scene_origin_s()
+        t = _bus_times(cycles)
+        t = t[np.isfinite(t)]
+        if self._bus_clock_checked or origin is None or not t.size:
+            return
+        self._bus_clock_checked = True  # by the first cycle received with a bus time
+        clock = self.radar.radar_clock
+        late_s = duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S
+        if not -BUS_CLOCK_SLACK_S <= float(t[0]) - origin <= late_s:
+            self._bus_clock_foreign = True
+            track.origin_s = None
 
     def _learn_counter_start(self, checker: Checker, cycles: list[Detections]) -> None:
         """Find where the radar's counter starts when its profile does not say.
@@ -367,6 +397,7 @@ class Pipeline:
             on_preflight(preflight(scene, options.method))
             mark = timer.add("preflight_s", mark)
         self.receiver.reset()
+        self._bus_clock_checked = self._bus_clock_foreign = False
         window_s = ambiguity_window_s(self.radar, self.rig)
         # When the radar measures: its profile's clock, corrected by its cycles' bus times.
         track = ClockTrack(clock, self._scene_origin_s(),
@@ -396,6 +427,7 @@ class Pipeline:
             # The cycles first, so that the clock knows them before it times the truth.
             cycles = self.receive()
             mark = timer.add("receive_s", mark)
+            self._check_bus_clock(cycles, scene.duration_s, track)
             if checker.counter_start is None and cycles:
                 self._learn_counter_start(checker, cycles)
             self._anchor(checker, cycles)
@@ -412,6 +444,7 @@ class Pipeline:
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
         last = self.receive(final=True)
+        self._check_bus_clock(last, scene.duration_s, track)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
         self._anchor(checker, last)
