@@ -38,7 +38,7 @@ from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
 from .errors import RtsError
 from .kinematics import compute_tracks
-from .pipeline import LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
+from .pipeline import BUS_CLOCK_SLACK_S, LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
 from .playback import SEND_LATENESS_ENCODING, playback_reasons, unpack_send_lateness
 from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, ClockTrack, CycleTimeFit, RadarClock
@@ -860,6 +860,11 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
     # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
     origin = (sidecar or {}).get("clock", {}).get("origin_bus_s")
+    first_t = bus_t_s[np.isfinite(bus_t_s)][:1]
+    late_s = scene.duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S
+    if origin is not None and first_t.size and not (
+            -BUS_CLOCK_SLACK_S <= float(first_t[0]) - float(origin) <= late_s):
+        origin = None  # the log's times moved since (a tool, a time zone): the counters tell
     if origin is not None and counters.size:
         # The scene's start on the bus's clock (the run's): the first cycle is a step from
         # cycle 0 told by its bus time too, as live (`Checker.anchor`).

@@ -667,3 +667,23 @@ def test_an_8_bit_radar_silent_for_its_first_seven_seconds_misses_them(tmp_path,
         assert report.frames["total"] == 600
         assert report.frames["checked"] == 460 and report.frames["missing"] == 140
         assert (report.frames["late"], report.frames["repeated"]) == (0, 0)
+
+
+def test_a_log_whose_clock_moved_an_hour_re_checks_by_its_sidecar_to_the_live_verdict(tmp_path):
+    # A copy of the log whose timestamps a tool moved by an hour (a time zone): its first
+    # cycle is not an hour of cycles after the scene's start the sidecar keeps; an 8-bit
+    # counter numbers the cycles, to the live verdict.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    live = run_scene(scene, RunOptions(bus_log=str(log), mapping=eight_bit_mapping(tmp_path))
+                     ).report
+    moved = tmp_path / "moved.blf"
+    with can.Logger(str(moved)) as writer:
+        for m in can.LogReader(str(log)):
+            writer.on_message_received(can.Message(
+                arbitration_id=m.arbitration_id, data=m.data, is_extended_id=False,
+                timestamp=m.timestamp + 3600.0))
+    shutil.copy(str(log) + ".rts.json", str(moved) + ".rts.json")
+    again = check_log(scene, moved).report
+    assert live.passed and again.passed, again.reasons
+    assert again.frames == live.frames
