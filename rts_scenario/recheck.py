@@ -183,7 +183,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             "type": "object",
             "required": ["cycle_s", "start_offset_s", "latency_s", "jitter_s", "counter_start"],
             "properties": {
-                "cycle_s": _number(exclusiveMinimum=0), "start_offset_s": _number(),
+                "cycle_s": _number(exclusiveMinimum=0), "start_offset_s": _number(minimum=0),
                 "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
                 "cycles": {"type": ["integer", "null"], "minimum": 0},
@@ -663,11 +663,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     numbers = sequential_numbers(counters, modulus, index.bus_t_s, profile_clock.cycle_s)
     if sidecar is not None:
         c = sidecar["clock"]
-        clock = RadarClock(cycle_s=float(c["cycle_s"]),
-                           start_offset_s=float(c["start_offset_s"]),
-                           latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
-                           counter_start=None if c["counter_start"] is None
-                           else int(c["counter_start"]))
+        try:
+            clock = RadarClock(cycle_s=float(c["cycle_s"]),
+                               start_offset_s=float(c["start_offset_s"]),
+                               latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
+                               counter_start=None if c["counter_start"] is None
+                               else int(c["counter_start"]))
+        except ValueError as exc:  # values the schema allows one by one, not together
+            raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: {exc} (not what `rts-scenario run "
+                           f"--record` writes)") from None
         if clock.counter_start is None:  # the run saw no cycle: count from the log's first
             clock = replace(clock, counter_start=int(counters[0]) if len(index) else 0)
         # A radar's crystal is not its profile: where its cycles came on the bus at another

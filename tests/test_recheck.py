@@ -263,6 +263,10 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
     (lambda d: {**d, "clock": {**d["clock"], "latency_s": -0.05}},
      r"clock\.latency_s: -0\.05 is less than the minimum of 0"),
     (lambda d: {k: v for k, v in d.items() if k != "clock"}, r"\(the document\): 'clock' is a"),
+    (lambda d: {**d, "clock": {**d["clock"], "start_offset_s": -1.0}},
+     r"clock\.start_offset_s: -1\.0 is less than the minimum of 0"),
+    (lambda d: {**d, "clock": {**d["clock"], "jitter_s": 5.0}},
+     r"clock\.jitter_s: must not exceed latency_s \(0\), got 5"),
     (lambda d: {**d, "method": "bogus"},
      r"method: got 'bogus'; allowed values: exact, paper, estimator"),
 ])
