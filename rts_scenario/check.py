@@ -309,6 +309,17 @@ class Checker:
         """
         self._played += np.asarray(played, dtype=bool).sum(axis=0)
 
+    def anchor(self, number: int, bus_t_s: float) -> None:
+        """Take cycle ``number``, on the bus at ``bus_t_s``, as the one before the first to come.
+
+        Where the run knows when a cycle reached the bus (or would have: the scene's first,
+        from the scene's start on the bus's clock), the first cycles received are a step
+        from it told by their bus times too: a radar silent for longer than half of what an
+        8-bit counter counts from the scene's start is numbered by how long it was silent.
+        """
+        if self._last_cycle is None:
+            self._last_cycle, self._last_bus_t = int(number), float(bus_t_s)
+
     def add_cycles(self, cycles: Iterable[Detections]) -> IntArray:
         """Take radar cycles, in the order they arrived; each is filed under its counter's frame.
 

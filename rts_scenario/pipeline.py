@@ -30,7 +30,7 @@ from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .playback import Playback
 from .preflight import Preflight, frames_per_batch, preflight, scene_limits
-from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
+from .radar.clock import ClockTrack, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .report import FrameRecord, Report, strict
@@ -49,6 +49,10 @@ BATCH_FRAMES = 500
 QUIET_S = 0.2
 # At the end of a stream, how long to wait for the RTS's report of its last frames (s).
 RTS_SETTLE_S = 0.2
+# How far outside the scene (plus the radar's latency) the first cycle's bus time may lie and
+# still be on the clock the scene's start was taken on (s): a radar's cycles from just before
+# the stream started, or one silent for a while. Farther, the interface stamps with its own.
+BUS_CLOCK_SLACK_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -144,6 +148,8 @@ class Pipeline:
         self.counter_start_learnt: tuple[int, str] | None = None
         # The scene's start on the bus's clock where the simulated radar stamps its messages.
         self._bus_origin_s: float | None = None
+        # Whether the cycles' bus times were found on another clock than the scene's start.
+        self._bus_clock_checked = self._bus_clock_foreign = False
         self.output: Output | None = None
         # A private name that does not end in digits (MF4 logs read those as a channel number).
         self.channel = options.can_channel or f"rts-scenario-{id(self):x}-detections"
@@ -294,18 +300,45 @@ class Pipeline:
         A stream paced in real time knows when it started the scene; the simulated radar in
         process stamps its messages from the run's start. None otherwise.
         """
+        if self._bus_clock_foreign:
+            return None
         origin = getattr(self.output, "scene_origin_wall_s", None)
         return origin if origin is not None else self._bus_origin_s
+
+    def _check_bus_clock(self, cycles: list[Detections], duration_s: float,
+                         track: ClockTrack) -> None:
+        """Forget the scene's start on the bus's clock where the cycles are not on that clock.
+
+        python-can stamps messages with the wall clock, the one the scene's start is taken
+        on; an interface that stamps them with its own (seconds since it was plugged in) puts
+        the first cycle received far outside the scene (`BUS_CLOCK_SLACK_S`). Its bus times
+        then number and time the cycles only relative to each other: the counters and the
+        profile's phase place them in the scene.
+        """
+        origin = self._scene_origin_s()
+        t = _bus_times(cycles)
+        t = t[np.isfinite(t)]
+        if self._bus_clock_checked or origin is None or not t.size:
+            return
+        self._bus_clock_checked = True  # by the first cycle received with a bus time
+        clock = self.radar.radar_clock
+        late_s = duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S
+        if not -BUS_CLOCK_SLACK_S <= float(t[0]) - origin <= late_s:
+            self._bus_clock_foreign = True
+            track.origin_s = None
 
     def _learn_counter_start(self, checker: Checker, cycles: list[Detections]) -> None:
         """Find where the radar's counter starts when its profile does not say.
 
         A radar whose profile gives no counter start runs free: it was switched on before the
-        scene, at any point of its frames. The cycles' bus times, less the radar's latency,
-        are their measurement times on the bus's clock; the scene's origin on that clock
-        makes them scene times. Cycle 0 is the first measured at or after the scene's start,
-        found on the line through the first cycles received (their jitter averages out).
-        Without those times, the first cycle received is taken as the scene's first.
+        scene, at any point of its frames. Where the scene's start is known on the bus's
+        clock, the first cycles' bus times less the radar's latency tell roughly how many
+        cycles it measured in the scene before the earliest received (those lost are
+        missing); cycle 0 is numbered a cycle earlier still, and the clock track
+        (`ClockTrack`, from all the cycles' bus times) tells which cycle is the scene's first
+        (`CycleTruth.first_cycle`): a few cycles' jitter decides nothing. The report gives
+        that cycle's counter. Without those times, the first cycle received is taken as the
+        scene's first.
         """
         clock = self.radar.radar_clock
         origin = self._scene_origin_s()
@@ -315,20 +348,30 @@ class Pipeline:
             m = sequential_numbers((counters - counters[0]) % self.counter_modulus,
                                    self.counter_modulus, _bus_times(timed), clock.cycle_s)
             measured = _bus_times(timed) - clock.latency_s - origin
-            cycle_s = clock.cycle_s
-            if m.size >= 8 and np.ptp(m) > 0:  # the radar's own cycle (a crystal off by 1000
-                cycle_s = float(np.polyfit(m, measured, 1)[0])  # ppm: 25 ms over 500 cycles)
-            residual = measured - m * cycle_s
-            phase = float(np.mean(residual))  # scene time of m = 0
-            # A cycle within three standard errors before the start may have measured at it.
-            tolerance = 3.0 * float(np.std(residual)) / np.sqrt(m.size)
-            m0 = int(np.ceil((-phase - tolerance) / cycle_s - TIME_EPS_S))
-            checker.counter_start = int(counters[0] + m0) % self.counter_modulus
+            # Scene time of the earliest received, on the line of the profile's cycle.
+            earliest = float(np.mean(measured - m * clock.cycle_s)) + m.min() * clock.cycle_s
+            before = max(0, int(np.floor(earliest / clock.cycle_s))) + 1
+            checker.counter_start = int(counters[0] + m.min() - before) % self.counter_modulus
+            # Cycle 0's bus time on that line: the earliest received is `before` cycles on,
+            # however many an 8-bit counter would read.
+            checker.anchor(0, origin + clock.latency_s + earliest - before * clock.cycle_s)
             source = "learnt from the cycles' bus times"
         else:
             checker.counter_start = cycles[0].cycle % self.counter_modulus
             source = "assumed: the first cycle received is the scene's first"
         self.counter_start_learnt = (checker.counter_start, source)
+
+    def _anchor(self, checker: Checker, cycles: list[Detections]) -> None:
+        """Tell the checker when a profile's radar's cycle 0 reached the bus (`Checker.anchor`).
+
+        Its cycle 0 reaches the bus its latency after the profile's start offset, from the
+        scene's start on the bus's clock (where the run knows it): the first cycle received
+        is numbered on from there (`Checker.anchor`).
+        """
+        clock = self.radar.radar_clock
+        origin = self._scene_origin_s()
+        if cycles and clock.counter_start is not None and origin is not None:
+            checker.anchor(0, origin + clock.latency_s + clock.start_offset_s)
 
     def run(self, scene: Scenario, progress: Callable[[int, int], None] | None = None,
             timing: dict[str, float] | None = None,
@@ -366,6 +409,7 @@ class Pipeline:
             on_preflight(preflight(scene, options.method))
             mark = timer.add("preflight_s", mark)
         self.receiver.reset()
+        self._bus_clock_checked = self._bus_clock_foreign = False
         window_s = ambiguity_window_s(self.radar, self.rig)
         # When the radar measures: its profile's clock, corrected by its cycles' bus times.
         track = ClockTrack(clock, self._scene_origin_s(),
@@ -395,8 +439,10 @@ class Pipeline:
             # The cycles first, so that the clock knows them before it times the truth.
             cycles = self.receive()
             mark = timer.add("receive_s", mark)
+            self._check_bus_clock(cycles, scene.duration_s, track)
             if checker.counter_start is None and cycles:
                 self._learn_counter_start(checker, cycles)
+            self._anchor(checker, cycles)
             track.add(checker.add_cycles(cycles), _bus_times(cycles))
             mark = timer.add("check_s", mark)
             # The radar's cycles while the RTS held the batch before: it was held until this
@@ -410,11 +456,16 @@ class Pipeline:
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
         last = self.receive(final=True)
+        self._check_bus_clock(last, scene.duration_s, track)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
+        self._anchor(checker, last)
         track.add(checker.add_cycles(last), _bus_times(last))
         mark = timer.add("receive_s", mark)
         truths.finish()
+        # The scene's first cycle as the clock ended up taking it, and how many it had.
+        first = truths.first_cycle or 0
+        n_cycles = (truths.end_cycle or first) - first
         mark = timer.add("kinematics_s", mark)
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
@@ -437,8 +488,12 @@ class Pipeline:
             report.passed = False
         if options.bus_log and digest is not None:
             write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
-                              counter_start=checker.counter_start, playback=report.playback,
-                              send_lateness=playback.send_lateness(), clock=track)
+                              counter_start=None if checker.counter_start is None
+                              else (checker.counter_start + first) % self.counter_modulus,
+                              playback=report.playback,
+                              send_lateness=playback.send_lateness(), clock=track,
+                              first_cycle=first, cycles=n_cycles,
+                              origin_bus_s=self._scene_origin_s())
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -447,11 +502,12 @@ class Pipeline:
             report.radar_clock = {"counter_start": clock.counter_start, "source": "profile"}
         elif self.counter_start_learnt is not None:
             start, source = self.counter_start_learnt
-            report.radar_clock = {"counter_start": start, "source": source}
+            report.radar_clock = {"counter_start": (start + first) % self.counter_modulus,
+                                  "source": source}
         measured = track.fit.cycle_s()
         if measured is not None:
             report.radar_clock["bus_cycle_s"] = measured[0]
-        report.radar_clock.update(track.to_dict())
+        report.radar_clock.update(track.to_dict(first))
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -512,18 +568,36 @@ class CycleTruth:
         bus (asked again for every batch).
     window_s : float
         The ambiguity window after a frame change (s); `ambiguity_window_s` gives it.
+    cycles : int, optional
+        How many cycles the scene has, from its first: a re-check gives the run's (its
+        sidecar's); by default those the clock puts in the scene.
+
+    The scene's cycles are those measured in it, as far as the clock knows: its first is the
+    first at or after its start less the clock's `start_tolerance_s` (it may have measured at
+    the start itself; the first batches wait until the clock knows which, within a batch of
+    frames), its last the last before its end less that tolerance (the one after it may have
+    measured at the end itself, after the scene). `first_cycle` and `end_cycle` say which
+    they were.
     """
 
     def __init__(self, checker: Checker, scene: Scenario, clock: RadarClock | ClockTrack,
-                 window_s: float) -> None:
+                 window_s: float, cycles: int | None = None) -> None:
         self.checker, self.scene, self.clock = checker, scene, clock
         self.window_s = float(window_s)
+        self.cycles = cycles
+        # The scene's first cycle (None until the first batch's truth is handed on).
+        self.first_cycle: int | None = None
         # The batch whose truth waits for the next one's first send time.
         self._pending: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         # The last frame of the batch before the pending one: (frame, status row, applied s).
         self._before: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         # The first cycle not handed on yet (None: the scene's first, found by its time).
         self._next_n: int | None = None
+
+    @property
+    def end_cycle(self) -> int | None:
+        """The first cycle not handed on (after `finish`: one past the scene's last)."""
+        return self._next_n
 
     def add(self, frames: np.ndarray, status: np.ndarray,
             applied_s: np.ndarray | None = None) -> np.ndarray:
@@ -538,10 +612,32 @@ class CycleTruth:
         applied = np.maximum.accumulate(np.maximum(applied, t_all[frames]))
         batch = (np.asarray(frames)[:], np.asarray(status), applied)
         done = np.zeros(0, dtype=np.int64)
+        if self._pending is not None and self._await_start(batch[0].size):
+            # The scene's first cycle is not known yet: the batch joins the pending one.
+            pending = self._pending
+            self._pending = (np.concatenate([pending[0], batch[0]]),
+                             np.concatenate([pending[1], batch[1]]),
+                             np.maximum.accumulate(np.concatenate([pending[2], applied])))
+            return done
         if self._pending is not None:
             done = self._give(float(applied[0]), (batch[0][:1], batch[1][:1], applied[:1]))
         self._pending = batch
         return done
+
+    def _await_start(self, more: int) -> bool:
+        """Whether to hold the first batches until the clock knows the scene's first cycle.
+
+        A clock learnt from the bus (a radar running free) may not tell it from a few cycles
+        (`ClockTrack.start_known`): its first batches wait for more, as long as they and
+        ``more`` frames stay within one batch of the scene's size (`frames_per_batch`).
+        """
+        assert self._pending is not None
+        known = getattr(self.clock, "start_known", None)
+        if self._next_n is not None or known is None:
+            return False
+        if known(float(self.scene.t_s[self._pending[0][0]])):
+            return False
+        return self._pending[0].size + more <= frames_per_batch(len(self.scene.targets))
 
     def finish(self) -> np.ndarray:
         """Hand on the last batch (held until the scene's end); return its cycles' numbers."""
@@ -570,9 +666,17 @@ class CycleTruth:
         # Cycle numbers follow on from the batch before's, whatever the clock now says: a
         # clock learnt from the bus (`ClockTrack`) may have moved a cycle across the batches'
         # boundary since (judged against the frame before, then).
-        lo = (self.clock.first_at(start_s - self.clock.start_tolerance_s)
+        tolerance_s = self.clock.start_tolerance_s
+        lo = (self.clock.first_at(start_s - tolerance_s)
               if self._next_n is None else self._next_n)
-        hi = max(lo, self.clock.first_at(max(end_s, start_s)))
+        if self.first_cycle is None:
+            self.first_cycle = lo
+        # The scene's end: a cycle that may have measured at it is after the scene.
+        end_s = max(end_s, start_s) if after is not None else max(end_s - tolerance_s, start_s)
+        hi = max(lo, self.clock.first_at(end_s))
+        if self.cycles is not None:
+            end_n = self.first_cycle + self.cycles
+            hi = max(lo, end_n if after is None else min(hi, end_n))
         self._next_n = hi
         n = np.arange(lo, hi, dtype=np.int64)
         if not n.size:
@@ -625,7 +729,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       counter_start: int | None = None,
                       playback: dict[str, Any] | None = None,
                       send_lateness: dict[str, Any] | None = None,
-                      clock: ClockTrack | None = None) -> Path:
+                      clock: ClockTrack | None = None, first_cycle: int = 0,
+                      cycles: int | None = None, origin_bus_s: float | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -636,7 +741,11 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     run used (learnt, where the profile does not give it); ``playback`` the run's
     (`Playback.to_dict`) and ``send_lateness`` when each frame went out
     (`Playback.send_lateness`). ``clock`` is the clock the run ended with (`ClockTrack`): its
-    cycle and phase are written, cycle 0 renumbered to the first measured in the scene.
+    cycle and phase are written, cycle 0 renumbered to the scene's first as the run took it
+    (``first_cycle`` of the clock's numbers; ``counter_start`` is its counter), and
+    ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones;
+    ``origin_bus_s`` the scene's start on the bus's clock, where the run knew it: the log's
+    first cycles are numbered from it by their bus times, as live (`Checker.anchor`).
     """
     import json
 
@@ -644,13 +753,10 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
 
     c = radar.radar_clock
     if clock is not None:
-        cycle_s, offset_s = clock.cycle_s, clock.start_offset_s
-        # Cycle 0 measured before the scene began (a radar running free): renumbered from
-        # the first the scene measured, the counter moved with it.
-        shift = min(0, int(np.floor(offset_s / cycle_s + TIME_EPS_S)))
-        if counter_start is not None:
-            counter_start -= shift
-        c = replace(c, cycle_s=cycle_s, start_offset_s=max(0.0, offset_s - shift * cycle_s))
+        # The scene's first cycle may lie within the clock's uncertainty before its start (it
+        # may have measured at it): at the start, then.
+        c = replace(c, cycle_s=clock.cycle_s,
+                    start_offset_s=max(0.0, float(clock.time_of(np.array([first_cycle]))[0])))
     path = Path(str(log) + LOG_SIDECAR_SUFFIX)
     data = {
         "rts_scenario_log": 1, "version": __version__, "scene": scene.name,
@@ -660,7 +766,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
                   "counter_start": c.counter_start if counter_start is None
-                  else counter_start},
+                  else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s},
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         "status_sha256": status_digest,

@@ -38,7 +38,7 @@ from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
 from .errors import RtsError
 from .kinematics import compute_tracks
-from .pipeline import LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
+from .pipeline import BUS_CLOCK_SLACK_S, LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
 from .playback import SEND_LATENESS_ENCODING, playback_reasons, unpack_send_lateness
 from .preflight import scene_limits, schedule_batches
 from .radar.clock import TIME_EPS_S, ClockTrack, CycleTimeFit, RadarClock
@@ -71,6 +71,9 @@ EDGE_RESOLUTION_S = 1e-6
 EDGE_GUARD_S = 1e-5
 # A cycle measured this close before the scene's time 0 counts as measured at it.
 START_TOLERANCE_S = 1e-5
+# Timestamps of a log that go back this far from one radar cycle to the next are a clock set
+# back while it logged: the log cannot be aligned by them (s).
+STAMPS_BACK_S = 1.0
 # Fitting the radar's cycle time, a stamp this far off the line (or five times the stamps'
 # spread, if more) is a cycle held up on the bus and left out.
 FIT_OUTLIER_FLOOR_S = 0.001
@@ -180,9 +183,11 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             "type": "object",
             "required": ["cycle_s", "start_offset_s", "latency_s", "jitter_s", "counter_start"],
             "properties": {
-                "cycle_s": _number(exclusiveMinimum=0), "start_offset_s": _number(),
+                "cycle_s": _number(exclusiveMinimum=0), "start_offset_s": _number(minimum=0),
                 "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
+                "cycles": {"type": ["integer", "null"], "minimum": 0},
+                "origin_bus_s": {"type": ["number", "null"]},
             },
         },
         "mapping": {"type": ["string", "null"]},
@@ -658,11 +663,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     numbers = sequential_numbers(counters, modulus, index.bus_t_s, profile_clock.cycle_s)
     if sidecar is not None:
         c = sidecar["clock"]
-        clock = RadarClock(cycle_s=float(c["cycle_s"]),
-                           start_offset_s=float(c["start_offset_s"]),
-                           latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
-                           counter_start=None if c["counter_start"] is None
-                           else int(c["counter_start"]))
+        try:
+            clock = RadarClock(cycle_s=float(c["cycle_s"]),
+                               start_offset_s=float(c["start_offset_s"]),
+                               latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
+                               counter_start=None if c["counter_start"] is None
+                               else int(c["counter_start"]))
+        except ValueError as exc:  # values the schema allows one by one, not together
+            raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: {exc} (not what `rts-scenario run "
+                           f"--record` writes)") from None
         if clock.counter_start is None:  # the run saw no cycle: count from the log's first
             clock = replace(clock, counter_start=int(counters[0]) if len(index) else 0)
         # A radar's crystal is not its profile: where its cycles came on the bus at another
@@ -702,6 +711,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"{receiver_mapping.name!r}); is --mapping the radar's?")
         latency = profile_clock.latency_s
         bus_t = index.bus_t_s
+        _check_timestamps(log, bus_t, profile_clock.cycle_s)
         # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
         chosen = _alignment_cycles(index)
         dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s)
@@ -780,6 +790,31 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     return RecheckResult(scene=scene, report=result, alignment=alignment)
 
 
+def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float) -> None:
+    """Refuse to align a log by timestamps that do not advance with its cycles.
+
+    All alike or nearly (a logger that wrote one time for every message: distinct cycles
+    span at least a cycle each, a tenth of the profile's for a radar far off it), or going back
+    by more than `STAMPS_BACK_S` between one cycle and the next in the log (a clock set back
+    while it logged; a cycle held up on the bus comes later, not earlier).
+    """
+    timed = bus_t[np.isfinite(bus_t)]
+    advice = ("it cannot be aligned by them; the sidecar `run --record` writes aligns a log by "
+              "the radar's counters")
+    span = float(np.ptp(timed)) if timed.size else 0.0
+    if timed.size >= 2 and not span >= 0.1 * cycle_s * (timed.size - 1):
+        raise LogError(f"--log {log}: its radar cycles' timestamps do not advance: all "
+                       f"{timed.size} of them within {span:.6f} s (cycles of "
+                       f"{cycle_s * 1e3:g} ms take {cycle_s * (timed.size - 1):.3f} s); {advice}")
+    step = np.diff(timed)
+    back = np.flatnonzero(step < -STAMPS_BACK_S)
+    if back.size:
+        i = int(back[0])
+        raise LogError(f"--log {log}: its radar cycles' timestamps go back: by "
+                       f"{-step[i]:.6f} s from cycle {i + 1} to {i + 2} of the {timed.size} "
+                       f"with a timestamp ({back.size} such steps); {advice}")
+
+
 def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
                   offset_s: float, modulus: int, nominal_cycle_s: float) -> RadarClock:
     """Return the radar's clock in scene time fitted to the header timestamps.
@@ -804,6 +839,9 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
         keep = np.abs(residual) <= max(5.0 * spread, FIT_OUTLIER_FLOOR_S)
         if not keep.all() and np.ptp(n[keep]) > 0:
             cycle_s, first_s = np.polyfit(n[keep], t[keep], 1)
+        if not cycle_s > 0:
+            raise LogError(f"the log's timestamps go back as its radar cycles go on (a cycle of "
+                           f"{cycle_s:.6g} s fits them); it cannot be aligned by them")
     else:
         cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - t0 - numbers[ok][0]
                                                   * nominal_cycle_s)
@@ -825,11 +863,29 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
                       expected_limits=[t.expected_limits for t in scene.targets],
                       scene_limits=scene_limits(scene), variant=scene.variant,
                       parameters=scene.parameters, cycle_s=clock.cycle_s)
-    total = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
+    # The cycles the run judged (its sidecar), else those the clock puts in the scene.
+    cycles = (sidecar or {}).get("clock", {}).get("cycles")
+    total = cycles if cycles is not None else len(
+        clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
     # Cycle numbers in the clock's terms, in log order (the counter wraps with the signal).
-    first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
-                - modulus // 2) if counters.size else 0
-    rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
+    origin = (sidecar or {}).get("clock", {}).get("origin_bus_s")
+    first_t = bus_t_s[np.isfinite(bus_t_s)][:1]
+    late_s = scene.duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S
+    if origin is not None and first_t.size and not (
+            -BUS_CLOCK_SLACK_S <= float(first_t[0]) - float(origin) <= late_s):
+        origin = None  # the log's times moved since (a tool, a time zone): the counters tell
+    if origin is not None and counters.size:
+        # The scene's start on the bus's clock (the run's): the first cycle is a step from
+        # cycle 0 told by its bus time too, as live (`Checker.anchor`).
+        zero_bus_s = float(origin) + clock.latency_s + clock.start_offset_s
+        rel = sequential_numbers(
+            np.r_[0, (counters - (clock.counter_start or 0)) % modulus], modulus,
+            np.r_[zero_bus_s, bus_t_s], clock.cycle_s)[1:]
+        checker.anchor(0, zero_bus_s)
+    else:
+        first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
+                    - modulus // 2) if counters.size else 0
+        rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
     logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s)
@@ -839,7 +895,8 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     # Frames as the run sent them (the sidecar's send times), else as applied at their times:
     # the ambiguity window around each change covers the transport, as it does live.
     late = _send_lateness(scene, sidecar, log)
-    truths = CycleTruth(checker, scene, clock, ambiguity_window_s(scene.radar, scene.rig))
+    truths = CycleTruth(checker, scene, clock, ambiguity_window_s(scene.radar, scene.rig),
+                        cycles)
 
     def check_cycles(n: IntArray) -> None:
         if n.size:
@@ -854,7 +911,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         check_cycles(truths.add(frames, schedule.status, sent))
     check_cycles(truths.finish())
     checker.settle()
-    # Cycles measured after the scene's end (a radar keeps measuring what the RTS holds) are
+    # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) are
     # counted as the run counted them; they were never handed to the checker.
     checker.frames["after_scene"] += int((rel >= total).sum())
     if sidecar is not None and sidecar.get("status_sha256"):

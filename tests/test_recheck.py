@@ -280,6 +280,10 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
     (lambda d: {**d, "clock": {**d["clock"], "latency_s": -0.05}},
      r"clock\.latency_s: -0\.05 is less than the minimum of 0"),
     (lambda d: {k: v for k, v in d.items() if k != "clock"}, r"\(the document\): 'clock' is a"),
+    (lambda d: {**d, "clock": {**d["clock"], "start_offset_s": -1.0}},
+     r"clock\.start_offset_s: -1\.0 is less than the minimum of 0"),
+    (lambda d: {**d, "clock": {**d["clock"], "jitter_s": 5.0}},
+     r"clock\.jitter_s: must not exceed latency_s \(0\), got 5"),
     (lambda d: {**d, "method": "bogus"},
      r"method: got 'bogus'; allowed values: exact, paper, estimator"),
 ])
@@ -637,3 +641,89 @@ def test_a_log_that_shrinks_between_the_passes_is_one_clear_error(tmp_path):
     with pytest.raises(LogError, match=r"run.asc: changed while it was checked \(it now ends "
                                        r"after 240 radar cycles, not 300\)"):
         reader.take(np.array([250]))
+
+
+@pytest.mark.parametrize(("stamps", "told"), [
+    ("equal", "all 240 of them within"), ("back", "go back"),
+    ("reversed", "(go back|do not advance)")])
+def test_a_log_whose_timestamps_do_not_advance_re_checks_by_its_sidecar_only(
+        tmp_path, stamps, told):
+    # A logger that wrote one time for every message, or whose clock went back 30 s midway
+    # (or ran backwards): its sidecar numbers the cycles by their counters, to the live
+    # verdict; without it, one clear error naming the log, not a traceback.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    messages = list(can.LogReader(str(log)))
+    t0 = messages[0].timestamp
+    restamp = {"equal": lambda t: t0, "back": lambda t: t - 30.0 * (t - t0 > 6.0),
+               "reversed": lambda t: 2 * t0 - t}[stamps]
+    odd = tmp_path / f"{stamps}.blf"
+    with can.Logger(str(odd)) as writer:
+        for m in messages:
+            writer.on_message_received(can.Message(
+                arbitration_id=m.arbitration_id, data=m.data, is_extended_id=False,
+                timestamp=restamp(m.timestamp)))
+    shutil.copy(str(log) + ".rts.json", str(odd) + ".rts.json")
+    again = check_log(scene, odd).report
+    assert again.passed == live.passed is True, again.reasons
+    assert again.frames == live.frames
+    Path(str(odd) + ".rts.json").unlink()
+    with pytest.raises(LogError, match=rf"--log {re.escape(str(odd))}: its radar cycles' "
+                                       rf"timestamps .*{told}"):
+        check_log(scene, odd)
+
+
+@pytest.mark.parametrize("free", [True, False])
+def test_an_8_bit_radar_silent_for_its_first_seven_seconds_misses_them(tmp_path, free):
+    # Its first 140 cycles (7 s, more than half of what an 8-bit counter counts) never reached
+    # the bus. Numbered by the counter from the scene's start, the first received read as 116
+    # cycles before it: the run judged the radar from 12.8 s on and passed with 344 cycles of
+    # 600. The bus time from the scene's start tells the 140: they are missing, live and
+    # re-checked by the sidecar.
+    from test_radar_clock import write_radar
+
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                        jitter_s=0.004, counter_start="auto" if free else 100)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml",
+                          {**QUIET, "radar.profile": radar, "duration_s": 30.0,
+                           "targets.0.motion.speed_mps": 22.0})
+    log = tmp_path / "silent.blf"
+    options = RunOptions(mapping=eight_bit_mapping(tmp_path), bus_log=str(log),
+                         batch_frames=200)
+    with Pipeline.for_scene(scene, options) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                                           jitter_s=0.004, counter_start=100)
+        sink = pipeline.output._sink
+        pipeline.output._sink = lambda cycles: sink([c for c in cycles if c.cycle >= 240])
+        live = pipeline.run(scene).report
+    assert live.radar_clock["counter_start"] == 100
+    for report in (live, check_log(scene, log, batch_frames=200).report):
+        assert not report.passed
+        assert report.frames["total"] == 600
+        assert report.frames["checked"] == 460 and report.frames["missing"] == 140
+        assert (report.frames["late"], report.frames["repeated"]) == (0, 0)
+
+
+def test_a_log_whose_clock_moved_an_hour_re_checks_by_its_sidecar_to_the_live_verdict(tmp_path):
+    # A copy of the log whose timestamps a tool moved by an hour (a time zone): its first
+    # cycle is not an hour of cycles after the scene's start the sidecar keeps; an 8-bit
+    # counter numbers the cycles, to the live verdict.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    live = run_scene(scene, RunOptions(bus_log=str(log), mapping=eight_bit_mapping(tmp_path))
+                     ).report
+    moved = tmp_path / "moved.blf"
+    with can.Logger(str(moved)) as writer:
+        for m in can.LogReader(str(log)):
+            writer.on_message_received(can.Message(
+                arbitration_id=m.arbitration_id, data=m.data, is_extended_id=False,
+                timestamp=m.timestamp + 3600.0))
+    shutil.copy(str(log) + ".rts.json", str(moved) + ".rts.json")
+    again = check_log(scene, moved).report
+    assert live.passed and again.passed, again.reasons
+    assert again.frames == live.frames

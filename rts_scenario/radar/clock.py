@@ -138,13 +138,14 @@ class CycleTimeFit:
         None before three cycles, and where the cycles scatter by more than a quarter of the
         cycle about the line: their numbers do not follow their bus times (a counter that
         jumped, or a gap longer than half of what a narrow counter counts), and a crystal off
-        its profile leaves them on a straight line.
+        its profile leaves them on a straight line. None too where the times do not advance
+        with the numbers (a logger that stamped every message alike, or whose clock went back).
         """
         line = self._line()
         if line is None:
             return None
         slope, scatter, var_x = line
-        if scatter > 0.25 * abs(slope):
+        if not slope > 0.0 or scatter > 0.25 * slope:
             return None
         return float(slope), float(scatter / np.sqrt(var_x))
 
@@ -228,6 +229,8 @@ DRIFT_FLOOR_S = 1e-5
 # Spread of bus times about a radar's line that its profile's jitter need not explain (s): the
 # stamping, a thread's wake-up.
 STAMP_NOISE_S = 1e-3
+# Cycles a free radar's phase is learnt from before it decides which is the scene's first.
+START_CYCLES = 8
 
 
 class ClockTrack:
@@ -313,11 +316,32 @@ class ClockTrack:
         """How far before the scene's start a cycle may lie and count as its first.
 
         Three standard errors of the phase from the bus (the radar may have measured at the
-        start itself); 0 where the phase is the profile's.
+        start itself), from the cycles' scatter and no less than the profile's jitter gives;
+        0 where the phase is the profile's.
         """
         if not self.phase_from_bus or self.fit.count < 2:
             return 0.0
-        return 3.0 * self.fit.zero_error_s(self.cycle_s)
+        return 3.0 * max(self.fit.zero_error_s(self.cycle_s),
+                         self.profile.jitter_s / np.sqrt(3.0 * self.fit.count))
+
+    def start_known(self, t_s: float) -> bool:
+        """Whether the clock tells which is the first cycle at or after scene time ``t_s``.
+
+        It does where its phase is the profile's. From the bus, once `START_CYCLES` cycles
+        are in and the cycle nearest ``t_s`` lies further from it than `start_tolerance_s`
+        (more cycles will not move it across); a radar that measures at ``t_s`` itself never
+        tells, and the first cycle is then the one within the tolerance before it.
+        """
+        if not self.phase_from_bus:
+            return True
+        if self.fit.count < START_CYCLES:
+            return False
+        nearest = self.time_of(np.array([self.cycle_at(t_s)]))[0]
+        return bool(abs(nearest - t_s) > self.start_tolerance_s)
+
+    def cycle_at(self, measured_s: float) -> int:
+        """Return the cycle number measured nearest scene time ``measured_s``."""
+        return int(np.round((measured_s - self.start_offset_s) / self.cycle_s))
 
     def off_profile_reason(self, tolerance_s: float) -> str | None:
         """Why the radar's clock fails the run (its cycle too far from the profile's), or None.
@@ -339,10 +363,13 @@ class ClockTrack:
                 f"radar's clock (another radar or mode?); the check followed the bus's cycle; "
                 f"set clock.cycle_s: {fit[0]:.10g} in the radar profile")
 
-    def to_dict(self) -> dict[str, float | str]:
-        """Return the clock the check ended with, for the report's ``radar_clock``."""
+    def to_dict(self, first: int = 0) -> dict[str, float | str]:
+        """Return the clock the check ended with, for the report's ``radar_clock``.
+
+        ``start_offset_s`` is the scene time of cycle ``first``: the scene's first.
+        """
         return {"cycle_s": self.cycle_s, "cycle_from": "bus" if self.cycle_from_bus
-                else "profile", "start_offset_s": self.start_offset_s,
+                else "profile", "start_offset_s": float(self.time_of(np.array([first]))[0]),
                 "start_from": "bus" if self.phase_from_bus and self.fit.count else "profile"}
 
 
