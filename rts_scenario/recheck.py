@@ -69,6 +69,9 @@ MAX_FINE_POINTS = 2000
 # estimate kept this far inside them, so that no cycle sits on a frame change by rounding.
 EDGE_RESOLUTION_S = 1e-6
 EDGE_GUARD_S = 1e-5
+# Longest latency a given --time-offset-s may imply (s): a radar reports within a cycle or a
+# few; seconds mean the offset is in another time base than the log's.
+MAX_LATENCY_S = 5.0
 # A cycle measured this close before the scene's time 0 counts as measured at it.
 START_TOLERANCE_S = 1e-5
 # Timestamps of a log that go back this far from one radar cycle to the next are a clock set
@@ -747,6 +750,14 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                                f"bus {-latency * 1e3:.1f} ms before the radar measured them; "
                                f"the scene starts at log time {found.offset_s:.6f} s or "
                                f"earlier")
+            if latency > MAX_LATENCY_S:
+                first_t = float(bus_t[np.isfinite(bus_t)][0])
+                raise LogError(f"--time-offset-s {offset:.6f}: the log's detections match the "
+                               f"scene from log time {found.offset_s:.6f} s on, which would "
+                               f"make the radar report {latency:.3g} s after measuring (at "
+                               f"most {MAX_LATENCY_S:g} s); give the scene's start in the "
+                               f"log's time base (its first cycle is at {first_t:.6f} s), or "
+                               f"leave the option out to estimate it")
             latency = max(latency, 0.0)
             # Shorter by the plateau, but never below 0: a latency the data put at 0 is 0.
             plateau = min(found.plateau_s, latency)

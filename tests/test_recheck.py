@@ -230,6 +230,12 @@ def test_a_given_time_offset_tells_the_latency(tmp_path):
     early = check_log(scene, log, time_offset_s=origin - 0.6)
     assert early.alignment.latency_s == pytest.approx(0.73, abs=0.01)
     assert any("differs from its profile's 130.0 ms" in n for n in early.alignment.notes)
+    # One in another time base (seconds since the logger started, for epoch timestamps) would
+    # make the radar report decades late: refused, naming the log's time base.
+    with pytest.raises(LogError, match=r"--time-offset-s 5\.000000: .*\(at most 5 s\); give the "
+                                       r"scene's start in the log's time base \(its first cycle "
+                                       r"is at 1700000055\.\d+ s\)"):
+        check_log(scene, log, time_offset_s=5.0)
 
 
 def test_a_biased_radar_in_another_tool_s_log_fails(tmp_path):
