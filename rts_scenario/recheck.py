@@ -911,9 +911,11 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         check_cycles(truths.add(frames, schedule.status, sent))
     check_cycles(truths.finish())
     checker.settle()
-    # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) are
-    # counted as the run counted them; they were never handed to the checker.
+    # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) or
+    # before its first are counted as the run counted them; they were never handed to the
+    # checker.
     checker.frames["after_scene"] += int((rel >= total).sum())
+    checker.frames["before_scene"] += int((rel < 0).sum())
     if sidecar is not None and sidecar.get("status_sha256"):
         alignment.schedule_matches_recording = digest.hexdigest() == sidecar["status_sha256"]
         if not alignment.schedule_matches_recording:

@@ -727,3 +727,37 @@ def test_a_log_whose_clock_moved_an_hour_re_checks_by_its_sidecar_to_the_live_ve
     again = check_log(scene, moved).report
     assert live.passed and again.passed, again.reasons
     assert again.frames == live.frames
+
+
+@pytest.mark.parametrize("free", [True, False])
+def test_cycles_from_before_the_scene_are_counted_alike_live_and_re_checked(tmp_path, free):
+    # A real radar measures before the stream starts the scene: three of its cycles from
+    # before the scene's start reach the bus. Live and re-checked by the sidecar they are
+    # the same count: measured before the scene, neither late nor after its end.
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                        jitter_s=0.0, counter_start="auto" if free else 100)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml", {**QUIET, "radar.profile": radar})
+    log = tmp_path / "early.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                                           jitter_s=0.0, counter_start=100)
+        sink, sent = pipeline.output._sink, []
+
+        def with_early(cycles):
+            if not sent:
+                early = [Detections.empty(100 - k, 0.01 - 0.05 * k, ()) for k in (3, 2, 1)]
+                cycles = early + list(cycles)
+            sent.append(len(cycles))
+            sink(cycles)
+
+        pipeline.output._sink = with_early
+        live = pipeline.run(scene).report
+    again = check_log(scene, log)
+    assert live.passed and again.report.passed, (live.reasons, again.report.reasons)
+    assert live.frames["before_scene"] == 3 and live.frames["total"] == 240
+    assert (live.frames["late"], live.frames["after_scene"]) == (0, 0)
+    assert again.report.frames == live.frames
