@@ -674,20 +674,18 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"--record` writes)") from None
         if clock.counter_start is None:  # the run saw no cycle: count from the log's first
             clock = replace(clock, counter_start=int(counters[0]) if len(index) else 0)
-        # A radar's crystal is not its profile: where its cycles came on the bus at another
-        # cycle than the run took, the re-check judges them at the bus's (and says so).
+        # The sidecar keeps the cycle the run followed, and the re-check judges the cycles
+        # where the run did. Where the bus times show another (a radar whose latency
+        # scattered too much for the run to follow its crystal), the notes say so.
         fit = CycleTimeFit()
         fit.add(numbers, index.bus_t_s)
         drifted = fit.drift_reason(clock.cycle_s, 0.5 * ambiguity_window_s(scene.radar,
                                                                             scene.rig))
-        measured = fit.cycle_s()
-        if drifted and measured is not None:
-            clock = replace(clock, cycle_s=measured[0])
         alignment = Alignment("sidecar", clock.cycle_s, latency_s=clock.latency_s)
         if drifted:
             alignment.notes.append(drifted.removeprefix("radar_clock: ").replace(
-                "its profile says", "the run took")
-                + "; this re-check takes the cycle from the bus")
+                "its profile says", "the run took").replace(
+                "than the check took it to", "than the run and this re-check took it to"))
         recorded = sidecar.get("variant")
         if recorded is not None and recorded != scene.variant:
             raise LogError(f"--log {log}: recorded for {_variant_text(recorded)} (its "

@@ -761,3 +761,38 @@ def test_cycles_from_before_the_scene_are_counted_alike_live_and_re_checked(tmp_
     assert live.frames["before_scene"] == 3 and live.frames["total"] == 240
     assert (live.frames["late"], live.frames["after_scene"]) == (0, 0)
     assert again.report.frames == live.frames
+
+
+def test_a_re_check_by_the_sidecar_judges_at_the_clock_the_run_took_and_notes_the_bus_s(
+        tmp_path):
+    # A radar 2000 ppm off its profile whose latency jitters +-12 ms where its profile says
+    # +-4 ms: the run keeps the profile's cycle (the scatter does not tell a crystal from a
+    # latency that changed on the way). The sidecar's re-check judges the cycles where the run
+    # did, to the live counts, and its notes say what the bus times show.
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004, counter_start=0)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml", {**QUIET, "radar.profile": radar})
+    log = tmp_path / "scattered.blf"
+    rng = np.random.default_rng(1)
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.0501, latency_s=0.13, jitter_s=0.004)
+        publisher = pipeline._publisher
+
+        def stamp(cycles):
+            t = np.array([c.t_s for c in cycles])
+            publisher.publish_many(cycles, pipeline._bus_origin_s + t + 0.13
+                                   + rng.uniform(-0.012, 0.012, t.size))
+
+        pipeline.output._sink = stamp
+        live = pipeline.run(scene).report
+    assert live.radar_clock["cycle_from"] == "profile"
+    again = check_log(scene, log)
+    assert again.alignment.cycle_s == live.radar_clock["cycle_s"] == 0.05
+    assert again.report.frames == live.frames
+    assert again.report.passed == live.passed
+    assert any(re.match(r"the radar.s cycles reached the bus every 50\.[01]\d+ ms, the run took "
+                        r"50\.000000 ms", n)
+               for n in again.alignment.notes), again.alignment.notes
