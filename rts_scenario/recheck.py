@@ -702,6 +702,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             raise LogError(f"--time-offset-s {time_offset_s!r}: the log's sidecar aligns it by "
                            f"the radar's counters, so a time offset would not be used; leave "
                            f"it out, or check a copy of the log without its sidecar")
+        _check_sidecar_cycles(scene, log, clock, c.get("cycles"))
     else:
         if not len(index):
             raise LogError(f"--log {log}: no radar cycle in it ({bus['messages']} messages, "
@@ -786,6 +787,26 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 f"judges them at their nominal times (the sidecar, from an older version, "
                 f"keeps no send times)")
     return RecheckResult(scene=scene, report=result, alignment=alignment)
+
+
+def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,
+                          cycles: int | None) -> None:
+    """Refuse a sidecar whose ``clock.cycles`` its own clock does not put in the scene.
+
+    The run judged the cycles its clock put in the scene: as many as the sidecar's cycle and
+    phase give over the scene's duration, give or take the one at either edge (a radar that
+    measured at the scene's start or end itself). Another number would judge other cycles
+    than the run did (a few of them: a pass on a fraction of the scene).
+    """
+    if cycles is None:  # a sidecar from a version that did not keep it
+        return
+    expected = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
+    if abs(cycles - expected) > 1:
+        raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.cycles: {cycles}, but cycles of "
+                       f"{clock.cycle_s * 1e3:.6g} ms from {clock.start_offset_s:.6g} s put "
+                       f"{expected} in the scene's {scene.duration_s:g} s (allowed: "
+                       f"{max(expected - 1, 0)} to {expected + 1}); not what `rts-scenario run "
+                       f"--record` writes for this scene")
 
 
 def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float) -> None:

@@ -286,6 +286,12 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"clock\.jitter_s: must not exceed latency_s \(0\), got 5"),
     (lambda d: {**d, "method": "bogus"},
      r"method: got 'bogus'; allowed values: exact, paper, estimator"),
+    # The run judged 400 cycles of 50 ms in 20 s: 3 would pass on 150 ms of the scene, and
+    # 10**30 is a runtime error.
+    (lambda d: {**d, "clock": {**d["clock"], "cycles": 3}},
+     r"clock\.cycles: 3, but cycles of 50 ms from 0 s put 400 in the scene's 20 s \(allowed: "
+     r"399 to 401\)"),
+    (lambda d: {**d, "clock": {**d["clock"], "cycles": 10**30}}, r"clock\.cycles: 10+, but"),
 ])
 def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
                                                          message):
