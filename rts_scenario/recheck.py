@@ -663,6 +663,12 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     numbers = sequential_numbers(counters, modulus, index.bus_t_s, profile_clock.cycle_s)
     if sidecar is not None:
         c = sidecar["clock"]
+        if c["counter_start"] is not None and not c["counter_start"] < modulus:
+            raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.counter_start: "
+                           f"{c['counter_start']}, beyond what the radar's "
+                           f"{modulus.bit_length() - 1}-bit counter counts (allowed: 0 to "
+                           f"{modulus - 1}, or null); not what `rts-scenario run --record` "
+                           f"writes for this mapping")
         try:
             clock = RadarClock(cycle_s=float(c["cycle_s"]),
                                start_offset_s=float(c["start_offset_s"]),

@@ -292,6 +292,12 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"clock\.cycles: 3, but cycles of 50 ms from 0 s put 400 in the scene's 20 s \(allowed: "
      r"399 to 401\)"),
     (lambda d: {**d, "clock": {**d["clock"], "cycles": 10**30}}, r"clock\.cycles: 10+, but"),
+    # Beyond what the 16-bit counter counts: 10**30 was a runtime error.
+    (lambda d: {**d, "clock": {**d["clock"], "counter_start": 10**30}},
+     r"clock\.counter_start: 10+, beyond what the radar's 16-bit counter counts \(allowed: 0 "
+     r"to 65535, or null\)"),
+    (lambda d: {**d, "clock": {**d["clock"], "counter_start": 65536}},
+     r"clock\.counter_start: 65536, beyond"),
 ])
 def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
                                                          message):
