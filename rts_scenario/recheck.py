@@ -195,7 +195,21 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         "method": {"type": ["string", "null"]},
         "output": {"type": ["string", "null"]},
         "status_sha256": {"type": ["string", "null"]},
-        "playback": {"type": ["object", "null"]},
+        # The run's playback (`Playback.to_dict`): a re-check fails on it as the run did.
+        "playback": {
+            "type": ["object", "null"],
+            "required": ["frames_sent", "late_frames", "lateness_s", "late_after_s",
+                         "ambiguity_window_s"],
+            "properties": {
+                "frames_sent": {"type": "integer", "minimum": 0},
+                "late_frames": {"type": "integer", "minimum": 0},
+                "lateness_s": {"type": "object", "required": ["max"],
+                               "properties": {k: _number() for k in ("p50", "p95", "max")}},
+                "late_after_s": _number(minimum=0), "ambiguity_window_s": _number(minimum=0),
+                "rts": {"type": ["object", "null"],
+                        "additionalProperties": {"type": "integer", "minimum": 0}},
+            },
+        },
         "send_lateness": {
             "type": ["object", "null"],
             "required": ["frames", "encoding", "data"],

@@ -298,6 +298,15 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"to 65535, or null\)"),
     (lambda d: {**d, "clock": {**d["clock"], "counter_start": 65536}},
      r"clock\.counter_start: 65536, beyond"),
+    # The run's playback, which the re-check fails on as the run did: each was a runtime error.
+    (lambda d: {**d, "playback": {"lateness_s": 5}},
+     r"playback: 'frames_sent' is a required property"),
+    (lambda d: {**d, "playback": {**d["playback"], "late_frames": "x"}},
+     r"playback\.late_frames: 'x' is not of type 'integer'"),
+    (lambda d: {**d, "playback": {**d["playback"], "rts": {"lost_frames": "a"}}},
+     r"playback\.rts\.lost_frames: 'a' is not of type 'integer'"),
+    (lambda d: {**d, "playback": {**d["playback"], "ambiguity_window_s": "x"}},
+     r"playback\.ambiguity_window_s: 'x' is not of type 'number'"),
 ])
 def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
                                                          message):
