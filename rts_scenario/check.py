@@ -241,6 +241,7 @@ class Checker:
         self.modulus = counter_modulus
         self.counter_start = counter_start
         self._started = False
+        self._scene_first = 0  # the scene's first cycle: those before it were measured before
         self.record = record
         n = len(names)
         self._expected = [expectations.expected_limits | (expected_limits[k] if expected_limits
@@ -267,7 +268,8 @@ class Checker:
         self._invalid = 0
         self._worst: list[tuple[float, int, int, dict[str, Any]]] = []
         self.frames = {"total": 0, "checked": 0, "received": 0, "unmatched": 0, "missing": 0,
-                       "incomplete": 0, "late": 0, "repeated": 0, "after_scene": 0,
+                       "incomplete": 0, "late": 0, "repeated": 0, "before_scene": 0,
+                       "after_scene": 0,
                        "ambiguous": 0, "adjacent_frame": 0}
 
     def add_truth(self, first_frame: int, tracks: Tracks, status: NDArray[np.uint16], *,
@@ -285,7 +287,7 @@ class Checker:
         """
         if not self._started:  # the radar's first cycle in the scene may be any
             self._started = True
-            self._settled = first_frame
+            self._settled = self._scene_first = first_frame
         expected = self._blocks[-1].end if self._blocks else self._settled
         if first_frame != expected:
             raise ValueError(f"truth block starts at frame {first_frame}, expected {expected}")
@@ -347,7 +349,9 @@ class Checker:
         self._last_cycle = int(frames[-1])
         self._last_bus_t = float(bus_t[-1])
         for frame, cycle in zip(frames.tolist(), cycles, strict=True):  # one per radar cycle
-            if frame < self._settled:
+            if frame < self._scene_first:  # measured before the scene's start: not checked
+                self.frames["before_scene"] += 1
+            elif frame < self._settled:
                 self.frames["late"] += 1
             elif frame in self._cycles:
                 self.frames["repeated"] += 1
@@ -362,9 +366,12 @@ class Checker:
             self._check_block(block)
             self._settled = block.end
         if before_frame is None:
-            # Every cycle of the scene is settled: the rest were measured after its end (a radar
-            # keeps measuring what the RTS holds) or carry a counter the scene does not have.
-            self.frames["after_scene"] += len(self._cycles)
+            # Every cycle of the scene is settled: the rest were measured before its start
+            # (taken before the scene's first cycle was known), after its end (a radar keeps
+            # measuring what the RTS holds) or carry a counter the scene does not have.
+            before = sum(1 for f in self._cycles if f < self._scene_first)
+            self.frames["before_scene"] += before
+            self.frames["after_scene"] += len(self._cycles) - before
             self._cycles.clear()
 
     def _check_block(self, block: _Block) -> None:

@@ -464,8 +464,8 @@ class Pipeline:
         mark = timer.add("receive_s", mark)
         truths.finish()
         # The scene's first cycle as the clock ended up taking it, and how many it had.
-        first = truths.first_cycle or 0
-        n_cycles = (truths.end_cycle or first) - first
+        scene_first = truths.first_cycle or 0
+        n_cycles = (truths.end_cycle or scene_first) - scene_first
         mark = timer.add("kinematics_s", mark)
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
@@ -489,10 +489,10 @@ class Pipeline:
         if options.bus_log and digest is not None:
             write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
                               counter_start=None if checker.counter_start is None
-                              else (checker.counter_start + first) % self.counter_modulus,
+                              else (checker.counter_start + scene_first) % self.counter_modulus,
                               playback=report.playback,
                               send_lateness=playback.send_lateness(), clock=track,
-                              first_cycle=first, cycles=n_cycles,
+                              first_cycle=scene_first, cycles=n_cycles,
                               origin_bus_s=self._scene_origin_s())
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
@@ -502,12 +502,12 @@ class Pipeline:
             report.radar_clock = {"counter_start": clock.counter_start, "source": "profile"}
         elif self.counter_start_learnt is not None:
             start, source = self.counter_start_learnt
-            report.radar_clock = {"counter_start": (start + first) % self.counter_modulus,
+            report.radar_clock = {"counter_start": (start + scene_first) % self.counter_modulus,
                                   "source": source}
         measured = track.fit.cycle_s()
         if measured is not None:
             report.radar_clock["bus_cycle_s"] = measured[0]
-        report.radar_clock.update(track.to_dict(first))
+        report.radar_clock.update(track.to_dict(scene_first))
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------

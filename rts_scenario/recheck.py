@@ -198,7 +198,21 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         "method": {"type": ["string", "null"]},
         "output": {"type": ["string", "null"]},
         "status_sha256": {"type": ["string", "null"]},
-        "playback": {"type": ["object", "null"]},
+        # The run's playback (`Playback.to_dict`): a re-check fails on it as the run did.
+        "playback": {
+            "type": ["object", "null"],
+            "required": ["frames_sent", "late_frames", "lateness_s", "late_after_s",
+                         "ambiguity_window_s"],
+            "properties": {
+                "frames_sent": {"type": "integer", "minimum": 0},
+                "late_frames": {"type": "integer", "minimum": 0},
+                "lateness_s": {"type": "object", "required": ["max"],
+                               "properties": {k: _number() for k in ("p50", "p95", "max")}},
+                "late_after_s": _number(minimum=0), "ambiguity_window_s": _number(minimum=0),
+                "rts": {"type": ["object", "null"],
+                        "additionalProperties": {"type": "integer", "minimum": 0}},
+            },
+        },
         "send_lateness": {
             "type": ["object", "null"],
             "required": ["frames", "encoding", "data"],
@@ -666,6 +680,12 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     numbers = sequential_numbers(counters, modulus, index.bus_t_s, profile_clock.cycle_s)
     if sidecar is not None:
         c = sidecar["clock"]
+        if c["counter_start"] is not None and not c["counter_start"] < modulus:
+            raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.counter_start: "
+                           f"{c['counter_start']}, beyond what the radar's "
+                           f"{modulus.bit_length() - 1}-bit counter counts (allowed: 0 to "
+                           f"{modulus - 1}, or null); not what `rts-scenario run --record` "
+                           f"writes for this mapping")
         try:
             clock = RadarClock(cycle_s=float(c["cycle_s"]),
                                start_offset_s=float(c["start_offset_s"]),
@@ -677,20 +697,18 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"--record` writes)") from None
         if clock.counter_start is None:  # the run saw no cycle: count from the log's first
             clock = replace(clock, counter_start=int(counters[0]) if len(index) else 0)
-        # A radar's crystal is not its profile: where its cycles came on the bus at another
-        # cycle than the run took, the re-check judges them at the bus's (and says so).
+        # The sidecar keeps the cycle the run followed, and the re-check judges the cycles
+        # where the run did. Where the bus times show another (a radar whose latency
+        # scattered too much for the run to follow its crystal), the notes say so.
         fit = CycleTimeFit()
         fit.add(numbers, index.bus_t_s)
         drifted = fit.drift_reason(clock.cycle_s, 0.5 * ambiguity_window_s(scene.radar,
                                                                             scene.rig))
-        measured = fit.cycle_s()
-        if drifted and measured is not None:
-            clock = replace(clock, cycle_s=measured[0])
         alignment = Alignment("sidecar", clock.cycle_s, latency_s=clock.latency_s)
         if drifted:
             alignment.notes.append(drifted.removeprefix("radar_clock: ").replace(
-                "its profile says", "the run took")
-                + "; this re-check takes the cycle from the bus")
+                "its profile says", "the run took").replace(
+                "than the check took it to", "than the run and this re-check took it to"))
         recorded = sidecar.get("variant")
         if recorded is not None and recorded != scene.variant:
             raise LogError(f"--log {log}: recorded for {_variant_text(recorded)} (its "
@@ -707,6 +725,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             raise LogError(f"--time-offset-s {time_offset_s!r}: the log's sidecar aligns it by "
                            f"the radar's counters, so a time offset would not be used; leave "
                            f"it out, or check a copy of the log without its sidecar")
+        _check_sidecar_cycles(scene, log, clock, c.get("cycles"))
     else:
         if not len(index):
             raise LogError(f"--log {log}: no radar cycle in it ({bus['messages']} messages, "
@@ -799,6 +818,26 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 f"judges them at their nominal times (the sidecar, from an older version, "
                 f"keeps no send times)")
     return RecheckResult(scene=scene, report=result, alignment=alignment)
+
+
+def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,
+                          cycles: int | None) -> None:
+    """Refuse a sidecar whose ``clock.cycles`` its own clock does not put in the scene.
+
+    The run judged the cycles its clock put in the scene: as many as the sidecar's cycle and
+    phase give over the scene's duration, give or take the one at either edge (a radar that
+    measured at the scene's start or end itself). Another number would judge other cycles
+    than the run did (a few of them: a pass on a fraction of the scene).
+    """
+    if cycles is None:  # a sidecar from a version that did not keep it
+        return
+    expected = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
+    if abs(cycles - expected) > 1:
+        raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.cycles: {cycles}, but cycles of "
+                       f"{clock.cycle_s * 1e3:.6g} ms from {clock.start_offset_s:.6g} s put "
+                       f"{expected} in the scene's {scene.duration_s:g} s (allowed: "
+                       f"{max(expected - 1, 0)} to {expected + 1}); not what `rts-scenario run "
+                       f"--record` writes for this scene")
 
 
 def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float) -> None:
@@ -922,9 +961,11 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         check_cycles(truths.add(frames, schedule.status, sent))
     check_cycles(truths.finish())
     checker.settle()
-    # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) are
-    # counted as the run counted them; they were never handed to the checker.
+    # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) or
+    # before its first are counted as the run counted them; they were never handed to the
+    # checker.
     checker.frames["after_scene"] += int((rel >= total).sum())
+    checker.frames["before_scene"] += int((rel < 0).sum())
     if sidecar is not None and sidecar.get("status_sha256"):
         alignment.schedule_matches_recording = digest.hexdigest() == sidecar["status_sha256"]
         if not alignment.schedule_matches_recording:

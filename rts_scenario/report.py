@@ -265,6 +265,8 @@ class Report:
                      f"{f.get('unmatched', 0)} with unmatched targets, "
                      f"{f['missing']} missing, {f['incomplete']} incomplete"
                      + "".join(f", {f[k]} {k}" for k in ("late", "repeated") if f.get(k))
+                     + (f", {f['before_scene']} before the scene's start (not checked)"
+                        if f.get("before_scene") else "")
                      + (f", {f['after_scene']} after the scene's end (not checked)"
                         if f.get("after_scene") else "")
                      + "; "

@@ -455,3 +455,24 @@ def test_a_limit_of_the_frame_held_counts_whatever_frame_across_the_change_is_tr
     assert report.targets[1].limits == {"attenuation_clipped": 1}
     assert report.frames["adjacent_frame"] == 0
     assert report.target_frames["checkable"] == 39
+
+
+@pytest.mark.parametrize("scene_first", [0, 3])
+def test_cycles_measured_before_the_scene_are_counted_as_such_not_late_or_after_it(scene_first):
+    # A radar measures before the scene's start (a real one runs before the stream starts):
+    # those cycles are neither late (their frame was never settled) nor after the scene's end.
+    tr = truth(10)
+    checker = Checker("s", tr.names, EXPECT, counter_start=100)
+    early = [Detections.empty(100 + scene_first - k, -0.05 * k, ()) for k in (3, 2, 1)]
+    checker.add_cycles(early[:2])
+    checker.add_truth(scene_first, tr, OK(10, 2))
+    checker.add_frames(checkable(tr, OK(10, 2)))
+    checker.add_cycles(early[2:] + cycles_from(tr, first=100 + scene_first))
+    checker.settle(before_frame=scene_first + 10)
+    checker.add_cycles(cycles_from(truth(2, first=10), first=110 + scene_first))
+    checker.settle()
+    report = checker.report()
+    assert report.frames["checked"] == 10 and report.passed, report.reasons
+    assert (report.frames["before_scene"], report.frames["late"],
+            report.frames["after_scene"]) == (3, 0, 2)
+    assert "3 before the scene's start (not checked)" in report.table()

@@ -292,6 +292,27 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"clock\.jitter_s: must not exceed latency_s \(0\), got 5"),
     (lambda d: {**d, "method": "bogus"},
      r"method: got 'bogus'; allowed values: exact, paper, estimator"),
+    # The run judged 400 cycles of 50 ms in 20 s: 3 would pass on 150 ms of the scene, and
+    # 10**30 is a runtime error.
+    (lambda d: {**d, "clock": {**d["clock"], "cycles": 3}},
+     r"clock\.cycles: 3, but cycles of 50 ms from 0 s put 400 in the scene's 20 s \(allowed: "
+     r"399 to 401\)"),
+    (lambda d: {**d, "clock": {**d["clock"], "cycles": 10**30}}, r"clock\.cycles: 10+, but"),
+    # Beyond what the 16-bit counter counts: 10**30 was a runtime error.
+    (lambda d: {**d, "clock": {**d["clock"], "counter_start": 10**30}},
+     r"clock\.counter_start: 10+, beyond what the radar's 16-bit counter counts \(allowed: 0 "
+     r"to 65535, or null\)"),
+    (lambda d: {**d, "clock": {**d["clock"], "counter_start": 65536}},
+     r"clock\.counter_start: 65536, beyond"),
+    # The run's playback, which the re-check fails on as the run did: each was a runtime error.
+    (lambda d: {**d, "playback": {"lateness_s": 5}},
+     r"playback: 'frames_sent' is a required property"),
+    (lambda d: {**d, "playback": {**d["playback"], "late_frames": "x"}},
+     r"playback\.late_frames: 'x' is not of type 'integer'"),
+    (lambda d: {**d, "playback": {**d["playback"], "rts": {"lost_frames": "a"}}},
+     r"playback\.rts\.lost_frames: 'a' is not of type 'integer'"),
+    (lambda d: {**d, "playback": {**d["playback"], "ambiguity_window_s": "x"}},
+     r"playback\.ambiguity_window_s: 'x' is not of type 'number'"),
 ])
 def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
                                                          message):
@@ -733,3 +754,72 @@ def test_a_log_whose_clock_moved_an_hour_re_checks_by_its_sidecar_to_the_live_ve
     again = check_log(scene, moved).report
     assert live.passed and again.passed, again.reasons
     assert again.frames == live.frames
+
+
+@pytest.mark.parametrize("free", [True, False])
+def test_cycles_from_before_the_scene_are_counted_alike_live_and_re_checked(tmp_path, free):
+    # A real radar measures before the stream starts the scene: three of its cycles from
+    # before the scene's start reach the bus. Live and re-checked by the sidecar they are
+    # the same count: measured before the scene, neither late nor after its end.
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                        jitter_s=0.0, counter_start="auto" if free else 100)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml", {**QUIET, "radar.profile": radar})
+    log = tmp_path / "early.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                                           jitter_s=0.0, counter_start=100)
+        sink, sent = pipeline.output._sink, []
+
+        def with_early(cycles):
+            if not sent:
+                early = [Detections.empty(100 - k, 0.01 - 0.05 * k, ()) for k in (3, 2, 1)]
+                cycles = early + list(cycles)
+            sent.append(len(cycles))
+            sink(cycles)
+
+        pipeline.output._sink = with_early
+        live = pipeline.run(scene).report
+    again = check_log(scene, log)
+    assert live.passed and again.report.passed, (live.reasons, again.report.reasons)
+    assert live.frames["before_scene"] == 3 and live.frames["total"] == 240
+    assert (live.frames["late"], live.frames["after_scene"]) == (0, 0)
+    assert again.report.frames == live.frames
+
+
+def test_a_re_check_by_the_sidecar_judges_at_the_clock_the_run_took_and_notes_the_bus_s(
+        tmp_path):
+    # A radar 2000 ppm off its profile whose latency jitters +-12 ms where its profile says
+    # +-4 ms: the run keeps the profile's cycle (the scatter does not tell a crystal from a
+    # latency that changed on the way). The sidecar's re-check judges the cycles where the run
+    # did, to the live counts, and its notes say what the bus times show.
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004, counter_start=0)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml", {**QUIET, "radar.profile": radar})
+    log = tmp_path / "scattered.blf"
+    rng = np.random.default_rng(1)
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.0501, latency_s=0.13, jitter_s=0.004)
+        publisher = pipeline._publisher
+
+        def stamp(cycles):
+            t = np.array([c.t_s for c in cycles])
+            publisher.publish_many(cycles, pipeline._bus_origin_s + t + 0.13
+                                   + rng.uniform(-0.012, 0.012, t.size))
+
+        pipeline.output._sink = stamp
+        live = pipeline.run(scene).report
+    assert live.radar_clock["cycle_from"] == "profile"
+    again = check_log(scene, log)
+    assert again.alignment.cycle_s == live.radar_clock["cycle_s"] == 0.05
+    assert again.report.frames == live.frames
+    assert again.report.passed == live.passed
+    assert any(re.match(r"the radar.s cycles reached the bus every 50\.[01]\d+ ms, the run took "
+                        r"50\.000000 ms", n)
+               for n in again.alignment.notes), again.alignment.notes

@@ -89,10 +89,6 @@ class RadarClock:
         """How far before the scene's start a cycle may lie and count as its first: 0 (exact)."""
         return 0.0
 
-    def cycle_at(self, measured_s: float) -> int:
-        """Return the cycle number measured nearest scene time ``measured_s``."""
-        return int(np.round((measured_s - self.start_offset_s) / self.cycle_s))
-
     def bus_delay(self, n_cycles: int, rng: np.random.Generator) -> FloatArray:
         """Latency of ``n_cycles`` cycles' messages, jitter included (s)."""
         if self.jitter_s == 0.0:
