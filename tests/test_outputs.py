@@ -13,6 +13,7 @@ from rts_scenario.outputs import available_outputs, open_output
 from rts_scenario.outputs.file import read_schedule
 from rts_scenario.outputs.udp import (
     ENTRY,
+    KIND_DELTA,
     KIND_FULL,
     SEQUENCE_WINDOW,
     FaultInjector,
@@ -206,6 +207,40 @@ def test_a_new_sender_s_first_frame_starts_a_new_stream():
     assert receiver.streams == 2 and receiver.current[0] == 1
     assert (stats.frames_applied, stats.stale, stats.lost_frames) == (2, 2, 0)
     assert [f for f, _, _ in receiver.applied] == [0, 1, 2, 3, 4, 0, 1]  # for a consumer
+
+
+def test_after_a_quiet_spell_a_stream_opens_from_the_same_port_or_without_its_first(
+        monkeypatch):
+    import rts_scenario.outputs.udp as udp
+
+    clock = [0.0]
+    monkeypatch.setattr(udp.time, "perf_counter", lambda: clock[0])
+    receiver = UdpReceiver()
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = 0, np.arange(4), 1
+
+    def frame(n, sequence, kind=KIND_FULL):
+        return encode_frame(entries, kind=kind, frame=n, t_s=n / 2.0, first_sequence=sequence)[0]
+
+    sender = ("127.0.0.1", 40001)
+    for n in range(3):  # a slow stream: 2 frames/s, quiet between its own frames
+        clock[0] += 0.5
+        receiver.handle(frame(n, n), sender)
+    assert receiver.streams == 1 and receiver.stats.frames_applied == 3
+    clock[0] += 0.01
+    receiver.handle(frame(0, 0), sender)  # a copy of its first datagram, soon: a duplicate
+    assert receiver.streams == 1 and receiver.stats.duplicates == 1
+    clock[0] += 1.0  # the next run's socket got the same port
+    receiver.handle(frame(0, 0), sender)
+    receiver.handle(frame(1, 1, KIND_DELTA), sender)
+    assert receiver.streams == 2 and receiver.stats.frames_applied == 2
+    clock[0] += 1.0  # the run after lost its first datagram: its full frame 1 opens it
+    other = ("127.0.0.1", 40002)
+    receiver.handle(frame(1, 1), other)
+    assert receiver.streams == 3 and receiver.stats.frames_applied == 1
+    clock[0] += 0.01
+    receiver.handle(frame(3, 3), sender)  # the run before's, late: stale
+    assert receiver.streams == 3 and receiver.stats.stale == 1
 
 
 def test_udp_paced_streaming_follows_the_frame_clock(schedule):

@@ -51,6 +51,10 @@ STATUS = struct.Struct("!4sB" + "I" * len(STATUS_COUNTERS))
 STATUS_DRAIN_FRAMES = 32
 # The receiver tells a duplicate from a new datagram this many sequence numbers back from the
 # newest (bounded memory); an older datagram is dropped as stale.
+# After this long without a datagram (s), a full frame's first datagram opens a new stream
+# from any sender: a run ends with a drain of its radar's last cycles and a wait for the RTS's
+# last report, longer than this; a copy of a datagram does not come this late on a bench.
+STREAM_QUIET_S = 0.25
 SEQUENCE_WINDOW = 4096
 MAX_DATAGRAM = 1400
 MAX_ENTRIES = (MAX_DATAGRAM - HEADER.size - TRAILER.size) // ENTRY.itemsize
@@ -308,6 +312,7 @@ class UdpReceiver:
         # one's sender.
         self.streams = 0
         self._sender: tuple[str, int] | None = None
+        self._last_datagram_s = -np.inf  # perf_counter time of the last datagram
         # Applied frames for a consumer (``keep_applied``), of every stream in turn.
         self.applied: deque[tuple[int, float, np.ndarray]] = deque()
         self.arrival_s: deque[float] = deque()
@@ -423,16 +428,25 @@ class UdpReceiver:
         than the current stream's that opens a stream (the first datagram of a full frame,
         sequence 0) starts a new one, and the stream before is forgotten (its frames, state
         and counters). Any other datagram from another sender is the stream before's, late:
-        counted as stale and dropped.
+        counted as stale and dropped. After `STREAM_QUIET_S` without a datagram, a stream's
+        first datagram opens a new one from the same sender too (the next run's socket may
+        get the same port), and another sender's first datagram of any full frame opens one
+        (the next run's very first datagram may be lost).
         """
-        if sender is not None and sender != self._sender:
-            if self._opens_stream(datagram) or self._sender is None:
+        now = time.perf_counter()
+        quiet = now - self._last_datagram_s > STREAM_QUIET_S
+        self._last_datagram_s = now
+        if sender is not None and (sender != self._sender or quiet):
+            # The same sender again opens a stream only with sequence 0 (its socket was
+            # opened again): a slow stream may be quiet between its own frames.
+            first = self._opens_stream(datagram, any_sequence=quiet and sender != self._sender)
+            if self._sender is None or first:
                 with self._lock:
                     if self._sender is not None:
                         self._new_stream()
                     self._sender = sender
                     self.streams += 1
-            else:
+            elif sender != self._sender:
                 self.stats.datagrams += 1
                 self.stats.stale += 1
                 return
@@ -480,16 +494,19 @@ class UdpReceiver:
             self._apply(frame)
 
     @staticmethod
-    def _opens_stream(datagram: bytes) -> bool:
-        """Whether a datagram is a valid first datagram of a stream (sequence 0, full frame)."""
+    def _opens_stream(datagram: bytes, any_sequence: bool = False) -> bool:
+        """Whether a datagram can open a stream: valid, a full frame's first datagram.
+
+        Sequence 0 (a stream's very first), or any with ``any_sequence``.
+        """
         if len(datagram) < HEADER.size + TRAILER.size:
             return False
         body, (crc,) = datagram[:-TRAILER.size], TRAILER.unpack(datagram[-TRAILER.size:])
         if zlib.crc32(body) != crc:
             return False
         magic, version, kind, seq, _, part, _, _, _ = HEADER.unpack(body[:HEADER.size])
-        return magic == MAGIC and version == VERSION and kind == KIND_FULL and seq == 0 \
-            and part == 0
+        return magic == MAGIC and version == VERSION and kind == KIND_FULL \
+            and (seq == 0 or any_sequence) and part == 0
 
     def _apply(self, frame: int) -> None:
         with self._lock:
