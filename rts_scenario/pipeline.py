@@ -672,7 +672,8 @@ class CycleTruth:
         if self.first_cycle is None:
             self.first_cycle = lo
         # The scene's end: a cycle that may have measured at it is after the scene.
-        end_s = max(end_s, start_s) if after is not None else max(end_s - tolerance_s, start_s)
+        end_s = (max(end_s, start_s) if after is not None
+                 else max(end_s - self.clock.edge_tolerance_s(end_s), start_s))
         hi = max(lo, self.clock.first_at(end_s))
         if self.cycles is not None:
             end_n = self.first_cycle + self.cycles

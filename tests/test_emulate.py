@@ -273,10 +273,13 @@ def test_a_perfect_radar_in_step_with_the_frames_passes_the_rehearsal(tmp_path):
                            "expectations.expected_limits": ["frames_sent_late"]})
     report, stats = rehearse(scene, mapping=None)
     assert report.passed, report.reasons
-    assert report.frames["checked"] == report.frames["total"] == 60
+    # The radar measures its 61st cycle a transport's delay after the scene's end; where a
+    # loaded machine held some of its messages, the cycle fitted to their bus times may put
+    # it a hair before the end, and it is judged too (it saw the last frame).
+    assert report.frames["checked"] == report.frames["total"] in (60, 61)
     # Every cycle after the first is measured at a change (fewer if the sender was late by
     # more than the window, on a loaded machine: then the send times decide alone).
-    assert 50 <= report.frames["ambiguous"] <= 59
+    assert 50 <= report.frames["ambiguous"] <= report.frames["total"] - 1
     assert report.playback["rts"]["frames_applied"] == 60  # the emulated RTS reported
     assert stats["udp"]["lost_frames"] == 0
 

@@ -89,6 +89,10 @@ class RadarClock:
         """How far before the scene's start a cycle may lie and count as its first: 0 (exact)."""
         return 0.0
 
+    def edge_tolerance_s(self, t_s: float) -> float:
+        """How far before scene time ``t_s`` a cycle may lie and have measured at it: 0."""
+        return 0.0
+
     def bus_delay(self, n_cycles: int, rng: np.random.Generator) -> FloatArray:
         """Latency of ``n_cycles`` cycles' messages, jitter included (s)."""
         if self.jitter_s == 0.0:
@@ -319,6 +323,19 @@ class ClockTrack:
             return 0.0
         return 3.0 * max(self.fit.zero_error_s(self.cycle_s),
                          self.profile.jitter_s / np.sqrt(3.0 * self.fit.count))
+
+    def edge_tolerance_s(self, t_s: float) -> float:
+        """How far before scene time ``t_s`` a cycle may lie and have measured at it itself.
+
+        `start_tolerance_s`, and where the cycle comes from the bus three standard errors of
+        it times the cycles from cycle 0 to ``t_s``: the scene's last cycle may be the one
+        after it (measured at the end itself, on a radar in step with the frames).
+        """
+        tolerance = self.start_tolerance_s
+        fit = self.fit.cycle_s()
+        if fit is not None and self.cycle_from_bus:
+            tolerance += 3.0 * fit[1] * abs(t_s - self.start_offset_s) / self.cycle_s
+        return tolerance
 
     def start_known(self, t_s: float) -> bool:
         """Whether the clock tells which is the first cycle at or after scene time ``t_s``.
