@@ -801,6 +801,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if off_profile:
         result.reasons.append(off_profile)
         result.passed = False
+    # When the radar measured, as this check took it (the run's clock from the sidecar, or the
+    # one fitted to the log's timestamps), in the live report's terms.
+    result.radar_clock = {
+        "counter_start": clock.counter_start,
+        "source": "sidecar" if sidecar is not None else "fitted to the log's timestamps",
+        "cycle_s": clock.cycle_s, "start_offset_s": clock.start_offset_s}
+    measured = track.fit.cycle_s()
+    if measured is not None:
+        result.radar_clock["bus_cycle_s"] = measured[0]
     playback = (sidecar or {}).get("playback")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run

@@ -291,6 +291,12 @@ def test_a_run_follows_a_radar_whose_crystal_runs_off_its_profile(tmp_path, cycl
     assert again.report.frames["checked"] == again.report.frames["total"] == 240
     assert again.alignment.cycle_s == pytest.approx(cycle_s, rel=1e-9)
     assert again.report.errors["range_m"].max == pytest.approx(report.errors["range_m"].max)
+    # Its report says which clock it judged by: the run's, from the sidecar.
+    rechecked = again.report.radar_clock
+    assert rechecked["source"] == "sidecar"
+    assert rechecked["counter_start"] == clock["counter_start"]
+    assert rechecked["cycle_s"] == pytest.approx(clock["cycle_s"], rel=1e-12)
+    assert rechecked["bus_cycle_s"] == pytest.approx(cycle_s, rel=1e-9)
 
 
 def test_a_radar_running_free_is_checked_at_the_phase_its_bus_times_show(tmp_path):
