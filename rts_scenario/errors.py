@@ -68,6 +68,10 @@ class CheckError(RtsError):
     """Detections cannot be checked against ground truth."""
 
 
+class BusError(CheckError):
+    """A CAN interface or channel the arguments name cannot be opened (bad input)."""
+
+
 def one_line(exc: BaseException) -> str:
     """Return an exception's message on one line (the CLI prints one ``error:`` line)."""
     return " ".join(part.strip() for part in str(exc).splitlines() if part.strip()) or repr(exc)

@@ -108,6 +108,18 @@ def test_run_exit_codes_json_and_plots(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: ")
 
 
+def test_a_can_channel_that_cannot_be_opened_is_bad_input(capsys):
+    # The arguments name a CAN channel this machine does not have: exit 2 (as emulate), not
+    # a runtime error, with one line naming the interface and the channel.
+    scene = str(ROOT / "scenarios" / "cut_in.scenario.yaml")
+    code = cli.main(["run", scene, "--can-interface", "socketcan", "--can-channel",
+                     "rts-no-such0"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "cannot open CAN interface 'socketcan' channel 'rts-no-such0'" in err
+    assert "Traceback" not in err
+
+
 def test_schedule_and_list_outputs(tmp_path, capsys):
     from pathlib import Path
 

@@ -27,7 +27,7 @@ import numpy as np
 from cantools.database.utils import create_encode_decode_formats
 
 from ..detections import GAP_TOLERANCE_CYCLES, Detections
-from ..errors import CheckError, OutputError
+from ..errors import BusError, OutputError
 from .mapping import CanMapping, PartKey, checksum_byte, multiplexer, page_signals
 
 DEFAULT_INTERFACE = "virtual"
@@ -39,13 +39,13 @@ def open_bus(interface: str = DEFAULT_INTERFACE, channel: str = DEFAULT_CHANNEL,
     """Open a python-can bus, with one clear error if the interface or channel is unusable."""
     valid = sorted(can.interfaces.VALID_INTERFACES)
     if interface not in valid:
-        raise CheckError(f"CAN interface {interface!r} unknown; valid interfaces: "
-                         f"{', '.join(valid)}")
+        raise BusError(f"CAN interface {interface!r} unknown; valid interfaces: "
+                       f"{', '.join(valid)}")
     try:
         return can.Bus(interface=interface, channel=channel, fd=fd, **options)
     except (can.CanError, OSError, ImportError, ValueError, TypeError) as exc:
-        raise CheckError(f"cannot open CAN interface {interface!r} channel {channel!r}: "
-                         f"{exc}") from None
+        raise BusError(f"cannot open CAN interface {interface!r} channel {channel!r}: "
+                       f"{exc}") from None
 
 
 class ListenerBus(can.BusABC):

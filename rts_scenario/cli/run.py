@@ -34,7 +34,7 @@ def _do_run(args: argparse.Namespace) -> int:
 
     from ..canbus.mapping import CanMapping
     from ..check import DETECTION_COLUMNS
-    from ..errors import RtsError, ScenarioError
+    from ..errors import BusError, RtsError, ScenarioError
     from ..pipeline import RunOptions, run_scene
     from ..plots import safe_stem
     from ..preflight import Preflight
@@ -176,8 +176,9 @@ def _do_run(args: argparse.Namespace) -> int:
                     show_traceback(args)
                     failed(scene.name, path, exc, variant, overrides)
                     # The scene loaded but its schedule cannot be built (e.g. the rig's update
-                    # rate): still the scene's fault, not the run's.
-                    if isinstance(exc, ScenarioError | ScheduleError):
+                    # rate): still the scene's fault, not the run's; so is a CAN interface or
+                    # channel the arguments name that cannot be opened.
+                    if isinstance(exc, ScenarioError | ScheduleError | BusError):
                         bad_input = True
                     else:
                         runtime_error = True
