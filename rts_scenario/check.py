@@ -46,7 +46,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .detections import Detections, sequential_numbers, unwrap_counter
+from .detections import Detections, bus_times, sequential_numbers, unwrap_counter
 from .errors import CheckError
 from .kinematics import Tracks
 from .report import FrameRecord, Report, RunningStats, TargetResult
@@ -338,7 +338,7 @@ class Checker:
         # before (the first of all from the first frame not settled). Where a frame is
         # expected is no guide: a batch holds more cycles than an 8-bit counter counts. A gap
         # longer than half the counter's range is told by its bus time (`cycle_s`).
-        bus_t = np.array([np.nan if c.bus_t_s is None else c.bus_t_s for c in cycles])
+        bus_t = bus_times(cycles)
         if self._last_cycle is None:
             frames = (unwrap_counter(counters[:1], self._settled, self.modulus)
                       + sequential_numbers(counters, self.modulus, bus_t, self.cycle_s))

@@ -8,7 +8,7 @@ the radar's clock, and one array per reported quantity. A quantity the radar doe
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -97,6 +97,12 @@ class Detections:
         return cls(cycle=cycle, t_s=t_s, complete=complete, **reported)
 
 
+def bus_times(cycles: Sequence[Detections]) -> NDArray[np.float64]:
+    """When each cycle reached the bus (NaN where it did not say)."""
+    return np.array([np.nan if c.bus_t_s is None else c.bus_t_s for c in cycles],
+                    dtype=np.float64)
+
+
 def unwrap_counter(counter: NDArray[np.int64], near: NDArray[np.int64] | int,
                    modulus: int) -> NDArray[np.int64]:
     """Full cycle numbers of wrapped counters: the value ``counter + k * modulus`` nearest ``near``.
@@ -145,5 +151,5 @@ def sequential_numbers(counters: NDArray[np.int64], modulus: int,
 GAP_TOLERANCE_CYCLES = 2.0
 
 
-__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "Detections", "sequential_numbers",
+__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "Detections", "bus_times", "sequential_numbers",
            "unwrap_counter"]

@@ -24,7 +24,7 @@ import numpy as np
 from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
-from .detections import Detections, sequential_numbers, unwrap_counter
+from .detections import Detections, bus_times, sequential_numbers, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
@@ -291,7 +291,7 @@ class Pipeline:
             int(counters[0]) if counters.size else 0)  # a measurement: the first is cycle 0
         counters = (counters - start) % self.counter_modulus
         return (unwrap_counter(counters[:1], 0, self.counter_modulus)
-                + sequential_numbers(counters, self.counter_modulus, _bus_times(cycles),
+                + sequential_numbers(counters, self.counter_modulus, bus_times(cycles),
                                      clock.cycle_s))
 
     def _scene_origin_s(self) -> float | None:
@@ -316,7 +316,7 @@ class Pipeline:
         profile's phase place them in the scene.
         """
         origin = self._scene_origin_s()
-        t = _bus_times(cycles)
+        t = bus_times(cycles)
         t = t[np.isfinite(t)]
         if self._bus_clock_checked or origin is None or not t.size:
             return
@@ -346,8 +346,8 @@ class Pipeline:
         if timed and origin is not None:
             counters = np.array([c.cycle for c in timed], dtype=np.int64)
             m = sequential_numbers((counters - counters[0]) % self.counter_modulus,
-                                   self.counter_modulus, _bus_times(timed), clock.cycle_s)
-            measured = _bus_times(timed) - clock.latency_s - origin
+                                   self.counter_modulus, bus_times(timed), clock.cycle_s)
+            measured = bus_times(timed) - clock.latency_s - origin
             # Scene time of the earliest received, on the line of the profile's cycle.
             earliest = float(np.mean(measured - m * clock.cycle_s)) + m.min() * clock.cycle_s
             before = max(0, int(np.floor(earliest / clock.cycle_s))) + 1
@@ -443,7 +443,7 @@ class Pipeline:
             if checker.counter_start is None and cycles:
                 self._learn_counter_start(checker, cycles)
             self._anchor(checker, cycles)
-            track.add(checker.add_cycles(cycles), _bus_times(cycles))
+            track.add(checker.add_cycles(cycles), bus_times(cycles))
             mark = timer.add("check_s", mark)
             # The radar's cycles while the RTS held the batch before: it was held until this
             # batch's first frame went out.
@@ -460,7 +460,7 @@ class Pipeline:
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
         self._anchor(checker, last)
-        track.add(checker.add_cycles(last), _bus_times(last))
+        track.add(checker.add_cycles(last), bus_times(last))
         mark = timer.add("receive_s", mark)
         truths.finish()
         # The scene's first cycle as the clock ended up taking it, and how many it had.
@@ -705,12 +705,6 @@ class CycleTruth:
         self.checker.add_truth(int(n[0]), truth, status[held], other=other,
                                ambiguous=ambiguous)
         return n
-
-
-def _bus_times(cycles: list[Detections]) -> np.ndarray:
-    """When each cycle reached the bus (NaN where it did not say)."""
-    return np.array([np.nan if c.bus_t_s is None else c.bus_t_s for c in cycles],
-                    dtype=np.float64)
 
 
 def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:
