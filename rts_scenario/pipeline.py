@@ -33,6 +33,7 @@ from .preflight import Preflight, frames_per_batch, preflight, scene_limits
 from .radar.clock import ClockTrack, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
+from .recording import StatusRecorder, TruthChecksums
 from .report import FrameRecord, Report, strict
 from .rig import Rig
 from .scenario import Scenario, load_scenario
@@ -400,6 +401,9 @@ class Pipeline:
         n_frames = scene.n_frames
         t_all = scene.t_s
         digest = hashlib.sha256() if options.bus_log else None
+        # What the run played, for a re-check of its log (`rts_scenario.recording`).
+        truth_sums = TruthChecksums(t.name for t in scene.targets) if options.bus_log else None
+        statuses = StatusRecorder(len(scene.targets)) if options.bus_log else None
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
         # read from disk instead of being built again.
         array, model = solver_inputs(scene.radar, FE_RESPONSES[0])
@@ -426,8 +430,10 @@ class Pipeline:
                                       frame_rate_hz=scene.frame_rate_hz)
             schedule = replace(schedule, frame_index=frames)
             checker.add_frames(checkable(tracks, schedule.status))
-            if digest is not None:
+            if digest is not None and truth_sums is not None and statuses is not None:
                 digest.update(schedule.status.tobytes())
+                truth_sums.add(tracks, frames)
+                statuses.add(schedule.status)
             mark = timer.add("schedule_s", mark)
             self.write(schedule)
             if track.origin_s is None:  # a stream knows the scene's start once it started it
@@ -486,8 +492,10 @@ class Pipeline:
         if failures:
             report.reasons += failures
             report.passed = False
-        if options.bus_log and digest is not None:
+        if (options.bus_log and digest is not None and truth_sums is not None
+                and statuses is not None):
             write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
+                              truth=truth_sums.to_dict(), statuses=statuses.to_dict(),
                               counter_start=None if checker.counter_start is None
                               else (checker.counter_start + scene_first) % self.counter_modulus,
                               playback=report.playback,
@@ -725,7 +733,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       playback: dict[str, Any] | None = None,
                       send_lateness: dict[str, Any] | None = None,
                       clock: ClockTrack | None = None, first_cycle: int = 0,
-                      cycles: int | None = None, origin_bus_s: float | None = None) -> Path:
+                      cycles: int | None = None, origin_bus_s: float | None = None,
+                      truth: dict[str, Any] | None = None,
+                      statuses: dict[str, Any] | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -741,6 +751,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones;
     ``origin_bus_s`` the scene's start on the bus's clock, where the run knew it: the log's
     first cycles are numbered from it by their bus times, as live (`Checker.anchor`).
+    ``truth`` (`TruthChecksums.to_dict`) tells a re-check whether the scene's ground truth is
+    the one that played, ``statuses`` (`StatusRecorder.to_dict`) which target-frames played.
     """
     import json
 
@@ -765,6 +777,10 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         "status_sha256": status_digest,
+        # Per target, a checksum of the ground truth the run judged by (`TruthChecksums`).
+        "truth": truth,
+        # The statuses the RTS played (`StatusRecorder`): a re-check judges by them.
+        "statuses": statuses,
         # How the schedule went out and what the RTS said it applied (`Playback.to_dict`):
         # a re-check fails on it as the run did.
         "playback": strict(playback) if playback is not None else None,

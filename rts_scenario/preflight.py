@@ -90,9 +90,9 @@ def scene_limits(scene: Scenario) -> dict[str, str]:
     return out
 
 
-def schedule_batches(scene: Scenario, method: str = "exact", batch_frames: int | None = None
-                     ) -> Iterator[tuple[np.ndarray, Tracks, Schedule]]:
-    """Yield the scene batch by batch: frame indices, their tracks and their schedule.
+def track_batches(scene: Scenario, batch_frames: int | None = None
+                  ) -> Iterator[tuple[np.ndarray, Tracks]]:
+    """Yield the scene batch by batch: frame indices and their tracks.
 
     ``batch_frames``: frames per batch (default: `frames_per_batch` of the scene's targets).
     """
@@ -101,7 +101,16 @@ def schedule_batches(scene: Scenario, method: str = "exact", batch_frames: int |
         batch_frames = frames_per_batch(len(scene.targets))
     for first in range(0, scene.n_frames, batch_frames):
         frames = np.arange(first, min(first + batch_frames, scene.n_frames))
-        tracks = compute_tracks(scene, t_all[frames], frames)
+        yield frames, compute_tracks(scene, t_all[frames], frames)
+
+
+def schedule_batches(scene: Scenario, method: str = "exact", batch_frames: int | None = None
+                     ) -> Iterator[tuple[np.ndarray, Tracks, Schedule]]:
+    """Yield the scene batch by batch: frame indices, their tracks and their schedule.
+
+    ``batch_frames``: frames per batch (default: `frames_per_batch` of the scene's targets).
+    """
+    for frames, tracks in track_batches(scene, batch_frames):
         yield frames, tracks, build_schedule(tracks, scene.rig, scene.radar, method=method,
                                              estimator=scene.radar_options.estimator,
                                              frame_rate_hz=scene.frame_rate_hz)

@@ -11,9 +11,11 @@ candidate offsets. The estimate and its uncertainty are reported. Either way the
 time counts: cycles the radar measured before the log's first one or after its last are
 missing.
 
-The ground truth and the played schedule are rebuilt from the scene (the same solver as live);
-with a sidecar, a digest of the statuses the RTS played tells whether the rebuilt schedule
-plays the same.
+The ground truth is rebuilt from the scene; a sidecar's checksums of the truth the run played
+(`rts_scenario.recording`) fail a re-check against a scene edited since. Which target played in
+which frame is the sidecar's record of the statuses the RTS played; without it (a log of another
+tool, an older sidecar) the schedule is rebuilt by the same solver as live, and an older
+sidecar's digest of the statuses tells whether the rebuilt schedule plays the same.
 """
 
 from __future__ import annotations
@@ -37,11 +39,12 @@ from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
 from .errors import RtsError
-from .kinematics import compute_tracks
+from .kinematics import Tracks, compute_tracks
 from .pipeline import BUS_CLOCK_SLACK_S, LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
 from .playback import SEND_LATENESS_ENCODING, playback_reasons, unpack_send_lateness
-from .preflight import scene_limits, schedule_batches
+from .preflight import scene_limits, schedule_batches, track_batches
 from .radar.clock import TIME_EPS_S, ClockTrack, CycleTimeFit, RadarClock
+from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
 from .report import Report
 from .scenario import Scenario, parametrizations, select_variant
 from .solver.estimator_aware import SCHEDULE_METHODS
@@ -105,6 +108,10 @@ class Alignment:
     cycles_in_log: int = 0
     cycles_outside_scene: int = 0
     schedule_matches_recording: bool | None = None
+    # Whether the scene's ground truth is the one the run played (its sidecar's checksums).
+    truth_matches_recording: bool | None = None
+    # The statuses judged by: "recorded" (the sidecar's, as played) or "rebuilt".
+    statuses: str = "rebuilt"
     notes: list[str] = field(default_factory=list)
 
     def describe(self) -> str:
@@ -147,6 +154,8 @@ class Alignment:
                 "cycles_in_log": self.cycles_in_log,
                 "cycles_outside_scene": self.cycles_outside_scene,
                 "schedule_matches_recording": self.schedule_matches_recording,
+                "truth_matches_recording": self.truth_matches_recording,
+                "statuses": self.statuses,
                 "notes": list(self.notes)}
 
 
@@ -198,6 +207,25 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         "method": {"type": ["string", "null"]},
         "output": {"type": ["string", "null"]},
         "status_sha256": {"type": ["string", "null"]},
+        # Per target, a checksum of the ground truth the run judged by (`TruthChecksums`).
+        "truth": {
+            "type": ["object", "null"],
+            "required": ["encoding", "quanta", "targets"],
+            "properties": {
+                "encoding": {"type": "string"}, "quanta": {"type": "object"},
+                "targets": {"type": "object", "additionalProperties": {
+                    "type": "string", "pattern": "^[0-9a-f]{16}$"}},
+            },
+        },
+        # The statuses the RTS played (`StatusRecorder`): the re-check judges by them.
+        "statuses": {
+            "type": ["object", "null"],
+            "required": ["frames", "targets", "encoding", "data"],
+            "properties": {"frames": {"type": "integer", "minimum": 0},
+                           "targets": {"type": "integer", "minimum": 0},
+                           "encoding": {"const": STATUS_ENCODING},
+                           "data": {"type": "string"}},
+        },
         # The run's playback (`Playback.to_dict`): a re-check fails on it as the run did.
         "playback": {
             "type": ["object", "null"],
@@ -963,11 +991,15 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
             checker.add_cycles(logged.take(order[lo:hi]))
             checker.settle(before_frame=int(n[-1]) + 1)
 
-    for frames, tracks, schedule in schedule_batches(scene, method, batch_frames):
-        digest.update(schedule.status.tobytes())
-        checker.add_frames(checkable(tracks, schedule.status))
+    played = _status_record(scene, sidecar, log)
+    truth_sums = TruthChecksums(t.name for t in scene.targets)
+    for frames, tracks, status in _batches(scene, method, batch_frames, played, log):
+        if played is None:
+            digest.update(status.tobytes())
+        truth_sums.add(tracks, frames)
+        checker.add_frames(checkable(tracks, status))
         sent = None if late is None else scene.t_s[frames] + late[frames]
-        check_cycles(truths.add(frames, schedule.status, sent))
+        check_cycles(truths.add(frames, status, sent))
     check_cycles(truths.finish())
     checker.settle()
     # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) or
@@ -975,12 +1007,82 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     # checker.
     checker.frames["after_scene"] += int((rel >= total).sum())
     checker.frames["before_scene"] += int((rel < 0).sum())
-    if sidecar is not None and sidecar.get("status_sha256"):
+    if played is not None:
+        alignment.statuses = "recorded"
+    elif sidecar is not None and sidecar.get("status_sha256"):
         alignment.schedule_matches_recording = digest.hexdigest() == sidecar["status_sha256"]
         if not alignment.schedule_matches_recording:
             alignment.notes.append("the rebuilt schedule differs from the one recorded (another "
                                    "version, rig or radar file): limits are those rebuilt")
-    return checker.report(bus)
+    report = checker.report(bus)
+    _compare_truth(truth_sums, sidecar, alignment, report)
+    return report
+
+
+def _status_record(scene: Scenario, sidecar: dict[str, Any] | None,
+                   log: str | Path) -> StatusRecord | None:
+    """Return the statuses the run played (its sidecar's), or None (rebuilt from the scene)."""
+    record = (sidecar or {}).get("statuses")
+    if record is None:
+        return None
+    try:
+        return StatusRecord(record, scene.n_frames, len(scene.targets))
+    except ValueError as exc:
+        raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: statuses: {exc} (not what "
+                       f"`rts-scenario run --record` wrote for this scene)") from None
+
+
+def _batches(scene: Scenario, method: str, batch_frames: int | None,
+             played: StatusRecord | None, log: str | Path
+             ) -> Iterator[tuple[IntArray, Tracks, NDArray[np.uint16]]]:
+    """Yield the scene's frames, tracks and statuses batch by batch.
+
+    The statuses the run played when its sidecar keeps them, else a rebuilt schedule's.
+    """
+    if played is None:
+        for frames, tracks, schedule in schedule_batches(scene, method, batch_frames):
+            yield frames, tracks, schedule.status
+        return
+    try:
+        for frames, tracks in track_batches(scene, batch_frames):
+            yield frames, tracks, played.take(frames.size)
+        played.finish()
+    except ValueError as exc:
+        raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: statuses: {exc} (not what "
+                       f"`rts-scenario run --record` wrote for this scene)") from None
+
+
+def _compare_truth(truth_sums: TruthChecksums, sidecar: dict[str, Any] | None,
+                   alignment: Alignment, report: Report) -> None:
+    """Fail a report whose scene's ground truth is not the one the recorded run played."""
+    record = (sidecar or {}).get("truth")
+    if sidecar is None:
+        return
+    if record is None:
+        alignment.notes.append("the sidecar keeps no checksum of the ground truth (an older "
+                               "version wrote it): the scene is taken to be the one that played")
+        return
+    differing = truth_sums.differing(record)
+    if differing is None:
+        alignment.notes.append("the sidecar's checksum of the ground truth was made another "
+                               "way (another version): the scene is taken to be the one that "
+                               "played")
+        return
+    alignment.truth_matches_recording = not differing
+    if differing:
+        recorded, mine = set(record["targets"]), set(truth_sums.names)
+        named = [f"{name!r}" + (" (not in the recording)" if name not in recorded else
+                                " (not in the scene)" if name not in mine else "")
+                 for name in differing[:5]]
+        if len(differing) > 5:
+            named[-1:] = [named[-1], f"{len(differing) - 5} more"]
+        shown = named[0] if len(named) == 1 else ", ".join(named[:-1]) + " and " + named[-1]
+        report.reasons.append(
+            f"scene: the ground truth of {shown} differs from the one the recorded run "
+            f"played (the scene file changed since, or the version computing it): the log "
+            f"is judged against a scene that did not play; check it against the scene file "
+            f"as it was")
+        report.passed = False
 
 
 def _alignment_cycles(index: _LogIndex) -> IntArray:

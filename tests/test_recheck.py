@@ -3,6 +3,7 @@
 import json
 import re
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -43,7 +44,9 @@ def test_a_recorded_run_re_checks_to_the_live_verdict(tmp_path, suffix):
     assert sidecar["clock"]["counter_start"] == 0 and sidecar["scene"] == scene.name
     again = check_log(scene, log)
     assert again.alignment.source == "sidecar"
-    assert again.alignment.schedule_matches_recording is True
+    # Judged by the statuses the run played, against the ground truth it played.
+    assert again.alignment.statuses == "recorded"
+    assert again.alignment.truth_matches_recording is True
     assert again.report.passed == live.passed is True
     assert again.report.frames == live.frames
     for q, stats in live.errors.items():
@@ -313,6 +316,16 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"playback\.rts\.lost_frames: 'a' is not of type 'integer'"),
     (lambda d: {**d, "playback": {**d["playback"], "ambiguity_window_s": "x"}},
      r"playback\.ambiguity_window_s: 'x' is not of type 'number'"),
+    # What the run played: each would have judged another scene, or raised.
+    (lambda d: {**d, "statuses": {**d["statuses"], "frames": 399}},
+     r"statuses: holds 399 frames of 2 targets, the scene has 400 of 2"),
+    (lambda d: {**d, "statuses": {**d["statuses"], "data": "AAAA"}},
+     r"statuses: data: not zlib-compressed"),
+    (lambda d: {**d, "statuses": {**d["statuses"], "data": "%%"}}, r"statuses: data: not base64"),
+    (lambda d: {**d, "statuses": {**d["statuses"], "encoding": "raw"}},
+     r"statuses\.encoding: 'uint16 little-endian .*' was expected"),
+    (lambda d: {**d, "truth": {**d["truth"], "targets": {"lead-car": "12"}}},
+     r"truth\.targets\.lead-car: '12' does not match"),
 ])
 def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
                                                          message):
@@ -376,6 +389,73 @@ def test_a_re_check_fails_on_the_playback_the_run_failed_on(recorded, tmp_path, 
     assert "frames_lost: the RTS reports 3 schedule frames it did not apply" in \
         capsys.readouterr().out
     assert cli.main(["check", scene, "--log", str(recorded)]) == 0
+
+@pytest.mark.parametrize("edit, target", [
+    # 2 cm further ahead: within every tolerance, so the log would pass against it.
+    (("position_m: [50.0, 3.5, 1.2]", "position_m: [50.02, 3.5, 1.2]"), "'truck-left'"),
+    (("rcs_dbsm: 10.0, fluctuation", "rcs_dbsm: 10.5, fluctuation"), "'lead-car'"),
+    (("name: lead-car", "name: leading-car"),
+     "'leading-car' (not in the recording) and 'lead-car' (not in the scene)"),
+])
+def test_a_scene_edited_since_the_recording_fails_its_re_check_naming_the_target(
+        recorded, tmp_path, capsys, edit, target):
+    # The RTS played the scene as it was; judged against the edited file, the log would be
+    # judged against a scene that never played.
+    text = (ROOT / "scenarios" / "highway_following.scenario.yaml").read_text()
+    edited = tmp_path / "highway_following.scenario.yaml"
+    assert edit[0] in text
+    edited.write_text(text.replace(*edit))
+    out = tmp_path / "r.json"
+    assert cli.main(["check", str(edited), "--log", str(recorded), "--json", str(out)]) == 1
+    assert (f"scene: the ground truth of {target} differs from the one the recorded run "
+            f"played") in capsys.readouterr().out
+    data = json.loads(out.read_text())
+    assert data["status"] == "fail" and data["alignment"]["truth_matches_recording"] is False
+
+
+def test_an_edit_that_leaves_the_ground_truth_alone_re_checks_as_recorded(recorded, tmp_path):
+    # New expectations judge the same log again: the truth is the one that played.
+    text = (ROOT / "scenarios" / "highway_following.scenario.yaml").read_text()
+    edited = tmp_path / "highway_following.scenario.yaml"
+    edited.write_text(text.replace("detection_rate: 0.9", "detection_rate: 0.8")
+                      .replace("slowly closes the gap", "closes the gap slowly"))
+    again = check_log(load_scenario(edited), recorded)
+    assert again.report.passed and again.alignment.truth_matches_recording is True
+    assert not again.alignment.notes
+
+
+def test_a_re_check_judges_by_the_statuses_the_run_played_not_a_rebuilt_schedule(
+        recorded, tmp_path, monkeypatch):
+    import rts_scenario.preflight as preflight
+    from rts_scenario.schedule.model import Status
+
+    scene_file = ROOT / "scenarios" / "highway_following.scenario.yaml"
+    before = check_log(load_scenario(scene_file), recorded).report
+    assert before.passed and before.frames["checked"] == 400
+
+    # A version whose schedule would keep every target out (as a coverage edge moved by a
+    # rounding does to a few target-frames): the run's statuses still say what played.
+    build = preflight.build_schedule
+
+    def out_of_coverage(*args, **kwargs):
+        schedule = build(*args, **kwargs)
+        return replace(schedule, status=schedule.status | np.uint16(Status.OUT_OF_COVERAGE))
+
+    monkeypatch.setattr(preflight, "build_schedule", out_of_coverage)
+    again = check_log(load_scenario(scene_file), recorded)
+    assert again.alignment.statuses == "recorded"
+    assert again.report.passed and again.report.frames == before.frames
+
+    # A sidecar of an older version keeps no statuses: the rebuilt schedule judges, and the
+    # re-check says it differs from the one recorded.
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    del data["statuses"], data["truth"]
+    older = check_log(load_scenario(scene_file), _copy(recorded, tmp_path, json.dumps(data)))
+    assert older.alignment.statuses == "rebuilt"
+    assert older.alignment.schedule_matches_recording is False
+    assert not older.report.passed
+    assert any("keeps no checksum of the ground truth" in n for n in older.alignment.notes)
+
 
 def test_a_simulated_run_stamps_its_messages_on_the_radar_s_clock(tmp_path):
     # The in-process radar's messages carry when the radar would have sent them, so a
