@@ -30,7 +30,7 @@ from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .playback import Playback
 from .preflight import Preflight, frames_per_batch, preflight, scene_limits
-from .radar.clock import ClockTrack, RadarClock
+from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .recording import StatusRecorder, TruthChecksums
@@ -284,16 +284,30 @@ class Pipeline:
     def _cycle_numbers(self, cycles: list[Detections]) -> np.ndarray:
         """Return the radar's cycle numbers (0 at its clock's start) of received cycles.
 
-        Each is a step from the cycle before (`sequential_numbers`), the first nearest 0.
+        Each is a step from the cycle before (`sequential_numbers`), the first nearest 0 for a
+        profile's counter start. A radar running free (no counter start) measured before the
+        first frame too, at any point of its cycle: where the measurement's start is known on
+        the bus's clock, cycle n is the one measured while frame n was held, told by the
+        cycles' bus times less the latency (on the line of the profile's cycle through them,
+        which averages the jitter out; a cycle within three standard errors of the line's
+        phase after a frame change counts as measured at it, as a run's first cycle does).
+        Without those times the first cycle received is taken as cycle 0.
         """
         clock = self.radar.radar_clock
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
         start = clock.counter_start if clock.counter_start is not None else (
-            int(counters[0]) if counters.size else 0)  # a measurement: the first is cycle 0
+            int(counters[0]) if counters.size else 0)
         counters = (counters - start) % self.counter_modulus
-        return (unwrap_counter(counters[:1], 0, self.counter_modulus)
-                + sequential_numbers(counters, self.counter_modulus, bus_times(cycles),
-                                     clock.cycle_s))
+        bus_t = bus_times(cycles)
+        steps = sequential_numbers(counters, self.counter_modulus, bus_t, clock.cycle_s)
+        origin = self._scene_origin_s()
+        if clock.counter_start is not None or origin is None or not np.isfinite(bus_t).all():
+            return unwrap_counter(counters[:1], 0, self.counter_modulus) + steps
+        measured = bus_t - clock.latency_s - origin - clock.start_offset_s
+        phase = float(np.mean(measured - steps * clock.cycle_s))
+        # The spread of the mean of uniform jitter over +- jitter_s.
+        stderr = clock.jitter_s / np.sqrt(3.0 * max(1, steps.size))
+        return steps + int(np.floor((phase + 3.0 * stderr + TIME_EPS_S) / clock.cycle_s))
 
     def _scene_origin_s(self) -> float | None:
         """Return the scene's time 0 on the bus's clock, where the run knows it.

@@ -164,3 +164,40 @@ def test_survey_that_misses_a_front_end_reports_it_and_writes_no_rig(tmp_path, c
                    f"is written only from a survey that saw every front end)\n")
     assert json.loads(json_out.read_text())["front_ends"][2]["seen_az_deg"] is None
     assert not rig_out.exists()
+
+
+@pytest.mark.parametrize("offset_s", [0.031, 0.0499])
+def test_a_radar_running_free_is_surveyed_by_when_it_measured_not_by_its_first_cycle(offset_s):
+    # A radar on the bench runs free: it measured before the survey's first frame (nothing
+    # played yet: an empty cycle) and is anywhere in its cycle when the frames start. Its
+    # first cycle received is not the first frame's: each FE is where the radar saw it while
+    # that FE alone was played.
+    from dataclasses import replace
+
+    from rts_scenario.detections import Detections
+    from rts_scenario.radar.clock import RadarClock
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
+    free = replace(radar, clock=replace(radar.radar_clock, counter_start=None))
+    clock = free.radar_clock
+    own = RadarClock(cycle_s=clock.cycle_s, start_offset_s=offset_s, latency_s=clock.latency_s,
+                     jitter_s=clock.jitter_s, counter_start=811)
+    with Pipeline(rig, free, radar_options=RadarOptions(fidelity="analytic", noise=False)
+                  ) as bench:
+        bench.output.clock = own
+        sink = bench.output._sink
+        early: list[int] = []
+
+        def switched_on_before(cycles):
+            if not early and cycles:
+                first = cycles[0]
+                early.append(first.cycle - 1)
+                cycles = [Detections.empty(first.cycle - 1, first.t_s - own.cycle_s),
+                          *cycles]
+            sink(cycles)
+
+        bench.output._sink = switched_on_before
+        result = survey(rig, free, bench.play)
+    assert early == [810]
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
