@@ -1028,8 +1028,7 @@ def _status_record(scene: Scenario, sidecar: dict[str, Any] | None,
     try:
         return StatusRecord(record, scene.n_frames, len(scene.targets))
     except ValueError as exc:
-        raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: statuses: {exc} (not what "
-                       f"`rts-scenario run --record` wrote for this scene)") from None
+        raise _sidecar_error(log, "statuses", exc) from None
 
 
 def _batches(scene: Scenario, method: str, batch_frames: int | None,
@@ -1048,8 +1047,7 @@ def _batches(scene: Scenario, method: str, batch_frames: int | None,
             yield frames, tracks, played.take(frames.size)
         played.finish()
     except ValueError as exc:
-        raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: statuses: {exc} (not what "
-                       f"`rts-scenario run --record` wrote for this scene)") from None
+        raise _sidecar_error(log, "statuses", exc) from None
 
 
 def _compare_truth(truth_sums: TruthChecksums, sidecar: dict[str, Any] | None,
@@ -1100,6 +1098,12 @@ def _alignment_cycles(index: _LogIndex) -> IntArray:
     return seen[np.unique(np.linspace(0, seen.size - 1, ALIGN_CYCLES).astype(np.int64))]
 
 
+def _sidecar_error(log: str | Path, key: str, exc: ValueError) -> LogError:
+    """Return the error for a sidecar's ``key`` that is not what ``run --record`` writes."""
+    return LogError(f"{log}{LOG_SIDECAR_SUFFIX}: {key}: {exc} (not what "
+                    f"`rts-scenario run --record` wrote for this scene)")
+
+
 def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None,
                    log: str | Path) -> FloatArray | None:
     """Each frame's lateness as the run's sidecar recorded it; None without (nominal times)."""
@@ -1109,8 +1113,7 @@ def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None,
     try:
         return unpack_send_lateness(record, scene.n_frames)
     except ValueError as exc:
-        raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: send_lateness: {exc} (not what "
-                       f"`rts-scenario run --record` wrote for this scene)") from None
+        raise _sidecar_error(log, "send_lateness", exc) from None
 
 
 __all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "OffsetEstimate", "RecheckResult",
