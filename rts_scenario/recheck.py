@@ -690,12 +690,16 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     time_offset_s : float, optional
         Log time of the scene's time 0 (a log without a sidecar); estimated when not given.
     method : str, optional
-        Solver method of the played schedule (default: the sidecar's, else ``exact``).
+        Solver method of the played schedule (default: the sidecar's, else ``exact``); not
+        used where the sidecar keeps the statuses the RTS played.
     """
     sidecar = read_sidecar(log)
     if mapping is None and sidecar is not None and sidecar.get("mapping"):
         mapping = sidecar["mapping"]
     can_mapping = CanMapping.from_file(mapping) if mapping else None
+    unused_method = (method is not None and sidecar is not None
+                     and sidecar.get("statuses") is not None
+                     and method != sidecar.get("method"))
     method = method or (sidecar or {}).get("method") or "exact"
     # The profile's cycle: a radar silent for half its counter's range is told by its bus time.
     index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s)
@@ -822,6 +826,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     alignment.cycles_in_log = len(index)
     result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
                     batch_frames, bus, alignment, sidecar)
+    if unused_method:
+        alignment.notes.append(f"--method {method} is not used: the sidecar keeps the statuses "
+                               f"the RTS played (with {(sidecar or {}).get('method')})")
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)

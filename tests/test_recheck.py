@@ -903,3 +903,12 @@ def test_a_re_check_by_the_sidecar_judges_at_the_clock_the_run_took_and_notes_th
     assert any(re.match(r"the radar.s cycles reached the bus every 50\.[01]\d+ ms, the run took "
                         r"50\.000000 ms", n)
                for n in again.alignment.notes), again.alignment.notes
+
+
+def test_a_method_the_recorded_statuses_make_unused_is_noted(recorded):
+    scene = load_scenario(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    again = check_log(scene, recorded, method="paper")
+    assert again.report.passed and again.alignment.statuses == "recorded"
+    assert again.alignment.notes == ["--method paper is not used: the sidecar keeps the statuses "
+                                     "the RTS played (with exact)"]
+    assert check_log(scene, recorded, method="exact").alignment.notes == []
