@@ -494,10 +494,11 @@ class Pipeline:
             # signal's range): the checker never saw them.
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
-        drifted = track.off_profile_reason(0.5 * window_s)
-        if drifted:
-            report.reasons.append(drifted)
-            report.passed = False
+        for drifted in (track.off_profile_reason(0.5 * window_s),
+                        track.latency_change_reason(0.5 * window_s)):
+            if drifted:
+                report.reasons.append(drifted)
+                report.passed = False
         assert self.output is not None
         # The stream has ended: its last frames' report may still be on the way.
         playback.rts = self.output.rts_status(settle_s=RTS_SETTLE_S)

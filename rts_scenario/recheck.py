@@ -730,8 +730,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if clock.counter_start is None:  # the run saw no cycle: count from the log's first
             clock = replace(clock, counter_start=int(counters[0]) if len(index) else 0)
         # The sidecar keeps the cycle the run followed, and the re-check judges the cycles
-        # where the run did. Where the bus times show another (a radar whose latency
-        # scattered too much for the run to follow its crystal), the notes say so.
+        # where the run did. Where the bus times show another (bus times that did not keep
+        # to one line, which the run did not follow), the notes say so.
         fit = CycleTimeFit()
         fit.add(numbers, index.bus_t_s)
         drifted = fit.drift_reason(clock.cycle_s, 0.5 * ambiguity_window_s(scene.radar,
@@ -832,10 +832,12 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)
-    off_profile = track.off_profile_reason(0.5 * ambiguity_window_s(scene.radar, scene.rig))
-    if off_profile:
-        result.reasons.append(off_profile)
-        result.passed = False
+    half_window_s = 0.5 * ambiguity_window_s(scene.radar, scene.rig)
+    for off_profile in (track.off_profile_reason(half_window_s),
+                        track.latency_change_reason(half_window_s)):
+        if off_profile:
+            result.reasons.append(off_profile)
+            result.passed = False
     # When the radar measured, as this check took it (the run's clock from the sidecar, or the
     # one fitted to the log's timestamps), in the live report's terms.
     result.radar_clock = {
@@ -845,6 +847,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     measured = track.fit.cycle_s()
     if measured is not None:
         result.radar_clock["bus_cycle_s"] = measured[0]
+    change = track.latency_change_s()
+    if change is not None:
+        result.radar_clock["latency_change_s"] = change[0]
     playback = (sidecar or {}).get("playback")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run

@@ -870,12 +870,9 @@ def test_cycles_from_before_the_scene_are_counted_alike_live_and_re_checked(tmp_
     assert again.report.frames == live.frames
 
 
-def test_a_re_check_by_the_sidecar_judges_at_the_clock_the_run_took_and_notes_the_bus_s(
-        tmp_path):
-    # A radar 2000 ppm off its profile whose latency jitters +-12 ms where its profile says
-    # +-4 ms: the run keeps the profile's cycle (the scatter does not tell a crystal from a
-    # latency that changed on the way). The sidecar's re-check judges the cycles where the run
-    # did, to the live counts, and its notes say what the bus times show.
+def run_scattered(tmp_path, radar_cycle_s, step_s):
+    """Run the cut-in scene with a radar of ``radar_cycle_s`` whose latency jitters +-12 ms
+    (its profile: 50 ms, +-4 ms), ``step_s`` longer from cycle 120 on; its log re-checked."""
     from rts_scenario.radar.clock import RadarClock
 
     shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
@@ -885,22 +882,55 @@ def test_a_re_check_by_the_sidecar_judges_at_the_clock_the_run_took_and_notes_th
     log = tmp_path / "scattered.blf"
     rng = np.random.default_rng(1)
     with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
-        pipeline.output.clock = RadarClock(cycle_s=0.0501, latency_s=0.13, jitter_s=0.004)
+        pipeline.output.clock = RadarClock(cycle_s=radar_cycle_s, latency_s=0.13,
+                                           jitter_s=0.004)
         publisher = pipeline._publisher
 
         def stamp(cycles):
             t = np.array([c.t_s for c in cycles])
+            counter = np.array([c.cycle for c in cycles])
             publisher.publish_many(cycles, pipeline._bus_origin_s + t + 0.13
-                                   + rng.uniform(-0.012, 0.012, t.size))
+                                   + rng.uniform(-0.012, 0.012, t.size)
+                                   + step_s * (counter >= 120))
 
         pipeline.output._sink = stamp
         live = pipeline.run(scene).report
+    return live, check_log(scene, log)
+
+
+def test_a_radar_2000_ppm_off_with_more_jitter_than_its_profile_says_fails_live_and_again(
+        tmp_path):
+    # Its cycles on one line through +-12 ms of jitter: the run follows the bus's cycle and
+    # fails, 2000 ppm being no crystal; the sidecar's re-check judges where the run did, to
+    # the same verdict.
+    live, again = run_scattered(tmp_path, 0.0501, 0.0)
+    assert live.radar_clock["cycle_from"] == "bus"
+    assert live.radar_clock["cycle_s"] == pytest.approx(0.0501, rel=1e-4)
+    assert not live.passed and len(live.reasons) == 1
+    assert "more than a crystal's 1000 ppm" in live.reasons[0]
+    assert again.alignment.cycle_s == live.radar_clock["cycle_s"]
+    assert again.report.frames == live.frames
+    assert again.report.reasons == live.reasons
+
+
+def test_a_re_check_by_the_sidecar_judges_at_the_clock_the_run_took_and_notes_the_bus_s(
+        tmp_path):
+    # A radar on its profile's cycle whose messages reach the bus 30 ms later from cycle 120
+    # on, through +-12 ms of jitter: the line through the bus times tilts by 45 ms, and the
+    # run keeps the profile's cycle (the segments' means do not keep to one line), saying the
+    # latency changed. A crystal could have drawn little of a step: the verdict stands. The
+    # sidecar's re-check judges the cycles where the run did, to the live counts, and its
+    # notes say what the bus times show.
+    live, again = run_scattered(tmp_path, 0.05, 0.03)
     assert live.radar_clock["cycle_from"] == "profile"
-    again = check_log(scene, log)
+    assert live.radar_clock["latency_change_s"] == pytest.approx(0.03, abs=0.01)
+    assert live.passed, live.reasons
     assert again.alignment.cycle_s == live.radar_clock["cycle_s"] == 0.05
     assert again.report.frames == live.frames
     assert again.report.passed == live.passed
-    assert any(re.match(r"the radar.s cycles reached the bus every 50\.[01]\d+ ms, the run took "
+    assert again.report.radar_clock["latency_change_s"] == pytest.approx(
+        live.radar_clock["latency_change_s"], abs=0.002)
+    assert any(re.match(r"the radar.s cycles reached the bus every 50\.1\d+ ms, the run took "
                         r"50\.000000 ms", n)
                for n in again.alignment.notes), again.alignment.notes
 

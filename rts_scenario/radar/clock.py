@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import fdtrc, ndtri
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -100,6 +101,156 @@ class RadarClock:
         return self.latency_s + rng.uniform(-self.jitter_s, self.jitter_s, n_cycles)
 
 
+# A radar's crystal keeps within about 100 ppm of its nominal frequency over temperature and
+# age. A cycle further than this from the profile's is not a crystal: the profile describes
+# another radar or another mode (a run fails with `radar_clock: ...`).
+CLOCK_TOLERANCE_PPM = 1000.0
+# A drift smaller than this over the cycles seen is rounding, not a crystal (s).
+DRIFT_FLOOR_S = 1e-5
+# Spread of bus times about a radar's line that its profile's jitter need not explain (s): the
+# stamping, a thread's wake-up.
+STAMP_NOISE_S = 1e-3
+# Cycles a free radar's phase is learnt from before it decides which is the scene's first.
+START_CYCLES = 8
+
+
+# Summaries a clock keeps of its cycles' bus times, however long the run (`LineSegments`).
+SEGMENTS = 32
+# Chance that cycles on one straight line (a crystal off its profile, latency jitter of any
+# size) read as bent (`LineSegments.test`): the two-sided tail beyond three sigma, the bar the
+# clock's cycle is told off the profile's by.
+BENT_P = 0.0027
+
+
+def _moments(x: FloatArray, y: FloatArray) -> FloatArray:
+    """Count, means and centred sums of squares and products of points (k, mx, my, xx, xy, yy)."""
+    mx, my = float(x.mean()), float(y.mean())
+    dx, dy = x - mx, y - my
+    return np.array([x.size, mx, my, dx @ dx, dx @ dy, dy @ dy], dtype=np.float64)
+
+
+def _combine(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Moments of two groups of points together (rows of `_moments`, or arrays of them)."""
+    k = a[..., 0] + b[..., 0]
+    w = np.divide(b[..., 0], k, out=np.zeros_like(k), where=k > 0)
+    dx, dy = b[..., 1] - a[..., 1], b[..., 2] - a[..., 2]
+    ab = a[..., 0] * w  # ka kb / k
+    return np.stack([k, a[..., 1] + dx * w, a[..., 2] + dy * w,
+                     a[..., 3] + b[..., 3] + ab * dx * dx, a[..., 4] + b[..., 4] + ab * dx * dy,
+                     a[..., 5] + b[..., 5] + ab * dy * dy], axis=-1)
+
+
+@dataclass(frozen=True)
+class Bend:
+    """How a radar's cycles lie about the straight line through their bus times.
+
+    Attributes
+    ----------
+    slope_s : float
+        The line's slope (the cycle on the bus's clock).
+    f : float
+        Spread of the segments' mean residuals about the line over the spread of the cycles
+        within the segments (each per its degrees of freedom): near 1 where they keep to it.
+    p : float
+        Chance of an ``f`` this large from cycles on one line.
+    departure_s : float
+        The largest distance of a segment's mean from the line.
+    scatter_s : float
+        The cycles' scatter within their segments (the measured one: latency jitter, stamping).
+    segments : numpy.ndarray
+        The segments' moments (rows of count, mean number, mean bus time, centred sums).
+    """
+
+    slope_s: float
+    f: float
+    p: float
+    departure_s: float
+    scatter_s: float
+    segments: FloatArray
+
+    @property
+    def bent(self) -> bool:
+        """Whether the cycles depart from one line: beyond `BENT_P`, and by more than rounding."""
+        return self.p < BENT_P and self.departure_s > DRIFT_FLOOR_S
+
+
+class LineSegments:
+    """Moments of consecutive runs of a radar's cycles (in the order they arrived).
+
+    At most ``cap`` segments of ``length`` cycles each, and one filling: when ``cap`` are full,
+    neighbours merge in pairs and ``length`` doubles. Memory is constant; the segments depend on
+    the order of the cycles, not on how they were handed over (moments merged exactly, the
+    sums centred on each segment's means, which keeps them precise over long runs).
+    """
+
+    def __init__(self, cap: int = SEGMENTS) -> None:
+        if cap < 4 or cap % 2:
+            raise ValueError(f"segments: an even number >= 4, got {cap}")
+        self.cap = cap
+        self.length = 1
+        self._full = np.zeros((0, 6))
+        self._open = np.zeros(6)
+
+    def add(self, x: FloatArray, y: FloatArray) -> None:
+        """Take points ``(x, y)`` in order."""
+        i = 0
+        while i < x.size:
+            room = self.length - int(self._open[0])
+            part = slice(i, i + room)
+            self._open = _combine(self._open, _moments(x[part], y[part]))
+            i += room
+            if int(self._open[0]) == self.length:
+                self._full = np.vstack([self._full, self._open])
+                self._open = np.zeros(6)
+                if len(self._full) == self.cap:
+                    self._full = _combine(self._full[0::2], self._full[1::2])
+                    self.length *= 2
+
+    @property
+    def segments(self) -> FloatArray:
+        """Moments of the segments with cycles (one row each, in order)."""
+        return self._full if self._open[0] == 0 else np.vstack([self._full, self._open])
+
+    def test(self) -> Bend | None:
+        """Whether the points keep to one straight line (lack of fit); None where it cannot tell.
+
+        The line through all points leaves each segment a mean residual; on one line (whatever
+        the points' scatter) these scatter as the points within the segments about it do,
+        divided by the root of the segment's count. Their ratio ``f`` (each sum of squares by its
+        degrees of freedom: ``K - 1 - rho`` between K segments, ``N - K - 1 + rho`` within,
+        ``rho`` the share of the numbers' spread that lies between the segments) follows
+        Fisher's F distribution there; a step or a bend in the points adds to the segments'
+        residuals alone. None before four segments, or with fewer degrees of freedom within
+        the segments than between them (too few points to measure their scatter).
+        """
+        s = self.segments
+        n_seg = len(s)
+        if n_seg < 4:
+            return None
+        total = s[0]
+        for row in s[1:]:
+            total = _combine(total, row)
+        k, mx, my, sxx, sxy, _ = total
+        if sxx <= 0.0:
+            return None
+        slope = sxy / sxx
+        residual = (s[:, 2] - my) - slope * (s[:, 1] - mx)
+        between = float(s[:, 0] @ (residual * residual))
+        within = float(np.sum(s[:, 5] - 2.0 * slope * s[:, 4] + slope * slope * s[:, 3]))
+        rho = float(s[:, 0] @ (s[:, 1] - mx) ** 2) / sxx
+        df_between, df_within = n_seg - 1.0 - rho, k - n_seg - 1.0 + rho
+        if df_within < df_between or df_between <= 0.0:
+            return None
+        scatter = np.sqrt(max(within, 0.0) / df_within)
+        if scatter > 0.0:
+            f = (between / df_between) / scatter ** 2
+            p = float(fdtrc(df_between, df_within, f))
+        else:
+            f, p = (np.inf, 0.0) if between > 0.0 else (0.0, 1.0)
+        return Bend(float(slope), float(f), p, float(np.abs(residual).max()), float(scatter),
+                    s.copy())
+
+
 class CycleTimeFit:
     """Running straight-line fit of when a radar's cycles reached the bus against their numbers.
 
@@ -115,6 +266,8 @@ class CycleTimeFit:
         self._origin: tuple[int, float] | None = None
         self._sums = np.zeros(5)  # n, t, n^2, n t, t^2 about the origin
         self._span = [0, 0]  # smallest and largest n about the origin
+        self.segments = LineSegments()
+        self._bend: tuple[int, Bend | None] | None = None
 
     def add(self, n: IntArray, bus_t_s: FloatArray) -> None:
         """Take cycles ``n`` and when they reached the bus (NaN: not known, left out)."""
@@ -131,6 +284,13 @@ class CycleTimeFit:
         self._sums += (x.sum(), y.sum(), (x * x).sum(), (x * y).sum(), (y * y).sum())
         self._span = [min(self._span[0], int(x.min())), max(self._span[1], int(x.max()))]
         self.count += int(n.size)
+        self.segments.add(x, y)
+
+    def bend(self) -> Bend | None:
+        """Whether the cycles keep to one line (`LineSegments.test`); None where it cannot tell."""
+        if self._bend is None or self._bend[0] != self.count:
+            self._bend = (self.count, self.segments.test())
+        return self._bend[1]
 
     def cycle_s(self) -> tuple[float, float] | None:
         """Return the fitted cycle (s) and its standard error; None when the bus cannot tell.
@@ -220,19 +380,6 @@ class CycleTimeFit:
                 f"{fit[0]:.10g} in the radar profile")
 
 
-# A radar's crystal keeps within about 100 ppm of its nominal frequency over temperature and
-# age. A cycle further than this from the profile's is not a crystal: the profile describes
-# another radar or another mode (a run fails with `radar_clock: ...`).
-CLOCK_TOLERANCE_PPM = 1000.0
-# A drift smaller than this over the cycles seen is rounding, not a crystal (s).
-DRIFT_FLOOR_S = 1e-5
-# Spread of bus times about a radar's line that its profile's jitter need not explain (s): the
-# stamping, a thread's wake-up.
-STAMP_NOISE_S = 1e-3
-# Cycles a free radar's phase is learnt from before it decides which is the scene's first.
-START_CYCLES = 8
-
-
 class ClockTrack:
     """When a radar measures, as a run learns it from the times its cycles reached the bus.
 
@@ -241,8 +388,10 @@ class ClockTrack:
 
     - **Cycle.** A crystal is not its profile: 50 ppm is 90 ms after half an hour of 50 ms
       cycles, nearly two frames. Once the bus tells a cycle off the profile's beyond three
-      standard errors (`CycleTimeFit`), that cycle is taken. A radar on its profile's cycle
-      keeps it exactly.
+      standard errors (`CycleTimeFit`), the cycles keeping to that line (`cycle_from_bus`),
+      that cycle is taken. A radar on its profile's cycle keeps it exactly. Cycles that bend
+      away from one line (a latency that changed) keep the profile's, and fail the run where a
+      crystal could have bent them so far (`latency_change_reason`).
     - **Phase.** A radar that runs free (``counter_start: auto``: switched on before the
       scene, not started by it) measures at any point of the scene's frames. Where the scene's
       start is known on the bus's clock (``origin_s``: a paced stream, or the simulated radar
@@ -274,19 +423,79 @@ class ClockTrack:
 
         Beyond three standard errors, and by more than `DRIFT_FLOOR_S` over the cycles seen
         (timestamps rounded to a microsecond, or epoch times in a float, are not a drift);
-        and only where the cycles keep to the line as the profile's jitter lets them (1.5
-        times its spread, at least `STAMP_NOISE_S`): a latency that changed on the way
-        (messages held up by a loaded bus or machine from some cycle on) tilts the line
-        without the radar's clock running off, and is not followed.
+        and only where the cycles keep to that straight line (`CycleTimeFit.bend`): a crystal
+        off its profile leaves them on one, however large their latency's jitter, while a
+        latency that changed on the way (messages held up by a loaded bus or machine from some
+        cycle on) bends them, tilting the line without the radar's clock running off, and is
+        not followed (`latency_change_s`). Where the cycles are too few to tell (`SEGMENTS` or
+        fewer), they must keep to the line as the profile's jitter lets them (1.5
+        times its spread, at least `STAMP_NOISE_S`).
         """
         fit = self.fit.cycle_s()
-        scatter = self.fit.scatter_s()
-        if fit is None or scatter is None:
+        if fit is None:
             return False
-        spread = max(self.profile.jitter_s / np.sqrt(3.0), STAMP_NOISE_S)
         off = abs(fit[0] - self.profile.cycle_s)
-        return (off > 3.0 * fit[1] and off * self.fit.span > DRIFT_FLOOR_S
-                and scatter <= 1.5 * spread)
+        if not (off > 3.0 * fit[1] and off * self.fit.span > DRIFT_FLOOR_S):
+            return False
+        bend = self.fit.bend()
+        if bend is not None:
+            return not bend.bent
+        scatter = self.fit.scatter_s()
+        spread = max(self.profile.jitter_s / np.sqrt(3.0), STAMP_NOISE_S)
+        return scatter is not None and scatter <= 1.5 * spread
+
+    def latency_change_s(self) -> tuple[float, float, float] | None:
+        """How far the cycles strayed from the profile's cycle where they bent (s, three values).
+
+        Where the cycles' bus times do not keep to one straight line (`CycleTimeFit.bend`),
+        the check keeps the profile's cycle. The segments' mean bus times, less the profile's
+        cycle times their numbers, then lie the first value apart (highest to lowest): the
+        latency changed by as much, or the radar's clock did not run steady. A clock moves
+        against the profile's no faster than `CLOCK_TOLERANCE_PPM` (beyond, the run fails as
+        another radar's): the second is the spread of the path that follows the segments'
+        means from the first as far as such a clock can between each two (a start-up's
+        messages held up by tens of milliseconds, or a step, are latency; a drift or a bend a
+        crystal can draw is taken whole). The third is how far apart the cycles' scatter
+        within the segments could put two of K segments' means, at the chance of 3 sigma for
+        all K at once. None where they keep to one line, or where the bus times do not follow
+        the cycles' numbers (`CycleTimeFit.cycle_s`).
+        """
+        bend = self.fit.bend()
+        if bend is None or not bend.bent or self.fit.cycle_s() is None:
+            return None
+        s = bend.segments
+        offset = s[:, 2] - self.profile.cycle_s * s[:, 1]
+        rate = CLOCK_TOLERANCE_PPM * 1e-6 * self.profile.cycle_s * np.diff(s[:, 1])
+        path = offset[:1] + np.concatenate(
+            [[0.0], np.cumsum(np.clip(np.diff(offset), -rate, rate))])
+        # Each of K segments' means within z of its standard error of where it would lie
+        # without the scatter, all at once with the chance of 3 sigma (Bonferroni).
+        z = float(ndtri(1.0 - BENT_P / (2.0 * len(s))))
+        error = bend.scatter_s / np.sqrt(s[:, 0])
+        margin = 0.0
+        for line in (offset, path):
+            hi, lo = int(np.argmax(line)), int(np.argmin(line))
+            margin = max(margin, z * float(error[hi] + error[lo]))
+        return float(offset.max() - offset.min()), float(path.max() - path.min()), margin
+
+    def latency_change_reason(self, tolerance_s: float) -> str | None:
+        """Why the cycles' bent bus times fail the run, or None.
+
+        Where the part of their stray from the profile's cycle a crystal could have drawn
+        exceeds ``tolerance_s`` beyond what the scatter could (`latency_change_s`): the bus
+        cannot tell a latency that changed from a clock that did not run steady, and in the
+        latter the cycles were judged against the wrong frames.
+        """
+        change = self.latency_change_s()
+        if change is None or change[1] - change[2] <= tolerance_s:
+            return None
+        return (f"radar_clock: the radar's cycles reached the bus up to {change[0] * 1e3:.1f} "
+                f"ms apart from its profile's cycle of {self.profile.cycle_s * 1e3:.6f} ms, not "
+                f"along one straight line, {change[1] * 1e3:.1f} ms (+-{change[2] * 1e3:.1f}) "
+                f"of it as a clock within {CLOCK_TOLERANCE_PPM:.0f} ppm could have: their "
+                f"latency changed during the run (messages held up), or the radar's clock did "
+                f"not run steady; the check kept the profile's cycle, and by more than "
+                f"{tolerance_s * 1e3:.3g} ms it may have judged cycles against the wrong frames")
 
     @property
     def cycle_s(self) -> float:
@@ -379,11 +588,18 @@ class ClockTrack:
     def to_dict(self, first: int = 0) -> dict[str, float | str]:
         """Return the clock the check ended with, for the report's ``radar_clock``.
 
-        ``start_offset_s`` is the scene time of cycle ``first``: the scene's first.
+        ``start_offset_s`` is the scene time of cycle ``first``: the scene's first;
+        ``latency_change_s`` where the cycles' bus times bent (`latency_change_s`).
         """
-        return {"cycle_s": self.cycle_s, "cycle_from": "bus" if self.cycle_from_bus
-                else "profile", "start_offset_s": float(self.time_of(np.array([first]))[0]),
-                "start_from": "bus" if self.phase_from_bus and self.fit.count else "profile"}
+        clock: dict[str, float | str] = {
+            "cycle_s": self.cycle_s, "cycle_from": "bus" if self.cycle_from_bus else "profile",
+            "start_offset_s": float(self.time_of(np.array([first]))[0]),
+            "start_from": "bus" if self.phase_from_bus and self.fit.count else "profile"}
+        change = self.latency_change_s()
+        if change is not None:
+            clock["latency_change_s"] = change[0]
+        return clock
 
 
-__all__ = ["CLOCK_TOLERANCE_PPM", "TIME_EPS_S", "ClockTrack", "CycleTimeFit", "RadarClock"]
+__all__ = ["CLOCK_TOLERANCE_PPM", "SEGMENTS", "TIME_EPS_S", "Bend", "ClockTrack", "CycleTimeFit",
+           "LineSegments", "RadarClock"]
