@@ -1,7 +1,7 @@
 """The simulated radar and the RTS delay grid against hand-derived FMCW physics.
 
-Nothing here goes through the solver or the schedule builder to produce what the radar plays:
-the RTS settings are written by hand from the scene (delay ``2 R / c0`` less the air path and
+The radar's tests play nothing the solver or the schedule builder computed: the RTS settings
+are written by hand from the scene (delay ``2 R / c0`` less the air path and
 the RTS latency, Doppler ``-2 v / lambda``, level from the rig's reference by the radar
 equation ``A = A_ref - (sigma - sigma_ref) + 40 log10(R / R_ref)``), and what the radar must
 measure is derived from the textbook FMCW relations:
@@ -12,8 +12,9 @@ measure is derived from the textbook FMCW relations:
 * a plane wave from direction u reaches virtual element p earlier by ``u . p / c0``: its phase
   there leads by ``2 pi f u . p / c0`` at the frequency f the radar receives at that instant.
 
-The quantization of RTS delays is checked with the independent near-field model
-(tests/nearfield_reference.py).
+The schedule builder's delay grid and the peak search (the instrument behind the solver's
+figures) are checked with the independent near-field model (tests/nearfield_reference.py); the
+superposition gain the schedule's level uses, by hand.
 """
 
 import dataclasses
@@ -331,3 +332,29 @@ def test_peak_search_measures_what_the_independent_model_says_a_radar_sees():
     # the parallax at 1 km: ~0.2 deg at 1 m (tests/test_nearfield_reference.py) over 1000.
     np.testing.assert_allclose(np.ravel(got), want, atol=5e-4)
     assert np.hypot(*(np.ravel(got) - [3.8, 9.9])) > 1.0
+
+
+def test_superposition_gain_at_the_quad_centre_by_hand():
+    # The paper array is a cross: 4 RX along y and 3 TX along z, lambda/2 apart, centred, so a
+    # plane wave's response at boresight is a product of two cosine sums,
+    # f_q(0, 0) = sum_r cos(k y_r u_q) * sum_t cos(k z_t s_q), and equal weights peak at the
+    # centre of a square quad with gain g = |sum_q f_q| / M; each channel then plays
+    # A - 20 log10(w_q / g) (DESIGN.md 5.4): here A_ref + 20 log10(g).
+    radar = RadarProfile.preset("paper")
+    rig = rs.Rig.from_angles([-5, 5, -5, 5], [-8, -8, 8, 8])
+    sch = build_schedule(tracks(0.0, 0.0, radar=radar, range_m=10.0), rig, radar,
+                         fe_responses="plane-wave")
+    # The plane-wave model is the profile's array at its nominal wavelength (DESIGN.md 5.1),
+    # which also sets the `paper` array's spacing.
+    lam = radar.wavelength_m
+    k = 2 * np.pi / lam
+    y = (np.arange(4) - 1.5) * lam / 2
+    z = (np.arange(3) - 1.0) * lam / 2
+    az, el = np.radians(rig.az_deg), np.radians(rig.el_deg)
+    u, s = np.cos(el) * np.sin(az), np.sin(el)
+    f = np.cos(k * np.outer(u, y)).sum(axis=1) * np.cos(k * np.outer(s, z)).sum(axis=1)
+    gain = abs(f.sum()) / 12
+    assert 3.0 < gain < 4.0
+    np.testing.assert_allclose(sch.weight[0, 0], 1.0, rtol=1e-9)
+    np.testing.assert_allclose(sch.attenuation_db[0, 0], 40.0 + 20 * np.log10(gain),
+                               atol=1e-9)
