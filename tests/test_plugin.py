@@ -144,13 +144,73 @@ def test_failing_detection_rate_lists_worst_frames(pytester):
                                  "*frame*t_s*target*range*vel*az*el*"])
 
 
-def test_bad_scene_is_a_collection_error_naming_file_and_line(pytester):
+def test_bad_scene_is_one_failing_item_naming_file_and_line(pytester):
+    # One scene that does not load fails as one item; the session still runs the others.
     pytester.makefile(".scenario.yaml", broken=scene("broken").replace("rig: wide-3x5",
-                                                                       "rig: wide-3x9"))
-    result = pytester.runpytest()
-    result.assert_outcomes(errors=1)
-    result.stdout.fnmatch_lines(["*broken.scenario.yaml:6:*rig: unknown preset 'wide-3x9'*"])
+                                                                       "rig: wide-3x9"),
+                      fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=1)
+    result.stdout.fnmatch_lines(["*broken.scenario.yaml:6:*rig: unknown preset 'wide-3x9'*",
+                                 "FAILED broken.scenario.yaml::broken - error: *"])
     assert "Traceback" not in result.stdout.str()
+
+
+def test_a_variant_that_does_not_load_fails_alone(pytester):
+    # As in `rts-scenario run`: the other variants of the scene, and the other scenes, run.
+    extra = "parametrize:\n  rig: [wide-3x5, wide-3x9]\n"
+    pytester.makefile(".scenario.yaml", mixed=scene("mixed", extra=extra), fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=2)
+    text = result.stdout.str()
+    result.stdout.fnmatch_lines([
+        "PASSED mixed.scenario.yaml::mixed[[]rig=wide-3x5[]]",
+        "FAILED mixed.scenario.yaml::mixed[[]rig=wide-3x9[]] - error: *",
+    ])
+    assert ("mixed.scenario.yaml:6:1: rig: unknown preset 'wide-3x9'; valid presets: "
+            "kit-table1, wide-3x5, or a relative path to a *.rig.yaml file [rig=wide-3x9]"
+            in text)
+    assert "Traceback" not in text and "Interrupted" not in text
+
+
+def test_a_bad_parametrize_block_is_one_failing_item(pytester):
+    extra = "parametrize:\n  radar.estimator: ti\n"
+    pytester.makefile(".scenario.yaml", block=scene("block", extra=extra), fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=1)
+    result.stdout.fnmatch_lines(["*block.scenario.yaml:16:3: parametrize.radar.estimator: "
+                                 "must be of type array, got 'ti'*"])
+    assert "Traceback" not in result.stdout.str()
+
+
+def test_a_mark_pytest_cannot_take_is_refused_by_the_scene_loader(pytester):
+    # pytest refuses marks starting with an underscore: the scene format refuses them first.
+    pytester.makefile(".scenario.yaml", under=scene("under", extra="marks: [_private]\n"),
+                      fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=1)
+    result.stdout.fnmatch_lines(["*under.scenario.yaml:15:*marks*_private*"])
+    assert "Traceback" not in result.stdout.str()
+
+
+def test_bad_rts_can_interface_stops_the_session_once(pytester):
+    for name in ("one", "two"):
+        pytester.makefile(".scenario.yaml", **{name: scene(name)})
+    result = pytester.runpytest("--rts-can-interface", "nonsense")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert text.count("--rts-can-interface 'nonsense': unknown python-can interface") == 1
+    assert "socketcan" in text and "Traceback" not in text
+    # udp_multicast needs a multicast group: a private channel name would reach no one.
+    result = pytester.runpytest("--rts-can-interface", "udp_multicast")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert "--rts-can-interface udp_multicast needs --rts-can-channel" in text
+    result = pytester.runpytest("--rts-can-interface", "udp_multicast",
+                                "--rts-can-channel", "can0")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "--rts-can-channel 'can0': udp_multicast needs" in (result.stderr.str()
+                                                               + result.stdout.str())
 
 
 def test_pattern_is_configurable(pytester):

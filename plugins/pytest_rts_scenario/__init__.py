@@ -54,14 +54,23 @@ def pytest_configure(config: pytest.Config) -> None:
     spec = config.getoption("--rts-output")
     mapping_path = config.getoption("--rts-mapping")
     can_fd = config.getoption("--rts-can-fd")
+    interface = config.getoption("--rts-can-interface")
     # The defaults need no check (nor the library's import).
-    if spec != "simulated-radar" or mapping_path or can_fd:
+    if spec != "simulated-radar" or mapping_path or can_fd or interface != "virtual":
         from rts_scenario.canbus.mapping import CanMapping
-        from rts_scenario.cli.common import check_fd_mapping, check_output, named_file
+        from rts_scenario.cli.common import (
+            check_can_interface,
+            check_fd_mapping,
+            check_output,
+            named_file,
+        )
         from rts_scenario.errors import RtsError
 
         try:
             check_output("--rts-output", spec, run=True)
+            check_can_interface("--rts-can-interface", interface,
+                                config.getoption("--rts-can-channel"),
+                                channel_option="--rts-can-channel")
             if mapping_path:
                 mapping = named_file("--rts-mapping", CanMapping.from_file, mapping_path)
                 check_fd_mapping(can_fd, mapping_path, mapping)
@@ -99,24 +108,54 @@ class ScenarioFile(pytest.File):
     """A scene file: one item per parametrized combination."""
 
     def collect(self) -> Iterator[ScenarioItem]:
-        """Validate the scene (a bad file is a collection error naming file and line)."""
-        from rts_scenario.errors import RtsError
-        from rts_scenario.scenario import load_scenario, parametrizations
+        """Validate the scene: one item per combination, loaded here.
 
+        A combination that does not load is still an item, which fails with the one-line
+        error naming file, line and key (as ``rts-scenario run`` reports it, the other
+        combinations and scenes still run); a file whose ``parametrize`` block cannot be
+        expanded is one such item. A collection error would stop the whole session.
+        """
+        from rts_scenario.errors import RtsError, located
+        from rts_scenario.scenario import load_scenario, parametrizations, run_label
+
+        path = str(self.path)
         try:
             combos = parametrizations(self.path)
-            scenes = [(overrides, load_scenario(self.path, overrides)) for _, overrides in combos]
         except RtsError as exc:
-            raise self.CollectError(str(exc)) from None
+            yield ScenarioItem.from_parent(self, name=_raw_name(self.path, {}), overrides={},
+                                           marks=(), error=located(path, exc))
+            return
         known = {line.split(":", 1)[0].split("(", 1)[0].strip()
                  for line in self.config.getini("markers")}
-        for overrides, scene in scenes:
+        for ident, overrides in combos:
+            try:
+                scene = load_scenario(self.path, overrides)
+            except RtsError as exc:
+                message = located(path, exc) + (f" [{ident}]" if ident else "")
+                yield ScenarioItem.from_parent(
+                    self, name=run_label(_raw_name(self.path, overrides), ident),
+                    overrides=overrides, marks=(), error=message)
+                continue
             # A scene's own marks are registered, so --strict-markers accepts them.
             for mark in set(scene.marks) - known:
                 self.config.addinivalue_line("markers", f"{mark}: a mark of scene files")
                 known.add(mark)
             yield ScenarioItem.from_parent(self, name=scene.label, overrides=overrides,
                                            marks=scene.marks)
+
+
+def _raw_name(path: Path, overrides: dict[str, Any]) -> str:
+    """Return the ``name`` a scene file gives itself (else its file's name)."""
+    if isinstance(overrides.get("name"), str):
+        return str(overrides["name"])
+    try:
+        from rts_scenario.located_yaml import load_yaml
+
+        data = load_yaml(path).data
+    except Exception:  # the item's error says what is wrong with the file
+        return path.name
+    name = data.get("name") if isinstance(data, dict) else None
+    return name if isinstance(name, str) and name else path.name
 
 
 class ScenarioFailed(Exception):
@@ -131,16 +170,21 @@ class ScenarioItem(pytest.Item):
     """One run of a scene."""
 
     def __init__(self, *, overrides: dict[str, Any], marks: tuple[str, ...],
-                 **kwargs: Any) -> None:
+                 error: str | None = None, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.overrides = overrides
+        self.error = error  # the scene did not load: the item fails with this message
         for mark in marks:
             self.add_marker(mark)
 
     def runtest(self) -> None:
         """Run the scene end to end and check it."""
+        from rts_scenario.errors import RtsError
         from rts_scenario.pipeline import run_scene
         from rts_scenario.scenario import load_scenario
+
+        if self.error is not None:
+            raise RtsError(self.error)
 
         # The HTML report's plots need every frame's errors: record them only for it.
         record = self.config.pluginmanager.hasplugin("rts-scenario-html")
