@@ -144,6 +144,25 @@ def test_failing_detection_rate_lists_worst_frames(pytester):
                                  "*frame*t_s*target*range*vel*az*el*"])
 
 
+def test_worst_frames_are_error_over_tolerance_as_their_heading_says():
+    """The worst frames' columns are each quantity's error divided by its tolerance."""
+    from types import SimpleNamespace
+
+    from pytest_rts_scenario import _render
+
+    scene_ = SimpleNamespace(expectations=SimpleNamespace(tolerances={
+        "range_m": 0.3, "radial_velocity_mps": 0.2, "az_deg": 0.004, "el_deg": 1.0,
+        "rcs_db": 6.0}))
+    row = {"frame": 7, "t_s": 0.35, "target": "car", "missed": False, "range_m": -0.15,
+           "radial_velocity_mps": 0.05, "az_deg": -0.005, "el_deg": 0.25, "rcs_dbsm": 0.0}
+    report = SimpleNamespace(label="s", reasons=["car: detection rate 0.0% < 90.0%"],
+                             table=lambda: "TABLE", worst_frames=[row])
+    text = _render(SimpleNamespace(scene=scene_, report=report))
+    heading, columns, line = text.splitlines()[4:7]
+    assert heading == "worst frames (error / tolerance):"
+    assert line.split() == ["7", "0.35", "car", "-0.500", "+0.250", "-1.250", "+0.250"]
+
+
 def test_bad_scene_is_one_failing_item_naming_file_and_line(pytester):
     # One scene that does not load fails as one item; the session still runs the others.
     pytester.makefile(".scenario.yaml", broken=scene("broken").replace("rig: wide-3x5",

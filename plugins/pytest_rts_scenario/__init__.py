@@ -228,8 +228,10 @@ def _render(result: RunResult) -> str:
              "worst frames (error / tolerance):",
              f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
              f"{'el':>8}"]
+    tolerances = result.scene.expectations.tolerances
     for row in report.worst_frames:
-        cells = ["missed" if row["missed"] else f"{row[key]:+.3f}"
+        # Each error over its tolerance (as the frames are ranked): beyond +-1 is out of it.
+        cells = ["missed" if row["missed"] else f"{row[key] / tolerances[key]:+.3f}"
                  for key in ("range_m", "radial_velocity_mps", "az_deg", "el_deg")]
         lines.append(f"{row['frame']:>6} {row['t_s']:>7.2f} {row['target']:<18} "
                      + " ".join(f"{c:>8}" for c in cells))
