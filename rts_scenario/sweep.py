@@ -97,11 +97,11 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     """
     from .errors import ScenarioError
     from .pipeline import RunOptions, run_scene
-    from .scenario import SCENE_SUFFIX, load_scenario
+    from .scenario import load_scenario
     from .schedule import ScheduleError
 
     start = time.perf_counter()
-    entry: Entry = {"scene": Path(task.file).name.removesuffix(SCENE_SUFFIX), "file": task.file,
+    entry: Entry = {"scene": _file_scene(task.file), "file": task.file,
                     "id": task.ident, "parameters": dict(task.parameters)}
     if task.error is not None:
         return error_entry(entry, task.error, "bad_input")
@@ -141,6 +141,13 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     entry["solver_plan"] = report.solver_plan
     entry["seconds"] = round(time.perf_counter() - start, 3)
     return entry
+
+
+def _file_scene(file: str) -> str:
+    """Name a run whose scene did not report its name: its file's name without the suffix."""
+    from .scenario import SCENE_SUFFIX
+
+    return Path(file).name.removesuffix(SCENE_SUFFIX)
 
 
 def error_entry(entry: Entry, message: str, error_type: str) -> Entry:
@@ -287,7 +294,7 @@ def _collect(futures: dict[Any, SweepTask], completed: Iterable[Future[Entry]],
             entry = future.result()
         except Exception as exc:  # the worker died or the task could not be shipped to it
             entry = error_entry(
-                {"scene": Path(task.file).name, "file": task.file, "id": task.ident,
+                {"scene": _file_scene(task.file), "file": task.file, "id": task.ident,
                  "parameters": dict(task.parameters)},
                 f"{task.file}: worker failed: {type(exc).__name__}: {one_line(exc)} "
                 f"(a runtime error)", "runtime")
@@ -340,7 +347,12 @@ def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, An
 
     def badness(entry: Entry) -> tuple[int, float]:
         ratio = entry.get("max_error_ratio")
-        return order.get(entry["status"], 2), -(ratio if ratio is not None else math.inf)
+        if ratio is None:
+            # A failed run with nothing to rate (nothing detected) leads its group; a passing
+            # one (an empty bench) is no close call: it comes last.
+            return order.get(entry["status"], 2), (math.inf if entry["status"] == "pass"
+                                                   else -math.inf)
+        return order.get(entry["status"], 2), -ratio
 
     ranked = sorted(entries, key=badness)[:worst]
     keys = ("scene", "file", "id", "status", "reason", "max_error_ratio", "max_error_quantity")

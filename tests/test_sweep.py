@@ -153,6 +153,27 @@ def test_json_layout_and_summary_counted_independently(scenes, tmp_path, capsys)
     assert "ERROR c_broken (" in stdout
 
 
+def test_worst_passing_runs_are_those_with_the_largest_error_ratio():
+    """A passing run with no error to rate (an empty bench) is not among the worst passes:
+    the JSON's worst runs and the printed ones are the same runs."""
+    from rts_scenario.cli.sweep import _summary_text
+
+    def run(name, status, ratio):
+        return {"scene": name, "file": f"{name}.scenario.yaml", "id": "", "parameters": {},
+                "passed": status == "pass", "status": status, "max_error_ratio": ratio,
+                "max_error_quantity": "az_deg" if ratio is not None else None,
+                **({"reason": "why"} if status != "pass" else {})}
+
+    entries = [run("empty", "pass", None), run("close", "pass", 0.9), run("far", "pass", 0.2),
+               run("lost", "fail", None), run("off", "fail", 2.5)]
+    summary = summarize(entries, worst=3)
+    assert [w["scene"] for w in summary["worst"]] == ["lost", "off", "close"]
+    text = _summary_text(summary, 1.0)
+    printed = [line.split()[1] for line in text.splitlines()[text.splitlines().index(
+        "worst runs:") + 1:]]
+    assert printed == [w["scene"] for w in summary["worst"]]
+
+
 def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
     plain = scenes / "sub" / "a_plain.scenario.yaml"
     assert sweep(capsys, plain, "--workers", "1")[0] == 0
@@ -297,6 +318,9 @@ def test_a_worker_that_dies_loses_no_run(scenes, tmp_path, capsys, monkeypatch):
     [plain] = [r for r in runs if r["file"].endswith("a_plain.scenario.yaml")]
     assert plain["status"] == "error" and plain["error_type"] == "runtime"
     assert "worker failed: BrokenProcessPool" in plain["reason"]
+    # Named as any run that did not report its scene: after its file, as in the listing.
+    assert plain["scene"] == "a_plain"
+    assert f"ERROR a_plain ({plain['file']}): " in stdout
     assert "Traceback" not in stdout + err
 
 
