@@ -591,6 +591,7 @@ class _Importer:
                 "<Storyboard> needs a <StopTrigger> (a SimulationTimeCondition gives the "
                 "scene's duration_s)")
         self.stop = self._trigger(stop)
+        self.stop_el = stop  # its errors name its line
         _check_all_read(root)
         self._check_references()
 
@@ -931,10 +932,10 @@ class _Importer:
                 pending.remove(item)
                 self._start_event(item, t)
         if not math.isfinite(stop):
-            raise self.root.error("the <Storyboard>'s <StopTrigger> never fires: the scene's "
+            raise self.stop_el.error("the <Storyboard>'s <StopTrigger> never fires: the scene's "
                                   "duration is unknown (give it a SimulationTimeCondition)")
         if stop <= 0.0:
-            raise self.root.error(f"the <StopTrigger> fires at t = {stop:g} s: the scene "
+            raise self.stop_el.error(f"the <StopTrigger> fires at t = {stop:g} s: the scene "
                                   f"needs a duration > 0")
         for act in pending_acts:
             self.notes.append(f"{self.file}:{act.el.line}: act {act.name!r} never starts "

@@ -376,6 +376,17 @@ def test_unplaced_entity_and_missing_stop_trigger(tmp_path):
         imported(tmp_path, path)
 
 
+@pytest.mark.parametrize("rule", ['value="0" rule="greaterThan"', 'value="10" rule="lessThan"'])
+def test_a_stop_trigger_at_zero_is_located_at_the_stop_trigger(tmp_path, rule):
+    path = variant(tmp_path, "cut_in", '<SimulationTimeCondition value="10" rule="greaterThan"/>',
+                   f'<SimulationTimeCondition {rule}/>')
+    line = line_of(path, "<StopTrigger>")
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (f"{path}:{line}: the <StopTrigger> fires at t = 0 s: the scene "
+                               f"needs a duration > 0")
+
+
 # ----------------------------------------------------------------------------- command line
 
 def test_cli_import_then_validate_and_run(tmp_path, capsys):
