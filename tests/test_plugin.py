@@ -192,6 +192,18 @@ def test_a_variant_that_does_not_load_fails_alone(pytester):
     assert "Traceback" not in text and "Interrupted" not in text
 
 
+def test_a_schedule_that_cannot_be_built_names_the_scene_file(pytester):
+    # The scene loads; its schedule cannot be built when it runs: the error names its file.
+    pytester.makefile(".scenario.yaml", fast=scene("fast").replace("frame_rate_hz: 20.0",
+                                                                   "frame_rate_hz: 200.0"))
+    result = pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines([f"error: {pytester.path / 'fast.scenario.yaml'}: frame_rate_hz: "
+                                 "the scene runs at 200 Hz but rig 'wide-3x5' updates at most "
+                                 "100 Hz*"])
+    assert "Traceback" not in result.stdout.str()
+
+
 def test_a_bad_parametrize_block_is_one_failing_item(pytester):
     extra = "parametrize:\n  radar.estimator: ti\n"
     pytester.makefile(".scenario.yaml", block=scene("block", extra=extra), fine=scene("fine"))

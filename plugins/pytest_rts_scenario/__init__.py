@@ -198,12 +198,14 @@ class ScenarioItem(pytest.Item):
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException],
                      style: Any = None) -> str | Any:
         """Show the report and worst frames of a failed check; one clean line for bad input."""
-        from rts_scenario.errors import RtsError
+        from rts_scenario.errors import RtsError, located
 
         if isinstance(excinfo.value, ScenarioFailed):
             return _render(excinfo.value.result)
         if isinstance(excinfo.value, RtsError):
-            return f"error: {excinfo.value}"
+            if self.error is not None:  # the load error, located already
+                return f"error: {self.error}"
+            return f"error: {located(str(self.path), excinfo.value)}"
         return super().repr_failure(excinfo, style=style)
 
     def reportinfo(self) -> tuple[Path, int, str]:
