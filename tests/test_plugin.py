@@ -164,8 +164,9 @@ def test_worst_frames_are_error_over_tolerance_as_their_heading_says():
 
 
 def test_bad_scene_is_one_failing_item_naming_file_and_line(pytester):
-    # One scene that does not load fails as one item; the session still runs the others.
-    pytester.makefile(".scenario.yaml", broken=scene("broken").replace("rig: wide-3x5",
+    # One scene that does not load fails as one item, named after its file (as
+    # `rts-scenario run` names it); the session still runs the others.
+    pytester.makefile(".scenario.yaml", broken=scene("cut-in").replace("rig: wide-3x5",
                                                                        "rig: wide-3x9"),
                       fine=scene("fine"))
     result = pytester.runpytest("-rA")

@@ -116,14 +116,16 @@ class ScenarioFile(pytest.File):
         expanded is one such item. A collection error would stop the whole session.
         """
         from rts_scenario.errors import RtsError, located
-        from rts_scenario.scenario import load_scenario, parametrizations, run_label
+        from rts_scenario.scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
 
         path = str(self.path)
+        # A run that does not load is named after its file, as rts-scenario run names it.
+        file_name = self.path.name.removesuffix(SCENE_SUFFIX)
         try:
             combos = parametrizations(self.path)
         except RtsError as exc:
-            yield ScenarioItem.from_parent(self, name=_raw_name(self.path, {}), overrides={},
-                                           marks=(), error=located(path, exc))
+            yield ScenarioItem.from_parent(self, name=file_name, overrides={}, marks=(),
+                                           error=located(path, exc))
             return
         known = {line.split(":", 1)[0].split("(", 1)[0].strip()
                  for line in self.config.getini("markers")}
@@ -132,9 +134,8 @@ class ScenarioFile(pytest.File):
                 scene = load_scenario(self.path, overrides)
             except RtsError as exc:
                 message = located(path, exc) + (f" [{ident}]" if ident else "")
-                yield ScenarioItem.from_parent(
-                    self, name=run_label(_raw_name(self.path, overrides), ident),
-                    overrides=overrides, marks=(), error=message)
+                yield ScenarioItem.from_parent(self, name=run_label(file_name, ident),
+                                               overrides=overrides, marks=(), error=message)
                 continue
             # A scene's own marks are registered, so --strict-markers accepts them.
             for mark in set(scene.marks) - known:
@@ -142,20 +143,6 @@ class ScenarioFile(pytest.File):
                 known.add(mark)
             yield ScenarioItem.from_parent(self, name=scene.label, overrides=overrides,
                                            marks=scene.marks)
-
-
-def _raw_name(path: Path, overrides: dict[str, Any]) -> str:
-    """Return the ``name`` a scene file gives itself (else its file's name)."""
-    if isinstance(overrides.get("name"), str):
-        return str(overrides["name"])
-    try:
-        from rts_scenario.located_yaml import load_yaml
-
-        data = load_yaml(path).data
-    except Exception:  # the item's error says what is wrong with the file
-        return path.name
-    name = data.get("name") if isinstance(data, dict) else None
-    return name if isinstance(name, str) and name else path.name
 
 
 class ScenarioFailed(Exception):
