@@ -174,6 +174,21 @@ def test_worst_passing_runs_are_those_with_the_largest_error_ratio():
     assert printed == [w["scene"] for w in summary["worst"]]
 
 
+def test_a_parameter_value_json_cannot_hold_is_bad_input_and_the_json_is_written(scenes,
+                                                                                  tmp_path,
+                                                                                  capsys):
+    # YAML reads 2024-01-01 as a date: writing the JSON failed after every run had finished.
+    dated = scenes / "d_dated.scenario.yaml"
+    dated.write_text(tiny_scene("dated", "parametrize:\n  description: [2024-01-01, x]\n"))
+    out = tmp_path / "dated.json"
+    code, stdout, err = sweep(capsys, dated, scenes / "sub", "--workers", "1", "--json", out)
+    assert code == 2 and "Traceback" not in err and "TypeError" not in err
+    runs = json.loads(out.read_text())["runs"]
+    assert [(r["scene"], r["status"]) for r in runs] == [("d_dated", "error"), ("plain", "pass")]
+    assert runs[0]["reason"].startswith(f"{dated}:14:")
+    assert "parametrize.description[0]: got a date (2024-01-01)" in runs[0]["reason"]
+
+
 def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
     plain = scenes / "sub" / "a_plain.scenario.yaml"
     assert sweep(capsys, plain, "--workers", "1")[0] == 0
