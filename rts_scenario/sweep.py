@@ -329,7 +329,8 @@ def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, An
     ``by_parameter`` maps each parameter's key path to its values (as text, in the order they
     first appear) and each value to ``{"runs", "passed", "failed", "errors", "pass_rate"}``.
     ``worst`` lists erred runs, then failed ones, then passing ones, each by their largest
-    error over tolerance, at most ``worst`` runs.
+    error over tolerance, at most ``worst`` runs (a pass with no error to rate is none of
+    them).
     """
     by_parameter: dict[str, dict[str, dict[str, Any]]] = {}
     for entry in entries:
@@ -347,14 +348,12 @@ def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, An
 
     def badness(entry: Entry) -> tuple[int, float]:
         ratio = entry.get("max_error_ratio")
-        if ratio is None:
-            # A failed run with nothing to rate (nothing detected) leads its group; a passing
-            # one (an empty bench) is no close call: it comes last.
-            return order.get(entry["status"], 2), (math.inf if entry["status"] == "pass"
-                                                   else -math.inf)
-        return order.get(entry["status"], 2), -ratio
+        # A failed run with nothing to rate (nothing detected) leads its group.
+        return order.get(entry["status"], 2), -(ratio if ratio is not None else math.inf)
 
-    ranked = sorted(entries, key=badness)[:worst]
+    # A pass with nothing to rate is no close call: the worst runs leave it out.
+    ranked = sorted((e for e in entries if e["status"] != "pass"
+                     or e.get("max_error_ratio") is not None), key=badness)[:worst]
     keys = ("scene", "file", "id", "status", "reason", "max_error_ratio", "max_error_quantity")
     return {**totals, "pass_rate": totals["passed"] / totals["runs"] if totals["runs"] else 0.0,
             "by_parameter": by_parameter,

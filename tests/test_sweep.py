@@ -166,12 +166,14 @@ def test_worst_passing_runs_are_those_with_the_largest_error_ratio():
 
     entries = [run("empty", "pass", None), run("close", "pass", 0.9), run("far", "pass", 0.2),
                run("lost", "fail", None), run("off", "fail", 2.5)]
-    summary = summarize(entries, worst=3)
-    assert [w["scene"] for w in summary["worst"]] == ["lost", "off", "close"]
-    text = _summary_text(summary, 1.0)
-    printed = [line.split()[1] for line in text.splitlines()[text.splitlines().index(
-        "worst runs:") + 1:]]
-    assert printed == [w["scene"] for w in summary["worst"]]
+    three = summarize(entries, worst=3)
+    assert [w["scene"] for w in three["worst"]] == ["lost", "off", "close"]
+    for summary in (three, summarize(entries)):
+        text = _summary_text(summary, 1.0)
+        printed = [line.split()[1] for line in text.splitlines()[text.splitlines().index(
+            "worst runs:") + 1:]]
+        assert printed == [w["scene"] for w in summary["worst"]]
+    assert printed == ["lost", "off", "close", "far"]
 
 
 def test_a_parameter_value_json_cannot_hold_is_bad_input_and_the_json_is_written(scenes,
