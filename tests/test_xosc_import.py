@@ -264,6 +264,43 @@ def test_parameter_override_changes_the_trigger_and_the_header(tmp_path):
     assert result.text.startswith("# Imported by rts-scenario import from cut_in.xosc")
 
 
+def chained(tmp_path, declared_value):
+    """The cut-in with its trigger distance taken from a parameter declared after it."""
+    path = variant(tmp_path, "cut_in",
+                   '<ParameterDeclaration name="LaneChangeTime" parameterType="double" '
+                   'value="3"/>',
+                   '<ParameterDeclaration name="LaneChangeTime" parameterType="double" '
+                   'value="3"/>\n    <ParameterDeclaration name="Gap" parameterType="double" '
+                   f'value="{declared_value}"/>')
+    path.write_text(path.read_text().replace('value="$TriggerDistance" freespace',
+                                             'value="$Gap" freespace'))
+    return path
+
+
+def test_a_parameter_declared_from_an_overridden_one_takes_the_override(tmp_path):
+    # A value naming an earlier parameter takes the value used for it: the --param one.
+    path = chained(tmp_path, "$TriggerDistance")
+    result, scene = imported(tmp_path, path, parameters={"TriggerDistance": "17.5"})
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.start_s == pytest.approx((30 - 17.5) / (25 - 20), abs=1e-9)
+    assert "TriggerDistance=17.5 (--param), LaneChangeTime=3, Gap=17.5." in result.text
+    # An expression over earlier parameters, too.
+    path = chained(tmp_path, "${$TriggerDistance - 2.5}")
+    result, scene = imported(tmp_path, path, parameters={"TriggerDistance": "17.5"})
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.start_s == pytest.approx((30 - 15) / (25 - 20), abs=1e-9)
+
+
+def test_a_declaration_naming_an_undeclared_parameter_is_located(tmp_path):
+    path = chained(tmp_path, "$TriggerDistanse")
+    line = line_of(path, "$TriggerDistanse")
+    with pytest.raises(ScenarioError, match=rf"cut_in\.xosc:{line}: <ParameterDeclaration "
+                                            r"name=\"Gap\">: unknown parameter "
+                                            r"\$TriggerDistanse; declared: EgoSpeed, "
+                                            r"CutterSpeed, TriggerDistance, LaneChangeTime$"):
+        imported(tmp_path, path)
+
+
 def test_unknown_parameter_lists_the_declared_ones(tmp_path):
     with pytest.raises(RtsError, match=r"--param Speed=3: no such parameter in .*cut_in\.xosc; "
                                        r"declared: EgoSpeed, CutterSpeed, TriggerDistance, "
