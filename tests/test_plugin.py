@@ -205,6 +205,17 @@ def test_a_schedule_that_cannot_be_built_names_the_scene_file(pytester):
     assert "Traceback" not in result.stdout.str()
 
 
+def test_a_variant_that_does_not_load_keeps_the_scene_s_marks(pytester):
+    # A bench-only scene whose lab rig is missing here: deselected with its marks, not failed.
+    extra = "parametrize:\n  rig: [wide-3x5, lab.rig.yaml]\nmarks: [hardware, lab_only]\n"
+    pytester.makefile(".scenario.yaml", bench=scene("bench", extra=extra), fine=scene("fine"))
+    result = pytester.runpytest("-rA", "-m", "not hardware")
+    result.assert_outcomes(passed=1, deselected=2)
+    result = pytester.runpytest("-rA", "--strict-markers", "-m", "lab_only")
+    result.assert_outcomes(passed=1, failed=1, deselected=1)
+    result.stdout.fnmatch_lines(["FAILED bench.scenario.yaml::bench[[]rig=lab.rig.yaml[]] - *"])
+
+
 def test_a_bad_parametrize_block_is_one_failing_item(pytester):
     extra = "parametrize:\n  radar.estimator: ti\n"
     pytester.makefile(".scenario.yaml", block=scene("block", extra=extra), fine=scene("fine"))

@@ -129,20 +129,48 @@ class ScenarioFile(pytest.File):
             return
         known = {line.split(":", 1)[0].split("(", 1)[0].strip()
                  for line in self.config.getini("markers")}
+
+        def register(marks: tuple[str, ...]) -> tuple[str, ...]:
+            # A scene's own marks are registered, so --strict-markers accepts them.
+            for mark in set(marks) - known:
+                self.config.addinivalue_line("markers", f"{mark}: a mark of scene files")
+                known.add(mark)
+            return marks
+
         for ident, overrides in combos:
             try:
                 scene = load_scenario(self.path, overrides)
             except RtsError as exc:
                 message = located(path, exc) + (f" [{ident}]" if ident else "")
-                yield ScenarioItem.from_parent(self, name=run_label(file_name, ident),
-                                               overrides=overrides, marks=(), error=message)
+                yield ScenarioItem.from_parent(
+                    self, name=run_label(file_name, ident), overrides=overrides,
+                    marks=register(_written_marks(self.path, overrides)), error=message)
                 continue
-            # A scene's own marks are registered, so --strict-markers accepts them.
-            for mark in set(scene.marks) - known:
-                self.config.addinivalue_line("markers", f"{mark}: a mark of scene files")
-                known.add(mark)
             yield ScenarioItem.from_parent(self, name=scene.label, overrides=overrides,
-                                           marks=scene.marks)
+                                           marks=register(scene.marks))
+
+
+def _written_marks(path: Path, overrides: dict[str, Any]) -> tuple[str, ...]:
+    """Return the marks a scene file gives itself, read from its text (or its combination).
+
+    For a combination that does not load: ``-m`` selects it, and ``skip`` skips it, as the
+    scene says; marks pytest could not take are left out.
+    """
+    import re
+
+    from rts_scenario.located_yaml import load_yaml
+
+    marks = overrides.get("marks")
+    if marks is None:
+        try:
+            data = load_yaml(path).data
+        except Exception:  # the item's error says what is wrong with the file
+            return ()
+        marks = data.get("marks") if isinstance(data, dict) else None
+    if not isinstance(marks, list):
+        return ()
+    return tuple(m for m in marks
+                 if isinstance(m, str) and re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", m))
 
 
 class ScenarioFailed(Exception):
