@@ -453,6 +453,22 @@ def test_cli_errors_are_one_line_exit_2(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_cli_import_of_a_scene_validate_refuses_is_refused(tmp_path, capsys):
+    # The scene loads, but its schedule cannot be built: 500 Hz frames on a 100 Hz rig.
+    out = tmp_path / "fast.scenario.yaml"
+    argv = ["import", str(DATA / "cut_in.xosc"), "--radar", "awr1843boost", "--rig",
+            "wide-3x5", "--output", str(out), "--frame-rate-hz", "500"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {DATA / 'cut_in.xosc'}: the scene it converts to cannot be "
+                          f"played (its schedule cannot be built); {out} not written: ")
+    assert "frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most " \
+           "100 Hz" in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+    argv[-1] = "50"
+    assert main(argv) == 0 and main(["validate", str(out)]) == 0
+
+
 def test_cli_profile_files_are_written_relative_to_the_scene(tmp_path, capsys):
     profiles = Path(__file__).parents[1] / "scenarios" / "radars"
     (tmp_path / "radars").mkdir()
