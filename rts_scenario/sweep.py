@@ -97,11 +97,11 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     """
     from .errors import ScenarioError
     from .pipeline import RunOptions, run_scene
-    from .scenario import SCENE_SUFFIX, load_scenario
+    from .scenario import load_scenario
     from .schedule import ScheduleError
 
     start = time.perf_counter()
-    entry: Entry = {"scene": Path(task.file).name.removesuffix(SCENE_SUFFIX), "file": task.file,
+    entry: Entry = {"scene": _file_scene(task.file), "file": task.file,
                     "id": task.ident, "parameters": dict(task.parameters)}
     if task.error is not None:
         return error_entry(entry, task.error, "bad_input")
@@ -141,6 +141,13 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     entry["solver_plan"] = report.solver_plan
     entry["seconds"] = round(time.perf_counter() - start, 3)
     return entry
+
+
+def _file_scene(file: str) -> str:
+    """Name a run whose scene did not report its name: its file's name without the suffix."""
+    from .scenario import SCENE_SUFFIX
+
+    return Path(file).name.removesuffix(SCENE_SUFFIX)
 
 
 def error_entry(entry: Entry, message: str, error_type: str) -> Entry:
@@ -287,7 +294,7 @@ def _collect(futures: dict[Any, SweepTask], completed: Iterable[Future[Entry]],
             entry = future.result()
         except Exception as exc:  # the worker died or the task could not be shipped to it
             entry = error_entry(
-                {"scene": Path(task.file).name, "file": task.file, "id": task.ident,
+                {"scene": _file_scene(task.file), "file": task.file, "id": task.ident,
                  "parameters": dict(task.parameters)},
                 f"{task.file}: worker failed: {type(exc).__name__}: {one_line(exc)} "
                 f"(a runtime error)", "runtime")
@@ -322,7 +329,8 @@ def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, An
     ``by_parameter`` maps each parameter's key path to its values (as text, in the order they
     first appear) and each value to ``{"runs", "passed", "failed", "errors", "pass_rate"}``.
     ``worst`` lists erred runs, then failed ones, then passing ones, each by their largest
-    error over tolerance, at most ``worst`` runs.
+    error over tolerance, at most ``worst`` runs (a pass with no error to rate is none of
+    them).
     """
     by_parameter: dict[str, dict[str, dict[str, Any]]] = {}
     for entry in entries:
@@ -340,9 +348,12 @@ def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, An
 
     def badness(entry: Entry) -> tuple[int, float]:
         ratio = entry.get("max_error_ratio")
+        # A failed run with nothing to rate (nothing detected) leads its group.
         return order.get(entry["status"], 2), -(ratio if ratio is not None else math.inf)
 
-    ranked = sorted(entries, key=badness)[:worst]
+    # A pass with nothing to rate is no close call: the worst runs leave it out.
+    ranked = sorted((e for e in entries if e["status"] != "pass"
+                     or e.get("max_error_ratio") is not None), key=badness)[:worst]
     keys = ("scene", "file", "id", "status", "reason", "max_error_ratio", "max_error_quantity")
     return {**totals, "pass_rate": totals["passed"] / totals["runs"] if totals["runs"] else 0.0,
             "by_parameter": by_parameter,

@@ -351,6 +351,8 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
     from lxml import etree
 
     params: dict[str, Parameter] = {}
+    # An override is in place from its declaration on: a later value naming it takes it.
+    given = {name.removeprefix("$"): (name, value) for name, value in overrides.items()}
     declarations = [d for d in raw_root if isinstance(d.tag, str)
                     and etree.QName(d).localname == "ParameterDeclarations"]
     for block in declarations:
@@ -369,22 +371,34 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
                 raise ScenarioError(f"<ParameterDeclaration parameterType=\"{kind}\">: "
                                     f"unknown type; valid: {', '.join(_PARAMETER_TYPES)}",
                                     file=file, line=raw.sourceline)
-            if value.startswith("$"):
-                value = params[value[1:]].value if value[1:] in params else value
+            where = f"<ParameterDeclaration name=\"{name}\">"
+            if value.startswith("${") and value.endswith("}"):
+                try:
+                    value = _evaluate(value[2:-1], params)
+                except ValueError as exc:
+                    raise ScenarioError(f"{where}: {exc}", file=file,
+                                        line=raw.sourceline) from None
+            elif value.startswith("$"):
+                if value[1:] not in params:
+                    raise ScenarioError(f"{where}: unknown parameter {value}; declared: "
+                                        f"{', '.join(params) or 'none'}", file=file,
+                                        line=raw.sourceline)
+                value = params[value[1:]].value
             problem = _check_type(name, kind, value)
             if problem:
                 raise ScenarioError(f"<ParameterDeclaration>: {problem}", file=file,
                                     line=raw.sourceline)
             params[name] = Parameter(name, kind, value, "declared")
+            if name in given:
+                option, override = given[name]
+                problem = _check_type(name, kind, override)
+                if problem:
+                    raise RtsError(f"--param {option}={override}: {problem}")
+                params[name] = Parameter(name, kind, override, "--param")
     for name, value in overrides.items():
-        key = name.removeprefix("$")
-        if key not in params:
+        if name.removeprefix("$") not in params:
             raise RtsError(f"--param {name}={value}: no such parameter in {file}; declared: "
                            f"{', '.join(params) or 'none'}")
-        problem = _check_type(key, params[key].type, value)
-        if problem:
-            raise RtsError(f"--param {name}={value}: {problem}")
-        params[key] = Parameter(key, params[key].type, value, "--param")
     return params
 
 
@@ -591,6 +605,7 @@ class _Importer:
                 "<Storyboard> needs a <StopTrigger> (a SimulationTimeCondition gives the "
                 "scene's duration_s)")
         self.stop = self._trigger(stop)
+        self.stop_el = stop  # its errors name its line
         _check_all_read(root)
         self._check_references()
 
@@ -931,10 +946,10 @@ class _Importer:
                 pending.remove(item)
                 self._start_event(item, t)
         if not math.isfinite(stop):
-            raise self.root.error("the <Storyboard>'s <StopTrigger> never fires: the scene's "
+            raise self.stop_el.error("the <Storyboard>'s <StopTrigger> never fires: the scene's "
                                   "duration is unknown (give it a SimulationTimeCondition)")
         if stop <= 0.0:
-            raise self.root.error(f"the <StopTrigger> fires at t = {stop:g} s: the scene "
+            raise self.stop_el.error(f"the <StopTrigger> fires at t = {stop:g} s: the scene "
                                   f"needs a duration > 0")
         for act in pending_acts:
             self.notes.append(f"{self.file}:{act.el.line}: act {act.name!r} never starts "

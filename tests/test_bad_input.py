@@ -167,6 +167,11 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"key path: duration_s, seed\), got \[2.0\]"),
     ("parametrize-group-empty-path", TINY + "parametrize:\n  'duration_s,': [[1.0, 2]]\n",
      r"^{f}:16:\d+: parametrize.duration_s,: 'duration_s,': an empty key path"),
+    # A YAML date is no value a report can hold (run --json, sweep --json lost every verdict).
+    ("parametrize-date", TINY + "parametrize:\n  description: [2024-01-01, plain]\n",
+     r"^{f}:16:\d+: parametrize.description\[0\]: got a date \(2024-01-01\); a value must be "
+     r"a string, a number, true, false, null, or a list or mapping of them \(quote it: "
+     r"'2024-01-01'\)$"),
 ]
 
 

@@ -144,13 +144,116 @@ def test_failing_detection_rate_lists_worst_frames(pytester):
                                  "*frame*t_s*target*range*vel*az*el*"])
 
 
-def test_bad_scene_is_a_collection_error_naming_file_and_line(pytester):
-    pytester.makefile(".scenario.yaml", broken=scene("broken").replace("rig: wide-3x5",
-                                                                       "rig: wide-3x9"))
-    result = pytester.runpytest()
-    result.assert_outcomes(errors=1)
-    result.stdout.fnmatch_lines(["*broken.scenario.yaml:6:*rig: unknown preset 'wide-3x9'*"])
+def test_worst_frames_are_error_over_tolerance_as_their_heading_says():
+    """The worst frames' columns are each quantity's error divided by its tolerance."""
+    from types import SimpleNamespace
+
+    from pytest_rts_scenario import _render
+
+    scene_ = SimpleNamespace(expectations=SimpleNamespace(tolerances={
+        "range_m": 0.3, "radial_velocity_mps": 0.2, "az_deg": 0.004, "el_deg": 1.0,
+        "rcs_db": 6.0}))
+    row = {"frame": 7, "t_s": 0.35, "target": "car", "missed": False, "range_m": -0.15,
+           "radial_velocity_mps": 0.05, "az_deg": -0.005, "el_deg": 0.25, "rcs_dbsm": 0.0}
+    report = SimpleNamespace(label="s", reasons=["car: detection rate 0.0% < 90.0%"],
+                             table=lambda: "TABLE", worst_frames=[row])
+    text = _render(SimpleNamespace(scene=scene_, report=report))
+    heading, columns, line = text.splitlines()[4:7]
+    assert heading == "worst frames (error / tolerance):"
+    assert line.split() == ["7", "0.35", "car", "-0.500", "+0.250", "-1.250", "+0.250"]
+
+
+def test_bad_scene_is_one_failing_item_naming_file_and_line(pytester):
+    # One scene that does not load fails as one item, named after its file (as
+    # `rts-scenario run` names it); the session still runs the others.
+    pytester.makefile(".scenario.yaml", broken=scene("cut-in").replace("rig: wide-3x5",
+                                                                       "rig: wide-3x9"),
+                      fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=1)
+    result.stdout.fnmatch_lines(["*broken.scenario.yaml:6:*rig: unknown preset 'wide-3x9'*",
+                                 "FAILED broken.scenario.yaml::broken - error: *"])
     assert "Traceback" not in result.stdout.str()
+
+
+def test_a_variant_that_does_not_load_fails_alone(pytester):
+    # As in `rts-scenario run`: the other variants of the scene, and the other scenes, run.
+    extra = "parametrize:\n  rig: [wide-3x5, wide-3x9]\n"
+    pytester.makefile(".scenario.yaml", mixed=scene("mixed", extra=extra), fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=2)
+    text = result.stdout.str()
+    result.stdout.fnmatch_lines([
+        "PASSED mixed.scenario.yaml::mixed[[]rig=wide-3x5[]]",
+        "FAILED mixed.scenario.yaml::mixed[[]rig=wide-3x9[]] - error: *",
+    ])
+    assert ("mixed.scenario.yaml:6:1: rig: unknown preset 'wide-3x9'; valid presets: "
+            "kit-table1, wide-3x5, or a relative path to a *.rig.yaml file [rig=wide-3x9]"
+            in text)
+    assert "Traceback" not in text and "Interrupted" not in text
+
+
+def test_a_schedule_that_cannot_be_built_names_the_scene_file(pytester):
+    # The scene loads; its schedule cannot be built when it runs: the error names its file.
+    pytester.makefile(".scenario.yaml", fast=scene("fast").replace("frame_rate_hz: 20.0",
+                                                                   "frame_rate_hz: 200.0"))
+    result = pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines([f"error: {pytester.path / 'fast.scenario.yaml'}: frame_rate_hz: "
+                                 "the scene runs at 200 Hz but rig 'wide-3x5' updates at most "
+                                 "100 Hz*"])
+    assert "Traceback" not in result.stdout.str()
+
+
+def test_a_variant_that_does_not_load_keeps_the_scene_s_marks(pytester):
+    # A bench-only scene whose lab rig is missing here: deselected with its marks, not failed.
+    extra = "parametrize:\n  rig: [wide-3x5, lab.rig.yaml]\nmarks: [hardware, lab_only]\n"
+    pytester.makefile(".scenario.yaml", bench=scene("bench", extra=extra), fine=scene("fine"))
+    result = pytester.runpytest("-rA", "-m", "not hardware")
+    result.assert_outcomes(passed=1, deselected=2)
+    result = pytester.runpytest("-rA", "--strict-markers", "-m", "lab_only")
+    result.assert_outcomes(passed=1, failed=1, deselected=1)
+    result.stdout.fnmatch_lines(["FAILED bench.scenario.yaml::bench[[]rig=lab.rig.yaml[]] - *"])
+
+
+def test_a_bad_parametrize_block_is_one_failing_item(pytester):
+    extra = "parametrize:\n  radar.estimator: ti\n"
+    pytester.makefile(".scenario.yaml", block=scene("block", extra=extra), fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=1)
+    result.stdout.fnmatch_lines(["*block.scenario.yaml:16:3: parametrize.radar.estimator: "
+                                 "must be of type array, got 'ti'*"])
+    assert "Traceback" not in result.stdout.str()
+
+
+def test_a_mark_pytest_cannot_take_is_refused_by_the_scene_loader(pytester):
+    # pytest refuses marks starting with an underscore: the scene format refuses them first.
+    pytester.makefile(".scenario.yaml", under=scene("under", extra="marks: [_private]\n"),
+                      fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=1)
+    result.stdout.fnmatch_lines(["*under.scenario.yaml:15:*marks*_private*"])
+    assert "Traceback" not in result.stdout.str()
+
+
+def test_bad_rts_can_interface_stops_the_session_once(pytester):
+    for name in ("one", "two"):
+        pytester.makefile(".scenario.yaml", **{name: scene(name)})
+    result = pytester.runpytest("--rts-can-interface", "nonsense")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert text.count("--rts-can-interface 'nonsense': unknown python-can interface") == 1
+    assert "socketcan" in text and "Traceback" not in text
+    # udp_multicast needs a multicast group: a private channel name would reach no one.
+    result = pytester.runpytest("--rts-can-interface", "udp_multicast")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert "--rts-can-interface udp_multicast needs --rts-can-channel" in text
+    result = pytester.runpytest("--rts-can-interface", "udp_multicast",
+                                "--rts-can-channel", "can0")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "--rts-can-channel 'can0': udp_multicast needs" in (result.stderr.str()
+                                                               + result.stdout.str())
 
 
 def test_pattern_is_configurable(pytester):

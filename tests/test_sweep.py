@@ -153,6 +153,44 @@ def test_json_layout_and_summary_counted_independently(scenes, tmp_path, capsys)
     assert "ERROR c_broken (" in stdout
 
 
+def test_worst_passing_runs_are_those_with_the_largest_error_ratio():
+    """A passing run with no error to rate (an empty bench) is not among the worst passes:
+    the JSON's worst runs and the printed ones are the same runs."""
+    from rts_scenario.cli.sweep import _summary_text
+
+    def run(name, status, ratio):
+        return {"scene": name, "file": f"{name}.scenario.yaml", "id": "", "parameters": {},
+                "passed": status == "pass", "status": status, "max_error_ratio": ratio,
+                "max_error_quantity": "az_deg" if ratio is not None else None,
+                **({"reason": "why"} if status != "pass" else {})}
+
+    entries = [run("empty", "pass", None), run("close", "pass", 0.9), run("far", "pass", 0.2),
+               run("lost", "fail", None), run("off", "fail", 2.5)]
+    three = summarize(entries, worst=3)
+    assert [w["scene"] for w in three["worst"]] == ["lost", "off", "close"]
+    for summary in (three, summarize(entries)):
+        text = _summary_text(summary, 1.0)
+        printed = [line.split()[1] for line in text.splitlines()[text.splitlines().index(
+            "worst runs:") + 1:]]
+        assert printed == [w["scene"] for w in summary["worst"]]
+    assert printed == ["lost", "off", "close", "far"]
+
+
+def test_a_parameter_value_json_cannot_hold_is_bad_input_and_the_json_is_written(scenes,
+                                                                                  tmp_path,
+                                                                                  capsys):
+    # YAML reads 2024-01-01 as a date: writing the JSON failed after every run had finished.
+    dated = scenes / "d_dated.scenario.yaml"
+    dated.write_text(tiny_scene("dated", "parametrize:\n  description: [2024-01-01, x]\n"))
+    out = tmp_path / "dated.json"
+    code, stdout, err = sweep(capsys, dated, scenes / "sub", "--workers", "1", "--json", out)
+    assert code == 2 and "Traceback" not in err and "TypeError" not in err
+    runs = json.loads(out.read_text())["runs"]
+    assert [(r["scene"], r["status"]) for r in runs] == [("d_dated", "error"), ("plain", "pass")]
+    assert runs[0]["reason"].startswith(f"{dated}:14:")
+    assert "parametrize.description[0]: got a date (2024-01-01)" in runs[0]["reason"]
+
+
 def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
     plain = scenes / "sub" / "a_plain.scenario.yaml"
     assert sweep(capsys, plain, "--workers", "1")[0] == 0
@@ -297,6 +335,9 @@ def test_a_worker_that_dies_loses_no_run(scenes, tmp_path, capsys, monkeypatch):
     [plain] = [r for r in runs if r["file"].endswith("a_plain.scenario.yaml")]
     assert plain["status"] == "error" and plain["error_type"] == "runtime"
     assert "worker failed: BrokenProcessPool" in plain["reason"]
+    # Named as any run that did not report its scene: after its file, as in the listing.
+    assert plain["scene"] == "a_plain"
+    assert f"ERROR a_plain ({plain['file']}): " in stdout
     assert "Traceback" not in stdout + err
 
 

@@ -264,6 +264,43 @@ def test_parameter_override_changes_the_trigger_and_the_header(tmp_path):
     assert result.text.startswith("# Imported by rts-scenario import from cut_in.xosc")
 
 
+def chained(tmp_path, declared_value):
+    """The cut-in with its trigger distance taken from a parameter declared after it."""
+    path = variant(tmp_path, "cut_in",
+                   '<ParameterDeclaration name="LaneChangeTime" parameterType="double" '
+                   'value="3"/>',
+                   '<ParameterDeclaration name="LaneChangeTime" parameterType="double" '
+                   'value="3"/>\n    <ParameterDeclaration name="Gap" parameterType="double" '
+                   f'value="{declared_value}"/>')
+    path.write_text(path.read_text().replace('value="$TriggerDistance" freespace',
+                                             'value="$Gap" freespace'))
+    return path
+
+
+def test_a_parameter_declared_from_an_overridden_one_takes_the_override(tmp_path):
+    # A value naming an earlier parameter takes the value used for it: the --param one.
+    path = chained(tmp_path, "$TriggerDistance")
+    result, scene = imported(tmp_path, path, parameters={"TriggerDistance": "17.5"})
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.start_s == pytest.approx((30 - 17.5) / (25 - 20), abs=1e-9)
+    assert "TriggerDistance=17.5 (--param), LaneChangeTime=3, Gap=17.5." in result.text
+    # An expression over earlier parameters, too.
+    path = chained(tmp_path, "${$TriggerDistance - 2.5}")
+    result, scene = imported(tmp_path, path, parameters={"TriggerDistance": "17.5"})
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.start_s == pytest.approx((30 - 15) / (25 - 20), abs=1e-9)
+
+
+def test_a_declaration_naming_an_undeclared_parameter_is_located(tmp_path):
+    path = chained(tmp_path, "$TriggerDistanse")
+    line = line_of(path, "$TriggerDistanse")
+    with pytest.raises(ScenarioError, match=rf"cut_in\.xosc:{line}: <ParameterDeclaration "
+                                            r"name=\"Gap\">: unknown parameter "
+                                            r"\$TriggerDistanse; declared: EgoSpeed, "
+                                            r"CutterSpeed, TriggerDistance, LaneChangeTime$"):
+        imported(tmp_path, path)
+
+
 def test_unknown_parameter_lists_the_declared_ones(tmp_path):
     with pytest.raises(RtsError, match=r"--param Speed=3: no such parameter in .*cut_in\.xosc; "
                                        r"declared: EgoSpeed, CutterSpeed, TriggerDistance, "
@@ -376,6 +413,17 @@ def test_unplaced_entity_and_missing_stop_trigger(tmp_path):
         imported(tmp_path, path)
 
 
+@pytest.mark.parametrize("rule", ['value="0" rule="greaterThan"', 'value="10" rule="lessThan"'])
+def test_a_stop_trigger_at_zero_is_located_at_the_stop_trigger(tmp_path, rule):
+    path = variant(tmp_path, "cut_in", '<SimulationTimeCondition value="10" rule="greaterThan"/>',
+                   f'<SimulationTimeCondition {rule}/>')
+    line = line_of(path, "<StopTrigger>")
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (f"{path}:{line}: the <StopTrigger> fires at t = 0 s: the scene "
+                               f"needs a duration > 0")
+
+
 # ----------------------------------------------------------------------------- command line
 
 def test_cli_import_then_validate_and_run(tmp_path, capsys):
@@ -403,6 +451,22 @@ def test_cli_errors_are_one_line_exit_2(tmp_path, capsys):
     assert main(["import", *base[:2], "nowhere", *base[3:]]) == 2
     assert "--radar 'nowhere'" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_cli_import_of_a_scene_validate_refuses_is_refused(tmp_path, capsys):
+    # The scene loads, but its schedule cannot be built: 500 Hz frames on a 100 Hz rig.
+    out = tmp_path / "fast.scenario.yaml"
+    argv = ["import", str(DATA / "cut_in.xosc"), "--radar", "awr1843boost", "--rig",
+            "wide-3x5", "--output", str(out), "--frame-rate-hz", "500"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {DATA / 'cut_in.xosc'}: the scene it converts to cannot be "
+                          f"played (its schedule cannot be built); {out} not written: ")
+    assert "frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most " \
+           "100 Hz" in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+    argv[-1] = "50"
+    assert main(argv) == 0 and main(["validate", str(out)]) == 0
 
 
 def test_cli_profile_files_are_written_relative_to_the_scene(tmp_path, capsys):

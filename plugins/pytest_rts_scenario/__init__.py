@@ -54,14 +54,23 @@ def pytest_configure(config: pytest.Config) -> None:
     spec = config.getoption("--rts-output")
     mapping_path = config.getoption("--rts-mapping")
     can_fd = config.getoption("--rts-can-fd")
+    interface = config.getoption("--rts-can-interface")
     # The defaults need no check (nor the library's import).
-    if spec != "simulated-radar" or mapping_path or can_fd:
+    if spec != "simulated-radar" or mapping_path or can_fd or interface != "virtual":
         from rts_scenario.canbus.mapping import CanMapping
-        from rts_scenario.cli.common import check_fd_mapping, check_output, named_file
+        from rts_scenario.cli.common import (
+            check_can_interface,
+            check_fd_mapping,
+            check_output,
+            named_file,
+        )
         from rts_scenario.errors import RtsError
 
         try:
             check_output("--rts-output", spec, run=True)
+            check_can_interface("--rts-can-interface", interface,
+                                config.getoption("--rts-can-channel"),
+                                channel_option="--rts-can-channel")
             if mapping_path:
                 mapping = named_file("--rts-mapping", CanMapping.from_file, mapping_path)
                 check_fd_mapping(can_fd, mapping_path, mapping)
@@ -99,24 +108,69 @@ class ScenarioFile(pytest.File):
     """A scene file: one item per parametrized combination."""
 
     def collect(self) -> Iterator[ScenarioItem]:
-        """Validate the scene (a bad file is a collection error naming file and line)."""
-        from rts_scenario.errors import RtsError
-        from rts_scenario.scenario import load_scenario, parametrizations
+        """Validate the scene: one item per combination, loaded here.
 
+        A combination that does not load is still an item, which fails with the one-line
+        error naming file, line and key (as ``rts-scenario run`` reports it, the other
+        combinations and scenes still run); a file whose ``parametrize`` block cannot be
+        expanded is one such item. A collection error would stop the whole session.
+        """
+        from rts_scenario.errors import RtsError, located
+        from rts_scenario.scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
+
+        path = str(self.path)
+        # A run that does not load is named after its file, as rts-scenario run names it.
+        file_name = self.path.name.removesuffix(SCENE_SUFFIX)
         try:
             combos = parametrizations(self.path)
-            scenes = [(overrides, load_scenario(self.path, overrides)) for _, overrides in combos]
         except RtsError as exc:
-            raise self.CollectError(str(exc)) from None
+            yield ScenarioItem.from_parent(self, name=file_name, overrides={}, marks=(),
+                                           error=located(path, exc))
+            return
         known = {line.split(":", 1)[0].split("(", 1)[0].strip()
                  for line in self.config.getini("markers")}
-        for overrides, scene in scenes:
+
+        def register(marks: tuple[str, ...]) -> tuple[str, ...]:
             # A scene's own marks are registered, so --strict-markers accepts them.
-            for mark in set(scene.marks) - known:
+            for mark in set(marks) - known:
                 self.config.addinivalue_line("markers", f"{mark}: a mark of scene files")
                 known.add(mark)
+            return marks
+
+        for ident, overrides in combos:
+            try:
+                scene = load_scenario(self.path, overrides)
+            except RtsError as exc:
+                message = located(path, exc) + (f" [{ident}]" if ident else "")
+                yield ScenarioItem.from_parent(
+                    self, name=run_label(file_name, ident), overrides=overrides,
+                    marks=register(_written_marks(self.path, overrides)), error=message)
+                continue
             yield ScenarioItem.from_parent(self, name=scene.label, overrides=overrides,
-                                           marks=scene.marks)
+                                           marks=register(scene.marks))
+
+
+def _written_marks(path: Path, overrides: dict[str, Any]) -> tuple[str, ...]:
+    """Return the marks a scene file gives itself, read from its text (or its combination).
+
+    For a combination that does not load: ``-m`` selects it, and ``skip`` skips it, as the
+    scene says; marks pytest could not take are left out.
+    """
+    import re
+
+    from rts_scenario.located_yaml import load_yaml
+
+    marks = overrides.get("marks")
+    if marks is None:
+        try:
+            data = load_yaml(path).data
+        except Exception:  # the item's error says what is wrong with the file
+            return ()
+        marks = data.get("marks") if isinstance(data, dict) else None
+    if not isinstance(marks, list):
+        return ()
+    return tuple(m for m in marks
+                 if isinstance(m, str) and re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", m))
 
 
 class ScenarioFailed(Exception):
@@ -131,16 +185,21 @@ class ScenarioItem(pytest.Item):
     """One run of a scene."""
 
     def __init__(self, *, overrides: dict[str, Any], marks: tuple[str, ...],
-                 **kwargs: Any) -> None:
+                 error: str | None = None, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.overrides = overrides
+        self.error = error  # the scene did not load: the item fails with this message
         for mark in marks:
             self.add_marker(mark)
 
     def runtest(self) -> None:
         """Run the scene end to end and check it."""
+        from rts_scenario.errors import RtsError
         from rts_scenario.pipeline import run_scene
         from rts_scenario.scenario import load_scenario
+
+        if self.error is not None:
+            raise RtsError(self.error)
 
         # The HTML report's plots need every frame's errors: record them only for it.
         record = self.config.pluginmanager.hasplugin("rts-scenario-html")
@@ -154,12 +213,14 @@ class ScenarioItem(pytest.Item):
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException],
                      style: Any = None) -> str | Any:
         """Show the report and worst frames of a failed check; one clean line for bad input."""
-        from rts_scenario.errors import RtsError
+        from rts_scenario.errors import RtsError, located
 
         if isinstance(excinfo.value, ScenarioFailed):
             return _render(excinfo.value.result)
         if isinstance(excinfo.value, RtsError):
-            return f"error: {excinfo.value}"
+            if self.error is not None:  # the load error, located already
+                return f"error: {self.error}"
+            return f"error: {located(str(self.path), excinfo.value)}"
         return super().repr_failure(excinfo, style=style)
 
     def reportinfo(self) -> tuple[Path, int, str]:
@@ -184,8 +245,10 @@ def _render(result: RunResult) -> str:
              "worst frames (error / tolerance):",
              f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
              f"{'el':>8}"]
+    tolerances = result.scene.expectations.tolerances
     for row in report.worst_frames:
-        cells = ["missed" if row["missed"] else f"{row[key]:+.3f}"
+        # Each error over its tolerance (as the frames are ranked): beyond +-1 is out of it.
+        cells = ["missed" if row["missed"] else f"{row[key] / tolerances[key]:+.3f}"
                  for key in ("range_m", "radial_velocity_mps", "az_deg", "el_deg")]
         lines.append(f"{row['frame']:>6} {row['t_s']:>7.2f} {row['target']:<18} "
                      + " ".join(f"{c:>8}" for c in cells))

@@ -236,11 +236,12 @@ def preset_or_file(what: str, name: str, presets: list[str], preset: Any, from_f
 UDP_MULTICAST_EXAMPLE = "239.74.163.2"
 
 
-def check_can_interface(option: str, interface: str, channel: str | None = None) -> None:
+def check_can_interface(option: str, interface: str, channel: str | None = None,
+                        channel_option: str = "--can-channel") -> None:
     """Reject an unknown python-can interface, and a udp_multicast channel not a multicast group.
 
     python-can would fail on such a channel with a name lookup error, and a private channel
-    name would be heard by no other process.
+    name would be heard by no other process. ``channel_option`` names the channel's option.
     """
     from can.interfaces import VALID_INTERFACES
 
@@ -252,13 +253,13 @@ def check_can_interface(option: str, interface: str, channel: str | None = None)
     need = (f"a multicast group address both processes join (e.g. {UDP_MULTICAST_EXAMPLE}, "
             f"python-can's default; IPv4 224.0.0.0/4 or IPv6 ff00::/8)")
     if channel is None:
-        raise RtsError(f"{option} udp_multicast needs --can-channel: {need}")
+        raise RtsError(f"{option} udp_multicast needs {channel_option}: {need}")
     try:
         multicast = ipaddress.ip_address(channel).is_multicast
     except ValueError:
         multicast = False
     if not multicast:
-        raise RtsError(f"--can-channel {channel!r}: udp_multicast needs {need}")
+        raise RtsError(f"{channel_option} {channel!r}: udp_multicast needs {need}")
 
 
 def check_readable_file(option: str, path: str) -> None:

@@ -46,7 +46,8 @@ def _parameters(values: list[str]) -> dict[str, str]:
 
 
 def _do_import(args: argparse.Namespace) -> int:
-    from ..errors import RtsError
+    from ..errors import RtsError, located
+    from ..preflight import preflight
     from ..radar.profile import preset_names as radar_presets
     from ..rig import preset_names as rig_presets
     from ..scenario import SCENE_SUFFIX, load_scenario
@@ -80,6 +81,13 @@ def _do_import(args: argparse.Namespace) -> int:
             reason = one_line(exc).replace(str(draft), str(output))
             raise RtsError(f"{args.file}: the scene it converts to does not load (a value "
                            f"beyond the scene format's limits); {output} not written: "
+                           f"{reason}") from None
+        try:
+            preflight(scene)  # its whole schedule, built as validate and run build it
+        except RtsError as exc:
+            reason = located(str(output), exc).replace(str(draft), str(output))
+            raise RtsError(f"{args.file}: the scene it converts to cannot be played (its "
+                           f"schedule cannot be built); {output} not written: "
                            f"{reason}") from None
         with writing("--output", output):
             os.replace(draft, output)

@@ -199,6 +199,8 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     if not block:
         return [("", {})]
     validate(doc, scenario_schema())
+    for key, values in block.items():
+        _check_plain(doc, ("parametrize", key), values)
     axes = [_parameter_axis(doc, key, values) for key, values in block.items()]
     combos: list[tuple[str, dict[str, Any]]] = []
     seen: dict[str, int] = {}
@@ -252,6 +254,26 @@ def select_variant(path: str | Path, variant: str | None, option: str = "--varia
         raise RtsError(f"{path}: a parametrized scene ({len(combos)} variants){unnamed}: choose "
                        f"one with {option} ID: {choices}")
     raise RtsError(f"{option} {variant}: not a variant of {path}; valid: {choices}")
+
+
+def _check_plain(doc: Document, key: KeyPath, value: Any) -> None:
+    """Refuse a value no report can hold: YAML's dates, timestamps, binary data.
+
+    A run's ``parameters`` go into the JSON reports (``run --json``, ``sweep --json``).
+    """
+    if isinstance(value, list):
+        for i, item in enumerate(value):
+            _check_plain(doc, (*key, i), item)
+    elif isinstance(value, dict):
+        for k, item in value.items():
+            _check_plain(doc, key, k)
+            _check_plain(doc, (*key, k), item)
+    elif value is not None and not isinstance(value, str | int | float):  # bool is an int
+        kind = {"date": "a date", "datetime": "a timestamp", "bytes": "binary data"}.get(
+            type(value).__name__, f"a {type(value).__name__}")
+        raise doc.error(key, f"got {kind} ({value}); a value must be a string, a number, "
+                             f"true, false, null, or a list or mapping of them (quote it: "
+                             f"'{value}')")
 
 
 def _parameter_axis(doc: Document, key: str,
