@@ -64,10 +64,12 @@ def test_failure_shows_the_report_and_worst_frames(pytester):
     # A target the rig cannot show (far outside its coverage) never gets detected.
     text = scene("impossible").replace("[30, 0, 0.6]", "[30, 20, 0.6]")
     pytester.makefile(".scenario.yaml", impossible=text)
-    result = pytester.runpytest()
+    result = pytester.runpytest("--junitxml=out.xml")
     result.assert_outcomes(failed=1)
     result.stdout.fnmatch_lines(["*FAIL: impossible*nothing to check*"])
     assert "Traceback" not in result.stdout.str()
+    # Nothing checkable has no detection rate: null, as the JSON report says (not "nan").
+    assert '<property name="detection_rate" value="null"' in (pytester.path / "out.xml").read_text()
 
 
 def test_failure_summary_starts_with_the_verdict_and_its_reasons(pytester):

@@ -224,7 +224,7 @@ def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
 def test_progress_lines_without_a_terminal(scenes, capsys):
     _, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")
     lines = err.splitlines()
-    assert lines[0] == "sweep: 6 runs on 1 worker"
+    assert lines[0] == "sweep: 6 runs on this process"
     assert [line.split(",")[0] for line in lines[1:]] == [f"sweep: {n}/6 runs"
                                                           for n in range(1, 7)]
     assert lines[-1].startswith("sweep: 6/6 runs, 2 failed, 0 errors, ")

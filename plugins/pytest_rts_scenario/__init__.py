@@ -12,6 +12,7 @@ this plugin, most of them for tests that have nothing to do with scenes.
 
 from __future__ import annotations
 
+import math
 import os
 import uuid
 from collections.abc import Callable, Generator, Iterator
@@ -229,8 +230,11 @@ class ScenarioItem(pytest.Item):
 
 
 def _metrics(report: Report) -> list[tuple[str, object]]:
+    # No detection rate where nothing was checkable (an empty bench): "null", as in the JSON.
+    rate = report.detection_rate
     out: list[tuple[str, object]] = [("passed", report.passed),
-                                     ("detection_rate", round(report.detection_rate, 4)),
+                                     ("detection_rate",
+                                      round(rate, 4) if math.isfinite(rate) else "null"),
                                      ("false_detections", report.false_detections)]
     for name, stats in report.errors.items():
         if stats.count:

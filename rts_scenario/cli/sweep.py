@@ -89,10 +89,13 @@ def _do_sweep(args: argparse.Namespace) -> int:
         check_writable_file("--plot", args.plot)
 
     tasks = collect_tasks(args.scenes)
+    # As many workers as there are runs at most (`run_sweep`); one runs in this process.
+    used = max(1, min(workers, len(tasks)))
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, LOCAL_SCHEDULER)
-             else f"{workers} worker{'s' if workers > 1 else ''}"
+             else "this process" if used == 1 and args.scheduler is None
+             else f"{used} worker{'s' if used > 1 else ''}"
              + (" (local Dask cluster)" if args.scheduler == LOCAL_SCHEDULER else ""))
-    print(f"sweep: {len(tasks)} runs on {where}", file=sys.stderr)
+    print(f"sweep: {len(tasks)} run{'s' if len(tasks) != 1 else ''} on {where}", file=sys.stderr)
     start = time.perf_counter()
     progress = SweepProgress(len(tasks))
     finished: list[dict[str, Any]] = []
