@@ -352,3 +352,28 @@ def test_a_late_sender_is_reported_and_fails_unless_expected(tmp_path, monkeypat
     report, _ = rehearse(expected)
     assert report.passed, report.reasons
     assert report.playback["late_frames"] == expected.n_frames - 1
+
+
+def test_a_radar_thread_that_wakes_late_measures_what_the_rts_held_at_its_cycle(tmp_path,
+                                                                               monkeypatch):
+    # A loaded machine wakes the emulated radar's thread late: every third cycle of the in-step
+    # radar is taken 60 ms after its time, past the next frame change (50 ms frames). A radar
+    # measures on its own clock whatever its host does: each cycle still sees the frame the
+    # RTS held at its time (a cycle taken at the next frame would see the target 0.4 m nearer,
+    # beyond the scene's 0.3 m tolerance).
+    measure = Emulator._measure_cycle
+
+    def late(self, n, due):
+        if n % 3 == 1:
+            time.sleep(0.06)
+        measure(self, n, due)
+
+    monkeypatch.setattr(Emulator, "_measure_cycle", late)
+    shutil.copy(ROOT / "scenarios" / "approaching_target.scenario.yaml", tmp_path)
+    scene = load_scenario(tmp_path / "approaching_target.scenario.yaml",
+                          {"duration_s": 3.0, "radar.noise": False,
+                           "expectations.expected_limits": ["frames_sent_late"]})
+    report, _ = rehearse(scene, mapping=None)
+    assert report.passed, report.reasons
+    assert report.targets[0].detection_rate == 1.0
+    assert report.frames["checked"] == report.frames["total"] == 60
