@@ -606,3 +606,29 @@ def test_a_last_cycle_within_the_edge_tolerance_of_the_scene_end_is_after_it(ins
     judged = truths.finish()
     assert truths.first_cycle == 0 and truths.end_cycle == scene_cycles
     np.testing.assert_array_equal(judged, np.arange(scene_cycles))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_host_delays_that_fade_after_the_first_cycles_are_not_a_crystal(seed):
+    from rts_scenario.radar.clock import ClockTrack
+
+    # A radar on its profile's 50 ms cycle, in step with a 3 s scene (cycle 60 measured at
+    # its end). A loaded host stamps its first cycles late, 1.5 ms fading to none by cycle
+    # 15, and every one up to 0.5 ms late: the line through the bus times tilts by about
+    # 0.9 ms over the 66 cycles, beyond three standard errors of a fit that takes the delays
+    # for independent (the cycles keep within 0.35 ms of it). A crystal is not told from that:
+    # the profile's cycle stays, and cycle 60 is the one after the scene.
+    rng = np.random.default_rng(seed)
+    n = np.arange(66)
+    host = np.clip(1.5e-3 * (1 - n / 15), 0, None) + rng.uniform(0, 0.5e-3, n.size)
+    track = ClockTrack(RadarClock(cycle_s=0.05, counter_start=0), 1000.0)
+    track.add(n, 1000.0 + 0.05 * n + host)
+    slope, se = track.fit.cycle_s()
+    assert 0.05 - slope > 3 * se and (0.05 - slope) * 65 > 7e-4
+    assert not track.cycle_from_bus and track.cycle_s == 0.05
+    assert track.first_at(3.0 - track.edge_tolerance_s(3.0)) == 60
+    # A crystal 1000 ppm short under the same delays drifts 3.3 ms over them: followed.
+    off = ClockTrack(RadarClock(cycle_s=0.05, counter_start=0), 1000.0)
+    off.add(n, 1000.0 + 0.04995 * n + host)
+    # (its cycle 14 us short of the crystal's: the delays' tilt, 0.9 ms over 65 cycles).
+    assert off.cycle_from_bus and off.cycle_s == pytest.approx(0.04995, abs=2e-5)

@@ -229,6 +229,10 @@ DRIFT_FLOOR_S = 1e-5
 # Spread of bus times about a radar's line that its profile's jitter need not explain (s): the
 # stamping, a thread's wake-up.
 STAMP_NOISE_S = 1e-3
+# How far a latency that changed on the way tilts the line through the bus times over the
+# cycles seen, for the scatter it leaves about it: a step in the middle (the most a change
+# of height h can tilt: 1.5 h) scatters the cycles by h / 4.
+LATENCY_TILT = 6.0
 # Cycles a free radar's phase is learnt from before it decides which is the scene's first.
 START_CYCLES = 8
 
@@ -277,16 +281,27 @@ class ClockTrack:
         and only where the cycles keep to the line as the profile's jitter lets them (1.5
         times its spread, at least `STAMP_NOISE_S`): a latency that changed on the way
         (messages held up by a loaded bus or machine from some cycle on) tilts the line
-        without the radar's clock running off, and is not followed.
+        without the radar's clock running off, and is not followed. The standard errors
+        take the scatter for independent from cycle to cycle, as the profile's jitter is;
+        what the cycles scatter beyond it (the host's stamping, a loaded machine's delays)
+        need not be, and a change of it tilts the line by up to `LATENCY_TILT` times that
+        excess over the cycles seen: a drift no larger is not told from it (bus times that
+        scatter as the profile's jitter lets them lose nothing to this).
         """
         fit = self.fit.cycle_s()
         scatter = self.fit.scatter_s()
         if fit is None or scatter is None:
             return False
-        spread = max(self.profile.jitter_s / np.sqrt(3.0), STAMP_NOISE_S)
+        jitter = self.profile.jitter_s / np.sqrt(3.0)
+        spread = max(jitter, STAMP_NOISE_S)
+        # The jitter's own share, up to 3 standard deviations of the variance of k uniform
+        # draws (sigma^2 sqrt(0.8 / k): a uniform's fourth moment is 1.8 sigma^4).
+        jitter_var = jitter * jitter * (1.0 + 3.0 * np.sqrt(0.8 / self.fit.count))
+        excess = np.sqrt(max(scatter * scatter - jitter_var, 0.0))
         off = abs(fit[0] - self.profile.cycle_s)
-        return (off > 3.0 * fit[1] and off * self.fit.span > DRIFT_FLOOR_S
-                and scatter <= 1.5 * spread)
+        return bool(off > 3.0 * fit[1]
+                    and off * self.fit.span > max(DRIFT_FLOOR_S, LATENCY_TILT * excess)
+                    and scatter <= 1.5 * spread)
 
     @property
     def cycle_s(self) -> float:
