@@ -199,7 +199,12 @@ class Emulator:
             n += 1
 
     def _measure_cycle(self, n: int, due: float) -> None:
-        snap = self.receiver.snapshot()
+        """Measure cycle ``n`` (due at perf_counter time ``due``) and queue its report.
+
+        It sees the frame the RTS held at ``due``, however late the thread got here: a radar
+        measures on its own clock, not on its host's (a loaded machine wakes a thread late).
+        """
+        snap = self.receiver.snapshot(at=due)
         if snap is None:  # a new stream began, its first frame not applied yet
             return
         frame, _, _, entries = snap

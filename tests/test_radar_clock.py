@@ -679,3 +679,131 @@ def test_a_bus_stamped_on_its_own_clock_is_numbered_by_the_counters(tmp_path, co
     assert report.frames["total"] == report.frames["checked"] == 240
     assert report.radar_clock["counter_start"] == 4242
     assert report.radar_clock["start_from"] == "profile"
+
+
+# -- the end-of-scene tolerance of a bus-fitted cycle (`ClockTrack.edge_tolerance_s`) --------
+
+def _on_a_line(cycle_s, d, n_cycles=100, phase_s=0.0, origin=1000.0):
+    """Bus times of cycles 0..n_cycles-1 on a line of slope ``cycle_s`` through ``phase_s``
+    (latency 0), off it by +d, -d, -d, +d in turn: a pattern with no slope and no mean, so
+    the least-squares line is that line and the scatter about it d * sqrt(N / (N - 2))."""
+    n = np.arange(n_cycles)
+    r = d * np.tile([1.0, -1.0, -1.0, 1.0], n_cycles // 4)
+    return n, origin + phase_s + cycle_s * n + r
+
+
+def _slope_error(d, n_cycles):
+    """Standard error of a least-squares slope: scatter / sqrt(sum (n - mean n)^2)."""
+    scatter = d * np.sqrt(n_cycles / (n_cycles - 2))
+    return scatter / np.sqrt(n_cycles * (n_cycles ** 2 - 1) / 12.0)
+
+
+def test_the_edge_tolerance_of_a_bus_cycle_is_three_standard_errors_per_cycle_from_zero():
+    from rts_scenario.radar.clock import ClockTrack
+
+    # 100 cycles 2000 ppm longer than the profile's, 1 ms off the line: the slope's standard
+    # error is 1.0102 ms / sqrt(83325) = 3.4994 us, and the bus's cycle is followed.
+    profile = RadarClock(cycle_s=0.05, counter_start=0)
+    track = ClockTrack(profile, 1000.0, free=False)
+    track.add(*_on_a_line(0.0501, 1e-3))
+    se = _slope_error(1e-3, 100)
+    assert se == pytest.approx(3.4994e-6, rel=1e-4)
+    assert track.cycle_from_bus and track.cycle_s == pytest.approx(0.0501, rel=1e-12)
+    # The phase is the profile's (0, exact): the tolerance at scene time t is 3 standard
+    # errors of the cycle times the cycles from cycle 0 to t.
+    assert track.start_tolerance_s == 0.0
+    for t in (0.0, 1.0, 5.01):
+        assert track.edge_tolerance_s(t) == pytest.approx(3 * se * t / 0.0501, rel=1e-9)
+    assert track.edge_tolerance_s(5.01) == pytest.approx(1.0498e-3, rel=1e-4)
+    # A cycle the bus does not tell off the profile's (on it, or within three standard
+    # errors of it) keeps the profile's exact cycle: no tolerance.
+    near = ClockTrack(profile, 1000.0, free=False)
+    near.add(*_on_a_line(0.05 + 2.9 * se, 1e-3))
+    assert not near.cycle_from_bus and near.edge_tolerance_s(5.0) == 0.0
+    assert profile.edge_tolerance_s(5.0) == 0.0
+
+
+def test_the_edge_tolerance_of_a_free_radar_adds_the_phase_s_own():
+    from rts_scenario.radar.clock import ClockTrack
+
+    # Running free, 10 ms into the frames: the phase's standard error is the scatter of the
+    # bus times less the line, d / sqrt(N - 1) (its floor from the profile's jitter is 0).
+    free = RadarClock(cycle_s=0.05, counter_start=None)
+    track = ClockTrack(free, 1000.0, free=True)
+    track.add(*_on_a_line(0.0501, 1e-3, phase_s=0.01))
+    se = _slope_error(1e-3, 100)
+    assert track.start_offset_s == pytest.approx(0.01, abs=1e-9)
+    phase = 3 * 1e-3 / np.sqrt(99)
+    assert track.start_tolerance_s == pytest.approx(phase, rel=1e-6)
+    assert track.edge_tolerance_s(5.01) == pytest.approx(phase + 3 * se * 5.0 / 0.0501,
+                                                         rel=1e-6)
+    # The profile's jitter (4 ms, uniform: 2.31 ms standard deviation) is more than the bus
+    # times show: the phase's error is no less than it gives over 100 cycles, 0.231 ms.
+    jittery = ClockTrack(RadarClock(cycle_s=0.05, latency_s=0.004, jitter_s=0.004,
+                                    counter_start=None), 1000.0, free=True)
+    jittery.add(*_on_a_line(0.0501, 1e-3, phase_s=0.014))
+    floor = 3 * 0.004 / np.sqrt(3 * 100)
+    assert jittery.start_tolerance_s == pytest.approx(floor, rel=1e-9)
+    assert jittery.edge_tolerance_s(5.01) == pytest.approx(floor + 3 * se * 5.0 / 0.0501,
+                                                           rel=1e-6)
+
+
+@pytest.mark.parametrize(("inside", "scene_cycles"), [(0.9, 59), (1.1, 60)])
+def test_a_last_cycle_within_the_edge_tolerance_of_the_scene_end_is_after_it(inside,
+                                                                           scene_cycles):
+    # A 3 s scene; the bus's cycle (1 ms scatter over 100 cycles, profile's phase 0) puts
+    # cycle 59 a fraction ``inside`` of the edge tolerance before the scene's end: within it
+    # (0.9), it may have measured at the end itself and is after the scene (59 cycles); just
+    # beyond it (1.1), it measured in the scene and is judged (60).
+    from rts_scenario.check import Checker
+    from rts_scenario.pipeline import CycleTruth
+    from rts_scenario.radar.clock import ClockTrack
+
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
+                          {"duration_s": 3.0, "radar.noise": False})
+    end, se, k = 3.0, _slope_error(1e-3, 100), 59
+    # Cycle k at end - f * tol(end), tol(end) = 3 se end / c: k c^2 - end c + 3 f se end = 0.
+    c = (end + np.sqrt(end ** 2 - 12 * k * inside * se * end)) / (2 * k)
+    track = ClockTrack(RadarClock(cycle_s=0.05, counter_start=0), 1000.0, free=False)
+    track.add(*_on_a_line(c, 1e-3))
+    assert track.cycle_from_bus and track.cycle_s == pytest.approx(c, rel=1e-12)
+    tolerance = track.edge_tolerance_s(end)
+    assert end - k * c == pytest.approx(inside * tolerance, rel=1e-6)
+    checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations)
+    truths = CycleTruth(checker, scene, track, 0.005)
+    frames = np.arange(scene.n_frames)
+    truths.add(frames, np.zeros((scene.n_frames, 1), dtype=np.uint16))
+    judged = truths.finish()
+    assert truths.first_cycle == 0 and truths.end_cycle == scene_cycles
+    np.testing.assert_array_equal(judged, np.arange(scene_cycles))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_host_delays_that_fade_after_the_first_cycles_are_not_a_crystal(seed):
+    from rts_scenario.radar.clock import ClockTrack
+
+    # A radar on its profile's 50 ms cycle, in step with a 3 s scene (cycle 60 measured at
+    # its end). A loaded host stamps its first cycles late, 1.5 ms fading to none by cycle
+    # 15, and every one up to 0.5 ms late: the line through the bus times tilts by about
+    # 0.9 ms over the 66 cycles, beyond three standard errors of a fit that takes the delays
+    # for independent (the cycles keep within 0.35 ms of it). A crystal is not told from that:
+    # the profile's cycle stays, and cycle 60 is the one after the scene.
+    rng = np.random.default_rng(seed)
+    n = np.arange(66)
+    host = np.clip(1.5e-3 * (1 - n / 15), 0, None) + rng.uniform(0, 0.5e-3, n.size)
+    track = ClockTrack(RadarClock(cycle_s=0.05, counter_start=0), 1000.0)
+    track.add(n, 1000.0 + 0.05 * n + host)
+    slope, se = track.fit.cycle_s()
+    assert 0.05 - slope > 3 * se and (0.05 - slope) * 65 > 7e-4
+    assert not track.cycle_from_bus and track.cycle_s == 0.05
+    assert track.first_at(3.0 - track.edge_tolerance_s(3.0)) == 60
+    # A crystal 100 ppm short under the same start-up delays, over half an hour (180 ms of
+    # drift by the end), handed over batch by batch: the start-up's cycles do not bend the
+    # line of 36,000, and the crystal is followed to within a nanosecond a cycle.
+    n = np.arange(36_000)
+    host = np.clip(1.5e-3 * (1 - n / 15), 0, None) + rng.uniform(0, 0.5e-3, n.size)
+    off = ClockTrack(RadarClock(cycle_s=0.05, counter_start=0), 1000.0)
+    for part in np.array_split(n, 90):
+        off.add(part, 1000.0 + 0.049995 * part + host[part])
+    assert off.cycle_from_bus and off.cycle_s == pytest.approx(0.049995, abs=1e-9)
+    assert off.latency_change_reason(0.00288) is None

@@ -55,6 +55,8 @@ STATUS_DRAIN_FRAMES = 32
 # from any sender: a run ends with a drain of its radar's last cycles and a wait for the RTS's
 # last report, longer than this; a copy of a datagram does not come this late on a bench.
 STREAM_QUIET_S = 0.25
+# States the receiver keeps for `UdpReceiver.snapshot` at a past moment: 12.8 s of 20 Hz frames.
+STATE_HISTORY = 256
 SEQUENCE_WINDOW = 4096
 MAX_DATAGRAM = 1400
 MAX_ENTRIES = (MAX_DATAGRAM - HEADER.size - TRAILER.size) // ENTRY.itemsize
@@ -335,17 +337,31 @@ class UdpReceiver:
         self._top_frame = -1
         self._synced = True
         self.current: tuple[int, float, float] | None = None  # frame, t_s, arrival (perf)
+        # The last `STATE_HISTORY` states applied: arrival (perf), frame, t_s, entries held.
+        self._states: deque[tuple[float, int, float, np.ndarray]] = deque(maxlen=STATE_HISTORY)
 
-    def snapshot(self) -> tuple[int, float, float, np.ndarray] | None:
+    def snapshot(self, at: float | None = None) -> tuple[int, float, float, np.ndarray] | None:
         """Return the frame applied last, its scene time and arrival, and the entries it holds.
 
-        Consistent while the receiving thread applies frames (None before the first frame).
+        ``at`` (a `time.perf_counter` time): the frame applied last at or before it, as the
+        state held then (a reader that looks later than it meant to, e.g. a radar whose thread
+        woke late, sees what was held at its moment); the oldest state kept if all came after.
+        Consistent while the receiving thread applies frames (None before the first frame, or
+        where ``at`` is before it).
         """
         with self._lock:
             if self.current is None:
                 return None
-            frame, t_s, arrival = self.current
-            return frame, t_s, arrival, self._table[self._live].copy()
+            if at is None:
+                frame, t_s, arrival = self.current
+                return frame, t_s, arrival, self._table[self._live].copy()
+            states = self._states
+            if at < states[0][0] and self.stats.frames_applied <= len(states):
+                return None  # before the stream's first frame
+            arrivals = [s[0] for s in states]
+            k = max(0, int(np.searchsorted(arrivals, at, side="right")) - 1)
+            arrival, frame, t_s, entries = states[k]
+            return frame, t_s, arrival, entries.copy()
 
     def start(self) -> UdpReceiver:
         """Receive in a background thread until `stop`."""
@@ -539,6 +555,7 @@ class UdpReceiver:
         self._last_frame = frame
         arrival = time.perf_counter()
         self.current = (frame, t_s, arrival)
+        self._states.append((arrival, frame, t_s, self._table[self._live].copy()))
         if self.keep_applied:
             self.applied.append((frame, t_s, entries))
             self.arrival_s.append(arrival)
