@@ -326,13 +326,13 @@ def write_json(rows: list[BenchRow], quantized: list[QuantizationRow], path: str
                figures: list[Any] | None = None) -> None:
     """Write the tables as JSON.
 
-    ``{"solver", "quantization", "honest", "end_to_end", "performance"}``; ``performance``
-    holds `rts_scenario.perf.Figure` records.
+    ``{"solver", "quantization", "honest", "end_to_end", "performance"}``, every key always
+    (docs/cli.md): a section not measured is ``[]``, or ``null`` for ``end_to_end``;
+    ``performance`` holds `rts_scenario.perf.Figure` records.
     """
     data: dict[str, object] = {"solver": [asdict(r) for r in rows],
                                "quantization": [asdict(r) for r in quantized],
                                "honest": [asdict(r) for r in honest_rows or []],
+                               "end_to_end": None if end is None else asdict(end),
                                "performance": [asdict(f) for f in figures or []]}
-    if end is not None:
-        data["end_to_end"] = asdict(end)
     Path(path).write_text(json.dumps(strict(data), indent=2, allow_nan=False) + "\n")

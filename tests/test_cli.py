@@ -30,6 +30,17 @@ def test_bench_reports_performance_figures_in_text_and_json(tmp_path, capsys, mo
     assert figure["met"] == (figure["value"] <= 150.0)
 
 
+def test_bench_json_has_every_section_when_one_is_skipped(tmp_path):
+    """`end_to_end` is null with --scene-s 0, as `honest` and `performance` are [] when skipped."""
+    from rts_scenario import bench
+
+    out = tmp_path / "bench.json"
+    bench.write_json([], [], out, end=None, honest_rows=None, figures=None)
+    data = json.loads(out.read_text())
+    assert set(data) == {"solver", "quantization", "honest", "end_to_end", "performance"}
+    assert data["end_to_end"] is None and data["honest"] == [] and data["performance"] == []
+
+
 def test_bench_prints_table_and_writes_json(tmp_path, capsys):
     out = tmp_path / "bench.json"
     code = cli.main(["bench", "--targets", "2000", "--repeats", "1", "--scene-s", "10",

@@ -96,8 +96,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     )
     add_bench_arguments(parser, "awr1843boost")
     parser.add_argument("--json", metavar="OUT",
-                        help='write {"front_ends": [{"index", "az_deg", "el_deg", "seen_az_deg", '
-                             '"seen_el_deg", "level_db"}, ...]}')
+                        help='write {"rig", "radar", "front_ends": [{"index", "az_deg", "el_deg", '
+                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...]}')
     parser.add_argument("--write", metavar="RIG_OUT",
                         help="write the rig with each FE's seen direction and level ('seen')")
     parser.add_argument("--place", action="store_true",

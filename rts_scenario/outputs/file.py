@@ -7,13 +7,14 @@ target x channel::
     # targets: lead-car,truck-left
     frame,t_s,target,channel,quad,fe,active,status,weight,attenuation_db,delay_s,doppler_hz,...
 
-Columns: ``frame`` (index in the scene), ``t_s``, ``target`` (index into the ``targets``
-line), ``channel`` (0..3, the quad's FE in paper order), ``quad`` and ``fe`` (rig indices, -1
-when not emitted), ``active`` (0/1), ``status`` (`rts_scenario.schedule.Status` bit flags of
-the entry), ``weight``, ``attenuation_db``, ``delay_s``, ``doppler_hz``, ``phase_rad`` (empty
-when the channel is off) and ``angle_error_az_deg``, ``angle_error_el_deg`` (predicted error
-left by the attenuator's quantization). Floats are written with 17 significant digits, so
-reading a file back gives the same schedule.
+Columns (docs/cli.md lists them for outside tools): ``frame`` (index in the scene), ``t_s``,
+``target`` (index into the ``targets`` line), ``channel`` (0..3, the quad's FE in paper order),
+``quad`` (the target's, -1 when not synthesized) and ``fe`` (rig index, -1 when the channel is
+off), ``active`` (0/1), ``status`` (`rts_scenario.schedule.Status` bit flags of the
+target-frame), ``weight``, ``attenuation_db``, ``delay_s``, ``doppler_hz``, ``phase_rad``
+(those four empty when the channel is off) and ``angle_error_az_deg``, ``angle_error_el_deg``
+(predicted error left by the attenuator's quantization). Floats are written with 17
+significant digits, so reading a file back gives the same schedule.
 """
 
 from __future__ import annotations

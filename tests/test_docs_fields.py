@@ -1,0 +1,472 @@
+"""The JSON keys, CSV columns and file layouts the docs name are the ones the commands write.
+
+Outside tools read these files by the names the docs give. Each test runs a command on a short
+shipped scene (or writes the file the command writes), collects the keys actually written
+(nested, as dotted paths, ``[]`` for the items of a list) and compares them with the keys the
+docs name, parsed from the docs as they are written: a table's first column, an inline
+``{"key", "key": {...}}`` layout, or a key list in backticks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+import shutil
+import typing
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import rts_scenario.cli as cli
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+SCENE = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"  # 4 s, two targets
+
+IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+# --- reading the docs ---------------------------------------------------------------------
+
+def doc(name: str) -> str:
+    return (DOCS / name).read_text(encoding="utf-8")
+
+
+def section(text: str, heading: str) -> str:
+    """The text under the markdown heading that contains ``heading``, to the next heading."""
+    m = re.search(rf"^#+ [^\n]*{re.escape(heading)}[^\n]*\n(.*?)(?=^#+ |\Z)", text,
+                  re.M | re.S)
+    assert m, f"no heading with {heading!r}"
+    return m.group(1)
+
+
+def table(text: str, first_column: str) -> list[tuple[list[str], str]]:
+    """Rows of the first table whose header starts with ``| first_column |``.
+
+    Each row: the names in backticks in its first cell, and its other cells' text.
+    """
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines)
+                 if re.match(rf"\|\s*{re.escape(first_column)}\s*\|", line))
+    rows = []
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = line.strip().strip("|").split("|", 1)
+        names = re.findall(r"`([^`]+)`", cells[0])
+        rows.append(([n.strip() for n in names], cells[1] if len(cells) > 1 else ""))
+    return rows
+
+
+def spans(text: str) -> list[str]:
+    """The inline backtick spans of ``text`` (fenced code blocks left out)."""
+    return re.findall(r"`([^`]+)`", re.sub(r"```.*?```", "", text, flags=re.S))
+
+
+def backticked(text: str) -> set[str]:
+    """Every identifier inside a backtick span (keys and values alike)."""
+    return {word for span in spans(text) for word in IDENT.findall(span)}
+
+
+def named(text: str) -> set[str]:
+    """The names ``text`` gives in backticks: a span that is one name, or a layout's keys."""
+    out = set()
+    for span in spans(text):
+        if re.fullmatch(r"[a-z][a-z0-9_]*", span):
+            out.add(span)
+        elif span.startswith("{"):
+            out |= set(re.findall(r'(?:^|[{,])\s*"([a-z][a-z0-9_]*)"', span))
+    return out
+
+
+_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|[{}\[\]:,|]|[^\s{}\[\]:,|"]+')
+
+
+def layout(text: str) -> dict[str, Any]:
+    """The keys of a documented layout, ``{"a", "b": {"c"}, "d": [{"e"}, ...], "f": 1}``.
+
+    Real JSON parses too. A value that is an object gives its keys; a list of objects gives the
+    union of their keys under ``"[]"``; ``"..."`` and bare words stand for more of the same.
+    """
+    tokens = _TOKEN.findall(text)
+    pos = 0
+
+    def value() -> Any:
+        nonlocal pos
+        if tokens[pos] == "{":
+            return obj()
+        if tokens[pos] == "[":
+            pos += 1
+            items: dict[str, Any] = {}
+            while tokens[pos] != "]":
+                item = value()
+                if isinstance(item, dict):
+                    items = merge(items, item)
+                if tokens[pos] == ",":
+                    pos += 1
+            pos += 1
+            return {"[]": items} if items else None
+        depth = 0  # a scalar, or alternatives: "a" | "b"
+        while depth or tokens[pos] not in (",", "}", "]"):
+            depth += tokens[pos] in "{[" and 1 or tokens[pos] in "}]" and -1 or 0
+            pos += 1
+        return None
+
+    def obj() -> dict[str, Any]:
+        nonlocal pos
+        pos += 1  # {
+        out: dict[str, Any] = {}
+        while tokens[pos] != "}":
+            key = tokens[pos].strip('"')
+            pos += 1
+            sub = None
+            if tokens[pos] == ":":
+                pos += 1
+                sub = value()
+            if key not in ("...", "…"):
+                out[key] = merge(out.get(key) or {}, sub) if isinstance(sub, dict) else sub
+            if tokens[pos] == ",":
+                pos += 1
+        pos += 1
+        return out
+
+    assert tokens[0] == "{", text[:60]
+    return obj()
+
+
+def merge(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = merge(out.get(k) or {}, v) if isinstance(v, dict) else out.get(k, v)
+    return out
+
+
+def inline_after(text: str, before: str) -> str:
+    """The backtick span ``{...}`` that follows ``before`` in ``text``."""
+    i = text.index(before) + len(before)
+    m = re.compile(r"`(\{[^`]*\})`").search(text, i)
+    assert m, f"no `{{...}}` after {before!r}"
+    return m.group(1)
+
+
+# --- what was written -----------------------------------------------------------------------
+
+def paths(data: Any, prefix: str = "", open_maps: frozenset[str] = frozenset()) -> set[str]:
+    """Every key path of ``data``; a key under one of ``open_maps`` (data, not a name) is ``*``."""
+    out: set[str] = set()
+    if isinstance(data, dict):
+        for k, v in data.items():
+            p = f"{prefix}.*" if prefix in open_maps else (f"{prefix}.{k}" if prefix else k)
+            out.add(p)
+            out |= paths(v, p, open_maps)
+    elif isinstance(data, list):
+        for item in data:
+            out |= paths(item, f"{prefix}[]", open_maps)
+    return out
+
+
+def doc_paths(tree: dict[str, Any] | None, prefix: str = "",
+              open_maps: frozenset[str] = frozenset()) -> set[str]:
+    out: set[str] = set()
+    for k, v in (tree or {}).items():
+        if k == "[]":
+            out |= doc_paths(v, f"{prefix}[]", open_maps)
+            continue
+        p = f"{prefix}.*" if prefix in open_maps else (f"{prefix}.{k}" if prefix else k)
+        out.add(p)
+        out |= doc_paths(v, p, open_maps)
+    return out
+
+
+def under_open_map(path: str, open_maps: frozenset[str]) -> bool:
+    return any(path.startswith(m + ".") for m in open_maps)
+
+
+def strings(data: Any) -> set[str]:
+    if isinstance(data, dict):
+        return set().union(*(strings(v) for v in data.values())) if data else set()
+    if isinstance(data, list):
+        return set().union(*(strings(v) for v in data)) if data else set()
+    return {data} if isinstance(data, str) else set()
+
+
+def keys(data: Any) -> set[str]:
+    if isinstance(data, dict):
+        return set(data) | (set().union(*(keys(v) for v in data.values())) if data else set())
+    if isinstance(data, list):
+        return set().union(*(keys(v) for v in data)) if data else set()
+    return set()
+
+
+def assert_same(written: set[str], documented: set[str], what: str,
+                open_maps: frozenset[str] = frozenset(), conditional: frozenset[str] = frozenset()
+                ) -> None:
+    undocumented = sorted(written - documented)
+    unwritten = sorted(p for p in documented - written
+                       if p not in conditional and not under_open_map(p, open_maps))
+    assert not undocumented and not unwritten, (
+        f"{what}: written but not in the docs: {undocumented}; "
+        f"in the docs but not written: {unwritten}")
+
+
+# --- the commands, once -------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def out(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    tmp = tmp_path_factory.mktemp("docs-fields")
+    broken = tmp / "broken.scenario.yaml"
+    broken.write_text("rts_scenario: 1\nname: broken\ncolour: red\n", encoding="utf-8")
+    # The scene at twice the radar's cycle rate, for 1 s: a scene-wide limit.
+    fast = tmp / "fast.scenario.yaml"
+    fast.write_text(SCENE.read_text(encoding="utf-8").replace("duration_s: 4.0", "duration_s: 1.0")
+                    .replace("frame_rate_hz: 20.0", "frame_rate_hz: 40.0"), encoding="utf-8")
+    log = tmp / "drive.blf"
+    res: dict[str, Any] = {"tmp": tmp}
+    assert cli.main(["run", str(SCENE), "--json", str(tmp / "run.json"), "--record", str(log),
+                     "--detections", str(tmp / "det.csv")]) == 0
+    cli.main(["run", str(fast), str(broken), "--json", str(tmp / "runs.json")])
+    # Aligned by the sidecar, and (a copy without it) by the log's timestamps.
+    assert cli.main(["check", str(SCENE), "--log", str(log), "--json",
+                     str(tmp / "check.json")]) == 0
+    bare = tmp / "bare.blf"
+    shutil.copy(log, bare)
+    assert cli.main(["check", str(SCENE), "--log", str(bare), "--json",
+                     str(tmp / "check2.json")]) == 0
+    cli.main(["sweep", str(SCENE), str(broken), "--workers", "1", "--json",
+              str(tmp / "sweep.json")])
+    assert cli.main(["survey", "kit-table1", "--radar", "awr1843boost", "--json",
+                     str(tmp / "survey.json")]) == 0
+    assert cli.main(["calibrate", "kit-table1", "--inject-phase-deg", "30", "--seed", "1",
+                     "--json", str(tmp / "cal.json")]) == 0
+    assert cli.main(["schedule", str(SCENE), "--output", f"file:{tmp / 'schedule.csv'}"]) == 0
+    for name in ("run", "runs", "check", "check2", "sweep", "survey", "cal"):
+        res[name] = json.loads((tmp / f"{name}.json").read_text(encoding="utf-8"))
+    res["sidecar"] = json.loads(Path(f"{log}.rts.json").read_text(encoding="utf-8"))
+    return res
+
+
+# --- the run report (docs/report.md, docs/cli.md) -------------------------------------------
+
+def report_rows() -> dict[str, str]:
+    rows = {}
+    for names, meaning in table(doc("report.md"), "key"):
+        for name in names:
+            rows[name] = meaning
+    return rows
+
+
+# Where a report's nested keys are data, not names: the scene's limits by name (report.md's
+# limits table), the parameters by key path.
+REPORT_DATA_KEYS = ("parameters", "scene_limits", "targets[].limits")
+# Names report.md's key table gives that a run's JSON need not hold: values these short runs
+# do not give, keys of the scene and radar files the text refers to, and a key only a clock
+# whose bus times bent writes. (The limits' names are values too, from report.md's table.)
+REPORT_VALUES = {"true", "false", "null", "profile", "bus", "built", "memory", "disk", "off",
+                 "frame_period_s", "clock", "parametrize", "latency_change_s"}
+
+
+def _report_entries(out: dict[str, Any]) -> list[dict[str, Any]]:
+    return [out["run"], *[e for e in out["runs"] if e["status"] != "error"],
+            out["check"], out["check2"]]
+
+
+def test_report_keys_are_the_documented_ones(out):
+    """Every key a run or a re-check writes is in report.md's table, in its row."""
+    rows = report_rows()
+    limits = {n for names, _ in table(doc("report.md"), "limit") for n in names}
+    cli_keys = {n for names, _ in table(section(doc("cli.md"), "with a parametrized scene"),
+                                        "key") for n in names}
+    check_text = section(doc("cli.md"), "run --record")
+    alignment = set(layout(inline_after(check_text, "`alignment`:")))
+    problems = []
+    for entry in _report_entries(out):
+        for key, value in entry.items():
+            if key in ("file", "status") and key in cli_keys:
+                continue
+            if key in ("log", "alignment") and "alignment" in entry:
+                assert key in backticked(check_text)
+                continue
+            if key not in rows:
+                problems.append(f"{entry['scene']}: top-level key {key!r} not in report.md")
+                continue
+            for path in paths(value, key):
+                parts = path.replace("[]", "").split(".")
+                if any(path.startswith(d + ".") for d in REPORT_DATA_KEYS):
+                    # A limit's name, or what a scene-wide limit says about itself.
+                    if parts[-2] in ("limits", "scene_limits") and parts[-1] not in limits:
+                        problems.append(f"{path}: not a limit report.md lists")
+                    continue
+                row = rows["errors"] if path.startswith("targets[].errors.") else rows[key]
+                if parts[-1] not in backticked(row):
+                    problems.append(f"{path}: written, not named in report.md's `{key}` row")
+    for key in out["check"]["alignment"]:
+        if key not in alignment:
+            problems.append(f"alignment.{key}: written, not in docs/cli.md's `alignment`")
+    assert not problems, "\n".join(sorted(set(problems)))
+
+
+def test_report_documented_keys_are_written(out):
+    """Every name report.md's table gives a run's key is written (or is one of its values)."""
+    entries = _report_entries(out)
+    written = set().union(*(keys(e) | strings(e) for e in entries))
+    limits = {n for names, _ in table(doc("report.md"), "limit") for n in names}
+    missing = []
+    for key, meaning in report_rows().items():
+        if not any(key in e for e in entries):
+            missing.append(key)
+        for name in named(meaning) - REPORT_VALUES - limits - written:
+            missing.append(f"{key}: {name}")
+    assert not missing, f"named in report.md, never written: {missing}"
+
+
+def test_error_entry_and_check_alignment_keys(out):
+    """A scene that does not load: exactly the keys docs/cli.md names; `alignment` likewise."""
+    (error,) = [e for e in out["runs"] if e["status"] == "error"]
+    para = section(doc("cli.md"), "with a parametrized scene")
+    para = para[para.index("An entry with `status: error`"):]
+    para = para[:para.index("\n\n")]
+    documented = named(re.sub(r"\([^()]*\)", "", para[para.index("holds only"):]))
+    assert set(error) == documented
+    check_text = section(doc("cli.md"), "run --record")
+    documented_alignment = set(layout(inline_after(check_text, "`alignment`:")))
+    bench_text = doc("bench.md")
+    i = bench_text.index("JSON's `alignment` (")
+    bench_alignment = {n for n in backticked(bench_text[i + 20:bench_text.index(")", i + 20)])}
+    for entry in (out["check"], out["check2"]):
+        assert set(entry["alignment"]) == documented_alignment == bench_alignment
+        assert {"file", "log", "status", "alignment"} <= set(entry)
+
+
+# --- the log's sidecar ----------------------------------------------------------------------
+
+SIDECAR_OPEN = frozenset({"parameters", "truth.targets"})
+
+
+def sidecar_doc() -> dict[str, Any]:
+    text = section(doc("cli.md"), "run --record")
+    tree = layout(inline_after(text, "writes `LOG.rts.json`:"))
+    # Sub-layouts given in the prose: `name`: `{...}`.
+    for name in ("send_lateness", "truth", "statuses"):
+        tree[name] = layout(inline_after(text, f"`{name}`:"))
+    return tree
+
+
+def test_sidecar_keys_are_the_documented_ones(out):
+    from rts_scenario.recheck import SIDECAR_SCHEMA
+
+    documented = doc_paths(sidecar_doc(), open_maps=SIDECAR_OPEN)
+    sidecar = dict(out["sidecar"])
+    playback = sidecar.pop("playback")
+    written = paths(sidecar, open_maps=SIDECAR_OPEN) | {"playback"}
+    assert_same(written, documented, "LOG.rts.json", SIDECAR_OPEN)
+    # `playback`: the report's, as report.md names it.
+    assert set(playback) == set(out["run"]["playback"])
+
+    def schema_paths(schema: dict[str, Any], prefix: str = "") -> set[str]:
+        found = set()
+        for k, sub in schema.get("properties", {}).items():
+            p = f"{prefix}.{k}" if prefix else k
+            found.add(p)
+            if k not in ("playback", "quanta"):
+                found |= schema_paths(sub, p)
+        return found
+
+    schema = schema_paths(SIDECAR_SCHEMA)
+    assert_same(schema, {p for p in documented if not p.startswith("truth.quanta.")
+                         and not under_open_map(p, SIDECAR_OPEN)},
+                "recheck.SIDECAR_SCHEMA")
+
+
+# --- sweep ----------------------------------------------------------------------------------
+
+SWEEP_OPEN = frozenset({"runs[].parameters", "runs[].errors", "summary.by_parameter",
+                        "summary.by_parameter.*"})
+
+
+def test_sweep_keys_are_the_documented_ones(out):
+    text = section(doc("cli.md"), "`sweep`")
+    example = re.search(r"```json\n(.*?)```", text, re.S).group(1)  # type: ignore[union-attr]
+    documented = doc_paths(layout(example), open_maps=SWEEP_OPEN)
+    # `interrupted` is in the summary only when Ctrl-C stopped the sweep.
+    assert "interrupted" in backticked(text)
+    written = paths(out["sweep"], open_maps=SWEEP_OPEN)
+    assert_same(written, documented, "sweep --json", SWEEP_OPEN)
+    run_keys = {n for names, _ in table(text, "key of a run") for n in names}
+    assert run_keys == keys(out["sweep"]["runs"]) - keys([r["parameters"] for r in
+                                                          out["sweep"]["runs"]]) - keys(
+        [r.get("errors", {}) for r in out["sweep"]["runs"]])
+
+
+# --- survey, calibrate ----------------------------------------------------------------------
+
+def test_survey_keys_are_the_documented_ones(out):
+    text = section(doc("cli.md"), "`survey`")
+    documented = doc_paths(layout(inline_after(text, "`--json` writes")))
+    assert_same(paths(out["survey"]), documented, "survey --json")
+
+
+def test_calibrate_keys_are_the_documented_ones(out):
+    text = section(doc("cli.md"), "`calibrate`")
+    example = re.search(r"```json\n(.*?)```", text, re.S).group(1)  # type: ignore[union-attr]
+    assert_same(paths(out["cal"]), doc_paths(layout(example)), "calibrate --json")
+    assert all(isinstance(s, str) for s in out["cal"]["suspects"])
+    assert [c["fe"] for c in out["cal"]["channels"]][0] == 0
+
+
+# --- bench ----------------------------------------------------------------------------------
+
+def test_bench_keys_are_the_documented_ones(tmp_path):
+    """`bench.write_json` with one record of each kind: every section documented, key by key."""
+    from rts_scenario import bench, perf
+
+    def one(cls: Any) -> Any:
+        sample = {int: 1, float: 1.0, str: "x", bool: True}
+        types = typing.get_type_hints(cls)
+        return cls(**{f.name: sample[types[f.name]] for f in dataclasses.fields(cls)})
+
+    path = tmp_path / "bench.json"
+    bench.write_json([one(bench.BenchRow)], [one(bench.QuantizationRow)], path,
+                     one(bench.EndToEndRow), [one(bench.HonestRow)], [one(perf.Figure)])
+    data = json.loads(path.read_text())
+    text = section(doc("cli.md"), "`bench`")
+    top = layout(inline_after(text, "`--json OUT` writes"))
+    assert set(data) == set(top)
+    for name, of_list, spec in re.findall(r"- `(\w+)`: (a list of )?`(\{[^`]*\})`", text):
+        value = data[name][0] if of_list else data[name]
+        assert isinstance(data[name], list) == bool(of_list), name
+        assert list(value) == list(layout(spec)), name
+    documented = set(re.findall(r"- `(\w+)`: (?:a list of )?`\{", text))
+    assert documented == set(data)
+
+
+# --- CSV files ------------------------------------------------------------------------------
+
+def test_detections_csv_columns_are_the_documented_ones(out):
+    header = (out["tmp"] / "det.csv").read_text(encoding="utf-8").splitlines()[0].split(",")
+    documented = [n for names, _ in table(section(doc("report.md"), "Detections"), "column")
+                  for n in names]
+    assert header == documented
+
+
+def test_schedule_csv_columns_are_the_documented_ones(out):
+    from rts_scenario.outputs.file import CSV_COLUMNS
+
+    lines = (out["tmp"] / "schedule.csv").read_text(encoding="utf-8").splitlines()
+    assert lines[0] == "# rts-scenario schedule v1" and lines[1].startswith("# targets: ")
+    text = doc("cli.md")
+    assert "`# rts-scenario schedule v1`" in text and "`# targets: NAME,NAME,...`" in text
+    documented = [n for names, _ in table(text, "column") for n in names]
+    assert lines[2].split(",") == documented == list(CSV_COLUMNS)
+
+
+def test_rts_status_counters_are_the_documented_ones():
+    """`playback.rts` holds the RTS's counters as udp-protocol.md lists them."""
+    from rts_scenario.outputs.udp import STATUS_COUNTERS, decode_status, encode_status
+
+    text = doc("udp-protocol.md")
+    listed = text[text.index("then u32 counters"):text.index("then a CRC-32")]
+    documented = re.findall(r"`(\w+)`", re.sub(r"\([^)]*\)", "", listed))
+    counters = decode_status(encode_status(dict.fromkeys(STATUS_COUNTERS, 1)))
+    assert counters is not None and list(counters) == documented
