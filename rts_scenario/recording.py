@@ -32,13 +32,19 @@ from .schedule.model import Status
 
 # The truth quantities a checksum covers, and the step each is rounded to first: finer than
 # any tolerance a scene can set, coarse enough that another machine's rounding does not move
-# a value across a step (that takes a value within about 1e-10 of a step's middle).
+# a value across a step (that takes a value within about 1e-10 of a step's edge).
 TRUTH_QUANTA: dict[str, float] = {"range_m": 1e-3, "radial_velocity_mps": 1e-3,
                                   "rcs_dbsm": 1e-2, "az_deg": 1e-3, "el_deg": 1e-3}
 # The flags a checksum covers (whether each target-frame could be checked at all).
 TRUTH_FLAGS = ("present", "in_range", "in_velocity")
+# Where the steps' edges lie, in quanta past a multiple of the quantum (sqrt(5) - 2): far
+# from the halves, quarters, tenths... a scene of round numbers puts values on (a car at
+# 2.778 m/s is 9.0285 m away in a frame: exactly a millimetre's middle), so that no such
+# value lies within an ulp of an edge.
+TRUTH_STEP_EDGE = 5**0.5 - 2
 TRUTH_ENCODING = ("per target: the sum modulo 2**64 over frames and quantities of splitmix64 "
-                  "of each quantity rounded to its quantum, its index and its frame's")
+                  "of each quantity rounded to its quantum (steps' edges sqrt(5) - 2 quanta past "
+                  "its multiples), its index and its frame's")
 STATUS_ENCODING = "uint16 little-endian per frame and target (frame-major), zlib, base64"
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -71,7 +77,8 @@ class TruthChecksums:
     def add(self, tracks: Tracks, frames: NDArray[np.int64] | NDArray[np.intp]) -> None:
         """Take a batch's tracks, frames ``frames`` (indices in the scene)."""
         present = tracks.present
-        columns = [np.where(present, np.rint(getattr(tracks, name) / quantum), np.nan)
+        columns = [np.where(present, np.floor(getattr(tracks, name) / quantum
+                                              - TRUTH_STEP_EDGE), np.nan)
                    for name, quantum in TRUTH_QUANTA.items()]
         columns += [getattr(tracks, name).astype(np.float64) for name in TRUTH_FLAGS]
         values = np.stack(columns, axis=-1)  # (F, K, Q)
@@ -177,9 +184,14 @@ class StatusRecord:
             rest = self._unpacker.decompress(self._tail) + self._unpacker.flush()
         except zlib.error as exc:
             raise ValueError(f"data: not zlib-compressed ({exc})") from None
-        if rest or not self._unpacker.eof:
+        if rest:
             raise ValueError("data: holds more frames than it says")
+        if not self._unpacker.eof:
+            raise ValueError("data: ends early: the compressed record is cut short")
+        if self._unpacker.unused_data:
+            raise ValueError(f"data: holds {len(self._unpacker.unused_data)} bytes after the "
+                             f"record's end")
 
 
-__all__ = ["STATUS_ENCODING", "TRUTH_ENCODING", "TRUTH_QUANTA", "StatusRecord",
-           "StatusRecorder", "TruthChecksums"]
+__all__ = ["STATUS_ENCODING", "TRUTH_ENCODING", "TRUTH_QUANTA", "TRUTH_STEP_EDGE",
+           "StatusRecord", "StatusRecorder", "TruthChecksums"]
