@@ -265,10 +265,14 @@ class Pipeline:
         # output applies frames exactly at their times. An RTS applies a frame after its time
         # (transport, its own update): a cycle measured as the frame is due may still show the
         # frame before, so there each frame is held for two cycles and measured in the second,
-        # a whole cycle after it was due. Frame numbers keep increasing (an RTS applies only a
-        # frame newer than the last).
+        # a whole cycle after it was due. So is it for a radar running free: where in its
+        # cycle it measures is known only to its messages' jitter (`_cycle_numbers`), and a
+        # radar measuring just before the frame changes would be taken for one measuring just
+        # after them (each frame judged by the cycle of the frame before); held for two
+        # cycles, either cycle numbered lies within the frame's hold. Frame numbers keep
+        # increasing (an RTS applies only a frame newer than the last).
         clock = self.radar.radar_clock
-        hold = 1 if self.output.applies_frames_on_time else 2
+        hold = 1 if self.output.applies_frames_on_time and clock.counter_start is not None else 2
         n = np.arange(schedule.n_frames, dtype=np.int64)
         played = schedule if hold == 1 else replace(
             schedule.take(np.repeat(n, hold)),
