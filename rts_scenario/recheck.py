@@ -282,6 +282,12 @@ def read_sidecar(log: str | Path) -> dict[str, Any] | None:
     if method is not None and method not in SCHEDULE_METHODS:
         raise LogError(f"{path}: method: got {method!r}; allowed values: "
                        f"{', '.join(SCHEDULE_METHODS)}")
+    if data.get("statuses") is not None and data.get("truth") is None:
+        # Written together: an older version's sidecar keeps neither, and one keeping the
+        # statuses alone would leave the scene unchecked.
+        raise LogError(f"{path}: truth: missing, but the sidecar keeps the statuses written "
+                       f"with it (not what `rts-scenario run --record` writes; a log without "
+                       f"its sidecar is aligned by its timestamps)")
     return dict(data)
 
 

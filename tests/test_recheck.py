@@ -326,6 +326,12 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"statuses\.encoding: 'uint16 little-endian .*' was expected"),
     (lambda d: {**d, "truth": {**d["truth"], "targets": {"lead-car": "12"}}},
      r"truth\.targets\.lead-car: '12' does not match"),
+    # Written together: statuses without the truth's checksums is a damaged sidecar, not an
+    # older one (which keeps neither); judged, the scene would go unchecked with a note.
+    (lambda d: {k: v for k, v in d.items() if k != "truth"},
+     r"truth: missing, but the sidecar keeps the statuses written with it"),
+    (lambda d: {**d, "truth": None},
+     r"truth: missing, but the sidecar keeps the statuses written with it"),
 ])
 def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
                                                          message):
