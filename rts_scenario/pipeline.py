@@ -421,7 +421,8 @@ class Pipeline:
         digest = hashlib.sha256() if options.bus_log else None
         # What the run played, for a re-check of its log (`rts_scenario.recording`).
         truth_sums = TruthChecksums(t.name for t in scene.targets) if options.bus_log else None
-        statuses = StatusRecorder(len(scene.targets)) if options.bus_log else None
+        statuses = (StatusRecorder(len(scene.targets), (t.name for t in scene.targets))
+                    if options.bus_log else None)
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
         # read from disk instead of being built again.
         array, model = solver_inputs(scene.radar, FE_RESPONSES[0])

@@ -223,6 +223,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             "required": ["frames", "targets", "encoding", "data"],
             "properties": {"frames": {"type": "integer", "minimum": 0},
                            "targets": {"type": "integer", "minimum": 0},
+                           "names": {"type": "array", "items": {"type": "string"}},
                            "encoding": {"const": STATUS_ENCODING},
                            "data": {"type": "string"}},
         },
@@ -1044,7 +1045,8 @@ def _status_record(scene: Scenario, sidecar: dict[str, Any] | None,
     if record is None:
         return None
     try:
-        return StatusRecord(record, scene.n_frames, len(scene.targets))
+        return StatusRecord(record, scene.n_frames, len(scene.targets),
+                            (t.name for t in scene.targets))
     except ValueError as exc:
         raise _sidecar_error(log, "statuses", exc) from None
 

@@ -115,10 +115,14 @@ class TruthChecksums:
 
 
 class StatusRecorder:
-    """The statuses a run played, compressed batch by batch (`STATUS_ENCODING`)."""
+    """The statuses a run played, compressed batch by batch (`STATUS_ENCODING`).
 
-    def __init__(self, n_targets: int) -> None:
+    ``names``: the targets' names, in the order of the statuses' columns (the scene's).
+    """
+
+    def __init__(self, n_targets: int, names: Iterable[str] | None = None) -> None:
         self.n_targets = int(n_targets)
+        self.names = None if names is None else list(names)
         self.frames = 0
         self._packer = zlib.compressobj(9)
         self._packed: list[bytes] = []
@@ -132,12 +136,20 @@ class StatusRecorder:
     def to_dict(self) -> dict[str, Any]:
         """Plain data for a sidecar (``statuses``); call once."""
         data = b"".join([*self._packed, self._packer.flush()])
-        return {"frames": self.frames, "targets": self.n_targets, "encoding": STATUS_ENCODING,
+        out: dict[str, Any] = {"frames": self.frames, "targets": self.n_targets}
+        if self.names is not None:
+            out["names"] = list(self.names)
+        return {**out, "encoding": STATUS_ENCODING,
                 "data": base64.b64encode(data).decode("ascii")}
 
 
 class StatusRecord:
     """A `StatusRecorder`'s record, read back batch by batch.
+
+    ``names``: the scene's targets, in its order. Where the record names its columns and they
+    are the same targets listed in another order (a scene file whose targets were reordered
+    since), each target gets its own column; otherwise the columns are taken in order (a
+    target renamed since fails the re-check by the ground truth's checksums).
 
     Raises
     ------
@@ -146,7 +158,8 @@ class StatusRecord:
         ``n_targets`` targets (the message names the field).
     """
 
-    def __init__(self, record: Mapping[str, Any], n_frames: int, n_targets: int) -> None:
+    def __init__(self, record: Mapping[str, Any], n_frames: int, n_targets: int,
+                 names: Iterable[str] | None = None) -> None:
         if record.get("encoding") != STATUS_ENCODING:
             raise ValueError(f"encoding: must be {STATUS_ENCODING!r}, got "
                              f"{record.get('encoding')!r}")
@@ -158,6 +171,17 @@ class StatusRecord:
         except binascii.Error as exc:
             raise ValueError(f"data: not base64 ({exc})") from None
         self.n_targets = n_targets
+        recorded = record.get("names")
+        if recorded is not None and (not isinstance(recorded, list) or len(recorded) != n_targets
+                                     or len(set(map(str, recorded))) != n_targets):
+            raise ValueError(f"names: must list the {n_targets} targets' distinct names, got "
+                             f"{recorded!r}")
+        # Which recorded column is each scene target's (None: the columns in order).
+        self._columns: list[int] | None = None
+        wanted = None if names is None else list(names)
+        if recorded is not None and wanted is not None and set(recorded) == set(wanted) \
+                and list(recorded) != wanted:
+            self._columns = [list(recorded).index(name) for name in wanted]
         self._unpacker = zlib.decompressobj()
         self._tail = self._data
         self._valid = int(np.uint16(sum(Status)))
@@ -176,6 +200,8 @@ class StatusRecord:
         if np.any(status & ~np.uint16(self._valid)):
             raise ValueError(f"data: holds values that are no status (flags must lie within "
                              f"{self._valid:#x})")
+        if self._columns is not None:
+            status = status[:, self._columns]
         return status.astype(np.uint16)
 
     def finish(self) -> None:

@@ -948,3 +948,32 @@ def test_a_method_the_recorded_statuses_make_unused_is_noted(recorded):
     assert again.alignment.notes == ["--method paper is not used: the sidecar keeps the statuses "
                                      "the RTS played (with exact)"]
     assert check_log(scene, recorded, method="exact").alignment.notes == []
+
+
+def test_targets_listed_in_another_order_are_judged_by_their_own_recorded_statuses(tmp_path):
+    # The truck stands 30 m to the left, beyond the rig's coverage: the RTS never played it.
+    # Listed after the car in the scene file the run played, before it in the one re-checked
+    # (no other change: the same ground truth per target), the truck is still the one not
+    # played and the car the one played.
+    text = (ROOT / "scenarios" / "highway_following.scenario.yaml").read_text()
+    text = (text.replace("duration_s: 20.0", "duration_s: 5.0")
+            .replace(", fluctuation: swerling1", "")
+            .replace("position_m: [50.0, 3.5, 1.2]", "position_m: [20.0, 30.0, 1.2]")
+            .replace("../rts_scenario", str(ROOT / "rts_scenario")))
+    head, rest = text.split("targets:\n", 1)
+    body, tail = rest.split("expectations:", 1)
+    car, truck = ("  - name: " + b for b in body.split("  - name: ")[1:])
+    played, reordered = tmp_path / "played.scenario.yaml", tmp_path / "reordered.scenario.yaml"
+    played.write_text(head + "targets:\n" + car + truck + "expectations:" + tail)
+    reordered.write_text(head + "targets:\n" + truck + car + "expectations:" + tail)
+    log = tmp_path / "run.blf"
+    live = run_scene(load_scenario(played), RunOptions(bus_log=str(log))).report
+    targets = {t.name: t for t in live.targets}
+    assert targets["truck-left"].limits == {"out_of_coverage": 100}
+    assert targets["lead-car"].detection_rate == 1.0 and not targets["lead-car"].limits
+    again = check_log(load_scenario(reordered), log)
+    assert again.alignment.truth_matches_recording is True
+    targets = {t.name: t for t in again.report.targets}
+    assert targets["truck-left"].limits == {"out_of_coverage": 100}
+    assert targets["lead-car"].detection_rate == 1.0 and not targets["lead-car"].limits
+    assert again.report.passed == live.passed and again.report.reasons == live.reasons

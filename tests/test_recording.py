@@ -151,3 +151,19 @@ def test_a_status_record_cut_short_or_with_bytes_after_it_is_told_so():
     record.take(250)
     with pytest.raises(ValueError, match="data: holds 3 bytes after the record's end"):
         record.finish()
+
+
+def test_statuses_are_read_back_by_target_name_in_the_scene_s_order():
+    played = statuses()
+    recorder = StatusRecorder(3, ["car", "truck", "bike"])
+    recorder.add(played)
+    data = recorder.to_dict()
+    assert data["names"] == ["car", "truck", "bike"]
+    back = StatusRecord(data, 250, 3, ["bike", "car", "truck"]).take(250)
+    np.testing.assert_array_equal(back, played[:, [2, 0, 1]])
+    # Another set of names (a renamed target, which the truth's checksums fail): in order.
+    np.testing.assert_array_equal(StatusRecord(data, 250, 3, ["van", "car", "truck"]).take(250),
+                                  played)
+    with pytest.raises(ValueError, match=r"names: must list the 3 targets' distinct names, got "
+                                         r"\['car', 'car', 'bike'\]"):
+        StatusRecord({**data, "names": ["car", "car", "bike"]}, 250, 3)
