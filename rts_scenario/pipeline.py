@@ -299,6 +299,8 @@ class Pipeline:
         """
         clock = self.radar.radar_clock
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
+        if not counters.size:  # a radar silent throughout: no phase to number by
+            return counters
         start = clock.counter_start if clock.counter_start is not None else (
             int(counters[0]) if counters.size else 0)
         counters = (counters - start) % self.counter_modulus

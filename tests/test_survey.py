@@ -253,3 +253,18 @@ def test_a_free_radar_on_a_bench_without_bus_times_is_surveyed_by_the_frame_it_s
     rig, result = _survey_free_radar(offset_s, 0.0, bus_times=False)
     np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
     np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
+
+
+@pytest.mark.parametrize("counter_start", [0, None], ids=["started", "free"])
+def test_a_silent_radar_is_surveyed_as_seeing_nothing(counter_start):
+    # No cycle came back (the radar reports on another bus): nothing seen, for a radar
+    # started with the frames and for one running free alike.
+    from dataclasses import replace
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
+    radar = replace(radar, clock=replace(radar.radar_clock, counter_start=counter_start))
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic", noise=False)
+                  ) as bench:
+        bench.output._sink = lambda cycles: None
+        result = survey(rig, radar, bench.play)
+    assert np.isnan(result.seen_az_deg).all() and np.isnan(result.seen_el_deg).all()
