@@ -386,6 +386,9 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
         yield from take(receiver.pop())
     yield from take(receiver.flush())
     stats.update({k: int(v) for k, v in vars(receiver.stats).items()})
+    # Messages before the first cycle's header are the log's too (a log the mapping reads no
+    # header of is not a silent bus).
+    stats["messages"] += skipped
     stats["before_first_cycle"] = skipped
 
 

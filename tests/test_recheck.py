@@ -977,3 +977,22 @@ def test_targets_listed_in_another_order_are_judged_by_their_own_recorded_status
     assert targets["truck-left"].limits == {"out_of_coverage": 100}
     assert targets["lead-car"].detection_rate == 1.0 and not targets["lead-car"].limits
     assert again.report.passed == live.passed and again.report.reasons == live.reasons
+
+
+def test_a_log_the_mapping_reads_no_cycle_of_counts_its_messages(recorded, tmp_path, capsys):
+    # Checked with a third-party radar's mapping, rts-scenario's own messages hold no header
+    # of it: the log is not silent, it holds every message the run recorded.
+    with can.LogReader(str(recorded)) as reader:
+        n_messages = sum(1 for _ in reader)
+    assert n_messages > 400
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    mapping = str(ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml")
+    again = check_log(load_scenario(scene), recorded, mapping=mapping)
+    assert not again.report.passed and again.report.frames["missing"] == 400
+    assert again.report.bus["messages"] == again.report.bus["before_first_cycle"] == n_messages
+    assert not any("silent" in r for r in again.report.reasons)
+    bare = _copy(recorded, tmp_path)
+    Path(str(bare) + ".rts.json").unlink()
+    assert cli.main(["check", scene, "--log", str(bare), "--mapping", mapping]) == 2
+    assert (f"no radar cycle in it ({n_messages} messages, none a Cluster_Status header of "
+            f"mapping 'cluster-list')") in capsys.readouterr().err
