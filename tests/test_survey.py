@@ -268,3 +268,21 @@ def test_a_silent_radar_is_surveyed_as_seeing_nothing(counter_start):
         bench.output._sink = lambda cycles: None
         result = survey(rig, radar, bench.play)
     assert np.isnan(result.seen_az_deg).all() and np.isnan(result.seen_el_deg).all()
+
+
+@pytest.mark.parametrize("clock_off_s", [-3600.0, 1234.5])
+def test_a_free_radar_on_an_interface_with_its_own_clock_is_surveyed(clock_off_s):
+    # The interface stamps the messages with its own clock (seconds since it was plugged in),
+    # not the one the frames' start is known on: the first cycle lies far outside the frames,
+    # and the bus times only time the cycles against each other, as in a run.
+    from dataclasses import replace
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
+    free = replace(radar, clock=replace(radar.radar_clock, counter_start=None))
+    with Pipeline(rig, free, radar_options=RadarOptions(fidelity="analytic", noise=False)
+                  ) as bench:
+        start = bench._scene_origin_s
+        bench._scene_origin_s = lambda: start() + clock_off_s
+        result = survey(rig, free, bench.play)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
