@@ -265,10 +265,14 @@ class Pipeline:
         # output applies frames exactly at their times. An RTS applies a frame after its time
         # (transport, its own update): a cycle measured as the frame is due may still show the
         # frame before, so there each frame is held for two cycles and measured in the second,
-        # a whole cycle after it was due. Frame numbers keep increasing (an RTS applies only a
-        # frame newer than the last).
+        # a whole cycle after it was due. So is it for a radar running free: where in its
+        # cycle it measures is known only to its messages' jitter (`_cycle_numbers`), and a
+        # radar measuring just before the frame changes would be taken for one measuring just
+        # after them (each frame judged by the cycle of the frame before); held for two
+        # cycles, either cycle numbered lies within the frame's hold. Frame numbers keep
+        # increasing (an RTS applies only a frame newer than the last).
         clock = self.radar.radar_clock
-        hold = 1 if self.output.applies_frames_on_time else 2
+        hold = 1 if self.output.applies_frames_on_time and clock.counter_start is not None else 2
         n = np.arange(schedule.n_frames, dtype=np.int64)
         played = schedule if hold == 1 else replace(
             schedule.take(np.repeat(n, hold)),
@@ -276,12 +280,13 @@ class Pipeline:
                          + np.tile(np.arange(hold), schedule.n_frames)))
         self.write(replace(played, t_s=clock.time_of(np.arange(played.n_frames))))
         cycles = [c for c in self.receive(final=True) if c.complete]
-        found = dict(zip(self._cycle_numbers(cycles).tolist(), cycles, strict=True))
+        duration_s = float(played.n_frames) * clock.cycle_s
+        found = dict(zip(self._cycle_numbers(cycles, duration_s).tolist(), cycles, strict=True))
         return [found.get(int(i) * hold + hold - 1,
                           Detections.empty(int(f), float(t), (), complete=False))
                 for i, f, t in zip(n, schedule.frame_index, schedule.t_s, strict=True)]
 
-    def _cycle_numbers(self, cycles: list[Detections]) -> np.ndarray:
+    def _cycle_numbers(self, cycles: list[Detections], duration_s: float) -> np.ndarray:
         """Return the radar's cycle numbers (0 at its clock's start) of received cycles.
 
         Each is a step from the cycle before (`sequential_numbers`), the first nearest 0 for a
@@ -291,16 +296,24 @@ class Pipeline:
         cycles' bus times less the latency (on the line of the profile's cycle through them,
         which averages the jitter out; a cycle within three standard errors of the line's
         phase after a frame change counts as measured at it, as a run's first cycle does).
-        Without those times the first cycle received is taken as cycle 0.
+        Without those times, or with times on another clock (an interface stamping with its
+        own: the first cycle far outside the ``duration_s`` played, `BUS_CLOCK_SLACK_S`), the
+        first cycle received is taken as cycle 0.
         """
         clock = self.radar.radar_clock
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
+        if not counters.size:  # a radar silent throughout: no phase to number by
+            return counters
         start = clock.counter_start if clock.counter_start is not None else (
             int(counters[0]) if counters.size else 0)
         counters = (counters - start) % self.counter_modulus
         bus_t = bus_times(cycles)
         steps = sequential_numbers(counters, self.counter_modulus, bus_t, clock.cycle_s)
         origin = self._scene_origin_s()
+        late_s = duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S
+        if origin is not None and np.isfinite(bus_t[0]) and not (
+                -BUS_CLOCK_SLACK_S <= float(bus_t[0]) - origin <= late_s):
+            origin = None
         if clock.counter_start is not None or origin is None or not np.isfinite(bus_t).all():
             return unwrap_counter(counters[:1], 0, self.counter_modulus) + steps
         measured = bus_t - clock.latency_s - origin - clock.start_offset_s
@@ -417,7 +430,8 @@ class Pipeline:
         digest = hashlib.sha256() if options.bus_log else None
         # What the run played, for a re-check of its log (`rts_scenario.recording`).
         truth_sums = TruthChecksums(t.name for t in scene.targets) if options.bus_log else None
-        statuses = StatusRecorder(len(scene.targets)) if options.bus_log else None
+        statuses = (StatusRecorder(len(scene.targets), (t.name for t in scene.targets))
+                    if options.bus_log else None)
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
         # read from disk instead of being built again.
         array, model = solver_inputs(scene.radar, FE_RESPONSES[0])

@@ -223,6 +223,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             "required": ["frames", "targets", "encoding", "data"],
             "properties": {"frames": {"type": "integer", "minimum": 0},
                            "targets": {"type": "integer", "minimum": 0},
+                           "names": {"type": "array", "items": {"type": "string"}},
                            "encoding": {"const": STATUS_ENCODING},
                            "data": {"type": "string"}},
         },
@@ -282,6 +283,12 @@ def read_sidecar(log: str | Path) -> dict[str, Any] | None:
     if method is not None and method not in SCHEDULE_METHODS:
         raise LogError(f"{path}: method: got {method!r}; allowed values: "
                        f"{', '.join(SCHEDULE_METHODS)}")
+    if data.get("statuses") is not None and data.get("truth") is None:
+        # Written together: an older version's sidecar keeps neither, and one keeping the
+        # statuses alone would leave the scene unchecked.
+        raise LogError(f"{path}: truth: missing, but the sidecar keeps the statuses written "
+                       f"with it (not what `rts-scenario run --record` writes; a log without "
+                       f"its sidecar is aligned by its timestamps)")
     return dict(data)
 
 
@@ -379,6 +386,9 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
         yield from take(receiver.pop())
     yield from take(receiver.flush())
     stats.update({k: int(v) for k, v in vars(receiver.stats).items()})
+    # Messages before the first cycle's header are the log's too (a log the mapping reads no
+    # header of is not a silent bus).
+    stats["messages"] += skipped
     stats["before_first_cycle"] = skipped
 
 
@@ -1038,7 +1048,8 @@ def _status_record(scene: Scenario, sidecar: dict[str, Any] | None,
     if record is None:
         return None
     try:
-        return StatusRecord(record, scene.n_frames, len(scene.targets))
+        return StatusRecord(record, scene.n_frames, len(scene.targets),
+                            (t.name for t in scene.targets))
     except ValueError as exc:
         raise _sidecar_error(log, "statuses", exc) from None
 

@@ -32,13 +32,19 @@ from .schedule.model import Status
 
 # The truth quantities a checksum covers, and the step each is rounded to first: finer than
 # any tolerance a scene can set, coarse enough that another machine's rounding does not move
-# a value across a step (that takes a value within about 1e-10 of a step's middle).
+# a value across a step (that takes a value within about 1e-10 of a step's edge).
 TRUTH_QUANTA: dict[str, float] = {"range_m": 1e-3, "radial_velocity_mps": 1e-3,
                                   "rcs_dbsm": 1e-2, "az_deg": 1e-3, "el_deg": 1e-3}
 # The flags a checksum covers (whether each target-frame could be checked at all).
 TRUTH_FLAGS = ("present", "in_range", "in_velocity")
+# Where the steps' edges lie, in quanta past a multiple of the quantum (sqrt(5) - 2): far
+# from the halves, quarters, tenths... a scene of round numbers puts values on (a car at
+# 2.778 m/s is 9.0285 m away in a frame: exactly a millimetre's middle), so that no such
+# value lies within an ulp of an edge.
+TRUTH_STEP_EDGE = 5**0.5 - 2
 TRUTH_ENCODING = ("per target: the sum modulo 2**64 over frames and quantities of splitmix64 "
-                  "of each quantity rounded to its quantum, its index and its frame's")
+                  "of each quantity rounded to its quantum (steps' edges sqrt(5) - 2 quanta past "
+                  "its multiples), its index and its frame's")
 STATUS_ENCODING = "uint16 little-endian per frame and target (frame-major), zlib, base64"
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -71,7 +77,8 @@ class TruthChecksums:
     def add(self, tracks: Tracks, frames: NDArray[np.int64] | NDArray[np.intp]) -> None:
         """Take a batch's tracks, frames ``frames`` (indices in the scene)."""
         present = tracks.present
-        columns = [np.where(present, np.rint(getattr(tracks, name) / quantum), np.nan)
+        columns = [np.where(present, np.floor(getattr(tracks, name) / quantum
+                                              - TRUTH_STEP_EDGE), np.nan)
                    for name, quantum in TRUTH_QUANTA.items()]
         columns += [getattr(tracks, name).astype(np.float64) for name in TRUTH_FLAGS]
         values = np.stack(columns, axis=-1)  # (F, K, Q)
@@ -108,10 +115,14 @@ class TruthChecksums:
 
 
 class StatusRecorder:
-    """The statuses a run played, compressed batch by batch (`STATUS_ENCODING`)."""
+    """The statuses a run played, compressed batch by batch (`STATUS_ENCODING`).
 
-    def __init__(self, n_targets: int) -> None:
+    ``names``: the targets' names, in the order of the statuses' columns (the scene's).
+    """
+
+    def __init__(self, n_targets: int, names: Iterable[str] | None = None) -> None:
         self.n_targets = int(n_targets)
+        self.names = None if names is None else list(names)
         self.frames = 0
         self._packer = zlib.compressobj(9)
         self._packed: list[bytes] = []
@@ -125,12 +136,20 @@ class StatusRecorder:
     def to_dict(self) -> dict[str, Any]:
         """Plain data for a sidecar (``statuses``); call once."""
         data = b"".join([*self._packed, self._packer.flush()])
-        return {"frames": self.frames, "targets": self.n_targets, "encoding": STATUS_ENCODING,
+        out: dict[str, Any] = {"frames": self.frames, "targets": self.n_targets}
+        if self.names is not None:
+            out["names"] = list(self.names)
+        return {**out, "encoding": STATUS_ENCODING,
                 "data": base64.b64encode(data).decode("ascii")}
 
 
 class StatusRecord:
     """A `StatusRecorder`'s record, read back batch by batch.
+
+    ``names``: the scene's targets, in its order. Where the record names its columns and they
+    are the same targets listed in another order (a scene file whose targets were reordered
+    since), each target gets its own column; otherwise the columns are taken in order (a
+    target renamed since fails the re-check by the ground truth's checksums).
 
     Raises
     ------
@@ -139,7 +158,8 @@ class StatusRecord:
         ``n_targets`` targets (the message names the field).
     """
 
-    def __init__(self, record: Mapping[str, Any], n_frames: int, n_targets: int) -> None:
+    def __init__(self, record: Mapping[str, Any], n_frames: int, n_targets: int,
+                 names: Iterable[str] | None = None) -> None:
         if record.get("encoding") != STATUS_ENCODING:
             raise ValueError(f"encoding: must be {STATUS_ENCODING!r}, got "
                              f"{record.get('encoding')!r}")
@@ -151,6 +171,17 @@ class StatusRecord:
         except binascii.Error as exc:
             raise ValueError(f"data: not base64 ({exc})") from None
         self.n_targets = n_targets
+        recorded = record.get("names")
+        if recorded is not None and (not isinstance(recorded, list) or len(recorded) != n_targets
+                                     or len(set(map(str, recorded))) != n_targets):
+            raise ValueError(f"names: must list the {n_targets} targets' distinct names, got "
+                             f"{recorded!r}")
+        # Which recorded column is each scene target's (None: the columns in order).
+        self._columns: list[int] | None = None
+        wanted = None if names is None else list(names)
+        if recorded is not None and wanted is not None and set(recorded) == set(wanted) \
+                and list(recorded) != wanted:
+            self._columns = [list(recorded).index(name) for name in wanted]
         self._unpacker = zlib.decompressobj()
         self._tail = self._data
         self._valid = int(np.uint16(sum(Status)))
@@ -169,6 +200,8 @@ class StatusRecord:
         if np.any(status & ~np.uint16(self._valid)):
             raise ValueError(f"data: holds values that are no status (flags must lie within "
                              f"{self._valid:#x})")
+        if self._columns is not None:
+            status = status[:, self._columns]
         return status.astype(np.uint16)
 
     def finish(self) -> None:
@@ -177,9 +210,14 @@ class StatusRecord:
             rest = self._unpacker.decompress(self._tail) + self._unpacker.flush()
         except zlib.error as exc:
             raise ValueError(f"data: not zlib-compressed ({exc})") from None
-        if rest or not self._unpacker.eof:
+        if rest:
             raise ValueError("data: holds more frames than it says")
+        if not self._unpacker.eof:
+            raise ValueError("data: ends early: the compressed record is cut short")
+        if self._unpacker.unused_data:
+            raise ValueError(f"data: holds {len(self._unpacker.unused_data)} bytes after the "
+                             f"record's end")
 
 
-__all__ = ["STATUS_ENCODING", "TRUTH_ENCODING", "TRUTH_QUANTA", "StatusRecord",
-           "StatusRecorder", "TruthChecksums"]
+__all__ = ["STATUS_ENCODING", "TRUTH_ENCODING", "TRUTH_QUANTA", "TRUTH_STEP_EDGE",
+           "StatusRecord", "StatusRecorder", "TruthChecksums"]

@@ -326,6 +326,12 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"statuses\.encoding: 'uint16 little-endian .*' was expected"),
     (lambda d: {**d, "truth": {**d["truth"], "targets": {"lead-car": "12"}}},
      r"truth\.targets\.lead-car: '12' does not match"),
+    # Written together: statuses without the truth's checksums is a damaged sidecar, not an
+    # older one (which keeps neither); judged, the scene would go unchecked with a note.
+    (lambda d: {k: v for k, v in d.items() if k != "truth"},
+     r"truth: missing, but the sidecar keeps the statuses written with it"),
+    (lambda d: {**d, "truth": None},
+     r"truth: missing, but the sidecar keeps the statuses written with it"),
 ])
 def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
                                                          message):
@@ -942,3 +948,51 @@ def test_a_method_the_recorded_statuses_make_unused_is_noted(recorded):
     assert again.alignment.notes == ["--method paper is not used: the sidecar keeps the statuses "
                                      "the RTS played (with exact)"]
     assert check_log(scene, recorded, method="exact").alignment.notes == []
+
+
+def test_targets_listed_in_another_order_are_judged_by_their_own_recorded_statuses(tmp_path):
+    # The truck stands 30 m to the left, beyond the rig's coverage: the RTS never played it.
+    # Listed after the car in the scene file the run played, before it in the one re-checked
+    # (no other change: the same ground truth per target), the truck is still the one not
+    # played and the car the one played.
+    text = (ROOT / "scenarios" / "highway_following.scenario.yaml").read_text()
+    text = (text.replace("duration_s: 20.0", "duration_s: 5.0")
+            .replace(", fluctuation: swerling1", "")
+            .replace("position_m: [50.0, 3.5, 1.2]", "position_m: [20.0, 30.0, 1.2]")
+            .replace("../rts_scenario", str(ROOT / "rts_scenario")))
+    head, rest = text.split("targets:\n", 1)
+    body, tail = rest.split("expectations:", 1)
+    car, truck = ("  - name: " + b for b in body.split("  - name: ")[1:])
+    played, reordered = tmp_path / "played.scenario.yaml", tmp_path / "reordered.scenario.yaml"
+    played.write_text(head + "targets:\n" + car + truck + "expectations:" + tail)
+    reordered.write_text(head + "targets:\n" + truck + car + "expectations:" + tail)
+    log = tmp_path / "run.blf"
+    live = run_scene(load_scenario(played), RunOptions(bus_log=str(log))).report
+    targets = {t.name: t for t in live.targets}
+    assert targets["truck-left"].limits == {"out_of_coverage": 100}
+    assert targets["lead-car"].detection_rate == 1.0 and not targets["lead-car"].limits
+    again = check_log(load_scenario(reordered), log)
+    assert again.alignment.truth_matches_recording is True
+    targets = {t.name: t for t in again.report.targets}
+    assert targets["truck-left"].limits == {"out_of_coverage": 100}
+    assert targets["lead-car"].detection_rate == 1.0 and not targets["lead-car"].limits
+    assert again.report.passed == live.passed and again.report.reasons == live.reasons
+
+
+def test_a_log_the_mapping_reads_no_cycle_of_counts_its_messages(recorded, tmp_path, capsys):
+    # Checked with a third-party radar's mapping, rts-scenario's own messages hold no header
+    # of it: the log is not silent, it holds every message the run recorded.
+    with can.LogReader(str(recorded)) as reader:
+        n_messages = sum(1 for _ in reader)
+    assert n_messages > 400
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    mapping = str(ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml")
+    again = check_log(load_scenario(scene), recorded, mapping=mapping)
+    assert not again.report.passed and again.report.frames["missing"] == 400
+    assert again.report.bus["messages"] == again.report.bus["before_first_cycle"] == n_messages
+    assert not any("silent" in r for r in again.report.reasons)
+    bare = _copy(recorded, tmp_path)
+    Path(str(bare) + ".rts.json").unlink()
+    assert cli.main(["check", scene, "--log", str(bare), "--mapping", mapping]) == 2
+    assert (f"no radar cycle in it ({n_messages} messages, none a Cluster_Status header of "
+            f"mapping 'cluster-list')") in capsys.readouterr().err

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rts_scenario.kinematics import compute_tracks
-from rts_scenario.recording import StatusRecord, StatusRecorder, TruthChecksums
+from rts_scenario.recording import TRUTH_STEP_EDGE, StatusRecord, StatusRecorder, TruthChecksums
 from rts_scenario.scenario import load_scenario
 from rts_scenario.schedule.model import Status
 
@@ -43,9 +43,11 @@ def test_one_value_a_quantum_off_changes_that_target_s_checksum_only(tracks, fie
     changed = checksums(replace(tracks, **{field: values}), 3)
     assert changed[tracks.names[k]] != base[tracks.names[k]]
     assert changed[tracks.names[1 - k]] == base[tracks.names[1 - k]]
-    # A hundredth of a quantum towards the value's step is rounding, not an edit.
+    # A hundredth of a quantum towards the middle of the value's step is rounding, not an
+    # edit (the steps' edges lie TRUTH_STEP_EDGE quanta past the quantum's multiples).
     values = getattr(tracks, field).copy()
-    off = values[123, k] / step - np.rint(values[123, k] / step)
+    middle = values[123, k] / step - TRUTH_STEP_EDGE - 0.5
+    off = middle - np.rint(middle)
     values[123, k] -= np.copysign(step / 100, off)
     assert checksums(replace(tracks, **{field: values}), 3) == base
 
@@ -117,3 +119,51 @@ def test_statuses_of_another_scene_or_damaged_are_refused():
     bad.add(np.full((250, 3), 0x100, dtype=np.uint16))
     with pytest.raises(ValueError, match="values that are no status"):
         StatusRecord(bad.to_dict(), 250, 3).take(10)
+
+
+@pytest.mark.parametrize("scene", ["euro-ncap/ccrs", "euro-ncap/ccrm", "hard_too_close"])
+def test_a_truth_one_rounding_off_has_the_same_checksum(scene):
+    # Scenes of round numbers put values exactly on the middle of a millimetre: CCRs's GVT is
+    # 10.4175 m away in frame 5, 9.0285 m in frame 15, 7.6395 m in frame 25. One ulp of another
+    # machine's or version's arithmetic must not tell another scene.
+    loaded = load_scenario(ROOT / "scenarios" / f"{scene}.scenario.yaml")
+    truth = compute_tracks(loaded, loaded.t_s, np.arange(loaded.n_frames))
+    base = checksums(truth, 1)
+    for direction in (np.inf, -np.inf):
+        moved = {name: np.nextafter(getattr(truth, name), direction)
+                 for name in ("range_m", "radial_velocity_mps", "rcs_dbsm", "az_deg", "el_deg")}
+        assert checksums(replace(truth, **moved), 1) == base, direction
+
+
+def test_a_status_record_cut_short_or_with_bytes_after_it_is_told_so():
+    import base64
+
+    recorder = StatusRecorder(3)
+    recorder.add(statuses())
+    data = recorder.to_dict()
+    packed = base64.b64decode(data["data"])
+    for cut in (1, 4):
+        record = StatusRecord({**data, "data": base64.b64encode(packed[:-cut]).decode()}, 250, 3)
+        record.take(250)
+        with pytest.raises(ValueError, match="data: ends early: the compressed record is cut"):
+            record.finish()
+    record = StatusRecord({**data, "data": base64.b64encode(packed + b"xyz").decode()}, 250, 3)
+    record.take(250)
+    with pytest.raises(ValueError, match="data: holds 3 bytes after the record's end"):
+        record.finish()
+
+
+def test_statuses_are_read_back_by_target_name_in_the_scene_s_order():
+    played = statuses()
+    recorder = StatusRecorder(3, ["car", "truck", "bike"])
+    recorder.add(played)
+    data = recorder.to_dict()
+    assert data["names"] == ["car", "truck", "bike"]
+    back = StatusRecord(data, 250, 3, ["bike", "car", "truck"]).take(250)
+    np.testing.assert_array_equal(back, played[:, [2, 0, 1]])
+    # Another set of names (a renamed target, which the truth's checksums fail): in order.
+    np.testing.assert_array_equal(StatusRecord(data, 250, 3, ["van", "car", "truck"]).take(250),
+                                  played)
+    with pytest.raises(ValueError, match=r"names: must list the 3 targets' distinct names, got "
+                                         r"\['car', 'car', 'bike'\]"):
+        StatusRecord({**data, "names": ["car", "car", "bike"]}, 250, 3)

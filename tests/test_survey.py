@@ -201,3 +201,88 @@ def test_a_radar_running_free_is_surveyed_by_when_it_measured_not_by_its_first_c
     assert early == [810]
     np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
     np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
+
+
+def _survey_free_radar(offset_s, jitter_s, bus_times=True):
+    """Survey kit-table1 with a radar running free: ``offset_s`` into its cycle when the
+    frames start, ``jitter_s`` on its messages' latency, one cycle measured before the first
+    frame; ``bus_times``: whether the bench knows the scene's start on the bus's clock."""
+    from dataclasses import replace
+
+    from rts_scenario.detections import Detections
+    from rts_scenario.radar.clock import RadarClock
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
+    free = replace(radar, clock=replace(radar.radar_clock, counter_start=None,
+                                        latency_s=0.05, jitter_s=jitter_s))
+    clock = free.radar_clock
+    own = RadarClock(cycle_s=clock.cycle_s, start_offset_s=offset_s, latency_s=clock.latency_s,
+                     jitter_s=clock.jitter_s, counter_start=811)
+    with Pipeline(rig, free, radar_options=RadarOptions(fidelity="analytic", noise=False)
+                  ) as bench:
+        bench.output.clock = own
+        sink = bench.output._sink
+        if not bus_times:
+            bench._scene_origin_s = lambda: None
+
+        def switched_on_before(cycles):
+            if cycles and cycles[0].cycle == 811:
+                first = cycles[0]
+                cycles = [Detections.empty(810, first.t_s - own.cycle_s), *cycles]
+            sink(cycles)
+
+        bench.output._sink = switched_on_before
+        return rig, survey(rig, free, bench.play)
+
+
+@pytest.mark.parametrize("offset_s, jitter_s", [
+    (0.049, 0.005), (0.045, 0.02), (0.0, 0.02), (0.025, 0.005), (0.001, 0.02)])
+def test_a_free_radar_measuring_near_the_frame_changes_is_surveyed_by_the_frame_it_saw(
+        offset_s, jitter_s):
+    # A radar measuring 1 ms before each frame change, its messages' latency jittering by
+    # +-5 ms: four frames' bus times put its phase within a few ms, on either side of the
+    # change. Each FE is still where the radar saw it while that FE alone was played.
+    rig, result = _survey_free_radar(offset_s, jitter_s)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
+
+
+@pytest.mark.parametrize("offset_s", [0.0, 0.025, 0.049])
+def test_a_free_radar_on_a_bench_without_bus_times_is_surveyed_by_the_frame_it_saw(offset_s):
+    # The first cycle received, measured before any FE played, is not the first FE's.
+    rig, result = _survey_free_radar(offset_s, 0.0, bus_times=False)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
+
+
+@pytest.mark.parametrize("counter_start", [0, None], ids=["started", "free"])
+def test_a_silent_radar_is_surveyed_as_seeing_nothing(counter_start):
+    # No cycle came back (the radar reports on another bus): nothing seen, for a radar
+    # started with the frames and for one running free alike.
+    from dataclasses import replace
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
+    radar = replace(radar, clock=replace(radar.radar_clock, counter_start=counter_start))
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic", noise=False)
+                  ) as bench:
+        bench.output._sink = lambda cycles: None
+        result = survey(rig, radar, bench.play)
+    assert np.isnan(result.seen_az_deg).all() and np.isnan(result.seen_el_deg).all()
+
+
+@pytest.mark.parametrize("clock_off_s", [-3600.0, 1234.5])
+def test_a_free_radar_on_an_interface_with_its_own_clock_is_surveyed(clock_off_s):
+    # The interface stamps the messages with its own clock (seconds since it was plugged in),
+    # not the one the frames' start is known on: the first cycle lies far outside the frames,
+    # and the bus times only time the cycles against each other, as in a run.
+    from dataclasses import replace
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
+    free = replace(radar, clock=replace(radar.radar_clock, counter_start=None))
+    with Pipeline(rig, free, radar_options=RadarOptions(fidelity="analytic", noise=False)
+                  ) as bench:
+        start = bench._scene_origin_s
+        bench._scene_origin_s = lambda: start() + clock_off_s
+        result = survey(rig, free, bench.play)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
