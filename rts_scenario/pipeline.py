@@ -10,7 +10,6 @@ calibration all run through it.
 
 from __future__ import annotations
 
-import hashlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -33,7 +32,7 @@ from .preflight import Preflight, frames_per_batch, preflight, scene_limits
 from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
-from .recording import StatusRecorder, TruthChecksums
+from .recording import PlayedRecord
 from .report import FrameRecord, Report, strict
 from .rig import Rig
 from .scenario import Scenario, load_scenario
@@ -427,11 +426,8 @@ class Pipeline:
                           cycle_s=clock.cycle_s)
         n_frames = scene.n_frames
         t_all = scene.t_s
-        digest = hashlib.sha256() if options.bus_log else None
         # What the run played, for a re-check of its log (`rts_scenario.recording`).
-        truth_sums = TruthChecksums(t.name for t in scene.targets) if options.bus_log else None
-        statuses = (StatusRecorder(len(scene.targets), (t.name for t in scene.targets))
-                    if options.bus_log else None)
+        played = PlayedRecord(t.name for t in scene.targets) if options.bus_log else None
         # The per-rig set-up, once (every batch then finds it in memory); a cached plan is
         # read from disk instead of being built again.
         array, model = solver_inputs(scene.radar, FE_RESPONSES[0])
@@ -458,10 +454,8 @@ class Pipeline:
                                       frame_rate_hz=scene.frame_rate_hz)
             schedule = replace(schedule, frame_index=frames)
             checker.add_frames(checkable(tracks, schedule.status))
-            if digest is not None and truth_sums is not None and statuses is not None:
-                digest.update(schedule.status.tobytes())
-                truth_sums.add(tracks, frames)
-                statuses.add(schedule.status)
+            if played is not None:
+                played.add(frames, tracks, schedule.status)
             mark = timer.add("schedule_s", mark)
             self.write(schedule)
             if track.origin_s is None:  # a stream knows the scene's start once it started it
@@ -521,10 +515,8 @@ class Pipeline:
         if failures:
             report.reasons += failures
             report.passed = False
-        if (options.bus_log and digest is not None and truth_sums is not None
-                and statuses is not None):
-            write_log_sidecar(options.bus_log, scene, self.radar, options, digest.hexdigest(),
-                              truth=truth_sums.to_dict(), statuses=statuses.to_dict(),
+        if options.bus_log and played is not None:
+            write_log_sidecar(options.bus_log, scene, self.radar, options, played,
                               counter_start=None if checker.counter_start is None
                               else (checker.counter_start + scene_first) % self.counter_modulus,
                               playback=report.playback,
@@ -757,21 +749,20 @@ LOG_SIDECAR_SUFFIX = ".rts.json"
 
 
 def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
-                      options: RunOptions, status_digest: str,
+                      options: RunOptions, played: PlayedRecord,
                       counter_start: int | None = None,
                       playback: dict[str, Any] | None = None,
                       send_lateness: dict[str, Any] | None = None,
                       clock: ClockTrack | None = None, first_cycle: int = 0,
-                      cycles: int | None = None, origin_bus_s: float | None = None,
-                      truth: dict[str, Any] | None = None,
-                      statuses: dict[str, Any] | None = None) -> Path:
+                      cycles: int | None = None, origin_bus_s: float | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
     combination), the radar's clock (which counter is which cycle, measured when), the mapping
     the bus speaks,
-    the solver method, and a digest of the statuses the RTS played, so that a re-check that
-    rebuilds the schedule can tell whether it plays the same. ``counter_start`` is the one the
+    the solver method, and what the run played (``played``, `PlayedRecord`: the statuses the
+    RTS played and their digest, and checksums of the ground truth, so that a re-check judges
+    the same target-frames against the same truth). ``counter_start`` is the one the
     run used (learnt, where the profile does not give it); ``playback`` the run's
     (`Playback.to_dict`) and ``send_lateness`` when each frame went out
     (`Playback.send_lateness`). ``clock`` is the clock the run ended with (`ClockTrack`): its
@@ -780,8 +771,6 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones;
     ``origin_bus_s`` the scene's start on the bus's clock, where the run knew it: the log's
     first cycles are numbered from it by their bus times, as live (`Checker.anchor`).
-    ``truth`` (`TruthChecksums.to_dict`) tells a re-check whether the scene's ground truth is
-    the one that played, ``statuses`` (`StatusRecorder.to_dict`) which target-frames played.
     """
     import json
 
@@ -805,11 +794,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                   else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s},
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
-        "status_sha256": status_digest,
-        # Per target, a checksum of the ground truth the run judged by (`TruthChecksums`).
-        "truth": truth,
-        # The statuses the RTS played (`StatusRecorder`): a re-check judges by them.
-        "statuses": statuses,
+        # The statuses the RTS played (a re-check judges by them) and their digest, and per
+        # target a checksum of the ground truth the run judged by (`PlayedRecord`).
+        **played.sidecar_fields(),
         # How the schedule went out and what the RTS said it applied (`Playback.to_dict`):
         # a re-check fails on it as the run did.
         "playback": strict(playback) if playback is not None else None,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import hashlib
 import zlib
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -219,5 +220,31 @@ class StatusRecord:
                              f"record's end")
 
 
+class PlayedRecord:
+    """Everything a recorded run keeps of what it played, batch by batch, for its sidecar.
+
+    The digest of the statuses (``status_sha256``, what sidecars of older versions compare),
+    the ground truth's checksums (`TruthChecksums`) and the statuses (`StatusRecorder`).
+    """
+
+    def __init__(self, names: Iterable[str]) -> None:
+        names = tuple(names)
+        self._digest = hashlib.sha256()
+        self._truth = TruthChecksums(names)
+        self._statuses = StatusRecorder(len(names), names)
+
+    def add(self, frames: NDArray[np.int64] | NDArray[np.intp], tracks: Tracks,
+            status: NDArray[np.uint16]) -> None:
+        """Take a batch: its frames (indices in the scene), tracks and played statuses."""
+        self._digest.update(status.tobytes())
+        self._truth.add(tracks, frames)
+        self._statuses.add(status)
+
+    def sidecar_fields(self) -> dict[str, Any]:
+        """Return the sidecar's ``status_sha256``, ``truth`` and ``statuses``; call once."""
+        return {"status_sha256": self._digest.hexdigest(), "truth": self._truth.to_dict(),
+                "statuses": self._statuses.to_dict()}
+
+
 __all__ = ["STATUS_ENCODING", "TRUTH_ENCODING", "TRUTH_QUANTA", "TRUTH_STEP_EDGE",
-           "StatusRecord", "StatusRecorder", "TruthChecksums"]
+           "PlayedRecord", "StatusRecord", "StatusRecorder", "TruthChecksums"]
