@@ -41,6 +41,10 @@ class Detections:
         checker must not take it as the radar's whole answer.
     bus_t_s : float or None
         When the cycle's first message was on the bus (the bus's clock), if it came over one.
+    host_t_s : float or None
+        When the host received the cycle's first message (the host's wall clock,
+        ``time.time()``, whatever clock the interface stamps ``bus_t_s`` with), if it came
+        over a bus: at least the radar's latency (less its jitter) after it measured.
     """
 
     cycle: int
@@ -53,6 +57,7 @@ class Detections:
     snr_db: FloatArray | None = None
     complete: bool = True
     bus_t_s: float | None = None
+    host_t_s: float | None = None
 
     def __post_init__(self) -> None:
         sizes = set()
@@ -100,6 +105,12 @@ class Detections:
 def bus_times(cycles: Sequence[Detections]) -> NDArray[np.float64]:
     """When each cycle reached the bus (NaN where it did not say)."""
     return np.array([np.nan if c.bus_t_s is None else c.bus_t_s for c in cycles],
+                    dtype=np.float64)
+
+
+def host_times(cycles: Sequence[Detections]) -> NDArray[np.float64]:
+    """When the host received each cycle (NaN where not known; `Detections.host_t_s`)."""
+    return np.array([np.nan if c.host_t_s is None else c.host_t_s for c in cycles],
                     dtype=np.float64)
 
 
@@ -151,5 +162,5 @@ def sequential_numbers(counters: NDArray[np.int64], modulus: int,
 GAP_TOLERANCE_CYCLES = 2.0
 
 
-__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "Detections", "bus_times", "sequential_numbers",
-           "unwrap_counter"]
+__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "Detections", "bus_times", "host_times",
+           "sequential_numbers", "unwrap_counter"]

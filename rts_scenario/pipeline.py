@@ -23,7 +23,7 @@ import numpy as np
 from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
-from .detections import Detections, bus_times, sequential_numbers, unwrap_counter
+from .detections import Detections, bus_times, host_times, sequential_numbers, unwrap_counter
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
@@ -53,6 +53,13 @@ RTS_SETTLE_S = 0.2
 # still be on the clock the scene's start was taken on (s): a radar's cycles from just before
 # the stream started, or one silent for a while. Farther, the interface stamps with its own.
 BUS_CLOCK_SLACK_S = 10.0
+# How long the host may take to receive a radar's message once it was on the bus, at the
+# fastest of a measurement's cycles (the interface's buffering, its driver, the notifier's
+# thread) (s). Where the interface stamps with its own clock, when the host received the
+# cycles places them against a measurement's frames (`Pipeline.play`) within this.
+HOST_DELIVERY_S = 0.01
+# How fast an interface's clock may run against the host's (two crystals' tolerance).
+HOST_DRIFT = 2e-4
 
 
 @dataclass(frozen=True)
@@ -193,8 +200,10 @@ class Pipeline:
             if o.can_interface == "virtual":
                 # In process, the simulated radar's messages go straight to the run's listeners
                 # (no copy, no thread) and keep the time the radar would have sent them: its
-                # measurement time after the run's start, plus its latency and jitter.
+                # measurement time after the run's start, plus its latency and jitter. That
+                # is when the host receives them, on its wall clock.
                 bus: can.BusABC = ListenerBus(self._listeners, self.channel)
+                self.receiver.received_at = _stamped
             else:
                 bus = open_bus(o.can_interface, self.channel, fd=o.can_fd)
             self._buses.append(bus)
@@ -265,11 +274,13 @@ class Pipeline:
         # (transport, its own update): a cycle measured as the frame is due may still show the
         # frame before, so there each frame is held for two cycles and measured in the second,
         # a whole cycle after it was due. So is it for a radar running free: where in its
-        # cycle it measures is known only to its messages' jitter (`_cycle_numbers`), and a
-        # radar measuring just before the frame changes would be taken for one measuring just
-        # after them (each frame judged by the cycle of the frame before); held for two
-        # cycles, either cycle numbered lies within the frame's hold. Frame numbers keep
-        # increasing (an RTS applies only a frame newer than the last).
+        # cycle it measures is known only to its messages' jitter (`_cycle_numbers`), or,
+        # behind an interface stamping with its own clock, to when the host received them
+        # (within `HOST_DELIVERY_S`), and a radar measuring just before the frame changes
+        # would be taken for one measuring just after them (each frame judged by the cycle of
+        # the frame before); held for two cycles, either cycle numbered lies within the
+        # frame's hold. A frame whose cycle may lie further off is not taken. Frame numbers
+        # keep increasing (an RTS applies only a frame newer than the last).
         clock = self.radar.radar_clock
         hold = 1 if self.output.applies_frames_on_time and clock.counter_start is not None else 2
         n = np.arange(schedule.n_frames, dtype=np.int64)
@@ -280,12 +291,18 @@ class Pipeline:
         self.write(replace(played, t_s=clock.time_of(np.arange(played.n_frames))))
         cycles = [c for c in self.receive(final=True) if c.complete]
         duration_s = float(played.n_frames) * clock.cycle_s
-        found = dict(zip(self._cycle_numbers(cycles, duration_s).tolist(), cycles, strict=True))
+        numbers, spread = self._cycle_numbers(cycles, duration_s)
+        found = dict(zip(numbers.tolist(), cycles, strict=True))
+        if spread >= hold:
+            # Each cycle may be up to ``spread`` cycles earlier than numbered: the last of a
+            # frame's hold may be one of the frame before's. None is taken for a frame.
+            found = {}
         return [found.get(int(i) * hold + hold - 1,
                           Detections.empty(int(f), float(t), (), complete=False))
                 for i, f, t in zip(n, schedule.frame_index, schedule.t_s, strict=True)]
 
-    def _cycle_numbers(self, cycles: list[Detections], duration_s: float) -> np.ndarray:
+    def _cycle_numbers(self, cycles: list[Detections],
+                       duration_s: float) -> tuple[np.ndarray, int]:
         """Return the radar's cycle numbers (0 at its clock's start) of received cycles.
 
         Each is a step from the cycle before (`sequential_numbers`), the first nearest 0 for a
@@ -295,31 +312,79 @@ class Pipeline:
         cycles' bus times less the latency (on the line of the profile's cycle through them,
         which averages the jitter out; a cycle within three standard errors of the line's
         phase after a frame change counts as measured at it, as a run's first cycle does).
-        Without those times, or with times on another clock (an interface stamping with its
-        own: the first cycle far outside the ``duration_s`` played, `BUS_CLOCK_SLACK_S`), the
-        first cycle received is taken as cycle 0.
+        With times on another clock (an interface stamping with its own: the first cycle far
+        outside the ``duration_s`` played, `BUS_CLOCK_SLACK_S`), or none, when the host
+        received the cycles places them (`_host_phase_s`), within the host's delivery delay:
+        each cycle is numbered as the latest it may be. Without those either, the first cycle
+        received is taken as cycle 0.
+
+        Returns the numbers and how many cycles earlier any of them may be (0: as numbered).
         """
         clock = self.radar.radar_clock
         counters = np.array([c.cycle for c in cycles], dtype=np.int64)
         if not counters.size:  # a radar silent throughout: no phase to number by
-            return counters
+            return counters, 0
         start = clock.counter_start if clock.counter_start is not None else (
             int(counters[0]) if counters.size else 0)
         counters = (counters - start) % self.counter_modulus
         bus_t = bus_times(cycles)
         steps = sequential_numbers(counters, self.counter_modulus, bus_t, clock.cycle_s)
+        if clock.counter_start is not None:
+            return unwrap_counter(counters[:1], 0, self.counter_modulus) + steps, 0
         origin = self._scene_origin_s()
         late_s = duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S
         if origin is not None and np.isfinite(bus_t[0]) and not (
                 -BUS_CLOCK_SLACK_S <= float(bus_t[0]) - origin <= late_s):
             origin = None
-        if clock.counter_start is not None or origin is None or not np.isfinite(bus_t).all():
-            return unwrap_counter(counters[:1], 0, self.counter_modulus) + steps
+        if origin is None or not np.isfinite(bus_t).all():
+            bounds = self._host_phase_s(cycles, steps)
+            if bounds is None:
+                return steps, 0
+            lo, hi = (int(np.floor((b + TIME_EPS_S) / clock.cycle_s)) for b in bounds)
+            return steps + hi, hi - lo
         measured = bus_t - clock.latency_s - origin - clock.start_offset_s
         phase = float(np.mean(measured - steps * clock.cycle_s))
         # The spread of the mean of uniform jitter over +- jitter_s.
         stderr = clock.jitter_s / np.sqrt(3.0 * max(1, steps.size))
-        return steps + int(np.floor((phase + 3.0 * stderr + TIME_EPS_S) / clock.cycle_s))
+        return steps + int(np.floor((phase + 3.0 * stderr + TIME_EPS_S) / clock.cycle_s)), 0
+
+    def _host_phase_s(self, cycles: list[Detections],
+                      steps: np.ndarray) -> tuple[float, float] | None:
+        """Return bounds of when a free radar measured its first cycle received (``steps`` 0).
+
+        Measured against the measurement's start (and the profile's start offset), from when
+        the host received the cycles (`Detections.host_t_s`, on the clock the start is known
+        on): each arrived the radar's latency (within its jitter) and the delivery delay
+        after it was measured. The delay is unknown but not negative, and that of the fastest
+        cycle at most `HOST_DELIVERY_S`. Where the interface stamped the cycles on its own
+        clock, those stamps time them against each other without the delivery delay (their
+        mean averages the jitter out) and the fastest delivery ties that clock to the host's
+        (within `HOST_DRIFT`). None where the start or a cycle's receipt is not known.
+        """
+        clock = self.radar.radar_clock
+        origin = self._host_origin_s()
+        host_t = host_times(cycles)
+        if origin is None or not np.isfinite(host_t).all():
+            return None
+        # A cycle's arrival on the bus, on the host's clock, had it measured at phase 0.
+        due = origin + clock.start_offset_s + clock.latency_s + steps * clock.cycle_s
+        bus_t = bus_times(cycles)
+        if np.isfinite(bus_t).all():
+            fastest = float(np.min(host_t - bus_t))
+            phase = float(np.mean(bus_t - due)) + fastest
+            spread = (3.0 * clock.jitter_s / np.sqrt(3.0 * max(1, steps.size))
+                      + HOST_DRIFT * float(bus_t.max() - bus_t.min()))
+            return phase - HOST_DELIVERY_S - spread, phase + spread
+        first = float(np.min(host_t - due))
+        return first - clock.jitter_s - HOST_DELIVERY_S, first + clock.jitter_s
+
+    def _host_origin_s(self) -> float | None:
+        """Return the measurement's time 0 on the host's wall clock, where the run knows it.
+
+        What `_scene_origin_s` gives, whatever clock the interface stamps the bus times with.
+        """
+        origin = getattr(self.output, "scene_origin_wall_s", None)
+        return origin if origin is not None else self._bus_origin_s
 
     def _scene_origin_s(self) -> float | None:
         """Return the scene's time 0 on the bus's clock, where the run knows it.
@@ -734,6 +799,11 @@ class CycleTruth:
         self.checker.add_truth(int(n[0]), truth, status[held], other=other,
                                ambiguous=ambiguous)
         return n
+
+
+def _stamped(message: can.Message) -> float:
+    """When the host received a message the simulated radar sent in process: its stamp."""
+    return float(message.timestamp)
 
 
 def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:

@@ -3,6 +3,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from free_radar import behind_own_clock, free_profile
 
 import rts_scenario as rs
 import rts_scenario.cli as cli
@@ -70,6 +71,24 @@ def test_recovers_injected_offsets_on_the_paper_radar(seed):
     calibrated = result.apply(KIT)
     after = grid_errors(calibrated, PAPER, simulated_measure(PAPER, calibrated, errors))
     assert np.nanmax(np.abs(after)) <= 0.01
+
+
+@pytest.mark.parametrize("latency_cycles, offset_s", [(1.5, 0.049), (2.5, 0.0), (3.0, 0.02)])
+def test_a_free_radar_on_an_interface_with_its_own_clock_is_calibrated(latency_cycles, offset_s):
+    # A real radar runs free, one and a half to three cycles late, behind an interface that
+    # stamps with its own clock: each pair's sweep is measured where the radar saw each of its
+    # frames (its cycles placed by when the host received them), not from its first cycle
+    # received, which it measured before the sweep began.
+    from rts_scenario.pipeline import Pipeline
+    from rts_scenario.scenario.model import RadarOptions
+
+    errors = ChannelErrors.random(4, np.random.default_rng(1), phase_deg=180.0, gain_db=1.0)
+    free = free_profile(PAPER, latency_cycles)
+    with Pipeline(KIT, free, errors=errors,
+                  radar_options=RadarOptions(fidelity="analytic", noise=False)) as bench:
+        behind_own_clock(bench, offset_s)
+        result = calibrate(KIT, free, bench.play)
+    recovered_within(result, errors, 0.5, 0.05)
 
 
 def test_the_fit_uses_the_radar_s_estimator():

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from free_radar import behind_own_clock, free_profile
 
 import rts_scenario.cli as cli
 from rts_scenario import RadarProfile, Rig
@@ -206,7 +207,8 @@ def test_a_radar_running_free_is_surveyed_by_when_it_measured_not_by_its_first_c
 def _survey_free_radar(offset_s, jitter_s, bus_times=True):
     """Survey kit-table1 with a radar running free: ``offset_s`` into its cycle when the
     frames start, ``jitter_s`` on its messages' latency, one cycle measured before the first
-    frame; ``bus_times``: whether the bench knows the scene's start on the bus's clock."""
+    frame; ``bus_times``: whether the bench knows the scene's start on the bus's (and the
+    host's) clock."""
     from dataclasses import replace
 
     from rts_scenario.detections import Detections
@@ -224,6 +226,7 @@ def _survey_free_radar(offset_s, jitter_s, bus_times=True):
         sink = bench.output._sink
         if not bus_times:
             bench._scene_origin_s = lambda: None
+            bench._host_origin_s = lambda: None
 
         def switched_on_before(cycles):
             if cycles and cycles[0].cycle == 811:
@@ -286,3 +289,46 @@ def test_a_free_radar_on_an_interface_with_its_own_clock_is_surveyed(clock_off_s
         result = survey(rig, free, bench.play)
     np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
     np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
+
+
+def _survey_free_radar_on_its_own_clock(latency_cycles, offset_s):
+    """Survey kit-table1 with a radar running free ``latency_cycles`` late behind an interface
+    stamping with its own clock, ``offset_s`` into its cycle when the frames start, its three
+    cycles measured before the first frame arriving after it (`free_radar.behind_own_clock`)."""
+    rig = Rig.preset("kit-table1")
+    free = free_profile(RadarProfile.preset("paper"), latency_cycles)
+    with Pipeline(rig, free, radar_options=RadarOptions(fidelity="analytic", noise=False)
+                  ) as bench:
+        behind_own_clock(bench, offset_s)
+        return rig, survey(rig, free, bench.play)
+
+
+@pytest.mark.parametrize("latency_cycles, offset_s", [
+    (1.5, 0.0), (1.5, 0.049), (2.0, 0.001), (2.2, 0.025), (2.7, 0.0499), (3.0, 0.012)])
+def test_a_free_radar_on_an_interface_with_its_own_clock_is_surveyed_by_when_it_measured(
+        latency_cycles, offset_s):
+    # A real radar runs free and reports one and a half to three cycles after it measured:
+    # the cycles it measured before the first frame (nothing played) arrive after the
+    # measurement started, so the first cycle received is not the first frame's. The
+    # interface stamps with its own clock; when the host received each cycle places it. Each
+    # FE is where the radar saw it while that FE alone was played.
+    rig, result = _survey_free_radar_on_its_own_clock(latency_cycles, offset_s)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
+
+
+def test_a_free_radar_whose_cycles_arrival_cannot_place_is_not_surveyed_by_a_guess(
+        monkeypatch):
+    # An interface that may deliver a message 120 ms after it was on the bus: with 50 ms
+    # cycles, a cycle numbered the last of a frame's two-cycle hold may be the last of the
+    # frame before's. No frame's measurement is taken (nothing seen, never a neighbour's FE).
+    import rts_scenario.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "HOST_DELIVERY_S", 0.12)
+    rig, result = _survey_free_radar_on_its_own_clock(2.0, 0.03)
+    assert np.isnan(result.seen_az_deg).all() and np.isnan(result.seen_el_deg).all()
+    # Within 60 ms (a cycle numbered at most one too late: still the frame's own hold), each
+    # FE is where the radar saw it.
+    monkeypatch.setattr(pipeline, "HOST_DELIVERY_S", 0.06)
+    rig, result = _survey_free_radar_on_its_own_clock(2.0, 0.03)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)

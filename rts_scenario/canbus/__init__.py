@@ -15,9 +15,10 @@ from __future__ import annotations
 import itertools
 import operator
 import threading
+import time
 import zlib
 from collections import Counter, OrderedDict, deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -460,6 +461,7 @@ class _Assembly:
     expected: int
     timestamp_s: float | None
     bus_t_s: float | None = None
+    host_t_s: float | None = None
     header: dict[str, float] = field(default_factory=dict)  # its raw values
     parts: dict[int, dict[str, float]] = field(default_factory=dict)
     arrived: dict[int, dict[PartKey, dict[str, float]]] = field(default_factory=dict)
@@ -514,11 +516,18 @@ class DetectionReceiver(can.Listener):
     range of cycles after the one before (less `GAP_TOLERANCE_CYCLES`) starts afresh: every
     counter remembered is from before that silence, so one that comes again is a new cycle,
     not a copy (an 8-bit counter repeats after 12.8 s of 50 ms cycles).
+
+    Each cycle keeps when its header was on the bus (the message's timestamp, on whatever
+    clock the interface stamps with) and when the host received it: ``received_at(message)``,
+    the host's wall clock (`time.time`) when the message is handed over, by default.
     """
 
-    def __init__(self, mapping: CanMapping | None = None, cycle_s: float | None = None) -> None:
+    def __init__(self, mapping: CanMapping | None = None, cycle_s: float | None = None,
+                 received_at: Callable[[can.Message], float] | None = None) -> None:
         self.mapping = mapping or CanMapping.builtin()
         self.cycle_s = cycle_s
+        self.received_at: Callable[[can.Message], float] = (
+            received_at or (lambda message: time.time()))
         db = self.mapping.db
         self._header = db.get_message_by_name(self.mapping.header)
         m = self.mapping
@@ -642,14 +651,16 @@ class DetectionReceiver(can.Listener):
             stats.decode_errors += 1
             return
         if message is self._header:
-            self._on_header(values, float(msg.timestamp))  # type: ignore[arg-type]
+            self._on_header(values, float(msg.timestamp),  # type: ignore[arg-type]
+                            float(self.received_at(msg)))
             return
         page = None if mux is None else int(values[mux])  # type: ignore[call-overload, arg-type]
         part = (message.frame_id, page)  # the raw page id
         if part in self._read:  # else a page the mapping does not read (extended information)
             self._on_detection(part, values)  # type: ignore[arg-type]
 
-    def _on_header(self, raw: dict[str, float], bus_t_s: float | None = None) -> None:
+    def _on_header(self, raw: dict[str, float], bus_t_s: float | None = None,
+                   host_t_s: float | None = None) -> None:
         m = self.mapping
         values: dict[str, float] = {
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
@@ -676,7 +687,7 @@ class DetectionReceiver(can.Listener):
         frame = _Assembly(
             counter=counter, expected=int(sum(values[c] for c in m.count)),
             timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s,
-            header=dict(raw))
+            host_t_s=host_t_s, header=dict(raw))
         self._open[counter] = frame
         self._current = frame
         for part, early in self._waiting.pop(counter % self._low_modulus, []):
@@ -789,7 +800,8 @@ class DetectionReceiver(can.Listener):
         if self._current is frame and not complete:
             self._current = None
         self._ready.append(Detections(cycle=counter, t_s=frame.timestamp_s, complete=complete,
-                                      bus_t_s=frame.bus_t_s, **self._quantities(frame)))
+                                      bus_t_s=frame.bus_t_s, host_t_s=frame.host_t_s,
+                                      **self._quantities(frame)))
 
     def _quantities(self, frame: _Assembly) -> dict[str, np.ndarray]:
         """Arrays of the quantities the mapping carries (polar, rts-scenario's names)."""
