@@ -158,6 +158,9 @@ class Pipeline:
         # Whether the cycles' bus times were found on another clock than the scene's start.
         self._bus_clock_checked = self._bus_clock_foreign = False
         self.output: Output | None = None
+        self._new_output: Callable[[], Output] | None = None
+        # Whether a measurement (`play`) was made: the next starts a stream of its own.
+        self._measured = False
         # A private name that does not end in digits (MF4 logs read those as a channel number).
         self.channel = options.can_channel or f"rts-scenario-{id(self):x}-detections"
         try:
@@ -177,7 +180,8 @@ class Pipeline:
                                  or RadarOptions(), open_publisher=self._open_publisher,
                                  rng=rng if rng is not None else np.random.default_rng(0),
                                  errors=errors)
-            self.output = output_class(name).for_run(argument, context)
+            self._new_output = lambda: output_class(name).for_run(argument, context)
+            self.output = self._new_output()
         except BaseException:
             self.close()
             raise
@@ -268,6 +272,16 @@ class Pipeline:
         incomplete.
         """
         assert self.output is not None
+        if self._measured:
+            # Each measurement is a stream of its own, as each run is: its frames paced from
+            # its own start and its cycles numbered from it (an RTS, and `emulate`, start a
+            # stream per sender). A stream that went on would have sent this one's frames at
+            # the first's times, all at once.
+            self.output.close()
+            self.output = None
+            assert self._new_output is not None
+            self.output = self._new_output()
+        self._measured = True
         self.receiver.reset()
         # Each frame is held for one cycle of the radar's clock and measured in it, where the
         # output applies frames exactly at their times. An RTS applies a frame after its time

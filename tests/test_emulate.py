@@ -145,11 +145,6 @@ def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
     np.testing.assert_allclose(seen.seen_el_deg, reference.seen_el_deg, atol=0.006)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "each Pipeline.play restarts the pattern's times at 0, but a paced UDP stream keeps the "
-    "first measurement's start: a second measurement on one bench (calibrate plays one FE pair "
-    "at a time) goes out at once and its cycles are numbered from the first's; a design change "
-    "(one timeline per bench, or a new stream per measurement)"))
 def test_a_second_measurement_over_udp_is_paced_and_numbered_like_the_first():
     # `calibrate --output udp://...` measures one FE pair after the other on one bench: each
     # measurement must be played in real time and its cycles found as the first's were.
