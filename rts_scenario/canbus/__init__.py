@@ -78,7 +78,10 @@ class ListenerBus(can.BusABC):
 
 def _checksum(data: bytes | bytearray, position: int) -> int:
     """Low 8 bits of the CRC-32 of the payload without its checksum byte."""
-    return zlib.crc32(data[position + 1 :], zlib.crc32(data[:position])) & 0xFF
+    crc = zlib.crc32(data[:position])
+    if position + 1 < len(data):  # (most often the checksum is the last byte)
+        crc = zlib.crc32(data[position + 1 :], crc)
+    return crc & 0xFF
 
 
 def _limits(sig: cantools.database.can.Signal) -> tuple[float, float]:
@@ -212,33 +215,38 @@ class DetectionPublisher:
         send = fits & ~over
         sent = np.bincount(cycle_of[send], minlength=len(frames))
         index = rank[send]
-        # Raw values per part, converted at once; then each cycle's header and parts in order.
+        # Raw values per part, converted at once, and packed; then each cycle's header and
+        # parts in order.
+        detection_cycle = cycle_of[send]
+        low_counter = (np.array([f.cycle for f in frames], dtype=np.int64)
+                       % layout.frame_counter_modulus)[detection_cycle].astype(np.float64)
+        frame_counter = m.frame_counter if m.frame_counter in layout.signals else None
         parts = []
         for codec in layout.part_codecs:
-            columns = [(name, codec.raw_column(name, values[layout.row[name], send]))
-                       for name in codec.carried if name != m.index]
-            columns.append((m.index, codec.raw_column(m.index, index.astype(np.float64))))
-            parts.append((codec, columns))
+            columns: dict[str, list[int] | list[float]] = {}
+            if frame_counter in codec.signals:  # the cycle's low bits, on every detection
+                columns[frame_counter] = codec.raw_column(frame_counter, low_counter)
+            for name in codec.carried:
+                if name != m.index:
+                    columns[name] = codec.raw_column(name, values[layout.row[name], send])
+            columns[m.index] = codec.raw_column(m.index, index.astype(np.float64))
+            try:  # the packer refuses a value its bits cannot carry: never wrapped, never cut
+                payloads = codec.encode_rows(columns, len(index))
+            except (OverflowError, TypeError, KeyError, ValueError) as exc:
+                raise OutputError(f"CAN {codec.message.name}: {exc}") from None
+            parts.append((codec.frame_id, codec.extended, self.fd or codec.is_fd, payloads))
         header = layout.header_codec
-        frame_counter = m.frame_counter if m.frame_counter in layout.signals else None
+        bus_send, message = self.bus.send, can.Message
         done = 0
-        for c, frame in enumerate(frames):
-            bus_time = float(times[c])
-            self._send(header, layout.header_values(frame, int(sent[c])), bus_time)
-            bases = []
-            for codec, columns in parts:
-                base = dict(codec.defaults)
-                if frame_counter in base:
-                    base[frame_counter] = codec.raw(
-                        frame_counter, frame.cycle % layout.frame_counter_modulus)
-                bases.append((codec, base, columns))
-            for i in range(done, done + int(sent[c])):  # one encoded message (or page) each
-                for codec, base, columns in bases:
-                    raw = base.copy()
-                    for name, column in columns:
-                        raw[name] = column[i]
-                    self._send(codec, raw, bus_time)
-            done += int(sent[c])
+        for frame, bus_time, count in zip(frames, times.tolist(), sent.tolist(), strict=True):
+            self._send(header, layout.header_values(frame, count), bus_time)
+            for i in range(done, done + count):  # one message (or page) each
+                for frame_id, extended, is_fd, payloads in parts:
+                    bus_send(message(arbitration_id=frame_id, data=payloads[i],
+                                     is_extended_id=extended, is_fd=is_fd,
+                                     timestamp=bus_time, check=False))
+                    self.sent += 1
+            done += count
 
 
 class _Codec:
@@ -289,7 +297,7 @@ class _Codec:
         ints: list[int] = np.rint(raw).astype(np.int64).tolist()
         return ints
 
-    def encode(self, raw: dict[str, int | float]) -> bytes:
+    def encode(self, raw: dict[str, int | float]) -> bytearray:
         """Pack raw values (every signal's) into the message's bytes, checksum filled in.
 
         cantools' compiled formats pack the big- and little-endian signals; their union is the
@@ -297,18 +305,34 @@ class _Codec:
         """
         formats = self.formats
         if not self._big:  # the little-endian format packs the bytes in reverse
-            data = formats.little_endian.pack(raw)[::-1]
+            data = bytearray(formats.little_endian.pack(raw)[::-1])
         elif not self._little:
-            data = formats.big_endian.pack(raw)
+            data = bytearray(formats.big_endian.pack(raw))
         else:
             packed = (int.from_bytes(formats.big_endian.pack(raw), "big")
                       | int.from_bytes(formats.little_endian.pack(raw), "little"))
-            data = packed.to_bytes(self.length, "big")
-        if self.checksum is None:
-            return data
-        out = bytearray(data)
-        out[self.checksum] = _checksum(data, self.checksum)
-        return bytes(out)
+            data = bytearray(packed.to_bytes(self.length, "big"))
+        position = self.checksum
+        if position is not None:
+            data[position] = _checksum(data, position)
+        return data
+
+    def encode_rows(self, columns: dict[str, list[int] | list[float]],
+                    n: int) -> list[bytearray]:
+        """Pack ``n`` messages as `encode` packs each.
+
+        Message ``i`` takes each column's ``i``-th raw value, and its defaults for the signals
+        without a column.
+        """
+        defaults, encode = self.defaults, self.encode
+        pairs = list(columns.items())
+        out = []
+        for i in range(n):
+            raw = defaults.copy()
+            for name, column in pairs:
+                raw[name] = column[i]
+            out.append(encode(raw))
+        return out
 
     def decode(self, data: bytes | bytearray) -> dict[str, int | float]:
         """Unpack a message's raw values (as `cantools.database.utils.decode_data` does).
@@ -421,9 +445,9 @@ class _MappedLayout:
             values[name] = header.raw(name, part)
             count -= part
         if m.timestamp is not None:
-            low, high = self.timestamp_range
+            low, high = self.timestamp_range  # (NaN stays NaN, as the packer refuses it)
             values[m.timestamp] = header.raw(m.timestamp,
-                                             float(np.clip(frame.t_s or 0.0, low, high)))
+                                             min(max(float(frame.t_s or 0.0), low), high))
         return values
 
 
@@ -453,11 +477,27 @@ class BusStats:
                     or self.conflicts)
 
 
+class _PartRule:
+    """One part (message or page) of a detection the receiver reads, and what it takes."""
+
+    __slots__ = ("key", "needs", "scalings", "whole_alone")
+
+    def __init__(self, key: PartKey, scalings: tuple[tuple[str, float, float], ...],
+                 needs: tuple[frozenset[PartKey], ...]) -> None:
+        self.key = key
+        # The mapped signals whose DBC scale or offset must be applied: (name, scale, offset).
+        self.scalings = scalings
+        # The ways a detection is whole that this part belongs to; alone, it may be one.
+        self.needs = needs
+        self.whole_alone = any(need <= {key} for need in needs)
+
+
 @dataclass
 class _Assembly:
     """A cycle being reassembled from the bus."""
 
     counter: int
+    low: int  # the low bits of the counter its detection messages carry
     expected: int
     timestamp_s: float | None
     bus_t_s: float | None = None
@@ -467,23 +507,29 @@ class _Assembly:
     arrived: dict[int, dict[PartKey, dict[str, float]]] = field(default_factory=dict)
     whole: set[int] = field(default_factory=set)  # detections whole so far
 
-    def add(self, index: int, part: PartKey, values: dict[str, float],
-            needed: tuple[frozenset[PartKey], ...]) -> bool | None:
+    def add(self, index: int, rule: _PartRule, values: dict[str, float]) -> bool | None:
         """Add one part of a detection.
 
         Returns True if it is new, False if that part had come already with the same values
         (a copy), None if it had come with other values (the first ones are kept).
         """
+        part = rule.key
         arrived = self.arrived.get(index)
         if arrived is None:
-            arrived = self.arrived[index] = {}
-            self.parts[index] = {}
-        elif part in arrived:
+            self.arrived[index] = {part: values}
+            self.parts[index] = values.copy()
+            if rule.whole_alone:
+                self.whole.add(index)
+            return True
+        if part in arrived:
             return False if _same(arrived[part], values) else None
         arrived[part] = values
         self.parts[index].update(values)
-        if index not in self.whole and any(arrived.keys() >= need for need in needed):
-            self.whole.add(index)
+        if index not in self.whole:
+            for need in rule.needs:  # the ways of being whole this part is one of
+                if arrived.keys() >= need:
+                    self.whole.add(index)
+                    break
         return True
 
     def complete(self) -> bool:
@@ -499,6 +545,12 @@ def _same(known: dict[str, float], values: dict[str, float]) -> bool:
             return False
     return True
 
+
+# How the receiver takes a message of one identifier: the message, its checksum byte and
+# multiplexer signal (if any), its compiled decoder (None if multiplexed) and its part (the page
+# is the multiplexer's value, if any).
+_Route = tuple[cantools.database.can.Message, int | None, str | None,
+               Callable[[bytes | bytearray], dict[str, int | float]] | None, PartKey]
 
 # Cycles kept open for late or reordered parts; older incomplete ones are handed on as such.
 OPEN_CYCLES = 16
@@ -541,9 +593,11 @@ class DetectionReceiver(can.Listener):
                    for i, message in self._detection_ids.items()}
         layouts[self._header.frame_id] = (
             self._header, _checksum_position(self._header, m.header_checksum), None)
-        # Messages without a multiplexer decode through their compiled codec directly.
-        self._layouts = {i: (message, checksum, mux,
-                             None if mux is not None else _Codec(message, None, None))
+        # Messages without a multiplexer decode through their compiled codec directly (and are
+        # one part: (identifier, None)); cantools picks a multiplexed one's page.
+        self._layouts: dict[int, _Route] = {i: (message, checksum, mux,
+                             None if mux is not None else _Codec(message, None, None).decode,
+                             (i, None))
                          for i, (message, checksum, mux) in layouts.items()}
         self._frame_counter, self._index = m.frame_counter, m.index
         # Parts keep raw values; quantities are scaled when a cycle is handed on.
@@ -560,14 +614,29 @@ class DetectionReceiver(can.Listener):
                               else lambda row: [row[self._field_names[0]]])
         scale = np.array([f.scale for f in fields.values()], dtype=np.float64)
         offset = np.array([f.offset for f in fields.values()], dtype=np.float64)
-        self._to_quantity = (scale, offset)
+        # The mapping's scale and offset per field (None: the DBC's values as they are).
+        self._to_quantity = (None if np.all(scale == 1) and np.all(offset == 0)
+                             else (scale, offset))
+        # The quantities read as they are (all of a polar mapping's): name, column.
+        direct = [("rcs_dbsm", "rcs_dbsm"), ("snr_db", "snr_db")]
+        if m.form == "polar":
+            direct += [("range_m", "range_m"), ("azimuth_deg", "az_deg"),
+                       ("elevation_deg", "el_deg"), ("radial_velocity_mps", "radial_velocity_mps")]
+        self._direct = [(name, self._field_column[m.fields[q].signal])
+                        for q, name in direct if q in m.fields]
         # Per message, the mapped signals whose DBC scale or offset must be applied (messages
         # may scale a signal of the same name differently, e.g. classic and CAN FD).
-        self._scalings = {
-            i: [(sg.name, sg.conversion.scale, sg.conversion.offset) for sg in message.signals
-                if sg.name in fields and not (sg.conversion.scale == 1
-                                              and sg.conversion.offset == 0)]
+        scalings = {
+            i: tuple((sg.name, sg.conversion.scale, sg.conversion.offset)
+                     for sg in message.signals
+                     if sg.name in fields and not (sg.conversion.scale == 1
+                                                   and sg.conversion.offset == 0))
             for i, message in self._detection_ids.items()}
+        # Per part the mapping reads: its scalings and the ways of being whole it is one of.
+        self._rules = {part: _PartRule(part, scalings[part[0]],
+                                       tuple(need for need in self._needed
+                                             if part in need or not need))
+                       for part in self._read}
         self.stats = BusStats()
         self._counter_modulus = 1 << self._header.get_signal_by_name(m.counter).length
         detection = {sg.name: sg for n in m.messages for sg in db.get_message_by_name(n).signals}
@@ -576,7 +645,15 @@ class DetectionReceiver(can.Listener):
                              if m.frame_counter in detection else 256)
         # The notifier's thread feeds messages while the run's thread takes cycles.
         self._lock = threading.Lock()
+        self._index_of, self._low_of = (self._whole_number(self._index),
+                                        self._whole_number(self._frame_counter))
         self.reset()
+
+    def _whole_number(self, name: str | None) -> Callable[[float], int]:
+        """Return how a control signal's raw value becomes its physical whole number."""
+        if name is None or name in self._identity:
+            return int
+        return lambda raw: int(self._physical(name, raw))
 
     def _physical(self, name: str, raw: float) -> float:
         """Return a detection signal's physical value (the DBC's scale and offset applied)."""
@@ -600,7 +677,7 @@ class DetectionReceiver(can.Listener):
         self._latest = -1
         self._last_header_t = np.nan  # when the last header reached the bus
         # Detections that came before their cycle's header, by counter (low 8 bits).
-        self._waiting: OrderedDict[int, list[tuple[PartKey, dict[str, float]]]] = OrderedDict()
+        self._waiting: OrderedDict[int, list[tuple[_PartRule, dict[str, float]]]] = OrderedDict()
 
     @property
     def pending(self) -> int:
@@ -637,15 +714,15 @@ class DetectionReceiver(can.Listener):
         if known is None:
             stats.unknown_ids += 1
             return
-        message, checksum, mux, codec = known
+        message, checksum, mux, decode, part = known
         data = msg.data
-        if checksum is not None and (len(data) <= checksum
-                                     or data[checksum] != _checksum(data, checksum)):
+        if checksum is not None and (
+                len(data) <= checksum or data[checksum] != _checksum(data, checksum)):
             stats.checksum_errors += 1
             return
         try:
             # Raw values: cantools' compiled codec, or (multiplexed) cantools picks the page.
-            values = (codec.decode(data) if codec is not None else
+            values = (decode(data) if decode is not None else
                       message.decode(bytes(data), decode_choices=False, scaling=False))
         except (cantools.database.DecodeError, ValueError, KeyError, TypeError):
             stats.decode_errors += 1
@@ -654,10 +731,11 @@ class DetectionReceiver(can.Listener):
             self._on_header(values, float(msg.timestamp),  # type: ignore[arg-type]
                             float(self.received_at(msg)))
             return
-        page = None if mux is None else int(values[mux])  # type: ignore[call-overload, arg-type]
-        part = (message.frame_id, page)  # the raw page id
-        if part in self._read:  # else a page the mapping does not read (extended information)
-            self._on_detection(part, values)  # type: ignore[arg-type]
+        if mux is not None:  # the raw page id
+            part = (message.frame_id, int(values[mux]))  # type: ignore[call-overload, arg-type]
+        rule = self._rules.get(part)
+        if rule is not None:  # else a page the mapping does not read (extended information)
+            self._on_detection(rule, values)  # type: ignore[arg-type]
 
     def _on_header(self, raw: dict[str, float], bus_t_s: float | None = None,
                    host_t_s: float | None = None) -> None:
@@ -685,26 +763,27 @@ class DetectionReceiver(can.Listener):
         else:
             self._latest = counter
         frame = _Assembly(
-            counter=counter, expected=int(sum(values[c] for c in m.count)),
+            counter=counter, low=counter % self._low_modulus,
+            expected=int(sum(values[c] for c in m.count)),
             timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s,
             host_t_s=host_t_s, header=dict(raw))
         self._open[counter] = frame
         self._current = frame
-        for part, early in self._waiting.pop(counter % self._low_modulus, []):
+        for rule, early in self._waiting.pop(counter % self._low_modulus, []):
             self.stats.orphans -= 1
-            self._attach(frame, part, early)
+            self._attach(frame, rule, early)
         if frame.complete():
             self._finish(counter)
         while len(self._open) > OPEN_CYCLES:
             self._finish(next(iter(self._open)))
 
-    def _on_detection(self, part: PartKey, values: dict[str, float]) -> None:
+    def _on_detection(self, rule: _PartRule, values: dict[str, float]) -> None:
         frame = self._current
         name = self._frame_counter
         low_counter = values.get(name) if name else None
-        if name and low_counter is not None:
-            low = int(self._physical(name, low_counter))
-            if frame is None or (frame.counter % self._low_modulus) != low:
+        if low_counter is not None:
+            low = self._low_of(low_counter)
+            if frame is None or frame.low != low:
                 # Late part of an earlier cycle, or early part of one whose header is late.
                 self.stats.reordered += 1
                 frame = next((f for c, f in reversed(self._open.items())
@@ -720,9 +799,9 @@ class DetectionReceiver(can.Listener):
                         # Its cycle was handed on: a copy, a conflict, or (the cycle went on
                         # incomplete) too late.
                         if self._recent[done]:
-                            self._after(done, part, values)
+                            self._after(done, rule, values)
                         return
-                    self._waiting.setdefault(low, []).append((part, values))
+                    self._waiting.setdefault(low, []).append((rule, values))
                     self.stats.orphans += 1  # until its header comes
                     while len(self._waiting) > OPEN_CYCLES:
                         self._waiting.popitem(last=False)
@@ -734,29 +813,32 @@ class DetectionReceiver(can.Listener):
             # Its cycle was handed on: a copy or a conflict if it was whole, else too late to
             # count.
             if self._recent.get(frame.counter, False):
-                self._after(frame.counter, part, values)
+                self._after(frame.counter, rule, values)
             else:
                 self.stats.orphans += 1
             return
-        self._attach(frame, part, values)
-        if frame.complete():
+        if self._attach(frame, rule, values) and frame.complete():
             self._finish(frame.counter)
 
-    def _scaled(self, part: PartKey, values: dict[str, float]) -> int:
+    def _scaled(self, rule: _PartRule, values: dict[str, float]) -> int:
         """Scale a part's mapped signals to the DBC's physical values; return its index."""
-        for name, scale, offset in self._scalings[part[0]]:  # raw -> the DBC's physical
+        for name, scale, offset in rule.scalings:  # raw -> the DBC's physical
             if name in values:
                 values[name] = values[name] * scale + offset
-        return int(self._physical(self._index, values[self._index]))
+        return self._index_of(values[self._index])
 
-    def _attach(self, frame: _Assembly, part: PartKey, values: dict[str, float]) -> None:
-        added = frame.add(self._scaled(part, values), part, values, self._needed)
+    def _attach(self, frame: _Assembly, rule: _PartRule, values: dict[str, float]) -> bool:
+        """Add a part to its cycle; return whether it was new (else a copy or a conflict)."""
+        added = frame.add(self._scaled(rule, values), rule, values)
+        if added:
+            return True
         if added is False:
             self.stats.duplicates += 1
-        elif added is None:
+        else:
             self.stats.conflicts += 1
+        return False
 
-    def _after(self, counter: int, part: PartKey, values: dict[str, float]) -> None:
+    def _after(self, counter: int, rule: _PartRule, values: dict[str, float]) -> None:
         """Count a part of a whole cycle already handed on: a copy, or a conflict.
 
         A conflict (another value, or a detection beyond the count its header announced)
@@ -767,8 +849,8 @@ class DetectionReceiver(can.Listener):
         if frame is None:
             self.stats.duplicates += 1
             return
-        index = self._scaled(part, values)
-        known = frame.arrived.get(index, {}).get(part)
+        index = self._scaled(rule, values)
+        known = frame.arrived.get(index, {}).get(rule.key)
         if known is not None and _same(known, values):
             self.stats.duplicates += 1
         else:
@@ -806,40 +888,35 @@ class DetectionReceiver(can.Listener):
     def _quantities(self, frame: _Assembly) -> dict[str, np.ndarray]:
         """Arrays of the quantities the mapping carries (polar, rts-scenario's names)."""
         m = self.mapping
-        rows = [frame.parts[i] for i in sorted(frame.parts)]
+        parts = frame.parts
+        rows = [parts[i] for i in sorted(parts)]
         try:  # every mapped signal arrived (a whole cycle)
-            raw = np.array([self._field_getter(r) for r in rows], dtype=np.float64)
+            raw = np.array(list(map(self._field_getter, rows)), dtype=np.float64)
         except KeyError:
             raw = np.array([[r.get(name, np.nan) for name in self._field_names] for r in rows],
                            dtype=np.float64)
-        # The DBC's physical values -> the mapping's quantities, column by column.
-        values = raw.reshape(len(rows), len(self._field_names)) * self._to_quantity[0] \
-            + self._to_quantity[1]
+        # The DBC's physical values -> the mapping's quantities, one row per field.
+        values = raw.reshape(len(rows), len(self._field_names)).T
+        if self._to_quantity is not None:
+            scale, offset = self._to_quantity
+            values = values * scale[:, None] + offset[:, None]
+        out = {name: values[column] for name, column in self._direct}
+        if m.form == "polar":
+            return out
 
         def get(q: str) -> np.ndarray:
-            return values[:, self._field_column[m.fields[q].signal]]
+            return values[self._field_column[m.fields[q].signal]]
 
-        out: dict[str, np.ndarray] = {}
-        if m.form == "polar":
-            for q, name in (("range_m", "range_m"), ("azimuth_deg", "az_deg"),
-                            ("elevation_deg", "el_deg"),
-                            ("radial_velocity_mps", "radial_velocity_mps")):
-                if q in m.fields:
-                    out[name] = get(q)
-        else:
-            x, y = get("x_m"), get("y_m")
-            z = get("z_m") if "z_m" in m.fields else np.zeros_like(x)
-            rng = np.sqrt(x * x + y * y + z * z)
-            out["range_m"] = rng
-            out["az_deg"] = np.degrees(np.arctan2(y, x))
-            if "z_m" in m.fields:
-                out["el_deg"] = np.degrees(np.arctan2(z, np.hypot(x, y)))
-            if "vx_mps" in m.fields and "vy_mps" in m.fields:
-                out["radial_velocity_mps"] = (x * get("vx_mps") + y * get("vy_mps")) / np.where(
-                    rng > 0, rng, 1.0)
-        for q in ("rcs_dbsm", "snr_db"):
-            if q in m.fields:
-                out[q] = get(q)
+        x, y = get("x_m"), get("y_m")
+        z = get("z_m") if "z_m" in m.fields else np.zeros_like(x)
+        rng = np.sqrt(x * x + y * y + z * z)
+        out["range_m"] = rng
+        out["az_deg"] = np.degrees(np.arctan2(y, x))
+        if "z_m" in m.fields:
+            out["el_deg"] = np.degrees(np.arctan2(z, np.hypot(x, y)))
+        if "vx_mps" in m.fields and "vy_mps" in m.fields:
+            out["radial_velocity_mps"] = (x * get("vx_mps") + y * get("vy_mps")) / np.where(
+                rng > 0, rng, 1.0)
         return out
 
 
