@@ -600,7 +600,8 @@ class DetectionReceiver(can.Listener):
                              (i, None))
                          for i, (message, checksum, mux) in layouts.items()}
         self._frame_counter, self._index = m.frame_counter, m.index
-        # Parts keep raw values; quantities are scaled when a cycle is handed on.
+        # Parts are scaled to the DBC's physical values as they arrive (`_scaled`); the mapping's
+        # own scale and offset are applied when a cycle is handed on.
         self._header_signals = {sg.name: sg for sg in self._header.signals}
         # Control signals (index, low counter) are read by name; they scale alike everywhere.
         self._signals = {sg.name: sg for message in self._detection_ids.values()
