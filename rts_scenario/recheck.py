@@ -704,8 +704,13 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         used where the sidecar keeps the statuses the RTS played.
     """
     sidecar = read_sidecar(log)
-    if mapping is None and sidecar is not None and sidecar.get("mapping"):
-        mapping = sidecar["mapping"]
+    recorded_mapping = (sidecar or {}).get("mapping")
+    # The mapping the run spoke: its sidecar's, else rts-scenario's own messages.
+    builtin = Path(__file__).resolve().parent / "data" / "can" / "rts_detections.mapping.yaml"
+    other_mapping = (mapping is not None and sidecar is not None
+                     and Path(mapping).resolve() != Path(recorded_mapping or builtin).resolve())
+    if mapping is None and recorded_mapping:
+        mapping = recorded_mapping
     can_mapping = CanMapping.from_file(mapping) if mapping else None
     unused_method = (method is not None and sidecar is not None
                      and sidecar.get("statuses") is not None
@@ -836,6 +841,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     alignment.cycles_in_log = len(index)
     result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
                     batch_frames, bus, alignment, sidecar)
+    if other_mapping:
+        spoken = recorded_mapping or "rts-scenario's messages"
+        alignment.notes.append(f"--mapping {mapping} is not the one the run spoke ({spoken}, "
+                               f"its sidecar): the log is read as this one says")
     if unused_method:
         alignment.notes.append(f"--method {method} is not used: the sidecar keeps the statuses "
                                f"the RTS played (with {(sidecar or {}).get('method')})")
@@ -1100,7 +1109,8 @@ def _compare_truth(truth_sums: TruthChecksums, sidecar: dict[str, Any] | None,
         shown = named[0] if len(named) == 1 else ", ".join(named[:-1]) + " and " + named[-1]
         report.reasons.append(
             f"scene: the ground truth of {shown} differs from the one the recorded run "
-            f"played (the scene file changed since, or the version computing it): the log "
+            f"played (the scene file, its radar profile or the version computing it changed "
+            f"since): the log "
             f"is judged against a scene that did not play; check it against the scene file "
             f"as it was")
         report.passed = False

@@ -165,8 +165,17 @@ class StatusRecord:
             raise ValueError(f"encoding: must be {STATUS_ENCODING!r}, got "
                              f"{record.get('encoding')!r}")
         if record.get("frames") != n_frames or record.get("targets") != n_targets:
+            names = None if names is None else list(names)
+            recorded, mine = record.get("names"), names
+            added = ([n for n in mine if n not in recorded]
+                     if isinstance(recorded, list) and mine is not None else [])
+            gone = ([n for n in recorded if n not in mine]
+                    if isinstance(recorded, list) and mine is not None else [])
+            which = "".join(f"; {label}: {', '.join(map(repr, found))}" for label, found in (
+                ("not in the recording", added), ("not in the scene", gone)) if found)
             raise ValueError(f"holds {record.get('frames')} frames of {record.get('targets')} "
-                             f"targets, the scene has {n_frames} of {n_targets}")
+                             f"targets, the scene has {n_frames} of {n_targets}{which}: not the "
+                             f"scene file that was recorded (edited since?)")
         try:
             self._data = base64.b64decode(str(record.get("data", "")), validate=True)
         except binascii.Error as exc:

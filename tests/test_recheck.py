@@ -996,3 +996,30 @@ def test_a_log_the_mapping_reads_no_cycle_of_counts_its_messages(recorded, tmp_p
     assert cli.main(["check", scene, "--log", str(bare), "--mapping", mapping]) == 2
     assert (f"no radar cycle in it ({n_messages} messages, none a Cluster_Status header of "
             f"mapping 'cluster-list')") in capsys.readouterr().err
+
+
+def test_a_mapping_other_than_the_run_s_is_noted_and_a_changed_target_list_named(recorded,
+                                                                                tmp_path):
+    scene_file = ROOT / "scenarios" / "highway_following.scenario.yaml"
+    scene = load_scenario(scene_file)
+    builtin = ROOT / "rts_scenario" / "data" / "can" / "rts_detections.mapping.yaml"
+    # rts-scenario's own mapping named explicitly is the one the run spoke: no note.
+    assert check_log(scene, recorded, mapping=str(builtin)).alignment.notes == []
+    other = tmp_path / "other.mapping.yaml"
+    other.write_text(builtin.read_text().replace(
+        "rts_detections.dbc", str(builtin.parent / "rts_detections.dbc")))
+    notes = check_log(scene, recorded, mapping=str(other)).alignment.notes
+    assert notes == [f"--mapping {other} is not the one the run spoke (rts-scenario's messages, "
+                     f"its sidecar): the log is read as this one says"]
+    # A target added since the recording: refused, naming it.
+    text = scene_file.read_text()
+    added = tmp_path / "highway_following.scenario.yaml"
+    added.write_text(text.replace("expectations:", """  - name: bus
+    kind: truck
+    motion: {type: constant_velocity, position_m: [70.0, -3.5, 1.2], speed_mps: 23.0}
+    rcs: {rcs_dbsm: 20.0}
+expectations:"""))
+    with pytest.raises(LogError, match=r"statuses: holds 400 frames of 2 targets, the scene has "
+                                       r"400 of 3; not in the recording: 'bus': not the scene "
+                                       r"file that was recorded \(edited since\?\)"):
+        check_log(load_scenario(added), recorded)
