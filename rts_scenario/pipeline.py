@@ -406,10 +406,7 @@ class Pipeline:
         A stream paced in real time knows when it started the scene; the simulated radar in
         process stamps its messages from the run's start. None otherwise.
         """
-        if self._bus_clock_foreign:
-            return None
-        origin = getattr(self.output, "scene_origin_wall_s", None)
-        return origin if origin is not None else self._bus_origin_s
+        return None if self._bus_clock_foreign else self._host_origin_s()
 
     def _check_bus_clock(self, cycles: list[Detections], duration_s: float,
                          track: ClockTrack) -> None:
