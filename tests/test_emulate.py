@@ -309,15 +309,16 @@ def test_a_perfect_radar_in_step_with_the_frames_passes_the_rehearsal(tmp_path, 
     report, stats = rehearse(scene, mapping=None)
     assert report.passed, report.reasons
     # The radar measures its 61st cycle a transport's delay after the scene's end: after the
-    # scene. A loaded machine that held some of its messages tilts the line through their bus
-    # times, but no more than the delays could: the profile's cycle stays, and 60 are judged.
-    assert report.frames["checked"] == report.frames["total"] == 60
+    # scene. Where a loaded machine held some of its messages, the line through their bus
+    # times may tilt without bending (the clock track then follows it) and put that cycle a
+    # hair before the end: it is judged too (it saw the last frame).
+    assert report.frames["checked"] == report.frames["total"] in (60, 61)
     # Every cycle after the first is measured at a change, within the window of it where its
     # frame went out no later than the window after its time (a loaded machine may hold the
     # sender longer: then the send times decide alone).
     late = np.concatenate(sent) - scene.t_s
     on_time = int(np.sum(late[1:] <= report.playback["ambiguity_window_s"]))
-    assert on_time <= report.frames["ambiguous"] <= 59
+    assert on_time <= report.frames["ambiguous"] <= report.frames["total"] - 1
     assert report.playback["rts"]["frames_applied"] == 60  # the emulated RTS reported
     assert stats["udp"]["lost_frames"] == 0
 
