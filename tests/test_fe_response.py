@@ -25,6 +25,20 @@ from rts_scenario.solver import plan_key
 KIT = rs.Rig.preset("kit-table1")
 RANGE_M = 12.3
 
+def played_snapshot(sch, f, rig, profile):
+    """The independent near-field model's snapshot of what frame ``f`` of ``sch`` plays for
+    its first target: each active channel's FE at its place, level, delay, phase and Doppler."""
+    on = sch.active[f, 0]
+    fe = sch.fe[f, 0, on]
+    return array_snapshot(
+        *layout(profile), rig.az_deg[fe], rig.el_deg[fe], rig.distance_m[fe],
+        chirp=chirp_of(profile), amplitude=10.0 ** (-sch.attenuation_db[f, 0, on] / 20.0),
+        tau_s=rig.limits.latency_s + sch.delay_s[f, 0, on], phase_rad=sch.phase_rad[f, 0, on],
+        doppler_hz=sch.doppler_hz[f, 0, on], fe_rx_offset_m=rig.rx_offset_m[fe],
+        fe_tx_offset_m=rig.tx_offset_m[fe], delay_model=rig.rts.delay_model,
+        if_hz=rig.rts.if_frequency_hz)
+
+
 
 def bench_rig(**kwargs) -> rs.Rig:
     """kit-table1's angles with distinct FE distances and small FE antenna offsets."""
@@ -149,15 +163,7 @@ def bench_errors(profile, rig, fidelity):
     vy, vz = virtual_positions(*layout(profile))
     lam = chirp_of(profile).steering_wavelength_m
     for f in np.flatnonzero(ok):
-        on = sch.active[f, 0]
-        fe = sch.fe[f, 0, on]
-        x = array_snapshot(
-            *layout(profile), rig.az_deg[fe], rig.el_deg[fe], rig.distance_m[fe],
-            chirp=chirp_of(profile), amplitude=10.0 ** (-sch.attenuation_db[f, 0, on] / 20.0),
-            tau_s=rig.limits.latency_s + sch.delay_s[f, 0, on], phase_rad=sch.phase_rad[f, 0, on],
-            doppler_hz=sch.doppler_hz[f, 0, on], fe_rx_offset_m=rig.rx_offset_m[fe],
-            fe_tx_offset_m=rig.tx_offset_m[fe], delay_model=rig.rts.delay_model,
-            if_hz=rig.rts.if_frequency_hz)
+        x = played_snapshot(sch, f, rig, profile)
         ref[f] = bartlett_direction(x, vy, vz, lam, az_range_deg=(-40, 40),
                                     el_range_deg=(-30, 30), grid_step_deg=0.25)
     want = np.column_stack([az, el])

@@ -22,7 +22,7 @@ import dataclasses
 import numpy as np
 import pytest
 from nearfield_reference import array_snapshot, bartlett_direction, virtual_positions
-from test_fe_response import bench_rig, calibrated
+from test_fe_response import bench_rig, calibrated, played_snapshot
 from test_honest_bench import chirp_of, layout, tracks
 
 import rts_scenario as rs
@@ -250,15 +250,7 @@ def reference_errors(profile, rig, sch, az, el):
     lam = chirp_of(profile).steering_wavelength_m
     out = np.full(az.size, np.nan)
     for f in range(az.size):
-        on = sch.active[f, 0]
-        fe = sch.fe[f, 0, on]
-        x = array_snapshot(
-            *layout(profile), rig.az_deg[fe], rig.el_deg[fe], rig.distance_m[fe],
-            chirp=chirp_of(profile), amplitude=10.0 ** (-sch.attenuation_db[f, 0, on] / 20.0),
-            tau_s=rig.limits.latency_s + sch.delay_s[f, 0, on], phase_rad=sch.phase_rad[f, 0, on],
-            doppler_hz=sch.doppler_hz[f, 0, on], fe_rx_offset_m=rig.rx_offset_m[fe],
-            fe_tx_offset_m=rig.tx_offset_m[fe], delay_model=rig.rts.delay_model,
-            if_hz=rig.rts.if_frequency_hz)
+        x = played_snapshot(sch, f, rig, profile)
         got = bartlett_direction(x, vy, vz, lam, az_range_deg=(-20, 20), el_range_deg=(-20, 20),
                                  grid_step_deg=0.5)
         out[f] = np.hypot(got[0] - az[f], got[1] - el[f])
