@@ -3,6 +3,7 @@
 Each test runs a few seconds of scene in real time on loopback.
 """
 
+import contextlib
 import itertools
 import shutil
 import time
@@ -54,6 +55,21 @@ def bench_scene(tmp_path: Path, duration_s: float = 4.0, counter_start="4242",
 
 
 OBJECT_LIST = ROOT / "scenarios" / "can" / "object_list.mapping.yaml"
+
+@contextlib.contextmanager
+def emulated_bench(rig, radar):
+    """A bench (`Pipeline`) whose output streams over UDP to an emulated RTS and radar."""
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(rig, radar, can_channel=channel, noise=False).start()
+    try:
+        host, port = emulator.address
+        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
+                             can_channel=channel)
+        with Pipeline(rig, radar, options) as bench:
+            yield bench
+    finally:
+        emulator.stop()
+
 
 
 def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=None, bus_log=None):
@@ -120,24 +136,16 @@ def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
     from rts_scenario.survey import survey
 
     rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
-    channel = f"rts-emulate-test-{next(_channels)}-bus"
-    emulator = Emulator(rig, radar, can_channel=channel, noise=False).start()
-    try:
-        host, port = emulator.address
-        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
-                             can_channel=channel)
-        with Pipeline(rig, radar, options) as bench:
-            transmit = bench.output.transmit
+    with emulated_bench(rig, radar) as bench:
+        transmit = bench.output.transmit
 
-            def late(datagram: bytes) -> None:
-                if HEADER.unpack_from(datagram)[4] > 0:  # the frame's index
-                    time.sleep(0.015)
-                transmit(datagram)
+        def late(datagram: bytes) -> None:
+            if HEADER.unpack_from(datagram)[4] > 0:  # the frame's index
+                time.sleep(0.015)
+            transmit(datagram)
 
-            bench.output.send = late
-            seen = survey(rig, radar, bench.play)
-    finally:
-        emulator.stop()
+        bench.output.send = late
+        seen = survey(rig, radar, bench.play)
     with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic",
                                                          noise=False)) as desk:
         reference = survey(rig, radar, desk.play)
@@ -152,17 +160,9 @@ def test_a_second_measurement_over_udp_is_paced_and_numbered_like_the_first():
     from rts_scenario.survey import survey
 
     rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
-    channel = f"rts-emulate-test-{next(_channels)}-bus"
-    emulator = Emulator(rig, radar, can_channel=channel, noise=False).start()
-    try:
-        host, port = emulator.address
-        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
-                             can_channel=channel)
-        with Pipeline(rig, radar, options) as bench:
-            first = survey(rig, radar, bench.play, repeats=1)
-            second = survey(rig, radar, bench.play, repeats=1)
-    finally:
-        emulator.stop()
+    with emulated_bench(rig, radar) as bench:
+        first = survey(rig, radar, bench.play, repeats=1)
+        second = survey(rig, radar, bench.play, repeats=1)
     assert np.isfinite(first.seen_az_deg).all()
     np.testing.assert_allclose(second.seen_az_deg, first.seen_az_deg, atol=0.006)
     np.testing.assert_allclose(second.seen_el_deg, first.seen_el_deg, atol=0.006)
