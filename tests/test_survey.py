@@ -172,51 +172,28 @@ def test_a_radar_running_free_is_surveyed_by_when_it_measured_not_by_its_first_c
     # A radar on the bench runs free: it measured before the survey's first frame (nothing
     # played yet: an empty cycle) and is anywhere in its cycle when the frames start. Its
     # first cycle received is not the first frame's: each FE is where the radar saw it while
-    # that FE alone was played.
-    from dataclasses import replace
-
-    from rts_scenario.detections import Detections
-    from rts_scenario.radar.clock import RadarClock
-
-    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
-    free = replace(radar, clock=replace(radar.radar_clock, counter_start=None))
-    clock = free.radar_clock
-    own = RadarClock(cycle_s=clock.cycle_s, start_offset_s=offset_s, latency_s=clock.latency_s,
-                     jitter_s=clock.jitter_s, counter_start=811)
-    with Pipeline(rig, free, radar_options=RadarOptions(fidelity="analytic", noise=False)
-                  ) as bench:
-        bench.output.clock = own
-        sink = bench.output._sink
-        early: list[int] = []
-
-        def switched_on_before(cycles):
-            if not early and cycles:
-                first = cycles[0]
-                early.append(first.cycle - 1)
-                cycles = [Detections.empty(first.cycle - 1, first.t_s - own.cycle_s),
-                          *cycles]
-            sink(cycles)
-
-        bench.output._sink = switched_on_before
-        result = survey(rig, free, bench.play)
-    assert early == [810]
+    # that FE alone was played (the paper profile's own latency and jitter).
+    rig, result = _survey_free_radar(offset_s, None, latency_s=None)
     np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
     np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
 
 
-def _survey_free_radar(offset_s, jitter_s, bus_times=True):
+def _survey_free_radar(offset_s, jitter_s, bus_times=True, latency_s=0.05):
     """Survey kit-table1 with a radar running free: ``offset_s`` into its cycle when the
-    frames start, ``jitter_s`` on its messages' latency, one cycle measured before the first
-    frame; ``bus_times``: whether the bench knows the scene's start on the bus's (and the
-    host's) clock."""
+    frames start, ``latency_s`` and ``jitter_s`` on its messages (None: the paper profile's),
+    one cycle measured before the first frame; ``bus_times``: whether the bench knows the
+    scene's start on the bus's (and the host's) clock."""
     from dataclasses import replace
 
     from rts_scenario.detections import Detections
     from rts_scenario.radar.clock import RadarClock
 
     rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
-    free = replace(radar, clock=replace(radar.radar_clock, counter_start=None,
-                                        latency_s=0.05, jitter_s=jitter_s))
+    profile = radar.radar_clock
+    free = replace(radar, clock=replace(
+        profile, counter_start=None,
+        latency_s=profile.latency_s if latency_s is None else latency_s,
+        jitter_s=profile.jitter_s if jitter_s is None else jitter_s))
     clock = free.radar_clock
     own = RadarClock(cycle_s=clock.cycle_s, start_offset_s=offset_s, latency_s=clock.latency_s,
                      jitter_s=clock.jitter_s, counter_start=811)
@@ -228,14 +205,19 @@ def _survey_free_radar(offset_s, jitter_s, bus_times=True):
             bench._scene_origin_s = lambda: None
             bench._host_origin_s = lambda: None
 
+        early: list[int] = []
+
         def switched_on_before(cycles):
             if cycles and cycles[0].cycle == 811:
                 first = cycles[0]
+                early.append(810)
                 cycles = [Detections.empty(810, first.t_s - own.cycle_s), *cycles]
             sink(cycles)
 
         bench.output._sink = switched_on_before
-        return rig, survey(rig, free, bench.play)
+        result = survey(rig, free, bench.play)
+    assert early == [810]  # the cycle measured before the first frame was sent
+    return rig, result
 
 
 @pytest.mark.parametrize("offset_s, jitter_s", [
