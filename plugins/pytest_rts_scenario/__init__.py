@@ -77,8 +77,33 @@ def pytest_configure(config: pytest.Config) -> None:
                 check_fd_mapping(can_fd, mapping_path, mapping)
         except RtsError as exc:
             raise pytest.UsageError(str(exc).replace("--can-fd", "--rts-can-fd")) from None
+        _refuse_workers_sharing_a_bench(config, spec, interface)
     if config.pluginmanager.hasplugin("html") and config.getoption("htmlpath", None):
         config.pluginmanager.register(HtmlReport(), "rts-scenario-html")
+
+
+def _refuse_workers_sharing_a_bench(config: pytest.Config, spec: str, interface: str) -> None:
+    """Refuse xdist workers driving one bench at once: each run would judge another's radar.
+
+    The simulated radar on a private virtual channel is each test's own; an RTS output other
+    than it, or a CAN interface other processes hear, is one bench (one RTS, one radar, one
+    bus), which runs one scene at a time.
+    """
+    workers = 0
+    if getattr(config.option, "dist", "no") != "no":
+        workers = len(getattr(config.option, "tx", None) or ())
+    workers = max(workers, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0))
+    if workers <= 1:
+        return
+    shared = [(option, value) for option, value, own in (
+        ("--rts-output", spec, "simulated-radar"),
+        ("--rts-can-interface", interface, "virtual")) if value != own]
+    if shared:
+        option, value = shared[0]
+        raise pytest.UsageError(
+            f"{option} {value} with {workers} xdist workers: that is one bench (one RTS, one "
+            f"radar, one bus), and workers running scenes on it at once would mix their frames "
+            f"and detections, each judging another's; run the scenes one at a time (-n 0)")
 
 
 def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> ScenarioFile | None:
