@@ -60,6 +60,77 @@ BUS_CLOCK_SLACK_S = 10.0
 HOST_DELIVERY_S = 0.01
 # How fast an interface's clock may run against the host's (two crystals' tolerance).
 HOST_DRIFT = 2e-4
+# A run ties an interface's own clock to the host's by the fastest delivery over the last
+# LINK_BLOCKS blocks of LINK_BLOCK_S of the interface's time (`ClockLink`).
+LINK_BLOCK_S = 1.0
+LINK_BLOCKS = 5
+
+
+class ClockLink:
+    """An interface's own clock tied to the host's, by when the host received its messages.
+
+    A message reached the host a delivery delay (not negative) after the interface stamped it,
+    so the least ``host - bus`` time over many is the offset between the two clocks, late by
+    the fastest delivery (at most `HOST_DELIVERY_S`). It is kept per block of `LINK_BLOCK_S`
+    of the interface's time: the least over the last `LINK_BLOCKS` blocks (`offset_s`) follows
+    two crystals running apart (`HOST_DRIFT`) as a run goes on, and a line through every
+    block's least (`line`: sums, constant memory) gives their rate over the whole run. A time on
+    the interface's clock plus either offset is on the host's, at most `error_s` late.
+    """
+
+    error_s = HOST_DELIVERY_S + HOST_DRIFT * LINK_BLOCK_S * LINK_BLOCKS
+
+    def __init__(self) -> None:
+        # Set where the receipts turned out not to be deliveries: the clocks are not tied.
+        self.broken = False
+        self._least: dict[int, tuple[float, float]] = {}  # block: least delay, its bus time
+        self._ref: float | None = None
+        self._sums = np.zeros(5)  # n, x, y, xx, xy of the blocks that left the window
+
+    def add(self, bus_t_s: np.ndarray, host_t_s: np.ndarray) -> None:
+        """Take messages stamped ``bus_t_s`` by the interface and received at ``host_t_s``."""
+        ok = np.isfinite(bus_t_s) & np.isfinite(host_t_s)
+        if not ok.any():
+            return
+        bus, delay = bus_t_s[ok], host_t_s[ok] - bus_t_s[ok]
+        if self._ref is None:
+            self._ref = float(bus[0])
+        block = np.floor(bus / LINK_BLOCK_S).astype(np.int64)
+        order = np.lexsort((delay, block))  # by block, then the least delay first
+        blocks, first = np.unique(block[order], return_index=True)
+        for b, i in zip(blocks.tolist(), order[first].tolist(), strict=True):
+            old = self._least.get(b)  # a batch spans a few blocks
+            if old is None or delay[i] < old[0]:
+                self._least[b] = (float(delay[i]), float(bus[i]))
+        for b in sorted(self._least)[:-LINK_BLOCKS]:
+            y, x = self._least.pop(b)
+            x -= self._ref
+            self._sums += (1.0, x, y, x * x, x * y)
+
+    @property
+    def offset_s(self) -> float | None:
+        """The host's time less the interface's now (the recent blocks'); None before any."""
+        return min(y for y, _ in self._least.values()) if self._least else None
+
+    def line(self) -> tuple[float, float, float] | None:
+        """Return the host's time less the interface's over the run: ``(offset, rate, at)``.
+
+        ``offset + rate * (t - at)`` at interface time ``t``; the least-squares line through the
+        blocks' least delays, each late by its fastest delivery, so the line by their mean.
+        The rate is 0 over less than `LINK_BLOCKS` blocks and held to `HOST_DRIFT`. None
+        before any message.
+        """
+        if self._ref is None:
+            return None
+        n, sx, sy, sxx, sxy = self._sums
+        for y, x in self._least.values():
+            x -= self._ref
+            n, sx, sy, sxx, sxy = n + 1, sx + x, sy + y, sxx + x * x, sxy + x * y
+        var = sxx / n - (sx / n) ** 2
+        rate = 0.0
+        if n > LINK_BLOCKS and var > 0.0:
+            rate = float(np.clip((sxy / n - sx * sy / n**2) / var, -HOST_DRIFT, HOST_DRIFT))
+        return float(sy / n - rate * sx / n), rate, self._ref
 
 
 @dataclass(frozen=True)
@@ -155,8 +226,10 @@ class Pipeline:
         self.counter_start_learnt: tuple[int, str] | None = None
         # The scene's start on the bus's clock where the simulated radar stamps its messages.
         self._bus_origin_s: float | None = None
-        # Whether the cycles' bus times were found on another clock than the scene's start.
+        # Whether the cycles' bus times were found on another clock than the scene's start,
+        # and that clock tied to the host's in a run (`ClockLink`).
         self._bus_clock_checked = self._bus_clock_foreign = False
+        self._link = ClockLink()
         self.output: Output | None = None
         self._new_output: Callable[[], Output] | None = None
         # Whether a measurement (`play`) was made: the next starts a stream of its own.
@@ -283,6 +356,9 @@ class Pipeline:
             self.output = self._new_output()
         self._measured = True
         self.receiver.reset()
+        # A measurement places its cycles itself (`_cycle_numbers`): no run's clock link holds.
+        self._bus_clock_checked = self._bus_clock_foreign = False
+        self._link = ClockLink()
         # Each frame is held for one cycle of the radar's clock and measured in it, where the
         # output applies frames exactly at their times. An RTS applies a frame after its time
         # (transport, its own update): a cycle measured as the frame is due may still show the
@@ -404,9 +480,17 @@ class Pipeline:
         """Return the scene's time 0 on the bus's clock, where the run knows it.
 
         A stream paced in real time knows when it started the scene; the simulated radar in
-        process stamps its messages from the run's start. None otherwise.
+        process stamps its messages from the run's start. On an interface stamping with its
+        own clock, a run ties that clock to the host's (`ClockLink`, from the cycles it
+        received so far): the start is then on the interface's clock, at most
+        `ClockLink.error_s` late. None otherwise.
         """
-        return None if self._bus_clock_foreign else self._host_origin_s()
+        if not self._bus_clock_foreign:
+            return self._host_origin_s()
+        host, offset = self._host_origin_s(), self._link.offset_s
+        if host is None or offset is None or self._link.broken:
+            return None
+        return host - offset
 
     def _check_bus_clock(self, cycles: list[Detections], duration_s: float,
                          track: ClockTrack) -> None:
@@ -429,6 +513,53 @@ class Pipeline:
         if not -BUS_CLOCK_SLACK_S <= float(t[0]) - origin <= late_s:
             self._bus_clock_foreign = True
             track.origin_s = None
+
+    def _follow_bus_clock(self, cycles: list[Detections], duration_s: float, track: ClockTrack,
+                          truths: CycleTruth) -> None:
+        """Tie a bus stamped on an interface's own clock to the host's, batch by batch.
+
+        Where the cycles' bus times are on another clock than the scene's start
+        (`_check_bus_clock`), when the host received them ties that clock to its own
+        (`ClockLink`): the scene's start on the interface's clock follows, at most
+        `ClockLink.error_s` late, and so the cycles' measurement times, which may then lie that
+        much earlier than they seem: a cycle just after a frame change may have seen the frame
+        before, and the ambiguity window after each change grows by that much
+        (`CycleTruth.early_s`).
+        """
+        self._check_bus_clock(cycles, duration_s, track)
+        if not self._bus_clock_foreign or self._link.broken:
+            return
+        bus_t = bus_times(cycles)
+        self._link.add(bus_t, host_times(cycles))
+        origin = self._scene_origin_s()
+        t = bus_t[np.isfinite(bus_t)]
+        clock = self.radar.radar_clock
+        if origin is not None and t.size and not (
+                -BUS_CLOCK_SLACK_S <= float(t[0]) - origin
+                <= duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S):
+            # Receipt times that do not put the cycles in the scene are not the host's
+            # deliveries of them (a tool's replay, a stamp taken for a receipt).
+            self._link.broken = True
+            origin = None
+        track.origin_s = origin
+        if origin is not None:
+            truths.early_s = ClockLink.error_s
+
+    def _link_over_the_run(self, track: ClockTrack) -> None:
+        """Tie an interface's clock to the host's over the whole run (`ClockLink.line`).
+
+        Batch by batch, the recent deliveries tied the clocks where the cycles were; the
+        report and the log's sidecar describe the radar's clock over the run, on the host's
+        seconds: its cycle less the interface's crystal's error, and its phase.
+        """
+        line = self._link.line()
+        host = self._host_origin_s()
+        if not self._bus_clock_foreign or line is None or host is None or self._link.broken:
+            return
+        offset, rate, at = line
+        track.scale = 1.0 + rate
+        # The interface's time at the scene's start: where its time plus the line is ``host``.
+        track.origin_s = at + (host - offset - at) / (1.0 + rate)
 
     def _learn_counter_start(self, checker: Checker, cycles: list[Detections]) -> None:
         """Find where the radar's counter starts when its profile does not say.
@@ -514,6 +645,7 @@ class Pipeline:
             mark = timer.add("preflight_s", mark)
         self.receiver.reset()
         self._bus_clock_checked = self._bus_clock_foreign = False
+        self._link = ClockLink()
         window_s = ambiguity_window_s(self.radar, self.rig)
         # When the radar measures: its profile's clock, corrected by its cycles' bus times.
         track = ClockTrack(clock, self._scene_origin_s(),
@@ -543,7 +675,7 @@ class Pipeline:
             # The cycles first, so that the clock knows them before it times the truth.
             cycles = self.receive()
             mark = timer.add("receive_s", mark)
-            self._check_bus_clock(cycles, scene.duration_s, track)
+            self._follow_bus_clock(cycles, scene.duration_s, track, truths)
             if checker.counter_start is None and cycles:
                 self._learn_counter_start(checker, cycles)
             self._anchor(checker, cycles)
@@ -560,13 +692,14 @@ class Pipeline:
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
         last = self.receive(final=True)
-        self._check_bus_clock(last, scene.duration_s, track)
+        self._follow_bus_clock(last, scene.duration_s, track, truths)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
         self._anchor(checker, last)
         track.add(checker.add_cycles(last), bus_times(last))
         mark = timer.add("receive_s", mark)
         truths.finish()
+        self._link_over_the_run(track)
         # The scene's first cycle as the clock ended up taking it, and how many it had.
         scene_first = truths.first_cycle or 0
         n_cycles = (truths.end_cycle or scene_first) - scene_first
@@ -598,7 +731,8 @@ class Pipeline:
                               playback=report.playback,
                               send_lateness=playback.send_lateness(), clock=track,
                               first_cycle=scene_first, cycles=n_cycles,
-                              origin_bus_s=self._scene_origin_s())
+                              origin_bus_s=self._scene_origin_s() if track.origin_s is None
+                              else track.origin_s, early_s=truths.early_s)
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -613,6 +747,8 @@ class Pipeline:
         if measured is not None:
             report.radar_clock["bus_cycle_s"] = measured[0]
         report.radar_clock.update(track.to_dict(scene_first))
+        # Whose clock the bus times are on: the host's, or an interface's own (`ClockLink`).
+        report.radar_clock["bus_clock"] = "interface" if self._bus_clock_foreign else "host"
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -689,6 +825,8 @@ class CycleTruth:
                  window_s: float, cycles: int | None = None) -> None:
         self.checker, self.scene, self.clock = checker, scene, clock
         self.window_s = float(window_s)
+        # How much earlier than the clock says a cycle may have been measured (`ClockLink`).
+        self.early_s = 0.0
         self.cycles = cycles
         # The scene's first cycle (None until the first batch's truth is handed on).
         self.first_cycle: int | None = None
@@ -794,7 +932,7 @@ class CycleTruth:
         has_next = held + 1 < frames.size
         until = np.where(has_next, applied[np.minimum(held + 1, frames.size - 1)] - t_cycles,
                          np.inf)
-        to_before = (since < self.window_s) & (held > 0) & (since <= until)
+        to_before = (since < self.window_s + self.early_s) & (held > 0) & (since <= until)
         to_after = (until <= self.window_s) & has_next & ~to_before
         ambiguous = to_before | to_after
         t_all, scene = self.scene.t_s, self.scene
@@ -835,7 +973,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       playback: dict[str, Any] | None = None,
                       send_lateness: dict[str, Any] | None = None,
                       clock: ClockTrack | None = None, first_cycle: int = 0,
-                      cycles: int | None = None, origin_bus_s: float | None = None) -> Path:
+                      cycles: int | None = None, origin_bus_s: float | None = None,
+                      early_s: float = 0.0) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -851,7 +990,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     (``first_cycle`` of the clock's numbers; ``counter_start`` is its counter), and
     ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones;
     ``origin_bus_s`` the scene's start on the bus's clock, where the run knew it: the log's
-    first cycles are numbered from it by their bus times, as live (`Checker.anchor`).
+    first cycles are numbered from it by their bus times, as live (`Checker.anchor`);
+    ``early_s`` how much earlier than the clock's times the cycles may have been measured
+    (`CycleTruth.early_s`: an interface's clock tied to the host's by deliveries).
     """
     import json
 
@@ -872,7 +1013,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
                   "counter_start": c.counter_start if counter_start is None
-                  else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s},
+                  else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s,
+                  "early_s": early_s},
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         # The statuses the RTS played (a re-check judges by them) and their digest, and per

@@ -200,6 +200,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
                 "cycles": {"type": ["integer", "null"], "minimum": 0},
                 "origin_bus_s": {"type": ["number", "null"]},
+                "early_s": _number(minimum=0),
             },
         },
         "mapping": {"type": ["string", "null"]},
@@ -1015,6 +1016,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     late = _send_lateness(scene, sidecar, log)
     truths = CycleTruth(checker, scene, clock, ambiguity_window_s(scene.radar, scene.rig),
                         cycles)
+    truths.early_s = float((sidecar or {}).get("clock", {}).get("early_s") or 0.0)
 
     def check_cycles(n: IntArray) -> None:
         if n.size:

@@ -264,7 +264,7 @@ REPORT_DATA_KEYS = ("parameters", "scene_limits", "targets[].limits")
 # do not give, keys of the scene and radar files the text refers to, and a key only a clock
 # whose bus times bent writes. (The limits' names are values too, from report.md's table.)
 REPORT_VALUES = {"true", "false", "null", "profile", "bus", "built", "memory", "disk", "off",
-                 "frame_period_s", "clock", "parametrize", "latency_change_s"}
+                 "frame_period_s", "clock", "parametrize", "latency_change_s", "interface"}
 
 
 def _report_entries(out: dict[str, Any]) -> list[dict[str, Any]]:

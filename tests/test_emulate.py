@@ -211,7 +211,7 @@ def test_a_radar_whose_counter_start_is_unknown_is_numbered_by_bus_time(tmp_path
     report.radar_clock.pop("latency_change_s", None)
     assert report.radar_clock == {"counter_start": 4242,
                                   "source": "learnt from the cycles' bus times",
-                                  "start_from": "bus",
+                                  "start_from": "bus", "bus_clock": "host",
                                   "cycle_from": report.radar_clock["cycle_from"]}
     assert report.frames["checked"] == report.frames["total"]
 

@@ -342,6 +342,95 @@ def test_a_radar_running_free_is_checked_at_the_phase_its_bus_times_show(tmp_pat
     assert again.report.errors["range_m"].max == pytest.approx(report.errors["range_m"].max)
 
 
+def run_behind_own_clock(scene, radar, *, ppm=0.0, log=None, late=False, seed=3):
+    """Run ``scene`` with ``radar``'s cycles stamped by an interface's own clock.
+
+    Seconds since it was plugged in (1234.5 s at the scene's start), its crystal ``ppm`` off
+    the host's; the host receives each message up to 3 ms after it was stamped. ``late``: the
+    radar reports each cycle's detections one cycle late (the frame before). Returns the
+    report and the cycles the radar measured.
+    """
+    seen: list[Detections] = []
+    measured: list[Detections] = []
+    rng = np.random.default_rng(seed)
+    rate = 1.0 + ppm * 1e-6
+    with Pipeline.for_scene(scene, RunOptions(bus_log=None if log is None else str(log))) \
+            as pipeline:
+        pipeline.output.clock = radar
+        publisher = pipeline._publisher
+        origin = pipeline._bus_origin_s
+
+        def stamp(cycles):
+            if late:  # each cycle carries the detections of the one before (none first)
+                before = (measured[-1:] or [Detections.empty(0, None)]) + cycles[:-1]
+                measured.extend(cycles)
+                cycles = [dataclasses.replace(b, cycle=c.cycle, t_s=c.t_s)
+                          for b, c in zip(before, cycles, strict=True)]
+            seen.extend(cycles)
+            t = np.array([c.t_s for c in cycles])
+            jitter = rng.uniform(-radar.jitter_s, radar.jitter_s, t.size)
+            publisher.publish_many(cycles, 1234.5 + (t + radar.latency_s + jitter) * rate)
+
+        pipeline.output._sink = stamp
+        pipeline.receiver.received_at = (
+            lambda msg: origin + (msg.timestamp - 1234.5) / rate + rng.uniform(0.0, 0.003))
+        return pipeline.run(scene).report, seen
+
+
+@pytest.mark.parametrize("interface_ppm", [0.0, 150.0, -150.0])
+def test_a_free_radar_behind_an_interface_with_its_own_clock_is_checked_at_its_phase(
+        tmp_path, interface_ppm):
+    # The radar of the test above, behind an interface that stamps messages with its own clock
+    # (seconds since it was plugged in, its crystal off the host's by ``interface_ppm``), as
+    # PCAN, Vector and Kvaser interfaces do. The bus times cannot say where the scene started;
+    # when the host received the messages (up to 3 ms later) ties that clock to the host's:
+    # the phase within the delivery, each cycle judged against the frame it saw.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.050015, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    log = tmp_path / "free.blf"
+    report, seen = run_behind_own_clock(scene, radar, ppm=interface_ppm, log=log)
+    assert report.passed, report.reasons
+    clock = report.radar_clock
+    assert clock["start_from"] == "bus" and clock["bus_clock"] == "interface"
+    # Placed by the fastest deliveries: late by up to their 3 ms, not earlier (and the
+    # phase's own 0.6 ms of jitter); the cycle on the host's clock, the interface's crystal
+    # taken out.
+    assert 0.031 - 6e-4 <= clock["start_offset_s"] <= 0.031 + 0.0036
+    assert clock["cycle_s"] == pytest.approx(0.050015, abs=8e-6)
+    t = np.array([c.t_s for c in seen])
+    held_t = np.floor(t * scene.frame_rate_hz + 1e-9) / scene.frame_rate_hz
+    truth = compute_tracks(scene, held_t)
+    moved = np.abs(compute_tracks(scene, held_t + 0.05).range_m[:, 0] - truth.range_m[:, 0])
+    assert report.errors["range_m"].max < 0.01 < moved.max()
+    assert report.frames["checked"] == report.frames["total"] == len(seen)
+    # Mid-frame, 19 ms from the next change and 31 ms after one: no cycle may have seen
+    # another frame (at the profile's phase every cycle sat on a change: 239 of 240 were).
+    assert report.frames["ambiguous"] == 0
+    # Its log (the interface's times only) re-checked by the sidecar: the same verdict.
+    again = check_log(scene, log)
+    assert again.report.passed, again.report.reasons
+    assert again.report.frames["checked"] == len(seen)
+    assert again.report.frames["ambiguous"] == 0
+    assert again.report.radar_clock["start_offset_s"] == pytest.approx(
+        clock["start_offset_s"], abs=1e-9)
+
+
+def test_a_free_radar_one_frame_late_behind_an_interface_with_its_own_clock_is_seen(tmp_path):
+    # The same radar reporting each cycle's detections a cycle late: it showed the frame
+    # before. At the profile's phase every cycle sat on a frame change and was judged against
+    # whichever frame matched (errors of 4 mm, as on time); tied to the host's clock the check
+    # knows where it measured: each cycle's error is the target's motion over a frame.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    report, _ = run_behind_own_clock(scene, radar, late=True)
+    assert report.frames["ambiguous"] == 0
+    assert report.errors["range_m"].p50 > 0.04, report.errors["range_m"]
+
+
 def test_the_clock_track_keeps_the_profile_until_the_bus_tells_otherwise():
     from rts_scenario.radar.clock import ClockTrack
 
@@ -807,3 +896,65 @@ def test_host_delays_that_fade_after_the_first_cycles_are_not_a_crystal(seed):
         off.add(part, 1000.0 + 0.049995 * part + host[part])
     assert off.cycle_from_bus and off.cycle_s == pytest.approx(0.049995, abs=1e-9)
     assert off.latency_change_reason(0.00288) is None
+
+
+# -- an interface's own clock tied to the host's (`ClockLink`) --------------------------------
+
+def _deliveries(bus_t, host_of, rng, fastest_every=10):
+    """Receipt times of messages stamped ``bus_t``: ``host_of(bus_t)`` plus up to 3 ms, every
+    ``fastest_every``-th message received at once (a zero delay, so the least is exact)."""
+    delay = rng.uniform(0.0, 0.003, bus_t.size)
+    delay[::fastest_every] = 0.0
+    return host_of(bus_t) + delay
+
+
+def test_a_clock_link_is_the_least_delivery_and_the_line_through_each_block_s_least():
+    from rts_scenario.pipeline import ClockLink
+
+    rng = np.random.default_rng(11)
+    link = ClockLink()
+    assert link.offset_s is None and link.line() is None
+    # The interface's clock 1234.5 s behind the host's, the same rate: 20 messages a second
+    # for 30 s, in batches of a second; every tenth delivered at once.
+    bus = 1000.0 + 0.05 * np.arange(600)
+    host = _deliveries(bus, lambda t: t + 1234.5, rng)
+    for i in range(0, 600, 20):
+        link.add(bus[i:i + 20], host[i:i + 20])
+    assert link.offset_s == pytest.approx(1234.5, abs=1e-9)
+    offset, rate, at = link.line()
+    assert rate == pytest.approx(0.0, abs=1e-12) and offset == pytest.approx(1234.5, abs=1e-9)
+    assert at == 1000.0
+    # Receipts without a time, and none at all, change nothing.
+    link.add(np.array([1030.0, np.nan]), np.array([np.nan, 5.0]))
+    assert link.offset_s == pytest.approx(1234.5, abs=1e-9)
+
+
+def test_a_clock_link_follows_two_crystals_running_apart():
+    from rts_scenario.pipeline import HOST_DRIFT, LINK_BLOCK_S, LINK_BLOCKS, ClockLink
+
+    rng = np.random.default_rng(12)
+    # The host's clock runs 150 ppm faster than the interface's: the offset grows 150 us a
+    # second. Each block's least lies on that line (its fastest delivery is immediate):
+    # the line through them is it, whatever the batches.
+    def host_of(t):
+        return 7.0 + (t - 500.0) * (1.0 + 150e-6)
+
+    bus = 500.0 + 0.05 * np.arange(1200)  # 60 s
+    host = _deliveries(bus, host_of, rng)
+    link = ClockLink()
+    for i in range(0, 1200, 37):
+        link.add(bus[i:i + 37], host[i:i + 37])
+    offset, rate, at = link.line()
+    assert rate == pytest.approx(150e-6, rel=1e-6)
+    assert offset + rate * (bus - at) == pytest.approx(host_of(bus) - bus, abs=1e-9)
+    # The recent blocks' least is the offset now, within the drift over the window.
+    now = host_of(bus[-1]) - bus[-1]
+    assert now - 150e-6 * LINK_BLOCK_S * LINK_BLOCKS <= link.offset_s <= now
+    assert ClockLink.error_s == pytest.approx(0.01 + HOST_DRIFT * LINK_BLOCK_S * LINK_BLOCKS)
+    # A rate beyond two crystals' tolerance is held to it; over too few blocks there is none.
+    fast = ClockLink()
+    fast.add(bus, bus + 3.0 + 0.01 * (bus - 500.0))
+    assert fast.line()[1] == HOST_DRIFT
+    short = ClockLink()
+    short.add(bus[:60], host[:60])  # 3 s
+    assert short.line()[1] == 0.0

@@ -398,6 +398,10 @@ class ClockTrack:
       in process), cycle ``n`` is measured at its bus time less the profile's latency less
       ``origin_s``, on the fitted line. Otherwise the profile's ``start_offset_s`` holds.
 
+    A bus stamped by an interface's own clock may run off the host's: ``scale`` is the host's
+    seconds per second of the bus's clock (1: the same clock), and scene times are the bus's
+    times less ``origin_s`` times it.
+
     ``time_of`` and ``first_at`` answer as `RadarClock`'s do, by the current estimate.
     """
 
@@ -406,7 +410,13 @@ class ClockTrack:
         self.profile = profile
         self.origin_s = origin_s  # may be set later: a stream knows it once it has started
         self.free = free
+        self.scale = 1.0
         self.fit = CycleTimeFit()
+
+    def _fit_s(self) -> tuple[float, float] | None:
+        """Return the fitted cycle and its standard error on the host's clock (s)."""
+        fit = self.fit.cycle_s()
+        return None if fit is None else (fit[0] * self.scale, fit[1] * self.scale)
 
     @property
     def phase_from_bus(self) -> bool:
@@ -431,7 +441,7 @@ class ClockTrack:
         fewer), they must keep to the line as the profile's jitter lets them (1.5
         times its spread, at least `STAMP_NOISE_S`).
         """
-        fit = self.fit.cycle_s()
+        fit = self._fit_s()
         if fit is None:
             return False
         off = abs(fit[0] - self.profile.cycle_s)
@@ -464,7 +474,7 @@ class ClockTrack:
         if bend is None or not bend.bent or self.fit.cycle_s() is None:
             return None
         s = bend.segments
-        offset = s[:, 2] - self.profile.cycle_s * s[:, 1]
+        offset = s[:, 2] - self.profile.cycle_s / self.scale * s[:, 1]
         rate = CLOCK_TOLERANCE_PPM * 1e-6 * self.profile.cycle_s * np.diff(s[:, 1])
         path = offset[:1] + np.concatenate(
             [[0.0], np.cumsum(np.clip(np.diff(offset), -rate, rate))])
@@ -500,17 +510,17 @@ class ClockTrack:
     @property
     def cycle_s(self) -> float:
         """The radar's cycle: the bus's where it tells one off the profile's, else the profile's."""
-        fit = self.fit.cycle_s()
+        fit = self._fit_s()
         return fit[0] if fit is not None and self.cycle_from_bus else self.profile.cycle_s
 
     @property
     def start_offset_s(self) -> float:
         """Scene time of cycle 0 (negative where it was measured before the scene began)."""
-        zero = self.fit.zero_s(self.cycle_s) if self.phase_from_bus else None
+        zero = self.fit.zero_s(self.cycle_s / self.scale) if self.phase_from_bus else None
         if zero is None:
             return self.profile.start_offset_s
         assert self.origin_s is not None
-        return zero - self.profile.latency_s - self.origin_s
+        return (zero - self.origin_s) * self.scale - self.profile.latency_s
 
     def time_of(self, n: IntArray) -> FloatArray:
         """Measurement time (scene time) of cycles ``n``."""
@@ -530,7 +540,7 @@ class ClockTrack:
         """
         if not self.phase_from_bus or self.fit.count < 2:
             return 0.0
-        return 3.0 * max(self.fit.zero_error_s(self.cycle_s),
+        return 3.0 * max(self.fit.zero_error_s(self.cycle_s / self.scale) * self.scale,
                          self.profile.jitter_s / np.sqrt(3.0 * self.fit.count))
 
     def edge_tolerance_s(self, t_s: float) -> float:
@@ -541,7 +551,7 @@ class ClockTrack:
         after it (measured at the end itself, on a radar in step with the frames).
         """
         tolerance = self.start_tolerance_s
-        fit = self.fit.cycle_s()
+        fit = self._fit_s()
         if fit is not None and self.cycle_from_bus:
             tolerance += 3.0 * fit[1] * abs(t_s - self.start_offset_s) / self.cycle_s
         return tolerance
@@ -572,7 +582,7 @@ class ClockTrack:
         ``tolerance_s`` over the cycles seen: on a short run a latency that changed on the way
         tilts the line as much.
         """
-        fit = self.fit.cycle_s()
+        fit = self._fit_s()
         if fit is None or not self.cycle_from_bus:
             return None
         ppm = (fit[0] / self.profile.cycle_s - 1.0) * 1e6
