@@ -66,6 +66,12 @@ QUANTITIES = (
     ("rcs_dbsm", "rcs_db"),
 )
 GATE = 3.0
+# Detections that fit the scene more than this share of a frame period (three standard errors
+# clear) before or after the times the check took for them fail the run (`Checker.lag_reason`):
+# most of their cycles were judged against frames the radar had not seen.
+LAG_FRAMES = 0.5
+# The least matched target-cycles, in cycles judged against one frame, the lag is told from.
+LAG_MIN_CYCLES = 10
 # Worst target-frames kept for the report.
 WORST_FRAMES = 8
 # The counter of rts-scenario's own frame header (16 bits).
@@ -258,6 +264,9 @@ class Checker:
         self._last_cycle: int | None = None  # the number of the last cycle taken
         self._last_bus_t = np.nan  # and when it reached the bus
         self.cycle_s = cycle_s
+        # Sums of range error x range rate, range rate^2, range error^2 and their count over
+        # matched targets of cycles judged against one frame (`detection_lag_s`).
+        self._lag = np.zeros(4)
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
         self._played = np.zeros(n, dtype=np.int64)
@@ -432,6 +441,9 @@ class Checker:
         truth, assigned, within = judged.truth, judged.assigned, judged.within
         errors, match = judged.errors, judged.match
         matched = match >= 0
+        self._add_lag(errors["range_m"], block.tracks.radial_velocity_mps,
+                      assigned & truth & (True if block.ambiguous is None
+                                          else ~block.ambiguous[:, None]))
         for q, _ in QUANTITIES:
             self._stats[q].add(errors[q], truth)
         detected = assigned & within & truth
@@ -507,6 +519,46 @@ class Checker:
             errors[q] = err
             within &= ~(np.abs(err) > tol[key])
         return _Judged(truth, assigned, within, errors, match, limit_masks(tracks, flags))
+
+    def _add_lag(self, error: FloatArray, rate: FloatArray, use: BoolArray) -> None:
+        use = use & np.isfinite(error) & np.isfinite(rate)
+        e, v = error[use], rate[use]
+        self._lag += (float(e @ v), float(v @ v), float(e @ e), float(e.size))
+
+    def detection_lag_s(self) -> tuple[float, float] | None:
+        """How much earlier than the check's times the detections fit the scene, and its error.
+
+        A radar that measured ``L`` seconds earlier than the check took it (its latency longer
+        than its profile's, its phase or the RTS's timing not what the run knows) ranged each
+        target ``L`` times its range rate short: the least-squares ``L`` of the matched
+        targets' range errors against their range rates, over cycles judged against one frame
+        (s), and its standard error. None over fewer than `LAG_MIN_CYCLES` target-cycles or
+        where no target moved in range.
+        """
+        ev, vv, ee, n = self._lag
+        if n < LAG_MIN_CYCLES or not vv > 0.0:
+            return None
+        lag = -ev / vv
+        residual = max(ee - lag * lag * vv, 0.0)
+        return float(lag), float(np.sqrt(residual / (n - 1.0) / vv))
+
+    def lag_reason(self, frame_s: float) -> str | None:
+        """Why the detections' lag fails the run (`detection_lag_s`), or None.
+
+        Beyond `LAG_FRAMES` of the scene's frame period ``frame_s``, three standard errors
+        clear: most cycles were then judged against frames the radar had not seen.
+        """
+        lag = self.detection_lag_s()
+        if lag is None or abs(lag[0]) - 3.0 * lag[1] <= LAG_FRAMES * frame_s:
+            return None
+        when = "before" if lag[0] > 0 else "after"
+        return (f"time_alignment: the detections fit the scene {abs(lag[0]) * 1e3:.1f} ms "
+                f"(+-{3e3 * lag[1]:.1f}) {when} the times the check took for the radar's "
+                f"cycles, more than {LAG_FRAMES:g} of a {frame_s * 1e3:g} ms frame: most "
+                f"cycles were judged against frames the radar had not seen; the radar's "
+                f"latency or phase is not its profile's (clock.latency_s, start_offset_s), or "
+                f"the RTS applied frames {'later' if lag[0] > 0 else 'earlier'} than the run "
+                f"knows")
 
     def _write_detections(self, got: list[Detections], counts: list[int], block: _Block,
                           frame_of: NDArray[np.int64], match: NDArray[np.int64]) -> None:

@@ -712,7 +712,8 @@ class Pipeline:
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         report = checker.report(bus)
         for drifted in (track.off_profile_reason(0.5 * window_s),
-                        track.latency_change_reason(0.5 * window_s)):
+                        track.latency_change_reason(0.5 * window_s),
+                        checker.lag_reason(1.0 / scene.frame_rate_hz)):
             if drifted:
                 report.reasons.append(drifted)
                 report.passed = False
@@ -749,6 +750,7 @@ class Pipeline:
         report.radar_clock.update(track.to_dict(scene_first))
         # Whose clock the bus times are on: the host's, or an interface's own (`ClockLink`).
         report.radar_clock["bus_clock"] = "interface" if self._bus_clock_foreign else "host"
+        report.radar_clock.update(lag_dict(checker))
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -953,6 +955,12 @@ class CycleTruth:
 def _stamped(message: can.Message) -> float:
     """When the host received a message the simulated radar sent in process: its stamp."""
     return float(message.timestamp)
+
+
+def lag_dict(checker: Checker) -> dict[str, float]:
+    """Return the report's ``radar_clock`` entries of the detections' lag."""
+    lag = checker.detection_lag_s()
+    return {} if lag is None else {"detection_lag_s": lag[0], "detection_lag_error_s": lag[1]}
 
 
 def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:

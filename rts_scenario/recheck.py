@@ -40,7 +40,13 @@ from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
 from .errors import RtsError
 from .kinematics import Tracks, compute_tracks
-from .pipeline import BUS_CLOCK_SLACK_S, LOG_SIDECAR_SUFFIX, CycleTruth, ambiguity_window_s
+from .pipeline import (
+    BUS_CLOCK_SLACK_S,
+    LOG_SIDECAR_SUFFIX,
+    CycleTruth,
+    ambiguity_window_s,
+    lag_dict,
+)
 from .playback import SEND_LATENESS_ENCODING, playback_reasons, unpack_send_lateness
 from .preflight import scene_limits, schedule_batches, track_batches
 from .radar.clock import TIME_EPS_S, ClockTrack, CycleTimeFit, RadarClock
@@ -860,6 +866,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             result.passed = False
     # When the radar measured, as this check took it (the run's clock from the sidecar, or the
     # one fitted to the log's timestamps), in the live report's terms.
+    lag = result.radar_clock  # the detections' lag (`_check`)
     result.radar_clock = {
         "counter_start": clock.counter_start,
         "source": "sidecar" if sidecar is not None else "fitted to the log's timestamps",
@@ -870,6 +877,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     change = track.latency_change_s()
     if change is not None:
         result.radar_clock["latency_change_s"] = change[0]
+    result.radar_clock.update(lag)
     playback = (sidecar or {}).get("playback")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run
@@ -1049,6 +1057,11 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
                                    "version, rig or radar file): limits are those rebuilt")
     report = checker.report(bus)
     _compare_truth(truth_sums, sidecar, alignment, report)
+    lagged = checker.lag_reason(1.0 / scene.frame_rate_hz)
+    if lagged:
+        report.reasons.append(lagged)
+        report.passed = False
+    report.radar_clock.update(lag_dict(checker))
     return report
 
 

@@ -261,10 +261,12 @@ def report_rows() -> dict[str, str]:
 # limits table), the parameters by key path.
 REPORT_DATA_KEYS = ("parameters", "scene_limits", "targets[].limits")
 # Names report.md's key table gives that a run's JSON need not hold: values these short runs
-# do not give, keys of the scene and radar files the text refers to, and a key only a clock
-# whose bus times bent writes. (The limits' names are values too, from report.md's table.)
+# do not give, keys of the scene and radar files the text refers to, a key only a clock whose
+# bus times bent writes, and the detections' lag (their scenes' targets do not move in range).
+# (The limits' names are values too, from report.md's table.)
 REPORT_VALUES = {"true", "false", "null", "profile", "bus", "built", "memory", "disk", "off",
-                 "frame_period_s", "clock", "parametrize", "latency_change_s", "interface"}
+                 "frame_period_s", "clock", "parametrize", "latency_change_s", "interface",
+                 "detection_lag_s", "detection_lag_error_s"}
 
 
 def _report_entries(out: dict[str, Any]) -> list[dict[str, Any]]:

@@ -429,6 +429,13 @@ def test_a_free_radar_one_frame_late_behind_an_interface_with_its_own_clock_is_s
     report, _ = run_behind_own_clock(scene, radar, late=True)
     assert report.frames["ambiguous"] == 0
     assert report.errors["range_m"].p50 > 0.04, report.errors["range_m"]
+    # The detections fit the scene a frame (50 ms) before the cycles' times (less the radar's
+    # range-Doppler coupling, a few ms): the run fails.
+    lag = report.radar_clock["detection_lag_s"]
+    assert lag == pytest.approx(0.05, abs=3 * report.radar_clock["detection_lag_error_s"] + 3e-3)
+    assert not report.passed
+    assert [r for r in report.reasons if r.startswith("time_alignment: the detections fit the "
+                                                     "scene 4")], report.reasons
 
 
 def test_the_clock_track_keeps_the_profile_until_the_bus_tells_otherwise():
@@ -896,6 +903,70 @@ def test_host_delays_that_fade_after_the_first_cycles_are_not_a_crystal(seed):
         off.add(part, 1000.0 + 0.049995 * part + host[part])
     assert off.cycle_from_bus and off.cycle_s == pytest.approx(0.049995, abs=1e-9)
     assert off.latency_change_reason(0.00288) is None
+
+
+# -- the detections' lag: a radar whose latency is not its profile's ---------------------------
+
+@pytest.mark.parametrize("true_latency_s, lag_s", [(0.13, 0.0), (0.17, 0.05), (0.09, -0.05)])
+def test_a_radar_whose_latency_is_not_its_profile_s_fails_on_the_detections_lag(
+        tmp_path, true_latency_s, lag_s):
+    # The profile says 130 ms; the radar (running free) reports 170 or 90 ms after it measured.
+    # Its phase, taken as its bus times less the profile's latency, is 40 ms off: measured 31
+    # ms into each 50 ms frame, it is taken for one measuring 21 ms into the next (or 41 ms
+    # into the one before), and every cycle is judged against a frame it did not see. Its
+    # range errors against the targets' range rates tell by how much: a whole frame (the RTS
+    # plays whole frames), and the run fails, live and re-checked. On its profile's latency
+    # the lag is the radar's range-Doppler coupling (its range shifts by its range rate times
+    # a millisecond or two), far below the half frame that fails.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    rng = np.random.default_rng(4)
+    log = tmp_path / "lag.blf"
+    report = run_stamped(scene, lambda n: true_latency_s + rng.uniform(-0.004, 0.004, n.size),
+                         log, radar=radar)
+    clock = report.radar_clock
+    lag, error = clock["detection_lag_s"], clock["detection_lag_error_s"]
+    assert 0.0 < error < 1e-3
+    assert lag == pytest.approx(lag_s, abs=3.0 * error + 3e-3)
+    failed = [r for r in report.reasons if r.startswith("time_alignment:")]
+    assert bool(failed) == (lag_s != 0.0) and report.passed == (lag_s == 0.0), report.reasons
+    if lag_s:
+        when = "before" if lag_s > 0 else "after"
+        assert f"ms (+-{3e3 * error:.1f}) {when} the times the check took" in failed[0]
+    again = check_log(scene, log).report
+    assert again.radar_clock["detection_lag_s"] == pytest.approx(lag, abs=1e-9)
+    assert again.passed == report.passed
+
+
+def test_the_detections_lag_is_the_least_squares_one_of_range_errors_on_range_rates():
+    from rts_scenario.check import LAG_MIN_CYCLES, Checker
+    from rts_scenario.scenario.model import Expectations
+
+    checker = Checker("s", ("a", "b"), Expectations())
+    # Range errors -L * rate + noise; by hand: L = -sum(e v) / sum(v v), its standard error
+    # sqrt(sum((e + L v)^2) / (n - 1) / sum(v v)).
+    rate = np.array([[10.0, -4.0], [12.0, np.nan], [-3.0, 5.0], [8.0, 0.0]] * 3)
+    noise = np.array([[0.01, -0.02], [0.0, 0.3], [0.02, 0.01], [-0.01, 0.0]] * 3)
+    error = -0.02 * rate + noise
+    use = np.ones(rate.shape, dtype=bool)
+    use[1, 1] = use[3, 0] = False
+    checker._add_lag(error, rate, use)
+    ok = use & np.isfinite(rate)
+    e, v = error[ok], rate[ok]
+    lag = -(e @ v) / (v @ v)
+    se = np.sqrt(((e + lag * v) ** 2).sum() / (e.size - 1) / (v @ v))
+    assert e.size >= LAG_MIN_CYCLES
+    assert checker.detection_lag_s() == pytest.approx((lag, se), rel=1e-12)
+    assert lag == pytest.approx(0.02, abs=3 * se)
+    # Too few target-cycles, or no target moving in range: no lag.
+    few = Checker("s", ("a",), Expectations())
+    few._add_lag(np.ones((3, 1)), np.ones((3, 1)), np.ones((3, 1), dtype=bool))
+    assert few.detection_lag_s() is None
+    still = Checker("s", ("a",), Expectations())
+    still._add_lag(np.ones((20, 1)), np.zeros((20, 1)), np.ones((20, 1), dtype=bool))
+    assert still.detection_lag_s() is None and still.lag_reason(0.05) is None
 
 
 # -- an interface's own clock tied to the host's (`ClockLink`) --------------------------------
