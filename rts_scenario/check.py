@@ -70,8 +70,11 @@ GATE = 3.0
 # clear) before or after the times the check took for them fail the run (`Checker.lag_reason`):
 # most of their cycles were judged against frames the radar had not seen.
 LAG_FRAMES = 0.5
-# The least matched target-cycles, in cycles judged against one frame, the lag is told from.
-LAG_MIN_CYCLES = 10
+# The least matched target-cycles, in cycles judged against one frame, the lag is told from,
+# and the least scatter of their range errors it takes, as a share of the range tolerance (a
+# few cycles, or quantized ranges, can fit a line closer than a radar's noise warrants).
+LAG_MIN_CYCLES = 30
+LAG_NOISE_FLOOR = 0.01
 # Worst target-frames kept for the report.
 WORST_FRAMES = 8
 # The counter of rts-scenario's own frame header (16 bits).
@@ -264,9 +267,9 @@ class Checker:
         self._last_cycle: int | None = None  # the number of the last cycle taken
         self._last_bus_t = np.nan  # and when it reached the bus
         self.cycle_s = cycle_s
-        # Sums of range error x range rate, range rate^2, range error^2 and their count over
-        # matched targets of cycles judged against one frame (`detection_lag_s`).
-        self._lag = np.zeros(4)
+        # Count, sums of range error, range rate, their product, range rate^2 and range
+        # error^2 over matched targets of cycles judged against one frame (`detection_lag_s`).
+        self._lag = np.zeros(6)
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
         self._played = np.zeros(n, dtype=np.int64)
@@ -523,24 +526,32 @@ class Checker:
     def _add_lag(self, error: FloatArray, rate: FloatArray, use: BoolArray) -> None:
         use = use & np.isfinite(error) & np.isfinite(rate)
         e, v = error[use], rate[use]
-        self._lag += (float(e @ v), float(v @ v), float(e @ e), float(e.size))
+        self._lag += (float(e.size), float(e.sum()), float(v.sum()), float(e @ v),
+                      float(v @ v), float(e @ e))
 
     def detection_lag_s(self) -> tuple[float, float] | None:
         """How much earlier than the check's times the detections fit the scene, and its error.
 
         A radar that measured ``L`` seconds earlier than the check took it (its latency longer
         than its profile's, its phase or the RTS's timing not what the run knows) ranged each
-        target ``L`` times its range rate short: the least-squares ``L`` of the matched
-        targets' range errors against their range rates, over cycles judged against one frame
-        (s), and its standard error. None over fewer than `LAG_MIN_CYCLES` target-cycles or
-        where no target moved in range.
+        target ``L`` times its range rate short. The matched targets' range errors over cycles
+        judged against one frame are fitted with that and one range offset for all (a radar's
+        or a rig's range calibration, which a lag must not be taken for): least squares, ``L``
+        (s) and its standard error, from the errors' scatter about the fit but no less than
+        `LAG_NOISE_FLOOR` of the range tolerance. None over fewer than `LAG_MIN_CYCLES`
+        target-cycles, or where the range rates do not vary (one target at a constant range
+        rate: a lag and an offset look alike).
         """
-        ev, vv, ee, n = self._lag
-        if n < LAG_MIN_CYCLES or not vv > 0.0:
+        n, se, sv, sev, svv, see = self._lag
+        if n < LAG_MIN_CYCLES:
             return None
-        lag = -ev / vv
-        residual = max(ee - lag * lag * vv, 0.0)
-        return float(lag), float(np.sqrt(residual / (n - 1.0) / vv))
+        cov, var = sev - se * sv / n, svv - sv * sv / n
+        if not var > 1e-9 * svv or not var > 0.0:
+            return None
+        lag = -cov / var
+        scatter = np.sqrt(max(see - se * se / n - cov * cov / var, 0.0) / (n - 2.0))
+        floor = LAG_NOISE_FLOOR * self.expectations.tolerances["range_m"]
+        return float(lag), float(max(scatter, floor) / np.sqrt(var))
 
     def lag_reason(self, frame_s: float) -> str | None:
         """Why the detections' lag fails the run (`detection_lag_s`), or None.
