@@ -847,9 +847,10 @@ class CycleTruth:
     The scene's cycles are those measured in it, as far as the clock knows: its first is the
     first at or after its start less the clock's `start_tolerance_s` (it may have measured at
     the start itself; the first batches wait until the clock knows which, within a batch of
-    frames), its last the last before its end less that tolerance (the one after it may have
-    measured at the end itself, after the scene). `first_cycle` and `end_cycle` say which
-    they were.
+    frames) plus ``early_s`` (one that seems measured less than that after the start may have
+    measured before it, when nothing was played yet), its last the last before its end less
+    that tolerance (the one after it may have measured at the end itself, after the scene).
+    `first_cycle` and `end_cycle` say which they were.
     """
 
     def __init__(self, checker: Checker, scene: Scenario, clock: RadarClock | ClockTrack,
@@ -909,7 +910,7 @@ class CycleTruth:
         known = getattr(self.clock, "start_known", None)
         if self._next_n is not None or known is None:
             return False
-        if known(float(self.scene.t_s[self._pending[0][0]])):
+        if known(float(self.scene.t_s[self._pending[0][0]]) + self.early_s):
             return False
         return self._pending[0].size + more <= frames_per_batch(len(self.scene.targets))
 
@@ -940,7 +941,9 @@ class CycleTruth:
         # Cycle numbers follow on from the batch before's, whatever the clock now says: a
         # clock learnt from the bus (`ClockTrack`) may have moved a cycle across the batches'
         # boundary since (judged against the frame before, then).
-        tolerance_s = self.clock.start_tolerance_s
+        # A cycle that seems measured within ``early_s`` after the scene's start may have
+        # measured before it (nothing played yet): the scene's first is the one after.
+        tolerance_s = self.clock.start_tolerance_s - self.early_s
         lo = (self.clock.first_at(start_s - tolerance_s)
               if self._next_n is None else self._next_n)
         if self.first_cycle is None:

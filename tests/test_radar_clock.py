@@ -513,6 +513,30 @@ def test_an_interface_s_slow_start_up_does_not_tilt_its_clock(tmp_path, interfac
     assert again.frames == report.frames
 
 
+def test_a_free_radar_measuring_just_before_the_scene_s_start_misses_no_cycle(tmp_path):
+    # Every delivery takes 2 to 10 ms: the cycles seem measured 2 ms (and up to 11) after
+    # they were. This radar measures 1 ms before each frame change, so its cycle before the
+    # first it sent seems measured 1 ms into the scene; it may as well have measured before
+    # the scene (it did, and was not played to): the scene's first cycle is the one after,
+    # and no cycle is missing. Its cycles 1 ms before a change are ambiguous (their window
+    # after the change grows by the 11 ms); its last, 1 ms before the scene's end, seems
+    # measured after it and is not judged (counted after the scene).
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.049, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    log = tmp_path / "edge.blf"
+    report, seen = run_behind_own_clock(scene, radar, log=log, delays=(0.002, 0.01))
+    assert report.passed, report.reasons
+    assert report.frames["missing"] == report.frames["before_scene"] == 0
+    assert report.frames["after_scene"] == 1
+    assert report.frames["checked"] == report.frames["total"] == len(seen) - 1
+    assert report.radar_clock["counter_start"] == 4242
+    again = check_log(scene, log).report
+    assert again.passed, again.reasons
+    assert again.frames == report.frames
+
+
 def test_a_72_ms_radar_behind_a_drifting_interface_is_re_checked_alike(tmp_path):
     # A 72 ms radar on 50 ms frames, behind an interface 200 ppm slow delivering in 2 to
     # 10 ms: every cycle is judged against the frame it saw (or counted ambiguous), and the
