@@ -73,9 +73,11 @@ class ClockLink:
     so the least ``host - bus`` time over many is the offset between the two clocks, late by
     the fastest delivery (at most `HOST_DELIVERY_S`). It is kept per block of `LINK_BLOCK_S`
     of the interface's time: the least over the last `LINK_BLOCKS` blocks (`offset_s`) follows
-    two crystals running apart (`HOST_DRIFT`) as a run goes on, and a line through every
-    block's least (`line`: sums, constant memory) gives their rate over the whole run. A time on
-    the interface's clock plus either offset is on the host's, at most `error_s` late.
+    two crystals running apart (`HOST_DRIFT`) as a run goes on, and the line below every
+    block's least and nearest them (`line`: on the lower convex hull of the blocks' least, a
+    few points) gives their rate over the whole run. A block whose messages were all held up
+    (an interface's start-up, a loaded host) lies above that line and does not tilt it. A time
+    on the interface's clock plus either offset is on the host's, at most `error_s` late.
     """
 
     error_s = HOST_DELIVERY_S + HOST_DRIFT * LINK_BLOCK_S * LINK_BLOCKS
@@ -85,7 +87,10 @@ class ClockLink:
         self.broken = False
         self._least: dict[int, tuple[float, float]] = {}  # block: least delay, its bus time
         self._ref: float | None = None
-        self._sums = np.zeros(5)  # n, x, y, xx, xy of the blocks that left the window
+        # The blocks that left the window: how many, the sum of their bus times (from
+        # ``_ref``), and the lower convex hull of their (bus time, least delay).
+        self._count, self._sum_x = 0, 0.0
+        self._hull: list[tuple[float, float]] = []
 
     def add(self, bus_t_s: np.ndarray, host_t_s: np.ndarray) -> None:
         """Take messages stamped ``bus_t_s`` by the interface and received at ``host_t_s``."""
@@ -105,7 +110,8 @@ class ClockLink:
         for b in sorted(self._least)[:-LINK_BLOCKS]:
             y, x = self._least.pop(b)
             x -= self._ref
-            self._sums += (1.0, x, y, x * x, x * y)
+            self._count, self._sum_x = self._count + 1, self._sum_x + x
+            self._hull = _lower_hull(self._hull + [(x, y)])
 
     @property
     def offset_s(self) -> float | None:
@@ -115,22 +121,40 @@ class ClockLink:
     def line(self) -> tuple[float, float, float] | None:
         """Return the host's time less the interface's over the run: ``(offset, rate, at)``.
 
-        ``offset + rate * (t - at)`` at interface time ``t``; the least-squares line through the
-        blocks' least delays, each late by its fastest delivery, so the line by their mean.
-        The rate is 0 over less than `LINK_BLOCKS` blocks and held to `HOST_DRIFT`. None
-        before any message.
+        ``offset + rate * (t - at)`` at interface time ``t``; the line below every block's
+        least delay (a delay is not negative: each lies above the clocks' true line by its
+        fastest delivery) that lies highest at the blocks' mean time: the edge of their lower
+        convex hull across it. Blocks held up (a start-up's) lie above it and leave it be. The
+        rate is 0 over less than `LINK_BLOCKS` blocks and held to `HOST_DRIFT` (the line then
+        the highest below every block with that rate). None before any message.
         """
         if self._ref is None:
             return None
-        n, sx, sy, sxx, sxy = self._sums
-        for y, x in self._least.values():
-            x -= self._ref
-            n, sx, sy, sxx, sxy = n + 1, sx + x, sy + y, sxx + x * x, sxy + x * y
-        var = sxx / n - (sx / n) ** 2
+        recent = sorted((x - self._ref, y) for y, x in self._least.values())
+        points = _lower_hull(self._hull + recent) if self._hull else _lower_hull(recent)
+        n = self._count + len(recent)
+        mean = (self._sum_x + sum(x for x, _ in recent)) / n
         rate = 0.0
-        if n > LINK_BLOCKS and var > 0.0:
-            rate = float(np.clip((sxy / n - sx * sy / n**2) / var, -HOST_DRIFT, HOST_DRIFT))
-        return float(sy / n - rate * sx / n), rate, self._ref
+        if n > LINK_BLOCKS and len(points) > 1:
+            xs = np.array([x for x, _ in points])
+            i = int(np.clip(np.searchsorted(xs, mean), 1, len(points) - 1))
+            (x0, y0), (x1, y1) = points[i - 1], points[i]
+            rate = float(np.clip((y1 - y0) / (x1 - x0), -HOST_DRIFT, HOST_DRIFT))
+        offset = min(y - rate * (x - mean) for x, y in points)
+        return float(offset - rate * mean), rate, self._ref
+
+
+def _lower_hull(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Return the lower convex hull of ``points``, sorted by x (Andrew's monotone chain)."""
+    hull: list[tuple[float, float]] = []
+    for p in sorted(points):
+        while len(hull) >= 2 and ((hull[-1][0] - hull[-2][0]) * (p[1] - hull[-2][1])
+                                  - (hull[-1][1] - hull[-2][1]) * (p[0] - hull[-2][0])) <= 0.0:
+            hull.pop()
+        if hull and hull[-1][0] == p[0]:
+            continue  # the same time again, not lower (sorted): the lower one stays
+        hull.append(p)
+    return hull
 
 
 @dataclass(frozen=True)
@@ -487,10 +511,12 @@ class Pipeline:
         """
         if not self._bus_clock_foreign:
             return self._host_origin_s()
-        host, offset = self._host_origin_s(), self._link.offset_s
-        if host is None or offset is None or self._link.broken:
+        host, line = self._host_origin_s(), self._link.line()
+        if host is None or line is None or self._link.broken:
             return None
-        return host - offset
+        offset, rate, at = line
+        # The interface's time at the scene's start: where its time plus the line is ``host``.
+        return at + (host - offset - at) / (1.0 + rate)
 
     def _check_bus_clock(self, cycles: list[Detections], duration_s: float,
                          track: ClockTrack) -> None:
@@ -543,13 +569,18 @@ class Pipeline:
             origin = None
         track.origin_s = origin
         if origin is not None:
+            line = self._link.line()
+            assert line is not None
+            # The cycles handed on are a batch older than the latest: the line times them
+            # through the crystals' drift since (`ClockLink.line`).
+            track.scale = 1.0 + line[1]
             truths.early_s = ClockLink.error_s
 
     def _link_over_the_run(self, track: ClockTrack) -> None:
         """Tie an interface's clock to the host's over the whole run (`ClockLink.line`).
 
-        Batch by batch, the recent deliveries tied the clocks where the cycles were; the
-        report and the log's sidecar describe the radar's clock over the run, on the host's
+        Batch by batch, the deliveries so far tied the clocks; the report and the log's
+        sidecar describe the radar's clock over the run by all of them, on the host's
         seconds: its cycle less the interface's crystal's error, and its phase.
         """
         line = self._link.line()
@@ -818,9 +849,10 @@ class CycleTruth:
     The scene's cycles are those measured in it, as far as the clock knows: its first is the
     first at or after its start less the clock's `start_tolerance_s` (it may have measured at
     the start itself; the first batches wait until the clock knows which, within a batch of
-    frames), its last the last before its end less that tolerance (the one after it may have
-    measured at the end itself, after the scene). `first_cycle` and `end_cycle` say which
-    they were.
+    frames) plus ``early_s`` (one that seems measured less than that after the start may have
+    measured before it, when nothing was played yet), its last the last before its end less
+    that tolerance (the one after it may have measured at the end itself, after the scene).
+    `first_cycle` and `end_cycle` say which they were.
     """
 
     def __init__(self, checker: Checker, scene: Scenario, clock: RadarClock | ClockTrack,
@@ -880,7 +912,7 @@ class CycleTruth:
         known = getattr(self.clock, "start_known", None)
         if self._next_n is not None or known is None:
             return False
-        if known(float(self.scene.t_s[self._pending[0][0]])):
+        if known(float(self.scene.t_s[self._pending[0][0]]) + self.early_s):
             return False
         return self._pending[0].size + more <= frames_per_batch(len(self.scene.targets))
 
@@ -911,7 +943,9 @@ class CycleTruth:
         # Cycle numbers follow on from the batch before's, whatever the clock now says: a
         # clock learnt from the bus (`ClockTrack`) may have moved a cycle across the batches'
         # boundary since (judged against the frame before, then).
-        tolerance_s = self.clock.start_tolerance_s
+        # A cycle that seems measured within ``early_s`` after the scene's start may have
+        # measured before it (nothing played yet): the scene's first is the one after.
+        tolerance_s = self.clock.start_tolerance_s - self.early_s
         lo = (self.clock.first_at(start_s - tolerance_s)
               if self._next_n is None else self._next_n)
         if self.first_cycle is None:

@@ -342,20 +342,23 @@ def test_a_radar_running_free_is_checked_at_the_phase_its_bus_times_show(tmp_pat
     assert again.report.errors["range_m"].max == pytest.approx(report.errors["range_m"].max)
 
 
-def run_behind_own_clock(scene, radar, *, ppm=0.0, log=None, late=False, seed=3):
+def run_behind_own_clock(scene, radar, *, ppm=0.0, log=None, late=False, seed=3,
+                         delays=(0.0, 0.003), start_up_s=0.0, record=False):
     """Run ``scene`` with ``radar``'s cycles stamped by an interface's own clock.
 
     Seconds since it was plugged in (1234.5 s at the scene's start), its crystal ``ppm`` off
-    the host's; the host receives each message up to 3 ms after it was stamped. ``late``: the
-    radar reports each cycle's detections one cycle late (the frame before). Returns the
-    report and the cycles the radar measured.
+    the host's; the host receives each message ``delays`` (lowest, highest; up to 3 ms by
+    default) after it was stamped, and those stamped in the first ``start_up_s`` of the scene
+    50 to 200 ms later still (an interface's start-up). ``late``: the radar reports each
+    cycle's detections one cycle late (the frame before). ``record``: keep the check's
+    per-cycle arrays. Returns the report and the cycles the radar measured.
     """
     seen: list[Detections] = []
     measured: list[Detections] = []
     rng = np.random.default_rng(seed)
     rate = 1.0 + ppm * 1e-6
-    with Pipeline.for_scene(scene, RunOptions(bus_log=None if log is None else str(log))) \
-            as pipeline:
+    with Pipeline.for_scene(scene, RunOptions(bus_log=None if log is None else str(log),
+                                              record=record)) as pipeline:
         pipeline.output.clock = radar
         publisher = pipeline._publisher
         origin = pipeline._bus_origin_s
@@ -372,8 +375,12 @@ def run_behind_own_clock(scene, radar, *, ppm=0.0, log=None, late=False, seed=3)
             publisher.publish_many(cycles, 1234.5 + (t + radar.latency_s + jitter) * rate)
 
         pipeline.output._sink = stamp
-        pipeline.receiver.received_at = (
-            lambda msg: origin + (msg.timestamp - 1234.5) / rate + rng.uniform(0.0, 0.003))
+        def received_at(msg):
+            host = origin + (msg.timestamp - 1234.5) / rate
+            start_up = rng.uniform(0.05, 0.2) if host - origin < start_up_s else 0.0
+            return host + rng.uniform(*delays) + start_up
+
+        pipeline.receiver.received_at = received_at
         return pipeline.run(scene).report, seen
 
 
@@ -436,6 +443,126 @@ def test_a_free_radar_one_frame_late_behind_an_interface_with_its_own_clock_is_s
     assert not report.passed
     assert [r for r in report.reasons if r.startswith("time_alignment: the detections fit the "
                                                      "scene 4")], report.reasons
+
+
+def receding_scene(tmp_path, duration_s, **clock):
+    """``scene_with_clock``'s scene ``duration_s`` long, its car straight ahead from 16 m,
+    receding 0.5 m/s: measurable for minutes, 2.5 cm further each frame."""
+    scene_with_clock(tmp_path, **clock)
+    return load_scenario(tmp_path / "cut_in.scenario.yaml",
+                         {"radar.profile": "radars/own.radar.yaml", "radar.noise": False,
+                          "radar.fidelity": "analytic", "duration_s": duration_s,
+                          "targets.0.motion.speed_mps": 22.5, "targets.0.lane_changes": [],
+                          "targets.0.motion.position_m": [20.0, 0.0, 0.6],
+                          "expectations.expected_limits": ["frame_rate_above_radar"]})
+
+
+def assert_measured_where_it_did(scene, report, seen, late_s):
+    """Each cycle's measurement time as the check took it lies at most ``late_s`` after the
+    radar's (and no earlier than the phase's jitter), and its truth is the frame it saw."""
+    t = np.array([c.t_s for c in seen])
+    got = report.record.load()["t_s"]
+    assert got.size == t.size
+    assert -6e-4 <= float((got - t).min()) and float((got - t).max()) <= late_s
+    held_t = np.floor(t * scene.frame_rate_hz + 1e-9) / scene.frame_rate_hz
+    truth = compute_tracks(scene, held_t)
+    moved = np.abs(compute_tracks(scene, held_t + 0.05).range_m[:, 0] - truth.range_m[:, 0])
+    assert report.errors["range_m"].max < 0.01 < moved.min()
+
+
+@pytest.mark.parametrize(("interface_ppm", "phase_s"), [(-200.0, 0.038), (200.0, 0.022)])
+def test_an_interface_drifting_over_a_long_run_keeps_each_cycle_at_its_phase(
+        tmp_path, interface_ppm, phase_s):
+    # 90 s in batches of 500 frames (25 s): each batch's cycles are judged once the next
+    # batch's came in, up to 50 s later, when the interface's crystal had drifted 10 ms
+    # against the host's. Each cycle is placed within its deliveries (3 ms) and the drift
+    # over the link's 5 s, as documented: 12 ms from a frame change either way, none is in an
+    # ambiguity window (5.8 ms each side, 11 ms more after a change), and the log's re-check
+    # judges alike.
+    scene = receding_scene(tmp_path, 90.0, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                           counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=phase_s, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    log = tmp_path / "long.blf"
+    report, seen = run_behind_own_clock(scene, radar, ppm=interface_ppm, log=log, record=True)
+    assert report.passed, report.reasons
+    assert report.frames["checked"] == report.frames["total"] == len(seen) == 1800
+    assert_measured_where_it_did(scene, report, seen, 0.003 + 0.001 + 6e-4)
+    assert report.frames["ambiguous"] == 0
+    clock = report.radar_clock
+    assert phase_s - 6e-4 <= clock["start_offset_s"] <= phase_s + 0.0036
+    assert clock["cycle_s"] == 0.05 and clock["cycle_from"] == "profile"
+    again = check_log(scene, log).report
+    assert again.passed, again.reasons
+    assert again.frames == report.frames
+
+
+@pytest.mark.parametrize("interface_ppm", [0.0, 150.0])
+def test_an_interface_s_slow_start_up_does_not_tilt_its_clock(tmp_path, interface_ppm):
+    # The interface delivers its first second's messages 50 to 200 ms late (USB start-up):
+    # those receipts are no clue to its clock, which the later ones tie to the host's. The
+    # report's clock is the radar's on the host's seconds: its profile's cycle, its phase
+    # within the deliveries' 3 ms; the sidecar keeps it, and the re-check judges alike.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    log = tmp_path / "start-up.blf"
+    report, seen = run_behind_own_clock(scene, radar, ppm=interface_ppm, log=log,
+                                        start_up_s=1.0, record=True)
+    assert report.passed, report.reasons
+    clock = report.radar_clock
+    assert clock["cycle_s"] == 0.05 and clock["cycle_from"] == "profile", clock
+    assert 0.031 - 6e-4 <= clock["start_offset_s"] <= 0.031 + 0.0036, clock
+    assert_measured_where_it_did(scene, report, seen, 0.003 + 0.001 + 6e-4)
+    again = check_log(scene, log).report
+    assert again.passed, again.reasons
+    assert again.frames == report.frames
+
+
+def test_a_free_radar_measuring_just_before_the_scene_s_start_misses_no_cycle(tmp_path):
+    # Every delivery takes 2 to 10 ms: the cycles seem measured 2 ms (and up to 11) after
+    # they were. This radar measures 1 ms before each frame change, so its cycle before the
+    # first it sent seems measured 1 ms into the scene; it may as well have measured before
+    # the scene (it did, and was not played to): the scene's first cycle is the one after,
+    # and no cycle is missing. Its cycles 1 ms before a change are ambiguous (their window
+    # after the change grows by the 11 ms); its last, 1 ms before the scene's end, seems
+    # measured after it and is not judged (counted after the scene).
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.049, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    log = tmp_path / "edge.blf"
+    report, seen = run_behind_own_clock(scene, radar, log=log, delays=(0.002, 0.01))
+    assert report.passed, report.reasons
+    assert report.frames["missing"] == report.frames["before_scene"] == 0
+    assert report.frames["after_scene"] == 1
+    assert report.frames["checked"] == report.frames["total"] == len(seen) - 1
+    assert report.radar_clock["counter_start"] == 4242
+    again = check_log(scene, log).report
+    assert again.passed, again.reasons
+    assert again.frames == report.frames
+
+
+def test_a_72_ms_radar_behind_a_drifting_interface_is_re_checked_alike(tmp_path):
+    # A 72 ms radar on 50 ms frames, behind an interface 200 ppm slow delivering in 2 to
+    # 10 ms: every cycle is judged against the frame it saw (or counted ambiguous), and the
+    # log's re-check by the sidecar counts the same cycles ambiguous.
+    scene = scene_with_clock(tmp_path, cycle_s=0.072, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.072, start_offset_s=0.02, latency_s=0.13, jitter_s=0.004,
+                       counter_start=7)
+    log = tmp_path / "72.blf"
+    report, seen = run_behind_own_clock(scene, radar, ppm=-200.0, log=log,
+                                        delays=(0.002, 0.01), record=True)
+    assert report.passed, report.reasons
+    assert report.frames["checked"] == report.frames["total"] == len(seen)
+    t = np.array([c.t_s for c in seen])
+    got = report.record.load()["t_s"]
+    assert 0.002 - 6e-4 <= float((got - t).min()) and float((got - t).max()) <= 0.011 + 6e-4
+    again = check_log(scene, log).report
+    assert again.passed, again.reasons
+    assert again.frames == report.frames
 
 
 def test_the_clock_track_keeps_the_profile_until_the_bus_tells_otherwise():
