@@ -284,11 +284,40 @@ def test_the_rts_state_is_the_schedule_s_frame():
 
 
 def test_emulate_command_stops_when_frames_stop(tmp_path, capsys):
+    # No stream within --wait: it stops, saying so (`emulate` waits for a run started by
+    # hand).
+    start = time.monotonic()
     code = cli.main(["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1",
-                     "--radar", "awr1843boost", "--seconds", "0.3"])
-    assert code == 0
+                     "--radar", "awr1843boost", "--seconds", "0.05", "--wait", "0.6"])
+    assert code == 0 and time.monotonic() - start >= 0.6
     out = capsys.readouterr().out
     assert "listening on udp://127.0.0.1:" in out and "cycles" in out
+    assert "no stream arrived within --wait 0.6 s" in out
+    # A datagram 0.2 s in (malformed, still a stream's) starts the quiet time: it ends 0.05 s
+    # after it, long before its --wait of 20 s.
+    import re
+    import socket
+    import threading
+
+    codes: list[int] = []
+    worker = threading.Thread(target=lambda: codes.append(cli.main(
+        ["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1", "--radar",
+         "awr1843boost", "--seconds", "0.05", "--wait", "20"])))
+    start = time.monotonic()
+    worker.start()
+    text = ""
+    while "listening on" not in text and time.monotonic() - start < 10:
+        time.sleep(0.05)
+        text += capsys.readouterr().out
+    port = int(re.search(r"listening on udp://127\.0\.0\.1:(\d+)", text).group(1))
+    time.sleep(0.2)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.sendto(b"not a frame", ("127.0.0.1", port))
+    worker.join(timeout=15)
+    assert not worker.is_alive() and codes == [0]
+    assert time.monotonic() - start < 10
+    out = capsys.readouterr().out
+    assert "no stream arrived" not in out and "1 datagrams" in out and "1 malformed" in out
 
 
 def test_a_perfect_radar_in_step_with_the_frames_passes_the_rehearsal(tmp_path, monkeypatch):

@@ -28,6 +28,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
     if args.can_channel is None:
         args.can_channel = "rts-emulator"
     check_number("--seconds", args.seconds, low=0.001, high=86400.0)
+    check_number("--wait", args.wait, low=0.001, high=86400.0)
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
     if args.estimator not in estimator_names():
@@ -57,17 +58,20 @@ def _do_emulate(args: argparse.Namespace) -> int:
     if args.can_interface == "virtual":
         print("note: the virtual CAN bus is heard only inside this process; run SCENE in "
               "another one needs a shared interface (socketcan vcan, udp_multicast)", flush=True)
-    datagrams, quiet_since = 0, time.monotonic()
+    # Until a stream starts (--wait), then until streams stop (--seconds without a datagram).
+    datagrams, quiet_since, quiet_s = 0, time.monotonic(), args.wait
     try:
-        while time.monotonic() - quiet_since < args.seconds:  # until the stream stops
+        while time.monotonic() - quiet_since < quiet_s:
             if emulator.receiver.stats.datagrams != datagrams:
                 datagrams = emulator.receiver.stats.datagrams
-                quiet_since = time.monotonic()
+                quiet_since, quiet_s = time.monotonic(), args.seconds
             time.sleep(0.01)
     except KeyboardInterrupt:
         pass
     finally:
         stats = emulator.stop()
+    if not datagrams:
+        print(f"no stream arrived within --wait {args.wait:g} s", flush=True)
     udp, measured = stats["udp"], stats["radar"]
     print(f"rts: {udp['frames_applied']} frames applied, {udp['datagrams']} datagrams, "
           f"{udp['lost_frames']} frames lost, {udp['corrupted']} corrupted, "
@@ -87,8 +91,9 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                     "until the next, and run the simulated radar on its own clock in real time "
                     "(the profile's clock: cycle, offset, latency, jitter, counter), publishing "
                     "its detections on CAN. Run `rts-scenario run SCENE --output "
-                    "udp://HOST:PORT --can-interface I --can-channel C` against it. Stops after "
-                    "--seconds without a datagram, or on Ctrl-C.",
+                    "udp://HOST:PORT --can-interface I --can-channel C` against it. Waits up to "
+                    "--wait for the first datagram, then stops after --seconds without one, or "
+                    "on Ctrl-C.",
     )
     parser.add_argument("--listen", required=True, metavar="udp://HOST:PORT",
                         help="where the RTS listens (port 0: any free port)")
@@ -108,5 +113,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--noise", action="store_true", help="thermal noise")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (>= 0)")
     parser.add_argument("--seconds", type=float, default=10.0,
-                        help="stop after this long without datagrams (default 10)")
+                        help="once a stream came, stop after this long without datagrams "
+                             "(default 10)")
+    parser.add_argument("--wait", type=float, default=600.0,
+                        help="stop if no stream comes within this long (default 600)")
     parser.set_defaults(handler=_do_emulate)
