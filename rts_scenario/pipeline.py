@@ -545,7 +545,9 @@ class Pipeline:
         """Tie a bus stamped on an interface's own clock to the host's, batch by batch.
 
         Where the cycles' bus times are on another clock than the scene's start
-        (`_check_bus_clock`), when the host received them ties that clock to its own
+        (`_check_bus_clock`, or their receipts say so: a message received before it was
+        stamped, or the fastest of seconds of them more than `HOST_DELIVERY_S` after), when the
+        host received them ties that clock to its own
         (`ClockLink`): the scene's start on the interface's clock follows, at most
         `ClockLink.error_s` late, and so the cycles' measurement times, which may then lie that
         much earlier than they seem: a cycle just after a frame change may have seen the frame
@@ -553,10 +555,19 @@ class Pipeline:
         (`CycleTruth.early_s`).
         """
         self._check_bus_clock(cycles, duration_s, track)
-        if not self._bus_clock_foreign or self._link.broken:
+        if self._link.broken:
             return
         bus_t = bus_times(cycles)
         self._link.add(bus_t, host_times(cycles))
+        if not self._bus_clock_foreign:
+            offset = self._link.offset_s
+            if offset is None or abs(offset) <= HOST_DELIVERY_S:
+                return
+            # No message reaches the host before it was stamped, nor every one of seconds of
+            # them later than the fastest delivery may be: stamps that say otherwise are on
+            # another clock, one within the scene's reach (an interface's, set from the host's
+            # once and run off since), and the receipts tie it to the host's.
+            self._bus_clock_foreign = True
         origin = self._scene_origin_s()
         t = bus_t[np.isfinite(bus_t)]
         clock = self.radar.radar_clock

@@ -343,10 +343,12 @@ def test_a_radar_running_free_is_checked_at_the_phase_its_bus_times_show(tmp_pat
 
 
 def run_behind_own_clock(scene, radar, *, ppm=0.0, log=None, late=False, seed=3,
-                         delays=(0.0, 0.003), start_up_s=0.0, record=False):
+                         delays=(0.0, 0.003), start_up_s=0.0, record=False, ahead_s=None):
     """Run ``scene`` with ``radar``'s cycles stamped by an interface's own clock.
 
-    Seconds since it was plugged in (1234.5 s at the scene's start), its crystal ``ppm`` off
+    Seconds since it was plugged in (1234.5 s at the scene's start; ``ahead_s``: the host's
+    time at the scene's start plus that, a clock set from the host's long ago), its crystal
+    ``ppm`` off
     the host's; the host receives each message ``delays`` (lowest, highest; up to 3 ms by
     default) after it was stamped, and those stamped in the first ``start_up_s`` of the scene
     50 to 200 ms later still (an interface's start-up). ``late``: the radar reports each
@@ -362,6 +364,7 @@ def run_behind_own_clock(scene, radar, *, ppm=0.0, log=None, late=False, seed=3,
         pipeline.output.clock = radar
         publisher = pipeline._publisher
         origin = pipeline._bus_origin_s
+        zero = 1234.5 if ahead_s is None else origin + ahead_s
 
         def stamp(cycles):
             if late:  # each cycle carries the detections of the one before (none first)
@@ -372,11 +375,12 @@ def run_behind_own_clock(scene, radar, *, ppm=0.0, log=None, late=False, seed=3,
             seen.extend(cycles)
             t = np.array([c.t_s for c in cycles])
             jitter = rng.uniform(-radar.jitter_s, radar.jitter_s, t.size)
-            publisher.publish_many(cycles, 1234.5 + (t + radar.latency_s + jitter) * rate)
+            publisher.publish_many(cycles, zero + (t + radar.latency_s + jitter) * rate)
 
         pipeline.output._sink = stamp
+
         def received_at(msg):
-            host = origin + (msg.timestamp - 1234.5) / rate
+            host = origin + (msg.timestamp - zero) / rate
             start_up = rng.uniform(0.05, 0.2) if host - origin < start_up_s else 0.0
             return host + rng.uniform(*delays) + start_up
 
@@ -422,6 +426,30 @@ def test_a_free_radar_behind_an_interface_with_its_own_clock_is_checked_at_its_p
     assert again.report.frames["ambiguous"] == 0
     assert again.report.radar_clock["start_offset_s"] == pytest.approx(
         clock["start_offset_s"], abs=1e-9)
+
+
+@pytest.mark.parametrize("ahead_s", [0.5, -2.0, 7.0])
+def test_an_interface_clock_near_the_host_s_is_told_by_the_receipts(tmp_path, ahead_s):
+    # An interface whose clock was set from the host's once and has run off it since (or a
+    # driver's own epoch close to it): its stamps lie within the 10 s that a first cycle's bus
+    # time may lie outside the scene, so they passed for the host's, and the radar's phase was
+    # off by that much (frames judged seconds away). No message reaches the host before it
+    # was stamped, nor all of a second's 10 ms late: the receipts tell the clocks apart, and
+    # tie them.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    log = tmp_path / "near.blf"
+    report, seen = run_behind_own_clock(scene, radar, log=log, ahead_s=ahead_s)
+    assert report.passed, report.reasons
+    clock = report.radar_clock
+    assert clock["bus_clock"] == "interface" and clock["start_from"] == "bus"
+    assert 0.031 - 6e-4 <= clock["start_offset_s"] <= 0.031 + 0.0036
+    assert report.frames["checked"] == report.frames["total"] == len(seen)
+    assert report.frames["ambiguous"] == 0
+    again = check_log(scene, log).report
+    assert again.passed and again.frames == report.frames
 
 
 def test_a_free_radar_one_frame_late_behind_an_interface_with_its_own_clock_is_seen(tmp_path):
