@@ -427,7 +427,8 @@ class Pipeline:
         which averages the jitter out; a cycle within three standard errors of the line's
         phase after a frame change counts as measured at it, as a run's first cycle does).
         With times on another clock (an interface stamping with its own: the first cycle far
-        outside the ``duration_s`` played, `BUS_CLOCK_SLACK_S`), or none, when the host
+        outside the ``duration_s`` played, `BUS_CLOCK_SLACK_S`, or the receipts telling them
+        apart as in `_follow_bus_clock`), or none, when the host
         received the cycles places them (`_host_phase_s`), within the host's delivery delay:
         each cycle is numbered as the latest it may be. Without those either, the first cycle
         received is taken as cycle 0.
@@ -449,6 +450,12 @@ class Pipeline:
         late_s = duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S
         if origin is not None and np.isfinite(bus_t[0]) and not (
                 -BUS_CLOCK_SLACK_S <= float(bus_t[0]) - origin <= late_s):
+            origin = None
+        delay = host_times(cycles) - bus_t
+        delay = delay[np.isfinite(delay)]
+        if origin is not None and delay.size and abs(float(delay.min())) > HOST_DELIVERY_S:
+            # A message received before it was stamped, or every one of them long after: the
+            # stamps are on another clock within the scene's reach (`_follow_bus_clock`).
             origin = None
         if origin is None or not np.isfinite(bus_t).all():
             bounds = self._host_phase_s(cycles, steps)

@@ -15,13 +15,14 @@ def free_profile(radar, latency_cycles, jitter_s=0.005):
                                         latency_s=latency_cycles * clock.cycle_s))
 
 
-def behind_own_clock(bench, offset_s, *, early=3, delivery_s=0.003, seed=7):
+def behind_own_clock(bench, offset_s, *, early=3, delivery_s=0.003, seed=7, ahead_s=None):
     """Make ``bench``'s simulated radar run free behind an interface with its own clock.
 
     Its cycle is ``offset_s`` along when each measurement's frames start; its ``early`` cycles
     measured before the first frame (nothing played) come first; the interface stamps every
-    message with seconds since it was plugged in (1234.5 s at the frames' start) and the host
-    receives each up to ``delivery_s`` after it was stamped.
+    message with seconds since it was plugged in (1234.5 s at the frames' start; ``ahead_s``:
+    the host's time plus that, a clock set from the host's once) and the host receives each up
+    to ``delivery_s`` after it was stamped.
     """
     clock = bench.radar.radar_clock
     own = RadarClock(cycle_s=clock.cycle_s, start_offset_s=offset_s, latency_s=clock.latency_s,
@@ -37,7 +38,7 @@ def behind_own_clock(bench, offset_s, *, early=3, delivery_s=0.003, seed=7):
         sink(cycles)
 
     bench.output._sink = switched_on_before
-    plugged_in_s = bench._scene_origin_s() - 1234.5
+    plugged_in_s = bench._scene_origin_s() - 1234.5 if ahead_s is None else -ahead_s
     bus = bench._publisher.bus
     send = bus.send
 

@@ -273,7 +273,7 @@ def test_a_free_radar_on_an_interface_with_its_own_clock_is_surveyed(clock_off_s
     np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
 
 
-def _survey_free_radar_on_its_own_clock(latency_cycles, offset_s):
+def _survey_free_radar_on_its_own_clock(latency_cycles, offset_s, ahead_s=None):
     """Survey kit-table1 with a radar running free ``latency_cycles`` late behind an interface
     stamping with its own clock, ``offset_s`` into its cycle when the frames start, its three
     cycles measured before the first frame arriving after it (`free_radar.behind_own_clock`)."""
@@ -281,7 +281,7 @@ def _survey_free_radar_on_its_own_clock(latency_cycles, offset_s):
     free = free_profile(RadarProfile.preset("paper"), latency_cycles)
     with Pipeline(rig, free, radar_options=RadarOptions(fidelity="analytic", noise=False)
                   ) as bench:
-        behind_own_clock(bench, offset_s)
+        behind_own_clock(bench, offset_s, ahead_s=ahead_s)
         return rig, survey(rig, free, bench.play)
 
 
@@ -295,6 +295,17 @@ def test_a_free_radar_on_an_interface_with_its_own_clock_is_surveyed_by_when_it_
     # interface stamps with its own clock; when the host received each cycle places it. Each
     # FE is where the radar saw it while that FE alone was played.
     rig, result = _survey_free_radar_on_its_own_clock(latency_cycles, offset_s)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
+
+
+@pytest.mark.parametrize("ahead_s", [0.3, -1.5])
+def test_a_free_radar_behind_an_interface_clock_near_the_host_s_is_surveyed(ahead_s):
+    # The interface's clock was set from the host's once and has run off it since: its stamps
+    # lie within seconds of the host's, where they passed for the host's and numbered the
+    # cycles by a start off by that much. No message is received before it was stamped, nor
+    # all of them long after: the receipts tell, and place the cycles.
+    rig, result = _survey_free_radar_on_its_own_clock(2.2, 0.025, ahead_s=ahead_s)
     np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
     np.testing.assert_allclose(result.seen_el_deg, rig.el_deg, atol=0.006)
 
