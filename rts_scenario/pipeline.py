@@ -60,6 +60,10 @@ BUS_CLOCK_SLACK_S = 10.0
 HOST_DELIVERY_S = 0.01
 # How fast an interface's clock may run against the host's (two crystals' tolerance).
 HOST_DRIFT = 2e-4
+# Stamps whose fastest receipt over seconds lies further than this after them are on another
+# clock than the host's (s): a loaded host holds some messages up, never every one that long.
+# (A stamp received before it was made, by more than HOST_DELIVERY_S, is another clock's too.)
+RECEIPT_OFF_S = 0.25
 # A run ties an interface's own clock to the host's by the fastest delivery over the last
 # LINK_BLOCKS blocks of LINK_BLOCK_S of the interface's time (`ClockLink`).
 LINK_BLOCK_S = 1.0
@@ -453,7 +457,8 @@ class Pipeline:
             origin = None
         delay = host_times(cycles) - bus_t
         delay = delay[np.isfinite(delay)]
-        if origin is not None and delay.size and abs(float(delay.min())) > HOST_DELIVERY_S:
+        if origin is not None and delay.size and not (
+                -HOST_DELIVERY_S <= float(delay.min()) <= RECEIPT_OFF_S):
             # A message received before it was stamped, or every one of them long after: the
             # stamps are on another clock within the scene's reach (`_follow_bus_clock`).
             origin = None
@@ -553,7 +558,7 @@ class Pipeline:
 
         Where the cycles' bus times are on another clock than the scene's start
         (`_check_bus_clock`, or their receipts say so: a message received before it was
-        stamped, or the fastest of seconds of them more than `HOST_DELIVERY_S` after), when the
+        stamped, or the fastest of seconds of them more than `RECEIPT_OFF_S` after), when the
         host received them ties that clock to its own
         (`ClockLink`): the scene's start on the interface's clock follows, at most
         `ClockLink.error_s` late, and so the cycles' measurement times, which may then lie that
@@ -568,12 +573,13 @@ class Pipeline:
         self._link.add(bus_t, host_times(cycles))
         if not self._bus_clock_foreign:
             offset = self._link.offset_s
-            if offset is None or abs(offset) <= HOST_DELIVERY_S:
+            if offset is None or -HOST_DELIVERY_S <= offset <= RECEIPT_OFF_S:
                 return
             # No message reaches the host before it was stamped, nor every one of seconds of
-            # them later than the fastest delivery may be: stamps that say otherwise are on
-            # another clock, one within the scene's reach (an interface's, set from the host's
-            # once and run off since), and the receipts tie it to the host's.
+            # them long after: stamps that say otherwise are on another clock, one within the
+            # scene's reach (an interface's, set from the host's once and run off since), and
+            # the receipts tie it to the host's. (One less than `RECEIPT_OFF_S` behind the
+            # host's shows as the detections' lag, `Checker.lag_reason`.)
             self._bus_clock_foreign = True
         origin = self._scene_origin_s()
         t = bus_t[np.isfinite(bus_t)]

@@ -428,14 +428,14 @@ def test_a_free_radar_behind_an_interface_with_its_own_clock_is_checked_at_its_p
         clock["start_offset_s"], abs=1e-9)
 
 
-@pytest.mark.parametrize("ahead_s", [0.5, -2.0, 7.0])
+@pytest.mark.parametrize("ahead_s", [0.02, 0.5, -0.3, -2.0, 7.0])
 def test_an_interface_clock_near_the_host_s_is_told_by_the_receipts(tmp_path, ahead_s):
     # An interface whose clock was set from the host's once and has run off it since (or a
     # driver's own epoch close to it): its stamps lie within the 10 s that a first cycle's bus
     # time may lie outside the scene, so they passed for the host's, and the radar's phase was
     # off by that much (frames judged seconds away). No message reaches the host before it
-    # was stamped, nor all of a second's 10 ms late: the receipts tell the clocks apart, and
-    # tie them.
+    # was stamped, nor all of seconds of them 0.25 s late: the receipts tell the clocks apart,
+    # and tie them.
     scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
                              counter_start="auto")
     radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
@@ -450,6 +450,22 @@ def test_an_interface_clock_near_the_host_s_is_told_by_the_receipts(tmp_path, ah
     assert report.frames["ambiguous"] == 0
     again = check_log(scene, log).report
     assert again.passed and again.frames == report.frames
+
+
+def test_an_interface_clock_a_little_behind_the_host_s_fails_on_the_detections_lag(tmp_path):
+    # 100 ms behind the host's: every receipt seems 100 ms after its stamp, which a loaded
+    # host could do to some messages; the stamps pass for the host's, the radar's phase is
+    # taken 100 ms early, and each cycle is judged against the frame two before the one it
+    # saw. The detections' lag tells, and the run fails.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
+                       counter_start=4242)
+    report, _ = run_behind_own_clock(scene, radar, ahead_s=-0.1)
+    assert report.radar_clock["bus_clock"] == "host"
+    assert report.radar_clock["detection_lag_s"] == pytest.approx(-0.1, abs=0.015)
+    assert not report.passed
+    assert [r for r in report.reasons if r.startswith("time_alignment:")], report.reasons
 
 
 def test_a_free_radar_one_frame_late_behind_an_interface_with_its_own_clock_is_seen(tmp_path):
