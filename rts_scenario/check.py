@@ -72,6 +72,12 @@ GATE = 3.0
 LAG_FRAMES = 0.5
 # The least matched target-cycles, in cycles judged against one frame, the lag is told from.
 LAG_MIN_CYCLES = 10
+# Range errors that follow the scene's geometry (the bench's, the radar's) change smoothly: the
+# lag's standard error is told from how its fit's residuals add up over each LAG_BIN_S of the
+# radar's measurement times, not target-cycle by target-cycle, over LAG_MIN_BINS of them at
+# least.
+LAG_BIN_S = 0.5
+LAG_MIN_BINS = 5
 # Worst target-frames kept for the report.
 WORST_FRAMES = 8
 # The counter of rts-scenario's own frame header (16 bits).
@@ -264,9 +270,12 @@ class Checker:
         self._last_cycle: int | None = None  # the number of the last cycle taken
         self._last_bus_t = np.nan  # and when it reached the bus
         self.cycle_s = cycle_s
-        # Sums of range error x range rate, range rate^2, range error^2 and their count over
+        # Sums of range error, range rate, their product, their squares and their count over
         # matched targets of cycles judged against one frame (`detection_lag_s`).
-        self._lag = np.zeros(4)
+        self._lag = np.zeros(6)
+        # The sums of count, range error, range rate, their product and range rate^2 per
+        # LAG_BIN_S of measurement time (its number).
+        self._lag_bins: dict[int, FloatArray] = {}
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
         self._played = np.zeros(n, dtype=np.int64)
@@ -443,7 +452,7 @@ class Checker:
         matched = match >= 0
         self._add_lag(errors["range_m"], block.tracks.radial_velocity_mps,
                       assigned & truth & (True if block.ambiguous is None
-                                          else ~block.ambiguous[:, None]))
+                                          else ~block.ambiguous[:, None]), block.tracks.t_s)
         for q, _ in QUANTITIES:
             self._stats[q].add(errors[q], truth)
         detected = assigned & within & truth
@@ -520,27 +529,62 @@ class Checker:
             within &= ~(np.abs(err) > tol[key])
         return _Judged(truth, assigned, within, errors, match, limit_masks(tracks, flags))
 
-    def _add_lag(self, error: FloatArray, rate: FloatArray, use: BoolArray) -> None:
+    def _add_lag(self, error: FloatArray, rate: FloatArray, use: BoolArray,
+                 t_s: FloatArray) -> None:
+        """Add target-cycles (rows: cycles measured at ``t_s``) to the lag's sums."""
         use = use & np.isfinite(error) & np.isfinite(rate)
         e, v = error[use], rate[use]
-        self._lag += (float(e @ v), float(v @ v), float(e @ e), float(e.size))
+        self._lag += (float(e.sum()), float(v.sum()), float(e @ v), float(v @ v),
+                      float(e @ e), float(e.size))
+        if not e.size:
+            return
+        bins = np.floor(np.asarray(t_s, dtype=np.float64)[np.nonzero(use)[0]] / LAG_BIN_S)
+        keys, of = np.unique(bins.astype(np.int64), return_inverse=True)
+        sums = np.stack([np.bincount(of, w, minlength=keys.size)
+                         for w in (np.ones(e.size), e, v, e * v, v * v)], axis=1)
+        for key, row in zip(keys.tolist(), sums, strict=True):
+            if key in self._lag_bins:
+                self._lag_bins[key] += row
+            else:
+                self._lag_bins[key] = row.copy()
 
     def detection_lag_s(self) -> tuple[float, float] | None:
         """How much earlier than the check's times the detections fit the scene, and its error.
 
         A radar that measured ``L`` seconds earlier than the check took it (its latency longer
         than its profile's, its phase or the RTS's timing not what the run knows) ranged each
-        target ``L`` times its range rate short: the least-squares ``L`` of the matched
-        targets' range errors against their range rates, over cycles judged against one frame
-        (s), and its standard error. None over fewer than `LAG_MIN_CYCLES` target-cycles or
-        where no target moved in range.
+        target ``L`` times its range rate short: the least-squares slope ``-L`` of the matched
+        targets' range errors on their range rates, over cycles judged against one frame (s).
+        The fit has a range offset of its own: a radar ranging every target alike long or
+        short (its range offset, the RTS's delay calibration) is not out of time. Its standard
+        error is the larger of the least-squares one and the one the residuals give summed
+        per `LAG_BIN_S` of measurement time (range errors that follow the scene's geometry
+        change smoothly, and do not average out cycle by cycle). None over fewer than
+        `LAG_MIN_CYCLES` target-cycles or `LAG_MIN_BINS` such spans, or where the range rates
+        did not vary (a lag could not be told from a range offset).
         """
-        ev, vv, ee, n = self._lag
-        if n < LAG_MIN_CYCLES or not vv > 0.0:
+        s_e, s_v, s_ev, s_vv, s_ee, n = self._lag
+        if n < LAG_MIN_CYCLES or len(self._lag_bins) < LAG_MIN_BINS:
+            return None
+        # About the means: the range offset out.
+        mean_e, mean_v = s_e / n, s_v / n
+        vv = s_vv - s_v * mean_v
+        ev = s_ev - s_e * mean_v
+        ee = s_ee - s_e * mean_e
+        if not vv > 1e-9 * s_vv:  # no spread beyond round-off of equal rates
             return None
         lag = -ev / vv
         residual = max(ee - lag * lag * vv, 0.0)
-        return float(lag), float(np.sqrt(residual / (n - 1.0) / vv))
+        error = np.sqrt(residual / (n - 2.0) / vv)
+        # Each span's sum of centred range rate x residual, (v - mean_v) (e - mean_e + L (v -
+        # mean_v)), from its sums.
+        b = np.array(list(self._lag_bins.values()))
+        k, e_k, v_k, ev_k, vv_k = b.T
+        score = (ev_k - mean_e * v_k - mean_v * e_k + k * mean_v * mean_e
+                 + lag * (vv_k - 2.0 * mean_v * v_k + k * mean_v * mean_v))
+        spans = float(b.shape[0])
+        error = max(error, float(np.sqrt(spans / (spans - 1.0) * (score @ score))) / vv)
+        return float(lag), float(error)
 
     def lag_reason(self, frame_s: float) -> str | None:
         """Why the detections' lag fails the run (`detection_lag_s`), or None.
