@@ -70,11 +70,14 @@ GATE = 3.0
 # clear) before or after the times the check took for them fail the run (`Checker.lag_reason`):
 # most of their cycles were judged against frames the radar had not seen.
 LAG_FRAMES = 0.5
-# The least matched target-cycles, in cycles judged against one frame, the lag is told from,
-# and the least scatter of their range errors it takes, as a share of the range tolerance (a
-# few cycles, or quantized ranges, can fit a line closer than a radar's noise warrants).
-LAG_MIN_CYCLES = 30
-LAG_NOISE_FLOOR = 0.01
+# The least matched target-cycles, in cycles judged against one frame, the lag is told from.
+LAG_MIN_CYCLES = 10
+# Range errors that follow the scene's geometry (the bench's, the radar's) change smoothly: the
+# lag's standard error is told from how its fit's residuals add up over each LAG_BIN_S of the
+# radar's measurement times, not target-cycle by target-cycle, over LAG_MIN_BINS of them at
+# least.
+LAG_BIN_S = 0.5
+LAG_MIN_BINS = 5
 # Worst target-frames kept for the report.
 WORST_FRAMES = 8
 # The counter of rts-scenario's own frame header (16 bits).
@@ -267,9 +270,15 @@ class Checker:
         self._last_cycle: int | None = None  # the number of the last cycle taken
         self._last_bus_t = np.nan  # and when it reached the bus
         self.cycle_s = cycle_s
-        # Count, sums of range error, range rate, their product, range rate^2 and range
-        # error^2 over matched targets of cycles judged against one frame (`detection_lag_s`).
+        # Sums of range error, range rate, their product, their squares and their count over
+        # matched targets of cycles judged against one frame (`detection_lag_s`).
         self._lag = np.zeros(6)
+        # Per LAG_BIN_S of measurement time, the sums of count, range error, range rate, their
+        # product and range rate^2: the span being filled (its number, its sums), and the
+        # outer products of the closed spans' sums summed, and their number (constant memory).
+        self._lag_span: tuple[int, FloatArray] | None = None
+        self._lag_outer = np.zeros((5, 5))
+        self._lag_spans = 0
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
         self._played = np.zeros(n, dtype=np.int64)
@@ -444,9 +453,8 @@ class Checker:
         truth, assigned, within = judged.truth, judged.assigned, judged.within
         errors, match = judged.errors, judged.match
         matched = match >= 0
-        self._add_lag(errors["range_m"], block.tracks.radial_velocity_mps,
-                      assigned & truth & (True if block.ambiguous is None
-                                          else ~block.ambiguous[:, None]))
+        self._add_lag(self._lag_errors(block, errors["range_m"], use_other),
+                      block.tracks.radial_velocity_mps, assigned & truth, block.tracks.t_s)
         for q, _ in QUANTITIES:
             self._stats[q].add(errors[q], truth)
         detected = assigned & within & truth
@@ -523,35 +531,96 @@ class Checker:
             within &= ~(np.abs(err) > tol[key])
         return _Judged(truth, assigned, within, errors, match, limit_masks(tracks, flags))
 
-    def _add_lag(self, error: FloatArray, rate: FloatArray, use: BoolArray) -> None:
+    @staticmethod
+    def _lag_errors(block: _Block, error: FloatArray, use_other: BoolArray) -> FloatArray:
+        """Range errors for the lag: an ambiguous cycle's against whichever frame fits better.
+
+        A cycle near a frame change may show either frame (`CycleTruth`); it is judged against
+        the one it was measured in unless the other detects more, but a target within
+        tolerance of both was judged against the first. For the lag, each ambiguous cycle's
+        target takes the smaller error of the two frames: a radar in step with the frames (all
+        its cycles ambiguous) fits one of them, and one a frame or more late fits neither (its
+        lag, if anything, comes out up to a frame short).
+        """
+        if block.other is None or block.ambiguous is None:
+            return error
+        held, other = block.tracks.range_m, block.other[0].range_m
+        turned = use_other[:, None]
+        judged_r, alt_r = np.where(turned, other, held), np.where(turned, held, other)
+        alt = error + judged_r - alt_r
+        better = block.ambiguous[:, None] & (np.abs(alt) < np.abs(error))
+        return np.where(better, alt, error)
+
+    def _add_lag(self, error: FloatArray, rate: FloatArray, use: BoolArray,
+                 t_s: FloatArray) -> None:
+        """Add target-cycles (rows: cycles measured at ``t_s``) to the lag's sums."""
         use = use & np.isfinite(error) & np.isfinite(rate)
         e, v = error[use], rate[use]
-        self._lag += (float(e.size), float(e.sum()), float(v.sum()), float(e @ v),
-                      float(v @ v), float(e @ e))
+        self._lag += (float(e.sum()), float(v.sum()), float(e @ v), float(v @ v),
+                      float(e @ e), float(e.size))
+        if not e.size:
+            return
+        bins = np.floor(np.asarray(t_s, dtype=np.float64)[np.nonzero(use)[0]] / LAG_BIN_S)
+        keys, of = np.unique(bins.astype(np.int64), return_inverse=True)
+        sums = np.stack([np.bincount(of, w, minlength=keys.size)
+                         for w in (np.ones(e.size), e, v, e * v, v * v)], axis=1)
+        for key, row in zip(keys.tolist(), sums, strict=True):  # a block spans a few
+            if self._lag_span is not None and key == self._lag_span[0]:
+                self._lag_span[1][:] += row
+            elif self._lag_span is None or key > self._lag_span[0]:
+                self._close_lag_span()
+                self._lag_span = (key, row.copy())
+            else:  # a span closed already (cycles settle in order): a span of its own
+                self._lag_outer += np.outer(row, row)
+                self._lag_spans += 1
+
+    def _close_lag_span(self) -> None:
+        if self._lag_span is not None:
+            row = self._lag_span[1]
+            self._lag_outer += np.outer(row, row)
+            self._lag_spans += 1
+            self._lag_span = None
 
     def detection_lag_s(self) -> tuple[float, float] | None:
         """How much earlier than the check's times the detections fit the scene, and its error.
 
         A radar that measured ``L`` seconds earlier than the check took it (its latency longer
         than its profile's, its phase or the RTS's timing not what the run knows) ranged each
-        target ``L`` times its range rate short. The matched targets' range errors over cycles
-        judged against one frame are fitted with that and one range offset for all (a radar's
-        or a rig's range calibration, which a lag must not be taken for): least squares, ``L``
-        (s) and its standard error, from the errors' scatter about the fit but no less than
-        `LAG_NOISE_FLOOR` of the range tolerance. None over fewer than `LAG_MIN_CYCLES`
-        target-cycles, or where the range rates do not vary (one target at a constant range
-        rate: a lag and an offset look alike).
+        target ``L`` times its range rate short: the least-squares slope ``-L`` of the matched
+        targets' range errors on their range rates, over cycles judged against one frame (s).
+        The fit has a range offset of its own: a radar ranging every target alike long or
+        short (its range offset, the RTS's delay calibration) is not out of time. Its standard
+        error is the larger of the least-squares one and the one the residuals give summed
+        per `LAG_BIN_S` of measurement time (range errors that follow the scene's geometry
+        change smoothly, and do not average out cycle by cycle). None over fewer than
+        `LAG_MIN_CYCLES` target-cycles or `LAG_MIN_BINS` such spans, or where the range rates
+        did not vary (a lag could not be told from a range offset).
         """
-        n, se, sv, sev, svv, see = self._lag
-        if n < LAG_MIN_CYCLES:
+        s_e, s_v, s_ev, s_vv, s_ee, n = self._lag
+        outer, spans = self._lag_outer, self._lag_spans
+        if self._lag_span is not None:  # the span being filled, as if closed
+            outer = outer + np.outer(self._lag_span[1], self._lag_span[1])
+            spans += 1
+        if n < LAG_MIN_CYCLES or spans < LAG_MIN_BINS:
             return None
-        cov, var = sev - se * sv / n, svv - sv * sv / n
-        if not var > 1e-9 * svv or not var > 0.0:
+        # About the means: the range offset out.
+        mean_e, mean_v = s_e / n, s_v / n
+        vv = s_vv - s_v * mean_v
+        ev = s_ev - s_e * mean_v
+        ee = s_ee - s_e * mean_e
+        if not vv > 1e-9 * s_vv:  # no spread beyond round-off of equal rates
             return None
-        lag = -cov / var
-        scatter = np.sqrt(max(see - se * se / n - cov * cov / var, 0.0) / (n - 2.0))
-        floor = LAG_NOISE_FLOOR * self.expectations.tolerances["range_m"]
-        return float(lag), float(max(scatter, floor) / np.sqrt(var))
+        lag = -ev / vv
+        residual = max(ee - lag * lag * vv, 0.0)
+        error = np.sqrt(residual / (n - 2.0) / vv)
+        # Each span's sum of centred range rate x residual, (v - mean_v) (e - mean_e + L (v -
+        # mean_v)), is c . (count, e, v, e v, v v) of its sums: the sum of their squares is
+        # c' (sum of the spans' outer products) c.
+        c = np.array([mean_v * mean_e + lag * mean_v * mean_v, -mean_v,
+                      -mean_e - 2.0 * lag * mean_v, 1.0, lag])
+        squares = max(float(c @ outer @ c), 0.0)
+        error = max(error, float(np.sqrt(spans / (spans - 1.0) * squares)) / vv)
+        return float(lag), float(error)
 
     def lag_reason(self, frame_s: float) -> str | None:
         """Why the detections' lag fails the run (`detection_lag_s`), or None.
