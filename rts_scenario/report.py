@@ -281,6 +281,12 @@ class Report:
                             else "the ambiguity window")
                          + f" of a frame change, {f.get('adjacent_frame', 0)} of them judged "
                          f"against the frame across it (more targets detected)")
+        lag = self.radar_clock.get("detection_lag_s")
+        if lag is not None:
+            error = self.radar_clock.get("detection_lag_error_s") or 0.0
+            lines.append(f"time alignment: the detections fit the scene {abs(lag) * 1e3:.1f} ms "
+                         f"(+-{3e3 * error:.1f}) {'before' if lag > 0 else 'after'} the "
+                         f"cycles' times")
         if self.playback:
             lines.append(_playback_line(self.playback))
         problems = {k: v for k, v in self.bus.items() if k != "messages" and v}

@@ -1307,3 +1307,16 @@ def test_a_clock_link_follows_two_crystals_running_apart():
     short = ClockLink()
     short.add(bus[:60], host[:60])  # 3 s
     assert short.line()[1] == 0.0
+
+
+def test_the_report_table_says_how_the_detections_fit_the_cycles_times(tmp_path):
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, start_offset_s=0.025, latency_s=0.13,
+                             counter_start=0)
+    report = run(scene)
+    report.radar_clock.update(detection_lag_s=-0.0086, detection_lag_error_s=0.00233)
+    assert ("time alignment: the detections fit the scene 8.6 ms (+-7.0) after the cycles' "
+            "times") in report.table()
+    report.radar_clock.update(detection_lag_s=0.05, detection_lag_error_s=0.001)
+    assert "fit the scene 50.0 ms (+-3.0) before" in report.table()
+    del report.radar_clock["detection_lag_s"]
+    assert "time alignment" not in report.table()
