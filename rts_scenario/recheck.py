@@ -43,6 +43,7 @@ from .kinematics import Tracks, compute_tracks
 from .pipeline import (
     BUS_CLOCK_SLACK_S,
     LOG_SIDECAR_SUFFIX,
+    RECEIPT_OFF_S,
     CycleTruth,
     ambiguity_window_s,
     lag_dict,
@@ -206,7 +207,8 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
                 "cycles": {"type": ["integer", "null"], "minimum": 0},
                 "origin_bus_s": {"type": ["number", "null"]},
-                "early_s": _number(minimum=0),
+                # A delivery delay: beyond RECEIPT_OFF_S receipts are no deliveries.
+                "early_s": _number(minimum=0, maximum=RECEIPT_OFF_S),
             },
         },
         "mapping": {"type": ["string", "null"]},

@@ -320,6 +320,29 @@ def test_emulate_command_stops_when_frames_stop(tmp_path, capsys):
     assert "no stream arrived" not in out and "1 datagrams" in out and "1 malformed" in out
 
 
+def test_emulate_stopped_by_ctrl_c_before_a_stream_does_not_claim_the_wait_ran_out(
+        monkeypatch, capsys):
+    # Ctrl-C a second into the default 600 s wait: no stream came, but the wait did not end.
+    import threading
+
+    import rts_scenario.cli.emulate as emulate
+
+    def interrupted(seconds):
+        if threading.current_thread() is threading.main_thread():
+            raise KeyboardInterrupt
+        sleep(seconds)
+
+    sleep = time.sleep
+    monkeypatch.setattr(emulate.time, "sleep", interrupted)
+    code = cli.main(["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1",
+                     "--radar", "awr1843boost"])
+    monkeypatch.undo()
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "within --wait" not in out, out
+    assert "stopped (Ctrl-C) before any stream arrived" in out and "0 datagrams" in out
+
+
 def test_a_perfect_radar_in_step_with_the_frames_passes_the_rehearsal(tmp_path, monkeypatch):
     # Every shipped profile measures each cycle exactly when the next frame is due: the
     # emulated RTS may or may not have it yet. The checker takes either frame within the

@@ -296,15 +296,17 @@ def test_xdist_gives_the_same_verdicts(pytester):
     parallel.assert_outcomes(passed=5, failed=1)
 
 
+@pytest.mark.parametrize("workers", [("-n", "2"), ("-d", "--tx", "2*popen")])
 @pytest.mark.parametrize("options", [
     ("--rts-can-interface", "udp_multicast", "--rts-can-channel", "239.74.163.2"),
     ("--rts-output", "udp://127.0.0.1:45871"),
 ])
-def test_xdist_workers_sharing_one_bench_are_refused(pytester, options):
+def test_xdist_workers_sharing_one_bench_are_refused(pytester, options, workers):
     # One bench (an RTS on UDP, a bus other processes hear) driven by two workers at once
     # would mix their frames and their radars' detections: each verdict judged the other's.
+    # Two workers as -n 2 or xdist's --tx 2*popen (which each worker refused with a traceback).
     pytester.makefile(".scenario.yaml", one=scene("one"), two=scene("two"))
-    result = pytester.runpytest("-n", "2", "-p", "no:benchmark", *options)
+    result = pytester.runpytest(*workers, "-p", "no:benchmark", *options)
     text = result.stderr.str() + result.stdout.str()
     assert result.ret == pytest.ExitCode.USAGE_ERROR, text
     assert f"{options[0]} {options[1]} with 2 xdist workers" in text

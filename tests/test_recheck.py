@@ -307,6 +307,17 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"to 65535, or null\)"),
     (lambda d: {**d, "clock": {**d["clock"], "counter_start": 65536}},
      r"clock\.counter_start: 65536, beyond"),
+    # How much earlier than the clock's times the cycles may have been measured: a delivery
+    # delay, at most the 0.25 s beyond which receipts are not deliveries; 1e300 was a runtime
+    # error, 5 s moved the scene's first cycle 100 cycles on.
+    (lambda d: {**d, "clock": {**d["clock"], "early_s": -0.01}},
+     r"clock\.early_s: -0\.01 is less than the minimum of 0"),
+    (lambda d: {**d, "clock": {**d["clock"], "early_s": 1e300}},
+     r"clock\.early_s: 1e\+300 is greater than the maximum of 0\.25"),
+    (lambda d: {**d, "clock": {**d["clock"], "early_s": 5.0}},
+     r"clock\.early_s: 5\.0 is greater than the maximum of 0\.25"),
+    (lambda d: {**d, "clock": {**d["clock"], "early_s": "x"}},
+     r"clock\.early_s: 'x' is not of type 'number'"),
     # The run's playback, which the re-check fails on as the run did: each was a runtime error.
     (lambda d: {**d, "playback": {"lateness_s": 5}},
      r"playback: 'frames_sent' is a required property"),

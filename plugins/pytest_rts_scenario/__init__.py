@@ -91,7 +91,10 @@ def _refuse_workers_sharing_a_bench(config: pytest.Config, spec: str, interface:
     """
     workers = 0
     if getattr(config.option, "dist", "no") != "no":
-        workers = len(getattr(config.option, "tx", None) or ())
+        # xdist's gateway specs: ``-n 2`` gives two, ``--tx 2*popen`` one for two workers.
+        for tx in getattr(config.option, "tx", None) or ():
+            count, star, _ = str(tx).partition("*")
+            workers += int(count) if star and count.strip().isdigit() else 1
     workers = max(workers, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0))
     if workers <= 1:
         return

@@ -67,11 +67,14 @@ def _do_emulate(args: argparse.Namespace) -> int:
                 quiet_since, quiet_s = time.monotonic(), args.seconds
             time.sleep(0.01)
     except KeyboardInterrupt:
-        pass
+        interrupted = True
+    else:
+        interrupted = False
     finally:
         stats = emulator.stop()
-    if not datagrams:
-        print(f"no stream arrived within --wait {args.wait:g} s", flush=True)
+    if not stats["udp"]["datagrams"]:
+        print("stopped (Ctrl-C) before any stream arrived" if interrupted
+              else f"no stream arrived within --wait {args.wait:g} s", flush=True)
     udp, measured = stats["udp"], stats["radar"]
     print(f"rts: {udp['frames_applied']} frames applied, {udp['datagrams']} datagrams, "
           f"{udp['lost_frames']} frames lost, {udp['corrupted']} corrupted, "
