@@ -633,7 +633,7 @@ class Checker:
             return None
         when = "before" if lag[0] > 0 else "after"
         return (f"time_alignment: the detections fit the scene {abs(lag[0]) * 1e3:.1f} ms "
-                f"(+-{3e3 * lag[1]:.1f}) {when} the times the check took for the radar's "
+                f"(+-{3e3 * lag[1]:.1f} ms) {when} the times the check took for the radar's "
                 f"cycles, more than {LAG_FRAMES:g} of a {frame_s * 1e3:g} ms frame: most "
                 f"cycles were judged against frames the radar had not seen; the radar's "
                 f"latency or phase is not its profile's (clock.latency_s, start_offset_s), or "

@@ -803,8 +803,10 @@ class Pipeline:
         if measured is not None:
             report.radar_clock["bus_cycle_s"] = measured[0]
         report.radar_clock.update(track.to_dict(scene_first))
-        # Whose clock the bus times are on: the host's, or an interface's own (`ClockLink`).
-        report.radar_clock["bus_clock"] = "interface" if self._bus_clock_foreign else "host"
+        # Whose clock the bus times are on: the host's, or an interface's own (`ClockLink`);
+        # not said where no cycle came with a bus time.
+        if track.fit.count:
+            report.radar_clock["bus_clock"] = "interface" if self._bus_clock_foreign else "host"
         report.radar_clock.update(lag_dict(checker))
         return RunResult(scene=scene, report=report)
 

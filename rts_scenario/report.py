@@ -285,7 +285,7 @@ class Report:
         if lag is not None:
             error = self.radar_clock.get("detection_lag_error_s") or 0.0
             lines.append(f"time alignment: the detections fit the scene {abs(lag) * 1e3:.1f} ms "
-                         f"(+-{3e3 * error:.1f}) {'before' if lag > 0 else 'after'} the "
+                         f"(+-{3e3 * error:.1f} ms) {'before' if lag > 0 else 'after'} the "
                          f"cycles' times")
         if self.playback:
             lines.append(_playback_line(self.playback))

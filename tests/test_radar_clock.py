@@ -342,6 +342,16 @@ def test_a_radar_running_free_is_checked_at_the_phase_its_bus_times_show(tmp_pat
     assert again.report.errors["range_m"].max == pytest.approx(report.errors["range_m"].max)
 
 
+def free_radar(tmp_path, cycle_s=0.05, offset_s=0.031, counter_start=4242):
+    """A scene whose radar runs free (profile: ``cycle_s``, 130 ms latency, 4 ms jitter,
+    ``counter_start: auto``), and that radar's own clock: ``offset_s`` into its cycle at the
+    scene's start, its counter from ``counter_start``."""
+    scene = scene_with_clock(tmp_path, cycle_s=cycle_s, latency_s=0.13, jitter_s=0.004,
+                             counter_start="auto")
+    return scene, RadarClock(cycle_s=cycle_s, start_offset_s=offset_s, latency_s=0.13,
+                             jitter_s=0.004, counter_start=counter_start)
+
+
 def run_behind_own_clock(scene, radar, *, ppm=0.0, log=None, late=False, seed=3,
                          delays=(0.0, 0.003), start_up_s=0.0, record=False, ahead_s=None):
     """Run ``scene`` with ``radar``'s cycles stamped by an interface's own clock.
@@ -436,10 +446,7 @@ def test_an_interface_clock_near_the_host_s_is_told_by_the_receipts(tmp_path, ah
     # off by that much (frames judged seconds away). No message reaches the host before it
     # was stamped, nor all of seconds of them 0.25 s late: the receipts tell the clocks apart,
     # and tie them.
-    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
-                       counter_start=4242)
+    scene, radar = free_radar(tmp_path)
     log = tmp_path / "near.blf"
     report, seen = run_behind_own_clock(scene, radar, log=log, ahead_s=ahead_s)
     assert report.passed, report.reasons
@@ -457,10 +464,7 @@ def test_an_interface_clock_a_little_behind_the_host_s_fails_on_the_detections_l
     # host could do to some messages; the stamps pass for the host's, the radar's phase is
     # taken 100 ms early, and each cycle is judged against the frame two before the one it
     # saw. The detections' lag tells, and the run fails.
-    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
-                       counter_start=4242)
+    scene, radar = free_radar(tmp_path)
     report, _ = run_behind_own_clock(scene, radar, ahead_s=-0.1)
     assert report.radar_clock["bus_clock"] == "host"
     assert report.radar_clock["detection_lag_s"] == pytest.approx(-0.1, abs=0.015)
@@ -473,10 +477,7 @@ def test_a_free_radar_one_frame_late_behind_an_interface_with_its_own_clock_is_s
     # before. At the profile's phase every cycle sat on a frame change and was judged against
     # whichever frame matched (errors of 4 mm, as on time); tied to the host's clock the check
     # knows where it measured: each cycle's error is the target's motion over a frame.
-    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
-                       counter_start=4242)
+    scene, radar = free_radar(tmp_path)
     report, _ = run_behind_own_clock(scene, radar, late=True)
     assert report.frames["ambiguous"] == 0
     assert report.errors["range_m"].p50 > 0.04, report.errors["range_m"]
@@ -549,10 +550,7 @@ def test_an_interface_s_slow_start_up_does_not_tilt_its_clock(tmp_path, interfac
     # those receipts are no clue to its clock, which the later ones tie to the host's. The
     # report's clock is the radar's on the host's seconds: its profile's cycle, its phase
     # within the deliveries' 3 ms; the sidecar keeps it, and the re-check judges alike.
-    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
-                       counter_start=4242)
+    scene, radar = free_radar(tmp_path)
     log = tmp_path / "start-up.blf"
     report, seen = run_behind_own_clock(scene, radar, ppm=interface_ppm, log=log,
                                         start_up_s=1.0, record=True)
@@ -574,10 +572,7 @@ def test_a_free_radar_measuring_just_before_the_scene_s_start_misses_no_cycle(tm
     # and no cycle is missing. Its cycles 1 ms before a change are ambiguous (their window
     # after the change grows by the 11 ms); its last, 1 ms before the scene's end, seems
     # measured after it and is not judged (counted after the scene).
-    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.049, latency_s=0.13, jitter_s=0.004,
-                       counter_start=4242)
+    scene, radar = free_radar(tmp_path, 0.05, 0.049, 4242)
     log = tmp_path / "edge.blf"
     report, seen = run_behind_own_clock(scene, radar, log=log, delays=(0.002, 0.01))
     assert report.passed, report.reasons
@@ -594,10 +589,7 @@ def test_a_72_ms_radar_behind_a_drifting_interface_is_re_checked_alike(tmp_path)
     # A 72 ms radar on 50 ms frames, behind an interface 200 ppm slow delivering in 2 to
     # 10 ms: every cycle is judged against the frame it saw (or counted ambiguous), and the
     # log's re-check by the sidecar counts the same cycles ambiguous.
-    scene = scene_with_clock(tmp_path, cycle_s=0.072, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.072, start_offset_s=0.02, latency_s=0.13, jitter_s=0.004,
-                       counter_start=7)
+    scene, radar = free_radar(tmp_path, 0.072, 0.02, 7)
     log = tmp_path / "72.blf"
     report, seen = run_behind_own_clock(scene, radar, ppm=-200.0, log=log,
                                         delays=(0.002, 0.01), record=True)
@@ -697,10 +689,7 @@ def test_a_free_radar_just_before_the_frames_is_numbered_by_all_its_cycles(tmp_p
     # (at -1 ms, never measured) in the scene: the scene's first is decided once the bus
     # times tell it (three standard errors of the phase over 240 cycles: 0.6 ms), the same
     # 240 cycles live and re-checked.
-    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.049, latency_s=0.13, jitter_s=0.004,
-                       counter_start=4242)
+    scene, radar = free_radar(tmp_path, 0.05, 0.049, 4242)
     log = tmp_path / "free.blf"
     report = run_stamped(scene, lambda n: 0.13 + np.where(
         n == 4242, 0.0035, np.where(n % 2, 0.003, -0.003)), log, radar, batch_frames)
@@ -719,10 +708,7 @@ def test_a_free_radar_that_lost_its_first_cycles_fails_with_them_missing(tmp_pat
                                                                          batch_frames):
     # The radar measured from the scene's start (25 ms into each frame), but its first ten
     # cycles never reached the bus: they are missing, not a later start of the scene's cycles.
-    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.025, latency_s=0.13, jitter_s=0.004,
-                       counter_start=4242)
+    scene, radar = free_radar(tmp_path, 0.05, 0.025, 4242)
     report = run_stamped(scene, lambda n: 0.13 + np.where(n % 2, 0.003, -0.003),
                          tmp_path / "lost.blf", radar, batch_frames,
                          keep=lambda c: c.cycle >= 4252)
@@ -1091,10 +1077,7 @@ def test_a_radar_whose_latency_is_not_its_profile_s_fails_on_the_detections_lag(
     # plays whole frames), and the run fails, live and re-checked. On its profile's latency
     # the lag is the radar's range-Doppler coupling (its range shifts by its range rate times
     # a millisecond or two), far below the half frame that fails.
-    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
-                             counter_start="auto")
-    radar = RadarClock(cycle_s=0.05, start_offset_s=0.031, latency_s=0.13, jitter_s=0.004,
-                       counter_start=4242)
+    scene, radar = free_radar(tmp_path)
     rng = np.random.default_rng(4)
     log = tmp_path / "lag.blf"
     report = run_stamped(scene, lambda n: true_latency_s + rng.uniform(-0.004, 0.004, n.size),
@@ -1108,7 +1091,7 @@ def test_a_radar_whose_latency_is_not_its_profile_s_fails_on_the_detections_lag(
     assert bool(failed) == (lag_s != 0.0) and report.passed == (lag_s == 0.0), report.reasons
     if lag_s:
         when = "before" if lag_s > 0 else "after"
-        assert f"ms (+-{3e3 * error:.1f}) {when} the times the check took" in failed[0]
+        assert f"ms (+-{3e3 * error:.1f} ms) {when} the times the check took" in failed[0]
     again = check_log(scene, log).report
     assert again.radar_clock["detection_lag_s"] == pytest.approx(lag, abs=1e-9)
     assert again.passed == report.passed
@@ -1314,9 +1297,9 @@ def test_the_report_table_says_how_the_detections_fit_the_cycles_times(tmp_path)
                              counter_start=0)
     report = run(scene)
     report.radar_clock.update(detection_lag_s=-0.0086, detection_lag_error_s=0.00233)
-    assert ("time alignment: the detections fit the scene 8.6 ms (+-7.0) after the cycles' "
+    assert ("time alignment: the detections fit the scene 8.6 ms (+-7.0 ms) after the cycles' "
             "times") in report.table()
     report.radar_clock.update(detection_lag_s=0.05, detection_lag_error_s=0.001)
-    assert "fit the scene 50.0 ms (+-3.0) before" in report.table()
+    assert "fit the scene 50.0 ms (+-3.0 ms) before" in report.table()
     del report.radar_clock["detection_lag_s"]
     assert "time alignment" not in report.table()
