@@ -70,6 +70,18 @@ LINK_BLOCK_S = 1.0
 LINK_BLOCKS = 5
 
 
+def stamped_on_another_clock(least_delay_s: float) -> bool:
+    """Whether stamps whose least receipt-less-stamp is ``least_delay_s`` are another clock's.
+
+    No message reaches the host before it was stamped (by more than `HOST_DELIVERY_S`), nor
+    every one of seconds of them more than `RECEIPT_OFF_S` after: stamps that say otherwise
+    are on another clock than the host's, though within the scene's reach (an interface's, set
+    from the host's once and run off since). One less than `RECEIPT_OFF_S` behind the host's
+    shows as the detections' lag (`Checker.lag_reason`).
+    """
+    return not -HOST_DELIVERY_S <= least_delay_s <= RECEIPT_OFF_S
+
+
 class ClockLink:
     """An interface's own clock tied to the host's, by when the host received its messages.
 
@@ -457,10 +469,7 @@ class Pipeline:
             origin = None
         delay = host_times(cycles) - bus_t
         delay = delay[np.isfinite(delay)]
-        if origin is not None and delay.size and not (
-                -HOST_DELIVERY_S <= float(delay.min()) <= RECEIPT_OFF_S):
-            # A message received before it was stamped, or every one of them long after: the
-            # stamps are on another clock within the scene's reach (`_follow_bus_clock`).
+        if origin is not None and delay.size and stamped_on_another_clock(float(delay.min())):
             origin = None
         if origin is None or not np.isfinite(bus_t).all():
             bounds = self._host_phase_s(cycles, steps)
@@ -573,13 +582,9 @@ class Pipeline:
         self._link.add(bus_t, host_times(cycles))
         if not self._bus_clock_foreign:
             offset = self._link.offset_s
-            if offset is None or -HOST_DELIVERY_S <= offset <= RECEIPT_OFF_S:
+            if offset is None or not stamped_on_another_clock(offset):
                 return
-            # No message reaches the host before it was stamped, nor every one of seconds of
-            # them long after: stamps that say otherwise are on another clock, one within the
-            # scene's reach (an interface's, set from the host's once and run off since), and
-            # the receipts tie it to the host's. (One less than `RECEIPT_OFF_S` behind the
-            # host's shows as the detections' lag, `Checker.lag_reason`.)
+            # The receipts tie that clock to the host's.
             self._bus_clock_foreign = True
         origin = self._scene_origin_s()
         t = bus_t[np.isfinite(bus_t)]
