@@ -622,22 +622,30 @@ class Checker:
         error = max(error, float(np.sqrt(spans / (spans - 1.0) * squares)) / vv)
         return float(lag), float(error)
 
-    def lag_reason(self, frame_s: float) -> str | None:
+    def lag_reason(self, frame_s: float, coupling_s: float = 0.0) -> str | None:
         """Why the detections' lag fails the run (`detection_lag_s`), or None.
 
-        Beyond `LAG_FRAMES` of the scene's frame period ``frame_s``, three standard errors
-        clear: most cycles were then judged against frames the radar had not seen.
+        Judged about ``coupling_s``, the lag the radar's range-Doppler coupling gives its
+        ranges (`RadarProfile.coupling_lag_s`): beyond `LAG_FRAMES` of the scene's frame
+        period ``frame_s``, three standard errors clear, most cycles were judged against
+        frames the radar had not seen.
         """
         lag = self.detection_lag_s()
-        if lag is None or abs(lag[0]) - 3.0 * lag[1] <= LAG_FRAMES * frame_s:
+        if lag is None:
+            return None
+        off = lag[0] - coupling_s
+        if abs(off) - 3.0 * lag[1] <= LAG_FRAMES * frame_s:
             return None
         when = "before" if lag[0] > 0 else "after"
+        coupling = (f", {abs(off) * 1e3:.1f} ms {'before' if off > 0 else 'after'} beyond the "
+                    f"{coupling_s * 1e3:+.1f} ms its range-Doppler coupling gives"
+                    if coupling_s else "")
         return (f"time_alignment: the detections fit the scene {abs(lag[0]) * 1e3:.1f} ms "
                 f"(+-{3e3 * lag[1]:.1f} ms) {when} the times the check took for the radar's "
-                f"cycles, more than {LAG_FRAMES:g} of a {frame_s * 1e3:g} ms frame: most "
-                f"cycles were judged against frames the radar had not seen; the radar's "
+                f"cycles{coupling}, more than {LAG_FRAMES:g} of a {frame_s * 1e3:g} ms frame: "
+                f"most cycles were judged against frames the radar had not seen; the radar's "
                 f"latency or phase is not its profile's (clock.latency_s, start_offset_s), or "
-                f"the RTS applied frames {'later' if lag[0] > 0 else 'earlier'} than the run "
+                f"the RTS applied frames {'later' if off > 0 else 'earlier'} than the run "
                 f"knows")
 
     def _write_detections(self, got: list[Detections], counts: list[int], block: _Block,

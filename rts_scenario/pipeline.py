@@ -773,7 +773,8 @@ class Pipeline:
         report = checker.report(bus)
         for drifted in (track.off_profile_reason(0.5 * window_s),
                         track.latency_change_reason(0.5 * window_s),
-                        checker.lag_reason(1.0 / scene.frame_rate_hz)):
+                        checker.lag_reason(1.0 / scene.frame_rate_hz,
+                                           scene.radar.coupling_lag_s)):
             if drifted:
                 report.reasons.append(drifted)
                 report.passed = False
@@ -812,7 +813,9 @@ class Pipeline:
         # not said where no cycle came with a bus time.
         if track.fit.count:
             report.radar_clock["bus_clock"] = "interface" if self._bus_clock_foreign else "host"
-        report.radar_clock.update(lag_dict(checker))
+        if truths.early_s:
+            report.radar_clock["early_s"] = truths.early_s
+        report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s))
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -1022,10 +1025,14 @@ def _stamped(message: can.Message) -> float:
     return float(message.timestamp)
 
 
-def lag_dict(checker: Checker) -> dict[str, float]:
-    """Return the report's ``radar_clock`` entries of the detections' lag."""
+def lag_dict(checker: Checker, coupling_s: float) -> dict[str, float]:
+    """Return the report's ``radar_clock`` entries of the detections' lag.
+
+    ``coupling_s``: the lag the radar's range-Doppler coupling gives (`Checker.lag_reason`).
+    """
     lag = checker.detection_lag_s()
-    return {} if lag is None else {"detection_lag_s": lag[0], "detection_lag_error_s": lag[1]}
+    return {} if lag is None else {"detection_lag_s": lag[0], "detection_lag_error_s": lag[1],
+                                   "detection_lag_coupling_s": coupling_s}
 
 
 def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:

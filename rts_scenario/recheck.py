@@ -1059,11 +1059,13 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
                                    "version, rig or radar file): limits are those rebuilt")
     report = checker.report(bus)
     _compare_truth(truth_sums, sidecar, alignment, report)
-    lagged = checker.lag_reason(1.0 / scene.frame_rate_hz)
+    lagged = checker.lag_reason(1.0 / scene.frame_rate_hz, scene.radar.coupling_lag_s)
     if lagged:
         report.reasons.append(lagged)
         report.passed = False
-    report.radar_clock.update(lag_dict(checker))
+    if truths.early_s:
+        report.radar_clock["early_s"] = truths.early_s
+    report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s))
     return report
 
 

@@ -276,17 +276,24 @@ class Report:
                         if self.invalid_detections else ""))
         if f.get("ambiguous"):
             window = self.playback.get("ambiguity_window_s")
+            early = self.radar_clock.get("early_s")
             lines.append(f"frame changes: {f['ambiguous']} cycles measured within "
                          + (f"{window * 1e3:.3g} ms" if window is not None
                             else "the ambiguity window")
-                         + f" of a frame change, {f.get('adjacent_frame', 0)} of them judged "
+                         + " of a frame change"
+                         + (f" ({early * 1e3:.3g} ms more after one: the interface's clock is "
+                            f"tied to the host's within that)" if early else "")
+                         + f", {f.get('adjacent_frame', 0)} of them judged "
                          f"against the frame across it (more targets detected)")
         lag = self.radar_clock.get("detection_lag_s")
         if lag is not None:
             error = self.radar_clock.get("detection_lag_error_s") or 0.0
+            coupling = self.radar_clock.get("detection_lag_coupling_s") or 0.0
             lines.append(f"time alignment: the detections fit the scene {abs(lag) * 1e3:.1f} ms "
                          f"(+-{3e3 * error:.1f} ms) {'before' if lag > 0 else 'after'} the "
-                         f"cycles' times")
+                         f"cycles' times"
+                         + (f" (the radar's range-Doppler coupling: {coupling * 1e3:+.1f} ms)"
+                            if coupling else ""))
         if self.playback:
             lines.append(_playback_line(self.playback))
         problems = {k: v for k, v in self.bus.items() if k != "messages" and v}

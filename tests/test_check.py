@@ -396,6 +396,12 @@ def test_a_cycle_measured_at_a_frame_change_may_show_the_frame_before(closing_sc
     assert report.frames["ambiguous"] == 59 and report.frames["adjacent_frame"] == 59
     assert ("59 cycles measured within the ambiguity window of a frame change, 59 of them "
             "judged against the frame across it") in report.table()
+    # Behind an interface stamping with its own clock, the window after each change is the
+    # clocks' tie longer, and the line says so.
+    report.radar_clock["early_s"] = 0.011
+    assert ("59 cycles measured within the ambiguity window of a frame change (11 ms more "
+            "after one: the interface's clock is tied to the host's within that), 59 of them "
+            "judged against the frame across it") in report.table()
 
 
 def test_a_radar_two_frames_behind_fails(closing_scene):

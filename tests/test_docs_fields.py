@@ -266,7 +266,8 @@ REPORT_DATA_KEYS = ("parameters", "scene_limits", "targets[].limits")
 # (The limits' names are values too, from report.md's table.)
 REPORT_VALUES = {"true", "false", "null", "profile", "bus", "built", "memory", "disk", "off",
                  "frame_period_s", "clock", "parametrize", "latency_change_s", "interface",
-                 "detection_lag_s", "detection_lag_error_s"}
+                 "detection_lag_s", "detection_lag_error_s", "detection_lag_coupling_s",
+                 "range_doppler_coupling", "corrected", "early_s"}
 
 
 def _report_entries(out: dict[str, Any]) -> list[dict[str, Any]]:

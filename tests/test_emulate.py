@@ -214,6 +214,8 @@ def test_a_radar_whose_counter_start_is_unknown_is_numbered_by_bus_time(tmp_path
     lag = report.radar_clock.pop("detection_lag_s", None)
     assert lag is None or abs(lag) < 0.025
     report.radar_clock.pop("detection_lag_error_s", None)
+    assert report.radar_clock.pop("detection_lag_coupling_s", None) in (
+        None, pytest.approx(-0.00193, abs=1e-5))  # -f / S of the awr1843boost profile
     assert report.radar_clock == {"counter_start": 4242,
                                   "source": "learnt from the cycles' bus times",
                                   "start_from": "bus", "bus_clock": "host",
@@ -284,12 +286,12 @@ def test_the_rts_state_is_the_schedule_s_frame():
 
 
 def test_emulate_command_stops_when_frames_stop(tmp_path, capsys):
-    # No stream within --wait: it stops, saying so (`emulate` waits for a run started by
-    # hand).
+    # No stream within --wait: it stops, saying so, and fails (`emulate` waits for a run
+    # started by hand; nothing was rehearsed).
     start = time.monotonic()
     code = cli.main(["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1",
                      "--radar", "awr1843boost", "--seconds", "0.05", "--wait", "0.6"])
-    assert code == 0 and time.monotonic() - start >= 0.6
+    assert code == 1 and time.monotonic() - start >= 0.6
     out = capsys.readouterr().out
     assert "listening on udp://127.0.0.1:" in out and "cycles" in out
     assert "no stream arrived within --wait 0.6 s" in out

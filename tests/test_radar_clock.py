@@ -3,6 +3,7 @@
 import dataclasses
 import re
 import shutil
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -415,6 +416,7 @@ def test_a_free_radar_behind_an_interface_with_its_own_clock_is_checked_at_its_p
     assert report.passed, report.reasons
     clock = report.radar_clock
     assert clock["start_from"] == "bus" and clock["bus_clock"] == "interface"
+    assert clock["early_s"] == 0.011  # `ClockLink.error_s`: delivery within 10 ms, and 1 more
     # Placed by the fastest deliveries: late by up to their 3 ms, not earlier (and the
     # phase's own 0.6 ms of jitter); the cycle on the host's clock, the interface's crystal
     # taken out.
@@ -434,6 +436,7 @@ def test_a_free_radar_behind_an_interface_with_its_own_clock_is_checked_at_its_p
     assert again.report.passed, again.report.reasons
     assert again.report.frames["checked"] == len(seen)
     assert again.report.frames["ambiguous"] == 0
+    assert again.report.radar_clock["early_s"] == 0.011
     assert again.report.radar_clock["start_offset_s"] == pytest.approx(
         clock["start_offset_s"], abs=1e-9)
 
@@ -466,7 +469,7 @@ def test_an_interface_clock_a_little_behind_the_host_s_fails_on_the_detections_l
     # saw. The detections' lag tells, and the run fails.
     scene, radar = free_radar(tmp_path)
     report, _ = run_behind_own_clock(scene, radar, ahead_s=-0.1)
-    assert report.radar_clock["bus_clock"] == "host"
+    assert report.radar_clock["bus_clock"] == "host" and "early_s" not in report.radar_clock
     assert report.radar_clock["detection_lag_s"] == pytest.approx(-0.1, abs=0.015)
     assert not report.passed
     assert [r for r in report.reasons if r.startswith("time_alignment:")], report.reasons
@@ -1151,6 +1154,102 @@ def test_the_detections_lag_is_the_least_squares_one_of_range_errors_on_range_ra
     steady._add_lag(np.full((20, 1), 0.4), np.full((20, 1), -8.0), np.ones((20, 1), dtype=bool),
                     np.arange(20.0))
     assert steady.detection_lag_s() is None and steady.lag_reason(0.05) is None
+
+
+def test_the_detections_lag_is_judged_about_the_radar_s_range_doppler_coupling():
+    from rts_scenario.check import Checker
+    from rts_scenario.scenario.model import Expectations
+
+    # A radar ranging each target 30.8 ms times its range rate farther (a slow chirp's
+    # coupling): its lag is -30.8 ms, more than half a 50 ms frame off none, within its
+    # standard error of the coupling its profile gives, and beyond half a frame of the
+    # opposite one.
+    t = 0.05 * np.arange(120)
+    rate = np.stack([-8.0 + 0.5 * np.sin(t), -1.0 + 0.1 * t, 3.0 - 0.2 * t], axis=1)
+    checker = Checker("s", ("a", "b", "c"), Expectations())
+    checker._add_lag(0.0308 * rate, rate, np.ones(rate.shape, dtype=bool), t)
+    lag, error = checker.detection_lag_s()
+    assert lag == pytest.approx(-0.0308, abs=1e-12)
+    assert checker.lag_reason(0.05, -0.0308) is None
+    failed = checker.lag_reason(0.05)
+    assert failed.startswith("time_alignment: the detections fit the scene 30.8 ms (+-0.0 ms) "
+                             "after the times the check took for the radar's cycles, more than "
+                             "0.5 of a 50 ms frame"), failed
+    assert "the RTS applied frames earlier than the run knows" in failed
+    opposite = checker.lag_reason(0.05, 0.0308)
+    assert (", 61.6 ms after beyond the +30.8 ms its range-Doppler coupling gives, more than "
+            "0.5 of a 50 ms frame") in opposite, opposite
+
+
+def slow_chirp_scene(folder: Path, **profile) -> object:
+    """A radar with a slow chirp (150 MHz in 60 us at 77 GHz: f / S about 31 ms, beyond half
+    a 20 Hz frame) and two cars 2.5 m/s faster and slower than the ego, 22 and 50 m ahead."""
+    data = yaml.safe_load(AWR.read_text())
+    data.update(name="slow-chirp", bandwidth_hz=150e6, ramp_time_s=60e-6, idle_time_s=5e-6,
+                adc_samples=128, sample_rate_hz=2.5e6, **profile)
+    folder.mkdir(exist_ok=True)
+    (folder / "slow.radar.yaml").write_text(yaml.safe_dump(data))
+    (folder / "s.scenario.yaml").write_text(textwrap.dedent("""\
+        rts_scenario: 1
+        name: two-speeds
+        duration_s: 8.0
+        frame_rate_hz: 20.0
+        radar:
+          profile: slow.radar.yaml
+          mount: {x_m: 3.7, z_m: 0.5}
+          noise: false
+          fidelity: analytic
+        rig: wide-3x5
+        ego:
+          motion: {type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}
+        targets:
+          - name: away
+            kind: car
+            motion: {type: constant_velocity, position_m: [22.0, 1.0, 0.6], speed_mps: 22.5}
+            rcs: {rcs_dbsm: 10.0}
+          - name: near
+            kind: car
+            motion: {type: constant_velocity, position_m: [50.0, -1.0, 0.6], speed_mps: 17.5}
+            rcs: {rcs_dbsm: 10.0}
+        expectations:
+          tolerances: {range_m: 0.3, radial_velocity_mps: 0.3, az_deg: 0.5, el_deg: 1.0}
+          detection_rate: 0.9
+        """))
+    return load_scenario(folder / "s.scenario.yaml")
+
+
+@pytest.mark.parametrize("coupling", ["kept", "corrected"])
+def test_a_slow_chirp_s_range_doppler_coupling_is_not_taken_for_a_late_radar(tmp_path, coupling):
+    # An up-chirp's beat is S tau - fD, fD = -2 v f / c at the sampled sweep's centre f: a
+    # target of range rate v is ranged v f / S farther, where the scene has it f / S later.
+    # By hand for this profile: f = 77 GHz + S (127 / 2) / 2.5 MHz, S = 150 MHz / 60 us.
+    slope = 150e6 / 60e-6
+    by_hand = -(77e9 + slope * 63.5 / 2.5e6) / slope
+    assert by_hand == pytest.approx(-0.030825, abs=1e-6)
+    scene = slow_chirp_scene(tmp_path, **({} if coupling == "kept" else
+                                          {"range_doppler_coupling": "corrected"}))
+    report = run(scene)
+    clock = report.radar_clock
+    expected = by_hand if coupling == "kept" else 0.0
+    assert clock["detection_lag_coupling_s"] == pytest.approx(expected, rel=1e-9)
+    # The simulated radar's ranges keep the coupling of its exact beat phases, or take the
+    # measured Doppler's share back out: its lag is the coupling (31 ms, more than half a
+    # frame: judged about none, the run would fail), or none.
+    assert clock["detection_lag_s"] == pytest.approx(expected, abs=1e-3)
+    assert 0.0 < clock["detection_lag_error_s"] < 1e-3
+    assert report.passed, report.reasons
+    coupled = "(the radar's range-Doppler coupling: -30.8 ms)"
+    assert (coupled in report.table()) == (coupling == "kept"), report.table()
+
+
+def test_range_doppler_coupling_key_names_what_is_allowed(tmp_path):
+    data = yaml.safe_load(AWR.read_text())
+    data["range_doppler_coupling"] = "compensated"
+    (tmp_path / "bad.radar.yaml").write_text(yaml.safe_dump(data))
+    with pytest.raises(RtsError, match=r"bad.radar.yaml:\d+:\d+: range_doppler_coupling: got "
+                                       r"'compensated'; allowed values: 'kept', 'corrected'"):
+        RadarProfile.from_file(tmp_path / "bad.radar.yaml")
+    assert RadarProfile.preset("awr1843boost").range_doppler_coupling == "kept"
 
 
 def test_the_detections_lag_s_standard_error_holds_where_its_model_does():

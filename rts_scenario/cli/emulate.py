@@ -6,7 +6,7 @@ import argparse
 import time
 from typing import Any
 
-from .common import EXIT_OK, check_can_interface, check_number
+from .common import EXIT_FAIL, EXIT_OK, check_can_interface, check_number
 
 
 def _do_emulate(args: argparse.Namespace) -> int:
@@ -82,7 +82,8 @@ def _do_emulate(args: argparse.Namespace) -> int:
     print(f"radar: {measured['cycles']} cycles measured, {measured['published']} published "
           f"({measured['detections']} detections, {stats['can_messages']} CAN messages), "
           f"worst {measured['worst_late_ms']} ms behind its clock", flush=True)
-    return EXIT_OK
+    # Nothing rehearsed: a script waiting on it must not read that as a bench that worked.
+    return EXIT_FAIL if not (udp["datagrams"] or interrupted) else EXIT_OK
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:

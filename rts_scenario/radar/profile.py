@@ -64,6 +64,10 @@ class RadarProfile:
         point the rig's FE angles and distances are measured from).
     tx_index : tuple of int
         The TX of each virtual element (elements are TX-major: TX t, RX r is t * n_rx + r).
+    range_doppler_coupling : {"kept", "corrected"}
+        Whether the radar's ranges keep the range-Doppler coupling of its up-chirps (a target
+        with range rate ``v`` ranged ``v f / S`` farther; most radars keep it) or correct it
+        with the measured Doppler (profile key ``range_doppler_coupling``, default ``kept``).
     """
 
     name: str
@@ -82,10 +86,14 @@ class RadarProfile:
     tx_index: tuple[int, ...] = ()
     adc_start_s: float = 0.0
     clock: RadarClock | None = None
+    range_doppler_coupling: str = "kept"
 
     def __post_init__(self) -> None:
         if self.clock is None:
             object.__setattr__(self, "clock", RadarClock(cycle_s=self.frame_period_s))
+        if self.range_doppler_coupling not in ("kept", "corrected"):
+            raise ScenarioError(f"range_doppler_coupling: must be 'kept' or 'corrected', got "
+                                f"{self.range_doppler_coupling!r}")
 
     @property
     def radar_clock(self) -> RadarClock:
@@ -103,6 +111,18 @@ class RadarProfile:
         """Transmit frequency at the centre of the sampled sweep (sample ``(N - 1) / 2``)."""
         centre_s = self.adc_start_s + (self.adc_samples - 1) / (2.0 * self.sample_rate_hz)
         return self.fc_hz + self.slope_hz_per_s * centre_s
+
+    @property
+    def coupling_lag_s(self) -> float:
+        """The lag the range-Doppler coupling gives the detections (s; 0 where corrected).
+
+        An up-chirp's beat frequency is ``S tau - fD`` with ``fD = -2 v f / c`` at the sampled
+        sweep's centre ``f``: a target of range rate ``v`` is ranged ``v f / S`` farther, where
+        the scene has it ``f / S`` later: ``-f / S`` (-1.9 ms for the awr1843boost profile).
+        """
+        if self.range_doppler_coupling == "corrected":
+            return 0.0
+        return -self.sampled_centre_frequency_hz / self.slope_hz_per_s
 
     @property
     def range_bin_m(self) -> float:
@@ -281,6 +301,7 @@ class RadarProfile:
             antennas=antennas,
             tx_index=tuple(int(t) for t in np.repeat(np.arange(n_tx), antennas.n_rx)),
             adc_start_s=adc_start, clock=clock,
+            range_doppler_coupling=str(d.get("range_doppler_coupling", "kept")),
         )
 
 
@@ -317,6 +338,7 @@ PROFILE_SCHEMA: dict[str, Any] = {
         "tx_order": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 0}},
         "frame_period_s": _POSITIVE,
         "noise_level_db": {"type": "number", "minimum": -300, "maximum": 0},
+        "range_doppler_coupling": {"enum": ["kept", "corrected"]},
         "clock": {
             "type": "object",
             "additionalProperties": False,

@@ -19,7 +19,9 @@ element v (TX t fired in slot i_t of each loop), loop l, fast time ``t_f = t_adc
 ``f_x`` is the frequency the RTS delays at: its IF for a digital RTS (the carrier phase comes
 from the air paths alone), ``f0`` for an RF delay line (`rts_scenario.rig.RtsDelayModel`). The
 phase is exact at each sample's true frequency: range-Doppler coupling (beat frequency
-``-(S T - fD)``) and the wavelength of the sampled sweep come out by themselves. The estimators
+``-(S T - fD)``) and the wavelength of the sampled sweep come out by themselves (a profile with
+``range_doppler_coupling: corrected`` takes the measured Doppler's share back out of each
+range, as a radar correcting it does). The estimators
 steer the profile's (centred) virtual array with the wavelength at the centre of the sampled
 sweep, as a well-designed radar does; a plane wave from direction u then gives the steering
 vector ``exp(+j k u.p_v)`` and a receding target a negative Doppler, the package's conventions.
@@ -563,10 +565,14 @@ class SimulatedRadar:
                                                         + np.outer(s, arr.z_m)))
         beam = np.abs(np.einsum("dm,dm->d", snap[src], steer.conj()))
         amplitude = beam / (self._gain * arr.n_elements)
+        range_m = range_m[src]
+        if p.range_doppler_coupling == "corrected":
+            # The beat is S tau - fD: the measured Doppler's share taken back out.
+            range_m = range_m + C0_MPS * doppler_hz[src] / (2.0 * p.slope_hz_per_s)
         with np.errstate(divide="ignore"):
-            rcs = (20.0 * np.log10(amplitude) + 40.0 * np.log10(range_m[src])
+            rcs = (20.0 * np.log10(amplitude) + 40.0 * np.log10(range_m)
                    + self._rcs_offset)
-        return {"source": src, "range_m": range_m[src],
+        return {"source": src, "range_m": range_m,
                 "radial_velocity_mps": -doppler_hz[src] * p.wavelength_m / 2.0,
                 "az_deg": est.az_deg, "el_deg": est.el_deg, "snr_db": snr_db[src],
                 "rcs_dbsm": rcs}
