@@ -622,6 +622,20 @@ class Checker:
         error = max(error, float(np.sqrt(spans / (spans - 1.0) * squares)) / vv)
         return float(lag), float(error)
 
+    def lag_untold(self) -> str | None:
+        """Why `detection_lag_s` tells no lag, or None where it tells one or nothing matched."""
+        n = self._lag[5]
+        if n == 0 or self.detection_lag_s() is not None:
+            return None
+        spans = self._lag_spans + (self._lag_span is not None)
+        if n < LAG_MIN_CYCLES:
+            return (f"{int(n)} matched target-cycles judged against one frame, fewer than "
+                    f"{LAG_MIN_CYCLES}")
+        if spans < LAG_MIN_BINS:
+            return (f"the matched target-cycles span {spans} of {LAG_BIN_S:g} s, fewer than "
+                    f"{LAG_MIN_BINS}")
+        return "the targets' range rates did not vary: a lag would look like a range offset"
+
     def lag_reason(self, frame_s: float, coupling_s: float = 0.0) -> str | None:
         """Why the detections' lag fails the run (`detection_lag_s`), or None.
 

@@ -1025,14 +1025,17 @@ def _stamped(message: can.Message) -> float:
     return float(message.timestamp)
 
 
-def lag_dict(checker: Checker, coupling_s: float) -> dict[str, float]:
+def lag_dict(checker: Checker, coupling_s: float) -> dict[str, float | str]:
     """Return the report's ``radar_clock`` entries of the detections' lag.
 
     ``coupling_s``: the lag the radar's range-Doppler coupling gives (`Checker.lag_reason`).
     """
     lag = checker.detection_lag_s()
-    return {} if lag is None else {"detection_lag_s": lag[0], "detection_lag_error_s": lag[1],
-                                   "detection_lag_coupling_s": coupling_s}
+    if lag is None:
+        untold = checker.lag_untold()
+        return {} if untold is None else {"detection_lag_untold": untold}
+    return {"detection_lag_s": lag[0], "detection_lag_error_s": lag[1],
+            "detection_lag_coupling_s": coupling_s}
 
 
 def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:

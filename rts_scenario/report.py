@@ -294,6 +294,9 @@ class Report:
                          f"cycles' times"
                          + (f" (the radar's range-Doppler coupling: {coupling * 1e3:+.1f} ms)"
                             if coupling else ""))
+        untold = self.radar_clock.get("detection_lag_untold")
+        if untold:
+            lines.append(f"time alignment: not told ({untold})")
         if self.playback:
             lines.append(_playback_line(self.playback))
         problems = {k: v for k, v in self.bus.items() if k != "messages" and v}

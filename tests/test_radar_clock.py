@@ -1145,6 +1145,15 @@ def test_the_detections_lag_is_the_least_squares_one_of_range_errors_on_range_ra
     few = Checker("s", ("a",), Expectations())
     few._add_lag(np.ones((3, 1)), np.ones((3, 1)), np.ones((3, 1), dtype=bool), np.arange(3.0))
     assert few.detection_lag_s() is None
+    assert few.lag_untold() == "3 matched target-cycles judged against one frame, fewer than 10"
+    assert lag_of(error, rate, use, t_s * 0.1) is None
+    brief = Checker("s", ("a", "b"), Expectations())
+    brief._add_lag(error, rate, use, t_s * 0.1)
+    assert brief.lag_untold() == "the matched target-cycles span 2 of 0.5 s, fewer than 5"
+    assert Checker("s", ("a",), Expectations()).lag_untold() is None  # nothing matched
+    told = Checker("s", ("a", "b"), Expectations())
+    told._add_lag(error, rate, use, t_s)
+    assert told.lag_untold() is None
     still = Checker("s", ("a",), Expectations())
     still._add_lag(np.ones((20, 1)), np.zeros((20, 1)), np.ones((20, 1), dtype=bool),
                    np.arange(20.0))
@@ -1154,6 +1163,22 @@ def test_the_detections_lag_is_the_least_squares_one_of_range_errors_on_range_ra
     steady._add_lag(np.full((20, 1), 0.4), np.full((20, 1), -8.0), np.ones((20, 1), dtype=bool),
                     np.arange(20.0))
     assert steady.detection_lag_s() is None and steady.lag_reason(0.05) is None
+    assert steady.lag_untold() == ("the targets' range rates did not vary: a lag would look "
+                                   "like a range offset")
+
+
+def test_a_lag_that_cannot_be_told_is_said(tmp_path):
+    # One car closing at a constant speed straight ahead: its range rate does not vary, and a
+    # lag of the detections would be a range offset. The timing is not checked, and the
+    # report says so.
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
+                          {"duration_s": 4.0, "radar.noise": False})
+    report = run(scene)
+    assert report.passed, report.reasons
+    assert "detection_lag_s" not in report.radar_clock
+    untold = report.radar_clock["detection_lag_untold"]
+    assert untold.startswith("the targets' range rates did not vary")
+    assert f"time alignment: not told ({untold})" in report.table()
 
 
 def test_the_detections_lag_is_judged_about_the_radar_s_range_doppler_coupling():
