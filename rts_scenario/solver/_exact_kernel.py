@@ -32,7 +32,7 @@ from numba import njit
 _jit = njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 
 # Indices into the ``tol`` argument.
-_NEGATIVE, _RANK, _GAIN, _RESIDUAL, _PHASE, _ITERATIONS = range(6)
+_NEGATIVE, _RANK, _GAIN, _RESIDUAL, _PHASE, _ITERATIONS, _INFEASIBLE, _FAR = range(8)
 # Indices into the ``codes`` argument.
 _OK, _NO_SOLUTION, _NOT_CONVERGED, _SPLIT = range(4)
 
@@ -728,8 +728,9 @@ def solve_targets(  # pragma: no cover
                 if centrosymmetric:
                     continue
                 for b in range(nb):
-                    if work[4, b] != 0.0 and not abs(work[5, b]) <= phase_tol:
-                        # The phase iterates: solved with the quad's other such targets.
+                    if not abs(work[5, b]) <= phase_tol:
+                        # The phase iterates (feasible or not at the map's phase: feasibility
+                        # is judged at the fixed point), with the quad's other such targets.
                         if pending == _BLOCK:
                             _iterate_batch(pend_n, pend_look_re, pend_look_im, pend_state,
                                            pending, table_re, table_im, n_elements, batch,
@@ -755,7 +756,9 @@ def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_ele
 
     ``pend_n`` the targets' indices, ``look_re, look_im`` their looks (columns ``< m``),
     ``state`` rows 0-3 their weights, 4 ok (1.0 or 0.0) and 5 their phase residual at the
-    map's phase (NaN: not computed). Their responses are summed again from the looks (all 12
+    map's phase (NaN: not computed). A target infeasible at ``tol[_INFEASIBLE]`` phases, at
+    a converged one or bound farther than ``tol[_FAR]`` from the map's leaves without a
+    solution (`exact.ExactQuad._iterate`). Their responses are summed again from the looks (all 12
     rows complex), and each secant step runs over the targets still iterating as vector loops
     (rotation, `_max_gain_weights_block`, phase residual); a target leaves (and is stored) when
     `_solve_one` would leave, and the rest move down to keep the columns contiguous. Same steps
@@ -766,8 +769,9 @@ def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_ele
     ``batch``: scratch ``(5, 12, B)``.
     """
     f_re, f_im, rot, work, per = batch[0], batch[1], batch[2], batch[3], batch[4]
-    phi, prev_phi, prev_res, cos_phi, sin_phi, y, x = (per[0], per[1], per[2], per[3], per[4],
-                                                       per[5], per[6])
+    phi, prev_phi, prev_res, cos_phi, sin_phi, y, x, bad = (per[0], per[1], per[2], per[3],
+                                                            per[4], per[5], per[6], per[7])
+    infeasible_steps, far = tol[_INFEASIBLE], tol[_FAR]
     phase_tol = tol[_PHASE]
     _complex_sums(f_re, f_im, table_re, table_im, look_re, look_im, 0, 12, n_elements, m)
     # The start, as `_solve_one`: targets converged once their residual is computed leave.
@@ -777,9 +781,10 @@ def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_ele
         res = state[5, j]
         if res != res:
             res = _phase_residual(_row(f_re, 0, j), _row(f_im, 0, j), w, 1.0, 0.0)
-        if abs(res) <= phase_tol or state[4, j] == 0.0:
+        if abs(res) <= phase_tol or (state[4, j] == 0.0 and not abs(res) <= far):
             _leave(pend_n[j], w, state[4, j] != 0.0, True, codes, weights, reason, margin)
             continue
+        bad[active] = 0.0 if state[4, j] != 0.0 else 1.0
         _move(f_re, f_im, state, j, active, pend_n)
         prev_phi[active] = 0.0
         prev_res[active] = res
@@ -810,28 +815,32 @@ def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_ele
                 res = math.atan2(y[k], x[k])
             ok = work[4, k] != 0.0
             done = abs(res) <= phase_tol
-            if done or not ok:  # `_solve_one` breaks: converged, or no solution
-                _leave(pend_n[k], _row(work, 0, k), ok, done, codes, weights, reason, margin)
-                continue
+            infeasible = bad[k] if ok else bad[k] + 1.0
             slope = (res - prev_res[k]) / (phi[k] - prev_phi[k] + 1e-300)
             # Secant step on g(phi) = arg(B(w(phi))) - phi; fixed-point step if flat.
             step = -res / slope if abs(slope) > 1e-3 else res
+            if done or not (ok or (infeasible < infeasible_steps
+                                   and abs(phi[k] + step) <= far)):  # as `_solve_one` breaks
+                _leave(pend_n[k], _row(work, 0, k), ok, done, codes, weights, reason, margin)
+                continue
             prev_phi[kept], prev_res[kept], phi[kept] = phi[k], res, phi[k] + step
+            bad[kept] = infeasible
             _move(f_re, f_im, work, k, kept, pend_n)
             kept += 1
         active = kept
-    for k in range(active):  # out of iterations: not converged
-        _leave(pend_n[k], _row(work, 0, k), True, False, codes, weights, reason, margin)
+    for k in range(active):  # out of iterations: not converged (or no solution)
+        _leave(pend_n[k], _row(work, 0, k), work[4, k] != 0.0, False, codes, weights, reason,
+               margin)
 
 
 @_jit
 def _move(f_re, f_im, state, src, dst, pend_n):  # pragma: no cover
-    """Column ``src`` of ``f_re, f_im``, ``state[:4]`` and ``pend_n`` to column ``dst``."""
+    """Column ``src`` of ``f_re, f_im``, ``state[:5]`` (weights, ok) and ``pend_n`` to ``dst``."""
     if src != dst:
         for r in range(f_re.shape[0]):
             f_re[r, dst] = f_re[r, src]
             f_im[r, dst] = f_im[r, src]
-        for q in range(4):
+        for q in range(5):
             state[q, dst] = state[q, src]
         pend_n[dst] = pend_n[src]
 
@@ -867,7 +876,8 @@ def _solve_one(n, acc_re, acc_im, b, w, ok, res, centrosymmetric, test, row_scal
         prev_res = res
         phi = res
         converged = abs(res) <= tol[_PHASE]
-        if ok and not converged:
+        bad = 0.0 if ok else 1.0
+        if not converged and (ok or abs(phi) <= tol[_FAR]):
             for _ in range(int(tol[_ITERATIONS])):
                 sn, c = _sincos(phi)
                 w, ok = _max_gain_weights(_rotated(acc_re, acc_im, 0, b, c, sn),
@@ -883,7 +893,8 @@ def _solve_one(n, acc_re, acc_im, b, w, ok, res, centrosymmetric, test, row_scal
                 prev_phi = phi
                 prev_res = res
                 phi += step
-                if done or not ok:
+                bad = bad if ok else bad + 1.0
+                if done or not (ok or (bad < tol[_INFEASIBLE] and abs(phi) <= tol[_FAR])):
                     break
         converged = converged or not ok
     code = codes[_OK]

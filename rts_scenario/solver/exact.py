@@ -45,6 +45,13 @@ _NEGATIVE_TOL = 1e-9
 # A constraint row shorter than this (relative to its scale) is absent: the FE gradients vanish.
 _RANK_TOL = 1e-12
 _MAX_ITERATIONS = 60
+# Phases a target may be infeasible at while its phase moves: at a phase off B's, weights
+# exist only farther from the region's edge, so a target near an edge that is infeasible at
+# the phase map's phase iterates on with its clipped weights; infeasible at its own phase, or
+# at this many, or bound for a phase farther than _INFEASIBLE_PHASE (rad) from the map's (a
+# phase of another solution, if any), it has no solution.
+_INFEASIBLE_STEPS = 3
+_INFEASIBLE_PHASE = 0.01
 # Converged when B's phase matches the frozen one to this (rad). The angle error it leaves is
 # about 2.5 deg per rad of phase on the shipped arrays: ~2.5e-8 deg.
 _PHASE_TOL = 1e-8
@@ -257,6 +264,10 @@ class ExactQuad:
         solution is a function ``w(phi)`` and only the scalar fixed point
         ``phi = arg(f . w(phi))`` remains; secant steps on it converge in a few passes, and in
         the frame of the quad's precomputed phase map the start is usually already converged.
+        Feasibility is judged at the fixed point: a target infeasible at the map's phase (near
+        the edge of the region the quad synthesizes, which moves with the phase) iterates on
+        with its clipped weights, until it was infeasible at `_INFEASIBLE_STEPS` phases or is
+        bound farther than `_INFEASIBLE_PHASE` from the map's.
         """
         phi = np.zeros(f.shape[1])
         w, ok = max_gain_weights(f.real, f_u.real, f_s.real, self.row_scale)
@@ -264,7 +275,8 @@ class ExactQuad:
         prev_phi, prev_res = phi, residual
         phi = phi + residual
         converged = np.abs(residual) <= _PHASE_TOL
-        active = np.flatnonzero(~converged & ok)
+        infeasible = (~ok).astype(np.int64)
+        active = np.flatnonzero(~converged & (ok | (np.abs(phi) <= _INFEASIBLE_PHASE)))
         for _ in range(_MAX_ITERATIONS):
             if active.size == 0:
                 break
@@ -291,7 +303,10 @@ class ExactQuad:
             prev_phi[active], prev_res[active] = phi[active], res
             phi = phi.copy()
             phi[active] += step
-            active = active[~done & ok_a]
+            infeasible[active] += ~ok_a
+            stay = ok_a | ((infeasible[active] < _INFEASIBLE_STEPS)
+                           & (np.abs(phi[active]) <= _INFEASIBLE_PHASE))
+            active = active[~done & stay]
         return w, ok, converged | ~ok
 
 
@@ -460,7 +475,8 @@ _NO_GEOMETRY = QuadGeometry(
 )
 # The kernel's constants, in the order it reads them.
 _TOLERANCES = np.array([_NEGATIVE_TOL, _RANK_TOL, _GAIN_TOL, _RESIDUAL_TOL, _PHASE_TOL,
-                        _MAX_ITERATIONS], dtype=np.float64)
+                        _MAX_ITERATIONS, _INFEASIBLE_STEPS, _INFEASIBLE_PHASE],
+                       dtype=np.float64)
 _CODES = np.array([Reason.OK, Reason.NO_SOLUTION, Reason.NOT_CONVERGED, Reason.SPLIT],
                   dtype=np.uint8)
 
