@@ -297,7 +297,7 @@ class UdpReceiver:
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, *,
-                 keep_applied: bool = False) -> None:
+                 keep_applied: bool = False, n_front_ends: int | None = None) -> None:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._socket = socket.socket(family, socket.SOCK_DGRAM)
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
@@ -306,6 +306,9 @@ class UdpReceiver:
         self.address: tuple[str, int] = self._socket.getsockname()[:2]
         self._closed = False
         self.keep_applied = keep_applied
+        # The FEs of the rig this RTS plays through, where known: an emitting entry must name
+        # one of them (0 .. n_front_ends - 1).
+        self.n_front_ends = n_front_ends
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         # The receiving thread applies frames while others read the state (`snapshot`).
@@ -481,6 +484,10 @@ class UdpReceiver:
                 or part >= parts or len(body) != HEADER.size + count * ENTRY.itemsize):
             stats.malformed += 1
             return
+        entries = np.frombuffer(body, dtype=ENTRY, offset=HEADER.size, count=count)
+        if not self._playable(entries):
+            stats.malformed += 1
+            return
         if seq in self._seen:
             stats.duplicates += 1
             return
@@ -503,11 +510,26 @@ class UdpReceiver:
         if frame <= self._last_frame:
             stats.stale += 1
             return
-        entries = np.frombuffer(body, dtype=ENTRY, offset=HEADER.size, count=count)
         self._pending.setdefault(frame, {})[part] = entries
         self._pending_meta[frame] = (kind, parts, t_s)
         if len(self._pending[frame]) == parts:
             self._apply(frame)
+
+    def _playable(self, entries: np.ndarray) -> bool:
+        """Whether every entry names a quad's channel (0..3) and every emitting one an FE.
+
+        The FE must be one of the rig's where the receiver knows it (``n_front_ends``): a
+        sender whose rig has more FEs than this RTS's is refused, not played on other FEs.
+        """
+        if entries.size == 0:
+            return True
+        if int(entries["channel"].max()) > 3:
+            return False
+        fe = entries["fe"][(entries["flags"] & 1).astype(bool)].astype(np.int64)
+        if fe.size == 0:
+            return True
+        return int(fe.min()) >= 0 and (self.n_front_ends is None
+                                       or int(fe.max()) < self.n_front_ends)
 
     @staticmethod
     def _opens_stream(datagram: bytes, any_sequence: bool = False) -> bool:
