@@ -17,6 +17,7 @@ frames so a receiver that lost a delta can resynchronize.
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import struct
 import threading
@@ -25,6 +26,7 @@ import zlib
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -110,14 +112,23 @@ class UdpOutput(Output):
         if mode not in MODES:
             raise OutputError(f"udp: unknown mode {mode!r}; valid: {', '.join(MODES)}")
         host, _, port = address.rpartition(":")
-        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        # ASCII digits only: str.isdigit also takes digits int() refuses (superscripts).
+        if not host or not (port.isascii() and port.isdigit()) or not 0 < int(port) < 65536:
             raise OutputError(f"udp://{address}: expected udp://HOST:PORT with a port 1..65535")
         self.address = (host.strip("[]"), int(port))
         self.pacing = pacing
         self.mode = mode
         self.keyframe_every = max(1, keyframe_every)
+        # Resolved once, here: a host that does not resolve is bad input before a run starts,
+        # not a failure at its first frame. A name goes to its IPv4 address where it has one
+        # (as an RTS listening on 127.0.0.1 is reached by "localhost"), else to its IPv6 one.
         try:
-            family = socket.AF_INET6 if ":" in self.address[0] else socket.AF_INET
+            family, _, _, _, self._sockaddr = _resolve(*self.address)
+        except (OSError, UnicodeError) as exc:
+            reason = getattr(exc, "strerror", None) or exc
+            raise OutputError(f"udp://{address}: unknown host {self.address[0]!r} "
+                              f"({reason})") from None
+        try:
             self._socket = socket.socket(family, socket.SOCK_DGRAM)
         except OSError as exc:
             raise OutputError(f"udp://{address}: cannot open a socket: {exc}") from None
@@ -137,7 +148,7 @@ class UdpOutput(Output):
     def transmit(self, datagram: bytes) -> None:
         """Put one datagram on the network."""
         try:
-            self._socket.sendto(datagram, self.address)
+            self._socket.sendto(datagram, self._sockaddr)
         except OSError as exc:
             raise OutputError(f"udp://{self.address[0]}:{self.address[1]}: send failed: "
                               f"{exc}") from None
@@ -235,6 +246,15 @@ class UdpOutput(Output):
 
     def _close(self) -> None:
         self._socket.close()
+
+
+def _resolve(host: str, port: int) -> tuple[Any, ...]:
+    """``getaddrinfo``'s first datagram address of ``host``: IPv4 first unless it is IPv6."""
+    families = [socket.AF_INET6] if ":" in host else [socket.AF_INET, socket.AF_UNSPEC]
+    for family in families[:-1]:
+        with contextlib.suppress(socket.gaierror):
+            return socket.getaddrinfo(host, port, family, socket.SOCK_DGRAM)[0]
+    return socket.getaddrinfo(host, port, families[-1], socket.SOCK_DGRAM)[0]
 
 
 def encode_status(counters: dict[str, int]) -> bytes:
