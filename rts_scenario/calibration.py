@@ -253,6 +253,7 @@ def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m
     with np.errstate(divide="ignore"):
         attenuation = level_db - 20.0 * np.log10(weight) + rig.cal_gain_db[fe0]
     phase = phase + np.radians(extra)
+    _check_pattern_limits(rig, fe, active, attenuation, delay, doppler, range_m)
     nan = np.nan
     schedule = Schedule(
         t_s=np.arange(n, dtype=np.float64) * 0.05, frame_index=np.arange(n), names=("calibration",),
@@ -262,6 +263,41 @@ def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m
         active=active, status=np.zeros((n, 1), dtype=np.uint16),
         angle_error_deg=np.zeros((n, 1, 2)))
     return schedule
+
+
+# Settings this close to a limit are within it (rounding of the delay grid and of dB sums).
+_LIMIT_SLACK = {"delay": 1e-18, "attenuation": 1e-9, "doppler": 1e-9}
+
+
+def _check_pattern_limits(rig: Rig, fe: NDArray[np.int64], active: NDArray[np.bool_],
+                          attenuation: NDArray[np.float64], delay: NDArray[np.float64],
+                          doppler: NDArray[np.float64], range_m: float) -> None:
+    """Refuse a test pattern with a setting beyond the rig's limits (`HardwareLimits`).
+
+    The RTS cannot play it as sent (a scene's schedule flags such entries; a test pattern has
+    no verdict to fail), and what the radar measured of it would pass for a measurement.
+    """
+    lim = rig.limits
+    checks = (
+        ("delay", delay, "s", "delay_min_s", lim.delay_min_s, -1.0,
+         f" (a target at {range_m:g} m, less the FE's distance and limits.latency_s)"),
+        ("attenuation", attenuation, "dB", "attenuation_min_db", lim.attenuation_min_db, -1.0,
+         " (the level plus the channel's calibration gain_db)"),
+        ("attenuation", attenuation, "dB", "attenuation_max_db", lim.attenuation_max_db, 1.0,
+         " (the level plus the channel's calibration gain_db)"),
+        ("doppler", doppler, "Hz", "doppler_min_hz", lim.doppler_min_hz, -1.0,
+         " (the pattern's target approaches at 1 m/s)"),
+        ("doppler", doppler, "Hz", "doppler_max_hz", lim.doppler_max_hz, 1.0,
+         " (the pattern's target approaches at 1 m/s)"),
+    )
+    for what, values, unit, key, limit, side, why in checks:
+        beyond = active & (side * (values - limit) > _LIMIT_SLACK[what])
+        if beyond.any():
+            f, k, c = (int(i) for i in np.argwhere(beyond)[0])
+            word = "below" if side < 0 else "above"
+            raise RtsError(f"rig {rig.name!r}: the test pattern needs {what} "
+                           f"{values[f, k, c]:.6g} {unit} on FE {int(fe[f, k, c])}, {word} "
+                           f"limits.{key} = {limit:g} {unit}{why}: the RTS cannot play it")
 
 
 def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+import rts_scenario as rs
 import rts_scenario.cli as cli
 from rts_scenario.canbus.mapping import CanMapping
 from rts_scenario.detections import Detections
@@ -72,13 +73,14 @@ def emulated_bench(rig, radar):
 
 
 
-def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=None, bus_log=None):
+def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=None, bus_log=None,
+             emulator_rig=None):
     """Play ``scene`` over UDP to the emulator; its radar (``radar``, else the scene's) speaks
     ``mapping``'s protocol (the object list with Motorola signals by default) on a virtual CAN
     bus."""
     channel = f"rts-emulate-test-{next(_channels)}-bus"
-    emulator = Emulator(scene.rig, radar or scene.radar, can_channel=channel, noise=False,
-                        tamper=tamper,
+    emulator = Emulator(emulator_rig or scene.rig, radar or scene.radar, can_channel=channel,
+                        noise=False, tamper=tamper,
                         mapping=CanMapping.from_file(mapping) if mapping else None).start()
     try:
         host, port = emulator.address
@@ -394,6 +396,23 @@ def test_frames_the_rts_lost_fail_the_run_with_the_rts_s_count(tmp_path):
     assert report.playback["rts"]["lost_frames"] >= lost
     assert any(r.startswith("frames_lost: the RTS reports") for r in report.reasons)
     assert "lost frames" in report.table()
+
+
+@pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
+def test_a_run_on_another_rig_than_the_emulated_rts_s_fails_and_the_rts_keeps_going(tmp_path):
+    # The scene plays on wide-3x5 (15 FEs), the emulated RTS has kit-table1's four: frames
+    # naming FEs it lacks are malformed for it, never played on other FEs (nor do they stop
+    # its radar); the run fails on the frames the RTS could not apply.
+    scene = bench_scene(tmp_path)
+    assert scene.rig.n_front_ends > 4
+    report, stats = rehearse(scene, radar=scene.radar, mapping=None,
+                             emulator_rig=rs.Rig.preset("kit-table1"))
+    assert stats["udp"]["malformed"] > 0
+    assert stats["udp"]["frames_applied"] < scene.n_frames
+    assert not report.passed
+    assert report.playback["rts"]["malformed"] == stats["udp"]["malformed"]
+    assert any(r.startswith("frames_lost: the RTS reports") and "malformed" in r
+               for r in report.reasons)
 
 
 def test_the_last_frame_lost_on_the_way_fails_the_run(tmp_path):

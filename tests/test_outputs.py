@@ -209,6 +209,43 @@ def test_a_new_sender_s_first_frame_starts_a_new_stream():
     assert [f for f, _, _ in receiver.applied] == [0, 1, 2, 3, 4, 0, 1]  # for a consumer
 
 
+@pytest.mark.parametrize("field, value", [("channel", 4), ("channel", 255), ("fe", 6),
+                                          ("fe", -1)])
+def test_an_entry_naming_a_channel_or_fe_the_rts_lacks_is_malformed_not_applied(field, value):
+    """A datagram with a valid CRC is still refused if an entry names no channel of a quad
+    (0..3) or an emitting one no FE of the RTS's rig: it is counted, and the receiver goes on."""
+    receiver = UdpReceiver(n_front_ends=6)
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = 0, np.arange(4), 1
+    entries["fe"] = [0, 1, 3, 4]
+    bad = entries.copy()
+    bad[field][2] = value
+
+    def frame(n, values):
+        return encode_frame(values, kind=KIND_FULL, frame=n, t_s=n / 20.0, first_sequence=n)[0]
+
+    receiver.handle(frame(0, entries))
+    receiver.handle(frame(1, bad))
+    receiver.handle(frame(2, entries))
+    stats = receiver.stop(drain_s=0.0)
+    assert (stats.malformed, stats.frames_applied, stats.lost_frames) == (1, 2, 1)
+    assert receiver.current is not None and receiver.current[0] == 2
+
+
+def test_an_off_entry_of_a_delta_needs_no_fe():
+    receiver = UdpReceiver(n_front_ends=4)
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = 0, np.arange(4), 1
+    entries["fe"] = np.arange(4)
+    off = entries.copy()
+    off["flags"], off["fe"] = 0, -1
+    receiver.handle(encode_frame(entries, kind=KIND_FULL, frame=0, t_s=0.0, first_sequence=0)[0])
+    receiver.handle(encode_frame(off, kind=KIND_DELTA, frame=1, t_s=0.05, first_sequence=1)[0])
+    stats = receiver.stop(drain_s=0.0)
+    assert (stats.malformed, stats.frames_applied) == (0, 2)
+    assert receiver.state.size == 0
+
+
 def test_after_a_quiet_spell_a_stream_opens_from_the_same_port_or_without_its_first(
         monkeypatch):
     import rts_scenario.outputs.udp as udp

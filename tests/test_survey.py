@@ -7,7 +7,7 @@ import pytest
 from free_radar import behind_own_clock, free_profile
 
 import rts_scenario.cli as cli
-from rts_scenario import RadarProfile, Rig
+from rts_scenario import RadarProfile, Rig, RtsError
 from rts_scenario.pipeline import Pipeline
 from rts_scenario.radar.simulate import ChannelErrors
 from rts_scenario.scenario.model import RadarOptions
@@ -325,3 +325,29 @@ def test_a_free_radar_whose_cycles_arrival_cannot_place_is_not_surveyed_by_a_gue
     monkeypatch.setattr(pipeline, "HOST_DELIVERY_S", 0.06)
     rig, result = _survey_free_radar_on_its_own_clock(2.0, 0.03)
     np.testing.assert_allclose(result.seen_az_deg, rig.az_deg, atol=0.006)
+
+
+@pytest.mark.parametrize("limits, reference, key", [
+    # The FEs' delay at a 1.2 m reference: 2 (1.2 - 1) m / c0 - 4 ns latency, below zero.
+    ({"latency_s": 4e-9, "delay_min_s": 4e-9}, {"range_m": 1.2}, "limits.delay_min_s"),
+    # The pattern's target approaches at 1 m/s: 2 / lambda = 513 Hz on a 77 GHz radar.
+    ({"doppler_min_hz": 1000.0, "doppler_max_hz": 60000.0}, {}, "limits.doppler_min_hz"),
+    ({"doppler_min_hz": -60000.0, "doppler_max_hz": 100.0}, {}, "limits.doppler_max_hz"),
+], ids=["delay", "doppler-min", "doppler-max"])
+def test_a_survey_the_rts_cannot_play_is_refused_naming_the_limit(tmp_path, capsys, limits,
+                                                                  reference, key):
+    # A test pattern beyond the rig's limits would go to the RTS as if it could play it
+    # (status OK), and its measurement would look like one.
+    doc = Rig.preset("kit-table1").to_document()
+    doc["limits"].update(limits)
+    doc["reference"].update(reference)
+    path = tmp_path / "near.rig.yaml"
+    import yaml
+    path.write_text(yaml.safe_dump(doc))
+    rig, radar = Rig.from_file(path), RadarProfile.preset("awr1843boost")
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic", noise=False)) as b, \
+            pytest.raises(RtsError, match=key.replace(".", r"\.")):
+        survey(rig, radar, b.play, repeats=1)
+    assert cli.main(["survey", str(path), "--radar", "awr1843boost"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and key in err[0] and "FE 0" in err[0], err

@@ -79,6 +79,10 @@ def _do_emulate(args: argparse.Namespace) -> int:
     print(f"rts: {udp['frames_applied']} frames applied, {udp['datagrams']} datagrams, "
           f"{udp['lost_frames']} frames lost, {udp['corrupted']} corrupted, "
           f"{udp['malformed']} malformed", flush=True)
+    if udp["malformed"]:
+        print(f"note: malformed datagrams are not played: a damaged datagram, or entries "
+              f"naming a channel beyond 0..3 or an FE rig {rig.name!r} lacks (it has "
+              f"{rig.n_front_ends}: the run's rig has more?)", flush=True)
     print(f"radar: {measured['cycles']} cycles measured, {measured['published']} published "
           f"({measured['detections']} detections, {stats['can_messages']} CAN messages), "
           f"worst {measured['worst_late_ms']} ms behind its clock", flush=True)

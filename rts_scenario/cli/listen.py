@@ -64,7 +64,7 @@ def _address(spec: str, option: str = "ADDRESS") -> tuple[str, int]:
     if not spec.startswith("udp://"):
         raise RtsError(f"{option} {spec!r}: {usage}")
     host, _, port = spec[len("udp://"):].rpartition(":")
-    if not host or not port.isdigit() or not 0 <= int(port) < 65536:
+    if not host or not (port.isascii() and port.isdigit()) or not 0 <= int(port) < 65536:
         raise RtsError(f"{option} {spec!r}: {usage}")
     return host.strip("[]"), int(port)
 

@@ -17,6 +17,7 @@ frames so a receiver that lost a delta can resynchronize.
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import struct
 import threading
@@ -25,6 +26,7 @@ import zlib
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -110,14 +112,23 @@ class UdpOutput(Output):
         if mode not in MODES:
             raise OutputError(f"udp: unknown mode {mode!r}; valid: {', '.join(MODES)}")
         host, _, port = address.rpartition(":")
-        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        # ASCII digits only: str.isdigit also takes digits int() refuses (superscripts).
+        if not host or not (port.isascii() and port.isdigit()) or not 0 < int(port) < 65536:
             raise OutputError(f"udp://{address}: expected udp://HOST:PORT with a port 1..65535")
         self.address = (host.strip("[]"), int(port))
         self.pacing = pacing
         self.mode = mode
         self.keyframe_every = max(1, keyframe_every)
+        # Resolved once, here: a host that does not resolve is bad input before a run starts,
+        # not a failure at its first frame. A name goes to its IPv4 address where it has one
+        # (as an RTS listening on 127.0.0.1 is reached by "localhost"), else to its IPv6 one.
         try:
-            family = socket.AF_INET6 if ":" in self.address[0] else socket.AF_INET
+            family, _, _, _, self._sockaddr = _resolve(*self.address)
+        except (OSError, UnicodeError) as exc:
+            reason = getattr(exc, "strerror", None) or exc
+            raise OutputError(f"udp://{address}: unknown host {self.address[0]!r} "
+                              f"({reason})") from None
+        try:
             self._socket = socket.socket(family, socket.SOCK_DGRAM)
         except OSError as exc:
             raise OutputError(f"udp://{address}: cannot open a socket: {exc}") from None
@@ -137,7 +148,7 @@ class UdpOutput(Output):
     def transmit(self, datagram: bytes) -> None:
         """Put one datagram on the network."""
         try:
-            self._socket.sendto(datagram, self.address)
+            self._socket.sendto(datagram, self._sockaddr)
         except OSError as exc:
             raise OutputError(f"udp://{self.address[0]}:{self.address[1]}: send failed: "
                               f"{exc}") from None
@@ -237,6 +248,15 @@ class UdpOutput(Output):
         self._socket.close()
 
 
+def _resolve(host: str, port: int) -> tuple[Any, ...]:
+    """``getaddrinfo``'s first datagram address of ``host``: IPv4 first unless it is IPv6."""
+    families = [socket.AF_INET6] if ":" in host else [socket.AF_INET, socket.AF_UNSPEC]
+    for family in families[:-1]:
+        with contextlib.suppress(socket.gaierror):
+            return socket.getaddrinfo(host, port, family, socket.SOCK_DGRAM)[0]
+    return socket.getaddrinfo(host, port, families[-1], socket.SOCK_DGRAM)[0]
+
+
 def encode_status(counters: dict[str, int]) -> bytes:
     """Return the status datagram carrying an RTS's ``counters`` (`STATUS_COUNTERS`)."""
     body = STATUS.pack(STATUS_MAGIC, VERSION,
@@ -297,7 +317,7 @@ class UdpReceiver:
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, *,
-                 keep_applied: bool = False) -> None:
+                 keep_applied: bool = False, n_front_ends: int | None = None) -> None:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._socket = socket.socket(family, socket.SOCK_DGRAM)
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
@@ -306,6 +326,9 @@ class UdpReceiver:
         self.address: tuple[str, int] = self._socket.getsockname()[:2]
         self._closed = False
         self.keep_applied = keep_applied
+        # The FEs of the rig this RTS plays through, where known: an emitting entry must name
+        # one of them (0 .. n_front_ends - 1).
+        self.n_front_ends = n_front_ends
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         # The receiving thread applies frames while others read the state (`snapshot`).
@@ -481,6 +504,10 @@ class UdpReceiver:
                 or part >= parts or len(body) != HEADER.size + count * ENTRY.itemsize):
             stats.malformed += 1
             return
+        entries = np.frombuffer(body, dtype=ENTRY, offset=HEADER.size, count=count)
+        if not self._playable(entries):
+            stats.malformed += 1
+            return
         if seq in self._seen:
             stats.duplicates += 1
             return
@@ -503,11 +530,26 @@ class UdpReceiver:
         if frame <= self._last_frame:
             stats.stale += 1
             return
-        entries = np.frombuffer(body, dtype=ENTRY, offset=HEADER.size, count=count)
         self._pending.setdefault(frame, {})[part] = entries
         self._pending_meta[frame] = (kind, parts, t_s)
         if len(self._pending[frame]) == parts:
             self._apply(frame)
+
+    def _playable(self, entries: np.ndarray) -> bool:
+        """Whether every entry names a quad's channel (0..3) and every emitting one an FE.
+
+        The FE must be one of the rig's where the receiver knows it (``n_front_ends``): a
+        sender whose rig has more FEs than this RTS's is refused, not played on other FEs.
+        """
+        if entries.size == 0:
+            return True
+        if int(entries["channel"].max()) > 3:
+            return False
+        fe = entries["fe"][(entries["flags"] & 1).astype(bool)].astype(np.int64)
+        if fe.size == 0:
+            return True
+        return int(fe.min()) >= 0 and (self.n_front_ends is None
+                                       or int(fe.max()) < self.n_front_ends)
 
     @staticmethod
     def _opens_stream(datagram: bytes, any_sequence: bool = False) -> bool:
