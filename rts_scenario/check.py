@@ -91,6 +91,7 @@ _LIMIT_FLAGS = {
     "not_synthesizable": Status.NOT_SYNTHESIZABLE,
     "split": Status.SPLIT,
     "too_close": Status.TOO_CLOSE,
+    "too_far": Status.TOO_FAR,
     "doppler_out_of_range": Status.DOPPLER_OUT_OF_RANGE,
     "no_echo_slot": Status.NO_ECHO_SLOT,
     "attenuation_clipped": Status.ATTENUATION_CLIPPED,

@@ -36,13 +36,15 @@ class HardwareLimits:
     ``latency_s`` is the signal path's delay (subtracted from every echo's delay);
     ``update_latency_s`` is how long the RTS may take, after a schedule frame reaches it, to
     play it (transport and its own update): cycles the radar measures within it may still see
-    the frame before (`rts_scenario.pipeline.CycleTruth`).
+    the frame before (`rts_scenario.pipeline.CycleTruth`). ``delay_max_s`` is the longest delay
+    a channel can set (None: no limit stated): a farther target is not played (``too_far``).
     """
 
     attenuation_min_db: float = 0.0
     attenuation_max_db: float = 120.0
     attenuation_step_db: float = 0.0
     delay_min_s: float = 0.0
+    delay_max_s: float | None = None
     delay_step_s: float = 0.0
     latency_s: float = 0.0
     doppler_min_hz: float = -100e3
@@ -57,6 +59,10 @@ class HardwareLimits:
             if not getattr(self, low) < getattr(self, high):
                 raise RigError(f"limits.{low}: must be below {high} = {getattr(self, high):g}, "
                                f"got {getattr(self, low):g}", key=f"limits.{low}")
+        if self.delay_max_s is not None and not self.delay_max_s > self.delay_min_s:
+            raise RigError(f"limits.delay_max_s: must be above delay_min_s = "
+                           f"{self.delay_min_s:g}, got {self.delay_max_s:g}",
+                           key="limits.delay_max_s")
         span = self.attenuation_max_db - self.attenuation_min_db
         if not 0.0 <= self.attenuation_step_db <= span:
             raise RigError(f"limits.attenuation_step_db: must be within 0 (continuous) .. "
@@ -413,7 +419,8 @@ class Rig:
                               if np.isfinite(v)}
             fes.append(fe)
         return {"rts_rig": 1, "name": self.name, "rows": self.rows, "columns": self.columns,
-                "front_ends": fes, "rts": asdict(self.rts), "limits": asdict(self.limits),
+                "front_ends": fes, "rts": asdict(self.rts),
+                "limits": {k: v for k, v in asdict(self.limits).items() if v is not None},
                 "reference": asdict(self.reference)}
 
     def write(self, path: str | Path) -> None:

@@ -1,7 +1,9 @@
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 import rts_scenario as rs
 from rts_scenario.evaluation import evaluation_grid
@@ -130,6 +132,54 @@ def test_status_flags():
     assert sch.emitted[0].tolist() == [False, False, False, False, True]
     assert np.all(sch.attenuation_db[0, 4][sch.active[0, 4]] <= 60.0)
     assert not sch.active[0, :4].any() and np.isnan(sch.delay_s[0, :4]).all()
+
+
+def test_a_target_beyond_the_rts_s_longest_delay_is_not_played():
+    # The delay is the target's round trip less the FEs' (1 m away): 2 (R - 1) / c. With
+    # delay_max_s = 2 x 74 m / c, a target at 70 m is played, one at 80 m is too far and not
+    # played; without the limit, both are.
+    c = 299_792_458.0
+    rig = rig_with(rs.Rig.from_angles([-5, 5, -5, 5], [-8, -8, 8, 8]), delay_max_s=2 * 74 / c)
+    sch = build_schedule(tracks([0.0, 0.0], [0.0, 0.0], range_m=[70.0, 80.0]), rig, RADAR)
+    np.testing.assert_allclose(sch.delay_s[0, 0][sch.active[0, 0]], 2 * 69 / c, rtol=1e-9)
+    assert Status(int(sch.status[0, 0])) == Status.OK
+    assert Status(int(sch.status[0, 1])) == Status.TOO_FAR
+    assert sch.emitted[0].tolist() == [True, False]
+    assert not sch.active[0, 1].any() and np.isnan(sch.delay_s[0, 1]).all()
+    free = build_schedule(tracks([0.0, 0.0], [0.0, 0.0], range_m=[70.0, 80.0]),
+                          rig_with(rig, delay_max_s=None), RADAR)
+    assert free.emitted[0].tolist() == [True, True]
+    with pytest.raises(rs.RtsError, match=r"limits.delay_max_s: must be above delay_min_s = "
+                                          r"4e-09, got 3e-09"):
+        rig_with(rig, delay_min_s=4e-9, delay_max_s=3e-9)
+
+
+def test_a_target_too_far_for_the_rts_fails_the_run_unless_expected(tmp_path):
+    # The approaching car starts 70 m out; an RTS whose delay reaches 50 m cannot play it for
+    # its first 2.5 s: those target-frames are too_far, visible, and fail the run unless the
+    # scene expects them.
+    import shutil
+
+    from rts_scenario.pipeline import Pipeline, RunOptions
+    from rts_scenario.scenario import load_scenario
+
+    root = Path(__file__).resolve().parents[1]
+    data = yaml.safe_load((root / "rts_scenario" / "data" / "rigs" / "wide-3x5.rig.yaml")
+                          .read_text())
+    data.setdefault("limits", {})["delay_max_s"] = 2 * 49.0 / 299_792_458.0
+    (tmp_path / "far.rig.yaml").write_text(yaml.safe_dump(data))
+    shutil.copy(root / "scenarios" / "approaching_target.scenario.yaml", tmp_path / "a.yaml")
+    for expected, passes in (([], False), (["too_far"], True)):
+        scene = load_scenario(tmp_path / "a.yaml", {
+            "rig": "far.rig.yaml", "radar.noise": False,
+            "expectations.expected_limits": expected})
+        with Pipeline.for_scene(scene, RunOptions()) as pipeline:
+            report = pipeline.run(scene).report
+        limits = report.targets[0].limits
+        assert limits["too_far"] == pytest.approx(50, abs=3), limits
+        assert report.passed == passes, report.reasons
+        if not passes:
+            assert [r for r in report.reasons if "too_far" in r], report.reasons
 
 
 def test_echo_slots_keep_the_nearest_targets():

@@ -25,6 +25,7 @@ LIMITS = {
     "not_synthesizable": "inside the rig, but no weights put the target there",
     "split": "the echoes would split into several targets",
     "too_close": "nearer than the RTS's shortest delay",
+    "too_far": "farther than the RTS's longest delay",
     "doppler_out_of_range": "Doppler shift beyond the RTS's range",
     "no_echo_slot": "no echo slot left on a front end it needs",
     "attenuation_clipped": "level beyond the attenuator's range (played distorted)",

@@ -214,6 +214,9 @@ def build_schedule(
 
     too_close = (active & (delay < limits.delay_min_s - DELAY_SLACK_S)).any(axis=-1)
     status |= np.where(too_close, Status.TOO_CLOSE, 0).astype(np.uint16)
+    if limits.delay_max_s is not None:
+        too_far = (active & (delay > limits.delay_max_s + DELAY_SLACK_S)).any(axis=-1)
+        status |= np.where(too_far, Status.TOO_FAR, 0).astype(np.uint16)
 
     doppler = np.broadcast_to(tracks.doppler_hz[..., None], (*shape, 4)).copy()
     off_range = (tracks.doppler_hz < limits.doppler_min_hz) | (

@@ -31,9 +31,10 @@ class Status(IntFlag):
     DOPPLER_OUT_OF_RANGE = 32
     NO_ECHO_SLOT = 64
     ATTENUATION_CLIPPED = 128
+    TOO_FAR = 256
 
 
-BLOCKING = Status(~Status.ATTENUATION_CLIPPED & 0xFF)
+BLOCKING = Status(sum(Status) & ~Status.ATTENUATION_CLIPPED)
 
 
 @dataclass(frozen=True)
