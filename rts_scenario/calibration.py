@@ -278,9 +278,13 @@ def _check_pattern_limits(rig: Rig, fe: NDArray[np.int64], active: NDArray[np.bo
     no verdict to fail), and what the radar measured of it would pass for a measurement.
     """
     lim = rig.limits
+    far = () if lim.delay_max_s is None else (
+        ("delay", delay, "s", "delay_max_s", lim.delay_max_s, 1.0,
+         f" (a target at {range_m:g} m, less the FE's distance and limits.latency_s)"),)
     checks = (
         ("delay", delay, "s", "delay_min_s", lim.delay_min_s, -1.0,
          f" (a target at {range_m:g} m, less the FE's distance and limits.latency_s)"),
+        *far,
         ("attenuation", attenuation, "dB", "attenuation_min_db", lim.attenuation_min_db, -1.0,
          " (the level plus the channel's calibration gain_db)"),
         ("attenuation", attenuation, "dB", "attenuation_max_db", lim.attenuation_max_db, 1.0,

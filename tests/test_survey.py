@@ -330,10 +330,12 @@ def test_a_free_radar_whose_cycles_arrival_cannot_place_is_not_surveyed_by_a_gue
 @pytest.mark.parametrize("limits, reference, key", [
     # The FEs' delay at a 1.2 m reference: 2 (1.2 - 1) m / c0 - 4 ns latency, below zero.
     ({"latency_s": 4e-9, "delay_min_s": 4e-9}, {"range_m": 1.2}, "limits.delay_min_s"),
+    # At a 10 m reference: 2 (10 - 1) m / c0 = 60 ns, beyond an RTS whose delay reaches 50 ns.
+    ({"delay_max_s": 50e-9}, {"range_m": 10.0}, "limits.delay_max_s"),
     # The pattern's target approaches at 1 m/s: 2 / lambda = 513 Hz on a 77 GHz radar.
     ({"doppler_min_hz": 1000.0, "doppler_max_hz": 60000.0}, {}, "limits.doppler_min_hz"),
     ({"doppler_min_hz": -60000.0, "doppler_max_hz": 100.0}, {}, "limits.doppler_max_hz"),
-], ids=["delay", "doppler-min", "doppler-max"])
+], ids=["delay", "delay-max", "doppler-min", "doppler-max"])
 def test_a_survey_the_rts_cannot_play_is_refused_naming_the_limit(tmp_path, capsys, limits,
                                                                   reference, key):
     # A test pattern beyond the rig's limits would go to the RTS as if it could play it
