@@ -195,6 +195,46 @@ def test_echo_slots_keep_the_nearest_targets():
     assert fe_load.max() <= 3
 
 
+def test_a_target_dropped_for_want_of_a_slot_leaves_its_other_fes_to_the_next():
+    # One echo per channel on three quads side by side (columns c0 c1 c2 c3, two rows): the
+    # nearest target, in the first quad, takes both rows of c0 and c1; the next, in the
+    # middle quad, needs c1 too and is dropped; the third, in the last quad (c2, c3), finds
+    # them free and is played: the dropped one took no slot. Counting every nearer target on
+    # an FE, the third was dropped too.
+    rig = rig_with(rs.Rig.grid([-15.0, -5.0, 5.0, 15.0], [-8.0, 8.0]), echoes_per_channel=1)
+    sch = build_schedule(tracks([-10.0, 0.0, 10.0], [0.0, 0.0, 0.0],
+                                range_m=[20.0, 21.0, 22.0]), rig, RADAR)
+    assert sch.emitted[0].tolist() == [True, False, True]
+    assert sorted(sch.fe[0, 2][sch.active[0, 2]].tolist()) == [2, 3, 6, 7]
+    assert sch.status[0, 1] == Status.NO_ECHO_SLOT
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_echo_slots_are_taken_target_by_target_in_order_of_relevance(seed):
+    from rts_scenario.schedule.echo_slots import assign_echo_slots
+
+    # Against taking the targets one by one (nearest first; ties: larger RCS, lower index).
+    rng = np.random.default_rng(seed)
+    n_frames, n_targets, n_fe, per = 40, 12, 6, 2
+    fe = np.stack([rng.permutation(n_fe)[:4] for _ in range(n_frames * n_targets)])
+    fe = fe.reshape(n_frames, n_targets, 4)
+    using = rng.random((n_frames, n_targets, 4)) < 0.8
+    cases = tracks(np.zeros(n_targets), np.zeros(n_targets), frames=n_frames,
+                   range_m=rng.choice([10.0, 20.0, 30.0], (n_frames, n_targets)),
+                   rcs=rng.choice([0.0, 10.0], (n_frames, n_targets)))
+    got = assign_echo_slots(fe, using, cases, per, n_fe) != 0
+    for f in range(n_frames):
+        load = np.zeros(n_fe, dtype=int)
+        order = sorted(range(n_targets), key=lambda t: (cases.range_m[f, t],
+                                                        -cases.rcs_dbsm[f, t], t))
+        for t in order:
+            used = fe[f, t][using[f, t]]
+            fits = bool(np.all(load[used] < per))
+            if fits:
+                load[used] += 1
+            assert got[f, t] == (not fits and used.size > 0), (f, t)
+
+
 def test_update_rate_and_mode_are_checked():
     rig = rig_with(update_rate_hz=20.0)
     with pytest.raises(ScheduleError, match="update_rate_hz"):
