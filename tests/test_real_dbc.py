@@ -433,6 +433,20 @@ BAD_MAPPINGS = [
      r"not tell them apart"),
     ("dbc-factor-zero", ("(0.001,0) [0|65.535]", "(0,0) [0|65.535]"), "header.timestamp",
      r"signal 'MeasTime' of message 'Head' in DBC mux.dbc has factor 0: every raw value reads 0"),
+    ("header-signal-typo", ("counter: Counter", "counter: Countr"), "header.counter",
+     r"signal 'Countr' is not in message 'Head'; signals: Checksum, Count, Counter, MeasTime$"),
+    ("quantity-signal-typo", ("range_m: Range", "range_m: Rnage"), "detection.range_m",
+     r"signal 'Rnage' is not in the detection message\(s\) Obj, ObjFD; signals: "
+     r"Azimuth, Checksum, Class, Elevation, Id, Page, ProbOfExist, RCS, Range, VrelRad$"),
+    ("index-typo", ("index: Id", "index: ID"), "detection.index",
+     r"signal 'ID' is not in the detection message\(s\) Obj, ObjFD; signals: .*, Id, "),
+    # A typo in an optional role must not leave the checksum or the counter unread.
+    ("checksum-typo", ("checksum: Checksum\n  form", "checksum: Chksum\n  form"),
+     "detection.checksum", r"signal 'Chksum' is not in the detection message\(s\) Obj, ObjFD; "
+                           r"signals: Azimuth, Checksum, "),
+    ("frame-counter-typo", ("index: Id\n", "index: Id\n  frame_counter: Counter8\n"),
+     "detection.frame_counter", r"signal 'Counter8' is not in the detection message\(s\) Obj, "
+                                r"ObjFD; signals: Azimuth, Checksum, "),
     ("dbc-factor-zero-unmapped", ("ProbOfExist m2 : 11|3@0+ (1,0)",
                                   "ProbOfExist m2 : 11|3@0+ (0,0)"), "dbc",
      r"signal 'ProbOfExist' of message 'Obj' in DBC mux.dbc has factor 0"),

@@ -244,28 +244,36 @@ class CanMapping:
         """Every named message and signal exists in the DBC; the form has what it needs."""
         _check_dbc(doc, self.db)
         names = {m.name: m for m in self.db.messages}
-        def need(key: tuple[str | int, ...], message: str, signals: list[str | None]) -> None:
+
+        def message_of(key: tuple[str | int, ...], message: str) -> Message:
             if message not in names:
                 raise doc.error(key, f"message {message!r} is not in the DBC; messages: "
                                      f"{', '.join(sorted(names))}")
-            have = {s.name for s in names[message].signals}
-            for sig in signals:
-                if sig is not None and sig not in have:
-                    raise doc.error(key, f"signal {sig!r} is not in message {message!r}; "
-                                         f"signals: {', '.join(sorted(have))}")
-        need(("header", "message"), self.header,
-             [self.counter, *self.count, self.timestamp, self.header_checksum])
-        detection_signals = [self.index, self.frame_counter, self.checksum]
-        for m in (*self.messages, *([self.fd_message] if self.fd_message else [])):
-            have = {s.name for s in names.get(m, self.db.messages[0]).signals}
-            need(("detection", "messages"), m,
-                 [s for s in detection_signals if s in have or s == self.index])
+            return names[message]
+
+        # Each signal is reported at the key that names it, with the signals it may name.
+        header = {s.name for s in message_of(("header", "message"), self.header).signals}
+        for key, name in self._named():
+            if key[0] == "header" and name not in header:
+                raise doc.error(key, f"signal {name!r} is not in message {self.header!r}; "
+                                     f"signals: {', '.join(sorted(header))}")
         carriers = [*self.messages, *([self.fd_message] if self.fd_message else [])]
+        for m in self.messages:
+            message_of(("detection", "messages"), m)
+        if self.fd_message:
+            message_of(("detection", "fd_message"), self.fd_message)
         carried = set().union(*({s.name for s in names[m].signals} for m in carriers))
-        for q, f in self.fields.items():
-            if f.signal not in carried:
-                raise doc.error(("detection", q), f"signal {f.signal!r} is not in the detection "
-                                                  f"message(s) {', '.join(carriers)}")
+        for key, name in self._named():
+            if key[0] == "detection" and name not in carried:
+                raise doc.error(key, f"signal {name!r} is not in the detection message(s) "
+                                     f"{', '.join(carriers)}; signals: "
+                                     f"{', '.join(sorted(carried))}")
+        for m in carriers:  # the index joins a detection's messages: every one carries it
+            have = {s.name for s in names[m].signals}
+            if self.index not in have:
+                raise doc.error(("detection", "index"),
+                                f"signal {self.index!r} is not in message {m!r}; signals: "
+                                f"{', '.join(sorted(have))}")
         for key, message_names, checksum in (
                 (("header", "checksum"), [self.header], self.header_checksum),
                 (("detection", "checksum"), carriers, self.checksum)):
