@@ -373,7 +373,8 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
     skipped = 0
     for msg in _messages(path):  # one per logged message
         if not started:
-            if msg.is_error_frame or (msg.arbitration_id, msg.is_extended_id) != header_id:
+            if (msg.is_error_frame or msg.is_remote_frame
+                    or (msg.arbitration_id, msg.is_extended_id) != header_id):
                 # The log began inside a cycle: its tail before the first header is no cycle.
                 skipped += 1
                 continue

@@ -326,3 +326,15 @@ def test_check_of_a_log_with_a_cut_off_cycle_fails_and_counts_it(objects, tmp_pa
     (fail,) = [line for line in out.splitlines() if line.startswith("FAIL")]
     assert fail.endswith("0 radar cycles missing and 1 incomplete: 1 target-cycles and the "
                          "cycles' false detections could not be checked"), fail
+
+
+def test_a_remote_frame_asking_for_the_radar_s_message_is_counted_not_undecodable(objects):
+    # A gateway asks for the status with a remote frame (no data, DLC 8): no data was lost,
+    # so it is counted on its own and does not fail the verdict as an undecodable message.
+    request = can.Message(arbitration_id=STATUS_ID, is_extended_id=False,
+                          is_remote_frame=True, dlc=8)
+    cycle = [status(1, 7), general(*OBJECTS[0]), quality(OBJECTS[0][0])]
+    receiver, got = receive(objects, [request, *cycle, request])
+    assert [(d.cycle, d.complete, d.count) for d in got] == [(7, True, 1)]
+    assert receiver.stats.remote_frames == 2 and receiver.stats.decode_errors == 0
+    assert not receiver.stats.clean  # visible in the report's bus counters

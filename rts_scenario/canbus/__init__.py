@@ -461,6 +461,7 @@ class BusStats:
 
     messages: int = 0
     error_frames: int = 0
+    remote_frames: int = 0  # requests for a message: they carry no data
     unknown_ids: int = 0
     checksum_errors: int = 0
     decode_errors: int = 0
@@ -472,9 +473,9 @@ class BusStats:
     @property
     def clean(self) -> bool:
         """Nothing went wrong."""
-        return not (self.error_frames or self.unknown_ids or self.checksum_errors
-                    or self.decode_errors or self.duplicates or self.reordered or self.orphans
-                    or self.conflicts)
+        return not (self.error_frames or self.remote_frames or self.unknown_ids
+                    or self.checksum_errors or self.decode_errors or self.duplicates
+                    or self.reordered or self.orphans or self.conflicts)
 
 
 class _PartRule:
@@ -713,6 +714,9 @@ class DetectionReceiver(can.Listener):
         stats.messages += 1
         if msg.is_error_frame:
             stats.error_frames += 1
+            return
+        if msg.is_remote_frame:
+            stats.remote_frames += 1
             return
         # An 11-bit and a 29-bit identifier of one number are different messages.
         known = self._layouts.get(msg.arbitration_id | (msg.is_extended_id << 31))
