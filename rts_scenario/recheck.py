@@ -20,10 +20,13 @@ sidecar's digest of the statuses tells whether the rebuilt schedule plays the sa
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import json
+import sys
 from array import array
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -455,13 +458,21 @@ class _ReadAhead:
 
 def _messages(path: Path) -> Iterator[can.Message]:
     """Yield the log's messages; a file python-can cannot parse is a `LogError`."""
-    try:
-        reader = can.LogReader(str(path))
-    except ImportError as exc:
-        raise LogError(f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "
-                       f"'rts-scenario[mf4]')") from None
-    except Exception as exc:  # noqa: BLE001 - each format fails in its own way
-        raise LogError(f"--log {path}: cannot read: {type(exc).__name__}: {exc}") from None
+    problem = None
+    with _quiet_unraisable():
+        try:
+            reader = can.LogReader(str(path))
+        except ImportError as exc:
+            problem = (f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "
+                       f"'rts-scenario[mf4]')")
+        except Exception as exc:  # noqa: BLE001 - each format fails in its own way
+            problem = f"--log {path}: cannot read: {type(exc).__name__}: {exc}"
+        if problem is not None:
+            # The reader it left half made goes now, while its clean-up's errors are held back
+            # (asammdf's fails on a file it could not open, with a traceback).
+            gc.collect()
+    if problem is not None:
+        raise LogError(problem)
     with reader:
         iterator = iter(reader)
         while True:
@@ -473,6 +484,17 @@ def _messages(path: Path) -> Iterator[can.Message]:
                 raise LogError(f"--log {path}: cannot read: {type(exc).__name__}: "
                                f"{exc}") from None
             yield msg
+
+
+@contextmanager
+def _quiet_unraisable() -> Iterator[None]:
+    """Hold back what Python prints of errors raised while objects are collected."""
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda _: None
+    try:
+        yield
+    finally:
+        sys.unraisablehook = hook
 
 
 class _Detected:
