@@ -16,6 +16,7 @@ as the protocol has them and skipped by the receiver.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -77,6 +78,31 @@ MAPPING_SCHEMA: dict[str, Any] = {
     },
 }
 
+
+# DBC units rts-scenario recognises: (dimension, factor to the quantity's own unit; None where
+# no scale converts it). Others (and none) are taken as the quantity's own.
+_UNITS: dict[str, tuple[str, float | None]] = {
+    "m": ("length", 1.0), "km": ("length", 1000.0), "cm": ("length", 0.01),
+    "mm": ("length", 0.001), "ft": ("length", 0.3048), "in": ("length", 0.0254),
+    "deg": ("angle", 1.0), "°": ("angle", 1.0), "degree": ("angle", 1.0),
+    "degrees": ("angle", 1.0), "rad": ("angle", 180.0 / math.pi),
+    "mrad": ("angle", 0.18 / math.pi),
+    "m/s": ("velocity", 1.0), "mps": ("velocity", 1.0), "km/h": ("velocity", 1.0 / 3.6),
+    "kph": ("velocity", 1.0 / 3.6), "kmh": ("velocity", 1.0 / 3.6), "mph": ("velocity", 0.44704),
+    "cm/s": ("velocity", 0.01),
+    "db": ("level", 1.0), "dbsm": ("level", 1.0), "dbm2": ("level", 1.0),
+    "dbm²": ("level", 1.0), "dbm^2": ("level", 1.0),
+    "m2": ("area", None), "m²": ("area", None), "m^2": ("area", None),
+}
+# Each quantity's dimension and unit.
+_QUANTITY_UNITS = {
+    "range_m": ("length", "m"), "x_m": ("length", "m"), "y_m": ("length", "m"),
+    "z_m": ("length", "m"), "azimuth_deg": ("angle", "deg"), "elevation_deg": ("angle", "deg"),
+    "radial_velocity_mps": ("velocity", "m/s"), "vx_mps": ("velocity", "m/s"),
+    "vy_mps": ("velocity", "m/s"), "rcs_dbsm": ("level", "dB"), "snr_db": ("level", "dB"),
+}
+_DIMENSION_NAMES = {"length": "a length", "angle": "an angle", "velocity": "a velocity",
+                    "level": "a level in dB", "area": "an area"}
 
 Message = cantools.database.can.Message
 # A part of a detection: a message's frame id and its multiplexer page (None: not multiplexed).
@@ -295,6 +321,7 @@ class CanMapping:
                                     f"signal {self.index!r} is not in {where} "
                                     f"{message.name!r}: every message and page that carries a "
                                     f"detection needs the index that joins them")
+        self._check_units(doc)
         required = {"polar": ("range_m", "azimuth_deg"), "cartesian": ("x_m", "y_m")}[self.form]
         missing = [q for q in required if q not in self.fields]
         if missing:
@@ -317,6 +344,36 @@ class CanMapping:
                                             f"has factor 0: every raw value reads "
                                             f"{sig.offset:g}, so it carries nothing and cannot "
                                             f"be written; give it a factor other than 0")
+
+    def _check_units(self, doc: Document) -> None:
+        """Refuse a quantity read from a signal the DBC gives in another unit, unconverted.
+
+        A quantity with its own ``scale`` or ``offset`` converts its signal: any unit goes.
+        """
+        carriers = [*self.messages, *([self.fd_message] if self.fd_message else [])]
+        for q, f in self.fields.items():
+            if (f.scale, f.offset) != (1.0, 0.0):
+                continue
+            dimension, unit = _QUANTITY_UNITS[q]
+            for name in carriers:
+                message = self.db.get_message_by_name(name)
+                sig = next((sg for sg in message.signals if sg.name == f.signal), None)
+                if sig is None or not sig.unit:
+                    continue
+                known = _UNITS.get(sig.unit.strip().lower().replace(" ", ""))
+                if known is None or known == (dimension, 1.0):
+                    continue
+                where = (f"signal {f.signal!r} of message {name!r} is in {sig.unit.strip()} "
+                         f"(its DBC unit)")
+                if known[0] == dimension and known[1] is not None:
+                    raise doc.error(("detection", q),
+                                    f"{where}, {q} in {unit}: give {{signal: {f.signal}, "
+                                    f"scale: {known[1]:.6g}}} to convert it")
+                how = ("map a signal in dB" if dimension == "level"
+                       else f"map a signal in {unit} (or give a scale that converts it)")
+                raise doc.error(("detection", q),
+                                f"{where}, not {_DIMENSION_NAMES[dimension]}: {q} is in "
+                                f"{unit}; {how}")
 
     def _named(self) -> list[tuple[tuple[str | int, ...], str]]:
         """Every (mapping key, signal) pair, header roles first, in file order."""
