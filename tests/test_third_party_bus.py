@@ -338,3 +338,12 @@ def test_a_remote_frame_asking_for_the_radar_s_message_is_counted_not_undecodabl
     assert [(d.cycle, d.complete, d.count) for d in got] == [(7, True, 1)]
     assert receiver.stats.remote_frames == 2 and receiver.stats.decode_errors == 0
     assert not receiver.stats.clean  # visible in the report's bus counters
+
+
+def test_a_dbc_saved_with_a_utf8_byte_order_mark_loads(tmp_path):
+    # Editors on Windows save UTF-8 with a byte order mark; the DBC is the same.
+    (tmp_path / "objects.dbc").write_bytes(b"\xef\xbb\xbf" + OBJECTS_DBC.encode()
+                                           + 'CM_ BO_ 1546 "Zähler °";\n'.encode())
+    (tmp_path / "objects.mapping.yaml").write_text(OBJECTS_MAPPING)
+    mapping = CanMapping.from_file(tmp_path / "objects.mapping.yaml")
+    assert mapping.db.get_message_by_name("Obj_0_Status").comment == "Zähler °"

@@ -243,7 +243,11 @@ class CanMapping:
         validate(doc, MAPPING_SCHEMA)
         dbc_path = path.parent / doc.data["dbc"]
         try:
-            db = _load_dbc(lambda: cantools.database.load_file(dbc_path, database_format="dbc"))
+            with open(dbc_path, "rb") as file:
+                # DBC tools write cp1252 (cantools' default); a byte order mark says UTF-8.
+                encoding = ("utf-8-sig" if file.read(3) == b"\xef\xbb\xbf" else None)
+            db = _load_dbc(lambda: cantools.database.load_file(dbc_path, database_format="dbc",
+                                                               encoding=encoding))
         except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
             raise doc.error(("dbc",), f"cannot load DBC {dbc_path}: {exc}") from None
         return cls._build(doc, db)
