@@ -20,11 +20,13 @@ sidecar's digest of the statuses tells whether the rebuilt schedule plays the sa
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import json
+import sys
 from array import array
-from collections import deque
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -363,34 +365,23 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
     receiver = DetectionReceiver(mapping, cycle_s)
     m = receiver.mapping
     header = m.db.get_message_by_name(m.header)
-    header_times: dict[int, deque[float]] = {}
+    header_id = (header.frame_id, bool(header.is_extended_frame))
 
     def take(cycles: list[Detections]) -> Iterator[_LoggedCycle]:
-        for cycle in cycles:  # one per radar cycle
-            times = header_times.get(cycle.cycle)
-            t = times.popleft() if times else float("nan")
-            if times is not None and not times:
-                del header_times[cycle.cycle]
-            yield _LoggedCycle(cycle, t)
+        for cycle in cycles:  # one per radar cycle, with the time of its own header
+            t = cycle.bus_t_s
+            yield _LoggedCycle(cycle, float("nan") if t is None else t)
 
     started = False
     skipped = 0
     for msg in _messages(path):  # one per logged message
-        is_header = msg.arbitration_id == header.frame_id and not msg.is_error_frame
-        if not (started or is_header):
-            # The log began inside a cycle: its tail before the first header is no cycle.
-            skipped += 1
-            continue
-        started = True
-        if is_header:
-            try:
-                decoded = header.decode(bytes(msg.data), decode_choices=False)
-                assert isinstance(decoded, dict)
-                counter: int | None = int(decoded[m.counter])  # type: ignore[arg-type]
-            except Exception:  # noqa: BLE001 - the receiver counts undecodable ones
-                counter = None
-            if counter is not None:
-                header_times.setdefault(counter, deque()).append(float(msg.timestamp))
+        if not started:
+            if (msg.is_error_frame or msg.is_remote_frame
+                    or (msg.arbitration_id, msg.is_extended_id) != header_id):
+                # The log began inside a cycle: its tail before the first header is no cycle.
+                skipped += 1
+                continue
+            started = True
         receiver.on_message_received(msg)
         yield from take(receiver.pop())
     yield from take(receiver.flush())
@@ -467,13 +458,21 @@ class _ReadAhead:
 
 def _messages(path: Path) -> Iterator[can.Message]:
     """Yield the log's messages; a file python-can cannot parse is a `LogError`."""
-    try:
-        reader = can.LogReader(str(path))
-    except ImportError as exc:
-        raise LogError(f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "
-                       f"'rts-scenario[mf4]')") from None
-    except Exception as exc:  # noqa: BLE001 - each format fails in its own way
-        raise LogError(f"--log {path}: cannot read: {type(exc).__name__}: {exc}") from None
+    problem = None
+    with _quiet_unraisable():
+        try:
+            reader = can.LogReader(str(path))
+        except ImportError as exc:
+            problem = (f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "
+                       f"'rts-scenario[mf4]')")
+        except Exception as exc:  # noqa: BLE001 - each format fails in its own way
+            problem = f"--log {path}: cannot read: {type(exc).__name__}: {exc}"
+        if problem is not None:
+            # The reader it left half made goes now, while its clean-up's errors are held back
+            # (asammdf's fails on a file it could not open, with a traceback).
+            gc.collect()
+    if problem is not None:
+        raise LogError(problem)
     with reader:
         iterator = iter(reader)
         while True:
@@ -485,6 +484,17 @@ def _messages(path: Path) -> Iterator[can.Message]:
                 raise LogError(f"--log {path}: cannot read: {type(exc).__name__}: "
                                f"{exc}") from None
             yield msg
+
+
+@contextmanager
+def _quiet_unraisable() -> Iterator[None]:
+    """Hold back what Python prints of errors raised while objects are collected."""
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda _: None
+    try:
+        yield
+    finally:
+        sys.unraisablehook = hook
 
 
 class _Detected:
@@ -789,7 +799,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"{receiver_mapping.name!r}); is --mapping the radar's?")
         latency = profile_clock.latency_s
         bus_t = index.bus_t_s
-        _check_timestamps(log, bus_t, profile_clock.cycle_s)
+        _check_timestamps(log, bus_t, profile_clock.cycle_s, numbers)
         # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
         chosen = _alignment_cycles(index)
         dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s)
@@ -919,15 +929,18 @@ def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,
                        f"--record` writes for this scene")
 
 
-def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float) -> None:
+def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float,
+                      numbers: IntArray) -> None:
     """Refuse to align a log by timestamps that do not advance with its cycles.
 
     All alike or nearly (a logger that wrote one time for every message: distinct cycles
     span at least a cycle each, a tenth of the profile's for a radar far off it), or going back
-    by more than `STAMPS_BACK_S` between one cycle and the next in the log (a clock set back
-    while it logged; a cycle held up on the bus comes later, not earlier).
+    by more than `STAMPS_BACK_S` from one cycle to the next in the radar's order (``numbers``:
+    a clock set back while it logged; a cycle held up on the bus comes later, not earlier, and
+    an incomplete one handed on after those that followed it is still in its place).
     """
-    timed = bus_t[np.isfinite(bus_t)]
+    ordered = bus_t[np.argsort(numbers, kind="stable")]
+    timed = ordered[np.isfinite(ordered)]
     advice = ("it cannot be aligned by them; the sidecar `run --record` writes aligns a log by "
               "the radar's counters")
     span = float(np.ptp(timed)) if timed.size else 0.0

@@ -105,7 +105,8 @@ def test_a_short_message_is_a_decode_error_and_padding_is_ignored():
     mapping = CanMapping.builtin()
     receiver = DetectionReceiver(mapping)
     header = mapping.db.get_message_by_name(mapping.header)
-    receiver.on_message_received(can.Message(arbitration_id=header.frame_id, data=b"\x01\x02"))
+    receiver.on_message_received(can.Message(arbitration_id=header.frame_id, data=b"\x01\x02",
+                                            is_extended_id=header.is_extended_frame))
     assert receiver.stats.decode_errors + receiver.stats.checksum_errors == 1
     codec = _Codec(header, None, None)
     data = codec.encode(codec.defaults)

@@ -433,6 +433,41 @@ BAD_MAPPINGS = [
      r"not tell them apart"),
     ("dbc-factor-zero", ("(0.001,0) [0|65.535]", "(0,0) [0|65.535]"), "header.timestamp",
      r"signal 'MeasTime' of message 'Head' in DBC mux.dbc has factor 0: every raw value reads 0"),
+    ("header-signal-typo", ("counter: Counter", "counter: Countr"), "header.counter",
+     r"signal 'Countr' is not in message 'Head'; signals: Checksum, Count, Counter, MeasTime$"),
+    ("quantity-signal-typo", ("range_m: Range", "range_m: Rnage"), "detection.range_m",
+     r"signal 'Rnage' is not in the detection message\(s\) Obj, ObjFD; signals: "
+     r"Azimuth, Checksum, Class, Elevation, Id, Page, ProbOfExist, RCS, Range, VrelRad$"),
+    ("index-typo", ("index: Id", "index: ID"), "detection.index",
+     r"signal 'ID' is not in the detection message\(s\) Obj, ObjFD; signals: .*, Id, "),
+    # A typo in an optional role must not leave the checksum or the counter unread.
+    ("checksum-typo", ("checksum: Checksum\n  form", "checksum: Chksum\n  form"),
+     "detection.checksum", r"signal 'Chksum' is not in the detection message\(s\) Obj, ObjFD; "
+                           r"signals: Azimuth, Checksum, "),
+    ("frame-counter-typo", ("index: Id\n", "index: Id\n  frame_counter: Counter8\n"),
+     "detection.frame_counter", r"signal 'Counter8' is not in the detection message\(s\) Obj, "
+                                r"ObjFD; signals: Azimuth, Checksum, "),
+    # A DBC unit that is not the quantity's: converted by the mapping's scale, or refused.
+    ("velocity-in-km/h", ('[-102.4|102.35] "m/s" CHECKER\n SG_ Elevation m1',
+                          '[-102.4|102.35] "km/h" CHECKER\n SG_ Elevation m1'),
+     "detection.radial_velocity_mps",
+     r"signal 'VrelRad' of message 'Obj' is in km/h \(its DBC unit\), radial_velocity_mps in "
+     r"m/s: give \{signal: VrelRad, scale: 0.277778\} to convert it$"),
+    ("azimuth-in-rad", ('(-0.1,0) [-102.3|102.4] "deg" CHECKER\n SG_ VrelRad m1',
+                        '(-0.1,0) [-102.3|102.4] "rad" CHECKER\n SG_ VrelRad m1'),
+     "detection.azimuth_deg",
+     r"signal 'Azimuth' of message 'Obj' is in rad \(its DBC unit\), azimuth_deg in deg: give "
+     r"\{signal: Azimuth, scale: 57.2958\} to convert it$"),
+    ("range-in-a-velocity-unit", ('[0|409.55] "m" CHECKER\n SG_ Azimuth m0',
+                                  '[0|409.55] "m/s" CHECKER\n SG_ Azimuth m0'),
+     "detection.range_m",
+     r"signal 'Range' of message 'Obj' is in m/s \(its DBC unit\), not a length: range_m is "
+     r"in m; map a signal in m \(or give a scale that converts it\)$"),
+    ("rcs-linear", ('(0.5,-50) [-50|77.5] "dBsm" CHECKER\n SG_ Class',
+                    '(0.5,-50) [-50|77.5] "m2" CHECKER\n SG_ Class'),
+     "detection.rcs_dbsm",
+     r"signal 'RCS' of message 'Obj' is in m2 \(its DBC unit\), not a level in dB: rcs_dbsm "
+     r"is in dB"),
     ("dbc-factor-zero-unmapped", ("ProbOfExist m2 : 11|3@0+ (1,0)",
                                   "ProbOfExist m2 : 11|3@0+ (0,0)"), "dbc",
      r"signal 'ProbOfExist' of message 'Obj' in DBC mux.dbc has factor 0"),

@@ -1,8 +1,11 @@
 """Recording the bus and re-checking logs: the live verdict again, or aligned by timestamps."""
 
 import json
+import os
 import re
 import shutil
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -1034,3 +1037,32 @@ expectations:"""))
                                        r"400 of 3; not in the recording: 'bus': not the scene "
                                        r"file that was recorded \(edited since\?\)"):
         check_log(load_scenario(added), recorded)
+
+
+@pytest.mark.parametrize("suffix", [".mf4", ".blf", ".csv"])
+def test_a_damaged_log_is_one_error_line_without_a_traceback(tmp_path, suffix):
+    # A log cut short by a full disk or a pulled cable: the format's reader fails. One error
+    # line names the log, with no traceback from the reader cleaning up after itself (asammdf
+    # does, on an MF4 it could not open).
+    if suffix == ".mf4":
+        pytest.importorskip("asammdf")
+    whole = tmp_path / f"whole{suffix}"
+    with can.Logger(str(whole)) as logger:
+        for i in range(2000):
+            logger.on_message_received(can.Message(arbitration_id=0x200 + i % 5,
+                                                   is_extended_id=False, timestamp=0.001 * i,
+                                                   data=bytes([i % 256] * 8)))
+    data = whole.read_bytes()
+    damaged = tmp_path / f"cut{suffix}"
+    damaged.write_bytes(data[: len(data) // 3] + b"\xff" * 7)
+    scene = str(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    # In a process of its own, as a user runs it (pytest takes over what Python prints of an
+    # exception raised while an object is collected).
+    done = subprocess.run([sys.executable, "-m", "rts_scenario.cli", "check", scene, "--log",
+                           str(damaged)], capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    err = done.stderr
+    assert done.returncode == 2, err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    (line,) = err.strip().splitlines()
+    assert line.startswith(f"error: --log {damaged}: ")

@@ -461,6 +461,7 @@ class BusStats:
 
     messages: int = 0
     error_frames: int = 0
+    remote_frames: int = 0  # requests for a message: they carry no data
     unknown_ids: int = 0
     checksum_errors: int = 0
     decode_errors: int = 0
@@ -472,9 +473,9 @@ class BusStats:
     @property
     def clean(self) -> bool:
         """Nothing went wrong."""
-        return not (self.error_frames or self.unknown_ids or self.checksum_errors
-                    or self.decode_errors or self.duplicates or self.reordered or self.orphans
-                    or self.conflicts)
+        return not (self.error_frames or self.remote_frames or self.unknown_ids
+                    or self.checksum_errors or self.decode_errors or self.duplicates
+                    or self.reordered or self.orphans or self.conflicts)
 
 
 class _PartRule:
@@ -562,7 +563,8 @@ class DetectionReceiver(can.Listener):
     """Decode detection messages through a mapping into `Detections` (a can.Listener).
 
     Finished cycles queue up until `pop` takes them (`flush` also hands on the ones still
-    open, as incomplete). Only `OPEN_CYCLES` cycles are assembled at a time.
+    open, as incomplete). Only `OPEN_CYCLES` cycles are assembled at a time, and an incomplete
+    one is handed on once the header of a cycle `OPEN_CYCLES` later came.
 
     With the radar's ``cycle_s``, a header that reaches the bus more than half the counter's
     range of cycles after the one before (less `GAP_TOLERANCE_CYCLES`) starts afresh: every
@@ -595,10 +597,12 @@ class DetectionReceiver(can.Listener):
             self._header, _checksum_position(self._header, m.header_checksum), None)
         # Messages without a multiplexer decode through their compiled codec directly (and are
         # one part: (identifier, None)); cantools picks a multiplexed one's page.
-        self._layouts: dict[int, _Route] = {i: (message, checksum, mux,
-                             None if mux is not None else _Codec(message, None, None).decode,
-                             (i, None))
-                         for i, (message, checksum, mux) in layouts.items()}
+        # Keyed as the DBC numbers them: a 29-bit identifier with bit 31 set.
+        self._layouts: dict[int, _Route] = {
+            i | (bool(message.is_extended_frame) << 31): (
+                message, checksum, mux,
+                None if mux is not None else _Codec(message, None, None).decode, (i, None))
+            for i, (message, checksum, mux) in layouts.items()}
         self._frame_counter, self._index = m.frame_counter, m.index
         # Parts are scaled to the DBC's physical values as they arrive (`_scaled`); the mapping's
         # own scale and offset are applied when a cycle is handed on.
@@ -711,7 +715,11 @@ class DetectionReceiver(can.Listener):
         if msg.is_error_frame:
             stats.error_frames += 1
             return
-        known = self._layouts.get(msg.arbitration_id)
+        if msg.is_remote_frame:
+            stats.remote_frames += 1
+            return
+        # An 11-bit and a 29-bit identifier of one number are different messages.
+        known = self._layouts.get(msg.arbitration_id | (msg.is_extended_id << 31))
         if known is None:
             stats.unknown_ids += 1
             return
@@ -775,6 +783,14 @@ class DetectionReceiver(can.Listener):
             self._attach(frame, rule, early)
         if frame.complete():
             self._finish(counter)
+        # An incomplete cycle waits for late parts while `OPEN_CYCLES` newer cycles begin (fewer
+        # for a narrow counter), then goes on as incomplete: held longer, the counter that
+        # names it could come round again and its place among the cycles be lost.
+        held = min(OPEN_CYCLES, max(1, self._counter_modulus // 4))
+        half = self._counter_modulus // 2
+        for old in [c for c in self._open if held <= (self._latest - c) % self._counter_modulus
+                    < half]:
+            self._finish(old)
         while len(self._open) > OPEN_CYCLES:
             self._finish(next(iter(self._open)))
 

@@ -16,6 +16,7 @@ as the protocol has them and skipped by the receiver.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -77,6 +78,31 @@ MAPPING_SCHEMA: dict[str, Any] = {
     },
 }
 
+
+# DBC units rts-scenario recognises: (dimension, factor to the quantity's own unit; None where
+# no scale converts it). Others (and none) are taken as the quantity's own.
+_UNITS: dict[str, tuple[str, float | None]] = {
+    "m": ("length", 1.0), "km": ("length", 1000.0), "cm": ("length", 0.01),
+    "mm": ("length", 0.001), "ft": ("length", 0.3048), "in": ("length", 0.0254),
+    "deg": ("angle", 1.0), "°": ("angle", 1.0), "degree": ("angle", 1.0),
+    "degrees": ("angle", 1.0), "rad": ("angle", 180.0 / math.pi),
+    "mrad": ("angle", 0.18 / math.pi),
+    "m/s": ("velocity", 1.0), "mps": ("velocity", 1.0), "km/h": ("velocity", 1.0 / 3.6),
+    "kph": ("velocity", 1.0 / 3.6), "kmh": ("velocity", 1.0 / 3.6), "mph": ("velocity", 0.44704),
+    "cm/s": ("velocity", 0.01),
+    "db": ("level", 1.0), "dbsm": ("level", 1.0), "dbm2": ("level", 1.0),
+    "dbm²": ("level", 1.0), "dbm^2": ("level", 1.0),
+    "m2": ("area", None), "m²": ("area", None), "m^2": ("area", None),
+}
+# Each quantity's dimension and unit.
+_QUANTITY_UNITS = {
+    "range_m": ("length", "m"), "x_m": ("length", "m"), "y_m": ("length", "m"),
+    "z_m": ("length", "m"), "azimuth_deg": ("angle", "deg"), "elevation_deg": ("angle", "deg"),
+    "radial_velocity_mps": ("velocity", "m/s"), "vx_mps": ("velocity", "m/s"),
+    "vy_mps": ("velocity", "m/s"), "rcs_dbsm": ("level", "dB"), "snr_db": ("level", "dB"),
+}
+_DIMENSION_NAMES = {"length": "a length", "angle": "an angle", "velocity": "a velocity",
+                    "level": "a level in dB", "area": "an area"}
 
 Message = cantools.database.can.Message
 # A part of a detection: a message's frame id and its multiplexer page (None: not multiplexed).
@@ -217,7 +243,11 @@ class CanMapping:
         validate(doc, MAPPING_SCHEMA)
         dbc_path = path.parent / doc.data["dbc"]
         try:
-            db = _load_dbc(lambda: cantools.database.load_file(dbc_path, database_format="dbc"))
+            with open(dbc_path, "rb") as file:
+                # DBC tools write cp1252 (cantools' default); a byte order mark says UTF-8.
+                encoding = ("utf-8-sig" if file.read(3) == b"\xef\xbb\xbf" else None)
+            db = _load_dbc(lambda: cantools.database.load_file(dbc_path, database_format="dbc",
+                                                               encoding=encoding))
         except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
             raise doc.error(("dbc",), f"cannot load DBC {dbc_path}: {exc}") from None
         return cls._build(doc, db)
@@ -244,28 +274,36 @@ class CanMapping:
         """Every named message and signal exists in the DBC; the form has what it needs."""
         _check_dbc(doc, self.db)
         names = {m.name: m for m in self.db.messages}
-        def need(key: tuple[str | int, ...], message: str, signals: list[str | None]) -> None:
+
+        def message_of(key: tuple[str | int, ...], message: str) -> Message:
             if message not in names:
                 raise doc.error(key, f"message {message!r} is not in the DBC; messages: "
                                      f"{', '.join(sorted(names))}")
-            have = {s.name for s in names[message].signals}
-            for sig in signals:
-                if sig is not None and sig not in have:
-                    raise doc.error(key, f"signal {sig!r} is not in message {message!r}; "
-                                         f"signals: {', '.join(sorted(have))}")
-        need(("header", "message"), self.header,
-             [self.counter, *self.count, self.timestamp, self.header_checksum])
-        detection_signals = [self.index, self.frame_counter, self.checksum]
-        for m in (*self.messages, *([self.fd_message] if self.fd_message else [])):
-            have = {s.name for s in names.get(m, self.db.messages[0]).signals}
-            need(("detection", "messages"), m,
-                 [s for s in detection_signals if s in have or s == self.index])
+            return names[message]
+
+        # Each signal is reported at the key that names it, with the signals it may name.
+        header = {s.name for s in message_of(("header", "message"), self.header).signals}
+        for key, name in self._named():
+            if key[0] == "header" and name not in header:
+                raise doc.error(key, f"signal {name!r} is not in message {self.header!r}; "
+                                     f"signals: {', '.join(sorted(header))}")
         carriers = [*self.messages, *([self.fd_message] if self.fd_message else [])]
+        for m in self.messages:
+            message_of(("detection", "messages"), m)
+        if self.fd_message:
+            message_of(("detection", "fd_message"), self.fd_message)
         carried = set().union(*({s.name for s in names[m].signals} for m in carriers))
-        for q, f in self.fields.items():
-            if f.signal not in carried:
-                raise doc.error(("detection", q), f"signal {f.signal!r} is not in the detection "
-                                                  f"message(s) {', '.join(carriers)}")
+        for key, name in self._named():
+            if key[0] == "detection" and name not in carried:
+                raise doc.error(key, f"signal {name!r} is not in the detection message(s) "
+                                     f"{', '.join(carriers)}; signals: "
+                                     f"{', '.join(sorted(carried))}")
+        for m in carriers:  # the index joins a detection's messages: every one carries it
+            have = {s.name for s in names[m].signals}
+            if self.index not in have:
+                raise doc.error(("detection", "index"),
+                                f"signal {self.index!r} is not in message {m!r}; signals: "
+                                f"{', '.join(sorted(have))}")
         for key, message_names, checksum in (
                 (("header", "checksum"), [self.header], self.header_checksum),
                 (("detection", "checksum"), carriers, self.checksum)):
@@ -287,6 +325,7 @@ class CanMapping:
                                     f"signal {self.index!r} is not in {where} "
                                     f"{message.name!r}: every message and page that carries a "
                                     f"detection needs the index that joins them")
+        self._check_units(doc)
         required = {"polar": ("range_m", "azimuth_deg"), "cartesian": ("x_m", "y_m")}[self.form]
         missing = [q for q in required if q not in self.fields]
         if missing:
@@ -309,6 +348,36 @@ class CanMapping:
                                             f"has factor 0: every raw value reads "
                                             f"{sig.offset:g}, so it carries nothing and cannot "
                                             f"be written; give it a factor other than 0")
+
+    def _check_units(self, doc: Document) -> None:
+        """Refuse a quantity read from a signal the DBC gives in another unit, unconverted.
+
+        A quantity with its own ``scale`` or ``offset`` converts its signal: any unit goes.
+        """
+        carriers = [*self.messages, *([self.fd_message] if self.fd_message else [])]
+        for q, f in self.fields.items():
+            if (f.scale, f.offset) != (1.0, 0.0):
+                continue
+            dimension, unit = _QUANTITY_UNITS[q]
+            for name in carriers:
+                message = self.db.get_message_by_name(name)
+                sig = next((sg for sg in message.signals if sg.name == f.signal), None)
+                if sig is None or not sig.unit:
+                    continue
+                known = _UNITS.get(sig.unit.strip().lower().replace(" ", ""))
+                if known is None or known == (dimension, 1.0):
+                    continue
+                where = (f"signal {f.signal!r} of message {name!r} is in {sig.unit.strip()} "
+                         f"(its DBC unit)")
+                if known[0] == dimension and known[1] is not None:
+                    raise doc.error(("detection", q),
+                                    f"{where}, {q} in {unit}: give {{signal: {f.signal}, "
+                                    f"scale: {known[1]:.6g}}} to convert it")
+                how = ("map a signal in dB" if dimension == "level"
+                       else f"map a signal in {unit} (or give a scale that converts it)")
+                raise doc.error(("detection", q),
+                                f"{where}, not {_DIMENSION_NAMES[dimension]}: {q} is in "
+                                f"{unit}; {how}")
 
     def _named(self) -> list[tuple[tuple[str | int, ...], str]]:
         """Every (mapping key, signal) pair, header roles first, in file order."""
