@@ -149,6 +149,12 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      "offset_m: 3}]\n",
      r"^{f}:15:\d+: targets\[0\].lane_changes\[0\].start_s: the lane change starts at 300 s, "
      r"at or after the scene's last frame at 0.4 s"),
+    # A limit of the whole scene listed on a target would be ignored: the scene's alone count.
+    ("scene-wide-limit-on-target", TINY + "    expected_limits: [out_of_coverage, "
+     "frame_rate_above_radar]\n",
+     r"^{f}:15:\d+: targets\[0\].expected_limits\[1\]: 'frame_rate_above_radar' is a limit of "
+     r"the whole scene, not of one target: list it in expectations.expected_limits; a target's "
+     r"expected_limits allow 'out_of_coverage', .*'beyond_radar_velocity'$"),
     ("rcs-table-mismatch", sub("rcs: {rcs_dbsm: 10.0}",
                                "rcs: {aspect_deg: [0, 90], rcs_dbsm: [1, 2, 3]}"),
      r"^{f}:14:\d+: targets\[0\].rcs.rcs_dbsm: needs one value per aspect_deg entry"),

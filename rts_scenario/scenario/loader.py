@@ -27,6 +27,8 @@ from ..rig import Rig
 from ..rig import preset_names as rig_presets
 from .model import (
     DEFAULT_TOLERANCES,
+    LIMITS,
+    SCENE_LIMITS,
     Effects,
     Expectations,
     Mount,
@@ -89,6 +91,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     if isinstance(effects_spec, dict) and "measurement_noise" in effects_spec:
         raise doc.error(("effects", "measurement_noise"),
                         "not supported; the simulated radar's noise comes from radar.noise")
+    _check_target_limits(doc)
     validate(doc, scenario_schema())
     data = doc.data
     root = path.resolve().parent
@@ -106,6 +109,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         fragment = load_yaml(fragment_path)
         if not isinstance(fragment.data, dict):
             raise fragment.error((), "a fragment must be a mapping with a 'targets' list")
+        _check_target_limits(fragment)
         validate(fragment, _fragment_schema())
         target_sources += [(fragment, ("targets", j), t)
                            for j, t in enumerate(fragment.data["targets"])]
@@ -164,6 +168,24 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         marks=tuple(data.get("marks", [])),
         radar_options=_radar_options(data["radar"], empty=not target_sources),
     )
+
+
+def _check_target_limits(doc: Document) -> None:
+    """Refuse a limit of the whole scene in a target's ``expected_limits``.
+
+    The verdict reads those from ``expectations.expected_limits`` alone: on a target one
+    would be ignored.
+    """
+    targets = doc.data.get("targets") if isinstance(doc.data, dict) else None
+    for j, target in enumerate(targets if isinstance(targets, list) else ()):
+        limits = target.get("expected_limits") if isinstance(target, dict) else None
+        for i, name in enumerate(limits if isinstance(limits, list) else ()):
+            if isinstance(name, str) and name in SCENE_LIMITS:
+                allowed = ", ".join(repr(n) for n in LIMITS if n not in SCENE_LIMITS)
+                raise doc.error(("targets", j, "expected_limits", i),
+                                f"{name!r} is a limit of the whole scene, not of one target: "
+                                f"list it in expectations.expected_limits; a target's "
+                                f"expected_limits allow {allowed}")
 
 
 def _radar_options(radar: dict[str, Any], empty: bool) -> RadarOptions:
