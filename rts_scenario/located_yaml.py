@@ -79,6 +79,30 @@ _Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+.012
 
 _MAP_TAG = "tag:yaml.org,2002:map"
 _SEQ_TAG = "tag:yaml.org,2002:seq"
+_INT_TAG = "tag:yaml.org,2002:int"
+_FLOAT_TAG = "tag:yaml.org,2002:float"
+
+# Plain scalars YAML 1.1 and YAML 1.2 read differently, and neither as the other guesses: a
+# leading zero (010: octal 8, or 10; 09: a string, or 9) and base 60 (1:30: 90, or a string).
+_LEADING_ZERO = re.compile(r"^[-+]?0[0-9_]+$")
+
+
+def _ambiguous_number(node: yaml.ScalarNode, value: Any) -> str | None:
+    """Why a plain scalar is a number only in one YAML version, or None."""
+    if node.style:  # quoted or a block scalar: a string in both (plain: None, or "" in libyaml)
+        return None
+    text = node.value
+    if _LEADING_ZERO.match(text):
+        digits = text.replace("_", "")
+        as_12 = int(digits, 10)
+        as_11 = f"octal {value}" if isinstance(value, int) else "a string"
+        return (f"{text}: a number with a leading zero reads as {as_11} in YAML 1.1 and as "
+                f"{as_12} in YAML 1.2; write it without the leading zero (or quote it for a "
+                f"string)")
+    if node.tag in (_INT_TAG, _FLOAT_TAG) and ":" in text:
+        return (f"{text}: reads as the base-60 number {value:g} in YAML 1.1 and as a string in "
+                f"YAML 1.2; write the number ({value:g}), or quote it for a string")
+    return None
 
 
 def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, int]],
@@ -118,7 +142,14 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
         return [
             _construct(item, (*path, i), marks, loader, file) for i, item in enumerate(node.value)
         ]
-    return loader.construct_object(node, deep=True)
+    value = loader.construct_object(node, deep=True)
+    if isinstance(node, yaml.ScalarNode):
+        ambiguous = _ambiguous_number(node, value)
+        if ambiguous is not None:
+            raise ScenarioError(ambiguous, file=file, line=node.start_mark.line + 1,
+                                column=node.start_mark.column + 1,
+                                key_path=format_key_path(path) or None)
+    return value
 
 
 # Bounds that keep a hostile or broken file from exhausting memory, time or the C stack: a

@@ -79,6 +79,18 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("top-level-list", "- 1\n- 2\n", r"^{f}:1:1: a scene must be a mapping of keys, got list"),
     ("empty-file", "", r"^{f}: a scene must be a mapping of keys, got an empty file"),
     ("not-utf8", b"name: \xff\xfe\n", r"^{f}: not UTF-8 text"),
+    # YAML 1.1 (PyYAML) reads 010 as octal 8 and 1:30 as the base-60 number 90; YAML 1.2 (what
+    # editors and the schema's users read) as 10 and a string: a number either way is a guess.
+    ("leading-zero", sub("speed_mps: 19.0}", "speed_mps: 010}"),
+     r"^{f}:13:\d+: targets\[0\].motion.speed_mps: 010: a number with a leading zero reads as "
+     r"octal 8 in YAML 1.1 and as 10 in YAML 1.2; write it without the leading zero \(or "
+     r"quote it for a string\)$"),
+    ("leading-zero-not-octal", sub("duration_s: 0.5", "duration_s: 09"),
+     r"^{f}:3:\d+: duration_s: 09: a number with a leading zero reads as a string in YAML 1.1 "
+     r"and as 9 in YAML 1.2; write it without the leading zero"),
+    ("sexagesimal", sub("duration_s: 0.5", "duration_s: 1:30"),
+     r"^{f}:3:\d+: duration_s: 1:30: reads as the base-60 number 90 in YAML 1.1 and as a "
+     r"string in YAML 1.2; write the number \(90\), or quote it for a string$"),
     ("missing-name", sub("name: tiny\n", ""), r"^{f}.*'name' is required but missing"),
     ("unknown-key", TINY + "colour: red\n", r"^{f}:15:1: colour: unknown key 'colour'; allowed"),
     ("version-2", sub("rts_scenario: 1", "rts_scenario: 2"),
