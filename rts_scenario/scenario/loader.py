@@ -504,6 +504,40 @@ def _starts_in_scene(doc: Document, key: KeyPath, start_s: float, frames: _Frame
                              f"{outcome}; start_s must be < {frames.last_s:g}")
 
 
+# A lateral offset may jump at most this far where a polyline turns (m).
+CORNER_JUMP_M = 0.01
+
+
+def _corner_offset(doc: Document, key: KeyPath, points: np.ndarray, t_s: float,
+                   lane_changes: tuple[LaneChange, ...]) -> None:
+    """Refuse a lateral offset where a polyline turns (at ``points[1]``, reached at ``t_s``).
+
+    The object turns in no time there, and its left normal with it: a point ``d`` to the
+    left of the path would jump ``2 |d| sin(angle / 2)``.
+    """
+    offset = sum(lc.offset_m * _ramp((t_s - lc.start_s) / lc.duration_s) for lc in lane_changes)
+    before, after = np.diff(points[:, :2], axis=0)
+    norms = np.linalg.norm(before), np.linalg.norm(after)
+    if min(norms) < 1e-9 or offset == 0.0:  # a vertical piece has no left to turn
+        return
+    cos = float(np.clip(np.dot(before, after) / (norms[0] * norms[1]), -1.0, 1.0))
+    angle = math.acos(cos)
+    jump = 2.0 * abs(offset) * math.sin(0.5 * angle)
+    if jump > CORNER_JUMP_M:
+        side = "left" if offset > 0 else "right"
+        raise doc.error(key, f"the path turns {math.degrees(angle):.3g} deg at this waypoint "
+                             f"(at {t_s:.6g} s) while the object is {abs(offset):.3g} m to the "
+                             f"{side} of it (lane_changes): a polyline turns in no time, so the "
+                             f"object would jump {jump:.3g} m; use path: spline, or end the "
+                             f"lateral offset before the corner")
+
+
+def _ramp(tau: float) -> float:
+    """Return the lane change's quintic at ``tau`` (0 before it, 1 after), as kinematics does."""
+    tau = min(max(tau, 0.0), 1.0)
+    return tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
+
+
 def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
                lane_changes: tuple[LaneChange, ...], frames: _Frames) -> Trajectory:
     start = float(motion.get("start_s", 0.0))
@@ -531,6 +565,9 @@ def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
     t = start
     for i, length in enumerate(lengths):
         a = (speeds[i + 1] ** 2 - speeds[i] ** 2) / (2.0 * length)
+        if i > 0 and motion.get("path", "polyline") == "polyline":
+            _corner_offset(doc, (*key, "points", i, "position_m"), points[i - 1: i + 2], t,
+                           lane_changes)
         knots.append(t)
         v0.append(speeds[i])
         acc.append(a)
