@@ -180,6 +180,15 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:15:1: parametrize: radar.nothing.here: no such key path in the scene"),
     ("parametrize-combination-fails", TINY + "parametrize: {frame_rate_hz: [10, 400]}\n",
      r"^{f}: frame_rate_hz: the scene runs at 400 Hz .*\[frame_rate_hz=400\]$"),
+    # A value a combination puts in place is wrong where the parametrize block gives it.
+    ("parametrize-bad-value", TINY + "parametrize:\n  targets.0.motion.speed_mps: [19.0, fast]\n",
+     r"^{f}:16:3: targets\[0\].motion.speed_mps: must be of type number, got 'fast' "
+     r"\[speed_mps=fast\]$"),
+    ("parametrize-new-key", TINY + "parametrize:\n  targets.0.motion.sped_mps: [19.0]\n",
+     r"^{f}:16:3: targets\[0\].motion.sped_mps: unknown key 'sped_mps'; allowed keys: "
+     r"heading_deg, position_m, speed_mps, type \[sped_mps=19.0\]$"),
+    ("parametrize-group-bad-value", TINY + "parametrize:\n  duration_s, seed: [[1.0, 2], "
+     "[2.0, -3]]\n", r"^{f}:16:3: seed: must be >= 0, got -3 \[duration_s=2.0-seed=-3\]$"),
     ("parametrize-group-short", TINY + "parametrize:\n  duration_s, seed: [[1.0, 2], [2.0]]\n",
      r"^{f}:16:\d+: parametrize.duration_s, seed\[1\]: needs a list of 2 values \(one per "
      r"key path: duration_s, seed\), got \[2.0\]"),

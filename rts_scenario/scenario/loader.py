@@ -332,6 +332,16 @@ def _override(doc: Document, key: str, value: Any) -> None:
         node[parts[-1]] = value
     except (IndexError, TypeError):
         raise doc.error(("parametrize",), f"{key}: no such key path in the scene") from None
+    # The value now there is the parametrize block's: an error in it points at its entry.
+    block = doc.data.get("parametrize")
+    entry = next((k for k in (block if isinstance(block, dict) else {})
+                  if key in (p.strip() for p in k.split(","))), None)
+    where = doc.marks.get(("parametrize", entry) if entry is not None else ("parametrize",))
+    if where is not None:
+        path = tuple(parts)
+        for old in [m for m in doc.marks if m[:len(path)] == path]:
+            del doc.marks[old]
+        doc.marks[path] = where
 
 
 def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:
