@@ -79,6 +79,7 @@ _Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+.012
 
 _MAP_TAG = "tag:yaml.org,2002:map"
 _SEQ_TAG = "tag:yaml.org,2002:seq"
+_MERGE_TAG = "tag:yaml.org,2002:merge"
 _INT_TAG = "tag:yaml.org,2002:int"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
 
@@ -118,9 +119,14 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
             key_path=format_key_path(path) or None,
         )
     if isinstance(node, yaml.MappingNode):
+        # YAML's merge keys (``<<: *anchor``): flattening puts the merged pairs first; the keys
+        # written in the mapping itself follow and override them, as YAML says.
+        written = sum(1 for key_node, _ in node.value if key_node.tag != _MERGE_TAG)
         loader.flatten_mapping(node)
+        first_written = len(node.value) - written
         out: dict[str, Any] = {}
-        for key_node, value_node in node.value:
+        merged: set[str] = set()
+        for index, (key_node, value_node) in enumerate(node.value):
             key = loader.construct_object(key_node, deep=True)
             if not isinstance(key, str):
                 raise ScenarioError(
@@ -129,11 +135,20 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
                     key_path=format_key_path(path) or None,
                 )
             if key in out:
-                raise ScenarioError(
-                    "duplicate key", file=file, line=key_node.start_mark.line + 1,
-                    column=key_node.start_mark.column + 1,
-                    key_path=format_key_path((*path, key)),
-                )
+                if key not in merged:
+                    raise ScenarioError(
+                        "duplicate key", file=file, line=key_node.start_mark.line + 1,
+                        column=key_node.start_mark.column + 1,
+                        key_path=format_key_path((*path, key)),
+                    )
+                # A merged value overridden (by one written here, or merged from a mapping
+                # listed before it: flattening puts those later) leaves no marks behind.
+                for old in [m for m in marks if m[:len(path) + 1] == (*path, key)]:
+                    del marks[old]
+            if index < first_written:
+                merged.add(key)
+            else:
+                merged.discard(key)
             # A key's errors point at the key, where a reader looks for it.
             marks[(*path, key)] = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
             out[key] = _construct(value_node, (*path, key), marks, loader, file)

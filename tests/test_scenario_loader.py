@@ -498,3 +498,34 @@ def test_a_lateral_offset_at_a_polyline_corner_is_refused(tmp_path, path, start_
     assert ("the path turns 90 deg at this waypoint (at 3 s) while the object is 3 m to the "
             "left of it (lane_changes): a polyline turns in no time, so the object would jump "
             "4.24 m; use path: spline, or end the lateral offset before the corner") in str(err)
+
+
+def test_yaml_merge_keys_take_the_keys_written_beside_them(tmp_path):
+    # YAML's merge key: the second target is the first, with its own name and motion. Keys
+    # written beside a merge override the merged ones; a key written twice is still an error.
+    text = GOOD.split("targets:\n")[0] + textwrap.dedent("""\
+        targets:
+          - &car {name: a, kind: car, motion: {type: stationary, position_m: [30, 1, 0.6]},
+                  rcs: {rcs_dbsm: 10}}
+          - <<: *car
+            name: b
+            motion:
+              type: stationary
+              position_m: [35, -1, 0.6]
+        """)
+    path = tmp_path / "merge.scenario.yaml"
+    path.write_text(text)
+    scene = load_scenario(path)
+    assert [t.name for t in scene.targets] == ["a", "b"]
+    assert [t.kind for t in scene.targets] == ["car", "car"]
+    tracks = compute_tracks(scene)
+    np.testing.assert_allclose(tracks.range_m[0], [np.hypot(30 - 3.7, np.hypot(1, 0.1)),
+                                                   np.hypot(35 - 3.7, np.hypot(1, 0.1))])
+    # An error in the merged-over value points at the line written, not at the anchor's.
+    path.write_text(text.replace("position_m: [35, -1, 0.6]", "position_m: [35, -1]"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert (info.value.line, info.value.key_path) == (18, "targets[1].motion.position_m")
+    path.write_text(text.replace("    name: b\n", "    name: b\n    name: c\n"))
+    with pytest.raises(ScenarioError, match="targets\\[1\\].name: duplicate key"):
+        load_scenario(path)
