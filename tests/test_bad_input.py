@@ -107,6 +107,11 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:4:1: frame_rate_hz: must be a finite number, got inf"),
     ("frame-rate-above-schema", sub("frame_rate_hz: 10.0", "frame_rate_hz: 5000"),
      r"^{f}:4:1: frame_rate_hz: must be <= 1000"),
+    # A scene has at least one frame, held for its frame period: here 11 days.
+    ("frames-span-too-long", sub("frame_rate_hz: 10.0", "frame_rate_hz: 1e-6"),
+     r"^{f}:4:1: frame_rate_hz: duration_s x frame_rate_hz = 0.5 s x 1e-06 Hz: the scene's 1 "
+     r"frame would span 1e\+06 s \(each held for 1 / frame_rate_hz = 1e\+06 s\), more than "
+     r"the 86400 s a scene may last; raise frame_rate_hz$"),
     ("frame-rate-above-rig", sub("frame_rate_hz: 10.0", "frame_rate_hz: 500"),
      r"^{f}: frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most"),
     ("target-frames-too-many", sub("duration_s: 0.5", "duration_s: 86400").replace(

@@ -45,6 +45,9 @@ SCENE_SUFFIX = ".scenario.yaml"
 # What a run can stream and check in reasonable time and memory (a 24 h scene at 20 Hz with 28
 # targets); the schema states it on duration_s and frame_rate_hz.
 MAX_TARGET_FRAMES = 50_000_000
+# The longest a scene may last, its frames held for their frame period (the schema's
+# duration_s bound).
+MAX_SCENE_S = 86400.0
 
 
 @lru_cache(maxsize=1)
@@ -130,6 +133,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                            Rig.from_file, ".rig.yaml")
     effects = Effects(rcs_fluctuation=data.get("effects", {}).get("rcs_fluctuation", "none"))
     frames = _Frames(float(data["duration_s"]), float(data["frame_rate_hz"]))
+    _check_frames(doc, frames)
     ego_spec = data.get("ego", {"motion": {"type": "stationary", "position_m": [0, 0, 0]}})
     ego = _trajectory(doc, ("ego",), ego_spec, frames)
 
@@ -194,6 +198,23 @@ def _radar_options(radar: dict[str, Any], empty: bool) -> RadarOptions:
         # False detections are all an empty bench checks, and only the cube has them.
         options["fidelity"] = "adc"
     return RadarOptions(**options)
+
+
+def _check_frames(doc: Document, frames: _Frames) -> None:
+    """Refuse frames that span more than a scene may last (`MAX_SCENE_S`).
+
+    A scene has at least one frame, and each is held for its frame period: a scene of one
+    frame at a rate far below its duration's inverse would last that whole period.
+    """
+    span = frames.n / frames.rate_hz
+    if span > MAX_SCENE_S * (1.0 + 1e-9):
+        raise doc.error(
+            ("frame_rate_hz",),
+            f"duration_s x frame_rate_hz = {frames.duration_s:g} s x {frames.rate_hz:g} Hz: "
+            f"the scene's {frames.n} frame{'s' if frames.n > 1 else ''} would span {span:g} s "
+            f"(each held for 1 / frame_rate_hz = {1.0 / frames.rate_hz:g} s), more than the "
+            f"{MAX_SCENE_S:g} s a scene may last; raise frame_rate_hz",
+        )
 
 
 def _check_size(doc: Document, frames: _Frames, n_targets: int) -> None:
