@@ -124,6 +124,13 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:8:1: rig: unknown preset 'wide-9x9'; valid presets: .*wide-3x5"),
     ("unknown-radar", sub("profile: awr1843boost", "profile: awr9999"),
      r"^{f}:6:3: radar.profile: unknown preset 'awr9999'; valid presets"),
+    # A file of another kind in its place: named as such, not by its every key unknown.
+    ("rig-file-as-radar", sub("profile: awr1843boost", "profile: lab.rig.yaml"),
+     r"^{f}:6:3: radar.profile: 'lab.rig.yaml' is a rig file \(\*.rig.yaml\); radar.profile "
+     r"takes a preset \(awr1843boost, cascade-12x16, paper\) or a \*.radar.yaml file$"),
+    ("radar-file-as-rig", sub("rig: wide-3x5", "rig: long.radar.yaml"),
+     r"^{f}:8:1: rig: 'long.radar.yaml' is a radar profile \(\*.radar.yaml\); rig takes a "
+     r"preset \(kit-table1, wide-3x5\) or a \*.rig.yaml file$"),
     ("rig-outside-tree", sub("rig: wide-3x5", "rig: ../elsewhere.rig.yaml"),
      r"^{f}:8:1: rig: '../elsewhere.rig.yaml' leaves the scene's folder tree"),
     ("absolute-include", TINY + "include: [/etc/passwd]\n",
