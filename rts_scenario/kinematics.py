@@ -136,7 +136,13 @@ def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None,
         rel_v = np.einsum("fij,fkj->fki", ego_rot, v) + np.cross(omega[:, None, :], rel_p)
         p = np.where(relative[None, :, None], ego_p[:, None, :] + rel_p, p)
         v = np.where(relative[None, :, None], ego_v[:, None, :] + rel_v, v)
-        yaw = np.where(relative[None, :], yaw + ego_yaw[:, None], yaw)
+        # A body faces where it drives in the world (a car falling back behind the ego still
+        # drives forward); standing in the world, along its path, turned with the ego.
+        moving = v[..., 0] ** 2 + v[..., 1] ** 2 > _STANDSTILL_MPS**2
+        world_yaw = np.where(moving, np.arctan2(v[..., 1], v[..., 0]),
+                             np.arctan2(motion.tangent[..., 1], motion.tangent[..., 0])
+                             + ego_yaw[:, None])
+        yaw = np.where(relative[None, :], world_yaw, yaw)
 
     line = p - radar_p[:, None, :]
     range_m = np.linalg.norm(line, axis=-1)

@@ -79,6 +79,31 @@ _Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+.012
 
 _MAP_TAG = "tag:yaml.org,2002:map"
 _SEQ_TAG = "tag:yaml.org,2002:seq"
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+_INT_TAG = "tag:yaml.org,2002:int"
+_FLOAT_TAG = "tag:yaml.org,2002:float"
+
+# Plain scalars YAML 1.1 and YAML 1.2 read differently, and neither as the other guesses: a
+# leading zero (010: octal 8, or 10; 09: a string, or 9) and base 60 (1:30: 90, or a string).
+_LEADING_ZERO = re.compile(r"^[-+]?0[0-9_]+$")
+
+
+def _ambiguous_number(node: yaml.ScalarNode, value: Any) -> str | None:
+    """Why a plain scalar is a number only in one YAML version, or None."""
+    if node.style:  # quoted or a block scalar: a string in both (plain: None, or "" in libyaml)
+        return None
+    text = node.value
+    if _LEADING_ZERO.match(text):
+        digits = text.replace("_", "")
+        as_12 = int(digits, 10)
+        as_11 = f"octal {value}" if isinstance(value, int) else "a string"
+        return (f"{text}: a number with a leading zero reads as {as_11} in YAML 1.1 and as "
+                f"{as_12} in YAML 1.2; write it without the leading zero (or quote it for a "
+                f"string)")
+    if node.tag in (_INT_TAG, _FLOAT_TAG) and ":" in text:
+        return (f"{text}: reads as the base-60 number {value:g} in YAML 1.1 and as a string in "
+                f"YAML 1.2; write the number ({value:g}), or quote it for a string")
+    return None
 
 
 def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, int]],
@@ -94,9 +119,14 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
             key_path=format_key_path(path) or None,
         )
     if isinstance(node, yaml.MappingNode):
+        # YAML's merge keys (``<<: *anchor``): flattening puts the merged pairs first; the keys
+        # written in the mapping itself follow and override them, as YAML says.
+        written = sum(1 for key_node, _ in node.value if key_node.tag != _MERGE_TAG)
         loader.flatten_mapping(node)
+        first_written = len(node.value) - written
         out: dict[str, Any] = {}
-        for key_node, value_node in node.value:
+        merged: set[str] = set()
+        for index, (key_node, value_node) in enumerate(node.value):
             key = loader.construct_object(key_node, deep=True)
             if not isinstance(key, str):
                 raise ScenarioError(
@@ -105,11 +135,20 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
                     key_path=format_key_path(path) or None,
                 )
             if key in out:
-                raise ScenarioError(
-                    "duplicate key", file=file, line=key_node.start_mark.line + 1,
-                    column=key_node.start_mark.column + 1,
-                    key_path=format_key_path((*path, key)),
-                )
+                if key not in merged:
+                    raise ScenarioError(
+                        "duplicate key", file=file, line=key_node.start_mark.line + 1,
+                        column=key_node.start_mark.column + 1,
+                        key_path=format_key_path((*path, key)),
+                    )
+                # A merged value overridden (by one written here, or merged from a mapping
+                # listed before it: flattening puts those later) leaves no marks behind.
+                for old in [m for m in marks if m[:len(path) + 1] == (*path, key)]:
+                    del marks[old]
+            if index < first_written:
+                merged.add(key)
+            else:
+                merged.discard(key)
             # A key's errors point at the key, where a reader looks for it.
             marks[(*path, key)] = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
             out[key] = _construct(value_node, (*path, key), marks, loader, file)
@@ -118,7 +157,14 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
         return [
             _construct(item, (*path, i), marks, loader, file) for i, item in enumerate(node.value)
         ]
-    return loader.construct_object(node, deep=True)
+    value = loader.construct_object(node, deep=True)
+    if isinstance(node, yaml.ScalarNode):
+        ambiguous = _ambiguous_number(node, value)
+        if ambiguous is not None:
+            raise ScenarioError(ambiguous, file=file, line=node.start_mark.line + 1,
+                                column=node.start_mark.column + 1,
+                                key_path=format_key_path(path) or None)
+    return value
 
 
 # Bounds that keep a hostile or broken file from exhausting memory, time or the C stack: a

@@ -395,6 +395,8 @@ class Pipeline:
             assert self._new_output is not None
             self.output = self._new_output()
         self._measured = True
+        # Each frame is held for a cycle (or two, below): never a run's frame period.
+        self.output.frame_period_s = None
         self.receiver.reset()
         # A measurement places its cycles itself (`_cycle_numbers`): no run's clock link holds.
         self._bus_clock_checked = self._bus_clock_foreign = False
@@ -713,6 +715,14 @@ class Pipeline:
         truths = CycleTruth(checker, scene, track, window_s)
         playback = Playback(1.0 / scene.frame_rate_hz, window_s)
         batch = options.batch_frames or frames_per_batch(len(scene.targets), BATCH_FRAMES)
+        if options.batch_frames is None:
+            # Frames slower than the radar's cycles: each batch's cycles go on the bus and to
+            # the checker together, so a batch holds about as many cycles as it would frames.
+            per_frame = 1.0 / (scene.frame_rate_hz * clock.cycle_s)
+            batch = max(1, min(batch, int(batch / per_frame))) if per_frame > 1.0 else batch
+        assert self.output is not None
+        # The RTS holds each frame for a frame period, the last one of a batch too.
+        self.output.frame_period_s = 1.0 / scene.frame_rate_hz
         for first in range(0, n_frames, batch):
             frames = np.arange(first, min(first + batch, n_frames))
             tracks = compute_tracks(scene, t_all[frames], frames)

@@ -79,6 +79,18 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("top-level-list", "- 1\n- 2\n", r"^{f}:1:1: a scene must be a mapping of keys, got list"),
     ("empty-file", "", r"^{f}: a scene must be a mapping of keys, got an empty file"),
     ("not-utf8", b"name: \xff\xfe\n", r"^{f}: not UTF-8 text"),
+    # YAML 1.1 (PyYAML) reads 010 as octal 8 and 1:30 as the base-60 number 90; YAML 1.2 (what
+    # editors and the schema's users read) as 10 and a string: a number either way is a guess.
+    ("leading-zero", sub("speed_mps: 19.0}", "speed_mps: 010}"),
+     r"^{f}:13:\d+: targets\[0\].motion.speed_mps: 010: a number with a leading zero reads as "
+     r"octal 8 in YAML 1.1 and as 10 in YAML 1.2; write it without the leading zero \(or "
+     r"quote it for a string\)$"),
+    ("leading-zero-not-octal", sub("duration_s: 0.5", "duration_s: 09"),
+     r"^{f}:3:\d+: duration_s: 09: a number with a leading zero reads as a string in YAML 1.1 "
+     r"and as 9 in YAML 1.2; write it without the leading zero"),
+    ("sexagesimal", sub("duration_s: 0.5", "duration_s: 1:30"),
+     r"^{f}:3:\d+: duration_s: 1:30: reads as the base-60 number 90 in YAML 1.1 and as a "
+     r"string in YAML 1.2; write the number \(90\), or quote it for a string$"),
     ("missing-name", sub("name: tiny\n", ""), r"^{f}.*'name' is required but missing"),
     ("unknown-key", TINY + "colour: red\n", r"^{f}:15:1: colour: unknown key 'colour'; allowed"),
     ("version-2", sub("rts_scenario: 1", "rts_scenario: 2"),
@@ -95,6 +107,11 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:4:1: frame_rate_hz: must be a finite number, got inf"),
     ("frame-rate-above-schema", sub("frame_rate_hz: 10.0", "frame_rate_hz: 5000"),
      r"^{f}:4:1: frame_rate_hz: must be <= 1000"),
+    # A scene has at least one frame, held for its frame period: here 11 days.
+    ("frames-span-too-long", sub("frame_rate_hz: 10.0", "frame_rate_hz: 1e-6"),
+     r"^{f}:4:1: frame_rate_hz: duration_s x frame_rate_hz = 0.5 s x 1e-06 Hz: the scene's 1 "
+     r"frame would span 1e\+06 s \(each held for 1 / frame_rate_hz = 1e\+06 s\), more than "
+     r"the 86400 s a scene may last; raise frame_rate_hz$"),
     ("frame-rate-above-rig", sub("frame_rate_hz: 10.0", "frame_rate_hz: 500"),
      r"^{f}: frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most"),
     ("target-frames-too-many", sub("duration_s: 0.5", "duration_s: 86400").replace(
@@ -107,6 +124,13 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:8:1: rig: unknown preset 'wide-9x9'; valid presets: .*wide-3x5"),
     ("unknown-radar", sub("profile: awr1843boost", "profile: awr9999"),
      r"^{f}:6:3: radar.profile: unknown preset 'awr9999'; valid presets"),
+    # A file of another kind in its place: named as such, not by its every key unknown.
+    ("rig-file-as-radar", sub("profile: awr1843boost", "profile: lab.rig.yaml"),
+     r"^{f}:6:3: radar.profile: 'lab.rig.yaml' is a rig file \(\*.rig.yaml\); radar.profile "
+     r"takes a preset \(awr1843boost, cascade-12x16, paper\) or a \*.radar.yaml file$"),
+    ("radar-file-as-rig", sub("rig: wide-3x5", "rig: long.radar.yaml"),
+     r"^{f}:8:1: rig: 'long.radar.yaml' is a radar profile \(\*.radar.yaml\); rig takes a "
+     r"preset \(kit-table1, wide-3x5\) or a \*.rig.yaml file$"),
     ("rig-outside-tree", sub("rig: wide-3x5", "rig: ../elsewhere.rig.yaml"),
      r"^{f}:8:1: rig: '../elsewhere.rig.yaml' leaves the scene's folder tree"),
     ("absolute-include", TINY + "include: [/etc/passwd]\n",
@@ -149,6 +173,12 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      "offset_m: 3}]\n",
      r"^{f}:15:\d+: targets\[0\].lane_changes\[0\].start_s: the lane change starts at 300 s, "
      r"at or after the scene's last frame at 0.4 s"),
+    # A limit of the whole scene listed on a target would be ignored: the scene's alone count.
+    ("scene-wide-limit-on-target", TINY + "    expected_limits: [out_of_coverage, "
+     "frame_rate_above_radar]\n",
+     r"^{f}:15:\d+: targets\[0\].expected_limits\[1\]: 'frame_rate_above_radar' is a limit of "
+     r"the whole scene, not of one target: list it in expectations.expected_limits; a target's "
+     r"expected_limits allow 'out_of_coverage', .*'beyond_radar_velocity'$"),
     ("rcs-table-mismatch", sub("rcs: {rcs_dbsm: 10.0}",
                                "rcs: {aspect_deg: [0, 90], rcs_dbsm: [1, 2, 3]}"),
      r"^{f}:14:\d+: targets\[0\].rcs.rcs_dbsm: needs one value per aspect_deg entry"),
@@ -162,6 +192,15 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:15:1: parametrize: radar.nothing.here: no such key path in the scene"),
     ("parametrize-combination-fails", TINY + "parametrize: {frame_rate_hz: [10, 400]}\n",
      r"^{f}: frame_rate_hz: the scene runs at 400 Hz .*\[frame_rate_hz=400\]$"),
+    # A value a combination puts in place is wrong where the parametrize block gives it.
+    ("parametrize-bad-value", TINY + "parametrize:\n  targets.0.motion.speed_mps: [19.0, fast]\n",
+     r"^{f}:16:3: targets\[0\].motion.speed_mps: must be of type number, got 'fast' "
+     r"\[speed_mps=fast\]$"),
+    ("parametrize-new-key", TINY + "parametrize:\n  targets.0.motion.sped_mps: [19.0]\n",
+     r"^{f}:16:3: targets\[0\].motion.sped_mps: unknown key 'sped_mps'; allowed keys: "
+     r"heading_deg, position_m, speed_mps, type \[sped_mps=19.0\]$"),
+    ("parametrize-group-bad-value", TINY + "parametrize:\n  duration_s, seed: [[1.0, 2], "
+     "[2.0, -3]]\n", r"^{f}:16:3: seed: must be >= 0, got -3 \[duration_s=2.0-seed=-3\]$"),
     ("parametrize-group-short", TINY + "parametrize:\n  duration_s, seed: [[1.0, 2], [2.0]]\n",
      r"^{f}:16:\d+: parametrize.duration_s, seed\[1\]: needs a list of 2 values \(one per "
      r"key path: duration_s, seed\), got \[2.0\]"),

@@ -216,3 +216,27 @@ def test_frame_count(tmp_path, n_frames_expected, duration, rate):
                                "motion": {"type": "stationary", "position_m": [20, 0, 0]}}],
                    duration_s=duration, frame_rate_hz=rate)
     assert tr.t_s.shape == (n_frames_expected,)
+
+
+def test_a_target_given_in_the_ego_frame_faces_where_it_drives(tmp_path):
+    # The ego drives at 20 m/s along x. Three cars ahead of it, given in its frame: one falling
+    # back at 1 m/s (19 m/s forward), one keeping its distance, one closing at 1 m/s. All three
+    # drive forward, so the radar behind them sees their backs: 30 dBsm in a table of 10 at
+    # the front and 30 at the back. A body yaws with its velocity in the world, not with its
+    # motion relative to the ego.
+    table = {"aspect_deg": [0, 90, 180, 270], "rcs_dbsm": [10, 20, 30, 20]}
+    targets = [{"name": name, "frame": "ego", "rcs": table,
+                "motion": {"type": "constant_velocity", "position_m": [30, y, 0.5],
+                           "heading_deg": heading, "speed_mps": speed}}
+               for name, y, heading, speed in (("falling-back", -3.0, 180, 1.0),
+                                                ("keeping", 0.0, 0, 0.0),
+                                                ("closing", 3.0, 0, 1.0))]
+    tr = tracks_of(tmp_path, targets, duration_s=2.0,
+                   ego={"motion": {"type": "constant_velocity", "position_m": [0, 0, 0],
+                                   "speed_mps": 20.0}})
+    # Aspect from behind, off the car's axis by the line of sight's angle: atan2(y, x) of the
+    # radar (at the ego's origin) seen from the car, interpolated in the table.
+    x = 30.0 + np.array([-1.0, 0.0, 1.0])[None, :] * tr.t_s[:, None]
+    y = np.array([-3.0, 0.0, 3.0])
+    off = np.degrees(np.arctan2(np.abs(y), x))  # degrees away from straight behind
+    np.testing.assert_allclose(tr.rcs_dbsm, 30.0 - 10.0 * off / 90.0, atol=1e-9)

@@ -124,3 +124,30 @@ def test_cycles_at_a_frame_change_are_counted_only_where_they_came_back():
     assert report.frames["missing"] == 40 and report.frames["received"] == 40
     # All received cycles but none of the missing ones (cycle 0 is missing: no change before).
     assert report.frames["ambiguous"] == 40
+
+
+def test_frames_slower_than_the_radar_stream_in_batches_of_cycles(tmp_path, monkeypatch):
+    # Two frames a second for 5 minutes, the radar's cycles every 50 ms: 6000 cycles. A batch
+    # of BATCH_FRAMES frames would put 5000 cycles on the bus and in the checker at once (a
+    # day of such frames, 1.7 million): the batches hold about BATCH_FRAMES cycles instead, so
+    # memory does not grow with the scene's length.
+    from rts_scenario.pipeline import BATCH_FRAMES
+    from rts_scenario.radar.simulate import SimulatedRadar
+
+    path = tmp_path / "slow.scenario.yaml"
+    path.write_text(CUT_IN.read_text().split("parametrize:")[0]
+                    .replace("duration_s: 12.0", "duration_s: 300.0")
+                    .replace("frame_rate_hz: 20.0", "frame_rate_hz: 2.0")
+                    .replace("profile: awr1843boost",
+                             "profile: awr1843boost\n  fidelity: analytic"))
+    sizes: list[int] = []
+    process = SimulatedRadar.process
+
+    def counted(self, schedule):
+        sizes.append(schedule.n_frames)
+        return process(self, schedule)
+
+    monkeypatch.setattr(SimulatedRadar, "process", counted)
+    report = run_scene(path, RunOptions(drain_s=1.0)).report
+    assert report.frames["total"] == 6000 and report.frames["missing"] == 0
+    assert sum(sizes) == 6000 and max(sizes) <= BATCH_FRAMES

@@ -189,7 +189,8 @@ def test_a_variant_that_does_not_load_fails_alone(pytester):
         "PASSED mixed.scenario.yaml::mixed[[]rig=wide-3x5[]]",
         "FAILED mixed.scenario.yaml::mixed[[]rig=wide-3x9[]] - error: *",
     ])
-    assert ("mixed.scenario.yaml:6:1: rig: unknown preset 'wide-3x9'; valid presets: "
+    # Located at the parametrize entry that put the value in place.
+    assert ("mixed.scenario.yaml:16:3: rig: unknown preset 'wide-3x9'; valid presets: "
             "kit-table1, wide-3x5, or a relative path to a *.rig.yaml file [rig=wide-3x9]"
             in text)
     assert "Traceback" not in text and "Interrupted" not in text

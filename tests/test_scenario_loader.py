@@ -3,6 +3,7 @@ import shutil
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
@@ -459,3 +460,72 @@ def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):
         "duration_s: 5.0", "duration_s: 5e0"))
     loaded = load_scenario(scene)
     assert loaded.duration_s == 5.0
+
+
+CORNER = """\
+    motion:
+      type: waypoints
+      path: {path}
+      points:
+        - {{position_m: [30, -10, 0.5], speed_mps: 5}}
+        - {{position_m: [30, 5, 0.5], speed_mps: 5}}
+        - {{position_m: [50, 5, 0.5], speed_mps: 5}}
+    lane_changes: [{{start_s: {start_s}, duration_s: 1, offset_m: 3}}]
+"""
+
+
+@pytest.mark.parametrize("path, start_s, refused", [
+    ("polyline", 0.0, True),     # 3 m left of the path when it turns right at 3 s
+    ("polyline", 3.5, False),    # the lane change starts after the corner
+    ("spline", 0.0, False),      # a spline turns smoothly
+])
+def test_a_lateral_offset_at_a_polyline_corner_is_refused(tmp_path, path, start_s, refused):
+    # At a corner of a polyline the object turns in no time: a point 3 m to the left of it
+    # would jump 2 x 3 m x sin(90 deg / 2) = 4.24 m between two instants.
+    text = GOOD.replace("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], "
+                        "speed_mps: 19.0}\n", CORNER.format(path=path, start_s=start_s))
+    scene = tmp_path / "corner.scenario.yaml"
+    scene.write_text(text)
+    if not refused:
+        tracks = compute_tracks(load_scenario(scene), np.linspace(0.0, 4.95, 991))
+        step = np.linalg.norm(np.diff(tracks.position_m[:, 0], axis=0), axis=1)
+        assert step.max() < 0.2  # 5 ms apart at some 20-30 m/s: no jump of metres
+        return
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    err = info.value
+    assert (err.line, err.key_path) == (18, "targets[0].motion.points[1].position_m")
+    assert ("the path turns 90 deg at this waypoint (at 3 s) while the object is 3 m to the "
+            "left of it (lane_changes): a polyline turns in no time, so the object would jump "
+            "4.24 m; use path: spline, or end the lateral offset before the corner") in str(err)
+
+
+def test_yaml_merge_keys_take_the_keys_written_beside_them(tmp_path):
+    # YAML's merge key: the second target is the first, with its own name and motion. Keys
+    # written beside a merge override the merged ones; a key written twice is still an error.
+    text = GOOD.split("targets:\n")[0] + textwrap.dedent("""\
+        targets:
+          - &car {name: a, kind: car, motion: {type: stationary, position_m: [30, 1, 0.6]},
+                  rcs: {rcs_dbsm: 10}}
+          - <<: *car
+            name: b
+            motion:
+              type: stationary
+              position_m: [35, -1, 0.6]
+        """)
+    path = tmp_path / "merge.scenario.yaml"
+    path.write_text(text)
+    scene = load_scenario(path)
+    assert [t.name for t in scene.targets] == ["a", "b"]
+    assert [t.kind for t in scene.targets] == ["car", "car"]
+    tracks = compute_tracks(scene)
+    np.testing.assert_allclose(tracks.range_m[0], [np.hypot(30 - 3.7, np.hypot(1, 0.1)),
+                                                   np.hypot(35 - 3.7, np.hypot(1, 0.1))])
+    # An error in the merged-over value points at the line written, not at the anchor's.
+    path.write_text(text.replace("position_m: [35, -1, 0.6]", "position_m: [35, -1]"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert (info.value.line, info.value.key_path) == (18, "targets[1].motion.position_m")
+    path.write_text(text.replace("    name: b\n", "    name: b\n    name: c\n"))
+    with pytest.raises(ScenarioError, match="targets\\[1\\].name: duplicate key"):
+        load_scenario(path)

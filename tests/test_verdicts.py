@@ -74,6 +74,19 @@ def test_frames_faster_than_the_radar_fail_unless_expected(tmp_path, expected):
         assert any("100 frames/s" in r and "20 cycles/s" in r for r in report.reasons)
 
 
+@pytest.mark.parametrize("rate, batch_frames", [(1.0, None), (2.0, 1)])
+def test_frames_slower_than_the_radar_are_measured_throughout_their_hold(tmp_path, rate,
+                                                                         batch_frames):
+    # A frame a second (a scene of one frame), or two a second streamed a frame per batch: the
+    # RTS holds each frame for 1 / rate s and the radar (a cycle every 50 ms) measures it
+    # 20 / rate times, every one of the scene's 20 cycles, none of them missing.
+    path = scene(tmp_path, f"held-{rate:g}", CAR, rate=rate)
+    report = run_scene(path, RunOptions(drain_s=1.0, batch_frames=batch_frames)).report
+    assert report.frames["total"] == 20
+    assert report.frames["received"] == 20 and report.frames["missing"] == 0
+    assert report.passed, report.reasons
+
+
 @pytest.mark.parametrize("appear_s, measured", [(0.02, False), (0.05, True)])
 def test_a_target_no_radar_cycle_measured_fails(tmp_path, appear_s, measured):
     # Frames every 10 ms, the radar's cycles every 50 ms from 0 (the scene expects that): a

@@ -53,6 +53,10 @@ class Output(ABC):
     # applies a frame after it arrives (transport, its own update), so a cycle measured at the
     # frame's time may still show the frame before (docs/bench.md, the ambiguity window).
     applies_frames_on_time: ClassVar[bool] = False
+    # The scene's frame period (s), set by a run before its first frame: how long the RTS
+    # holds a batch's last frame when the batch does not tell (a batch of one frame, a scene
+    # of one frame). None where no run set it.
+    frame_period_s: float | None = None
 
     def __init__(self) -> None:
         self._closed = False

@@ -23,8 +23,9 @@ class SimulatedRadarOutput(Output):
     The radar measures at its clock's times (`rts_scenario.radar.clock.RadarClock`, the
     profile's unless ``clock`` is given), not at the scene's frames: each cycle sees the frame
     the RTS holds at that time, and carries the radar's counter and measurement time. A batch
-    of frames is held from its first frame's time until one frame spacing after its last (the
-    next batch's first frame). ``sink`` receives each batch's cycles as a list, in order;
+    of frames is held from its first frame's time until one frame period after its last (the
+    next batch's first frame; `Output.frame_period_s` where a run set it, else the batch's
+    spacing). ``sink`` receives each batch's cycles as a list, in order;
     without a sink the cycles collect in `detections`. Keyword
     options go to `SimulatedRadar` (fidelity, estimator, cfar, noise, errors, rng,
     threshold_db).
@@ -59,7 +60,9 @@ class SimulatedRadarOutput(Output):
         t = batch.t_s
         if batch.n_frames > 1:
             self._spacing_s = float(np.median(np.diff(t)))
-        spacing = self._spacing_s if self._spacing_s is not None else self.clock.cycle_s
+        # The last frame is held one frame period: the run's, else the batches', else a cycle.
+        spacing = next(s for s in (self.frame_period_s, self._spacing_s, self.clock.cycle_s)
+                       if s is not None)
         n, t_cycles = self.clock.cycles_between(float(t[0]), float(t[-1]) + spacing)
         cycles = batch.held(t_cycles, self.clock.counter_of(n))
         self._sink(list(self.radar.process(cycles)))

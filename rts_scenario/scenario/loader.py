@@ -20,13 +20,15 @@ from typing import Any
 import numpy as np
 
 from ..errors import RtsError, ScenarioError
-from ..located_yaml import Document, KeyPath, load_yaml, validate
+from ..located_yaml import Document, KeyPath, format_key_path, load_yaml, validate
 from ..radar.profile import RadarProfile
 from ..radar.profile import preset_names as radar_presets
 from ..rig import Rig
 from ..rig import preset_names as rig_presets
 from .model import (
     DEFAULT_TOLERANCES,
+    LIMITS,
+    SCENE_LIMITS,
     Effects,
     Expectations,
     Mount,
@@ -43,6 +45,9 @@ SCENE_SUFFIX = ".scenario.yaml"
 # What a run can stream and check in reasonable time and memory (a 24 h scene at 20 Hz with 28
 # targets); the schema states it on duration_s and frame_rate_hz.
 MAX_TARGET_FRAMES = 50_000_000
+# The longest a scene may last, its frames held for their frame period (the schema's
+# duration_s bound).
+MAX_SCENE_S = 86400.0
 
 
 @lru_cache(maxsize=1)
@@ -89,6 +94,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     if isinstance(effects_spec, dict) and "measurement_noise" in effects_spec:
         raise doc.error(("effects", "measurement_noise"),
                         "not supported; the simulated radar's noise comes from radar.noise")
+    _check_target_limits(doc)
     validate(doc, scenario_schema())
     data = doc.data
     root = path.resolve().parent
@@ -106,6 +112,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         fragment = load_yaml(fragment_path)
         if not isinstance(fragment.data, dict):
             raise fragment.error((), "a fragment must be a mapping with a 'targets' list")
+        _check_target_limits(fragment)
         validate(fragment, _fragment_schema())
         target_sources += [(fragment, ("targets", j), t)
                            for j, t in enumerate(fragment.data["targets"])]
@@ -126,6 +133,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                            Rig.from_file, ".rig.yaml")
     effects = Effects(rcs_fluctuation=data.get("effects", {}).get("rcs_fluctuation", "none"))
     frames = _Frames(float(data["duration_s"]), float(data["frame_rate_hz"]))
+    _check_frames(doc, frames)
     ego_spec = data.get("ego", {"motion": {"type": "stationary", "position_m": [0, 0, 0]}})
     ego = _trajectory(doc, ("ego",), ego_spec, frames)
 
@@ -166,12 +174,47 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     )
 
 
+def _check_target_limits(doc: Document) -> None:
+    """Refuse a limit of the whole scene in a target's ``expected_limits``.
+
+    The verdict reads those from ``expectations.expected_limits`` alone: on a target one
+    would be ignored.
+    """
+    targets = doc.data.get("targets") if isinstance(doc.data, dict) else None
+    for j, target in enumerate(targets if isinstance(targets, list) else ()):
+        limits = target.get("expected_limits") if isinstance(target, dict) else None
+        for i, name in enumerate(limits if isinstance(limits, list) else ()):
+            if isinstance(name, str) and name in SCENE_LIMITS:
+                allowed = ", ".join(repr(n) for n in LIMITS if n not in SCENE_LIMITS)
+                raise doc.error(("targets", j, "expected_limits", i),
+                                f"{name!r} is a limit of the whole scene, not of one target: "
+                                f"list it in expectations.expected_limits; a target's "
+                                f"expected_limits allow {allowed}")
+
+
 def _radar_options(radar: dict[str, Any], empty: bool) -> RadarOptions:
     options = {k: v for k, v in radar.items() if k in ("fidelity", "estimator", "cfar", "noise")}
     if empty and options.get("fidelity", "auto") == "auto":
         # False detections are all an empty bench checks, and only the cube has them.
         options["fidelity"] = "adc"
     return RadarOptions(**options)
+
+
+def _check_frames(doc: Document, frames: _Frames) -> None:
+    """Refuse frames that span more than a scene may last (`MAX_SCENE_S`).
+
+    A scene has at least one frame, and each is held for its frame period: a scene of one
+    frame at a rate far below its duration's inverse would last that whole period.
+    """
+    span = frames.n / frames.rate_hz
+    if span > MAX_SCENE_S * (1.0 + 1e-9):
+        raise doc.error(
+            ("frame_rate_hz",),
+            f"duration_s x frame_rate_hz = {frames.duration_s:g} s x {frames.rate_hz:g} Hz: "
+            f"the scene's {frames.n} frame{'s' if frames.n > 1 else ''} would span {span:g} s "
+            f"(each held for 1 / frame_rate_hz = {1.0 / frames.rate_hz:g} s), more than the "
+            f"{MAX_SCENE_S:g} s a scene may last; raise frame_rate_hz",
+        )
 
 
 def _check_size(doc: Document, frames: _Frames, n_targets: int) -> None:
@@ -310,6 +353,16 @@ def _override(doc: Document, key: str, value: Any) -> None:
         node[parts[-1]] = value
     except (IndexError, TypeError):
         raise doc.error(("parametrize",), f"{key}: no such key path in the scene") from None
+    # The value now there is the parametrize block's: an error in it points at its entry.
+    block = doc.data.get("parametrize")
+    entry = next((k for k in (block if isinstance(block, dict) else {})
+                  if key in (p.strip() for p in k.split(","))), None)
+    where = doc.marks.get(("parametrize", entry) if entry is not None else ("parametrize",))
+    if where is not None:
+        path = tuple(parts)
+        for old in [m for m in doc.marks if m[:len(path)] == path]:
+            del doc.marks[old]
+        doc.marks[path] = where
 
 
 def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:
@@ -327,10 +380,19 @@ def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:
     return resolved
 
 
+# The files the tool reads, by suffix: one named where another kind belongs is refused as such.
+_FILE_KINDS = {".rig.yaml": "a rig file", ".radar.yaml": "a radar profile",
+               ".scenario.yaml": "a scene file", ".mapping.yaml": "a CAN mapping"}
+
+
 def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets: list[str],
                      preset: Any, from_file: Any, suffix: str) -> Any:
     if name in presets:
         return preset(name)
+    for other, kind in _FILE_KINDS.items():
+        if other != suffix and name.endswith(other):
+            raise doc.error(key, f"{name!r} is {kind} (*{other}); {format_key_path(key)} takes "
+                                 f"a preset ({', '.join(presets)}) or a *{suffix} file")
     # A name that is no preset is a file when it looks like one or one exists by that name.
     looks_like_file = name.endswith((suffix, ".yaml", ".yml")) or "/" in name
     if not looks_like_file and not (root / name).is_file():
@@ -482,6 +544,40 @@ def _starts_in_scene(doc: Document, key: KeyPath, start_s: float, frames: _Frame
                              f"{outcome}; start_s must be < {frames.last_s:g}")
 
 
+# A lateral offset may jump at most this far where a polyline turns (m).
+CORNER_JUMP_M = 0.01
+
+
+def _corner_offset(doc: Document, key: KeyPath, points: np.ndarray, t_s: float,
+                   lane_changes: tuple[LaneChange, ...]) -> None:
+    """Refuse a lateral offset where a polyline turns (at ``points[1]``, reached at ``t_s``).
+
+    The object turns in no time there, and its left normal with it: a point ``d`` to the
+    left of the path would jump ``2 |d| sin(angle / 2)``.
+    """
+    offset = sum(lc.offset_m * _ramp((t_s - lc.start_s) / lc.duration_s) for lc in lane_changes)
+    before, after = np.diff(points[:, :2], axis=0)
+    norms = np.linalg.norm(before), np.linalg.norm(after)
+    if min(norms) < 1e-9 or offset == 0.0:  # a vertical piece has no left to turn
+        return
+    cos = float(np.clip(np.dot(before, after) / (norms[0] * norms[1]), -1.0, 1.0))
+    angle = math.acos(cos)
+    jump = 2.0 * abs(offset) * math.sin(0.5 * angle)
+    if jump > CORNER_JUMP_M:
+        side = "left" if offset > 0 else "right"
+        raise doc.error(key, f"the path turns {math.degrees(angle):.3g} deg at this waypoint "
+                             f"(at {t_s:.6g} s) while the object is {abs(offset):.3g} m to the "
+                             f"{side} of it (lane_changes): a polyline turns in no time, so the "
+                             f"object would jump {jump:.3g} m; use path: spline, or end the "
+                             f"lateral offset before the corner")
+
+
+def _ramp(tau: float) -> float:
+    """Return the lane change's quintic at ``tau`` (0 before it, 1 after), as kinematics does."""
+    tau = min(max(tau, 0.0), 1.0)
+    return tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
+
+
 def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
                lane_changes: tuple[LaneChange, ...], frames: _Frames) -> Trajectory:
     start = float(motion.get("start_s", 0.0))
@@ -509,6 +605,9 @@ def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
     t = start
     for i, length in enumerate(lengths):
         a = (speeds[i + 1] ** 2 - speeds[i] ** 2) / (2.0 * length)
+        if i > 0 and motion.get("path", "polyline") == "polyline":
+            _corner_offset(doc, (*key, "points", i, "position_m"), points[i - 1: i + 2], t,
+                           lane_changes)
         knots.append(t)
         v0.append(speeds[i])
         acc.append(a)

@@ -36,6 +36,10 @@ LIMITS = {
     "frames_lost": "the RTS reports schedule frames it lost or could not apply",
 }
 
+# Limits of the whole scene, not of a target-frame: only ``expectations.expected_limits``
+# declares them.
+SCENE_LIMITS = ("frame_rate_above_radar", "frames_sent_late", "frames_lost")
+
 DEFAULT_TOLERANCES = {
     "range_m": 0.3,
     "radial_velocity_mps": 0.3,
