@@ -177,6 +177,8 @@ class Report:
     (`rts_scenario.radar.clock.ClockTrack`).
     ``playback`` is how the schedule went out (`rts_scenario.playback.Playback`: frames sent,
     their lateness, the ambiguity window, the RTS's counters where it reports them).
+    ``expected_not_hit`` lists the limits the scene expects that no target (or, for a
+    target's own, that target) hit: the scene may not test what it means to.
     ``variant`` names the combination of the scene's ``parametrize`` block that ran, as the
     pytest plugin names it (``""`` for a scene without one), ``parameters`` holds its values.
     ``worst_frames`` lists the worst target-frames (misses first, then by error over
@@ -203,6 +205,7 @@ class Report:
     playback: dict[str, Any] = field(default_factory=dict)
     variant: str = ""
     parameters: dict[str, Any] = field(default_factory=dict)
+    expected_not_hit: list[str] = field(default_factory=list)
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
     record: FrameRecord | None = field(default=None, repr=False, compare=False)
 
@@ -260,6 +263,8 @@ class Report:
                              + [f"{t.name} " + ", ".join(
                                  f"{lim} {n}{'' if lim in t.unexpected_limits else ' (expected)'}"
                                  for lim, n in t.limits.items()) for t in limited]))
+        if self.expected_not_hit:
+            lines.append("expected limits not hit: " + "; ".join(self.expected_not_hit))
         f = self.frames
         lines.append(f"radar cycles: {f['total']} during the scene, {f['checked']} checked, "
                      f"{f.get('unmatched', 0)} with unmatched targets, "

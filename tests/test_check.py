@@ -1,6 +1,7 @@
 """The streaming checker against hand-built truth and cycles (no simulator involved)."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from rts_scenario.check import check_cycles as check
 from rts_scenario.detections import Detections, unwrap_counter
 from rts_scenario.kinematics import Tracks
 from rts_scenario.report import FrameRecord, RunningStats
+from rts_scenario.scenario import load_scenario
 from rts_scenario.scenario.model import Expectations
 from rts_scenario.schedule import Status
 
@@ -482,3 +484,30 @@ def test_cycles_measured_before_the_scene_are_counted_as_such_not_late_or_after_
     assert (report.frames["before_scene"], report.frames["late"],
             report.frames["after_scene"]) == (3, 0, 2)
     assert "3 before the scene's start (not checked)" in report.table()
+
+
+def test_limits_a_scene_expects_but_never_hits_are_said(tmp_path):
+    # The scene expects its car to leave the rig's coverage and the radar to be slower than
+    # the frames, and the car to come too close: none of it happens in its 3 s. The run
+    # passes (nothing unchecked), and says which expectations it did not meet.
+    import yaml
+
+    from rts_scenario.pipeline import Pipeline, RunOptions
+
+    root = Path(__file__).resolve().parents[1]
+    data = yaml.safe_load((root / "scenarios" / "approaching_target.scenario.yaml").read_text())
+    data["duration_s"] = 3.0
+    data["radar"]["noise"] = False
+    data["expectations"]["expected_limits"] = ["out_of_coverage", "frame_rate_above_radar",
+                                               "frames_lost"]
+    data["targets"][0]["expected_limits"] = ["too_close"]
+    (tmp_path / "s.scenario.yaml").write_text(yaml.safe_dump(data))
+    scene = load_scenario(tmp_path / "s.scenario.yaml")
+    with Pipeline.for_scene(scene, RunOptions()) as pipeline:
+        report = pipeline.run(scene).report
+    assert report.passed, report.reasons
+    assert report.expected_not_hit == ["frame_rate_above_radar", "out_of_coverage",
+                                       "oncoming-car: too_close"]
+    assert ("expected limits not hit: frame_rate_above_radar; out_of_coverage; "
+            "oncoming-car: too_close") in report.table()
+    assert report.to_dict()["expected_not_hit"] == report.expected_not_hit
