@@ -113,7 +113,7 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"frame would span 1e\+06 s \(each held for 1 / frame_rate_hz = 1e\+06 s\), more than "
      r"the 86400 s a scene may last; raise frame_rate_hz$"),
     ("frame-rate-above-rig", sub("frame_rate_hz: 10.0", "frame_rate_hz: 500"),
-     r"^{f}: frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most"),
+     r"^{f}:4:1: frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most"),
     ("target-frames-too-many", sub("duration_s: 0.5", "duration_s: 86400").replace(
         "frame_rate_hz: 10.0", "frame_rate_hz: 1000"),
      r"^{f}:3:1: duration_s: duration_s x frame_rate_hz = .* the limit is 50,000,000"),
@@ -191,7 +191,7 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("parametrize-bad-path", TINY + "parametrize: {radar.nothing.here: [1, 2]}\n",
      r"^{f}:15:1: parametrize: radar.nothing.here: no such key path in the scene"),
     ("parametrize-combination-fails", TINY + "parametrize: {frame_rate_hz: [10, 400]}\n",
-     r"^{f}: frame_rate_hz: the scene runs at 400 Hz .*\[frame_rate_hz=400\]$"),
+     r"^{f}:15:\d+: frame_rate_hz: the scene runs at 400 Hz .*\[frame_rate_hz=400\]$"),
     # A value a combination puts in place is wrong where the parametrize block gives it.
     ("parametrize-bad-value", TINY + "parametrize:\n  targets.0.motion.speed_mps: [19.0, fast]\n",
      r"^{f}:16:3: targets\[0\].motion.speed_mps: must be of type number, got 'fast' "

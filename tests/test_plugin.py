@@ -196,13 +196,13 @@ def test_a_variant_that_does_not_load_fails_alone(pytester):
     assert "Traceback" not in text and "Interrupted" not in text
 
 
-def test_a_schedule_that_cannot_be_built_names_the_scene_file(pytester):
-    # The scene loads; its schedule cannot be built when it runs: the error names its file.
+def test_a_scene_its_rig_cannot_play_names_the_scene_file_and_line(pytester):
+    # Frames faster than the rig's update rate: the error names the file, line and key.
     pytester.makefile(".scenario.yaml", fast=scene("fast").replace("frame_rate_hz: 20.0",
                                                                    "frame_rate_hz: 200.0"))
     result = pytester.runpytest()
     result.assert_outcomes(failed=1)
-    result.stdout.fnmatch_lines([f"error: {pytester.path / 'fast.scenario.yaml'}: frame_rate_hz: "
+    result.stdout.fnmatch_lines([f"error: {pytester.path / 'fast.scenario.yaml'}:*: frame_rate_hz: "
                                  "the scene runs at 200 Hz but rig 'wide-3x5' updates at most "
                                  "100 Hz*"])
     assert "Traceback" not in result.stdout.str()

@@ -454,14 +454,15 @@ def test_cli_errors_are_one_line_exit_2(tmp_path, capsys):
 
 
 def test_cli_import_of_a_scene_validate_refuses_is_refused(tmp_path, capsys):
-    # The scene loads, but its schedule cannot be built: 500 Hz frames on a 100 Hz rig.
+    # 500 Hz frames on a 100 Hz rig: the scene does not load.
     out = tmp_path / "fast.scenario.yaml"
     argv = ["import", str(DATA / "cut_in.xosc"), "--radar", "awr1843boost", "--rig",
             "wide-3x5", "--output", str(out), "--frame-rate-hz", "500"]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"error: {DATA / 'cut_in.xosc'}: the scene it converts to cannot be "
-                          f"played (its schedule cannot be built); {out} not written: ")
+    assert err.startswith(f"error: {DATA / 'cut_in.xosc'}: the scene it converts to does not "
+                          f"load (a value beyond the scene format's or the bench's limits); "
+                          f"{out} not written: {out}:")
     assert "frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most " \
            "100 Hz" in err and err.count("\n") == 1
     assert list(tmp_path.iterdir()) == []

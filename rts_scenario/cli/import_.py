@@ -80,8 +80,8 @@ def _do_import(args: argparse.Namespace) -> int:
         except RtsError as exc:
             reason = one_line(exc).replace(str(draft), str(output))
             raise RtsError(f"{args.file}: the scene it converts to does not load (a value "
-                           f"beyond the scene format's limits); {output} not written: "
-                           f"{reason}") from None
+                           f"beyond the scene format's or the bench's limits); {output} not "
+                           f"written: {reason}") from None
         try:
             preflight(scene)  # its whole schedule, built as validate and run build it
         except RtsError as exc:

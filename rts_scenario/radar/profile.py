@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,6 +24,12 @@ from ..located_yaml import Document, load_yaml, validate
 from ..propagation import C0_MPS
 from ..responses import FrontEndModel
 from .clock import RadarClock
+
+if TYPE_CHECKING:
+    from ..rig import Rig
+
+# Frame rates this close above a rig's update rate are at it (a rate written as 1 / period).
+RATE_SLACK = 1e-9
 
 FloatArray = NDArray[np.float64]
 
@@ -195,6 +201,31 @@ class RadarProfile:
     def loop_time_s(self) -> float:
         """Time of one TDM loop (every TX once): the slow-time sampling interval."""
         return len(self.tx_order) * self.chirp_slot_s
+
+    def frame_rate_problem(self, frame_rate_hz: float, rig: Rig) -> str | None:
+        """Why scene frames at ``frame_rate_hz`` cannot be played and checked, or None.
+
+        The rig must follow the rate (``limits.update_rate_hz``), and the time a radar cycle
+        may show either frame after a change (this radar's chirps plus the rig's
+        ``limits.update_latency_s``) must be under half the time between the frames the radar
+        sees (a frame period, or its cycle where frames come faster): else the check could not
+        tell a radar a frame behind from one in step.
+        """
+        limits = rig.limits
+        if frame_rate_hz > limits.update_rate_hz * (1 + RATE_SLACK):
+            return (f"the scene runs at {frame_rate_hz:g} Hz but rig {rig.name!r} updates at "
+                    f"most {limits.update_rate_hz:g} Hz (limits.update_rate_hz)")
+        window_s = self.measurement_s + limits.update_latency_s
+        step_s = max(1.0 / frame_rate_hz, self.radar_clock.cycle_s)
+        if window_s >= 0.5 * step_s:
+            return (f"a radar cycle may show either frame for {window_s * 1e3:.3g} ms after a "
+                    f"frame change (the chirps of radar {self.name!r} "
+                    f"{self.measurement_s * 1e3:.3g} ms + limits.update_latency_s of rig "
+                    f"{rig.name!r} {limits.update_latency_s * 1e3:.3g} ms), half the "
+                    f"{step_s * 1e3:.3g} ms between the frames the radar sees or more: the "
+                    f"check could not tell a radar a frame behind from one in step; lower "
+                    f"frame_rate_hz below {0.5 / window_s:.3g} Hz (or the update latency)")
+        return None
 
     @property
     def measurement_s(self) -> float:

@@ -152,6 +152,9 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         targets.append(_target(source, key, spec, effects.rcs_fluctuation, frames))
 
     _check_size(doc, frames, len(targets))
+    problem = radar.frame_rate_problem(frames.rate_hz, rig)
+    if problem is not None:
+        raise doc.error(("frame_rate_hz",), problem)
     expect = data.get("expectations", {})
     return Scenario(
         variant=variant_id(overrides or {}), parameters=dict(overrides or {}),

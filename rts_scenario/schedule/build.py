@@ -48,8 +48,6 @@ Levels = tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]
 
 # What the solver takes the FEs' echoes to be (`solver_inputs`); the first is the default.
 FE_RESPONSES = ("modeled", "plane-wave")
-# The scene's frame rate may equal the rig's update rate up to rounding (relative).
-RATE_SLACK = 1e-9
 # A delay that rounds to the minimum is not too close: far below any delay step.
 DELAY_SLACK_S = 1e-18
 
@@ -108,27 +106,9 @@ def build_schedule(
     if quantization not in QUANTIZATION_MODES:
         raise ScheduleError(f"quantization: unknown mode {quantization!r}; valid modes: "
                             f"{', '.join(QUANTIZATION_MODES)}")
-    if frame_rate_hz is not None and frame_rate_hz > limits.update_rate_hz * (1 + RATE_SLACK):
-        raise ScheduleError(
-            f"frame_rate_hz: the scene runs at {frame_rate_hz:g} Hz but rig {rig.name!r} "
-            f"updates at most {limits.update_rate_hz:g} Hz (limits.update_rate_hz)"
-        )
-    window_s = radar.measurement_s + limits.update_latency_s
-    # A cycle within this window of a frame change may show either frame
-    # (`rts_scenario.pipeline.CycleTruth`): over half the time between the frames a radar sees
-    # (a frame period, or its cycle where frames come faster), a radar behind by one could pass
-    # for one in step.
-    step_s = None if frame_rate_hz is None else max(1.0 / frame_rate_hz,
-                                                    radar.radar_clock.cycle_s)
-    if step_s is not None and window_s >= 0.5 * step_s:
-        raise ScheduleError(
-            f"frame_rate_hz: a radar cycle may show either frame for {window_s * 1e3:.3g} ms "
-            f"after a frame change (the chirps of radar {radar.name!r} "
-            f"{radar.measurement_s * 1e3:.3g} ms + limits.update_latency_s of rig {rig.name!r} "
-            f"{limits.update_latency_s * 1e3:.3g} ms), half the {step_s * 1e3:.3g} ms between "
-            f"the frames the radar sees or more: the check could not tell a radar a frame "
-            f"behind from one in step; lower frame_rate_hz below {0.5 / window_s:.3g} Hz "
-            f"(or the update latency)")
+    problem = None if frame_rate_hz is None else radar.frame_rate_problem(frame_rate_hz, rig)
+    if problem is not None:
+        raise ScheduleError(f"frame_rate_hz: {problem}")
     shape = tracks.range_m.shape
     status = np.where(tracks.present, Status.OK, Status.NOT_PRESENT).astype(np.uint16)
     status |= np.where(tracks.present & ~tracks.in_coverage, Status.OUT_OF_COVERAGE,
