@@ -231,8 +231,9 @@ def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m
 
     Each row item is ``(fe, weight, extra phase deg)`` or ``(fe, weight, extra phase deg,
     extra delay s)``; the target is at ``range_m``, approaching at 1 m/s, with ``level_db`` of
-    attenuation at weight 1 (plus each channel's calibration). An extra delay is added to the
-    channel's delay as it is (on the RTS's grid if it is on it), its phase not given back.
+    attenuation at weight 1 (plus each channel's calibration), on the attenuator's steps. An
+    extra delay is added to the channel's delay as it is (on the RTS's grid if it is on it),
+    its phase not given back.
     """
     n = len(rows)
     fe = np.full((n, 1, 4), -1, dtype=np.int64)
@@ -254,6 +255,8 @@ def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m
         attenuation = level_db - 20.0 * np.log10(weight) + rig.cal_gain_db[fe0]
     phase = phase + np.radians(extra)
     _check_pattern_limits(rig, fe, active, attenuation, delay, doppler, range_m)
+    # On the attenuator's steps, as the RTS will set them (the fit takes the rounding back).
+    attenuation = rig.limits.attenuator_setting(attenuation)
     nan = np.nan
     schedule = Schedule(
         t_s=np.arange(n, dtype=np.float64) * 0.05, frame_index=np.arange(n), names=("calibration",),
@@ -333,12 +336,14 @@ class _PairModel:
         return self.radar.range_bin(total, schedule.doppler_hz[:, 0, :])
 
     def predict(self, a: int, b: int, theta_deg: FloatArray, level: FloatArray,
-                phase_deg: FloatArray, gain_db: FloatArray) -> tuple[FloatArray, FloatArray]:
+                phase_deg: FloatArray, gain_db: FloatArray,
+                steps_db: float = 0.0) -> tuple[FloatArray, FloatArray]:
         """Return the reported (az, el) for candidates ``phase_deg``/``gain_db`` (P,): (P, S).
 
-        ``level`` (S, 2) is each echo's amplitude through the range window at the cell read.
+        ``level`` (S, 2) is each echo's amplitude through the range window at the cell read;
+        ``steps_db`` how much more b was attenuated than a on the attenuator's steps than asked.
         """
-        rel = (self.ratio * 10.0 ** (-np.asarray(gain_db)[:, None] / 20.0)
+        rel = (self.ratio * 10.0 ** (-(np.asarray(gain_db)[:, None] + steps_db) / 20.0)
                * np.exp(1j * np.radians(theta_deg[None, :] - np.asarray(phase_deg)[:, None])))
         x = (level[None, :, 0, None] * self.vectors[:, a][None, None, :]
              + (rel * level[None, :, 1])[..., None] * self.vectors[:, b][None, None, :])
@@ -370,21 +375,28 @@ class _PairModel:
         offset = bins[:, channel] - cell[:, None]
         offset = np.mod(offset + self.n / 2.0, self.n) - self.n / 2.0
         level = self.radar.range_response(offset)
+        # What the attenuators' steps added to b's attenuation over a's: the sweep played b
+        # at (attenuation b - a) less the asked (calibration b - a - 20 log10 ratio).
+        att = schedule.attenuation_db[0, 0, channel]
+        steps_db = float((att[1] - att[0]) - (self.rig.cal_gain_db[b] - self.rig.cal_gain_db[a])
+                         + 20.0 * np.log10(self.ratio))
 
         def residual(x: FloatArray) -> FloatArray:
-            p_az, p_el = self.predict(a, b, sweep_deg, level, x[:1], x[1:])
+            p_az, p_el = self.predict(a, b, sweep_deg, level, x[:1], x[1:], steps_db)
             out = np.concatenate([p_az[0] - az, p_el[0] - el])
             return np.where(np.isfinite(out), out, 10.0)
 
         # Start from the best phase on a coarse grid at equal gains, then fit both.
         coarse = np.arange(0.0, 360.0, 5.0)
-        c_az, c_el = self.predict(a, b, sweep_deg, level, coarse, np.zeros_like(coarse))
+        c_az, c_el = self.predict(a, b, sweep_deg, level, coarse, np.zeros_like(coarse),
+                                  steps_db)
         cost = np.nansum(np.minimum((c_az - az) ** 2 + (c_el - el) ** 2, 100.0), axis=1)
         start = np.array([coarse[np.argmin(cost)], 0.0])
         fit = least_squares(residual, start, x_scale=np.array([1.0, 0.1]), diff_step=1e-7,
                             loss="soft_l1", f_scale=0.05, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         phase, gain = float(_wrap(fit.x[0])), float(fit.x[1])
-        m_az, m_el = self.predict(a, b, sweep_deg, level, np.array([phase]), np.array([gain]))
+        m_az, m_el = self.predict(a, b, sweep_deg, level, np.array([phase]), np.array([gain]),
+                                  steps_db)
         axis = _axis(self.rig, a, b)
         return PairMeasurement(
             a=a, b=b, delay_s=delays, sweep_deg=sweep_deg, az_deg=az, el_deg=el,

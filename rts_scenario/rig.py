@@ -72,6 +72,21 @@ class HardwareLimits:
             raise RigError(f"limits.update_rate_hz: must be > 0, got {self.update_rate_hz:g}",
                            key="limits.update_rate_hz")
 
+    def attenuator_setting(self, attenuation_db: ArrayLike) -> NDArray[np.float64]:
+        """Return what a channel's attenuator sets for ``attenuation_db``.
+
+        The nearest of its steps (``attenuation_min_db + k attenuation_step_db``) within its
+        range; NaN (a channel off) stays NaN.
+        """
+        att = np.clip(np.asarray(attenuation_db, dtype=np.float64), self.attenuation_min_db,
+                      self.attenuation_max_db)
+        step = self.attenuation_step_db
+        if step > 0.0:
+            top = np.floor((self.attenuation_max_db - self.attenuation_min_db) / step + 1e-9)
+            att = self.attenuation_min_db + np.clip(
+                np.round((att - self.attenuation_min_db) / step), 0.0, top) * step
+        return att
+
 
 @dataclass(frozen=True)
 class Reference:

@@ -64,6 +64,32 @@ def test_recovers_injected_offsets_on_the_awr1843boost_for_its_estimator(seed, e
 
 
 @pytest.mark.parametrize("seed", range(3))
+def test_a_stepped_attenuator_s_rounding_is_not_taken_for_a_channel_gain(seed):
+    # The RTS sets the nearest of its 0.5 dB attenuator steps. Calibrating channels with
+    # gain errors (and a calibration already holding fractions of a dB) plays each pair's
+    # swept channel up to a quarter step off what it asked: that rounding is the pattern's,
+    # not the channel's, and the gains come out within the 0.05 dB of a continuous one.
+    import dataclasses
+
+    rig = dataclasses.replace(KIT, limits=dataclasses.replace(KIT.limits,
+                                                              attenuation_step_db=0.5),
+                              cal_gain_db=np.array([0.0, 0.13, -0.21, 0.37]))
+    errors = ChannelErrors.random(4, np.random.default_rng(seed), phase_deg=180.0, gain_db=1.0)
+    result = calibrate(rig, PAPER, simulated_measure(PAPER, rig, errors))
+    phase, gain = relative(errors)
+    assert np.abs(wrapped(result.phase_deg - phase)).max() <= 0.5
+    # The channels' gains relative to the calibration the rig already has.
+    assert np.abs(result.gain_db - (gain - (rig.cal_gain_db - rig.cal_gain_db[0]))).max() \
+        <= 0.05
+    # What the pattern asked for lies on the attenuator's steps.
+    from rts_scenario.calibration import pattern_schedule
+
+    pattern = pattern_schedule(rig, PAPER, [[(0, 1.0, 0.0), (1, 0.5, 0.0)]], 10.0, 40.0)
+    att = pattern.attenuation_db[0, 0, :2]
+    np.testing.assert_allclose(att / 0.5, np.round(att / 0.5), atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(3))
 def test_recovers_injected_offsets_on_the_paper_radar(seed):
     errors = ChannelErrors.random(4, np.random.default_rng(seed), phase_deg=180.0, gain_db=1.0)
     result = calibrate(KIT, PAPER, simulated_measure(PAPER, KIT, errors))

@@ -273,7 +273,9 @@ class SimulatedRadar:
         fe = schedule.fe[f, k, c]
         return self.propagate(
             fe, frame=f, target=k,
-            amplitude=10.0 ** (-(schedule.attenuation_db[f, k, c] - err.gain_db[fe]) / 20.0),
+            # The attenuator sets the nearest of its steps, whatever it was sent.
+            amplitude=10.0 ** (-(self.rig.limits.attenuator_setting(
+                schedule.attenuation_db[f, k, c]) - err.gain_db[fe]) / 20.0),
             rts_delay_s=self.rig.limits.latency_s + schedule.delay_s[f, k, c] + err.delay_s[fe],
             doppler_hz=schedule.doppler_hz[f, k, c],
             phase_rad=schedule.phase_rad[f, k, c] + np.radians(err.phase_deg[fe]))
