@@ -502,6 +502,15 @@ _ANGLE = {"type": "number", "minimum": -90, "maximum": 90}
 _OFFSET = {"type": "array", "minItems": 2, "maxItems": 2,
            "items": {"type": "number", "minimum": -1.0, "maximum": 1.0}}
 _DISTANCE = {"type": "number", "exclusiveMinimum": 0, "maximum": 100.0}
+# The RTS's limits, as wide: delays and latencies up to a second (150,000 km of range),
+# attenuation within 0..300 dB, Doppler within +-1 GHz, updates up to 1 MHz, 1024 echoes.
+_LIMIT_BOUNDS: dict[str, tuple[float, float]] = {
+    "attenuation_min_db": (0.0, 300.0), "attenuation_max_db": (0.0, 300.0),
+    "attenuation_step_db": (0.0, 300.0), "delay_min_s": (0.0, 1.0), "delay_max_s": (0.0, 1.0),
+    "delay_step_s": (0.0, 1.0), "latency_s": (0.0, 1.0), "doppler_min_hz": (-1e9, 1e9),
+    "doppler_max_hz": (-1e9, 1e9), "echoes_per_channel": (1, 1024),
+    "update_rate_hz": (0.0, 1e6), "update_latency_s": (0.0, 1.0),
+}
 # Cable and path differences: 1 us is 150 m of range.
 _CAL_DELAY = {"type": "number", "minimum": -1e-6, "maximum": 1e-6}
 _CAL_GAIN = {"type": "number", "minimum": -60.0, "maximum": 60.0}
@@ -561,8 +570,9 @@ RIG_SCHEMA: dict[str, Any] = {
             "type": "object",
             "additionalProperties": False,
             "properties": {
-                f.name: ({"type": "integer", "minimum": 1} if f.name == "echoes_per_channel"
-                         else _number(None if "doppler" in f.name else 0))
+                f.name: {"type": "integer" if f.name == "echoes_per_channel" else "number",
+                         "minimum": _LIMIT_BOUNDS[f.name][0],
+                         "maximum": _LIMIT_BOUNDS[f.name][1]}
                 for f in fields(HardwareLimits)
             },
         },

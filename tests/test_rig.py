@@ -140,8 +140,8 @@ BAD_RIGS = [
      "  doppler_max_hz: 1000\n  doppler_min_hz: 2000\n", 6, "limits.doppler_min_hz",
      "must be below doppler_max_hz = 1000, got 2000"),
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
-     "  attenuation_max_db: 80\n  attenuation_step_db: 500\n", 6, "limits.attenuation_step_db",
-     "must be within 0 (continuous) .. 80 (attenuation_max_db - attenuation_min_db), got 500"),
+     "  attenuation_max_db: 80\n  attenuation_step_db: 200\n", 6, "limits.attenuation_step_db",
+     "must be within 0 (continuous) .. 80 (attenuation_max_db - attenuation_min_db), got 200"),
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
      "  update_rate_hz: 0\n", 5, "limits.update_rate_hz", "must be > 0, got 0"),
     # Survey and calibrate play each FE at the reference level: it must be one the RTS sets.
@@ -173,6 +173,13 @@ BAD_RIGS = [
     ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, rx_offset_m: [5, 0]}\n"
      "  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
      4, "front_ends[0].rx_offset_m[0]", "must be <= 1"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  latency_s: 1.0e+300\n", 5, "limits.latency_s", "must be <= 1.0, got 1e+300"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  echoes_per_channel: 100000\n", 5, "limits.echoes_per_channel", "must be <= 1024"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  delay_min_s: 4.0e-9\n  delay_max_s: 3.0e-9\n", 6, "limits.delay_max_s",
+     "must be above delay_min_s = 4e-09, got 3e-09"),
     ("rts_rig: 1\nname: x\nname: y\n", 3, "name", "duplicate key"),
     ("rts_rig: 1\nname: [x\n", 3, "", "invalid YAML"),
     ("rts_rig: 1\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n", 1, "", "'name' is required"),
