@@ -340,9 +340,8 @@ class Pipeline:
 
     @property
     def counter_modulus(self) -> int:
-        """Where the radar's cycle counter wraps (from the header's counter signal)."""
-        m = self.receiver.mapping
-        return 1 << int(m.db.get_message_by_name(m.header).get_signal_by_name(m.counter).length)
+        """Where the radar's cycle counter wraps (the mapping's `CanMapping.counter_modulus`)."""
+        return self.receiver.mapping.counter_modulus
 
     # -- playing ---------------------------------------------------------------------------
 

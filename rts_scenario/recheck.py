@@ -342,6 +342,13 @@ def log_variant(scene: str | Path, log: str | Path,
                                                   f"one it records")
 
 
+def _counter_words(mapping: CanMapping) -> str:
+    """Name the radar's counter by its width, or where it wraps when that is below it."""
+    if mapping.counter_max is not None:
+        return f"counter (wrapping after {mapping.counter_max})"
+    return f"{mapping.counter_modulus.bit_length() - 1}-bit counter"
+
+
 def _variant_text(variant: str) -> str:
     return f"variant {variant!r}" if variant else "the scene without parametrize"
 
@@ -739,8 +746,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s)
     bus = index.bus
     receiver_mapping = (can_mapping or CanMapping.builtin())
-    header = receiver_mapping.db.get_message_by_name(receiver_mapping.header)
-    modulus = 1 << int(header.get_signal_by_name(receiver_mapping.counter).length)
+    modulus = receiver_mapping.counter_modulus
     profile_clock = scene.radar.radar_clock
     counters = index.counters
     numbers = sequential_numbers(counters, modulus, index.bus_t_s, profile_clock.cycle_s)
@@ -749,7 +755,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if c["counter_start"] is not None and not c["counter_start"] < modulus:
             raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.counter_start: "
                            f"{c['counter_start']}, beyond what the radar's "
-                           f"{modulus.bit_length() - 1}-bit counter counts (allowed: 0 to "
+                           f"{_counter_words(receiver_mapping)} counts (allowed: 0 to "
                            f"{modulus - 1}, or null); not what `rts-scenario run --record` "
                            f"writes for this mapping")
         try:
