@@ -346,3 +346,117 @@ def test_a_bad_checksum_or_counter_entry_is_one_located_error(tmp_path, capsys, 
     message = lines[0].split("error: ", 1)[1]
     assert re.match(rf"--mapping {re.escape(str(path))}:\d+:\d+: {re.escape(key)}: {pattern}",
                     message), message
+
+
+# --- logs of a bench with several CAN channels ----------------------------------------------
+
+def resealed(msg, channel, shift):
+    """The message as another radar of the family sends it on another bus: its counter
+    ``shift`` cycles on (within 0..14), its checksum computed again, on ``channel``."""
+    data = bytearray(msg.data)
+    if msg.arbitration_id == HEADER_ID:
+        data[1] = (data[1] & 0xF0) | ((data[1] & 0x0F) + shift) % 15
+        data[0] = crc8_h2f(bytes(data[1:]) + bytes([HEADER_IDS[data[1] & 0x0F]]))
+    else:
+        data[2] = (data[2] & 0xF0) | ((data[2] & 0x0F) + shift) % 15
+        crc = crc16_ccitt(bytes(data[2:]) + bytes([DET_ID & 0xFF, DET_ID >> 8]))
+        data[0], data[1] = crc & 0xFF, crc >> 8
+    return can.Message(arbitration_id=msg.arbitration_id, is_extended_id=False, data=data,
+                       timestamp=msg.timestamp + 0.003, channel=channel)
+
+
+def write_log(path, messages):
+    with can.Logger(str(path)) as logger:
+        for msg in sorted(messages, key=lambda m: m.timestamp):
+            logger.on_message_received(msg)
+
+
+def two_channel_log(path, messages):
+    """The radar's messages on channel 0 and a sibling's, same identifiers, on channel 1."""
+    mine = [can.Message(arbitration_id=m.arbitration_id, is_extended_id=m.is_extended_id,
+                        data=m.data, timestamp=m.timestamp, channel=0) for m in messages]
+    write_log(path, mine + [resealed(m, 1, 5) for m in messages])
+
+
+def test_a_channel_of_a_log_is_read_alone(autosar, tmp_path):
+    messages = []
+    for k in range(20):
+        messages += [header_p2(k % 15, 1, stamp=0.05 * k),
+                     detection_p5(k % 15, 0, 10.0 + k, 0.0, 0.0, stamp=0.05 * k)]
+    log = tmp_path / "bench.blf"
+    two_channel_log(log, messages)
+    from rts_scenario.recheck import read_cycles
+
+    mapping = CanMapping.from_file(autosar)
+    cycles, stats = read_cycles(log, mapping, 0.05, channel="0")
+    assert [c.detections.cycle for c in cycles] == [k % 15 for k in range(20)]
+    assert all(c.detections.complete for c in cycles)
+    np.testing.assert_allclose([c.detections.range_m[0] for c in cycles],
+                               [10.0 + k for k in range(20)])
+    assert stats["other_channels"] == 40
+    assert (stats["duplicates"], stats["conflicts"], stats["reordered"]) == (0, 0, 0)
+    # Read whole, the sibling's cycles join the radar's.
+    _, mixed = read_cycles(log, mapping, 0.05)
+    assert mixed["conflicts"] + mixed["duplicates"] + mixed["reordered"] > 0
+
+
+@pytest.fixture
+def recorded(autosar, tmp_path, capsys):
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / "drive.blf"
+    assert cli.main(["run", str(scene), "--mapping", str(autosar), "--record", str(log)]) == 0
+    capsys.readouterr()
+    return scene, log
+
+
+def test_run_record_keeps_the_channel_it_listened_on(recorded):
+    import json
+
+    _, log = recorded
+    sidecar = json.loads(Path(f"{log}.rts.json").read_text())
+    assert sidecar["can_interface"] == "virtual"
+    assert sidecar["can_channel"].startswith("rts-scenario-")
+
+
+def test_check_of_a_log_with_the_radar_s_identifiers_on_two_channels(recorded, autosar,
+                                                                     tmp_path, capsys):
+    scene, log = recorded
+    messages = list(can.LogReader(str(log)))
+    n = len([m for m in messages if m.arbitration_id in (HEADER_ID, DETECTION_ID)])
+    bench = tmp_path / "bench.blf"  # another tool's log: no sidecar
+    two_channel_log(bench, messages)
+    code = cli.main(["check", str(scene), "--log", str(bench), "--mapping", str(autosar)])
+    out, err = capsys.readouterr()
+    assert code == 2 and "Traceback" not in err
+    (line,) = [x for x in err.splitlines() if "error: " in x]
+    assert line == (f"error: --log {bench}: holds the radar's messages (the identifiers of "
+                    f"mapping 'autosar-radar') on 2 channels: 0 ({n} messages), 1 ({n} "
+                    f"messages); which is the radar's is not guessed: give --log-channel CH "
+                    f"(the channel as python-can reads it from the log)"), line
+    code = cli.main(["check", str(scene), "--log", str(bench), "--mapping", str(autosar),
+                     "--log-channel", "0"])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    assert "other channels" in out  # the report's bus names the messages left out
+    code = cli.main(["check", str(scene), "--log", str(bench), "--mapping", str(autosar),
+                     "--log-channel", "can0"])
+    _, err = capsys.readouterr()
+    assert code == 2
+    assert (f"error: --log-channel can0: the log {bench} holds none of the radar's messages "
+            f"(the identifiers of mapping 'autosar-radar') on channel can0; its channels with "
+            f"them: 0 ({n} messages), 1 ({n} messages)") in err, err
+    code = cli.main(["check", str(scene), "--log", str(bench), "--log-channel", " "])
+    _, err = capsys.readouterr()
+    assert code == 2 and "error: --log-channel ' ': empty" in err, err
+
+
+def test_check_reads_the_channel_the_run_listened_on_where_the_sidecar_says_it(
+        recorded, tmp_path, capsys):
+    scene, log = recorded
+    bench = tmp_path / "bench.blf"
+    two_channel_log(bench, list(can.LogReader(str(log))))
+    Path(f"{bench}.rts.json").write_text(Path(f"{log}.rts.json").read_text())
+    code = cli.main(["check", str(scene), "--log", str(bench)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    assert "read channel 0, the one the run listened on" in out, out
