@@ -744,7 +744,7 @@ class DetectionReceiver(can.Listener):
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
             for name, value in raw.items()}
         counter = int(values[m.counter])
-        if not 0 <= counter < self._counter_modulus:
+        if m.counter_max is not None and not 0 <= counter <= m.counter_max:
             # A value the counter never takes (15 of an AUTOSAR counter wrapping after 14):
             # the message is invalid.
             self.stats.decode_errors += 1
