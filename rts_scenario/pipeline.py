@@ -340,9 +340,8 @@ class Pipeline:
 
     @property
     def counter_modulus(self) -> int:
-        """Where the radar's cycle counter wraps (from the header's counter signal)."""
-        m = self.receiver.mapping
-        return 1 << int(m.db.get_message_by_name(m.header).get_signal_by_name(m.counter).length)
+        """Where the radar's cycle counter wraps (the mapping's `CanMapping.counter_modulus`)."""
+        return self.receiver.mapping.counter_modulus
 
     # -- playing ---------------------------------------------------------------------------
 
@@ -804,7 +803,8 @@ class Pipeline:
                               send_lateness=playback.send_lateness(), clock=track,
                               first_cycle=scene_first, cycles=n_cycles,
                               origin_bus_s=self._scene_origin_s() if track.origin_s is None
-                              else track.origin_s, early_s=truths.early_s)
+                              else track.origin_s, early_s=truths.early_s,
+                              channel=self.channel)
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -1067,7 +1067,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       send_lateness: dict[str, Any] | None = None,
                       clock: ClockTrack | None = None, first_cycle: int = 0,
                       cycles: int | None = None, origin_bus_s: float | None = None,
-                      early_s: float = 0.0) -> Path:
+                      early_s: float = 0.0, channel: str | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -1085,7 +1085,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     ``origin_bus_s`` the scene's start on the bus's clock, where the run knew it: the log's
     first cycles are numbered from it by their bus times, as live (`Checker.anchor`);
     ``early_s`` how much earlier than the clock's times the cycles may have been measured
-    (`CycleTruth.early_s`: an interface's clock tied to the host's by deliveries).
+    (`CycleTruth.early_s`: an interface's clock tied to the host's by deliveries);
+    ``channel`` the CAN channel the run listened on (``options.can_channel`` by default), kept
+    with the interface so that a re-check of a log holding several channels reads the radar's.
     """
     import json
 
@@ -1108,6 +1110,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                   "counter_start": c.counter_start if counter_start is None
                   else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s,
                   "early_s": early_s},
+        "can_interface": options.can_interface,
+        "can_channel": channel if channel is not None else options.can_channel,
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         # The statuses the RTS played (a re-check judges by them) and their digest, and per

@@ -25,6 +25,7 @@ import hashlib
 import json
 import sys
 from array import array
+from collections import Counter
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -214,6 +215,9 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             },
         },
         "mapping": {"type": ["string", "null"]},
+        # The bus the run listened on (python-can's interface and channel).
+        "can_interface": {"type": ["string", "null"]},
+        "can_channel": {"type": ["string", "null"]},
         "can_fd": {"type": "boolean"},
         "method": {"type": ["string", "null"]},
         "output": {"type": ["string", "null"]},
@@ -342,30 +346,103 @@ def log_variant(scene: str | Path, log: str | Path,
                                                   f"one it records")
 
 
+def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | None],
+                 mapping: CanMapping, sidecar: dict[str, Any] | None,
+                 ) -> tuple[str | None, str | None]:
+    """Return the log's channel to read (None: all of it) and a note on the choice, if any.
+
+    ``channels``: per channel, the messages of the radar's identifiers the log holds. A
+    channel given (``--log-channel``) must hold some. Without one, a log that holds them on
+    one channel (or says of no message which channel it came on) is read whole; on several,
+    the channel the run listened on (its sidecar's ``can_channel``) where the log names one
+    so, else the log is refused: which one is the radar's is not guessed.
+
+    Raises
+    ------
+    LogError
+        Naming the log, its channels with the radar's messages and how many each holds.
+    """
+    held = {c: n for c, n in channels.items() if n}
+
+    def listing() -> str:
+        return ", ".join(f"{'(none)' if c is None else c} ({n} messages)"
+                         for c, n in sorted(held.items(), key=lambda cn: str(cn[0])))
+
+    what = f"the radar's messages (the identifiers of mapping {mapping.name!r})"
+    if channel is not None:
+        if channel not in held:
+            found = (f"its channels with them: {listing()}" if held
+                     else "it holds none on any channel")
+            raise LogError(f"--log-channel {channel}: the log {log} holds none of {what} on "
+                           f"channel {channel}; {found}")
+        return channel, None
+    if len(held) <= 1:
+        return None, None
+    recorded = (sidecar or {}).get("can_channel")
+    if recorded is not None:
+        # As the log names it: python-can's BLF and ASC writers number a channel by the
+        # digits its name ends in (can1: 1), else as the first (0, read back).
+        names = [str(recorded)]
+        if Path(log).suffix.lower() in (".blf", ".asc"):
+            number = can.util.channel2int(recorded)
+            names.append(str(0 if number is None else number))
+        match = next((name for name in names if name in held), None)
+        if match is not None:
+            return match, (f"the log holds {what} on {len(held)} channels ({listing()}): "
+                           f"read channel {match}, the one the run listened on ({recorded!r}, "
+                           f"its sidecar)")
+    heard = (f"; the run listened on channel {recorded} (its sidecar), which the log does not "
+             f"name" if recorded is not None else "")
+    raise LogError(f"--log {log}: holds {what} on {len(held)} channels: {listing()}{heard}; "
+                   f"which is the radar's is not guessed: give --log-channel CH (the channel "
+                   f"as python-can reads it from the log)")
+
+
+def _counter_words(mapping: CanMapping) -> str:
+    """Name the radar's counter by its width, or where it wraps when that is below it."""
+    if mapping.counter_max is not None:
+        return f"counter (wrapping after {mapping.counter_max})"
+    return f"{mapping.counter_modulus.bit_length() - 1}-bit counter"
+
+
 def _variant_text(variant: str) -> str:
     return f"variant {variant!r}" if variant else "the scene without parametrize"
 
 
 def read_cycles(log: str | Path, mapping: CanMapping | None, cycle_s: float | None = None,
-                ) -> tuple[list[_LoggedCycle], dict[str, int]]:
+                *, channel: str | None = None) -> tuple[list[_LoggedCycle], dict[str, int]]:
     """Decode a log's radar cycles, each with the bus time of its header message.
 
     ``cycle_s``: the radar's cycle, so that a counter repeated after a long silence is told
-    from a copy (`DetectionReceiver`).
+    from a copy (`DetectionReceiver`). ``channel``: read only the messages of this channel
+    (python-can's ``Message.channel`` as text), None: every message.
     """
     stats: dict[str, int] = {}
-    return list(_iter_cycles(log, mapping, stats, cycle_s)), stats
+    return list(_iter_cycles(log, mapping, stats, cycle_s, channel=channel)), stats
+
+
+def channel_label(channel: Any) -> str | None:
+    """Return a message's channel as ``--log-channel`` names it (python-can's, as text)."""
+    return None if channel is None else str(channel)
 
 
 def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, int],
-                 cycle_s: float | None = None) -> Iterator[_LoggedCycle]:
-    """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end."""
+                 cycle_s: float | None = None, *, channel: str | None = None,
+                 channels: Counter[str | None] | None = None) -> Iterator[_LoggedCycle]:
+    """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end.
+
+    ``channel``: read only its messages (the others count as ``other_channels``).
+    ``channels`` gets, per channel, how many messages of the radar's identifiers it holds.
+    """
     check_log_file(log)
     path = Path(log)
     receiver = DetectionReceiver(mapping, cycle_s)
     m = receiver.mapping
     header = m.db.get_message_by_name(m.header)
     header_id = (header.frame_id, bool(header.is_extended_frame))
+    radar_ids = {(message.frame_id, bool(message.is_extended_frame))
+                 for message in (header, *(message for fd in (False, True)
+                                           for message, _ in m.parts(fd)))}
 
     def take(cycles: list[Detections]) -> Iterator[_LoggedCycle]:
         for cycle in cycles:  # one per radar cycle, with the time of its own header
@@ -373,8 +450,16 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
             yield _LoggedCycle(cycle, float("nan") if t is None else t)
 
     started = False
-    skipped = 0
+    skipped = other = 0
     for msg in _messages(path):  # one per logged message
+        if channels is not None or channel is not None:
+            label = channel_label(msg.channel)
+            if channels is not None and not (msg.is_error_frame or msg.is_remote_frame) and (
+                    msg.arbitration_id, msg.is_extended_id) in radar_ids:
+                channels[label] += 1
+            if channel is not None and label != channel:
+                other += 1  # another bus's
+                continue
         if not started:
             if (msg.is_error_frame or msg.is_remote_frame
                     or (msg.arbitration_id, msg.is_extended_id) != header_id):
@@ -390,6 +475,7 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
     # header of is not a silent bus).
     stats["messages"] += skipped
     stats["before_first_cycle"] = skipped
+    stats["other_channels"] = other
 
 
 @dataclass(frozen=True)
@@ -403,29 +489,34 @@ class _LogIndex:
     bus_t_s: FloatArray
     counts: IntArray  # detections per cycle
     bus: dict[str, int]
+    # Per channel of the log, the messages of the radar's identifiers it holds.
+    channels: Counter[str | None] = field(default_factory=Counter)
 
     @classmethod
     def scan(cls, log: str | Path, mapping: CanMapping | None,
-             cycle_s: float | None = None) -> _LogIndex:
+             cycle_s: float | None = None, *, channel: str | None = None) -> _LogIndex:
         stats: dict[str, int] = {}
+        channels: Counter[str | None] = Counter()
         counters, times, counts = array("q"), array("d"), array("l")
-        for c in _iter_cycles(log, mapping, stats, cycle_s):  # one per radar cycle
+        for c in _iter_cycles(log, mapping, stats, cycle_s, channel=channel,
+                              channels=channels):  # one per radar cycle
             counters.append(c.detections.cycle)
             times.append(c.bus_t_s)
             counts.append(c.detections.count)
         return cls(np.frombuffer(counters, dtype=np.int64).copy(),
                    np.frombuffer(times, dtype=np.float64).copy(),
-                   np.asarray(counts, dtype=np.int64), stats)
+                   np.asarray(counts, dtype=np.int64), stats, channels)
 
     def __len__(self) -> int:
         return int(self.counters.size)
 
 
 def _cycles_at(log: str | Path, mapping: CanMapping | None, positions: IntArray,
-               cycle_s: float | None = None) -> list[Detections]:
+               cycle_s: float | None = None, *, channel: str | None = None) -> list[Detections]:
     """Read the log again for the cycles at ``positions`` (increasing)."""
     want = set(positions.tolist())
-    return [c.detections for i, c in enumerate(_iter_cycles(log, mapping, {}, cycle_s))
+    return [c.detections for i, c in enumerate(_iter_cycles(log, mapping, {}, cycle_s,
+                                                            channel=channel))
             if i in want]
 
 
@@ -433,9 +524,10 @@ class _ReadAhead:
     """Cycles of a log by their position, read once, in order, as far as asked."""
 
     def __init__(self, log: str | Path, mapping: CanMapping | None,
-                 kept: NDArray[np.bool_], cycle_s: float | None = None) -> None:
+                 kept: NDArray[np.bool_], cycle_s: float | None = None, *,
+                 channel: str | None = None) -> None:
         self._log = log
-        self._cycles = enumerate(_iter_cycles(log, mapping, {}, cycle_s))
+        self._cycles = enumerate(_iter_cycles(log, mapping, {}, cycle_s, channel=channel))
         self._kept = kept  # positions ever asked for: the others are not held
         self._held: dict[int, Detections] = {}
         self._read = -1
@@ -705,7 +797,7 @@ def _offset_uncertainty(table: _TruthTable, det: _Detected, t_log: FloatArray,
 
 def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
               time_offset_s: float | None = None, method: str | None = None,
-              batch_frames: int | None = None) -> RecheckResult:
+              batch_frames: int | None = None, channel: str | None = None) -> RecheckResult:
     """Check a recorded log's detections against ``scene``.
 
     Parameters
@@ -721,6 +813,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     method : str, optional
         Solver method of the played schedule (default: the sidecar's, else ``exact``); not
         used where the sidecar keeps the statuses the RTS played.
+    channel : str, optional
+        The log's channel the radar's messages are on (``--log-channel``; python-can's
+        ``Message.channel`` as text). Without it, a log holding the radar's identifiers on
+        one channel is read whole; on several, the sidecar's ``can_channel`` where the log
+        names it so, else it is refused (`pick_channel`).
     """
     sidecar = read_sidecar(log)
     recorded_mapping = (sidecar or {}).get("mapping")
@@ -736,11 +833,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                      and method != sidecar.get("method"))
     method = method or (sidecar or {}).get("method") or "exact"
     # The profile's cycle: a radar silent for half its counter's range is told by its bus time.
-    index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s)
-    bus = index.bus
+    index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s, channel=channel)
     receiver_mapping = (can_mapping or CanMapping.builtin())
-    header = receiver_mapping.db.get_message_by_name(receiver_mapping.header)
-    modulus = 1 << int(header.get_signal_by_name(receiver_mapping.counter).length)
+    picked, channel_note = pick_channel(log, channel, index.channels, receiver_mapping, sidecar)
+    if picked != channel:  # the sidecar's: read again, that channel alone
+        channel = picked
+        index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s,
+                               channel=channel)
+    bus = index.bus
+    modulus = receiver_mapping.counter_modulus
     profile_clock = scene.radar.radar_clock
     counters = index.counters
     numbers = sequential_numbers(counters, modulus, index.bus_t_s, profile_clock.cycle_s)
@@ -749,7 +850,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if c["counter_start"] is not None and not c["counter_start"] < modulus:
             raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.counter_start: "
                            f"{c['counter_start']}, beyond what the radar's "
-                           f"{modulus.bit_length() - 1}-bit counter counts (allowed: 0 to "
+                           f"{_counter_words(receiver_mapping)} counts (allowed: 0 to "
                            f"{modulus - 1}, or null); not what `rts-scenario run --record` "
                            f"writes for this mapping")
         try:
@@ -802,7 +903,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         _check_timestamps(log, bus_t, profile_clock.cycle_s, numbers)
         # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
         chosen = _alignment_cycles(index)
-        dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s)
+        dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s, channel=channel)
         # Detections of targets are what the data align by: an empty bench has none to match.
         aligned_by_data = bool(scene.targets) and any(d.count for d in dets)
         if time_offset_s is None and not scene.targets:
@@ -858,8 +959,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                               profile_clock.cycle_s)
         alignment.cycle_s = clock.cycle_s
     alignment.cycles_in_log = len(index)
+    if channel_note:
+        alignment.notes.append(channel_note)
     result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
-                    batch_frames, bus, alignment, sidecar)
+                    batch_frames, bus, alignment, sidecar, channel)
     if other_mapping:
         spoken = recorded_mapping or "rts-scenario's messages"
         alignment.notes.append(f"--mapping {mapping} is not the one the run spoke ({spoken}, "
@@ -998,7 +1101,8 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
 def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counters: IntArray,
            bus_t_s: FloatArray, clock: RadarClock,
            modulus: int, method: str, batch_frames: int | None, bus: dict[str, int],
-           alignment: Alignment, sidecar: dict[str, Any] | None) -> Report:
+           alignment: Alignment, sidecar: dict[str, Any] | None,
+           channel: str | None = None) -> Report:
     """Check the log's cycles (``counters`` in log order, their bus times) batch by batch."""
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
@@ -1030,7 +1134,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
-    logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s)
+    logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s, channel=channel)
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]

@@ -16,7 +16,6 @@ import itertools
 import operator
 import threading
 import time
-import zlib
 from collections import Counter, OrderedDict, deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -29,7 +28,8 @@ from cantools.database.utils import create_encode_decode_formats
 
 from ..detections import GAP_TOLERANCE_CYCLES, Detections
 from ..errors import BusError, OutputError
-from .mapping import CanMapping, PartKey, checksum_byte, multiplexer, page_signals
+from .checksums import Seal, Verify, checksum_of
+from .mapping import CanMapping, Checksum, PartKey, multiplexer, page_signals
 
 DEFAULT_INTERFACE = "virtual"
 DEFAULT_CHANNEL = "rts-scenario"
@@ -76,27 +76,10 @@ class ListenerBus(can.BusABC):
         return None, False  # what is sent goes to the listeners, never to a queue
 
 
-def _checksum(data: bytes | bytearray, position: int) -> int:
-    """Low 8 bits of the CRC-32 of the payload without its checksum byte."""
-    crc = zlib.crc32(data[:position])
-    if position + 1 < len(data):  # (most often the checksum is the last byte)
-        crc = zlib.crc32(data[position + 1 :], crc)
-    return crc & 0xFF
-
-
 def _limits(sig: cantools.database.can.Signal) -> tuple[float, float]:
     """Return a signal's physical range as the DBC states it (ours states every one)."""
     assert sig.minimum is not None and sig.maximum is not None
     return float(sig.minimum), float(sig.maximum)
-
-
-def _checksum_position(message: cantools.database.can.Message, name: str | None) -> int | None:
-    """Return the byte of a message's checksum signal, None if the message has none."""
-    if name is None or name not in {sg.name for sg in message.signals}:
-        return None
-    pos = checksum_byte(message, name)
-    assert pos is not None  # the mapping checked it
-    return pos
 
 
 class DetectionPublisher:
@@ -218,7 +201,10 @@ class DetectionPublisher:
         # Raw values per part, converted at once, and packed; then each cycle's header and
         # parts in order.
         detection_cycle = cycle_of[send]
+        # The low part of the header's counter (a counter wrapping below its width wraps
+        # first: its low bits are those of the counter on the bus).
         low_counter = (np.array([f.cycle for f in frames], dtype=np.int64)
+                       % layout.counter_modulus
                        % layout.frame_counter_modulus)[detection_cycle].astype(np.float64)
         frame_counter = m.frame_counter if m.frame_counter in layout.signals else None
         parts = []
@@ -256,7 +242,8 @@ class _Codec:
     """
 
     def __init__(self, message: cantools.database.can.Message, page: int | None,
-                 checksum: str | None, mapped: set[str] | frozenset[str] = frozenset()) -> None:
+                 checksum: Checksum | None,
+                 mapped: set[str] | frozenset[str] = frozenset()) -> None:
         self.message = message
         self.signals = page_signals(message, page)
         self.signal_list = list(self.signals.values())
@@ -268,7 +255,8 @@ class _Codec:
         self.frame_id = message.frame_id
         self.extended = message.is_extended_frame
         self.is_fd = bool(message.is_fd or message.length > 8)
-        self.checksum = _checksum_position(message, checksum)
+        sealed = checksum_of(message, checksum)
+        self.seal: Seal | None = sealed[0] if sealed is not None else None
         # The mapped signals this part carries, and a value for every other one: the
         # multiplexer's page, else 0 or the signal's nearest end.
         self.carried = tuple(sorted(set(self.signals) & set(mapped)))
@@ -312,9 +300,8 @@ class _Codec:
             packed = (int.from_bytes(formats.big_endian.pack(raw), "big")
                       | int.from_bytes(formats.little_endian.pack(raw), "little"))
             data = bytearray(packed.to_bytes(self.length, "big"))
-        position = self.checksum
-        if position is not None:
-            data[position] = _checksum(data, position)
+        if self.seal is not None:
+            self.seal(data)
         return data
 
     def encode_rows(self, columns: dict[str, list[int] | list[float]],
@@ -376,7 +363,7 @@ class _MappedLayout:
         self.header = db.get_message_by_name(m.header)
         self.parts = m.parts(fd)
         self.signals = {sg.name: sg for message, _ in self.parts for sg in message.signals}
-        self.counter_modulus = 1 << self.header.get_signal_by_name(m.counter).length
+        self.counter_modulus = m.counter_modulus
         self.frame_counter_modulus = (1 << self.signals[m.frame_counter].length
                                       if m.frame_counter in self.signals else 1)
         index_top = int(_range_of(self.signals[m.index])[1]) + 1
@@ -384,7 +371,7 @@ class _MappedLayout:
         self.capacity, self.capacity_signal = min((index_top, m.index),
                                                   (count_top, "+".join(m.count)))
         mapped = {f.signal for f in m.fields.values()}
-        self.header_codec = _Codec(self.header, None, m.header_checksum)
+        self.header_codec = _Codec(self.header, None, m.header_checksum_spec)
         self.count_tops = [int(_range_of(self.header.get_signal_by_name(c))[1]) for c in m.count]
         self.timestamp_range = (_range_of(self.header.get_signal_by_name(m.timestamp))
                                 if m.timestamp is not None else (0.0, 0.0))
@@ -395,7 +382,7 @@ class _MappedLayout:
         self.low, self.high = ranges[:, 0], ranges[:, 1]
         saturating = {m.fields[q].signal for q in ("rcs_dbsm", "snr_db") if q in m.fields}
         self.saturates = np.array([name in saturating for name in self.names], dtype=bool)
-        self.part_codecs = [_Codec(message, page, m.checksum, mapped | {m.index})
+        self.part_codecs = [_Codec(message, page, m.checksum_spec, mapped | {m.index})
                             for message, page in self.parts]
 
     def signal_matrix(self, frames: Sequence[Detections], n: int) -> np.ndarray:
@@ -547,10 +534,10 @@ def _same(known: dict[str, float], values: dict[str, float]) -> bool:
     return True
 
 
-# How the receiver takes a message of one identifier: the message, its checksum byte and
+# How the receiver takes a message of one identifier: the message, its checksum's check and
 # multiplexer signal (if any), its compiled decoder (None if multiplexed) and its part (the page
 # is the multiplexer's value, if any).
-_Route = tuple[cantools.database.can.Message, int | None, str | None,
+_Route = tuple[cantools.database.can.Message, Verify | None, str | None,
                Callable[[bytes | bytearray], dict[str, int | float]] | None, PartKey]
 
 # Cycles kept open for late or reordered parts; older incomplete ones are handed on as such.
@@ -590,11 +577,16 @@ class DetectionReceiver(can.Listener):
         # A detection is whole with every classic part it needs, or its CAN FD message.
         self._needed = tuple({m.needed_parts(False), m.needed_parts(True)})
         self._read = frozenset().union(*self._needed)
-        # Per identifier: the message, its checksum byte and multiplexer signal (if any).
-        layouts = {i: (message, _checksum_position(message, m.checksum), multiplexer(message))
+        # Per identifier: the message, its checksum's check and multiplexer signal (if any).
+        def verify(message: cantools.database.can.Message,
+                   spec: Checksum | None) -> Verify | None:
+            sealed = checksum_of(message, spec)
+            return sealed[1] if sealed is not None else None
+
+        layouts = {i: (message, verify(message, m.checksum_spec), multiplexer(message))
                    for i, message in self._detection_ids.items()}
         layouts[self._header.frame_id] = (
-            self._header, _checksum_position(self._header, m.header_checksum), None)
+            self._header, verify(self._header, m.header_checksum_spec), None)
         # Messages without a multiplexer decode through their compiled codec directly (and are
         # one part: (identifier, None)); cantools picks a multiplexed one's page.
         # Keyed as the DBC numbers them: a 29-bit identifier with bit 31 set.
@@ -643,7 +635,7 @@ class DetectionReceiver(can.Listener):
                                              if part in need or not need))
                        for part in self._read}
         self.stats = BusStats()
-        self._counter_modulus = 1 << self._header.get_signal_by_name(m.counter).length
+        self._counter_modulus = m.counter_modulus
         detection = {sg.name: sg for n in m.messages for sg in db.get_message_by_name(n).signals}
         # Detection messages carry the low bits of the cycle counter (if any).
         self._low_modulus = (1 << detection[m.frame_counter].length
@@ -725,8 +717,7 @@ class DetectionReceiver(can.Listener):
             return
         message, checksum, mux, decode, part = known
         data = msg.data
-        if checksum is not None and (
-                len(data) <= checksum or data[checksum] != _checksum(data, checksum)):
+        if checksum is not None and not checksum(data):
             stats.checksum_errors += 1
             return
         try:
@@ -753,6 +744,11 @@ class DetectionReceiver(can.Listener):
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
             for name, value in raw.items()}
         counter = int(values[m.counter])
+        if m.counter_max is not None and not 0 <= counter <= m.counter_max:
+            # A value the counter never takes (15 of an AUTOSAR counter wrapping after 14):
+            # the message is invalid.
+            self.stats.decode_errors += 1
+            return
         if bus_t_s is not None:
             if self.cycle_s is not None and bus_t_s - self._last_header_t > (
                     self._counter_modulus // 2 - GAP_TOLERANCE_CYCLES) * self.cycle_s:

@@ -43,6 +43,34 @@ _SIGNAL: dict[str, Any] = {
     ]
 }
 
+# Checksum schemes: rts-scenario's own (the low byte of the CRC-32 of the other bytes, the
+# default), CRC-8 SAE J1850 of the other bytes, AUTOSAR E2E profiles 2 and 5 (with a data ID).
+CHECKSUM_SCHEMES = ("crc32-low-byte", "crc8-sae-j1850", "autosar-e2e-p2", "autosar-e2e-p5")
+DEFAULT_CHECKSUM_SCHEME = "crc32-low-byte"
+# The data ID a scheme takes: its largest value, and whether a list of 16 (one per value of the
+# counter in byte 1's low nibble, profile 2's DataIDList) is allowed.
+_DATA_ID = {"autosar-e2e-p2": (0xFF, True), "autosar-e2e-p5": (0xFFFF, False)}
+
+_DATA_ID_VALUE: dict[str, Any] = {
+    "oneOf": [
+        {"type": "integer", "minimum": 0, "maximum": 0xFFFF},
+        {"type": "array", "minItems": 16, "maxItems": 16,
+         "items": {"type": "integer", "minimum": 0, "maximum": 0xFF}},
+    ]
+}
+
+_CHECKSUM: dict[str, Any] = {
+    "oneOf": [
+        {"type": "string"},
+        {"type": "object", "additionalProperties": False, "required": ["signal"],
+         "properties": {"signal": {"type": "string"}, "scheme": {"enum": list(CHECKSUM_SCHEMES)},
+                        "data_id": {"oneOf": [
+                            *_DATA_ID_VALUE["oneOf"],
+                            {"type": "object", "minProperties": 1,
+                             "additionalProperties": _DATA_ID_VALUE}]}}},
+    ]
+}
+
 MAPPING_SCHEMA: dict[str, Any] = {
     "type": "object",
     "additionalProperties": False,
@@ -57,8 +85,10 @@ MAPPING_SCHEMA: dict[str, Any] = {
             "required": ["message", "counter", "count"],
             "properties": {
                 "message": {"type": "string"}, "counter": {"type": "string"},
+                "counter_max": {"oneOf": [{"type": "integer", "minimum": 1},
+                                          {"const": "dbc"}]},
                 "count": {"type": "array", "minItems": 1, "items": {"type": "string"}},
-                "timestamp": {"type": "string"}, "checksum": {"type": "string"},
+                "timestamp": {"type": "string"}, "checksum": _CHECKSUM,
             },
         },
         "detection": {
@@ -70,7 +100,7 @@ MAPPING_SCHEMA: dict[str, Any] = {
                 "fd_message": {"type": "string"},
                 "frame_counter": {"type": "string"},
                 "index": {"type": "string"},
-                "checksum": {"type": "string"},
+                "checksum": _CHECKSUM,
                 "form": {"enum": ["polar", "cartesian"]},
                 **{q: _SIGNAL for q in QUANTITIES},
             },
@@ -163,6 +193,69 @@ def checksum_byte(message: Message, name: str) -> int | None:
     return int(sig.start // 8)
 
 
+def checksum_bytes(message: Message, checksum: Checksum) -> tuple[int, int] | None:
+    """Return the bytes (first, how many) a checksum signal fills in its scheme, else None.
+
+    rts-scenario's scheme and CRC-8 SAE J1850 fill one whole byte anywhere (`checksum_byte`);
+    AUTOSAR E2E profile 2 fills byte 0, profile 5 bytes 0 and 1 (a 16-bit Intel signal from
+    bit 0, low byte first), as the profiles place them.
+    """
+    if checksum.scheme == "autosar-e2e-p5":
+        sig = message.get_signal_by_name(checksum.signal)
+        whole = (sig.length == 16 and sig.start == 0 and sig.byte_order == "little_endian"
+                 and not sig.is_signed and not sig.multiplexer_ids)
+        return (0, 2) if whole else None
+    position = checksum_byte(message, checksum.signal)
+    if position is None or (checksum.scheme == "autosar-e2e-p2" and position != 0):
+        return None
+    return position, 1
+
+
+_PLACEMENT = {
+    "crc32-low-byte": "8 unsigned bits from a byte's bit 0 Intel or bit 7 Motorola",
+    "crc8-sae-j1850": "8 unsigned bits from a byte's bit 0 Intel or bit 7 Motorola",
+    "autosar-e2e-p2": "byte 0: 8 unsigned bits from bit 0 Intel or bit 7 Motorola",
+    "autosar-e2e-p5": "bytes 0 and 1: 16 unsigned bits from bit 0 Intel",
+}
+# Shortest message a scheme protects (cantools' E2E functions need these lengths).
+_MIN_LENGTH = {"autosar-e2e-p2": 2, "autosar-e2e-p5": 4}
+
+
+@dataclass(frozen=True)
+class Checksum:
+    """A checksum signal and how its value is computed (``scheme``, ``data_id``).
+
+    ``data_id``: the AUTOSAR E2E data ID, one for every message, or per message name; for
+    profile 2 also a list of 16 (the DataIDList, picked by the counter in byte 1's low nibble).
+    """
+
+    signal: str
+    scheme: str = DEFAULT_CHECKSUM_SCHEME
+    data_id: int | tuple[int, ...] | dict[str, int | tuple[int, ...]] | None = None
+
+    @classmethod
+    def parse(cls, value: str | dict[str, Any] | None) -> Checksum | None:
+        """Read a mapping's ``checksum`` entry: a signal, or ``{signal, scheme, data_id}``."""
+        if value is None:
+            return None
+        if isinstance(value, str):
+            return cls(value)
+
+        def frozen(v: Any) -> int | tuple[int, ...]:
+            return tuple(v) if isinstance(v, list) else int(v)
+
+        data_id = value.get("data_id")
+        return cls(value["signal"], value.get("scheme", DEFAULT_CHECKSUM_SCHEME),
+                   None if data_id is None else {k: frozen(v) for k, v in data_id.items()}
+                   if isinstance(data_id, dict) else frozen(data_id))
+
+    def data_id_of(self, message: str) -> int | tuple[int, ...] | None:
+        """Return the data ID of one message."""
+        if isinstance(self.data_id, dict):
+            return self.data_id.get(message)
+        return self.data_id
+
+
 @dataclass(frozen=True)
 class Field:
     """A quantity read from a signal: ``value * scale + offset``."""
@@ -190,6 +283,21 @@ class CanMapping:
     checksum: str | None
     form: str
     fields: dict[str, Field]
+    header_checksum_spec: Checksum | None = None
+    checksum_spec: Checksum | None = None
+    counter_max: int | None = None  # the counter's last value before 0 (None: its width's)
+
+    @property
+    def counter_modulus(self) -> int:
+        """How many values the header's counter takes before it comes back to 0.
+
+        ``counter_max + 1`` where the mapping says where it wraps (an AUTOSAR alive counter
+        runs 0..14 in 4 bits), else the counter signal's width (an 8-bit counter: 256).
+        """
+        if self.counter_max is not None:
+            return self.counter_max + 1
+        return 1 << int(self.db.get_message_by_name(self.header)
+                        .get_signal_by_name(self.counter).length)
 
     @property
     def quantities(self) -> set[str]:
@@ -260,15 +368,43 @@ class CanMapping:
         fields = {q: Field(v) if isinstance(v, str) else Field(v["signal"], v.get("scale", 1.0),
                                                                v.get("offset", 0.0))
                   for q, v in det.items() if q in QUANTITIES}
+        head_checksum, det_checksum = (Checksum.parse(head.get("checksum")),
+                                       Checksum.parse(det.get("checksum")))
         mapping = cls(
             name=d["name"], db=db, header=head["message"], counter=head["counter"],
             count=tuple(head["count"]), timestamp=head.get("timestamp"),
-            header_checksum=head.get("checksum"), messages=tuple(det["messages"]),
+            header_checksum=head_checksum.signal if head_checksum else None,
+            messages=tuple(det["messages"]),
             fd_message=det.get("fd_message"), frame_counter=det.get("frame_counter"),
-            index=det["index"], checksum=det.get("checksum"), form=det["form"], fields=fields,
+            index=det["index"], checksum=det_checksum.signal if det_checksum else None,
+            form=det["form"], fields=fields, header_checksum_spec=head_checksum,
+            checksum_spec=det_checksum,
         )
         mapping._check(doc)
+        if "counter_max" in head:
+            object.__setattr__(mapping, "counter_max", mapping._counter_max(doc))
         return mapping
+
+    def _counter_max(self, doc: Document) -> int:
+        """Return the header's ``counter_max``: given, or the DBC's maximum of the counter."""
+        key = ("header", "counter_max")
+        value = doc.data["header"]["counter_max"]
+        sig = self.db.get_message_by_name(self.header).get_signal_by_name(self.counter)
+        raw_top = (1 << (sig.length - (1 if sig.is_signed else 0))) - 1
+        top = int(math.floor(raw_top * sig.scale + sig.offset + 1e-9))
+        if value == "dbc":
+            maximum = sig.maximum
+            if maximum is None or float(maximum) != int(maximum) or not 1 <= maximum <= top:
+                raise doc.error(key, f"dbc: the DBC states no whole maximum from 1 to {top} "
+                                     f"for signal {self.counter!r} of message "
+                                     f"{self.header!r} (got {maximum}); give the counter's "
+                                     f"last value as a number instead")
+            return int(maximum)
+        if not 1 <= value <= top:
+            raise doc.error(key, f"got {value}: the {sig.length}-bit signal {self.counter!r} "
+                                 f"counts to {top} at most; allowed: 1 to {top}, or dbc (the "
+                                 f"DBC's maximum)")
+        return int(value)
 
     def _check(self, doc: Document) -> None:
         """Every named message and signal exists in the DBC; the form has what it needs."""
@@ -304,18 +440,14 @@ class CanMapping:
                 raise doc.error(("detection", "index"),
                                 f"signal {self.index!r} is not in message {m!r}; signals: "
                                 f"{', '.join(sorted(have))}")
-        for key, message_names, checksum in (
-                (("header", "checksum"), [self.header], self.header_checksum),
-                (("detection", "checksum"), carriers, self.checksum)):
-            for m in message_names:
-                if checksum in {s.name for s in names[m].signals} and \
-                        checksum_byte(names[m], checksum) is None:
-                    sig = names[m].get_signal_by_name(checksum)
-                    raise doc.error(key, f"signal {checksum!r} of message {m!r} must fill one "
-                                         f"whole byte to be a checksum (8 unsigned bits from a "
-                                         f"byte's bit 0 Intel or bit 7 Motorola, in every "
-                                         f"page), got {sig.length} bits from bit {sig.start} "
-                                         f"{sig.byte_order.replace('_', '-')}")
+        for key, message_names, spec in (
+                (("header", "checksum"), [self.header], self.header_checksum_spec),
+                (("detection", "checksum"), carriers, self.checksum_spec)):
+            if spec is not None:
+                self._check_checksum(doc, key, [names[m] for m in message_names
+                                                if spec.signal in {s.name
+                                                                   for s in names[m].signals}],
+                                     spec)
         for fd in (False, True):
             for message, page in self.parts(fd):
                 if (message.frame_id, page) in self.needed_parts(fd) and \
@@ -348,6 +480,56 @@ class CanMapping:
                                             f"has factor 0: every raw value reads "
                                             f"{sig.offset:g}, so it carries nothing and cannot "
                                             f"be written; give it a factor other than 0")
+
+    def _check_checksum(self, doc: Document, key: tuple[str, ...], carrying: list[Message],
+                        spec: Checksum) -> None:
+        """Refuse a checksum signal not where its scheme puts it, or a data ID amiss."""
+        scheme = spec.scheme
+        for message in carrying:
+            if checksum_bytes(message, spec) is None:
+                sig = message.get_signal_by_name(spec.signal)
+                what = "its bytes" if scheme.startswith("autosar") else "one whole byte"
+                raise doc.error(key, f"signal {spec.signal!r} of message {message.name!r} must "
+                                     f"fill {what} to be a checksum of scheme {scheme} "
+                                     f"({_PLACEMENT[scheme]}, in every page), got "
+                                     f"{sig.length} bits from bit {sig.start} "
+                                     f"{sig.byte_order.replace('_', '-')}")
+            if message.length < _MIN_LENGTH.get(scheme, 1):
+                raise doc.error(key, f"message {message.name!r} has {message.length} bytes; a "
+                                     f"checksum of scheme {scheme} protects {_MIN_LENGTH[scheme]} "
+                                     f"bytes or more")
+        if scheme not in _DATA_ID:
+            if spec.data_id is not None:
+                raise doc.error((*key, "data_id"), f"scheme {scheme} takes no data ID; "
+                                                   f"data_id is for autosar-e2e-p2 and "
+                                                   f"autosar-e2e-p5")
+            return
+        top, listed = _DATA_ID[scheme]
+        if spec.data_id is None:
+            raise doc.error(key, f"scheme {scheme} needs data_id (the data ID of the "
+                                 f"messages, 0 to {top}"
+                                 f"{', or a list of 16' if listed else ''}; or one per message "
+                                 f"name)")
+        if isinstance(spec.data_id, dict):
+            carried = [m.name for m in carrying]
+            for name in spec.data_id:
+                if name not in carried:
+                    raise doc.error((*key, "data_id", name),
+                                    f"message {name!r} carries no checksum {spec.signal!r}; "
+                                    f"messages: {', '.join(carried)}")
+            for name in carried:
+                if name not in spec.data_id:
+                    raise doc.error((*key, "data_id"),
+                                    f"no data ID for message {name!r}; give one for each of "
+                                    f"{', '.join(carried)}")
+        for name in [m.name for m in carrying]:
+            value = spec.data_id_of(name)
+            where = (*key, "data_id", *((name,) if isinstance(spec.data_id, dict) else ()))
+            if isinstance(value, tuple) and not listed:
+                raise doc.error(where, f"scheme {scheme} takes one data ID (0 to {top}), not "
+                                       f"a list (a list of 16 is profile 2's)")
+            if isinstance(value, int) and value > top:
+                raise doc.error(where, f"got {value}: a data ID of scheme {scheme} is 0 to {top}")
 
     def _check_units(self, doc: Document) -> None:
         """Refuse a quantity read from a signal the DBC gives in another unit, unconverted.

@@ -22,11 +22,15 @@ def _do_check(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..canbus.mapping import CanMapping
+    from ..errors import RtsError
     from ..recheck import check_log, check_log_file, log_variant
     from ..scenario import load_scenario
 
     if args.mapping:
         named_file("--mapping", CanMapping.from_file, args.mapping)
+    if args.log_channel is not None and not args.log_channel.strip():
+        raise RtsError(f"--log-channel {args.log_channel!r}: empty; give the channel of the "
+                       f"radar's messages as python-can reads it from the log (e.g. 0)")
     if args.time_offset_s is not None:
         check_number("--time-offset-s", args.time_offset_s)
     check_distinct_paths([("--json", args.json)],
@@ -42,7 +46,7 @@ def _do_check(args: argparse.Namespace) -> int:
     if variant:
         print(f"variant {scene.label}" + ("" if args.variant else " (from the log's sidecar)"))
     result = check_log(scene, args.log, mapping=args.mapping, time_offset_s=args.time_offset_s,
-                       method=args.method)
+                       method=args.method, channel=args.log_channel)
     report = result.report
     print(f"log {args.log}: {result.alignment.describe()}")
     for note in result.alignment.notes:
@@ -75,6 +79,11 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--mapping", default=None,
                         help="*.mapping.yaml of the radar's DBC (default: the sidecar's, else "
                              "rts-scenario's messages)")
+    parser.add_argument("--log-channel", default=None, metavar="CH",
+                        help="read only the log's messages of this channel (as python-can reads "
+                             "it from the log, e.g. 0 for a BLF's or ASC's first); default: the "
+                             "one channel holding the radar's messages (several: the sidecar's, "
+                             "else refused, listing them)")
     parser.add_argument("--time-offset-s", type=float, default=None, metavar="S",
                         help="log time of the scene's time 0 (default: estimated from the data)")
     parser.add_argument("--method", default=None, choices=METHODS,

@@ -1,0 +1,462 @@
+"""A production radar's protocol on a real bench: AUTOSAR E2E and SAE J1850 checksums, an alive
+counter that wraps below its bit width (0..14 in 4 bits), and logs holding several CAN channels.
+
+Every CRC here is computed by a bitwise reference written from the polynomials (and proven on
+the standard check values of "123456789"), every message packed by hand from its bit layout.
+"""
+
+import re
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+import rts_scenario.cli as cli
+from rts_scenario.canbus import DetectionPublisher, DetectionReceiver
+from rts_scenario.canbus.mapping import CanMapping
+from rts_scenario.detections import Detections
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def crc_bitwise(data, poly, init, xorout, width):
+    """A non-reflected CRC, bit by bit, as the polynomial defines it."""
+    crc, top, mask = init, 1 << (width - 1), (1 << width) - 1
+    for byte in data:
+        crc ^= byte << (width - 8)
+        for _ in range(8):
+            crc = ((crc << 1) ^ poly) & mask if crc & top else (crc << 1) & mask
+    return crc ^ xorout
+
+
+def crc8_j1850(data):
+    return crc_bitwise(data, 0x1D, 0xFF, 0xFF, 8)
+
+
+def crc8_h2f(data):  # AUTOSAR CRC-8 (E2E profile 2)
+    return crc_bitwise(data, 0x2F, 0xFF, 0xFF, 8)
+
+
+def crc16_ccitt(data):  # CRC-16/CCITT-FALSE (E2E profile 5)
+    return crc_bitwise(data, 0x1021, 0xFFFF, 0x0000, 16)
+
+
+def test_the_reference_crcs_give_the_standard_check_values():
+    assert crc8_j1850(b"123456789") == 0x4B
+    assert crc8_h2f(b"123456789") == 0xDF
+    assert crc16_ccitt(b"123456789") == 0x29B1
+
+
+# A radar in the AUTOSAR style: the header protected by E2E profile 2 (CRC in byte 0, the alive
+# counter 0..14 in byte 1's low nibble, a DataIDList of 16), each detection by profile 5 (CRC-16
+# in bytes 0-1, data ID 0x1234) with the counter's low part. All Intel.
+AUTOSAR_DBC = '''VERSION ""
+BU_: RADAR GW
+BO_ 768 Rad_Header: 8 RADAR
+ SG_ Hdr_CRC : 0|8@1+ (1,0) [0|255] "" GW
+ SG_ Hdr_Alive : 8|4@1+ (1,0) [0|14] "" GW
+ SG_ Hdr_Count : 16|8@1+ (1,0) [0|255] "" GW
+ SG_ Hdr_Time : 24|16@1+ (0.01,0) [0|655.35] "s" GW
+ SG_ Hdr_J1850 : 56|8@1+ (1,0) [0|255] "" GW
+BO_ 769 Rad_Det: 8 RADAR
+ SG_ Det_CRC : 0|16@1+ (1,0) [0|65535] "" GW
+ SG_ Det_Alive : 16|4@1+ (1,0) [0|14] "" GW
+ SG_ Det_Idx : 20|8@1+ (1,0) [0|255] "" GW
+ SG_ Det_Range : 28|12@1+ (0.1,0) [0|409.5] "m" GW
+ SG_ Det_Azi : 40|12@1- (0.1,0) [-204.8|204.7] "deg" GW
+ SG_ Det_Vr : 52|12@1- (0.1,0) [-204.8|204.7] "m/s" GW
+'''
+
+HEADER_IDS = [0x10 + 3 * k for k in range(16)]  # profile 2's DataIDList
+DET_ID = 0x1234
+
+AUTOSAR_MAPPING = f'''rts_can_mapping: 1
+name: autosar-radar
+dbc: autosar.dbc
+header:
+  message: Rad_Header
+  counter: Hdr_Alive
+  counter_max: 14
+  count: [Hdr_Count]
+  timestamp: Hdr_Time
+  checksum: {{signal: Hdr_CRC, scheme: autosar-e2e-p2, data_id: {HEADER_IDS}}}
+detection:
+  messages: [Rad_Det]
+  frame_counter: Det_Alive
+  index: Det_Idx
+  checksum: {{signal: Det_CRC, scheme: autosar-e2e-p5, data_id: {DET_ID}}}
+  form: polar
+  range_m: Det_Range
+  azimuth_deg: Det_Azi
+  radial_velocity_mps: Det_Vr
+'''
+
+# The same radar with a plain CRC-8 SAE J1850 in the header's last byte instead.
+J1850_MAPPING = AUTOSAR_MAPPING.replace(
+    f"{{signal: Hdr_CRC, scheme: autosar-e2e-p2, data_id: {HEADER_IDS}}}",
+    "{signal: Hdr_J1850, scheme: crc8-sae-j1850}")
+
+HEADER_ID, DETECTION_ID = 768, 769
+
+
+@pytest.fixture
+def autosar(tmp_path):
+    (tmp_path / "autosar.dbc").write_text(AUTOSAR_DBC)
+    path = tmp_path / "autosar.mapping.yaml"
+    path.write_text(AUTOSAR_MAPPING)
+    return path
+
+
+@pytest.fixture
+def j1850(tmp_path):
+    (tmp_path / "autosar.dbc").write_text(AUTOSAR_DBC)
+    path = tmp_path / "j1850.mapping.yaml"
+    path.write_text(J1850_MAPPING)
+    return path
+
+
+def header_p2(alive, count, t_s=0.0, *, stamp=0.0):
+    """Rad_Header by hand, its profile 2 CRC over bytes 1..7 and the counter's data ID."""
+    time_raw = round(t_s / 0.01)
+    data = bytearray([0, alive & 0x0F, count, time_raw & 0xFF, time_raw >> 8, 0, 0, 0])
+    data[0] = crc8_h2f(bytes(data[1:]) + bytes([HEADER_IDS[alive & 0x0F]]))
+    return can.Message(arbitration_id=HEADER_ID, is_extended_id=False, data=data,
+                       timestamp=stamp)
+
+
+def header_j1850(alive, count, *, stamp=0.0):
+    """Rad_Header by hand, its CRC-8 SAE J1850 in byte 7 over bytes 0..6."""
+    data = bytearray([0, alive & 0x0F, count, 0, 0, 0, 0, 0])
+    data[7] = crc8_j1850(bytes(data[:7]))
+    return can.Message(arbitration_id=HEADER_ID, is_extended_id=False, data=data,
+                       timestamp=stamp)
+
+
+def detection_p5(alive, idx, range_m, az_deg, vr_mps, *, stamp=0.0):
+    """Rad_Det by hand, its profile 5 CRC-16 (low byte first) over bytes 2..7 and the ID."""
+    word = ((alive & 0xF) << 16 | idx << 20 | round(range_m / 0.1) << 28
+            | (round(az_deg / 0.1) & 0xFFF) << 40 | (round(vr_mps / 0.1) & 0xFFF) << 52)
+    data = bytearray(word.to_bytes(8, "little"))
+    crc = crc16_ccitt(bytes(data[2:]) + bytes([DET_ID & 0xFF, DET_ID >> 8]))
+    data[0], data[1] = crc & 0xFF, crc >> 8
+    return can.Message(arbitration_id=DETECTION_ID, is_extended_id=False, data=data,
+                       timestamp=stamp)
+
+
+def receive(mapping, messages):
+    receiver = DetectionReceiver(CanMapping.from_file(mapping))
+    got = []
+    for msg in messages:
+        receiver.on_message_received(msg)
+        got += receiver.pop()
+    return receiver, got + receiver.flush()
+
+
+def test_hand_packed_e2e_protected_messages_decode_to_their_values(autosar):
+    messages = [header_p2(9, 2, 12.34),
+                detection_p5(9, 0, 40.2, -12.5, -5.3),
+                detection_p5(9, 1, 120.0, 30.1, 2.0)]
+    receiver, got = receive(autosar, messages)
+    assert receiver.stats.checksum_errors == 0 and receiver.stats.decode_errors == 0
+    (cycle,) = got
+    assert cycle.complete and cycle.cycle == 9 and cycle.t_s == pytest.approx(12.34)
+    np.testing.assert_allclose(cycle.range_m, [40.2, 120.0], atol=1e-9)
+    np.testing.assert_allclose(cycle.az_deg, [-12.5, 30.1], atol=1e-9)
+    np.testing.assert_allclose(cycle.radial_velocity_mps, [-5.3, 2.0], atol=1e-9)
+
+
+def test_a_profile_2_header_is_checked_with_the_data_id_of_its_counter(autosar):
+    # The CRC of alive 9 computed with the data ID of alive 8: not this message's.
+    good = header_p2(9, 0)
+    wrong_id = bytearray(good.data)
+    wrong_id[0] = crc8_h2f(bytes(wrong_id[1:]) + bytes([HEADER_IDS[8]]))
+    assert wrong_id[0] != good.data[0]
+    receiver, got = receive(autosar, [
+        can.Message(arbitration_id=HEADER_ID, is_extended_id=False, data=wrong_id), good])
+    assert receiver.stats.checksum_errors == 1
+    assert [c.cycle for c in got] == [9]
+
+
+def test_a_damaged_byte_fails_each_scheme_s_checksum(autosar, j1850):
+    for mapping, header in ((autosar, header_p2(3, 1)), (j1850, header_j1850(3, 1))):
+        detection = detection_p5(3, 0, 50.0, 1.0, 0.0)
+        damaged = [bytearray(m.data) for m in (header, detection)]
+        for data in damaged:
+            data[3] ^= 0x04  # one bit of the payload
+        receiver, got = receive(mapping, [
+            can.Message(arbitration_id=m.arbitration_id, is_extended_id=False, data=d)
+            for m, d in zip((header, detection), damaged, strict=True)])
+        assert receiver.stats.checksum_errors == 2, mapping
+        assert got == []
+        receiver, got = receive(mapping, [header, detection])
+        assert receiver.stats.checksum_errors == 0 and [c.complete for c in got] == [True]
+
+
+def test_a_hand_packed_j1850_header_decodes(j1850):
+    receiver, got = receive(j1850, [header_j1850(14, 1), detection_p5(14, 0, 7.5, 0.0, 0.0)])
+    assert receiver.stats.checksum_errors == 0
+    (cycle,) = got
+    assert cycle.complete and cycle.cycle == 14
+    np.testing.assert_allclose(cycle.range_m, [7.5])
+
+
+class Capture:
+    """A bus that keeps what is sent."""
+
+    def __init__(self):
+        self.messages: list[can.Message] = []
+
+    def send(self, msg):
+        self.messages.append(msg)
+
+
+def cycles(n, per_cycle=2):
+    rng = np.random.default_rng(3)
+    return [Detections(cycle=k, t_s=0.05 * k, range_m=rng.uniform(5, 80, per_cycle),
+                       radial_velocity_mps=rng.uniform(-20, 20, per_cycle),
+                       az_deg=rng.uniform(-40, 40, per_cycle), el_deg=np.zeros(per_cycle))
+            for k in range(n)]
+
+
+@pytest.mark.parametrize("which", ["autosar", "j1850"])
+def test_the_simulated_radar_speaking_the_mapping_computes_the_same_checksums(which, request):
+    mapping = request.getfixturevalue(which)
+    bus = Capture()
+    sent = cycles(40)
+    DetectionPublisher(bus, mapping=CanMapping.from_file(mapping)).publish_many(sent)
+    headers = [m for m in bus.messages if m.arbitration_id == HEADER_ID]
+    detections = [m for m in bus.messages if m.arbitration_id == DETECTION_ID]
+    assert len(headers) == 40 and len(detections) == 80
+    for k, msg in enumerate(headers):
+        data = bytes(msg.data)
+        assert data[1] & 0x0F == k % 15  # the alive counter wraps after 14
+        if which == "autosar":
+            assert data[0] == crc8_h2f(data[1:] + bytes([HEADER_IDS[k % 15]]))
+        else:
+            assert data[7] == crc8_j1850(data[:7])
+    for j, msg in enumerate(detections):
+        data = bytes(msg.data)
+        assert (data[2] & 0x0F) == (j // 2) % 15
+        crc = crc16_ccitt(data[2:] + bytes([DET_ID & 0xFF, DET_ID >> 8]))
+        assert (data[0], data[1]) == (crc & 0xFF, crc >> 8)
+    receiver, got = receive(mapping, bus.messages)
+    stats = receiver.stats
+    assert (stats.checksum_errors, stats.decode_errors, stats.reordered, stats.duplicates,
+            stats.conflicts, stats.orphans) == (0, 0, 0, 0, 0, 0)
+    assert [c.cycle for c in got] == [k % 15 for k in range(40)]
+    assert all(c.complete for c in got)
+    for c, s in zip(got, sent, strict=True):
+        np.testing.assert_allclose(c.range_m, s.range_m, atol=0.05 + 1e-9)
+
+
+def test_a_counter_wrapping_after_14_steps_from_14_to_0(autosar):
+    mapping = CanMapping.from_file(autosar)
+    assert mapping.counter_modulus == 15
+    alive = [12, 13, 14, 0, 1, 2]
+    receiver, got = receive(autosar, [header_p2(a, 0) for a in alive])
+    assert (receiver.stats.reordered, receiver.stats.duplicates) == (0, 0)
+    assert [c.cycle for c in got] == alive
+
+
+def test_a_counter_wrapping_after_14_tells_reordered_and_copied_cycles_over_the_wrap(autosar):
+    # 0 comes after 1 (one step back over the wrap), then 14 again with the same content.
+    receiver, got = receive(autosar, [header_p2(a, 0) for a in (13, 14, 1, 0, 2, 14)])
+    assert receiver.stats.reordered == 1  # 0, one step behind 1
+    assert receiver.stats.duplicates == 1  # 14 again, within the cycles remembered
+    assert [c.cycle for c in got] == [13, 14, 1, 0, 2]
+
+
+def test_the_invalid_value_15_of_a_counter_wrapping_after_14_is_refused(autosar):
+    receiver, got = receive(autosar, [header_p2(14, 0), header_p2(15, 0), header_p2(0, 0)])
+    assert receiver.stats.decode_errors == 1
+    assert [c.cycle for c in got] == [14, 0]
+    assert receiver.stats.reordered == 0
+
+
+def test_counter_max_dbc_takes_the_signal_s_maximum(tmp_path):
+    (tmp_path / "autosar.dbc").write_text(AUTOSAR_DBC)
+    path = tmp_path / "m.mapping.yaml"
+    path.write_text(AUTOSAR_MAPPING.replace("counter_max: 14", "counter_max: dbc"))
+    assert CanMapping.from_file(path).counter_modulus == 15
+    path.write_text(AUTOSAR_MAPPING.replace("  counter_max: 14\n", ""))
+    assert CanMapping.from_file(path).counter_modulus == 16  # the width, as before
+
+
+def test_a_run_and_its_recheck_pass_with_e2e_checksums_and_a_counter_wrapping_after_14(
+        autosar, tmp_path, capsys):
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / "drive.blf"
+    assert cli.main(["run", str(scene), "--mapping", str(autosar), "--record", str(log)]) == 0
+    out = capsys.readouterr().out
+    assert "checksum" not in out, out
+    headers = [m for m in can.LogReader(str(log)) if m.arbitration_id == HEADER_ID]
+    assert len(headers) > 30  # over the counter's wrap, twice at least
+    assert cli.main(["check", str(scene), "--log", str(log)]) == 0, capsys.readouterr().out
+
+
+BAD = [
+    ("counter-max-beyond-width", ("counter_max: 14", "counter_max: 16"), "header.counter_max",
+     r"got 16: the 4-bit signal 'Hdr_Alive' counts to 15 at most; allowed: 1 to 15"),
+    ("counter-max-dbc-without-maximum", (("counter_max: 14", "counter_max: dbc"),
+                                         ("[0|14]", "[0|0]")), "header.counter_max",
+     r"dbc: the DBC states no whole maximum from 1 to 15"),
+    ("unknown-scheme", ("scheme: autosar-e2e-p5", "scheme: crc16"),
+     "detection.checksum.scheme", r"got 'crc16'; allowed values: 'crc32-low-byte', "
+                                  r"'crc8-sae-j1850', 'autosar-e2e-p2', 'autosar-e2e-p5'$"),
+    ("p2-not-in-byte-0", ("signal: Hdr_CRC, scheme: autosar-e2e-p2",
+                          "signal: Hdr_J1850, scheme: autosar-e2e-p2"), "header.checksum",
+     r"signal 'Hdr_J1850' of message 'Rad_Header' must fill its bytes to be a checksum "
+     r"of scheme autosar-e2e-p2 \(byte 0: "),
+    ("p5-on-a-byte", ("signal: Det_CRC, scheme: autosar-e2e-p5",
+                      "signal: Det_Idx, scheme: autosar-e2e-p5"), "detection.checksum",
+     r"signal 'Det_Idx' of message 'Rad_Det' must fill its bytes to be a checksum "
+     r"of scheme autosar-e2e-p5 \(bytes 0 and 1: 16 unsigned bits from bit 0 Intel"),
+    ("e2e-without-data-id", (f", data_id: {DET_ID}}}", "}"), "detection.checksum",
+     r"scheme autosar-e2e-p5 needs data_id"),
+    ("data-id-for-j1850", ("scheme: autosar-e2e-p2", "scheme: crc8-sae-j1850"),
+     "header.checksum.data_id", r"scheme crc8-sae-j1850 takes no data ID"),
+    ("p5-data-id-list", (f"data_id: {DET_ID}", f"data_id: {HEADER_IDS}"),
+     "detection.checksum.data_id", r"scheme autosar-e2e-p5 takes one data ID"),
+    ("p2-data-id-too-big", (f"data_id: {HEADER_IDS}", "data_id: 300"),
+     "header.checksum.data_id", r"got 300: a data ID of scheme autosar-e2e-p2 is 0 to 255"),
+    ("data-id-of-another-message", (f"data_id: {DET_ID}", "data_id: {Rad_Header: 5}"),
+     "detection.checksum.data_id.Rad_Header",
+     r"message 'Rad_Header' carries no checksum 'Det_CRC'; messages: Rad_Det"),
+]
+
+
+@pytest.mark.parametrize(("changes", "key", "pattern"), [c[1:] for c in BAD],
+                         ids=[c[0] for c in BAD])
+def test_a_bad_checksum_or_counter_entry_is_one_located_error(tmp_path, capsys, changes, key,
+                                                              pattern):
+    dbc, mapping = AUTOSAR_DBC, AUTOSAR_MAPPING
+    for old, new in (changes if isinstance(changes[0], tuple) else [changes]):
+        assert old in dbc + mapping, old
+        dbc, mapping = dbc.replace(old, new), mapping.replace(old, new)
+    (tmp_path / "autosar.dbc").write_text(dbc)
+    path = tmp_path / "bad.mapping.yaml"
+    path.write_text(mapping)
+    code = cli.main(["run", str(ROOT / "scenarios" / "cut_in.scenario.yaml"),
+                     "--mapping", str(path)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    lines = [line for line in err.splitlines() if "error: " in line]
+    assert len(lines) == 1, err
+    message = lines[0].split("error: ", 1)[1]
+    assert re.match(rf"--mapping {re.escape(str(path))}:\d+:\d+: {re.escape(key)}: {pattern}",
+                    message), message
+
+
+# --- logs of a bench with several CAN channels ----------------------------------------------
+
+def resealed(msg, channel, shift):
+    """The message as another radar of the family sends it on another bus: its counter
+    ``shift`` cycles on (within 0..14), its checksum computed again, on ``channel``."""
+    data = bytearray(msg.data)
+    if msg.arbitration_id == HEADER_ID:
+        data[1] = (data[1] & 0xF0) | ((data[1] & 0x0F) + shift) % 15
+        data[0] = crc8_h2f(bytes(data[1:]) + bytes([HEADER_IDS[data[1] & 0x0F]]))
+    else:
+        data[2] = (data[2] & 0xF0) | ((data[2] & 0x0F) + shift) % 15
+        crc = crc16_ccitt(bytes(data[2:]) + bytes([DET_ID & 0xFF, DET_ID >> 8]))
+        data[0], data[1] = crc & 0xFF, crc >> 8
+    return can.Message(arbitration_id=msg.arbitration_id, is_extended_id=False, data=data,
+                       timestamp=msg.timestamp + 0.003, channel=channel)
+
+
+def write_log(path, messages):
+    with can.Logger(str(path)) as logger:
+        for msg in sorted(messages, key=lambda m: m.timestamp):
+            logger.on_message_received(msg)
+
+
+def two_channel_log(path, messages):
+    """The radar's messages on channel 0 and a sibling's, same identifiers, on channel 1."""
+    mine = [can.Message(arbitration_id=m.arbitration_id, is_extended_id=m.is_extended_id,
+                        data=m.data, timestamp=m.timestamp, channel=0) for m in messages]
+    write_log(path, mine + [resealed(m, 1, 5) for m in messages])
+
+
+def test_a_channel_of_a_log_is_read_alone(autosar, tmp_path):
+    messages = []
+    for k in range(20):
+        messages += [header_p2(k % 15, 1, stamp=0.05 * k),
+                     detection_p5(k % 15, 0, 10.0 + k, 0.0, 0.0, stamp=0.05 * k)]
+    log = tmp_path / "bench.blf"
+    two_channel_log(log, messages)
+    from rts_scenario.recheck import read_cycles
+
+    mapping = CanMapping.from_file(autosar)
+    cycles, stats = read_cycles(log, mapping, 0.05, channel="0")
+    assert [c.detections.cycle for c in cycles] == [k % 15 for k in range(20)]
+    assert all(c.detections.complete for c in cycles)
+    np.testing.assert_allclose([c.detections.range_m[0] for c in cycles],
+                               [10.0 + k for k in range(20)])
+    assert stats["other_channels"] == 40
+    assert (stats["duplicates"], stats["conflicts"], stats["reordered"]) == (0, 0, 0)
+    # Read whole, the sibling's cycles join the radar's.
+    _, mixed = read_cycles(log, mapping, 0.05)
+    assert mixed["conflicts"] + mixed["duplicates"] + mixed["reordered"] > 0
+
+
+@pytest.fixture
+def recorded(autosar, tmp_path, capsys):
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / "drive.blf"
+    assert cli.main(["run", str(scene), "--mapping", str(autosar), "--record", str(log)]) == 0
+    capsys.readouterr()
+    return scene, log
+
+
+def test_run_record_keeps_the_channel_it_listened_on(recorded):
+    import json
+
+    _, log = recorded
+    sidecar = json.loads(Path(f"{log}.rts.json").read_text())
+    assert sidecar["can_interface"] == "virtual"
+    assert sidecar["can_channel"].startswith("rts-scenario-")
+
+
+def test_check_of_a_log_with_the_radar_s_identifiers_on_two_channels(recorded, autosar,
+                                                                     tmp_path, capsys):
+    scene, log = recorded
+    messages = list(can.LogReader(str(log)))
+    n = len([m for m in messages if m.arbitration_id in (HEADER_ID, DETECTION_ID)])
+    bench = tmp_path / "bench.blf"  # another tool's log: no sidecar
+    two_channel_log(bench, messages)
+    code = cli.main(["check", str(scene), "--log", str(bench), "--mapping", str(autosar)])
+    out, err = capsys.readouterr()
+    assert code == 2 and "Traceback" not in err
+    (line,) = [x for x in err.splitlines() if "error: " in x]
+    assert line == (f"error: --log {bench}: holds the radar's messages (the identifiers of "
+                    f"mapping 'autosar-radar') on 2 channels: 0 ({n} messages), 1 ({n} "
+                    f"messages); which is the radar's is not guessed: give --log-channel CH "
+                    f"(the channel as python-can reads it from the log)"), line
+    code = cli.main(["check", str(scene), "--log", str(bench), "--mapping", str(autosar),
+                     "--log-channel", "0"])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    assert "other channels" in out  # the report's bus names the messages left out
+    code = cli.main(["check", str(scene), "--log", str(bench), "--mapping", str(autosar),
+                     "--log-channel", "can0"])
+    _, err = capsys.readouterr()
+    assert code == 2
+    assert (f"error: --log-channel can0: the log {bench} holds none of the radar's messages "
+            f"(the identifiers of mapping 'autosar-radar') on channel can0; its channels with "
+            f"them: 0 ({n} messages), 1 ({n} messages)") in err, err
+    code = cli.main(["check", str(scene), "--log", str(bench), "--log-channel", " "])
+    _, err = capsys.readouterr()
+    assert code == 2 and "error: --log-channel ' ': empty" in err, err
+
+
+def test_check_reads_the_channel_the_run_listened_on_where_the_sidecar_says_it(
+        recorded, tmp_path, capsys):
+    scene, log = recorded
+    bench = tmp_path / "bench.blf"
+    two_channel_log(bench, list(can.LogReader(str(log))))
+    Path(f"{bench}.rts.json").write_text(Path(f"{log}.rts.json").read_text())
+    code = cli.main(["check", str(scene), "--log", str(bench)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    assert "read channel 0, the one the run listened on" in out, out
