@@ -60,6 +60,11 @@ def sinc_derivative(
     return -aperture_wl * np.cos(alpha_rad) * sinc_slope(x)
 
 
+# Relative size below which a negative amplitude is rounding of a zero one (see pair_weights);
+# it moves the synthesized angle by ~1e-11 deg at most.
+_ROUNDING = 1e-12
+
+
 def pair_weights(
     d_low: FloatArray, d_high: FloatArray
 ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
@@ -71,6 +76,12 @@ def pair_weights(
     """
     a_low = d_high
     a_high = -d_low
+    # On the pair's averaged angle the far derivative is 0 in the paper, and here the residue
+    # of rounding the angles' sines (~1e-16 of the near one), of either sign: an amplitude that
+    # negative is the paper's 0, not a target outside the pair.
+    residue = _ROUNDING * np.maximum(np.abs(a_low), np.abs(a_high))
+    a_low = np.where((a_low < 0.0) & (a_low >= -residue), 0.0, a_low)
+    a_high = np.where((a_high < 0.0) & (a_high >= -residue), 0.0, a_high)
     both_zero = (a_low == 0.0) & (a_high == 0.0)
     ok = (a_low >= 0.0) & (a_high >= 0.0)
     scale = np.maximum(a_low, a_high)
