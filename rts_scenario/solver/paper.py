@@ -8,8 +8,10 @@ and bottom/top, and asks the derivative of the superposition to vanish at the se
     A_l g'_l(alpha) + A_r g'_r(alpha) = 0,     A_b g'_b(beta) + A_t g'_t(beta) = 0,
     A_0 = A_b A_l,  A_1 = A_b A_r,  A_2 = A_t A_l,  A_3 = A_t A_r.
 
-The derivative formula is 0/0 when the target sits on an FE; it is evaluated through the sinc
-slope, with a Taylor series near zero instead of the difference of two large terms.
+The derivative formula is 0/0 where ``sin theta_q = sin alpha``: a target at the averaged azimuth
+(or elevation) of a pair, on an FE of an aligned quad. It is evaluated through the sinc slope,
+with a Taylor series near zero instead of the difference of two large terms; there the far
+pair's amplitude is 0, which rounding must not turn into a refusal.
 """
 
 from __future__ import annotations
