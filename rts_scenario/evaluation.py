@@ -1,7 +1,7 @@
 """The paper's evaluation grid and the angles the independent peak search sees there.
 
 The reference against which solver methods, the bench table and calibration are measured:
-set angles on the paper's grid (azimuth -3..3 deg in 6 steps, elevation -6..6 deg in 5 steps)
+set angles on the paper's grid (azimuth -3..3 deg, 6 values; elevation -6..6 deg, 5 values)
 and where the Bartlett peak search of `rts_scenario.peak_search`, which knows nothing of the solver,
 finds the synthesized targets.
 """

@@ -8,8 +8,10 @@ and bottom/top, and asks the derivative of the superposition to vanish at the se
     A_l g'_l(alpha) + A_r g'_r(alpha) = 0,     A_b g'_b(beta) + A_t g'_t(beta) = 0,
     A_0 = A_b A_l,  A_1 = A_b A_r,  A_2 = A_t A_l,  A_3 = A_t A_r.
 
-The derivative formula is 0/0 when the target sits on an FE; it is evaluated through the sinc
-slope, with a Taylor series near zero instead of the difference of two large terms.
+The derivative formula is 0/0 where ``sin theta_q = sin alpha``: a target at the averaged azimuth
+(or elevation) of a pair, on an FE of an aligned quad. It is evaluated through the sinc slope,
+with a Taylor series near zero instead of the difference of two large terms; there the far
+pair's amplitude is 0, which rounding must not turn into a refusal.
 """
 
 from __future__ import annotations
@@ -60,6 +62,11 @@ def sinc_derivative(
     return -aperture_wl * np.cos(alpha_rad) * sinc_slope(x)
 
 
+# Relative size below which a negative amplitude is rounding of a zero one (see pair_weights);
+# it moves the synthesized angle by ~1e-11 deg at most.
+_ROUNDING = 1e-12
+
+
 def pair_weights(
     d_low: FloatArray, d_high: FloatArray
 ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
@@ -71,6 +78,12 @@ def pair_weights(
     """
     a_low = d_high
     a_high = -d_low
+    # On the pair's averaged angle the far derivative is 0 in the paper, and here the residue
+    # of rounding the angles' sines (~1e-16 of the near one), of either sign: an amplitude that
+    # negative is the paper's 0, not a target outside the pair.
+    residue = _ROUNDING * np.maximum(np.abs(a_low), np.abs(a_high))
+    a_low = np.where((a_low < 0.0) & (a_low >= -residue), 0.0, a_low)
+    a_high = np.where((a_high < 0.0) & (a_high >= -residue), 0.0, a_high)
     both_zero = (a_low == 0.0) & (a_high == 0.0)
     ok = (a_low >= 0.0) & (a_high >= 0.0)
     scale = np.maximum(a_low, a_high)
