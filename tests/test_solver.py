@@ -335,7 +335,7 @@ def test_modeled_bench_leaves_no_gap_between_stacked_quads():
         assert sol.feasible.all(), (az0, el[~sol.feasible])
 
 
-@pytest.mark.parametrize("jit", ["auto", "off"])
+@pytest.mark.parametrize("jit", ["on", "off"])
 def test_plane_waves_leave_no_gap_between_the_slanted_quads_of_lab_2x3(jit, monkeypatch):
     # The two quads of lab-2x3 share a slanted column of FEs (0.1, -7.9) .. (-0.2, 8.3) deg.
     # Within 0.2 .. 0.55 mdeg of it on the second quad's side (the first's is outside), the
