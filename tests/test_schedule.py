@@ -235,6 +235,37 @@ def test_echo_slots_are_taken_target_by_target_in_order_of_relevance(seed):
             assert got[f, t] == (not fits and used.size > 0), (f, t)
 
 
+@pytest.mark.parametrize("seed", range(20))
+def test_echo_slots_one_by_one_on_large_scenes_with_ties_and_absent_targets(seed):
+    from rts_scenario.schedule.echo_slots import assign_echo_slots
+
+    # Up to 60 targets on up to 40 FEs, one to four echoes per channel; ranges and RCS tied
+    # often (-0.0 and 0.0 among them), absent targets (NaN range and RCS, no channel used).
+    rng = np.random.default_rng(100 + seed)
+    n_frames, n_targets = int(rng.integers(1, 30)), int(rng.integers(1, 60))
+    n_fe, per = int(rng.integers(4, 40)), int(rng.integers(1, 5))
+    fe = np.stack([rng.permutation(n_fe)[:4] for _ in range(n_frames * n_targets)])
+    fe = fe.reshape(n_frames, n_targets, 4)
+    using = rng.random((n_frames, n_targets, 4)) < rng.uniform(0.3, 1.0)
+    range_m = rng.choice([10.0, 20.0, 30.0, 10.0 + 1e-12], (n_frames, n_targets))
+    rcs = rng.choice([0.0, 10.0, -0.0], (n_frames, n_targets))
+    absent = rng.random((n_frames, n_targets)) < 0.2
+    range_m[absent], rcs[absent], using[absent] = np.nan, np.nan, False
+    cases = tracks(np.zeros(n_targets), np.zeros(n_targets), frames=n_frames, range_m=range_m,
+                   rcs=rcs)
+    got = assign_echo_slots(fe, using, cases, per, n_fe) != 0
+    for f in range(n_frames):
+        load = np.zeros(n_fe, dtype=int)
+        present = [t for t in range(n_targets) if not absent[f, t]]
+        for t in sorted(present, key=lambda t: (range_m[f, t], -rcs[f, t], t)):
+            used = fe[f, t][using[f, t]]
+            fits = bool(np.all(load[used] < per))
+            if fits:
+                load[used] += 1
+            assert got[f, t] == (not fits and used.size > 0), (f, t)
+        assert not got[f, absent[f]].any()
+
+
 def test_update_rate_and_mode_are_checked():
     rig = rig_with(update_rate_hz=20.0)
     with pytest.raises(ScheduleError, match="update_rate_hz"):

@@ -49,9 +49,10 @@ _MAX_ITERATIONS = 60
 # exist only farther from the region's edge, so a target near an edge that is infeasible at
 # the phase map's phase iterates on with its clipped weights; infeasible at its own phase, or
 # at this many, or bound for a phase farther than _INFEASIBLE_PHASE (rad) from the map's (a
-# phase of another solution, if any), it has no solution.
+# phase of another solution, if any), it has no solution. Near the slanted column the two
+# quads of lab-2x3 share, the awr1843boost's fixed point lies up to 0.03 rad from the map's.
 _INFEASIBLE_STEPS = 3
-_INFEASIBLE_PHASE = 0.01
+_INFEASIBLE_PHASE = 0.1
 # Converged when B's phase matches the frozen one to this (rad). The angle error it leaves is
 # about 2.5 deg per rad of phase on the shipped arrays: ~2.5e-8 deg.
 _PHASE_TOL = 1e-8
