@@ -272,13 +272,15 @@ class Checker:
         self._last_bus_t = np.nan  # and when it reached the bus
         self.cycle_s = cycle_s
         # Sums of range error, range rate, their product, their squares and their count over
-        # matched targets of cycles judged against one frame (`detection_lag_s`).
-        self._lag = np.zeros(6)
+        # matched targets (`detection_lag_s`), twice: the cycles near a frame change taken
+        # as having seen the frame they were judged by the clock to see (row 0), or the one
+        # across the change (row 1).
+        self._lag = np.zeros((2, 6))
         # Per LAG_BIN_S of measurement time, the sums of count, range error, range rate, their
         # product and range rate^2: the span being filled (its number, its sums), and the
         # outer products of the closed spans' sums summed, and their number (constant memory).
         self._lag_span: tuple[int, FloatArray] | None = None
-        self._lag_outer = np.zeros((5, 5))
+        self._lag_outer = np.zeros((2, 5, 5))
         self._lag_spans = 0
         self._stats = {q: RunningStats(n) for q, _ in QUANTITIES}
         self._checkable = np.zeros(n, dtype=np.int64)
@@ -534,37 +536,48 @@ class Checker:
 
     @staticmethod
     def _lag_errors(block: _Block, error: FloatArray, use_other: BoolArray) -> FloatArray:
-        """Range errors for the lag: an ambiguous cycle's against whichever frame fits better.
+        """Return the range errors for the lag, shape ``(2, F, K)``, read two ways.
+
+        An ambiguous cycle's error against the frame the clock says it saw (row 0) and
+        against the one across the change (row 1).
 
         A cycle near a frame change may show either frame (`CycleTruth`); it is judged against
         the one it was measured in unless the other detects more, but a target within
-        tolerance of both was judged against the first. For the lag, each ambiguous cycle's
-        target takes the smaller error of the two frames: a radar in step with the frames (all
-        its cycles ambiguous) fits one of them, and one a frame or more late fits neither (its
-        lag, if anything, comes out up to a frame short).
+        tolerance of both was judged against the first. A radar sees a frame change at one
+        phase of its cycle: in step with the frames, all its cycles near a change saw the
+        same side of it. The lag is fitted both ways and `detection_lag_s` keeps the one
+        nearer the radar's range-Doppler coupling: choosing target by target the frame whose
+        error is smaller would let a range offset common to all targets (an RTS's delay
+        calibration) choose, and tilt the lag by up to a frame.
         """
         if block.other is None or block.ambiguous is None:
-            return error
+            return np.stack([error, error])
         held, other = block.tracks.range_m, block.other[0].range_m
         turned = use_other[:, None]
-        judged_r, alt_r = np.where(turned, other, held), np.where(turned, held, other)
-        alt = error + judged_r - alt_r
-        better = block.ambiguous[:, None] & (np.abs(alt) < np.abs(error))
-        return np.where(better, alt, error)
+        judged_r = np.where(turned, other, held)
+        near = block.ambiguous[:, None]
+        return np.stack([np.where(near, error + judged_r - held, error),
+                         np.where(near, error + judged_r - other, error)])
 
     def _add_lag(self, error: FloatArray, rate: FloatArray, use: BoolArray,
                  t_s: FloatArray) -> None:
-        """Add target-cycles (rows: cycles measured at ``t_s``) to the lag's sums."""
-        use = use & np.isfinite(error) & np.isfinite(rate)
-        e, v = error[use], rate[use]
-        self._lag += (float(e.sum()), float(v.sum()), float(e @ v), float(v @ v),
-                      float(e @ e), float(e.size))
-        if not e.size:
+        """Add target-cycles (rows: cycles measured at ``t_s``) to the lag's sums.
+
+        ``error``: ``(F, K)``, or ``(2, F, K)`` for both readings of the cycles near a frame
+        change (`_lag_errors`).
+        """
+        error = np.broadcast_to(error, (2, *np.shape(rate)))
+        use = use & np.isfinite(error).all(axis=0) & np.isfinite(rate)
+        e, v = error[:, use], rate[use]
+        self._lag += np.stack([e.sum(axis=1), np.full(2, v.sum()), e @ v, np.full(2, v @ v),
+                               (e * e).sum(axis=1), np.full(2, float(v.size))], axis=1)
+        if not v.size:
             return
         bins = np.floor(np.asarray(t_s, dtype=np.float64)[np.nonzero(use)[0]] / LAG_BIN_S)
         keys, of = np.unique(bins.astype(np.int64), return_inverse=True)
-        sums = np.stack([np.bincount(of, w, minlength=keys.size)
-                         for w in (np.ones(e.size), e, v, e * v, v * v)], axis=1)
+        sums = np.stack([np.stack([np.bincount(of, w, minlength=keys.size)
+                                   for w in (np.ones(v.size), e[h], v, e[h] * v, v * v)],
+                                  axis=1) for h in range(2)], axis=1)  # (spans, 2, 5)
         for key, row in zip(keys.tolist(), sums, strict=True):  # a block spans a few
             if self._lag_span is not None and key == self._lag_span[0]:
                 self._lag_span[1][:] += row
@@ -572,17 +585,17 @@ class Checker:
                 self._close_lag_span()
                 self._lag_span = (key, row.copy())
             else:  # a span closed already (cycles settle in order): a span of its own
-                self._lag_outer += np.outer(row, row)
+                self._lag_outer += np.einsum("hi,hj->hij", row, row)
                 self._lag_spans += 1
 
     def _close_lag_span(self) -> None:
         if self._lag_span is not None:
             row = self._lag_span[1]
-            self._lag_outer += np.outer(row, row)
+            self._lag_outer += np.einsum("hi,hj->hij", row, row)
             self._lag_spans += 1
             self._lag_span = None
 
-    def detection_lag_s(self) -> tuple[float, float] | None:
+    def detection_lag_s(self, coupling_s: float = 0.0) -> tuple[float, float] | None:
         """How much earlier than the check's times the detections fit the scene, and its error.
 
         A radar that measured ``L`` seconds earlier than the check took it (its latency longer
@@ -596,12 +609,25 @@ class Checker:
         change smoothly, and do not average out cycle by cycle). None over fewer than
         `LAG_MIN_CYCLES` target-cycles or `LAG_MIN_BINS` such spans, or where the range rates
         did not vary (a lag could not be told from a range offset).
+
+        Cycles near a frame change are read both ways (`_lag_errors`): as having seen the
+        frame the clock says, or the one across the change; the reading whose lag is nearer
+        ``coupling_s``, the lag the radar's range-Doppler coupling gives
+        (`RadarProfile.coupling_lag_s`), is kept. A radar in step with the frames fits one of
+        them; one whose cycles saw either side at random gives a lag within half a frame.
         """
-        s_e, s_v, s_ev, s_vv, s_ee, n = self._lag
         outer, spans = self._lag_outer, self._lag_spans
         if self._lag_span is not None:  # the span being filled, as if closed
-            outer = outer + np.outer(self._lag_span[1], self._lag_span[1])
+            outer = outer + np.einsum("hi,hj->hij", self._lag_span[1], self._lag_span[1])
             spans += 1
+        lags = [lag for h in range(2)
+                if (lag := self._lag_of(self._lag[h], outer[h], spans)) is not None]
+        return min(lags, key=lambda lag: abs(lag[0] - coupling_s), default=None)
+
+    @staticmethod
+    def _lag_of(sums: FloatArray, outer: FloatArray, spans: int) -> tuple[float, float] | None:
+        """Return the lag and its standard error of one reading's sums (`detection_lag_s`)."""
+        s_e, s_v, s_ev, s_vv, s_ee, n = sums
         if n < LAG_MIN_CYCLES or spans < LAG_MIN_BINS:
             return None
         # About the means: the range offset out.
@@ -625,7 +651,7 @@ class Checker:
 
     def lag_untold(self) -> str | None:
         """Why `detection_lag_s` tells no lag, or None where it tells one or nothing matched."""
-        n = self._lag[5]
+        n = self._lag[0, 5]
         if n == 0 or self.detection_lag_s() is not None:
             return None
         spans = self._lag_spans + (self._lag_span is not None)
@@ -645,7 +671,7 @@ class Checker:
         period ``frame_s``, three standard errors clear, most cycles were judged against
         frames the radar had not seen.
         """
-        lag = self.detection_lag_s()
+        lag = self.detection_lag_s(coupling_s)
         if lag is None:
             return None
         off = lag[0] - coupling_s

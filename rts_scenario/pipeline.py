@@ -1040,7 +1040,7 @@ def lag_dict(checker: Checker, coupling_s: float) -> dict[str, float | str]:
 
     ``coupling_s``: the lag the radar's range-Doppler coupling gives (`Checker.lag_reason`).
     """
-    lag = checker.detection_lag_s()
+    lag = checker.detection_lag_s(coupling_s)
     if lag is None:
         untold = checker.lag_untold()
         return {} if untold is None else {"detection_lag_untold": untold}

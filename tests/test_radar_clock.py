@@ -1429,12 +1429,6 @@ def test_the_report_table_says_how_the_detections_fit_the_cycles_times(tmp_path)
     assert "time alignment" not in report.table()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the lag takes each ambiguous target-cycle's error against whichever frame is nearer "
-    "zero, target by target, before the range offset is fitted: a range offset common to all "
-    "targets then decides which frame each takes, and tilts the lag; the frame should be "
-    "chosen per cycle (the RTS switches every target at once), about the range offset and "
-    "the radar's range-Doppler coupling"))
 @pytest.mark.parametrize("offset_m", [-0.1, 0.1])
 def test_a_range_offset_common_to_all_targets_is_not_taken_for_a_lag(tmp_path, offset_m):
     # A radar in step with the frames (every cycle within the ambiguity window), correcting
