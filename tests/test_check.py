@@ -511,3 +511,13 @@ def test_limits_a_scene_expects_but_never_hits_are_said(tmp_path):
     assert ("expected limits not hit: frame_rate_above_radar; out_of_coverage; "
             "oncoming-car: too_close") in report.table()
     assert report.to_dict()["expected_not_hit"] == report.expected_not_hit
+
+
+def test_a_scene_wide_limit_is_said_not_hit_only_where_scene_limits_were_judged():
+    from rts_scenario.check import Checker
+
+    # check_cycles judges no scene-wide limits: it cannot tell that the radar kept up.
+    expect = Expectations(expected_limits=frozenset({"frame_rate_above_radar"}))
+    assert Checker("s", ("a",), expect).report().expected_not_hit == []
+    judged = Checker("s", ("a",), expect, scene_limits={})
+    assert judged.report().expected_not_hit == ["frame_rate_above_radar"]
