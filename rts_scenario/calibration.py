@@ -52,7 +52,7 @@ from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors, SimulatedRadar
 from .rig import Rig
 from .schedule import Schedule
-from .schedule.build import channel_delays, solver_inputs
+from .schedule.build import DELAY_SLACK_S, channel_delays, solver_inputs
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -268,8 +268,9 @@ def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m
     return schedule
 
 
-# Settings this close to a limit are within it (rounding of the delay grid and of dB sums).
-_LIMIT_SLACK = {"delay": 1e-18, "attenuation": 1e-9, "doppler": 1e-9}
+# Settings this close to a limit are within it (rounding of the delay grid, as a scene's
+# schedule takes it, and of dB sums).
+_LIMIT_SLACK = {"delay": DELAY_SLACK_S, "attenuation": 1e-9, "doppler": 1e-9}
 
 
 def _check_pattern_limits(rig: Rig, fe: NDArray[np.int64], active: NDArray[np.bool_],

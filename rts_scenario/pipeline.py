@@ -714,11 +714,11 @@ class Pipeline:
         truths = CycleTruth(checker, scene, track, window_s)
         playback = Playback(1.0 / scene.frame_rate_hz, window_s)
         batch = options.batch_frames or frames_per_batch(len(scene.targets), BATCH_FRAMES)
-        if options.batch_frames is None:
+        per_frame = 1.0 / (scene.frame_rate_hz * clock.cycle_s)  # the radar's cycles a frame
+        if options.batch_frames is None and per_frame > 1.0:
             # Frames slower than the radar's cycles: each batch's cycles go on the bus and to
             # the checker together, so a batch holds about as many cycles as it would frames.
-            per_frame = 1.0 / (scene.frame_rate_hz * clock.cycle_s)
-            batch = max(1, min(batch, int(batch / per_frame))) if per_frame > 1.0 else batch
+            batch = max(1, int(batch / per_frame))
         assert self.output is not None
         # The RTS holds each frame for a frame period, the last one of a batch too.
         self.output.frame_period_s = 1.0 / scene.frame_rate_hz

@@ -275,17 +275,25 @@ class CanMapping:
     counter: str
     count: tuple[str, ...]
     timestamp: str | None
-    header_checksum: str | None
     messages: tuple[str, ...]
     fd_message: str | None
     frame_counter: str | None
     index: str
-    checksum: str | None
     form: str
     fields: dict[str, Field]
     header_checksum_spec: Checksum | None = None
     checksum_spec: Checksum | None = None
     counter_max: int | None = None  # the counter's last value before 0 (None: its width's)
+
+    @property
+    def header_checksum(self) -> str | None:
+        """The header's checksum signal, if any."""
+        return self.header_checksum_spec.signal if self.header_checksum_spec else None
+
+    @property
+    def checksum(self) -> str | None:
+        """The detection messages' checksum signal, if any."""
+        return self.checksum_spec.signal if self.checksum_spec else None
 
     @property
     def counter_modulus(self) -> int:
@@ -368,17 +376,14 @@ class CanMapping:
         fields = {q: Field(v) if isinstance(v, str) else Field(v["signal"], v.get("scale", 1.0),
                                                                v.get("offset", 0.0))
                   for q, v in det.items() if q in QUANTITIES}
-        head_checksum, det_checksum = (Checksum.parse(head.get("checksum")),
-                                       Checksum.parse(det.get("checksum")))
         mapping = cls(
             name=d["name"], db=db, header=head["message"], counter=head["counter"],
             count=tuple(head["count"]), timestamp=head.get("timestamp"),
-            header_checksum=head_checksum.signal if head_checksum else None,
             messages=tuple(det["messages"]),
             fd_message=det.get("fd_message"), frame_counter=det.get("frame_counter"),
-            index=det["index"], checksum=det_checksum.signal if det_checksum else None,
-            form=det["form"], fields=fields, header_checksum_spec=head_checksum,
-            checksum_spec=det_checksum,
+            index=det["index"], form=det["form"], fields=fields,
+            header_checksum_spec=Checksum.parse(head.get("checksum")),
+            checksum_spec=Checksum.parse(det.get("checksum")),
         )
         mapping._check(doc)
         if "counter_max" in head:

@@ -37,7 +37,7 @@ from .model import (
     Scenario,
     TargetSpec,
 )
-from .trajectory import LaneChange, Trajectory, TravelLaw
+from .trajectory import LaneChange, Trajectory, TravelLaw, lane_change_ramp
 from .trajectory import Path as TrajectoryPath
 
 SCENE_SUFFIX = ".scenario.yaml"
@@ -558,7 +558,9 @@ def _corner_offset(doc: Document, key: KeyPath, points: np.ndarray, t_s: float,
     The object turns in no time there, and its left normal with it: a point ``d`` to the
     left of the path would jump ``2 |d| sin(angle / 2)``.
     """
-    offset = sum(lc.offset_m * _ramp((t_s - lc.start_s) / lc.duration_s) for lc in lane_changes)
+    changes = np.array([(lc.offset_m, lc.start_s, lc.duration_s) for lc in lane_changes],
+                       dtype=np.float64).reshape(-1, 3)
+    offset = float(changes[:, 0] @ lane_change_ramp((t_s - changes[:, 1]) / changes[:, 2]))
     before, after = np.diff(points[:, :2], axis=0)
     norms = np.linalg.norm(before), np.linalg.norm(after)
     if min(norms) < 1e-9 or offset == 0.0:  # a vertical piece has no left to turn
@@ -573,12 +575,6 @@ def _corner_offset(doc: Document, key: KeyPath, points: np.ndarray, t_s: float,
                              f"{side} of it (lane_changes): a polyline turns in no time, so the "
                              f"object would jump {jump:.3g} m; use path: spline, or end the "
                              f"lateral offset before the corner")
-
-
-def _ramp(tau: float) -> float:
-    """Return the lane change's quintic at ``tau`` (0 before it, 1 after), as kinematics does."""
-    tau = min(max(tau, 0.0), 1.0)
-    return tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
 
 
 def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],

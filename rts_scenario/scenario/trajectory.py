@@ -245,11 +245,17 @@ class TrajectorySet:
     def _lateral(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         start, duration, offset = self._lc[:, None]  # each (1, width, K)
         tau = np.clip((t[:, None, :] - start) / duration, 0.0, 1.0)
-        ramp = tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
+        ramp = lane_change_ramp(tau)
         slope = 30.0 * tau * tau * (1.0 - tau) ** 2 / duration
         bend = 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) / duration**2
         return ((offset * ramp).sum(axis=1), (offset * slope).sum(axis=1),
                 (offset * bend).sum(axis=1))
+
+
+def lane_change_ramp(tau: FloatArray) -> FloatArray:
+    """Return a lane change's share of its offset at ``tau`` (its quintic: 0 before, 1 after)."""
+    tau = np.clip(tau, 0.0, 1.0)
+    return tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
 
 
 def _left_normal(
