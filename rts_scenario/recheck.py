@@ -353,7 +353,8 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
 
     ``channels``: per channel, the messages of the radar's identifiers the log holds. A
     channel given (``--log-channel``) must hold some. Without one, a log that holds them on
-    one channel (or says of no message which channel it came on) is read whole; on several,
+    one channel (or says of no message which channel it came on) is read whole, with a note
+    where the sidecar says the run listened on another; on several,
     the channel the run listened on (its sidecar's ``can_channel``) where the log names one
     so, else the log is refused: which one is the radar's is not guessed.
 
@@ -376,16 +377,20 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
             raise LogError(f"--log-channel {channel}: the log {log} holds none of {what} on "
                            f"channel {channel}; {found}")
         return channel, None
-    if len(held) <= 1:
-        return None, None
     recorded = (sidecar or {}).get("can_channel")
+    # As the log names the run's channel: python-can's BLF and ASC writers number a channel
+    # by the digits its name ends in (can1: 1), else as the first (0, read back).
+    names = [str(recorded)]
+    if recorded is not None and Path(log).suffix.lower() in (".blf", ".asc"):
+        number = can.util.channel2int(recorded)
+        names.append(str(0 if number is None else number))
+    if len(held) <= 1:
+        only = next(iter(held), None)
+        if recorded is None or only is None or only in names:
+            return None, None
+        return None, (f"the log holds {what} on channel {only} only, not on the one the run "
+                      f"listened on ({recorded!r}, its sidecar): read it")
     if recorded is not None:
-        # As the log names it: python-can's BLF and ASC writers number a channel by the
-        # digits its name ends in (can1: 1), else as the first (0, read back).
-        names = [str(recorded)]
-        if Path(log).suffix.lower() in (".blf", ".asc"):
-            number = can.util.channel2int(recorded)
-            names.append(str(0 if number is None else number))
         match = next((name for name in names if name in held), None)
         if match is not None:
             return match, (f"the log holds {what} on {len(held)} channels ({listing()}): "

@@ -460,3 +460,22 @@ def test_check_reads_the_channel_the_run_listened_on_where_the_sidecar_says_it(
     out, err = capsys.readouterr()
     assert code == 0, out + err
     assert "read channel 0, the one the run listened on" in out, out
+
+
+def test_a_log_holding_the_radar_on_another_channel_than_the_run_s_says_so():
+    # The sidecar says the run listened on vcan0 (a BLF numbers it 0); the log holds the
+    # radar's messages on channel 1 alone: read, with a note (a log of another bus?).
+    from collections import Counter
+
+    from rts_scenario.canbus import CanMapping
+    from rts_scenario.recheck import pick_channel
+
+    sidecar = {"can_channel": "vcan0"}
+    picked, note = pick_channel("bench.blf", None, Counter({"1": 40}), CanMapping.builtin(),
+                                sidecar)
+    assert picked is None and "on channel 1 only, not on the one the run listened on " \
+        "('vcan0', its sidecar)" in note
+    assert pick_channel("bench.blf", None, Counter({"0": 40}), CanMapping.builtin(),
+                        sidecar) == (None, None)
+    assert pick_channel("bench.blf", None, Counter({"1": 40}), CanMapping.builtin(),
+                        None) == (None, None)
