@@ -823,9 +823,8 @@ class Pipeline:
         # not said where no cycle came with a bus time.
         if track.fit.count:
             report.radar_clock["bus_clock"] = "interface" if self._bus_clock_foreign else "host"
-        if truths.early_s:
-            report.radar_clock["early_s"] = truths.early_s
-        report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s))
+        report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s,
+                                           truths.early_s))
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -1035,16 +1034,19 @@ def _stamped(message: can.Message) -> float:
     return float(message.timestamp)
 
 
-def lag_dict(checker: Checker, coupling_s: float) -> dict[str, float | str]:
-    """Return the report's ``radar_clock`` entries of the detections' lag.
+def lag_dict(checker: Checker, coupling_s: float, early_s: float) -> dict[str, float | str]:
+    """Return the report's ``radar_clock`` entries of the detections' timing.
 
-    ``coupling_s``: the lag the radar's range-Doppler coupling gives (`Checker.lag_reason`).
+    ``coupling_s``: the lag the radar's range-Doppler coupling gives (`Checker.lag_reason`);
+    ``early_s``: how much earlier than their times the cycles may have been measured
+    (`CycleTruth.early_s`), said where not 0.
     """
+    out: dict[str, float | str] = {"early_s": early_s} if early_s else {}
     lag = checker.detection_lag_s(coupling_s)
     if lag is None:
         untold = checker.lag_untold()
-        return {} if untold is None else {"detection_lag_untold": untold}
-    return {"detection_lag_s": lag[0], "detection_lag_error_s": lag[1],
+        return out if untold is None else {**out, "detection_lag_untold": untold}
+    return {**out, "detection_lag_s": lag[0], "detection_lag_error_s": lag[1],
             "detection_lag_coupling_s": coupling_s}
 
 

@@ -1185,9 +1185,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     if lagged:
         report.reasons.append(lagged)
         report.passed = False
-    if truths.early_s:
-        report.radar_clock["early_s"] = truths.early_s
-    report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s))
+    report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s, truths.early_s))
     return report
 
 
