@@ -32,7 +32,7 @@ def mixed_targets(n: int, rng: np.random.Generator) -> list[dict]:
                   "rcs": {"rcs_dbsm": 10.0} if i % 2 else
                          {"aspect_deg": [0, 90, 180, 270], "rcs_dbsm": [10, 15, 12, 15],
                           "fluctuation": "swerling1"}}
-        if i % 4 == 0:
+        if i % 4 == 0 and motion.get("path") != "polyline":  # no offset at a polyline's corner
             target["lane_changes"] = [{"start_s": 10.0 + i, "duration_s": 4.0, "offset_m": 3.5}]
         targets.append(target)
     return targets
