@@ -100,20 +100,22 @@ J1850_MAPPING = AUTOSAR_MAPPING.replace(
 HEADER_ID, DETECTION_ID = 768, 769
 
 
+def _mapping(folder, name, text):
+    """The AUTOSAR-style DBC and a mapping of it, written to ``folder``."""
+    (folder / "autosar.dbc").write_text(AUTOSAR_DBC)
+    path = folder / f"{name}.mapping.yaml"
+    path.write_text(text)
+    return path
+
+
 @pytest.fixture
 def autosar(tmp_path):
-    (tmp_path / "autosar.dbc").write_text(AUTOSAR_DBC)
-    path = tmp_path / "autosar.mapping.yaml"
-    path.write_text(AUTOSAR_MAPPING)
-    return path
+    return _mapping(tmp_path, "autosar", AUTOSAR_MAPPING)
 
 
 @pytest.fixture
 def j1850(tmp_path):
-    (tmp_path / "autosar.dbc").write_text(AUTOSAR_DBC)
-    path = tmp_path / "j1850.mapping.yaml"
-    path.write_text(J1850_MAPPING)
-    return path
+    return _mapping(tmp_path, "j1850", J1850_MAPPING)
 
 
 def header_p2(alive, count, t_s=0.0, *, stamp=0.0):
