@@ -291,6 +291,7 @@ class Checker:
         self._matched = 0
         self._unchecked = 0
         self._false = 0
+        self._folded = 0
         self._invalid = 0
         self._worst: list[tuple[float, int, int, dict[str, Any]]] = []
         self.frames = {"total": 0, "checked": 0, "received": 0, "unmatched": 0, "missing": 0,
@@ -477,6 +478,9 @@ class Checker:
         self._matched += int((assigned & truth).sum())
         self._unchecked += int(((~ok)[:, None] & truth).sum())
         self._false += int((~matched & ~invalid).sum())
+        if matched.any():  # detections of echoes beyond the radar's limits, where it folds them
+            unambiguous = block.tracks.in_range & block.tracks.in_velocity
+            self._folded += int((~unambiguous[frame_of[matched], match[matched]]).sum())
         self._invalid += int(invalid.sum())
         tally = self.frames
         tally["total"] += n_frames
@@ -507,23 +511,14 @@ class Checker:
         # a sorted search per frame (no detections x targets arrays).
         det, target = _range_candidates(frame_of, values["range_m"], tracks.range_m,
                                         GATE * tol["range_m"])
-        cost = np.zeros(det.size)
-        inside = played[frame_of[det], target] & ~invalid[det]
-        diffs: dict[str, FloatArray] = {}
-        for q, key in QUANTITIES:
-            diff = values[q][det] - getattr(tracks, q)[frame_of[det], target]
-            if q == "az_deg":
-                diff = (diff + 180.0) % 360.0 - 180.0
-            diffs[q] = diff
-            if q != "rcs_dbsm":  # RCS fluctuates: it does not decide who is who
-                norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
-                cost += norm * norm
-                inside &= np.abs(norm) <= GATE
+        inside, cost, diffs = self._gate(det, target, frame_of, values, invalid, played,
+                                         {q: getattr(tracks, q) for q, _ in QUANTITIES})
         det, target, cost = det[inside], target[inside], cost[inside]
         diffs = {q: d[inside] for q, d in diffs.items()}
         pair = _assign(frame_of, det, target, cost, n_targets)
         match = np.full(n_det, -1, dtype=np.int64)
         match[det[pair]] = target[pair]
+        self._match_folded(match, tracks, played, frame_of, values, invalid)
         matched = match >= 0
         assigned = np.zeros((n_frames, n_targets), dtype=bool)
         assigned[frame_of[matched], match[matched]] = True
@@ -535,6 +530,62 @@ class Checker:
             errors[q] = err
             within &= ~(np.abs(err) > tol[key])
         return _Judged(truth, assigned, within, errors, match, limit_masks(tracks, flags))
+
+    def _gate(self, det: NDArray[np.int64], target: NDArray[np.int64],
+              frame_of: NDArray[np.int64], values: dict[str, FloatArray], invalid: BoolArray,
+              played: BoolArray, seen: dict[str, FloatArray], angles: BoolArray | None = None
+              ) -> tuple[BoolArray, FloatArray, dict[str, FloatArray]]:
+        """Which candidate pairs lie within the gate of a played echo, their costs and errors.
+
+        ``seen``: each quantity's truth where the radar shows it; ``angles`` (per pair): where
+        its angles are compared (default: every pair).
+        """
+        tol = self.expectations.tolerances
+        cost = np.zeros(det.size)
+        inside = played[frame_of[det], target] & ~invalid[det]
+        diffs: dict[str, FloatArray] = {}
+        for q, key in QUANTITIES:
+            diff = values[q][det] - seen[q][frame_of[det], target]
+            if q == "az_deg":
+                diff = (diff + 180.0) % 360.0 - 180.0
+            diffs[q] = diff
+            if q != "rcs_dbsm":  # RCS fluctuates: it does not decide who is who
+                norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
+                if angles is not None and q in ("az_deg", "el_deg"):
+                    norm = np.where(angles, norm, 0.0)
+                cost += norm * norm
+                inside &= np.abs(norm) <= GATE
+        return inside, cost, diffs
+
+    def _match_folded(self, match: NDArray[np.int64], tracks: Tracks, played: BoolArray,
+                      frame_of: NDArray[np.int64], values: dict[str, FloatArray],
+                      invalid: BoolArray) -> None:
+        """Give detections left unmatched to the echoes beyond the radar's limits they show.
+
+        A played echo beyond the radar's unambiguous range or velocity shows where the radar's
+        FFTs fold it (`Tracks.folded`). Folded in velocity, its angles are not compared: the
+        radar's TDM-MIMO compensation used the folded Doppler, so its angles are wrong, and it
+        may report the echo at several of them. Every unmatched detection within the gate of
+        such an echo is that echo's (the nearest one's), not a false alarm; the target-frame
+        stays under its limit (not checkable), so none of this decides a detection rate.
+        """
+        beyond = played & tracks.present & ~(tracks.in_range & tracks.in_velocity)
+        free = np.flatnonzero(match < 0)
+        if not beyond.any() or free.size == 0:
+            return
+        range_m, velocity = tracks.folded()
+        tol = self.expectations.tolerances
+        det, target = _range_candidates(frame_of[free], values["range_m"][free],
+                                        np.where(beyond, range_m, np.nan), GATE * tol["range_m"])
+        det = free[det]
+        seen = {q: getattr(tracks, q) for q, _ in QUANTITIES}
+        seen.update(range_m=range_m, radial_velocity_mps=velocity)
+        inside, cost, _ = self._gate(det, target, frame_of, values, invalid, beyond, seen,
+                                     angles=tracks.in_velocity[frame_of[det], target])
+        det, target, cost = det[inside], target[inside], cost[inside]
+        nearest = np.lexsort((cost, det))
+        first = np.unique(det[nearest], return_index=True)[1]
+        match[det[nearest][first]] = target[nearest][first]
 
     @staticmethod
     def _lag_errors(block: _Block, error: FloatArray, use_other: BoolArray) -> FloatArray:
@@ -610,7 +661,10 @@ class Checker:
         per `LAG_BIN_S` of measurement time (range errors that follow the scene's geometry
         change smoothly, and do not average out cycle by cycle). None over fewer than
         `LAG_MIN_CYCLES` target-cycles or `LAG_MIN_BINS` such spans, or where the range rates
-        did not vary (a lag could not be told from a range offset).
+        did not vary (a lag could not be told from a range offset), or varied so little that
+        the lag fits only with a range offset beyond the gate of the detections it is told
+        from (`GATE` times the range tolerance; a lag of seconds and a range offset of metres
+        fit a target whose range rate drifts by a millimetre per second as well as no lag).
 
         Cycles near a frame change are read both ways (`_lag_errors`): as having seen the
         frame the clock says, or the one across the change; the reading whose lag is nearer
@@ -618,17 +672,25 @@ class Checker:
         (`RadarProfile.coupling_lag_s`), is kept. A radar in step with the frames fits one of
         them; one whose cycles saw either side at random gives a lag within half a frame.
         """
+        fits = [fit[:2] for fit in self._lag_fits() if fit is not None and self._plausible(fit)]
+        return min(fits, key=lambda lag: abs(lag[0] - coupling_s), default=None)
+
+    def _lag_fits(self) -> list[tuple[float, float, float] | None]:
+        """Return the lag, its standard error and its fit's range offset, of both readings."""
         outer, spans = self._lag_outer, self._lag_spans
         if self._lag_span is not None:  # the span being filled, as if closed
             outer = outer + np.einsum("hi,hj->hij", self._lag_span[1], self._lag_span[1])
             spans += 1
-        lags = [lag for h in range(2)
-                if (lag := self._lag_of(self._lag[h], outer[h], spans)) is not None]
-        return min(lags, key=lambda lag: abs(lag[0] - coupling_s), default=None)
+        return [self._lag_of(self._lag[h], outer[h], spans) for h in range(2)]
+
+    def _plausible(self, fit: tuple[float, float, float]) -> bool:
+        """Whether the range offset a lag fits with could be the radar's (`detection_lag_s`)."""
+        return abs(fit[2]) <= GATE * self.expectations.tolerances["range_m"]
 
     @staticmethod
-    def _lag_of(sums: FloatArray, outer: FloatArray, spans: int) -> tuple[float, float] | None:
-        """Return the lag and its standard error of one reading's sums (`detection_lag_s`)."""
+    def _lag_of(sums: FloatArray, outer: FloatArray, spans: int
+                ) -> tuple[float, float, float] | None:
+        """Return the lag, its standard error and its fit's range offset, of one reading."""
         s_e, s_v, s_ev, s_vv, s_ee, n = sums
         if n < LAG_MIN_CYCLES or spans < LAG_MIN_BINS:
             return None
@@ -649,7 +711,7 @@ class Checker:
                       -mean_e - 2.0 * lag * mean_v, 1.0, lag])
         squares = max(float(c @ outer @ c), 0.0)
         error = max(error, float(np.sqrt(spans / (spans - 1.0) * squares)) / vv)
-        return float(lag), float(error)
+        return float(lag), float(error), float(mean_e + lag * mean_v)
 
     def lag_untold(self) -> str | None:
         """Why `detection_lag_s` tells no lag, or None where it tells one or nothing matched."""
@@ -663,6 +725,13 @@ class Checker:
         if spans < LAG_MIN_BINS:
             return (f"the matched target-cycles span {spans} of {LAG_BIN_S:g} s, fewer than "
                     f"{LAG_MIN_BINS}")
+        fits = [fit for fit in self._lag_fits() if fit is not None]
+        if fits:
+            lag, _, offset = min(fits, key=lambda fit: abs(fit[2]))
+            return (f"the targets' range rates varied too little: the lag that fits, "
+                    f"{lag * 1e3:.1f} ms, needs a range offset of {offset:.3g} m, beyond "
+                    f"the {GATE:g} x {self.expectations.tolerances['range_m']:g} m range gate "
+                    f"of the detections it was told from")
         return "the targets' range rates did not vary: a lag would look like a range offset"
 
     def lag_reason(self, frame_s: float, coupling_s: float = 0.0) -> str | None:
@@ -814,7 +883,7 @@ class Checker:
             targets=targets, errors={q: self._stats[q].result() for q, _ in QUANTITIES},
             detection_rate=float(self._detected.sum() / n_truth) if n_truth else float("nan"),
             false_detections=self._false, false_detections_per_frame=per_frame,
-            invalid_detections=self._invalid,
+            invalid_detections=self._invalid, folded_detections=self._folded,
             bus=dict(bus or {}),
             target_frames={"checkable": n_truth, "matched": self._matched,
                            "unmatched": n_truth - self._matched - self._unchecked,

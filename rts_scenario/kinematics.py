@@ -48,6 +48,10 @@ class Tracks:
         Inside a quad of the rig (its direction can be synthesized).
     in_range, in_velocity : ndarray of bool, shape (F, K)
         Within the radar's unambiguous range and radial velocity.
+    max_range_m, max_radial_velocity_mps : float
+        Those limits (infinite: none known). Beyond them the radar's FFTs fold an echo: its
+        range into ``[0, max_range_m)``, its radial velocity into
+        ``[-max_radial_velocity_mps, max_radial_velocity_mps)`` (`folded`).
     """
 
     names: tuple[str, ...]
@@ -63,6 +67,8 @@ class Tracks:
     in_coverage: BoolArray
     in_range: BoolArray
     in_velocity: BoolArray
+    max_range_m: float = np.inf
+    max_radial_velocity_mps: float = np.inf
 
     @property
     def checkable(self) -> BoolArray:
@@ -72,10 +78,29 @@ class Tracks:
     def take(self, rows: NDArray[np.intp] | NDArray[np.int64], t_s: FloatArray | None = None
              ) -> Tracks:
         """Return the frames ``rows`` (indices, repeats allowed), at times ``t_s`` if given."""
-        out = {f.name: getattr(self, f.name)[rows] for f in fields(self) if f.name != "names"}
+        out = {f.name: getattr(self, f.name)[rows] for f in fields(self)
+               if f.name not in _SCALARS}
         if t_s is not None:
             out["t_s"] = np.asarray(t_s, dtype=np.float64)
-        return Tracks(names=self.names, **out)
+        return Tracks(**{name: getattr(self, name) for name in _SCALARS}, **out)
+
+    def folded(self) -> tuple[FloatArray, FloatArray]:
+        """Range and radial velocity as the radar's FFTs show them, shape (F, K) each.
+
+        Within its unambiguous limits the truth; beyond them folded as `rts_scenario.radar`
+        folds them (and as a real radar's circular FFTs do).
+        """
+        r_max, v_max = self.max_range_m, self.max_radial_velocity_mps
+        range_m = self.range_m if not np.isfinite(r_max) else np.where(
+            self.in_range, self.range_m, np.mod(self.range_m, r_max))
+        velocity = self.radial_velocity_mps if not np.isfinite(v_max) else np.where(
+            self.in_velocity, self.radial_velocity_mps,
+            np.mod(self.radial_velocity_mps + v_max, 2.0 * v_max) - v_max)
+        return range_m, velocity
+
+
+# Fields of `Tracks` that are not per frame.
+_SCALARS = ("names", "max_range_m", "max_radial_velocity_mps")
 
 
 def _rotation_z(yaw: FloatArray) -> FloatArray:
@@ -177,4 +202,6 @@ def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None,
         in_coverage=assign_quads(scenario.rig, az, el) >= 0,
         in_range=(range_m > 0.0) & (range_m < profile.max_range_m),
         in_velocity=np.abs(radial) < profile.max_radial_velocity_mps,
+        max_range_m=profile.max_range_m,
+        max_radial_velocity_mps=profile.max_radial_velocity_mps,
     )

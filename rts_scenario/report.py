@@ -197,6 +197,7 @@ class Report:
     false_detections_per_frame: float
     bus: dict[str, int]
     invalid_detections: int = 0
+    folded_detections: int = 0
     target_frames: dict[str, int] = field(default_factory=dict)
     scene_limits: dict[str, dict[str, Any]] = field(default_factory=dict)
     timing: dict[str, float] = field(default_factory=dict)
@@ -278,7 +279,10 @@ class Report:
                      f"false detections: {self.false_detections} "
                      f"({self.false_detections_per_frame:.3f} per cycle)"
                      + (f"; invalid detections (not a number): {self.invalid_detections}"
-                        if self.invalid_detections else ""))
+                        if self.invalid_detections else "")
+                     + (f"; folded detections (echoes beyond the radar's unambiguous range "
+                        f"or velocity, not false): {self.folded_detections}"
+                        if self.folded_detections else ""))
         if f.get("ambiguous"):
             window = self.playback.get("ambiguity_window_s")
             early = self.radar_clock.get("early_s")

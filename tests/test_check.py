@@ -55,7 +55,8 @@ def cycles_from(tracks, first=0, modulus=65536, drop=None, offset=0.0):
 
 
 def block(tracks, a, b):
-    return Tracks(**{f.name: (getattr(tracks, f.name) if f.name == "names"
+    return Tracks(**{f.name: (getattr(tracks, f.name) if not isinstance(getattr(tracks, f.name),
+                                                                        np.ndarray)
                               else getattr(tracks, f.name)[a:b])
                      for f in dataclasses.fields(Tracks)})
 
@@ -521,3 +522,99 @@ def test_a_scene_wide_limit_is_said_not_hit_only_where_scene_limits_were_judged(
     assert Checker("s", ("a",), expect).report().expected_not_hit == []
     judged = Checker("s", ("a",), expect, scene_limits={})
     assert judged.report().expected_not_hit == ["frame_rate_above_radar"]
+
+
+# -- echoes beyond the radar's unambiguous range or velocity: where the radar folds them --------
+
+V_MAX, R_MAX = 10.0, 75.0
+
+
+def beyond(velocity_mps, range_m=40.0, frames=20):
+    """A target at ``velocity_mps`` and ``range_m``, and a checkable one at 20 m, 3 m/s, az
+    -2 deg, before a radar that folds beyond 10 m/s and 75 m (its unambiguous limits)."""
+    shape = (frames, 2)
+    ones = np.ones(shape, dtype=bool)
+    range_m = np.broadcast_to([range_m, 20.0], shape)
+    velocity = np.broadcast_to([velocity_mps, 3.0], shape)
+    return Tracks(names=("fast", "steady"), t_s=np.arange(frames) * 0.05, range_m=range_m,
+                  radial_velocity_mps=velocity, doppler_hz=np.zeros(shape),
+                  rcs_dbsm=np.full(shape, 10.0), az_deg=np.broadcast_to([2.0, -2.0], shape),
+                  el_deg=np.ones(shape), position_m=np.zeros((*shape, 3)), present=ones,
+                  in_coverage=ones, in_range=range_m < R_MAX, in_velocity=abs(velocity) < V_MAX,
+                  max_range_m=R_MAX, max_radial_velocity_mps=V_MAX)
+
+
+def reported(tracks, range_m, velocity_mps, angles):
+    """Each cycle: the steady target's detection, and one per (az, el) in ``angles`` at
+    ``range_m``, ``velocity_mps``."""
+    az, el = np.array([(-2.0, 1.0), *angles], dtype=float).T
+    n = az.size
+    return [Detections(cycle=f, t_s=float(t), range_m=np.array([20.0] + [range_m] * (n - 1)),
+                       radial_velocity_mps=np.array([3.0] + [velocity_mps] * (n - 1)),
+                       az_deg=az, el_deg=el, rcs_dbsm=np.full(n, 10.0), snr_db=np.full(n, 30.0))
+            for f, t in enumerate(tracks.t_s)]
+
+
+@pytest.mark.parametrize("velocity, folded", [(12.0, -8.0), (-12.0, 8.0), (31.0, -9.0),
+                                              (5.0, 5.0)])
+def test_tracks_fold_the_radial_velocity_into_the_radar_s_unambiguous_interval(velocity, folded):
+    assert beyond(velocity).folded()[1][0, 0] == pytest.approx(folded)
+
+
+def test_tracks_fold_the_range_into_the_radar_s_unambiguous_range():
+    assert beyond(5.0, range_m=80.0).folded()[0][0, 0] == pytest.approx(5.0)
+    assert beyond(5.0, range_m=40.0).folded()[0][0, 0] == pytest.approx(40.0)
+
+
+def test_detections_of_an_echo_folded_in_velocity_are_not_false():
+    # 12 m/s beyond a radar's 10: it shows at -8 m/s, at two wrong angles (its TDM-MIMO
+    # compensation used the folded Doppler). Expected, the run passes; its detections are the
+    # folded echo's, none false.
+    tracks = beyond(12.0)
+    expect = dataclasses.replace(EXPECT, expected_limits=frozenset({"beyond_radar_velocity"}),
+                                 max_false_detections_per_frame=0.0)
+    report = check("s", tracks, OK(20, 2), reported(tracks, 40.0, -8.0, [(90, -90), (90, 90)]),
+                   expect)
+    assert report.passed, report.reasons
+    assert report.false_detections == 0 and report.folded_detections == 40
+    assert "folded detections (echoes beyond the radar's unambiguous range or velocity, not " \
+           "false): 40" in report.table()
+    # Not expected: the limit fails the run, and the detections are still no false alarms.
+    report = check("s", tracks, OK(20, 2), reported(tracks, 40.0, -8.0, [(2, 1)]),
+                   dataclasses.replace(EXPECT, max_false_detections_per_frame=0.0))
+    assert not report.passed and report.false_detections == 0
+    assert any("beyond_radar_velocity 20" in r for r in report.reasons), report.reasons
+    # Elsewhere in velocity (or range), or of an echo the RTS did not play: false.
+    unplayed = OK(20, 2)
+    unplayed[:, 0] = Status.NO_ECHO_SLOT
+    for det, status in (((40.0, 5.0), OK(20, 2)), ((42.0, -8.0), OK(20, 2)),
+                        ((40.0, -8.0), unplayed)):
+        report = check("s", tracks, status, reported(tracks, *det, [(2, 1)]), expect)
+        assert report.false_detections == 20 and report.folded_detections == 0, det
+        assert not report.passed
+    # A radar that resolves the ambiguity reports the true velocity: not false either.
+    report = check("s", tracks, OK(20, 2), reported(tracks, 40.0, 12.0, [(2, 1)]), expect)
+    assert report.false_detections == 0 and report.passed, report.reasons
+
+
+def test_an_echo_folded_in_range_only_is_looked_for_at_its_angles():
+    # 80 m beyond a radar's 75 m, at 5 m/s: it shows at 5 m, and its angles are right.
+    tracks = beyond(5.0, range_m=80.0)
+    expect = dataclasses.replace(EXPECT, expected_limits=frozenset({"beyond_radar_range"}),
+                                 max_false_detections_per_frame=0.0)
+    report = check("s", tracks, OK(20, 2), reported(tracks, 5.0, 5.0, [(2, 1)]), expect)
+    assert report.passed and report.folded_detections == 20, report.reasons
+    report = check("s", tracks, OK(20, 2), reported(tracks, 5.0, 5.0, [(12, 1)]), expect)
+    assert report.false_detections == 20 and not report.passed
+
+
+def test_a_folded_echo_never_takes_a_checkable_target_s_detection():
+    # An echo at 20 m and 23 m/s folds onto the steady target (20 m, 3 m/s). The one
+    # detection there is the steady target's, and it is detected.
+    tracks = beyond(23.0, range_m=20.0)
+    assert tracks.folded()[1][0, 0] == pytest.approx(3.0)
+    expect = dataclasses.replace(EXPECT, expected_limits=frozenset({"beyond_radar_velocity"}),
+                                 max_false_detections_per_frame=0.0)
+    report = check("s", tracks, OK(20, 2), reported(tracks, 20.0, 3.0, []), expect)
+    assert report.passed, report.reasons
+    assert report.targets[1].detected_frames == 20 and report.folded_detections == 0

@@ -1164,6 +1164,36 @@ def test_the_detections_lag_is_the_least_squares_one_of_range_errors_on_range_ra
                                    "like a range offset")
 
 
+def test_a_lag_that_needs_a_range_offset_beyond_the_gate_is_not_told():
+    from rts_scenario.check import Checker
+    from rts_scenario.scenario.model import Expectations
+
+    # A car receding at 3 m/s whose range rate drifts by 0.4 mm/s over 3 s (the geometry), its
+    # range errors 5 mm and a 1.6 mm trend (the bench's): the least-squares lag is 4 s, and it
+    # fits only with a range offset of 12 m (a radar measuring 4 s early ranges a receding
+    # target 12 m short: the offset would give that back). The detections it is told from
+    # lie within 0.9 m (3 x 0.3 m) of their targets: no such offset; a lag cannot be told
+    # from the bench's range errors.
+    t_s = np.arange(60) * 0.05
+    rate = (3.0 - 4e-4 * t_s / 3.0)[:, None]
+    error = 0.005 - 4.0 * (rate - rate.mean())
+    checker = Checker("s", ("a",), Expectations(tolerances={"range_m": 0.3}))
+    checker._add_lag(error, rate, np.ones(rate.shape, dtype=bool), t_s)
+    lag, _, offset = checker._lag_fits()[0]
+    assert (lag, offset) == pytest.approx((4.0, 0.005 + 4.0 * rate.mean()), rel=1e-6)
+    assert checker.detection_lag_s() is None and checker.lag_reason(0.05) is None
+    assert checker.lag_untold() == (
+        "the targets' range rates varied too little: the lag that fits, 4000.0 ms, needs a "
+        "range offset of 12 m, beyond the 3 x 0.3 m range gate of the detections it was told "
+        "from")
+    # A lag of a frame with the same drift fits with an offset of -15 cm: told.
+    late = 0.005 + 0.05 * (rate - rate.mean())
+    told = Checker("s", ("a",), Expectations(tolerances={"range_m": 0.3}))
+    told._add_lag(late, rate, np.ones(rate.shape, dtype=bool), t_s)
+    assert told.detection_lag_s()[0] == pytest.approx(-0.05, rel=1e-6)
+    assert told.lag_untold() is None
+
+
 def test_a_lag_that_cannot_be_told_is_said(tmp_path):
     # One car closing at a constant speed straight ahead: its range rate does not vary, and a
     # lag of the detections would be a range offset. The timing is not checked, and the

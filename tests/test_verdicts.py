@@ -146,3 +146,27 @@ def test_run_prints_the_preflight_before_playing(tmp_path, capsys):
     assert warnings == [f"warning: {path}: car: no_echo_slot in 20 frames (no echo slot left "
                         "on a front end it needs)"]
     assert "preflight" in captured.out.splitlines()[-2]  # the timing line counts it
+
+
+@pytest.mark.parametrize("fidelity", ["analytic", "adc"])
+@pytest.mark.parametrize("expected", [True, False])
+def test_an_echo_beyond_the_radar_s_velocity_is_its_limit_not_false_detections(
+        tmp_path, fidelity, expected):
+    # A car receding at 12 m/s before a radar unambiguous to 10.7 m/s (awr1843boost): the
+    # radar folds it to -9.5 m/s, at wrong angles (its TDM-MIMO compensation used the folded
+    # Doppler). Those detections are the car's, not false alarms; the car is not checkable,
+    # and fails the run unless the scene expects it.
+    fast = ("- {name: fast, rcs: {rcs_dbsm: 10.0}, "
+            + ("expected_limits: [beyond_radar_velocity], " if expected else "")
+            + "motion: {type: constant_velocity, position_m: [40, -1.0, 1.1], speed_mps: 12}}\n")
+    path = scene(tmp_path, f"fast-{fidelity}-{expected}", CAR + fast,
+                 expectations="  max_false_detections_per_frame: 0.0\n")
+    path.write_text(path.read_text().replace("fidelity: analytic", f"fidelity: {fidelity}"))
+    report = run_scene(path, RunOptions(drain_s=1.0)).report
+    assert report.false_detections == 0
+    assert report.folded_detections >= 20  # at least one per radar cycle
+    fast_car = next(t for t in report.targets if t.name == "fast")
+    assert fast_car.limits == {"beyond_radar_velocity": 20}
+    assert report.passed == expected, report.reasons
+    if not expected:
+        assert [r for r in report.reasons if not r.startswith("fast: ")] == [], report.reasons
