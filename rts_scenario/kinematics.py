@@ -1,8 +1,8 @@
 """From a scene to per-frame target parameters as the radar sees them.
 
 World frame: x forward along the road, y left, z up. The ego's body yaws with its velocity
-direction; the radar sits on the ego at its mount pose. Every array is ``[frame, target]``;
-there is no Python loop over frames or targets.
+direction (against it while it drives backwards); the radar sits on the ego at its mount pose.
+Every array is ``[frame, target]``; there is no Python loop over frames or targets.
 
 Radial velocity is ``d(range)/dt`` computed from the analytic velocities of target and radar
 (the radar's includes the ego's yaw rate acting on the mount lever arm), not by differencing.
@@ -111,6 +111,18 @@ def _rotation_z(yaw: FloatArray) -> FloatArray:
                      np.stack([zero, zero, one], -1)], -2)
 
 
+def _body_yaw(v: FloatArray, tangent: FloatArray, moving: BoolArray) -> FloatArray:
+    """Yaw of bodies with velocity ``v`` along paths with ``tangent`` (both ``(..., 3)``).
+
+    A moving body faces its velocity, or against it where it drives backwards (against its
+    path's direction: it still faces along the path); a standing one faces along its path.
+    """
+    along = np.arctan2(tangent[..., 1], tangent[..., 0])
+    backwards = v[..., 0] * tangent[..., 0] + v[..., 1] * tangent[..., 1] < 0.0
+    return np.where(moving, np.arctan2(v[..., 1], v[..., 0]) + np.where(backwards, np.pi, 0.0),
+                    along)
+
+
 def _heading(motion: Motion) -> tuple[FloatArray, FloatArray | None]:
     """Yaw of each body (velocity direction, or path tangent when standing) and its rate.
 
@@ -119,8 +131,7 @@ def _heading(motion: Motion) -> tuple[FloatArray, FloatArray | None]:
     v, a = motion.velocity_mps, motion.acceleration_mps2
     speed2 = v[..., 0] ** 2 + v[..., 1] ** 2
     moving = speed2 > _STANDSTILL_MPS**2
-    yaw = np.where(moving, np.arctan2(v[..., 1], v[..., 0]),
-                   np.arctan2(motion.tangent[..., 1], motion.tangent[..., 0]))
+    yaw = _body_yaw(v, motion.tangent, moving)
     if a is None:
         return yaw, None
     rate = np.where(moving, (v[..., 0] * a[..., 1] - v[..., 1] * a[..., 0])

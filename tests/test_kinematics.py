@@ -240,3 +240,59 @@ def test_a_target_given_in_the_ego_frame_faces_where_it_drives(tmp_path):
     y = np.array([-3.0, 0.0, 3.0])
     off = np.degrees(np.arctan2(np.abs(y), x))  # degrees away from straight behind
     np.testing.assert_allclose(tr.rcs_dbsm, 30.0 - 10.0 * off / 90.0, atol=1e-9)
+
+
+# -- driving backwards -------------------------------------------------------------------------
+
+RCS_BY_ASPECT = {"aspect_deg": [0, 90, 180, 270], "rcs_dbsm": [10, 20, 30, 20]}
+
+
+@pytest.mark.parametrize("motion, x_of_t, v_of_t", [
+    ({"type": "constant_velocity", "speed_mps": -2.0},
+     lambda t: 20.0 - 2.0 * t, lambda t: -2.0 + 0 * t),
+    # Reversing and braking at 1 m/s^2: stops after 2 s and stays.
+    ({"type": "constant_acceleration", "speed_mps": -2.0, "acceleration_mps2": 1.0},
+     lambda t: np.where(t < 2, 20.0 - 2.0 * t + 0.5 * t * t, 18.0),
+     lambda t: np.minimum(-2.0 + t, 0.0)),
+    # Reversing harder and harder.
+    ({"type": "constant_acceleration", "speed_mps": -1.0, "acceleration_mps2": -0.5},
+     lambda t: 20.0 - t - 0.25 * t * t, lambda t: -1.0 - 0.5 * t),
+    # Backs off at 2 m/s for 1 s, then drives forwards: speed -2 -> 2 m/s over 1..3 s.
+    ({"type": "speed_profile", "profile": [{"t_s": 1.0, "speed_mps": -2.0},
+                                           {"t_s": 3.0, "speed_mps": 2.0}]},
+     lambda t: np.where(t < 1, 20.0 - 2 * t, np.where(
+         t < 3, 18.0 - 2 * (t - 1) + (t - 1) ** 2, 18.0 + 2 * (t - 3))),
+     lambda t: np.where(t < 1, -2.0, np.where(t < 3, -2.0 + 2 * (t - 1), 2.0))),
+])
+def test_a_car_driving_backwards_faces_its_heading(tmp_path, motion, x_of_t, v_of_t):
+    # A car 20 m ahead, facing away from the radar (heading 0: the radar sees its back, 30
+    # dBsm), backs towards it: positions and range rates by hand, and the radar keeps seeing
+    # its back (a car does not turn round to reverse), also while it stands.
+    tr = tracks_of(tmp_path, [{
+        "name": "reversing", "rcs": RCS_BY_ASPECT,
+        "motion": {**motion, "position_m": [20.0, 0.0, 0.0], "heading_deg": 0.0},
+    }], duration_s=5.0)
+    t = tr.t_s
+    np.testing.assert_allclose(tr.position_m[:, 0, 0], x_of_t(t), atol=1e-12)
+    np.testing.assert_allclose(tr.radial_velocity_mps[:, 0], v_of_t(t), atol=1e-12)
+    np.testing.assert_allclose(tr.rcs_dbsm[:, 0], 30.0, atol=1e-12)
+
+
+def test_an_ego_driving_backwards_keeps_its_radar_facing_its_heading(tmp_path):
+    # The ego reverses along x at 3 m/s; its radar, mounted at the back (x -1 m, yawed 180
+    # deg), looks behind it, where a post stands at (-20, 2, 0): by hand, the post comes
+    # nearer at 3 m/s (less its angle's share), and stays at the same side of the radar.
+    tr = tracks_of(tmp_path, [{
+        "name": "post", "rcs": {"rcs_dbsm": 0},
+        "motion": {"type": "stationary", "position_m": [-20.0, 2.0, 0.0]},
+    }], ego={"motion": {"type": "constant_velocity", "position_m": [0, 0, 0],
+                        "speed_mps": -3.0}},
+        radar={"profile": "awr1843boost", "mount": {"x_m": -1.0, "yaw_deg": 180.0}},
+        duration_s=4.0)
+    t = tr.t_s
+    dx = -20.0 - (-1.0 - 3.0 * t)  # post less radar, along x (negative: behind)
+    rng = np.hypot(dx, 2.0)
+    np.testing.assert_allclose(tr.range_m[:, 0], rng, rtol=1e-12)
+    np.testing.assert_allclose(tr.radial_velocity_mps[:, 0], 3.0 * dx / rng, rtol=1e-9)
+    # Behind and 2 m to the ego's left: the rear radar (turned round) sees it to its right.
+    np.testing.assert_allclose(tr.az_deg[:, 0], -np.degrees(np.arctan2(2.0, -dx)), atol=1e-9)

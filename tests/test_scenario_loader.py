@@ -122,7 +122,13 @@ BAD = [
      "must have at least 3 items"),
     (edit("speed_mps: 20.0}", "speed_mps: 20.0, acceleration_mps2: 1}"), 10,
      "ego.motion.acceleration_mps2", "unknown key 'acceleration_mps2'"),
-    (edit("speed_mps: 20.0}", "speed_mps: -20.0}"), 10, "ego.motion.speed_mps", "must be >= 0"),
+    (edit("speed_mps: 20.0}", "speed_mps: -200.0}"), 10, "ego.motion.speed_mps",
+     "must be >= -150"),
+    (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
+          "    motion:\n      type: waypoints\n      points:\n"
+          "        - {position_m: [30, 0, 0], speed_mps: 3}\n"
+          "        - {position_m: [40, 0, 0], speed_mps: -3}"), 17,
+     "targets[0].motion.points[1].speed_mps", "must be >= 0"),
     (edit("{type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
           "{position_m: [30, 0, 0.6]}"), 13, "targets[0].motion",
      "'type' is required but missing; allowed values: 'stationary', 'constant_velocity', "

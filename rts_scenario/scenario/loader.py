@@ -517,9 +517,9 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
         law = TravelLaw.pieces([0.0], [motion["speed_mps"]], [0.0])
     elif kind == "constant_acceleration":
         v0, a = float(motion["speed_mps"]), float(motion["acceleration_mps2"])
-        if a < 0.0 and v0 > 0.0:
-            law = TravelLaw.pieces([0.0, v0 / -a], [v0, 0.0], [a, 0.0])  # stops, never reverses
-        else:
+        if a * v0 < 0.0:  # braking, forwards or backwards: stops, never turns back
+            law = TravelLaw.pieces([0.0, v0 / -a], [v0, 0.0], [a, 0.0])
+        else:  # from standstill it drives off forwards; braking there, it stands
             law = TravelLaw.pieces([0.0], [v0], [max(a, 0.0) if v0 == 0.0 else a])
     else:  # speed_profile
         law = _speed_profile(doc, (*mkey, "profile"), motion["profile"])
