@@ -124,6 +124,15 @@ BAD = [
      "ego.motion.acceleration_mps2", "unknown key 'acceleration_mps2'"),
     (edit("speed_mps: 20.0}", "speed_mps: -200.0}"), 10, "ego.motion.speed_mps",
      "must be >= -150"),
+    (edit("  motion: {type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}",
+          "  motion:\n    type: waypoints\n    points:\n"
+          "      - {position_m: [0, 0, 0], speed_mps: 20}\n"
+          "      - {position_m: [50, 0, 0], speed_mps: 20}\n"
+          "      - {position_m: [100, 8.8, 0], speed_mps: 20}"), 14,
+     "ego.motion.points[1].position_m",
+     "the ego's path turns 9.98 deg at this waypoint: a polyline turns in no time, and the "
+     "radar with it, so every target's azimuth would jump 9.98 deg between two frames and the "
+     "radar (3.7 m from the ego's reference point) 0.644 m sideways; use path: spline"),
     (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
           "    motion:\n      type: waypoints\n      points:\n"
           "        - {position_m: [30, 0, 0], speed_mps: 3}\n"

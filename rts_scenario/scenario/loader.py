@@ -136,6 +136,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     _check_frames(doc, frames)
     ego_spec = data.get("ego", {"motion": {"type": "stationary", "position_m": [0, 0, 0]}})
     ego = _trajectory(doc, ("ego",), ego_spec, frames)
+    _ego_corners(doc, ego_spec["motion"], data["radar"].get("mount", {}))
 
     targets = []
     seen: dict[str, tuple[Document, KeyPath]] = {}
@@ -575,6 +576,36 @@ def _corner_offset(doc: Document, key: KeyPath, points: np.ndarray, t_s: float,
                              f"{side} of it (lane_changes): a polyline turns in no time, so the "
                              f"object would jump {jump:.3g} m; use path: spline, or end the "
                              f"lateral offset before the corner")
+
+
+# The ego's path may turn at most this far where a polyline turns (deg): its radar turns with it.
+EGO_CORNER_DEG = 0.01
+
+
+def _ego_corners(doc: Document, motion: dict[str, Any], mount: dict[str, float]) -> None:
+    """Refuse an ego polyline that turns at a waypoint: its radar would turn in no time."""
+    if motion["type"] != "waypoints" or motion.get("path", "polyline") != "polyline":
+        return
+    points = np.array([p["position_m"] for p in motion["points"]], dtype=float)[:, :2]
+    chords = np.diff(points, axis=0)
+    lengths = np.linalg.norm(chords, axis=1)
+    for i in range(1, len(chords)):
+        if min(lengths[i - 1], lengths[i]) < 1e-9:  # a vertical piece turns no heading
+            continue
+        cos = float(np.clip(chords[i - 1] @ chords[i] / (lengths[i - 1] * lengths[i]), -1, 1))
+        angle = math.degrees(math.acos(cos))
+        if angle > EGO_CORNER_DEG:
+            lever = math.hypot(float(mount.get("x_m", 0.0)), float(mount.get("y_m", 0.0)))
+            jump = 2.0 * lever * math.sin(math.radians(angle) / 2.0)
+            raise doc.error(
+                ("ego", "motion", "points", i, "position_m"),
+                f"the ego's path turns {angle:.3g} deg at this waypoint: a polyline turns in no "
+                f"time, and the radar with it, so every target's azimuth would jump "
+                f"{angle:.3g} deg between two frames"
+                + (f" and the radar ({lever:.3g} m from the ego's reference point) {jump:.3g} m"
+                   f" sideways" if jump >= 0.001 else "")
+                + f"; use path: spline (the ego's path may turn at most {EGO_CORNER_DEG:g} deg "
+                  f"at a polyline's waypoint)")
 
 
 def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
