@@ -328,6 +328,49 @@ def test_emulate_command_stops_when_frames_stop(tmp_path, capsys):
     assert "no stream arrived" not in out and "1 datagrams" in out and "1 malformed" in out
 
 
+def _emulate_in_thread(capsys, args):
+    """Start `rts-scenario emulate ARGS` in a thread; return it, its exit codes and port."""
+    import re
+    import threading
+
+    codes: list[int] = []
+    worker = threading.Thread(target=lambda: codes.append(cli.main(["emulate", *args])))
+    start = time.monotonic()
+    worker.start()
+    text = ""
+    while "listening on" not in text and time.monotonic() - start < 20:
+        time.sleep(0.05)
+        text += capsys.readouterr().out
+    port = int(re.search(r"listening on udp://127\.0\.0\.1:(\d+)", text).group(1))
+    return worker, codes, port
+
+
+def test_emulate_refuses_a_run_on_a_rig_laid_out_otherwise_and_fails(tmp_path, capsys):
+    # The RTS has 15 FEs in 5 rows of 3; the run's frames name quads of 3 rows of 5 (as many
+    # FEs): not played on this geometry, said, and the command fails.
+    import socket
+
+    from rts_scenario.outputs.udp import ENTRY, KIND_FULL, encode_frame
+
+    path = tmp_path / "rows5.rig.yaml"
+    rs.Rig.grid(az_deg=[-10.0, 0.0, 10.0], el_deg=[-8.0, -4.0, 0.0, 4.0, 8.0]).write(path)
+    worker, codes, port = _emulate_in_thread(
+        capsys, ["--listen", "udp://127.0.0.1:0", "--rig", str(path), "--radar",
+                 "awr1843boost", "--seconds", "0.5", "--wait", "30"])
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["channel"], entries["flags"], entries["fe"] = np.arange(4), 1, [0, 1, 5, 6]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        for n in range(3):
+            sock.sendto(encode_frame(entries, kind=KIND_FULL, frame=n, t_s=n / 20.0,
+                                     first_sequence=n)[0], ("127.0.0.1", port))
+            time.sleep(0.05)
+    worker.join(timeout=30)
+    assert not worker.is_alive() and codes == [1]
+    out = capsys.readouterr().out
+    assert "0 frames applied" in out and "3 malformed" in out
+    assert "3 datagrams name FEs that are no quad of rig" in out
+
+
 def test_emulate_stopped_by_ctrl_c_before_a_stream_does_not_claim_the_wait_ran_out(
         monkeypatch, capsys):
     # Ctrl-C a second into the default 600 s wait: no stream came, but the wait did not end.

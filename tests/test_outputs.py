@@ -232,6 +232,34 @@ def test_an_entry_naming_a_channel_or_fe_the_rts_lacks_is_malformed_not_applied(
     assert receiver.current is not None and receiver.current[0] == 2
 
 
+def test_a_target_on_fes_that_make_no_quad_of_the_rts_s_rig_is_refused():
+    """An RTS with as many FEs as the run's rig, laid out otherwise (5 rows of 3, the run's 3
+    rows of 5): each target's channels name FEs that are no quad of the RTS's rig. The frames
+    are refused (malformed, counted apart as ``other_rig``), never played on that geometry; a
+    quad of its own rig, in the paper's channel order, is played."""
+    from rts_scenario.rig import Rig
+
+    rts_rig = Rig.grid(az_deg=[-10.0, 0.0, 10.0], el_deg=[-8.0, -4.0, 0.0, 4.0, 8.0])
+    assert rts_rig.n_front_ends == 15
+    receiver = UdpReceiver(n_front_ends=rts_rig.n_front_ends, quads=rts_rig.quads)
+    entries = np.zeros(8, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = np.arange(8) // 4, np.arange(8) % 4, 1
+
+    def frame(n, fe):
+        values = entries.copy()
+        values["fe"] = fe
+        return encode_frame(values, kind=KIND_FULL, frame=n, t_s=n / 20.0, first_sequence=n)[0]
+
+    receiver.handle(frame(0, [0, 1, 3, 4, 4, 5, 7, 8]))  # two quads of 5 rows of 3
+    receiver.handle(frame(1, [0, 1, 5, 6, 1, 2, 6, 7]))  # quads of 3 rows of 5
+    receiver.handle(frame(2, [0, 1, 3, 4, 1, 0, 4, 3]))  # the second one's channels swapped
+    receiver.handle(frame(3, [0, 1, 3, 4, 0, 1, 7, 8]))  # the second one across two quads
+    receiver.handle(frame(4, [3, 4, 6, 7, 0, 1, 3, 4]))
+    stats = receiver.stop(drain_s=0.0)
+    assert (stats.frames_applied, stats.malformed, stats.other_rig) == (2, 3, 3)
+    assert receiver.current is not None and receiver.current[0] == 4
+
+
 def test_an_off_entry_of_a_delta_needs_no_fe():
     receiver = UdpReceiver(n_front_ends=4)
     entries = np.zeros(4, dtype=ENTRY)

@@ -79,15 +79,21 @@ def _do_emulate(args: argparse.Namespace) -> int:
     print(f"rts: {udp['frames_applied']} frames applied, {udp['datagrams']} datagrams, "
           f"{udp['lost_frames']} frames lost, {udp['corrupted']} corrupted, "
           f"{udp['malformed']} malformed", flush=True)
-    if udp["malformed"]:
-        print(f"note: malformed datagrams are not played: a damaged datagram, or entries "
-              f"naming a channel beyond 0..3 or an FE rig {rig.name!r} lacks (it has "
-              f"{rig.n_front_ends}: the run's rig has more?)", flush=True)
+    if udp["other_rig"]:
+        print(f"error: {udp['other_rig']} datagrams name FEs that are no quad of rig "
+              f"{rig.name!r} ({rig.rows} rows of {rig.columns} FEs): the run's rig is another; "
+              f"not played", flush=True)
+    if udp["malformed"] > udp["other_rig"]:
+        print("note: malformed datagrams are not played: a damaged datagram, or entries "
+              "naming a channel beyond 0..3", flush=True)
     print(f"radar: {measured['cycles']} cycles measured, {measured['published']} published "
           f"({measured['detections']} detections, {stats['can_messages']} CAN messages), "
           f"worst {measured['worst_late_ms']} ms behind its clock", flush=True)
-    # Nothing rehearsed: a script waiting on it must not read that as a bench that worked.
-    return EXIT_FAIL if not (udp["datagrams"] or interrupted) else EXIT_OK
+    # Nothing rehearsed, or a run refused for its rig: a script waiting on it must not read
+    # that as a bench that worked.
+    if udp["other_rig"] or not (udp["datagrams"] or interrupted):
+        return EXIT_FAIL
+    return EXIT_OK
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:

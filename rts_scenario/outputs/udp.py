@@ -293,6 +293,9 @@ class ReceiverStats:
     lost_datagrams: int = 0
     lost_frames: int = 0
     unsynced_frames: int = 0
+    # Of the malformed: entries naming FEs the RTS's rig lacks or that make none of its quads
+    # (a run on another rig); not in the status reply (counted there as malformed).
+    other_rig: int = 0
 
     @property
     def clean(self) -> bool:
@@ -317,7 +320,8 @@ class UdpReceiver:
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, *,
-                 keep_applied: bool = False, n_front_ends: int | None = None) -> None:
+                 keep_applied: bool = False, n_front_ends: int | None = None,
+                 quads: NDArray[np.integer] | None = None) -> None:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._socket = socket.socket(family, socket.SOCK_DGRAM)
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
@@ -329,6 +333,9 @@ class UdpReceiver:
         # The FEs of the rig this RTS plays through, where known: an emitting entry must name
         # one of them (0 .. n_front_ends - 1).
         self.n_front_ends = n_front_ends
+        # Its quads' FEs in the paper's channel order (Q, 4), where known: a target's emitting
+        # channels must name FEs of one of them, each on its own channel.
+        self.quads = None if quads is None else np.asarray(quads, dtype=np.int64).reshape(-1, 4)
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         # The receiving thread applies frames while others read the state (`snapshot`).
@@ -505,8 +512,12 @@ class UdpReceiver:
             stats.malformed += 1
             return
         entries = np.frombuffer(body, dtype=ENTRY, offset=HEADER.size, count=count)
-        if not self._playable(entries):
+        if int(entries["channel"].max(initial=0)) > 3:
             stats.malformed += 1
+            return
+        if not self._on_this_rig(entries):
+            stats.malformed += 1
+            stats.other_rig += 1
             return
         if seq in self._seen:
             stats.duplicates += 1
@@ -535,21 +546,33 @@ class UdpReceiver:
         if len(self._pending[frame]) == parts:
             self._apply(frame)
 
-    def _playable(self, entries: np.ndarray) -> bool:
-        """Whether every entry names a quad's channel (0..3) and every emitting one an FE.
+    def _on_this_rig(self, entries: np.ndarray) -> bool:
+        """Whether every emitting entry names an FE of this RTS's rig, on a quad of it.
 
-        The FE must be one of the rig's where the receiver knows it (``n_front_ends``): a
-        sender whose rig has more FEs than this RTS's is refused, not played on other FEs.
+        Channels are 0..3 (checked before). The FE must be one of the rig's where the receiver
+        knows it (``n_front_ends``): a sender whose rig has more FEs than this RTS's is
+        refused, not played on other FEs. Where it knows the rig's quads, each target's
+        emitting channels must name the FEs of one quad, each on its channel: a sender whose
+        rig has as many FEs laid out otherwise is refused too.
         """
-        if entries.size == 0:
-            return True
-        if int(entries["channel"].max()) > 3:
-            return False
-        fe = entries["fe"][(entries["flags"] & 1).astype(bool)].astype(np.int64)
+        on = (entries["flags"] & 1).astype(bool)
+        fe = entries["fe"][on].astype(np.int64)
         if fe.size == 0:
             return True
-        return int(fe.min()) >= 0 and (self.n_front_ends is None
-                                       or int(fe.max()) < self.n_front_ends)
+        if int(fe.min()) < 0 or (self.n_front_ends is not None
+                                 and int(fe.max()) >= self.n_front_ends):
+            return False
+        if self.quads is None:
+            return True
+        target = entries["target"][on].astype(np.int64)
+        channel = entries["channel"][on].astype(np.int64)
+        # fits[e, q]: entry e's FE is quad q's on its channel; a target must fit one quad
+        # with all its entries.
+        fits = self.quads[:, channel].T == fe[:, None]
+        order = np.argsort(target, kind="stable")
+        target, fits = target[order], fits[order]
+        starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]])
+        return bool(np.logical_and.reduceat(fits, starts, axis=0).any(axis=1).all())
 
     @staticmethod
     def _opens_stream(datagram: bytes, any_sequence: bool = False) -> bool:
