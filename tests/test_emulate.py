@@ -186,7 +186,13 @@ def test_two_runs_against_one_emulator_both_pass():
             with Pipeline.for_scene(scene, options) as pipeline:
                 reports.append(pipeline.run(scene).report)
     finally:
-        emulator.stop()
+        stats = emulator.stop()
+    # The emulator keeps each run's counters, the RTS's and its radar's.
+    assert [run["run"] for run in stats["runs"]] == [1, 2]
+    for run in stats["runs"]:
+        assert run["udp"]["frames_applied"] == scene.n_frames
+        assert 0 < run["radar"]["published"] <= run["radar"]["cycles"]
+    assert stats["radar"]["cycles"] == sum(run["radar"]["cycles"] for run in stats["runs"])
     assert reports[0].passed, reports[0].reasons
     assert reports[1].passed, reports[1].reasons
     # Each run is a stream of its own: the RTS's counters are the run's, not the sum.
@@ -369,6 +375,39 @@ def test_emulate_refuses_a_run_on_a_rig_laid_out_otherwise_and_fails(tmp_path, c
     out = capsys.readouterr().out
     assert "0 frames applied" in out and "3 malformed" in out
     assert "3 datagrams name FEs that are no quad of rig" in out
+
+
+def test_emulate_prints_each_run_s_counters_and_fails_if_any_run_was_refused(capsys):
+    # Two runs against one emulate (kit-table1, FEs 0..3): the first on a rig with more FEs
+    # (refused), the second on its own (played). Each run's counters are printed, and the
+    # exit code tells the refused one, though the last run was fine.
+    import socket
+
+    from rts_scenario.outputs.udp import ENTRY, KIND_FULL, encode_frame
+
+    worker, codes, port = _emulate_in_thread(
+        capsys, ["--listen", "udp://127.0.0.1:0", "--rig", "kit-table1", "--radar",
+                 "awr1843boost", "--seconds", "1.0", "--wait", "30"])
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["channel"], entries["flags"] = np.arange(4), 1
+    for frames, fe in ((3, [0, 1, 5, 6]), (5, [0, 1, 2, 3])):  # a socket per run
+        entries["fe"] = fe
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            for n in range(frames):
+                sock.sendto(encode_frame(entries, kind=KIND_FULL, frame=n, t_s=n / 20.0,
+                                         first_sequence=n)[0], ("127.0.0.1", port))
+                time.sleep(0.05)
+        time.sleep(0.3)  # quiet before the next run's socket (it may get the same port)
+    worker.join(timeout=30)
+    assert not worker.is_alive() and codes == [1]
+    out = capsys.readouterr().out
+    assert "run 1: rts: 0 frames applied, 3 datagrams, 0 frames lost, 0 corrupted, " \
+           "3 malformed" in out, out
+    assert "run 2: rts: 5 frames applied, 5 datagrams, 0 frames lost, 0 corrupted, " \
+           "0 malformed" in out, out
+    assert "run 1: radar: 0 cycles measured" in out and "run 2: radar: " in out, out
+    assert "run 1: error: 3 datagrams name FEs that are no quad of rig" in out, out
+    assert "run 2: error" not in out
 
 
 def test_emulate_stopped_by_ctrl_c_before_a_stream_does_not_claim_the_wait_ran_out(

@@ -345,6 +345,10 @@ class UdpReceiver:
         self.streams = 0
         self._sender: tuple[str, int] | None = None
         self._last_datagram_s = -np.inf  # perf_counter time of the last datagram
+        # Called with a stream's number and its final counters when the next one begins (in
+        # the receiving thread, under the state's lock: keep it short). The last stream's are
+        # `stop`'s.
+        self.on_stream_end: Callable[[int, ReceiverStats], None] | None = None
         # Applied frames for a consumer (``keep_applied``), of every stream in turn.
         self.applied: deque[tuple[int, float, np.ndarray]] = deque()
         self.arrival_s: deque[float] = deque()
@@ -489,6 +493,9 @@ class UdpReceiver:
             if self._sender is None or first:
                 with self._lock:
                     if self._sender is not None:
+                        self._finish()
+                        if self.on_stream_end is not None:
+                            self.on_stream_end(self.streams, self.stats)
                         self._new_stream()
                     self._sender = sender
                     self.streams += 1
