@@ -260,6 +260,79 @@ def test_a_target_on_fes_that_make_no_quad_of_the_rts_s_rig_is_refused():
     assert receiver.current is not None and receiver.current[0] == 4
 
 
+def _wide_schedule(n_targets, frame=0, active=(-1,)):
+    """One frame of ``n_targets`` targets, those of ``active`` emitting on FEs 0..3."""
+    from rts_scenario.schedule import Schedule, Status
+
+    shape = (1, n_targets, 4)
+    on = np.zeros(shape, dtype=bool)
+    on[0, list(active)] = True
+    values = np.where(on, 1.0, np.nan)
+    return Schedule(
+        t_s=np.array([frame / 20.0]), frame_index=np.array([frame]),
+        names=tuple(f"t{i}" for i in range(n_targets)), quad=np.where(on.any(-1), 0, -1),
+        fe=np.where(on, np.arange(4), -1), weight=on.astype(float), attenuation_db=values,
+        delay_s=values * 1e-7, doppler_hz=values, phase_rad=values * 0.0, active=on,
+        status=np.full((1, n_targets), Status.OK, dtype=np.uint16),
+        angle_error_deg=np.zeros((1, n_targets, 2)))
+
+
+def test_udp_refuses_more_targets_than_its_target_field_numbers():
+    """``target`` is u16: target 65536 would go out as target 0, silently. The stream takes
+    65536 targets (0..65535) and refuses more with one error naming the limit, sending
+    nothing."""
+    receiver = UdpReceiver(keep_applied=True).start()
+    host, port = receiver.address
+    try:
+        with outputs.open_output(f"udp://{host}:{port}", pacing="fast") as out:
+            sent: list[bytes] = []
+            transmit = out.send
+
+            def record(datagram):
+                sent.append(datagram)
+                transmit(datagram)
+
+            out.send = record
+            out.write(_wide_schedule(65536))  # the last target is the highest u16
+            with pytest.raises(OutputError, match=r"udp: 65537 targets: the stream's `target` "
+                                                  r"field \(u16\) numbers at most 65536"):
+                out.write(_wide_schedule(65537, frame=1))
+            assert len(sent) == 1
+    finally:
+        receiver.stop(drain_s=0.2)
+    (_, _, entries), = receiver.applied
+    assert set(entries["target"].tolist()) == {65535}
+
+
+def test_udp_sequence_wraps_at_2_32_and_the_receiver_follows():
+    """``sequence`` counts datagrams modulo 2^32: after 4294967295 comes 0. The receiver
+    takes the wrap for what it is (no stale, duplicate or lost datagram), and still tells a
+    copy and a gap across it."""
+    from rts_scenario.outputs.udp import HEADER, UdpOutput
+
+    out = UdpOutput("127.0.0.1:9", pacing="fast")
+    sent: list[bytes] = []
+    out.send = sent.append
+    out._sequence = 2**32 - 3
+    for frame in range(6):
+        out.write(_wide_schedule(1, frame=frame, active=(0,)))
+    out.close()
+    sequences = [HEADER.unpack(d[:HEADER.size])[3] for d in sent]
+    assert sequences == [2**32 - 3, 2**32 - 2, 2**32 - 1, 0, 1, 2]
+    receiver = UdpReceiver(n_front_ends=4)
+    for datagram in sent:
+        receiver.handle(datagram)
+    stats = receiver.stop(drain_s=0.0)
+    assert (stats.frames_applied, stats.stale, stats.duplicates, stats.reordered) == (6, 0, 0, 0)
+    assert (stats.lost_datagrams, stats.lost_frames) == (0, 0)
+    receiver = UdpReceiver(n_front_ends=4)
+    for datagram in [*sent[:2], sent[3], sent[2], sent[3], *sent[5:]]:  # 4 lost, 2 late
+        receiver.handle(datagram)
+    stats = receiver.stop(drain_s=0.0)
+    assert (stats.duplicates, stats.reordered, stats.lost_datagrams) == (1, 1, 1)
+    assert stats.frames_applied == 4  # 0, 1, 3, 5: 2 came after 3, 4 never
+
+
 def test_an_off_entry_of_a_delta_needs_no_fe():
     receiver = UdpReceiver(n_front_ends=4)
     entries = np.zeros(4, dtype=ENTRY)

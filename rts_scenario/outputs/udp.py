@@ -62,6 +62,12 @@ STATE_HISTORY = 256
 SEQUENCE_WINDOW = 4096
 MAX_DATAGRAM = 1400
 MAX_ENTRIES = (MAX_DATAGRAM - HEADER.size - TRAILER.size) // ENTRY.itemsize
+# What the fields number: targets (``target`` u16), frames (``frame`` u32), FEs (``fe`` i16);
+# ``sequence`` counts modulo 2^32.
+MAX_TARGETS = 1 << 16
+MAX_FRAMES = 1 << 32
+MAX_FRONT_ENDS = 1 << 15
+SEQUENCE_MODULUS = 1 << 32
 
 PACING = ("realtime", "fast")
 MODES = ("full", "delta")
@@ -154,6 +160,7 @@ class UdpOutput(Output):
                               f"{exc}") from None
 
     def _write(self, batch: Schedule) -> None:
+        self._check_fits(batch)
         changed = batch.changed() if self.mode == "delta" else None
         self._sent_t_s = batch.t_s.astype(np.float64, copy=True)
         for pos in range(batch.n_frames):  # frames go out one by one, at their own time
@@ -173,6 +180,23 @@ class UdpOutput(Output):
             self._frames_sent += 1
             if self._frames_sent % STATUS_DRAIN_FRAMES == 0:
                 self.rts_status()  # the socket's buffer holds a few hundred replies at most
+
+    @staticmethod
+    def _check_fits(batch: Schedule) -> None:
+        """Refuse a batch the protocol's fields cannot number (they would wrap silently)."""
+        limits = [("targets", batch.active.shape[1], "target", "u16", MAX_TARGETS)]
+        if batch.n_frames:
+            limits.append(("frame index", int(batch.frame_index.max()) + 1, "frame", "u32",
+                           MAX_FRAMES))
+        fe = batch.fe[batch.active]
+        if fe.size:
+            limits.append(("FE index", int(fe.max()) + 1, "fe", "i16", MAX_FRONT_ENDS))
+        for what, count, name, kind, limit in limits:
+            if count > limit:
+                shown = f"{count} {what}" if what == "targets" else f"{what} {count - 1}"
+                raise OutputError(f"udp: {shown}: the stream's `{name}` field ({kind}) numbers "
+                                  f"at most {limit} {what.split()[0]}s (0..{limit - 1}; "
+                                  f"docs/udp-protocol.md)")
 
     def sent_t_s(self, batch: Schedule) -> np.ndarray:
         """Return when the frames of ``batch`` went out, in scene time (see `Output.sent_t_s`).
@@ -519,6 +543,7 @@ class UdpReceiver:
             stats.malformed += 1
             return
         entries = np.frombuffer(body, dtype=ENTRY, offset=HEADER.size, count=count)
+        seq = self._unwrap(seq)
         if int(entries["channel"].max(initial=0)) > 3:
             stats.malformed += 1
             return
@@ -552,6 +577,17 @@ class UdpReceiver:
         self._pending_meta[frame] = (kind, parts, t_s)
         if len(self._pending[frame]) == parts:
             self._apply(frame)
+
+    def _unwrap(self, seq: int) -> int:
+        """Return ``seq`` (modulo 2^32) as the stream's count: the nearest to the newest.
+
+        The sender's ``sequence`` wraps at 2^32; a datagram up to 2^31 before or after the
+        newest one is taken as that far from it (serial number arithmetic, RFC 1982).
+        """
+        if self._max_sequence < 0:
+            return seq
+        ahead = (seq - self._max_sequence + SEQUENCE_MODULUS // 2) % SEQUENCE_MODULUS
+        return self._max_sequence + ahead - SEQUENCE_MODULUS // 2
 
     def _on_this_rig(self, entries: np.ndarray) -> bool:
         """Whether every emitting entry names an FE of this RTS's rig, on a quad of it.
