@@ -333,6 +333,42 @@ def test_udp_sequence_wraps_at_2_32_and_the_receiver_follows():
     assert stats.frames_applied == 4  # 0, 1, 3, 5: 2 came after 3, 4 never
 
 
+def test_a_frame_that_comes_after_a_newer_one_is_late_not_lost():
+    """Frame 1 comes after frame 2 (reordered on the way): not applied (frames are applied in
+    order), but it came: counted as a late frame, not a lost one; its datagram is reordered
+    and stale, none lost. Frame 5's second part comes after frame 6: late too. Frame 8 never
+    comes: lost. The status reply's ``lost_frames`` (version 1: every frame not applied)
+    holds both."""
+    receiver = UdpReceiver(n_front_ends=4)
+    one = np.zeros(4, dtype=ENTRY)
+    one["channel"], one["flags"], one["fe"] = np.arange(4), 1, np.arange(4)
+    two = np.zeros(52, dtype=ENTRY)  # 13 targets: two datagrams
+    two["target"], two["channel"], two["flags"] = np.arange(52) // 4, np.arange(52) % 4, 1
+    two["fe"] = two["channel"]
+    sent = [0]  # the sender numbers its datagrams in the order of its frames
+
+    def frame(n, entries=one):
+        datagrams = encode_frame(entries, kind=KIND_FULL, frame=n, t_s=n / 20.0,
+                                 first_sequence=sent[0])
+        sent[0] += len(datagrams)
+        return datagrams
+
+    def send(*datagrams):
+        for datagram in datagrams:
+            receiver.handle(datagram)
+
+    f0, f1, f2, f3, f4 = (frame(n) for n in range(5))
+    send(*f0, *f2, *f1, *f3, *f4)
+    f5, f6, f7 = frame(5, two), frame(6), frame(7)
+    frame(8)  # lost on the way
+    send(f5[0], *f6, f5[1], *f7, *frame(9))
+    assert receiver.status_counters()["lost_frames"] == 3  # 1, 5, 8: not applied
+    stats = receiver.stop(drain_s=0.0)
+    assert stats.frames_applied == 7
+    assert (stats.stale_frames, stats.lost_frames) == (2, 1)
+    assert (stats.reordered, stats.stale, stats.lost_datagrams) == (2, 2, 1)
+
+
 def test_an_off_entry_of_a_delta_needs_no_fe():
     receiver = UdpReceiver(n_front_ends=4)
     entries = np.zeros(4, dtype=ENTRY)

@@ -101,7 +101,9 @@ def _print_run(run: dict[str, Any], rig: Any) -> bool:
     head = f"run {run['run']}: " if "run" in run else ""
     print(f"{head}rts: {udp['frames_applied']} frames applied, {udp['datagrams']} datagrams, "
           f"{udp['lost_frames']} frames lost, {udp['corrupted']} corrupted, "
-          f"{udp['malformed']} malformed", flush=True)
+          f"{udp['malformed']} malformed"
+          + (f", {udp['stale_frames']} frames came too late (after a newer one: not applied)"
+             if udp.get("stale_frames") else ""), flush=True)
     if udp["other_rig"]:
         print(f"{head}error: {udp['other_rig']} datagrams name FEs that are no quad of rig "
               f"{rig.name!r} ({rig.rows} rows of {rig.columns} FEs): the run's rig is another; "

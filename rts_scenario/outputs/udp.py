@@ -315,7 +315,10 @@ class ReceiverStats:
     frames_applied: int = 0
     entries_applied: int = 0
     lost_datagrams: int = 0
+    # Frames not applied: none of whose datagrams came, or not all (``lost_frames``), or
+    # one that came after a newer frame was applied (``stale_frames``: reordered, late).
     lost_frames: int = 0
+    stale_frames: int = 0
     unsynced_frames: int = 0
     # Of the malformed: entries naming FEs the RTS's rig lacks or that make none of its quads
     # (a run on another rig); not in the status reply (counted there as malformed).
@@ -326,7 +329,7 @@ class ReceiverStats:
         """No loss, reordering, duplication, corruption or malformed data."""
         return not (self.corrupted or self.malformed or self.duplicates or self.reordered
                     or self.stale or self.lost_datagrams or self.lost_frames
-                    or self.unsynced_frames)
+                    or self.stale_frames or self.unsynced_frames)
 
 
 class UdpReceiver:
@@ -388,6 +391,9 @@ class UdpReceiver:
         self._unique = 0
         self._max_sequence = -1
         self._min_sequence: int | None = None
+        # Frames not applied of which a datagram came after a newer frame was (the newest
+        # `SEQUENCE_WINDOW` of them: each is counted once).
+        self._stale_frames: set[int] = set()
         self._pending: dict[int, dict[int, np.ndarray]] = {}
         self._pending_meta: dict[int, tuple[int, int, float]] = {}
         self._last_frame = -1
@@ -476,23 +482,34 @@ class UdpReceiver:
         A UDP sender cannot see loss; these replies let it report lost frames. A sender that
         does not read them loses nothing.
         """
-        counters = dict(vars(self.stats))
-        counters["lost_frames"] = self._lost_frames_now()
         try:
-            self._socket.sendto(encode_status(counters), sender)
+            self._socket.sendto(encode_status(self.status_counters()), sender)
         except OSError:
             pass
 
-    def _lost_frames_now(self, pending: int | None = None) -> int:
-        """Frames lost so far: between the first and last seen, neither applied nor pending.
+    def status_counters(self) -> dict[str, int]:
+        """Return the counters a status reply carries (docs/udp-protocol.md).
 
-        Frames are applied in order, each once, so counting them is enough. ``pending``: the
-        frames taken as still being assembled (default: those that are).
+        Version 1's ``lost_frames`` is every frame not applied (between the first and the last
+        seen, nor being assembled): lost on the way or come too late (`ReceiverStats`'
+        ``lost_frames`` and ``stale_frames``), which it does not tell apart.
+        """
+        counters = dict(vars(self.stats))
+        counters["lost_frames"] = self._lost_frames_now() + self.stats.stale_frames
+        return counters
+
+    def _lost_frames_now(self, pending: int | None = None) -> int:
+        """Frames lost so far: between the first and last seen, none applied, pending or late.
+
+        Late: a datagram came after a newer frame was applied (``stale_frames``). Frames are
+        applied in order, each once, so counting them is enough. ``pending``: the frames taken
+        as still being assembled (default: those that are).
         """
         if self._first_frame is None:
             return 0
         span = self._top_frame - self._first_frame + 1
         return max(0, span - self.stats.frames_applied - self.stats.unsynced_frames
+                   - self.stats.stale_frames
                    - (len(self._pending) if pending is None else pending))
 
     def handle(self, datagram: bytes, sender: tuple[str, int] | None = None) -> None:
@@ -571,7 +588,15 @@ class UdpReceiver:
         self._first_frame = frame if self._first_frame is None else min(self._first_frame, frame)
         self._top_frame = max(self._top_frame, frame)
         if frame <= self._last_frame:
+            # A frame applied (or given up as unsynced) came whole, so a copy of its datagrams
+            # is a duplicate: this one's frame was not applied, and came late.
             stats.stale += 1
+            if frame not in self._stale_frames:
+                self._stale_frames.add(frame)
+                stats.stale_frames += 1
+                if len(self._stale_frames) > 2 * SEQUENCE_WINDOW:
+                    oldest = self._top_frame - SEQUENCE_WINDOW
+                    self._stale_frames = {f for f in self._stale_frames if f >= oldest}
             return
         self._pending.setdefault(frame, {})[part] = entries
         self._pending_meta[frame] = (kind, parts, t_s)
