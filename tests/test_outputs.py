@@ -235,8 +235,9 @@ def test_an_entry_naming_a_channel_or_fe_the_rts_lacks_is_malformed_not_applied(
 def test_a_target_on_fes_that_make_no_quad_of_the_rts_s_rig_is_refused():
     """An RTS with as many FEs as the run's rig, laid out otherwise (5 rows of 3, the run's 3
     rows of 5): each target's channels name FEs that are no quad of the RTS's rig. The frames
-    are refused (malformed, counted apart as ``other_rig``), never played on that geometry; a
-    quad of its own rig, in the paper's channel order, is played."""
+    are refused (malformed, counted apart as ``other_rig``), never played on that geometry.
+    FEs of a quad of its own are played, on whichever channels (a test pattern plays one FE,
+    or a pair, from channel 0 on)."""
     from rts_scenario.rig import Rig
 
     rts_rig = Rig.grid(az_deg=[-10.0, 0.0, 10.0], el_deg=[-8.0, -4.0, 0.0, 4.0, 8.0])
@@ -255,9 +256,14 @@ def test_a_target_on_fes_that_make_no_quad_of_the_rts_s_rig_is_refused():
     receiver.handle(frame(2, [0, 1, 3, 4, 1, 0, 4, 3]))  # the second one's channels swapped
     receiver.handle(frame(3, [0, 1, 3, 4, 0, 1, 7, 8]))  # the second one across two quads
     receiver.handle(frame(4, [3, 4, 6, 7, 0, 1, 3, 4]))
+    receiver.handle(frame(5, [0, 1, 2, 0, 4, 5, 7, 8]))  # the first across two quads
+    pattern = np.zeros(1, dtype=ENTRY)  # a survey's frame: FE 13 alone, on channel 0
+    pattern["flags"], pattern["fe"] = 1, 13
+    receiver.handle(encode_frame(pattern, kind=KIND_FULL, frame=6, t_s=0.3,
+                                 first_sequence=6)[0])
     stats = receiver.stop(drain_s=0.0)
-    assert (stats.frames_applied, stats.malformed, stats.other_rig) == (2, 3, 3)
-    assert receiver.current is not None and receiver.current[0] == 4
+    assert (stats.frames_applied, stats.malformed, stats.other_rig) == (4, 3, 3)
+    assert receiver.current is not None and receiver.current[0] == 6
 
 
 def _wide_schedule(n_targets, frame=0, active=(-1,)):

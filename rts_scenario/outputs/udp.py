@@ -620,8 +620,9 @@ class UdpReceiver:
         Channels are 0..3 (checked before). The FE must be one of the rig's where the receiver
         knows it (``n_front_ends``): a sender whose rig has more FEs than this RTS's is
         refused, not played on other FEs. Where it knows the rig's quads, each target's
-        emitting channels must name the FEs of one quad, each on its channel: a sender whose
-        rig has as many FEs laid out otherwise is refused too.
+        emitting channels must name FEs of one quad (on any of its channels: a test pattern
+        plays one FE, or a pair of a quad, from channel 0 on): a sender whose rig has as many
+        FEs laid out otherwise is refused too.
         """
         on = (entries["flags"] & 1).astype(bool)
         fe = entries["fe"][on].astype(np.int64)
@@ -633,10 +634,9 @@ class UdpReceiver:
         if self.quads is None:
             return True
         target = entries["target"][on].astype(np.int64)
-        channel = entries["channel"][on].astype(np.int64)
-        # fits[e, q]: entry e's FE is quad q's on its channel; a target must fit one quad
-        # with all its entries.
-        fits = self.quads[:, channel].T == fe[:, None]
+        # fits[e, q]: entry e's FE is one of quad q's; a target must fit one quad with all
+        # its entries.
+        fits = (self.quads[None, :, :] == fe[:, None, None]).any(axis=2)
         order = np.argsort(target, kind="stable")
         target, fits = target[order], fits[order]
         starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]])
