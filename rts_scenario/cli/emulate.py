@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .common import EXIT_FAIL, EXIT_OK, check_can_interface, check_number
+
+if TYPE_CHECKING:
+    from ..rig import Rig
 
 
 def _do_emulate(args: argparse.Namespace) -> int:
@@ -95,7 +98,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _print_run(run: dict[str, Any], rig: Any) -> bool:
+def _print_run(run: dict[str, Any], rig: Rig) -> bool:
     """Print a run's counters (``run N:`` before each line); return whether it was refused."""
     udp, measured = run["udp"], run["radar"]
     head = f"run {run['run']}: " if "run" in run else ""
