@@ -12,6 +12,7 @@ exercises the path a bench uses: UDP to the RTS, a radar on its own clock, CAN b
 from __future__ import annotations
 
 import heapq
+import itertools
 import threading
 import time
 from collections.abc import Callable
@@ -24,7 +25,7 @@ import numpy as np
 from .canbus import DetectionPublisher, open_bus
 from .canbus.mapping import CanMapping
 from .detections import Detections
-from .outputs.udp import UdpReceiver
+from .outputs.udp import ReceiverStats, UdpReceiver
 from .radar.profile import RadarProfile
 from .radar.simulate import SimulatedRadar
 from .rig import Rig
@@ -44,10 +45,19 @@ class EmulatorStats:
     idle_cycles: int = 0  # measured while the RTS held no frame yet
     late_s: list[float] = field(default_factory=list)  # measurement later than its time
 
+    can_messages: int = 0
+    unsendable_detections: int = 0
+
     @property
     def worst_late_s(self) -> float:
         """Largest delay of a measurement behind its cycle time (s)."""
         return max(self.late_s, default=0.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the radar's counters as `Emulator.stop` gives them."""
+        return {"cycles": self.cycles, "published": self.published,
+                "detections": self.detections, "idle_cycles": self.idle_cycles,
+                "worst_late_ms": round(self.worst_late_s * 1e3, 2)}
 
 
 def schedule_of_entries(entries: np.ndarray, frame: int, t_s: float) -> Schedule:
@@ -105,9 +115,10 @@ class Emulator:
         self.rig, self.radar = rig, radar
         self.clock = radar.radar_clock
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        # Frames that name FEs this rig lacks (a run on another rig) are refused as
-        # malformed, never played on other FEs.
-        self.receiver = UdpReceiver(host, port, n_front_ends=rig.n_front_ends)
+        # Frames that name FEs this rig lacks, or FEs that make none of its quads (a run on
+        # another rig) are refused as malformed, never played on other FEs.
+        self.receiver = UdpReceiver(host, port, n_front_ends=rig.n_front_ends,
+                                    quads=rig.quads)
         self._own_bus = bus is None
         try:
             self.bus = bus if bus is not None else open_bus(can_interface, can_channel)
@@ -118,9 +129,19 @@ class Emulator:
         self.simulated = SimulatedRadar(radar, rig, fidelity=fidelity, estimator=estimator,
                                         cfar=cfar, noise=noise, rng=self.rng)
         self.tamper = tamper
+        # The radar's counters of each stream (a run) by the stream's number; `stats` is the
+        # current one's.
         self.stats = EmulatorStats()
+        self._radar_runs: dict[int, EmulatorStats] = {}
+        # Each finished run's counters (`stop`'s ``runs``), and the RTS's of those not yet
+        # taken with their radar's.
+        self.runs: list[dict[str, Any]] = []
+        self._runs_lock = threading.Lock()
+        self.receiver.on_stream_end = self._stream_ended
         self._stop = threading.Event()
-        self._due: list[tuple[float, int, Detections]] = []  # (publish at, order, cycle)
+        # (publish at, order, cycle, its run's counters)
+        self._due: list[tuple[float, int, Detections, EmulatorStats]] = []
+        self._order = itertools.count()
         self._due_lock = threading.Condition()
         self._threads: list[threading.Thread] = []
 
@@ -138,8 +159,30 @@ class Emulator:
             self._threads.append(thread)
         return self
 
+    def _radar_of(self, stream: int) -> EmulatorStats:
+        """Return the radar's counters of stream ``stream`` (created on first use)."""
+        with self._runs_lock:
+            return self._radar_runs.setdefault(stream, EmulatorStats())
+
+    def _stream_ended(self, stream: int, udp: ReceiverStats) -> None:
+        """Keep a finished stream's counters, the RTS's and its radar's, as a run's."""
+        with self._runs_lock:
+            radar = self._radar_runs.pop(stream, None) or EmulatorStats()
+            self.runs.append(self._run_dict(stream, udp, radar))
+
+    @staticmethod
+    def _run_dict(stream: int, udp: ReceiverStats, radar: EmulatorStats) -> dict[str, Any]:
+        return {"run": stream, "udp": dict(vars(udp)), "radar": radar.to_dict(),
+                "can_messages": radar.can_messages,
+                "unsendable_detections": radar.unsendable_detections}
+
     def stop(self) -> dict[str, Any]:
-        """Stop everything (cycles not yet published are dropped); return the statistics."""
+        """Stop everything (cycles not yet published are dropped); return the statistics.
+
+        ``runs``: each stream's (a run's) counters in turn, ``run`` its number from 1, ``udp``
+        the RTS's, ``radar`` the radar's, ``can_messages`` and ``unsendable_detections``. At
+        the top: ``udp`` of the last stream, the others summed over the runs.
+        """
         self._stop.set()
         with self._due_lock:
             self._due_lock.notify_all()
@@ -149,12 +192,18 @@ class Emulator:
         udp = self.receiver.stop(drain_s=0.0)
         if self._own_bus:
             self.bus.shutdown()
-        return {"udp": dict(vars(udp)), "radar": {
-            "cycles": self.stats.cycles, "published": self.stats.published,
-            "detections": self.stats.detections, "idle_cycles": self.stats.idle_cycles,
-            "worst_late_ms": round(self.stats.worst_late_s * 1e3, 2)},
-            "can_messages": self.publisher.sent,
-            "unsendable_detections": self.publisher.unsendable_detections}
+        with self._runs_lock:
+            if self.receiver.streams and not any(r["run"] == self.receiver.streams
+                                                 for r in self.runs):
+                radar = self._radar_runs.pop(self.receiver.streams, None) or EmulatorStats()
+                self.runs.append(self._run_dict(self.receiver.streams, udp, radar))
+            runs = list(self.runs)
+        total = {k: sum(r["radar"][k] for r in runs)
+                 for k in ("cycles", "published", "detections", "idle_cycles")}
+        total["worst_late_ms"] = max((r["radar"]["worst_late_ms"] for r in runs), default=0.0)
+        return {"udp": dict(vars(udp)), "radar": total,
+                "can_messages": self.publisher.sent,
+                "unsendable_detections": self.publisher.unsendable_detections, "runs": runs}
 
     def __enter__(self) -> Emulator:
         return self.start()
@@ -179,6 +228,7 @@ class Emulator:
                 stream, origin, n = self.receiver.streams, None, 0
                 with self._due_lock:
                     self._due.clear()
+                self.stats = self._radar_of(stream)
             if origin is None:
                 snap = self.receiver.snapshot()
                 if snap is None:
@@ -194,9 +244,10 @@ class Emulator:
                 return
             if self.receiver.streams != stream:
                 continue
-            self.stats.late_s.append(time.perf_counter() - due)
-            if len(self.stats.late_s) > 10000:  # keep the worst, bounded
-                self.stats.late_s = [max(self.stats.late_s)]
+            stats = self.stats
+            stats.late_s.append(time.perf_counter() - due)
+            if len(stats.late_s) > 10000:  # keep the worst, bounded
+                stats.late_s = [max(stats.late_s)]
             self._measure_cycle(n, due)
             n += 1
 
@@ -210,21 +261,22 @@ class Emulator:
         if snap is None:  # a new stream began, its first frame not applied yet
             return
         frame, _, _, entries = snap
+        stats = self.stats
         t_cycle = float(self.clock.time_of(np.array([n]))[0])
         counter = int(self.clock.counter_of(np.array([n]))[0])
-        self.stats.cycles += 1
+        stats.cycles += 1
         schedule = schedule_of_entries(entries, counter, t_cycle)
         if schedule.active.any():
             cycle = self.simulated.process(schedule)[0]
         else:
-            self.stats.idle_cycles += 1
+            stats.idle_cycles += 1
             cycle = Detections.empty(counter, t_cycle)
         report = self.tamper(cycle) if self.tamper is not None else cycle
         if report is None:
             return
         at = due + float(self.clock.bus_delay(1, self.rng)[0])
         with self._due_lock:
-            heapq.heappush(self._due, (at, n, report))
+            heapq.heappush(self._due, (at, next(self._order), report, stats))
             self._due_lock.notify()
 
     def _publish(self) -> None:
@@ -235,15 +287,18 @@ class Emulator:
                     self._due_lock.wait(0.05)
                 if self._stop.is_set():
                     return
-                at, _, report = self._due[0]
+                at, _, report, stats = self._due[0]
                 wait = at - time.perf_counter()
                 if wait > 0:
                     self._due_lock.wait(min(wait, 0.05))
                     continue
                 heapq.heappop(self._due)
+            sent, unsendable = self.publisher.sent, self.publisher.unsendable_detections
             self.publisher.publish(report)
-            self.stats.published += 1
-            self.stats.detections += report.count
+            stats.published += 1
+            stats.detections += report.count
+            stats.can_messages += self.publisher.sent - sent
+            stats.unsendable_detections += self.publisher.unsendable_detections - unsendable
 
 
 __all__ = ["Emulator", "EmulatorStats", "schedule_of_entries"]

@@ -792,6 +792,7 @@ class Pipeline:
         playback.rts = self.output.rts_status(settle_s=RTS_SETTLE_S)
         report.playback = playback.to_dict()
         failures = playback.reasons(scene.expectations.expected_limits)
+        report.add_expected_not_hit(playback.not_hit(scene.expectations.expected_limits))
         if failures:
             report.reasons += failures
             report.passed = False

@@ -93,6 +93,10 @@ class Playback:
         """Why the playback fails the run (nothing when it does not)."""
         return playback_reasons(self.to_dict(), expected)
 
+    def not_hit(self, expected: frozenset[str] | set[str]) -> list[str]:
+        """Return the playback limits the scene expects that the run did not hit."""
+        return playback_not_hit(self.to_dict(), expected)
+
 
 def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set[str]
                      ) -> list[str]:
@@ -110,6 +114,23 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
         out.append(f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("
                    + ", ".join(f"{k.replace('_', ' ')} {rts[k]}"
                                for k in LOST_COUNTERS if rts and rts.get(k)) + ")")
+    return out
+
+
+def playback_not_hit(playback: Mapping[str, Any], expected: frozenset[str] | set[str]
+                     ) -> list[str]:
+    """Return the playback's scene-wide limits ``expected`` declares that the run did not hit.
+
+    ``frames_sent_late``: no frame went out late. ``frames_lost``: the RTS reported its
+    counters and lost or left unapplied no frame; an RTS that reports none cannot tell, and
+    the limit is not said (sorted names, as `rts_scenario.report.Report.expected_not_hit`).
+    """
+    out = []
+    if "frames_lost" in expected and playback.get("rts") is not None \
+            and not lost_frames(playback["rts"]):
+        out.append("frames_lost")
+    if "frames_sent_late" in expected and not int(playback["late_frames"]):
+        out.append("frames_sent_late")
     return out
 
 
@@ -146,4 +167,4 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
 
 
 __all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "lost_frames",
-           "playback_reasons", "unpack_send_lateness"]
+           "playback_not_hit", "playback_reasons", "unpack_send_lateness"]

@@ -51,7 +51,12 @@ from .pipeline import (
     ambiguity_window_s,
     lag_dict,
 )
-from .playback import SEND_LATENESS_ENCODING, playback_reasons, unpack_send_lateness
+from .playback import (
+    SEND_LATENESS_ENCODING,
+    playback_not_hit,
+    playback_reasons,
+    unpack_send_lateness,
+)
 from .preflight import scene_limits, schedule_batches, track_batches
 from .radar.clock import TIME_EPS_S, ClockTrack, CycleTimeFit, RadarClock
 from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
@@ -1004,6 +1009,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         # did.
         result.playback = playback
         failures = playback_reasons(playback, scene.expectations.expected_limits)
+        result.add_expected_not_hit(playback_not_hit(playback, scene.expectations.expected_limits))
         if failures:
             result.reasons += failures
             result.passed = False

@@ -210,6 +210,15 @@ class Report:
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
     record: FrameRecord | None = field(default=None, repr=False, compare=False)
 
+    def add_expected_not_hit(self, limits: list[str]) -> None:
+        """Add expected scene-wide ``limits`` the run did not hit, judged apart from the checker.
+
+        They join the scene-wide ones (sorted), before the targets' own (``"name: limit"``: a
+        limit's name holds no colon).
+        """
+        scene = sorted({*(x for x in self.expected_not_hit if ":" not in x), *limits})
+        self.expected_not_hit = scene + [x for x in self.expected_not_hit if ":" in x]
+
     @property
     def label(self) -> str:
         """``scene[variant]``, as the pytest plugin names the run (``scene`` without one)."""

@@ -514,6 +514,48 @@ def test_limits_a_scene_expects_but_never_hits_are_said(tmp_path):
     assert report.to_dict()["expected_not_hit"] == report.expected_not_hit
 
 
+def test_playback_limits_a_scene_expects_but_never_hits_are_said(tmp_path):
+    # frames_sent_late and frames_lost are judged from the playback, not by the checker: a
+    # scene that expects them is told when they did not happen, as for the other limits.
+    # The in-process radar output applies every frame at its time (none late) and reports
+    # no RTS counters: whether frames were lost is not told, so it is not said.
+    import yaml
+
+    from rts_scenario.pipeline import Pipeline, RunOptions
+
+    root = Path(__file__).resolve().parents[1]
+    data = yaml.safe_load((root / "scenarios" / "approaching_target.scenario.yaml").read_text())
+    data["duration_s"] = 1.0
+    data["radar"]["noise"] = False
+    data["expectations"]["expected_limits"] = ["out_of_coverage", "frames_sent_late",
+                                               "frames_lost"]
+    (tmp_path / "s.scenario.yaml").write_text(yaml.safe_dump(data))
+    scene = load_scenario(tmp_path / "s.scenario.yaml")
+    with Pipeline.for_scene(scene, RunOptions()) as pipeline:
+        report = pipeline.run(scene).report
+    assert report.passed, report.reasons
+    assert report.playback["late_frames"] == 0 and report.playback["rts"] is None
+    assert report.expected_not_hit == ["frames_sent_late", "out_of_coverage"]
+    assert "expected limits not hit: frames_sent_late; out_of_coverage" in report.table()
+
+
+@pytest.mark.parametrize("late, rts, not_hit", [
+    (0, None, ["frames_sent_late"]),
+    (2, None, []),
+    (0, {"lost_frames": 0, "unsynced_frames": 0, "malformed": 0}, ["frames_lost",
+                                                                   "frames_sent_late"]),
+    (0, {"lost_frames": 0, "unsynced_frames": 1}, ["frames_sent_late"]),
+    (0, {"lost_frames": 3, "unsynced_frames": 0}, ["frames_sent_late"]),
+])
+def test_playback_limits_not_hit_follow_the_playback(late, rts, not_hit):
+    from rts_scenario.playback import playback_not_hit
+
+    playback = {"frames_sent": 10, "late_frames": late, "rts": rts}
+    assert playback_not_hit(playback, {"frames_sent_late", "frames_lost"}) == not_hit
+    # Only what the scene expects is said.
+    assert playback_not_hit(playback, set()) == []
+
+
 def test_a_scene_wide_limit_is_said_not_hit_only_where_scene_limits_were_judged():
     from rts_scenario.check import Checker
 

@@ -232,6 +232,149 @@ def test_an_entry_naming_a_channel_or_fe_the_rts_lacks_is_malformed_not_applied(
     assert receiver.current is not None and receiver.current[0] == 2
 
 
+def test_a_target_on_fes_that_make_no_quad_of_the_rts_s_rig_is_refused():
+    """An RTS with as many FEs as the run's rig, laid out otherwise (5 rows of 3, the run's 3
+    rows of 5): each target's channels name FEs that are no quad of the RTS's rig. The frames
+    are refused (malformed, counted apart as ``other_rig``), never played on that geometry.
+    FEs of a quad of its own are played, on whichever channels (a test pattern plays one FE,
+    or a pair, from channel 0 on)."""
+    from rts_scenario.rig import Rig
+
+    rts_rig = Rig.grid(az_deg=[-10.0, 0.0, 10.0], el_deg=[-8.0, -4.0, 0.0, 4.0, 8.0])
+    assert rts_rig.n_front_ends == 15
+    receiver = UdpReceiver(n_front_ends=rts_rig.n_front_ends, quads=rts_rig.quads)
+    entries = np.zeros(8, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = np.arange(8) // 4, np.arange(8) % 4, 1
+
+    def frame(n, fe):
+        values = entries.copy()
+        values["fe"] = fe
+        return encode_frame(values, kind=KIND_FULL, frame=n, t_s=n / 20.0, first_sequence=n)[0]
+
+    receiver.handle(frame(0, [0, 1, 3, 4, 4, 5, 7, 8]))  # two quads of 5 rows of 3
+    receiver.handle(frame(1, [0, 1, 5, 6, 1, 2, 6, 7]))  # quads of 3 rows of 5
+    receiver.handle(frame(2, [0, 1, 3, 4, 1, 0, 4, 3]))  # the second one's channels swapped
+    receiver.handle(frame(3, [0, 1, 3, 4, 0, 1, 7, 8]))  # the second one across two quads
+    receiver.handle(frame(4, [3, 4, 6, 7, 0, 1, 3, 4]))
+    receiver.handle(frame(5, [0, 1, 2, 0, 4, 5, 7, 8]))  # the first across two quads
+    pattern = np.zeros(1, dtype=ENTRY)  # a survey's frame: FE 13 alone, on channel 0
+    pattern["flags"], pattern["fe"] = 1, 13
+    receiver.handle(encode_frame(pattern, kind=KIND_FULL, frame=6, t_s=0.3,
+                                 first_sequence=6)[0])
+    stats = receiver.stop(drain_s=0.0)
+    assert (stats.frames_applied, stats.malformed, stats.other_rig) == (4, 3, 3)
+    assert receiver.current is not None and receiver.current[0] == 6
+
+
+def _wide_schedule(n_targets, frame=0, active=(-1,)):
+    """One frame of ``n_targets`` targets, those of ``active`` emitting on FEs 0..3."""
+    from rts_scenario.schedule import Schedule, Status
+
+    shape = (1, n_targets, 4)
+    on = np.zeros(shape, dtype=bool)
+    on[0, list(active)] = True
+    values = np.where(on, 1.0, np.nan)
+    return Schedule(
+        t_s=np.array([frame / 20.0]), frame_index=np.array([frame]),
+        names=tuple(f"t{i}" for i in range(n_targets)), quad=np.where(on.any(-1), 0, -1),
+        fe=np.where(on, np.arange(4), -1), weight=on.astype(float), attenuation_db=values,
+        delay_s=values * 1e-7, doppler_hz=values, phase_rad=values * 0.0, active=on,
+        status=np.full((1, n_targets), Status.OK, dtype=np.uint16),
+        angle_error_deg=np.zeros((1, n_targets, 2)))
+
+
+def test_udp_refuses_more_targets_than_its_target_field_numbers():
+    """``target`` is u16: target 65536 would go out as target 0, silently. The stream takes
+    65536 targets (0..65535) and refuses more with one error naming the limit, sending
+    nothing."""
+    receiver = UdpReceiver(keep_applied=True).start()
+    host, port = receiver.address
+    try:
+        with outputs.open_output(f"udp://{host}:{port}", pacing="fast") as out:
+            sent: list[bytes] = []
+            transmit = out.send
+
+            def record(datagram):
+                sent.append(datagram)
+                transmit(datagram)
+
+            out.send = record
+            out.write(_wide_schedule(65536))  # the last target is the highest u16
+            with pytest.raises(OutputError, match=r"udp: 65537 targets: the stream's `target` "
+                                                  r"field \(u16\) numbers at most 65536"):
+                out.write(_wide_schedule(65537, frame=1))
+            assert len(sent) == 1
+    finally:
+        receiver.stop(drain_s=0.2)
+    (_, _, entries), = receiver.applied
+    assert set(entries["target"].tolist()) == {65535}
+
+
+def test_udp_sequence_wraps_at_2_32_and_the_receiver_follows():
+    """``sequence`` counts datagrams modulo 2^32: after 4294967295 comes 0. The receiver
+    takes the wrap for what it is (no stale, duplicate or lost datagram), and still tells a
+    copy and a gap across it."""
+    from rts_scenario.outputs.udp import HEADER, UdpOutput
+
+    out = UdpOutput("127.0.0.1:9", pacing="fast")
+    sent: list[bytes] = []
+    out.send = sent.append
+    out._sequence = 2**32 - 3
+    for frame in range(6):
+        out.write(_wide_schedule(1, frame=frame, active=(0,)))
+    out.close()
+    sequences = [HEADER.unpack(d[:HEADER.size])[3] for d in sent]
+    assert sequences == [2**32 - 3, 2**32 - 2, 2**32 - 1, 0, 1, 2]
+    receiver = UdpReceiver(n_front_ends=4)
+    for datagram in sent:
+        receiver.handle(datagram)
+    stats = receiver.stop(drain_s=0.0)
+    assert (stats.frames_applied, stats.stale, stats.duplicates, stats.reordered) == (6, 0, 0, 0)
+    assert (stats.lost_datagrams, stats.lost_frames) == (0, 0)
+    receiver = UdpReceiver(n_front_ends=4)
+    for datagram in [*sent[:2], sent[3], sent[2], sent[3], *sent[5:]]:  # 4 lost, 2 late
+        receiver.handle(datagram)
+    stats = receiver.stop(drain_s=0.0)
+    assert (stats.duplicates, stats.reordered, stats.lost_datagrams) == (1, 1, 1)
+    assert stats.frames_applied == 4  # 0, 1, 3, 5: 2 came after 3, 4 never
+
+
+def test_a_frame_that_comes_after_a_newer_one_is_late_not_lost():
+    """Frame 1 comes after frame 2 (reordered on the way): not applied (frames are applied in
+    order), but it came: counted as a late frame, not a lost one; its datagram is reordered
+    and stale, none lost. Frame 5's second part comes after frame 6: late too. Frame 8 never
+    comes: lost. The status reply's ``lost_frames`` (version 1: every frame not applied)
+    holds both."""
+    receiver = UdpReceiver(n_front_ends=4)
+    one = np.zeros(4, dtype=ENTRY)
+    one["channel"], one["flags"], one["fe"] = np.arange(4), 1, np.arange(4)
+    two = np.zeros(52, dtype=ENTRY)  # 13 targets: two datagrams
+    two["target"], two["channel"], two["flags"] = np.arange(52) // 4, np.arange(52) % 4, 1
+    two["fe"] = two["channel"]
+    sent = [0]  # the sender numbers its datagrams in the order of its frames
+
+    def frame(n, entries=one):
+        datagrams = encode_frame(entries, kind=KIND_FULL, frame=n, t_s=n / 20.0,
+                                 first_sequence=sent[0])
+        sent[0] += len(datagrams)
+        return datagrams
+
+    def send(*datagrams):
+        for datagram in datagrams:
+            receiver.handle(datagram)
+
+    f0, f1, f2, f3, f4 = (frame(n) for n in range(5))
+    send(*f0, *f2, *f1, *f3, *f4)
+    f5, f6, f7 = frame(5, two), frame(6), frame(7)
+    frame(8)  # lost on the way
+    send(f5[0], *f6, f5[1], *f7, *frame(9))
+    assert receiver.status_counters()["lost_frames"] == 3  # 1, 5, 8: not applied
+    stats = receiver.stop(drain_s=0.0)
+    assert stats.frames_applied == 7
+    assert (stats.stale_frames, stats.lost_frames) == (2, 1)
+    assert (stats.reordered, stats.stale, stats.lost_datagrams) == (2, 2, 1)
+
+
 def test_an_off_entry_of_a_delta_needs_no_fe():
     receiver = UdpReceiver(n_front_ends=4)
     entries = np.zeros(4, dtype=ENTRY)

@@ -410,6 +410,30 @@ def test_a_re_check_fails_on_the_playback_the_run_failed_on(recorded, tmp_path, 
         capsys.readouterr().out
     assert cli.main(["check", scene, "--log", str(recorded)]) == 0
 
+def test_a_re_check_says_the_playback_limits_the_run_did_not_hit(tmp_path):
+    # The scene expects frames sent late and frames lost; the run (in-process, every frame at
+    # its time) sent none late: the re-check says so, as the run did. Where the sidecar holds
+    # an RTS's counters with nothing lost, frames_lost is said not hit too.
+    data = yaml.safe_load(CUT_IN.read_text())
+    data["expectations"]["expected_limits"] = sorted(
+        {*data["expectations"].get("expected_limits", []), "frames_sent_late", "frames_lost"})
+    shutil.copy(CUT_IN, tmp_path / "scene.scenario.yaml")
+    (tmp_path / "scene.scenario.yaml").write_text(yaml.safe_dump(data))
+    scene = load_scenario(tmp_path / "scene.scenario.yaml", QUIET)
+    log = tmp_path / "run.blf"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    assert "frames_sent_late" in live.expected_not_hit
+    assert "frames_lost" not in live.expected_not_hit  # no RTS counters: not told
+    again = check_log(scene, log).report
+    assert again.expected_not_hit == live.expected_not_hit
+    sidecar = json.loads(Path(str(log) + ".rts.json").read_text())
+    sidecar["playback"]["rts"] = {"lost_frames": 0, "unsynced_frames": 0, "corrupted": 0}
+    Path(str(log) + ".rts.json").write_text(json.dumps(sidecar))
+    again = check_log(scene, log).report
+    assert again.passed
+    assert {"frames_lost", "frames_sent_late"} <= set(again.expected_not_hit)
+
+
 @pytest.mark.parametrize("edit, target", [
     # 2 cm further ahead: within every tolerance, so the log would pass against it.
     (("position_m: [50.0, 3.5, 1.2]", "position_m: [50.02, 3.5, 1.2]"), "'truck-left'"),

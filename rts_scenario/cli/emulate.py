@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .common import EXIT_FAIL, EXIT_OK, check_can_interface, check_number
+
+if TYPE_CHECKING:
+    from ..rig import Rig
 
 
 def _do_emulate(args: argparse.Namespace) -> int:
@@ -58,13 +61,19 @@ def _do_emulate(args: argparse.Namespace) -> int:
     if args.can_interface == "virtual":
         print("note: the virtual CAN bus is heard only inside this process; run SCENE in "
               "another one needs a shared interface (socketcan vcan, udp_multicast)", flush=True)
-    # Until a stream starts (--wait), then until streams stop (--seconds without a datagram).
+    # Until a stream starts (--wait), then until streams stop (--seconds without a datagram);
+    # each run's counters as the next begins, the last's at the end.
     datagrams, quiet_since, quiet_s = 0, time.monotonic(), args.wait
+    printed = 0
+    refused = False
     try:
         while time.monotonic() - quiet_since < quiet_s:
             if emulator.receiver.stats.datagrams != datagrams:
                 datagrams = emulator.receiver.stats.datagrams
                 quiet_since, quiet_s = time.monotonic(), args.seconds
+            for run in emulator.runs[printed:]:
+                refused |= _print_run(run, rig)
+                printed += 1
             time.sleep(0.01)
     except KeyboardInterrupt:
         interrupted = True
@@ -72,22 +81,43 @@ def _do_emulate(args: argparse.Namespace) -> int:
         interrupted = False
     finally:
         stats = emulator.stop()
-    if not stats["udp"]["datagrams"]:
+    runs = stats["runs"]
+    if not runs:
         print("stopped (Ctrl-C) before any stream arrived" if interrupted
               else f"no stream arrived within --wait {args.wait:g} s", flush=True)
-    udp, measured = stats["udp"], stats["radar"]
-    print(f"rts: {udp['frames_applied']} frames applied, {udp['datagrams']} datagrams, "
+        _print_run({"udp": stats["udp"], "radar": stats["radar"], "can_messages": 0}, rig)
+    for run in runs[printed:]:
+        refused |= _print_run(run, rig)
+    if len(runs) > 1:
+        print(f"{len(runs)} runs" + (": some refused (another rig)" if refused else ""),
+              flush=True)
+    # Nothing rehearsed, or a run refused for its rig: a script waiting on it must not read
+    # that as a bench that worked.
+    if refused or not (runs or interrupted):
+        return EXIT_FAIL
+    return EXIT_OK
+
+
+def _print_run(run: dict[str, Any], rig: Rig) -> bool:
+    """Print a run's counters (``run N:`` before each line); return whether it was refused."""
+    udp, measured = run["udp"], run["radar"]
+    head = f"run {run['run']}: " if "run" in run else ""
+    print(f"{head}rts: {udp['frames_applied']} frames applied, {udp['datagrams']} datagrams, "
           f"{udp['lost_frames']} frames lost, {udp['corrupted']} corrupted, "
-          f"{udp['malformed']} malformed", flush=True)
-    if udp["malformed"]:
-        print(f"note: malformed datagrams are not played: a damaged datagram, or entries "
-              f"naming a channel beyond 0..3 or an FE rig {rig.name!r} lacks (it has "
-              f"{rig.n_front_ends}: the run's rig has more?)", flush=True)
-    print(f"radar: {measured['cycles']} cycles measured, {measured['published']} published "
-          f"({measured['detections']} detections, {stats['can_messages']} CAN messages), "
-          f"worst {measured['worst_late_ms']} ms behind its clock", flush=True)
-    # Nothing rehearsed: a script waiting on it must not read that as a bench that worked.
-    return EXIT_FAIL if not (udp["datagrams"] or interrupted) else EXIT_OK
+          f"{udp['malformed']} malformed"
+          + (f", {udp['stale_frames']} frames came too late (after a newer one: not applied)"
+             if udp.get("stale_frames") else ""), flush=True)
+    if udp["other_rig"]:
+        print(f"{head}error: {udp['other_rig']} datagrams name FEs that are no quad of rig "
+              f"{rig.name!r} ({rig.rows} rows of {rig.columns} FEs): the run's rig is another; "
+              f"not played", flush=True)
+    if udp["malformed"] > udp["other_rig"]:
+        print(f"{head}note: malformed datagrams are not played: a damaged datagram, or entries "
+              f"naming a channel beyond 0..3", flush=True)
+    print(f"{head}radar: {measured['cycles']} cycles measured, {measured['published']} "
+          f"published ({measured['detections']} detections, {run['can_messages']} CAN "
+          f"messages), worst {measured['worst_late_ms']} ms behind its clock", flush=True)
+    return bool(udp["other_rig"])
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:

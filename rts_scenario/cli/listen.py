@@ -52,7 +52,8 @@ def _do_listen(args: argparse.Namespace) -> int:
         stats = receiver.stop(drain_s=0.0)
     print(f"{shown} frames shown; {stats.frames_applied} applied, {stats.datagrams} datagrams, "
           f"{stats.corrupted} corrupted, {stats.malformed} malformed, {stats.lost_frames} frames "
-          f"lost", flush=True)
+          f"lost" + (f", {stats.stale_frames} frames came too late (after a newer one)"
+                     if stats.stale_frames else ""), flush=True)
     return EXIT_OK
 
 

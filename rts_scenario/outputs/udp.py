@@ -62,6 +62,12 @@ STATE_HISTORY = 256
 SEQUENCE_WINDOW = 4096
 MAX_DATAGRAM = 1400
 MAX_ENTRIES = (MAX_DATAGRAM - HEADER.size - TRAILER.size) // ENTRY.itemsize
+# What the fields number: targets (``target`` u16), frames (``frame`` u32), FEs (``fe`` i16);
+# ``sequence`` counts modulo 2^32.
+MAX_TARGETS = 1 << 16
+MAX_FRAMES = 1 << 32
+MAX_FRONT_ENDS = 1 << 15
+SEQUENCE_MODULUS = 1 << 32
 
 PACING = ("realtime", "fast")
 MODES = ("full", "delta")
@@ -154,6 +160,7 @@ class UdpOutput(Output):
                               f"{exc}") from None
 
     def _write(self, batch: Schedule) -> None:
+        self._check_fits(batch)
         changed = batch.changed() if self.mode == "delta" else None
         self._sent_t_s = batch.t_s.astype(np.float64, copy=True)
         for pos in range(batch.n_frames):  # frames go out one by one, at their own time
@@ -173,6 +180,23 @@ class UdpOutput(Output):
             self._frames_sent += 1
             if self._frames_sent % STATUS_DRAIN_FRAMES == 0:
                 self.rts_status()  # the socket's buffer holds a few hundred replies at most
+
+    @staticmethod
+    def _check_fits(batch: Schedule) -> None:
+        """Refuse a batch the protocol's fields cannot number (they would wrap silently)."""
+        limits = [("targets", batch.active.shape[1], "target", "u16", MAX_TARGETS)]
+        if batch.n_frames:
+            limits.append(("frame index", int(batch.frame_index.max()) + 1, "frame", "u32",
+                           MAX_FRAMES))
+        fe = batch.fe[batch.active]
+        if fe.size:
+            limits.append(("FE index", int(fe.max()) + 1, "fe", "i16", MAX_FRONT_ENDS))
+        for what, count, name, kind, limit in limits:
+            if count > limit:
+                shown = f"{count} {what}" if what == "targets" else f"{what} {count - 1}"
+                raise OutputError(f"udp: {shown}: the stream's `{name}` field ({kind}) numbers "
+                                  f"at most {limit} {what.split()[0]}s (0..{limit - 1}; "
+                                  f"docs/udp-protocol.md)")
 
     def sent_t_s(self, batch: Schedule) -> np.ndarray:
         """Return when the frames of ``batch`` went out, in scene time (see `Output.sent_t_s`).
@@ -291,15 +315,21 @@ class ReceiverStats:
     frames_applied: int = 0
     entries_applied: int = 0
     lost_datagrams: int = 0
+    # Frames not applied: none of whose datagrams came, or not all (``lost_frames``), or
+    # one that came after a newer frame was applied (``stale_frames``: reordered, late).
     lost_frames: int = 0
+    stale_frames: int = 0
     unsynced_frames: int = 0
+    # Of the malformed: entries naming FEs the RTS's rig lacks or that make none of its quads
+    # (a run on another rig); not in the status reply (counted there as malformed).
+    other_rig: int = 0
 
     @property
     def clean(self) -> bool:
         """No loss, reordering, duplication, corruption or malformed data."""
         return not (self.corrupted or self.malformed or self.duplicates or self.reordered
                     or self.stale or self.lost_datagrams or self.lost_frames
-                    or self.unsynced_frames)
+                    or self.stale_frames or self.unsynced_frames)
 
 
 class UdpReceiver:
@@ -317,7 +347,8 @@ class UdpReceiver:
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, *,
-                 keep_applied: bool = False, n_front_ends: int | None = None) -> None:
+                 keep_applied: bool = False, n_front_ends: int | None = None,
+                 quads: NDArray[np.integer] | None = None) -> None:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._socket = socket.socket(family, socket.SOCK_DGRAM)
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
@@ -329,6 +360,9 @@ class UdpReceiver:
         # The FEs of the rig this RTS plays through, where known: an emitting entry must name
         # one of them (0 .. n_front_ends - 1).
         self.n_front_ends = n_front_ends
+        # Its quads' FEs in the paper's channel order (Q, 4), where known: a target's emitting
+        # channels must name FEs of one of them, each on its own channel.
+        self.quads = None if quads is None else np.asarray(quads, dtype=np.int64).reshape(-1, 4)
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         # The receiving thread applies frames while others read the state (`snapshot`).
@@ -338,6 +372,10 @@ class UdpReceiver:
         self.streams = 0
         self._sender: tuple[str, int] | None = None
         self._last_datagram_s = -np.inf  # perf_counter time of the last datagram
+        # Called with a stream's number and its final counters when the next one begins (in
+        # the receiving thread, under the state's lock: keep it short). The last stream's are
+        # `stop`'s.
+        self.on_stream_end: Callable[[int, ReceiverStats], None] | None = None
         # Applied frames for a consumer (``keep_applied``), of every stream in turn.
         self.applied: deque[tuple[int, float, np.ndarray]] = deque()
         self.arrival_s: deque[float] = deque()
@@ -353,6 +391,9 @@ class UdpReceiver:
         self._unique = 0
         self._max_sequence = -1
         self._min_sequence: int | None = None
+        # Frames not applied of which a datagram came after a newer frame was (the newest
+        # `SEQUENCE_WINDOW` of them: each is counted once).
+        self._stale_frames: set[int] = set()
         self._pending: dict[int, dict[int, np.ndarray]] = {}
         self._pending_meta: dict[int, tuple[int, int, float]] = {}
         self._last_frame = -1
@@ -441,23 +482,34 @@ class UdpReceiver:
         A UDP sender cannot see loss; these replies let it report lost frames. A sender that
         does not read them loses nothing.
         """
-        counters = dict(vars(self.stats))
-        counters["lost_frames"] = self._lost_frames_now()
         try:
-            self._socket.sendto(encode_status(counters), sender)
+            self._socket.sendto(encode_status(self.status_counters()), sender)
         except OSError:
             pass
 
-    def _lost_frames_now(self, pending: int | None = None) -> int:
-        """Frames lost so far: between the first and last seen, neither applied nor pending.
+    def status_counters(self) -> dict[str, int]:
+        """Return the counters a status reply carries (docs/udp-protocol.md).
 
-        Frames are applied in order, each once, so counting them is enough. ``pending``: the
-        frames taken as still being assembled (default: those that are).
+        Version 1's ``lost_frames`` is every frame not applied (between the first and the last
+        seen, nor being assembled): lost on the way or come too late (`ReceiverStats`'
+        ``lost_frames`` and ``stale_frames``), which it does not tell apart.
+        """
+        counters = dict(vars(self.stats))
+        counters["lost_frames"] = self._lost_frames_now() + self.stats.stale_frames
+        return counters
+
+    def _lost_frames_now(self, pending: int | None = None) -> int:
+        """Frames lost so far: between the first and last seen, none applied, pending or late.
+
+        Late: a datagram came after a newer frame was applied (``stale_frames``). Frames are
+        applied in order, each once, so counting them is enough. ``pending``: the frames taken
+        as still being assembled (default: those that are).
         """
         if self._first_frame is None:
             return 0
         span = self._top_frame - self._first_frame + 1
         return max(0, span - self.stats.frames_applied - self.stats.unsynced_frames
+                   - self.stats.stale_frames
                    - (len(self._pending) if pending is None else pending))
 
     def handle(self, datagram: bytes, sender: tuple[str, int] | None = None) -> None:
@@ -482,6 +534,9 @@ class UdpReceiver:
             if self._sender is None or first:
                 with self._lock:
                     if self._sender is not None:
+                        self._finish()
+                        if self.on_stream_end is not None:
+                            self.on_stream_end(self.streams, self.stats)
                         self._new_stream()
                     self._sender = sender
                     self.streams += 1
@@ -505,8 +560,13 @@ class UdpReceiver:
             stats.malformed += 1
             return
         entries = np.frombuffer(body, dtype=ENTRY, offset=HEADER.size, count=count)
-        if not self._playable(entries):
+        seq = self._unwrap(seq)
+        if int(entries["channel"].max(initial=0)) > 3:
             stats.malformed += 1
+            return
+        if not self._on_this_rig(entries):
+            stats.malformed += 1
+            stats.other_rig += 1
             return
         if seq in self._seen:
             stats.duplicates += 1
@@ -528,28 +588,59 @@ class UdpReceiver:
         self._first_frame = frame if self._first_frame is None else min(self._first_frame, frame)
         self._top_frame = max(self._top_frame, frame)
         if frame <= self._last_frame:
+            # A frame applied (or given up as unsynced) came whole, so a copy of its datagrams
+            # is a duplicate: this one's frame was not applied, and came late.
             stats.stale += 1
+            if frame not in self._stale_frames:
+                self._stale_frames.add(frame)
+                stats.stale_frames += 1
+                if len(self._stale_frames) > 2 * SEQUENCE_WINDOW:
+                    oldest = self._top_frame - SEQUENCE_WINDOW
+                    self._stale_frames = {f for f in self._stale_frames if f >= oldest}
             return
         self._pending.setdefault(frame, {})[part] = entries
         self._pending_meta[frame] = (kind, parts, t_s)
         if len(self._pending[frame]) == parts:
             self._apply(frame)
 
-    def _playable(self, entries: np.ndarray) -> bool:
-        """Whether every entry names a quad's channel (0..3) and every emitting one an FE.
+    def _unwrap(self, seq: int) -> int:
+        """Return ``seq`` (modulo 2^32) as the stream's count: the nearest to the newest.
 
-        The FE must be one of the rig's where the receiver knows it (``n_front_ends``): a
-        sender whose rig has more FEs than this RTS's is refused, not played on other FEs.
+        The sender's ``sequence`` wraps at 2^32; a datagram up to 2^31 before or after the
+        newest one is taken as that far from it (serial number arithmetic, RFC 1982).
         """
-        if entries.size == 0:
-            return True
-        if int(entries["channel"].max()) > 3:
-            return False
-        fe = entries["fe"][(entries["flags"] & 1).astype(bool)].astype(np.int64)
+        if self._max_sequence < 0:
+            return seq
+        ahead = (seq - self._max_sequence + SEQUENCE_MODULUS // 2) % SEQUENCE_MODULUS
+        return self._max_sequence + ahead - SEQUENCE_MODULUS // 2
+
+    def _on_this_rig(self, entries: np.ndarray) -> bool:
+        """Whether every emitting entry names an FE of this RTS's rig, on a quad of it.
+
+        Channels are 0..3 (checked before). The FE must be one of the rig's where the receiver
+        knows it (``n_front_ends``): a sender whose rig has more FEs than this RTS's is
+        refused, not played on other FEs. Where it knows the rig's quads, each target's
+        emitting channels must name FEs of one quad (on any of its channels: a test pattern
+        plays one FE, or a pair of a quad, from channel 0 on): a sender whose rig has as many
+        FEs laid out otherwise is refused too.
+        """
+        on = (entries["flags"] & 1).astype(bool)
+        fe = entries["fe"][on].astype(np.int64)
         if fe.size == 0:
             return True
-        return int(fe.min()) >= 0 and (self.n_front_ends is None
-                                       or int(fe.max()) < self.n_front_ends)
+        if int(fe.min()) < 0 or (self.n_front_ends is not None
+                                 and int(fe.max()) >= self.n_front_ends):
+            return False
+        if self.quads is None:
+            return True
+        target = entries["target"][on].astype(np.int64)
+        # fits[e, q]: entry e's FE is one of quad q's; a target must fit one quad with all
+        # its entries.
+        fits = (self.quads[None, :, :] == fe[:, None, None]).any(axis=2)
+        order = np.argsort(target, kind="stable")
+        target, fits = target[order], fits[order]
+        starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]])
+        return bool(np.logical_and.reduceat(fits, starts, axis=0).any(axis=1).all())
 
     @staticmethod
     def _opens_stream(datagram: bytes, any_sequence: bool = False) -> bool:
