@@ -37,7 +37,7 @@ import jsonschema
 import numpy as np
 from numpy.typing import NDArray
 
-from .canbus import DetectionReceiver
+from .canbus import DetectionReceiver, channel_label
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
@@ -424,11 +424,6 @@ def read_cycles(log: str | Path, mapping: CanMapping | None, cycle_s: float | No
     """
     stats: dict[str, int] = {}
     return list(_iter_cycles(log, mapping, stats, cycle_s, channel=channel)), stats
-
-
-def channel_label(channel: Any) -> str | None:
-    """Return a message's channel as ``--log-channel`` names it (python-can's, as text)."""
-    return None if channel is None else str(channel)
 
 
 def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, int],

@@ -481,3 +481,117 @@ def test_a_log_holding_the_radar_on_another_channel_than_the_run_s_says_so():
                         sidecar) == (None, None)
     assert pick_channel("bench.blf", None, Counter({"1": 40}), CanMapping.builtin(),
                         None) == (None, None)
+
+
+# --- a live run on an interface that listens on several channels ---------------------------
+
+def two_channel_interface(monkeypatch):
+    """Make the run's in-process bus an interface listening on two channels: the radar's
+    messages come on channel 0 (python-can's ``Message.channel``, as a Vector interface
+    given ``0,1`` numbers them), a sibling radar's with the same identifiers (its counter 5
+    cycles on) on channel 1."""
+    from rts_scenario.canbus import ListenerBus
+
+    class TwoChannels(ListenerBus):
+        def send(self, msg, timeout=None):
+            twin = resealed(msg, 1, 5)
+            msg.channel, msg.is_rx, twin.is_rx = 0, True, True
+            for listener in self._listeners:
+                listener.on_message_received(msg)
+                listener.on_message_received(twin)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", TwoChannels)
+
+
+APPROACH = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+
+
+def test_a_run_hearing_the_radar_s_identifiers_on_two_channels_fails_naming_them(
+        autosar, tmp_path, monkeypatch, capsys):
+    import json
+
+    two_channel_interface(monkeypatch)
+    out_json, log = tmp_path / "report.json", tmp_path / "bench.blf"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--json", str(out_json),
+                     "--record", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 1, out + err
+    report = json.loads(out_json.read_text())
+    (reason,) = [r for r in report["reasons"] if "channels" in r]
+    assert re.fullmatch(
+        r"the radar's messages \(the identifiers of mapping 'autosar-radar'\) came on 2 "
+        r"channels: 0 \((\d+) messages\), 1 \(\1 messages\): the radar's cycles and another "
+        r"bus's were mixed; give --radar-channel CH \(the channel as python-can gives it\)",
+        reason), reason
+    # Which channel was the radar's is not known: the sidecar names none, and the log's
+    # check does not pick one either.
+    assert json.loads(Path(f"{log}.rts.json").read_text())["can_channel"] is None
+    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    _, err = capsys.readouterr()
+    assert code == 2 and "which is the radar's is not guessed" in err, err
+
+
+def test_run_radar_channel_reads_one_channel_and_the_log_s_check_reads_the_same(
+        autosar, tmp_path, monkeypatch, capsys):
+    import json
+
+    two_channel_interface(monkeypatch)
+    log = tmp_path / "bench.blf"
+    out_json = tmp_path / "report.json"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "0",
+                     "--record", str(log), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    report = json.loads(out_json.read_text())
+    bus = report["bus"]
+    assert bus["other_channels"] == bus["messages"] > 0  # the sibling's, one per radar message
+    assert (bus["conflicts"], bus["duplicates"], bus["reordered"]) == (0, 0, 0)
+    sidecar = json.loads(Path(f"{log}.rts.json").read_text())
+    assert sidecar["can_channel"] == "0"
+    # The log holds both channels; its check reads the one the run read.
+    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    assert "read channel 0, the one the run listened on ('0', its sidecar)" in out, out
+
+
+def test_run_radar_channel_without_the_radar_on_it_fails_naming_the_channels(
+        autosar, tmp_path, monkeypatch, capsys):
+    import json
+
+    two_channel_interface(monkeypatch)
+    out_json = tmp_path / "report.json"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "2",
+                     "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 1, out + err
+    reasons = json.loads(out_json.read_text())["reasons"]
+    assert any(re.fullmatch(
+        r"--radar-channel 2: none of the radar's messages \(the identifiers of mapping "
+        r"'autosar-radar'\) came on channel 2; the channels they came on: 0 \((\d+) "
+        r"messages\), 1 \(\1 messages\)", r) for r in reasons), reasons
+    code = cli.main(["run", str(APPROACH), "--radar-channel", " "])
+    _, err = capsys.readouterr()
+    assert code == 2 and "error: --radar-channel ' ': empty" in err, err
+
+
+def test_a_run_hearing_the_radar_on_one_channel_keeps_it_in_the_sidecar(
+        autosar, tmp_path, monkeypatch, capsys):
+    # The interface names the channel the radar came on (socketcan bound to every device
+    # names each message's): the sidecar keeps that one, as the log names it.
+    import json
+
+    from rts_scenario.canbus import ListenerBus
+
+    class Named(ListenerBus):
+        def send(self, msg, timeout=None):
+            msg.channel, msg.is_rx = "vcan1", True
+            for listener in self._listeners:
+                listener.on_message_received(msg)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Named)
+    log = tmp_path / "drive.blf"
+    assert cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--record",
+                     str(log)]) == 0
+    capsys.readouterr()
+    assert json.loads(Path(f"{log}.rts.json").read_text())["can_channel"] == "vcan1"

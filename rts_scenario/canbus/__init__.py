@@ -35,6 +35,16 @@ DEFAULT_INTERFACE = "virtual"
 DEFAULT_CHANNEL = "rts-scenario"
 
 
+def channel_label(channel: Any) -> str | None:
+    """Return a message's channel as text, as python-can gives it (``Message.channel``).
+
+    ``run --radar-channel`` and ``check --log-channel`` name channels so (a Vector
+    interface's 1, a BLF's channel 0, socketcan's ``vcan1``); None where the interface or
+    log does not say.
+    """
+    return None if channel is None else str(channel)
+
+
 def open_bus(interface: str = DEFAULT_INTERFACE, channel: str = DEFAULT_CHANNEL, *,
              fd: bool = False, **options: Any) -> can.BusABC:
     """Open a python-can bus, with one clear error if the interface or channel is unusable."""
@@ -561,12 +571,20 @@ class DetectionReceiver(can.Listener):
     Each cycle keeps when its header was on the bus (the message's timestamp, on whatever
     clock the interface stamps with) and when the host received it: ``received_at(message)``,
     the host's wall clock (`time.time`) when the message is handed over, by default.
+
+    An interface may listen on several channels (each message's ``Message.channel``): with
+    ``channel`` (as `channel_label` names it), the receiver reads only that channel's messages
+    and counts the others (`other_channels`); it counts, per channel, the messages of the
+    radar's identifiers it heard (`channels`), so that a run can tell a bus whose radar
+    identifiers came on several channels (`channel_reason`).
     """
 
     def __init__(self, mapping: CanMapping | None = None, cycle_s: float | None = None,
-                 received_at: Callable[[can.Message], float] | None = None) -> None:
+                 received_at: Callable[[can.Message], float] | None = None, *,
+                 channel: str | None = None) -> None:
         self.mapping = mapping or CanMapping.builtin()
         self.cycle_s = cycle_s
+        self.channel = channel
         self.received_at: Callable[[can.Message], float] = (
             received_at or (lambda message: time.time()))
         db = self.mapping.db
@@ -664,6 +682,10 @@ class DetectionReceiver(can.Listener):
             self._reset()
 
     def _reset(self) -> None:
+        # Per channel, the messages of the radar's identifiers heard; those of other channels
+        # than `channel`, not read.
+        self.channels: Counter[str | None] = Counter()
+        self.other_channels = 0
         self._open: OrderedDict[int, _Assembly] = OrderedDict()
         self._ready: deque[Detections] = deque()
         self._recent: OrderedDict[int, bool] = OrderedDict()  # counter -> handed on whole
@@ -701,8 +723,42 @@ class DetectionReceiver(can.Listener):
         with self._lock:
             self._receive(msg)
 
+    def channel_reason(self) -> str | None:
+        """Say why the channels the radar's identifiers came on make the cycles untrustworthy.
+
+        Without `channel`: they came on several channels (another radar of the family, or the
+        same bus bridged twice), and the cycles mixed theirs. With it: none came on it.
+        None where neither happened.
+        """
+        held = {c: n for c, n in self.channels.items() if n}
+        listing = ", ".join(f"{'(none)' if c is None else c} ({n} messages)"
+                            for c, n in sorted(held.items(), key=lambda cn: str(cn[0])))
+        what = f"the radar's messages (the identifiers of mapping {self.mapping.name!r})"
+        if self.channel is not None:
+            if self.channel in held:
+                return None
+            found = f"the channels they came on: {listing}" if held else "none came on any"
+            return (f"--radar-channel {self.channel}: none of {what} came on channel "
+                    f"{self.channel}; {found}")
+        if len(held) <= 1:
+            return None
+        return (f"{what} came on {len(held)} channels: {listing}: the radar's cycles and "
+                f"another bus's were mixed; give --radar-channel CH (the channel as python-can "
+                f"gives it)")
+
     def _receive(self, msg: can.Message) -> None:
         stats = self.stats
+        # An 11-bit and a 29-bit identifier of one number are different messages.
+        known = self._layouts.get(msg.arbitration_id | (msg.is_extended_id << 31))
+        if known is not None and not (msg.is_error_frame or msg.is_remote_frame):
+            label = None if msg.channel is None else str(msg.channel)
+            self.channels[label] += 1
+            if self.channel is not None and label != self.channel:
+                self.other_channels += 1  # another bus's
+                return
+        elif self.channel is not None and channel_label(msg.channel) != self.channel:
+            self.other_channels += 1
+            return
         stats.messages += 1
         if msg.is_error_frame:
             stats.error_frames += 1
@@ -710,8 +766,6 @@ class DetectionReceiver(can.Listener):
         if msg.is_remote_frame:
             stats.remote_frames += 1
             return
-        # An 11-bit and a 29-bit identifier of one number are different messages.
-        known = self._layouts.get(msg.arbitration_id | (msg.is_extended_id << 31))
         if known is None:
             stats.unknown_ids += 1
             return
@@ -939,4 +993,4 @@ def _behind(counter: int, latest: int, modulus: int) -> bool:
 
 
 __all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "ListenerBus",
-           "open_bus"]
+           "channel_label", "open_bus"]
