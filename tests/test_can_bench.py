@@ -595,3 +595,73 @@ def test_a_run_hearing_the_radar_on_one_channel_keeps_it_in_the_sidecar(
                      str(log)]) == 0
     capsys.readouterr()
     assert json.loads(Path(f"{log}.rts.json").read_text())["can_channel"] == "vcan1"
+
+
+# --- a log cut short ---------------------------------------------------------------------------
+
+def test_a_blf_cut_short_fails_its_check_saying_where_it_ends(recorded, tmp_path, capsys):
+    import json
+
+    scene, log = recorded
+    whole = log.read_bytes()
+    messages = list(can.LogReader(str(log)))
+    cut = tmp_path / "cut.blf"
+    cut.write_bytes(whole[: len(whole) * 6 // 10])
+    Path(f"{cut}.rts.json").write_text(Path(f"{log}.rts.json").read_text())
+    kept = list(can.LogReader(str(cut)))
+    assert 0 < len(kept) < len(messages)  # python-can reads it as a shorter log, silently
+    out_json = tmp_path / "check.json"
+    code = cli.main(["check", str(scene), "--log", str(cut), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 1 and "Traceback" not in err, out + err
+    report = json.loads(out_json.read_text())
+    expected = (f"the log {cut} was cut short: its header says {len(whole)} bytes, the file "
+                f"holds {len(whole) * 6 // 10}; it ends at log time {kept[-1].timestamp:.6f} s "
+                f"(its last message read): what the radar sent after it is not in it")
+    assert expected in report["reasons"], report["reasons"]
+    assert report["alignment"]["log_cut_short"] == {
+        "header_bytes": len(whole), "file_bytes": len(whole) * 6 // 10,
+        "last_message_t_s": kept[-1].timestamp}
+    assert expected in out
+    # The whole log has nothing of the kind.
+    assert cli.main(["check", str(scene), "--log", str(log), "--json", str(out_json)]) == 0
+    assert json.loads(out_json.read_text())["alignment"]["log_cut_short"] is None
+
+
+def test_a_blf_its_writer_never_closed_fails_its_check(recorded, tmp_path, capsys):
+    # A recording stopped without closing its writer (the process killed): python-can's BLF
+    # header still says 144 bytes and no object, the messages in its buffer are lost.
+    scene, log = recorded
+    messages = list(can.LogReader(str(log)))
+    open_log = tmp_path / "open.blf"
+    Path(f"{open_log}.rts.json").write_text(Path(f"{log}.rts.json").read_text())
+    writer = can.BLFWriter(str(open_log), max_container_size=1024)  # flushed as it goes
+    for msg in messages:
+        writer.on_message_received(msg)
+    writer.file.flush()
+    size = open_log.stat().st_size
+    kept = list(can.LogReader(str(open_log)))
+    assert 0 < len(kept) < len(messages)
+    code = cli.main(["check", str(scene), "--log", str(open_log)])
+    out, err = capsys.readouterr()
+    writer.file.close()
+    assert code == 1 and "Traceback" not in err, out + err
+    assert (f"the log {open_log} was cut short: its header says 144 bytes (the tool that "
+            f"wrote it never closed it), the file holds {size}; it ends at log time "
+            f"{kept[-1].timestamp:.6f} s") in out, out
+
+
+def test_an_asc_cut_short_fails_its_check(autosar, tmp_path, capsys):
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / "drive.asc"
+    assert cli.main(["run", str(scene), "--mapping", str(autosar), "--record", str(log)]) == 0
+    capsys.readouterr()
+    lines = log.read_text().splitlines(keepends=True)
+    assert lines[-1].strip() == "End TriggerBlock"
+    log.write_text("".join(lines[: len(lines) // 2]))
+    last = list(can.LogReader(str(log)))[-1].timestamp
+    code = cli.main(["check", str(scene), "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 1 and "Traceback" not in err, out + err
+    assert (f"the log {log} was cut short: it lacks the 'End TriggerBlock' line an ASC log "
+            f"ends with; it ends at log time {last:.6f} s") in out, out
