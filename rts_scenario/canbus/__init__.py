@@ -554,6 +554,8 @@ _Route = tuple[cantools.database.can.Message, Verify | None, str | None,
 OPEN_CYCLES = 16
 # Counters remembered to recognise duplicated headers and parts of cycles already handed on.
 RECENT_CYCLES = 256
+# Without a frame counter, parts after a whole cycle held until the next header places them.
+UNPLACED_PARTS = 4096
 
 
 class DetectionReceiver(can.Listener):
@@ -697,6 +699,10 @@ class DetectionReceiver(can.Listener):
         self._last_header_t = np.nan  # when the last header reached the bus
         # Detections that came before their cycle's header, by counter (low 8 bits).
         self._waiting: OrderedDict[int, list[tuple[_PartRule, dict[str, float]]]] = OrderedDict()
+        # Without a frame counter: parts that came after their cycle was whole, with the
+        # cycle's counter, until the next header tells whether one was lost between
+        # (`_place_after`).
+        self._unplaced: list[tuple[int, _PartRule, dict[str, float]]] = []
 
     @property
     def pending(self) -> int:
@@ -713,6 +719,8 @@ class DetectionReceiver(can.Listener):
     def flush(self) -> list[Detections]:
         """Hand on every open cycle (incomplete ones marked so) and take all cycles."""
         with self._lock:
+            if self._unplaced:
+                self._place_after(None)
             while self._open:
                 self._finish(next(iter(self._open)))
             self._current = None
@@ -803,6 +811,8 @@ class DetectionReceiver(can.Listener):
             # the message is invalid.
             self.stats.decode_errors += 1
             return
+        if self._unplaced:
+            self._place_after(counter)
         if bus_t_s is not None:
             if self.cycle_s is not None and bus_t_s - self._last_header_t > (
                     self._counter_modulus // 2 - GAP_TOLERANCE_CYCLES) * self.cycle_s:
@@ -879,10 +889,17 @@ class DetectionReceiver(can.Listener):
         if frame.counter not in self._open:
             # Its cycle was handed on: a copy or a conflict if it was whole, else too late to
             # count.
-            if self._recent.get(frame.counter, False):
-                self._after(frame.counter, rule, values)
-            else:
+            if not self._recent.get(frame.counter, False):
                 self.stats.orphans += 1
+            elif name is None:
+                # No frame counter tells its cycle: the next one's, whose header was lost, or
+                # this one's again. The next header says which.
+                self._unplaced.append((frame.counter, rule, values))
+                if len(self._unplaced) > UNPLACED_PARTS:  # no header for that long
+                    self._unplaced.pop(0)
+                    self.stats.orphans += 1
+            else:
+                self._after(frame.counter, rule, values)
             return
         if self._attach(frame, rule, values) and frame.complete():
             self._finish(frame.counter)
@@ -904,6 +921,24 @@ class DetectionReceiver(can.Listener):
         else:
             self.stats.conflicts += 1
         return False
+
+    def _place_after(self, counter: int | None) -> None:
+        """Place the parts that came after their whole cycle, without a frame counter.
+
+        ``counter``: the next header's (None: none came). A header more than one cycle on
+        (within half the counter's range: not one of an earlier cycle come again) says a
+        cycle came without its header: the parts are its,
+        detections without a frame header (`BusStats.orphans`; its cycle is missing), not
+        messages of the whole cycle come again. Otherwise they are that cycle's again: a
+        copy or a conflict (`_after`).
+        """
+        unplaced, self._unplaced = self._unplaced, []
+        for after, rule, values in unplaced:
+            step = None if counter is None else (counter - after) % self._counter_modulus
+            if step is not None and 2 <= step < max(2, self._counter_modulus // 2) + 1:
+                self.stats.orphans += 1
+            else:
+                self._after(after, rule, values)
 
     def _after(self, counter: int, rule: _PartRule, values: dict[str, float]) -> None:
         """Count a part of a whole cycle already handed on: a copy, or a conflict.
@@ -928,6 +963,8 @@ class DetectionReceiver(can.Listener):
 
         Detections waiting for their header stay: they may have come just before it.
         """
+        if self._unplaced:
+            self._place_after(None)
         while self._open:
             self._finish(next(iter(self._open)))
         self._recent.clear()
