@@ -409,6 +409,10 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
 
 def _counter_words(mapping: CanMapping) -> str:
     """Name the radar's counter by its width, or where it wraps when that is below it."""
+    if mapping.counter_min:
+        return (f"counter (running {mapping.counter_min} to "
+                f"{mapping.counter_min + mapping.counter_modulus - 1}, counted from "
+                f"{mapping.counter_min} as 0)")
     if mapping.counter_max is not None:
         return f"counter (wrapping after {mapping.counter_max})"
     return f"{mapping.counter_modulus.bit_length() - 1}-bit counter"

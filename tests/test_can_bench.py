@@ -297,9 +297,102 @@ def test_a_run_and_its_recheck_pass_with_e2e_checksums_and_a_counter_wrapping_af
     assert cli.main(["check", str(scene), "--log", str(log)]) == 0, capsys.readouterr().out
 
 
+# A radar whose alive counter runs 1 to 14 (0 and 15 are never sent), header and detections.
+ONE_BASED_DBC = AUTOSAR_DBC.replace("Hdr_Alive : 8|4@1+ (1,0) [0|14]",
+                                    "Hdr_Alive : 8|4@1+ (1,0) [1|14]")
+ONE_BASED_MAPPING = AUTOSAR_MAPPING.replace("  counter_max: 14\n",
+                                            "  counter_min: 1\n  counter_max: 14\n")
+
+
+@pytest.fixture
+def one_based(tmp_path):
+    (tmp_path / "autosar.dbc").write_text(ONE_BASED_DBC)
+    path = tmp_path / "one_based.mapping.yaml"
+    path.write_text(ONE_BASED_MAPPING)
+    return path
+
+
+def test_a_counter_running_1_to_14_steps_from_14_to_1(one_based):
+    mapping = CanMapping.from_file(one_based)
+    assert mapping.counter_modulus == 14
+    alive = [1 + k % 14 for k in range(40)]  # 14 -> 1 is one step, twice
+    messages = []
+    for k, a in enumerate(alive):
+        messages += [header_p2(a, 1, stamp=0.05 * k), detection_p5(a, 0, 10.0 + k, 0.0, 0.0,
+                                                                    stamp=0.05 * k)]
+    receiver, got = receive(one_based, messages)
+    assert receiver.stats.clean, receiver.stats
+    assert all(c.complete for c in got) and len(got) == 40
+    # The cycles count from the counter's first value: 1 is 0, 14 is 13.
+    assert [c.cycle for c in got] == [a - 1 for a in alive]
+    from rts_scenario.detections import sequential_numbers
+
+    steps = sequential_numbers(np.array([c.cycle for c in got]), mapping.counter_modulus,
+                               0.05 * np.arange(40), 0.05)
+    np.testing.assert_array_equal(steps, np.arange(40))  # no cycle lost at the wraps
+    np.testing.assert_allclose([c.range_m[0] for c in got], 10.0 + np.arange(40))
+    # 0 and 15 are values it never takes: refused.
+    receiver, got = receive(one_based, [header_p2(14, 0), header_p2(0, 0), header_p2(15, 0),
+                                        header_p2(1, 0)])
+    assert receiver.stats.decode_errors == 2 and [c.cycle for c in got] == [13, 0]
+
+
+def test_the_simulated_radar_counts_1_to_14(one_based):
+    mapping = CanMapping.from_file(one_based)
+    recorder = Recorder()
+    publisher = DetectionPublisher(recorder, mapping=mapping)
+    publisher.publish_many([Detections(cycle=k, t_s=0.05 * k, range_m=np.array([20.0]),
+                                       az_deg=np.zeros(1), radial_velocity_mps=np.zeros(1))
+                            for k in range(30)])
+    db = mapping.db
+    alive = [db.decode_message(m.arbitration_id, m.data, scaling=False)
+             for m in recorder]
+    assert [a["Hdr_Alive"] for a in alive if "Hdr_Alive" in a] == [1 + k % 14
+                                                                  for k in range(30)]
+    assert [a["Det_Alive"] for a in alive if "Det_Alive" in a] == [1 + k % 14
+                                                                  for k in range(30)]
+
+
+def test_a_run_and_its_recheck_pass_with_a_counter_running_1_to_14(one_based, tmp_path,
+                                                                     capsys):
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / "drive.blf"
+    assert cli.main(["run", str(scene), "--mapping", str(one_based), "--record",
+                     str(log)]) == 0, capsys.readouterr().out
+    capsys.readouterr()
+    alive = [m.data[1] & 0x0F for m in can.LogReader(str(log)) if m.arbitration_id == HEADER_ID]
+    assert len(alive) > 30 and set(alive) == set(range(1, 15))
+    assert cli.main(["check", str(scene), "--log", str(log)]) == 0, capsys.readouterr().out
+
+
+def test_counter_min_dbc_takes_the_signal_s_minimum(tmp_path):
+    (tmp_path / "autosar.dbc").write_text(ONE_BASED_DBC)
+    path = tmp_path / "m.mapping.yaml"
+    path.write_text(ONE_BASED_MAPPING.replace("counter_min: 1", "counter_min: dbc"))
+    assert CanMapping.from_file(path).counter_modulus == 14
+    # Without counter_max, the counter runs to what its bits carry: 1 to 15.
+    path.write_text(ONE_BASED_MAPPING.replace("  counter_max: 14\n", ""))
+    assert CanMapping.from_file(path).counter_modulus == 15
+
+
+class Recorder(list):
+    """A ``send`` target that keeps the messages."""
+
+    send = list.append
+
+
 BAD = [
     ("counter-max-beyond-width", ("counter_max: 14", "counter_max: 16"), "header.counter_max",
      r"got 16: the 4-bit signal 'Hdr_Alive' counts to 15 at most; allowed: 1 to 15"),
+    ("counter-min-not-below-max", ("counter_max: 14", "counter_min: 14\n  counter_max: 14"),
+     "header.counter_min", r"got 14: the counter must take two values at least, from "
+                           r"counter_min to 14 \(counter_max\); allowed: 0 to 13, or dbc"),
+    ("counter-min-negative", ("counter_max: 14", "counter_min: -1\n  counter_max: 14"),
+     "header.counter_min", r"must be >= 0, got -1"),
+    ("counter-min-dbc-without-minimum", (("counter_max: 14",
+                                          "counter_min: dbc\n  counter_max: 14"),
+                                         ("[0|14]", "[-0.5|14]")), "header.counter_min",
+     r"dbc: the DBC states no whole minimum from 0 to 13"),
     ("counter-max-dbc-without-maximum", (("counter_max: 14", "counter_max: dbc"),
                                          ("[0|14]", "[0|0]")), "header.counter_max",
      r"dbc: the DBC states no whole maximum from 1 to 15"),

@@ -213,8 +213,8 @@ class DetectionPublisher:
         detection_cycle = cycle_of[send]
         # The low part of the header's counter (a counter wrapping below its width wraps
         # first: its low bits are those of the counter on the bus).
-        low_counter = (np.array([f.cycle for f in frames], dtype=np.int64)
-                       % layout.counter_modulus
+        low_counter = ((np.array([f.cycle for f in frames], dtype=np.int64)
+                        % layout.counter_modulus + m.counter_min)
                        % layout.frame_counter_modulus)[detection_cycle].astype(np.float64)
         frame_counter = m.frame_counter if m.frame_counter in layout.signals else None
         parts = []
@@ -436,7 +436,8 @@ class _MappedLayout:
         """Return the header's raw values for a cycle announcing ``count`` detections."""
         m, header = self.mapping, self.header_codec
         values = dict(header.defaults)
-        values[m.counter] = header.raw(m.counter, frame.cycle % self.counter_modulus)
+        values[m.counter] = header.raw(m.counter,
+                                       frame.cycle % self.counter_modulus + m.counter_min)
         for name, top in zip(m.count, self.count_tops, strict=True):
             part = min(count, top)  # the count, spread over the count signals in order
             values[name] = header.raw(name, part)
@@ -805,10 +806,13 @@ class DetectionReceiver(can.Listener):
         values: dict[str, float] = {
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
             for name, value in raw.items()}
-        counter = int(values[m.counter])
-        if m.counter_max is not None and not 0 <= counter <= m.counter_max:
-            # A value the counter never takes (15 of an AUTOSAR counter wrapping after 14):
-            # the message is invalid.
+        # The counter from its first value (a counter running 1..14 counts 1 as 0); its low
+        # bits, in the detection messages, are the value's on the bus.
+        value = int(values[m.counter])
+        counter = value - m.counter_min
+        if not 0 <= counter < self._counter_modulus:
+            # A value the counter never takes (15 of an AUTOSAR counter wrapping after 14, 0
+            # of one running 1..14): the message is invalid.
             self.stats.decode_errors += 1
             return
         if self._unplaced:
@@ -832,13 +836,13 @@ class DetectionReceiver(can.Listener):
         else:
             self._latest = counter
         frame = _Assembly(
-            counter=counter, low=counter % self._low_modulus,
+            counter=counter, low=value % self._low_modulus,
             expected=int(sum(values[c] for c in m.count)),
             timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s,
             host_t_s=host_t_s, header=dict(raw))
         self._open[counter] = frame
         self._current = frame
-        for rule, early in self._waiting.pop(counter % self._low_modulus, []):
+        for rule, early in self._waiting.pop(value % self._low_modulus, []):
             self.stats.orphans -= 1
             self._attach(frame, rule, early)
         if frame.complete():
@@ -863,15 +867,14 @@ class DetectionReceiver(can.Listener):
             if frame is None or frame.low != low:
                 # Late part of an earlier cycle, or early part of one whose header is late.
                 self.stats.reordered += 1
-                frame = next((f for c, f in reversed(self._open.items())
-                              if c % self._low_modulus == low),
-                             None)
+                frame = next((f for f in reversed(self._open.values()) if f.low == low), None)
                 if frame is None:
                     # Within half the low counter's range: further back, the same low bits
                     # name another cycle (the one whose header is still to come).
+                    first = self.mapping.counter_min  # the counters' value 0 on the bus
                     done = next((c for c in itertools.islice(reversed(self._recent),
                                                              self._low_modulus // 2)
-                                 if c % self._low_modulus == low), None)
+                                 if (c + first) % self._low_modulus == low), None)
                     if done is not None:
                         # Its cycle was handed on: a copy, a conflict, or (the cycle went on
                         # incomplete) too late.
