@@ -685,10 +685,18 @@ class DetectionReceiver(can.Listener):
             self._reset()
 
     def _reset(self) -> None:
-        # Per channel, the messages of the radar's identifiers heard; those of other channels
-        # than `channel`, not read.
-        self.channels: Counter[str | None] = Counter()
+        # Per channel, the messages of the radar's identifiers heard (`channels`: those
+        # counted in `_heard`, and the current channel's run of them); the messages of other
+        # channels than `channel`, not read.
+        self._heard: Counter[str | None] = Counter()
         self.other_channels = 0
+        # The channel of the last message (python-can's object), its label, how many of the
+        # radar's messages came on it since it became the current one, and whether it is
+        # another channel than `channel`: a bus keeps to one channel object for long runs.
+        self._ch: Any = None
+        self._ch_label: str | None = None
+        self._ch_count = 0
+        self._ch_other = self.channel is not None
         self._open: OrderedDict[int, _Assembly] = OrderedDict()
         self._ready: deque[Detections] = deque()
         self._recent: OrderedDict[int, bool] = OrderedDict()  # counter -> handed on whole
@@ -732,6 +740,22 @@ class DetectionReceiver(can.Listener):
         with self._lock:
             self._receive(msg)
 
+    @property
+    def channels(self) -> Counter[str | None]:
+        """Per channel (`channel_label`), the messages of the radar's identifiers heard."""
+        with self._lock:
+            out = self._heard.copy()
+            if self._ch_count:
+                out[self._ch_label] += self._ch_count
+        return out
+
+    def _switch_channel(self, channel: Any) -> None:
+        """Make ``channel`` (a message's) the current one; count the one before's."""
+        if self._ch_count:
+            self._heard[self._ch_label] += self._ch_count
+        self._ch, self._ch_label, self._ch_count = channel, channel_label(channel), 0
+        self._ch_other = self.channel is not None and self._ch_label != self.channel
+
     def channel_reason(self) -> str | None:
         """Say why the channels the radar's identifiers came on make the cycles untrustworthy.
 
@@ -759,14 +783,12 @@ class DetectionReceiver(can.Listener):
         stats = self.stats
         # An 11-bit and a 29-bit identifier of one number are different messages.
         known = self._layouts.get(msg.arbitration_id | (msg.is_extended_id << 31))
-        if known is not None and not (msg.is_error_frame or msg.is_remote_frame):
-            label = None if msg.channel is None else str(msg.channel)
-            self.channels[label] += 1
-            if self.channel is not None and label != self.channel:
-                self.other_channels += 1  # another bus's
-                return
-        elif self.channel is not None and channel_label(msg.channel) != self.channel:
-            self.other_channels += 1
+        if msg.channel is not self._ch:
+            self._switch_channel(msg.channel)
+        if self._ch_other:
+            self.other_channels += 1  # another bus's
+            if known is not None and not (msg.is_error_frame or msg.is_remote_frame):
+                self._ch_count += 1
             return
         stats.messages += 1
         if msg.is_error_frame:
@@ -778,6 +800,7 @@ class DetectionReceiver(can.Listener):
         if known is None:
             stats.unknown_ids += 1
             return
+        self._ch_count += 1  # a message of the radar's identifiers, on the current channel
         message, checksum, mux, decode, part = known
         data = msg.data
         if checksum is not None and not checksum(data):
