@@ -185,6 +185,11 @@ class RunOptions:
     can_interface, can_channel, can_fd : str, str or None, bool
         The bus the radar's detections come on (python-can); a private virtual channel by
         default.
+    radar_channel : str, optional
+        On an interface listening on several channels, the one the radar's messages come on
+        (``Message.channel`` as text, `rts_scenario.canbus.channel_label`): the others are
+        not read (``other_channels`` in the report's bus). Without it, radar identifiers
+        heard on several channels fail the verdict (`DetectionReceiver.channel_reason`).
     mapping : str, optional
         ``*.mapping.yaml`` of a third-party radar's DBC.
     method : {"exact", "paper", "estimator"}
@@ -206,6 +211,7 @@ class RunOptions:
     can_interface: str = "virtual"
     can_channel: str | None = None
     can_fd: bool = False
+    radar_channel: str | None = None
     mapping: str | None = None
     method: str = "exact"
     drain_s: float = 2.0
@@ -278,7 +284,8 @@ class Pipeline:
         self.channel = options.can_channel or f"rts-scenario-{id(self):x}-detections"
         try:
             self.mapping = CanMapping.from_file(options.mapping) if options.mapping else None
-            self.receiver = DetectionReceiver(self.mapping, radar.radar_clock.cycle_s)
+            self.receiver = DetectionReceiver(self.mapping, radar.radar_clock.cycle_s,
+                                              channel=options.radar_channel)
             listen = self._open_bus()
             self._listeners: list[can.Listener] = [self.receiver]
             if options.bus_log:
@@ -304,6 +311,21 @@ class Pipeline:
         """Wire the bench a scene asks for: its rig, radar, simulated-radar options and seed."""
         return cls(scene.rig, scene.radar, options, radar_options=scene.radar_options,
                    rng=np.random.default_rng(scene.seed))
+
+    def _radar_channel(self) -> str | None:
+        """Return the channel the radar's messages were read from, as a log names it.
+
+        ``--radar-channel`` where given; else the one channel the interface said they came
+        on (socketcan bound to every device names each message's), or the channel listened
+        on where it said none. None where they came on several: which is the radar's is not
+        known (the run failed), and a re-check must not pick one.
+        """
+        if self.options.radar_channel is not None:
+            return self.options.radar_channel
+        held = [c for c, n in self.receiver.channels.items() if n]
+        if len(held) > 1:
+            return None
+        return held[0] if held and held[0] is not None else self.channel
 
     def _open_bus(self) -> can.BusABC:
         o = self.options
@@ -779,8 +801,11 @@ class Pipeline:
             # Detections the simulated radar made that the bus could not carry (out of a
             # signal's range): the checker never saw them.
             bus["unsendable_detections"] = self._publisher.unsendable_detections
+        if options.radar_channel is not None:
+            bus["other_channels"] = self.receiver.other_channels
         report = checker.report(bus)
-        for drifted in (track.off_profile_reason(0.5 * window_s),
+        for drifted in (self.receiver.channel_reason(),
+                        track.off_profile_reason(0.5 * window_s),
                         track.latency_change_reason(0.5 * window_s),
                         checker.lag_reason(1.0 / scene.frame_rate_hz,
                                            scene.radar.coupling_lag_s)):
@@ -805,7 +830,8 @@ class Pipeline:
                               first_cycle=scene_first, cycles=n_cycles,
                               origin_bus_s=self._scene_origin_s() if track.origin_s is None
                               else track.origin_s, early_s=truths.early_s,
-                              channel=self.channel)
+                              channel=self._radar_channel(),
+                              channel_unknown=self._radar_channel() is None)
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -1070,7 +1096,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       send_lateness: dict[str, Any] | None = None,
                       clock: ClockTrack | None = None, first_cycle: int = 0,
                       cycles: int | None = None, origin_bus_s: float | None = None,
-                      early_s: float = 0.0, channel: str | None = None) -> Path:
+                      early_s: float = 0.0, channel: str | None = None,
+                      channel_unknown: bool = False) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -1089,8 +1116,10 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     first cycles are numbered from it by their bus times, as live (`Checker.anchor`);
     ``early_s`` how much earlier than the clock's times the cycles may have been measured
     (`CycleTruth.early_s`: an interface's clock tied to the host's by deliveries);
-    ``channel`` the CAN channel the run listened on (``options.can_channel`` by default), kept
-    with the interface so that a re-check of a log holding several channels reads the radar's.
+    ``channel`` the CAN channel the radar's messages were read from (``options.can_channel``
+    when not given; `Pipeline._radar_channel`), kept with the interface so that a re-check of
+    a log holding several channels reads the radar's; ``channel_unknown``: they came on
+    several and none was chosen (``can_channel`` null: a re-check does not pick one).
     """
     import json
 
@@ -1114,7 +1143,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                   else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s,
                   "early_s": early_s},
         "can_interface": options.can_interface,
-        "can_channel": channel if channel is not None else options.can_channel,
+        "can_channel": None if channel_unknown else (
+            channel if channel is not None else options.can_channel),
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         # The statuses the RTS played (a re-check judges by them) and their digest, and per

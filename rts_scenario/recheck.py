@@ -37,7 +37,7 @@ import jsonschema
 import numpy as np
 from numpy.typing import NDArray
 
-from .canbus import DetectionReceiver
+from .canbus import DetectionReceiver, channel_label
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
@@ -128,6 +128,8 @@ class Alignment:
     # The statuses judged by: "recorded" (the sidecar's, as played) or "rebuilt".
     statuses: str = "rebuilt"
     notes: list[str] = field(default_factory=list)
+    # How the log was cut short, where its format tells (`log_cut_short`); None: it was not.
+    log_cut_short: dict[str, Any] | None = None
 
     def describe(self) -> str:
         """One line for people."""
@@ -171,6 +173,8 @@ class Alignment:
                 "schedule_matches_recording": self.schedule_matches_recording,
                 "truth_matches_recording": self.truth_matches_recording,
                 "statuses": self.statuses,
+                "log_cut_short": None if self.log_cut_short is None else {
+                    k: v for k, v in self.log_cut_short.items() if k != "why"},
                 "notes": list(self.notes)}
 
 
@@ -410,6 +414,10 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
 
 def _counter_words(mapping: CanMapping) -> str:
     """Name the radar's counter by its width, or where it wraps when that is below it."""
+    if mapping.counter_min:
+        return (f"counter (running {mapping.counter_min} to "
+                f"{mapping.counter_min + mapping.counter_modulus - 1}, counted from "
+                f"{mapping.counter_min} as 0)")
     if mapping.counter_max is not None:
         return f"counter (wrapping after {mapping.counter_max})"
     return f"{mapping.counter_modulus.bit_length() - 1}-bit counter"
@@ -431,18 +439,15 @@ def read_cycles(log: str | Path, mapping: CanMapping | None, cycle_s: float | No
     return list(_iter_cycles(log, mapping, stats, cycle_s, channel=channel)), stats
 
 
-def channel_label(channel: Any) -> str | None:
-    """Return a message's channel as ``--log-channel`` names it (python-can's, as text)."""
-    return None if channel is None else str(channel)
-
-
 def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, int],
                  cycle_s: float | None = None, *, channel: str | None = None,
-                 channels: Counter[str | None] | None = None) -> Iterator[_LoggedCycle]:
+                 channels: Counter[str | None] | None = None,
+                 last_t_s: list[float] | None = None) -> Iterator[_LoggedCycle]:
     """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end.
 
     ``channel``: read only its messages (the others count as ``other_channels``).
-    ``channels`` gets, per channel, how many messages of the radar's identifiers it holds.
+    ``channels`` gets, per channel, how many messages of the radar's identifiers it holds;
+    ``last_t_s`` the timestamp of the log's last message (of any channel), if it has one.
     """
     check_log_file(log)
     path = Path(log)
@@ -480,6 +485,8 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
         receiver.on_message_received(msg)
         yield from take(receiver.pop())
     yield from take(receiver.flush())
+    if last_t_s is not None and started | skipped | other:
+        last_t_s.append(float(msg.timestamp))
     stats.update({k: int(v) for k, v in vars(receiver.stats).items()})
     # Messages before the first cycle's header are the log's too (a log the mapping reads no
     # header of is not a silent bus).
@@ -501,21 +508,25 @@ class _LogIndex:
     bus: dict[str, int]
     # Per channel of the log, the messages of the radar's identifiers it holds.
     channels: Counter[str | None] = field(default_factory=Counter)
+    # The timestamp of the log's last message (None: it holds none).
+    last_t_s: float | None = None
 
     @classmethod
     def scan(cls, log: str | Path, mapping: CanMapping | None,
              cycle_s: float | None = None, *, channel: str | None = None) -> _LogIndex:
         stats: dict[str, int] = {}
         channels: Counter[str | None] = Counter()
+        last: list[float] = []
         counters, times, counts = array("q"), array("d"), array("l")
         for c in _iter_cycles(log, mapping, stats, cycle_s, channel=channel,
-                              channels=channels):  # one per radar cycle
+                              channels=channels, last_t_s=last):  # one per radar cycle
             counters.append(c.detections.cycle)
             times.append(c.bus_t_s)
             counts.append(c.detections.count)
         return cls(np.frombuffer(counters, dtype=np.int64).copy(),
                    np.frombuffer(times, dtype=np.float64).copy(),
-                   np.asarray(counts, dtype=np.int64), stats, channels)
+                   np.asarray(counts, dtype=np.int64), stats, channels,
+                   last[0] if last else None)
 
     def __len__(self) -> int:
         return int(self.counters.size)
@@ -556,6 +567,56 @@ class _ReadAhead:
                 if self._kept[self._read]:
                     self._held[self._read] = cycle.detections
         return [self._held.pop(int(i)) for i in positions]
+
+
+# The header of a BLF python-can wrote and never closed (its size, no object count yet).
+_BLF_OPEN_HEADER_BYTES = 144
+# What an ASC log's last line is (python-can's writer and Vector's tools end it so).
+_ASC_END = b"End TriggerBlock"
+
+
+def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | None:
+    """Return how a log was cut short, where its format tells; None where it was not.
+
+    python-can's readers read a BLF or an ASC cut short as a shorter log, without a word. A
+    BLF's header gives the file's size (python-can's `BLFReader` reads it; a writer that was
+    never closed left the 144 bytes of the header alone there); an ASC log ends with an
+    ``End TriggerBlock`` line. ``last_t_s``: the log's last message's time, where it ends.
+
+    Returns ``{"header_bytes", "file_bytes", "last_message_t_s", "why"}`` (``header_bytes``
+    None where the format keeps no size; ``why``: one line for people).
+    """
+    path = Path(log)
+    size = path.stat().st_size
+    suffix = path.suffix.lower()
+    ends = ("it holds no message" if last_t_s is None
+            else f"it ends at log time {last_t_s:.6f} s (its last message read)")
+    if suffix == ".blf":
+        with _quiet_unraisable():
+            try:
+                with can.BLFReader(str(path)) as reader:
+                    stated = int(reader.file_size)
+            except Exception:  # noqa: BLE001 - a header python-can cannot read: read as before
+                return None
+        if stated == size:
+            return None
+        never = (" (the tool that wrote it never closed it)"
+                 if stated == _BLF_OPEN_HEADER_BYTES else "")
+        why = (f"the log {log} was cut short: its header says {stated} bytes{never}, the file "
+               f"holds {size}; {ends}: what the radar sent after it is not in it")
+        return {"header_bytes": stated, "file_bytes": size, "last_message_t_s": last_t_s,
+                "why": why}
+    if suffix == ".asc":
+        with path.open("rb") as f:
+            f.seek(max(0, size - 256))
+            tail = f.read().rstrip()
+        if tail.endswith(_ASC_END):
+            return None
+        why = (f"the log {log} was cut short: it lacks the 'End TriggerBlock' line an ASC log "
+               f"ends with; {ends}: what the radar sent after it is not in it")
+        return {"header_bytes": None, "file_bytes": size, "last_message_t_s": last_t_s,
+                "why": why}
+    return None
 
 
 def _messages(path: Path) -> Iterator[can.Message]:
@@ -851,6 +912,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s,
                                channel=channel)
     bus = index.bus
+    cut_short = log_cut_short(log, index.last_t_s)
     modulus = receiver_mapping.counter_modulus
     profile_clock = scene.radar.radar_clock
     counters = index.counters
@@ -907,7 +969,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if not len(index):
             raise LogError(f"--log {log}: no radar cycle in it ({bus['messages']} messages, "
                            f"none a {receiver_mapping.header} header of mapping "
-                           f"{receiver_mapping.name!r}); is --mapping the radar's?")
+                           f"{receiver_mapping.name!r}); "
+                           + ("is --mapping the radar's?" if cut_short is None
+                              else cut_short["why"].removeprefix(f"the log {log} ")))
         latency = profile_clock.latency_s
         bus_t = index.bus_t_s
         _check_timestamps(log, bus_t, profile_clock.cycle_s, numbers)
@@ -969,6 +1033,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                               profile_clock.cycle_s)
         alignment.cycle_s = clock.cycle_s
     alignment.cycles_in_log = len(index)
+    alignment.log_cut_short = cut_short
     if channel_note:
         alignment.notes.append(channel_note)
     result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
@@ -980,6 +1045,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if unused_method:
         alignment.notes.append(f"--method {method} is not used: the sidecar keeps the statuses "
                                f"the RTS played (with {(sidecar or {}).get('method')})")
+    if cut_short is not None:
+        # Its missing cycles may not all show (a log without a sidecar is judged as long as
+        # it is): the log itself fails.
+        result.reasons.append(cut_short["why"])
+        result.passed = False
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)

@@ -297,9 +297,102 @@ def test_a_run_and_its_recheck_pass_with_e2e_checksums_and_a_counter_wrapping_af
     assert cli.main(["check", str(scene), "--log", str(log)]) == 0, capsys.readouterr().out
 
 
+# A radar whose alive counter runs 1 to 14 (0 and 15 are never sent), header and detections.
+ONE_BASED_DBC = AUTOSAR_DBC.replace("Hdr_Alive : 8|4@1+ (1,0) [0|14]",
+                                    "Hdr_Alive : 8|4@1+ (1,0) [1|14]")
+ONE_BASED_MAPPING = AUTOSAR_MAPPING.replace("  counter_max: 14\n",
+                                            "  counter_min: 1\n  counter_max: 14\n")
+
+
+@pytest.fixture
+def one_based(tmp_path):
+    (tmp_path / "autosar.dbc").write_text(ONE_BASED_DBC)
+    path = tmp_path / "one_based.mapping.yaml"
+    path.write_text(ONE_BASED_MAPPING)
+    return path
+
+
+def test_a_counter_running_1_to_14_steps_from_14_to_1(one_based):
+    mapping = CanMapping.from_file(one_based)
+    assert mapping.counter_modulus == 14
+    alive = [1 + k % 14 for k in range(40)]  # 14 -> 1 is one step, twice
+    messages = []
+    for k, a in enumerate(alive):
+        messages += [header_p2(a, 1, stamp=0.05 * k), detection_p5(a, 0, 10.0 + k, 0.0, 0.0,
+                                                                    stamp=0.05 * k)]
+    receiver, got = receive(one_based, messages)
+    assert receiver.stats.clean, receiver.stats
+    assert all(c.complete for c in got) and len(got) == 40
+    # The cycles count from the counter's first value: 1 is 0, 14 is 13.
+    assert [c.cycle for c in got] == [a - 1 for a in alive]
+    from rts_scenario.detections import sequential_numbers
+
+    steps = sequential_numbers(np.array([c.cycle for c in got]), mapping.counter_modulus,
+                               0.05 * np.arange(40), 0.05)
+    np.testing.assert_array_equal(steps, np.arange(40))  # no cycle lost at the wraps
+    np.testing.assert_allclose([c.range_m[0] for c in got], 10.0 + np.arange(40))
+    # 0 and 15 are values it never takes: refused.
+    receiver, got = receive(one_based, [header_p2(14, 0), header_p2(0, 0), header_p2(15, 0),
+                                        header_p2(1, 0)])
+    assert receiver.stats.decode_errors == 2 and [c.cycle for c in got] == [13, 0]
+
+
+def test_the_simulated_radar_counts_1_to_14(one_based):
+    mapping = CanMapping.from_file(one_based)
+    recorder = Recorder()
+    publisher = DetectionPublisher(recorder, mapping=mapping)
+    publisher.publish_many([Detections(cycle=k, t_s=0.05 * k, range_m=np.array([20.0]),
+                                       az_deg=np.zeros(1), radial_velocity_mps=np.zeros(1))
+                            for k in range(30)])
+    db = mapping.db
+    alive = [db.decode_message(m.arbitration_id, m.data, scaling=False)
+             for m in recorder]
+    assert [a["Hdr_Alive"] for a in alive if "Hdr_Alive" in a] == [1 + k % 14
+                                                                  for k in range(30)]
+    assert [a["Det_Alive"] for a in alive if "Det_Alive" in a] == [1 + k % 14
+                                                                  for k in range(30)]
+
+
+def test_a_run_and_its_recheck_pass_with_a_counter_running_1_to_14(one_based, tmp_path,
+                                                                     capsys):
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / "drive.blf"
+    assert cli.main(["run", str(scene), "--mapping", str(one_based), "--record",
+                     str(log)]) == 0, capsys.readouterr().out
+    capsys.readouterr()
+    alive = [m.data[1] & 0x0F for m in can.LogReader(str(log)) if m.arbitration_id == HEADER_ID]
+    assert len(alive) > 30 and set(alive) == set(range(1, 15))
+    assert cli.main(["check", str(scene), "--log", str(log)]) == 0, capsys.readouterr().out
+
+
+def test_counter_min_dbc_takes_the_signal_s_minimum(tmp_path):
+    (tmp_path / "autosar.dbc").write_text(ONE_BASED_DBC)
+    path = tmp_path / "m.mapping.yaml"
+    path.write_text(ONE_BASED_MAPPING.replace("counter_min: 1", "counter_min: dbc"))
+    assert CanMapping.from_file(path).counter_modulus == 14
+    # Without counter_max, the counter runs to what its bits carry: 1 to 15.
+    path.write_text(ONE_BASED_MAPPING.replace("  counter_max: 14\n", ""))
+    assert CanMapping.from_file(path).counter_modulus == 15
+
+
+class Recorder(list):
+    """A ``send`` target that keeps the messages."""
+
+    send = list.append
+
+
 BAD = [
     ("counter-max-beyond-width", ("counter_max: 14", "counter_max: 16"), "header.counter_max",
      r"got 16: the 4-bit signal 'Hdr_Alive' counts to 15 at most; allowed: 1 to 15"),
+    ("counter-min-not-below-max", ("counter_max: 14", "counter_min: 14\n  counter_max: 14"),
+     "header.counter_min", r"got 14: the counter must take two values at least, from "
+                           r"counter_min to 14 \(counter_max\); allowed: 0 to 13, or dbc"),
+    ("counter-min-negative", ("counter_max: 14", "counter_min: -1\n  counter_max: 14"),
+     "header.counter_min", r"must be >= 0, got -1"),
+    ("counter-min-dbc-without-minimum", (("counter_max: 14",
+                                          "counter_min: dbc\n  counter_max: 14"),
+                                         ("[0|14]", "[-0.5|14]")), "header.counter_min",
+     r"dbc: the DBC states no whole minimum from 0 to 13"),
     ("counter-max-dbc-without-maximum", (("counter_max: 14", "counter_max: dbc"),
                                          ("[0|14]", "[0|0]")), "header.counter_max",
      r"dbc: the DBC states no whole maximum from 1 to 15"),
@@ -481,3 +574,187 @@ def test_a_log_holding_the_radar_on_another_channel_than_the_run_s_says_so():
                         sidecar) == (None, None)
     assert pick_channel("bench.blf", None, Counter({"1": 40}), CanMapping.builtin(),
                         None) == (None, None)
+
+
+# --- a live run on an interface that listens on several channels ---------------------------
+
+def two_channel_interface(monkeypatch):
+    """Make the run's in-process bus an interface listening on two channels: the radar's
+    messages come on channel 0 (python-can's ``Message.channel``, as a Vector interface
+    given ``0,1`` numbers them), a sibling radar's with the same identifiers (its counter 5
+    cycles on) on channel 1."""
+    from rts_scenario.canbus import ListenerBus
+
+    class TwoChannels(ListenerBus):
+        def send(self, msg, timeout=None):
+            twin = resealed(msg, 1, 5)
+            msg.channel, msg.is_rx, twin.is_rx = 0, True, True
+            for listener in self._listeners:
+                listener.on_message_received(msg)
+                listener.on_message_received(twin)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", TwoChannels)
+
+
+APPROACH = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+
+
+def test_a_run_hearing_the_radar_s_identifiers_on_two_channels_fails_naming_them(
+        autosar, tmp_path, monkeypatch, capsys):
+    import json
+
+    two_channel_interface(monkeypatch)
+    out_json, log = tmp_path / "report.json", tmp_path / "bench.blf"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--json", str(out_json),
+                     "--record", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 1, out + err
+    report = json.loads(out_json.read_text())
+    (reason,) = [r for r in report["reasons"] if "channels" in r]
+    assert re.fullmatch(
+        r"the radar's messages \(the identifiers of mapping 'autosar-radar'\) came on 2 "
+        r"channels: 0 \((\d+) messages\), 1 \(\1 messages\): the radar's cycles and another "
+        r"bus's were mixed; give --radar-channel CH \(the channel as python-can gives it\)",
+        reason), reason
+    # Which channel was the radar's is not known: the sidecar names none, and the log's
+    # check does not pick one either.
+    assert json.loads(Path(f"{log}.rts.json").read_text())["can_channel"] is None
+    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    _, err = capsys.readouterr()
+    assert code == 2 and "which is the radar's is not guessed" in err, err
+
+
+def test_run_radar_channel_reads_one_channel_and_the_log_s_check_reads_the_same(
+        autosar, tmp_path, monkeypatch, capsys):
+    import json
+
+    two_channel_interface(monkeypatch)
+    log = tmp_path / "bench.blf"
+    out_json = tmp_path / "report.json"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "0",
+                     "--record", str(log), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    report = json.loads(out_json.read_text())
+    bus = report["bus"]
+    assert bus["other_channels"] == bus["messages"] > 0  # the sibling's, one per radar message
+    assert (bus["conflicts"], bus["duplicates"], bus["reordered"]) == (0, 0, 0)
+    sidecar = json.loads(Path(f"{log}.rts.json").read_text())
+    assert sidecar["can_channel"] == "0"
+    # The log holds both channels; its check reads the one the run read.
+    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    assert "read channel 0, the one the run listened on ('0', its sidecar)" in out, out
+
+
+def test_run_radar_channel_without_the_radar_on_it_fails_naming_the_channels(
+        autosar, tmp_path, monkeypatch, capsys):
+    import json
+
+    two_channel_interface(monkeypatch)
+    out_json = tmp_path / "report.json"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "2",
+                     "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 1, out + err
+    reasons = json.loads(out_json.read_text())["reasons"]
+    assert any(re.fullmatch(
+        r"--radar-channel 2: none of the radar's messages \(the identifiers of mapping "
+        r"'autosar-radar'\) came on channel 2; the channels they came on: 0 \((\d+) "
+        r"messages\), 1 \(\1 messages\)", r) for r in reasons), reasons
+    code = cli.main(["run", str(APPROACH), "--radar-channel", " "])
+    _, err = capsys.readouterr()
+    assert code == 2 and "error: --radar-channel ' ': empty" in err, err
+
+
+def test_a_run_hearing_the_radar_on_one_channel_keeps_it_in_the_sidecar(
+        autosar, tmp_path, monkeypatch, capsys):
+    # The interface names the channel the radar came on (socketcan bound to every device
+    # names each message's): the sidecar keeps that one, as the log names it.
+    import json
+
+    from rts_scenario.canbus import ListenerBus
+
+    class Named(ListenerBus):
+        def send(self, msg, timeout=None):
+            msg.channel, msg.is_rx = "vcan1", True
+            for listener in self._listeners:
+                listener.on_message_received(msg)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Named)
+    log = tmp_path / "drive.blf"
+    assert cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--record",
+                     str(log)]) == 0
+    capsys.readouterr()
+    assert json.loads(Path(f"{log}.rts.json").read_text())["can_channel"] == "vcan1"
+
+
+# --- a log cut short ---------------------------------------------------------------------------
+
+def test_a_blf_cut_short_fails_its_check_saying_where_it_ends(recorded, tmp_path, capsys):
+    import json
+
+    scene, log = recorded
+    whole = log.read_bytes()
+    messages = list(can.LogReader(str(log)))
+    cut = tmp_path / "cut.blf"
+    cut.write_bytes(whole[: len(whole) * 6 // 10])
+    Path(f"{cut}.rts.json").write_text(Path(f"{log}.rts.json").read_text())
+    kept = list(can.LogReader(str(cut)))
+    assert 0 < len(kept) < len(messages)  # python-can reads it as a shorter log, silently
+    out_json = tmp_path / "check.json"
+    code = cli.main(["check", str(scene), "--log", str(cut), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 1 and "Traceback" not in err, out + err
+    report = json.loads(out_json.read_text())
+    expected = (f"the log {cut} was cut short: its header says {len(whole)} bytes, the file "
+                f"holds {len(whole) * 6 // 10}; it ends at log time {kept[-1].timestamp:.6f} s "
+                f"(its last message read): what the radar sent after it is not in it")
+    assert expected in report["reasons"], report["reasons"]
+    assert report["alignment"]["log_cut_short"] == {
+        "header_bytes": len(whole), "file_bytes": len(whole) * 6 // 10,
+        "last_message_t_s": kept[-1].timestamp}
+    assert expected in out
+    # The whole log has nothing of the kind.
+    assert cli.main(["check", str(scene), "--log", str(log), "--json", str(out_json)]) == 0
+    assert json.loads(out_json.read_text())["alignment"]["log_cut_short"] is None
+
+
+def test_a_blf_its_writer_never_closed_fails_its_check(recorded, tmp_path, capsys):
+    # A recording stopped without closing its writer (the process killed): python-can's BLF
+    # header still says 144 bytes and no object, the messages in its buffer are lost.
+    scene, log = recorded
+    messages = list(can.LogReader(str(log)))
+    open_log = tmp_path / "open.blf"
+    Path(f"{open_log}.rts.json").write_text(Path(f"{log}.rts.json").read_text())
+    writer = can.BLFWriter(str(open_log), max_container_size=1024)  # flushed as it goes
+    for msg in messages:
+        writer.on_message_received(msg)
+    writer.file.flush()
+    size = open_log.stat().st_size
+    kept = list(can.LogReader(str(open_log)))
+    assert 0 < len(kept) < len(messages)
+    code = cli.main(["check", str(scene), "--log", str(open_log)])
+    out, err = capsys.readouterr()
+    writer.file.close()
+    assert code == 1 and "Traceback" not in err, out + err
+    assert (f"the log {open_log} was cut short: its header says 144 bytes (the tool that "
+            f"wrote it never closed it), the file holds {size}; it ends at log time "
+            f"{kept[-1].timestamp:.6f} s") in out, out
+
+
+def test_an_asc_cut_short_fails_its_check(autosar, tmp_path, capsys):
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / "drive.asc"
+    assert cli.main(["run", str(scene), "--mapping", str(autosar), "--record", str(log)]) == 0
+    capsys.readouterr()
+    lines = log.read_text().splitlines(keepends=True)
+    assert lines[-1].strip() == "End TriggerBlock"
+    log.write_text("".join(lines[: len(lines) // 2]))
+    last = list(can.LogReader(str(log)))[-1].timestamp
+    code = cli.main(["check", str(scene), "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 1 and "Traceback" not in err, out + err
+    assert (f"the log {log} was cut short: it lacks the 'End TriggerBlock' line an ASC log "
+            f"ends with; it ends at log time {last:.6f} s") in out, out

@@ -393,3 +393,51 @@ def test_a_header_after_its_detections_is_its_cycle_after_hundreds_of_cycles():
     assert late.complete and late.range_m[0] == pytest.approx(13.0, abs=0.003)
     assert (receiver.stats.duplicates, receiver.stats.conflicts, receiver.stats.orphans) == \
         (0, 0, 0)
+
+
+def test_a_lost_header_without_a_frame_counter_is_reported_as_such_not_as_a_conflict(cut_in):
+    # The cluster list's detections carry no frame counter: with a cycle's header lost, its
+    # detections follow the cycle before, already whole. They are detections without their
+    # header (the cycle is missing), not messages of that cycle come again with other values.
+    scene, tracks, schedule, _ = cut_in
+    mapping = CanMapping.from_file(ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml")
+    header_id = mapping.db.get_message_by_name(mapping.header).frame_id
+    frames = [one_cycle(k, [20.0 + k, 40.0 - k], az_deg=[1.0, -3.0]) for k in range(6)]
+    recorder = Recorder()
+    publisher = DetectionPublisher(recorder, mapping=mapping)
+    lost = 3
+    for frame in frames:
+        before = len(recorder)
+        publisher.publish(frame)
+        if frame.cycle == lost:
+            assert recorder[before].arbitration_id == header_id
+            del recorder[before]
+    receiver = DetectionReceiver(mapping)
+    for msg in recorder:
+        receiver.on_message_received(msg)
+    got = receiver.flush()
+    assert [c.cycle for c in got] == [0, 1, 2, 4, 5] and all(c.complete for c in got)
+    assert (receiver.stats.conflicts, receiver.stats.duplicates, receiver.stats.orphans) == \
+        (0, 0, 2)
+    report = check(scene.name, tracks, schedule.status, got, scene.expectations,
+                   bus=vars(receiver.stats))
+    assert "2 detections without a frame header" in report.reasons
+    assert not any("conflicting" in r for r in report.reasons), report.reasons
+
+
+def test_without_a_frame_counter_a_detection_beyond_the_count_is_still_a_conflict():
+    # The same detections after a whole cycle, and the next header the very next counter:
+    # no header was lost, the cycle held more than announced.
+    mapping = CanMapping.from_file(ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml")
+    recorder = Recorder()
+    publisher = DetectionPublisher(recorder, mapping=mapping)
+    publisher.publish(one_cycle(0, [20.0]))
+    extra = Recorder()
+    DetectionPublisher(extra, mapping=mapping).publish(one_cycle(0, [20.0, 33.0]))
+    recorder.append(extra[-1])  # detection 1, beyond the count of 1
+    publisher.publish(one_cycle(1, [21.0]))
+    receiver = DetectionReceiver(mapping)
+    for msg in recorder:
+        receiver.on_message_received(msg)
+    assert [c.cycle for c in receiver.flush()] == [0, 1]
+    assert (receiver.stats.conflicts, receiver.stats.orphans) == (1, 0)

@@ -35,6 +35,16 @@ DEFAULT_INTERFACE = "virtual"
 DEFAULT_CHANNEL = "rts-scenario"
 
 
+def channel_label(channel: Any) -> str | None:
+    """Return a message's channel as text, as python-can gives it (``Message.channel``).
+
+    ``run --radar-channel`` and ``check --log-channel`` name channels so (a Vector
+    interface's 1, a BLF's channel 0, socketcan's ``vcan1``); None where the interface or
+    log does not say.
+    """
+    return None if channel is None else str(channel)
+
+
 def open_bus(interface: str = DEFAULT_INTERFACE, channel: str = DEFAULT_CHANNEL, *,
              fd: bool = False, **options: Any) -> can.BusABC:
     """Open a python-can bus, with one clear error if the interface or channel is unusable."""
@@ -203,8 +213,8 @@ class DetectionPublisher:
         detection_cycle = cycle_of[send]
         # The low part of the header's counter (a counter wrapping below its width wraps
         # first: its low bits are those of the counter on the bus).
-        low_counter = (np.array([f.cycle for f in frames], dtype=np.int64)
-                       % layout.counter_modulus
+        low_counter = ((np.array([f.cycle for f in frames], dtype=np.int64)
+                        % layout.counter_modulus + m.counter_min)
                        % layout.frame_counter_modulus)[detection_cycle].astype(np.float64)
         frame_counter = m.frame_counter if m.frame_counter in layout.signals else None
         parts = []
@@ -426,7 +436,8 @@ class _MappedLayout:
         """Return the header's raw values for a cycle announcing ``count`` detections."""
         m, header = self.mapping, self.header_codec
         values = dict(header.defaults)
-        values[m.counter] = header.raw(m.counter, frame.cycle % self.counter_modulus)
+        values[m.counter] = header.raw(m.counter,
+                                       frame.cycle % self.counter_modulus + m.counter_min)
         for name, top in zip(m.count, self.count_tops, strict=True):
             part = min(count, top)  # the count, spread over the count signals in order
             values[name] = header.raw(name, part)
@@ -544,6 +555,8 @@ _Route = tuple[cantools.database.can.Message, Verify | None, str | None,
 OPEN_CYCLES = 16
 # Counters remembered to recognise duplicated headers and parts of cycles already handed on.
 RECENT_CYCLES = 256
+# Without a frame counter, parts after a whole cycle held until the next header places them.
+UNPLACED_PARTS = 4096
 
 
 class DetectionReceiver(can.Listener):
@@ -561,12 +574,20 @@ class DetectionReceiver(can.Listener):
     Each cycle keeps when its header was on the bus (the message's timestamp, on whatever
     clock the interface stamps with) and when the host received it: ``received_at(message)``,
     the host's wall clock (`time.time`) when the message is handed over, by default.
+
+    An interface may listen on several channels (each message's ``Message.channel``): with
+    ``channel`` (as `channel_label` names it), the receiver reads only that channel's messages
+    and counts the others (`other_channels`); it counts, per channel, the messages of the
+    radar's identifiers it heard (`channels`), so that a run can tell a bus whose radar
+    identifiers came on several channels (`channel_reason`).
     """
 
     def __init__(self, mapping: CanMapping | None = None, cycle_s: float | None = None,
-                 received_at: Callable[[can.Message], float] | None = None) -> None:
+                 received_at: Callable[[can.Message], float] | None = None, *,
+                 channel: str | None = None) -> None:
         self.mapping = mapping or CanMapping.builtin()
         self.cycle_s = cycle_s
+        self.channel = channel
         self.received_at: Callable[[can.Message], float] = (
             received_at or (lambda message: time.time()))
         db = self.mapping.db
@@ -664,6 +685,18 @@ class DetectionReceiver(can.Listener):
             self._reset()
 
     def _reset(self) -> None:
+        # Per channel, the messages of the radar's identifiers heard (`channels`: those
+        # counted in `_heard`, and the current channel's run of them); the messages of other
+        # channels than `channel`, not read.
+        self._heard: Counter[str | None] = Counter()
+        self.other_channels = 0
+        # The channel of the last message (python-can's object), its label, how many of the
+        # radar's messages came on it since it became the current one, and whether it is
+        # another channel than `channel`: a bus keeps to one channel object for long runs.
+        self._ch: Any = None
+        self._ch_label: str | None = None
+        self._ch_count = 0
+        self._ch_other = self.channel is not None
         self._open: OrderedDict[int, _Assembly] = OrderedDict()
         self._ready: deque[Detections] = deque()
         self._recent: OrderedDict[int, bool] = OrderedDict()  # counter -> handed on whole
@@ -675,6 +708,10 @@ class DetectionReceiver(can.Listener):
         self._last_header_t = np.nan  # when the last header reached the bus
         # Detections that came before their cycle's header, by counter (low 8 bits).
         self._waiting: OrderedDict[int, list[tuple[_PartRule, dict[str, float]]]] = OrderedDict()
+        # Without a frame counter: parts that came after their cycle was whole, with the
+        # cycle's counter, until the next header tells whether one was lost between
+        # (`_place_after`).
+        self._unplaced: list[tuple[int, _PartRule, dict[str, float]]] = []
 
     @property
     def pending(self) -> int:
@@ -691,6 +728,8 @@ class DetectionReceiver(can.Listener):
     def flush(self) -> list[Detections]:
         """Hand on every open cycle (incomplete ones marked so) and take all cycles."""
         with self._lock:
+            if self._unplaced:
+                self._place_after(None)
             while self._open:
                 self._finish(next(iter(self._open)))
             self._current = None
@@ -701,8 +740,56 @@ class DetectionReceiver(can.Listener):
         with self._lock:
             self._receive(msg)
 
+    @property
+    def channels(self) -> Counter[str | None]:
+        """Per channel (`channel_label`), the messages of the radar's identifiers heard."""
+        with self._lock:
+            out = self._heard.copy()
+            if self._ch_count:
+                out[self._ch_label] += self._ch_count
+        return out
+
+    def _switch_channel(self, channel: Any) -> None:
+        """Make ``channel`` (a message's) the current one; count the one before's."""
+        if self._ch_count:
+            self._heard[self._ch_label] += self._ch_count
+        self._ch, self._ch_label, self._ch_count = channel, channel_label(channel), 0
+        self._ch_other = self.channel is not None and self._ch_label != self.channel
+
+    def channel_reason(self) -> str | None:
+        """Say why the channels the radar's identifiers came on make the cycles untrustworthy.
+
+        Without `channel`: they came on several channels (another radar of the family, or the
+        same bus bridged twice), and the cycles mixed theirs. With it: none came on it.
+        None where neither happened.
+        """
+        held = {c: n for c, n in self.channels.items() if n}
+        listing = ", ".join(f"{'(none)' if c is None else c} ({n} messages)"
+                            for c, n in sorted(held.items(), key=lambda cn: str(cn[0])))
+        what = f"the radar's messages (the identifiers of mapping {self.mapping.name!r})"
+        if self.channel is not None:
+            if self.channel in held:
+                return None
+            found = f"the channels they came on: {listing}" if held else "none came on any"
+            return (f"--radar-channel {self.channel}: none of {what} came on channel "
+                    f"{self.channel}; {found}")
+        if len(held) <= 1:
+            return None
+        return (f"{what} came on {len(held)} channels: {listing}: the radar's cycles and "
+                f"another bus's were mixed; give --radar-channel CH (the channel as python-can "
+                f"gives it)")
+
     def _receive(self, msg: can.Message) -> None:
         stats = self.stats
+        # An 11-bit and a 29-bit identifier of one number are different messages.
+        known = self._layouts.get(msg.arbitration_id | (msg.is_extended_id << 31))
+        if msg.channel is not self._ch:
+            self._switch_channel(msg.channel)
+        if self._ch_other:
+            self.other_channels += 1  # another bus's
+            if known is not None and not (msg.is_error_frame or msg.is_remote_frame):
+                self._ch_count += 1
+            return
         stats.messages += 1
         if msg.is_error_frame:
             stats.error_frames += 1
@@ -710,11 +797,10 @@ class DetectionReceiver(can.Listener):
         if msg.is_remote_frame:
             stats.remote_frames += 1
             return
-        # An 11-bit and a 29-bit identifier of one number are different messages.
-        known = self._layouts.get(msg.arbitration_id | (msg.is_extended_id << 31))
         if known is None:
             stats.unknown_ids += 1
             return
+        self._ch_count += 1  # a message of the radar's identifiers, on the current channel
         message, checksum, mux, decode, part = known
         data = msg.data
         if checksum is not None and not checksum(data):
@@ -743,12 +829,17 @@ class DetectionReceiver(can.Listener):
         values: dict[str, float] = {
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
             for name, value in raw.items()}
-        counter = int(values[m.counter])
-        if m.counter_max is not None and not 0 <= counter <= m.counter_max:
-            # A value the counter never takes (15 of an AUTOSAR counter wrapping after 14):
-            # the message is invalid.
+        # The counter from its first value (a counter running 1..14 counts 1 as 0); its low
+        # bits, in the detection messages, are the value's on the bus.
+        value = int(values[m.counter])
+        counter = value - m.counter_min
+        if not 0 <= counter < self._counter_modulus:
+            # A value the counter never takes (15 of an AUTOSAR counter wrapping after 14, 0
+            # of one running 1..14): the message is invalid.
             self.stats.decode_errors += 1
             return
+        if self._unplaced:
+            self._place_after(counter)
         if bus_t_s is not None:
             if self.cycle_s is not None and bus_t_s - self._last_header_t > (
                     self._counter_modulus // 2 - GAP_TOLERANCE_CYCLES) * self.cycle_s:
@@ -768,13 +859,13 @@ class DetectionReceiver(can.Listener):
         else:
             self._latest = counter
         frame = _Assembly(
-            counter=counter, low=counter % self._low_modulus,
+            counter=counter, low=value % self._low_modulus,
             expected=int(sum(values[c] for c in m.count)),
             timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s,
             host_t_s=host_t_s, header=dict(raw))
         self._open[counter] = frame
         self._current = frame
-        for rule, early in self._waiting.pop(counter % self._low_modulus, []):
+        for rule, early in self._waiting.pop(value % self._low_modulus, []):
             self.stats.orphans -= 1
             self._attach(frame, rule, early)
         if frame.complete():
@@ -799,15 +890,14 @@ class DetectionReceiver(can.Listener):
             if frame is None or frame.low != low:
                 # Late part of an earlier cycle, or early part of one whose header is late.
                 self.stats.reordered += 1
-                frame = next((f for c, f in reversed(self._open.items())
-                              if c % self._low_modulus == low),
-                             None)
+                frame = next((f for f in reversed(self._open.values()) if f.low == low), None)
                 if frame is None:
                     # Within half the low counter's range: further back, the same low bits
                     # name another cycle (the one whose header is still to come).
+                    first = self.mapping.counter_min  # the counters' value 0 on the bus
                     done = next((c for c in itertools.islice(reversed(self._recent),
                                                              self._low_modulus // 2)
-                                 if c % self._low_modulus == low), None)
+                                 if (c + first) % self._low_modulus == low), None)
                     if done is not None:
                         # Its cycle was handed on: a copy, a conflict, or (the cycle went on
                         # incomplete) too late.
@@ -825,10 +915,17 @@ class DetectionReceiver(can.Listener):
         if frame.counter not in self._open:
             # Its cycle was handed on: a copy or a conflict if it was whole, else too late to
             # count.
-            if self._recent.get(frame.counter, False):
-                self._after(frame.counter, rule, values)
-            else:
+            if not self._recent.get(frame.counter, False):
                 self.stats.orphans += 1
+            elif name is None:
+                # No frame counter tells its cycle: the next one's, whose header was lost, or
+                # this one's again. The next header says which.
+                self._unplaced.append((frame.counter, rule, values))
+                if len(self._unplaced) > UNPLACED_PARTS:  # no header for that long
+                    self._unplaced.pop(0)
+                    self.stats.orphans += 1
+            else:
+                self._after(frame.counter, rule, values)
             return
         if self._attach(frame, rule, values) and frame.complete():
             self._finish(frame.counter)
@@ -850,6 +947,24 @@ class DetectionReceiver(can.Listener):
         else:
             self.stats.conflicts += 1
         return False
+
+    def _place_after(self, counter: int | None) -> None:
+        """Place the parts that came after their whole cycle, without a frame counter.
+
+        ``counter``: the next header's (None: none came). A header more than one cycle on
+        (within half the counter's range: not one of an earlier cycle come again) says a
+        cycle came without its header: the parts are its,
+        detections without a frame header (`BusStats.orphans`; its cycle is missing), not
+        messages of the whole cycle come again. Otherwise they are that cycle's again: a
+        copy or a conflict (`_after`).
+        """
+        unplaced, self._unplaced = self._unplaced, []
+        for after, rule, values in unplaced:
+            step = None if counter is None else (counter - after) % self._counter_modulus
+            if step is not None and 2 <= step < max(2, self._counter_modulus // 2) + 1:
+                self.stats.orphans += 1
+            else:
+                self._after(after, rule, values)
 
     def _after(self, counter: int, rule: _PartRule, values: dict[str, float]) -> None:
         """Count a part of a whole cycle already handed on: a copy, or a conflict.
@@ -874,6 +989,8 @@ class DetectionReceiver(can.Listener):
 
         Detections waiting for their header stay: they may have come just before it.
         """
+        if self._unplaced:
+            self._place_after(None)
         while self._open:
             self._finish(next(iter(self._open)))
         self._recent.clear()
@@ -939,4 +1056,4 @@ def _behind(counter: int, latest: int, modulus: int) -> bool:
 
 
 __all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "ListenerBus",
-           "open_bus"]
+           "channel_label", "open_bus"]

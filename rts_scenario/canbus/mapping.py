@@ -87,6 +87,8 @@ MAPPING_SCHEMA: dict[str, Any] = {
                 "message": {"type": "string"}, "counter": {"type": "string"},
                 "counter_max": {"oneOf": [{"type": "integer", "minimum": 1},
                                           {"const": "dbc"}]},
+                "counter_min": {"oneOf": [{"type": "integer", "minimum": 0},
+                                          {"const": "dbc"}]},
                 "count": {"type": "array", "minItems": 1, "items": {"type": "string"}},
                 "timestamp": {"type": "string"}, "checksum": _CHECKSUM,
             },
@@ -284,6 +286,7 @@ class CanMapping:
     header_checksum_spec: Checksum | None = None
     checksum_spec: Checksum | None = None
     counter_max: int | None = None  # the counter's last value before 0 (None: its width's)
+    counter_min: int = 0  # the counter's first value, the one after its last
 
     @property
     def header_checksum(self) -> str | None:
@@ -300,12 +303,15 @@ class CanMapping:
         """How many values the header's counter takes before it comes back to 0.
 
         ``counter_max + 1`` where the mapping says where it wraps (an AUTOSAR alive counter
-        runs 0..14 in 4 bits), else the counter signal's width (an 8-bit counter: 256).
+        runs 0..14 in 4 bits), else the counter signal's width (an 8-bit counter: 256), less
+        ``counter_min`` (a counter running 1..14: 14). The receiver counts a header's counter
+        from ``counter_min`` (its value less it) and the publisher writes it so, so that
+        every counter past the bus runs from 0.
         """
         if self.counter_max is not None:
-            return self.counter_max + 1
-        return 1 << int(self.db.get_message_by_name(self.header)
-                        .get_signal_by_name(self.counter).length)
+            return self.counter_max + 1 - self.counter_min
+        return (1 << int(self.db.get_message_by_name(self.header)
+                         .get_signal_by_name(self.counter).length)) - self.counter_min
 
     @property
     def quantities(self) -> set[str]:
@@ -388,7 +394,33 @@ class CanMapping:
         mapping._check(doc)
         if "counter_max" in head:
             object.__setattr__(mapping, "counter_max", mapping._counter_max(doc))
+        if "counter_min" in head:
+            object.__setattr__(mapping, "counter_min", mapping._counter_min(doc))
         return mapping
+
+    def _counter_min(self, doc: Document) -> int:
+        """Return the header's ``counter_min``: given, or the DBC's minimum of the counter."""
+        key = ("header", "counter_min")
+        value = doc.data["header"]["counter_min"]
+        sig = self.db.get_message_by_name(self.header).get_signal_by_name(self.counter)
+        if self.counter_max is not None:
+            top, said = self.counter_max, f"{self.counter_max} (counter_max)"
+        else:
+            top = (1 << sig.length) - 1
+            said = f"{top} (what the {sig.length}-bit signal {self.counter!r} carries)"
+        if value == "dbc":
+            minimum = sig.minimum
+            if minimum is None or float(minimum) != int(minimum) or not 0 <= minimum < top:
+                raise doc.error(key, f"dbc: the DBC states no whole minimum from 0 to {top - 1} "
+                                     f"for signal {self.counter!r} of message "
+                                     f"{self.header!r} (got {minimum}); give the counter's "
+                                     f"first value as a number instead")
+            return int(minimum)
+        if not value < top:
+            raise doc.error(key, f"got {value}: the counter must take two values at least, "
+                                 f"from counter_min to {said}; allowed: 0 to {top - 1}, or "
+                                 f"dbc (the DBC's minimum)")
+        return int(value)
 
     def _counter_max(self, doc: Document) -> int:
         """Return the header's ``counter_max``: given, or the DBC's maximum of the counter."""

@@ -54,6 +54,9 @@ def _do_run(args: argparse.Namespace) -> int:
     # Everything the options name is checked before the first scene runs, not after it.
     check_output("--output", args.output, run=True)
     check_can_interface("--can-interface", args.can_interface, args.can_channel)
+    if args.radar_channel is not None and not args.radar_channel.strip():
+        raise RtsError(f"--radar-channel {args.radar_channel!r}: empty; give the channel the "
+                       f"radar's messages come on, as python-can gives it (Message.channel)")
     if args.mapping:
         mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
         check_fd_mapping(args.can_fd, args.mapping, mapping)
@@ -151,6 +154,7 @@ def _do_run(args: argparse.Namespace) -> int:
                     log = logs.get(variant, args.record)
                     options = RunOptions(output=args.output, can_interface=args.can_interface,
                                          can_channel=args.can_channel, can_fd=args.can_fd,
+                                         radar_channel=args.radar_channel,
                                          mapping=args.mapping, method=args.method,
                                          record=bool(args.plot), bus_log=log)
                     result = run_scene(scene, options,
@@ -274,6 +278,10 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                         help="python-can interface (default virtual)")
     parser.add_argument("--can-channel", default=None, help="CAN channel (default: private)")
     parser.add_argument("--can-fd", action="store_true", help="CAN FD detection messages")
+    parser.add_argument("--radar-channel", default=None, metavar="CH",
+                        help="on an interface listening on several channels, read only the "
+                             "radar's (Message.channel as python-can gives it, e.g. 1 of a "
+                             "Vector interface given 0,1); the log's check reads the same one")
     parser.add_argument("--mapping", default=None,
                         help="*.mapping.yaml for a third-party radar's DBC")
     parser.add_argument("--method", default="exact", choices=METHODS,
