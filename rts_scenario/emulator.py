@@ -116,9 +116,10 @@ class Emulator:
         self.clock = radar.radar_clock
         self.rng = rng if rng is not None else np.random.default_rng(0)
         # Frames that name FEs this rig lacks, or FEs that make none of its quads (a run on
-        # another rig) are refused as malformed, never played on other FEs.
+        # another rig) are refused as malformed, never played on other FEs; each sender is told
+        # the rig's geometry, so a run on a rig of the same layout pointing elsewhere fails.
         self.receiver = UdpReceiver(host, port, n_front_ends=rig.n_front_ends,
-                                    quads=rig.quads)
+                                    quads=rig.quads, rig_digest=rig.geometry_digest())
         self._own_bus = bus is None
         try:
             self.bus = bus if bus is not None else open_bus(can_interface, can_channel)

@@ -27,7 +27,7 @@ from .detections import Detections, bus_times, host_times, sequential_numbers, u
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
-from .playback import Playback
+from .playback import Playback, rts_rig_record
 from .preflight import Preflight, frames_per_batch, preflight, scene_limits
 from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
 from .radar.profile import RadarProfile
@@ -815,6 +815,7 @@ class Pipeline:
         assert self.output is not None
         # The stream has ended: its last frames' report may still be on the way.
         playback.rts = self.output.rts_status(settle_s=RTS_SETTLE_S)
+        playback.rts_rig = rts_rig_record(self.output.rts_rig(), scene.rig)
         report.playback = playback.to_dict()
         failures = playback.reasons(scene.expectations.expected_limits)
         report.add_expected_not_hit(playback.not_hit(scene.expectations.expected_limits))

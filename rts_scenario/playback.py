@@ -56,6 +56,8 @@ class Playback:
         self.frames = 0
         self.late_frames = 0
         self.rts: dict[str, int] | None = None
+        # What the RTS said of its rig (`rts_rig_record`), None where it said nothing.
+        self.rts_rig: dict[str, Any] | None = None
         # Every frame's lateness, compressed as it comes (a few bytes per frame where the
         # sender's timing varies, nearly nothing where it does not): a log's re-check judges
         # the radar's cycles by the same send times as the run did.
@@ -87,7 +89,8 @@ class Playback:
         return {"frames_sent": self.frames, "late_frames": self.late_frames,
                 "lateness_s": {"p50": stats.p50, "p95": stats.p95, "max": stats.max},
                 "late_after_s": self.late_after_s,
-                "ambiguity_window_s": self.ambiguity_window_s, "rts": self.rts}
+                "ambiguity_window_s": self.ambiguity_window_s, "rts": self.rts,
+                "rts_rig": self.rts_rig}
 
     def reasons(self, expected: frozenset[str] | set[str]) -> list[str]:
         """Why the playback fails the run (nothing when it does not)."""
@@ -109,6 +112,13 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
         out.append(f"frames_sent_late: {late} of {frames} frames went out more than a frame "
                    f"period ({playback['late_after_s'] * 1e3:.3g} ms) after their time: the "
                    f"frame before was held instead (worst {worst * 1e3:.3g} ms)")
+    rig = playback.get("rts_rig")
+    if rig is not None and not rig["matches_run"]:
+        out.append(f"rts_rig: the RTS plays a rig of {rig['front_ends']} FEs whose geometry "
+                   f"(sha256 {rig['geometry_sha256'][:12]}) is not the run's ({rig['run']}, "
+                   f"{rig['run_geometry_sha256'][:12]}): its echoes came from other directions "
+                   f"than the schedule put them in; run on the rig the RTS has (emulate: "
+                   f"--rig the run's)")
     lost = lost_frames(rts)
     if lost and "frames_lost" not in expected:
         out.append(f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("
@@ -132,6 +142,21 @@ def playback_not_hit(playback: Mapping[str, Any], expected: frozenset[str] | set
     if "frames_sent_late" in expected and not int(playback["late_frames"]):
         out.append("frames_sent_late")
     return out
+
+
+def rts_rig_record(said: tuple[int, bytes] | None, rig: Any) -> dict[str, Any] | None:
+    """Return the report's ``playback.rts_rig``: what the RTS said of its rig, against ``rig``.
+
+    ``said``: its FE count and geometry digest (`rts_scenario.rig.Rig.geometry_digest`), None
+    where the RTS said nothing (then None: it cannot be told).
+    """
+    if said is None:
+        return None
+    front_ends, digest = said
+    own = rig.geometry_digest()
+    return {"front_ends": front_ends, "geometry_sha256": digest.hex(), "run": rig.name,
+            "run_geometry_sha256": own.hex(),
+            "matches_run": front_ends == rig.n_front_ends and digest == own}
 
 
 # How `Playback.send_lateness` packs when each frame went out after its time.
@@ -167,4 +192,4 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
 
 
 __all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "lost_frames",
-           "playback_not_hit", "playback_reasons", "unpack_send_lateness"]
+           "playback_not_hit", "playback_reasons", "rts_rig_record", "unpack_send_lateness"]

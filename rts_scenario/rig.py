@@ -253,6 +253,23 @@ class Rig:
         """Hashable identity of the FE geometry, used to cache per-rig precomputation."""
         return (self.az_deg.tobytes(), self.el_deg.tobytes(), self.rows, self.columns)
 
+    def geometry_digest(self) -> bytes:
+        """SHA-256 of the FEs' geometry (32 bytes): grid, directions, distances, antennas.
+
+        What an RTS and a run must share for the echoes to come from where the schedule puts
+        them (calibration offsets and limits are left out: they are the channels', not the
+        geometry's). Values rounded to 1e-9 (a rig written to a file and read back keeps it).
+        """
+        import hashlib
+
+        digest = hashlib.sha256(np.array([self.rows, self.columns], dtype="<i8").tobytes())
+        for values in (self.az_deg, self.el_deg, self.distance_m, self.rx_offset_m,
+                       self.tx_offset_m):
+            rounded = np.round(np.broadcast_to(np.asarray(values, dtype=np.float64),
+                                               np.shape(values)), 9) + 0.0  # no -0.0
+            digest.update(rounded.astype("<f8").tobytes())
+        return digest.digest()
+
     @classmethod
     def from_angles(
         cls,

@@ -4,6 +4,7 @@ Each test runs a few seconds of scene in real time on loopback.
 """
 
 import contextlib
+import dataclasses
 import itertools
 import shutil
 import time
@@ -103,6 +104,7 @@ def test_a_scene_over_udp_to_a_radar_on_its_own_clock_passes(tmp_path, mapping):
     scene = bench_scene(tmp_path)
     report, stats = rehearse(scene, mapping=mapping)
     assert report.passed, report.reasons
+    assert report.playback["rts_rig"]["matches_run"]
     cycles = int(np.ceil(scene.duration_s / 0.072))
     assert report.frames["total"] == report.frames["checked"] == cycles
     assert stats["udp"]["frames_applied"] == scene.n_frames
@@ -377,28 +379,37 @@ def test_emulate_refuses_a_run_on_a_rig_laid_out_otherwise_and_fails(tmp_path, c
     assert "3 datagrams name FEs that are no quad of rig" in out
 
 
-@pytest.mark.xfail(strict=True, reason="protocol version 1 carries no identity of the rig: a "
-                   "rig of the same rows and columns pointing elsewhere cannot be told "
-                   "(docs/udp-protocol.md); telling it needs a protocol change")
-def test_emulate_refuses_a_run_on_a_rig_of_the_same_layout_pointing_elsewhere(tmp_path, capsys):
-    import socket
+def test_a_run_on_a_rig_of_the_same_layout_pointing_elsewhere_fails_on_the_rts_s_word(tmp_path):
+    # The emulator's wide-3x5 has every FE half a degree further in azimuth than the run's:
+    # the same 15 FEs in the same rows and columns, so every frame is valid. The RTS tells
+    # each sender its rig's geometry (a digest, docs/udp-protocol.md): the run fails, naming
+    # both, and so does the re-check of its recording.
+    scene = bench_scene(tmp_path)
+    other = dataclasses.replace(scene.rig, az_deg=scene.rig.az_deg + 0.5)
+    log = tmp_path / "other.blf"
+    report, _ = rehearse(scene, emulator_rig=other, bus_log=str(log))
+    rig = report.playback["rts_rig"]
+    assert rig["front_ends"] == 15 and not rig["matches_run"]
+    assert rig["geometry_sha256"] == other.geometry_digest().hex() != \
+        rig["run_geometry_sha256"] == scene.rig.geometry_digest().hex()
+    assert not report.passed
+    assert any(r.startswith("rts_rig: the RTS plays a rig of 15 FEs") for r in report.reasons)
+    again = check_log(scene, log).report
+    assert not again.passed and any(r.startswith("rts_rig: ") for r in again.reasons)
 
-    from rts_scenario.outputs.udp import ENTRY, KIND_FULL, encode_frame
 
-    path = tmp_path / "other.rig.yaml"
-    # kit-table1's one quad of four FEs, each 2 degrees further out.
-    rs.Rig.from_angles(az_deg=[-7.4, 6.5, -5.4, 5.8], el_deg=[-10.8, -9.7, 10.4, 11.9],
-                       distance_m=1.0).write(path)
-    worker, codes, port = _emulate_in_thread(
-        capsys, ["--listen", "udp://127.0.0.1:0", "--rig", str(path), "--radar",
-                 "awr1843boost", "--seconds", "0.5", "--wait", "30"])
-    entries = np.zeros(4, dtype=ENTRY)  # a frame of a run on kit-table1
-    entries["channel"], entries["flags"], entries["fe"] = np.arange(4), 1, np.arange(4)
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.sendto(encode_frame(entries, kind=KIND_FULL, frame=0, t_s=0.0,
-                                 first_sequence=0)[0], ("127.0.0.1", port))
-    worker.join(timeout=30)
-    assert not worker.is_alive() and codes == [1]
+def test_a_rig_s_geometry_digest_follows_its_geometry_only(tmp_path):
+    rig = rs.Rig.preset("wide-3x5")
+    path = tmp_path / "copy.rig.yaml"
+    rig.write(path)
+    assert rs.Rig.from_file(path).geometry_digest() == rig.geometry_digest()
+    # Calibration is the channels', not the geometry's; a millimetre of distance is geometry.
+    assert dataclasses.replace(rig, cal_phase_deg=rig.cal_phase_deg + 3.0).geometry_digest() \
+        == rig.geometry_digest()
+    farther = rig.distance_m.copy()
+    farther[7] += 0.001
+    assert dataclasses.replace(rig, distance_m=farther).geometry_digest() != \
+        rig.geometry_digest()
 
 
 def test_emulate_prints_each_run_s_counters_and_fails_if_any_run_was_refused(capsys):

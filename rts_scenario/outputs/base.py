@@ -101,6 +101,13 @@ class Output(ABC):
         """
         return None
 
+    def rts_rig(self) -> tuple[int, bytes] | None:
+        """Return the FE count and geometry digest the RTS says it plays, if it says.
+
+        None (the default) when the output has no RTS that says (`Rig.geometry_digest`).
+        """
+        return None
+
     def close(self) -> None:
         """Flush and release resources; further calls do nothing."""
         if not self._closed:

@@ -49,6 +49,10 @@ STATUS_MAGIC = b"RTSR"
 STATUS_COUNTERS = ("datagrams", "corrupted", "malformed", "duplicates", "reordered", "stale",
                    "frames_applied", "lost_frames", "unsynced_frames")
 STATUS = struct.Struct("!4sB" + "I" * len(STATUS_COUNTERS))
+# The RTS's rig reply (optional): how many FEs it has and a digest of their geometry
+# (`rts_scenario.rig.Rig.geometry_digest`).
+RIG_MAGIC = b"RTSI"
+RIG_REPLY = struct.Struct("!4sBH32s")
 # The sender reads the replies every this many frames (they would fill its socket's buffer).
 STATUS_DRAIN_FRAMES = 32
 # The receiver tells a duplicate from a new datagram this many sequence numbers back from the
@@ -150,6 +154,7 @@ class UdpOutput(Output):
         self.datagrams_sent = 0
         self._sent_t_s = np.zeros(0)
         self._rts_status: dict[str, int] | None = None
+        self._rts_rig: tuple[int, bytes] | None = None
 
     def transmit(self, datagram: bytes) -> None:
         """Put one datagram on the network."""
@@ -236,6 +241,14 @@ class UdpOutput(Output):
         out["lost_frames"] = max(out.get("lost_frames", 0), unplayed)
         return out
 
+    def rts_rig(self) -> tuple[int, bytes] | None:
+        """Return the FE count and geometry digest the RTS said it plays, None if it did not.
+
+        Read with the status replies (`rts_status`).
+        """
+        self._read_replies()
+        return self._rts_rig
+
     def _read_replies(self) -> None:
         """Take every status reply waiting on the socket (the last valid one is kept)."""
         self._socket.setblocking(False)
@@ -250,6 +263,8 @@ class UdpOutput(Output):
                 status = decode_status(data)
                 if status is not None:
                     self._rts_status = status
+                elif (rig := decode_rig_reply(data)) is not None:
+                    self._rts_rig = rig
         finally:
             self._socket.setblocking(True)
 
@@ -287,6 +302,25 @@ def encode_status(counters: dict[str, int]) -> bytes:
                        *(min(max(int(counters.get(k, 0)), 0), 0xFFFFFFFF)
                          for k in STATUS_COUNTERS))
     return body + TRAILER.pack(zlib.crc32(body))
+
+
+def encode_rig_reply(n_front_ends: int, digest: bytes) -> bytes:
+    """Return the rig datagram of an RTS with ``n_front_ends`` FEs of geometry ``digest``."""
+    body = RIG_REPLY.pack(RIG_MAGIC, VERSION, n_front_ends, digest)
+    return body + TRAILER.pack(zlib.crc32(body))
+
+
+def decode_rig_reply(datagram: bytes) -> tuple[int, bytes] | None:
+    """Return the FE count and geometry digest of a rig datagram; None if it is not one."""
+    if len(datagram) != RIG_REPLY.size + TRAILER.size:
+        return None
+    body, (crc,) = datagram[:RIG_REPLY.size], TRAILER.unpack(datagram[RIG_REPLY.size:])
+    if zlib.crc32(body) != crc:
+        return None
+    magic, version, n_front_ends, digest = RIG_REPLY.unpack(body)
+    if magic != RIG_MAGIC or version != VERSION:
+        return None
+    return int(n_front_ends), bytes(digest)
 
 
 def decode_status(datagram: bytes) -> dict[str, int] | None:
@@ -348,7 +382,8 @@ class UdpReceiver:
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, *,
                  keep_applied: bool = False, n_front_ends: int | None = None,
-                 quads: NDArray[np.integer] | None = None) -> None:
+                 quads: NDArray[np.integer] | None = None,
+                 rig_digest: bytes | None = None) -> None:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._socket = socket.socket(family, socket.SOCK_DGRAM)
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
@@ -363,6 +398,9 @@ class UdpReceiver:
         # Its quads' FEs in the paper's channel order (Q, 4), where known: a target's emitting
         # channels must name FEs of one of them, each on its own channel.
         self.quads = None if quads is None else np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+        # Its rig's geometry digest (`Rig.geometry_digest`), where known: told to each sender
+        # with the status replies, so a run on another rig fails.
+        self.rig_digest = rig_digest
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         # The receiving thread applies frames while others read the state (`snapshot`).
@@ -484,6 +522,9 @@ class UdpReceiver:
         """
         try:
             self._socket.sendto(encode_status(self.status_counters()), sender)
+            if self.rig_digest is not None and self.n_front_ends is not None:
+                self._socket.sendto(encode_rig_reply(self.n_front_ends, self.rig_digest),
+                                    sender)
         except OSError:
             pass
 
