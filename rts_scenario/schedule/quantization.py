@@ -111,9 +111,9 @@ def phase_settings(resp: NDArray[np.complex128], weights: FloatArray, phase: Flo
     (a common turn of all four channels moves no angle), the others' nearest or the step
     below or above it, the combination whose synthesized angle with the solved ``weights`` is
     closest to the set one (the exact prediction, one Newton step per combination; the
-    nearest steps compete and win ties). The schedule then fits the
-    attenuators to these phases and to the nearest ones and keeps the better fit
-    (`rts_scenario.schedule.build`). Without a step the phases are only wrapped.
+    nearest steps compete and win ties). The schedule then fits the attenuators to these
+    phases and to the nearest ones and keeps the better fit (`rts_scenario.schedule.build`).
+    Without a step the phases are only wrapped.
 
     Parameters
     ----------
