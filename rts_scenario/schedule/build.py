@@ -265,48 +265,57 @@ def _start_levels(
     phase shifter's nearest steps, and the attenuations are fitted to the attenuator's range
     and step with the channels as those phases play them
     (`rts_scenario.schedule.quantization.attenuator_settings`, which also says what clipped
-    means). Quantization-aware, entries whose angle neighbouring phase steps keep better
+    means), for the target's level as the superposition with those phases gives it.
+    Quantization-aware, entries whose angle neighbouring phase steps keep better
     (`rts_scenario.schedule.quantization.phase_settings`) are fitted with those too, and the
     fit with the smaller predicted angle error is kept. The weights follow from the settings;
     the angle error, from both settings.
     """
-    gain = np.abs(np.einsum("qn,nq->n", resp[0], weights)) / n_elements
     on = weights > 0.0
-    full = single_db + 20.0 * np.log10(gain)[:, None]  # attenuation at weight 1
-    with np.errstate(divide="ignore"):
-        exact = np.where(on, full - 20.0 * np.log10(np.where(on, weights, 1.0)), np.inf)
     nearest = limits.phase_setting(phase)
     chosen_phase = phase_settings(resp, weights, phase, limits, mode, u, s)
     if limits.phase_step_deg > 0.0:
         # Each channel's echo as the phase shifter plays it: turned by its rounding.
         resp = resp * phase_rounding(nearest, phase).T[None, :, :]
-    settings = start_attenuator_settings(resp, weights, full, exact, limits, mode, u, s)
+
+    def start(turned: NDArray[np.complex128], at: slice | NDArray[np.intp],
+              ) -> tuple[FloatArray, Callable[[], tuple[FloatArray, NDArray[np.bool_]]]]:
+        """Start fitting the attenuators of entries ``at`` with their echoes ``turned``."""
+        # The superposition's gain as the phases play it (turned from the solved phases, the
+        # peak is weaker), and each channel's attenuation at weight 1 for the target's level.
+        gain = np.abs(np.einsum("qn,nq->n", turned[0], weights[at])) / n_elements
+        full = single_db[at] + 20.0 * np.log10(gain)[:, None]
+        with np.errstate(divide="ignore"):
+            exact = np.where(on[at], full - 20.0 * np.log10(np.where(on[at], weights[at], 1.0)),
+                             np.inf)
+        return full, start_attenuator_settings(turned, weights[at], full, exact, limits, mode,
+                                               u[at], s[at])
+
+    full, settings = start(resp, slice(None))
     # Aware: where neighbouring phase steps keep the angle better, the attenuators are fitted
     # to those too, and the better of the two fits is kept (never worse than the nearest steps).
     other = np.flatnonzero((chosen_phase != nearest).any(axis=1))
     other_resp = resp[:, :, other] * phase_rounding(chosen_phase[other], nearest[other]).T[None]
-    other_settings = None if other.size == 0 else start_attenuator_settings(
-        other_resp, weights[other], full[other], exact[other], limits, mode, u[other],
-        s[other])
+    other_full, other_settings = start(other_resp, other) if other.size else (full, None)
 
-    def levels(chosen: FloatArray, turned: NDArray[np.complex128], at: slice | NDArray[np.intp],
-               ) -> tuple[FloatArray, FloatArray]:
-        new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full[at]) / 20.0), 0.0)
+    def levels(chosen: FloatArray, full: FloatArray, turned: NDArray[np.complex128],
+               at: slice | NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
+        new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
         top = new_w.max(axis=1, keepdims=True)
         new_w = new_w / np.where(top > 0.0, top, 1.0)
         return new_w, predicted_angle_error(turned, new_w, u[at], s[at])
 
     def finish() -> Levels:
         chosen, clipped = settings()
-        new_w, err = levels(chosen, resp, slice(None))
+        new_w, err = levels(chosen, full, resp, slice(None))
         set_phase = nearest.copy()
         if other_settings is not None:
-            other_chosen, _ = other_settings()  # clipping follows from the exact levels alone
-            other_w, other_err = levels(other_chosen, other_resp, other)
+            other_chosen, other_clipped = other_settings()
+            other_w, other_err = levels(other_chosen, other_full, other_resp, other)
             better = np.hypot(*other_err.T) < np.hypot(*err[other].T) - ANGLE_TIE_DEG
             at = other[better]
-            chosen[at], new_w[at], err[at] = (other_chosen[better], other_w[better],
-                                              other_err[better])
+            chosen[at], new_w[at], err[at], clipped[at] = (
+                other_chosen[better], other_w[better], other_err[better], other_clipped[better])
             set_phase[at] = chosen_phase[at]
         return (new_w, np.where(np.isfinite(chosen), chosen, np.nan), set_phase, err, clipped)
 
