@@ -66,9 +66,9 @@ SUSPECT_PHASE_DEG = 3.0
 SUSPECT_GAIN_DB = 0.3
 SUSPECT_FIT_DEG = 0.05
 # After calibration, the check grid may be seen at most this far (deg) off the angle the schedule
-# predicts (its attenuator and delay steps). A calibrated simulated bench stays below 0.01 deg
-# (0.005 deg steps on classic CAN); one channel left 0.3 dB off costs 0.08-0.13 deg on the shipped
-# rigs, 10 deg of phase 0.13-0.24 deg on the awr1843boost.
+# predicts (its attenuator, phase shifter and delay steps). A calibrated simulated bench stays
+# below 0.01 deg (0.005 deg steps on classic CAN); one channel left 0.3 dB off costs 0.08-0.13
+# deg on the shipped rigs, 10 deg of phase 0.13-0.24 deg on the awr1843boost.
 MAX_EXCESS_ERROR_DEG = 0.1
 
 
@@ -212,7 +212,7 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
         dets += measure(schedule.frames(i * batch, (i + 1) * batch))
         if progress is not None:
             progress(i + 1, len(pairs))
-    model = _PairModel(rig, radar, estimator, weight_ratio)
+    model = _PairModel(rig, radar, estimator, weight_ratio, range_m)
     measured = []
     for i, (a, b) in enumerate(pairs):
         frames = slice(i * batch + 2, (i + 1) * batch)
@@ -231,9 +231,10 @@ def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m
 
     Each row item is ``(fe, weight, extra phase deg)`` or ``(fe, weight, extra phase deg,
     extra delay s)``; the target is at ``range_m``, approaching at 1 m/s, with ``level_db`` of
-    attenuation at weight 1 (plus each channel's calibration), on the attenuator's steps. An
-    extra delay is added to the channel's delay as it is (on the RTS's grid if it is on it),
-    its phase not given back.
+    attenuation at weight 1 (plus each channel's calibration), on the attenuator's steps; each
+    channel's phase (its calibration, the delay rounding's compensation and the extra phase)
+    on the phase shifter's steps. An extra delay is added to the channel's delay as it is (on
+    the RTS's grid if it is on it), its phase not given back.
     """
     n = len(rows)
     fe = np.full((n, 1, 4), -1, dtype=np.int64)
@@ -255,8 +256,10 @@ def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m
         attenuation = level_db - 20.0 * np.log10(weight) + rig.cal_gain_db[fe0]
     phase = phase + np.radians(extra)
     _check_pattern_limits(rig, fe, active, attenuation, delay, doppler, range_m)
-    # On the attenuator's steps, as the RTS will set them (the fit takes the rounding back).
+    # On the attenuator's and phase shifter's steps, as the RTS will set them (the fit takes
+    # the rounding back).
     attenuation = rig.limits.attenuator_setting(attenuation)
+    phase = rig.limits.phase_setting(phase)
     nan = np.nan
     schedule = Schedule(
         t_s=np.arange(n, dtype=np.float64) * 0.05, frame_index=np.arange(n), names=("calibration",),
@@ -320,10 +323,11 @@ def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
 class _PairModel:
     """What the radar reports for a pair (a at weight 1, b at ``ratio``), given a - b."""
 
-    def __init__(self, rig: Rig, radar: RadarProfile, estimator: str, ratio: float) -> None:
+    def __init__(self, rig: Rig, radar: RadarProfile, estimator: str, ratio: float,
+                 range_m: float) -> None:
         array, fe_model = solver_inputs(radar, "modeled")
         assert fe_model is not None
-        self.rig, self.radar, self.ratio = rig, radar, ratio
+        self.rig, self.radar, self.ratio, self.range_m = rig, radar, ratio, range_m
         self.vectors = fe_model.vectors(rig, np.arange(rig.n_front_ends), array)  # (M, F)
         self.estimate = make_estimator(estimator, array)
         self.n = radar.adc_samples
@@ -337,15 +341,17 @@ class _PairModel:
         return self.radar.range_bin(total, schedule.doppler_hz[:, 0, :])
 
     def predict(self, a: int, b: int, theta_deg: FloatArray, level: FloatArray,
-                phase_deg: FloatArray, gain_db: FloatArray,
-                steps_db: float = 0.0) -> tuple[FloatArray, FloatArray]:
+                phase_deg: FloatArray, gain_db: FloatArray, steps_db: float = 0.0,
+                steps_deg: float = 0.0) -> tuple[FloatArray, FloatArray]:
         """Return the reported (az, el) for candidates ``phase_deg``/``gain_db`` (P,): (P, S).
 
         ``level`` (S, 2) is each echo's amplitude through the range window at the cell read;
-        ``steps_db`` how much more b was attenuated than a on the attenuator's steps than asked.
+        ``steps_db`` how much more b was attenuated than a on the attenuator's steps than asked,
+        ``steps_deg`` how much more b's phase than a's the phase shifter's steps turned.
         """
         rel = (self.ratio * 10.0 ** (-(np.asarray(gain_db)[:, None] + steps_db) / 20.0)
-               * np.exp(1j * np.radians(theta_deg[None, :] - np.asarray(phase_deg)[:, None])))
+               * np.exp(1j * np.radians(theta_deg[None, :] + steps_deg
+                                        - np.asarray(phase_deg)[:, None])))
         x = (level[None, :, 0, None] * self.vectors[:, a][None, None, :]
              + (rel * level[None, :, 1])[..., None] * self.vectors[:, b][None, None, :])
         shape = x.shape[:2]
@@ -381,23 +387,29 @@ class _PairModel:
         att = schedule.attenuation_db[0, 0, channel]
         steps_db = float((att[1] - att[0]) - (self.rig.cal_gain_db[b] - self.rig.cal_gain_db[a])
                          + 20.0 * np.log10(self.ratio))
+        # Likewise the phase shifter's steps: each channel's phase as played less the one asked
+        # (its calibration phase and the delay rounding's compensation), b's less a's.
+        _, asked = channel_delays(self.rig, self.radar, np.asarray(self.range_m),
+                                  np.asarray(pair))
+        turned = schedule.phase_rad[0, 0, channel] - asked
+        steps_deg = float(_wrap(np.degrees(turned[1] - turned[0])))
 
         def residual(x: FloatArray) -> FloatArray:
-            p_az, p_el = self.predict(a, b, sweep_deg, level, x[:1], x[1:], steps_db)
+            p_az, p_el = self.predict(a, b, sweep_deg, level, x[:1], x[1:], steps_db, steps_deg)
             out = np.concatenate([p_az[0] - az, p_el[0] - el])
             return np.where(np.isfinite(out), out, 10.0)
 
         # Start from the best phase on a coarse grid at equal gains, then fit both.
         coarse = np.arange(0.0, 360.0, 5.0)
         c_az, c_el = self.predict(a, b, sweep_deg, level, coarse, np.zeros_like(coarse),
-                                  steps_db)
+                                  steps_db, steps_deg)
         cost = np.nansum(np.minimum((c_az - az) ** 2 + (c_el - el) ** 2, 100.0), axis=1)
         start = np.array([coarse[np.argmin(cost)], 0.0])
         fit = least_squares(residual, start, x_scale=np.array([1.0, 0.1]), diff_step=1e-7,
                             loss="soft_l1", f_scale=0.05, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         phase, gain = float(_wrap(fit.x[0])), float(fit.x[1])
         m_az, m_el = self.predict(a, b, sweep_deg, level, np.array([phase]), np.array([gain]),
-                                  steps_db)
+                                  steps_db, steps_deg)
         axis = _axis(self.rig, a, b)
         return PairMeasurement(
             a=a, b=b, delay_s=delays, sweep_deg=sweep_deg, az_deg=az, el_deg=el,
@@ -546,7 +558,8 @@ def failures(result: CalibrationResult, before: GridCheck, after: GridCheck,
     It fails when a pair is suspect (its measurement contradicts the others or the model),
     when a point of the check grid could not be played or was not detected after calibration
     (the calibrated rig is unverified there), or when the angle error after calibration exceeds
-    what the rig's attenuator and delay steps predict by more than ``max_excess_deg``.
+    what the rig's attenuator, phase shifter and delay steps predict by more than
+    ``max_excess_deg``.
     """
     from .schedule.model import BLOCKING, Status
 

@@ -28,6 +28,9 @@ from .located_yaml import Document, load_yaml, validate
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+# The coarsest phase shifter: one bit, 0 or 180 deg.
+PHASE_STEP_MAX_DEG = 180.0
+
 
 @dataclass(frozen=True)
 class HardwareLimits:
@@ -38,6 +41,8 @@ class HardwareLimits:
     play it (transport and its own update): cycles the radar measures within it may still see
     the frame before (`rts_scenario.pipeline.CycleTruth`). ``delay_max_s`` is the longest delay
     a channel can set (None: no limit stated): a farther target is not played (``too_far``).
+    ``phase_step_deg`` is the resolution of a channel's phase shifter (0: continuous), a whole
+    number of steps per turn (an n-bit shifter: ``360 / 2**n``).
     """
 
     attenuation_min_db: float = 0.0
@@ -46,6 +51,7 @@ class HardwareLimits:
     delay_min_s: float = 0.0
     delay_max_s: float | None = None
     delay_step_s: float = 0.0
+    phase_step_deg: float = 0.0
     latency_s: float = 0.0
     doppler_min_hz: float = -100e3
     doppler_max_hz: float = 100e3
@@ -68,6 +74,19 @@ class HardwareLimits:
             raise RigError(f"limits.attenuation_step_db: must be within 0 (continuous) .. "
                            f"{span:g} (attenuation_max_db - attenuation_min_db), got "
                            f"{self.attenuation_step_db:g}", key="limits.attenuation_step_db")
+        step = self.phase_step_deg
+        if not 0.0 <= step <= PHASE_STEP_MAX_DEG:
+            raise RigError(f"limits.phase_step_deg: must be within 0 (continuous) .. "
+                           f"{PHASE_STEP_MAX_DEG:g} (a 1-bit shifter), got {step:g}",
+                           key="limits.phase_step_deg")
+        if step > 0.0 and abs(360.0 / step - round(360.0 / step)) > 1e-6 * 360.0 / step:
+            # A shifter's steps divide the turn; a datasheet's rounded LSB (5.6 for 5.625)
+            # would put a gap at the wrap that no hardware has.
+            turns = max(2, round(360.0 / step))
+            raise RigError(f"limits.phase_step_deg: must divide 360 deg into whole steps "
+                           f"(360 / 2**n for an n-bit shifter), got {step:g} "
+                           f"({360.0 / step:.4g} steps per turn; the nearest that divides it: "
+                           f"{360.0 / turns:g})", key="limits.phase_step_deg")
         if not self.update_rate_hz > 0.0:
             raise RigError(f"limits.update_rate_hz: must be > 0, got {self.update_rate_hz:g}",
                            key="limits.update_rate_hz")
@@ -86,6 +105,23 @@ class HardwareLimits:
             att = self.attenuation_min_db + np.clip(
                 np.round((att - self.attenuation_min_db) / step), 0.0, top) * step
         return att
+
+    def phase_setting(self, phase_rad: ArrayLike) -> NDArray[np.float64]:
+        """Return what a channel's phase shifter sets for ``phase_rad``, in rad.
+
+        The nearest of its steps (``k phase_step_deg``) on the circle, wrapped to [-pi, pi)
+        (a phase and the same phase a turn away set the same step; a phase half-way between two
+        steps takes the upper one); continuous (only wrapped) without a step. NaN (a channel
+        off) stays NaN.
+        """
+        phase = np.asarray(phase_rad, dtype=np.float64)
+        step = self.phase_step_deg
+        if step > 0.0:
+            turns = round(360.0 / step)
+            k = np.floor(np.mod(phase, 2.0 * np.pi) / (2.0 * np.pi) * turns + 0.5)
+            phase = np.mod(k, turns) * (2.0 * np.pi / turns)
+        out: NDArray[np.float64] = np.mod(phase + np.pi, 2.0 * np.pi) - np.pi
+        return out
 
 
 @dataclass(frozen=True)
@@ -520,11 +556,13 @@ _OFFSET = {"type": "array", "minItems": 2, "maxItems": 2,
            "items": {"type": "number", "minimum": -1.0, "maximum": 1.0}}
 _DISTANCE = {"type": "number", "exclusiveMinimum": 0, "maximum": 100.0}
 # The RTS's limits, as wide: delays and latencies up to a second (150,000 km of range),
-# attenuation within 0..300 dB, Doppler within +-1 GHz, updates up to 1 MHz, 1024 echoes.
+# attenuation within 0..300 dB, a phase step up to half a turn (1 bit), Doppler within +-1 GHz,
+# updates up to 1 MHz, 1024 echoes.
 _LIMIT_BOUNDS: dict[str, tuple[float, float]] = {
     "attenuation_min_db": (0.0, 300.0), "attenuation_max_db": (0.0, 300.0),
     "attenuation_step_db": (0.0, 300.0), "delay_min_s": (0.0, 1.0), "delay_max_s": (0.0, 1.0),
-    "delay_step_s": (0.0, 1.0), "latency_s": (0.0, 1.0), "doppler_min_hz": (-1e9, 1e9),
+    "delay_step_s": (0.0, 1.0), "phase_step_deg": (0.0, PHASE_STEP_MAX_DEG),
+    "latency_s": (0.0, 1.0), "doppler_min_hz": (-1e9, 1e9),
     "doppler_max_hz": (-1e9, 1e9), "echoes_per_channel": (1, 1024),
     "update_rate_hz": (0.0, 1e6), "update_latency_s": (0.0, 1.0),
 }

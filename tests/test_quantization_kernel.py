@@ -55,6 +55,34 @@ def test_compiled_search_matches_the_numpy_search(profile, monkeypatch):
                                atol=2e-3)
 
 
+def test_compiled_search_matches_with_a_phase_shifter(monkeypatch):
+    # With a 6-bit phase shifter both searches fit the attenuators to the channels as their
+    # phase steps play them, and choose the same settings (phases included).
+    import dataclasses
+
+    kit = Rig.preset("kit-table1")
+    rig = rig_with(dataclasses.replace(kit, cal_phase_deg=[10.0, -47.0, 100.3, 2.0]),
+                   attenuation_step_db=0.5, phase_step_deg=5.625, echoes_per_channel=64)
+    rng = np.random.default_rng(12)
+    az, el = rng.uniform(-2.9, 2.9, 300), rng.uniform(-5.9, 5.9, 300)
+
+    def schedule(compiled):
+        monkeypatch.setenv("RTS_SCENARIO_JIT", "on" if compiled else "off")
+        return build_schedule(tracks(az[:, None], el[:, None]), rig, RADAR,
+                              quantization="aware", fe_responses="plane-wave")
+
+    fast, slow = schedule(True), schedule(False)
+    err_fast = np.hypot(*fast.angle_error_deg[:, 0].T)
+    err_slow = np.hypot(*slow.angle_error_deg[:, 0].T)
+    assert np.isfinite(err_fast).all()
+    same = np.all(np.isclose(fast.attenuation_db[:, 0], slow.attenuation_db[:, 0],
+                             equal_nan=True)
+                  & np.isclose(fast.phase_rad[:, 0], slow.phase_rad[:, 0], equal_nan=True),
+                  axis=1)
+    assert same.mean() >= 0.995
+    assert np.all(err_fast <= err_slow + 1e-9)
+
+
 def test_compiled_search_matches_with_channels_off_on_a_grid_rig(monkeypatch):
     # Weak targets on the wide grid: channels that would need more attenuation than the
     # attenuator has are off, so the searches take their one-candidate and idle-channel paths.

@@ -370,3 +370,32 @@ def test_windowed_cube_gives_the_windowed_centred_spectrum(loops):
         axes=0)
     got = np.fft.fft(np.fft.ifft(sim.cube(echoes, windowed=True), axis=2), axis=0)
     np.testing.assert_allclose(got, expected, atol=1e-9 * np.abs(expected).max())
+
+
+def test_the_simulated_rts_sets_the_nearest_phase_step():
+    # A 6-bit phase shifter (5.625 deg steps) sent 2.9 deg plays 5.625 deg, sent -2.7 deg
+    # plays 0: the echoes are those of the steps, to the last bit; a continuous one plays
+    # what it is sent.
+    import dataclasses
+
+    from rts_scenario.calibration import pattern_schedule
+
+    kit = rs.Rig.preset("kit-table1")
+    radar = RadarProfile.preset("paper")
+    stepped = dataclasses.replace(kit, limits=dataclasses.replace(kit.limits,
+                                                                  phase_step_deg=5.625))
+    pattern = pattern_schedule(kit, radar, [[(0, 1.0, 0.0), (1, 0.5, 0.0)]], 10.0, 40.0)
+
+    def channels(rig, phase_deg):
+        sent = dataclasses.replace(pattern, phase_rad=np.radians(
+            np.array(phase_deg, dtype=float)[None, None, :]))
+        sim = SimulatedRadar(radar, rig, noise=False, rng=np.random.default_rng(0))
+        return sim.echoes(sent).channel
+
+    asked = [2.9, -2.7, np.nan, np.nan]
+    np.testing.assert_array_equal(channels(stepped, asked),
+                                  channels(stepped, [5.625, 0.0, np.nan, np.nan]))
+    np.testing.assert_array_equal(channels(kit, asked),
+                                  channels(kit, [2.9, -2.7, np.nan, np.nan]))
+    turned = channels(kit, asked) / channels(kit, [5.625, 0.0, np.nan, np.nan])
+    np.testing.assert_allclose(np.angle(turned[0]), np.radians(2.9 - 5.625), atol=1e-12)

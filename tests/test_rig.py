@@ -60,6 +60,44 @@ def test_rig_file_keeps_calibration_and_limits():
     assert rig.reference.attenuation_db == 42.0
 
 
+def test_a_phase_shifter_sets_the_nearest_of_its_steps():
+    limits = rs.HardwareLimits(phase_step_deg=5.625)  # 6 bits
+    deg = np.array([0.0, 2.8, 2.9, -2.9, 8.4, 179.0, -180.0, 370.0, -725.0, np.nan])
+    # By hand: 2.8 < 5.625 / 2 < 2.9; 8.4 is just below 8.4375 = 1.5 steps; 179 rounds to 180,
+    # which is -180 wrapped; 370 is 10 deg a turn on; -725 is -5 deg two turns back.
+    expected = np.array([0.0, 0.0, 5.625, -5.625, 5.625, -180.0, -180.0, 11.25, -5.625, np.nan])
+    np.testing.assert_allclose(np.degrees(limits.phase_setting(np.radians(deg))), expected,
+                               atol=1e-12)
+    rng = np.random.default_rng(0)
+    phase = rng.uniform(-4.0 * np.pi, 4.0 * np.pi, 10_000)
+    for step in (5.625, 22.5, 120.0, 180.0):
+        limits = rs.HardwareLimits(phase_step_deg=step)
+        out = limits.phase_setting(phase)
+        # On the steps, within [-pi, pi), at most half a step from the phase asked (on the
+        # circle), and the same for a phase a turn away.
+        k = np.degrees(out) / step
+        np.testing.assert_allclose(k, np.round(k), atol=1e-9)
+        assert np.all((out >= -np.pi) & (out < np.pi))
+        miss = np.degrees(np.angle(np.exp(1j * (out - phase))))
+        assert np.abs(miss).max() <= step / 2 + 1e-9
+        np.testing.assert_array_equal(limits.phase_setting(phase + 2.0 * np.pi), out)
+    # Continuous: wrapped only.
+    np.testing.assert_allclose(rs.HardwareLimits().phase_setting(np.radians([190.0, -10.0])),
+                               np.radians([-170.0, -10.0]), atol=1e-12)
+
+
+def test_rig_file_reads_the_phase_step(tmp_path):
+    path = tmp_path / "p.rig.yaml"
+    path.write_text("rts_rig: 1\nname: p\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n"
+                    "limits: {phase_step_deg: 5.625}\n")
+    rig = rs.Rig.from_file(path)
+    assert rig.limits.phase_step_deg == 5.625
+    assert rs.Rig.preset("kit-table1").limits.phase_step_deg == 0.0
+    # Written back and read again.
+    rig.write(tmp_path / "q.rig.yaml")
+    assert rs.Rig.from_file(tmp_path / "q.rig.yaml").limits.phase_step_deg == 5.625
+
+
 def test_fe_antenna_offsets_and_delay_model_from_a_file(tmp_path):
     path = tmp_path / "fe.rig.yaml"
     path.write_text(
@@ -144,6 +182,15 @@ BAD_RIGS = [
      "must be within 0 (continuous) .. 80 (attenuation_max_db - attenuation_min_db), got 200"),
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
      "  update_rate_hz: 0\n", 5, "limits.update_rate_hz", "must be > 0, got 0"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  phase_step_deg: 200\n", 5, "limits.phase_step_deg", "must be <= 180"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  phase_step_deg: -5.625\n", 5, "limits.phase_step_deg", "must be >= 0"),
+    # A datasheet's rounded LSB: a 6-bit shifter's 5.625 deg typed as 5.6.
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
+     "  phase_step_deg: 5.6\n", 5, "limits.phase_step_deg",
+     "must divide 360 deg into whole steps (360 / 2**n for an n-bit shifter), got 5.6 "
+     "(64.29 steps per turn; the nearest that divides it: 5.625)"),
     # Survey and calibrate play each FE at the reference level: it must be one the RTS sets.
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
      "  attenuation_max_db: 80\nreference:\n  attenuation_db: 1.0e+6\n", 7,

@@ -13,8 +13,8 @@ Columns (docs/cli.md lists them for outside tools): ``frame`` (index in the scen
 off), ``active`` (0/1), ``status`` (`rts_scenario.schedule.Status` bit flags of the
 target-frame), ``weight``, ``attenuation_db``, ``delay_s``, ``doppler_hz``, ``phase_rad``
 (those four empty when the channel is off) and ``angle_error_az_deg``, ``angle_error_el_deg``
-(predicted error left by the attenuator's quantization). Floats are written with 17
-significant digits, so reading a file back gives the same schedule.
+(predicted error left by the attenuator's and phase shifter's quantization). Floats are written
+with 17 significant digits, so reading a file back gives the same schedule.
 """
 
 from __future__ import annotations

@@ -278,7 +278,9 @@ class SimulatedRadar:
                 schedule.attenuation_db[f, k, c]) - err.gain_db[fe]) / 20.0),
             rts_delay_s=self.rig.limits.latency_s + schedule.delay_s[f, k, c] + err.delay_s[fe],
             doppler_hz=schedule.doppler_hz[f, k, c],
-            phase_rad=schedule.phase_rad[f, k, c] + np.radians(err.phase_deg[fe]))
+            # So does its phase shifter.
+            phase_rad=self.rig.limits.phase_setting(schedule.phase_rad[f, k, c])
+            + np.radians(err.phase_deg[fe]))
 
     def propagate(self, fe: NDArray[np.int64], *, frame: NDArray[np.int64],
                   target: NDArray[np.int64], amplitude: FloatArray, rts_delay_s: FloatArray,

@@ -12,7 +12,9 @@ flags. Formulas (DESIGN.md 5.4):
 - delay: ``tau_q = 2R/c0 - 2 R_c,q / c0 - tau_hw + delta_q``; quantizing it is compensated in
   the channel phase so the channels stay coherent;
 - Doppler: ``doppler_hz`` of the track on all channels;
-- phase: the channel's calibration phase (plus the delay-quantization compensation);
+- phase: the channel's calibration phase (plus the delay-quantization compensation), on the
+  phase shifter's steps (`rts_scenario.schedule.quantization.phase_settings`; the angle error
+  reported includes the rounding);
 - echo slots: `rts_scenario.schedule.echo_slots`.
 """
 
@@ -36,15 +38,18 @@ from ..workers import with_one_blas_thread
 from .echo_slots import assign_echo_slots
 from .model import BLOCKING, Schedule, ScheduleError, Status
 from .quantization import (
+    ANGLE_TIE_DEG,
     QUANTIZATION_MODES,
+    phase_rounding,
+    phase_settings,
     predicted_angle_error,
     start_attenuator_settings,
 )
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-# A quad's levels: weights, attenuations, predicted angle errors, clipping.
-Levels = tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]
+# A quad's levels: weights, attenuations, phases, predicted angle errors, clipping.
+Levels = tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]
 
 # What the solver takes the FEs' echoes to be (`solver_inputs`); the first is the default.
 FE_RESPONSES = ("modeled", "plane-wave")
@@ -87,7 +92,8 @@ def build_schedule(
         Weight solver method; ``"estimator"``: exact weights aimed so that the radar's
         ``estimator`` reads the set angle (`rts_scenario.solver.estimator_aware`).
     quantization : {"aware", "naive"}
-        How attenuations snap to the attenuator's step (no effect without a step).
+        How attenuations and phases snap to the attenuator's and phase shifter's steps (no
+        effect without steps).
     frame_rate_hz : float, optional
         Scene frame rate, checked against the rig's update rate.
     fe_responses : {"modeled", "plane-wave"}
@@ -155,7 +161,9 @@ def build_schedule(
     angle_error = np.zeros((*shape, 2))
     clipped = np.zeros(shape, dtype=bool)
     fe0 = np.maximum(fe, 0)
-    delay, phase = channel_delays(rig, radar, tracks.range_m[..., None], fe0)
+    delay, exact_phase = channel_delays(rig, radar, tracks.range_m[..., None], fe0)
+    # On the phase shifter's steps; a quad's entries may take a neighbouring step (below).
+    phase = limits.phase_setting(exact_phase)
     straddle_db = _straddle_db(rig, radar, tracks, delay, fe0)
     # The FEs' responses on the array (estimator-aware weights are exact weights re-aimed).
     responses = solver_plan(rig, array, plan_method(method), model).responses
@@ -176,11 +184,13 @@ def build_schedule(
             offset = rig.cal_gain_db[rig.quads[q]][None, :] + straddle_db.reshape(-1, 4)[sel]
             pending.append((sel, _start_levels(resp, weight.reshape(-1, 4)[sel],
                                                single_db.ravel()[sel][:, None] + offset,
+                                               exact_phase.reshape(-1, 4)[sel],
                                                array.n_elements, limits, quantization, u, s)))
             if len(pending) > 1:
-                _store_levels(*pending.pop(0), weight, attenuation, angle_error, clipped)
+                _store_levels(*pending.pop(0), weight, attenuation, phase, angle_error,
+                              clipped)
         while pending:
-            _store_levels(*pending.pop(0), weight, attenuation, angle_error, clipped)
+            _store_levels(*pending.pop(0), weight, attenuation, phase, angle_error, clipped)
     except BaseException:
         # No search goes on behind the caller's back once it hears of the error.
         for _, finish in pending:
@@ -243,43 +253,84 @@ def _straddle_db(rig: Rig, radar: RadarProfile, tracks: Tracks, delay: FloatArra
 
 
 def _start_levels(
-    resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatArray, n_elements: int,
-    limits: HardwareLimits, mode: str, u: FloatArray, s: FloatArray,
+    resp: NDArray[np.complex128], weights: FloatArray, single_db: FloatArray,
+    phase: FloatArray, n_elements: int, limits: HardwareLimits, mode: str, u: FloatArray,
+    s: FloatArray,
 ) -> Callable[[], Levels]:
     """Start fitting a quad's levels; the returned function waits and gives the result.
 
-    The result: weights, channel attenuations (N, 4), predicted angle errors (N, 2) and
-    clipping (N,). ``single_db`` (N, 4) is each channel's attenuation for full weight
-    (calibration included). The attenuations are fitted to the attenuator's range and step
+    The result: weights, channel attenuations (N, 4), channel phases (N, 4), predicted angle
+    errors (N, 2) and clipping (N,). ``single_db`` (N, 4) is each channel's attenuation for
+    full weight (calibration included), ``phase`` (N, 4) its exact phase. The phases go on the
+    phase shifter's nearest steps, and the attenuations are fitted to the attenuator's range
+    and step with the channels as those phases play them
     (`rts_scenario.schedule.quantization.attenuator_settings`, which also says what clipped
-    means); the weights follow from the settings.
+    means), for the target's level as the superposition with those phases gives it.
+    Quantization-aware, entries whose angle neighbouring phase steps keep better
+    (`rts_scenario.schedule.quantization.phase_settings`) are fitted with those too, and the
+    fit with the smaller predicted angle error is kept. The weights follow from the settings;
+    the angle error, from both settings.
     """
-    gain = np.abs(np.einsum("qn,nq->n", resp[0], weights)) / n_elements
     on = weights > 0.0
-    full = single_db + 20.0 * np.log10(gain)[:, None]  # attenuation at weight 1
-    with np.errstate(divide="ignore"):
-        exact = np.where(on, full - 20.0 * np.log10(np.where(on, weights, 1.0)), np.inf)
-    settings = start_attenuator_settings(resp, weights, full, exact, limits, mode, u, s)
+    nearest = limits.phase_setting(phase)
+    chosen_phase = phase_settings(resp, weights, phase, limits, mode, u, s)
+    if limits.phase_step_deg > 0.0:
+        # Each channel's echo as the phase shifter plays it: turned by its rounding.
+        resp = resp * phase_rounding(nearest, phase).T[None, :, :]
 
-    def finish() -> Levels:
-        chosen, clipped = settings()
+    def start(turned: NDArray[np.complex128], at: slice | NDArray[np.intp],
+              ) -> tuple[FloatArray, Callable[[], tuple[FloatArray, NDArray[np.bool_]]]]:
+        """Start fitting the attenuators of entries ``at`` with their echoes ``turned``."""
+        # The superposition's gain as the phases play it (turned from the solved phases, the
+        # peak is weaker), and each channel's attenuation at weight 1 for the target's level.
+        gain = np.abs(np.einsum("qn,nq->n", turned[0], weights[at])) / n_elements
+        full = single_db[at] + 20.0 * np.log10(gain)[:, None]
+        with np.errstate(divide="ignore"):
+            exact = np.where(on[at], full - 20.0 * np.log10(np.where(on[at], weights[at], 1.0)),
+                             np.inf)
+        return full, start_attenuator_settings(turned, weights[at], full, exact, limits, mode,
+                                               u[at], s[at])
+
+    full, settings = start(resp, slice(None))
+    # Aware: where neighbouring phase steps keep the angle better, the attenuators are fitted
+    # to those too, and the better of the two fits is kept (never worse than the nearest steps).
+    other = np.flatnonzero((chosen_phase != nearest).any(axis=1))
+    other_resp = resp[:, :, other] * phase_rounding(chosen_phase[other], nearest[other]).T[None]
+    other_full, other_settings = start(other_resp, other) if other.size else (full, None)
+
+    def levels(chosen: FloatArray, full: FloatArray, turned: NDArray[np.complex128],
+               at: slice | NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
         new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
         top = new_w.max(axis=1, keepdims=True)
         new_w = new_w / np.where(top > 0.0, top, 1.0)
-        return (new_w, np.where(np.isfinite(chosen), chosen, np.nan),
-                predicted_angle_error(resp, new_w, u, s), clipped)
+        return new_w, predicted_angle_error(turned, new_w, u[at], s[at])
+
+    def finish() -> Levels:
+        chosen, clipped = settings()
+        new_w, err = levels(chosen, full, resp, slice(None))
+        set_phase = nearest.copy()
+        if other_settings is not None:
+            other_chosen, other_clipped = other_settings()
+            other_w, other_err = levels(other_chosen, other_full, other_resp, other)
+            better = np.hypot(*other_err.T) < np.hypot(*err[other].T) - ANGLE_TIE_DEG
+            at = other[better]
+            chosen[at], new_w[at], err[at], clipped[at] = (
+                other_chosen[better], other_w[better], other_err[better], other_clipped[better])
+            set_phase[at] = chosen_phase[at]
+        return (new_w, np.where(np.isfinite(chosen), chosen, np.nan), set_phase, err, clipped)
 
     return finish
 
 
 def _store_levels(sel: NDArray[np.intp], finish: Callable[[], Levels],
-                  weight: FloatArray, attenuation: FloatArray, angle_error: FloatArray,
-                  clipped: NDArray[np.bool_]) -> None:
+                  weight: FloatArray, attenuation: FloatArray, phase: FloatArray,
+                  angle_error: FloatArray, clipped: NDArray[np.bool_]) -> None:
     """Wait for a quad's levels (`_start_levels`) and write them at its entries ``sel``."""
-    w, att, err, clip = finish()
+    w, att, ph, err, clip = finish()
     clipped.ravel()[sel] = clip
     weight.reshape(-1, 4)[sel] = w
     attenuation.reshape(-1, 4)[sel] = att
+    phase.reshape(-1, 4)[sel] = ph
     angle_error.reshape(-1, 2)[sel] = err
 
 

@@ -62,7 +62,8 @@ class Schedule:
     status : ndarray, shape (F, K)
         `Status` flags.
     angle_error_deg : ndarray, shape (F, K, 2)
-        Predicted azimuth and elevation error left by the quantization of the attenuations.
+        Predicted azimuth and elevation error left by the quantization of the attenuations
+        and phases.
     """
 
     t_s: FloatArray

@@ -4,6 +4,9 @@ With an attenuation step, each channel's attenuation is set to the grid value be
 the exact one, choosing the combination whose synthesized angle is closest to the set angle (a
 Newton step on the exact beamformer response predicts the angle of every combination); the
 predicted remaining error is kept per entry. Without a step only the attenuator's range applies.
+With a phase step, each channel's phase goes on the step below or above its exact phase
+(`phase_settings`); the response the attenuators are fitted with, and the predicted error,
+are the channels' as those phases play them.
 """
 
 from __future__ import annotations
@@ -29,6 +32,9 @@ QUANTIZATION_MODES = ("aware", "naive")
 # attenuator's limits allow this much so that rounding (of order 1e-14 dB) never turns a
 # reachable setting into an unreachable one. Far below any attenuator's resolution.
 GRID_SLACK_DB = 1e-9
+# Settings whose predicted angle errors differ by less than this (deg) are alike: the simpler
+# one is kept (far below any error a radar reports, far above the predictions' rounding).
+ANGLE_TIE_DEG = 1e-9
 # Floor on squared norms before dividing by them: a channel whose steps do not move the angle
 # at all gets no step instead of a division by zero (any real norm is far larger).
 NORM_FLOOR = 1e-300
@@ -73,7 +79,8 @@ def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: 
     resp : ndarray of complex, shape (6, 4, N)
         ``f, f_u, f_s, f_uu, f_us, f_ss`` of the quad's four channels at the set directions.
     weights : ndarray, shape (N, 4) or (N, C, 4)
-        Channel amplitudes, or C candidate amplitude sets per entry.
+        Channel amplitudes, or C candidate amplitude sets per entry; complex where a channel
+        is played off its exact phase (a phase shifter's rounding: `phase_rounding`).
     u, s : ndarray, shape (N,)
         Set directions in direction cosines.
 
@@ -83,11 +90,76 @@ def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: 
         Predicted azimuth and elevation error in degrees.
     """
     w = weights if weights.ndim == 3 else weights[:, None, :]
-    du, dsv, _ = newton_step(*np.einsum("tqn,ncq->tnc", resp, w))
+    err = _beam_angle_error(np.einsum("tqn,ncq->tnc", resp, w), u, s)
+    return err if weights.ndim == 3 else err[:, 0]
+
+
+def _beam_angle_error(beam: NDArray[np.complex128], u: FloatArray, s: FloatArray) -> FloatArray:
+    """`predicted_angle_error` from the beamformer output and its derivatives, (6, N, C)."""
+    du, dsv, _ = newton_step(*beam)
     az0, el0 = angles_from_cosines(u, s)
     az1, el1 = angles_from_cosines(u[:, None] + du, s[:, None] + dsv)
-    err = np.degrees(np.stack([az1 - az0[:, None], el1 - el0[:, None]], axis=-1))
-    return err if weights.ndim == 3 else err[:, 0]
+    return np.degrees(np.stack([az1 - az0[:, None], el1 - el0[:, None]], axis=-1))
+
+
+def phase_settings(resp: NDArray[np.complex128], weights: FloatArray, phase: FloatArray,
+                   limits: HardwareLimits, mode: str, u: FloatArray,
+                   s: FloatArray) -> FloatArray:
+    """Phase shifter settings (rad, on its steps) for the exact channel phases ``phase``.
+
+    ``"naive"``: each channel's nearest step. ``"aware"``: the strongest channel's nearest step
+    (a common turn of all four channels moves no angle), the others' nearest or the step
+    below or above it, the combination whose synthesized angle with the solved ``weights`` is
+    closest to the set one (the exact prediction, one Newton step per combination; the
+    nearest steps compete and win ties). The schedule then fits the attenuators to these
+    phases and to the nearest ones and keeps the better fit (`rts_scenario.schedule.build`).
+    Without a step the phases are only wrapped.
+
+    Parameters
+    ----------
+    resp : ndarray of complex, shape (6, 4, N)
+        Exact response of the quad's channels and its derivatives at the set directions.
+    weights : ndarray, shape (N, 4)
+        Solved amplitude weights (0: channel off).
+    phase : ndarray, shape (N, 4)
+        The exact phase (rad) each channel needs.
+    """
+    nearest = limits.phase_setting(phase)
+    step = limits.phase_step_deg
+    if step <= 0.0 or mode != "aware" or len(phase) == 0:
+        return nearest
+    # A common turn moves no angle: the strongest channel keeps its nearest step, the other
+    # three take every combination of the step below their nearest, it and the step above.
+    # (Without that, all four a step up would tie with the nearest steps, to rounding.)
+    n = np.arange(len(phase))
+    others = _OTHER_CHANNELS[np.argmax(weights, axis=1)]  # (N, 3)
+    # Each channel's share of the beamformer output at its nearest step, (6, 4, N); the
+    # combinations' outputs are sums of the shares, turned by -1, 0 or 1 step.
+    share = resp * (weights * phase_rounding(nearest, phase)).T[None]
+    turns = np.exp(1j * np.radians(step) * np.arange(-1.0, 2.0))
+    beam = share.sum(axis=1)[:, :, None, None, None]
+    for i in range(3):  # the three channels that may move
+        moved = share[:, others[:, i], n][:, :, None] * (turns - 1.0)  # (6, N, 3)
+        beam = beam + moved.reshape(*moved.shape[:2], *np.roll([3, 1, 1], i))
+    err = _beam_angle_error(beam.reshape(6, len(phase), -1), u, s)
+    cost = np.hypot(err[..., 0], err[..., 1])
+    centre = cost.shape[1] // 2  # no channel moved: the nearest steps
+    best = np.argmin(cost, axis=1)
+    best = np.where(cost[n, best] < cost[:, centre] - ANGLE_TIE_DEG, best, centre)
+    steps = np.stack(np.unravel_index(best, (3, 3, 3)), axis=1) - 1.0  # (N, 3)
+    chosen = nearest.copy()
+    np.put_along_axis(chosen, others, limits.phase_setting(
+        np.take_along_axis(nearest, others, axis=1) + np.radians(step) * steps), axis=1)
+    return chosen
+
+
+# The channels of a quad other than channel q, row q.
+_OTHER_CHANNELS = np.array([[c for c in range(4) if c != q] for q in range(4)])
+
+
+def phase_rounding(settings: FloatArray, phase: FloatArray) -> NDArray[np.complex128]:
+    """Return what the phase settings do to each channel's echo: ``exp(j (setting - exact))``."""
+    return np.exp(1j * (settings - phase))
 
 
 def attenuator_settings(resp: NDArray[np.complex128], weights: FloatArray, full: FloatArray,
@@ -381,5 +453,5 @@ def _degree_scale(u: FloatArray, s: FloatArray) -> FloatArray:
     return np.degrees(np.stack([1.0 / (np.cos(el) * np.cos(az)), 1.0 / np.cos(el)], axis=-1))
 
 
-__all__ = ["QUANTIZATION_MODES", "attenuator_settings", "predicted_angle_error",
-           "start_attenuator_settings"]
+__all__ = ["QUANTIZATION_MODES", "attenuator_settings", "phase_rounding", "phase_settings",
+           "predicted_angle_error", "start_attenuator_settings"]
