@@ -53,6 +53,9 @@ STATUS = struct.Struct("!4sB" + "I" * len(STATUS_COUNTERS))
 # (`rts_scenario.rig.Rig.geometry_digest`).
 RIG_MAGIC = b"RTSI"
 RIG_REPLY = struct.Struct("!4sBH32s")
+# The receiver sends it with the status reply to a stream's first datagram and every this many
+# after (one that arrives is enough; a lost one is sent again).
+RIG_REPLY_EVERY = 32
 # The sender reads the replies every this many frames (they would fill its socket's buffer).
 STATUS_DRAIN_FRAMES = 32
 # The receiver tells a duplicate from a new datagram this many sequence numbers back from the
@@ -522,7 +525,8 @@ class UdpReceiver:
         """
         try:
             self._socket.sendto(encode_status(self.status_counters()), sender)
-            if self.rig_digest is not None and self.n_front_ends is not None:
+            if self.rig_digest is not None and self.n_front_ends is not None \
+                    and self.stats.datagrams % RIG_REPLY_EVERY == 1:
                 self._socket.sendto(encode_rig_reply(self.n_front_ends, self.rig_digest),
                                     sender)
         except OSError:
