@@ -95,6 +95,7 @@ _LIMIT_FLAGS = {
     "doppler_out_of_range": Status.DOPPLER_OUT_OF_RANGE,
     "no_echo_slot": Status.NO_ECHO_SLOT,
     "attenuation_clipped": Status.ATTENUATION_CLIPPED,
+    "angle_quantized": Status.ANGLE_QUANTIZED,
 }
 # Columns of the detections CSV (``run --detections``), in order.
 DETECTION_COLUMNS = ("scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
@@ -511,8 +512,12 @@ class Checker:
         # a sorted search per frame (no detections x targets arrays).
         det, target = _range_candidates(frame_of, values["range_m"], tracks.range_m,
                                         GATE * tol["range_m"])
+        # An echo the RTS's steps played off its angle (ANGLE_QUANTIZED, not checkable) is
+        # matched on range and radial velocity only: its detections are no false alarms.
+        on_angle = (flags & Status.ANGLE_QUANTIZED) == 0
         inside, cost, diffs = self._gate(det, target, frame_of, values, invalid, played,
-                                         {q: getattr(tracks, q) for q, _ in QUANTITIES})
+                                         {q: getattr(tracks, q) for q, _ in QUANTITIES},
+                                         angles=on_angle[frame_of[det], target])
         det, target, cost = det[inside], target[inside], cost[inside]
         diffs = {q: d[inside] for q, d in diffs.items()}
         pair = _assign(frame_of, det, target, cost, n_targets)

@@ -28,7 +28,7 @@ from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .playback import Playback, rts_rig_record
-from .preflight import Preflight, frames_per_batch, preflight, scene_limits
+from .preflight import Preflight, angle_tolerance_deg, frames_per_batch, preflight, scene_limits
 from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
@@ -750,7 +750,8 @@ class Pipeline:
             mark = timer.add("kinematics_s", mark)
             schedule = build_schedule(tracks, scene.rig, scene.radar, method=options.method,
                                       estimator=scene.radar_options.estimator,
-                                      frame_rate_hz=scene.frame_rate_hz)
+                                      frame_rate_hz=scene.frame_rate_hz,
+                                      angle_tolerance_deg=angle_tolerance_deg(scene))
             schedule = replace(schedule, frame_index=frames)
             checker.add_frames(checkable(tracks, schedule.status))
             if played is not None:

@@ -113,7 +113,14 @@ def schedule_batches(scene: Scenario, method: str = "exact", batch_frames: int |
     for frames, tracks in track_batches(scene, batch_frames):
         yield frames, tracks, build_schedule(tracks, scene.rig, scene.radar, method=method,
                                              estimator=scene.radar_options.estimator,
-                                             frame_rate_hz=scene.frame_rate_hz)
+                                             frame_rate_hz=scene.frame_rate_hz,
+                                             angle_tolerance_deg=angle_tolerance_deg(scene))
+
+
+def angle_tolerance_deg(scene: Scenario) -> tuple[float, float]:
+    """Return the scene's azimuth and elevation tolerances (what `build_schedule` flags by)."""
+    tol = scene.expectations.tolerances
+    return float(tol["az_deg"]), float(tol["el_deg"])
 
 
 def preflight(scene: Scenario, method: str = "exact",

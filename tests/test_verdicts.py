@@ -170,3 +170,44 @@ def test_an_echo_beyond_the_radar_s_velocity_is_its_limit_not_false_detections(
     assert report.passed == expected, report.reasons
     if not expected:
         assert [r for r in report.reasons if not r.startswith("fast: ")] == [], report.reasons
+
+
+def test_a_target_the_rts_s_steps_move_off_its_angle_fails_unless_expected(tmp_path):
+    # A wide-3x5 whose channels have phase offsets (the simulated bench's, the rig file's
+    # calibration cancelling them) and phase shifters of 90 deg steps: the calibration phases
+    # lie between the steps, and rounded, they move the synthesized angle by more than a third
+    # of the scene's tolerance in some frames. The radar is not judged there (the bench played
+    # the target off its angle), its detections are no false alarms, and the limit is counted
+    # and fails the run, unless the scene expects it.
+    import dataclasses
+
+    import numpy as np
+
+    from rts_scenario.pipeline import Pipeline
+    from rts_scenario.radar.simulate import ChannelErrors
+    from rts_scenario.rig import Rig
+    from rts_scenario.scenario import load_scenario
+
+    rig = Rig.preset("wide-3x5")
+    offsets = np.linspace(10.0, 170.0, rig.n_front_ends)
+    dataclasses.replace(rig, name="coarse",
+                        limits=dataclasses.replace(rig.limits, phase_step_deg=90.0),
+                        cal_phase_deg=offsets).write(tmp_path / "coarse.rig.yaml")
+    errors = dataclasses.replace(ChannelErrors.none(rig.n_front_ends), phase_deg=-offsets)
+    crossing = ("- {name: crossing, rcs: {rcs_dbsm: 10.0}, motion: {type: constant_velocity, "
+                "position_m: [30, -6, 1.1], heading_deg: 90, speed_mps: 12}}\n")
+    for expected in (False, True):
+        path = scene(tmp_path, f"coarse-{expected}", CAR + crossing, expectations=(
+            "  tolerances: {az_deg: 0.3}\n  max_false_detections_per_frame: 0.0\n"
+            + ("  expected_limits: [angle_quantized]\n" if expected else "")))
+        path.write_text(path.read_text().replace("rig: wide-3x5", "rig: coarse.rig.yaml"))
+        loaded = load_scenario(path)
+        with Pipeline(loaded.rig, loaded.radar, RunOptions(drain_s=1.0),
+                      radar_options=loaded.radar_options, errors=errors) as pipeline:
+            report = pipeline.run(loaded).report
+        hit = {t.name: t.limits.get("angle_quantized", 0) for t in report.targets}
+        assert sum(hit.values()) > 0, hit
+        assert report.false_detections == 0
+        assert report.passed == expected, report.reasons
+        if not expected:
+            assert all("angle_quantized" in r for r in report.reasons), report.reasons

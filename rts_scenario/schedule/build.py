@@ -21,7 +21,8 @@ flags. Formulas (DESIGN.md 5.4):
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +41,7 @@ from .model import BLOCKING, Schedule, ScheduleError, Status
 from .quantization import (
     ANGLE_TIE_DEG,
     QUANTIZATION_MODES,
+    peak_near,
     phase_rounding,
     phase_settings,
     predicted_angle_error,
@@ -77,6 +79,7 @@ def build_schedule(
     frame_rate_hz: float | None = None,
     fe_responses: str = FE_RESPONSES[0],
     estimator: str = "bartlett",
+    angle_tolerance_deg: tuple[float, float] | None = None,
 ) -> Schedule:
     """Turn per-frame target tracks into channel settings for the rig.
 
@@ -100,6 +103,11 @@ def build_schedule(
         What the solver takes each FE's echo on the radar's array to be (`solver_inputs`).
     estimator : str
         The radar's angle estimator (a registered name), for ``method="estimator"``.
+    angle_tolerance_deg : (float, float), optional
+        The scene's azimuth and elevation tolerances: a target whose synthesized angle the
+        RTS's steps move by more than `BENCH_ANGLE_SHARE` of either is flagged
+        ``ANGLE_QUANTIZED`` (played off its angle; its predicted error against the weights'
+        own, before the steps, so a method's intended aim is not counted). Without: no flag.
 
     Raises
     ------
@@ -158,6 +166,7 @@ def build_schedule(
         single_db = (ref.attenuation_db - (tracks.rcs_dbsm - ref.rcs_dbsm)
                      + 40.0 * np.log10(tracks.range_m / ref.range_m))
     attenuation = np.full((*shape, 4), np.nan)
+    solved = weight.copy()  # before the steps: what the method aims at
     angle_error = np.zeros((*shape, 2))
     clipped = np.zeros(shape, dtype=bool)
     fe0 = np.maximum(fe, 0)
@@ -197,6 +206,10 @@ def build_schedule(
             with contextlib.suppress(Exception):
                 finish()
         raise
+    if angle_tolerance_deg is not None and (limits.attenuation_step_db > 0.0
+                                            or limits.phase_step_deg > 0.0):
+        status |= _angle_quantized(angle_error, solved, weight, phase, exact_phase, quad, ok,
+                                   tracks, responses, angle_tolerance_deg)
     # Quantization may switch an idle channel on (weakly) to hold the angle.
     active = ok[..., None] & (weight > 0.0)
     attenuation[~active] = np.nan
@@ -320,6 +333,41 @@ def _start_levels(
         return (new_w, np.where(np.isfinite(chosen), chosen, np.nan), set_phase, err, clipped)
 
     return finish
+
+
+# The share of the scene's angle tolerance the RTS's steps may take: beyond it a target is
+# flagged ANGLE_QUANTIZED (the radar would be judged for an angle the bench moved).
+BENCH_ANGLE_SHARE = 1.0 / 3.0
+
+
+def _angle_quantized(angle_error: FloatArray, solved: FloatArray, played: FloatArray,
+                     phase: FloatArray, exact_phase: FloatArray, quad: NDArray[np.int64],
+                     ok: NDArray[np.bool_], tracks: Tracks, responses: Sequence[Any],
+                     tolerance_deg: tuple[float, float]) -> NDArray[np.uint16]:
+    """Flag entries whose synthesized angle the RTS's steps move beyond `BENCH_ANGLE_SHARE`.
+
+    The steps' share is the predicted error of the settings played (weights ``played``,
+    phases ``phase`` against the ``exact_phase`` each channel needs) less that of the
+    ``solved`` weights before the steps (zero for the exact method, the method's own for the
+    paper's or an estimator's aim). Flagged too: settings that play no peak near the set
+    direction at all (its predicted error, zero there, says nothing). Evaluated where
+    ``angle_error`` exceeds the share or is that zero.
+    """
+    bound = BENCH_ANGLE_SHARE * np.asarray(tolerance_deg, dtype=np.float64)
+    out = np.zeros(ok.shape, dtype=np.uint16)
+    err = np.nan_to_num(angle_error)
+    maybe = ok & ((np.abs(err) > bound).any(axis=-1) | (err == 0.0).all(axis=-1))
+    for q in np.unique(quad[maybe]):
+        sel = np.flatnonzero((maybe & (quad == q)).ravel())
+        u, s = direction_cosines(np.radians(tracks.az_deg.ravel()[sel]),
+                                 np.radians(tracks.el_deg.ravel()[sel]))
+        resp = responses[q].evaluate(u, s)
+        own, _ = peak_near(resp, solved.reshape(-1, 4)[sel], u, s)
+        turn = np.exp(1j * (phase.reshape(-1, 4)[sel] - exact_phase.reshape(-1, 4)[sel]))
+        as_played, peak = peak_near(resp, played.reshape(-1, 4)[sel] * turn, u, s)
+        off = ~peak | (np.abs(as_played - own) > bound).any(axis=-1)
+        out.ravel()[sel[off]] = Status.ANGLE_QUANTIZED
+    return out
 
 
 def _store_levels(sel: NDArray[np.intp], finish: Callable[[], Levels],

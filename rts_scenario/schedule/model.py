@@ -20,7 +20,10 @@ class ScheduleError(RtsError):
 
 
 class Status(IntFlag):
-    """Per-entry flags. Any flag but ``ATTENUATION_CLIPPED`` keeps the entry from being emitted."""
+    """Per-entry flags; all but two keep the entry from being emitted.
+
+    ``ATTENUATION_CLIPPED`` and ``ANGLE_QUANTIZED`` entries are played, not as specified.
+    """
 
     OK = 0
     NOT_PRESENT = 1
@@ -32,9 +35,10 @@ class Status(IntFlag):
     NO_ECHO_SLOT = 64
     ATTENUATION_CLIPPED = 128
     TOO_FAR = 256
+    ANGLE_QUANTIZED = 512
 
 
-BLOCKING = Status(sum(Status) & ~Status.ATTENUATION_CLIPPED)
+BLOCKING = Status(sum(Status) & ~Status.ATTENUATION_CLIPPED & ~Status.ANGLE_QUANTIZED)
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -92,6 +93,21 @@ def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: 
     w = weights if weights.ndim == 3 else weights[:, None, :]
     err = _beam_angle_error(np.einsum("tqn,ncq->tnc", resp, w), u, s)
     return err if weights.ndim == 3 else err[:, 0]
+
+
+def peak_near(resp: NDArray[np.complex128], weights: NDArray[Any], u: FloatArray,
+              s: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """`predicted_angle_error` of ``weights`` (N, 4) and whether a peak is near at all.
+
+    The second is False where ``|B|^2`` does not curve down at the set direction (its
+    Hessian is not negative definite): the settings play no peak near it, and the error the
+    first gives there (zero) says nothing.
+    """
+    beam = np.einsum("tqn,nq->tn", resp, weights)
+    du, dsv, ok = newton_step(*beam)
+    az0, el0 = angles_from_cosines(u, s)
+    az1, el1 = angles_from_cosines(u + du, s + dsv)
+    return np.degrees(np.stack([az1 - az0, el1 - el0], axis=-1)), ok
 
 
 def _beam_angle_error(beam: NDArray[np.complex128], u: FloatArray, s: FloatArray) -> FloatArray:
