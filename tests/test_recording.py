@@ -116,7 +116,7 @@ def test_statuses_of_another_scene_or_damaged_are_refused():
     with pytest.raises(ValueError, match="holds more frames than it says"):
         record.finish()
     bad = StatusRecorder(3)
-    bad.add(np.full((250, 3), 0x200, dtype=np.uint16))
+    bad.add(np.full((250, 3), 0x400, dtype=np.uint16))
     with pytest.raises(ValueError, match="values that are no status"):
         StatusRecord(bad.to_dict(), 250, 3).take(10)
 
