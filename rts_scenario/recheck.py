@@ -227,6 +227,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         # The bus the run listened on (python-can's interface and channel).
         "can_interface": {"type": ["string", "null"]},
         "can_channel": {"type": ["string", "null"]},
+        "radar_channel": {"type": ["string", "null"]},
         "can_fd": {"type": "boolean"},
         "method": {"type": ["string", "null"]},
         "output": {"type": ["string", "null"]},
@@ -397,6 +398,12 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
         only = next(iter(held), None)
         if recorded is None or only is None or only in names:
             return None, None
+        chosen = (sidecar or {}).get("radar_channel")
+        if chosen is not None:  # the run read that channel alone: none of these messages
+            raise LogError(f"--log {log}: the run read channel {chosen} alone (run "
+                           f"--radar-channel, its sidecar), and the log holds none of {what} "
+                           f"there: only on {listing()}; the run judged none of them; give "
+                           f"--log-channel {only} to judge those")
         return None, (f"the log holds {what} on channel {only} only, not on the one the run "
                       f"listened on ({recorded!r}, its sidecar): read it")
     if recorded is not None:

@@ -758,3 +758,36 @@ def test_an_asc_cut_short_fails_its_check(autosar, tmp_path, capsys):
     assert code == 1 and "Traceback" not in err, out + err
     assert (f"the log {log} was cut short: it lacks the 'End TriggerBlock' line an ASC log "
             f"ends with; it ends at log time {last:.6f} s") in out, out
+
+
+def test_the_check_of_a_run_whose_radar_channel_held_none_does_not_read_another(
+        autosar, tmp_path, monkeypatch, capsys):
+    # The radar's messages come on channel 0 only; the run was told --radar-channel 1, read
+    # none and failed. The log holds them (on channel 0): its check must not judge them as
+    # the run's, which read none: it says so, as for a run that heard several channels.
+    import json
+
+    from rts_scenario.canbus import ListenerBus
+
+    class ChannelZero(ListenerBus):
+        def send(self, msg, timeout=None):
+            msg.channel, msg.is_rx = 0, True
+            for listener in self._listeners:
+                listener.on_message_received(msg)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", ChannelZero)
+    log, out_json = tmp_path / "bench.blf", tmp_path / "report.json"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "1",
+                     "--record", str(log), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 1, out + err
+    assert any(r.startswith("--radar-channel 1: none of the radar's messages")
+               for r in json.loads(out_json.read_text())["reasons"])
+    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 2, out + err
+    assert ("the run read channel 1 alone (run --radar-channel, its sidecar), and the log holds "
+            "none of the radar's messages (the identifiers of mapping 'autosar-radar') there: "
+            "only on 0 (") in err, err
+    # Told which channel to judge, it judges that one.
+    assert cli.main(["check", str(APPROACH), "--log", str(log), "--log-channel", "0"]) == 0
