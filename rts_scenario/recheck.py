@@ -579,7 +579,10 @@ class _ReadAhead:
 # The header of a BLF python-can wrote and never closed (its size, no object count yet).
 _BLF_OPEN_HEADER_BYTES = 144
 # What an ASC log's last line is (python-can's writer and Vector's tools end it so).
-_ASC_END = b"End TriggerBlock"
+_ASC_END = b"end triggerblock"
+# ... where it opened one: its header's ``Begin Triggerblock`` line, within this many bytes.
+_ASC_BEGIN = b"begin triggerblock"
+_ASC_HEAD_BYTES = 4096
 
 
 def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | None:
@@ -587,8 +590,10 @@ def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | N
 
     python-can's readers read a BLF or an ASC cut short as a shorter log, without a word. A
     BLF's header gives the file's size (python-can's `BLFReader` reads it; a writer that was
-    never closed left the 144 bytes of the header alone there); an ASC log ends with an
-    ``End TriggerBlock`` line. ``last_t_s``: the log's last message's time, where it ends.
+    never closed left the 144 bytes of the header alone there); an ASC log that opened a
+    trigger block (its header's ``Begin Triggerblock``) ends with an ``End TriggerBlock`` line
+    (either in any case; a log that opens none cannot tell). ``last_t_s``: the log's last
+    message's time, where it ends.
 
     Returns ``{"header_bytes", "file_bytes", "last_message_t_s", "why"}`` (``header_bytes``
     None where the format keeps no size; ``why``: one line for people).
@@ -615,9 +620,12 @@ def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | N
                 "why": why}
     if suffix == ".asc":
         with path.open("rb") as f:
+            head = f.read(_ASC_HEAD_BYTES).lower()
             f.seek(max(0, size - 256))
-            tail = f.read().rstrip()
-        if tail.endswith(_ASC_END):
+            tail = f.read().rstrip().lower()
+        # Keywords in any case, as python-can reads them; a log that opens no trigger block
+        # (can-utils' log2asc writes none) has no end line to miss.
+        if tail.endswith(_ASC_END) or _ASC_BEGIN not in head:
             return None
         why = (f"the log {log} was cut short: it lacks the 'End TriggerBlock' line an ASC log "
                f"ends with; {ends}: what the radar sent after it is not in it")

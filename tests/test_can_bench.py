@@ -791,3 +791,33 @@ def test_the_check_of_a_run_whose_radar_channel_held_none_does_not_read_another(
             "only on 0 (") in err, err
     # Told which channel to judge, it judges that one.
     assert cli.main(["check", str(APPROACH), "--log", str(log), "--log-channel", "0"]) == 0
+
+
+ASC_HEAD = "date Fri Nov 27 02:30:00.000 pm 2026\nbase hex  timestamps absolute\n"
+ASC_MESSAGES = (" 0.010000 1  101             Rx   d 8 13 01 50 46 8D BD D9 F4\n"
+                " 0.060000 1  101             Rx   d 8 13 02 FD 09 96 F8 FF 3A\n")
+
+
+@pytest.mark.parametrize(("text", "cut"), [
+    # Vector's casing, another tool's, and no trigger block at all (can-utils' log2asc):
+    # complete logs.
+    (ASC_HEAD + "Begin Triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES
+     + "End TriggerBlock\n", False),
+    (ASC_HEAD + "begin triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES
+     + "end Triggerblock\r\n", False),
+    (ASC_HEAD + "no internal events logged\n" + ASC_MESSAGES, False),
+    # A trigger block opened and never closed: cut short.
+    (ASC_HEAD + "Begin Triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES, True),
+    (ASC_HEAD + "Begin Triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES
+     + "End TriggerBlock\nBegin Triggerblock Fri Nov 27 02:31:00.000 pm 2026\n"
+     + ASC_MESSAGES, True),
+])
+def test_an_asc_log_is_cut_short_where_a_trigger_block_it_opened_never_ends(tmp_path, text,
+                                                                             cut):
+    from rts_scenario.recheck import log_cut_short
+
+    log = tmp_path / "drive.asc"
+    log.write_bytes(text.encode())
+    assert len(list(can.LogReader(str(log)))) in (2, 4)
+    said = log_cut_short(log, 0.06)
+    assert (said is not None) == cut, said
