@@ -391,15 +391,19 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
     # As the log names the run's channel: python-can's BLF and ASC writers number a channel
     # by the digits its name ends in (can1: 1), else as the first (0, read back).
     names = [str(recorded)]
-    if recorded is not None and Path(log).suffix.lower() in (".blf", ".asc"):
+    suffix = Path(log).suffix.lower()
+    if recorded is not None and suffix in (".blf", ".asc"):
         number = can.util.channel2int(recorded)
         names.append(str(0 if number is None else number))
+    elif recorded is not None and suffix == ".log" and str(recorded).isdigit():
+        names.append(f"can{recorded}")  # python-can's canutils writer: channel 1 as can1
     if len(held) <= 1:
         only = next(iter(held), None)
         if recorded is None or only is None or only in names:
             return None, None
         chosen = (sidecar or {}).get("radar_channel")
-        if chosen is not None:  # the run read that channel alone: none of these messages
+        if chosen is not None and suffix in (".blf", ".asc", ".log"):
+            # The run read that channel alone, as this format names it: none of these.
             raise LogError(f"--log {log}: the run read channel {chosen} alone (run "
                            f"--radar-channel, its sidecar), and the log holds none of {what} "
                            f"there: only on {listing()}; the run judged none of them; give "

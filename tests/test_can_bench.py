@@ -791,6 +791,17 @@ def test_the_check_of_a_run_whose_radar_channel_held_none_does_not_read_another(
             "only on 0 (") in err, err
     # Told which channel to judge, it judges that one.
     assert cli.main(["check", str(APPROACH), "--log", str(log), "--log-channel", "0"]) == 0
+    capsys.readouterr()
+    # A run that read its --radar-channel: its log's check reads it, also where the log's
+    # format names the channel otherwise (a canutils .log writes channel 0 as can0).
+    log = tmp_path / "bench.log"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "0",
+                     "--record", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
 
 
 ASC_HEAD = "date Fri Nov 27 02:30:00.000 pm 2026\nbase hex  timestamps absolute\n"
