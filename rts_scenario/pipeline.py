@@ -1147,6 +1147,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "can_interface": options.can_interface,
         "can_channel": None if channel_unknown else (
             channel if channel is not None else options.can_channel),
+        # The channel ``run --radar-channel`` read alone (null: not given): a re-check reads
+        # no other in its place.
+        "radar_channel": options.radar_channel,
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         # The statuses the RTS played (a re-check judges by them) and their digest, and per

@@ -227,6 +227,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         # The bus the run listened on (python-can's interface and channel).
         "can_interface": {"type": ["string", "null"]},
         "can_channel": {"type": ["string", "null"]},
+        "radar_channel": {"type": ["string", "null"]},
         "can_fd": {"type": "boolean"},
         "method": {"type": ["string", "null"]},
         "output": {"type": ["string", "null"]},
@@ -390,13 +391,23 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
     # As the log names the run's channel: python-can's BLF and ASC writers number a channel
     # by the digits its name ends in (can1: 1), else as the first (0, read back).
     names = [str(recorded)]
-    if recorded is not None and Path(log).suffix.lower() in (".blf", ".asc"):
+    suffix = Path(log).suffix.lower()
+    if recorded is not None and suffix in (".blf", ".asc"):
         number = can.util.channel2int(recorded)
         names.append(str(0 if number is None else number))
+    elif recorded is not None and suffix == ".log" and str(recorded).isdigit():
+        names.append(f"can{recorded}")  # python-can's canutils writer: channel 1 as can1
     if len(held) <= 1:
         only = next(iter(held), None)
         if recorded is None or only is None or only in names:
             return None, None
+        chosen = (sidecar or {}).get("radar_channel")
+        if chosen is not None and suffix in (".blf", ".asc", ".log"):
+            # The run read that channel alone, as this format names it: none of these.
+            raise LogError(f"--log {log}: the run read channel {chosen} alone (run "
+                           f"--radar-channel, its sidecar), and the log holds none of {what} "
+                           f"there: only on {listing()}; the run judged none of them; give "
+                           f"--log-channel {only} to judge those")
         return None, (f"the log holds {what} on channel {only} only, not on the one the run "
                       f"listened on ({recorded!r}, its sidecar): read it")
     if recorded is not None:
@@ -572,7 +583,10 @@ class _ReadAhead:
 # The header of a BLF python-can wrote and never closed (its size, no object count yet).
 _BLF_OPEN_HEADER_BYTES = 144
 # What an ASC log's last line is (python-can's writer and Vector's tools end it so).
-_ASC_END = b"End TriggerBlock"
+_ASC_END = b"end triggerblock"
+# ... where it opened one: its header's ``Begin Triggerblock`` line, within this many bytes.
+_ASC_BEGIN = b"begin triggerblock"
+_ASC_HEAD_BYTES = 4096
 
 
 def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | None:
@@ -580,8 +594,10 @@ def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | N
 
     python-can's readers read a BLF or an ASC cut short as a shorter log, without a word. A
     BLF's header gives the file's size (python-can's `BLFReader` reads it; a writer that was
-    never closed left the 144 bytes of the header alone there); an ASC log ends with an
-    ``End TriggerBlock`` line. ``last_t_s``: the log's last message's time, where it ends.
+    never closed left the 144 bytes of the header alone there); an ASC log that opened a
+    trigger block (its header's ``Begin Triggerblock``) ends with an ``End TriggerBlock`` line
+    (either in any case; a log that opens none cannot tell). ``last_t_s``: the log's last
+    message's time, where it ends.
 
     Returns ``{"header_bytes", "file_bytes", "last_message_t_s", "why"}`` (``header_bytes``
     None where the format keeps no size; ``why``: one line for people).
@@ -608,9 +624,12 @@ def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | N
                 "why": why}
     if suffix == ".asc":
         with path.open("rb") as f:
+            head = f.read(_ASC_HEAD_BYTES).lower()
             f.seek(max(0, size - 256))
-            tail = f.read().rstrip()
-        if tail.endswith(_ASC_END):
+            tail = f.read().rstrip().lower()
+        # Keywords in any case, as python-can reads them; a log that opens no trigger block
+        # (can-utils' log2asc writes none) has no end line to miss.
+        if tail.endswith(_ASC_END) or _ASC_BEGIN not in head:
             return None
         why = (f"the log {log} was cut short: it lacks the 'End TriggerBlock' line an ASC log "
                f"ends with; {ends}: what the radar sent after it is not in it")

@@ -1033,7 +1033,10 @@ class _Importer:
                 target = base + p["value"] if p["value_type"] == "delta" else base * p["value"]
             if not 0.0 <= target <= 150.0:
                 raise action.el.error(f"target speed {target:g} m/s of {action.actor!r}: "
-                                      f"scenes allow 0 to 150 m/s (no reversing)")
+                                      f"the import takes 0 to 150 m/s (it does not import "
+                                      f"reversing; a scene file drives backwards with a "
+                                      f"negative speed_mps on constant_velocity or "
+                                      f"speed_profile)")
             duration = self._speed_duration(action, dyn, v0, target)
             body.set_speed(t, target, duration, dyn.shape)
             if dyn.shape in ("cubic", "sinusoidal") and duration >= STEP_S and v0 != target:

@@ -758,3 +758,77 @@ def test_an_asc_cut_short_fails_its_check(autosar, tmp_path, capsys):
     assert code == 1 and "Traceback" not in err, out + err
     assert (f"the log {log} was cut short: it lacks the 'End TriggerBlock' line an ASC log "
             f"ends with; it ends at log time {last:.6f} s") in out, out
+
+
+def test_the_check_of_a_run_whose_radar_channel_held_none_does_not_read_another(
+        autosar, tmp_path, monkeypatch, capsys):
+    # The radar's messages come on channel 0 only; the run was told --radar-channel 1, read
+    # none and failed. The log holds them (on channel 0): its check must not judge them as
+    # the run's, which read none: it says so, as for a run that heard several channels.
+    import json
+
+    from rts_scenario.canbus import ListenerBus
+
+    class ChannelZero(ListenerBus):
+        def send(self, msg, timeout=None):
+            msg.channel, msg.is_rx = 0, True
+            for listener in self._listeners:
+                listener.on_message_received(msg)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", ChannelZero)
+    log, out_json = tmp_path / "bench.blf", tmp_path / "report.json"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "1",
+                     "--record", str(log), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 1, out + err
+    assert any(r.startswith("--radar-channel 1: none of the radar's messages")
+               for r in json.loads(out_json.read_text())["reasons"])
+    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 2, out + err
+    assert ("the run read channel 1 alone (run --radar-channel, its sidecar), and the log holds "
+            "none of the radar's messages (the identifiers of mapping 'autosar-radar') there: "
+            "only on 0 (") in err, err
+    # Told which channel to judge, it judges that one.
+    assert cli.main(["check", str(APPROACH), "--log", str(log), "--log-channel", "0"]) == 0
+    capsys.readouterr()
+    # A run that read its --radar-channel: its log's check reads it, also where the log's
+    # format names the channel otherwise (a canutils .log writes channel 0 as can0).
+    log = tmp_path / "bench.log"
+    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "0",
+                     "--record", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+
+
+ASC_HEAD = "date Fri Nov 27 02:30:00.000 pm 2026\nbase hex  timestamps absolute\n"
+ASC_MESSAGES = (" 0.010000 1  101             Rx   d 8 13 01 50 46 8D BD D9 F4\n"
+                " 0.060000 1  101             Rx   d 8 13 02 FD 09 96 F8 FF 3A\n")
+
+
+@pytest.mark.parametrize(("text", "cut"), [
+    # Vector's casing, another tool's, and no trigger block at all (can-utils' log2asc):
+    # complete logs.
+    (ASC_HEAD + "Begin Triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES
+     + "End TriggerBlock\n", False),
+    (ASC_HEAD + "begin triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES
+     + "end Triggerblock\r\n", False),
+    (ASC_HEAD + "no internal events logged\n" + ASC_MESSAGES, False),
+    # A trigger block opened and never closed: cut short.
+    (ASC_HEAD + "Begin Triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES, True),
+    (ASC_HEAD + "Begin Triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES
+     + "End TriggerBlock\nBegin Triggerblock Fri Nov 27 02:31:00.000 pm 2026\n"
+     + ASC_MESSAGES, True),
+])
+def test_an_asc_log_is_cut_short_where_a_trigger_block_it_opened_never_ends(tmp_path, text,
+                                                                             cut):
+    from rts_scenario.recheck import log_cut_short
+
+    log = tmp_path / "drive.asc"
+    log.write_bytes(text.encode())
+    assert len(list(can.LogReader(str(log)))) in (2, 4)
+    said = log_cut_short(log, 0.06)
+    assert (said is not None) == cut, said

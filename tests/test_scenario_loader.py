@@ -133,6 +133,26 @@ BAD = [
      "the ego's path turns 9.98 deg at this waypoint: a polyline turns in no time, and the "
      "radar with it, so every target's azimuth would jump 9.98 deg between two frames and the "
      "radar (3.7 m from the ego's reference point) 0.644 m sideways; use path: spline"),
+    # A piece straight up or down gives the ego no heading (its radar faced the world's x
+    # axis there) and hid a turn across it from the corner's check.
+    (edit("  motion: {type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}",
+          "  motion:\n    type: waypoints\n    points:\n"
+          "      - {position_m: [0, 0, 0], speed_mps: 20}\n"
+          "      - {position_m: [50, 0, 0], speed_mps: 20}\n"
+          "      - {position_m: [50, 0, 1], speed_mps: 20}\n"
+          "      - {position_m: [50, 50, 1], speed_mps: 20}"), 15,
+     "ego.motion.points[2].position_m",
+     "the ego's path runs straight up or down from the waypoint before: it has no heading "
+     "there"),
+    (edit("  motion: {type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}",
+          "  motion:\n    type: waypoints\n    points:\n"
+          "      - {position_m: [0, 0, 0], speed_mps: 20}\n"
+          "      - {position_m: [-50, 0, 0], speed_mps: 20}\n"
+          "      - {position_m: [-50, 0, 1], speed_mps: 20}\n"
+          "      - {position_m: [-100, 0, 1], speed_mps: 20}"), 15,
+     "ego.motion.points[2].position_m",
+     "the ego's path runs straight up or down from the waypoint before: it has no heading "
+     "there"),
     (edit("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], speed_mps: 19.0}",
           "    motion:\n      type: waypoints\n      points:\n"
           "        - {position_m: [30, 0, 0], speed_mps: 3}\n"

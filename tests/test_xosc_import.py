@@ -557,3 +557,20 @@ def test_cli_import_that_does_not_load_leaves_no_file_and_keeps_the_old_one(tmp_
     capsys.readouterr()
     assert out.read_text() == "earlier: scene\n"
     assert list(tmp_path.iterdir()) == [out]
+
+
+def test_a_reversing_speed_is_refused_naming_the_import_s_range_not_the_scene_s():
+    # Scenes drive backwards (a negative speed_mps on constant_velocity and speed_profile);
+    # the import does not: its refusal says so, and where a scene takes reversing instead.
+    path = DATA / "braking_lead.xosc"
+    text = path.read_text().splitlines()
+    brake = line_of(path, '<Action name="Brake">')
+    line = next(i for i, row in enumerate(text[brake:], brake + 1) if "<SpeedAction>" in row)
+    with pytest.raises(ScenarioError) as refused:
+        import_xosc(path, radar="awr1843boost", rig="wide-3x5",
+                    parameters={"TargetSpeed": "-5"})
+    message = str(refused.value)
+    assert f"braking_lead.xosc:{line}: target speed -5 m/s of 'Lead'" in message
+    assert "scenes allow 0 to 150" not in message
+    assert "the import takes 0 to 150 m/s (it does not import reversing" in message
+    assert "speed_mps" in message

@@ -589,8 +589,14 @@ def _ego_corners(doc: Document, motion: dict[str, Any], mount: dict[str, float])
     points = np.array([p["position_m"] for p in motion["points"]], dtype=float)[:, :2]
     chords = np.diff(points, axis=0)
     lengths = np.linalg.norm(chords, axis=1)
-    for i in range(1, len(chords)):
-        if min(lengths[i - 1], lengths[i]) < 1e-9:  # a vertical piece turns no heading
+    for i in range(len(chords)):
+        if lengths[i] < 1e-9:  # straight up or down: no heading, the body would face x
+            raise doc.error(
+                ("ego", "motion", "points", i + 1, "position_m"),
+                "the ego's path runs straight up or down from the waypoint before: it has no "
+                "heading there (its radar would face the world's x axis); give the waypoints a "
+                "horizontal distance")
+        if i == 0:
             continue
         cos = float(np.clip(chords[i - 1] @ chords[i] / (lengths[i - 1] * lengths[i]), -1, 1))
         angle = math.degrees(math.acos(cos))
