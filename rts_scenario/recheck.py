@@ -221,6 +221,16 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "origin_bus_s": {"type": ["number", "null"]},
                 # A delivery delay: beyond RECEIPT_OFF_S receipts are no deliveries.
                 "early_s": _number(minimum=0, maximum=RECEIPT_OFF_S),
+                # The host's clock steps the run saw, and where they moved the log's stamps.
+                "host_clock_steps": {"type": "array", "items": {
+                    "type": "object", "required": ["at_s", "within_s", "size_s", "corrected"],
+                    "properties": {"at_s": _number(), "within_s": _number(minimum=0),
+                                   "size_s": _number(), "corrected": {"type": "string"}}}},
+                "bus_time_shifts": {"type": "array", "items": {
+                    "type": "object", "required": ["bus_s", "counter", "shift_s"],
+                    "properties": {"bus_s": _number(),
+                                   "counter": {"type": "integer", "minimum": 0},
+                                   "shift_s": _number()}}},
             },
         },
         "mapping": {"type": ["string", "null"]},
@@ -546,8 +556,9 @@ class _ReadAhead:
 
     def __init__(self, log: str | Path, mapping: CanMapping | None,
                  kept: NDArray[np.bool_], cycle_s: float | None = None, *,
-                 channel: str | None = None) -> None:
+                 channel: str | None = None, shifts: FloatArray | None = None) -> None:
         self._log = log
+        self._shifts = shifts  # per position, what its bus time is brought back by
         self._cycles = enumerate(_iter_cycles(log, mapping, {}, cycle_s, channel=channel))
         self._kept = kept  # positions ever asked for: the others are not held
         self._held: dict[int, Detections] = {}
@@ -565,7 +576,12 @@ class _ReadAhead:
                                    f"{self._kept.size}); check it again")
                 self._read, cycle = step
                 if self._kept[self._read]:
-                    self._held[self._read] = cycle.detections
+                    held = cycle.detections
+                    if (self._shifts is not None and self._shifts[self._read]
+                            and held.bus_t_s is not None):
+                        held = replace(held, bus_t_s=held.bus_t_s
+                                       - float(self._shifts[self._read]))
+                    self._held[self._read] = held
         return [self._held.pop(int(i)) for i in positions]
 
 
@@ -912,6 +928,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s,
                                channel=channel)
     bus = index.bus
+    # Where the host's clock stepped while the run recorded (its sidecar): the stamps after it
+    # are brought back onto the clock the scene's start was taken on, as live.
+    shifts, unplaced = _bus_time_shifts(index, sidecar)
+    if shifts is not None:
+        index = replace(index, bus_t_s=index.bus_t_s - shifts)
     cut_short = log_cut_short(log, index.last_t_s)
     modulus = receiver_mapping.counter_modulus
     profile_clock = scene.radar.radar_clock
@@ -1037,7 +1058,12 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if channel_note:
         alignment.notes.append(channel_note)
     result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
-                    batch_frames, bus, alignment, sidecar, channel)
+                    batch_frames, bus, alignment, sidecar, channel, shifts)
+    if unplaced:
+        # Stamps the run brought back that this check cannot find: judged as they are, they
+        # may put cycles against the wrong frames.
+        result.reasons.append(unplaced)
+        result.passed = False
     if other_mapping:
         spoken = recorded_mapping or "rts-scenario's messages"
         alignment.notes.append(f"--mapping {mapping} is not the one the run spoke ({spoken}, "
@@ -1073,6 +1099,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if change is not None:
         result.radar_clock["latency_change_s"] = change[0]
     result.radar_clock.update(lag)
+    steps = ((sidecar or {}).get("clock") or {}).get("host_clock_steps") or []
+    if steps:
+        # The run's, as it said them: the log's stamps were brought back as it did.
+        result.radar_clock["host_clock_steps"] = steps
     playback = (sidecar or {}).get("playback")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run
@@ -1091,6 +1121,41 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 f"judges them at their nominal times (the sidecar, from an older version, "
                 f"keeps no send times)")
     return RecheckResult(scene=scene, report=result, alignment=alignment)
+
+
+# How near a log's stamp must lie to the one the sidecar gives of the cycle a step of the
+# host's clock moved the stamps from (s): a log's time resolution (ASC: 1 us).
+SHIFT_MATCH_S = 1e-4
+
+
+def _bus_time_shifts(index: _LogIndex,
+                     sidecar: dict[str, Any] | None) -> tuple[FloatArray | None, str | None]:
+    """Return what each of the log's cycles' bus time is brought back by, and any step not found.
+
+    The sidecar's ``clock.bus_time_shifts``: from the cycle of that counter stamped ``bus_s``
+    on (in log order), the stamps are ``shift_s`` off the clock the scene's start was taken
+    on (the host's wall clock stepped, `rts_scenario.pipeline.Pipeline._unstep`). None where
+    there are none; the reason where a cycle named is not in the log.
+    """
+    entries = ((sidecar or {}).get("clock") or {}).get("bus_time_shifts") or []
+    if not entries:
+        return None, None
+    shifts = np.zeros(len(index))
+    start = 0
+    for entry in entries:
+        found = np.flatnonzero((index.counters[start:] == int(entry["counter"]))
+                               & (np.abs(index.bus_t_s[start:] - float(entry["bus_s"]))
+                                  <= SHIFT_MATCH_S))
+        if not found.size:
+            return shifts, (f"host_clock: the host's wall clock stepped while the run recorded "
+                            f"(its sidecar), its stamps moved by "
+                            f"{float(entry['shift_s']) * 1e3:+.1f} ms from the cycle of counter "
+                            f"{entry['counter']} stamped {float(entry['bus_s']):.6f} s, which "
+                            f"is not in the log: the stamps from there on were not brought "
+                            f"back, and cycles may be judged against the wrong frames")
+        start += int(found[0])
+        shifts[start:] = float(entry["shift_s"])
+    return shifts, None
 
 
 def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,
@@ -1183,7 +1248,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
            bus_t_s: FloatArray, clock: RadarClock,
            modulus: int, method: str, batch_frames: int | None, bus: dict[str, int],
            alignment: Alignment, sidecar: dict[str, Any] | None,
-           channel: str | None = None) -> Report:
+           channel: str | None = None, shifts: FloatArray | None = None) -> Report:
     """Check the log's cycles (``counters`` in log order, their bus times) batch by batch."""
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
@@ -1215,7 +1280,8 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
-    logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s, channel=channel)
+    logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s, channel=channel,
+                        shifts=shifts)
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]
