@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from free_radar import behind_own_clock
 from test_emulate import bench_scene, rehearse
 from test_radar_clock import free_radar
 
@@ -161,3 +162,43 @@ def test_without_bringing_the_times_back_the_emulated_bench_fails(monkeypatch, t
     _, report = emulated_run(monkeypatch, tmp_path, 0.5)
     assert not report.passed
     assert not any("host" in r for r in report.reasons), report.reasons
+
+
+@pytest.mark.parametrize("step_s", [0.5, -0.2])
+def test_behind_an_interface_with_its_own_clock_only_the_receipts_are_brought_back(
+        monkeypatch, tmp_path, step_s):
+    # The interface stamps with its own clock (seconds since it was plugged in), which the
+    # host's step does not move; the host receives on its wall clock, which it does. The
+    # receipts tie the interface's clock to the host's: brought back, the tie holds.
+    scene, radar = free_radar(tmp_path)
+    wall = SteppedWallClock(monkeypatch)
+    batches = []
+
+    def progress(done, total):
+        batches.append(done)
+        if len(batches) == 2:
+            wall.step(step_s)
+
+    with Pipeline.for_scene(scene, RunOptions(batch_frames=40)) as pipeline:
+        behind_own_clock(pipeline, 0.031, early=0)
+        pipeline.output.clock = radar
+        bus = pipeline._publisher.bus
+        send = bus.send
+
+        def unstepped(msg, timeout=None):  # the interface's clock does not step
+            msg.timestamp -= wall.offset_s
+            send(msg, timeout)
+
+        bus.send = unstepped
+        receipt = pipeline.receiver.received_at
+        pipeline.receiver.received_at = lambda msg: receipt(msg) + wall.offset_s
+        report = pipeline.run(scene, progress=progress).report
+    assert report.passed, report.reasons
+    clock = report.radar_clock
+    assert clock["bus_clock"] == "interface"
+    (step,) = clock["host_clock_steps"]
+    assert step["size_s"] == pytest.approx(step_s, abs=2e-3)
+    assert step["corrected"] == "receipt times (the interface stamps with its own clock)"
+    # Tied within the fastest delivery (3 ms) and the line's 1 ms.
+    assert clock["start_offset_s"] == pytest.approx(0.031, abs=0.005)
+    assert report.frames["checked"] == report.frames["total"]
