@@ -58,7 +58,14 @@ from .playback import (
     unpack_send_lateness,
 )
 from .preflight import scene_limits, schedule_batches, track_batches
-from .radar.clock import TIME_EPS_S, ClockTrack, CycleTimeFit, RadarClock
+from .radar.clock import (
+    CLOCK_TOLERANCE_PPM,
+    STAMP_NOISE_S,
+    TIME_EPS_S,
+    ClockTrack,
+    CycleTimeFit,
+    RadarClock,
+)
 from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
 from .report import Report
 from .scenario import Scenario, parametrizations, select_variant
@@ -1054,11 +1061,32 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                               profile_clock.cycle_s)
         alignment.cycle_s = clock.cycle_s
     alignment.cycles_in_log = len(index)
+    jump = None
+    if "bus_time_shifts" not in ((sidecar or {}).get("clock") or {}):
+        # Nothing tells whether the host's clock stepped while the log was recorded.
+        jump = stamp_jump(numbers, index.bus_t_s, profile_clock)
+    if jump is not None:
+        at, size = jump
+        alignment.notes.append(
+            f"the log's stamps jump by {size * 1e3:+.1f} ms from its cycle {at + 1} on "
+            f"(stamped {index.bus_t_s[at]:.6f} s), beyond the radar's jitter: the host's "
+            f"clock stepped while it was recorded (no sidecar of this version says so), or "
+            f"the radar's latency changed; the stamps are taken as they are")
     alignment.log_cut_short = cut_short
     if channel_note:
         alignment.notes.append(channel_note)
     result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
                     batch_frames, bus, alignment, sidecar, channel, shifts)
+    half_window_s = 0.5 * ambiguity_window_s(scene.radar, scene.rig)
+    if jump is not None and sidecar is None and abs(jump[1]) > half_window_s:
+        # Aligned by its timestamps, the cycles after the jump are judged that far off.
+        result.reasons.append(
+            f"log_stamps: the log's stamps jump by {jump[1] * 1e3:+.1f} ms from its cycle "
+            f"{jump[0] + 1} on, more than half the ambiguity window ({half_window_s * 1e3:.3g}"
+            f" ms): aligned by its timestamps, the cycles after it may be judged against the "
+            f"wrong frames (a step of the host's clock as it was recorded, or the radar's "
+            f"latency changed); a recording's sidecar says where the host's clock stepped")
+        result.passed = False
     if unplaced:
         # Stamps the run brought back that this check cannot find: judged as they are, they
         # may put cycles against the wrong frames.
@@ -1079,7 +1107,6 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)
-    half_window_s = 0.5 * ambiguity_window_s(scene.radar, scene.rig)
     for off_profile in (track.off_profile_reason(half_window_s),
                         track.latency_change_reason(half_window_s)):
         if off_profile:
@@ -1156,6 +1183,39 @@ def _bus_time_shifts(index: _LogIndex,
         start += int(found[0])
         shifts[start:] = float(entry["shift_s"])
     return shifts, None
+
+
+# Cycles on either side of a jump in a log's stamps whose medians are compared (`stamp_jump`).
+JUMP_CYCLES = 8
+
+
+def stamp_jump(numbers: IntArray, bus_t_s: FloatArray,
+               clock: RadarClock) -> tuple[int, float] | None:
+    """Return where a log's stamps jump (log position of the first cycle after it) and by how much.
+
+    The stamps less the profile's cycle times their numbers, in log order: the median of the
+    `JUMP_CYCLES` after each cycle against that of those up to it. Each lies within the
+    radar's jitter of the latency, so the two differ by at most twice its jitter, plus the
+    stamping's noise and what a crystal within `CLOCK_TOLERANCE_PPM` draws over the windows;
+    beyond that the stamps moved for good from there on (a cycle held up moves one). The
+    largest such jump; None where there is none.
+    """
+    t = np.asarray(bus_t_s, dtype=np.float64)
+    ok = np.isfinite(t)
+    k = JUMP_CYCLES
+    if ok.sum() < 2 * k:
+        return None
+    positions = np.flatnonzero(ok)
+    r = t[ok] - t[ok][0] - (numbers[ok] - numbers[ok][0]) * clock.cycle_s
+    windows = np.lib.stride_tricks.sliding_window_view(r, k)
+    medians = np.median(windows, axis=1)  # of r[i:i + k]
+    jumps = medians[k:] - medians[:-k]  # after cycle i + k - 1 against up to it
+    bound = (2.0 * clock.jitter_s + STAMP_NOISE_S
+             + CLOCK_TOLERANCE_PPM * 1e-6 * 2 * k * clock.cycle_s)
+    if not jumps.size or np.abs(jumps).max() <= bound:
+        return None
+    i = int(np.argmax(np.abs(jumps)))
+    return int(positions[i + k]), float(jumps[i])
 
 
 def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,

@@ -5,8 +5,11 @@ start is taken on it: a step moves every later time but not the start. A run wat
 clock against the monotonic one, brings the times back by the steps and says so.
 """
 
+import json
+import shutil
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -101,6 +104,23 @@ def test_a_host_clock_step_mid_run_is_told_and_its_cycles_judged_as_if_it_had_no
     assert again.frames == report.frames
     (told,) = again.radar_clock["host_clock_steps"]
     assert told["size_s"] == pytest.approx(step_s, abs=2e-3)
+    # Without its sidecar nothing says the host's clock stepped: aligned by its timestamps,
+    # the re-check says where they jump, and fails rather than judge the cycles after it off.
+    bare = tmp_path / "bare.blf"
+    shutil.copy(log, bare)
+    blind = check_log(scene, bare)
+    assert not blind.report.passed
+    (reason,) = [r for r in blind.report.reasons if r.startswith("log_stamps:")]
+    size = float(reason.split("jump by ")[1].split(" ms")[0]) * 1e-3
+    assert size == pytest.approx(step_s, abs=3e-3)
+    # A sidecar naming a cycle the log lacks: its stamps cannot be brought back, it says so.
+    sidecar = Path(f"{log}.rts.json")
+    data = json.loads(sidecar.read_text())
+    data["clock"]["bus_time_shifts"][0]["bus_s"] += 1.0
+    sidecar.write_text(json.dumps(data))
+    lost = check_log(scene, log).report
+    assert not lost.passed
+    assert any(r.startswith("host_clock: ") and "not in the log" in r for r in lost.reasons)
 
 
 @pytest.mark.parametrize("step_s", [0.5, -0.2])
