@@ -74,6 +74,14 @@ class HostClockWatch:
 
     def sample(self) -> float:
         """Read the clocks; record a step where they moved apart; return the level."""
+        return self.read()[1]
+
+    def read(self) -> tuple[float, float]:
+        """Read the clocks as `sample` does; return the wall clock's time and its level.
+
+        The level is the one that time was read at: a reading another thread overtook (the
+        clocks read before, the watch taken after) is placed by its own times.
+        """
         m0 = monotonic_s()
         wall = wall_s()
         m1 = monotonic_s()
@@ -81,16 +89,17 @@ class HostClockWatch:
         offset = wall - mono
         with self._lock:
             last = self._last
-            if last is None or mono >= last[1]:  # a reading older than the last is no news
-                if last is not None:
-                    change = offset - last[0]
-                    allowed = (STEP_TOLERANCE_S + SLEW_PPM * 1e-6 * (mono - last[1])
-                               + error + last[2])
-                    if abs(change) > allowed:
-                        self.steps.append(HostClockStep(last[1], mono, change,
-                                                        self.level_s + change))
-                self._last = (offset, mono, error)
-            return self.level_s
+            if last is not None and mono < last[1]:  # overtaken: no news, but its own level
+                return wall, self._level_at(mono, wall)
+            if last is not None:
+                change = offset - last[0]
+                allowed = (STEP_TOLERANCE_S + SLEW_PPM * 1e-6 * (mono - last[1])
+                           + error + last[2])
+                if abs(change) > allowed:
+                    self.steps.append(HostClockStep(last[1], mono, change,
+                                                    self.level_s + change))
+            self._last = (offset, mono, error)
+            return wall, self.level_s
 
     def level_at(self, monotonic: float, wall: float | None = None) -> float:
         """Return the level at a monotonic time; ``wall``, read then, decides within a step.
@@ -98,11 +107,13 @@ class HostClockWatch:
         A reading between the two a step fell between is at the level before it or after it:
         the one its wall time less its monotonic time lies nearer (without ``wall``: after).
         """
-        level = 0.0
         with self._lock:
-            steps = list(self.steps)
-            last = self._last
-        for step in steps:
+            return self._level_at(monotonic, wall)
+
+    def _level_at(self, monotonic: float, wall: float | None) -> float:
+        level = 0.0
+        last = self._last
+        for step in self.steps:
             if monotonic >= step.before_s:
                 level = step.level_s
             elif monotonic > step.after_s and wall is not None and last is not None:

@@ -222,3 +222,25 @@ def test_behind_an_interface_with_its_own_clock_only_the_receipts_are_brought_ba
     # Tied within the fastest delivery (3 ms) and the line's 1 ms.
     assert clock["start_offset_s"] == pytest.approx(0.031, abs=0.005)
     assert report.frames["checked"] == report.frames["total"]
+
+
+def test_a_reading_another_thread_overtook_keeps_the_level_it_was_read_at(monkeypatch):
+    import rts_scenario.hostclock as hostclock
+
+    readings = iter([])
+
+    def feed(*pairs):  # (monotonic, wall) readings, each read as m0, wall, m1
+        nonlocal readings
+        readings = iter([v for m, w in pairs for v in (m, w, m)])
+
+    monkeypatch.setattr(hostclock, "monotonic_s", lambda: next(readings))
+    monkeypatch.setattr(hostclock, "wall_s", lambda: next(readings))
+    feed((0.0, 100.0))
+    watch = HostClockWatch()
+    feed((9.0, 109.0), (10.0, 110.5), (9.5, 109.5), (9.6, 110.1))
+    assert watch.read() == (109.0, 0.0)
+    assert watch.read() == (110.5, 0.5)  # the step, between 9 s and 10 s
+    # Read before the watch took the step, handed in after: at the level it was read at.
+    assert watch.read() == (109.5, 0.0)
+    assert watch.read() == (110.1, 0.5)
+    assert len(watch.steps) == 1

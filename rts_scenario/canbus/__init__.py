@@ -595,7 +595,7 @@ class DetectionReceiver(can.Listener):
         self.cycle_s = cycle_s
         self.channel = channel
         self.received_at: Callable[[can.Message], float] = (
-            received_at or (lambda message: time.time()))
+            received_at or self._wall_receipt)
         db = self.mapping.db
         self._header = db.get_message_by_name(self.mapping.header)
         m = self.mapping
@@ -672,6 +672,11 @@ class DetectionReceiver(can.Listener):
         self._index_of, self._low_of = (self._whole_number(self._index),
                                         self._whole_number(self._frame_counter))
         self.reset()
+
+    @staticmethod
+    def _wall_receipt(message: can.Message) -> float:
+        """Return the host's wall clock now: when it received a message (by default)."""
+        return time.time()
 
     def _whole_number(self, name: str | None) -> Callable[[float], int]:
         """Return how a control signal's raw value becomes its physical whole number."""
@@ -821,9 +826,16 @@ class DetectionReceiver(can.Listener):
             return
         if message is self._header:
             host = self.host_clock
+            if host is None:
+                received, level = float(self.received_at(msg)), 0.0
+            elif self.received_at is self._wall_receipt:
+                # The receipt is the watch's own reading: its level is the one it was read at.
+                received, level = host.read()
+            else:
+                received = float(self.received_at(msg))
+                level = host.sample()
             self._on_header(values, float(msg.timestamp),  # type: ignore[arg-type]
-                            float(self.received_at(msg)),
-                            0.0 if host is None else host.sample())
+                            received, level)
             return
         if mux is not None:  # the raw page id
             part = (message.frame_id, int(values[mux]))  # type: ignore[call-overload, arg-type]
