@@ -45,6 +45,10 @@ class Detections:
         When the host received the cycle's first message (the host's wall clock,
         ``time.time()``, whatever clock the interface stamps ``bus_t_s`` with), if it came
         over a bus: at least the radar's latency (less its jitter) after it measured.
+    host_step_s : float
+        How far the host's wall clock had stepped (the sum of its steps,
+        `rts_scenario.hostclock.HostClockWatch`) when the host received the cycle: 0 where
+        it never stepped, or where the receiver did not watch it (a log).
     """
 
     cycle: int
@@ -58,6 +62,7 @@ class Detections:
     complete: bool = True
     bus_t_s: float | None = None
     host_t_s: float | None = None
+    host_step_s: float = 0.0
 
     def __post_init__(self) -> None:
         sizes = set()

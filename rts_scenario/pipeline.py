@@ -24,6 +24,7 @@ from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, bus_times, host_times, sequential_numbers, unwrap_counter
+from .hostclock import HostClockWatch, monotonic_s, wall_s
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
@@ -276,6 +277,19 @@ class Pipeline:
         # and that clock tied to the host's in a run (`ClockLink`).
         self._bus_clock_checked = self._bus_clock_foreign = False
         self._link = ClockLink()
+        # The host's wall clock, watched for steps against its monotonic clock from here on
+        # (`HostClockWatch`): the receiver reads it at every cycle, a run at every batch.
+        self.host_clock = HostClockWatch()
+        # The level of the host's clock (`HostClockWatch.level_s`) the scene's start was taken
+        # at, by the simulated radar in process; and the monotonic time of that start.
+        self._bus_origin_level_s = 0.0
+        self._bus_origin_monotonic_s: float | None = None
+        # A run's corrections of host clock steps (`_unstep`): the monotonic time it began,
+        # the level of its stamps' last cycle, and where that level changed (for the sidecar).
+        self._run_monotonic_s = monotonic_s()
+        self._run_level_s = 0.0
+        self._stamp_shift_s = 0.0
+        self._bus_shifts: list[dict[str, float | int]] = []
         self.output: Output | None = None
         self._new_output: Callable[[], Output] | None = None
         # Whether a measurement (`play`) was made: the next starts a stream of its own.
@@ -285,7 +299,8 @@ class Pipeline:
         try:
             self.mapping = CanMapping.from_file(options.mapping) if options.mapping else None
             self.receiver = DetectionReceiver(self.mapping, radar.radar_clock.cycle_s,
-                                              channel=options.radar_channel)
+                                              channel=options.radar_channel,
+                                              host_clock=self.host_clock)
             listen = self._open_bus()
             self._listeners: list[can.Listener] = [self.receiver]
             if options.bus_log:
@@ -349,14 +364,24 @@ class Pipeline:
             # The run's mapping (a third-party radar's DBC) makes the simulated radar speak it.
             self._publisher = DetectionPublisher(bus, fd=o.can_fd, mapping=self.mapping)
         publisher, clock = self._publisher, self.radar.radar_clock
-        origin, rng = time.time(), np.random.default_rng(0)
-        if self.options.can_interface == "virtual":
+        watch = self.host_clock
+        level = watch.sample()
+        origin, rng = wall_s(), np.random.default_rng(0)
+        in_process = self.options.can_interface == "virtual"
+        if in_process:
             # The messages keep the times given them: the scene's start on the bus's clock.
             self._bus_origin_s = origin
+            self._bus_origin_level_s = level
+            self._bus_origin_monotonic_s = monotonic_s()
 
         def publish(cycles: list[Detections]) -> None:
             t = np.array([c.t_s or 0.0 for c in cycles], dtype=np.float64)
-            publisher.publish_many(cycles, origin + t + clock.bus_delay(len(cycles), rng))
+            # Stamped as the host's wall clock reads them, as python-can would: where it
+            # stepped since the scene's start (`HostClockWatch`), by the step (its slow
+            # slew, within a step's tolerance, left out: a desk run's stamps stay exact).
+            stepped = watch.sample() - level if in_process else 0.0
+            publisher.publish_many(cycles,
+                                   origin + stepped + t + clock.bus_delay(len(cycles), rng))
 
         return publish
 
@@ -544,6 +569,90 @@ class Pipeline:
         origin = getattr(self.output, "scene_origin_wall_s", None)
         return origin if origin is not None else self._bus_origin_s
 
+    def _origin_level_s(self) -> float:
+        """Return the level of the host's clock (`HostClockWatch.level_s`) the start was taken at.
+
+        The start `_host_origin_s` gives: a paced stream's (read with the monotonic clock: a
+        step between the watch's readings around it is placed by its wall time), the simulated
+        radar's in process; else the level when the run began.
+        """
+        wall = getattr(self.output, "scene_origin_wall_s", None)
+        mono = getattr(self.output, "scene_origin_monotonic_s", None)
+        if wall is not None and mono is not None:
+            return self.host_clock.level_at(mono, wall)
+        if wall is None and self._bus_origin_s is not None:
+            return self._bus_origin_level_s
+        return self._run_level_s
+
+    def _origin_monotonic_s(self) -> float | None:
+        """Return the scene's start on the host's monotonic clock, where the run knows it."""
+        if getattr(self.output, "scene_origin_wall_s", None) is not None:
+            return getattr(self.output, "scene_origin_monotonic_s", None)
+        return self._bus_origin_monotonic_s if self._bus_origin_s is not None else None
+
+    def _unstep(self, cycles: list[Detections], duration_s: float,
+                track: ClockTrack) -> list[Detections]:
+        """Return the cycles with their times on the host's clock as it read at the start.
+
+        The host's wall clock may step while a run plays (`HostClockWatch`): every time read on
+        it after the step is off by it, while the scene's start was taken before. Each cycle
+        says how far it had stepped when the host received it (`Detections.host_step_s`): its
+        receipt time is brought back by the steps since the start (`_origin_level_s`), and so
+        is its bus time where the bus stamps with the host's clock (python-can's stamps, the
+        simulated radar's). A cycle stamped just before a step and received just after it
+        keeps the level before: the one that leaves its delivery (receipt less stamp) nearer
+        0. Bus times an interface stamps with its own clock do not step; only their receipts
+        are brought back (they tie that clock to the host's, `ClockLink`).
+        """
+        ref = self._origin_level_s()
+        if not cycles or (all(c.host_step_s == ref for c in cycles)
+                          and self._stamp_shift_s == 0.0):
+            return cycles
+        self._check_bus_clock(cycles, duration_s, track)
+        foreign = self._bus_clock_foreign
+        if not foreign and self._link.offset_s is None:
+            # The first cycles: their receipts tell an interface's clock (`_follow_bus_clock`).
+            delay = np.array([c.host_t_s - c.bus_t_s for c in cycles
+                              if c.host_step_s == ref and c.host_t_s is not None
+                              and c.bus_t_s is not None])
+            foreign = bool(delay.size) and stamped_on_another_clock(float(delay.min()))
+        levels = self.host_clock.levels()
+        out = []
+        for c in cycles:
+            shift = c.host_step_s - ref
+            host_t = None if c.host_t_s is None else c.host_t_s - shift
+            bus_t = c.bus_t_s
+            if bus_t is not None and not foreign:
+                stamp = c.host_step_s
+                i = levels.index(stamp) if stamp in levels else 0
+                if i > 0 and c.host_t_s is not None:
+                    delivery = c.host_t_s - bus_t
+                    if abs(delivery - (stamp - levels[i - 1])) < abs(delivery):
+                        stamp = levels[i - 1]  # stamped before the step, received after it
+                if stamp - ref != self._stamp_shift_s:
+                    self._stamp_shift_s = stamp - ref
+                    self._bus_shifts.append({"bus_s": bus_t, "counter": c.cycle,
+                                             "shift_s": stamp - ref})
+                bus_t -= stamp - ref
+            out.append(replace(c, bus_t_s=bus_t, host_t_s=host_t, host_step_s=ref))
+        return out
+
+    def host_clock_steps(self) -> list[dict[str, float | str]]:
+        """Return the steps of the host's clock since the scene's start (or the run's).
+
+        Each: ``at_s`` the scene time of the first reading after it (the host's monotonic clock
+        from the scene's start), ``within_s`` how long before that it may have come (since the
+        reading before), ``size_s`` and what was ``corrected`` (`_unstep`).
+        """
+        origin = self._origin_monotonic_s()
+        zero = self._run_monotonic_s if origin is None else origin
+        since = min(zero, self._run_monotonic_s)
+        corrected = ("receipt times (the interface stamps with its own clock)"
+                     if self._bus_clock_foreign else "bus and receipt times")
+        return [{"at_s": s.before_s - zero, "within_s": s.before_s - s.after_s,
+                 "size_s": s.size_s, "corrected": corrected}
+                for s in self.host_clock.steps if s.before_s > since]
+
     def _scene_origin_s(self) -> float | None:
         """Return the scene's time 0 on the bus's clock, where the run knows it.
 
@@ -729,6 +838,9 @@ class Pipeline:
         self.receiver.reset()
         self._bus_clock_checked = self._bus_clock_foreign = False
         self._link = ClockLink()
+        self._run_level_s = self.host_clock.sample()
+        self._run_monotonic_s = monotonic_s()
+        self._stamp_shift_s, self._bus_shifts = 0.0, []
         window_s = ambiguity_window_s(self.radar, self.rig)
         # When the radar measures: its profile's clock, corrected by its cycles' bus times.
         track = ClockTrack(clock, self._scene_origin_s(),
@@ -766,6 +878,8 @@ class Pipeline:
             mark = timer.add("play_s", mark)
             # The cycles first, so that the clock knows them before it times the truth.
             cycles = self.receive()
+            self.host_clock.sample()  # a step is told by the batch, if no cycle told it
+            cycles = self._unstep(cycles, scene.duration_s, track)
             mark = timer.add("receive_s", mark)
             self._follow_bus_clock(cycles, scene.duration_s, track, truths)
             if checker.counter_start is None and cycles:
@@ -783,7 +897,7 @@ class Pipeline:
             mark = timer.add("check_s", mark)
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
-        last = self.receive(final=True)
+        last = self._unstep(self.receive(final=True), scene.duration_s, track)
         self._follow_bus_clock(last, scene.duration_s, track, truths)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
@@ -833,7 +947,9 @@ class Pipeline:
                               origin_bus_s=self._scene_origin_s() if track.origin_s is None
                               else track.origin_s, early_s=truths.early_s,
                               channel=self._radar_channel(),
-                              channel_unknown=self._radar_channel() is None)
+                              channel_unknown=self._radar_channel() is None,
+                              host_clock_steps=self.host_clock_steps(),
+                              bus_time_shifts=self._bus_shifts)
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -854,6 +970,10 @@ class Pipeline:
             report.radar_clock["bus_clock"] = "interface" if self._bus_clock_foreign else "host"
         report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s,
                                            truths.early_s))
+        steps = self.host_clock_steps()
+        if steps:
+            # Said where the host's clock stepped: the times were brought back (`_unstep`).
+            report.radar_clock["host_clock_steps"] = steps
         return RunResult(scene=scene, report=report)
 
     # -- closing ---------------------------------------------------------------------------
@@ -1099,7 +1219,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       clock: ClockTrack | None = None, first_cycle: int = 0,
                       cycles: int | None = None, origin_bus_s: float | None = None,
                       early_s: float = 0.0, channel: str | None = None,
-                      channel_unknown: bool = False) -> Path:
+                      channel_unknown: bool = False,
+                      host_clock_steps: list[dict[str, float | str]] | None = None,
+                      bus_time_shifts: list[dict[str, float | int]] | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -1121,7 +1243,11 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     ``channel`` the CAN channel the radar's messages were read from (``options.can_channel``
     when not given; `Pipeline._radar_channel`), kept with the interface so that a re-check of
     a log holding several channels reads the radar's; ``channel_unknown``: they came on
-    several and none was chosen (``can_channel`` null: a re-check does not pick one).
+    several and none was chosen (``can_channel`` null: a re-check does not pick one);
+    ``host_clock_steps`` the steps of the host's clock the run saw (`Pipeline.host_clock_steps`)
+    and ``bus_time_shifts`` where they moved the log's stamps: from the cycle of that counter
+    stamped ``bus_s`` on (in log order), its bus times less ``shift_s`` are on the clock the
+    scene's start (``origin_bus_s``) was taken on (`Pipeline._unstep`).
     """
     import json
 
@@ -1143,7 +1269,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
                   "counter_start": c.counter_start if counter_start is None
                   else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s,
-                  "early_s": early_s},
+                  "early_s": early_s, "host_clock_steps": host_clock_steps or [],
+                  "bus_time_shifts": bus_time_shifts or []},
         "can_interface": options.can_interface,
         "can_channel": None if channel_unknown else (
             channel if channel is not None else options.can_channel),

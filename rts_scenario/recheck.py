@@ -58,7 +58,14 @@ from .playback import (
     unpack_send_lateness,
 )
 from .preflight import scene_limits, schedule_batches, track_batches
-from .radar.clock import TIME_EPS_S, ClockTrack, CycleTimeFit, RadarClock
+from .radar.clock import (
+    CLOCK_TOLERANCE_PPM,
+    STAMP_NOISE_S,
+    TIME_EPS_S,
+    ClockTrack,
+    CycleTimeFit,
+    RadarClock,
+)
 from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
 from .report import Report
 from .scenario import Scenario, parametrizations, select_variant
@@ -221,6 +228,16 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "origin_bus_s": {"type": ["number", "null"]},
                 # A delivery delay: beyond RECEIPT_OFF_S receipts are no deliveries.
                 "early_s": _number(minimum=0, maximum=RECEIPT_OFF_S),
+                # The host's clock steps the run saw, and where they moved the log's stamps.
+                "host_clock_steps": {"type": "array", "items": {
+                    "type": "object", "required": ["at_s", "within_s", "size_s", "corrected"],
+                    "properties": {"at_s": _number(), "within_s": _number(minimum=0),
+                                   "size_s": _number(), "corrected": {"type": "string"}}}},
+                "bus_time_shifts": {"type": "array", "items": {
+                    "type": "object", "required": ["bus_s", "counter", "shift_s"],
+                    "properties": {"bus_s": _number(),
+                                   "counter": {"type": "integer", "minimum": 0},
+                                   "shift_s": _number()}}},
             },
         },
         "mapping": {"type": ["string", "null"]},
@@ -557,8 +574,9 @@ class _ReadAhead:
 
     def __init__(self, log: str | Path, mapping: CanMapping | None,
                  kept: NDArray[np.bool_], cycle_s: float | None = None, *,
-                 channel: str | None = None) -> None:
+                 channel: str | None = None, shifts: FloatArray | None = None) -> None:
         self._log = log
+        self._shifts = shifts  # per position, what its bus time is brought back by
         self._cycles = enumerate(_iter_cycles(log, mapping, {}, cycle_s, channel=channel))
         self._kept = kept  # positions ever asked for: the others are not held
         self._held: dict[int, Detections] = {}
@@ -576,7 +594,12 @@ class _ReadAhead:
                                    f"{self._kept.size}); check it again")
                 self._read, cycle = step
                 if self._kept[self._read]:
-                    self._held[self._read] = cycle.detections
+                    held = cycle.detections
+                    if (self._shifts is not None and self._shifts[self._read]
+                            and held.bus_t_s is not None):
+                        held = replace(held, bus_t_s=held.bus_t_s
+                                       - float(self._shifts[self._read]))
+                    self._held[self._read] = held
         return [self._held.pop(int(i)) for i in positions]
 
 
@@ -931,6 +954,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s,
                                channel=channel)
     bus = index.bus
+    # Where the host's clock stepped while the run recorded (its sidecar): the stamps after it
+    # are brought back onto the clock the scene's start was taken on, as live.
+    shifts, unplaced = _bus_time_shifts(index, sidecar)
+    if shifts is not None:
+        index = replace(index, bus_t_s=index.bus_t_s - shifts)
     cut_short = log_cut_short(log, index.last_t_s)
     modulus = receiver_mapping.counter_modulus
     profile_clock = scene.radar.radar_clock
@@ -1052,11 +1080,37 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                               profile_clock.cycle_s)
         alignment.cycle_s = clock.cycle_s
     alignment.cycles_in_log = len(index)
+    jump = None
+    if "bus_time_shifts" not in ((sidecar or {}).get("clock") or {}):
+        # Nothing tells whether the host's clock stepped while the log was recorded.
+        jump = stamp_jump(numbers, index.bus_t_s, profile_clock)
+    if jump is not None:
+        at, size = jump
+        alignment.notes.append(
+            f"the log's stamps jump by {size * 1e3:+.1f} ms from its cycle {at + 1} on "
+            f"(stamped {index.bus_t_s[at]:.6f} s), beyond the radar's jitter: the host's "
+            f"clock stepped while it was recorded (no sidecar of this version says so), or "
+            f"the radar's latency changed; the stamps are taken as they are")
     alignment.log_cut_short = cut_short
     if channel_note:
         alignment.notes.append(channel_note)
     result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
-                    batch_frames, bus, alignment, sidecar, channel)
+                    batch_frames, bus, alignment, sidecar, channel, shifts)
+    half_window_s = 0.5 * ambiguity_window_s(scene.radar, scene.rig)
+    if jump is not None and sidecar is None and abs(jump[1]) > half_window_s:
+        # Aligned by its timestamps, the cycles after the jump are judged that far off.
+        result.reasons.append(
+            f"log_stamps: the log's stamps jump by {jump[1] * 1e3:+.1f} ms from its cycle "
+            f"{jump[0] + 1} on, more than half the ambiguity window ({half_window_s * 1e3:.3g}"
+            f" ms): aligned by its timestamps, the cycles after it may be judged against the "
+            f"wrong frames (a step of the host's clock as it was recorded, or the radar's "
+            f"latency changed); a recording's sidecar says where the host's clock stepped")
+        result.passed = False
+    if unplaced:
+        # Stamps the run brought back that this check cannot find: judged as they are, they
+        # may put cycles against the wrong frames.
+        result.reasons.append(unplaced)
+        result.passed = False
     if other_mapping:
         spoken = recorded_mapping or "rts-scenario's messages"
         alignment.notes.append(f"--mapping {mapping} is not the one the run spoke ({spoken}, "
@@ -1072,7 +1126,6 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)
-    half_window_s = 0.5 * ambiguity_window_s(scene.radar, scene.rig)
     for off_profile in (track.off_profile_reason(half_window_s),
                         track.latency_change_reason(half_window_s)):
         if off_profile:
@@ -1092,6 +1145,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if change is not None:
         result.radar_clock["latency_change_s"] = change[0]
     result.radar_clock.update(lag)
+    steps = ((sidecar or {}).get("clock") or {}).get("host_clock_steps") or []
+    if steps:
+        # The run's, as it said them: the log's stamps were brought back as it did.
+        result.radar_clock["host_clock_steps"] = steps
     playback = (sidecar or {}).get("playback")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run
@@ -1110,6 +1167,74 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 f"judges them at their nominal times (the sidecar, from an older version, "
                 f"keeps no send times)")
     return RecheckResult(scene=scene, report=result, alignment=alignment)
+
+
+# How near a log's stamp must lie to the one the sidecar gives of the cycle a step of the
+# host's clock moved the stamps from (s): a log's time resolution (ASC: 1 us).
+SHIFT_MATCH_S = 1e-4
+
+
+def _bus_time_shifts(index: _LogIndex,
+                     sidecar: dict[str, Any] | None) -> tuple[FloatArray | None, str | None]:
+    """Return what each of the log's cycles' bus time is brought back by, and any step not found.
+
+    The sidecar's ``clock.bus_time_shifts``: from the cycle of that counter stamped ``bus_s``
+    on (in log order), the stamps are ``shift_s`` off the clock the scene's start was taken
+    on (the host's wall clock stepped, `rts_scenario.pipeline.Pipeline._unstep`). None where
+    there are none; the reason where a cycle named is not in the log.
+    """
+    entries = ((sidecar or {}).get("clock") or {}).get("bus_time_shifts") or []
+    if not entries:
+        return None, None
+    shifts = np.zeros(len(index))
+    start = 0
+    for entry in entries:
+        found = np.flatnonzero((index.counters[start:] == int(entry["counter"]))
+                               & (np.abs(index.bus_t_s[start:] - float(entry["bus_s"]))
+                                  <= SHIFT_MATCH_S))
+        if not found.size:
+            return shifts, (f"host_clock: the host's wall clock stepped while the run recorded "
+                            f"(its sidecar), its stamps moved by "
+                            f"{float(entry['shift_s']) * 1e3:+.1f} ms from the cycle of counter "
+                            f"{entry['counter']} stamped {float(entry['bus_s']):.6f} s, which "
+                            f"is not in the log: the stamps from there on were not brought "
+                            f"back, and cycles may be judged against the wrong frames")
+        start += int(found[0])
+        shifts[start:] = float(entry["shift_s"])
+    return shifts, None
+
+
+# Cycles on either side of a jump in a log's stamps whose medians are compared (`stamp_jump`).
+JUMP_CYCLES = 8
+
+
+def stamp_jump(numbers: IntArray, bus_t_s: FloatArray,
+               clock: RadarClock) -> tuple[int, float] | None:
+    """Return where a log's stamps jump (log position of the first cycle after it) and by how much.
+
+    The stamps less the profile's cycle times their numbers, in log order: the median of the
+    `JUMP_CYCLES` after each cycle against that of those up to it. Each lies within the
+    radar's jitter of the latency, so the two differ by at most twice its jitter, plus the
+    stamping's noise and what a crystal within `CLOCK_TOLERANCE_PPM` draws over the windows;
+    beyond that the stamps moved for good from there on (a cycle held up moves one). The
+    largest such jump; None where there is none.
+    """
+    t = np.asarray(bus_t_s, dtype=np.float64)
+    ok = np.isfinite(t)
+    k = JUMP_CYCLES
+    if ok.sum() < 2 * k:
+        return None
+    positions = np.flatnonzero(ok)
+    r = t[ok] - t[ok][0] - (numbers[ok] - numbers[ok][0]) * clock.cycle_s
+    windows = np.lib.stride_tricks.sliding_window_view(r, k)
+    medians = np.median(windows, axis=1)  # of r[i:i + k]
+    jumps = medians[k:] - medians[:-k]  # after cycle i + k - 1 against up to it
+    bound = (2.0 * clock.jitter_s + STAMP_NOISE_S
+             + CLOCK_TOLERANCE_PPM * 1e-6 * 2 * k * clock.cycle_s)
+    if not jumps.size or np.abs(jumps).max() <= bound:
+        return None
+    i = int(np.argmax(np.abs(jumps)))
+    return int(positions[i + k]), float(jumps[i])
 
 
 def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,
@@ -1202,7 +1327,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
            bus_t_s: FloatArray, clock: RadarClock,
            modulus: int, method: str, batch_frames: int | None, bus: dict[str, int],
            alignment: Alignment, sidecar: dict[str, Any] | None,
-           channel: str | None = None) -> Report:
+           channel: str | None = None, shifts: FloatArray | None = None) -> Report:
     """Check the log's cycles (``counters`` in log order, their bus times) batch by batch."""
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
@@ -1234,7 +1359,8 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
-    logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s, channel=channel)
+    logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s, channel=channel,
+                        shifts=shifts)
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]

@@ -315,6 +315,11 @@ class Report:
         untold = self.radar_clock.get("detection_lag_untold")
         if untold:
             lines.append(f"time alignment: not told ({untold})")
+        for step in self.radar_clock.get("host_clock_steps") or []:
+            lines.append(f"host clock: the wall clock stepped {step['size_s'] * 1e3:+.1f} ms "
+                         f"at {step['at_s']:.3f} s after the scene's start (within "
+                         f"{step['within_s'] * 1e3:.0f} ms before); corrected: "
+                         f"{step['corrected']}")
         if self.playback:
             lines.append(_playback_line(self.playback))
         problems = {k: v for k, v in self.bus.items() if k != "messages" and v}

@@ -28,6 +28,7 @@ from cantools.database.utils import create_encode_decode_formats
 
 from ..detections import GAP_TOLERANCE_CYCLES, Detections
 from ..errors import BusError, OutputError
+from ..hostclock import HostClockWatch
 from .checksums import Seal, Verify, checksum_of
 from .mapping import CanMapping, Checksum, PartKey, multiplexer, page_signals
 
@@ -501,6 +502,7 @@ class _Assembly:
     timestamp_s: float | None
     bus_t_s: float | None = None
     host_t_s: float | None = None
+    host_step_s: float = 0.0
     header: dict[str, float] = field(default_factory=dict)  # its raw values
     parts: dict[int, dict[str, float]] = field(default_factory=dict)
     arrived: dict[int, dict[PartKey, dict[str, float]]] = field(default_factory=dict)
@@ -573,7 +575,9 @@ class DetectionReceiver(can.Listener):
 
     Each cycle keeps when its header was on the bus (the message's timestamp, on whatever
     clock the interface stamps with) and when the host received it: ``received_at(message)``,
-    the host's wall clock (`time.time`) when the message is handed over, by default.
+    the host's wall clock (`time.time`) when the message is handed over, by default. With
+    ``host_clock`` (a `HostClockWatch`), it reads the host's clocks at each header too: how
+    far the wall clock had stepped by then is the cycle's `Detections.host_step_s`.
 
     An interface may listen on several channels (each message's ``Message.channel``): with
     ``channel`` (as `channel_label` names it), the receiver reads only that channel's messages
@@ -584,12 +588,14 @@ class DetectionReceiver(can.Listener):
 
     def __init__(self, mapping: CanMapping | None = None, cycle_s: float | None = None,
                  received_at: Callable[[can.Message], float] | None = None, *,
-                 channel: str | None = None) -> None:
+                 channel: str | None = None,
+                 host_clock: HostClockWatch | None = None) -> None:
         self.mapping = mapping or CanMapping.builtin()
+        self.host_clock = host_clock
         self.cycle_s = cycle_s
         self.channel = channel
         self.received_at: Callable[[can.Message], float] = (
-            received_at or (lambda message: time.time()))
+            received_at or self._wall_receipt)
         db = self.mapping.db
         self._header = db.get_message_by_name(self.mapping.header)
         m = self.mapping
@@ -666,6 +672,11 @@ class DetectionReceiver(can.Listener):
         self._index_of, self._low_of = (self._whole_number(self._index),
                                         self._whole_number(self._frame_counter))
         self.reset()
+
+    @staticmethod
+    def _wall_receipt(message: can.Message) -> float:
+        """Return the host's wall clock now: when it received a message (by default)."""
+        return time.time()
 
     def _whole_number(self, name: str | None) -> Callable[[float], int]:
         """Return how a control signal's raw value becomes its physical whole number."""
@@ -814,8 +825,17 @@ class DetectionReceiver(can.Listener):
             stats.decode_errors += 1
             return
         if message is self._header:
+            host = self.host_clock
+            if host is None:
+                received, level = float(self.received_at(msg)), 0.0
+            elif self.received_at is self._wall_receipt:
+                # The receipt is the watch's own reading: its level is the one it was read at.
+                received, level = host.read()
+            else:
+                received = float(self.received_at(msg))
+                level = host.sample()
             self._on_header(values, float(msg.timestamp),  # type: ignore[arg-type]
-                            float(self.received_at(msg)))
+                            received, level)
             return
         if mux is not None:  # the raw page id
             part = (message.frame_id, int(values[mux]))  # type: ignore[call-overload, arg-type]
@@ -824,7 +844,7 @@ class DetectionReceiver(can.Listener):
             self._on_detection(rule, values)  # type: ignore[arg-type]
 
     def _on_header(self, raw: dict[str, float], bus_t_s: float | None = None,
-                   host_t_s: float | None = None) -> None:
+                   host_t_s: float | None = None, host_step_s: float = 0.0) -> None:
         m = self.mapping
         values: dict[str, float] = {
             name: self._header_signals[name].conversion.raw_to_scaled(value, False)  # type: ignore[misc]
@@ -862,7 +882,7 @@ class DetectionReceiver(can.Listener):
             counter=counter, low=value % self._low_modulus,
             expected=int(sum(values[c] for c in m.count)),
             timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s,
-            host_t_s=host_t_s, header=dict(raw))
+            host_t_s=host_t_s, host_step_s=host_step_s, header=dict(raw))
         self._open[counter] = frame
         self._current = frame
         for rule, early in self._waiting.pop(value % self._low_modulus, []):
@@ -1013,6 +1033,7 @@ class DetectionReceiver(can.Listener):
             self._current = None
         self._ready.append(Detections(cycle=counter, t_s=frame.timestamp_s, complete=complete,
                                       bus_t_s=frame.bus_t_s, host_t_s=frame.host_t_s,
+                                      host_step_s=frame.host_step_s,
                                       **self._quantities(frame)))
 
     def _quantities(self, frame: _Assembly) -> dict[str, np.ndarray]:

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import OutputError
+from ..hostclock import monotonic_s, wall_s
 from ..schedule import Schedule
 from .base import Output
 
@@ -152,6 +153,8 @@ class UdpOutput(Output):
         self._start: float | None = None
         self._t0 = 0.0
         self.scene_origin_wall_s: float | None = None
+        # The same instant on the host's monotonic clock (`rts_scenario.hostclock`).
+        self.scene_origin_monotonic_s: float | None = None
         self._frames_sent = 0
         self.entries_sent = 0
         self.datagrams_sent = 0
@@ -277,7 +280,8 @@ class UdpOutput(Output):
         if self._start is None:
             self._start, self._t0 = now, t_s
             # The bus's clock (python-can stamps messages with time.time()) at scene time 0.
-            self.scene_origin_wall_s = time.time() - t_s
+            self.scene_origin_monotonic_s = monotonic_s() - t_s
+            self.scene_origin_wall_s = wall_s() - t_s
         due = self._start + (t_s - self._t0)
         # Sleep most of the way, then spin: sleep alone overshoots by up to a few ms.
         if due - now > 0.002:

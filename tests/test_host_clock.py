@@ -1,0 +1,246 @@
+"""The host's wall clock stepping while a run plays (an NTP step, a manual change, a VM resuming).
+
+python-can stamps messages with ``time.time()``, the host receives them on it, and the scene's
+start is taken on it: a step moves every later time but not the start. A run watches the wall
+clock against the monotonic one, brings the times back by the steps and says so.
+"""
+
+import json
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from free_radar import behind_own_clock
+from test_emulate import bench_scene, rehearse
+from test_radar_clock import free_radar
+
+from rts_scenario.hostclock import SLEW_PPM, STEP_TOLERANCE_S, HostClockWatch
+from rts_scenario.pipeline import Pipeline, RunOptions
+from rts_scenario.radar.profile import RadarProfile
+from rts_scenario.recheck import check_log
+
+
+class SteppedWallClock:
+    """``time.time`` as a host's wall clock that steps by ``step`` when told (`step`)."""
+
+    def __init__(self, monkeypatch):
+        real = time.time
+        self.offset_s = 0.0
+        monkeypatch.setattr(time, "time", lambda: real() + self.offset_s)
+
+    def step(self, size_s):
+        self.offset_s += size_s
+
+
+def test_the_watch_tells_a_step_from_the_wall_clock_s_slew(monkeypatch):
+    wall = SteppedWallClock(monkeypatch)
+    watch = HostClockWatch()
+    assert watch.sample() == 0.0 and watch.steps == []
+    # Below the tolerance: a slew (or a reading's jitter), not a step.
+    wall.step(0.5 * STEP_TOLERANCE_S)
+    assert watch.sample() == 0.0 and watch.steps == []
+    wall.step(0.5)
+    # The step is measured from the reading before: a slew before it is not part of it.
+    assert watch.sample() == pytest.approx(0.5, abs=1e-4)
+    (step,) = watch.steps
+    assert step.size_s == pytest.approx(0.5, abs=1e-3) and step.after_s < step.before_s
+    wall.step(-0.2)
+    assert watch.sample() == pytest.approx(0.3, abs=2e-3)
+    assert [round(s.size_s, 3) for s in watch.steps] == [0.5, -0.2]
+    assert watch.levels() == [0.0, *(s.level_s for s in watch.steps)]
+    # A reading between the two a step fell between is placed by its wall time.
+    first = watch.steps[0]
+    mid = 0.5 * (first.after_s + first.before_s)
+    offset0 = time.time() - time.monotonic() - watch.level_s
+    assert watch.level_at(mid, mid + offset0) == 0.0
+    assert watch.level_at(mid, mid + offset0 + first.size_s) == first.level_s
+    assert watch.level_at(first.before_s) == first.level_s
+    assert SLEW_PPM == 500.0  # NTP's limit: 0.5 ms a second at most
+
+
+def desk_run(monkeypatch, tmp_path, step_s, *, after_batches=2, log=None):
+    """A radar running free on the desk (50 ms, 31 ms into its cycle at the scene's start); the
+    host's wall clock steps by ``step_s`` after ``after_batches`` batches of 40 frames (2 s)."""
+    scene, radar = free_radar(tmp_path)
+    wall = SteppedWallClock(monkeypatch)
+    batches = []
+
+    def progress(done, total):
+        batches.append(done)
+        if len(batches) == after_batches:
+            wall.step(step_s)
+
+    options = RunOptions(batch_frames=40, bus_log=None if log is None else str(log))
+    with Pipeline.for_scene(scene, options) as pipeline:
+        pipeline.output.clock = radar
+        report = pipeline.run(scene, progress=progress).report
+    return scene, report
+
+
+@pytest.mark.parametrize("step_s", [0.5, -0.2])
+def test_a_host_clock_step_mid_run_is_told_and_its_cycles_judged_as_if_it_had_not(
+        monkeypatch, tmp_path, step_s):
+    log = tmp_path / "stepped.blf"
+    scene, report = desk_run(monkeypatch, tmp_path, step_s, log=log)
+    assert report.passed, report.reasons
+    clock = report.radar_clock
+    (step,) = clock["host_clock_steps"]
+    assert step["size_s"] == pytest.approx(step_s, abs=2e-3)
+    assert step["corrected"] == "bus and receipt times"
+    # Told at the batch after the second (4 s of the 12 s scene played on the desk in far
+    # less: the scene's time of a reading is the host's since the start, not the scene's).
+    assert 0.0 <= step["at_s"] and 0.0 <= step["within_s"]
+    # The radar's phase and cycle as if the clock had not stepped.
+    assert clock["start_offset_s"] == pytest.approx(0.031, abs=5e-4)
+    assert "latency_change_s" not in clock
+    assert report.frames["checked"] == report.frames["total"] == 240
+    assert "host clock" in report.table() and f"{step_s * 1e3:+.1f} ms" in report.table()
+    # Its log's sidecar keeps where the stamps stepped: the re-check judges alike.
+    again = check_log(scene, log).report
+    assert again.passed, again.reasons
+    assert again.frames == report.frames
+    (told,) = again.radar_clock["host_clock_steps"]
+    assert told["size_s"] == pytest.approx(step_s, abs=2e-3)
+    # Without its sidecar nothing says the host's clock stepped: aligned by its timestamps,
+    # the re-check says where they jump, and fails rather than judge the cycles after it off.
+    bare = tmp_path / "bare.blf"
+    shutil.copy(log, bare)
+    blind = check_log(scene, bare)
+    assert not blind.report.passed
+    (reason,) = [r for r in blind.report.reasons if r.startswith("log_stamps:")]
+    size = float(reason.split("jump by ")[1].split(" ms")[0]) * 1e-3
+    assert size == pytest.approx(step_s, abs=3e-3)
+    # A sidecar naming a cycle the log lacks: its stamps cannot be brought back, it says so.
+    sidecar = Path(f"{log}.rts.json")
+    data = json.loads(sidecar.read_text())
+    data["clock"]["bus_time_shifts"][0]["bus_s"] += 1.0
+    sidecar.write_text(json.dumps(data))
+    lost = check_log(scene, log).report
+    assert not lost.passed
+    assert any(r.startswith("host_clock: ") and "not in the log" in r for r in lost.reasons)
+
+
+@pytest.mark.parametrize("step_s", [0.5, -0.2])
+def test_without_bringing_the_times_back_the_same_step_fails_the_run(monkeypatch, tmp_path,
+                                                                     step_s):
+    # The control: the step is one a run misjudges when it takes the stamps as they are, and
+    # nothing it says names the cause (+0.5 s: half the cycles judged against frames 10 away,
+    # a detection rate of about 50 %; -0.2 s: cycles taken for missing).
+    monkeypatch.setattr(Pipeline, "_unstep", lambda self, cycles, *args: cycles)
+    _, report = desk_run(monkeypatch, tmp_path, step_s)
+    assert not report.passed
+    assert not any("host" in r for r in report.reasons), report.reasons
+
+
+def test_no_step_no_key(monkeypatch, tmp_path):
+    _, report = desk_run(monkeypatch, tmp_path, 0.0)
+    assert report.passed, report.reasons
+    assert "host_clock_steps" not in report.radar_clock
+    assert np.isfinite(report.radar_clock["start_offset_s"])
+
+
+def emulated_run(monkeypatch, tmp_path, step_s, log=None):
+    """A 4 s scene over UDP to the emulated RTS, its radar running free on a virtual CAN bus
+    (python-can stamps every message with ``time.time()``); the host's wall clock steps by
+    ``step_s`` 2 s into the run, in real time."""
+    scene = bench_scene(tmp_path, counter_start="auto")
+    radar = RadarProfile.from_file(tmp_path / "radars" / "bench.radar.yaml")
+    wall = SteppedWallClock(monkeypatch)
+    timer = threading.Timer(2.0, wall.step, [step_s])
+    timer.start()
+    try:
+        report, _ = rehearse(scene, radar=radar, mapping=None,
+                             bus_log=None if log is None else str(log))
+    finally:
+        timer.cancel()
+    return scene, report
+
+
+@pytest.mark.parametrize("step_s", [0.5, -0.2])
+def test_a_host_clock_step_on_the_emulated_bench_is_told_and_corrected(monkeypatch, tmp_path,
+                                                                        step_s):
+    log = tmp_path / "bench.blf"
+    scene, report = emulated_run(monkeypatch, tmp_path, step_s, log=log)
+    assert report.passed, report.reasons
+    (step,) = report.radar_clock["host_clock_steps"]
+    assert step["size_s"] == pytest.approx(step_s, abs=2e-3)
+    assert step["corrected"] == "bus and receipt times"
+    # 2 s into the run, the scene's start a transport's delay in: wide for a loaded machine.
+    assert 1.0 < step["at_s"] < 3.5
+    assert report.frames["checked"] == report.frames["total"]
+    again = check_log(scene, log).report
+    assert again.passed, again.reasons
+    assert {k: v for k, v in again.frames.items() if k != "after_scene"} == {
+        k: v for k, v in report.frames.items() if k != "after_scene"}
+
+
+def test_without_bringing_the_times_back_the_emulated_bench_fails(monkeypatch, tmp_path):
+    monkeypatch.setattr(Pipeline, "_unstep", lambda self, cycles, *args: cycles)
+    _, report = emulated_run(monkeypatch, tmp_path, 0.5)
+    assert not report.passed
+    assert not any("host" in r for r in report.reasons), report.reasons
+
+
+@pytest.mark.parametrize("step_s", [0.5, -0.2])
+def test_behind_an_interface_with_its_own_clock_only_the_receipts_are_brought_back(
+        monkeypatch, tmp_path, step_s):
+    # The interface stamps with its own clock (seconds since it was plugged in), which the
+    # host's step does not move; the host receives on its wall clock, which it does. The
+    # receipts tie the interface's clock to the host's: brought back, the tie holds.
+    scene, radar = free_radar(tmp_path)
+    wall = SteppedWallClock(monkeypatch)
+    batches = []
+
+    def progress(done, total):
+        batches.append(done)
+        if len(batches) == 2:
+            wall.step(step_s)
+
+    with Pipeline.for_scene(scene, RunOptions(batch_frames=40)) as pipeline:
+        behind_own_clock(pipeline, 0.031, early=0)
+        pipeline.output.clock = radar
+        bus = pipeline._publisher.bus
+        send = bus.send
+
+        def unstepped(msg, timeout=None):  # the interface's clock does not step
+            msg.timestamp -= wall.offset_s
+            send(msg, timeout)
+
+        bus.send = unstepped
+        receipt = pipeline.receiver.received_at
+        pipeline.receiver.received_at = lambda msg: receipt(msg) + wall.offset_s
+        report = pipeline.run(scene, progress=progress).report
+    assert report.passed, report.reasons
+    clock = report.radar_clock
+    assert clock["bus_clock"] == "interface"
+    (step,) = clock["host_clock_steps"]
+    assert step["size_s"] == pytest.approx(step_s, abs=2e-3)
+    assert step["corrected"] == "receipt times (the interface stamps with its own clock)"
+    # Tied within the fastest delivery (3 ms) and the line's 1 ms.
+    assert clock["start_offset_s"] == pytest.approx(0.031, abs=0.005)
+    assert report.frames["checked"] == report.frames["total"]
+
+
+def test_a_reading_another_thread_overtook_keeps_the_level_it_was_read_at(monkeypatch):
+    import rts_scenario.hostclock as hostclock
+
+    readings = iter([])
+
+    def feed(*pairs):  # (monotonic, wall) readings, each read as m0, wall, m1
+        nonlocal readings
+        readings = iter([v for m, w in pairs for v in (m, w, m)])
+
+    monkeypatch.setattr(hostclock, "monotonic_s", lambda: next(readings))
+    monkeypatch.setattr(hostclock, "wall_s", lambda: next(readings))
+    feed((0.0, 100.0))
+    watch = HostClockWatch()
+    feed((9.0, 109.0), (10.0, 110.5), (9.5, 109.5), (9.6, 110.1))
+    assert watch.read() == (109.0, 0.0)
+    assert watch.read() == (110.5, 0.5)  # the step, between 9 s and 10 s
+    # Read before the watch took the step, handed in after: at the level it was read at.
+    assert watch.read() == (109.5, 0.0)
+    assert watch.read() == (110.1, 0.5)
+    assert len(watch.steps) == 1
