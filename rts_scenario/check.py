@@ -524,6 +524,7 @@ class Checker:
         match = np.full(n_det, -1, dtype=np.int64)
         match[det[pair]] = target[pair]
         self._match_folded(match, tracks, played, frame_of, values, invalid)
+        self._match_off_angle(match, tracks, played & ~on_angle, frame_of, values, invalid)
         matched = match >= 0
         assigned = np.zeros((n_frames, n_targets), dtype=bool)
         assigned[frame_of[matched], match[matched]] = True
@@ -587,6 +588,33 @@ class Checker:
         seen.update(range_m=range_m, radial_velocity_mps=velocity)
         inside, cost, _ = self._gate(det, target, frame_of, values, invalid, beyond, seen,
                                      angles=tracks.in_velocity[frame_of[det], target])
+        det, target, cost = det[inside], target[inside], cost[inside]
+        nearest = np.lexsort((cost, det))
+        first = np.unique(det[nearest], return_index=True)[1]
+        match[det[nearest][first]] = target[nearest][first]
+
+    def _match_off_angle(self, match: NDArray[np.int64], tracks: Tracks, off: BoolArray,
+                         frame_of: NDArray[np.int64], values: dict[str, FloatArray],
+                         invalid: BoolArray) -> None:
+        """Give detections left unmatched to the echoes the RTS's steps played off their angle.
+
+        Settings that move a target's angle (``ANGLE_QUANTIZED``) may play more than one peak
+        at its range and velocity (a split beam), which the radar reports as several
+        detections. Every unmatched detection within the range and velocity gate of such an
+        echo is that echo's (the nearest one's), not a false alarm; the target-frame is not
+        checkable, so none of this decides a detection rate.
+        """
+        free = np.flatnonzero(match < 0)
+        if not off.any() or free.size == 0:
+            return
+        tol = self.expectations.tolerances
+        det, target = _range_candidates(frame_of[free], values["range_m"][free],
+                                        np.where(off, tracks.range_m, np.nan),
+                                        GATE * tol["range_m"])
+        det = free[det]
+        inside, cost, _ = self._gate(det, target, frame_of, values, invalid, off,
+                                     {q: getattr(tracks, q) for q, _ in QUANTITIES},
+                                     angles=np.zeros(det.size, dtype=bool))
         det, target, cost = det[inside], target[inside], cost[inside]
         nearest = np.lexsort((cost, det))
         first = np.unique(det[nearest], return_index=True)[1]

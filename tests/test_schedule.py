@@ -484,3 +484,28 @@ def test_a_target_the_rts_s_steps_move_off_its_angle_is_flagged_but_played():
                          fe_responses="plane-wave", angle_tolerance_deg=(0.03, 0.03))
     assert (np.abs(sch.angle_error_deg[0]) > 0.01).any(axis=1).mean() > 0.5
     assert not (sch.status & Status.ANGLE_QUANTIZED).any()
+
+
+@pytest.mark.parametrize("step_deg", [90.0, 180.0])
+def test_the_aware_phase_search_never_leaves_settings_that_play_no_peak(step_deg):
+    # kit-table1 uncalibrated, a continuous attenuator, plane waves: every channel's exact
+    # phase is 0, on the phase shifter's steps, so the nearest steps play each target exactly
+    # where it is set. Neighbouring steps (90 or 180 deg off) play no peak there at all (the
+    # predicted error of such settings is zero, saying nothing): the aware search must not take
+    # them for perfect. The independent Bartlett search finds every played peak on its angle.
+    radar = RadarProfile.preset("awr1843boost")
+    rig = rig_with(phase_step_deg=step_deg, echoes_per_channel=200)
+    az, el = np.meshgrid(np.linspace(-3.5, 3.5, 8), np.linspace(-7, 7, 8))
+    az, el = az.ravel(), el.ravel()
+    sch = build_schedule(tracks(az, el), rig, radar, quantization="aware",
+                         fe_responses="plane-wave", angle_tolerance_deg=(0.5, 1.0))
+    assert not (sch.status & Status.ANGLE_QUANTIZED).any()
+    fe, on = np.maximum(sch.fe[0], 0), sch.active[0]
+    k = 2.0 * np.pi / radar.array.wavelength_m
+    for i in range(az.size):
+        a_az, a_el = np.radians(rig.az_deg[fe[i]]), np.radians(rig.el_deg[fe[i]])
+        sources = np.exp(1j * k * (np.outer(np.cos(a_el) * np.sin(a_az), radar.array.y_m)
+                                   + np.outer(np.sin(a_el), radar.array.z_m)))
+        x = (sch.weight[0, i] * np.exp(1j * np.where(on[i], sch.phase_rad[0, i], 0.0))) @ sources
+        np.testing.assert_allclose(_bartlett_peak(radar.array, x, az[i], el[i]), [az[i], el[i]],
+                                   atol=0.01)

@@ -318,6 +318,11 @@ def _start_levels(
         new_w = new_w / np.where(top > 0.0, top, 1.0)
         return new_w, predicted_angle_error(turned, new_w, u[at], s[at])
 
+    def peak(w: FloatArray, turned: NDArray[np.complex128],
+             at: slice | NDArray[np.intp]) -> NDArray[np.bool_]:
+        """Where the weights, as the phases play them, have a peak near the set direction."""
+        return peak_near(turned, w.astype(np.complex128), u[at], s[at])[1]
+
     def finish() -> Levels:
         chosen, clipped = settings()
         new_w, err = levels(chosen, full, resp, slice(None))
@@ -325,7 +330,12 @@ def _start_levels(
         if other_settings is not None:
             other_chosen, other_clipped = other_settings()
             other_w, other_err = levels(other_chosen, other_full, other_resp, other)
-            better = np.hypot(*other_err.T) < np.hypot(*err[other].T) - ANGLE_TIE_DEG
+            # Settings that play no peak near the set direction (their predicted error, zero,
+            # says nothing) lose to settings that do.
+            other_peak = peak(other_w, other_resp, other)
+            near_peak = peak(new_w[other], resp[:, :, other], other)
+            better = other_peak & (~near_peak | (np.hypot(*other_err.T)
+                                                 < np.hypot(*err[other].T) - ANGLE_TIE_DEG))
             at = other[better]
             chosen[at], new_w[at], err[at], clipped[at] = (
                 other_chosen[better], other_w[better], other_err[better], other_clipped[better])

@@ -127,7 +127,8 @@ def phase_settings(resp: NDArray[np.complex128], weights: FloatArray, phase: Flo
     (a common turn of all four channels moves no angle), the others' nearest or the step
     below or above it, the combination whose synthesized angle with the solved ``weights`` is
     closest to the set one (the exact prediction, one Newton step per combination; the
-    nearest steps compete and win ties). The schedule then fits the attenuators to these
+    nearest steps compete and win ties; a combination that plays no peak near the set
+    direction never wins). The schedule then fits the attenuators to these
     phases and to the nearest ones and keeps the better fit (`rts_scenario.schedule.build`).
     Without a step the phases are only wrapped.
 
@@ -157,8 +158,11 @@ def phase_settings(resp: NDArray[np.complex128], weights: FloatArray, phase: Flo
     for i in range(3):  # the three channels that may move
         moved = share[:, others[:, i], n][:, :, None] * (turns - 1.0)  # (6, N, 3)
         beam = beam + moved.reshape(*moved.shape[:2], *np.roll([3, 1, 1], i))
-    err = _beam_angle_error(beam.reshape(6, len(phase), -1), u, s)
-    cost = np.hypot(err[..., 0], err[..., 1])
+    beam = beam.reshape(6, len(phase), -1)
+    err = _beam_angle_error(beam, u, s)
+    # Settings that play no peak near the set direction predict an error of zero, which says
+    # nothing: they never win.
+    cost = np.where(newton_step(*beam)[2], np.hypot(err[..., 0], err[..., 1]), np.inf)
     centre = cost.shape[1] // 2  # no channel moved: the nearest steps
     best = np.argmin(cost, axis=1)
     best = np.where(cost[n, best] < cost[:, centre] - ANGLE_TIE_DEG, best, centre)
