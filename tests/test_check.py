@@ -660,3 +660,19 @@ def test_a_folded_echo_never_takes_a_checkable_target_s_detection():
     report = check("s", tracks, OK(20, 2), reported(tracks, 20.0, 3.0, []), expect)
     assert report.passed, report.reasons
     assert report.targets[1].detected_frames == 20 and report.folded_detections == 0
+
+
+def test_every_detection_of_an_echo_played_off_its_angle_is_its_own():
+    # The RTS's steps played the target at 40 m, 5 m/s off its angle (ANGLE_QUANTIZED, not
+    # checkable): the radar reports it twice, 6 deg apart, both away from the set angle. Both
+    # are the echo's, no false alarm; elsewhere in range they are false.
+    tracks = beyond(5.0)
+    status = OK(20, 2)
+    status[:, 0] = Status.ANGLE_QUANTIZED
+    expect = dataclasses.replace(EXPECT, expected_limits=frozenset({"angle_quantized"}),
+                                 max_false_detections_per_frame=0.0)
+    report = check("s", tracks, status, reported(tracks, 40.0, 5.0, [(5, 1), (-1, 1)]), expect)
+    assert report.passed, report.reasons
+    assert report.false_detections == 0 and report.targets[0].limits == {"angle_quantized": 20}
+    report = check("s", tracks, status, reported(tracks, 43.0, 5.0, [(5, 1), (-1, 1)]), expect)
+    assert report.false_detections == 40 and not report.passed

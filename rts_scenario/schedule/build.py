@@ -44,14 +44,15 @@ from .quantization import (
     peak_near,
     phase_rounding,
     phase_settings,
-    predicted_angle_error,
     start_attenuator_settings,
 )
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-# A quad's levels: weights, attenuations, phases, predicted angle errors, clipping.
-Levels = tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]
+# A quad's levels: weights, attenuations, phases, predicted angle errors, clipping, and
+# whether the settings play a peak near the set direction.
+Levels = tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_],
+               NDArray[np.bool_]]
 
 # What the solver takes the FEs' echoes to be (`solver_inputs`); the first is the default.
 FE_RESPONSES = ("modeled", "plane-wave")
@@ -169,6 +170,7 @@ def build_schedule(
     solved = weight.copy()  # before the steps: what the method aims at
     angle_error = np.zeros((*shape, 2))
     clipped = np.zeros(shape, dtype=bool)
+    no_peak = np.zeros(shape, dtype=bool)
     fe0 = np.maximum(fe, 0)
     delay, exact_phase = channel_delays(rig, radar, tracks.range_m[..., None], fe0)
     # On the phase shifter's steps; a quad's entries may take a neighbouring step (below).
@@ -197,9 +199,10 @@ def build_schedule(
                                                array.n_elements, limits, quantization, u, s)))
             if len(pending) > 1:
                 _store_levels(*pending.pop(0), weight, attenuation, phase, angle_error,
-                              clipped)
+                              clipped, no_peak)
         while pending:
-            _store_levels(*pending.pop(0), weight, attenuation, phase, angle_error, clipped)
+            _store_levels(*pending.pop(0), weight, attenuation, phase, angle_error, clipped,
+                          no_peak)
     except BaseException:
         # No search goes on behind the caller's back once it hears of the error.
         for _, finish in pending:
@@ -208,8 +211,8 @@ def build_schedule(
         raise
     if angle_tolerance_deg is not None and (limits.attenuation_step_db > 0.0
                                             or limits.phase_step_deg > 0.0):
-        status |= _angle_quantized(angle_error, solved, weight, phase, exact_phase, quad, ok,
-                                   tracks, responses, angle_tolerance_deg)
+        status |= _angle_quantized(angle_error, no_peak, solved, quad, ok, tracks, responses,
+                                   angle_tolerance_deg)
     # Quantization may switch an idle channel on (weakly) to hold the angle.
     active = ok[..., None] & (weight > 0.0)
     attenuation[~active] = np.nan
@@ -312,35 +315,36 @@ def _start_levels(
     other_full, other_settings = start(other_resp, other) if other.size else (full, None)
 
     def levels(chosen: FloatArray, full: FloatArray, turned: NDArray[np.complex128],
-               at: slice | NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
+               at: slice | NDArray[np.intp]
+               ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Return the settings' weights, predicted angle error and whether they play a peak.
+
+        A peak near the set direction, that is; where there is none, the error says nothing.
+        """
         new_w = np.where(np.isfinite(chosen), 10.0 ** (-(chosen - full) / 20.0), 0.0)
         top = new_w.max(axis=1, keepdims=True)
         new_w = new_w / np.where(top > 0.0, top, 1.0)
-        return new_w, predicted_angle_error(turned, new_w, u[at], s[at])
-
-    def peak(w: FloatArray, turned: NDArray[np.complex128],
-             at: slice | NDArray[np.intp]) -> NDArray[np.bool_]:
-        """Where the weights, as the phases play them, have a peak near the set direction."""
-        return peak_near(turned, w.astype(np.complex128), u[at], s[at])[1]
+        err, has_peak = peak_near(turned, new_w, u[at], s[at])
+        return new_w, err, has_peak
 
     def finish() -> Levels:
         chosen, clipped = settings()
-        new_w, err = levels(chosen, full, resp, slice(None))
+        new_w, err, has_peak = levels(chosen, full, resp, slice(None))
         set_phase = nearest.copy()
         if other_settings is not None:
             other_chosen, other_clipped = other_settings()
-            other_w, other_err = levels(other_chosen, other_full, other_resp, other)
-            # Settings that play no peak near the set direction (their predicted error, zero,
-            # says nothing) lose to settings that do.
-            other_peak = peak(other_w, other_resp, other)
-            near_peak = peak(new_w[other], resp[:, :, other], other)
-            better = other_peak & (~near_peak | (np.hypot(*other_err.T)
-                                                 < np.hypot(*err[other].T) - ANGLE_TIE_DEG))
+            other_w, other_err, other_peak = levels(other_chosen, other_full, other_resp, other)
+            # Settings that play no peak near the set direction lose to settings that do.
+            better = other_peak & (~has_peak[other] | (np.hypot(*other_err.T)
+                                                       < np.hypot(*err[other].T)
+                                                       - ANGLE_TIE_DEG))
             at = other[better]
-            chosen[at], new_w[at], err[at], clipped[at] = (
-                other_chosen[better], other_w[better], other_err[better], other_clipped[better])
+            chosen[at], new_w[at], err[at], clipped[at], has_peak[at] = (
+                other_chosen[better], other_w[better], other_err[better], other_clipped[better],
+                True)
             set_phase[at] = chosen_phase[at]
-        return (new_w, np.where(np.isfinite(chosen), chosen, np.nan), set_phase, err, clipped)
+        return (new_w, np.where(np.isfinite(chosen), chosen, np.nan), set_phase, err, clipped,
+                has_peak)
 
     return finish
 
@@ -350,42 +354,39 @@ def _start_levels(
 BENCH_ANGLE_SHARE = 1.0 / 3.0
 
 
-def _angle_quantized(angle_error: FloatArray, solved: FloatArray, played: FloatArray,
-                     phase: FloatArray, exact_phase: FloatArray, quad: NDArray[np.int64],
-                     ok: NDArray[np.bool_], tracks: Tracks, responses: Sequence[Any],
-                     tolerance_deg: tuple[float, float]) -> NDArray[np.uint16]:
+def _angle_quantized(angle_error: FloatArray, no_peak: NDArray[np.bool_], solved: FloatArray,
+                     quad: NDArray[np.int64], ok: NDArray[np.bool_], tracks: Tracks,
+                     responses: Sequence[Any], tolerance_deg: tuple[float, float]
+                     ) -> NDArray[np.uint16]:
     """Flag entries whose synthesized angle the RTS's steps move beyond `BENCH_ANGLE_SHARE`.
 
-    The steps' share is the predicted error of the settings played (weights ``played``,
-    phases ``phase`` against the ``exact_phase`` each channel needs) less that of the
-    ``solved`` weights before the steps (zero for the exact method, the method's own for the
-    paper's or an estimator's aim). Flagged too: settings that play no peak near the set
-    direction at all (its predicted error, zero there, says nothing). Evaluated where
-    ``angle_error`` exceeds the share or is that zero.
+    The steps' share is the predicted error ``angle_error`` of the settings played less that
+    of the ``solved`` weights before the steps (zero for the exact method, the method's own
+    for the paper's or an estimator's aim), evaluated where the whole error exceeds the share.
+    Flagged too: settings that play no peak near the set direction (``no_peak``: their
+    predicted error says nothing).
     """
     bound = BENCH_ANGLE_SHARE * np.asarray(tolerance_deg, dtype=np.float64)
-    out = np.zeros(ok.shape, dtype=np.uint16)
-    err = np.nan_to_num(angle_error)
-    maybe = ok & ((np.abs(err) > bound).any(axis=-1) | (err == 0.0).all(axis=-1))
+    out = np.where(ok & no_peak, Status.ANGLE_QUANTIZED, 0).astype(np.uint16)
+    maybe = ok & ~no_peak & (np.abs(np.nan_to_num(angle_error)) > bound).any(axis=-1)
     for q in np.unique(quad[maybe]):
         sel = np.flatnonzero((maybe & (quad == q)).ravel())
         u, s = direction_cosines(np.radians(tracks.az_deg.ravel()[sel]),
                                  np.radians(tracks.el_deg.ravel()[sel]))
-        resp = responses[q].evaluate(u, s)
-        own, _ = peak_near(resp, solved.reshape(-1, 4)[sel], u, s)
-        turn = np.exp(1j * (phase.reshape(-1, 4)[sel] - exact_phase.reshape(-1, 4)[sel]))
-        as_played, peak = peak_near(resp, played.reshape(-1, 4)[sel] * turn, u, s)
-        off = ~peak | (np.abs(as_played - own) > bound).any(axis=-1)
-        out.ravel()[sel[off]] = Status.ANGLE_QUANTIZED
+        own, _ = peak_near(responses[q].evaluate(u, s), solved.reshape(-1, 4)[sel], u, s)
+        moved = (np.abs(angle_error.reshape(-1, 2)[sel] - own) > bound).any(axis=-1)
+        out.ravel()[sel[moved]] = Status.ANGLE_QUANTIZED
     return out
 
 
 def _store_levels(sel: NDArray[np.intp], finish: Callable[[], Levels],
                   weight: FloatArray, attenuation: FloatArray, phase: FloatArray,
-                  angle_error: FloatArray, clipped: NDArray[np.bool_]) -> None:
+                  angle_error: FloatArray, clipped: NDArray[np.bool_],
+                  no_peak: NDArray[np.bool_]) -> None:
     """Wait for a quad's levels (`_start_levels`) and write them at its entries ``sel``."""
-    w, att, ph, err, clip = finish()
+    w, att, ph, err, clip, has_peak = finish()
     clipped.ravel()[sel] = clip
+    no_peak.ravel()[sel] = ~has_peak
     weight.reshape(-1, 4)[sel] = w
     attenuation.reshape(-1, 4)[sel] = att
     phase.reshape(-1, 4)[sel] = ph
