@@ -91,7 +91,7 @@ def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: 
         Predicted azimuth and elevation error in degrees.
     """
     w = weights if weights.ndim == 3 else weights[:, None, :]
-    err = _beam_angle_error(np.einsum("tqn,ncq->tnc", resp, w), u, s)
+    err, _ = _beam_angle_error(np.einsum("tqn,ncq->tnc", resp, w), u, s)
     return err if weights.ndim == 3 else err[:, 0]
 
 
@@ -103,19 +103,20 @@ def peak_near(resp: NDArray[np.complex128], weights: NDArray[Any], u: FloatArray
     Hessian is not negative definite): the settings play no peak near it, and the error the
     first gives there (zero) says nothing.
     """
-    beam = np.einsum("tqn,nq->tn", resp, weights)
+    err, ok = _beam_angle_error(np.einsum("tqn,nq->tn", resp, weights)[:, :, None], u, s)
+    return err[:, 0], ok[:, 0]
+
+
+def _beam_angle_error(beam: NDArray[np.complex128], u: FloatArray, s: FloatArray
+                      ) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """`predicted_angle_error` from the beamformer output and its derivatives, (6, N, C).
+
+    Also where a peak is near (`peak_near`), shape (N, C).
+    """
     du, dsv, ok = newton_step(*beam)
     az0, el0 = angles_from_cosines(u, s)
-    az1, el1 = angles_from_cosines(u + du, s + dsv)
-    return np.degrees(np.stack([az1 - az0, el1 - el0], axis=-1)), ok
-
-
-def _beam_angle_error(beam: NDArray[np.complex128], u: FloatArray, s: FloatArray) -> FloatArray:
-    """`predicted_angle_error` from the beamformer output and its derivatives, (6, N, C)."""
-    du, dsv, _ = newton_step(*beam)
-    az0, el0 = angles_from_cosines(u, s)
     az1, el1 = angles_from_cosines(u[:, None] + du, s[:, None] + dsv)
-    return np.degrees(np.stack([az1 - az0[:, None], el1 - el0[:, None]], axis=-1))
+    return np.degrees(np.stack([az1 - az0[:, None], el1 - el0[:, None]], axis=-1)), ok
 
 
 def phase_settings(resp: NDArray[np.complex128], weights: FloatArray, phase: FloatArray,
@@ -159,10 +160,10 @@ def phase_settings(resp: NDArray[np.complex128], weights: FloatArray, phase: Flo
         moved = share[:, others[:, i], n][:, :, None] * (turns - 1.0)  # (6, N, 3)
         beam = beam + moved.reshape(*moved.shape[:2], *np.roll([3, 1, 1], i))
     beam = beam.reshape(6, len(phase), -1)
-    err = _beam_angle_error(beam, u, s)
+    err, has_peak = _beam_angle_error(beam, u, s)
     # Settings that play no peak near the set direction predict an error of zero, which says
     # nothing: they never win.
-    cost = np.where(newton_step(*beam)[2], np.hypot(err[..., 0], err[..., 1]), np.inf)
+    cost = np.where(has_peak, np.hypot(err[..., 0], err[..., 1]), np.inf)
     centre = cost.shape[1] // 2  # no channel moved: the nearest steps
     best = np.argmin(cost, axis=1)
     best = np.where(cost[n, best] < cost[:, centre] - ANGLE_TIE_DEG, best, centre)
