@@ -13,6 +13,11 @@ continuous level is a bound); an option already predicted is not predicted again
 candidates are the last pass's, from the same settings, is not run. Amplitudes of grid
 settings come from tables, and the angle changes from the sines of the differences.
 
+`phase_search` is the phase shifter's search (`quantization.phase_settings`): the 27
+combinations of turns, each predicted in real arithmetic from partial sums of the channels'
+shares; it chooses as the numpy search does where the predictions do not tie to rounding
+(tests/test_phase_search.py).
+
 Constants are arguments, not globals: numba freezes globals into its cached machine code.
 """
 
@@ -373,3 +378,146 @@ def search(resp, weights, full, naive, u, s, reaches, aboves, low, step, high, s
         for q in range(4):
             out[i, q] = best[q]
         out_error[i] = best_err
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def phase_search(resp, weights, rotation, turns_re, turns_im, u, s, tie, out,
+                 first, stop):  # pragma: no cover
+    """`quantization.phase_settings`' choice, entry by entry: ``out[i]`` the combination.
+
+    ``rotation`` (N, 4) complex: each channel's turn at its nearest step,
+    ``exp(j (nearest - exact))``; ``turns_re``, ``turns_im`` (3,): ``exp(j k step) - 1`` for
+    ``k = -1, 0, 1``. ``out`` (N,) gets the index of the chosen combination of the three
+    channels other than the strongest (``(k_a + 1) * 9 + (k_b + 1) * 3 + k_c + 1``, 13: the
+    nearest steps). Each combination's beam is the nearest steps' beam plus the turned
+    channels' shares, in real arithmetic; its predicted error is `_error`'s (one Newton step,
+    the angle change from the sines of the differences), inf where it plays no peak.
+    """
+    share_re = np.empty((6, 4))
+    share_im = np.empty((6, 4))
+    moved_re = np.empty((3, 6, 3))
+    moved_im = np.empty((3, 6, 3))
+    beam_re = np.empty(6)
+    beam_im = np.empty(6)
+    part_re = np.empty((3, 6))
+    part_im = np.empty((3, 6))
+    others = np.empty(3, dtype=np.int64)
+    du = np.empty(27)
+    ds = np.empty(27)
+    peak = np.empty(27, dtype=np.bool_)
+    near = np.empty(27, dtype=np.bool_)
+    cost = np.empty(27)
+    for i in range(first, stop):
+        strong = 0
+        for q in range(1, 4):
+            if weights[i, q] > weights[i, strong]:
+                strong = q
+        j = 0
+        for q in range(4):
+            if q != strong:
+                others[j] = q
+                j += 1
+        for q in range(4):
+            rot = rotation[i, q] * weights[i, q]
+            for t in range(6):
+                v = resp[t, q, i] * rot
+                share_re[t, q] = v.real
+                share_im[t, q] = v.imag
+        for t in range(6):
+            beam_re[t] = share_re[t, 0] + share_re[t, 1] + share_re[t, 2] + share_re[t, 3]
+            beam_im[t] = share_im[t, 0] + share_im[t, 1] + share_im[t, 2] + share_im[t, 3]
+        for a in range(3):
+            q = others[a]
+            for t in range(6):
+                for k in range(3):
+                    moved_re[a, t, k] = share_re[t, q] * turns_re[k] - share_im[t, q] * turns_im[k]
+                    moved_im[a, t, k] = share_re[t, q] * turns_im[k] + share_im[t, q] * turns_re[k]
+        # Each combination's Newton step (the sums in the order ((beam + a) + b) + c).
+        for ka in range(3):
+            for t in range(6):
+                part_re[0, t] = beam_re[t] + moved_re[0, t, ka]
+                part_im[0, t] = beam_im[t] + moved_im[0, t, ka]
+            for kb in range(3):
+                for t in range(6):
+                    part_re[1, t] = part_re[0, t] + moved_re[1, t, kb]
+                    part_im[1, t] = part_im[0, t] + moved_im[1, t, kb]
+                for kc in range(3):
+                    for t in range(6):
+                        part_re[2, t] = part_re[1, t] + moved_re[2, t, kc]
+                        part_im[2, t] = part_im[1, t] + moved_im[2, t, kc]
+                    _newton(part_re, part_im, ka * 9 + kb * 3 + kc, du, ds, peak)
+        # The angle changes of all 27 (branch-free: numba vectorizes it), the sines of the
+        # differences through `_asin_small`'s series; beyond its range the exact path.
+        direction = _direction(u[i], s[i])
+        az0, el0, sin_az0, cos_az0, sin_el0, cos_el0 = direction
+        for c in range(27):
+            s1 = s[i] + ds[c]
+            u1 = u[i] + du[c]
+            cos_el1 = math.sqrt(1.0 - s1 * s1)
+            sin_az1 = u1 / cos_el1
+            cos_az1 = math.sqrt(1.0 - sin_az1 * sin_az1)
+            x_el = s1 * cos_el0 - cos_el1 * sin_el0
+            x_az = sin_az1 * cos_az0 - cos_az1 * sin_az0
+            d_el = _series_asin(x_el)
+            d_az = _series_asin(x_az)
+            near[c] = ((abs(x_el) <= 0.02) & (abs(x_az) <= 0.02) & (abs(d_el) <= 0.02)
+                       & (abs(d_az) <= 0.02))  # False for NaN
+            cost[c] = d_az * d_az + d_el * d_el
+        best = 13
+        best_cost = math.inf
+        centre_cost = math.inf
+        for c in range(27):
+            h = math.inf
+            if peak[c]:
+                h = cost[c]
+                if not near[c]:  # far off (or beyond the sphere)
+                    h = _far_error(u[i] + du[c], s[i] + ds[c], direction)
+            if c == 13:
+                centre_cost = h
+            if h < best_cost:
+                best_cost = h
+                best = c
+        best_deg = math.degrees(math.sqrt(best_cost))
+        out[i] = best if best_deg < math.degrees(math.sqrt(centre_cost)) - tie else 13
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _newton(re, im, c, du, ds, peak):  # pragma: no cover
+    """Newton step of the beam ``re[2] + j im[2]`` (B and its derivatives) into ``du[c], ds[c]``.
+
+    ``peak[c]``: whether ``|B|^2`` curves down there (else the step says nothing).
+    """
+    r0, r1, r2, r3, r4, r5 = re[2, 0], re[2, 1], re[2, 2], re[2, 3], re[2, 4], re[2, 5]
+    i0, i1, i2, i3, i4, i5 = im[2, 0], im[2, 1], im[2, 2], im[2, 3], im[2, 4], im[2, 5]
+    g_u = r0 * r1 + i0 * i1
+    g_s = r0 * r2 + i0 * i2
+    h_uu = (r0 * r3 + i0 * i3) + (r1 * r1 + i1 * i1)
+    h_us = (r0 * r4 + i0 * i4) + (r1 * r2 + i1 * i2)
+    h_ss = (r0 * r5 + i0 * i5) + (r2 * r2 + i2 * i2)
+    det = h_uu * h_ss - h_us * h_us
+    peak[c] = det > 0.0 and h_uu < 0.0
+    du[c] = -(h_ss * g_u - h_us * g_s) / det
+    ds[c] = -(h_uu * g_s - h_us * g_u) / det
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _series_asin(x):  # pragma: no cover
+    """`_asin_small`'s series for ``|x| <= 0.02`` (the caller checks the range)."""
+    x2 = x * x
+    return x * (1.0 + x2 * (1.0 / 6.0 + x2 * (3.0 / 40.0 + x2 * (5.0 / 112.0 + x2 * (
+        35.0 / 1152.0 + x2 * (63.0 / 2816.0))))))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _far_error(u1, s1, direction):  # pragma: no cover
+    """Squared angle change (rad^2) to ``(u1, s1)`` where the series does not apply: `_error`."""
+    az0, el0, sin_az0, cos_az0, sin_el0, cos_el0 = direction
+    cos_el1 = math.sqrt(1.0 - s1 * s1)
+    sin_az1 = u1 / cos_el1
+    cos_az1 = math.sqrt(1.0 - sin_az1 * sin_az1)
+    d_el = _asin_small(s1 * cos_el0 - cos_el1 * sin_el0)
+    d_az = _asin_small(sin_az1 * cos_az0 - cos_az1 * sin_az0)
+    if not (abs(d_el) <= 0.02 and abs(d_az) <= 0.02):
+        az1, el1 = _angles(u1, s1)
+        d_az, d_el = az1 - az0, el1 - el0
+    return d_az * d_az + d_el * d_el

@@ -65,6 +65,9 @@ COMPILED_FROM = 20_000
 # Entries per compiled call at most: parts run on threads, one per core, several parts per
 # thread so that a core slowed by other work does not hold the others up.
 COMPILED_PART = 2048
+# Entries per block of the numpy phase search (`phase_settings`): its (6, entries, 27) complex
+# temporaries stay in cache.
+PHASE_BLOCK = 1024
 
 
 def predicted_angle_error(resp: NDArray[np.complex128], weights: FloatArray, u: FloatArray,
@@ -129,7 +132,8 @@ def phase_settings(resp: NDArray[np.complex128], weights: FloatArray, phase: Flo
     below or above it, the combination whose synthesized angle with the solved ``weights`` is
     closest to the set one (the exact prediction, one Newton step per combination; the
     nearest steps compete and win ties; a combination that plays no peak near the set
-    direction never wins). The schedule then fits the attenuators to these
+    direction never wins). Large searches run compiled with numba (`compiled_phase_search`,
+    as `compiled_search` for the attenuators). The schedule then fits the attenuators to these
     phases and to the nearest ones and keeps the better fit (`rts_scenario.schedule.build`).
     Without a step the phases are only wrapped.
 
@@ -149,29 +153,84 @@ def phase_settings(resp: NDArray[np.complex128], weights: FloatArray, phase: Flo
     # A common turn moves no angle: the strongest channel keeps its nearest step, the other
     # three take every combination of the step below their nearest, it and the step above.
     # (Without that, all four a step up would tie with the nearest steps, to rounding.)
-    n = np.arange(len(phase))
     others = _OTHER_CHANNELS[np.argmax(weights, axis=1)]  # (N, 3)
-    # Each channel's share of the beamformer output at its nearest step, (6, 4, N); the
-    # combinations' outputs are sums of the shares, turned by -1, 0 or 1 step.
-    share = resp * (weights * phase_rounding(nearest, phase)).T[None]
-    turns = np.exp(1j * np.radians(step) * np.arange(-1.0, 2.0))
+    rotation = phase_rounding(nearest, phase)
+    turns = np.exp(1j * np.radians(step) * np.arange(-1.0, 2.0)) - 1.0
+    kernel = compiled_phase_search() if _compile_phases(len(phase)) else None
+    if kernel is not None:
+        best = np.empty(len(phase), dtype=np.int64)
+        args = [np.ascontiguousarray(a) for a in (resp, weights, rotation, turns.real,
+                                                  turns.imag, u, s)]
+        start_parts(lambda first: kernel(*args, ANGLE_TIE_DEG, best, first,
+                                         min(first + COMPILED_PART, len(best))),
+                    range(0, len(best), COMPILED_PART))()
+    else:
+        # Entries go in blocks: the (6, entries, 27) temporaries stay in cache.
+        best = np.concatenate([
+            _best_turns(resp[:, :, b], weights[b], rotation[b], others[b], turns, u[b], s[b])
+            for b in (slice(i, i + PHASE_BLOCK) for i in range(0, len(phase), PHASE_BLOCK))])
+    steps = np.stack(np.unravel_index(best, (3, 3, 3)), axis=1) - 1.0  # (N, 3)
+    chosen = nearest.copy()
+    np.put_along_axis(chosen, others, limits.phase_setting(
+        np.take_along_axis(nearest, others, axis=1) + np.radians(step) * steps), axis=1)
+    return chosen
+
+
+def _best_turns(resp: NDArray[np.complex128], weights: FloatArray,
+                rotation: NDArray[np.complex128], others: NDArray[np.intp],
+                turns: NDArray[np.complex128], u: FloatArray, s: FloatArray) -> NDArray[np.intp]:
+    """`phase_settings`' choice: the combination of turns (index into (3, 3, 3)) per entry.
+
+    Each channel's share of the beamformer output at its nearest step (``rotation``); the
+    combinations' outputs are the sums of the shares, ``others`` turned by ``turns`` (the
+    factors ``exp(j k step) - 1``, k = -1, 0, 1), predicted one Newton step each.
+    """
+    n = np.arange(len(u))
+    share = resp * (weights * rotation).T[None]  # (6, 4, N)
     beam = share.sum(axis=1)[:, :, None, None, None]
     for i in range(3):  # the three channels that may move
-        moved = share[:, others[:, i], n][:, :, None] * (turns - 1.0)  # (6, N, 3)
+        moved = share[:, others[:, i], n][:, :, None] * turns  # (6, N, 3)
         beam = beam + moved.reshape(*moved.shape[:2], *np.roll([3, 1, 1], i))
-    beam = beam.reshape(6, len(phase), -1)
+    beam = beam.reshape(6, len(u), -1)
     err, has_peak = _beam_angle_error(beam, u, s)
     # Settings that play no peak near the set direction predict an error of zero, which says
     # nothing: they never win.
     cost = np.where(has_peak, np.hypot(err[..., 0], err[..., 1]), np.inf)
     centre = cost.shape[1] // 2  # no channel moved: the nearest steps
     best = np.argmin(cost, axis=1)
-    best = np.where(cost[n, best] < cost[:, centre] - ANGLE_TIE_DEG, best, centre)
-    steps = np.stack(np.unravel_index(best, (3, 3, 3)), axis=1) - 1.0  # (N, 3)
-    chosen = nearest.copy()
-    np.put_along_axis(chosen, others, limits.phase_setting(
-        np.take_along_axis(nearest, others, axis=1) + np.radians(step) * steps), axis=1)
-    return chosen
+    return np.where(cost[n, best] < cost[:, centre] - ANGLE_TIE_DEG, best, centre)
+
+
+def _compile_phases(entries: int) -> bool:
+    """Whether the phase search of ``entries`` runs compiled (as `_compile` decides).
+
+    With "auto", from `COMPILED_FROM` entries on, or once a compiled search is loaded.
+    """
+    chosen = mode()
+    if chosen != "auto":
+        return chosen == "on"
+    return (entries >= COMPILED_FROM or compiled_phase_search.cache_info().currsize > 0
+            or compiled_search.cache_info().currsize > 0)
+
+
+@lru_cache(maxsize=1)
+def compiled_phase_search() -> Callable[..., None] | None:
+    """Return the compiled phase search (`_search_kernel.phase_search`), or None without numba.
+
+    Loaded as `compiled_search` is: where numba is missing or cannot compile or cache, the
+    numpy search runs (it chooses the same, tests/test_phase_search.py).
+    """
+    try:
+        from ._search_kernel import phase_search
+
+        one = np.ones((1, 4))
+        phase_search(np.ones((6, 4, 1), dtype=complex), one, one + 0j, np.zeros(3),
+                     np.zeros(3), np.zeros(1), np.zeros(1), ANGLE_TIE_DEG,
+                     np.empty(1, dtype=np.int64), 0, 1)
+    except Exception:  # noqa: BLE001 - numba is optional: the numpy search does the same
+        return None
+    kernel: Callable[..., None] = phase_search
+    return kernel
 
 
 # The channels of a quad other than channel q, row q.

@@ -25,17 +25,19 @@ def scene_tracks(tmp_path_factory):
     return scene, compute_tracks(scene)
 
 
-def rig_for(scene, step_db):
+def rig_for(scene, step_db, phase_step_deg=0.0):
     limits = dataclasses.replace(scene.rig.limits, attenuation_step_db=step_db,
-                                 echoes_per_channel=64)
+                                 echoes_per_channel=64, phase_step_deg=phase_step_deg)
     return dataclasses.replace(scene.rig, limits=limits)
 
 
-@pytest.mark.parametrize("step_db, mode", [(0.0, "aware"), (0.5, "naive"), (0.5, "aware")],
-                         ids=["continuous", "0.5dB-naive", "0.5dB-aware"])
-def test_schedule_1200_frames_32_targets(benchmark, scene_tracks, step_db, mode):
+@pytest.mark.parametrize("step_db, phase_deg, mode",
+                         [(0.0, 0.0, "aware"), (0.5, 0.0, "naive"), (0.5, 0.0, "aware"),
+                          (0.5, 5.625, "aware")],
+                         ids=["continuous", "0.5dB-naive", "0.5dB-aware", "0.5dB-5.625deg-aware"])
+def test_schedule_1200_frames_32_targets(benchmark, scene_tracks, step_db, phase_deg, mode):
     scene, tracks = scene_tracks
-    rig = rig_for(scene, step_db)
+    rig = rig_for(scene, step_db, phase_deg)
     build_schedule(tracks, rig, scene.radar, quantization=mode)  # per-rig caches
     benchmark.group = "schedule: 1200 frames x 32 targets"
     sch = benchmark.pedantic(build_schedule, args=(tracks, rig, scene.radar),
