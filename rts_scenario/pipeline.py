@@ -24,6 +24,7 @@ from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, bus_times, host_times, sequential_numbers, unwrap_counter
+from .errors import MeasurementError
 from .hostclock import HostClockWatch, monotonic_s, wall_s
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
@@ -467,7 +468,13 @@ class Pipeline:
             frame_index=(np.repeat(schedule.frame_index, hold) * hold
                          + np.tile(np.arange(hold), schedule.n_frames)))
         self.write(replace(played, t_s=clock.time_of(np.arange(played.n_frames))))
-        cycles = [c for c in self.receive(final=True) if c.complete]
+        received = self.receive(final=True)
+        # The radar's identifiers on several channels (or none on --radar-channel): the
+        # cycles would mix another bus's in; nothing is measured from them.
+        reason = self.receiver.channel_reason()
+        if reason:
+            raise MeasurementError(reason)
+        cycles = [c for c in received if c.complete]
         duration_s = float(played.n_frames) * clock.cycle_s
         numbers, spread = self._cycle_numbers(cycles, duration_s)
         found = dict(zip(numbers.tolist(), cycles, strict=True))

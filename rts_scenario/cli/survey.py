@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from ..errors import RtsError
+from ..errors import MeasurementError, RtsError
 from .common import (
     EXIT_FAIL,
     EXIT_OK,
@@ -38,11 +38,17 @@ def _do_survey(args: argparse.Namespace) -> int:
     if args.write:
         check_rig_out("--write", args.write)
     options = RunOptions(output=args.output, can_interface=args.can_interface,
-                         can_channel=args.can_channel)
-    with Pipeline(rig, radar, options,
-                  radar_options=RadarOptions(fidelity=args.fidelity, noise=args.noise,
-                                             estimator=args.estimator)) as bench:
-        result = survey(rig, radar, bench.play)
+                         can_channel=args.can_channel, radar_channel=args.radar_channel)
+    try:
+        with Pipeline(rig, radar, options,
+                      radar_options=RadarOptions(fidelity=args.fidelity, noise=args.noise,
+                                                 estimator=args.estimator)) as bench:
+            result = survey(rig, radar, bench.play)
+    except MeasurementError as exc:
+        # The radar's cycles mixed with another bus's (or none on --radar-channel): a
+        # measurement that failed, as one missing an FE does.
+        print(f"error: survey: {exc}; nothing written", file=sys.stderr)
+        return EXIT_FAIL
     seen = np.isfinite(result.seen_az_deg) & np.isfinite(result.seen_el_deg)
     if not seen.any():
         channel = f":{args.can_channel}" if args.can_channel else ""
@@ -58,8 +64,8 @@ def _do_survey(args: argparse.Namespace) -> int:
         print(f"note: {note}")
     if args.json:
         with writing("--json", args.json):
-            Path(args.json).write_text(json.dumps(result.to_dict(), indent=2, allow_nan=False)
-                                       + "\n")
+            data = {**result.to_dict(), "radar_channel": args.radar_channel}
+            Path(args.json).write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
     missed = [str(q) for q in np.flatnonzero(~seen)]
     if missed:
@@ -97,7 +103,7 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     add_bench_arguments(parser, "awr1843boost")
     parser.add_argument("--json", metavar="OUT",
                         help='write {"rig", "radar", "front_ends": [{"index", "az_deg", "el_deg", '
-                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...]}')
+                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...], "radar_channel"}')
     parser.add_argument("--write", metavar="RIG_OUT",
                         help="write the rig with each FE's seen direction and level ('seen')")
     parser.add_argument("--place", action="store_true",
