@@ -298,6 +298,14 @@ def add_radar_channel_argument(parser: argparse.ArgumentParser, what: str) -> No
                              "radar's identifiers on several channels fails")
 
 
+def host_clock_lines(steps: list[dict[str, Any]]) -> list[str]:
+    """Say each step of the host's clock during a command's measurements (`Pipeline.play`)."""
+    return [f"host clock: the wall clock stepped {step['size_s'] * 1e3:+.1f} ms at "
+            f"{step['at_s']:.3f} s after measurement {step['measurement']}'s start (within "
+            f"{step['within_s'] * 1e3:.0f} ms before); corrected: {step['corrected']}"
+            for step in steps]
+
+
 def check_radar_channel(channel: str | None) -> None:
     """Reject an empty ``--radar-channel`` (bad input)."""
     if channel is not None and not channel.strip():

@@ -15,6 +15,7 @@ from .common import (
     check_bench_paths,
     check_rig_out,
     check_writable_file,
+    host_clock_lines,
     writing,
 )
 
@@ -49,6 +50,7 @@ def _do_survey(args: argparse.Namespace) -> int:
         # measurement that failed, as one missing an FE does.
         print(f"error: survey: {exc}; nothing written", file=sys.stderr)
         return EXIT_FAIL
+    steps = bench.measurement_steps
     seen = np.isfinite(result.seen_az_deg) & np.isfinite(result.seen_el_deg)
     if not seen.any():
         channel = f":{args.can_channel}" if args.can_channel else ""
@@ -57,6 +59,8 @@ def _do_survey(args: argparse.Namespace) -> int:
                        f"{args.output} played them); check that the radar sees the rig and "
                        f"reports on that bus; nothing written")
     print(result.table())
+    for line in host_clock_lines(steps):
+        print(line)
     from ..radar.simulate import near_field_warning
 
     note = near_field_warning(radar, rig)
@@ -64,7 +68,8 @@ def _do_survey(args: argparse.Namespace) -> int:
         print(f"note: {note}")
     if args.json:
         with writing("--json", args.json):
-            data = {**result.to_dict(), "radar_channel": args.radar_channel}
+            data = {**result.to_dict(), "radar_channel": args.radar_channel,
+                    "host_clock_steps": steps}
             Path(args.json).write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
     missed = [str(q) for q in np.flatnonzero(~seen)]
@@ -103,7 +108,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     add_bench_arguments(parser, "awr1843boost")
     parser.add_argument("--json", metavar="OUT",
                         help='write {"rig", "radar", "front_ends": [{"index", "az_deg", "el_deg", '
-                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...], "radar_channel"}')
+                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...], "radar_channel", '
+                             '"host_clock_steps": [...]}')
     parser.add_argument("--write", metavar="RIG_OUT",
                         help="write the rig with each FE's seen direction and level ('seen')")
     parser.add_argument("--place", action="store_true",
