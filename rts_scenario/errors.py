@@ -72,6 +72,15 @@ class BusError(CheckError):
     """A CAN interface or channel the arguments name cannot be opened (bad input)."""
 
 
+class MeasurementError(CheckError):
+    """A measurement through the bench (`Pipeline.play`) whose cycles cannot be trusted.
+
+    The radar's identifiers came on several channels, or none on ``--radar-channel``: what
+    was measured would mix another bus's cycles in, or hold none of the radar's. ``survey``
+    and ``calibrate`` fail with it (exit 1), as with any other measurement that failed.
+    """
+
+
 def one_line(exc: BaseException) -> str:
     """Return an exception's message on one line (the CLI prints one ``error:`` line)."""
     return " ".join(part.strip() for part in str(exc).splitlines() if part.strip()) or repr(exc)

@@ -24,6 +24,7 @@ from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, bus_times, host_times, sequential_numbers, unwrap_counter
+from .errors import MeasurementError
 from .hostclock import HostClockWatch, monotonic_s, wall_s
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
@@ -290,6 +291,12 @@ class Pipeline:
         self._run_level_s = 0.0
         self._stamp_shift_s = 0.0
         self._bus_shifts: list[dict[str, float | int]] = []
+        # Whether `_unstep` found the cycles' receipts on another clock than their stamps.
+        self._stamps_foreign = False
+        # The measurements made (`play`) and the steps of the host's clock seen during them
+        # (`host_clock_steps`, each with the ``measurement``'s number, from 0).
+        self.measurements = 0
+        self.measurement_steps: list[dict[str, float | str | int]] = []
         self.output: Output | None = None
         self._new_output: Callable[[], Output] | None = None
         # Whether a measurement (`play`) was made: the next starts a stream of its own.
@@ -431,6 +438,11 @@ class Pipeline:
         incomplete.
         """
         assert self.output is not None
+        # The host's clock is watched from here on (`HostClockWatch`): a step during the
+        # measurement is told and its times brought back (`_unstep`), as in a run.
+        self._run_level_s = self.host_clock.sample()
+        self._run_monotonic_s = monotonic_s()
+        self._stamp_shift_s, self._bus_shifts, self._stamps_foreign = 0.0, [], False
         if self._measured:
             # Each measurement is a stream of its own, as each run is: its frames paced from
             # its own start and its cycles numbered from it (an RTS, and `emulate`, start a
@@ -467,8 +479,18 @@ class Pipeline:
             frame_index=(np.repeat(schedule.frame_index, hold) * hold
                          + np.tile(np.arange(hold), schedule.n_frames)))
         self.write(replace(played, t_s=clock.time_of(np.arange(played.n_frames))))
-        cycles = [c for c in self.receive(final=True) if c.complete]
+        received = self.receive(final=True)
+        # The radar's identifiers on several channels (or none on --radar-channel): the
+        # cycles would mix another bus's in; nothing is measured from them.
+        reason = self.receiver.channel_reason()
+        if reason:
+            raise MeasurementError(reason)
+        self.host_clock.sample()  # a step is told by the measurement, if no cycle told it
         duration_s = float(played.n_frames) * clock.cycle_s
+        cycles = [c for c in self._unstep(received, duration_s) if c.complete]
+        self.measurement_steps += [{"measurement": self.measurements, **step}
+                                   for step in self.host_clock_steps()]
+        self.measurements += 1
         numbers, spread = self._cycle_numbers(cycles, duration_s)
         found = dict(zip(numbers.tolist(), cycles, strict=True))
         if spread >= hold:
@@ -591,7 +613,7 @@ class Pipeline:
         return self._bus_origin_monotonic_s if self._bus_origin_s is not None else None
 
     def _unstep(self, cycles: list[Detections], duration_s: float,
-                track: ClockTrack) -> list[Detections]:
+                track: ClockTrack | None = None) -> list[Detections]:
         """Return the cycles with their times on the host's clock as it read at the start.
 
         The host's wall clock may step while a run plays (`HostClockWatch`): every time read on
@@ -602,7 +624,8 @@ class Pipeline:
         simulated radar's). A cycle stamped just before a step and received just after it
         keeps the level before: the one that leaves its delivery (receipt less stamp) nearer
         0. Bus times an interface stamps with its own clock do not step; only their receipts
-        are brought back (they tie that clock to the host's, `ClockLink`).
+        are brought back (they tie that clock to the host's, `ClockLink`). ``track``: a run's
+        clock (None for a measurement, `play`, which places its cycles itself).
         """
         ref = self._origin_level_s()
         if not cycles or (all(c.host_step_s == ref for c in cycles)
@@ -616,6 +639,7 @@ class Pipeline:
                               if c.host_step_s == ref and c.host_t_s is not None
                               and c.bus_t_s is not None])
             foreign = bool(delay.size) and stamped_on_another_clock(float(delay.min()))
+        self._stamps_foreign = self._stamps_foreign or foreign
         levels = self.host_clock.levels()
         out = []
         for c in cycles:
@@ -648,7 +672,8 @@ class Pipeline:
         zero = self._run_monotonic_s if origin is None else origin
         since = min(zero, self._run_monotonic_s)
         corrected = ("receipt times (the interface stamps with its own clock)"
-                     if self._bus_clock_foreign else "bus and receipt times")
+                     if self._bus_clock_foreign or self._stamps_foreign
+                     else "bus and receipt times")
         return [{"at_s": s.before_s - zero, "within_s": s.before_s - s.after_s,
                  "size_s": s.size_s, "corrected": corrected}
                 for s in self.host_clock.steps if s.before_s > since]
@@ -672,7 +697,7 @@ class Pipeline:
         return at + (host - offset - at) / (1.0 + rate)
 
     def _check_bus_clock(self, cycles: list[Detections], duration_s: float,
-                         track: ClockTrack) -> None:
+                         track: ClockTrack | None) -> None:
         """Forget the scene's start on the bus's clock where the cycles are not on that clock.
 
         python-can stamps messages with the wall clock, the one the scene's start is taken
@@ -691,7 +716,8 @@ class Pipeline:
         late_s = duration_s + clock.latency_s + clock.jitter_s + BUS_CLOCK_SLACK_S
         if not -BUS_CLOCK_SLACK_S <= float(t[0]) - origin <= late_s:
             self._bus_clock_foreign = True
-            track.origin_s = None
+            if track is not None:
+                track.origin_s = None
 
     def _follow_bus_clock(self, cycles: list[Detections], duration_s: float, track: ClockTrack,
                           truths: CycleTruth) -> None:
@@ -840,7 +866,7 @@ class Pipeline:
         self._link = ClockLink()
         self._run_level_s = self.host_clock.sample()
         self._run_monotonic_s = monotonic_s()
-        self._stamp_shift_s, self._bus_shifts = 0.0, []
+        self._stamp_shift_s, self._bus_shifts, self._stamps_foreign = 0.0, [], False
         window_s = ambiguity_window_s(self.radar, self.rig)
         # When the radar measures: its profile's clock, corrected by its cycles' bus times.
         track = ClockTrack(clock, self._scene_origin_s(),

@@ -86,9 +86,12 @@ def survey(rig: Rig, radar: RadarProfile, measure: Measure, repeats: int = REPEA
         for j, values in enumerate((cycle.az_deg, cycle.el_deg, cycle.rcs_dbsm)):
             if values is not None:
                 seen[i, j] = values[k]
-    with np.errstate(invalid="ignore"):
-        per_fe = np.nanmean(seen.reshape(n, repeats, 3), axis=1) if np.isfinite(seen).any() \
-            else np.full((n, 3), np.nan)
+    # The mean of each FE's repeats that saw it; NaN for an FE none saw (no empty mean).
+    per_repeat = seen.reshape(n, repeats, 3)
+    valid = np.isfinite(per_repeat)
+    count = valid.sum(axis=1)
+    total = np.where(valid, per_repeat, 0.0).sum(axis=1)
+    per_fe = np.where(count > 0, total / np.maximum(count, 1), np.nan)
     return SurveyResult(rig=rig.name, radar=radar.name, az_deg=rig.az_deg.copy(),
                         el_deg=rig.el_deg.copy(), seen_az_deg=per_fe[:, 0],
                         seen_el_deg=per_fe[:, 1], level_db=per_fe[:, 2] - ref.rcs_dbsm)

@@ -244,3 +244,157 @@ def test_a_reading_another_thread_overtook_keeps_the_level_it_was_read_at(monkey
     assert watch.read() == (109.5, 0.0)
     assert watch.read() == (110.1, 0.5)
     assert len(watch.steps) == 1
+
+
+# --- a step during a measurement (survey, calibrate: `Pipeline.play`) -----------------------
+
+def step_during(monkeypatch, wall, step_s, measurement=0):
+    """Step the host's wall clock by ``step_s`` as the ``measurement``-th pattern (from 0)
+    goes out to the RTS: after the measurement's start was taken, before any cycle."""
+    write, calls = Pipeline.write, []
+
+    def stepped(self, schedule):
+        if len(calls) == measurement:
+            wall.step(step_s)
+        calls.append(schedule.n_frames)
+        write(self, schedule)
+
+    monkeypatch.setattr(Pipeline, "write", stepped)
+
+
+def surveyed(radar, errors):
+    from rts_scenario import Rig
+    from rts_scenario.scenario.model import RadarOptions
+    from rts_scenario.survey import survey
+
+    rig = Rig.preset("kit-table1")
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic", noise=False),
+                  errors=errors) as bench:
+        result = survey(rig, radar, bench.play)
+    return rig, result, bench.measurement_steps
+
+
+def moved_front_ends():
+    from rts_scenario.radar.simulate import ChannelErrors
+
+    return ChannelErrors(gain_db=np.array([0.0, -1.5, 0.0, 2.0]), phase_deg=np.zeros(4),
+                         delay_s=np.zeros(4), az_deg=np.array([0.3, 0.0, -0.2, 0.0]),
+                         el_deg=np.array([0.0, 0.25, 0.0, -0.1]), distance_m=np.zeros(4))
+
+
+def free_paper_radar():
+    from free_radar import free_profile
+
+    return free_profile(RadarProfile.preset("paper"), 1.5)
+
+
+@pytest.mark.parametrize("step_s", [0.5, -0.2])
+def test_a_host_clock_step_during_a_survey_is_told_and_its_cycles_placed_as_if_it_had_not(
+        monkeypatch, step_s):
+    # A radar running free: its cycles are placed in the measurement by their bus times less
+    # its latency, against the measurement's start taken before the step.
+    radar, moved = free_paper_radar(), moved_front_ends()
+    wall = SteppedWallClock(monkeypatch)
+    step_during(monkeypatch, wall, step_s)
+    rig, result, steps = surveyed(radar, moved)
+    # Where each FE stands (classic CAN: 0.005 deg), as without the step.
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg + moved.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg + moved.el_deg, atol=0.006)
+    np.testing.assert_allclose(result.level_db, moved.gain_db, atol=0.26)
+    (step,) = steps
+    assert step["measurement"] == 0
+    assert step["size_s"] == pytest.approx(step_s, abs=2e-3)
+    assert step["corrected"] == "bus and receipt times"
+    assert 0.0 <= step["at_s"] < 30.0 and 0.0 <= step["within_s"] < 30.0
+
+
+@pytest.mark.parametrize("step_s", [0.5, -0.2])
+def test_without_bringing_the_times_back_the_survey_sees_other_front_ends(monkeypatch,
+                                                                          step_s):
+    # The control: taken as they are, the stepped stamps place every cycle 10 (4) cycles off:
+    # each FE is surveyed by another FE's cycles, or by none.
+    monkeypatch.setattr(Pipeline, "_unstep", lambda self, cycles, *args: cycles)
+    radar, moved = free_paper_radar(), moved_front_ends()
+    wall = SteppedWallClock(monkeypatch)
+    step_during(monkeypatch, wall, step_s)
+    rig, result, _ = surveyed(radar, moved)
+    seen = rig.az_deg + moved.az_deg
+    assert not np.all(np.abs(result.seen_az_deg - seen) < 0.006), result.seen_az_deg
+
+
+def test_no_step_during_a_survey_no_step_told(monkeypatch):
+    radar, moved = free_paper_radar(), moved_front_ends()
+    rig, result, steps = surveyed(radar, moved)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg + moved.az_deg, atol=0.006)
+    assert steps == []
+
+
+@pytest.mark.parametrize("command, measurement", [
+    (["survey", "kit-table1", "--radar", "paper"], 0),
+    (["calibrate", "kit-table1", "--inject-phase-deg", "30", "--seed", "1"], 3)])
+def test_survey_and_calibrate_say_a_host_clock_step_in_their_text_and_json(
+        command, measurement, monkeypatch, tmp_path, capsys):
+    import rts_scenario.cli as cli
+
+    wall = SteppedWallClock(monkeypatch)
+    step_during(monkeypatch, wall, 0.5, measurement)
+    out_json = tmp_path / "out.json"
+    code = cli.main([*command, "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    (step,) = json.loads(out_json.read_text())["host_clock_steps"]
+    assert set(step) == {"measurement", "at_s", "within_s", "size_s", "corrected"}
+    assert step["measurement"] == measurement
+    assert step["size_s"] == pytest.approx(0.5, abs=2e-3)
+    assert step["corrected"] == "bus and receipt times"
+    (line,) = [x for x in out.splitlines() if x.startswith("host clock:")]
+    assert line.startswith("host clock: the wall clock stepped +500.")
+    assert f"after measurement {measurement}'s start" in line
+    assert line.endswith("corrected: bus and receipt times")
+
+
+def survey_behind_own_clock(monkeypatch, step_s):
+    """Survey a free radar behind an interface stamping with its own clock (which the host's
+    step does not move; the host's receipts it does), the host's clock stepping by
+    ``step_s`` as the pattern goes out."""
+    from rts_scenario import Rig
+    from rts_scenario.scenario.model import RadarOptions
+    from rts_scenario.survey import survey
+
+    radar, moved, rig = free_paper_radar(), moved_front_ends(), Rig.preset("kit-table1")
+    wall = SteppedWallClock(monkeypatch)
+    step_during(monkeypatch, wall, step_s)
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic", noise=False),
+                  errors=moved) as bench:
+        behind_own_clock(bench, 0.031)
+        bus = bench._publisher.bus
+        send = bus.send
+
+        def unstepped(msg, timeout=None):  # the interface's clock does not step
+            msg.timestamp -= wall.offset_s
+            send(msg, timeout)
+
+        bus.send = unstepped
+        receipt = bench.receiver.received_at
+        bench.receiver.received_at = lambda msg: receipt(msg) + wall.offset_s
+        result = survey(rig, radar, bench.play)
+    return rig, moved, result, bench.measurement_steps
+
+
+@pytest.mark.parametrize("step_s", [0.5, -0.2])
+def test_a_survey_behind_an_interface_with_its_own_clock_brings_the_receipts_back(
+        monkeypatch, step_s):
+    rig, moved, result, steps = survey_behind_own_clock(monkeypatch, step_s)
+    np.testing.assert_allclose(result.seen_az_deg, rig.az_deg + moved.az_deg, atol=0.006)
+    np.testing.assert_allclose(result.seen_el_deg, rig.el_deg + moved.el_deg, atol=0.006)
+    (step,) = steps
+    assert step["size_s"] == pytest.approx(step_s, abs=2e-3)
+    assert step["corrected"] == "receipt times (the interface stamps with its own clock)"
+
+
+def test_without_bringing_the_receipts_back_the_survey_behind_an_interface_is_off(
+        monkeypatch):
+    monkeypatch.setattr(Pipeline, "_unstep", lambda self, cycles, *args: cycles)
+    rig, moved, result, _ = survey_behind_own_clock(monkeypatch, 0.5)
+    seen = rig.az_deg + moved.az_deg
+    assert not np.all(np.abs(result.seen_az_deg - seen) < 0.006), result.seen_az_deg

@@ -353,3 +353,23 @@ def test_a_survey_the_rts_cannot_play_is_refused_naming_the_limit(tmp_path, caps
     assert cli.main(["survey", str(path), "--radar", "awr1843boost"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and key in err[0] and "FE 0" in err[0], err
+
+
+def test_a_front_end_the_radar_never_saw_is_null_without_a_numpy_warning():
+    # No cycle of FE 2's frames held a detection: its direction and level are NaN (null in
+    # the JSON), the others as measured; nothing else is printed (a RuntimeWarning of
+    # numpy's empty mean would reach the user's terminal).
+    from rts_scenario.detections import Detections
+    from rts_scenario.survey import REPEATS
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("paper")
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic", noise=False)) as b:
+        def blind_to_fe_2(schedule):
+            return [Detections.empty(c.cycle, c.t_s, ()) if i // REPEATS == 2 else c
+                    for i, c in enumerate(b.play(schedule))]
+
+        result = survey(rig, radar, blind_to_fe_2)
+    for seen in (result.seen_az_deg, result.seen_el_deg, result.level_db):
+        assert np.isnan(seen[2]) and np.isfinite(np.delete(seen, 2)).all()
+    np.testing.assert_allclose(np.delete(result.seen_az_deg, 2), np.delete(rig.az_deg, 2),
+                               atol=0.006)

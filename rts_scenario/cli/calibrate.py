@@ -17,6 +17,7 @@ from .common import (
     check_rig_out,
     check_writable_file,
     check_writable_folder,
+    host_clock_lines,
     writing,
 )
 
@@ -32,7 +33,7 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .. import calibration as cal
-    from ..errors import RtsError
+    from ..errors import MeasurementError, RtsError
     from ..pipeline import Pipeline, RunOptions
     from ..radar.simulate import ChannelErrors
     from ..rig import Rig
@@ -61,7 +62,8 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     errors = ChannelErrors.random(rig.n_front_ends, rng, phase_deg=args.inject_phase_deg,
                                   gain_db=args.inject_gain_db)
     options = RunOptions(output=args.output, can_interface=args.can_interface,
-                         can_channel=args.can_channel or f"rts-calibrate-{args.seed}")
+                         can_channel=args.can_channel or f"rts-calibrate-{args.seed}",
+                         radar_channel=args.radar_channel)
     radar_options = RadarOptions(fidelity=args.fidelity, noise=args.noise,
                                  estimator=args.estimator)
     # The check grid's weights: exact for a Bartlett radar, aimed at any other estimator.
@@ -71,13 +73,24 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         # The same physical bench (injected errors included) driven with the rig's settings.
         return Pipeline(on, radar, options, radar_options=radar_options, errors=errors, rng=rng)
 
-    with bench(rig) as pipeline:
-        before = cal.check_grid(rig, radar, pipeline.play, method, args.estimator)
-        result = cal.calibrate(rig, radar, pipeline.play, estimator=args.estimator,
-                               progress=Progress("calibrate"))
-    calibrated = result.apply(rig)
-    with bench(calibrated) as pipeline:
-        after = cal.check_grid(calibrated, radar, pipeline.play, method, args.estimator)
+    # The steps of the host's clock during the measurements, numbered over both benches.
+    steps: list[dict[str, Any]] = []
+    try:
+        with bench(rig) as pipeline:
+            before = cal.check_grid(rig, radar, pipeline.play, method, args.estimator)
+            result = cal.calibrate(rig, radar, pipeline.play, estimator=args.estimator,
+                                   progress=Progress("calibrate"))
+        steps += pipeline.measurement_steps
+        calibrated = result.apply(rig)
+        with bench(calibrated) as checked:
+            after = cal.check_grid(calibrated, radar, checked.play, method, args.estimator)
+        steps += [{**s, "measurement": int(s["measurement"]) + pipeline.measurements}
+                  for s in checked.measurement_steps]
+    except MeasurementError as exc:
+        # The radar's cycles mixed with another bus's (or none on --radar-channel): a
+        # measurement that failed, as a calibration that did not pass does.
+        print(f"error: calibrate: {exc}; nothing written", file=sys.stderr)
+        return EXIT_FAIL
     failed = cal.failures(result, before, after, args.max_error_deg)
     injected = args.output == "simulated-radar" and (args.inject_phase_deg or args.inject_gain_db)
     print(f"{'FE':>3} {'phase deg':>10} {'gain dB':>8}"
@@ -105,11 +118,14 @@ def _do_calibrate(args: argparse.Namespace) -> int:
 
     print(f"angle error before: {summary(before)}")
     print(f"angle error after:  {summary(after)}")
+    for line in host_clock_lines(steps):
+        print(line)
     if args.json:
         with writing("--json", args.json):
             Path(args.json).write_text(json.dumps(
-                calibration_report(result, errors if injected else None, before, after,
-                                   args.estimator, method, failed),
+                {**calibration_report(result, errors if injected else None, before, after,
+                                      args.estimator, method, failed),
+                 "radar_channel": args.radar_channel, "host_clock_steps": steps},
                 indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
     if args.plot:

@@ -281,11 +281,36 @@ def add_bench_arguments(parser: argparse.ArgumentParser, radar_default: str) -> 
                         help="simulated-radar (default) or udp://HOST:PORT")
     parser.add_argument("--can-interface", default="virtual")
     parser.add_argument("--can-channel", default=None)
+    add_radar_channel_argument(parser, "a measurement")
     parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
     parser.add_argument("--noise", action="store_true", help="thermal noise (simulated)")
     parser.add_argument("--estimator", default="bartlett",
                         help="the radar's angle estimator (the simulated radar's, and the one "
                              "the model reads with): bartlett (default), ti or an installed one")
+
+
+def add_radar_channel_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--radar-channel CH``: ``what`` reads only the radar's channel."""
+    parser.add_argument("--radar-channel", default=None, metavar="CH",
+                        help="on an interface listening on several channels, read only the "
+                             "radar's (Message.channel as python-can gives it, e.g. 1 of a "
+                             f"Vector interface given 0,1); without it, {what} hearing the "
+                             "radar's identifiers on several channels fails")
+
+
+def host_clock_lines(steps: list[dict[str, Any]]) -> list[str]:
+    """Say each step of the host's clock during a command's measurements (`Pipeline.play`)."""
+    return [f"host clock: the wall clock stepped {step['size_s'] * 1e3:+.1f} ms at "
+            f"{step['at_s']:.3f} s after measurement {step['measurement']}'s start (within "
+            f"{step['within_s'] * 1e3:.0f} ms before); corrected: {step['corrected']}"
+            for step in steps]
+
+
+def check_radar_channel(channel: str | None) -> None:
+    """Reject an empty ``--radar-channel`` (bad input)."""
+    if channel is not None and not channel.strip():
+        raise RtsError(f"--radar-channel {channel!r}: empty; give the channel the radar's "
+                       f"messages come on, as python-can gives it (Message.channel)")
 
 
 def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
@@ -301,6 +326,7 @@ def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
                        f"{', '.join(estimator_names())}")
     check_output("--output", args.output, run=True)
     check_can_interface("--can-interface", args.can_interface, args.can_channel)
+    check_radar_channel(args.radar_channel)
     rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,

@@ -21,6 +21,7 @@ from .common import (
     check_distinct_paths,
     check_fd_mapping,
     check_output,
+    check_radar_channel,
     check_writable_file,
     check_writable_folder,
     named_file,
@@ -54,9 +55,7 @@ def _do_run(args: argparse.Namespace) -> int:
     # Everything the options name is checked before the first scene runs, not after it.
     check_output("--output", args.output, run=True)
     check_can_interface("--can-interface", args.can_interface, args.can_channel)
-    if args.radar_channel is not None and not args.radar_channel.strip():
-        raise RtsError(f"--radar-channel {args.radar_channel!r}: empty; give the channel the "
-                       f"radar's messages come on, as python-can gives it (Message.channel)")
+    check_radar_channel(args.radar_channel)
     if args.mapping:
         mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
         check_fd_mapping(args.can_fd, args.mapping, mapping)

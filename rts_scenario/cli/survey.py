@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from ..errors import RtsError
+from ..errors import MeasurementError, RtsError
 from .common import (
     EXIT_FAIL,
     EXIT_OK,
@@ -15,6 +15,7 @@ from .common import (
     check_bench_paths,
     check_rig_out,
     check_writable_file,
+    host_clock_lines,
     writing,
 )
 
@@ -38,11 +39,18 @@ def _do_survey(args: argparse.Namespace) -> int:
     if args.write:
         check_rig_out("--write", args.write)
     options = RunOptions(output=args.output, can_interface=args.can_interface,
-                         can_channel=args.can_channel)
-    with Pipeline(rig, radar, options,
-                  radar_options=RadarOptions(fidelity=args.fidelity, noise=args.noise,
-                                             estimator=args.estimator)) as bench:
-        result = survey(rig, radar, bench.play)
+                         can_channel=args.can_channel, radar_channel=args.radar_channel)
+    try:
+        with Pipeline(rig, radar, options,
+                      radar_options=RadarOptions(fidelity=args.fidelity, noise=args.noise,
+                                                 estimator=args.estimator)) as bench:
+            result = survey(rig, radar, bench.play)
+    except MeasurementError as exc:
+        # The radar's cycles mixed with another bus's (or none on --radar-channel): a
+        # measurement that failed, as one missing an FE does.
+        print(f"error: survey: {exc}; nothing written", file=sys.stderr)
+        return EXIT_FAIL
+    steps = bench.measurement_steps
     seen = np.isfinite(result.seen_az_deg) & np.isfinite(result.seen_el_deg)
     if not seen.any():
         channel = f":{args.can_channel}" if args.can_channel else ""
@@ -51,6 +59,8 @@ def _do_survey(args: argparse.Namespace) -> int:
                        f"{args.output} played them); check that the radar sees the rig and "
                        f"reports on that bus; nothing written")
     print(result.table())
+    for line in host_clock_lines(steps):
+        print(line)
     from ..radar.simulate import near_field_warning
 
     note = near_field_warning(radar, rig)
@@ -58,8 +68,9 @@ def _do_survey(args: argparse.Namespace) -> int:
         print(f"note: {note}")
     if args.json:
         with writing("--json", args.json):
-            Path(args.json).write_text(json.dumps(result.to_dict(), indent=2, allow_nan=False)
-                                       + "\n")
+            data = {**result.to_dict(), "radar_channel": args.radar_channel,
+                    "host_clock_steps": steps}
+            Path(args.json).write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
     missed = [str(q) for q in np.flatnonzero(~seen)]
     if missed:
@@ -97,7 +108,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     add_bench_arguments(parser, "awr1843boost")
     parser.add_argument("--json", metavar="OUT",
                         help='write {"rig", "radar", "front_ends": [{"index", "az_deg", "el_deg", '
-                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...]}')
+                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...], "radar_channel", '
+                             '"host_clock_steps": [...]}')
     parser.add_argument("--write", metavar="RIG_OUT",
                         help="write the rig with each FE's seen direction and level ('seen')")
     parser.add_argument("--place", action="store_true",
