@@ -576,22 +576,11 @@ class Checker:
         stays under its limit (not checkable), so none of this decides a detection rate.
         """
         beyond = played & tracks.present & ~(tracks.in_range & tracks.in_velocity)
-        free = np.flatnonzero(match < 0)
-        if not beyond.any() or free.size == 0:
-            return
-        range_m, velocity = tracks.folded()
-        tol = self.expectations.tolerances
-        det, target = _range_candidates(frame_of[free], values["range_m"][free],
-                                        np.where(beyond, range_m, np.nan), GATE * tol["range_m"])
-        det = free[det]
-        seen = {q: getattr(tracks, q) for q, _ in QUANTITIES}
-        seen.update(range_m=range_m, radial_velocity_mps=velocity)
-        inside, cost, _ = self._gate(det, target, frame_of, values, invalid, beyond, seen,
-                                     angles=tracks.in_velocity[frame_of[det], target])
-        det, target, cost = det[inside], target[inside], cost[inside]
-        nearest = np.lexsort((cost, det))
-        first = np.unique(det[nearest], return_index=True)[1]
-        match[det[nearest][first]] = target[nearest][first]
+        if beyond.any():
+            range_m, velocity = tracks.folded()
+            self._match_rest(match, tracks, beyond, frame_of, values, invalid,
+                             {"range_m": range_m, "radial_velocity_mps": velocity},
+                             tracks.in_velocity)
 
     def _match_off_angle(self, match: NDArray[np.int64], tracks: Tracks, off: BoolArray,
                          frame_of: NDArray[np.int64], values: dict[str, FloatArray],
@@ -604,17 +593,28 @@ class Checker:
         echo is that echo's (the nearest one's), not a false alarm; the target-frame is not
         checkable, so none of this decides a detection rate.
         """
+        if off.any():
+            self._match_rest(match, tracks, off, frame_of, values, invalid, {},
+                             np.zeros(off.shape, dtype=bool))
+
+    def _match_rest(self, match: NDArray[np.int64], tracks: Tracks, echoes: BoolArray,
+                    frame_of: NDArray[np.int64], values: dict[str, FloatArray],
+                    invalid: BoolArray, seen: dict[str, FloatArray], angles: BoolArray) -> None:
+        """Give each unmatched detection to the nearest of ``echoes`` (F, K) whose gate it is in.
+
+        ``seen``: quantities where the radar shows those echoes other than their truth;
+        ``angles`` (F, K): whose angles are compared. Many detections may go to one echo.
+        """
         free = np.flatnonzero(match < 0)
-        if not off.any() or free.size == 0:
+        if free.size == 0:
             return
-        tol = self.expectations.tolerances
+        truth = {q: getattr(tracks, q) for q, _ in QUANTITIES} | seen
         det, target = _range_candidates(frame_of[free], values["range_m"][free],
-                                        np.where(off, tracks.range_m, np.nan),
-                                        GATE * tol["range_m"])
+                                        np.where(echoes, truth["range_m"], np.nan),
+                                        GATE * self.expectations.tolerances["range_m"])
         det = free[det]
-        inside, cost, _ = self._gate(det, target, frame_of, values, invalid, off,
-                                     {q: getattr(tracks, q) for q, _ in QUANTITIES},
-                                     angles=np.zeros(det.size, dtype=bool))
+        inside, cost, _ = self._gate(det, target, frame_of, values, invalid, echoes, truth,
+                                     angles=angles[frame_of[det], target])
         det, target, cost = det[inside], target[inside], cost[inside]
         nearest = np.lexsort((cost, det))
         first = np.unique(det[nearest], return_index=True)[1]
