@@ -35,6 +35,21 @@ class SteppedWallClock:
         self.offset_s += size_s
 
 
+
+def interface_stamps_unstepped(pipeline, wall):
+    """The simulated radar's interface stamps with its own clock, which does not step; the
+    host receives its messages on the stepped wall clock."""
+    bus = pipeline._publisher.bus
+    send = bus.send
+
+    def unstepped(msg, timeout=None):
+        msg.timestamp -= wall.offset_s
+        send(msg, timeout)
+
+    bus.send = unstepped
+    receipt = pipeline.receiver.received_at
+    pipeline.receiver.received_at = lambda msg: receipt(msg) + wall.offset_s
+
 def test_the_watch_tells_a_step_from_the_wall_clock_s_slew(monkeypatch):
     wall = SteppedWallClock(monkeypatch)
     watch = HostClockWatch()
@@ -202,16 +217,7 @@ def test_behind_an_interface_with_its_own_clock_only_the_receipts_are_brought_ba
     with Pipeline.for_scene(scene, RunOptions(batch_frames=40)) as pipeline:
         behind_own_clock(pipeline, 0.031, early=0)
         pipeline.output.clock = radar
-        bus = pipeline._publisher.bus
-        send = bus.send
-
-        def unstepped(msg, timeout=None):  # the interface's clock does not step
-            msg.timestamp -= wall.offset_s
-            send(msg, timeout)
-
-        bus.send = unstepped
-        receipt = pipeline.receiver.received_at
-        pipeline.receiver.received_at = lambda msg: receipt(msg) + wall.offset_s
+        interface_stamps_unstepped(pipeline, wall)
         report = pipeline.run(scene, progress=progress).report
     assert report.passed, report.reasons
     clock = report.radar_clock
@@ -367,16 +373,7 @@ def survey_behind_own_clock(monkeypatch, step_s):
     with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic", noise=False),
                   errors=moved) as bench:
         behind_own_clock(bench, 0.031)
-        bus = bench._publisher.bus
-        send = bus.send
-
-        def unstepped(msg, timeout=None):  # the interface's clock does not step
-            msg.timestamp -= wall.offset_s
-            send(msg, timeout)
-
-        bus.send = unstepped
-        receipt = bench.receiver.received_at
-        bench.receiver.received_at = lambda msg: receipt(msg) + wall.offset_s
+        interface_stamps_unstepped(bench, wall)
         result = survey(rig, radar, bench.play)
     return rig, moved, result, bench.measurement_steps
 
