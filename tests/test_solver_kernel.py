@@ -43,6 +43,23 @@ def modeled():
 # A quad 4 deg x 6 deg wide (the benchmark's): narrow enough for the cascades' sharp beams.
 NARROW = rs.Rig.from_angles([-2.0, 2.0, -2.0, 2.0], [-3.0, -3.0, 3.0, 3.0], name="narrow")
 
+def _grid_3x3():
+    """A centro-symmetric 3 x 3 grid: its centre element is its own mirror."""
+    lam = rs.VirtualArray.preset("paper").wavelength_m
+    y, z = np.meshgrid(np.arange(-1, 2) * lam / 2, np.arange(-1, 2) * lam / 2)
+    return rs.VirtualArray(y_m=y.ravel(), z_m=z.ravel(), wavelength_m=lam, name="grid-3x3")
+
+
+def _scattered_pairs():
+    """Centro-symmetric but no grid: five elements and their mirrors, in shuffled order."""
+    lam = rs.VirtualArray.preset("paper").wavelength_m
+    rng = np.random.default_rng(7)
+    y, z = rng.uniform(-1.2, 1.2, 5) * lam, rng.uniform(-0.8, 0.8, 5) * lam
+    y, z = np.concatenate([y, -y]), np.concatenate([z, -z])
+    order = rng.permutation(y.size)
+    return rs.VirtualArray(y_m=y[order], z_m=z[order], wavelength_m=lam, name="pairs")
+
+
 CASES = {
     "paper": lambda: (rs.Rig.preset("kit-table1"), rs.VirtualArray.preset("paper"), None),
     "awr1843boost": lambda: (rs.Rig.preset("kit-table1"), rs.VirtualArray.preset("awr1843boost"),
@@ -53,6 +70,9 @@ CASES = {
     "wide-3x5 awr1843boost": lambda: (rs.Rig.preset("wide-3x5"),
                                       rs.VirtualArray.preset("awr1843boost"), None),
     "wide-3x5 paper": lambda: (rs.Rig.preset("wide-3x5"), rs.VirtualArray.preset("paper"), None),
+    # Centro-symmetric layouts other than the paper's (the kernel folds mirror pairs).
+    "grid-3x3": lambda: (rs.Rig.preset("kit-table1"), _grid_3x3(), None),
+    "scattered pairs": lambda: (NARROW, _scattered_pairs(), None),
 }
 
 

@@ -5,11 +5,15 @@ caches the machine code on disk), so neither ``import rts_scenario`` nor a machi
 numba pays for it. Every function mirrors a numpy function of `rts_scenario.solver.exact` and
 `rts_scenario.arrays` step for step (same tests, same order of operations where it matters), so
 weights agree with the numpy path to rounding and reasons are identical
-(tests/test_solver_kernel.py). Targets go in blocks of `_BLOCK`: sines and cosines (a
-polynomial with Cody-Waite reduction, ~1 ulp, instead of libm's ~20 ns calls), exponentials,
-response sums and the weights up to the boundary's fast path run as loops over the block that
-compile to vector instructions, and so do the phase map's cells and weights (its table reads
-stay a scalar loop: they do not vectorize here). Targets whose phase iterates are gathered
+(tests/test_solver_kernel.py). One sum differs in form, not in value: a centro-symmetric
+array's real responses are summed over one element of each mirror pair, with the pair's table
+entries folded into one (`exact.ExactTables`), half the multiply-adds of the full sum.
+
+Targets go in blocks of `_BLOCK`: sines and cosines (a polynomial with Cody-Waite reduction,
+~1 ulp, instead of libm's ~20 ns calls), exponentials, response sums and the weights up to the
+boundary's fast path run as loops over the block that compile to vector instructions, and so
+do the phase map's cells and weights (its table reads stay a scalar loop: they do not
+vectorize here). Targets whose phase iterates are gathered
 per quad and iterate together, in vector loops as well. The rest (every boundary ray, the
 curvature test) runs per target on 4-tuples held in registers. No temporaries: the scratch
 arrays are allocated once per call.
@@ -563,8 +567,9 @@ def solve_targets(  # pragma: no cover
     angle, other, scale, quad, tab_re, tab_im, k, iy, iz,
     y_coords, y_direct, y_indirect, y_mirror, y_progression,
     z_coords, z_direct, z_indirect, z_mirror, z_progression,
-    phase_origin, phase_table, centrosymmetric, row_scale, curvature, tol, codes,
-    weights, reason, margin, locate, column_az, row_el, lines, boxes, edge_tol,
+    phase_origin, phase_table, centrosymmetric, fold_re, fold_im, fold_iy, fold_iz, row_scale,
+    curvature, tol, codes, weights, reason, margin, locate, column_az, row_el, lines, boxes,
+    edge_tol,
 ):
     """Solve every target whose ``quad`` is >= 0; other rows are left as they are.
 
@@ -579,7 +584,10 @@ def solve_targets(  # pragma: no cover
     distinct-coordinate indices, and the exponential plans of both coordinates. Per quad:
     ``phase_origin`` ``(Q, 4)`` (u0, s0, du, ds) and ``phase_table`` ``(Q, n + 2, n + 2)`` of
     the phase map, padded (`exact.ExactTables`; ``phase_table.shape[1] == 0``: none),
-    ``curvature`` ``(Q,)`` whether to test for a local maximum. Writes ``weights`` ``(N, 4)``
+    ``curvature`` ``(Q,)`` whether to test for a local maximum. ``fold_re, fold_im``
+    ``(Q, 12, H)`` and ``fold_iy, fold_iz`` ``(H,)``: a centro-symmetric array's real rows
+    folded onto one element of each mirror pair (`exact.ExactTables`), summed over the ``H``
+    elements kept where only the real part is needed. Writes ``weights`` ``(N, 4)``
     (normalized, 0 unless OK), ``reason`` and, where tested, ``margin`` (NaN elsewhere; an
     empty ``margin``: not wanted).
 
@@ -673,15 +681,20 @@ def solve_targets(  # pragma: no cover
                             re, im = ez_re[i, b], ez_im[i, b]
                             ez_re[i, b] = re * step_re[b] - im * step_im[b]
                             ez_im[i, b] = re * step_im[b] + im * step_re[b]
-                for v in range(n_elements):
-                    jy, jz = iy[v], iz[v]
+                # Real responses: the looks of the folded elements only (their mirrors' are
+                # their conjugates, folded into the table).
+                n_looks = fold_iy.size if real_only else n_elements
+                look_y = fold_iy if real_only else iy
+                look_z = fold_iz if real_only else iz
+                for v in range(n_looks):
+                    jy, jz = look_y[v], look_z[v]
                     for b in range(nb):
                         yr, yi, zr, zi = ey_re[jy, b], ey_im[jy, b], ez_re[jz, b], ez_im[jz, b]
                         look_re[v, b] = yr * zr - yi * zi
                         look_im[v, b] = yr * zi + yi * zr
                 if real_only:
-                    _real_sums(acc_re, table_re, table_im, look_re, look_im, 0, 12, n_elements,
-                               nb)
+                    _real_sums(acc_re, fold_re[qd], fold_im[qd], look_re, look_im, 0, 12,
+                               n_looks, nb)
                 elif test:
                     _complex_sums(acc_re, acc_im, table_re, table_im, look_re, look_im, 0, 24,
                                   n_elements, nb)

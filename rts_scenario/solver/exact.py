@@ -384,6 +384,13 @@ class ExactTables:
     row_scale : float
     y_indirect, z_indirect : ndarray of int
         Coordinates whose exponential is the conjugate of another's (see `arrays._ExpPlan`).
+    fold_re, fold_im : ndarray, shape (Q, 12, H)
+        For a centro-symmetric array, the real responses' rows (f, f_u, f_s) folded onto one
+        element of each mirror pair: an element's look is the conjugate of its mirror's, so
+        ``Re(t_v a_v + t_m a_m) = Re((t_v + conj(t_m)) a_v)`` and the kernel sums H (about
+        M / 2) elements instead of M. Shape ``(Q, 12, 0)`` otherwise.
+    fold_iy, fold_iz : ndarray of int, shape (H,)
+        The distinct-coordinate indices of the elements kept.
     """
 
     tab_re: FloatArray
@@ -396,6 +403,10 @@ class ExactTables:
     row_scale: float
     y_indirect: NDArray[np.int64]
     z_indirect: NDArray[np.int64]
+    fold_re: FloatArray
+    fold_im: FloatArray
+    fold_iy: NDArray[np.int64]
+    fold_iz: NDArray[np.int64]
 
     @classmethod
     def of(cls, quads: Sequence[ExactQuad]) -> ExactTables:
@@ -413,6 +424,14 @@ class ExactTables:
             phase = np.stack([np.pad(m.table, 1, mode="edge") for m in maps if m is not None])
         else:
             origin, phase = np.zeros((len(quads), 4)), np.zeros((len(quads), 0, 0))
+        resp = first.response
+        kept = _folded_elements(resp) if first.centrosymmetric else np.zeros(0, dtype=np.int64)
+        mirror = _element_mirror(resp)[kept]
+        # Rows f, f_u, f_s: Re(t_v a_v) + Re(t_m conj(a_v)) = Re((t_v + conj(t_m)) a_v); an
+        # element on the centre is its own mirror and is kept as it is.
+        own = (mirror == kept)[None, None, :]
+        rows = tables[:, :12]
+        fold = rows[:, :, kept] + np.where(own, 0.0, np.conj(rows[:, :, mirror]))
         return cls(
             tab_re=np.ascontiguousarray(tables.real), tab_im=np.ascontiguousarray(tables.imag),
             phase_origin=origin, phase_table=np.ascontiguousarray(phase),
@@ -420,6 +439,9 @@ class ExactTables:
             centrosymmetric=first.centrosymmetric, row_scale=first.row_scale,
             y_indirect=_indirect(first.response._y_plan),
             z_indirect=_indirect(first.response._z_plan),
+            fold_re=np.ascontiguousarray(fold.real), fold_im=np.ascontiguousarray(fold.imag),
+            fold_iy=np.ascontiguousarray(resp._iy[kept], dtype=np.int64),
+            fold_iz=np.ascontiguousarray(resp._iz[kept], dtype=np.int64),
         )
 
     def solve(
@@ -455,7 +477,8 @@ class ExactTables:
             scale, quad, self.tab_re, self.tab_im, resp.k, resp._iy, resp._iz,
             resp.y_distinct, y_plan.direct, self.y_indirect, y_plan.mirror, y_plan.progression,
             resp.z_distinct, z_plan.direct, self.z_indirect, z_plan.mirror, z_plan.progression,
-            self.phase_origin, self.phase_table, self.centrosymmetric, self.row_scale,
+            self.phase_origin, self.phase_table, self.centrosymmetric, self.fold_re,
+            self.fold_im, self.fold_iy, self.fold_iz, self.row_scale,
             self.curvature if curvature is None else curvature, _TOLERANCES, _CODES,
             weights, reason, margin, locate,
             # Copies (tiny): one type for every geometry, so the kernel compiles once.
@@ -463,6 +486,24 @@ class ExactTables:
                 geometry.column_az_deg, geometry.row_el_deg, geometry.lines, geometry.boxes)),
             EDGE_TOL_DEG,
         )
+
+
+def _element_mirror(resp: SourceResponse) -> NDArray[np.int64]:
+    """Each element's point reflection: the element whose distinct coordinates mirror its own.
+
+    The exponential plans pair every coordinate with its negative (`arrays._ExpPlan.mirror`);
+    in a centro-symmetric layout the element at the mirrored y and z exists.
+    """
+    y_mirror, z_mirror = resp._y_plan.mirror[resp._iy], resp._z_plan.mirror[resp._iz]
+    match = (resp._iy[None, :] == y_mirror[:, None]) & (resp._iz[None, :] == z_mirror[:, None])
+    return np.asarray(match.argmax(axis=1), dtype=np.int64)
+
+
+def _folded_elements(resp: SourceResponse) -> NDArray[np.int64]:
+    """One element of every mirror pair (the first), and any element on the centre."""
+    mirror = _element_mirror(resp)
+    index = np.arange(mirror.size)
+    return index[index <= mirror]
 
 
 def _indirect(plan: _ExpPlan) -> NDArray[np.int64]:
