@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from .detections import Detections
-from .errors import RtsError
+from .errors import MeasurementError, RtsError
 from .propagation import C0_MPS
 from .radar.angle import make_estimator
 from .radar.profile import RadarProfile
@@ -315,8 +315,9 @@ def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
     k = d.strongest()
     values = getattr(d, what)
     if k is None or values is None:
-        raise RtsError(f"calibration: no detection with {what} for FE pair {pair[0]}-{pair[1]} "
-                       f"in cycle {d.cycle}; check that the radar sees the rig")
+        # A measurement that failed (the radar does not see the rig, or reports elsewhere).
+        raise MeasurementError(f"no detection with {what} for FE pair {pair[0]}-{pair[1]} in "
+                               f"cycle {d.cycle}; check that the radar sees the rig")
     return float(values[k])
 
 

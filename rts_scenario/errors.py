@@ -76,8 +76,9 @@ class MeasurementError(CheckError):
     """A measurement through the bench (`Pipeline.play`) whose cycles cannot be trusted.
 
     The radar's identifiers came on several channels, or none on ``--radar-channel``: what
-    was measured would mix another bus's cycles in, or hold none of the radar's. ``survey``
-    and ``calibrate`` fail with it (exit 1), as with any other measurement that failed.
+    was measured would mix another bus's cycles in, or hold none of the radar's; or a
+    calibration's pair was not reported at all. ``survey`` and ``calibrate`` fail with it
+    (exit 1), as with any other measurement that failed.
     """
 
 

@@ -297,6 +297,8 @@ class Pipeline:
         # (`host_clock_steps`, each with the ``measurement``'s number, from 0).
         self.measurements = 0
         self.measurement_steps: list[dict[str, float | str | int]] = []
+        # The messages of other channels than ``radar_channel`` the measurements skipped.
+        self.measurement_other_channels = 0
         self.output: Output | None = None
         self._new_output: Callable[[], Output] | None = None
         # Whether a measurement (`play`) was made: the next starts a stream of its own.
@@ -480,6 +482,7 @@ class Pipeline:
                          + np.tile(np.arange(hold), schedule.n_frames)))
         self.write(replace(played, t_s=clock.time_of(np.arange(played.n_frames))))
         received = self.receive(final=True)
+        self.measurement_other_channels += self.receiver.other_channels
         # The radar's identifiers on several channels (or none on --radar-channel): the
         # cycles would mix another bus's in; nothing is measured from them.
         reason = self.receiver.channel_reason()

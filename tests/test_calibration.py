@@ -398,3 +398,46 @@ def test_cli_calibrate_tolerance_must_be_positive(capsys):
     assert CLI_DEFAULT == MAX_EXCESS_ERROR_DEG
     assert cli.main(["calibrate", "kit-table1", "--max-error-deg", "0"]) == 2
     assert "--max-error-deg: must be > 0" in capsys.readouterr().err
+
+
+OBJECT_LIST = Path(__file__).resolve().parents[1] / "scenarios" / "can" / "object_list.mapping.yaml"
+
+
+@pytest.mark.parametrize("mapping", [None, OBJECT_LIST])
+def test_cli_calibrate_through_a_third_party_mapping_recovers_the_injected_errors(tmp_path,
+                                                                                   mapping):
+    # The simulated radar speaks the mapping's DBC (the object list: angles at 0.05 deg steps)
+    # and the calibration decodes it: the same offsets as through rts-scenario's own messages,
+    # within the tolerance the injected errors are recovered to on the awr1843boost.
+    import json
+
+    report = tmp_path / "cal.json"
+    code = cli.main(["calibrate", "kit-table1", "--radar", "awr1843boost", "--inject-phase-deg",
+                     "180", "--inject-gain-db", "1", "--seed", "4", "--json", str(report),
+                     *(["--mapping", str(mapping)] if mapping else [])])
+    assert code == 0
+    data = json.loads(report.read_text())
+    assert data["mapping"] == (str(mapping.resolve()) if mapping else None)
+    assert data["passed"] and not data["suspects"]
+    errors = ChannelErrors.random(4, np.random.default_rng(4), phase_deg=180.0, gain_db=1.0)
+    phase, gain = relative(errors)
+    recovered_phase = [c["recovered_phase_deg"] for c in data["channels"]]
+    recovered_gain = [c["recovered_gain_db"] for c in data["channels"]]
+    assert np.abs(wrapped(np.array(recovered_phase) - phase)).max() <= 0.5
+    assert np.abs(np.array(recovered_gain) - gain).max() <= 0.05
+    assert data["after"]["max_excess_error_deg"] <= 0.05
+
+
+def test_cli_calibrate_of_a_silent_radar_is_a_failed_measurement(tmp_path, capsys, monkeypatch):
+    # No cycle comes back (the radar reports on another bus): a measurement that failed (exit
+    # 1, as a survey that saw nothing), not bad input; one line, nothing written.
+    monkeypatch.setattr("rts_scenario.pipeline.DetectionPublisher.publish_many",
+                        lambda self, cycles, times: None)
+    out_json, rig_out = tmp_path / "cal.json", tmp_path / "cal.rig.yaml"
+    code = cli.main(["calibrate", "kit-table1", "--json", str(out_json), "--write",
+                     str(rig_out)])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert err == ("error: calibrate: no detection with rcs_dbsm for FE pair 0-1 in cycle 0; "
+                   "check that the radar sees the rig; nothing written\n")
+    assert not out_json.exists() and not rig_out.exists()

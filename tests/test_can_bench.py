@@ -929,3 +929,118 @@ def test_a_measurement_s_radar_channel_without_the_radar_on_it_is_refused(
     code = cli.main([*command, "--radar-channel", " "])
     _, err = capsys.readouterr()
     assert code == 2 and "error: --radar-channel ' ': empty" in err, err
+
+
+# --- survey and calibrate with a third-party radar's DBC (--mapping, --can-fd) -------------
+
+BENCH_COMMANDS = [["survey", "kit-table1", "--radar", "paper"],
+                  ["calibrate", "kit-table1", "--inject-phase-deg", "30", "--seed", "1"]]
+OBJECT_LIST = ROOT / "scenarios" / "can" / "object_list.mapping.yaml"
+
+
+def one_error_line(err):
+    assert "Traceback" not in err, err
+    (line,) = err.splitlines()
+    return line
+
+
+@pytest.mark.parametrize("command", BENCH_COMMANDS)
+def test_a_measurement_s_missing_mapping_is_one_error_naming_the_option(command, tmp_path,
+                                                                        capsys):
+    missing = tmp_path / "radar.mapping.yaml"
+    out_json = tmp_path / "out.json"
+    code = cli.main([*command, "--mapping", str(missing), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 2, out + err
+    assert one_error_line(err) == (f"error: --mapping {missing}: cannot read file: No such file "
+                                   f"or directory")
+    assert out == "" and not out_json.exists()
+
+
+@pytest.mark.parametrize("command", BENCH_COMMANDS)
+def test_a_measurement_s_bad_mapping_is_one_located_error_naming_the_option(command, tmp_path,
+                                                                            capsys):
+    bad = tmp_path / "objects.mapping.yaml"
+    (tmp_path / "object_list.dbc").write_text((OBJECT_LIST.parent / "object_list.dbc").read_text())
+    bad.write_text(OBJECT_LIST.read_text().replace("range_m: Obj_Range", "range_m: Obj_Rnage"))
+    code = cli.main([*command, "--mapping", str(bad)])
+    out, err = capsys.readouterr()
+    assert code == 2, out + err
+    line = one_error_line(err)
+    assert re.match(rf"error: --mapping {re.escape(str(bad))}:\d+:\d+: detection\.range_m: ",
+                    line), line
+    assert "Obj_Rnage" in line
+
+
+@pytest.mark.parametrize("command", BENCH_COMMANDS)
+def test_a_measurement_s_can_fd_with_a_mapping_without_an_fd_message_is_refused(command,
+                                                                                capsys):
+    code = cli.main([*command, "--can-fd", "--mapping", str(OBJECT_LIST)])
+    out, err = capsys.readouterr()
+    assert code == 2, out + err
+    assert one_error_line(err) == (
+        f"error: --can-fd: the mapping {OBJECT_LIST} has no fd_message (the radar's CAN FD "
+        f"detection message) for --can-fd to use; add fd_message to the mapping or leave out "
+        f"--can-fd")
+
+
+def test_survey_over_can_fd_sees_what_classic_can_sees(tmp_path):
+    import json
+
+    outs = []
+    for name, extra in (("classic", []), ("fd", ["--can-fd"])):
+        out = tmp_path / f"{name}.json"
+        assert cli.main(["survey", "kit-table1", "--radar", "paper", *extra, "--json",
+                         str(out)]) == 0
+        outs.append(json.loads(out.read_text()))
+    classic, fd = outs
+    for a, b in zip(classic["front_ends"], fd["front_ends"], strict=True):
+        assert b["seen_az_deg"] == pytest.approx(a["seen_az_deg"], abs=0.006)
+        assert b["seen_el_deg"] == pytest.approx(a["seen_el_deg"], abs=0.006)
+
+
+@pytest.mark.parametrize("command", BENCH_COMMANDS)
+def test_a_measurement_s_json_counts_the_messages_of_the_other_channels(command, tmp_path,
+                                                                        monkeypatch, capsys):
+    # Every message of the radar comes again on channel 1 (`bridged_twice`): read on channel
+    # 0, the measurement skipped exactly as many messages as the radar sent.
+    import json
+
+    import rts_scenario.pipeline as pipeline
+
+    bridged_twice(monkeypatch)
+    sent = []
+    bridged_send = pipeline.ListenerBus.send
+
+    def counting(self, msg, timeout=None):
+        sent.append(msg.arbitration_id)
+        return bridged_send(self, msg, timeout)
+
+    monkeypatch.setattr(pipeline.ListenerBus, "send", counting)
+    out_json = tmp_path / "out.json"
+    code = cli.main([*command, "--radar-channel", "0", "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
+    data = json.loads(out_json.read_text())
+    assert len(sent) > 0 and data["other_channels"] == len(sent)
+    # Without --radar-channel every channel is read: nothing skipped to count.
+    monkeypatch.undo()
+    assert cli.main([*command, "--json", str(out_json)]) == 0
+    assert json.loads(out_json.read_text())["other_channels"] is None
+
+
+@pytest.mark.parametrize("command", BENCH_COMMANDS)
+def test_a_measurement_through_a_mapping_without_elevation_is_refused_naming_it(command,
+                                                                                capsys):
+    # The cluster list is a 2-D radar's (distance long/lat, no height): it carries no
+    # elevation, which a survey and a calibration measure. Not a radar that saw nothing.
+    clusters = ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml"
+    code = cli.main([*command, "--mapping", str(clusters)])
+    out, err = capsys.readouterr()
+    assert code == 2, out + err
+    assert one_error_line(err) == (
+        f"error: --mapping {clusters}: the mapping 'cluster-list' carries no elevation_deg, "
+        f"which {command[0]} measures (of each detection it needs: "
+        f"{'range_m, ' if command[0] == 'calibrate' else ''}azimuth_deg, elevation_deg, "
+        f"rcs_dbsm)")
+    assert out == ""

@@ -1,6 +1,7 @@
 """Survey: each front end alone, where the radar sees it and how strong."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,12 @@ from rts_scenario.pipeline import Pipeline
 from rts_scenario.radar.simulate import ChannelErrors
 from rts_scenario.scenario.model import RadarOptions
 from rts_scenario.survey import survey
+
+OBJECT_LIST = (Path(__file__).resolve().parents[1] / "scenarios" / "can"
+               / "object_list.mapping.yaml")
+# The object list's angle signals: 0.05 deg a step (object_list.dbc), against 0.005 deg on
+# rts-scenario's own classic CAN messages.
+OBJECT_LIST_STEP_DEG = 0.05
 
 
 def test_survey_finds_moved_front_ends_and_their_levels():
@@ -134,7 +141,8 @@ def test_survey_that_sees_nothing_fails_and_writes_nothing(tmp_path, capsys):
     code = cli.main(["survey", "kit-table1", "--radar", "awr1843boost", "--output",
                      f"udp://127.0.0.1:{port}", "--json", str(json_out), "--place", "--write",
                      str(rig_out)])
-    assert code == 2
+    # A measurement that failed (exit 1, as one missing an FE), not bad input.
+    assert code == 1
     err = capsys.readouterr().err
     assert err.startswith("error: survey: the radar saw none of the 4 front ends")
     assert err.count("\n") == 1 and "nothing written" in err
@@ -373,3 +381,41 @@ def test_a_front_end_the_radar_never_saw_is_null_without_a_numpy_warning():
         assert np.isnan(seen[2]) and np.isfinite(np.delete(seen, 2)).all()
     np.testing.assert_allclose(np.delete(result.seen_az_deg, 2), np.delete(rig.az_deg, 2),
                                atol=0.006)
+
+
+def surveyed_json(tmp_path, name, *argv):
+    out = tmp_path / f"{name}.json"
+    assert cli.main(["survey", "kit-table1", *argv, "--json", str(out)]) == 0
+    return json.loads(out.read_text())
+
+
+def test_survey_through_a_third_party_mapping_sees_the_rig_s_front_ends(tmp_path):
+    # The paper radar sees each kit-table1 FE at its mechanical direction (far field, on the
+    # rig's axis): through the object list's DBC as through rts-scenario's own.
+    rig = Rig.preset("kit-table1")
+    data = surveyed_json(tmp_path, "objects", "--radar", "paper", "--mapping", str(OBJECT_LIST))
+    assert data["mapping"] == str(OBJECT_LIST.resolve())
+    fes = data["front_ends"]
+    np.testing.assert_allclose([fe["seen_az_deg"] for fe in fes], rig.az_deg,
+                               atol=OBJECT_LIST_STEP_DEG / 2 + 1e-9)
+    np.testing.assert_allclose([fe["seen_el_deg"] for fe in fes], rig.el_deg,
+                               atol=OBJECT_LIST_STEP_DEG / 2 + 1e-9)
+    assert surveyed_json(tmp_path, "own", "--radar", "paper")["mapping"] is None
+
+
+def test_survey_through_a_third_party_mapping_decodes_the_radar_speaking_it(tmp_path):
+    # The awr1843boost sees the FEs 1 m away in its near field, off any 0.05 deg step: through
+    # the mapping the radar speaks the object list and the survey decodes it (every seen angle
+    # on its 0.05 deg steps), the same directions as through the built-in DBC within a step.
+    own = surveyed_json(tmp_path, "own", "--radar", "awr1843boost")["front_ends"]
+    objects = surveyed_json(tmp_path, "objects", "--radar", "awr1843boost", "--mapping",
+                            str(OBJECT_LIST))["front_ends"]
+    for key in ("seen_az_deg", "seen_el_deg"):
+        seen_own = np.array([fe[key] for fe in own])
+        seen = np.array([fe[key] for fe in objects])
+        steps = seen / OBJECT_LIST_STEP_DEG
+        np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)
+        np.testing.assert_allclose(seen, seen_own, atol=OBJECT_LIST_STEP_DEG / 2 + 0.0051)
+    # The built-in DBC's steps are finer: the near field's directions are off the object list's.
+    el_own = np.array([fe["seen_el_deg"] for fe in own]) / OBJECT_LIST_STEP_DEG
+    assert np.abs(el_own - np.round(el_own)).max() > 0.05

@@ -18,12 +18,16 @@ from .common import (
     check_writable_file,
     check_writable_folder,
     host_clock_lines,
+    mapping_record,
     writing,
 )
 
 MAX_INJECT_GAIN_DB = 20.0
 # The library's default, without importing numpy and scipy to build the parser.
 MAX_EXCESS_ERROR_DEG = 0.1
+
+# What the command reads of each detection (a --mapping must carry them).
+MEASURED = ("range_m", "azimuth_deg", "elevation_deg", "rcs_dbsm")
 
 
 def _do_calibrate(args: argparse.Namespace) -> int:
@@ -46,7 +50,7 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     check_number("--max-error-deg", args.max_error_deg, low=0.0)
     if args.max_error_deg == 0.0:
         raise RtsError("--max-error-deg: must be > 0, got 0.0")
-    rig, radar = bench_of(args)
+    rig, radar = bench_of(args, "calibrate", MEASURED)
     check_bench_paths(args, [("--json", args.json), ("--write", args.write),
                              ("--plot", args.plot)])
     if args.json:
@@ -63,7 +67,8 @@ def _do_calibrate(args: argparse.Namespace) -> int:
                                   gain_db=args.inject_gain_db)
     options = RunOptions(output=args.output, can_interface=args.can_interface,
                          can_channel=args.can_channel or f"rts-calibrate-{args.seed}",
-                         radar_channel=args.radar_channel)
+                         can_fd=args.can_fd, radar_channel=args.radar_channel,
+                         mapping=args.mapping)
     radar_options = RadarOptions(fidelity=args.fidelity, noise=args.noise,
                                  estimator=args.estimator)
     # The check grid's weights: exact for a Bartlett radar, aimed at any other estimator.
@@ -75,20 +80,25 @@ def _do_calibrate(args: argparse.Namespace) -> int:
 
     # The steps of the host's clock during the measurements, numbered over both benches.
     steps: list[dict[str, Any]] = []
+    # The messages of other channels than --radar-channel skipped, over both benches.
+    other_channels = 0
     try:
         with bench(rig) as pipeline:
             before = cal.check_grid(rig, radar, pipeline.play, method, args.estimator)
             result = cal.calibrate(rig, radar, pipeline.play, estimator=args.estimator,
                                    progress=Progress("calibrate"))
         steps += pipeline.measurement_steps
+        other_channels += pipeline.measurement_other_channels
         calibrated = result.apply(rig)
         with bench(calibrated) as checked:
             after = cal.check_grid(calibrated, radar, checked.play, method, args.estimator)
         steps += [{**s, "measurement": int(s["measurement"]) + pipeline.measurements}
                   for s in checked.measurement_steps]
+        other_channels += checked.measurement_other_channels
     except MeasurementError as exc:
-        # The radar's cycles mixed with another bus's (or none on --radar-channel): a
-        # measurement that failed, as a calibration that did not pass does.
+        # The radar's cycles mixed with another bus's (or none on --radar-channel), or a
+        # pair it did not report: a measurement that failed, as a calibration that did not
+        # pass does.
         print(f"error: calibrate: {exc}; nothing written", file=sys.stderr)
         return EXIT_FAIL
     failed = cal.failures(result, before, after, args.max_error_deg)
@@ -125,7 +135,9 @@ def _do_calibrate(args: argparse.Namespace) -> int:
             Path(args.json).write_text(json.dumps(
                 {**calibration_report(result, errors if injected else None, before, after,
                                       args.estimator, method, failed),
-                 "radar_channel": args.radar_channel, "host_clock_steps": steps},
+                 "mapping": mapping_record(args.mapping), "radar_channel": args.radar_channel,
+                 "other_channels": None if args.radar_channel is None else other_channels,
+                 "host_clock_steps": steps},
                 indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
     if args.plot:

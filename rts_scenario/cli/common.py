@@ -272,7 +272,8 @@ def check_readable_file(option: str, path: str) -> None:
 def add_bench_arguments(parser: argparse.ArgumentParser, radar_default: str) -> None:
     """Add the arguments of a command that drives a bench without a scene.
 
-    Rig, radar, output, CAN, and the simulated radar's fidelity and noise.
+    Rig, radar, output, CAN (and the radar's DBC: ``--mapping``), and the simulated radar's
+    fidelity and noise.
     """
     parser.add_argument("rig", metavar="RIG", help="rig preset or *.rig.yaml")
     parser.add_argument("--radar", default=radar_default,
@@ -281,7 +282,11 @@ def add_bench_arguments(parser: argparse.ArgumentParser, radar_default: str) -> 
                         help="simulated-radar (default) or udp://HOST:PORT")
     parser.add_argument("--can-interface", default="virtual")
     parser.add_argument("--can-channel", default=None)
+    parser.add_argument("--can-fd", action="store_true", help="CAN FD detection messages")
     add_radar_channel_argument(parser, "a measurement")
+    parser.add_argument("--mapping", default=None,
+                        help="*.mapping.yaml for a third-party radar's DBC (the simulated "
+                             "radar speaks it, the measurement reads it)")
     parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
     parser.add_argument("--noise", action="store_true", help="thermal noise (simulated)")
     parser.add_argument("--estimator", default="bartlett",
@@ -313,8 +318,13 @@ def check_radar_channel(channel: str | None) -> None:
                        f"messages come on, as python-can gives it (Message.channel)")
 
 
-def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
-    """Check the bench arguments (`add_bench_arguments`); return ``(rig, radar profile)``."""
+def bench_of(args: argparse.Namespace, command: str = "a measurement",
+             needs: tuple[str, ...] = ()) -> tuple[Any, Any]:
+    """Check the bench arguments (`add_bench_arguments`); return ``(rig, radar profile)``.
+
+    ``needs``: the quantities (`rts_scenario.canbus.mapping.QUANTITIES`) ``command`` reads of
+    each detection; a ``--mapping`` whose detections do not carry one of them is refused.
+    """
     from ..radar.angle import estimator_names
     from ..radar.profile import RadarProfile
     from ..radar.profile import preset_names as radar_presets
@@ -327,6 +337,16 @@ def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
     check_output("--output", args.output, run=True)
     check_can_interface("--can-interface", args.can_interface, args.can_channel)
     check_radar_channel(args.radar_channel)
+    if args.mapping is not None:
+        from ..canbus.mapping import CanMapping
+
+        mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
+        check_fd_mapping(args.can_fd, args.mapping, mapping)
+        lacking = [q for q in needs if q not in mapping.quantities]
+        if lacking:
+            raise RtsError(f"--mapping {args.mapping}: the mapping {mapping.name!r} carries no "
+                           f"{', '.join(lacking)}, which {command} measures (of each detection "
+                           f"it needs: {', '.join(needs)})")
     rig = preset_or_file("RIG", args.rig, rig_presets(), Rig.preset, Rig.from_file,
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
@@ -335,10 +355,19 @@ def bench_of(args: argparse.Namespace) -> tuple[Any, Any]:
 
 
 def check_bench_paths(args: argparse.Namespace, outputs: Paths) -> None:
-    """`check_distinct_paths` for a bench command: its outputs against its rig and radar files."""
+    """`check_distinct_paths` for a bench command: its outputs against the files it reads.
+
+    The rig and radar files, and the ``--mapping``.
+    """
     check_distinct_paths(outputs, [("RIG", args.rig if Path(args.rig).is_file() else None),
                                    ("--radar", args.radar if Path(args.radar).is_file()
-                                    else None)])
+                                    else None),
+                                   ("--mapping", args.mapping)])
+
+
+def mapping_record(path: str | None) -> str | None:
+    """Return the mapping a JSON records: its absolute path (as a run's sidecar), or None."""
+    return str(Path(path).resolve()) if path else None
 
 
 def check_fd_mapping(can_fd: bool, path: str | None, mapping: Any) -> None:

@@ -16,8 +16,12 @@ from .common import (
     check_rig_out,
     check_writable_file,
     host_clock_lines,
+    mapping_record,
     writing,
 )
+
+# What the command reads of each detection (a --mapping must carry them).
+MEASURED = ("azimuth_deg", "elevation_deg", "rcs_dbsm")
 
 
 def _do_survey(args: argparse.Namespace) -> int:
@@ -30,7 +34,7 @@ def _do_survey(args: argparse.Namespace) -> int:
     from ..scenario.model import RadarOptions
     from ..survey import placed_by_survey, survey
 
-    rig, radar = bench_of(args)
+    rig, radar = bench_of(args, "survey", MEASURED)
     if args.place and not args.write:
         raise RtsError("--place: needs --write RIG_OUT (the rig file to write the placed FEs to)")
     check_bench_paths(args, [("--json", args.json), ("--write", args.write)])
@@ -39,7 +43,8 @@ def _do_survey(args: argparse.Namespace) -> int:
     if args.write:
         check_rig_out("--write", args.write)
     options = RunOptions(output=args.output, can_interface=args.can_interface,
-                         can_channel=args.can_channel, radar_channel=args.radar_channel)
+                         can_channel=args.can_channel, can_fd=args.can_fd,
+                         radar_channel=args.radar_channel, mapping=args.mapping)
     try:
         with Pipeline(rig, radar, options,
                       radar_options=RadarOptions(fidelity=args.fidelity, noise=args.noise,
@@ -53,11 +58,13 @@ def _do_survey(args: argparse.Namespace) -> int:
     steps = bench.measurement_steps
     seen = np.isfinite(result.seen_az_deg) & np.isfinite(result.seen_el_deg)
     if not seen.any():
+        # A measurement that failed, as one missing an FE (below): not bad input.
         channel = f":{args.can_channel}" if args.can_channel else ""
-        raise RtsError(f"survey: the radar saw none of the {rig.n_front_ends} front ends (no "
-                       f"detection came over CAN {args.can_interface}{channel} while "
-                       f"{args.output} played them); check that the radar sees the rig and "
-                       f"reports on that bus; nothing written")
+        print(f"error: survey: the radar saw none of the {rig.n_front_ends} front ends (no "
+              f"detection came over CAN {args.can_interface}{channel} while {args.output} "
+              f"played them); check that the radar sees the rig and reports on that bus; "
+              f"nothing written", file=sys.stderr)
+        return EXIT_FAIL
     print(result.table())
     for line in host_clock_lines(steps):
         print(line)
@@ -68,7 +75,10 @@ def _do_survey(args: argparse.Namespace) -> int:
         print(f"note: {note}")
     if args.json:
         with writing("--json", args.json):
-            data = {**result.to_dict(), "radar_channel": args.radar_channel,
+            data = {**result.to_dict(), "mapping": mapping_record(args.mapping),
+                    "radar_channel": args.radar_channel,
+                    "other_channels": None if args.radar_channel is None
+                    else bench.measurement_other_channels,
                     "host_clock_steps": steps}
             Path(args.json).write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
@@ -108,8 +118,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     add_bench_arguments(parser, "awr1843boost")
     parser.add_argument("--json", metavar="OUT",
                         help='write {"rig", "radar", "front_ends": [{"index", "az_deg", "el_deg", '
-                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...], "radar_channel", '
-                             '"host_clock_steps": [...]}')
+                             '"seen_az_deg", "seen_el_deg", "level_db"}, ...], "mapping", '
+                             '"radar_channel", "other_channels", "host_clock_steps": [...]}')
     parser.add_argument("--write", metavar="RIG_OUT",
                         help="write the rig with each FE's seen direction and level ('seen')")
     parser.add_argument("--place", action="store_true",
