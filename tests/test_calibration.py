@@ -418,6 +418,7 @@ def test_cli_calibrate_through_a_third_party_mapping_recovers_the_injected_error
     assert code == 0
     data = json.loads(report.read_text())
     assert data["mapping"] == (str(mapping.resolve()) if mapping else None)
+    assert data["can_fd"] is False
     assert data["passed"] and not data["suspects"]
     errors = ChannelErrors.random(4, np.random.default_rng(4), phase_deg=180.0, gain_db=1.0)
     phase, gain = relative(errors)

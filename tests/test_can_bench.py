@@ -994,6 +994,7 @@ def test_survey_over_can_fd_sees_what_classic_can_sees(tmp_path):
                          str(out)]) == 0
         outs.append(json.loads(out.read_text()))
     classic, fd = outs
+    assert (classic["can_fd"], fd["can_fd"]) == (False, True)
     for a, b in zip(classic["front_ends"], fd["front_ends"], strict=True):
         assert b["seen_az_deg"] == pytest.approx(a["seen_az_deg"], abs=0.006)
         assert b["seen_el_deg"] == pytest.approx(a["seen_el_deg"], abs=0.006)

@@ -135,7 +135,8 @@ def _do_calibrate(args: argparse.Namespace) -> int:
             Path(args.json).write_text(json.dumps(
                 {**calibration_report(result, errors if injected else None, before, after,
                                       args.estimator, method, failed),
-                 "mapping": mapping_record(args.mapping), "radar_channel": args.radar_channel,
+                 "mapping": mapping_record(args.mapping), "can_fd": args.can_fd,
+                 "radar_channel": args.radar_channel,
                  "other_channels": None if args.radar_channel is None else other_channels,
                  "host_clock_steps": steps},
                 indent=2, allow_nan=False) + "\n")

@@ -76,7 +76,7 @@ def _do_survey(args: argparse.Namespace) -> int:
     if args.json:
         with writing("--json", args.json):
             data = {**result.to_dict(), "mapping": mapping_record(args.mapping),
-                    "radar_channel": args.radar_channel,
+                    "can_fd": args.can_fd, "radar_channel": args.radar_channel,
                     "other_channels": None if args.radar_channel is None
                     else bench.measurement_other_channels,
                     "host_clock_steps": steps}
@@ -119,7 +119,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--json", metavar="OUT",
                         help='write {"rig", "radar", "front_ends": [{"index", "az_deg", "el_deg", '
                              '"seen_az_deg", "seen_el_deg", "level_db"}, ...], "mapping", '
-                             '"radar_channel", "other_channels", "host_clock_steps": [...]}')
+                             '"can_fd", "radar_channel", "other_channels", '
+                             '"host_clock_steps": [...]}')
     parser.add_argument("--write", metavar="RIG_OUT",
                         help="write the rig with each FE's seen direction and level ('seen')")
     parser.add_argument("--place", action="store_true",
