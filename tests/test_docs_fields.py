@@ -482,3 +482,78 @@ def test_rts_status_counters_are_the_documented_ones():
     documented = re.findall(r"`(\w+)`", re.sub(r"\([^)]*\)", "", listed))
     counters = decode_status(encode_status(dict.fromkeys(STATUS_COUNTERS, 1)))
     assert counters is not None and list(counters) == documented
+
+
+# --- the command line (docs/cli.md) ---------------------------------------------------------
+
+def _subcommands() -> dict[str, Any]:
+    import argparse
+
+    parser = cli.build_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return dict(sub.choices)
+
+
+def _options(parser: Any) -> list[Any]:
+    return [a for a in parser._actions
+            if a.option_strings and not {"-h", "--debug"} & set(a.option_strings)]
+
+
+def synopses(text: str, command: str) -> list[str]:
+    """The command lines cli.md gives for ``rts-scenario COMMAND`` (inline spans, code blocks)."""
+    chunks = spans(text) + re.findall(r"```sh\n(.*?)```", text, re.S)
+    return [c for c in chunks if re.match(rf"rts-scenario {re.escape(command)}(\s|$)", c)]
+
+
+def test_every_option_of_every_subcommand_is_in_its_synopsis_in_cli_md():
+    """A user finds every option of a subcommand on its command line in docs/cli.md."""
+    text = doc("cli.md")
+    missing = []
+    for name, parser in _subcommands().items():
+        lines = " ".join(synopses(text, name))
+        for action in _options(parser):
+            if not any(re.search(rf"{re.escape(o)}(?![\w-])", lines)
+                       for o in action.option_strings):
+                missing.append(f"{name} {'/'.join(action.option_strings)}")
+    assert not missing, f"options not on their subcommand's command line in cli.md: {missing}"
+
+
+def _default_text(value: Any) -> list[str]:
+    if isinstance(value, float) and value.is_integer():
+        return [str(int(value)), str(value)]
+    if isinstance(value, int):
+        return [str(value), f"{value:,}"]
+    return [str(value)]
+
+
+def test_option_defaults_in_cli_md_are_argparse_defaults():
+    """Every option with a default says it in cli.md, next to the option, as argparse has it.
+
+    Looked for in the section that gives the subcommand's full command line: ``--opt ... default
+    V`` or ``--opt ... `V` (default`` within a sentence, no other option between.
+    """
+    text = doc("cli.md")
+    problems = []
+    for name, parser in _subcommands().items():
+        synopsis = synopses(text, name)
+        if not synopsis:
+            continue
+        # The section (between level-2 headings) holding the subcommand's command line.
+        where = text.index(max(synopsis, key=len))
+        start = text.rfind("\n## ", 0, where)
+        end = text.find("\n## ", where)
+        sect = text[start:end if end > 0 else None]
+        for action in _options(parser):
+            if action.default in (None, False) or action.nargs == 0:
+                continue
+            opt = action.option_strings[-1]
+            values = _default_text(action.default)
+            found = [m.group(1) or m.group(2) for m in re.finditer(
+                rf"{re.escape(opt)}(?![\w-])(?:(?!--[a-z])[^.;]){{0,160}}?"
+                rf"(?:\bdefault:?\s+`?([\w.,-]+)|`([\w.,-]+)`\s+\(default\b)", sect, re.S)]
+            if not found:
+                problems.append(f"{name} {opt}: no default in cli.md (argparse: {values[0]})")
+            elif not any(f.rstrip(".,`") in values for f in found):
+                problems.append(f"{name} {opt}: cli.md says default {found}, argparse "
+                                f"{values[0]}")
+    assert not problems, "\n".join(problems)
