@@ -557,3 +557,21 @@ def test_option_defaults_in_cli_md_are_argparse_defaults():
                 problems.append(f"{name} {opt}: cli.md says default {found}, argparse "
                                 f"{values[0]}")
     assert not problems, "\n".join(problems)
+
+
+# --- per-frame arrays, the .npz schedule, mapping files -------------------------------------
+
+def test_per_frame_arrays_are_the_documented_ones():
+    import rts_scenario as rs
+
+    scene = rs.load_scenario(SCENE)
+    report = rs.run_scene(scene, rs.RunOptions(record=True)).report
+    text = doc("report.md")
+    para = text[text.index("`report.per_frame` reads them back ("):]
+    para = para[:para.index("\n\n")]
+    documented = set(spans(para)) - {"report.per_frame", "frames.adjacent_frame"}
+    quantities = {f"error_{q}" for q in report.errors}
+    written = set(report.per_frame)
+    assert written - quantities == documented - {"error_<quantity>", "(frames, targets)"}
+    assert quantities == {f"error_{q}" for q in ("range_m", "radial_velocity_mps", "az_deg",
+                                                 "el_deg", "rcs_dbsm")} <= written
