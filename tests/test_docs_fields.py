@@ -559,6 +559,120 @@ def test_option_defaults_in_cli_md_are_argparse_defaults():
     assert not problems, "\n".join(problems)
 
 
+# --- the UDP stream (docs/udp-protocol.md) --------------------------------------------------
+
+_WIRE = {"u8": "B", "u16": "H", "u32": "I", "i16": "h", "f32": "f", "f64": "d"}
+
+
+def wire_fields(text: str) -> list[tuple[str, str]]:
+    """``(name, struct code)`` of a layout "`name` u16, `name` 4 bytes ..." (big-endian)."""
+    out = []
+    for name, kind in re.findall(r"`(\w+)`\s+(\d+ bytes|[uif]\d+)", text):
+        out.append((name, f"{kind.split()[0]}s" if "bytes" in kind else _WIRE[kind]))
+    return out
+
+
+def test_udp_datagram_decoded_by_the_documented_layout():
+    """A datagram the sender encodes, read back field by field as udp-protocol.md lays it out."""
+    import struct
+    import zlib
+
+    import numpy as np
+
+    from rts_scenario.outputs.udp import ENTRY, KIND_DELTA, MAX_ENTRIES, encode_frame
+
+    text = doc("udp-protocol.md")
+    rows = {m.group(1): (int(m.group(2)), m.group(3)) for m in re.finditer(
+        r"^\| (header|entries|trailer) \| (\d+) bytes[^|]*\| ([^|]*)\|", text, re.M)}
+    header, entry = wire_fields(rows["header"][1]), wire_fields(rows["entries"][1])
+    head_fmt = ">" + "".join(c for _, c in header)
+    entry_fmt = ">" + "".join(c for _, c in entry)
+    assert struct.calcsize(head_fmt) == rows["header"][0] == 28
+    assert struct.calcsize(entry_fmt) == rows["entries"][0] == ENTRY.itemsize
+    assert [n for n, _ in entry] == list(ENTRY.names)
+    at_most = int(re.search(r"at most (\d+) entries", text).group(1))  # type: ignore[union-attr]
+    assert at_most == MAX_ENTRIES
+
+    entries = np.zeros(at_most + 3, dtype=ENTRY)  # two parts
+    entries["target"] = np.arange(entries.size) // 4
+    entries["channel"] = np.arange(entries.size) % 4
+    entries["flags"] = 1
+    entries["fe"] = np.arange(entries.size) % 15 - 1
+    entries["status"] = 0x0102
+    entries["attenuation_db"] = 12.5
+    entries["delay_s"] = 1.234567890123e-7
+    entries["doppler_hz"] = -2500.25
+    entries["phase_rad"] = -1.5
+    datagrams = encode_frame(entries, kind=KIND_DELTA, frame=70000, t_s=3500.05,
+                             first_sequence=2**32 - 1)
+    seen = []
+    for part, datagram in enumerate(datagrams):
+        h = dict(zip([n for n, _ in header], struct.unpack_from(head_fmt, datagram), strict=True))
+        assert (h["magic"], h["version"], h["kind"]) == (b"RTSS", 1, 1)
+        assert (h["sequence"], h["frame"], h["part"], h["parts"]) == (
+            (2**32 - 1 + part) % 2**32, 70000, part, 2)
+        assert h["t_s"] == 3500.05
+        body = len(datagram) - rows["trailer"][0]
+        assert body == 28 + h["entries"] * 28 and len(datagram) <= 1400
+        assert struct.unpack(">I", datagram[body:]) == (zlib.crc32(datagram[:body]),)
+        for i in range(h["entries"]):
+            seen.append(struct.unpack_from(entry_fmt, datagram, 28 + 28 * i))
+    assert seen == [tuple(e.item()) for e in entries]
+
+
+def test_udp_replies_decoded_by_the_documented_layout():
+    """The status and rig replies, and the rig's geometry digest, as udp-protocol.md gives them."""
+    import hashlib
+    import struct
+    import zlib
+
+    import numpy as np
+
+    from rts_scenario.outputs.udp import STATUS_COUNTERS, encode_rig_reply, encode_status
+    from rts_scenario.playback import rts_rig_record
+    from rts_scenario.rig import Rig
+
+    text = doc("udp-protocol.md")
+    status_text = text[text.index("## Status replies"):text.index("then a CRC-32")]
+    fields = wire_fields(status_text)
+    assert [n for n, _ in fields] == ["magic", "version"]
+    counters = re.findall(r"`(\w+)`", re.sub(r"\([^)]*\)", "",
+                                             status_text[status_text.index("u32 counters"):]))
+    reply = encode_status({c: i + 1 for i, c in enumerate(STATUS_COUNTERS)})
+    fmt = ">4sB" + "I" * len(counters)
+    assert len(reply) == struct.calcsize(fmt) + 4
+    values = struct.unpack_from(fmt, reply)
+    assert values[:2] == (b"RTSR", 1)
+    assert dict(zip(counters, values[2:], strict=True)) == {
+        c: i + 1 for i, c in enumerate(STATUS_COUNTERS)}
+    assert struct.unpack(">I", reply[-4:]) == (zlib.crc32(reply[:-4]),)
+
+    rig_text = text[text.index("## Rig replies"):]
+    fields = wire_fields(rig_text[:rig_text.index("then a CRC-32")])
+    assert [n for n, _ in fields] == ["magic", "version", "front_ends", "geometry"]
+    # A rig with antenna offsets and a direction that rounds to -0: the digest by the doc's words.
+    rig = Rig(name="t", az_deg=[-5.4, 4.5, -3.4, 3.8], el_deg=[-8.8, -7.7, 8.4, -4e-10],
+              distance_m=[1.0, 1.1, 1.2, 1.3], rows=2, columns=2, cal_delay_s=0.0,
+              cal_phase_deg=0.0, cal_gain_db=0.0,
+              rx_offset_m=[[0.01, 0.0], [0.0, 0.02], [0.0, 0.0], [-0.03, 0.0]],
+              tx_offset_m=[0.0, 0.005])
+    expected = hashlib.sha256(struct.pack("<qq", 2, 2))
+    values_in_order = [*rig.az_deg, *rig.el_deg, *rig.distance_m,
+                       *np.ravel(rig.rx_offset_m), *np.ravel(rig.tx_offset_m)]
+    for v in values_in_order:
+        r = round(float(v), 9)
+        expected.update(struct.pack("<d", 0.0 if r == 0 else r))
+    reply = encode_rig_reply(4, rig.geometry_digest())
+    fmt = ">" + "".join(c for _, c in fields)
+    assert len(reply) == struct.calcsize(fmt) + 4
+    assert struct.unpack_from(fmt, reply) == (b"RTSI", 1, 4, expected.digest())
+    assert struct.unpack(">I", reply[-4:]) == (zlib.crc32(reply[:-4]),)
+    # `playback.rts_rig` holds the keys the doc names for it.
+    documented = named(rig_text[rig_text.index("`playback.rts_rig`"):])
+    record = rts_rig_record((4, rig.geometry_digest()), rig)
+    assert record is not None and set(record) == documented - {"playback"}
+
+
 # --- per-frame arrays, the .npz schedule, mapping files -------------------------------------
 
 def test_per_frame_arrays_are_the_documented_ones():
