@@ -689,3 +689,43 @@ def test_per_frame_arrays_are_the_documented_ones():
     assert written - quantities == documented - {"error_<quantity>", "(frames, targets)"}
     assert quantities == {f"error_{q}" for q in ("range_m", "radial_velocity_mps", "az_deg",
                                                  "el_deg", "rcs_dbsm")} <= written
+
+
+def test_npz_schedule_arrays_are_the_documented_ones(out):
+    import numpy as np
+
+    path = out["tmp"] / "schedule.npz"
+    assert cli.main(["schedule", str(SCENE), "--output", f"file:{path}"]) == 0
+    text = doc("cli.md")
+    para = text[text.index("A `.npz` holds"):]
+    para = para[:para.index("\n\n")]
+    documented = {s for s in spans(para) if re.fullmatch(r"[a-z_]+", s)} - {"npz"}
+    with np.load(path) as data:
+        shapes = {k: data[k].shape for k in data.files}
+    assert set(shapes) == documented
+    frames, targets = shapes["status"]
+    dims = {"frames": frames, "targets": targets}
+    for names, shape in re.findall(r"((?:`[a-z_]+`(?:,| and)? )+)`\(([^)]*)\)`", para):
+        want = tuple(dims.get(d.strip(), None) or int(d) for d in shape.split(",") if d.strip())
+        for name in re.findall(r"`([a-z_]+)`", names):
+            assert shapes[name] == want, name
+
+
+def test_can_mapping_keys_are_the_documented_ones():
+    """The keys can-mapping.md's example and its prose give are the loader's schema."""
+    import yaml
+
+    from rts_scenario.canbus.mapping import CHECKSUM_SCHEMES, MAPPING_SCHEMA, QUANTITIES
+
+    text = doc("can-mapping.md")
+    example = yaml.safe_load(re.search(r"```yaml\n(.*?)```", text, re.S).group(1))  # type: ignore[union-attr]
+    props = MAPPING_SCHEMA["properties"]
+    assert set(example) == set(props)
+    assert set(example["header"]) == set(props["header"]["properties"])
+    detection = set(props["detection"]["properties"])
+    assert set(example["detection"]) <= detection
+    # The cartesian quantities are in the prose; every quantity is named somewhere.
+    assert detection - set(example["detection"]) <= set(QUANTITIES)
+    assert set(QUANTITIES) <= set(example["detection"]) | backticked(text)
+    schemes = {n for names, _ in table(text, "`scheme`") for n in names}
+    assert schemes == set(CHECKSUM_SCHEMES)
