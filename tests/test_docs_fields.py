@@ -729,3 +729,36 @@ def test_can_mapping_keys_are_the_documented_ones():
     assert set(QUANTITIES) <= set(example["detection"]) | backticked(text)
     schemes = {n for names, _ in table(text, "`scheme`") for n in names}
     assert schemes == set(CHECKSUM_SCHEMES)
+
+
+# --- the pytest plugin (README.md) ----------------------------------------------------------
+
+def test_plugin_options_and_defaults_are_in_the_readme():
+    """Every ``--rts-*`` option of the plugin is in the README, with argparse's default."""
+    import pytest_rts_scenario
+
+    options: dict[str, Any] = {}
+
+    class Group:
+        def addoption(self, name: str, **kwargs: Any) -> None:
+            options[name] = kwargs
+
+    class Parser:
+        def getgroup(self, *args: Any) -> Group:
+            return Group()
+
+        def addini(self, *args: Any, **kwargs: Any) -> None:
+            pass
+
+    pytest_rts_scenario.pytest_addoption(Parser())  # type: ignore[arg-type]
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section_text = section(text, "pytest plugin")
+    problems = []
+    for name, kwargs in options.items():
+        if name not in section_text:
+            problems.append(f"{name}: not in the README's pytest plugin section")
+        default = kwargs.get("default")
+        if default is not None and not re.search(
+                rf"`{re.escape(name)}`\s+\(default\s+`{re.escape(str(default))}`", section_text):
+            problems.append(f"{name}: the README does not give its default {default!r}")
+    assert not problems, "\n".join(problems)
