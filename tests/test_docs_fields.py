@@ -762,3 +762,20 @@ def test_plugin_options_and_defaults_are_in_the_readme():
                 rf"`{re.escape(name)}`\s+\(default\s+`{re.escape(str(default))}`", section_text):
             problems.append(f"{name}: the README does not give its default {default!r}")
     assert not problems, "\n".join(problems)
+
+
+def test_time_alignment_line_is_the_documented_lag():
+    """The text's `time alignment:` line is `detection_lag_s` and three of its standard errors."""
+    import rts_scenario as rs
+
+    report = rs.run_scene(rs.load_scenario(SCENE), rs.RunOptions()).report
+    clock = report.to_dict()["radar_clock"]
+    m = re.search(r"time alignment: the detections fit the scene ([\d.]+) ms \(\+-([\d.]+) ms\) "
+                  r"(before|after) the cycles' times", report.table())
+    assert m, report.table()
+    lag, error = clock["detection_lag_s"], clock["detection_lag_error_s"]
+    assert float(m.group(1)) == round(abs(lag) * 1e3, 1)
+    assert float(m.group(2)) == round(3 * error * 1e3, 1)
+    assert m.group(3) == ("before" if lag > 0 else "after")
+    row = report_rows()["radar_clock"]
+    assert re.search(r"`time alignment:` line[^;]*plus or minus three standard errors", row)
