@@ -229,7 +229,7 @@ class Report:
         """Every frame's arrays, read back from the record (empty without one).
 
         Keys: ``frame``, ``t_s``, ``detected``, ``checkable``, ``frame_status``,
-        ``error_<quantity>``.
+        ``adjacent_frame``, ``error_<quantity>`` (docs/report.md).
         """
         return self.record.load() if self.record is not None else {}
 

@@ -343,8 +343,11 @@ def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_compl
     assert code == 1 and calls == ["approaching-target", "cut-out"]
     assert "cut_out.scenario.yaml: interrupted (Ctrl-C) while running: no verdict" in err
     entries = json.loads(report.read_text())
+    # The scene under way had loaded: its entry names it by the scene's name (docs/cli.md),
+    # as the summary line does.
     assert [(e["scene"], e["status"]) for e in entries] == [("approaching-target", "pass"),
-                                                            ("cut_out", "error")]
+                                                            ("cut-out", "error")]
+    assert "ERROR cut-out (" in out
     # The detections so far are kept under a name that says they are not the whole run's.
     assert not detections.exists()
     rows = (tmp_path / "d.csv.partial").read_text().splitlines()

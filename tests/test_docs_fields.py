@@ -482,3 +482,300 @@ def test_rts_status_counters_are_the_documented_ones():
     documented = re.findall(r"`(\w+)`", re.sub(r"\([^)]*\)", "", listed))
     counters = decode_status(encode_status(dict.fromkeys(STATUS_COUNTERS, 1)))
     assert counters is not None and list(counters) == documented
+
+
+# --- the command line (docs/cli.md) ---------------------------------------------------------
+
+def _subcommands() -> dict[str, Any]:
+    import argparse
+
+    parser = cli.build_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return dict(sub.choices)
+
+
+def _options(parser: Any) -> list[Any]:
+    return [a for a in parser._actions
+            if a.option_strings and not {"-h", "--debug"} & set(a.option_strings)]
+
+
+def synopses(text: str, command: str) -> list[str]:
+    """The command lines cli.md gives for ``rts-scenario COMMAND`` (inline spans, code blocks)."""
+    chunks = spans(text) + re.findall(r"```sh\n(.*?)```", text, re.S)
+    return [c for c in chunks if re.match(rf"rts-scenario {re.escape(command)}(\s|$)", c)]
+
+
+def test_every_option_of_every_subcommand_is_in_its_synopsis_in_cli_md():
+    """A user finds every option of a subcommand on its command line in docs/cli.md."""
+    text = doc("cli.md")
+    missing = []
+    for name, parser in _subcommands().items():
+        lines = " ".join(synopses(text, name))
+        for action in _options(parser):
+            if not any(re.search(rf"{re.escape(o)}(?![\w-])", lines)
+                       for o in action.option_strings):
+                missing.append(f"{name} {'/'.join(action.option_strings)}")
+    assert not missing, f"options not on their subcommand's command line in cli.md: {missing}"
+
+
+def _default_text(value: Any) -> list[str]:
+    if isinstance(value, float) and value.is_integer():
+        return [str(int(value)), str(value)]
+    if isinstance(value, int):
+        return [str(value), f"{value:,}"]
+    return [str(value)]
+
+
+def test_option_defaults_in_cli_md_are_argparse_defaults():
+    """Every option with a default says it in cli.md, next to the option, as argparse has it.
+
+    Looked for in the section that gives the subcommand's full command line: ``--opt ... default
+    V`` or ``--opt ... `V` (default`` within a sentence, no other option between.
+    """
+    text = doc("cli.md")
+    problems = []
+    for name, parser in _subcommands().items():
+        synopsis = synopses(text, name)
+        if not synopsis:
+            continue
+        # The section (between level-2 headings) holding the subcommand's command line.
+        where = text.index(max(synopsis, key=len))
+        start = text.rfind("\n## ", 0, where)
+        end = text.find("\n## ", where)
+        sect = text[start:end if end > 0 else None]
+        for action in _options(parser):
+            if action.default in (None, False) or action.nargs == 0:
+                continue
+            opt = action.option_strings[-1]
+            values = _default_text(action.default)
+            found = [m.group(1) or m.group(2) for m in re.finditer(
+                rf"{re.escape(opt)}(?![\w-])(?:(?!--[a-z])[^.;]){{0,160}}?"
+                rf"(?:\bdefault:?\s+`?([\w.,-]+)|`([\w.,-]+)`\s+\(default\b)", sect, re.S)]
+            if not found:
+                problems.append(f"{name} {opt}: no default in cli.md (argparse: {values[0]})")
+            elif not any(f.rstrip(".,`") in values for f in found):
+                problems.append(f"{name} {opt}: cli.md says default {found}, argparse "
+                                f"{values[0]}")
+    assert not problems, "\n".join(problems)
+
+
+# --- the UDP stream (docs/udp-protocol.md) --------------------------------------------------
+
+_WIRE = {"u8": "B", "u16": "H", "u32": "I", "i16": "h", "f32": "f", "f64": "d"}
+
+
+def wire_fields(text: str) -> list[tuple[str, str]]:
+    """``(name, struct code)`` of a layout "`name` u16, `name` 4 bytes ..." (big-endian)."""
+    out = []
+    for name, kind in re.findall(r"`(\w+)`\s+(\d+ bytes|[uif]\d+)", text):
+        out.append((name, f"{kind.split()[0]}s" if "bytes" in kind else _WIRE[kind]))
+    return out
+
+
+def test_udp_datagram_decoded_by_the_documented_layout():
+    """A datagram the sender encodes, read back field by field as udp-protocol.md lays it out."""
+    import struct
+    import zlib
+
+    import numpy as np
+
+    from rts_scenario.outputs.udp import ENTRY, KIND_DELTA, MAX_ENTRIES, encode_frame
+
+    text = doc("udp-protocol.md")
+    rows = {m.group(1): (int(m.group(2)), m.group(3)) for m in re.finditer(
+        r"^\| (header|entries|trailer) \| (\d+) bytes[^|]*\| ([^|]*)\|", text, re.M)}
+    header, entry = wire_fields(rows["header"][1]), wire_fields(rows["entries"][1])
+    head_fmt = ">" + "".join(c for _, c in header)
+    entry_fmt = ">" + "".join(c for _, c in entry)
+    assert struct.calcsize(head_fmt) == rows["header"][0] == 28
+    assert struct.calcsize(entry_fmt) == rows["entries"][0] == ENTRY.itemsize
+    assert [n for n, _ in entry] == list(ENTRY.names)
+    at_most = int(re.search(r"at most (\d+) entries", text).group(1))  # type: ignore[union-attr]
+    assert at_most == MAX_ENTRIES
+
+    entries = np.zeros(at_most + 3, dtype=ENTRY)  # two parts
+    entries["target"] = np.arange(entries.size) // 4
+    entries["channel"] = np.arange(entries.size) % 4
+    entries["flags"] = 1
+    entries["fe"] = np.arange(entries.size) % 15 - 1
+    entries["status"] = 0x0102
+    entries["attenuation_db"] = 12.5
+    entries["delay_s"] = 1.234567890123e-7
+    entries["doppler_hz"] = -2500.25
+    entries["phase_rad"] = -1.5
+    datagrams = encode_frame(entries, kind=KIND_DELTA, frame=70000, t_s=3500.05,
+                             first_sequence=2**32 - 1)
+    seen = []
+    for part, datagram in enumerate(datagrams):
+        h = dict(zip([n for n, _ in header], struct.unpack_from(head_fmt, datagram), strict=True))
+        assert (h["magic"], h["version"], h["kind"]) == (b"RTSS", 1, 1)
+        assert (h["sequence"], h["frame"], h["part"], h["parts"]) == (
+            (2**32 - 1 + part) % 2**32, 70000, part, 2)
+        assert h["t_s"] == 3500.05
+        body = len(datagram) - rows["trailer"][0]
+        assert body == 28 + h["entries"] * 28 and len(datagram) <= 1400
+        assert struct.unpack(">I", datagram[body:]) == (zlib.crc32(datagram[:body]),)
+        for i in range(h["entries"]):
+            seen.append(struct.unpack_from(entry_fmt, datagram, 28 + 28 * i))
+    assert seen == [tuple(e.item()) for e in entries]
+
+
+def test_udp_replies_decoded_by_the_documented_layout():
+    """The status and rig replies, and the rig's geometry digest, as udp-protocol.md gives them."""
+    import hashlib
+    import struct
+    import zlib
+
+    import numpy as np
+
+    from rts_scenario.outputs.udp import STATUS_COUNTERS, encode_rig_reply, encode_status
+    from rts_scenario.playback import rts_rig_record
+    from rts_scenario.rig import Rig
+
+    text = doc("udp-protocol.md")
+    status_text = text[text.index("## Status replies"):text.index("then a CRC-32")]
+    fields = wire_fields(status_text)
+    assert [n for n, _ in fields] == ["magic", "version"]
+    counters = re.findall(r"`(\w+)`", re.sub(r"\([^)]*\)", "",
+                                             status_text[status_text.index("u32 counters"):]))
+    reply = encode_status({c: i + 1 for i, c in enumerate(STATUS_COUNTERS)})
+    fmt = ">4sB" + "I" * len(counters)
+    assert len(reply) == struct.calcsize(fmt) + 4
+    values = struct.unpack_from(fmt, reply)
+    assert values[:2] == (b"RTSR", 1)
+    assert dict(zip(counters, values[2:], strict=True)) == {
+        c: i + 1 for i, c in enumerate(STATUS_COUNTERS)}
+    assert struct.unpack(">I", reply[-4:]) == (zlib.crc32(reply[:-4]),)
+
+    rig_text = text[text.index("## Rig replies"):]
+    fields = wire_fields(rig_text[:rig_text.index("then a CRC-32")])
+    assert [n for n, _ in fields] == ["magic", "version", "front_ends", "geometry"]
+    # A rig with antenna offsets and a direction that rounds to -0: the digest by the doc's words.
+    rig = Rig(name="t", az_deg=[-5.4, 4.5, -3.4, 3.8], el_deg=[-8.8, -7.7, 8.4, -4e-10],
+              distance_m=[1.0, 1.1, 1.2, 1.3], rows=2, columns=2, cal_delay_s=0.0,
+              cal_phase_deg=0.0, cal_gain_db=0.0,
+              rx_offset_m=[[0.01, 0.0], [0.0, 0.02], [0.0, 0.0], [-0.03, 0.0]],
+              tx_offset_m=[0.0, 0.005])
+    expected = hashlib.sha256(struct.pack("<qq", 2, 2))
+    values_in_order = [*rig.az_deg, *rig.el_deg, *rig.distance_m,
+                       *np.ravel(rig.rx_offset_m), *np.ravel(rig.tx_offset_m)]
+    for v in values_in_order:
+        r = round(float(v), 9)
+        expected.update(struct.pack("<d", 0.0 if r == 0 else r))
+    reply = encode_rig_reply(4, rig.geometry_digest())
+    fmt = ">" + "".join(c for _, c in fields)
+    assert len(reply) == struct.calcsize(fmt) + 4
+    assert struct.unpack_from(fmt, reply) == (b"RTSI", 1, 4, expected.digest())
+    assert struct.unpack(">I", reply[-4:]) == (zlib.crc32(reply[:-4]),)
+    # `playback.rts_rig` holds the keys the doc names for it.
+    documented = named(rig_text[rig_text.index("`playback.rts_rig`"):])
+    record = rts_rig_record((4, rig.geometry_digest()), rig)
+    assert record is not None and set(record) == documented - {"playback"}
+
+
+# --- per-frame arrays, the .npz schedule, mapping files -------------------------------------
+
+def test_per_frame_arrays_are_the_documented_ones():
+    import rts_scenario as rs
+
+    scene = rs.load_scenario(SCENE)
+    report = rs.run_scene(scene, rs.RunOptions(record=True)).report
+    text = doc("report.md")
+    para = text[text.index("`report.per_frame` reads them back ("):]
+    para = para[:para.index("\n\n")]
+    documented = set(spans(para)) - {"report.per_frame", "frames.adjacent_frame"}
+    quantities = {f"error_{q}" for q in report.errors}
+    written = set(report.per_frame)
+    assert written - quantities == documented - {"error_<quantity>", "(frames, targets)"}
+    assert quantities == {f"error_{q}" for q in ("range_m", "radial_velocity_mps", "az_deg",
+                                                 "el_deg", "rcs_dbsm")} <= written
+
+
+def test_npz_schedule_arrays_are_the_documented_ones(out):
+    import numpy as np
+
+    path = out["tmp"] / "schedule.npz"
+    assert cli.main(["schedule", str(SCENE), "--output", f"file:{path}"]) == 0
+    text = doc("cli.md")
+    para = text[text.index("A `.npz` holds"):]
+    para = para[:para.index("\n\n")]
+    documented = {s for s in spans(para) if re.fullmatch(r"[a-z_]+", s)} - {"npz"}
+    with np.load(path) as data:
+        shapes = {k: data[k].shape for k in data.files}
+    assert set(shapes) == documented
+    frames, targets = shapes["status"]
+    dims = {"frames": frames, "targets": targets}
+    for names, shape in re.findall(r"((?:`[a-z_]+`(?:,| and)? )+)`\(([^)]*)\)`", para):
+        want = tuple(dims.get(d.strip(), None) or int(d) for d in shape.split(",") if d.strip())
+        for name in re.findall(r"`([a-z_]+)`", names):
+            assert shapes[name] == want, name
+
+
+def test_can_mapping_keys_are_the_documented_ones():
+    """The keys can-mapping.md's example and its prose give are the loader's schema."""
+    import yaml
+
+    from rts_scenario.canbus.mapping import CHECKSUM_SCHEMES, MAPPING_SCHEMA, QUANTITIES
+
+    text = doc("can-mapping.md")
+    example = yaml.safe_load(re.search(r"```yaml\n(.*?)```", text, re.S).group(1))  # type: ignore[union-attr]
+    props = MAPPING_SCHEMA["properties"]
+    assert set(example) == set(props)
+    assert set(example["header"]) == set(props["header"]["properties"])
+    detection = set(props["detection"]["properties"])
+    assert set(example["detection"]) <= detection
+    # The cartesian quantities are in the prose; every quantity is named somewhere.
+    assert detection - set(example["detection"]) <= set(QUANTITIES)
+    assert set(QUANTITIES) <= set(example["detection"]) | backticked(text)
+    schemes = {n for names, _ in table(text, "`scheme`") for n in names}
+    assert schemes == set(CHECKSUM_SCHEMES)
+
+
+# --- the pytest plugin (README.md) ----------------------------------------------------------
+
+def test_plugin_options_and_defaults_are_in_the_readme():
+    """Every ``--rts-*`` option of the plugin is in the README, with argparse's default."""
+    import pytest_rts_scenario
+
+    options: dict[str, Any] = {}
+
+    class Group:
+        def addoption(self, name: str, **kwargs: Any) -> None:
+            options[name] = kwargs
+
+    class Parser:
+        def getgroup(self, *args: Any) -> Group:
+            return Group()
+
+        def addini(self, *args: Any, **kwargs: Any) -> None:
+            pass
+
+    pytest_rts_scenario.pytest_addoption(Parser())  # type: ignore[arg-type]
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section_text = section(text, "pytest plugin")
+    problems = []
+    for name, kwargs in options.items():
+        if name not in section_text:
+            problems.append(f"{name}: not in the README's pytest plugin section")
+        default = kwargs.get("default")
+        if default is not None and not re.search(
+                rf"`{re.escape(name)}`\s+\(default\s+`{re.escape(str(default))}`", section_text):
+            problems.append(f"{name}: the README does not give its default {default!r}")
+    assert not problems, "\n".join(problems)
+
+
+def test_time_alignment_line_is_the_documented_lag():
+    """The text's `time alignment:` line is `detection_lag_s` and three of its standard errors."""
+    import rts_scenario as rs
+
+    report = rs.run_scene(rs.load_scenario(SCENE), rs.RunOptions()).report
+    clock = report.to_dict()["radar_clock"]
+    m = re.search(r"time alignment: the detections fit the scene ([\d.]+) ms \(\+-([\d.]+) ms\) "
+                  r"(before|after) the cycles' times", report.table())
+    assert m, report.table()
+    lag, error = clock["detection_lag_s"], clock["detection_lag_error_s"]
+    assert float(m.group(1)) == round(abs(lag) * 1e3, 1)
+    assert float(m.group(2)) == round(3 * error * 1e3, 1)
+    assert m.group(3) == ("before" if lag > 0 else "after")
+    row = report_rows()["radar_clock"]
+    assert re.search(r"`time alignment:` line[^;]*plus or minus three standard errors", row)

@@ -117,7 +117,8 @@ def _do_run(args: argparse.Namespace) -> int:
         entries.append({"scene": scene, "file": path, "status": "error", "error": message,
                         "variant": variant, "parameters": dict(parameters or {})})
 
-    # The run under way when Ctrl-C came: (file name, path, variant, overrides, log).
+    # The run under way when Ctrl-C came: (scene name, or file name until it loaded, path,
+    # variant, overrides, log).
     current: tuple[str, str, str, dict[str, Any], str | None] | None = None
     interrupted = False
     try:
@@ -141,6 +142,8 @@ def _do_run(args: argparse.Namespace) -> int:
                     bad_input = bad_input or isinstance(exc, RtsError)
                     runtime_error = runtime_error or not isinstance(exc, RtsError)
                     continue
+                # Loaded: an interrupted run's entry names the scene, not its file.
+                current = (scene.name, *current[1:])
                 try:
                     loaded = {"load_s": time.perf_counter() - start}
 

@@ -50,7 +50,7 @@ def _do_validate(args: argparse.Namespace) -> int:
             bad += args.strict and bool(unexpected)
             for note in (near_field_warning(scene.radar, scene.rig),
                          delay_step_note(scene.rig, scene.radar)):
-                if note and note not in reported:  # once per rig and radar
+                if note and note not in reported:  # once per file, rig and radar
                     reported.add(note)
                     print(f"note: {label}: {note}")
             if not (args.strict and unexpected):
