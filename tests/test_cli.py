@@ -353,3 +353,71 @@ def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_compl
     rows = (tmp_path / "d.csv.partial").read_text().splitlines()
     assert len(rows) > 100 and all(r.startswith("approaching-target,") for r in rows[1:])
     assert f"wrote {detections}.partial (cut short: the run was interrupted)" in out
+
+
+def test_a_reader_that_stops_early_loses_neither_the_verdict_nor_the_report(tmp_path):
+    # `rts-scenario run SCENE --json R | head -1`: the reader goes away after one line. The
+    # rest of the output has nowhere to go, but every variant still runs, the report is written
+    # and the exit code is the verdict's (before: exit 3, the variants after the first line
+    # erred, no report).
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    report = tmp_path / "r.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(root / "plugins"),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys, rts_scenario.cli as c; sys.exit(c.main())", "run",
+         str(root / "scenarios" / "cut_in.scenario.yaml"), "--json", str(report)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    assert proc.stdout is not None and proc.stderr is not None
+    first = proc.stdout.readline()
+    proc.stdout.close()  # as `head -1` does
+    errors = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == 0, errors
+    assert first.startswith(b"target ")
+    assert "BrokenPipe" not in errors and "Exception ignored" not in errors, errors
+    assert [s["status"] for s in json.loads(report.read_text())] == ["pass", "pass"]
+
+
+def test_rts_listen_stops_when_its_reader_has_gone(tmp_path):
+    # `rts-scenario rts-listen udp://... | head -1`: printing frames is all it does, so it ends
+    # (exit 0) once nobody reads them, rather than listening on for ever.
+    import os
+    import subprocess
+    import sys
+    import time
+
+    from rts_scenario.kinematics import compute_tracks
+    from rts_scenario.outputs import open_output
+    from rts_scenario.scenario import load_scenario
+    from rts_scenario.schedule import build_schedule
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(root / "plugins"),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys, rts_scenario.cli as c; sys.exit(c.main())",
+         "rts-listen", "udp://127.0.0.1:0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    assert proc.stdout is not None and proc.stderr is not None
+    try:
+        first = proc.stdout.readline().decode()
+        assert first.startswith("listening on udp://127.0.0.1:"), first
+        port = int(first.rsplit(":", 1)[1])
+        proc.stdout.close()  # as `head -1` does
+        scene = load_scenario(root / "scenarios" / "cut_in.scenario.yaml")
+        schedule = build_schedule(compute_tracks(scene), scene.rig, scene.radar)
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and time.monotonic() < deadline:
+            with open_output(f"udp://127.0.0.1:{port}", pacing="fast") as out:
+                out.write(schedule)
+            time.sleep(0.2)
+        assert proc.wait(timeout=10) == 0
+        errors = proc.stderr.read().decode()
+        assert "BrokenPipe" not in errors and "Exception ignored" not in errors, errors
+    finally:
+        if proc.poll() is None:
+            proc.kill()

@@ -36,6 +36,7 @@ from .common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_RUNTIME_ERROR,
+    guarded_stdout,
     one_line,
     show_traceback,
 )
@@ -73,6 +74,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    stdout = sys.stdout
+    guard = guarded_stdout(stdout)
+    if guard is not None:
+        sys.stdout = guard
+    try:
+        return _handle(args)
+    finally:
+        if guard is not None:
+            sys.stdout.flush()
+            sys.stdout = stdout
+
+
+def _handle(args: argparse.Namespace) -> int:
     try:
         code: int = args.handler(args)
         return code

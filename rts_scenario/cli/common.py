@@ -12,7 +12,7 @@ import traceback
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO, cast
 
 from ..errors import RtsError, one_line
 
@@ -24,6 +24,60 @@ EXIT_OK = 0
 EXIT_FAIL = 1
 EXIT_BAD_INPUT = 2
 EXIT_RUNTIME_ERROR = 3
+
+
+class _ReaderGone:
+    """Standard output that outlives its reader (``rts-scenario run ... | head``).
+
+    Once the reader has gone, what is still written goes to the null device: the command runs
+    to its end, writes its files and exits with its verdict, instead of failing every later
+    scene on a broken pipe.
+    """
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+        self.reader_gone = False
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._to_null()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._to_null()
+
+    def _to_null(self) -> None:
+        # The stream's file descriptor now points at the null device, so its buffer (and the
+        # interpreter's last flush at exit) drains there.
+        self.reader_gone = True
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, self._stream.fileno())
+        finally:
+            os.close(null)
+        self._stream.flush()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+def guarded_stdout(stream: TextIO) -> TextIO | None:
+    """``stream`` wrapped in `_ReaderGone` when it is a file (not a capture), else None."""
+    try:
+        stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
+    return cast(TextIO, _ReaderGone(stream))
+
+
+def stdout_reader_gone() -> bool:
+    """Whether standard output's reader has gone (`guarded_stdout`): nothing printed is read."""
+    return bool(getattr(sys.stdout, "reader_gone", False))
 
 
 class Progress:

@@ -6,7 +6,7 @@ import argparse
 import time
 from typing import Any
 
-from .common import EXIT_OK, check_number
+from .common import EXIT_OK, check_number, stdout_reader_gone
 
 
 def _do_listen(args: argparse.Namespace) -> int:
@@ -44,6 +44,8 @@ def _do_listen(args: argparse.Namespace) -> int:
                 datagrams = receiver.stats.datagrams
                 quiet_since = time.monotonic()
             elif args.seconds is not None and time.monotonic() - quiet_since >= args.seconds:
+                break
+            if stdout_reader_gone():  # printing is all it does (`rts-listen ... | head`)
                 break
             time.sleep(0.01)
     except KeyboardInterrupt:
