@@ -1,6 +1,7 @@
 import re
 import shutil
 import textwrap
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -465,6 +466,25 @@ def test_a_carrier_outside_the_radar_bands_is_a_located_error(tmp_path, fc):
     with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: fc_hz: must be "
                                             rf"(<= 300000000000|>= 1000000000)"):
         RadarProfile.from_file(path)
+
+
+@pytest.mark.parametrize("position", ["2.0", "1.0e+6", "1.0e+200", "1.0e+308"])
+def test_an_array_wider_than_the_angle_grids_allow_is_a_located_error(tmp_path, position):
+    # An RX antenna 1e6 m out made the global-maximum check's grid 34 GiB (MemoryError, exit 3);
+    # 1e200 m an OverflowError, 1e308 m numpy's overflow warning and an error naming no key.
+    from rts_scenario.radar.profile import MAX_APERTURE_WAVELENGTHS, RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar.replace("rx_y_m: [0.002075,", f"rx_y_m: [{position},"))
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1)
+                if text.strip().startswith("rx_y_m"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: array.rx_y_m: "
+                                                rf".* at most {MAX_APERTURE_WAVELENGTHS} "
+                                                rf"wavelengths"):
+            RadarProfile.from_file(path)
 
 
 def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):

@@ -33,6 +33,12 @@ RATE_SLACK = 1e-9
 
 FloatArray = NDArray[np.float64]
 
+# The widest virtual array a profile may give, per axis, in nominal wavelengths: the angle grids
+# of the radar's estimator and of the solver's global-maximum check grow with (aperture /
+# wavelength) per axis (64 x 64 wavelengths: about 1.2 GB and 20 s to validate a scene). The
+# widest preset, cascade-12x16, spans 42.5 wavelengths along y.
+MAX_APERTURE_WAVELENGTHS = 64
+
 
 @dataclass(frozen=True, eq=False)
 class RadarProfile:
@@ -283,6 +289,7 @@ class RadarProfile:
             # The preset's geometry is in wavelengths: at this profile's nominal wavelength.
             antennas = Antennas.preset(spec, C0_MPS / (fc + bw / 2.0))
         else:
+            _check_aperture(doc, spec, C0_MPS / (fc + bw / 2.0))
             try:
                 antennas = Antennas(spec["tx_y_m"], spec["tx_z_m"], spec["rx_y_m"],
                                     spec["rx_z_m"], name=d["name"])
@@ -334,6 +341,26 @@ class RadarProfile:
             adc_start_s=adc_start, clock=clock,
             range_doppler_coupling=str(d.get("range_doppler_coupling", "kept")),
         )
+
+
+def _check_aperture(doc: Document, spec: dict[str, list[float]], wavelength_m: float) -> None:
+    """Refuse antennas whose virtual array is wider than `MAX_APERTURE_WAVELENGTHS`.
+
+    The virtual array (every TX + RX) spans the TX group's spread plus the RX group's per axis.
+    """
+    for axis in ("y", "z"):
+        spreads = {key: max(spec[key]) - min(spec[key])
+                   for key in (f"tx_{axis}_m", f"rx_{axis}_m")}
+        span = sum(spreads.values())
+        if span <= MAX_APERTURE_WAVELENGTHS * wavelength_m:
+            continue
+        widest = max(spreads, key=lambda key: spreads[key])
+        raise doc.error(
+            ("array", widest),
+            f"the virtual array spans {span:.3g} m along {axis} (the spread of tx_{axis}_m plus "
+            f"that of rx_{axis}_m), {span / wavelength_m:.3g} wavelengths of "
+            f"{wavelength_m * 1e3:.3g} mm; at most {MAX_APERTURE_WAVELENGTHS} wavelengths (the "
+            f"estimator's angle grid grows with it): check the positions are in metres")
 
 
 def preset_names() -> list[str]:
