@@ -475,6 +475,17 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("validate-dev-zero", ["validate", "/dev/zero"], 2,
      r"^/dev/zero: document larger than the limit of 4 MB"),
     ("unknown-command", ["fly"], 2, r"invalid choice: 'fly'"),
+    # An empty value (an unset shell variable) was taken as no option: the run passed and
+    # wrote no report; `sweep ""` swept the current folder.
+    ("run-json-empty", ["run", "{scene}", "--json", ""], 2,
+     r"argument --json: an empty value"),
+    ("run-detections-empty", ["run", "{scene}", "--detections", ""], 2,
+     r"argument --detections: an empty value"),
+    ("run-record-empty", ["run", "{scene}", "--record", ""], 2,
+     r"argument --record: an empty value"),
+    ("sweep-scene-empty", ["sweep", ""], 2, r"argument SCENE: an empty value"),
+    ("check-json-empty", ["check", "{scene}", "--log", "{tmp}/junk.blf", "--json", ""], 2,
+     r"argument --json: an empty value"),
 ]
 
 
