@@ -223,7 +223,16 @@ BAD = [
      "must have at least 2 items"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
           "      - {start_s: 1, duration_s: 0, offset_m: 3}"), 16,
-     "targets[0].lane_changes[0].duration_s", "must be > 0"),
+     "targets[0].lane_changes[0].duration_s", "must be >= 0.001"),
+    # 1e-300 s: the lateral acceleration's duration**2 underflowed to 0 (numpy's "invalid value
+    # encountered in divide" printed by validate and run). The floor is import's lateral step.
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
+          "      - {start_s: 1, duration_s: 1.0e-300, offset_m: 3}"), 16,
+     "targets[0].lane_changes[0].duration_s", "must be >= 0.001, got 1e-300"),
+    # A tolerance of 1e-300 overflowed the checker's gate (numpy's "overflow encountered in
+    # multiply" printed by run); a micrometre, a micro-degree is below any radar's resolution.
+    (GOOD + "expectations: {tolerances: {az_deg: 1.0e-300}}\n", 15,
+     "expectations.tolerances.az_deg", "must be >= 1e-06, got 1e-300"),
     (edit("targets:", "include: [../outside.yaml]\ntargets:"), 11, "include[0]",
      "leaves the scene's folder tree"),
     (edit("name: good", "name: good\nname: again"), 3, "name", "duplicate key"),
@@ -235,6 +244,26 @@ BAD = [
     (edit("rig: wide-3x5", "rig: wide-3x5\nexpectations: {detection_rate: 1.5}"), 9,
      "expectations.detection_rate", "must be <= 1"),
 ]
+
+
+def test_the_shortest_lane_change_moves_the_target_by_its_offset_without_numpy_warnings(
+        tmp_path):
+    # The floor of lane_changes[].duration_s (1 ms, import's lateral step): every frame is
+    # finite, and the target ends the offset away from where it would be without it.
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n"
+                         "    lane_changes:\n      - {start_s: 1, duration_s: 0.001, "
+                         "offset_m: 3}"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tracks = compute_tracks(load_scenario(path))
+    assert all(np.all(np.isfinite(np.asarray(v, dtype=float)))
+               for v in (tracks.range_m, tracks.radial_velocity_mps, tracks.az_deg))
+    # The target is 1 m/s slower than the ego: at the last frame (t = 4.95 s) it is
+    # 30 - 4.95 - 3.7 m ahead of the radar and 3 m to its left.
+    assert tracks.az_deg[0, 0] == pytest.approx(0.0, abs=1e-9)
+    assert tracks.az_deg[-1, 0] == pytest.approx(np.degrees(np.arctan2(3.0, 30 - 4.95 - 3.7)),
+                                                 abs=1e-6)
 
 
 @pytest.mark.parametrize("text, line, key, message", BAD)
