@@ -516,6 +516,44 @@ def test_an_array_wider_than_the_angle_grids_allow_is_a_located_error(tmp_path, 
             RadarProfile.from_file(path)
 
 
+@pytest.mark.parametrize("edits, key", [
+    ({"chirp_loops: 64": "chirp_loops: 100000000", "frame_period_s: 0.05":
+      "frame_period_s: 1.0e+6"}, "chirp_loops"),
+    ({"adc_samples: 256": "adc_samples: 100000000", "sample_rate_hz: 20.0e+6":
+      "sample_rate_hz: 1.0e+20"}, "adc_samples"),
+])
+def test_a_cube_larger_than_the_simulated_radar_can_hold_is_a_located_error(tmp_path, edits,
+                                                                             key):
+    # 10^8 chirp loops (or ADC samples) made run allocate 191 GiB (47.7 GiB): MemoryError,
+    # exit 3.
+    from rts_scenario.radar.profile import MAX_CUBE_SAMPLES, RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    for old, new in edits.items():
+        assert old in radar
+        radar = radar.replace(old, new)
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar)
+    line = next(i for i, text in enumerate(radar.splitlines(), 1) if text.startswith(key))
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: {key}: .* at most "
+                                            rf"{MAX_CUBE_SAMPLES:,}"):
+        RadarProfile.from_file(path)
+
+
+def test_a_sweep_beyond_the_radar_bands_is_a_located_error(tmp_path):
+    # A bandwidth of 1e30 Hz was refused as an array 2.28e19 wavelengths wide.
+    from rts_scenario.radar.profile import RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar.replace("bandwidth_hz: 0.6e+9", "bandwidth_hz: 1.0e+30"))
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1)
+                if text.startswith("bandwidth_hz"))
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: bandwidth_hz: must be "
+                                            rf"<= 300000000000"):
+        RadarProfile.from_file(path)
+
+
 def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):
     # YAML 1.1 reads 76.5e9 and 1e6 as strings; YAML 1.2 (and engineers) as numbers.
     from rts_scenario.canbus.mapping import CanMapping

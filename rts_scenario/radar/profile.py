@@ -38,6 +38,9 @@ FloatArray = NDArray[np.float64]
 # wavelength) per axis (64 x 64 wavelengths: about 1.2 GB and 20 s to validate a scene). The
 # widest preset, cascade-12x16, spans 42.5 wavelengths along y.
 MAX_APERTURE_WAVELENGTHS = 64
+# The most ADC samples one frame may hold: adc_samples x chirp_loops x virtual channels (the
+# simulated radar's beat-signal cube, 1 GiB as complex numbers; cascade-12x16: 3.1 million).
+MAX_CUBE_SAMPLES = 2**26
 
 
 @dataclass(frozen=True, eq=False)
@@ -295,8 +298,16 @@ class RadarProfile:
                                     spec["rx_z_m"], name=d["name"])
             except ArrayError as exc:
                 raise doc.error(("array",), str(exc)) from None
-        array = antennas.virtual_array(fc_hz=fc, bandwidth_hz=bw)
         n_tx = antennas.n_tx
+        cube = d["adc_samples"] * d["chirp_loops"] * n_tx * antennas.n_rx
+        if cube > MAX_CUBE_SAMPLES:
+            key = "adc_samples" if d["adc_samples"] >= d["chirp_loops"] else "chirp_loops"
+            raise doc.error(
+                (key,),
+                f"adc_samples x chirp_loops x virtual channels = {d['adc_samples']} x "
+                f"{d['chirp_loops']} x {n_tx * antennas.n_rx} = {cube:,} samples per frame; at "
+                f"most {MAX_CUBE_SAMPLES:,} (the simulated radar's beat-signal cube)")
+        array = antennas.virtual_array(fc_hz=fc, bandwidth_hz=bw)
         tx_order = tuple(int(t) for t in d["tx_order"])
         if sorted(tx_order) != list(range(n_tx)):
             raise doc.error(
@@ -386,7 +397,7 @@ PROFILE_SCHEMA: dict[str, Any] = {
         # Radar bands from 1 to 300 GHz (automotive: 24, 77-81 GHz); beyond them the
         # estimator's angle grid, which grows with (aperture / wavelength)^2, would not fit.
         "fc_hz": {"type": "number", "minimum": 1e9, "maximum": 3e11},
-        "bandwidth_hz": _POSITIVE,
+        "bandwidth_hz": {"type": "number", "exclusiveMinimum": 0, "maximum": 3e11},
         "ramp_time_s": _POSITIVE,
         "idle_time_s": {"type": "number", "minimum": 0},
         "adc_samples": {"type": "integer", "minimum": 2},
