@@ -185,7 +185,7 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("detection-rate-2", TINY + "expectations: {detection_rate: 2}\n",
      r"^{f}:15:\d+: expectations.detection_rate: must be <= 1, got 2"),
     ("tolerance-zero", TINY + "expectations: {tolerances: {az_deg: 0}}\n",
-     r"^{f}:15:\d+: expectations.tolerances.az_deg: must be > 0, got 0"),
+     r"^{f}:15:\d+: expectations.tolerances.az_deg: must be >= 1e-06, got 0"),
     ("seed-negative", TINY + "seed: -4\n", r"^{f}:15:1: seed: must be >= 0, got -4"),
     ("bad-mark", TINY + "marks: [not a mark]\n", r"^{f}:15:\d+: marks\[0\]: .*does not match"),
     ("parametrize-bad-path", TINY + "parametrize: {radar.nothing.here: [1, 2]}\n",
