@@ -554,6 +554,25 @@ def test_a_sweep_beyond_the_radar_bands_is_a_located_error(tmp_path):
         RadarProfile.from_file(path)
 
 
+def test_an_integer_beyond_64_bits_is_a_located_error_in_every_file_type(tmp_path):
+    # clock.counter_start: 10**20 reached numpy: OverflowError ("Python int too large to
+    # convert to C long"), exit 3.
+    from rts_scenario.radar.profile import RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar + "clock: {counter_start: 100000000000000000000}\n")
+    line = len(radar.splitlines()) + 1
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: clock.counter_start: "
+                                            rf"an integer beyond 64 bits"):
+        RadarProfile.from_file(path)
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(GOOD + "seed: 100000000000000000000\n")
+    with pytest.raises(ScenarioError, match=r"s.scenario.yaml:15:\d+: seed: an integer beyond "
+                                            r"64 bits"):
+        load_scenario(scene)
+
+
 def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):
     # YAML 1.1 reads 76.5e9 and 1e6 as strings; YAML 1.2 (and engineers) as numbers.
     from rts_scenario.canbus.mapping import CanMapping
