@@ -540,17 +540,20 @@ def test_a_cube_larger_than_the_simulated_radar_can_hold_is_a_located_error(tmp_
         RadarProfile.from_file(path)
 
 
-def test_a_sweep_beyond_the_radar_bands_is_a_located_error(tmp_path):
-    # A bandwidth of 1e30 Hz was refused as an array 2.28e19 wavelengths wide.
+@pytest.mark.parametrize("bandwidth, allowed", [("1.0e+30", "<= 300000000000"),
+                                                 ("1.0e-300", ">= 1000000")])
+def test_a_sweep_beyond_the_radar_bands_is_a_located_error(tmp_path, bandwidth, allowed):
+    # A bandwidth of 1e30 Hz was refused as an array 2.28e19 wavelengths wide; 1e-300 Hz made
+    # range bins of 1.5e308 m (numpy's "overflow encountered in multiply" printed by run).
     from rts_scenario.radar.profile import RadarProfile
 
     radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
     path = tmp_path / "r.radar.yaml"
-    path.write_text(radar.replace("bandwidth_hz: 0.6e+9", "bandwidth_hz: 1.0e+30"))
+    path.write_text(radar.replace("bandwidth_hz: 0.6e+9", f"bandwidth_hz: {bandwidth}"))
     line = next(i for i, text in enumerate(path.read_text().splitlines(), 1)
                 if text.startswith("bandwidth_hz"))
     with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: bandwidth_hz: must be "
-                                            rf"<= 300000000000"):
+                                            rf"{allowed}"):
         RadarProfile.from_file(path)
 
 

@@ -397,7 +397,8 @@ PROFILE_SCHEMA: dict[str, Any] = {
         # Radar bands from 1 to 300 GHz (automotive: 24, 77-81 GHz); beyond them the
         # estimator's angle grid, which grows with (aperture / wavelength)^2, would not fit.
         "fc_hz": {"type": "number", "minimum": 1e9, "maximum": 3e11},
-        "bandwidth_hz": {"type": "number", "exclusiveMinimum": 0, "maximum": 3e11},
+        # A range resolution c0 / (2 bandwidth) from 150 m down to half a millimetre.
+        "bandwidth_hz": {"type": "number", "minimum": 1e6, "maximum": 3e11},
         "ramp_time_s": _POSITIVE,
         "idle_time_s": {"type": "number", "minimum": 0},
         "adc_samples": {"type": "integer", "minimum": 2},
