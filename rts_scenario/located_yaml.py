@@ -312,10 +312,22 @@ def validate(document: Document, schema: dict[str, Any]) -> None:
     raise document.error(path, _describe(best))
 
 
+# Integers numpy holds (int64); a larger one reaches it as a Python object and fails there.
+_INT_BITS = 64
+
+
 def _reject_non_finite(document: Document, node: Any, path: KeyPath) -> None:
-    """NaN and infinities pass every JSON Schema bound (all comparisons are false): reject."""
+    """Reject numbers the computation cannot hold, whatever the schema says of the key.
+
+    NaN and infinities pass every JSON Schema bound (all comparisons are false); an integer
+    beyond 64 bits passes a key without a bound and fails inside numpy.
+    """
     if isinstance(node, float) and not math.isfinite(node):
         raise document.error(path, f"must be a finite number, got {node}")
+    if (isinstance(node, int) and not isinstance(node, bool)
+            and not -(2 ** (_INT_BITS - 1)) <= node < 2 ** (_INT_BITS - 1)):
+        raise document.error(path, f"an integer beyond {_INT_BITS} bits, got {node}; numbers "
+                                   f"must lie within +-{2 ** (_INT_BITS - 1):,}")
     if isinstance(node, dict):
         for key, value in node.items():
             _reject_non_finite(document, value, (*path, key))

@@ -569,6 +569,10 @@ _LIMIT_BOUNDS: dict[str, tuple[float, float]] = {
 # Cable and path differences: 1 us is 150 m of range.
 _CAL_DELAY = {"type": "number", "minimum": -1e-6, "maximum": 1e-6}
 _CAL_GAIN = {"type": "number", "minimum": -60.0, "maximum": 60.0}
+# The level reference: a target as far and as large as a scene's may be (positions within
+# 100 km, RCS within +-60 dBsm).
+_REFERENCE_RANGE = {"type": "number", "exclusiveMinimum": 0, "maximum": 100000}
+_REFERENCE_RCS = {"type": "number", "minimum": -60, "maximum": 60}
 
 RIG_SCHEMA: dict[str, Any] = {
     "type": "object",
@@ -643,9 +647,9 @@ RIG_SCHEMA: dict[str, Any] = {
             "type": "object",
             "additionalProperties": False,
             "properties": {
-                "range_m": _number(0, exclusive=True),
-                "rcs_dbsm": {"type": "number"},
-                "attenuation_db": {"type": "number"},
+                "range_m": _REFERENCE_RANGE,
+                "rcs_dbsm": _REFERENCE_RCS,
+                "attenuation_db": {"type": "number"},  # within limits: Rig checks it
             },
         },
     },

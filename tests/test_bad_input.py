@@ -185,7 +185,7 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("detection-rate-2", TINY + "expectations: {detection_rate: 2}\n",
      r"^{f}:15:\d+: expectations.detection_rate: must be <= 1, got 2"),
     ("tolerance-zero", TINY + "expectations: {tolerances: {az_deg: 0}}\n",
-     r"^{f}:15:\d+: expectations.tolerances.az_deg: must be > 0, got 0"),
+     r"^{f}:15:\d+: expectations.tolerances.az_deg: must be >= 1e-06, got 0"),
     ("seed-negative", TINY + "seed: -4\n", r"^{f}:15:1: seed: must be >= 0, got -4"),
     ("bad-mark", TINY + "marks: [not a mark]\n", r"^{f}:15:\d+: marks\[0\]: .*does not match"),
     ("parametrize-bad-path", TINY + "parametrize: {radar.nothing.here: [1, 2]}\n",
@@ -475,6 +475,17 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("validate-dev-zero", ["validate", "/dev/zero"], 2,
      r"^/dev/zero: document larger than the limit of 4 MB"),
     ("unknown-command", ["fly"], 2, r"invalid choice: 'fly'"),
+    # An empty value (an unset shell variable) was taken as no option: the run passed and
+    # wrote no report; `sweep ""` swept the current folder.
+    ("run-json-empty", ["run", "{scene}", "--json", ""], 2,
+     r"argument --json: an empty value"),
+    ("run-detections-empty", ["run", "{scene}", "--detections", ""], 2,
+     r"argument --detections: an empty value"),
+    ("run-record-empty", ["run", "{scene}", "--record", ""], 2,
+     r"argument --record: an empty value"),
+    ("sweep-scene-empty", ["sweep", ""], 2, r"argument SCENE: an empty value"),
+    ("check-json-empty", ["check", "{scene}", "--log", "{tmp}/junk.blf", "--json", ""], 2,
+     r"argument --json: an empty value"),
 ]
 
 

@@ -227,6 +227,17 @@ BAD_RIGS = [
     ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nlimits:\n"
      "  delay_min_s: 4.0e-9\n  delay_max_s: 3.0e-9\n", 6, "limits.delay_max_s",
      "must be above delay_min_s = 4e-09, got 3e-09"),
+    # A reference RCS of 1e30 dBsm overflowed the schedule's level (numpy's "overflow
+    # encountered in power" printed by validate and run).
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nreference:\n"
+     "  rcs_dbsm: 1.0e+30\n", 5, "reference.rcs_dbsm", "must be <= 60, got 1e+30"),
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nreference:\n"
+     "  range_m: 1.0e+30\n", 5, "reference.range_m", "must be <= 100000, got 1e+30"),
+    # An integer beyond 64 bits reached numpy as a Python object: TypeError ("no callable
+    # log10 method"), exit 3.
+    ("rts_rig: 1\nname: x\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\nreference:\n"
+     "  range_m: 1000000000000000000000000000000\n", 5, "reference.range_m",
+     "an integer beyond 64 bits"),
     ("rts_rig: 1\nname: x\nname: y\n", 3, "name", "duplicate key"),
     ("rts_rig: 1\nname: [x\n", 3, "", "invalid YAML"),
     ("rts_rig: 1\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n", 1, "", "'name' is required"),

@@ -1,6 +1,7 @@
 import re
 import shutil
 import textwrap
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -222,7 +223,16 @@ BAD = [
      "must have at least 2 items"),
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
           "      - {start_s: 1, duration_s: 0, offset_m: 3}"), 16,
-     "targets[0].lane_changes[0].duration_s", "must be > 0"),
+     "targets[0].lane_changes[0].duration_s", "must be >= 0.001"),
+    # 1e-300 s: the lateral acceleration's duration**2 underflowed to 0 (numpy's "invalid value
+    # encountered in divide" printed by validate and run). The floor is import's lateral step.
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
+          "      - {start_s: 1, duration_s: 1.0e-300, offset_m: 3}"), 16,
+     "targets[0].lane_changes[0].duration_s", "must be >= 0.001, got 1e-300"),
+    # A tolerance of 1e-300 overflowed the checker's gate (numpy's "overflow encountered in
+    # multiply" printed by run); a micrometre, a micro-degree is below any radar's resolution.
+    (GOOD + "expectations: {tolerances: {az_deg: 1.0e-300}}\n", 15,
+     "expectations.tolerances.az_deg", "must be >= 1e-06, got 1e-300"),
     (edit("targets:", "include: [../outside.yaml]\ntargets:"), 11, "include[0]",
      "leaves the scene's folder tree"),
     (edit("name: good", "name: good\nname: again"), 3, "name", "duplicate key"),
@@ -234,6 +244,26 @@ BAD = [
     (edit("rig: wide-3x5", "rig: wide-3x5\nexpectations: {detection_rate: 1.5}"), 9,
      "expectations.detection_rate", "must be <= 1"),
 ]
+
+
+def test_the_shortest_lane_change_moves_the_target_by_its_offset_without_numpy_warnings(
+        tmp_path):
+    # The floor of lane_changes[].duration_s (1 ms, import's lateral step): every frame is
+    # finite, and the target ends the offset away from where it would be without it.
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n"
+                         "    lane_changes:\n      - {start_s: 1, duration_s: 0.001, "
+                         "offset_m: 3}"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tracks = compute_tracks(load_scenario(path))
+    assert all(np.all(np.isfinite(np.asarray(v, dtype=float)))
+               for v in (tracks.range_m, tracks.radial_velocity_mps, tracks.az_deg))
+    # The target is 1 m/s slower than the ego: at the last frame (t = 4.95 s) it is
+    # 30 - 4.95 - 3.7 m ahead of the radar and 3 m to its left.
+    assert tracks.az_deg[0, 0] == pytest.approx(0.0, abs=1e-9)
+    assert tracks.az_deg[-1, 0] == pytest.approx(np.degrees(np.arctan2(3.0, 30 - 4.95 - 3.7)),
+                                                 abs=1e-6)
 
 
 @pytest.mark.parametrize("text, line, key, message", BAD)
@@ -465,6 +495,85 @@ def test_a_carrier_outside_the_radar_bands_is_a_located_error(tmp_path, fc):
     with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: fc_hz: must be "
                                             rf"(<= 300000000000|>= 1000000000)"):
         RadarProfile.from_file(path)
+
+
+@pytest.mark.parametrize("position", ["2.0", "1.0e+6", "1.0e+200", "1.0e+308"])
+def test_an_array_wider_than_the_angle_grids_allow_is_a_located_error(tmp_path, position):
+    # An RX antenna 1e6 m out made the global-maximum check's grid 34 GiB (MemoryError, exit 3);
+    # 1e200 m an OverflowError, 1e308 m numpy's overflow warning and an error naming no key.
+    from rts_scenario.radar.profile import MAX_APERTURE_WAVELENGTHS, RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar.replace("rx_y_m: [0.002075,", f"rx_y_m: [{position},"))
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1)
+                if text.strip().startswith("rx_y_m"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: array.rx_y_m: "
+                                                rf".* at most {MAX_APERTURE_WAVELENGTHS} "
+                                                rf"wavelengths"):
+            RadarProfile.from_file(path)
+
+
+@pytest.mark.parametrize("edits, key", [
+    ({"chirp_loops: 64": "chirp_loops: 100000000", "frame_period_s: 0.05":
+      "frame_period_s: 1.0e+6"}, "chirp_loops"),
+    ({"adc_samples: 256": "adc_samples: 100000000", "sample_rate_hz: 20.0e+6":
+      "sample_rate_hz: 1.0e+20"}, "adc_samples"),
+])
+def test_a_cube_larger_than_the_simulated_radar_can_hold_is_a_located_error(tmp_path, edits,
+                                                                             key):
+    # 10^8 chirp loops (or ADC samples) made run allocate 191 GiB (47.7 GiB): MemoryError,
+    # exit 3.
+    from rts_scenario.radar.profile import MAX_CUBE_SAMPLES, RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    for old, new in edits.items():
+        assert old in radar
+        radar = radar.replace(old, new)
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar)
+    line = next(i for i, text in enumerate(radar.splitlines(), 1) if text.startswith(key))
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: {key}: .* at most "
+                                            rf"{MAX_CUBE_SAMPLES:,}"):
+        RadarProfile.from_file(path)
+
+
+@pytest.mark.parametrize("bandwidth, allowed", [("1.0e+30", "<= 300000000000"),
+                                                 ("1.0e-300", ">= 1000000")])
+def test_a_sweep_beyond_the_radar_bands_is_a_located_error(tmp_path, bandwidth, allowed):
+    # A bandwidth of 1e30 Hz was refused as an array 2.28e19 wavelengths wide; 1e-300 Hz made
+    # range bins of 1.5e308 m (numpy's "overflow encountered in multiply" printed by run).
+    from rts_scenario.radar.profile import RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar.replace("bandwidth_hz: 0.6e+9", f"bandwidth_hz: {bandwidth}"))
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1)
+                if text.startswith("bandwidth_hz"))
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: bandwidth_hz: must be "
+                                            rf"{allowed}"):
+        RadarProfile.from_file(path)
+
+
+def test_an_integer_beyond_64_bits_is_a_located_error_in_every_file_type(tmp_path):
+    # clock.counter_start: 10**20 reached numpy: OverflowError ("Python int too large to
+    # convert to C long"), exit 3.
+    from rts_scenario.radar.profile import RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar + "clock: {counter_start: 100000000000000000000}\n")
+    line = len(radar.splitlines()) + 1
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: clock.counter_start: "
+                                            rf"an integer beyond 64 bits"):
+        RadarProfile.from_file(path)
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(GOOD + "seed: 100000000000000000000\n")
+    with pytest.raises(ScenarioError, match=r"s.scenario.yaml:15:\d+: seed: an integer beyond "
+                                            r"64 bits"):
+        load_scenario(scene)
 
 
 def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):

@@ -63,7 +63,21 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in _SUBCOMMANDS:
         module.add_parser(subparsers, [debug])
+    for sub in subparsers.choices.values():
+        for action in sub._actions:
+            if action.nargs != 0 and action.type in (None, str) and action.choices is None:
+                action.type = _not_empty
     return parser
+
+
+def _not_empty(value: str) -> str:
+    """Refuse an empty argument: an unset shell variable is not an option left out.
+
+    Taken as absent, ``--json ""`` wrote no report and ``sweep ""`` swept the current folder.
+    """
+    if not value:
+        raise argparse.ArgumentTypeError("an empty value; give one, or leave the option out")
+    return value
 
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_FAIL", "EXIT_OK", "EXIT_RUNTIME_ERROR", "build_parser",

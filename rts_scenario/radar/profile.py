@@ -33,6 +33,15 @@ RATE_SLACK = 1e-9
 
 FloatArray = NDArray[np.float64]
 
+# The widest virtual array a profile may give, per axis, in nominal wavelengths: the angle grids
+# of the radar's estimator and of the solver's global-maximum check grow with (aperture /
+# wavelength) per axis (64 x 64 wavelengths: about 1.2 GB and 20 s to validate a scene). The
+# widest preset, cascade-12x16, spans 42.5 wavelengths along y.
+MAX_APERTURE_WAVELENGTHS = 64
+# The most ADC samples one frame may hold: adc_samples x chirp_loops x virtual channels (the
+# simulated radar's beat-signal cube, 1 GiB as complex numbers; cascade-12x16: 3.1 million).
+MAX_CUBE_SAMPLES = 2**26
+
 
 @dataclass(frozen=True, eq=False)
 class RadarProfile:
@@ -283,13 +292,22 @@ class RadarProfile:
             # The preset's geometry is in wavelengths: at this profile's nominal wavelength.
             antennas = Antennas.preset(spec, C0_MPS / (fc + bw / 2.0))
         else:
+            _check_aperture(doc, spec, C0_MPS / (fc + bw / 2.0))
             try:
                 antennas = Antennas(spec["tx_y_m"], spec["tx_z_m"], spec["rx_y_m"],
                                     spec["rx_z_m"], name=d["name"])
             except ArrayError as exc:
                 raise doc.error(("array",), str(exc)) from None
-        array = antennas.virtual_array(fc_hz=fc, bandwidth_hz=bw)
         n_tx = antennas.n_tx
+        cube = d["adc_samples"] * d["chirp_loops"] * n_tx * antennas.n_rx
+        if cube > MAX_CUBE_SAMPLES:
+            key = "adc_samples" if d["adc_samples"] >= d["chirp_loops"] else "chirp_loops"
+            raise doc.error(
+                (key,),
+                f"adc_samples x chirp_loops x virtual channels = {d['adc_samples']} x "
+                f"{d['chirp_loops']} x {n_tx * antennas.n_rx} = {cube:,} samples per frame; at "
+                f"most {MAX_CUBE_SAMPLES:,} (the simulated radar's beat-signal cube)")
+        array = antennas.virtual_array(fc_hz=fc, bandwidth_hz=bw)
         tx_order = tuple(int(t) for t in d["tx_order"])
         if sorted(tx_order) != list(range(n_tx)):
             raise doc.error(
@@ -336,6 +354,26 @@ class RadarProfile:
         )
 
 
+def _check_aperture(doc: Document, spec: dict[str, list[float]], wavelength_m: float) -> None:
+    """Refuse antennas whose virtual array is wider than `MAX_APERTURE_WAVELENGTHS`.
+
+    The virtual array (every TX + RX) spans the TX group's spread plus the RX group's per axis.
+    """
+    for axis in ("y", "z"):
+        spreads = {key: max(spec[key]) - min(spec[key])
+                   for key in (f"tx_{axis}_m", f"rx_{axis}_m")}
+        span = sum(spreads.values())
+        if span <= MAX_APERTURE_WAVELENGTHS * wavelength_m:
+            continue
+        widest = max(spreads, key=lambda key: spreads[key])
+        raise doc.error(
+            ("array", widest),
+            f"the virtual array spans {span:.3g} m along {axis} (the spread of tx_{axis}_m plus "
+            f"that of rx_{axis}_m), {span / wavelength_m:.3g} wavelengths of "
+            f"{wavelength_m * 1e3:.3g} mm; at most {MAX_APERTURE_WAVELENGTHS} wavelengths (the "
+            f"estimator's angle grid grows with it): check the positions are in metres")
+
+
 def preset_names() -> list[str]:
     """Names of the shipped radar profiles."""
     folder = resources.files("rts_scenario").joinpath("data/radars")
@@ -359,7 +397,8 @@ PROFILE_SCHEMA: dict[str, Any] = {
         # Radar bands from 1 to 300 GHz (automotive: 24, 77-81 GHz); beyond them the
         # estimator's angle grid, which grows with (aperture / wavelength)^2, would not fit.
         "fc_hz": {"type": "number", "minimum": 1e9, "maximum": 3e11},
-        "bandwidth_hz": _POSITIVE,
+        # A range resolution c0 / (2 bandwidth) from 150 m down to half a millimetre.
+        "bandwidth_hz": {"type": "number", "minimum": 1e6, "maximum": 3e11},
         "ramp_time_s": _POSITIVE,
         "idle_time_s": {"type": "number", "minimum": 0},
         "adc_samples": {"type": "integer", "minimum": 2},
