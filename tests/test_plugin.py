@@ -105,6 +105,23 @@ def test_bad_rts_mapping_or_can_fd_stops_the_session_up_front(pytester):
     text = result.stderr.str() + result.stdout.str()
     assert f"--rts-can-fd: the mapping {mapping} has no fd_message" in text
 
+def test_rts_radar_channel_reads_the_radar_s_channel_alone(pytester, monkeypatch):
+    # The interface hears the radar's messages on channels 0 and 1 (`bridged_twice`): the run
+    # refuses to judge the mixed cycles, unless told which channel is the radar's.
+    from test_can_bench import bridged_twice
+
+    bridged_twice(monkeypatch)
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    result = pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    assert "came on 2 channels" in result.stdout.str()
+    pytester.runpytest("--rts-radar-channel", "0").assert_outcomes(passed=1)
+    result = pytester.runpytest("--rts-radar-channel", " ")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert "--rts-radar-channel ' ': empty" in text and "Traceback" not in text
+
+
 def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):
     sub = pytester.mkdir("sub")
     (sub / "data").mkdir()

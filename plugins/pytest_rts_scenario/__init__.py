@@ -41,6 +41,10 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                     help="CAN channel (default: a private one per test)")
     group.addoption("--rts-can-fd", action="store_true", help="CAN FD detection messages")
     group.addoption("--rts-mapping", default=None, help="*.mapping.yaml of a third-party radar")
+    group.addoption("--rts-radar-channel", default=None, metavar="CH",
+                    help="on an interface listening on several channels, read only the radar's "
+                         "(Message.channel as python-can gives it); without it, a run hearing "
+                         "the radar's identifiers on several channels fails")
     group.addoption("--rts-method", default="exact", choices=["exact", "paper", "estimator"],
                     help="weight solver (default exact)")
     parser.addini("rts_scenario_pattern", "glob of the scene files to collect",
@@ -56,19 +60,23 @@ def pytest_configure(config: pytest.Config) -> None:
     mapping_path = config.getoption("--rts-mapping")
     can_fd = config.getoption("--rts-can-fd")
     interface = config.getoption("--rts-can-interface")
+    radar_channel = config.getoption("--rts-radar-channel")
     # The defaults need no check (nor the library's import).
-    if spec != "simulated-radar" or mapping_path or can_fd or interface != "virtual":
+    if (spec != "simulated-radar" or mapping_path or can_fd or interface != "virtual"
+            or radar_channel is not None):
         from rts_scenario.canbus.mapping import CanMapping
         from rts_scenario.cli.common import (
             check_can_interface,
             check_fd_mapping,
             check_output,
+            check_radar_channel,
             named_file,
         )
         from rts_scenario.errors import RtsError
 
         try:
             check_output("--rts-output", spec, run=True)
+            check_radar_channel(radar_channel)
             check_can_interface("--rts-can-interface", interface,
                                 config.getoption("--rts-can-channel"),
                                 channel_option="--rts-can-channel")
@@ -76,7 +84,8 @@ def pytest_configure(config: pytest.Config) -> None:
                 mapping = named_file("--rts-mapping", CanMapping.from_file, mapping_path)
                 check_fd_mapping(can_fd, mapping_path, mapping)
         except RtsError as exc:
-            raise pytest.UsageError(str(exc).replace("--can-fd", "--rts-can-fd")) from None
+            raise pytest.UsageError(str(exc).replace("--can-fd", "--rts-can-fd").replace(
+                "--radar-channel", "--rts-radar-channel")) from None
         _refuse_workers_sharing_a_bench(config, spec, interface)
     if config.pluginmanager.hasplugin("html") and config.getoption("htmlpath", None):
         config.pluginmanager.register(HtmlReport(), "rts-scenario-html")
@@ -127,6 +136,7 @@ def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
         or f"rts-scenario-{worker}-{uuid.uuid4().hex[:8]}",
         "can_fd": config.getoption("--rts-can-fd"),
         "mapping": config.getoption("--rts-mapping"),
+        "radar_channel": config.getoption("--rts-radar-channel"),
         "method": config.getoption("--rts-method"),
     }
     values.update(overrides)
