@@ -782,3 +782,50 @@ def test_an_output_that_clashes_leaves_every_file_as_it_was(tmp_path, capsys):
     assert call(["run", str(scene), "--json", str(link)]) == 2
     assert f"the same file as SCENE {scene}" in one_error(capsys.readouterr().err)
     assert scene.read_text() == text
+
+
+JIT_MESSAGE = (r"^RTS_SCENARIO_JIT='onn': unknown value; allowed: auto, on, off \(also 1/0, "
+               r"yes/no, true/false; unset or empty is auto\)$")
+
+
+@pytest.mark.parametrize("argv", [["run", "{scene}", "--json", "{tmp}/out.json"],
+                                  ["sweep", "{scene}"], ["validate", "{scene}"],
+                                  ["list"]])
+def test_an_unknown_jit_setting_is_refused_before_anything_runs(places, capsys, monkeypatch,
+                                                                argv):
+    """A typo in RTS_SCENARIO_JIT was taken as "auto" without a word."""
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "onn")
+    assert call([a.format(**places) for a in argv]) == 2
+    out, err = capsys.readouterr()
+    assert re.search(JIT_MESSAGE, one_error(err)), err
+    assert out == "" and not Path(places["tmp"], "out.json").exists()
+
+
+@pytest.mark.parametrize(("value", "expected"), [
+    ("", "auto"), ("auto", "auto"), (" ON ", "on"), ("1", "on"), ("yes", "on"), ("true", "on"),
+    ("off", "off"), ("0", "off"), ("No", "off"), ("false", "off")])
+def test_the_known_jit_settings(monkeypatch, value, expected):
+    from rts_scenario.solver import compiled
+
+    monkeypatch.setenv("RTS_SCENARIO_JIT", value)
+    assert compiled.mode() == expected
+
+
+def test_an_unknown_jit_setting_is_an_error_in_library_use(monkeypatch):
+    """The solver and the quantization search ask the same setting: both refuse a typo."""
+    import numpy as np
+
+    import rts_scenario as rs
+    from rts_scenario.errors import RtsError
+    from rts_scenario.schedule import quantization
+    from rts_scenario.solver import compiled
+
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "onn")
+    with pytest.raises(RtsError, match=JIT_MESSAGE):
+        compiled.mode()
+    rig = rs.Rig.preset("wide-3x5")
+    with pytest.raises(ValueError, match=JIT_MESSAGE):
+        rs.solve_weights(np.array([0.0]), np.array([0.0]), rig=rig,
+                         array=rs.VirtualArray.preset("awr1843boost"))
+    with pytest.raises(RtsError, match=JIT_MESSAGE):
+        quantization._compile(1)

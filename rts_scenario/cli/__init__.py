@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 from .._version import __version__
 from ..errors import RtsError
+from ..settings import check_environment
 from . import (
     bench,
     calibrate,
@@ -88,6 +89,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    try:
+        # Settings the environment gives are checked once, before anything runs.
+        check_environment()
+    except RtsError as exc:
+        print(f"error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     stdout = sys.stdout
     guard = guarded_stdout(stdout)
     if guard is not None:
