@@ -829,3 +829,81 @@ def test_an_unknown_jit_setting_is_an_error_in_library_use(monkeypatch):
                          array=rs.VirtualArray.preset("awr1843boost"))
     with pytest.raises(RtsError, match=JIT_MESSAGE):
         quantization._compile(1)
+
+
+RIG_FILE = str(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml")
+RADAR_FILE = str(ROOT / "rts_scenario" / "data" / "radars" / "paper.radar.yaml")
+MAPPING_FILE = str(ROOT / "rts_scenario" / "data" / "can" / "rts_detections.mapping.yaml")
+
+
+@pytest.fixture
+def disguised(tmp_path):
+    """The shipped rig, radar profile and mapping under names that do not say what they are."""
+    names = {}
+    for kind, source in (("rig", RIG_FILE), ("radar", RADAR_FILE), ("mapping", MAPPING_FILE)):
+        path = tmp_path / f"{kind}-copy.yaml"
+        path.write_text(Path(source).read_text())
+        names[kind] = str(path)
+    return names
+
+
+# (argv, the message after "error: "): {scene} is a good scene; {rig}, {radar}, {mapping} are
+# the copies with plain .yaml names.
+WRONG_KIND_CASES = [
+    (["run", RIG_FILE],
+     rf"^{re.escape(RIG_FILE)} is a rig file \(\*\.rig\.yaml\), not a scene "
+     r"\(\*\.scenario\.yaml\); a scene names its rig under rig:"),
+    (["validate", MAPPING_FILE],
+     rf"^{re.escape(MAPPING_FILE)} is a CAN mapping \(\*\.mapping\.yaml\), not a scene "
+     r"\(\*\.scenario\.yaml\); run and check take it as --mapping"),
+    (["validate", RADAR_FILE],
+     rf"^{re.escape(RADAR_FILE)} is a radar profile \(\*\.radar\.yaml\), not a scene "
+     r"\(\*\.scenario\.yaml\); a scene names its radar under radar.profile"),
+    (["validate", "{rig}"], r"^{rig} is a rig file \(its rts_rig key\), not a scene"),
+    (["run", "{radar}"], r"^{radar} is a radar profile \(its rts_radar key\), not a scene"),
+    (["run", "{mapping}"], r"^{mapping} is a CAN mapping \(its rts_can_mapping key\), not a "
+                           r"scene"),
+    (["run", "{scene}", "--mapping", "{scene}"],
+     r"^--mapping {scene} is a scene file \(\*\.scenario\.yaml\), not a CAN mapping "
+     r"\(\*\.mapping\.yaml\)"),
+    (["check", "{scene}", "--log", "{tmp}/junk.blf", "--mapping", RIG_FILE],
+     rf"^--mapping {re.escape(RIG_FILE)} is a rig file \(\*\.rig\.yaml\), not a CAN mapping"),
+    (["run", "{scene}", "--mapping", "{rig}"],
+     r"^--mapping {rig} is a rig file \(its rts_rig key\), not a CAN mapping"),
+    (["survey", "{scene}"],
+     r"^RIG {scene} is a scene file \(\*\.scenario\.yaml\), not a rig file \(\*\.rig\.yaml\)"),
+    (["calibrate", MAPPING_FILE],
+     rf"^RIG {re.escape(MAPPING_FILE)} is a CAN mapping \(\*\.mapping\.yaml\), not a rig file"),
+    (["survey", "{radar}"], r"^RIG {radar} is a radar profile \(its rts_radar key\), not a rig "
+                            r"file"),
+    (["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1", "--radar", RIG_FILE],
+     rf"^--radar {re.escape(RIG_FILE)} is a rig file \(\*\.rig\.yaml\), not a radar profile "
+     r"\(\*\.radar\.yaml\)"),
+    (["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "{scene}", "--radar", "paper"],
+     r"^--rig {scene} is a scene file \(\*\.scenario\.yaml\), not a rig file"),
+    (["import", str(ROOT / "tests" / "data" / "xosc" / "cut_in.xosc"), "--radar", "paper",
+      "--rig", RADAR_FILE, "--output", "{tmp}/x.scenario.yaml"],
+     rf"^--rig {re.escape(RADAR_FILE)} is a radar profile \(\*\.radar\.yaml\), not a rig "
+     r"file"),
+]
+
+
+@pytest.mark.parametrize(("argv", "pattern"), WRONG_KIND_CASES,
+                         ids=[f"{c[0][0]}-{i}" for i, c in enumerate(WRONG_KIND_CASES)])
+def test_a_file_of_another_kind_says_what_it_is(places, disguised, capsys, argv, pattern):
+    """A rig, radar profile or mapping given as a scene (or a scene as a mapping or a rig) said
+    "unknown key 'columns' ...; allowed keys ...": true, but not what went wrong."""
+    names = {**places, **disguised}
+    assert call([a.format(**names) for a in argv]) == 2
+    message = one_error(capsys.readouterr().err)
+    expected = pattern
+    for key, value in names.items():
+        expected = expected.replace("{" + key + "}", re.escape(value))
+    assert re.search(expected, message), message
+
+
+def test_a_sweep_of_a_rig_file_says_what_it_is(capsys):
+    assert call(["sweep", RIG_FILE, "--workers", "1"]) == 2
+    out = capsys.readouterr().out
+    assert f"{RIG_FILE} is a rig file (*.rig.yaml), not a scene" in out
+    assert "unknown key" not in out
