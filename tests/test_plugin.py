@@ -259,6 +259,19 @@ def test_bad_rts_can_interface_stops_the_session_once(pytester):
                                                                + result.stdout.str())
 
 
+def test_a_can_interface_that_cannot_be_opened_stops_the_session_once(pytester):
+    """Each scene failed on its own with "cannot open CAN interface"."""
+    for name in ("one", "two"):
+        pytester.makefile(".scenario.yaml", **{name: scene(name)})
+    result = pytester.runpytest("--rts-can-interface", "socketcan", "--rts-can-channel",
+                                "rts-no-such0")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert text.count("--rts-can-interface socketcan --rts-can-channel rts-no-such0: cannot "
+                      "open CAN interface 'socketcan' channel 'rts-no-such0'") == 1
+    assert "Traceback" not in text
+
+
 def test_pattern_is_configurable(pytester):
     pytester.makefile(".yml", odd=scene("odd"))
     pytester.makeini("[pytest]\nrts_scenario_pattern = *.yml\n")

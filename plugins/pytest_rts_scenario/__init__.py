@@ -61,6 +61,7 @@ def pytest_configure(config: pytest.Config) -> None:
         from rts_scenario.canbus.mapping import CanMapping
         from rts_scenario.cli.common import (
             check_can_interface,
+            check_can_opens,
             check_fd_mapping,
             check_output,
             named_file,
@@ -75,6 +76,10 @@ def pytest_configure(config: pytest.Config) -> None:
             if mapping_path:
                 mapping = named_file("--rts-mapping", CanMapping.from_file, mapping_path)
                 check_fd_mapping(can_fd, mapping_path, mapping)
+            # Once here, not once per scene: an interface this machine cannot open.
+            check_can_opens("--rts-can-interface", interface,
+                            config.getoption("--rts-can-channel"), "--rts-can-channel",
+                            fd=can_fd)
         except RtsError as exc:
             raise pytest.UsageError(str(exc).replace("--can-fd", "--rts-can-fd")) from None
         _refuse_workers_sharing_a_bench(config, spec, interface)
