@@ -8,6 +8,7 @@ documented exit code; a hypothesis test throws random argument lists at the CLI.
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import subprocess
@@ -375,6 +376,34 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("check-offset-nan", ["check", "{scene}", "--log", "{tmp}/none.blf", "--time-offset-s",
                           "nan"], 2, r"^--time-offset-s: must be a finite number"),
     ("check-without-log", ["check", "{scene}"], 2, r"--log"),
+    # A negative number argparse did not take for one ("-inf", "-1e3") was "expected one
+    # argument"; the option's own check refuses those it does not allow.
+    ("check-offset-minus-inf", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                                "--time-offset-s", "-inf"], 2,
+     r"^--time-offset-s: must be a finite number, got -inf$"),
+    ("check-offset-minus-infinity", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                                     "--time-offset-s", "-Infinity"], 2,
+     r"^--time-offset-s: must be a finite number, got -inf$"),
+    ("check-offset-minus-nan", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                                "--time-offset-s", "-nan"], 2,
+     r"^--time-offset-s: must be a finite number, got nan$"),
+    ("check-offset-exponent", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                               "--time-offset-s", "-1e3"], 2,
+     r"^--log {tmp}/none.blf: no such file"),
+    ("check-offset-not-a-number", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                                   "--time-offset-s", "-x"], 2,
+     r"argument --time-offset-s: expected one argument"),
+    ("calibrate-gain-minus-exponent", ["calibrate", "kit-table1", "--inject-gain-db", "-1e3"],
+     2, r"^--inject-gain-db: must be within 0..20, got -1000.0$"),
+    ("calibrate-phase-minus-inf", ["calibrate", "kit-table1", "--inject-phase-deg", "-inf"],
+     2, r"^--inject-phase-deg: must be within 0..180, got -inf$"),
+    ("bench-scene-minus-exponent", ["bench", "--scene-s", "-2E+1"], 2,
+     r"^--scene-s: must be within .*, got -20.0$"),
+    ("listen-seconds-minus-inf", ["rts-listen", "udp://127.0.0.1:0", "--seconds", "-inf"], 2,
+     r"^--seconds: must be within .*, got -inf$"),
+    ("import-lane-minus-half", ["import", "{tmp}/none.xosc", "--radar", "paper", "--rig",
+                                "kit-table1", "--output", "{tmp}/x.scenario.yaml",
+                                "--lane-width-m", "-.5"], 2, r"--lane-width-m.*-0.5"),
     ("run-record-two-scenes", ["run", "{scene}", "{scene}", "--record", "{tmp}/r.blf"], 2,
      r"^--record: records the bus of one scene, got 2 scenes"),
     ("run-record-format", ["run", "{scene}", "--record", "{tmp}/r.txtx"], 2,
@@ -907,3 +936,14 @@ def test_a_sweep_of_a_rig_file_says_what_it_is(capsys):
     out = capsys.readouterr().out
     assert f"{RIG_FILE} is a rig file (*.rig.yaml), not a scene" in out
     assert "unknown key" not in out
+
+
+@pytest.mark.parametrize("value", ["-inf", "-Infinity", "-1e3", "-1E-3", "-.5", "-5.", "-1_000",
+                                   "-0", "-nan"])
+def test_negative_numbers_are_values_of_number_options(value):
+    """argparse took "-inf" and "-1e3" for options (only "-5" and "-.5" passed as values)."""
+    args = cli.build_parser().parse_args(["check", "s.scenario.yaml", "--log", "x.blf",
+                                          "--time-offset-s", value])
+    expected = float(value)
+    assert (math.isnan(args.time_offset_s) if math.isnan(expected)
+            else args.time_offset_s == expected)
