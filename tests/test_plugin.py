@@ -379,3 +379,14 @@ def test_without_an_html_report_nothing_is_recorded_or_added(pytester):
     result = pytester.runpytest()
     result.assert_outcomes(failed=1)
     assert not pytester.parseconfig().pluginmanager.hasplugin("rts-scenario-html")
+
+
+def test_an_unknown_jit_setting_stops_the_session_once(pytester, monkeypatch):
+    """Each scene failed on its own with the same message."""
+    for name in ("one", "two"):
+        pytester.makefile(".scenario.yaml", **{name: scene(name)})
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "onn")
+    result = pytester.runpytest()
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert text.count("RTS_SCENARIO_JIT='onn': unknown value; allowed: auto, on, off") == 1

@@ -52,6 +52,13 @@ def pytest_configure(config: pytest.Config) -> None:
     for line in ("slow: a long scene", "hardware: needs a real RTS and radar",
                  "hard: a hard numerical or physical case"):
         config.addinivalue_line("markers", line)
+    from rts_scenario.errors import RtsError
+    from rts_scenario.settings import check_environment
+
+    try:
+        check_environment()
+    except RtsError as exc:
+        raise pytest.UsageError(str(exc)) from None
     spec = config.getoption("--rts-output")
     mapping_path = config.getoption("--rts-mapping")
     can_fd = config.getoption("--rts-can-fd")
@@ -66,7 +73,6 @@ def pytest_configure(config: pytest.Config) -> None:
             check_output,
             named_file,
         )
-        from rts_scenario.errors import RtsError
 
         try:
             check_output("--rts-output", spec, run=True)
