@@ -33,7 +33,7 @@ from ._version import __version__ as __version__
 _EXPORTS = {
     "ArrayError": "errors", "CheckError": "errors", "OutputError": "errors",
     "RigError": "errors", "RtsError": "errors", "ScenarioError": "errors",
-    "SolverError": "errors",
+    "SolverError": "errors", "SettingError": "errors",
     "VirtualArray": "arrays",
     "HardwareLimits": "rig", "Reference": "rig", "Rig": "rig",
     "Reason": "solver", "WeightSolution": "solver", "solve_weights": "solver",
@@ -72,6 +72,7 @@ __all__ = [
     "Scenario",
     "ScenarioError",
     "Schedule",
+    "SettingError",
     "SolverError",
     "SolverPlan",
     "Status",
@@ -114,6 +115,7 @@ if TYPE_CHECKING:
         RigError,
         RtsError,
         ScenarioError,
+        SettingError,
         SolverError,
     )
     from .kinematics import Tracks, compute_tracks

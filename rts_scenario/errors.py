@@ -39,6 +39,10 @@ class ScenarioError(RtsError):
         super().__init__(f"{where}{key}{message}")
 
 
+class SettingError(RtsError, ValueError):
+    """An environment variable the package reads holds a value it does not know."""
+
+
 class ArrayError(RtsError):
     """A radar virtual array definition is invalid."""
 

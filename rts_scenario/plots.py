@@ -173,13 +173,15 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
     ``passed/runs``. More (or none): the pass rate per value of each parameter (per scene when
     no run has a parameter), one panel each.
     """
+    from .sweep import value_name
+
     plt = _pyplot()
     keys = list(dict.fromkeys(k for e in entries for k in e["parameters"]))
     colors = {"pass": "tab:green", "fail": "tab:red", "error": "tab:orange"}
     markers = {"pass": "o", "fail": "X", "error": "s"}
 
     def values_of(key: str) -> list[str]:
-        return list(dict.fromkeys(str(e["parameters"][key]) for e in entries
+        return list(dict.fromkeys(value_name(e["parameters"][key]) for e in entries
                                   if key in e["parameters"]))
 
     if len(keys) == 1:
@@ -191,7 +193,7 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
             picked = [e for e in entries if e["status"] == status and key in e["parameters"]]
             if not picked:
                 continue
-            ax.plot([values.index(str(e["parameters"][key])) for e in picked],
+            ax.plot([values.index(value_name(e["parameters"][key])) for e in picked],
                     [scenes.index(str(e["scene"])) for e in picked], markers[status], ms=10,
                     color=colors[status], label=status, linestyle="none")
         ax.set_xticks(range(len(values)), values)
@@ -207,7 +209,7 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
         for e in entries:
             p = e["parameters"]
             if kx in p and ky in p:
-                cell = (ys.index(str(p[ky])), xs.index(str(p[kx])))
+                cell = (ys.index(value_name(p[ky])), xs.index(value_name(p[kx])))
                 runs[cell] += 1
                 passed[cell] += e["status"] == "pass"
         rate = np.full_like(runs, np.nan)
@@ -230,7 +232,8 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
             ("scene", list(dict.fromkeys(str(e["scene"]) for e in entries)), None)]
 
         def value_of(entry: dict[str, Any], key: str | None) -> str:
-            return str(entry["parameters"].get(key) if key else entry["scene"])
+            return (value_name(entry["parameters"].get(key)) if key
+                    else str(entry["scene"]))
 
         fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.2 * len(groups)), squeeze=False)
         for ax, (label, values, key) in zip(axes[:, 0], groups, strict=True):

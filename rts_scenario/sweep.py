@@ -323,11 +323,32 @@ def run_label(entry: Entry) -> str:
     return f"{entry['scene']}[{entry['id']}]" if entry.get("id") else str(entry["scene"])
 
 
+def value_name(value: Any) -> str:
+    """Name a parameter's value in the summary: equal numbers get one name.
+
+    A number is named as a decimal number (``0``, ``0.0`` and ``-0.0`` are ``0.0``, ``12`` is
+    ``12.0``), except an integer a float cannot hold exactly, which keeps its digits; a
+    boolean is ``True`` or ``False``; anything else is its text.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return str(value)
+    if isinstance(value, int):
+        try:
+            exact = float(value)
+        except OverflowError:
+            return str(value)
+        if exact != value:
+            return str(value)
+        value = exact
+    return repr(value + 0.0)  # -0.0 + 0.0 is 0.0
+
+
 def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, Any]:
     """Count verdicts overall and per parameter value; pick the worst runs.
 
-    ``by_parameter`` maps each parameter's key path to its values (as text, in the order they
-    first appear) and each value to ``{"runs", "passed", "failed", "errors", "pass_rate"}``.
+    ``by_parameter`` maps each parameter's key path to its values (named by
+    :func:`value_name`, in the order they first appear) and each value to ``{"runs", "passed",
+    "failed", "errors", "pass_rate"}``: equal numbers are one value (``0`` and ``0.0``).
     ``worst`` lists erred runs, then failed ones, then passing ones, each by their largest
     error over tolerance, at most ``worst`` runs (a pass with no error to rate is none of
     them).
@@ -336,7 +357,7 @@ def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, An
     for entry in entries:
         for key, value in entry["parameters"].items():
             counts = by_parameter.setdefault(key, {}).setdefault(
-                str(value), {"runs": 0, "passed": 0, "failed": 0, "errors": 0})
+                value_name(value), {"runs": 0, "passed": 0, "failed": 0, "errors": 0})
             _count(counts, entry)
     for values in by_parameter.values():
         for counts in values.values():

@@ -8,6 +8,7 @@ documented exit code; a hypothesis test throws random argument lists at the CLI.
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import subprocess
@@ -375,6 +376,34 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("check-offset-nan", ["check", "{scene}", "--log", "{tmp}/none.blf", "--time-offset-s",
                           "nan"], 2, r"^--time-offset-s: must be a finite number"),
     ("check-without-log", ["check", "{scene}"], 2, r"--log"),
+    # A negative number argparse did not take for one ("-inf", "-1e3") was "expected one
+    # argument"; the option's own check refuses those it does not allow.
+    ("check-offset-minus-inf", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                                "--time-offset-s", "-inf"], 2,
+     r"^--time-offset-s: must be a finite number, got -inf$"),
+    ("check-offset-minus-infinity", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                                     "--time-offset-s", "-Infinity"], 2,
+     r"^--time-offset-s: must be a finite number, got -inf$"),
+    ("check-offset-minus-nan", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                                "--time-offset-s", "-nan"], 2,
+     r"^--time-offset-s: must be a finite number, got nan$"),
+    ("check-offset-exponent", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                               "--time-offset-s", "-1e3"], 2,
+     r"^--log {tmp}/none.blf: no such file"),
+    ("check-offset-not-a-number", ["check", "{scene}", "--log", "{tmp}/none.blf",
+                                   "--time-offset-s", "-x"], 2,
+     r"argument --time-offset-s: expected one argument"),
+    ("calibrate-gain-minus-exponent", ["calibrate", "kit-table1", "--inject-gain-db", "-1e3"],
+     2, r"^--inject-gain-db: must be within 0..20, got -1000.0$"),
+    ("calibrate-phase-minus-inf", ["calibrate", "kit-table1", "--inject-phase-deg", "-inf"],
+     2, r"^--inject-phase-deg: must be within 0..180, got -inf$"),
+    ("bench-scene-minus-exponent", ["bench", "--scene-s", "-2E+1"], 2,
+     r"^--scene-s: must be within .*, got -20.0$"),
+    ("listen-seconds-minus-inf", ["rts-listen", "udp://127.0.0.1:0", "--seconds", "-inf"], 2,
+     r"^--seconds: must be within .*, got -inf$"),
+    ("import-lane-minus-half", ["import", "{tmp}/none.xosc", "--radar", "paper", "--rig",
+                                "kit-table1", "--output", "{tmp}/x.scenario.yaml",
+                                "--lane-width-m", "-.5"], 2, r"--lane-width-m.*-0.5"),
     ("run-record-two-scenes", ["run", "{scene}", "{scene}", "--record", "{tmp}/r.blf"], 2,
      r"^--record: records the bus of one scene, got 2 scenes"),
     ("run-record-format", ["run", "{scene}", "--record", "{tmp}/r.txtx"], 2,
@@ -782,3 +811,139 @@ def test_an_output_that_clashes_leaves_every_file_as_it_was(tmp_path, capsys):
     assert call(["run", str(scene), "--json", str(link)]) == 2
     assert f"the same file as SCENE {scene}" in one_error(capsys.readouterr().err)
     assert scene.read_text() == text
+
+
+JIT_MESSAGE = (r"^RTS_SCENARIO_JIT='onn': unknown value; allowed: auto, on, off \(also 1/0, "
+               r"yes/no, true/false; unset or empty is auto\)$")
+
+
+@pytest.mark.parametrize("argv", [["run", "{scene}", "--json", "{tmp}/out.json"],
+                                  ["sweep", "{scene}"], ["validate", "{scene}"],
+                                  ["list"]])
+def test_an_unknown_jit_setting_is_refused_before_anything_runs(places, capsys, monkeypatch,
+                                                                argv):
+    """A typo in RTS_SCENARIO_JIT was taken as "auto" without a word."""
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "onn")
+    assert call([a.format(**places) for a in argv]) == 2
+    out, err = capsys.readouterr()
+    assert re.search(JIT_MESSAGE, one_error(err)), err
+    assert out == "" and not Path(places["tmp"], "out.json").exists()
+
+
+@pytest.mark.parametrize(("value", "expected"), [
+    ("", "auto"), ("auto", "auto"), (" ON ", "on"), ("1", "on"), ("yes", "on"), ("true", "on"),
+    ("off", "off"), ("0", "off"), ("No", "off"), ("false", "off")])
+def test_the_known_jit_settings(monkeypatch, value, expected):
+    from rts_scenario.solver import compiled
+
+    monkeypatch.setenv("RTS_SCENARIO_JIT", value)
+    assert compiled.mode() == expected
+
+
+def test_an_unknown_jit_setting_is_an_error_in_library_use(monkeypatch):
+    """The solver and the quantization search ask the same setting: both refuse a typo."""
+    import numpy as np
+
+    import rts_scenario as rs
+    from rts_scenario.errors import RtsError
+    from rts_scenario.schedule import quantization
+    from rts_scenario.solver import compiled
+
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "onn")
+    with pytest.raises(RtsError, match=JIT_MESSAGE):
+        compiled.mode()
+    rig = rs.Rig.preset("wide-3x5")
+    with pytest.raises(ValueError, match=JIT_MESSAGE):
+        rs.solve_weights(np.array([0.0]), np.array([0.0]), rig=rig,
+                         array=rs.VirtualArray.preset("awr1843boost"))
+    with pytest.raises(RtsError, match=JIT_MESSAGE):
+        quantization._compile(1)
+
+
+RIG_FILE = str(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml")
+RADAR_FILE = str(ROOT / "rts_scenario" / "data" / "radars" / "paper.radar.yaml")
+MAPPING_FILE = str(ROOT / "rts_scenario" / "data" / "can" / "rts_detections.mapping.yaml")
+
+
+@pytest.fixture
+def disguised(tmp_path):
+    """The shipped rig, radar profile and mapping under names that do not say what they are."""
+    names = {}
+    for kind, source in (("rig", RIG_FILE), ("radar", RADAR_FILE), ("mapping", MAPPING_FILE)):
+        path = tmp_path / f"{kind}-copy.yaml"
+        path.write_text(Path(source).read_text())
+        names[kind] = str(path)
+    return names
+
+
+# (argv, the message after "error: "): {scene} is a good scene; {rig}, {radar}, {mapping} are
+# the copies with plain .yaml names.
+WRONG_KIND_CASES = [
+    (["run", RIG_FILE],
+     rf"^{re.escape(RIG_FILE)} is a rig file \(\*\.rig\.yaml\), not a scene "
+     r"\(\*\.scenario\.yaml\); a scene names its rig under rig:"),
+    (["validate", MAPPING_FILE],
+     rf"^{re.escape(MAPPING_FILE)} is a CAN mapping \(\*\.mapping\.yaml\), not a scene "
+     r"\(\*\.scenario\.yaml\); run and check take it as --mapping"),
+    (["validate", RADAR_FILE],
+     rf"^{re.escape(RADAR_FILE)} is a radar profile \(\*\.radar\.yaml\), not a scene "
+     r"\(\*\.scenario\.yaml\); a scene names its radar under radar.profile"),
+    (["validate", "{rig}"], r"^{rig} is a rig file \(its rts_rig key\), not a scene"),
+    (["run", "{radar}"], r"^{radar} is a radar profile \(its rts_radar key\), not a scene"),
+    (["run", "{mapping}"], r"^{mapping} is a CAN mapping \(its rts_can_mapping key\), not a "
+                           r"scene"),
+    (["run", "{scene}", "--mapping", "{scene}"],
+     r"^--mapping {scene} is a scene file \(\*\.scenario\.yaml\), not a CAN mapping "
+     r"\(\*\.mapping\.yaml\)"),
+    (["check", "{scene}", "--log", "{tmp}/junk.blf", "--mapping", RIG_FILE],
+     rf"^--mapping {re.escape(RIG_FILE)} is a rig file \(\*\.rig\.yaml\), not a CAN mapping"),
+    (["run", "{scene}", "--mapping", "{rig}"],
+     r"^--mapping {rig} is a rig file \(its rts_rig key\), not a CAN mapping"),
+    (["survey", "{scene}"],
+     r"^RIG {scene} is a scene file \(\*\.scenario\.yaml\), not a rig file \(\*\.rig\.yaml\)"),
+    (["calibrate", MAPPING_FILE],
+     rf"^RIG {re.escape(MAPPING_FILE)} is a CAN mapping \(\*\.mapping\.yaml\), not a rig file"),
+    (["survey", "{radar}"], r"^RIG {radar} is a radar profile \(its rts_radar key\), not a rig "
+                            r"file"),
+    (["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1", "--radar", RIG_FILE],
+     rf"^--radar {re.escape(RIG_FILE)} is a rig file \(\*\.rig\.yaml\), not a radar profile "
+     r"\(\*\.radar\.yaml\)"),
+    (["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "{scene}", "--radar", "paper"],
+     r"^--rig {scene} is a scene file \(\*\.scenario\.yaml\), not a rig file"),
+    (["import", str(ROOT / "tests" / "data" / "xosc" / "cut_in.xosc"), "--radar", "paper",
+      "--rig", RADAR_FILE, "--output", "{tmp}/x.scenario.yaml"],
+     rf"^--rig {re.escape(RADAR_FILE)} is a radar profile \(\*\.radar\.yaml\), not a rig "
+     r"file"),
+]
+
+
+@pytest.mark.parametrize(("argv", "pattern"), WRONG_KIND_CASES,
+                         ids=[f"{c[0][0]}-{i}" for i, c in enumerate(WRONG_KIND_CASES)])
+def test_a_file_of_another_kind_says_what_it_is(places, disguised, capsys, argv, pattern):
+    """A rig, radar profile or mapping given as a scene (or a scene as a mapping or a rig) said
+    "unknown key 'columns' ...; allowed keys ...": true, but not what went wrong."""
+    names = {**places, **disguised}
+    assert call([a.format(**names) for a in argv]) == 2
+    message = one_error(capsys.readouterr().err)
+    expected = pattern
+    for key, value in names.items():
+        expected = expected.replace("{" + key + "}", re.escape(value))
+    assert re.search(expected, message), message
+
+
+def test_a_sweep_of_a_rig_file_says_what_it_is(capsys):
+    assert call(["sweep", RIG_FILE, "--workers", "1"]) == 2
+    out = capsys.readouterr().out
+    assert f"{RIG_FILE} is a rig file (*.rig.yaml), not a scene" in out
+    assert "unknown key" not in out
+
+
+@pytest.mark.parametrize("value", ["-inf", "-Infinity", "-1e3", "-1E-3", "-.5", "-5.", "-1_000",
+                                   "-0", "-nan"])
+def test_negative_numbers_are_values_of_number_options(value):
+    """argparse took "-inf" and "-1e3" for options (only "-5" and "-.5" passed as values)."""
+    args = cli.build_parser().parse_args(["check", "s.scenario.yaml", "--log", "x.blf",
+                                          "--time-offset-s", value])
+    expected = float(value)
+    assert (math.isnan(args.time_offset_s) if math.isnan(expected)
+            else args.time_offset_s == expected)

@@ -421,3 +421,58 @@ def test_rts_listen_stops_when_its_reader_has_gone(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_a_can_interface_that_cannot_be_opened_is_one_error_before_the_first_scene(tmp_path,
+                                                                                   capsys):
+    """A parametrized scene gave one "cannot open" error per variant, each after loading it;
+    the options are checked before the first scene runs, as for the other options."""
+    scene = str(ROOT / "scenarios" / "euro-ncap" / "ccrs.scenario.yaml")
+    report = tmp_path / "report.json"
+    code = cli.main(["run", scene, scene, "--can-interface", "socketcan", "--can-channel",
+                     "rts-no-such0", "--json", str(report)])
+    out, err = capsys.readouterr()
+    assert code == 2
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: --can-interface socketcan --can-channel rts-no-such0: "
+                               "cannot open CAN interface 'socketcan' channel 'rts-no-such0'")
+    assert out == "" and not report.exists()  # nothing ran
+    # Without --can-channel the run would use a private channel name: said so.
+    assert cli.main(["run", scene, "--can-interface", "socketcan"]) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith("error: --can-interface socketcan (no --can-channel: a private "
+                          "channel name): cannot open CAN interface 'socketcan'")
+    assert len(err.splitlines()) == 1 and out == ""
+
+
+def test_the_virtual_interface_is_not_opened_up_front(monkeypatch):
+    """Opening a virtual bus has no effect anywhere else, and a check is not a run."""
+    import can
+
+    from rts_scenario.cli.common import check_can_opens
+
+    opened = []
+    monkeypatch.setattr(can, "Bus", lambda *a, **k: opened.append((a, k)))
+    check_can_opens("--can-interface", "virtual", None, "--can-channel")
+    check_can_opens("--can-interface", "virtual", "vcan7", "--can-channel")
+    assert opened == []
+
+
+def test_a_can_interface_that_opens_is_opened_once_up_front_and_closed(monkeypatch):
+    import can
+
+    from rts_scenario.cli.common import check_can_opens
+
+    events = []
+
+    class Probe:
+        def __init__(self, **kwargs):
+            events.append(("open", kwargs["interface"], kwargs["channel"], kwargs["fd"]))
+
+        def shutdown(self):
+            events.append(("shutdown",))
+
+    monkeypatch.setattr(can, "Bus", Probe)
+    check_can_opens("--can-interface", "socketcan", "vcan0", "--can-channel", fd=True)
+    assert events == [("open", "socketcan", "vcan0", True), ("shutdown",)]

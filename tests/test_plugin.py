@@ -276,6 +276,19 @@ def test_bad_rts_can_interface_stops_the_session_once(pytester):
                                                                + result.stdout.str())
 
 
+def test_a_can_interface_that_cannot_be_opened_stops_the_session_once(pytester):
+    """Each scene failed on its own with "cannot open CAN interface"."""
+    for name in ("one", "two"):
+        pytester.makefile(".scenario.yaml", **{name: scene(name)})
+    result = pytester.runpytest("--rts-can-interface", "socketcan", "--rts-can-channel",
+                                "rts-no-such0")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert text.count("--rts-can-interface socketcan --rts-can-channel rts-no-such0: cannot "
+                      "open CAN interface 'socketcan' channel 'rts-no-such0'") == 1
+    assert "Traceback" not in text
+
+
 def test_pattern_is_configurable(pytester):
     pytester.makefile(".yml", odd=scene("odd"))
     pytester.makeini("[pytest]\nrts_scenario_pattern = *.yml\n")
@@ -383,3 +396,14 @@ def test_without_an_html_report_nothing_is_recorded_or_added(pytester):
     result = pytester.runpytest()
     result.assert_outcomes(failed=1)
     assert not pytester.parseconfig().pluginmanager.hasplugin("rts-scenario-html")
+
+
+def test_an_unknown_jit_setting_stops_the_session_once(pytester, monkeypatch):
+    """Each scene failed on its own with the same message."""
+    for name in ("one", "two"):
+        pytester.makefile(".scenario.yaml", **{name: scene(name)})
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "onn")
+    result = pytester.runpytest()
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert text.count("RTS_SCENARIO_JIT='onn': unknown value; allowed: auto, on, off") == 1

@@ -366,3 +366,42 @@ def test_the_euro_ncap_catalogue_sweeps_to_the_same_verdicts_everywhere(tmp_path
         len(first)
     for payload in payloads[1:]:
         assert verdicts(payload) == first
+
+
+def test_equal_numbers_are_one_parameter_value_however_a_scene_writes_them():
+    """ccrs and ccrb in the Euro NCAP catalogue write the same lateral offset as 0 and 0.0:
+    one value in the summary (named as a decimal number), as in the plot; 12 and 12.0 alike,
+    -0.0 is 0.0, and text stays text."""
+    from rts_scenario.cli.sweep import _summary_text
+    from rts_scenario.sweep import value_name
+
+    key = "targets.0.motion.position_m.1"
+
+    def run(value, status):
+        return {"scene": "s", "file": "s.scenario.yaml", "id": "", "parameters": {key: value},
+                "passed": status == "pass", "status": status, "max_error_ratio": 0.1,
+                "max_error_quantity": "az_deg", **({"reason": "why"} if status != "pass" else {})}
+
+    entries = [run(0, "pass"), run(0.0, "fail"), run(-0.0, "pass"), run(0.45, "pass"),
+               run(12, "pass"), run(12.0, "pass"), run("0", "pass"), run(True, "pass"),
+               run(1, "fail")]
+    values = summarize(entries)["by_parameter"][key]
+    assert list(values) == ["0.0", "0.45", "12.0", "0", "True", "1.0"]
+    assert {v: (c["runs"], c["passed"]) for v, c in values.items()} == {
+        "0.0": (3, 2), "0.45": (1, 1), "12.0": (2, 2), "0": (1, 1), "True": (1, 1),
+        "1.0": (1, 0)}
+    assert "position_m.1=0.0: 2/3" in _summary_text(summarize(entries), 1.0)
+    # Integers a float cannot hold exactly keep their digits (and stay apart).
+    assert value_name(2 ** 64 + 1) == str(2 ** 64 + 1) != value_name(2 ** 64)
+    assert value_name(2 ** 64) == value_name(float(2 ** 64))
+
+
+def test_the_euro_ncap_scenes_write_one_offset_two_ways():
+    """The case above is real: the shipped catalogue writes the 100 % overlap as 0 and 0.0."""
+    import yaml
+
+    folder = Path(__file__).resolve().parent.parent / "scenarios" / "euro-ncap"
+    offsets = [yaml.safe_load((folder / f"{n}.scenario.yaml").read_text())["parametrize"][
+        "targets.0.motion.position_m.1"] for n in ("ccrs", "ccrb")]
+    zeros = [next(v for v in values if v == 0) for values in offsets]
+    assert {type(z) for z in zeros} == {int, float}

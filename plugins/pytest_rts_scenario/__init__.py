@@ -56,6 +56,13 @@ def pytest_configure(config: pytest.Config) -> None:
     for line in ("slow: a long scene", "hardware: needs a real RTS and radar",
                  "hard: a hard numerical or physical case"):
         config.addinivalue_line("markers", line)
+    from rts_scenario.errors import RtsError
+    from rts_scenario.settings import check_environment
+
+    try:
+        check_environment()
+    except RtsError as exc:
+        raise pytest.UsageError(str(exc)) from None
     spec = config.getoption("--rts-output")
     mapping_path = config.getoption("--rts-mapping")
     can_fd = config.getoption("--rts-can-fd")
@@ -67,12 +74,12 @@ def pytest_configure(config: pytest.Config) -> None:
         from rts_scenario.canbus.mapping import CanMapping
         from rts_scenario.cli.common import (
             check_can_interface,
+            check_can_opens,
             check_fd_mapping,
             check_output,
             check_radar_channel,
             named_file,
         )
-        from rts_scenario.errors import RtsError
 
         try:
             check_output("--rts-output", spec, run=True)
@@ -83,6 +90,10 @@ def pytest_configure(config: pytest.Config) -> None:
             if mapping_path:
                 mapping = named_file("--rts-mapping", CanMapping.from_file, mapping_path)
                 check_fd_mapping(can_fd, mapping_path, mapping)
+            # Once here, not once per scene: an interface this machine cannot open.
+            check_can_opens("--rts-can-interface", interface,
+                            config.getoption("--rts-can-channel"), "--rts-can-channel",
+                            fd=can_fd)
         except RtsError as exc:
             raise pytest.UsageError(str(exc).replace("--can-fd", "--rts-can-fd").replace(
                 "--radar-channel", "--rts-radar-channel")) from None

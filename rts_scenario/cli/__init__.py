@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 from .._version import __version__
 from ..errors import RtsError
+from ..settings import check_environment
 from . import (
     bench,
     calibrate,
@@ -64,10 +65,34 @@ def build_parser() -> argparse.ArgumentParser:
     for module in _SUBCOMMANDS:
         module.add_parser(subparsers, [debug])
     for sub in subparsers.choices.values():
+        # No option looks like a number: every negative number is a value.
+        sub._negative_number_matcher = _NEGATIVE_NUMBER  # type: ignore[assignment]
         for action in sub._actions:
             if action.nargs != 0 and action.type in (None, str) and action.choices is None:
                 action.type = _not_empty
     return parser
+
+
+class _NegativeNumber:
+    """What argparse takes for a negative number, a value rather than an option.
+
+    argparse's own pattern (``-5``, ``-.5``) left out ``-inf``, ``-nan`` and ``-1e3``, so
+    ``--time-offset-s -inf`` read as an option and failed with "expected one argument"
+    instead of the option's own check. Here anything ``float()`` reads is a number.
+    """
+
+    @staticmethod
+    def match(text: str) -> bool:
+        if not text.startswith("-"):
+            return False
+        try:
+            float(text)
+        except ValueError:
+            return False
+        return True
+
+
+_NEGATIVE_NUMBER = _NegativeNumber()
 
 
 def _not_empty(value: str) -> str:
@@ -88,6 +113,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    try:
+        # Settings the environment gives are checked once, before anything runs.
+        check_environment()
+    except RtsError as exc:
+        print(f"error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     stdout = sys.stdout
     guard = guarded_stdout(stdout)
     if guard is not None:

@@ -316,6 +316,30 @@ def check_can_interface(option: str, interface: str, channel: str | None = None,
         raise RtsError(f"{channel_option} {channel!r}: udp_multicast needs {need}")
 
 
+def check_can_opens(option: str, interface: str, channel: str | None, channel_option: str,
+                    *, fd: bool = False) -> None:
+    """Open the CAN interface a run will use once, and close it: one error before any run.
+
+    A run opens it per scene (per variant of a parametrized one), so an interface this machine
+    cannot open failed each of them in turn. Opening it and closing it again sends nothing;
+    the ``virtual`` interface is left alone (a run's own bus, heard by no one else).
+    """
+    if interface == "virtual":
+        return
+    from ..canbus import open_bus
+    from ..errors import BusError
+
+    # Without a channel a run uses a private channel name (`Pipeline`): so does the check.
+    name = channel if channel is not None else f"rts-scenario-{os.getpid():x}-detections"
+    given = (f"{channel_option} {channel}" if channel is not None
+             else f"(no {channel_option}: a private channel name)")
+    try:
+        bus = open_bus(interface, name, fd=fd)
+    except BusError as exc:
+        raise BusError(f"{option} {interface} {given}: {one_line(exc)}") from None
+    bus.shutdown()
+
+
 def check_readable_file(option: str, path: str) -> None:
     """Reject a path that is not a readable file."""
     if not Path(path).is_file():

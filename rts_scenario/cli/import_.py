@@ -18,6 +18,19 @@ def _scene_reference(option: str, name: str, presets: list[str], suffix: str,
     if name in presets:
         return name
     path = Path(name)
+    if not name.endswith(suffix) and path.is_file():
+        # A file of another kind says what it is.
+        from ..file_kinds import refuse_other_kind
+        from ..located_yaml import load_yaml
+
+        try:
+            data = load_yaml(path).data
+        except RtsError:
+            data = None  # not YAML: no kind to tell
+        try:
+            refuse_other_kind(name, data, suffix)
+        except RtsError as exc:
+            raise RtsError(f"{option} {exc}") from None
     if not name.endswith(suffix) or not path.is_file():
         raise RtsError(f"{option} {name!r}: unknown preset and no such *{suffix} file; valid "
                        f"presets: {', '.join(presets)}")

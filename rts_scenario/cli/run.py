@@ -18,6 +18,7 @@ from .common import (
     METHODS,
     Progress,
     check_can_interface,
+    check_can_opens,
     check_distinct_paths,
     check_fd_mapping,
     check_output,
@@ -95,6 +96,9 @@ def _do_run(args: argparse.Namespace) -> int:
 
         require_matplotlib()
         check_writable_folder("--plot", args.plot)
+    # Last: the interface opens once (and closes) only when every other option is good.
+    check_can_opens("--can-interface", args.can_interface, args.can_channel, "--can-channel",
+                    fd=args.can_fd)
 
     entries: list[dict[str, Any]] = []
     stems: set[str] = set()

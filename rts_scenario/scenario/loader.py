@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import RtsError, ScenarioError
+from ..file_kinds import kind_by_name, kind_name, refuse_other_kind
 from ..located_yaml import Document, KeyPath, format_key_path, load_yaml, validate
 from ..radar.profile import RadarProfile
 from ..radar.profile import preset_names as radar_presets
@@ -85,6 +86,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     """
     path = Path(path)
     doc = load_yaml(path)
+    refuse_other_kind(path, doc.data, ".scenario.yaml")
     if not isinstance(doc.data, dict):
         got = "an empty file" if doc.data is None else type(doc.data).__name__
         raise doc.error((), f"a scene must be a mapping of keys, got {got}")
@@ -384,19 +386,16 @@ def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:
     return resolved
 
 
-# The files the tool reads, by suffix: one named where another kind belongs is refused as such.
-_FILE_KINDS = {".rig.yaml": "a rig file", ".radar.yaml": "a radar profile",
-               ".scenario.yaml": "a scene file", ".mapping.yaml": "a CAN mapping"}
-
-
 def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets: list[str],
                      preset: Any, from_file: Any, suffix: str) -> Any:
     if name in presets:
         return preset(name)
-    for other, kind in _FILE_KINDS.items():
-        if other != suffix and name.endswith(other):
-            raise doc.error(key, f"{name!r} is {kind} (*{other}); {format_key_path(key)} takes "
-                                 f"a preset ({', '.join(presets)}) or a *{suffix} file")
+    # A file named as another kind is refused as such.
+    other = kind_by_name(name)
+    if other is not None and other != suffix:
+        raise doc.error(key, f"{name!r} is {kind_name(other)} (*{other}); "
+                             f"{format_key_path(key)} takes a preset ({', '.join(presets)}) "
+                             f"or a *{suffix} file")
     # A name that is no preset is a file when it looks like one or one exists by that name.
     looks_like_file = name.endswith((suffix, ".yaml", ".yml")) or "/" in name
     if not looks_like_file and not (root / name).is_file():

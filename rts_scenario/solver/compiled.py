@@ -13,19 +13,19 @@ Loading numba and the cached kernel takes about half a second, what the numpy co
 about a million targets, so by default (``RTS_SCENARIO_JIT=auto``) a process loads the kernel
 only once it has solved `LOAD_AFTER_TARGETS` targets: a scene of a few thousand target-frames
 never pays for it, a sweep over millions soon does. ``RTS_SCENARIO_JIT=on`` loads it at the
-first solve, ``off`` never.
+first solve, ``off`` never. Any other value is refused (`SettingError`) wherever it is read:
+a typo would otherwise change when the kernel loads without a word.
 """
 
 from __future__ import annotations
 
 import importlib
-import os
 import sys
 import threading
 from types import ModuleType
 
-# Environment variable choosing when to use the compiled kernels: "auto" (default), "on", "off".
-JIT_ENV = "RTS_SCENARIO_JIT"
+from ..settings import JIT_ENV, jit_mode
+
 # With "auto", targets a process solves with the numpy code before it loads the kernel.
 LOAD_AFTER_TARGETS = 1_000_000
 _KERNEL_MODULE = f"{__package__}._exact_kernel"
@@ -35,11 +35,12 @@ _solved_targets = [0]
 
 
 def mode() -> str:
-    """``$RTS_SCENARIO_JIT`` as one of "auto", "on", "off" (unknown values count as "auto")."""
-    value = os.environ.get(JIT_ENV, "").strip().lower()
-    if value in ("off", "0", "no", "false"):
-        return "off"
-    return "on" if value in ("on", "1", "yes", "true") else "auto"
+    """``$RTS_SCENARIO_JIT`` as one of "auto", "on", "off" (`rts_scenario.settings.jit_mode`).
+
+    Unset or empty is "auto"; 1/yes/true are "on", 0/no/false "off". Any other value raises
+    `SettingError` naming the variable, the value and the allowed values.
+    """
+    return jit_mode()
 
 
 def exact_kernel(n_targets: int | None = None) -> ModuleType | None:
