@@ -105,6 +105,19 @@ def test_bad_rts_mapping_or_can_fd_stops_the_session_up_front(pytester):
     text = result.stderr.str() + result.stdout.str()
     assert f"--rts-can-fd: the mapping {mapping} has no fd_message" in text
 
+
+@pytest.mark.parametrize("option", ["--rts-mapping", "--rts-can-channel", "--rts-output",
+                                    "--rts-can-interface"])
+def test_an_empty_rts_option_is_a_usage_error(pytester, option):
+    # `--rts-mapping=$MAPPING` with MAPPING unset is not the option left out: a radar read with
+    # rts-scenario's own DBC instead of its own, or a private channel instead of the bench's.
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    result = pytester.runpytest(f"{option}=")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert f"{option}: an empty value; give one, or leave the option out" in text
+    assert text.count("an empty value") == 1 and "Traceback" not in text
+
 def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):
     sub = pytester.mkdir("sub")
     (sub / "data").mkdir()
