@@ -382,6 +382,33 @@ def test_a_reader_that_stops_early_loses_neither_the_verdict_nor_the_report(tmp_
     assert [s["status"] for s in json.loads(report.read_text())] == ["pass", "pass"]
 
 
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
+def test_standard_output_that_cannot_be_written_is_a_runtime_error_not_a_scene_s(tmp_path):
+    # `rts-scenario run SCENE --json R > /dev/full`: everything printed is lost. That is exit 3
+    # (never the verdict's 0: nobody saw it), said once; the scenes still run and are not
+    # blamed for it, and the report holds their verdicts (before: the first variant an error
+    # entry for an OSError, the second not run, no report).
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    report = tmp_path / "r.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(root / "plugins"),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run(
+            [sys.executable, "-c", "import sys, rts_scenario.cli as c; sys.exit(c.main())",
+             "run", str(root / "scenarios" / "cut_in.scenario.yaml"), "--json", str(report)],
+            stdout=full, stderr=subprocess.PIPE, env=env, timeout=300)
+    errors = proc.stderr.decode()
+    assert proc.returncode == 3, errors
+    assert [s["status"] for s in json.loads(report.read_text())] == ["pass", "pass"]
+    lines = [line for line in errors.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and lines[0].startswith("error: standard output: "), errors
+    assert "No space left on device" in lines[0] and "Traceback" not in errors
+
+
 def test_rts_listen_stops_when_its_reader_has_gone(tmp_path):
     # `rts-scenario rts-listen udp://... | head -1`: printing frames is all it does, so it ends
     # (exit 0) once nobody reads them, rather than listening on for ever.

@@ -93,11 +93,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     if guard is not None:
         sys.stdout = guard
     try:
-        return _handle(args)
+        code = _handle(args)
     finally:
         if guard is not None:
             sys.stdout.flush()
             sys.stdout = stdout
+    lost = getattr(guard, "lost", None)
+    if lost is not None:
+        # What was printed (a verdict among it) went nowhere: never the verdict's exit code.
+        print(f"error: standard output: {one_line(lost)}: what the command printed is lost",
+              file=sys.stderr)
+        return EXIT_RUNTIME_ERROR
+    return code
 
 
 def _handle(args: argparse.Namespace) -> int:

@@ -31,24 +31,33 @@ class _ReaderGone:
 
     Once the reader has gone, what is still written goes to the null device: the command runs
     to its end, writes its files and exits with its verdict, instead of failing every later
-    scene on a broken pipe.
+    scene on a broken pipe. So it goes for output that cannot be written (``> /dev/full``, a
+    lost device), which is kept in ``lost``: nobody saw what was printed, and the command
+    exits with a runtime error (`rts_scenario.cli.main`), never with its verdict.
     """
 
     def __init__(self, stream: TextIO) -> None:
         self._stream = stream
         self.reader_gone = False
+        self.lost: OSError | None = None
 
     def write(self, text: str) -> int:
         try:
             return self._stream.write(text)
         except BrokenPipeError:
             self._to_null()
-            return len(text)
+        except OSError as exc:
+            self.lost = self.lost or exc
+            self._to_null()
+        return len(text)
 
     def flush(self) -> None:
         try:
             self._stream.flush()
         except BrokenPipeError:
+            self._to_null()
+        except OSError as exc:
+            self.lost = self.lost or exc
             self._to_null()
 
     def _to_null(self) -> None:
