@@ -516,6 +516,31 @@ def test_an_array_wider_than_the_angle_grids_allow_is_a_located_error(tmp_path, 
             RadarProfile.from_file(path)
 
 
+@pytest.mark.parametrize("edits, axis", [
+    ({"tx_z_m: [-0.000325, 0.001625, -0.000325]": "tx_z_m: [-0.000325, -0.000325, -0.000325]"},
+     "z"),
+    ({"tx_y_m: [-0.0089, -0.0050, -0.0011]": "tx_y_m: [0.0, 0.0, 0.0]",
+      "rx_y_m: [0.002075, 0.004025, 0.005975, 0.007925]": "rx_y_m: [0.002, 0.002, 0.002, 0.002]"},
+     "y"),
+])
+def test_an_array_on_a_line_is_a_located_error(tmp_path, edits, axis):
+    # Every TX and RX at one height (or one y): the virtual array measures one angle only, and
+    # no weight method can synthesize both. The profile loaded; run then failed with exit 3
+    # and a message naming no line or key (validate: exit 2).
+    from rts_scenario.radar.profile import RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    for old, new in edits.items():
+        assert old in radar
+        radar = radar.replace(old, new)
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar)
+    line = next(i for i, text in enumerate(radar.splitlines(), 1) if text.startswith("array"))
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: array: the virtual "
+                                            rf"array is a line: every element at one {axis}"):
+        RadarProfile.from_file(path)
+
+
 @pytest.mark.parametrize("edits, key", [
     ({"chirp_loops: 64": "chirp_loops: 100000000", "frame_period_s: 0.05":
       "frame_period_s: 1.0e+6"}, "chirp_loops"),
