@@ -601,6 +601,20 @@ def test_an_integer_beyond_64_bits_is_a_located_error_in_every_file_type(tmp_pat
         load_scenario(scene)
 
 
+def test_the_64_bit_bound_message_gives_the_range_of_integers_accepted(tmp_path):
+    # 2^63 was refused with "numbers must lie within +-9,223,372,036,854,775,808": the bound
+    # itself, read as allowed. The largest accepted integer is 2^63 - 1.
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(GOOD + f"seed: {2**63 - 1}\n")
+    assert load_scenario(scene).seed == 2**63 - 1
+    scene.write_text(GOOD + f"seed: {2**63}\n")
+    with pytest.raises(ScenarioError, match=r"s.scenario.yaml:15:\d+: seed: an integer beyond "
+                                            r"64 bits, got 9223372036854775808; integers must "
+                                            r"lie from -9,223,372,036,854,775,808 to "
+                                            r"9,223,372,036,854,775,807$"):
+        load_scenario(scene)
+
+
 def test_exponent_numbers_are_floats_in_every_file_type(tmp_path):
     # YAML 1.1 reads 76.5e9 and 1e6 as strings; YAML 1.2 (and engineers) as numbers.
     from rts_scenario.canbus.mapping import CanMapping
