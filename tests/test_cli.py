@@ -382,6 +382,41 @@ def test_a_reader_that_stops_early_loses_neither_the_verdict_nor_the_report(tmp_
     assert [s["status"] for s in json.loads(report.read_text())] == ["pass", "pass"]
 
 
+def test_a_reader_of_both_outputs_that_stops_early_loses_neither_verdict_nor_report(tmp_path):
+    # `rts-scenario run A B --json R 2>&1 | head -1`: standard error goes to the same reader.
+    # Its next line (B's warning) met a broken pipe: B did not run, no report was written,
+    # and the exit code was 1 from an uncaught BrokenPipeError, whatever the verdicts.
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "scenarios" / "approaching_target.scenario.yaml").read_text()
+    scenes = []
+    for name in ("loud-a", "loud-b"):
+        # A 60 dBsm car saturates the attenuator near the radar: a warning on stderr, and a
+        # verdict of fail (the limit is not declared expected).
+        scene = tmp_path / f"{name}.scenario.yaml"
+        scene.write_text(text.replace("name: approaching-target", f"name: {name}")
+                         .replace("rcs_dbsm: 12.0", "rcs_dbsm: 60.0"))
+        scenes.append(str(scene))
+    report = tmp_path / "r.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(root / "plugins"),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys, rts_scenario.cli as c; sys.exit(c.main())", "run",
+         *scenes, "--json", str(report)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env)
+    assert proc.stdout is not None
+    first = proc.stdout.readline()
+    proc.stdout.close()  # as `head -1` does
+    assert proc.wait(timeout=300) == 1
+    assert first.startswith(b"warning: "), first
+    entries = json.loads(report.read_text())
+    assert [(e["scene"], e["status"]) for e in entries] == [("loud-a", "fail"),
+                                                            ("loud-b", "fail")]
+
+
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
 def test_standard_output_that_cannot_be_written_is_a_runtime_error_not_a_scene_s(tmp_path):
     # `rts-scenario run SCENE --json R > /dev/full`: everything printed is lost. That is exit 3

@@ -36,7 +36,7 @@ from .common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_RUNTIME_ERROR,
-    guarded_stdout,
+    guarded_output,
     one_line,
     show_traceback,
 )
@@ -88,21 +88,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    stdout = sys.stdout
-    guard = guarded_stdout(stdout)
-    if guard is not None:
-        sys.stdout = guard
+    stdout, stderr = sys.stdout, sys.stderr
+    out_guard, err_guard = guarded_output(stdout), guarded_output(stderr)
+    if out_guard is not None:
+        sys.stdout = out_guard
+    if err_guard is not None:
+        sys.stderr = err_guard
     try:
         code = _handle(args)
     finally:
-        if guard is not None:
+        if out_guard is not None:
             sys.stdout.flush()
             sys.stdout = stdout
-    lost = getattr(guard, "lost", None)
-    if lost is not None:
+        if err_guard is not None:
+            sys.stderr.flush()
+            sys.stderr = stderr
+    lost = [(name, getattr(guard, "lost", None))
+            for name, guard in (("standard output", out_guard), ("standard error", err_guard))]
+    if any(exc is not None for _, exc in lost):
         # What was printed (a verdict among it) went nowhere: never the verdict's exit code.
-        print(f"error: standard output: {one_line(lost)}: what the command printed is lost",
-              file=sys.stderr)
+        for name, exc in lost:
+            if exc is not None:
+                try:
+                    print(f"error: {name}: {one_line(exc)}: what the command printed is lost",
+                          file=sys.stderr)
+                except OSError:
+                    pass  # standard error itself is lost: the exit code is all that is left
         return EXIT_RUNTIME_ERROR
     return code
 

@@ -27,13 +27,14 @@ EXIT_RUNTIME_ERROR = 3
 
 
 class _ReaderGone:
-    """Standard output that outlives its reader (``rts-scenario run ... | head``).
+    """Standard output or error that outlives its reader (``rts-scenario run ... | head``).
 
-    Once the reader has gone, what is still written goes to the null device: the command runs
-    to its end, writes its files and exits with its verdict, instead of failing every later
-    scene on a broken pipe. So it goes for output that cannot be written (``> /dev/full``, a
-    lost device), which is kept in ``lost``: nobody saw what was printed, and the command
-    exits with a runtime error (`rts_scenario.cli.main`), never with its verdict.
+    Standard error too (``2>&1 | head``). Once the reader has gone, what is still written goes
+    to the null device: the command runs to its end, writes its files and exits with its
+    verdict, instead of failing every later scene on a broken pipe. So it goes for output that
+    cannot be written (``> /dev/full``, a lost device), which is kept in ``lost``: nobody saw
+    what was printed, and the command exits with a runtime error (`rts_scenario.cli.main`),
+    never with its verdict.
     """
 
     def __init__(self, stream: TextIO) -> None:
@@ -75,8 +76,11 @@ class _ReaderGone:
         return getattr(self._stream, name)
 
 
-def guarded_stdout(stream: TextIO) -> TextIO | None:
-    """``stream`` wrapped in `_ReaderGone` when it is a file (not a capture), else None."""
+def guarded_output(stream: TextIO) -> TextIO | None:
+    """Return ``stream`` wrapped in `_ReaderGone` when it is a file (not a capture), else None.
+
+    For standard output and standard error alike.
+    """
     try:
         stream.fileno()
     except (AttributeError, OSError, ValueError):
@@ -85,7 +89,7 @@ def guarded_stdout(stream: TextIO) -> TextIO | None:
 
 
 def stdout_reader_gone() -> bool:
-    """Whether standard output's reader has gone (`guarded_stdout`): nothing printed is read."""
+    """Whether standard output's reader has gone (`guarded_output`): nothing printed is read."""
     return bool(getattr(sys.stdout, "reader_gone", False))
 
 
