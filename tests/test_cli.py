@@ -444,6 +444,38 @@ def test_standard_output_that_cannot_be_written_is_a_runtime_error_not_a_scene_s
     assert "No space left on device" in lines[0] and "Traceback" not in errors
 
 
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
+def test_main_called_twice_reports_lost_output_each_time():
+    # main() in one process twice (as a program embedding the command line does): the first
+    # call's lost output must not leave standard output on the null device, where the second
+    # call's output was lost without a word and its exit code 0.
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(root / "plugins"),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    code = ("import sys, rts_scenario.cli as c\n"
+            "codes = [c.main(['list-outputs']), c.main(['list-outputs'])]\n"
+            "print('codes', codes, file=sys.stderr)\n")
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-c", code], stdout=full, stderr=subprocess.PIPE,
+                              env=env, timeout=120)
+    errors = proc.stderr.decode()
+    assert "codes [3, 3]" in errors, errors
+    assert errors.count("error: standard output: ") == 2, errors
+    # A reader gone stays gone for both calls: each ends with its verdict, nothing on stderr.
+    proc2 = subprocess.Popen([sys.executable, "-c", code.replace("list-outputs", "list")],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    assert proc2.stdout is not None and proc2.stderr is not None
+    proc2.stdout.readline()
+    proc2.stdout.close()
+    errors = proc2.stderr.read().decode()
+    assert proc2.wait(timeout=120) == 0
+    assert errors.strip() == "codes [0, 0]", errors
+
+
 def test_rts_listen_stops_when_its_reader_has_gone(tmp_path):
     # `rts-scenario rts-listen udp://... | head -1`: printing frames is all it does, so it ends
     # (exit 0) once nobody reads them, rather than listening on for ever.

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import TextIO, cast
 
 from .._version import __version__
 from ..errors import RtsError
@@ -91,17 +92,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     stdout, stderr = sys.stdout, sys.stderr
     out_guard, err_guard = guarded_output(stdout), guarded_output(stderr)
     if out_guard is not None:
-        sys.stdout = out_guard
+        sys.stdout = cast(TextIO, out_guard)
     if err_guard is not None:
-        sys.stderr = err_guard
+        sys.stderr = cast(TextIO, err_guard)
     try:
         code = _handle(args)
     finally:
         if out_guard is not None:
-            sys.stdout.flush()
+            out_guard.restore()
             sys.stdout = stdout
         if err_guard is not None:
-            sys.stderr.flush()
+            err_guard.restore()
             sys.stderr = stderr
     lost = [(name, getattr(guard, "lost", None))
             for name, guard in (("standard output", out_guard), ("standard error", err_guard))]

@@ -12,7 +12,7 @@ import traceback
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, TextIO, cast
+from typing import Any, TextIO
 
 from ..errors import RtsError, one_line
 
@@ -41,6 +41,9 @@ class _ReaderGone:
         self._stream = stream
         self.reader_gone = False
         self.lost: OSError | None = None
+        # A duplicate of the stream's file descriptor while it points at the null device for
+        # output that could not be written (`restore` puts it back).
+        self._saved: int | None = None
 
     def write(self, text: str) -> int:
         try:
@@ -48,8 +51,7 @@ class _ReaderGone:
         except BrokenPipeError:
             self._to_null()
         except OSError as exc:
-            self.lost = self.lost or exc
-            self._to_null()
+            self._lose(exc)
         return len(text)
 
     def flush(self) -> None:
@@ -58,12 +60,30 @@ class _ReaderGone:
         except BrokenPipeError:
             self._to_null()
         except OSError as exc:
-            self.lost = self.lost or exc
-            self._to_null()
+            self._lose(exc)
+
+    def restore(self) -> None:
+        """Flush; give the stream its own file back if output could not be written to it.
+
+        A reader that has gone stays gone (the null device), but a full or lost device is
+        tried again by the next command in this process (`rts_scenario.cli.main` called
+        twice), which then reports its own lost output.
+        """
+        self.flush()
+        if self._saved is not None:
+            os.dup2(self._saved, self._stream.fileno())
+            os.close(self._saved)
+            self._saved = None
+
+    def _lose(self, exc: OSError) -> None:
+        self.lost = self.lost or exc
+        if self._saved is None:
+            self._saved = os.dup(self._stream.fileno())
+        self._to_null()
 
     def _to_null(self) -> None:
-        # The stream's file descriptor now points at the null device, so its buffer (and the
-        # interpreter's last flush at exit) drains there.
+        # The stream's file descriptor now points at the null device, so its buffer (and, for a
+        # reader gone, the interpreter's last flush at exit) drains there.
         self.reader_gone = True
         null = os.open(os.devnull, os.O_WRONLY)
         try:
@@ -76,7 +96,7 @@ class _ReaderGone:
         return getattr(self._stream, name)
 
 
-def guarded_output(stream: TextIO) -> TextIO | None:
+def guarded_output(stream: TextIO) -> _ReaderGone | None:
     """Return ``stream`` wrapped in `_ReaderGone` when it is a file (not a capture), else None.
 
     For standard output and standard error alike.
@@ -85,7 +105,7 @@ def guarded_output(stream: TextIO) -> TextIO | None:
         stream.fileno()
     except (AttributeError, OSError, ValueError):
         return None
-    return cast(TextIO, _ReaderGone(stream))
+    return _ReaderGone(stream)
 
 
 def stdout_reader_gone() -> bool:
