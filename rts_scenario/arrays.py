@@ -295,11 +295,15 @@ class VirtualArray:
 
     @cached_property
     def is_centrosymmetric(self) -> bool:
-        """Whether the layout equals its point reflection (then the response is real)."""
+        """Whether the layout equals its point reflection (then the response is real).
+
+        Counting elements at one place: as many at each position as at its mirror.
+        """
         tol = 1e-9 * self.wavelength_m
         pos = np.column_stack([self.y_m, self.z_m])
-        dist = np.abs(pos[:, None, :] + pos[None, :, :]).max(axis=2)
-        return bool(np.all(dist.min(axis=1) <= tol))
+        mirrored = (np.abs(pos[:, None, :] + pos[None, :, :]).max(axis=2) <= tol).sum(axis=1)
+        same = (np.abs(pos[:, None, :] - pos[None, :, :]).max(axis=2) <= tol).sum(axis=1)
+        return bool(np.all(mirrored == same))
 
     @property
     def key(self) -> tuple[Any, ...]:

@@ -326,8 +326,9 @@ def _reject_non_finite(document: Document, node: Any, path: KeyPath) -> None:
         raise document.error(path, f"must be a finite number, got {node}")
     if (isinstance(node, int) and not isinstance(node, bool)
             and not -(2 ** (_INT_BITS - 1)) <= node < 2 ** (_INT_BITS - 1)):
-        raise document.error(path, f"an integer beyond {_INT_BITS} bits, got {node}; numbers "
-                                   f"must lie within +-{2 ** (_INT_BITS - 1):,}")
+        raise document.error(path, f"an integer beyond {_INT_BITS} bits, got {node}; integers "
+                                   f"must lie from {-(2 ** (_INT_BITS - 1)):,} to "
+                                   f"{2 ** (_INT_BITS - 1) - 1:,}")
     if isinstance(node, dict):
         for key, value in node.items():
             _reject_non_finite(document, value, (*path, key))

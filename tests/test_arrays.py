@@ -41,6 +41,24 @@ def test_awr1843boost_preset_layout():
     assert not arr.is_centrosymmetric
 
 
+def uneven_mirror_counts():
+    """Three positions 120 deg apart, each twice, and their mirrors once: every element has a
+    mirror and the centroid is the origin, but the layout is not its point reflection."""
+    ang = np.radians([0.0, 120.0, 240.0])
+    y, z = 0.6 * LAM * np.cos(ang), 0.6 * LAM * np.sin(ang)
+    return rs.VirtualArray.from_positions(np.r_[y, y, -y], np.r_[z, z, -z], wavelength_m=LAM)
+
+
+def test_mirrored_positions_with_uneven_counts_are_not_centrosymmetric():
+    arr = uneven_mirror_counts()
+    # The sum of the steering vectors (the response to a source on the boresight) is complex.
+    assert abs(arr.steering_vector(30.0, -40.0).sum().imag) > 1.0
+    assert not arr.is_centrosymmetric
+    doubled = rs.VirtualArray.from_positions(np.r_[arr.y_m, -arr.y_m], np.r_[arr.z_m, -arr.z_m],
+                                             wavelength_m=LAM)
+    assert doubled.is_centrosymmetric  # three elements at each position, three at its mirror
+
+
 def test_custom_array_from_tx_rx_matches_preset():
     half = LAM / 2
     arr = rs.VirtualArray.from_tx_rx(

@@ -382,6 +382,100 @@ def test_a_reader_that_stops_early_loses_neither_the_verdict_nor_the_report(tmp_
     assert [s["status"] for s in json.loads(report.read_text())] == ["pass", "pass"]
 
 
+def test_a_reader_of_both_outputs_that_stops_early_loses_neither_verdict_nor_report(tmp_path):
+    # `rts-scenario run A B --json R 2>&1 | head -1`: standard error goes to the same reader.
+    # Its next line (B's warning) met a broken pipe: B did not run, no report was written,
+    # and the exit code was 1 from an uncaught BrokenPipeError, whatever the verdicts.
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "scenarios" / "approaching_target.scenario.yaml").read_text()
+    scenes = []
+    for name in ("loud-a", "loud-b"):
+        # A 60 dBsm car saturates the attenuator near the radar: a warning on stderr, and a
+        # verdict of fail (the limit is not declared expected).
+        scene = tmp_path / f"{name}.scenario.yaml"
+        scene.write_text(text.replace("name: approaching-target", f"name: {name}")
+                         .replace("rcs_dbsm: 12.0", "rcs_dbsm: 60.0"))
+        scenes.append(str(scene))
+    report = tmp_path / "r.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(root / "plugins"),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys, rts_scenario.cli as c; sys.exit(c.main())", "run",
+         *scenes, "--json", str(report)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env)
+    assert proc.stdout is not None
+    first = proc.stdout.readline()
+    proc.stdout.close()  # as `head -1` does
+    assert proc.wait(timeout=300) == 1
+    assert first.startswith(b"warning: "), first
+    entries = json.loads(report.read_text())
+    assert [(e["scene"], e["status"]) for e in entries] == [("loud-a", "fail"),
+                                                            ("loud-b", "fail")]
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
+def test_standard_output_that_cannot_be_written_is_a_runtime_error_not_a_scene_s(tmp_path):
+    # `rts-scenario run SCENE --json R > /dev/full`: everything printed is lost. That is exit 3
+    # (never the verdict's 0: nobody saw it), said once; the scenes still run and are not
+    # blamed for it, and the report holds their verdicts (before: the first variant an error
+    # entry for an OSError, the second not run, no report).
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    report = tmp_path / "r.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(root / "plugins"),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run(
+            [sys.executable, "-c", "import sys, rts_scenario.cli as c; sys.exit(c.main())",
+             "run", str(root / "scenarios" / "cut_in.scenario.yaml"), "--json", str(report)],
+            stdout=full, stderr=subprocess.PIPE, env=env, timeout=300)
+    errors = proc.stderr.decode()
+    assert proc.returncode == 3, errors
+    assert [s["status"] for s in json.loads(report.read_text())] == ["pass", "pass"]
+    lines = [line for line in errors.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and lines[0].startswith("error: standard output: "), errors
+    assert "No space left on device" in lines[0] and "Traceback" not in errors
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
+def test_main_called_twice_reports_lost_output_each_time():
+    # main() in one process twice (as a program embedding the command line does): the first
+    # call's lost output must not leave standard output on the null device, where the second
+    # call's output was lost without a word and its exit code 0.
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(root / "plugins"),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    code = ("import sys, rts_scenario.cli as c\n"
+            "codes = [c.main(['list-outputs']), c.main(['list-outputs'])]\n"
+            "print('codes', codes, file=sys.stderr)\n")
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-c", code], stdout=full, stderr=subprocess.PIPE,
+                              env=env, timeout=120)
+    errors = proc.stderr.decode()
+    assert "codes [3, 3]" in errors, errors
+    assert errors.count("error: standard output: ") == 2, errors
+    # A reader gone stays gone for both calls: each ends with its verdict, nothing on stderr.
+    proc2 = subprocess.Popen([sys.executable, "-c", code.replace("list-outputs", "list")],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    assert proc2.stdout is not None and proc2.stderr is not None
+    proc2.stdout.readline()
+    proc2.stdout.close()
+    errors = proc2.stderr.read().decode()
+    assert proc2.wait(timeout=120) == 0
+    assert errors.strip() == "codes [0, 0]", errors
+
+
 def test_rts_listen_stops_when_its_reader_has_gone(tmp_path):
     # `rts-scenario rts-listen udp://... | head -1`: printing frames is all it does, so it ends
     # (exit 0) once nobody reads them, rather than listening on for ever.

@@ -122,6 +122,18 @@ def test_rts_radar_channel_reads_the_radar_s_channel_alone(pytester, monkeypatch
     assert "--rts-radar-channel ' ': empty" in text and "Traceback" not in text
 
 
+@pytest.mark.parametrize("option", ["--rts-mapping", "--rts-can-channel", "--rts-output",
+                                    "--rts-can-interface"])
+def test_an_empty_rts_option_is_a_usage_error(pytester, option):
+    # `--rts-mapping=$MAPPING` with MAPPING unset is not the option left out: a radar read with
+    # rts-scenario's own DBC instead of its own, or a private channel instead of the bench's.
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    result = pytester.runpytest(f"{option}=")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert f"{option}: an empty value; give one, or leave the option out" in text
+    assert text.count("an empty value") == 1 and "Traceback" not in text
+
 def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):
     sub = pytester.mkdir("sub")
     (sub / "data").mkdir()

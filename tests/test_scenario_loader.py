@@ -516,6 +516,31 @@ def test_an_array_wider_than_the_angle_grids_allow_is_a_located_error(tmp_path, 
             RadarProfile.from_file(path)
 
 
+@pytest.mark.parametrize("edits, axis", [
+    ({"tx_z_m: [-0.000325, 0.001625, -0.000325]": "tx_z_m: [-0.000325, -0.000325, -0.000325]"},
+     "z"),
+    ({"tx_y_m: [-0.0089, -0.0050, -0.0011]": "tx_y_m: [0.0, 0.0, 0.0]",
+      "rx_y_m: [0.002075, 0.004025, 0.005975, 0.007925]": "rx_y_m: [0.002, 0.002, 0.002, 0.002]"},
+     "y"),
+])
+def test_an_array_on_a_line_is_a_located_error(tmp_path, edits, axis):
+    # Every TX and RX at one height (or one y): the virtual array measures one angle only, and
+    # no weight method can synthesize both. The profile loaded; run then failed with exit 3
+    # and a message naming no line or key (validate: exit 2).
+    from rts_scenario.radar.profile import RadarProfile
+
+    radar = (ROOT / "scenarios" / "radars" / "awr1843boost-long.radar.yaml").read_text()
+    for old, new in edits.items():
+        assert old in radar
+        radar = radar.replace(old, new)
+    path = tmp_path / "r.radar.yaml"
+    path.write_text(radar)
+    line = next(i for i, text in enumerate(radar.splitlines(), 1) if text.startswith("array"))
+    with pytest.raises(ScenarioError, match=rf"r.radar.yaml:{line}:\d+: array: the virtual "
+                                            rf"array is a line: every element at one {axis}"):
+        RadarProfile.from_file(path)
+
+
 @pytest.mark.parametrize("edits, key", [
     ({"chirp_loops: 64": "chirp_loops: 100000000", "frame_period_s: 0.05":
       "frame_period_s: 1.0e+6"}, "chirp_loops"),
@@ -573,6 +598,20 @@ def test_an_integer_beyond_64_bits_is_a_located_error_in_every_file_type(tmp_pat
     scene.write_text(GOOD + "seed: 100000000000000000000\n")
     with pytest.raises(ScenarioError, match=r"s.scenario.yaml:15:\d+: seed: an integer beyond "
                                             r"64 bits"):
+        load_scenario(scene)
+
+
+def test_the_64_bit_bound_message_gives_the_range_of_integers_accepted(tmp_path):
+    # 2^63 was refused with "numbers must lie within +-9,223,372,036,854,775,808": the bound
+    # itself, read as allowed. The largest accepted integer is 2^63 - 1.
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(GOOD + f"seed: {2**63 - 1}\n")
+    assert load_scenario(scene).seed == 2**63 - 1
+    scene.write_text(GOOD + f"seed: {2**63}\n")
+    with pytest.raises(ScenarioError, match=r"s.scenario.yaml:15:\d+: seed: an integer beyond "
+                                            r"64 bits, got 9223372036854775808; integers must "
+                                            r"lie from -9,223,372,036,854,775,808 to "
+                                            r"9,223,372,036,854,775,807$"):
         load_scenario(scene)
 
 

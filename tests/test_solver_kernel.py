@@ -60,6 +60,50 @@ def _scattered_pairs():
     return rs.VirtualArray(y_m=y[order], z_m=z[order], wavelength_m=lam, name="pairs")
 
 
+def _paper_with(extra):
+    """The paper's array with copies of the elements ``extra`` (indices) added."""
+    paper = rs.VirtualArray.preset("paper")
+    y, z = paper.y_m, paper.z_m
+    return rs.VirtualArray.from_positions(np.r_[y, y[extra]], np.r_[z, z[extra]],
+                                          wavelength_m=paper.wavelength_m, name="paper+copies")
+
+
+def _mirror_of(array, i):
+    return int(np.argmin(np.abs(array.y_m + array.y_m[i]) + np.abs(array.z_m + array.z_m[i])))
+
+
+def _duplicated_pair():
+    """Centro-symmetric with two elements at one place and two at its mirror."""
+    return _paper_with([0, _mirror_of(rs.VirtualArray.preset("paper"), 0)])
+
+
+def _doubled_centre():
+    """The 3 x 3 grid with a second element on the centre."""
+    grid = _grid_3x3()
+    return rs.VirtualArray.from_positions(np.r_[grid.y_m, 0.0], np.r_[grid.z_m, 0.0],
+                                          wavelength_m=grid.wavelength_m, name="grid+centre")
+
+
+def _nearly_centrosymmetric():
+    """The paper's array with every position off by up to 1e-10 wavelength (centro-symmetric
+    within `VirtualArray.is_centrosymmetric`'s tolerance, 1e-9 wavelength)."""
+    paper = rs.VirtualArray.preset("paper")
+    rng = np.random.default_rng(4)
+    off = rng.uniform(-1e-10, 1e-10, (2, paper.n_elements)) * paper.wavelength_m
+    return rs.VirtualArray.from_positions(paper.y_m + off[0], paper.z_m + off[1],
+                                          wavelength_m=paper.wavelength_m, name="paper-near")
+
+
+def _uneven_mirror_counts():
+    """Every element has a mirror, but three places hold two elements and their mirrors one:
+    not centro-symmetric (the response is complex)."""
+    lam = rs.VirtualArray.preset("paper").wavelength_m
+    ang = np.radians([0.0, 120.0, 240.0])
+    y, z = 0.6 * lam * np.cos(ang), 0.6 * lam * np.sin(ang)
+    return rs.VirtualArray.from_positions(np.r_[y, y, -y], np.r_[z, z, -z], wavelength_m=lam,
+                                          name="uneven")
+
+
 CASES = {
     "paper": lambda: (rs.Rig.preset("kit-table1"), rs.VirtualArray.preset("paper"), None),
     "awr1843boost": lambda: (rs.Rig.preset("kit-table1"), rs.VirtualArray.preset("awr1843boost"),
@@ -73,6 +117,12 @@ CASES = {
     # Centro-symmetric layouts other than the paper's (the kernel folds mirror pairs).
     "grid-3x3": lambda: (rs.Rig.preset("kit-table1"), _grid_3x3(), None),
     "scattered pairs": lambda: (NARROW, _scattered_pairs(), None),
+    # Several elements at one place, and positions within the tolerance of a mirror's.
+    "duplicated pair": lambda: (rs.Rig.preset("kit-table1"), _duplicated_pair(), None),
+    "doubled centre": lambda: (rs.Rig.preset("kit-table1"), _doubled_centre(), None),
+    "nearly centro-symmetric": lambda: (rs.Rig.preset("kit-table1"),
+                                        _nearly_centrosymmetric(), None),
+    "uneven mirror counts": lambda: (rs.Rig.preset("kit-table1"), _uneven_mirror_counts(), None),
 }
 
 
@@ -246,7 +296,8 @@ def bartlett(array, sources, weights, u, s):
     return np.abs(look @ (sources @ weights))
 
 
-@pytest.mark.parametrize("case", ["paper", "awr1843boost", "modeled", "wide-3x5 awr1843boost"])
+@pytest.mark.parametrize("case", ["paper", "awr1843boost", "modeled", "wide-3x5 awr1843boost",
+                                  "duplicated pair", "doubled centre", "uneven mirror counts"])
 def test_kernel_weights_put_the_bartlett_peak_on_the_set_angle(case):
     """Independent check: the Bartlett spectrum of the weighted FE responses peaks on target.
 

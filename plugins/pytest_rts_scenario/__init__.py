@@ -63,6 +63,12 @@ def pytest_configure(config: pytest.Config) -> None:
         check_environment()
     except RtsError as exc:
         raise pytest.UsageError(str(exc)) from None
+    for option in ("--rts-output", "--rts-can-interface", "--rts-can-channel", "--rts-mapping"):
+        # An unset shell variable (``--rts-mapping=$MAPPING``) is not the option left out, as
+        # for ``rts-scenario run``.
+        if config.getoption(option) == "":
+            raise pytest.UsageError(f"{option}: an empty value; give one, or leave the option "
+                                    f"out")
     spec = config.getoption("--rts-output")
     mapping_path = config.getoption("--rts-mapping")
     can_fd = config.getoption("--rts-can-fd")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import TextIO, cast
 
 from .._version import __version__
 from ..errors import RtsError
@@ -37,7 +38,7 @@ from .common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_RUNTIME_ERROR,
-    guarded_stdout,
+    guarded_output,
     one_line,
     show_traceback,
 )
@@ -119,16 +120,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RtsError as exc:
         print(f"error: {one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    stdout = sys.stdout
-    guard = guarded_stdout(stdout)
-    if guard is not None:
-        sys.stdout = guard
+    stdout, stderr = sys.stdout, sys.stderr
+    out_guard, err_guard = guarded_output(stdout), guarded_output(stderr)
+    if out_guard is not None:
+        sys.stdout = cast(TextIO, out_guard)
+    if err_guard is not None:
+        sys.stderr = cast(TextIO, err_guard)
     try:
-        return _handle(args)
+        code = _handle(args)
     finally:
-        if guard is not None:
-            sys.stdout.flush()
+        if out_guard is not None:
+            out_guard.restore()
             sys.stdout = stdout
+        if err_guard is not None:
+            err_guard.restore()
+            sys.stderr = stderr
+    lost = [(name, getattr(guard, "lost", None))
+            for name, guard in (("standard output", out_guard), ("standard error", err_guard))]
+    if any(exc is not None for _, exc in lost):
+        # What was printed (a verdict among it) went nowhere: never the verdict's exit code.
+        for name, exc in lost:
+            if exc is not None:
+                try:
+                    print(f"error: {name}: {one_line(exc)}: what the command printed is lost",
+                          file=sys.stderr)
+                except OSError:
+                    pass  # standard error itself is lost: the exit code is all that is left
+        return EXIT_RUNTIME_ERROR
+    return code
 
 
 def _handle(args: argparse.Namespace) -> int:

@@ -12,7 +12,7 @@ import traceback
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, TextIO, cast
+from typing import Any, TextIO
 
 from ..errors import RtsError, one_line
 
@@ -27,33 +27,63 @@ EXIT_RUNTIME_ERROR = 3
 
 
 class _ReaderGone:
-    """Standard output that outlives its reader (``rts-scenario run ... | head``).
+    """Standard output or error that outlives its reader (``rts-scenario run ... | head``).
 
-    Once the reader has gone, what is still written goes to the null device: the command runs
-    to its end, writes its files and exits with its verdict, instead of failing every later
-    scene on a broken pipe.
+    Standard error too (``2>&1 | head``). Once the reader has gone, what is still written goes
+    to the null device: the command runs to its end, writes its files and exits with its
+    verdict, instead of failing every later scene on a broken pipe. So it goes for output that
+    cannot be written (``> /dev/full``, a lost device), which is kept in ``lost``: nobody saw
+    what was printed, and the command exits with a runtime error (`rts_scenario.cli.main`),
+    never with its verdict.
     """
 
     def __init__(self, stream: TextIO) -> None:
         self._stream = stream
         self.reader_gone = False
+        self.lost: OSError | None = None
+        # A duplicate of the stream's file descriptor while it points at the null device for
+        # output that could not be written (`restore` puts it back).
+        self._saved: int | None = None
 
     def write(self, text: str) -> int:
         try:
             return self._stream.write(text)
         except BrokenPipeError:
             self._to_null()
-            return len(text)
+        except OSError as exc:
+            self._lose(exc)
+        return len(text)
 
     def flush(self) -> None:
         try:
             self._stream.flush()
         except BrokenPipeError:
             self._to_null()
+        except OSError as exc:
+            self._lose(exc)
+
+    def restore(self) -> None:
+        """Flush; give the stream its own file back if output could not be written to it.
+
+        A reader that has gone stays gone (the null device), but a full or lost device is
+        tried again by the next command in this process (`rts_scenario.cli.main` called
+        twice), which then reports its own lost output.
+        """
+        self.flush()
+        if self._saved is not None:
+            os.dup2(self._saved, self._stream.fileno())
+            os.close(self._saved)
+            self._saved = None
+
+    def _lose(self, exc: OSError) -> None:
+        self.lost = self.lost or exc
+        if self._saved is None:
+            self._saved = os.dup(self._stream.fileno())
+        self._to_null()
 
     def _to_null(self) -> None:
-        # The stream's file descriptor now points at the null device, so its buffer (and the
-        # interpreter's last flush at exit) drains there.
+        # The stream's file descriptor now points at the null device, so its buffer (and, for a
+        # reader gone, the interpreter's last flush at exit) drains there.
         self.reader_gone = True
         null = os.open(os.devnull, os.O_WRONLY)
         try:
@@ -66,17 +96,20 @@ class _ReaderGone:
         return getattr(self._stream, name)
 
 
-def guarded_stdout(stream: TextIO) -> TextIO | None:
-    """``stream`` wrapped in `_ReaderGone` when it is a file (not a capture), else None."""
+def guarded_output(stream: TextIO) -> _ReaderGone | None:
+    """Return ``stream`` wrapped in `_ReaderGone` when it is a file (not a capture), else None.
+
+    For standard output and standard error alike.
+    """
     try:
         stream.fileno()
     except (AttributeError, OSError, ValueError):
         return None
-    return cast(TextIO, _ReaderGone(stream))
+    return _ReaderGone(stream)
 
 
 def stdout_reader_gone() -> bool:
-    """Whether standard output's reader has gone (`guarded_stdout`): nothing printed is read."""
+    """Whether standard output's reader has gone (`guarded_output`): nothing printed is read."""
     return bool(getattr(sys.stdout, "reader_gone", False))
 
 

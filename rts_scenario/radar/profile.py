@@ -311,6 +311,14 @@ class RadarProfile:
                 f"{d['chirp_loops']} x {n_tx * antennas.n_rx} = {cube:,} samples per frame; at "
                 f"most {MAX_CUBE_SAMPLES:,} (the simulated radar's beat-signal cube)")
         array = antennas.virtual_array(fc_hz=fc, bandwidth_hz=bw)
+        for axis, positions in (("y", array.y_m), ("z", array.z_m)):
+            # The RTS synthesizes azimuth and elevation: no weight method solves for a line.
+            if np.ptp(positions) == 0.0:
+                raise doc.error(
+                    ("array",),
+                    f"the virtual array is a line: every element at one {axis} (tx_{axis}_m "
+                    f"plus rx_{axis}_m); azimuth and elevation need elements spread along y "
+                    f"and along z")
         tx_order = tuple(int(t) for t in d["tx_order"])
         if sorted(tx_order) != list(range(n_tx)):
             raise doc.error(

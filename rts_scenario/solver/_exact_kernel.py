@@ -6,8 +6,9 @@ numba pays for it. Every function mirrors a numpy function of `rts_scenario.solv
 `rts_scenario.arrays` step for step (same tests, same order of operations where it matters), so
 weights agree with the numpy path to rounding and reasons are identical
 (tests/test_solver_kernel.py). One sum differs in form, not in value: a centro-symmetric
-array's real responses are summed over one element of each mirror pair, with the pair's table
-entries folded into one (`exact.ExactTables`), half the multiply-adds of the full sum.
+array's real responses are summed over one place of each mirror pair, with the table entries
+of the elements there and at the mirror folded into one (`exact.ExactTables`), half the
+multiply-adds of the full sum.
 
 Targets go in blocks of `_BLOCK`: sines and cosines (a polynomial with Cody-Waite reduction,
 ~1 ulp, instead of libm's ~20 ns calls), exponentials, response sums and the weights up to the

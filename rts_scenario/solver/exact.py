@@ -385,12 +385,13 @@ class ExactTables:
     y_indirect, z_indirect : ndarray of int
         Coordinates whose exponential is the conjugate of another's (see `arrays._ExpPlan`).
     fold_re, fold_im : ndarray, shape (Q, 12, H)
-        For a centro-symmetric array, the real responses' rows (f, f_u, f_s) folded onto one
-        element of each mirror pair: an element's look is the conjugate of its mirror's, so
-        ``Re(t_v a_v + t_m a_m) = Re((t_v + conj(t_m)) a_v)`` and the kernel sums H (about
-        M / 2) elements instead of M. Shape ``(Q, 12, 0)`` otherwise.
+        For a centro-symmetric array, the real responses' rows (f, f_u, f_s) summed per place
+        (elements at one position) and folded onto one place of each mirror pair: a place's
+        look is the conjugate of its mirror's, so ``Re(t_v a_v + t_m a_m) = Re((t_v +
+        conj(t_m)) a_v)`` and the kernel sums H (about M / 2) places instead of M elements
+        (`_fold`). Shape ``(Q, 12, 0)`` otherwise.
     fold_iy, fold_iz : ndarray of int, shape (H,)
-        The distinct-coordinate indices of the elements kept.
+        The distinct-coordinate indices of the places kept.
     """
 
     tab_re: FloatArray
@@ -425,13 +426,11 @@ class ExactTables:
         else:
             origin, phase = np.zeros((len(quads), 4)), np.zeros((len(quads), 0, 0))
         resp = first.response
-        kept = _folded_elements(resp) if first.centrosymmetric else np.zeros(0, dtype=np.int64)
-        mirror = _element_mirror(resp)[kept]
-        # Rows f, f_u, f_s: Re(t_v a_v) + Re(t_m conj(a_v)) = Re((t_v + conj(t_m)) a_v); an
-        # element on the centre is its own mirror and is kept as it is.
-        own = (mirror == kept)[None, None, :]
-        rows = tables[:, :12]
-        fold = rows[:, :, kept] + np.where(own, 0.0, np.conj(rows[:, :, mirror]))
+        if first.centrosymmetric:
+            fold, fold_iy, fold_iz = _fold(resp, tables[:, :12])
+        else:
+            fold = np.zeros((len(quads), 12, 0), dtype=np.complex128)
+            fold_iy = fold_iz = np.zeros(0, dtype=np.int64)
         return cls(
             tab_re=np.ascontiguousarray(tables.real), tab_im=np.ascontiguousarray(tables.imag),
             phase_origin=origin, phase_table=np.ascontiguousarray(phase),
@@ -440,8 +439,7 @@ class ExactTables:
             y_indirect=_indirect(first.response._y_plan),
             z_indirect=_indirect(first.response._z_plan),
             fold_re=np.ascontiguousarray(fold.real), fold_im=np.ascontiguousarray(fold.imag),
-            fold_iy=np.ascontiguousarray(resp._iy[kept], dtype=np.int64),
-            fold_iz=np.ascontiguousarray(resp._iz[kept], dtype=np.int64),
+            fold_iy=fold_iy, fold_iz=fold_iz,
         )
 
     def solve(
@@ -488,22 +486,70 @@ class ExactTables:
         )
 
 
-def _element_mirror(resp: SourceResponse) -> NDArray[np.int64]:
-    """Each element's point reflection: the element whose distinct coordinates mirror its own.
+# The largest phase per unit direction cosine whose exponential is taken as real: it differs
+# from its conjugate by rounding (2e-15 at most).
+_REAL_PHASE = 1e-15
 
-    The exponential plans pair every coordinate with its negative (`arrays._ExpPlan.mirror`);
-    in a centro-symmetric layout the element at the mirrored y and z exists.
+
+def _fold(
+    resp: SourceResponse, rows: ComplexArray
+) -> tuple[ComplexArray, NDArray[np.int64], NDArray[np.int64]]:
+    """Fold the rows ``(Q, 12, M)`` for the real responses' sums: ``(fold, iy, iz)``.
+
+    An element's look depends only on its distinct-coordinate indices ``(iy, iz)``: elements at
+    one place (duplicated positions) are summed first, one column per place. Then each place
+    whose look the kernel gets as the exact conjugate of another's (`_conjugate_looks`: the
+    exponential plans conjugate mirrored coordinates) is folded onto that one, ``Re(t_v a_v +
+    t_m conj(a_v)) = Re((t_v + conj(t_m)) a_v)``; a place without such a partner (the centre,
+    or a coordinate within the tolerance of its mirror but not conjugated) is kept as it is.
+    The sum over the columns kept equals the real part of the full sum whatever the layout.
     """
-    y_mirror, z_mirror = resp._y_plan.mirror[resp._iy], resp._z_plan.mirror[resp._iz]
-    match = (resp._iy[None, :] == y_mirror[:, None]) & (resp._iz[None, :] == z_mirror[:, None])
-    return np.asarray(match.argmax(axis=1), dtype=np.int64)
+    places = resp._iy * resp.z_distinct.size + resp._iz
+    unique, column = np.unique(places, return_inverse=True)
+    cell_y, cell_z = unique // resp.z_distinct.size, unique % resp.z_distinct.size
+    summed = rows @ (column[:, None] == np.arange(unique.size)[None, :]).astype(np.float64)
+    conj_y = _conjugate_looks(resp.k * resp.y_distinct, resp._y_plan)
+    conj_z = _conjugate_looks(resp.k * resp.z_distinct, resp._z_plan)
+    partner = conj_y[cell_y[:, None], cell_y[None, :]] & conj_z[cell_z[:, None], cell_z[None, :]]
+    np.fill_diagonal(partner, False)
+    kept: list[int] = []
+    columns: list[ComplexArray] = []
+    used = np.zeros(unique.size, dtype=bool)
+    for c in range(unique.size):
+        if used[c]:
+            continue
+        used[c] = True
+        kept.append(c)
+        match = np.flatnonzero(partner[c] & ~used)
+        if match.size:
+            used[match[0]] = True
+            columns.append(summed[:, :, c] + np.conj(summed[:, :, match[0]]))
+        else:
+            columns.append(summed[:, :, c])
+    index = np.array(kept, dtype=np.int64)
+    return (np.stack(columns, axis=-1), np.ascontiguousarray(cell_y[index], dtype=np.int64),
+            np.ascontiguousarray(cell_z[index], dtype=np.int64))
 
 
-def _folded_elements(resp: SourceResponse) -> NDArray[np.int64]:
-    """One element of every mirror pair (the first), and any element on the centre."""
-    mirror = _element_mirror(resp)
-    index = np.arange(mirror.size)
-    return index[index <= mirror]
+def _conjugate_looks(phases: FloatArray, plan: _ExpPlan) -> NDArray[np.bool_]:
+    """Return ``[a, b]``: whether `arrays._exp_rows` gives row ``b`` as the conjugate of ``a``.
+
+    ``phases``: the coordinates times the wavenumber. A coordinate not computed is exactly the
+    conjugate of its mirror's row (`arrays._ExpPlan`); a coordinate 0 to rounding (the centre,
+    re-centred: phase at most `_REAL_PHASE`), computed by ``exp`` as the plan's first, is real.
+    A coordinate within the tolerance of its own mirror but farther from 0 (up to 1e-9
+    wavelength) is no one's conjugate, not even its own: its place is not folded.
+    """
+    n = phases.size
+    root = np.arange(n)
+    negated = np.zeros(n, dtype=bool)
+    indirect = _indirect(plan)
+    root[indirect] = plan.mirror[indirect]
+    negated[indirect] = True
+    real = np.zeros(n, dtype=bool)
+    real[plan.direct[0]] = abs(phases[plan.direct[0]]) <= _REAL_PHASE
+    same = root[:, None] == root[None, :]
+    return same & ((negated[:, None] != negated[None, :]) | real[root][:, None])
 
 
 def _indirect(plan: _ExpPlan) -> NDArray[np.int64]:
