@@ -137,12 +137,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             sys.stderr = stderr
     lost = [(name, getattr(guard, "lost", None))
             for name, guard in (("standard output", out_guard), ("standard error", err_guard))]
-    if any(exc is not None for _, exc in lost):
+    if any(error is not None for _, error in lost):
         # What was printed (a verdict among it) went nowhere: never the verdict's exit code.
-        for name, exc in lost:
-            if exc is not None:
+        for name, error in lost:
+            if error is not None:
                 try:
-                    print(f"error: {name}: {one_line(exc)}: what the command printed is lost",
+                    print(f"error: {name}: {one_line(error)}: what the command printed is lost",
                           file=sys.stderr)
                 except OSError:
                     pass  # standard error itself is lost: the exit code is all that is left
