@@ -572,6 +572,10 @@ _LIMIT_BOUNDS: dict[str, tuple[float, float]] = {
 # Cable and path differences: 1 us is 150 m of range.
 _CAL_DELAY = {"type": "number", "minimum": -1e-6, "maximum": 1e-6}
 _CAL_GAIN = {"type": "number", "minimum": -60.0, "maximum": 60.0}
+# A phase offset within one turn either way (`calibrate` writes them within -180..180).
+_CAL_PHASE = {"type": "number", "minimum": -360, "maximum": 360}
+# A surveyed level: a difference of detected levels in dB.
+_SEEN_LEVEL = {"type": "number", "minimum": -200, "maximum": 200}
 # The level reference: a target as far and as large as a scene's may be (positions within
 # 100 km, RCS within +-60 dBsm).
 _REFERENCE_RANGE = {"type": "number", "exclusiveMinimum": 0, "maximum": 100000}
@@ -606,7 +610,7 @@ RIG_SCHEMA: dict[str, Any] = {
                         "additionalProperties": False,
                         "properties": {
                             "delay_s": _CAL_DELAY,
-                            "phase_deg": {"type": "number"},
+                            "phase_deg": _CAL_PHASE,
                             "gain_db": _CAL_GAIN,
                         },
                     },
@@ -614,7 +618,7 @@ RIG_SCHEMA: dict[str, Any] = {
                         "type": "object",
                         "additionalProperties": False,
                         "properties": {"az_deg": _ANGLE, "el_deg": _ANGLE,
-                                       "level_db": {"type": "number"}},
+                                       "level_db": _SEEN_LEVEL},
                     },
                 },
             },

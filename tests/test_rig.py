@@ -217,6 +217,16 @@ BAD_RIGS = [
     ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, calibration: {gain_db: 500}}"
      "\n  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
      4, "front_ends[0].calibration.gain_db", "must be <= 60"),
+    # A phase of 1e30 deg was taken and played as whatever cos(1e30) rounds to.
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1}\n  - {az_deg: 2, el_deg: 1}\n"
+     "  - {az_deg: 1, el_deg: 2, calibration: {phase_deg: 1.0e+30}}\n  - {az_deg: 2, el_deg: 2}\n",
+     6, "front_ends[2].calibration.phase_deg", "must be <= 360, got 1e+30"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, calibration: {phase_deg: -400}}"
+     "\n  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
+     4, "front_ends[0].calibration.phase_deg", "must be >= -360, got -400"),
+    ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, seen: {level_db: 1.0e+300}}"
+     "\n  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
+     4, "front_ends[0].seen.level_db", "must be <= 200, got 1e+300"),
     ("rts_rig: 1\nname: x\nfront_ends:\n  - {az_deg: 1, el_deg: 1, rx_offset_m: [5, 0]}\n"
      "  - {az_deg: 2, el_deg: 1}\n  - {az_deg: 1, el_deg: 2}\n  - {az_deg: 2, el_deg: 2}\n",
      4, "front_ends[0].rx_offset_m[0]", "must be <= 1"),
