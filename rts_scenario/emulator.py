@@ -27,7 +27,7 @@ from .canbus.mapping import CanMapping
 from .detections import Detections
 from .outputs.udp import ReceiverStats, UdpReceiver
 from .radar.profile import RadarProfile
-from .radar.simulate import SimulatedRadar
+from .radar.simulate import ChannelErrors, SimulatedRadar
 from .rig import Rig
 from .schedule import Schedule, Status
 
@@ -103,6 +103,9 @@ class Emulator:
     mapping, fd : CanMapping, bool, optional
         The radar's protocol (a third-party DBC through its mapping; rts-scenario's messages by
         default) and whether it speaks CAN FD.
+    errors : ChannelErrors, optional
+        The RTS channels' own phase, gain and delay errors (default none): what a calibration
+        measures and the rig's calibration offsets cancel.
     """
 
     def __init__(self, rig: Rig, radar: RadarProfile, *, host: str = "127.0.0.1",
@@ -111,7 +114,8 @@ class Emulator:
                  fidelity: str = "analytic", estimator: str = "bartlett", cfar: str = "ca",
                  noise: bool = True, rng: np.random.Generator | None = None,
                  tamper: Callable[[Detections], Detections | None] | None = None,
-                 mapping: CanMapping | None = None, fd: bool = False) -> None:
+                 mapping: CanMapping | None = None, fd: bool = False,
+                 errors: ChannelErrors | None = None) -> None:
         self.rig, self.radar = rig, radar
         self.clock = radar.radar_clock
         self.rng = rng if rng is not None else np.random.default_rng(0)
@@ -128,7 +132,7 @@ class Emulator:
             raise
         self.publisher = DetectionPublisher(self.bus, fd=fd, mapping=mapping)
         self.simulated = SimulatedRadar(radar, rig, fidelity=fidelity, estimator=estimator,
-                                        cfar=cfar, noise=noise, rng=self.rng)
+                                        cfar=cfar, noise=noise, errors=errors, rng=self.rng)
         self.tamper = tamper
         # The radar's counters of each stream (a run) by the stream's number; `stats` is the
         # current one's.

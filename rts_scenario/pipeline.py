@@ -457,7 +457,7 @@ class Pipeline:
         self._measured = True
         # Each frame is held for a cycle (or two, below): never a run's frame period.
         self.output.frame_period_s = None
-        self.receiver.reset()
+        self.receiver.reset(restart=self._counter_restart())
         # A measurement places its cycles itself (`_cycle_numbers`): no run's clock link holds.
         self._bus_clock_checked = self._bus_clock_foreign = False
         self._link = ClockLink()
@@ -503,6 +503,16 @@ class Pipeline:
         return [found.get(int(i) * hold + hold - 1,
                           Detections.empty(int(f), float(t), (), complete=False))
                 for i, f, t in zip(n, schedule.frame_index, schedule.t_s, strict=True)]
+
+    def _counter_restart(self) -> int | None:
+        """Return the counter a run's or measurement's stream restarts the radar's count at.
+
+        The profile's counter start: a radar numbered from it starts counting with each
+        stream (`emulate` restarts its radar so), and the stream before's last cycles may
+        still come after the reset (`DetectionReceiver.reset`). None for a radar running free.
+        """
+        start = self.radar.radar_clock.counter_start
+        return None if start is None else start % self.counter_modulus
 
     def _cycle_numbers(self, cycles: list[Detections],
                        duration_s: float) -> tuple[np.ndarray, int]:
@@ -864,7 +874,7 @@ class Pipeline:
         if on_preflight is not None:
             on_preflight(preflight(scene, options.method))
             mark = timer.add("preflight_s", mark)
-        self.receiver.reset()
+        self.receiver.reset(restart=self._counter_restart())
         self._bus_clock_checked = self._bus_clock_foreign = False
         self._link = ClockLink()
         self._run_level_s = self.host_clock.sample()

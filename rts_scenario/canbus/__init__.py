@@ -690,12 +690,23 @@ class DetectionReceiver(can.Listener):
             return raw
         return float(self._signals[name].conversion.raw_to_scaled(raw, False))  # type: ignore[arg-type]
 
-    def reset(self) -> None:
-        """Forget the cycles received so far (a new measurement reuses counters)."""
-        with self._lock:
-            self._reset()
+    def reset(self, restart: int | None = None) -> None:
+        """Forget the cycles received so far (a new measurement reuses counters).
 
-    def _reset(self) -> None:
+        ``restart``: the counter (from 0, the mapping's first value subtracted) at which the
+        radar's count starts afresh with what comes next: a bench that starts the radar per
+        stream (as `emulate` does for each run and measurement) may still deliver the stream
+        before's last cycles after this reset. When a header with that counter comes after
+        other cycles whose count does not lead up to it, those were measured before the
+        restart: they are dropped (counted in `stale_cycles`) and every counter is forgotten,
+        so the new count is neither taken for late cycles nor for copies. A restart not seen
+        within `OPEN_CYCLES` headers (half the counter's range, if less; its header lost) is
+        no longer waited for.
+        """
+        with self._lock:
+            self._reset(restart)
+
+    def _reset(self, restart: int | None = None) -> None:
         # Per channel, the messages of the radar's identifiers heard (`channels`: those
         # counted in `_heard`, and the current channel's run of them); the messages of other
         # channels than `channel`, not read.
@@ -717,6 +728,11 @@ class DetectionReceiver(can.Listener):
         self._current: _Assembly | None = None
         self._latest = -1
         self._last_header_t = np.nan  # when the last header reached the bus
+        # The counter the radar's count restarts at (`reset`), until it came; the cycles of
+        # the stream before dropped at the restart.
+        self._restart = restart
+        self._headers_before_restart = 0
+        self.stale_cycles = 0
         # Detections that came before their cycle's header, by counter (low 8 bits).
         self._waiting: OrderedDict[int, list[tuple[_PartRule, dict[str, float]]]] = OrderedDict()
         # Without a frame counter: parts that came after their cycle was whole, with the
@@ -858,6 +874,20 @@ class DetectionReceiver(can.Listener):
             # of one running 1..14): the message is invalid.
             self.stats.decode_errors += 1
             return
+        half = self._counter_modulus // 2
+        if self._restart is not None:
+            if counter == self._restart:
+                # Cycles counting up to it (a radar measuring before the stream's start) are
+                # the stream's own; the count coming back to it restarted.
+                step = (counter - self._latest) % self._counter_modulus
+                if self._latest >= 0 and not 0 < step < min(OPEN_CYCLES, half):
+                    self._drop_before_restart()
+                self._restart = None
+            elif self._headers_before_restart >= min(OPEN_CYCLES, half):
+                # The restart's header was lost: the count later coming round to it again is
+                # no restart.
+                self._restart = None
+            self._headers_before_restart += 1
         if self._unplaced:
             self._place_after(counter)
         if bus_t_s is not None:
@@ -1013,6 +1043,17 @@ class DetectionReceiver(can.Listener):
             self._place_after(None)
         while self._open:
             self._finish(next(iter(self._open)))
+        self._recent.clear()
+        self._content.clear()
+        self._current = None
+        self._latest = -1
+
+    def _drop_before_restart(self) -> None:
+        """Drop the cycles received since the reset: the stream before's (see `reset`)."""
+        self.stale_cycles += len(self._ready) + len(self._open)
+        self._ready.clear()
+        self._open.clear()
+        self._unplaced.clear()
         self._recent.clear()
         self._content.clear()
         self._current = None

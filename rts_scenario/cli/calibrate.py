@@ -47,6 +47,13 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     check_number("--inject-gain-db", args.inject_gain_db, low=0.0, high=MAX_INJECT_GAIN_DB)
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
+    if args.output != "simulated-radar" and (args.inject_phase_deg or args.inject_gain_db):
+        # The errors would be drawn and never played: a real RTS's channels carry their own.
+        which = "--inject-phase-deg" if args.inject_phase_deg else "--inject-gain-db"
+        raise RtsError(f"{which}: injects errors into the built-in simulated radar's channels; "
+                       f"with --output {args.output} the RTS's channels carry their own (to "
+                       f"rehearse, give the errors to `rts-scenario emulate --inject-phase-deg "
+                       f"... --inject-gain-db ...`)")
     check_number("--max-error-deg", args.max_error_deg, low=0.0)
     if args.max_error_deg == 0.0:
         raise RtsError("--max-error-deg: must be > 0, got 0.0")

@@ -6,6 +6,7 @@ import argparse
 import time
 from typing import TYPE_CHECKING, Any
 
+from .calibrate import MAX_INJECT_GAIN_DB
 from .common import EXIT_FAIL, EXIT_OK, check_can_interface, check_number
 
 if TYPE_CHECKING:
@@ -21,6 +22,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
     from ..radar.angle import estimator_names
     from ..radar.profile import RadarProfile
     from ..radar.profile import preset_names as radar_presets
+    from ..radar.simulate import ChannelErrors
     from ..rig import Rig
     from ..rig import preset_names as rig_presets
     from .common import check_fd_mapping, named_file, preset_or_file
@@ -32,6 +34,8 @@ def _do_emulate(args: argparse.Namespace) -> int:
         args.can_channel = "rts-emulator"
     check_number("--seconds", args.seconds, low=0.001, high=86400.0)
     check_number("--wait", args.wait, low=0.001, high=86400.0)
+    check_number("--inject-phase-deg", args.inject_phase_deg, low=0.0, high=180.0)
+    check_number("--inject-gain-db", args.inject_gain_db, low=0.0, high=MAX_INJECT_GAIN_DB)
     if args.seed < 0:
         raise RtsError(f"--seed: must be >= 0, got {args.seed}")
     if args.estimator not in estimator_names():
@@ -44,12 +48,16 @@ def _do_emulate(args: argparse.Namespace) -> int:
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
                            RadarProfile.from_file, ".radar.yaml")
+    # The channels' errors first, then the noise, from one generator: `calibrate --inject-*`
+    # with the same --seed draws the same errors.
+    rng = np.random.default_rng(args.seed)
+    errors = ChannelErrors.random(rig.n_front_ends, rng, phase_deg=args.inject_phase_deg,
+                                  gain_db=args.inject_gain_db)
     try:
         emulator = Emulator(rig, radar, host=host, port=port, can_interface=args.can_interface,
                             can_channel=args.can_channel, fidelity=args.fidelity,
-                            estimator=args.estimator, noise=args.noise,
-                            rng=np.random.default_rng(args.seed), mapping=mapping,
-                            fd=args.can_fd)
+                            estimator=args.estimator, noise=args.noise, rng=rng,
+                            mapping=mapping, fd=args.can_fd, errors=errors)
     except OSError as exc:
         raise RtsError(f"{args.listen}: cannot listen: {exc.strerror or exc}") from None
     emulator.start()
@@ -58,6 +66,8 @@ def _do_emulate(args: argparse.Namespace) -> int:
     print(f"listening on udp://{bound_host}:{bound_port}; radar {radar.name!r} measures every "
           f"{clock.cycle_s * 1e3:g} ms, reports {clock.latency_s * 1e3:g} ms later on "
           f"{args.can_interface}:{args.can_channel}", flush=True)
+    if args.inject_phase_deg or args.inject_gain_db:
+        _print_errors(errors, args.seed)
     if args.can_interface == "virtual":
         print("note: the virtual CAN bus is heard only inside this process; run SCENE in "
               "another one needs a shared interface (socketcan vcan, udp_multicast)", flush=True)
@@ -96,6 +106,17 @@ def _do_emulate(args: argparse.Namespace) -> int:
     if refused or not (runs or interrupted):
         return EXIT_FAIL
     return EXIT_OK
+
+
+def _print_errors(errors: Any, seed: int) -> None:
+    """Print the injected channel errors as `calibrate` reports its offsets: against FE 0."""
+    print(f"channel errors injected (--seed {seed}), relative to FE 0 as calibrate reports "
+          f"them:", flush=True)
+    print(f"{'FE':>3} {'phase deg':>10} {'gain dB':>8}", flush=True)
+    for q in range(errors.phase_deg.size):
+        phase = (errors.phase_deg[q] - errors.phase_deg[0] + 180.0) % 360.0 - 180.0
+        print(f"{q:>3} {phase:>10.2f} {errors.gain_db[q] - errors.gain_db[0]:>8.3f}",
+              flush=True)
 
 
 def _print_run(run: dict[str, Any], rig: Rig) -> bool:
@@ -149,7 +170,14 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--estimator", default="bartlett",
                         help="the radar's angle estimator (default bartlett)")
     parser.add_argument("--noise", action="store_true", help="thermal noise")
-    parser.add_argument("--seed", type=int, default=0, help="noise seed (>= 0)")
+    parser.add_argument("--inject-phase-deg", type=float, default=0.0,
+                        help="random phase errors of the RTS channels within +-this (0..180): "
+                             "an uncalibrated RTS to rehearse `calibrate` on")
+    parser.add_argument("--inject-gain-db", type=float, default=0.0,
+                        help="random gain errors of the RTS channels within +-this "
+                             f"(0..{MAX_INJECT_GAIN_DB:g})")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the injected errors and the noise (>= 0)")
     parser.add_argument("--seconds", type=float, default=10.0,
                         help="once a stream came, stop after this long without datagrams "
                              "(default 10)")
