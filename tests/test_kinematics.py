@@ -296,3 +296,104 @@ def test_an_ego_driving_backwards_keeps_its_radar_facing_its_heading(tmp_path):
     np.testing.assert_allclose(tr.radial_velocity_mps[:, 0], 3.0 * dx / rng, rtol=1e-9)
     # Behind and 2 m to the ego's left: the rear radar (turned round) sees it to its right.
     np.testing.assert_allclose(tr.az_deg[:, 0], -np.degrees(np.arctan2(2.0, -dx)), atol=1e-9)
+
+
+def test_spline_straight_reversal_is_the_straight_segment_and_keeps_facing(tmp_path):
+    # A car drives 20 m away from the radar along its boresight, stops at 40 m and backs 15 m
+    # towards it: the path doubles back on the same line. Speeds 4 -> 0 -> 3 m/s at the
+    # waypoints: -0.4 m/s^2 for 10 s (20 m), then +0.3 m/s^2 backwards for 10 s (15 m).
+    # The body faces away from the radar throughout (aspect 180 deg: 30 dBsm in the table).
+    tr = tracks_of(tmp_path, [{
+        "name": "reverser", "rcs": {"aspect_deg": [0, 90, 180, 270], "rcs_dbsm": [10, 20, 30, 20]},
+        "motion": {"type": "waypoints", "path": "spline", "points": [
+            {"position_m": [20, 0, 0.5], "speed_mps": 4},
+            {"position_m": [40, 0, 0.5], "speed_mps": 0},
+            {"position_m": [25, 0, 0.5], "speed_mps": 3}]},
+    }], duration_s=25.0, frame_rate_hz=20.0)
+    t = tr.t_s
+    x = np.where(t <= 10, 20 + 4 * t - 0.2 * t * t,
+                 np.where(t <= 20, 40 - 0.15 * (t - 10) ** 2, 25 - 3 * (t - 20)))
+    vx = np.where(t <= 10, 4 - 0.4 * t, np.where(t <= 20, -0.3 * (t - 10), -3.0))
+    pos = tr.position_m[:, 0]
+    np.testing.assert_allclose(pos[:, 0], x, atol=1e-9)
+    np.testing.assert_allclose(pos[:, 1:], np.broadcast_to([0.0, 0.5], (t.size, 2)), atol=1e-9)
+    assert pos[:, 0].max() <= 40.0 + 1e-9  # never past the waypoint where it reverses
+    rng = np.hypot(x, 0.5)
+    np.testing.assert_allclose(tr.radial_velocity_mps[:, 0], x * vx / rng, atol=1e-9)
+    np.testing.assert_allclose(tr.rcs_dbsm[:, 0], 30.0, atol=1e-9)
+
+
+def test_spline_reversal_stops_at_the_waypoint_with_a_cusp(tmp_path):
+    # Parking: forward along +x into the space, stop at B, back out to the rear left. The
+    # turn at B is 161.6 deg (> 90 deg): B is a cusp. The path must reach B exactly, never run
+    # past it, and the body keeps facing the way it drove in while it backs out (its yaw, and
+    # with it the RCS aspect, continuous through B).
+    a, b, c = np.array([20.0, 0, 0.5]), np.array([30.0, 0, 0.5]), np.array([24.0, 2, 0.5])
+    scene = load_scenario(write_scene(tmp_path, [{
+        "name": "parker", "rcs": {"aspect_deg": [0, 90, 180, 270], "rcs_dbsm": [10, 20, 30, 20]},
+        "motion": {"type": "waypoints", "path": "spline", "points": [
+            {"position_m": a.tolist(), "speed_mps": 3},
+            {"position_m": b.tolist(), "speed_mps": 0},
+            {"position_m": c.tolist(), "speed_mps": 2}]},
+    }], duration_s=12.0, frame_rate_hz=20.0))
+    t_b = float(scene.targets[0].trajectory.law.knots_s[1])  # arrival at the second waypoint
+    at_b = compute_tracks(scene, np.array([t_b]))
+    np.testing.assert_allclose(at_b.position_m[0, 0], b, atol=1e-9)
+    np.testing.assert_allclose(at_b.radial_velocity_mps[0, 0], 0.0, atol=1e-9)
+    # No point of the path beyond B along the incoming chord, nor along the cusp's line.
+    u_in, u_out = (b - a) / np.linalg.norm(b - a), (c - b) / np.linalg.norm(c - b)
+    line = (u_in - u_out) / np.linalg.norm(u_in - u_out)
+    t = np.linspace(0.0, 12.0, 24001)
+    pos = compute_tracks(scene, t).position_m[:, 0]
+    assert ((pos - b) @ u_in).max() <= 1e-9
+    assert ((pos - b) @ line).max() <= 1e-9
+    # Either side of B the body lies along the cusp's line, facing in (aspect: the radar at
+    # the origin seen from the body; B is 30 m ahead on the boresight).
+    eps = np.array([t_b - 1e-4, t_b, t_b + 1e-4])
+    near = compute_tracks(scene, eps)
+    facing = np.arctan2(line[1], line[0])
+    expect = np.degrees(np.pi - facing)  # direction to the radar (180 deg) minus the yaw
+    table = np.interp(np.mod(expect, 360.0), [0, 90, 180, 270, 360], [10, 20, 30, 20, 10])
+    np.testing.assert_allclose(near.rcs_dbsm[:, 0], table, atol=1e-3)
+    # Backing out, the body keeps facing +x roughly: its aspect stays near 180 deg (the table
+    # near 30 dBsm), where a body that turned round would show its front (10 dBsm).
+    later = compute_tracks(scene, np.linspace(t_b, 12.0, 50))
+    assert later.rcs_dbsm[:, 0].min() > 25.0
+
+
+def test_spline_without_reversal_is_the_natural_cubic_spline(tmp_path):
+    # Turns of 90 deg at most: one natural cubic spline through all points (chord-length
+    # parameter), as scipy computes it; its tangents at the waypoints are the path's.
+    from scipy.interpolate import CubicSpline
+
+    from rts_scenario.scenario.trajectory import Path
+
+    points = np.array([[30, 2, 0.5], [60, -3, 0.8], [90, 4, 0.5], [90, 30, 0.5], [70, 40, 0]],
+                      dtype=float)
+    knots = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    reference = CubicSpline(knots, points, bc_type="natural")
+    d1 = reference(knots, 1)
+    path, at_points = Path.spline(points)
+    idx = np.searchsorted(path.arc_m, at_points)
+    np.testing.assert_allclose(path.points[idx], points, atol=1e-12)
+    tangents = np.concatenate([path.tangent_start[idx[:-1]], path.tangent_end[-1:]])
+    np.testing.assert_allclose(tangents, d1 / np.linalg.norm(d1, axis=1)[:, None], atol=1e-12)
+    np.testing.assert_array_equal(path.facing, 1.0)
+
+
+def test_ego_backing_out_on_a_spline_keeps_its_radar_facing_forward(tmp_path):
+    # The ego drives 10 m forward, stops and backs 10 m out on the same line: its radar faces
+    # +x throughout, so a post straight ahead stays at azimuth 0 and its range follows the ego.
+    tr = tracks_of(tmp_path, [{
+        "name": "post", "rcs": {"rcs_dbsm": 0},
+        "motion": {"type": "stationary", "position_m": [40.0, 0.0, 0.5]}}],
+        ego={"motion": {"type": "waypoints", "path": "spline", "points": [
+            {"position_m": [0, 0, 0], "speed_mps": 2}, {"position_m": [10, 0, 0], "speed_mps": 0},
+            {"position_m": [0, 0, 0], "speed_mps": 2}]}},
+        radar={"profile": "awr1843boost", "mount": {"x_m": 3.7, "z_m": 0.5}},
+        duration_s=20.0)
+    t = tr.t_s
+    # -0.2 m/s^2 for 10 s to 10 m, then backwards at +0.2 m/s^2 for 10 s.
+    x = np.where(t <= 10, 2 * t - 0.1 * t * t, 10 - 0.1 * (t - 10) ** 2)
+    np.testing.assert_allclose(tr.az_deg[:, 0], 0.0, atol=1e-9)
+    np.testing.assert_allclose(tr.range_m[:, 0], 40.0 - 3.7 - x, atol=1e-9)

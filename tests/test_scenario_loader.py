@@ -712,3 +712,39 @@ def test_yaml_merge_keys_take_the_keys_written_beside_them(tmp_path):
     path.write_text(text.replace("    name: b\n", "    name: b\n    name: c\n"))
     with pytest.raises(ScenarioError, match="targets\\[1\\].name: duplicate key"):
         load_scenario(path)
+
+
+REVERSAL = """\
+    motion:
+      type: waypoints
+      path: {path}
+      points:
+        - {{position_m: [20, 0, 0.6], speed_mps: 3}}
+        - {{position_m: [30, 0, 0.6], speed_mps: {speed}}}
+        - {{position_m: [24, 2, 0.6], speed_mps: 2}}
+"""
+
+
+@pytest.mark.parametrize("path, speed, refused", [
+    ("spline", 1.5, True),       # a reversal passed at 1.5 m/s: impossible
+    ("spline", 0, False),        # stops at the cusp, then backs out
+    ("polyline", 1.5, False),    # a polyline turns in no time at any corner
+])
+def test_a_spline_reversal_passed_at_speed_is_refused(tmp_path, path, speed, refused):
+    # The path turns 161.6 deg at the second waypoint: a spline path reverses there (a cusp),
+    # where the object must stand for an instant.
+    text = GOOD.replace("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], "
+                        "speed_mps: 19.0}\n", REVERSAL.format(path=path, speed=speed))
+    scene = tmp_path / "reversal.scenario.yaml"
+    scene.write_text(text)
+    if not refused:
+        load_scenario(scene)
+        return
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    err = info.value
+    assert err.file.endswith("reversal.scenario.yaml")
+    assert (err.line, err.key_path) == (18, "targets[0].motion.points[1].speed_mps")
+    assert ("the path reverses at this waypoint (it turns 162 deg, more than 90 deg): a spline "
+            "path has a cusp there, where the object stops and backs out; speed_mps must be 0 "
+            "here, got 1.5") in str(err)

@@ -38,7 +38,14 @@ from .model import (
     Scenario,
     TargetSpec,
 )
-from .trajectory import LaneChange, Trajectory, TravelLaw, lane_change_ramp
+from .trajectory import (
+    REVERSAL_DEG,
+    LaneChange,
+    Trajectory,
+    TravelLaw,
+    lane_change_ramp,
+    reversal_waypoints,
+)
 from .trajectory import Path as TrajectoryPath
 
 SCENE_SUFFIX = ".scenario.yaml"
@@ -631,6 +638,18 @@ def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
                             f"waypoints {i} and {i + 1} both have speed 0: the object would "
                             f"never get from one to the other")
     if motion.get("path", "polyline") == "spline":
+        for i in reversal_waypoints(points):
+            if speeds[i] != 0.0:
+                before, after = points[i] - points[i - 1], points[i + 1] - points[i]
+                cos = before @ after / (np.linalg.norm(before) * np.linalg.norm(after))
+                angle = math.degrees(math.acos(max(-1.0, float(cos))))
+                raise doc.error(
+                    (*key, "points", i, "speed_mps"),
+                    f"the path reverses at this waypoint (it turns {angle:.3g} deg, more than "
+                    f"{REVERSAL_DEG:g} deg): a spline path has a cusp there, where the object "
+                    f"stops and backs out; speed_mps must be 0 here, got {speeds[i]:g} (to "
+                    f"drive round the turn instead, add waypoints that turn by at most "
+                    f"{REVERSAL_DEG:g} deg each)")
         path, at_points = TrajectoryPath.spline(points)
     else:
         path = TrajectoryPath.polyline(points)

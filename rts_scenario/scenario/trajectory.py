@@ -4,7 +4,9 @@ Every motion of the scene vocabulary compiles to the same three parts:
 
 - a path: points in 3-D with their cumulative arc length and the tangents at both ends of
   each piece (a straight line for the simple motions; the waypoints' polyline; a dense
-  sampling of a cubic spline with its exact tangents), cubic Hermite between the points,
+  sampling of a cubic spline with its exact tangents, split into one spline per stretch where
+  the path reverses), cubic Hermite between the points, and the way the body faces on each
+  piece (along the direction of travel, or against it while it backs out after a reversal),
 - a travel law: arc length over time, piecewise quadratic (constant acceleration per piece),
 - lateral offsets: smooth lane changes (quintic in time) to the left of the path.
 
@@ -29,20 +31,40 @@ FloatArray = NDArray[np.float64]
 SPLINE_STEP_M = 0.25
 SPLINE_MIN_SAMPLES = 16
 
+# A spline path reverses (has a cusp) at a waypoint where its direction turns by more than this
+# (deg): the angle between the chord arriving at the waypoint and the chord leaving it.
+REVERSAL_DEG = 90.0
+
+
+def reversal_waypoints(points: FloatArray) -> list[int]:
+    """Return the inner waypoints (indices) where a spline path reverses.
+
+    There the path turns by more than `REVERSAL_DEG`.
+    """
+    chords = np.diff(np.asarray(points, dtype=np.float64), axis=0)
+    cos = (chords[:-1] * chords[1:]).sum(axis=1) / (
+        np.linalg.norm(chords[:-1], axis=1) * np.linalg.norm(chords[1:], axis=1))
+    # A hair above the limit: a right angle stays a turn when its cosine rounds below 0.
+    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return [int(i) + 1 for i in np.flatnonzero(angle > REVERSAL_DEG + 1e-9)]
+
 
 @dataclass(frozen=True)
 class Path:
     """Points (J, 3), their cumulative arc length (J,) and unit tangents per piece.
 
-    ``tangent_start`` and ``tangent_end`` (J - 1, 3) are the directions at both ends of each
-    piece. Between points the path is the cubic Hermite curve matching points and tangents (a
-    straight piece when both point along it); beyond its ends it continues straight.
+    ``tangent_start`` and ``tangent_end`` (J - 1, 3) are the directions of travel at both ends
+    of each piece. Between points the path is the cubic Hermite curve matching points and
+    tangents (a straight piece when both point along it); beyond its ends it continues
+    straight. ``facing`` (J - 1,) is +1 where the body faces its direction of travel and -1
+    where it faces against it (backing out after a reversal).
     """
 
     points: FloatArray
     arc_m: FloatArray
     tangent_start: FloatArray
     tangent_end: FloatArray
+    facing: FloatArray
 
     @classmethod
     def line(cls, start: FloatArray, heading_rad: float) -> Path:
@@ -50,7 +72,8 @@ class Path:
         direction = np.array([np.cos(heading_rad), np.sin(heading_rad), 0.0])
         start = np.asarray(start, dtype=np.float64)
         return cls(points=np.stack([start, start + direction]), arc_m=np.array([0.0, 1.0]),
-                   tangent_start=direction[None], tangent_end=direction[None])
+                   tangent_start=direction[None], tangent_end=direction[None],
+                   facing=np.ones(1))
 
     @classmethod
     def polyline(cls, points: FloatArray) -> Path:
@@ -60,29 +83,73 @@ class Path:
         directions = chords / lengths[:, None]
         return cls(points=np.asarray(points, dtype=np.float64),
                    arc_m=np.concatenate([[0.0], np.cumsum(lengths)]),
-                   tangent_start=directions, tangent_end=directions)
+                   tangent_start=directions, tangent_end=directions,
+                   facing=np.ones(len(directions)))
 
     @classmethod
     def spline(cls, points: FloatArray) -> tuple[Path, FloatArray]:
-        """Sample a natural cubic spline through the points (chord-length parameter) densely.
+        """Sample cubic splines through the points (chord-length parameter) densely.
+
+        Without a reversal (`reversal_waypoints`) this is one natural cubic spline through all
+        points. A reversal waypoint is a cusp: the path stops there and doubles back. It splits
+        the path into stretches, each its own cubic spline (natural at the path's ends), which
+        meet at the cusp on one line: the bisector of the chord arriving and the reversed chord
+        leaving, along which the stretch before arrives and the stretch after leaves, the
+        other way. The body keeps facing the same way through a cusp: it faces its direction
+        of travel on the first stretch, against it on the second (backing out), and so on.
 
         Returns the path and the arc length at each of the given points.
         """
-        chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
-        knots = np.concatenate([[0.0], np.cumsum(chords)])
-        curve = CubicSpline(knots, points, bc_type="natural")
-        per_piece = np.maximum(SPLINE_MIN_SAMPLES, np.ceil(chords / SPLINE_STEP_M)).astype(int)
-        params = np.concatenate(
-            [np.linspace(a, b, n, endpoint=False) for a, b, n in
-             zip(knots[:-1], knots[1:], per_piece, strict=True)] + [knots[-1:]]
-        )
-        samples = curve(params)
-        d1 = curve(params, 1)
-        tangents = d1 / np.linalg.norm(d1, axis=1)[:, None]
-        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(samples, axis=0), axis=1))])
-        at_points = arc[np.searchsorted(params, knots)]
-        return cls(points=samples, arc_m=arc, tangent_start=tangents[:-1],
-                   tangent_end=tangents[1:]), at_points
+        points = np.asarray(points, dtype=np.float64)
+        cusps = reversal_waypoints(points)
+        bounds = [0, *cusps, len(points) - 1]
+        lines = {}
+        for i in cusps:
+            arrive = points[i] - points[i - 1]
+            leave = points[i + 1] - points[i]
+            bisector = arrive / np.linalg.norm(arrive) - leave / np.linalg.norm(leave)
+            lines[i] = bisector / np.linalg.norm(bisector)
+        samples, tangents, arc, facing, at_points = [], [], [], [], [np.zeros(1)]
+        start_arc = 0.0
+        for n, (first, last) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+            stretch = points[first:last + 1]
+            start_bc = (1, -lines[first]) if first in lines else (2, np.zeros(3))
+            end_bc = (1, lines[last]) if last in lines else (2, np.zeros(3))
+            p, d1, s, s_at = _sample_spline(stretch, start_bc, end_bc)
+            skip = 1 if n else 0  # the cusp's sample ends one stretch and starts the next
+            samples.append(p[skip:])
+            tangents.append((d1[:-1], d1[1:]))
+            arc.append(start_arc + s[skip:])
+            facing.append(np.full(len(p) - 1, 1.0 if n % 2 == 0 else -1.0))
+            at_points.append(start_arc + s_at[1:])
+            start_arc += s[-1]
+        return cls(points=np.concatenate(samples), arc_m=np.concatenate(arc),
+                   tangent_start=np.concatenate([t[0] for t in tangents]),
+                   tangent_end=np.concatenate([t[1] for t in tangents]),
+                   facing=np.concatenate(facing)), np.concatenate(at_points)
+
+
+def _sample_spline(
+    points: FloatArray, start_bc: tuple[int, FloatArray], end_bc: tuple[int, FloatArray]
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Sample a cubic spline through ``points`` (chord-length parameter) with the end conditions.
+
+    Returns the samples, their unit tangents, their cumulative arc length and the arc length at
+    each of the points.
+    """
+    chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    knots = np.concatenate([[0.0], np.cumsum(chords)])
+    curve = CubicSpline(knots, points, bc_type=(start_bc, end_bc))
+    per_piece = np.maximum(SPLINE_MIN_SAMPLES, np.ceil(chords / SPLINE_STEP_M)).astype(int)
+    params = np.concatenate(
+        [np.linspace(a, b, n, endpoint=False) for a, b, n in
+         zip(knots[:-1], knots[1:], per_piece, strict=True)] + [knots[-1:]]
+    )
+    samples = curve(params)
+    d1 = curve(params, 1)
+    tangents = d1 / np.linalg.norm(d1, axis=1)[:, None]
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(samples, axis=0), axis=1))])
+    return samples, tangents, arc, arc[np.searchsorted(params, knots)]
 
 
 @dataclass(frozen=True)
@@ -144,7 +211,11 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class Motion:
-    """Position, velocity, acceleration (each ``(F, K, 3)``) and path tangent of K objects."""
+    """Position, velocity, acceleration (each ``(F, K, 3)``) and path tangent of K objects.
+
+    ``tangent`` is the unit direction the body faces along its path: the direction of travel,
+    or against it while it backs out after a reversal of a spline path.
+    """
 
     position_m: FloatArray
     velocity_mps: FloatArray
@@ -169,6 +240,7 @@ class TrajectorySet:
         self._piece_start = self._path_start - np.arange(self.count)
         self._tangent_start = np.concatenate([p.tangent_start for p in self._paths])
         self._tangent_end = np.concatenate([p.tangent_end for p in self._paths])
+        self._facing = np.concatenate([p.facing for p in self._paths])
         law_sizes = np.array([law.knots_s.size for law in self._laws])
         self._law_start = np.concatenate([[0], np.cumsum(law_sizes)[:-1]])
         self._knots = np.concatenate([law.knots_s for law in self._laws])
@@ -193,9 +265,10 @@ class TrajectorySet:
             return Motion(empty, empty, empty if acceleration else None, empty)
         t = np.broadcast_to(np.asarray(t_s, dtype=np.float64)[:, None], (t_s.size, self.count))
         s, ds, dds = self._travel(t)
-        g, g1, g2, g3 = self._path(s, third=acceleration)
+        g, g1, g2, g3, facing = self._path(s, third=acceleration)
         lat, dlat, ddlat = self._lateral(t)
-        n, n1, n2 = _left_normal(g1, g2, g3)
+        # Left of the body: against the direction of travel while it backs out.
+        n, n1, n2 = _left_normal(facing * g1, facing * g2, None if g3 is None else facing * g3)
         # Chain rule with s(t): d/dt = s' d/ds, d2/dt2 = s'' d/ds + s'^2 d2/ds2.
         ds_, dds_ = ds[..., None], dds[..., None]
         lat_, dlat_, ddlat_ = lat[..., None], dlat[..., None], ddlat[..., None]
@@ -206,14 +279,18 @@ class TrajectorySet:
             assert n2 is not None
             accel = (dds_ * g1 + ds_ * ds_ * g2 + ddlat_ * n + 2.0 * dlat_ * ds_ * n1
                      + lat_ * (dds_ * n1 + ds_ * ds_ * n2))
-        tangent = g1 / np.linalg.norm(g1, axis=-1, keepdims=True)
+        tangent = facing * g1 / np.linalg.norm(g1, axis=-1, keepdims=True)
         return Motion(position_m=position, velocity_mps=velocity, acceleration_mps2=accel,
                       tangent=tangent)
 
     def _path(
         self, s: FloatArray, third: bool
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None]:
-        """Hermite path position and its arc-length derivatives (the third one if asked)."""
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None, FloatArray]:
+        """Hermite path position, its arc-length derivatives (the third one if asked), facing.
+
+        ``facing`` (``(..., 1)``) is +1 where the body faces the direction of travel, -1 where
+        it backs out.
+        """
         # Paths have at least two points and the lookup stops one short of the end.
         piece = piece_index([p.arc_m for p in self._paths], s)
         j = piece + self._path_start
@@ -234,7 +311,7 @@ class TrajectorySet:
         inside = beyond == 0.0
         g2 = ((6 - 12 * fc) * chord + (6 * fc - 4) * m0 + (6 * fc - 2) * m1) / length**2 * inside
         g3 = ((6 * (m0 + m1) - 12 * chord) / length**3 * inside) if third else None
-        return g + beyond * g1, g1, g2, g3
+        return g + beyond * g1, g1, g2, g3, self._facing[k][..., None]
 
     def _travel(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         k = piece_index([law.knots_s for law in self._laws], t, open_end=True) + self._law_start
