@@ -18,7 +18,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,8 @@ class SweepTask:
 
     ``error`` is set when the file could not even be expanded into combinations (missing,
     not a scene, invalid ``parametrize``); the task then runs nothing and reports it.
+    ``path``, when set, is where the run reads ``file`` (its absolute path, for a worker whose
+    current folder is another); the entry and its messages still name ``file``.
     """
 
     index: int
@@ -47,6 +49,7 @@ class SweepTask:
     ident: str = ""
     parameters: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+    path: str | None = None
 
 
 def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
@@ -105,10 +108,17 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
                     "id": task.ident, "parameters": dict(task.parameters)}
     if task.error is not None:
         return error_entry(entry, task.error, "bad_input")
+    source = task.path if task.path is not None else task.file
+
+    def message(exc: BaseException) -> str:
+        # Named as given, also where the run read it by its absolute path.
+        text = _message(source, exc)
+        return text if source == task.file else text.replace(source, task.file)
+
     try:
-        scene = load_scenario(task.file, task.parameters)
+        scene = load_scenario(source, task.parameters)
     except Exception as exc:
-        return error_entry(entry, _message(task.file, exc),
+        return error_entry(entry, message(exc),
                            "bad_input" if isinstance(exc, RtsError) else "runtime")
     entry["scene"] = scene.name
     try:
@@ -117,7 +127,7 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
         # As in `rts-scenario run`: a schedule the scene asks for and the bench cannot build is
         # the scene's fault; anything else is a runtime error.
         bad = isinstance(exc, ScenarioError | ScheduleError)
-        return error_entry(entry, _message(task.file, exc), "bad_input" if bad else "runtime")
+        return error_entry(entry, message(exc), "bad_input" if bad else "runtime")
     from .check import QUANTITIES
     from .report import strict
 
@@ -273,9 +283,12 @@ def _run_dask(tasks: Sequence[SweepTask], method: str, scheduler: str, workers: 
 
                 raise RtsError(f"--scheduler {scheduler}: cannot connect: {one_line(exc)}"
                                ) from None
+        # A worker's current folder is its own (another machine's, a worker started
+        # elsewhere): it reads each scene by its absolute path, the same on a shared folder.
+        shipped = [replace(task, path=os.path.abspath(task.file)) for task in tasks]
         with client:
             # Each run is deterministic, not pure in Dask's sense (it times itself).
-            futures = dict(zip(client.map(run_task, tasks, method=method, pure=False), tasks,
+            futures = dict(zip(client.map(run_task, shipped, method=method, pure=False), tasks,
                                strict=True))
             _collect(futures, distributed.as_completed(futures), finish)
     finally:

@@ -276,6 +276,32 @@ def test_unreachable_scheduler_is_one_clear_line(scenes, capsys, monkeypatch):
     assert err.count("\n") == 2 and "error: --scheduler tcp://127.0.0.1:9: cannot connect" in err
 
 
+def test_relative_paths_reach_dask_workers_started_in_another_folder(scenes, tmp_path, capsys,
+                                                                    monkeypatch):
+    """A cluster's workers run elsewhere (another folder, another machine sharing the files):
+    a scene given relative to this folder is still found there, and named as given."""
+    distributed = pytest.importorskip("distributed")
+    import logging
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+        monkeypatch.chdir(scenes)  # the workers stay in `elsewhere`
+        out = tmp_path / "remote.json"
+        code, stdout, _ = sweep(capsys, "sub", "c_broken.scenario.yaml", "--json", out,
+                                "--scheduler", cluster.scheduler_address)
+    runs = json.loads(out.read_text())["runs"]
+    assert [(r["file"], r["status"]) for r in runs] == [
+        (str(Path("sub") / "a_plain.scenario.yaml"), "pass"),
+        ("c_broken.scenario.yaml", "error")]
+    # The error names the file as given, where it is wrong.
+    assert runs[1]["reason"].startswith("c_broken.scenario.yaml:")
+    assert "colour" in runs[1]["reason"]
+    assert code == 2
+
+
 def test_plot_of_pass_and_fail_over_two_parameters(scenes, tmp_path, capsys):
     png = tmp_path / "sweep.png"
     try:
