@@ -339,6 +339,34 @@ def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeyp
     assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
 
 
+def test_interrupted_sweep_prints_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
+    """Without --json too: the verdicts that finished are printed, as `run` prints them, and a
+    run that erred at run time before Ctrl-C keeps its exit code."""
+    import rts_scenario.pipeline
+
+    real = rts_scenario.pipeline.run_scene
+    calls = []
+
+    def crash_then_interrupt(scene, options):
+        calls.append(scene.name)
+        if len(calls) == 2:
+            raise RuntimeError("the bench fell over")
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", crash_then_interrupt)
+    code, stdout, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")
+    assert code == 3 and err.endswith("error: interrupted\n")
+    lines = [line for line in stdout.splitlines() if line.split(" ")[0] in ("PASS", "FAIL",
+                                                                            "ERROR")]
+    assert [line.split(" (")[0] for line in lines] == [
+        "PASS swept[1=0.0-rcs_dbsm=5.0]", "ERROR swept[1=0.0-rcs_dbsm=10.0]",
+        "PASS swept[1=2.0-rcs_dbsm=5.0]"]
+    assert "RuntimeError: the bench fell over" in lines[1]
+    assert "sweep: 3 of 6 runs (interrupted), 2 passed, 0 failed, 1 errors" in stdout
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="the pool's workers are forked")
 def test_a_worker_that_dies_loses_no_run(scenes, tmp_path, capsys, monkeypatch):
     import os
