@@ -225,6 +225,30 @@ def test_a_variant_that_does_not_load_fails_alone(pytester):
     assert "Traceback" not in text and "Interrupted" not in text
 
 
+@pytest.mark.parametrize("stage", ["load_scenario", "parametrizations"])
+def test_a_scene_whose_loading_crashes_fails_alone(pytester, monkeypatch, stage):
+    # A bug met while loading one scene (not bad input: no located message for it) fails that
+    # scene's item with its traceback; it does not stop the session as a collection error,
+    # which would run none of the other scenes (`rts-scenario run` and `sweep` run them too).
+    import rts_scenario.scenario
+
+    real = getattr(rts_scenario.scenario, stage)
+
+    def crashes_on_buggy(path, *args):
+        if Path(path).name.startswith("buggy"):
+            raise ZeroDivisionError("a bug in the loader")
+        return real(path, *args)
+
+    monkeypatch.setattr(rts_scenario.scenario, stage, crashes_on_buggy)
+    pytester.makefile(".scenario.yaml", buggy=scene("buggy"), fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=1)
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+    result.stdout.fnmatch_lines(["FAILED buggy.scenario.yaml::buggy - ZeroDivisionError: a bug*"])
+    assert "Traceback" in result.stdout.str() or "crashes_on_buggy" in result.stdout.str()
+    assert "error during collection" not in result.stdout.str()
+
+
 def test_a_scene_its_rig_cannot_play_names_the_scene_file_and_line(pytester):
     # Frames faster than the rig's update rate: the error names the file, line and key.
     pytester.makefile(".scenario.yaml", fast=scene("fast").replace("frame_rate_hz: 20.0",

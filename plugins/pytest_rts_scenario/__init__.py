@@ -169,7 +169,9 @@ class ScenarioFile(pytest.File):
         A combination that does not load is still an item, which fails with the one-line
         error naming file, line and key (as ``rts-scenario run`` reports it, the other
         combinations and scenes still run); a file whose ``parametrize`` block cannot be
-        expanded is one such item. A collection error would stop the whole session.
+        expanded is one such item. So is a combination whose loading raised anything else (a
+        bug, not bad input), which fails with that exception and its traceback. A collection
+        error would stop the whole session.
         """
         from rts_scenario.errors import RtsError, located
         from rts_scenario.scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
@@ -182,6 +184,10 @@ class ScenarioFile(pytest.File):
         except RtsError as exc:
             yield ScenarioItem.from_parent(self, name=file_name, overrides={}, marks=(),
                                            error=located(path, exc))
+            return
+        except Exception as exc:
+            yield ScenarioItem.from_parent(self, name=file_name, overrides={},
+                                           marks=_written_marks(self.path, {}), crash=exc)
             return
         known = {line.split(":", 1)[0].split("(", 1)[0].strip()
                  for line in self.config.getini("markers")}
@@ -201,6 +207,11 @@ class ScenarioFile(pytest.File):
                 yield ScenarioItem.from_parent(
                     self, name=run_label(file_name, ident), overrides=overrides,
                     marks=register(_written_marks(self.path, overrides)), error=message)
+                continue
+            except Exception as exc:
+                yield ScenarioItem.from_parent(
+                    self, name=run_label(file_name, ident), overrides=overrides,
+                    marks=register(_written_marks(self.path, overrides)), crash=exc)
                 continue
             yield ScenarioItem.from_parent(self, name=scene.label, overrides=overrides,
                                            marks=register(scene.marks))
@@ -241,10 +252,12 @@ class ScenarioItem(pytest.Item):
     """One run of a scene."""
 
     def __init__(self, *, overrides: dict[str, Any], marks: tuple[str, ...],
-                 error: str | None = None, **kwargs: Any) -> None:
+                 error: str | None = None, crash: Exception | None = None,
+                 **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.overrides = overrides
         self.error = error  # the scene did not load: the item fails with this message
+        self.crash = crash  # loading it raised (a bug): the item fails with this exception
         for mark in marks:
             self.add_marker(mark)
 
@@ -256,6 +269,8 @@ class ScenarioItem(pytest.Item):
 
         if self.error is not None:
             raise RtsError(self.error)
+        if self.crash is not None:
+            raise self.crash
 
         # The HTML report's plots need every frame's errors: record them only for it.
         record = self.config.pluginmanager.hasplugin("rts-scenario-html")
