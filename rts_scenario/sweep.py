@@ -40,8 +40,10 @@ class SweepTask:
 
     ``error`` is set when the file could not even be expanded into combinations (missing,
     not a scene, invalid ``parametrize``); the task then runs nothing and reports it.
-    ``path``, when set, is where the run reads ``file`` (its absolute path, for a worker whose
-    current folder is another); the entry and its messages still name ``file``.
+    ``error_type`` says which exit code the error gives (``runtime`` when listing the
+    combinations raised something else than bad input). ``path``, when set, is where the run
+    reads ``file`` (its absolute path, for a worker whose current folder is another); the
+    entry and its messages still name ``file``.
     """
 
     index: int
@@ -50,6 +52,7 @@ class SweepTask:
     parameters: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
     path: str | None = None
+    error_type: str = "bad_input"
 
 
 def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
@@ -78,8 +81,10 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
             name = str(given) if file is path else str(file)
             try:
                 combos = parametrizations(file)
-            except RtsError as exc:
-                tasks.append(SweepTask(len(tasks), name, error=_message(name, exc)))
+            except Exception as exc:  # the file's one run reports it; the others still run
+                tasks.append(SweepTask(len(tasks), name, error=_message(name, exc),
+                                       error_type="bad_input" if isinstance(exc, RtsError)
+                                       else "runtime"))
                 continue
             tasks += [SweepTask(len(tasks) + i, name, ident, overrides)
                       for i, (ident, overrides) in enumerate(combos)]
@@ -107,7 +112,7 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     entry: Entry = {"scene": _file_scene(task.file), "file": task.file,
                     "id": task.ident, "parameters": dict(task.parameters)}
     if task.error is not None:
-        return error_entry(entry, task.error, "bad_input")
+        return error_entry(entry, task.error, task.error_type)
     source = task.path if task.path is not None else task.file
 
     def message(exc: BaseException) -> str:

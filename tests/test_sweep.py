@@ -221,6 +221,32 @@ def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
     assert "Traceback" not in stdout + err
 
 
+def test_a_scene_whose_combinations_cannot_be_listed_for_a_bug_loses_no_other_run(
+        scenes, tmp_path, capsys, monkeypatch):
+    # Listing a scene's combinations raised something else than bad input: that scene is a
+    # runtime error, and the other scenes still run.
+    import rts_scenario.scenario
+
+    real = rts_scenario.scenario.parametrizations
+
+    def crashes_on_swept(path):
+        if Path(path).name.startswith("b_swept"):
+            raise ZeroDivisionError("a bug in the loader")
+        return real(path)
+
+    monkeypatch.setattr(rts_scenario.scenario, "parametrizations", crashes_on_swept)
+    out = tmp_path / "bug.json"
+    code, stdout, err = sweep(capsys, scenes, "--workers", "1", "--json", out)
+    assert code == 3
+    runs = json.loads(out.read_text())["runs"]
+    assert [(Path(r["file"]).name, r["status"]) for r in runs] == [
+        ("b_swept.scenario.yaml", "error"), ("c_broken.scenario.yaml", "error"),
+        ("a_plain.scenario.yaml", "pass")]
+    assert runs[0]["error_type"] == "runtime" and runs[1]["error_type"] == "bad_input"
+    assert "ZeroDivisionError: a bug in the loader" in runs[0]["reason"]
+    assert "Traceback" not in stdout + err
+
+
 def test_progress_lines_without_a_terminal(scenes, capsys):
     _, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")
     lines = err.splitlines()
