@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import re
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
@@ -59,15 +60,21 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
     """Expand folders (every scene file in them, recursively, sorted) and parametrize blocks.
 
     A path that is neither a scene file nor a folder holding one, or a scene whose
-    ``parametrize`` block is invalid, becomes one task carrying its error.
+    ``parametrize`` block is invalid, becomes one task carrying its error; so does a file in a
+    folder that holds a scene under another name than ``*.scenario.yaml`` (`holds_scene`),
+    which would otherwise never run without the sweep saying so.
     """
     from .scenario import SCENE_SUFFIX, parametrizations
 
     tasks: list[SweepTask] = []
     for given in paths:
         path = Path(given)
+        misnamed: set[Path] = set()
         if path.is_dir():
-            files = sorted((p for p in path.rglob(f"*{SCENE_SUFFIX}") if p.is_file()), key=str)
+            misnamed = {p for p in path.rglob("*") if not p.name.endswith(SCENE_SUFFIX)
+                        and p.is_file() and holds_scene(p)}
+            files = sorted([*(p for p in path.rglob(f"*{SCENE_SUFFIX}") if p.is_file()),
+                            *misnamed], key=str)
             if not files:
                 tasks.append(SweepTask(len(tasks), str(given),
                                        error=f"{given}: no *{SCENE_SUFFIX} files in this folder"))
@@ -79,6 +86,14 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
             continue
         for file in files:
             name = str(given) if file is path else str(file)
+            if file in misnamed:
+                stem = file.name.split(".", 1)[0]
+                tasks.append(SweepTask(
+                    len(tasks), name,
+                    error=f"{name} holds a scene (its rts_scenario key) but is not named "
+                          f"*{SCENE_SUFFIX}, so it does not run as one; rename it "
+                          f"{stem}{SCENE_SUFFIX}"))
+                continue
             try:
                 combos = parametrizations(file)
             except Exception as exc:  # the file's one run reports it; the others still run
@@ -89,6 +104,27 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
             tasks += [SweepTask(len(tasks) + i, name, ident, overrides)
                       for i, (ident, overrides) in enumerate(combos)]
     return tasks
+
+
+# A scene's version key, at the start of a line: a key of the file's top-level mapping.
+_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:", re.MULTILINE)
+# How much of a YAML file is read to find it (a scene starts with it, after its comments).
+_HEAD_BYTES = 65536
+
+
+def holds_scene(path: Path) -> bool:
+    """Whether ``path``, a ``.yaml``/``.yml`` file, holds a scene (its ``rts_scenario`` key).
+
+    The pytest plugin tells such files apart alike (without importing the library).
+    """
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        with path.open("rb") as file:
+            head = file.read(_HEAD_BYTES)
+    except OSError:
+        return False
+    return _SCENE_KEY.search(head) is not None
 
 
 def run_task(task: SweepTask, method: str = "exact") -> Entry:

@@ -325,6 +325,30 @@ def test_a_can_interface_that_cannot_be_opened_stops_the_session_once(pytester):
     assert "Traceback" not in text
 
 
+def test_a_scene_with_a_mistyped_suffix_fails_instead_of_being_left_out(pytester):
+    # A file holding a scene (its rts_scenario key) but not named *.scenario.yaml is not run
+    # as one: without an item for it, the session would be green with the scene never played.
+    # Fragments and other kinds of file are no scenes and stay uncollected.
+    pytester.makefile(".scenario.yaml", fine=scene("fine"))
+    pytester.makefile(".scenario.yml", typo=scene("typo"))
+    pytester.makefile(".yaml", plain=scene("plain"))
+    pytester.makefile(".yaml", parked="targets:\n  - name: parked\n")
+    pytester.makefile(".rig.yaml", lab=(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml"
+                                        ).read_text())
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(passed=1, failed=2)
+    result.stdout.fnmatch_lines([
+        f"*error: {pytester.path / 'plain.yaml'} holds a scene (its rts_scenario key) but is "
+        f"not named *.scenario.yaml, so it does not run as one; rename it plain.scenario.yaml",
+        f"*error: {pytester.path / 'typo.scenario.yml'} holds a scene (its rts_scenario key) "
+        f"but is not named *.scenario.yaml, so it does not run as one; rename it "
+        f"typo.scenario.yaml"])
+    assert "Traceback" not in result.stdout.str()
+    # A pattern of one's own chooses the scenes: the others are left out on purpose.
+    pytester.makeini("[pytest]\nrts_scenario_pattern = fine.*\n")
+    pytester.runpytest().assert_outcomes(passed=1)
+
+
 def test_pattern_is_configurable(pytester):
     pytester.makefile(".yml", odd=scene("odd"))
     pytester.makeini("[pytest]\nrts_scenario_pattern = *.yml\n")

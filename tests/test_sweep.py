@@ -247,6 +247,23 @@ def test_a_scene_whose_combinations_cannot_be_listed_for_a_bug_loses_no_other_ru
     assert "Traceback" not in stdout + err
 
 
+def test_a_scene_with_a_mistyped_suffix_in_a_folder_is_an_erred_run(scenes, tmp_path, capsys):
+    # Left out, the sweep would not say that the scene it holds never ran.
+    (scenes / "sub" / "typo.scenario.yml").write_text(tiny_scene("typo"))
+    (scenes / "sub" / "parked.yaml").write_text("targets:\n  - name: parked\n")
+    out = tmp_path / "typo.json"
+    code, stdout, _ = sweep(capsys, scenes / "sub", "--workers", "1", "--json", out)
+    assert code == 2
+    runs = json.loads(out.read_text())["runs"]
+    assert [(Path(r["file"]).name, r["status"]) for r in runs] == [
+        ("a_plain.scenario.yaml", "pass"), ("typo.scenario.yml", "error")]
+    typo = scenes / "sub" / "typo.scenario.yml"
+    assert runs[1]["reason"] == (f"{typo} holds a scene (its rts_scenario key) but is not named "
+                                 f"*.scenario.yaml, so it does not run as one; rename it "
+                                 f"typo.scenario.yaml")
+    assert runs[1]["error_type"] == "bad_input"
+
+
 def test_progress_lines_without_a_terminal(scenes, capsys):
     _, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")
     lines = err.splitlines()

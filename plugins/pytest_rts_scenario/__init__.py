@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import uuid
 from collections.abc import Callable, Generator, Iterator
 from fnmatch import fnmatch
@@ -135,11 +136,38 @@ def _refuse_workers_sharing_a_bench(config: pytest.Config, spec: str, interface:
             f"and detections, each judging another's; run the scenes one at a time (-n 0)")
 
 
-def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> ScenarioFile | None:
-    """Collect scene files matching the ``rts_scenario_pattern`` ini option."""
-    if fnmatch(file_path.name, parent.config.getini("rts_scenario_pattern")):
+def pytest_collect_file(parent: pytest.Collector,
+                        file_path: Path) -> ScenarioFile | MisnamedScene | None:
+    """Collect scene files matching the ``rts_scenario_pattern`` ini option.
+
+    With the default pattern, a YAML file that holds a scene (its ``rts_scenario`` key) under
+    another name (``cut_in.scenario.yml``, ``cut_in.yaml``) is one failing item: the scene it
+    holds would otherwise never run, and the session would not say so.
+    """
+    pattern = parent.config.getini("rts_scenario_pattern")
+    if fnmatch(file_path.name, pattern):
         return ScenarioFile.from_parent(parent, path=file_path)
+    if pattern == DEFAULT_PATTERN and holds_scene(file_path):
+        return MisnamedScene.from_parent(parent, path=file_path)
     return None
+
+
+# A scene's version key, at the start of a line: a key of the file's top-level mapping.
+_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:", re.MULTILINE)
+# How much of a YAML file is read to find it (a scene starts with it, after its comments).
+_HEAD_BYTES = 65536
+
+
+def holds_scene(path: Path) -> bool:
+    """Whether ``path``, a ``.yaml``/``.yml`` file, holds a scene (its ``rts_scenario`` key)."""
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        with path.open("rb") as file:
+            head = file.read(_HEAD_BYTES)
+    except OSError:
+        return False
+    return _SCENE_KEY.search(head) is not None
 
 
 def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
@@ -217,14 +245,26 @@ class ScenarioFile(pytest.File):
                                            marks=register(scene.marks))
 
 
+class MisnamedScene(pytest.File):
+    """A file holding a scene under a name the plugin does not collect: one failing item."""
+
+    def collect(self) -> Iterator[ScenarioItem]:
+        """Yield the item that says so and how to name the file."""
+        from rts_scenario.scenario import SCENE_SUFFIX
+
+        stem = self.path.name.split(".", 1)[0]
+        yield ScenarioItem.from_parent(
+            self, name=self.path.name, overrides={}, marks=(),
+            error=f"{self.path} holds a scene (its rts_scenario key) but is not named "
+                  f"*{SCENE_SUFFIX}, so it does not run as one; rename it {stem}{SCENE_SUFFIX}")
+
+
 def _written_marks(path: Path, overrides: dict[str, Any]) -> tuple[str, ...]:
     """Return the marks a scene file gives itself, read from its text (or its combination).
 
     For a combination that does not load: ``-m`` selects it, and ``skip`` skips it, as the
     scene says; marks pytest could not take are left out.
     """
-    import re
-
     from rts_scenario.located_yaml import load_yaml
 
     marks = overrides.get("marks")
