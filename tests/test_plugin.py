@@ -282,6 +282,24 @@ def test_a_bad_parametrize_block_is_one_failing_item(pytester):
     assert "Traceback" not in result.stdout.str()
 
 
+def test_an_xfail_scene_expects_its_check_to_fail_not_its_file_to_break(pytester):
+    # `marks: [xfail]` declares a known failure of the radar's check: a scene that then does
+    # not load, or a variant that does not, is an error of its own and fails the session.
+    extra = "marks: [xfail]\nparametrize:\n  rig: [wide-3x5, wide-3x9]\n"
+    known = scene("known").replace("[30, 0, 0.6]", "[30, 20, 0.6]")  # never detected
+    pytester.makefile(".scenario.yaml", known=known + "marks: [xfail]\n",
+                      broken=scene("broken", extra="marks: [xfail]\ncolour: red\n"),
+                      mixed=known.replace("name: known", "name: mixed") + extra)
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(xfailed=2, failed=2)
+    result.stdout.fnmatch_lines(["XFAIL known.scenario.yaml::known*",
+                                 "XFAIL mixed.scenario.yaml::mixed[[]rig=wide-3x5[]]*"])
+    result.stdout.fnmatch_lines(["FAILED broken.scenario.yaml::broken - error: *",
+                                 "FAILED mixed.scenario.yaml::mixed[[]rig=wide-3x9[]] - error: *"])
+    result.stdout.fnmatch_lines(["error: *broken.scenario.yaml:*: colour: unknown key*"])
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+
+
 def test_a_mark_pytest_cannot_take_is_refused_by_the_scene_loader(pytester):
     # pytest refuses marks starting with an underscore: the scene format refuses them first.
     pytester.makefile(".scenario.yaml", under=scene("under", extra="marks: [_private]\n"),
