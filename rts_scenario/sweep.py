@@ -62,7 +62,8 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
     A path that is neither a scene file nor a folder holding one, or a scene whose
     ``parametrize`` block is invalid, becomes one task carrying its error; so does a file in a
     folder that holds a scene under another name than ``*.scenario.yaml`` (`holds_scene`),
-    which would otherwise never run without the sweep saying so.
+    or a ``*.scenario.yaml`` there that is a link to nothing: either would otherwise never run
+    without the sweep saying so.
     """
     from .scenario import SCENE_SUFFIX, parametrizations
 
@@ -70,11 +71,14 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
     for given in paths:
         path = Path(given)
         misnamed: set[Path] = set()
+        dangling: set[Path] = set()
         if path.is_dir():
             misnamed = {p for p in path.rglob("*") if not p.name.endswith(SCENE_SUFFIX)
                         and p.is_file() and holds_scene(p)}
+            dangling = {p for p in path.rglob(f"*{SCENE_SUFFIX}")
+                        if p.is_symlink() and not p.exists()}
             files = sorted([*(p for p in path.rglob(f"*{SCENE_SUFFIX}") if p.is_file()),
-                            *misnamed], key=str)
+                            *misnamed, *dangling], key=str)
             if not files:
                 tasks.append(SweepTask(len(tasks), str(given),
                                        error=f"{given}: no *{SCENE_SUFFIX} files in this folder"))
@@ -86,6 +90,9 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
             continue
         for file in files:
             name = str(given) if file is path else str(file)
+            if file in dangling:
+                tasks.append(SweepTask(len(tasks), name, error=dangling_link(file)))
+                continue
             if file in misnamed:
                 stem = file.name.split(".", 1)[0]
                 tasks.append(SweepTask(
@@ -104,6 +111,11 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
             tasks += [SweepTask(len(tasks) + i, name, ident, overrides)
                       for i, (ident, overrides) in enumerate(combos)]
     return tasks
+
+
+def dangling_link(path: Path) -> str:
+    """Say that ``path`` is a link to nothing (a scene linked from a folder that is not there)."""
+    return f"{path}: cannot read file: a link to {os.readlink(path)}, which does not exist"
 
 
 # A scene's version key, at the start of a line: a key of the file's top-level mapping.

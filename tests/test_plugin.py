@@ -367,6 +367,20 @@ def test_a_scene_with_a_mistyped_suffix_fails_instead_of_being_left_out(pytester
     pytester.runpytest().assert_outcomes(passed=1)
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="symbolic links")
+def test_a_scene_link_that_leads_nowhere_fails_instead_of_being_left_out(pytester):
+    # A scene linked from elsewhere (a shared folder, a checkout not made): pytest walks past a
+    # link to nothing, and the session would be green with that scene never played.
+    pytester.makefile(".scenario.yaml", fine=scene("fine"))
+    (pytester.path / "sub").mkdir()
+    (pytester.path / "sub" / "gone.scenario.yaml").symlink_to("../shared/gone.scenario.yaml")
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(passed=1, failed=1)
+    gone = pytester.path / "sub" / "gone.scenario.yaml"
+    result.stdout.fnmatch_lines([f"error: {gone}: cannot read file: a link to "
+                                 f"../shared/gone.scenario.yaml, which does not exist"])
+
+
 def test_pattern_is_configurable(pytester):
     pytester.makefile(".yml", odd=scene("odd"))
     pytester.makeini("[pytest]\nrts_scenario_pattern = *.yml\n")

@@ -264,6 +264,20 @@ def test_a_scene_with_a_mistyped_suffix_in_a_folder_is_an_erred_run(scenes, tmp_
     assert runs[1]["error_type"] == "bad_input"
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="symbolic links")
+def test_a_scene_link_that_leads_nowhere_is_an_erred_run(scenes, tmp_path, capsys):
+    gone = scenes / "sub" / "gone.scenario.yaml"
+    gone.symlink_to("../shared/gone.scenario.yaml")
+    out = tmp_path / "gone.json"
+    code, _, _ = sweep(capsys, scenes / "sub", "--workers", "1", "--json", out)
+    assert code == 2
+    runs = json.loads(out.read_text())["runs"]
+    assert [(Path(r["file"]).name, r["status"]) for r in runs] == [
+        ("a_plain.scenario.yaml", "pass"), ("gone.scenario.yaml", "error")]
+    assert runs[1]["reason"] == (f"{gone}: cannot read file: a link to "
+                                 f"../shared/gone.scenario.yaml, which does not exist")
+
+
 def test_progress_lines_without_a_terminal(scenes, capsys):
     _, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")
     lines = err.splitlines()

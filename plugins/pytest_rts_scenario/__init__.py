@@ -152,6 +152,29 @@ def pytest_collect_file(parent: pytest.Collector,
     return None
 
 
+@pytest.hookimpl(wrapper=True)
+def pytest_make_collect_report(collector: pytest.Collector
+                               ) -> Generator[None, pytest.CollectReport, pytest.CollectReport]:
+    """Add a failing item for each scene file in a folder that is a link to nothing.
+
+    pytest walks past such a link (neither a file nor a folder): the scene it named would
+    never run, and the session would not say so.
+    """
+    report = yield
+    if isinstance(collector, pytest.Directory) and report.passed:
+        pattern = collector.config.getini("rts_scenario_pattern")
+        try:
+            entries = sorted(os.scandir(collector.path), key=lambda e: e.name)
+        except OSError:
+            return report
+        for entry in entries:
+            if (fnmatch(entry.name, pattern) and entry.is_symlink()
+                    and not os.path.exists(entry.path)):
+                report.result.append(DanglingScene.from_parent(collector,
+                                                               path=Path(entry.path)))
+    return report
+
+
 # A scene's version key, at the start of a line: a key of the file's top-level mapping.
 _SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:", re.MULTILINE)
 # How much of a YAML file is read to find it (a scene starts with it, after its comments).
@@ -257,6 +280,19 @@ class MisnamedScene(pytest.File):
             self, name=self.path.name, overrides={}, marks=(),
             error=f"{self.path} holds a scene (its rts_scenario key) but is not named "
                   f"*{SCENE_SUFFIX}, so it does not run as one; rename it {stem}{SCENE_SUFFIX}")
+
+
+class DanglingScene(pytest.File):
+    """A scene file that is a link to nothing: one failing item."""
+
+    def collect(self) -> Iterator[ScenarioItem]:
+        """Yield the item that says where the link leads."""
+        from rts_scenario.scenario import SCENE_SUFFIX
+
+        yield ScenarioItem.from_parent(
+            self, name=self.path.name.removesuffix(SCENE_SUFFIX), overrides={}, marks=(),
+            error=f"{self.path}: cannot read file: a link to {os.readlink(self.path)}, which "
+                  f"does not exist")
 
 
 def _written_marks(path: Path, overrides: dict[str, Any]) -> tuple[str, ...]:
