@@ -15,10 +15,11 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import re
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,10 @@ class SweepTask:
 
     ``error`` is set when the file could not even be expanded into combinations (missing,
     not a scene, invalid ``parametrize``); the task then runs nothing and reports it.
+    ``error_type`` says which exit code the error gives (``runtime`` when listing the
+    combinations raised something else than bad input). ``path``, when set, is where the run
+    reads ``file`` (its absolute path, for a worker whose current folder is another); the
+    entry and its messages still name ``file``.
     """
 
     index: int
@@ -47,21 +52,33 @@ class SweepTask:
     ident: str = ""
     parameters: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+    path: str | None = None
+    error_type: str = "bad_input"
 
 
 def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
     """Expand folders (every scene file in them, recursively, sorted) and parametrize blocks.
 
     A path that is neither a scene file nor a folder holding one, or a scene whose
-    ``parametrize`` block is invalid, becomes one task carrying its error.
+    ``parametrize`` block is invalid, becomes one task carrying its error; so does a file in a
+    folder that holds a scene under another name than ``*.scenario.yaml`` (`holds_scene`),
+    or a ``*.scenario.yaml`` there that is a link to nothing: either would otherwise never run
+    without the sweep saying so.
     """
     from .scenario import SCENE_SUFFIX, parametrizations
 
     tasks: list[SweepTask] = []
     for given in paths:
         path = Path(given)
+        misnamed: set[Path] = set()
+        dangling: set[Path] = set()
         if path.is_dir():
-            files = sorted((p for p in path.rglob(f"*{SCENE_SUFFIX}") if p.is_file()), key=str)
+            misnamed = {p for p in path.rglob("*") if not p.name.endswith(SCENE_SUFFIX)
+                        and p.is_file() and holds_scene(p)}
+            dangling = {p for p in path.rglob(f"*{SCENE_SUFFIX}")
+                        if p.is_symlink() and not p.exists()}
+            files = sorted([*(p for p in path.rglob(f"*{SCENE_SUFFIX}") if p.is_file()),
+                            *misnamed, *dangling], key=str)
             if not files:
                 tasks.append(SweepTask(len(tasks), str(given),
                                        error=f"{given}: no *{SCENE_SUFFIX} files in this folder"))
@@ -73,14 +90,53 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
             continue
         for file in files:
             name = str(given) if file is path else str(file)
+            if file in dangling:
+                tasks.append(SweepTask(len(tasks), name, error=dangling_link(file)))
+                continue
+            if file in misnamed:
+                stem = file.name.split(".", 1)[0]
+                tasks.append(SweepTask(
+                    len(tasks), name,
+                    error=f"{name} holds a scene (its rts_scenario key) but is not named "
+                          f"*{SCENE_SUFFIX}, so it does not run as one; rename it "
+                          f"{stem}{SCENE_SUFFIX}"))
+                continue
             try:
                 combos = parametrizations(file)
-            except RtsError as exc:
-                tasks.append(SweepTask(len(tasks), name, error=_message(name, exc)))
+            except Exception as exc:  # the file's one run reports it; the others still run
+                tasks.append(SweepTask(len(tasks), name, error=_message(name, exc),
+                                       error_type="bad_input" if isinstance(exc, RtsError)
+                                       else "runtime"))
                 continue
             tasks += [SweepTask(len(tasks) + i, name, ident, overrides)
                       for i, (ident, overrides) in enumerate(combos)]
     return tasks
+
+
+def dangling_link(path: Path) -> str:
+    """Say that ``path`` is a link to nothing (a scene linked from a folder that is not there)."""
+    return f"{path}: cannot read file: a link to {os.readlink(path)}, which does not exist"
+
+
+# A scene's version key, at the start of a line: a key of the file's top-level mapping.
+_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:", re.MULTILINE)
+# How much of a YAML file is read to find it (a scene starts with it, after its comments).
+_HEAD_BYTES = 65536
+
+
+def holds_scene(path: Path) -> bool:
+    """Whether ``path``, a ``.yaml``/``.yml`` file, holds a scene (its ``rts_scenario`` key).
+
+    The pytest plugin tells such files apart alike (without importing the library).
+    """
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        with path.open("rb") as file:
+            head = file.read(_HEAD_BYTES)
+    except OSError:
+        return False
+    return _SCENE_KEY.search(head) is not None
 
 
 def run_task(task: SweepTask, method: str = "exact") -> Entry:
@@ -104,11 +160,18 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     entry: Entry = {"scene": _file_scene(task.file), "file": task.file,
                     "id": task.ident, "parameters": dict(task.parameters)}
     if task.error is not None:
-        return error_entry(entry, task.error, "bad_input")
+        return error_entry(entry, task.error, task.error_type)
+    source = task.path if task.path is not None else task.file
+
+    def message(exc: BaseException) -> str:
+        # Named as given, also where the run read it by its absolute path.
+        text = _message(source, exc)
+        return text if source == task.file else text.replace(source, task.file)
+
     try:
-        scene = load_scenario(task.file, task.parameters)
+        scene = load_scenario(source, task.parameters)
     except Exception as exc:
-        return error_entry(entry, _message(task.file, exc),
+        return error_entry(entry, message(exc),
                            "bad_input" if isinstance(exc, RtsError) else "runtime")
     entry["scene"] = scene.name
     try:
@@ -117,7 +180,7 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
         # As in `rts-scenario run`: a schedule the scene asks for and the bench cannot build is
         # the scene's fault; anything else is a runtime error.
         bad = isinstance(exc, ScenarioError | ScheduleError)
-        return error_entry(entry, _message(task.file, exc), "bad_input" if bad else "runtime")
+        return error_entry(entry, message(exc), "bad_input" if bad else "runtime")
     from .check import QUANTITIES
     from .report import strict
 
@@ -273,9 +336,12 @@ def _run_dask(tasks: Sequence[SweepTask], method: str, scheduler: str, workers: 
 
                 raise RtsError(f"--scheduler {scheduler}: cannot connect: {one_line(exc)}"
                                ) from None
+        # A worker's current folder is its own (another machine's, a worker started
+        # elsewhere): it reads each scene by its absolute path, the same on a shared folder.
+        shipped = [replace(task, path=os.path.abspath(task.file)) for task in tasks]
         with client:
             # Each run is deterministic, not pure in Dask's sense (it times itself).
-            futures = dict(zip(client.map(run_task, tasks, method=method, pure=False), tasks,
+            futures = dict(zip(client.map(run_task, shipped, method=method, pure=False), tasks,
                                strict=True))
             _collect(futures, distributed.as_completed(futures), finish)
     finally:

@@ -225,6 +225,30 @@ def test_a_variant_that_does_not_load_fails_alone(pytester):
     assert "Traceback" not in text and "Interrupted" not in text
 
 
+@pytest.mark.parametrize("stage", ["load_scenario", "parametrizations"])
+def test_a_scene_whose_loading_crashes_fails_alone(pytester, monkeypatch, stage):
+    # A bug met while loading one scene (not bad input: no located message for it) fails that
+    # scene's item with its traceback; it does not stop the session as a collection error,
+    # which would run none of the other scenes (`rts-scenario run` and `sweep` run them too).
+    import rts_scenario.scenario
+
+    real = getattr(rts_scenario.scenario, stage)
+
+    def crashes_on_buggy(path, *args):
+        if Path(path).name.startswith("buggy"):
+            raise ZeroDivisionError("a bug in the loader")
+        return real(path, *args)
+
+    monkeypatch.setattr(rts_scenario.scenario, stage, crashes_on_buggy)
+    pytester.makefile(".scenario.yaml", buggy=scene("buggy"), fine=scene("fine"))
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(failed=1, passed=1)
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+    result.stdout.fnmatch_lines(["FAILED buggy.scenario.yaml::buggy - ZeroDivisionError: a bug*"])
+    assert "Traceback" in result.stdout.str() or "crashes_on_buggy" in result.stdout.str()
+    assert "error during collection" not in result.stdout.str()
+
+
 def test_a_scene_its_rig_cannot_play_names_the_scene_file_and_line(pytester):
     # Frames faster than the rig's update rate: the error names the file, line and key.
     pytester.makefile(".scenario.yaml", fast=scene("fast").replace("frame_rate_hz: 20.0",
@@ -256,6 +280,24 @@ def test_a_bad_parametrize_block_is_one_failing_item(pytester):
     result.stdout.fnmatch_lines(["*block.scenario.yaml:16:3: parametrize.radar.estimator: "
                                  "must be of type array, got 'ti'*"])
     assert "Traceback" not in result.stdout.str()
+
+
+def test_an_xfail_scene_expects_its_check_to_fail_not_its_file_to_break(pytester):
+    # `marks: [xfail]` declares a known failure of the radar's check: a scene that then does
+    # not load, or a variant that does not, is an error of its own and fails the session.
+    extra = "marks: [xfail]\nparametrize:\n  rig: [wide-3x5, wide-3x9]\n"
+    known = scene("known").replace("[30, 0, 0.6]", "[30, 20, 0.6]")  # never detected
+    pytester.makefile(".scenario.yaml", known=known + "marks: [xfail]\n",
+                      broken=scene("broken", extra="marks: [xfail]\ncolour: red\n"),
+                      mixed=known.replace("name: known", "name: mixed") + extra)
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(xfailed=2, failed=2)
+    result.stdout.fnmatch_lines(["XFAIL known.scenario.yaml::known*",
+                                 "XFAIL mixed.scenario.yaml::mixed[[]rig=wide-3x5[]]*"])
+    result.stdout.fnmatch_lines(["FAILED broken.scenario.yaml::broken - error: *",
+                                 "FAILED mixed.scenario.yaml::mixed[[]rig=wide-3x9[]] - error: *"])
+    result.stdout.fnmatch_lines(["error: *broken.scenario.yaml:*: colour: unknown key*"])
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
 
 
 def test_a_mark_pytest_cannot_take_is_refused_by_the_scene_loader(pytester):
@@ -299,6 +341,44 @@ def test_a_can_interface_that_cannot_be_opened_stops_the_session_once(pytester):
     assert text.count("--rts-can-interface socketcan --rts-can-channel rts-no-such0: cannot "
                       "open CAN interface 'socketcan' channel 'rts-no-such0'") == 1
     assert "Traceback" not in text
+
+
+def test_a_scene_with_a_mistyped_suffix_fails_instead_of_being_left_out(pytester):
+    # A file holding a scene (its rts_scenario key) but not named *.scenario.yaml is not run
+    # as one: without an item for it, the session would be green with the scene never played.
+    # Fragments and other kinds of file are no scenes and stay uncollected.
+    pytester.makefile(".scenario.yaml", fine=scene("fine"))
+    pytester.makefile(".scenario.yml", typo=scene("typo"))
+    pytester.makefile(".yaml", plain=scene("plain"))
+    pytester.makefile(".yaml", parked="targets:\n  - name: parked\n")
+    pytester.makefile(".rig.yaml", lab=(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml"
+                                        ).read_text())
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(passed=1, failed=2)
+    result.stdout.fnmatch_lines([
+        f"*error: {pytester.path / 'plain.yaml'} holds a scene (its rts_scenario key) but is "
+        f"not named *.scenario.yaml, so it does not run as one; rename it plain.scenario.yaml",
+        f"*error: {pytester.path / 'typo.scenario.yml'} holds a scene (its rts_scenario key) "
+        f"but is not named *.scenario.yaml, so it does not run as one; rename it "
+        f"typo.scenario.yaml"])
+    assert "Traceback" not in result.stdout.str()
+    # A pattern of one's own chooses the scenes: the others are left out on purpose.
+    pytester.makeini("[pytest]\nrts_scenario_pattern = fine.*\n")
+    pytester.runpytest().assert_outcomes(passed=1)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="symbolic links")
+def test_a_scene_link_that_leads_nowhere_fails_instead_of_being_left_out(pytester):
+    # A scene linked from elsewhere (a shared folder, a checkout not made): pytest walks past a
+    # link to nothing, and the session would be green with that scene never played.
+    pytester.makefile(".scenario.yaml", fine=scene("fine"))
+    (pytester.path / "sub").mkdir()
+    (pytester.path / "sub" / "gone.scenario.yaml").symlink_to("../shared/gone.scenario.yaml")
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(passed=1, failed=1)
+    gone = pytester.path / "sub" / "gone.scenario.yaml"
+    result.stdout.fnmatch_lines([f"error: {gone}: cannot read file: a link to "
+                                 f"../shared/gone.scenario.yaml, which does not exist"])
 
 
 def test_pattern_is_configurable(pytester):

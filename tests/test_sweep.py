@@ -221,6 +221,63 @@ def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
     assert "Traceback" not in stdout + err
 
 
+def test_a_scene_whose_combinations_cannot_be_listed_for_a_bug_loses_no_other_run(
+        scenes, tmp_path, capsys, monkeypatch):
+    # Listing a scene's combinations raised something else than bad input: that scene is a
+    # runtime error, and the other scenes still run.
+    import rts_scenario.scenario
+
+    real = rts_scenario.scenario.parametrizations
+
+    def crashes_on_swept(path):
+        if Path(path).name.startswith("b_swept"):
+            raise ZeroDivisionError("a bug in the loader")
+        return real(path)
+
+    monkeypatch.setattr(rts_scenario.scenario, "parametrizations", crashes_on_swept)
+    out = tmp_path / "bug.json"
+    code, stdout, err = sweep(capsys, scenes, "--workers", "1", "--json", out)
+    assert code == 3
+    runs = json.loads(out.read_text())["runs"]
+    assert [(Path(r["file"]).name, r["status"]) for r in runs] == [
+        ("b_swept.scenario.yaml", "error"), ("c_broken.scenario.yaml", "error"),
+        ("a_plain.scenario.yaml", "pass")]
+    assert runs[0]["error_type"] == "runtime" and runs[1]["error_type"] == "bad_input"
+    assert "ZeroDivisionError: a bug in the loader" in runs[0]["reason"]
+    assert "Traceback" not in stdout + err
+
+
+def test_a_scene_with_a_mistyped_suffix_in_a_folder_is_an_erred_run(scenes, tmp_path, capsys):
+    # Left out, the sweep would not say that the scene it holds never ran.
+    (scenes / "sub" / "typo.scenario.yml").write_text(tiny_scene("typo"))
+    (scenes / "sub" / "parked.yaml").write_text("targets:\n  - name: parked\n")
+    out = tmp_path / "typo.json"
+    code, stdout, _ = sweep(capsys, scenes / "sub", "--workers", "1", "--json", out)
+    assert code == 2
+    runs = json.loads(out.read_text())["runs"]
+    assert [(Path(r["file"]).name, r["status"]) for r in runs] == [
+        ("a_plain.scenario.yaml", "pass"), ("typo.scenario.yml", "error")]
+    typo = scenes / "sub" / "typo.scenario.yml"
+    assert runs[1]["reason"] == (f"{typo} holds a scene (its rts_scenario key) but is not named "
+                                 f"*.scenario.yaml, so it does not run as one; rename it "
+                                 f"typo.scenario.yaml")
+    assert runs[1]["error_type"] == "bad_input"
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="symbolic links")
+def test_a_scene_link_that_leads_nowhere_is_an_erred_run(scenes, tmp_path, capsys):
+    gone = scenes / "sub" / "gone.scenario.yaml"
+    gone.symlink_to("../shared/gone.scenario.yaml")
+    out = tmp_path / "gone.json"
+    code, _, _ = sweep(capsys, scenes / "sub", "--workers", "1", "--json", out)
+    assert code == 2
+    runs = json.loads(out.read_text())["runs"]
+    assert [(Path(r["file"]).name, r["status"]) for r in runs] == [
+        ("a_plain.scenario.yaml", "pass"), ("gone.scenario.yaml", "error")]
+    assert runs[1]["reason"] == (f"{gone}: cannot read file: a link to "
+                                 f"../shared/gone.scenario.yaml, which does not exist")
+
+
 def test_progress_lines_without_a_terminal(scenes, capsys):
     _, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")
     lines = err.splitlines()
@@ -276,6 +333,32 @@ def test_unreachable_scheduler_is_one_clear_line(scenes, capsys, monkeypatch):
     assert err.count("\n") == 2 and "error: --scheduler tcp://127.0.0.1:9: cannot connect" in err
 
 
+def test_relative_paths_reach_dask_workers_started_in_another_folder(scenes, tmp_path, capsys,
+                                                                    monkeypatch):
+    """A cluster's workers run elsewhere (another folder, another machine sharing the files):
+    a scene given relative to this folder is still found there, and named as given."""
+    distributed = pytest.importorskip("distributed")
+    import logging
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+        monkeypatch.chdir(scenes)  # the workers stay in `elsewhere`
+        out = tmp_path / "remote.json"
+        code, stdout, _ = sweep(capsys, "sub", "c_broken.scenario.yaml", "--json", out,
+                                "--scheduler", cluster.scheduler_address)
+    runs = json.loads(out.read_text())["runs"]
+    assert [(r["file"], r["status"]) for r in runs] == [
+        (str(Path("sub") / "a_plain.scenario.yaml"), "pass"),
+        ("c_broken.scenario.yaml", "error")]
+    # The error names the file as given, where it is wrong.
+    assert runs[1]["reason"].startswith("c_broken.scenario.yaml:")
+    assert "colour" in runs[1]["reason"]
+    assert code == 2
+
+
 def test_plot_of_pass_and_fail_over_two_parameters(scenes, tmp_path, capsys):
     png = tmp_path / "sweep.png"
     try:
@@ -311,6 +394,34 @@ def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeyp
     payload = json.loads(out.read_text())
     assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
     assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
+
+
+def test_interrupted_sweep_prints_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
+    """Without --json too: the verdicts that finished are printed, as `run` prints them, and a
+    run that erred at run time before Ctrl-C keeps its exit code."""
+    import rts_scenario.pipeline
+
+    real = rts_scenario.pipeline.run_scene
+    calls = []
+
+    def crash_then_interrupt(scene, options):
+        calls.append(scene.name)
+        if len(calls) == 2:
+            raise RuntimeError("the bench fell over")
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", crash_then_interrupt)
+    code, stdout, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1")
+    assert code == 3 and err.endswith("error: interrupted\n")
+    lines = [line for line in stdout.splitlines() if line.split(" ")[0] in ("PASS", "FAIL",
+                                                                            "ERROR")]
+    assert [line.split(" (")[0] for line in lines] == [
+        "PASS swept[1=0.0-rcs_dbsm=5.0]", "ERROR swept[1=0.0-rcs_dbsm=10.0]",
+        "PASS swept[1=2.0-rcs_dbsm=5.0]"]
+    assert "RuntimeError: the bench fell over" in lines[1]
+    assert "sweep: 3 of 6 runs (interrupted), 2 passed, 0 failed, 1 errors" in stdout
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="the pool's workers are forked")

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import uuid
 from collections.abc import Callable, Generator, Iterator
 from fnmatch import fnmatch
@@ -135,11 +136,61 @@ def _refuse_workers_sharing_a_bench(config: pytest.Config, spec: str, interface:
             f"and detections, each judging another's; run the scenes one at a time (-n 0)")
 
 
-def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> ScenarioFile | None:
-    """Collect scene files matching the ``rts_scenario_pattern`` ini option."""
-    if fnmatch(file_path.name, parent.config.getini("rts_scenario_pattern")):
+def pytest_collect_file(parent: pytest.Collector,
+                        file_path: Path) -> ScenarioFile | MisnamedScene | None:
+    """Collect scene files matching the ``rts_scenario_pattern`` ini option.
+
+    With the default pattern, a YAML file that holds a scene (its ``rts_scenario`` key) under
+    another name (``cut_in.scenario.yml``, ``cut_in.yaml``) is one failing item: the scene it
+    holds would otherwise never run, and the session would not say so.
+    """
+    pattern = parent.config.getini("rts_scenario_pattern")
+    if fnmatch(file_path.name, pattern):
         return ScenarioFile.from_parent(parent, path=file_path)
+    if pattern == DEFAULT_PATTERN and holds_scene(file_path):
+        return MisnamedScene.from_parent(parent, path=file_path)
     return None
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_make_collect_report(collector: pytest.Collector
+                               ) -> Generator[None, pytest.CollectReport, pytest.CollectReport]:
+    """Add a failing item for each scene file in a folder that is a link to nothing.
+
+    pytest walks past such a link (neither a file nor a folder): the scene it named would
+    never run, and the session would not say so.
+    """
+    report = yield
+    if isinstance(collector, pytest.Directory) and report.passed:
+        pattern = collector.config.getini("rts_scenario_pattern")
+        try:
+            entries = sorted(os.scandir(collector.path), key=lambda e: e.name)
+        except OSError:
+            return report
+        for entry in entries:
+            if (fnmatch(entry.name, pattern) and entry.is_symlink()
+                    and not os.path.exists(entry.path)):
+                report.result.append(DanglingScene.from_parent(collector,
+                                                               path=Path(entry.path)))
+    return report
+
+
+# A scene's version key, at the start of a line: a key of the file's top-level mapping.
+_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:", re.MULTILINE)
+# How much of a YAML file is read to find it (a scene starts with it, after its comments).
+_HEAD_BYTES = 65536
+
+
+def holds_scene(path: Path) -> bool:
+    """Whether ``path``, a ``.yaml``/``.yml`` file, holds a scene (its ``rts_scenario`` key)."""
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        with path.open("rb") as file:
+            head = file.read(_HEAD_BYTES)
+    except OSError:
+        return False
+    return _SCENE_KEY.search(head) is not None
 
 
 def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
@@ -169,7 +220,9 @@ class ScenarioFile(pytest.File):
         A combination that does not load is still an item, which fails with the one-line
         error naming file, line and key (as ``rts-scenario run`` reports it, the other
         combinations and scenes still run); a file whose ``parametrize`` block cannot be
-        expanded is one such item. A collection error would stop the whole session.
+        expanded is one such item. So is a combination whose loading raised anything else (a
+        bug, not bad input), which fails with that exception and its traceback. A collection
+        error would stop the whole session.
         """
         from rts_scenario.errors import RtsError, located
         from rts_scenario.scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
@@ -182,6 +235,10 @@ class ScenarioFile(pytest.File):
         except RtsError as exc:
             yield ScenarioItem.from_parent(self, name=file_name, overrides={}, marks=(),
                                            error=located(path, exc))
+            return
+        except Exception as exc:
+            yield ScenarioItem.from_parent(self, name=file_name, overrides={},
+                                           marks=_written_marks(self.path, {}), crash=exc)
             return
         known = {line.split(":", 1)[0].split("(", 1)[0].strip()
                  for line in self.config.getini("markers")}
@@ -202,8 +259,40 @@ class ScenarioFile(pytest.File):
                     self, name=run_label(file_name, ident), overrides=overrides,
                     marks=register(_written_marks(self.path, overrides)), error=message)
                 continue
+            except Exception as exc:
+                yield ScenarioItem.from_parent(
+                    self, name=run_label(file_name, ident), overrides=overrides,
+                    marks=register(_written_marks(self.path, overrides)), crash=exc)
+                continue
             yield ScenarioItem.from_parent(self, name=scene.label, overrides=overrides,
                                            marks=register(scene.marks))
+
+
+class MisnamedScene(pytest.File):
+    """A file holding a scene under a name the plugin does not collect: one failing item."""
+
+    def collect(self) -> Iterator[ScenarioItem]:
+        """Yield the item that says so and how to name the file."""
+        from rts_scenario.scenario import SCENE_SUFFIX
+
+        stem = self.path.name.split(".", 1)[0]
+        yield ScenarioItem.from_parent(
+            self, name=self.path.name, overrides={}, marks=(),
+            error=f"{self.path} holds a scene (its rts_scenario key) but is not named "
+                  f"*{SCENE_SUFFIX}, so it does not run as one; rename it {stem}{SCENE_SUFFIX}")
+
+
+class DanglingScene(pytest.File):
+    """A scene file that is a link to nothing: one failing item."""
+
+    def collect(self) -> Iterator[ScenarioItem]:
+        """Yield the item that says where the link leads."""
+        from rts_scenario.scenario import SCENE_SUFFIX
+
+        yield ScenarioItem.from_parent(
+            self, name=self.path.name.removesuffix(SCENE_SUFFIX), overrides={}, marks=(),
+            error=f"{self.path}: cannot read file: a link to {os.readlink(self.path)}, which "
+                  f"does not exist")
 
 
 def _written_marks(path: Path, overrides: dict[str, Any]) -> tuple[str, ...]:
@@ -212,8 +301,6 @@ def _written_marks(path: Path, overrides: dict[str, Any]) -> tuple[str, ...]:
     For a combination that does not load: ``-m`` selects it, and ``skip`` skips it, as the
     scene says; marks pytest could not take are left out.
     """
-    import re
-
     from rts_scenario.located_yaml import load_yaml
 
     marks = overrides.get("marks")
@@ -241,12 +328,20 @@ class ScenarioItem(pytest.Item):
     """One run of a scene."""
 
     def __init__(self, *, overrides: dict[str, Any], marks: tuple[str, ...],
-                 error: str | None = None, **kwargs: Any) -> None:
+                 error: str | None = None, crash: Exception | None = None,
+                 **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.overrides = overrides
         self.error = error  # the scene did not load: the item fails with this message
+        self.crash = crash  # loading it raised (a bug): the item fails with this exception
         for mark in marks:
-            self.add_marker(mark)
+            if mark == "xfail":
+                # A known failure of the radar's check; a scene that does not load or run is
+                # no such failure, and fails.
+                self.add_marker(pytest.mark.xfail(raises=ScenarioFailed,
+                                                  reason="the scene's marks: xfail"))
+            else:
+                self.add_marker(mark)
 
     def runtest(self) -> None:
         """Run the scene end to end and check it."""
@@ -256,6 +351,8 @@ class ScenarioItem(pytest.Item):
 
         if self.error is not None:
             raise RtsError(self.error)
+        if self.crash is not None:
+            raise self.crash
 
         # The HTML report's plots need every frame's errors: record them only for it.
         record = self.config.pluginmanager.hasplugin("rts-scenario-html")

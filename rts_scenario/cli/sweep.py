@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-from .common import METHODS, check_distinct_paths, check_writable_file, writing
+from .common import EXIT_FAIL, METHODS, check_distinct_paths, check_writable_file, writing
 
 # Without a terminal, a progress line each time another tenth of the runs is done.
 PLAIN_PROGRESS_STEPS = 10
@@ -50,8 +50,6 @@ class SweepProgress:
 
 
 def _do_sweep(args: argparse.Namespace) -> int:
-    import json
-
     from ..errors import RtsError
     from ..scenario import SCENE_SUFFIX
     from ..sweep import (
@@ -60,7 +58,6 @@ def _do_sweep(args: argparse.Namespace) -> int:
         default_workers,
         exit_code,
         require_dask,
-        run_label,
         run_sweep,
         summarize,
     )
@@ -108,29 +105,18 @@ def _do_sweep(args: argparse.Namespace) -> int:
         entries = run_sweep(tasks, method=args.method, workers=workers,
                             scheduler=args.scheduler, on_result=on_result)
     except KeyboardInterrupt:
-        # Keep what finished: the runs done so far, in the sweep's order, and their summary.
-        if args.json:
-            order = {(t.file, t.ident): t.index for t in tasks}
-            done = sorted(finished, key=lambda e: order.get((e["file"], e["id"]), len(order)))
-            summary = {**summarize(done), "interrupted": True}
-            with writing("--json", args.json):
-                Path(args.json).write_text(json.dumps({"runs": done, "summary": summary},
-                                                      indent=2, allow_nan=False) + "\n")
-            print(f"wrote {args.json} ({len(done)} of {len(tasks)} runs)", file=sys.stderr)
-        raise
-    seconds = time.perf_counter() - start
-    summary = summarize(entries)
-
-    for entry in entries:
-        line = f"{entry['status'].upper()} {run_label(entry)} ({entry['file']})"
-        print(line + (f": {entry['reason']}" if entry["status"] != "pass" else ""))
-    print()
-    print(_summary_text(summary, seconds))
-    if args.json:
-        payload = {"runs": entries, "summary": summary}
-        with writing("--json", args.json):
-            Path(args.json).write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
-        print(f"wrote {args.json}")
+        # Keep what finished: the runs done so far, in the sweep's order, printed and in the
+        # JSON with their summary, as `run` keeps the scenes that ran.
+        order = {(t.file, t.ident): t.index for t in tasks}
+        done = sorted(finished, key=lambda e: order.get((e["file"], e["id"]), len(order)))
+        if progress.tty:  # off the progress bar's line
+            progress.stream.write("\n")
+        _print_runs(done, {**summarize(done), "interrupted": True},
+                    time.perf_counter() - start, args, total=len(tasks))
+        print("error: interrupted", file=sys.stderr)
+        # Never a pass; a run that erred before keeps its exit code.
+        return max(exit_code(done), EXIT_FAIL)
+    _print_runs(entries, summarize(entries), time.perf_counter() - start, args)
     if args.plot:
         from ..plots import write_sweep_plot
 
@@ -140,12 +126,39 @@ def _do_sweep(args: argparse.Namespace) -> int:
     return exit_code(entries)
 
 
-def _summary_text(summary: dict[str, Any], seconds: float) -> str:
-    """Render the summary for people: totals, pass rate per parameter value, worst runs."""
+def _print_runs(entries: list[dict[str, Any]], summary: dict[str, Any], seconds: float,
+                args: argparse.Namespace, total: int | None = None) -> None:
+    """Print a line per run and the summary, and write ``--json``.
+
+    ``total``: the runs the sweep had, when it was interrupted before all of them finished.
+    """
+    import json
+
+    from ..sweep import run_label
+
+    for entry in entries:
+        line = f"{entry['status'].upper()} {run_label(entry)} ({entry['file']})"
+        print(line + (f": {entry['reason']}" if entry["status"] != "pass" else ""))
+    print()
+    print(_summary_text(summary, seconds, total))
+    if args.json:
+        payload = {"runs": entries, "summary": summary}
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+        print(f"wrote {args.json}" + (f" ({len(entries)} of {total} runs)"
+                                      if total is not None else ""))
+
+
+def _summary_text(summary: dict[str, Any], seconds: float, total: int | None = None) -> str:
+    """Render the summary for people: totals, pass rate per parameter value, worst runs.
+
+    ``total``: the sweep's runs, when it was interrupted (``summary`` counts those done).
+    """
     from ..sweep import run_label
 
     runs = summary["runs"]
-    lines = [f"sweep: {runs} runs, {summary['passed']} passed, {summary['failed']} failed, "
+    count = f"{runs} runs" if total is None else f"{runs} of {total} runs (interrupted)"
+    lines = [f"sweep: {count}, {summary['passed']} passed, {summary['failed']} failed, "
              f"{summary['errors']} errors; pass rate {summary['pass_rate']:.1%} "
              f"({seconds:.1f} s, {runs / seconds if seconds > 0 else 0.0:.2f} runs/s)"]
     by_parameter = summary["by_parameter"]
