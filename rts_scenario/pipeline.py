@@ -1263,7 +1263,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     (`Playback.to_dict`) and ``send_lateness`` when each frame went out
     (`Playback.send_lateness`). ``clock`` is the clock the run ended with (`ClockTrack`): its
     cycle and phase are written, cycle 0 renumbered to the scene's first as the run took it
-    (``first_cycle`` of the clock's numbers; ``counter_start`` is its counter), and
+    (``first_cycle`` of the clock's numbers; ``counter_start`` is its counter; its time, the
+    ``start_offset_s`` written, negative where it measured just before the scene's start), and
     ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones;
     ``origin_bus_s`` the scene's start on the bus's clock, where the run knew it: the log's
     first cycles are numbered from it by their bus times, as live (`Checker.anchor`);
@@ -1283,18 +1284,19 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     from ._version import __version__
 
     c = radar.radar_clock
+    start_offset_s = c.start_offset_s
     if clock is not None:
-        # The scene's first cycle may lie within the clock's uncertainty before its start (it
-        # may have measured at it): at the start, then.
-        c = replace(c, cycle_s=clock.cycle_s,
-                    start_offset_s=max(0.0, float(clock.time_of(np.array([first_cycle]))[0])))
+        c = replace(c, cycle_s=clock.cycle_s)
+        # Signed: the scene's first cycle may lie within the clock's uncertainty before its
+        # start (it may have measured at it), and a re-check times the cycles from there too.
+        start_offset_s = float(clock.time_of(np.array([first_cycle]))[0])
     path = Path(str(log) + LOG_SIDECAR_SUFFIX)
     data = {
         "rts_scenario_log": 1, "version": __version__, "scene": scene.name,
         "variant": scene.variant, "parameters": scene.parameters,
         "frames": scene.n_frames, "frame_rate_hz": scene.frame_rate_hz,
         "radar": radar.name,
-        "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,
+        "clock": {"cycle_s": c.cycle_s, "start_offset_s": start_offset_s,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
                   "counter_start": c.counter_start if counter_start is None
                   else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s,

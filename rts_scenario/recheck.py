@@ -194,6 +194,30 @@ class RecheckResult:
     alignment: Alignment
 
 
+@dataclass(frozen=True)
+class RecordedClock(RadarClock):
+    """The radar's clock a recorded run ended with (its sidecar's ``clock``).
+
+    Its cycle 0 is the scene's first as the run took it, measured at ``start_offset_s``:
+    negative where the run took a cycle measured within its clock's uncertainty before the
+    scene's start as the scene's first (it may have measured at the start itself). Sidecars of
+    older versions kept that time clamped at 0.
+    """
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.start_offset_s) and self.start_offset_s > -self.cycle_s):
+            raise ValueError(f"clock.start_offset_s: must lie within a cycle before the scene's "
+                             f"start, got {self.start_offset_s!r}")
+        RadarClock(cycle_s=self.cycle_s, start_offset_s=max(0.0, self.start_offset_s),
+                   latency_s=self.latency_s, jitter_s=self.jitter_s,
+                   counter_start=self.counter_start)
+
+    @property
+    def start_tolerance_s(self) -> float:
+        """How far before the scene's start its first cycle lies: cycle 0 is the first."""
+        return max(0.0, -self.start_offset_s)
+
+
 @dataclass
 class _LoggedCycle:
     detections: Detections
@@ -221,7 +245,9 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             "type": "object",
             "required": ["cycle_s", "start_offset_s", "latency_s", "jitter_s", "counter_start"],
             "properties": {
-                "cycle_s": _number(exclusiveMinimum=0), "start_offset_s": _number(minimum=0),
+                "cycle_s": _number(exclusiveMinimum=0),
+                # Signed (older versions wrote it clamped at 0): within a cycle of the start.
+                "start_offset_s": _number(),
                 "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
                 "cycles": {"type": ["integer", "null"], "minimum": 0},
@@ -972,12 +998,17 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"{_counter_words(receiver_mapping)} counts (allowed: 0 to "
                            f"{modulus - 1}, or null); not what `rts-scenario run --record` "
                            f"writes for this mapping")
+        if not float(c["start_offset_s"]) > -float(c["cycle_s"]):
+            raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.start_offset_s: "
+                           f"{c['start_offset_s']:g} s, a cycle or more before the scene's start "
+                           f"(allowed: above -{c['cycle_s']:g}: the scene's first cycle, measured "
+                           f"at most within the run's tolerance before it); not what "
+                           f"`rts-scenario run --record` writes")
         try:
-            clock = RadarClock(cycle_s=float(c["cycle_s"]),
-                               start_offset_s=float(c["start_offset_s"]),
-                               latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
-                               counter_start=None if c["counter_start"] is None
-                               else int(c["counter_start"]))
+            clock: RadarClock = RecordedClock(
+                cycle_s=float(c["cycle_s"]), start_offset_s=float(c["start_offset_s"]),
+                latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
+                counter_start=None if c["counter_start"] is None else int(c["counter_start"]))
         except ValueError as exc:  # values the schema allows one by one, not together
             raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: {exc} (not what `rts-scenario run "
                            f"--record` writes)") from None
@@ -1248,7 +1279,8 @@ def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,
     """
     if cycles is None:  # a sidecar from a version that did not keep it
         return
-    expected = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
+    expected = (len(clock.cycles_between(min(0.0, clock.start_offset_s), scene.duration_s)[0])
+                if scene.n_frames else 0)
     if abs(cycles - expected) > 1:
         raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.cycles: {cycles}, but cycles of "
                        f"{clock.cycle_s * 1e3:.6g} ms from {clock.start_offset_s:.6g} s put "
@@ -1510,5 +1542,6 @@ def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None,
 
 
 __all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "OffsetEstimate", "RecheckResult",
+           "RecordedClock",
            "check_log", "check_log_file", "estimate_offset", "log_variant", "read_cycles",
            "read_sidecar"]

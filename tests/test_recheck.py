@@ -293,7 +293,8 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"clock\.latency_s: -0\.05 is less than the minimum of 0"),
     (lambda d: {k: v for k, v in d.items() if k != "clock"}, r"\(the document\): 'clock' is a"),
     (lambda d: {**d, "clock": {**d["clock"], "start_offset_s": -1.0}},
-     r"clock\.start_offset_s: -1\.0 is less than the minimum of 0"),
+     r"clock\.start_offset_s: -1 s, a cycle or more before the scene's start \(allowed: "
+     r"above -0\.05"),
     (lambda d: {**d, "clock": {**d["clock"], "jitter_s": 5.0}},
      r"clock\.jitter_s: must not exceed latency_s \(0\), got 5"),
     (lambda d: {**d, "method": "bogus"},
@@ -912,6 +913,53 @@ def test_cycles_from_before_the_scene_are_counted_alike_live_and_re_checked(tmp_
     assert live.frames["before_scene"] == 3 and live.frames["total"] == 240
     assert (live.frames["late"], live.frames["after_scene"]) == (0, 0)
     assert again.report.frames == live.frames
+
+
+def test_a_free_radar_whose_first_cycle_measured_just_before_the_scene_re_checks_on_its_clock(
+        tmp_path):
+    # A radar running free whose messages reach the bus 0.2 ms sooner after it measured than
+    # its profile's latency says: its phase from the bus puts the scene's first cycle 0.2 ms
+    # before the scene's start, within three standard errors of the phase (0.45 ms): it is
+    # the scene's first, measured at -0.2 ms. The sidecar keeps that phase, signed, so the
+    # re-check times every cycle where the run did.
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                        counter_start="auto")
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml", {**QUIET, "radar.profile": radar})
+    log = tmp_path / "free.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.05, latency_s=0.13, counter_start=100)
+        publisher = pipeline._publisher
+
+        def stamp(cycles):
+            t = np.array([c.t_s for c in cycles])
+            publisher.publish_many(cycles, pipeline._bus_origin_s + t + 0.13 - 0.0002)
+
+        pipeline.output._sink = stamp
+        live = pipeline.run(scene).report
+    assert live.radar_clock["start_from"] == "bus"
+    assert live.radar_clock["start_offset_s"] == pytest.approx(-0.0002, abs=2e-5)
+    assert live.frames["total"] == 240 and live.frames["before_scene"] == 0
+    sidecar = json.loads(Path(str(log) + ".rts.json").read_text())
+    assert sidecar["clock"]["start_offset_s"] == pytest.approx(-0.0002, abs=2e-5)
+    again = check_log(scene, log).report
+    for key in ("counter_start", "cycle_s", "start_offset_s"):
+        assert again.radar_clock[key] == pytest.approx(live.radar_clock[key], abs=1e-6), key
+    assert again.frames == live.frames and again.reasons == live.reasons
+    # A sidecar of an older version kept the phase clamped at the scene's start: read as before.
+    sidecar["clock"]["start_offset_s"] = 0.0
+    (tmp_path / "old").mkdir()
+    old = check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar))).report
+    assert old.radar_clock["start_offset_s"] == 0.0
+    assert old.frames["total"] == 240 and old.passed == live.passed
+    # A phase more than a cycle before the scene's start is no scene's first cycle's.
+    sidecar["clock"]["start_offset_s"] = -0.06
+    with pytest.raises(LogError, match=r"clock.start_offset_s: -0.06 s, a cycle or more before "
+                                       r"the scene's start \(allowed: above -0.05: "):
+        check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
 
 
 def run_scattered(tmp_path, radar_cycle_s, step_s):
