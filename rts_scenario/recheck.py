@@ -48,6 +48,7 @@ from .pipeline import (
     LOG_SIDECAR_SUFFIX,
     RECEIPT_OFF_S,
     CycleTruth,
+    after_scene_until_s,
     ambiguity_window_s,
     lag_dict,
 )
@@ -1422,9 +1423,18 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     checker.settle()
     # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) or
     # before its first are counted as the run counted them; they were never handed to the
-    # checker.
-    checker.frames["after_scene"] += int((rel >= total).sum())
+    # checker. After it, those within the window the run counts (`after_scene_until_s`): a
+    # recorder goes on after the run stopped listening.
+    until_s = after_scene_until_s(scene.duration_s, clock.cycle_s)
+    end = max(total, clock.first_at(until_s))
+    checker.frames["after_scene"] += int(((rel >= total) & (rel < end)).sum())
     checker.frames["before_scene"] += int((rel < 0).sum())
+    later = int((rel >= end).sum())
+    if later:
+        alignment.notes.append(
+            f"{later} cycles in the log were measured after the scene's end and the "
+            f"{(until_s - scene.duration_s) * 1e3:.0f} ms after it in which cycles are counted "
+            f"(after_scene; the recorder went on after the run stopped listening): not counted")
     if played is not None:
         alignment.statuses = "recorded"
     elif sidecar is not None and sidecar.get("status_sha256"):
