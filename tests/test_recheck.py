@@ -1138,3 +1138,113 @@ def test_a_damaged_log_is_one_error_line_without_a_traceback(tmp_path, suffix):
     assert "Traceback" not in err and "Exception ignored" not in err, err
     (line,) = err.strip().splitlines()
     assert line.startswith(f"error: --log {damaged}: ")
+
+
+def _mid_line_cut(log: Path, fraction: float) -> tuple[bytes, int]:
+    """The log's bytes cut in the middle of the line at ``fraction`` of it (not its last), and
+    that line's number (from 1)."""
+    data = log.read_bytes()
+    lines = data.splitlines(keepends=True)
+    at = min(int(len(lines) * fraction), len(lines) - 2)
+    start = sum(len(line) for line in lines[:at])
+    return data[:start + len(lines[at].rstrip()) // 2], at + 1
+
+
+@pytest.mark.parametrize("suffix", [".log", ".trc", ".asc", ".csv"])
+def test_a_text_log_cut_in_the_middle_of_a_line_fails_its_re_check_naming_the_line(
+        tmp_path, capsys, suffix):
+    # A recorder killed mid-write, a copy cut short: the last line is written in part.
+    # python-can reads it as it is (a data field cut short, its half byte made up), fails on
+    # it, or skips it; the re-check reads the complete lines and fails naming the line.
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"  # 7.5 s: 150 cycles
+    log = tmp_path / f"run{suffix}"
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    capsys.readouterr()
+    data, line = _mid_line_cut(log, 0.6)
+    cut = tmp_path / f"cut{suffix}"
+    cut.write_bytes(data)
+    shutil.copy(str(log) + ".rts.json", str(cut) + ".rts.json")
+    # The reference: the complete lines alone, as python-can reads them.
+    whole = tmp_path / f"whole{suffix}"
+    whole.write_bytes(data[:data.rfind(b"\n") + 1])
+    kept = list(can.LogReader(str(whole)))
+    headers = sum(1 for m in kept if m.arbitration_id == 0x100)
+    assert 0 < headers < 150
+    out_json = tmp_path / "check.json"
+    code = cli.main(["check", str(scene), "--log", str(cut), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 1 and "Traceback" not in err, out + err
+    report = json.loads(out_json.read_text())
+    lacks = " (and the 'End TriggerBlock' line an ASC log ends with)" if suffix == ".asc" else ""
+    expected = (f"the log {cut} was cut short: its line {line} ends without a line end{lacks}, "
+                f"{len(data) - len(whole.read_bytes())} bytes of it written: not read; it ends at "
+                f"log time {kept[-1].timestamp:.6f} s (its last message read): what the radar "
+                f"sent after it is not in it")
+    assert expected in report["reasons"], report["reasons"]
+    assert expected in out
+    assert report["alignment"]["log_cut_short"] == {
+        "header_bytes": None, "file_bytes": len(data), "line": line,
+        "last_message_t_s": kept[-1].timestamp}
+    # The cycles the complete lines hold are judged, the rest missing: none read from half a
+    # line.
+    frames = report["frames"]
+    assert frames["total"] == 150 and frames["missing"] == 150 - headers
+    assert frames["received"] + frames["incomplete"] == headers
+    assert report["bus"]["messages"] == len(kept)
+    # The whole log has nothing of the kind.
+    assert cli.main(["check", str(scene), "--log", str(log), "--json", str(out_json)]) == 0
+    capsys.readouterr()
+    assert json.loads(out_json.read_text())["alignment"]["log_cut_short"] is None
+
+
+@pytest.mark.parametrize("suffix", [".log", ".trc"])
+def test_a_text_log_cut_after_the_cycles_counted_is_noted_and_re_checks_to_the_live_verdict(
+        tmp_path, suffix):
+    # The radar went on for 10 cycles after the scene's end (12 s, cycles of 50 ms from 0):
+    # 5 of them (12.00 s to 12.20 s) within a cycle and 0.2 s of the end are counted, live
+    # and re-checked. A log cut in its last line, after those, lacks nothing counted: noted.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / f"run{suffix}"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        sink = pipeline.output._sink
+
+        def going_on(cycles):
+            if cycles and cycles[-1].cycle == 239:
+                cycles = list(cycles) + [Detections.empty(240 + k, 12.0 + 0.05 * k, ())
+                                         for k in range(10)]
+            sink(cycles)
+
+        pipeline.output._sink = going_on
+        live = pipeline.run(scene).report
+    assert live.passed and live.frames["after_scene"] == 5
+    again = check_log(scene, log)
+    assert again.report.frames == live.frames and again.report.passed
+    data = log.read_bytes()
+    cut = tmp_path / f"cut{suffix}"
+    cut.write_bytes(data[:len(data.rstrip()) - 3])
+    shutil.copy(str(log) + ".rts.json", str(cut) + ".rts.json")
+    line = data.rstrip().count(b"\n") + 1
+    result = check_log(scene, cut)
+    assert result.report.passed, result.report.reasons
+    assert result.report.frames == live.frames
+    assert result.alignment.log_cut_short["line"] == line
+    assert any(note.startswith(f"the log {cut} was cut short: its line {line} ends without a "
+                               f"line end") and note.endswith("nothing counted is lost")
+               for note in result.alignment.notes), result.alignment.notes
+
+
+@pytest.mark.parametrize("suffix", [".log", ".csv", ".trc"])
+def test_a_damaged_line_inside_a_text_log_is_one_error_naming_it(tmp_path, capsys, suffix):
+    # python-can's readers fail on it, or skip it with a warning (TRC): either way a message
+    # is lost in the middle of the log, which is not read as a shorter one.
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / f"run{suffix}"
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    capsys.readouterr()
+    lines = log.read_bytes().splitlines(keepends=True)
+    lines[99] = b"(garbage\n"
+    log.write_bytes(b"".join(lines))
+    assert cli.main(["check", str(scene), "--log", str(log)]) == 2
+    err = capsys.readouterr().err
+    (said,) = err.strip().splitlines()
+    assert said.startswith(f"error: --log {log}: line 100: cannot read: "), said
