@@ -674,7 +674,7 @@ def _text_end(path: Path) -> _TextEnd:
             start = max(0, end - _TAIL_CHUNK_BYTES)
             f.seek(start)
             chunk = f.read(end - start)
-            at = max(chunk.rfind(b"\n"), chunk.rfind(b"\r"))
+            at = chunk.rfind(b"\n")  # a line end, alone or after a carriage return
             if at >= 0:
                 end = start + at + 1
                 break
@@ -687,7 +687,7 @@ def _text_end(path: Path) -> _TextEnd:
         lines, left = 0, end
         while left > 0:  # the line's number: the line ends before it, a chunk at a time
             chunk = f.read(min(left, 1 << 20))
-            lines += chunk.count(b"\n") + (chunk.count(b"\r") - chunk.count(b"\r\n"))
+            lines += chunk.count(b"\n")
             left -= len(chunk)
         return _TextEnd(end, lines + 1, size - end)
 
