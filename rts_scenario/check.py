@@ -256,6 +256,10 @@ class Checker:
         self.counter_start = counter_start
         self._started = False
         self._scene_first = 0  # the scene's first cycle: those before it were measured before
+        # The first cycle after the scene not counted in ``frames["after_scene"]`` (None: all
+        # are): those measured later than the window after the scene's end
+        # (`rts_scenario.pipeline.after_scene_until_s`) depend on how long a bus was listened to.
+        self.after_scene_end: int | None = None
         self.record = record
         n = len(names)
         self._expected = [expectations.expected_limits | (expected_limits[k] if expected_limits
@@ -396,10 +400,13 @@ class Checker:
         if before_frame is None:
             # Every cycle of the scene is settled: the rest were measured before its start
             # (taken before the scene's first cycle was known), after its end (a radar keeps
-            # measuring what the RTS holds) or carry a counter the scene does not have.
+            # measuring what the RTS holds) or carry a counter the scene does not have. Of
+            # those after it, the ones within the window after its end (`after_scene_end`).
+            end = self.after_scene_end
             before = sum(1 for f in self._cycles if f < self._scene_first)
             self.frames["before_scene"] += before
-            self.frames["after_scene"] += len(self._cycles) - before
+            self.frames["after_scene"] += sum(1 for f in self._cycles if f >= self._scene_first
+                                              and (end is None or f < end))
             self._cycles.clear()
 
     def _check_block(self, block: _Block) -> None:

@@ -406,12 +406,14 @@ class Pipeline:
         assert self.output is not None
         self.output.write(schedule)
 
-    def receive(self, *, final: bool = False) -> list[Detections]:
+    def receive(self, *, final: bool = False,
+                until_monotonic_s: float | None = None) -> list[Detections]:
         """Return the radar cycles received so far.
 
         With the simulated radar, waits until every message it published has arrived. For a
         real radar, returns what is there, except at the end (``final``): then waits the radar
-        clock's latency, jitter and one cycle plus `QUIET_S` (at most ``drain_s``) and hands on
+        clock's latency, jitter and one cycle plus `QUIET_S`, and until ``until_monotonic_s``
+        on the host's monotonic clock where given (at most ``drain_s`` in all), and hands on
         the cycles still being assembled, as incomplete where parts are missing.
         """
         start = time.perf_counter()
@@ -428,7 +430,8 @@ class Pipeline:
                 break
             if expected is None and not final:
                 break
-            if expected is None and time.perf_counter() - start > settle_s:
+            if expected is None and time.perf_counter() - start > settle_s and (
+                    until_monotonic_s is None or monotonic_s() >= until_monotonic_s):
                 break
             time.sleep(0.002)
         return self.receiver.flush() if final else self.receiver.pop()
@@ -936,7 +939,14 @@ class Pipeline:
             mark = timer.add("check_s", mark)
             if progress is not None:
                 progress(int(frames[-1]) + 1, n_frames)
-        last = self._unstep(self.receive(final=True), scene.duration_s, track)
+        # The radar's cycles after the scene's end, as far as they are counted
+        # (`after_scene_until_s`), reach the host by its latency, jitter and `QUIET_S` later.
+        origin_mono = self._origin_monotonic_s()
+        until = None if origin_mono is None else (
+            origin_mono + after_scene_until_s(scene.duration_s, track.cycle_s)
+            + clock.latency_s + clock.jitter_s + QUIET_S)
+        last = self._unstep(self.receive(final=True, until_monotonic_s=until), scene.duration_s,
+                            track)
         self._follow_bus_clock(last, scene.duration_s, track, truths)
         if checker.counter_start is None and last:
             self._learn_counter_start(checker, last)
@@ -949,6 +959,10 @@ class Pipeline:
         scene_first = truths.first_cycle or 0
         n_cycles = (truths.end_cycle or scene_first) - scene_first
         mark = timer.add("kinematics_s", mark)
+        # Cycles after the scene are counted as far as a re-check of the log counts them.
+        checker.after_scene_end = max(
+            scene_first + n_cycles,
+            track.first_at(after_scene_until_s(scene.duration_s, track.cycle_s)))
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
         if self._publisher is not None:
@@ -1238,6 +1252,18 @@ def lag_dict(checker: Checker, coupling_s: float, early_s: float) -> dict[str, f
             "detection_lag_coupling_s": coupling_s}
 
 
+def after_scene_until_s(duration_s: float, cycle_s: float) -> float:
+    """Return the scene time up to which cycles after the scene are counted (``after_scene``).
+
+    A radar keeps measuring what the RTS holds after the scene's end, as long as it runs: how
+    many of those cycles a run receives depends on how long it listens, and a recorder may go
+    on after it stopped. Counted are those measured within one cycle (``cycle_s``, the
+    radar's) and `QUIET_S` after the end, by the radar's clock: the run listens until they are
+    in, and a re-check of its log counts the same ones.
+    """
+    return float(duration_s) + float(cycle_s) + QUIET_S
+
+
 def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:
     """Return how long after a frame change a radar cycle may still show the frame before.
 
@@ -1273,7 +1299,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     (`Playback.to_dict`) and ``send_lateness`` when each frame went out
     (`Playback.send_lateness`). ``clock`` is the clock the run ended with (`ClockTrack`): its
     cycle and phase are written, cycle 0 renumbered to the scene's first as the run took it
-    (``first_cycle`` of the clock's numbers; ``counter_start`` is its counter), and
+    (``first_cycle`` of the clock's numbers; ``counter_start`` is its counter; its time, the
+    ``start_offset_s`` written, negative where it measured just before the scene's start), and
     ``cycles`` the number of cycles the run judged, so that a re-check judges the same ones;
     ``origin_bus_s`` the scene's start on the bus's clock, where the run knew it: the log's
     first cycles are numbered from it by their bus times, as live (`Checker.anchor`);
@@ -1293,18 +1320,19 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     from ._version import __version__
 
     c = radar.radar_clock
+    start_offset_s = c.start_offset_s
     if clock is not None:
-        # The scene's first cycle may lie within the clock's uncertainty before its start (it
-        # may have measured at it): at the start, then.
-        c = replace(c, cycle_s=clock.cycle_s,
-                    start_offset_s=max(0.0, float(clock.time_of(np.array([first_cycle]))[0])))
+        c = replace(c, cycle_s=clock.cycle_s)
+        # Signed: the scene's first cycle may lie within the clock's uncertainty before its
+        # start (it may have measured at it), and a re-check times the cycles from there too.
+        start_offset_s = float(clock.time_of(np.array([first_cycle]))[0])
     path = Path(str(log) + LOG_SIDECAR_SUFFIX)
     data = {
         "rts_scenario_log": 1, "version": __version__, "scene": scene.name,
         "variant": scene.variant, "parameters": scene.parameters,
         "frames": scene.n_frames, "frame_rate_hz": scene.frame_rate_hz,
         "radar": radar.name,
-        "clock": {"cycle_s": c.cycle_s, "start_offset_s": c.start_offset_s,
+        "clock": {"cycle_s": c.cycle_s, "start_offset_s": start_offset_s,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
                   "counter_start": c.counter_start if counter_start is None
                   else counter_start, "cycles": cycles, "origin_bus_s": origin_bus_s,
@@ -1354,4 +1382,5 @@ def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
 
 
 __all__ = ["BATCH_FRAMES", "LOG_SIDECAR_SUFFIX", "Pipeline", "RunOptions", "RunResult",
-           "CycleTruth", "ambiguity_window_s", "run_scene", "write_log_sidecar"]
+           "CycleTruth", "after_scene_until_s", "ambiguity_window_s", "run_scene",
+           "write_log_sidecar"]

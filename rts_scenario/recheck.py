@@ -22,7 +22,10 @@ from __future__ import annotations
 
 import gc
 import hashlib
+import io
 import json
+import locale
+import logging
 import sys
 from array import array
 from collections import Counter
@@ -48,6 +51,7 @@ from .pipeline import (
     LOG_SIDECAR_SUFFIX,
     RECEIPT_OFF_S,
     CycleTruth,
+    after_scene_until_s,
     ambiguity_window_s,
     lag_dict,
 )
@@ -194,6 +198,30 @@ class RecheckResult:
     alignment: Alignment
 
 
+@dataclass(frozen=True)
+class RecordedClock(RadarClock):
+    """The radar's clock a recorded run ended with (its sidecar's ``clock``).
+
+    Its cycle 0 is the scene's first as the run took it, measured at ``start_offset_s``:
+    negative where the run took a cycle measured within its clock's uncertainty before the
+    scene's start as the scene's first (it may have measured at the start itself). Sidecars of
+    older versions kept that time clamped at 0.
+    """
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.start_offset_s) and self.start_offset_s > -self.cycle_s):
+            raise ValueError(f"clock.start_offset_s: must lie within a cycle before the scene's "
+                             f"start, got {self.start_offset_s!r}")
+        RadarClock(cycle_s=self.cycle_s, start_offset_s=max(0.0, self.start_offset_s),
+                   latency_s=self.latency_s, jitter_s=self.jitter_s,
+                   counter_start=self.counter_start)
+
+    @property
+    def start_tolerance_s(self) -> float:
+        """How far before the scene's start its first cycle lies: cycle 0 is the first."""
+        return max(0.0, -self.start_offset_s)
+
+
 @dataclass
 class _LoggedCycle:
     detections: Detections
@@ -221,7 +249,9 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             "type": "object",
             "required": ["cycle_s", "start_offset_s", "latency_s", "jitter_s", "counter_start"],
             "properties": {
-                "cycle_s": _number(exclusiveMinimum=0), "start_offset_s": _number(minimum=0),
+                "cycle_s": _number(exclusiveMinimum=0),
+                # Signed (older versions wrote it clamped at 0): within a cycle of the start.
+                "start_offset_s": _number(),
                 "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
                 "cycles": {"type": ["integer", "null"], "minimum": 0},
@@ -612,6 +642,93 @@ _ASC_BEGIN = b"begin triggerblock"
 _ASC_HEAD_BYTES = 4096
 
 
+# Log formats of text lines, one message a line (python-can's readers by extension).
+TEXT_LOG_READERS: dict[str, type[can.io.generic.TextIOMessageReader]] = {
+    ".asc": can.ASCReader, ".csv": can.CSVReader, ".log": can.CanutilsLogReader,
+    ".trc": can.TRCReader}
+# How much of a text log's end is read at a time looking for its last line's end (bytes).
+_TAIL_CHUNK_BYTES = 65536
+
+
+@dataclass(frozen=True)
+class _TextEnd:
+    """Where a text log's complete lines end: a last line without its line end was cut."""
+
+    complete_bytes: int  # the file's bytes up to its last line end
+    cut_line: int | None  # the number (from 1) of the line cut in the middle; None: none was
+    cut_bytes: int  # the bytes of that line the file holds
+
+
+def _text_end(path: Path) -> _TextEnd:
+    """Find whether a text log's last line lacks its line end (written in part: cut short).
+
+    Every tool ends each line of a log with a line end; python-can's readers take a line
+    without one as it is (a data field cut in the middle of a byte as a shorter message, with
+    a made-up half byte), or fail on it. A last line of white space alone, or an ASC log's
+    ``End TriggerBlock`` without a line end, is complete.
+    """
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        end = size
+        while end > 0:  # back to the last line end, a chunk at a time
+            start = max(0, end - _TAIL_CHUNK_BYTES)
+            f.seek(start)
+            chunk = f.read(end - start)
+            at = chunk.rfind(b"\n")  # a line end, alone or after a carriage return
+            if at >= 0:
+                end = start + at + 1
+                break
+            end = start
+        f.seek(end)
+        partial = f.read(size - end).strip()
+        if not partial or (path.suffix.lower() == ".asc" and partial.lower() == _ASC_END):
+            return _TextEnd(size, None, 0)
+        f.seek(0)
+        lines, left = 0, end
+        while left > 0:  # the line's number: the line ends before it, a chunk at a time
+            chunk = f.read(min(left, 1 << 20))
+            lines += chunk.count(b"\n")
+            left -= len(chunk)
+        return _TextEnd(end, lines + 1, size - end)
+
+
+class _HeadBytes(io.RawIOBase):
+    """The first ``limit`` bytes of a binary file, as a raw stream."""
+
+    def __init__(self, f: io.BufferedReader, limit: int) -> None:
+        super().__init__()
+        self._f, self._left = f, int(limit)
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: Any) -> int:
+        n = min(len(buffer), self._left)
+        data = self._f.read(n) if n > 0 else b""
+        buffer[:len(data)] = data
+        self._left -= len(data)
+        return len(data)
+
+    def close(self) -> None:
+        self._f.close()
+        super().close()
+
+
+class _CountedLines(io.TextIOWrapper):
+    """A text log's complete lines (`_TextEnd`), counting those read (``lines``)."""
+
+    def __init__(self, path: Path, limit: int) -> None:
+        head = io.BufferedReader(_HeadBytes(path.open("rb"), limit))
+        # As python-can opens a text log: the locale's encoding, universal line ends.
+        super().__init__(head, encoding=locale.getpreferredencoding(False))
+        self.lines = 0
+
+    def __next__(self) -> str:  # type: ignore[override]  # text lines, as read
+        line = super().__next__()
+        self.lines += 1
+        return line
+
+
 def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | None:
     """Return how a log was cut short, where its format tells; None where it was not.
 
@@ -619,17 +736,30 @@ def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | N
     BLF's header gives the file's size (python-can's `BLFReader` reads it; a writer that was
     never closed left the 144 bytes of the header alone there); an ASC log that opened a
     trigger block (its header's ``Begin Triggerblock``) ends with an ``End TriggerBlock`` line
-    (either in any case; a log that opens none cannot tell). ``last_t_s``: the log's last
-    message's time, where it ends.
+    (either in any case; a log that opens none cannot tell). A text log (``.asc``, ``.csv``,
+    ``.log``, ``.trc``) whose last line lacks its line end was cut in the middle of writing it
+    (`_text_end`): that line is not read. ``last_t_s``: the log's last message's time, where
+    it ends.
 
-    Returns ``{"header_bytes", "file_bytes", "last_message_t_s", "why"}`` (``header_bytes``
-    None where the format keeps no size; ``why``: one line for people).
+    Returns ``{"header_bytes", "file_bytes", "line", "last_message_t_s", "why"}``
+    (``header_bytes`` None where the format keeps no size; ``line`` the line cut in the
+    middle, None where none was; ``why``: one line for people).
     """
     path = Path(log)
     size = path.stat().st_size
     suffix = path.suffix.lower()
     ends = ("it holds no message" if last_t_s is None
             else f"it ends at log time {last_t_s:.6f} s (its last message read)")
+    if suffix in TEXT_LOG_READERS:
+        text = _text_end(path)
+        if text.cut_line is not None:
+            lacks = (" (and the 'End TriggerBlock' line an ASC log ends with)"
+                     if suffix == ".asc" else "")
+            why = (f"the log {log} was cut short: its line {text.cut_line} ends without a "
+                   f"line end{lacks}, {text.cut_bytes} bytes of it written: not read; {ends}: "
+                   f"what the radar sent after it is not in it")
+            return {"header_bytes": None, "file_bytes": size, "line": text.cut_line,
+                    "last_message_t_s": last_t_s, "why": why}
     if suffix == ".blf":
         with _quiet_unraisable():
             try:
@@ -643,8 +773,8 @@ def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | N
                  if stated == _BLF_OPEN_HEADER_BYTES else "")
         why = (f"the log {log} was cut short: its header says {stated} bytes{never}, the file "
                f"holds {size}; {ends}: what the radar sent after it is not in it")
-        return {"header_bytes": stated, "file_bytes": size, "last_message_t_s": last_t_s,
-                "why": why}
+        return {"header_bytes": stated, "file_bytes": size, "line": None,
+                "last_message_t_s": last_t_s, "why": why}
     if suffix == ".asc":
         with path.open("rb") as f:
             head = f.read(_ASC_HEAD_BYTES).lower()
@@ -656,39 +786,94 @@ def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | N
             return None
         why = (f"the log {log} was cut short: it lacks the 'End TriggerBlock' line an ASC log "
                f"ends with; {ends}: what the radar sent after it is not in it")
-        return {"header_bytes": None, "file_bytes": size, "last_message_t_s": last_t_s,
-                "why": why}
+        return {"header_bytes": None, "file_bytes": size, "line": None,
+                "last_message_t_s": last_t_s, "why": why}
     return None
 
 
 def _messages(path: Path) -> Iterator[can.Message]:
-    """Yield the log's messages; a file python-can cannot parse is a `LogError`."""
+    """Yield the log's messages; a file python-can cannot parse is a `LogError`.
+
+    A text log's lines are read up to its last line end: a last line without one was cut in
+    the middle of writing it (`log_cut_short` says so), and a line python-can cannot parse is
+    named by its number.
+    """
     problem = None
+    text: _CountedLines | None = None
+    reader: can.io.generic.MessageReader
     with _quiet_unraisable():
         try:
-            reader = can.LogReader(str(path))
+            suffix = path.suffix.lower()
+            if suffix in TEXT_LOG_READERS:
+                text = _CountedLines(path, _text_end(path).complete_bytes)
+                reader = TEXT_LOG_READERS[suffix](file=text)
+            else:
+                reader = can.LogReader(str(path))
         except ImportError as exc:
             problem = (f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "
                        f"'rts-scenario[mf4]')")
         except Exception as exc:  # noqa: BLE001 - each format fails in its own way
-            problem = f"--log {path}: cannot read: {type(exc).__name__}: {exc}"
+            where = f"line {text.lines}: " if text is not None and text.lines else ""
+            problem = f"--log {path}: {where}cannot read: {type(exc).__name__}: {exc}"
+            if text is not None:
+                text.close()
         if problem is not None:
             # The reader it left half made goes now, while its clean-up's errors are held back
             # (asammdf's fails on a file it could not open, with a traceback).
             gc.collect()
     if problem is not None:
         raise LogError(problem)
-    with reader:
+    with reader, _skipped_lines(text) as skipped:
         iterator = iter(reader)
         while True:
             try:
                 msg = next(iterator)
             except StopIteration:
-                return
+                msg = None
             except Exception as exc:  # noqa: BLE001 - a damaged log, in the format's words
-                raise LogError(f"--log {path}: cannot read: {type(exc).__name__}: "
+                where = f"line {text.lines}: " if text is not None else ""
+                raise LogError(f"--log {path}: {where}cannot read: {type(exc).__name__}: "
                                f"{exc}") from None
+            if skipped:
+                # A line python-can's reader skipped with a warning (its TRC reader, on a
+                # line of too few columns): a message lost, not a shorter log.
+                line, said = skipped[0]
+                raise LogError(f"--log {path}: line {line}: cannot read: python-can's reader "
+                               f"skipped it ({said})")
+            if msg is None:
+                return
             yield msg
+
+
+class _SkippedLines(logging.Handler):
+    """Collects the lines python-can's TRC reader skips (``(line, its words)``)."""
+
+    def __init__(self, text: _CountedLines) -> None:
+        super().__init__(logging.WARNING)
+        self.text = text
+        self.lines: list[tuple[int, str]] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.getMessage().startswith("TRCReader: Failed to parse"):
+            self.lines.append((self.text.lines, record.getMessage()))
+
+
+@contextmanager
+def _skipped_lines(text: _CountedLines | None) -> Iterator[list[tuple[int, str]]]:
+    """Collect, while reading ``text``, the lines python-can's TRC reader skips."""
+    if text is None:
+        yield []
+        return
+    logger = logging.getLogger("can.io.trc")
+    handler, level = _SkippedLines(text), logger.level
+    logger.addHandler(handler)
+    if not logger.isEnabledFor(logging.WARNING):
+        logger.setLevel(logging.WARNING)
+    try:
+        yield handler.lines
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
 
 
 @contextmanager
@@ -972,12 +1157,17 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"{_counter_words(receiver_mapping)} counts (allowed: 0 to "
                            f"{modulus - 1}, or null); not what `rts-scenario run --record` "
                            f"writes for this mapping")
+        if not float(c["start_offset_s"]) > -float(c["cycle_s"]):
+            raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.start_offset_s: "
+                           f"{c['start_offset_s']:g} s, a cycle or more before the scene's start "
+                           f"(allowed: above -{c['cycle_s']:g}: the scene's first cycle, measured "
+                           f"at most within the run's tolerance before it); not what "
+                           f"`rts-scenario run --record` writes")
         try:
-            clock = RadarClock(cycle_s=float(c["cycle_s"]),
-                               start_offset_s=float(c["start_offset_s"]),
-                               latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
-                               counter_start=None if c["counter_start"] is None
-                               else int(c["counter_start"]))
+            clock: RadarClock = RecordedClock(
+                cycle_s=float(c["cycle_s"]), start_offset_s=float(c["start_offset_s"]),
+                latency_s=float(c["latency_s"]), jitter_s=float(c["jitter_s"]),
+                counter_start=None if c["counter_start"] is None else int(c["counter_start"]))
         except ValueError as exc:  # values the schema allows one by one, not together
             raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: {exc} (not what `rts-scenario run "
                            f"--record` writes)") from None
@@ -1094,8 +1284,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     alignment.log_cut_short = cut_short
     if channel_note:
         alignment.notes.append(channel_note)
-    result = _check(scene, log, can_mapping, counters, index.bus_t_s, clock, modulus, method,
-                    batch_frames, bus, alignment, sidecar, channel, shifts)
+    result, ends_early = _check(scene, log, can_mapping, counters, index.bus_t_s, clock,
+                                modulus, method, batch_frames, bus, alignment, sidecar, channel,
+                                shifts)
     half_window_s = 0.5 * ambiguity_window_s(scene.radar, scene.rig)
     if jump is not None and sidecar is None and abs(jump[1]) > half_window_s:
         # Aligned by its timestamps, the cycles after the jump are judged that far off.
@@ -1118,11 +1309,17 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if unused_method:
         alignment.notes.append(f"--method {method} is not used: the sidecar keeps the statuses "
                                f"the RTS played (with {(sidecar or {}).get('method')})")
-    if cut_short is not None:
-        # Its missing cycles may not all show (a log without a sidecar is judged as long as
-        # it is): the log itself fails.
+    if cut_short is not None and ends_early:
+        # Its missing cycles may not all show (a cycle's tail, those after the scene counted
+        # as the run counts them): the log itself fails.
         result.reasons.append(cut_short["why"])
         result.passed = False
+    elif cut_short is not None:
+        # Its last cycle read was measured after every cycle counted: what it lacks counts
+        # for nothing.
+        alignment.notes.append(f"{cut_short['why']}; its last cycle read was measured after "
+                               f"the scene and the cycles counted after it, so nothing counted "
+                               f"is lost")
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)
@@ -1248,7 +1445,8 @@ def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,
     """
     if cycles is None:  # a sidecar from a version that did not keep it
         return
-    expected = len(clock.cycles_between(0.0, scene.duration_s)[0]) if scene.n_frames else 0
+    expected = (len(clock.cycles_between(min(0.0, clock.start_offset_s), scene.duration_s)[0])
+                if scene.n_frames else 0)
     if abs(cycles - expected) > 1:
         raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: clock.cycles: {cycles}, but cycles of "
                        f"{clock.cycle_s * 1e3:.6g} ms from {clock.start_offset_s:.6g} s put "
@@ -1327,8 +1525,13 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
            bus_t_s: FloatArray, clock: RadarClock,
            modulus: int, method: str, batch_frames: int | None, bus: dict[str, int],
            alignment: Alignment, sidecar: dict[str, Any] | None,
-           channel: str | None = None, shifts: FloatArray | None = None) -> Report:
-    """Check the log's cycles (``counters`` in log order, their bus times) batch by batch."""
+           channel: str | None = None, shifts: FloatArray | None = None
+           ) -> tuple[Report, bool]:
+    """Check the log's cycles (``counters`` in log order, their bus times) batch by batch.
+
+    Returns the report and whether the log ends before the cycles counted end (the scene's
+    and those after it counted as ``after_scene``): what a log cut short lacks may count.
+    """
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
                       expected_limits=[t.expected_limits for t in scene.targets],
@@ -1390,9 +1593,18 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     checker.settle()
     # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) or
     # before its first are counted as the run counted them; they were never handed to the
-    # checker.
-    checker.frames["after_scene"] += int((rel >= total).sum())
+    # checker. After it, those within the window the run counts (`after_scene_until_s`): a
+    # recorder goes on after the run stopped listening.
+    until_s = after_scene_until_s(scene.duration_s, clock.cycle_s)
+    end = max(total, clock.first_at(until_s))
+    checker.frames["after_scene"] += int(((rel >= total) & (rel < end)).sum())
     checker.frames["before_scene"] += int((rel < 0).sum())
+    later = int((rel >= end).sum())
+    if later:
+        alignment.notes.append(
+            f"{later} cycles in the log were measured after the scene's end and the "
+            f"{(until_s - scene.duration_s) * 1e3:.0f} ms after it in which cycles are counted "
+            f"(after_scene; the recorder went on after the run stopped listening): not counted")
     if played is not None:
         alignment.statuses = "recorded"
     elif sidecar is not None and sidecar.get("status_sha256"):
@@ -1407,7 +1619,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         report.reasons.append(lagged)
         report.passed = False
     report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s, truths.early_s))
-    return report
+    return report, not (rel.size and rel[-1] >= end)
 
 
 def _status_record(scene: Scenario, sidecar: dict[str, Any] | None,
@@ -1510,5 +1722,6 @@ def _send_lateness(scene: Scenario, sidecar: dict[str, Any] | None,
 
 
 __all__ = ["LOG_SUFFIXES", "Alignment", "LogError", "OffsetEstimate", "RecheckResult",
+           "RecordedClock",
            "check_log", "check_log_file", "estimate_offset", "log_variant", "read_cycles",
            "read_sidecar"]

@@ -713,7 +713,7 @@ def test_a_blf_cut_short_fails_its_check_saying_where_it_ends(recorded, tmp_path
                 f"(its last message read): what the radar sent after it is not in it")
     assert expected in report["reasons"], report["reasons"]
     assert report["alignment"]["log_cut_short"] == {
-        "header_bytes": len(whole), "file_bytes": len(whole) * 6 // 10,
+        "header_bytes": len(whole), "file_bytes": len(whole) * 6 // 10, "line": None,
         "last_message_t_s": kept[-1].timestamp}
     assert expected in out
     # The whole log has nothing of the kind.
@@ -822,6 +822,12 @@ ASC_MESSAGES = (" 0.010000 1  101             Rx   d 8 13 01 50 46 8D BD D9 F4\n
     (ASC_HEAD + "Begin Triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES
      + "End TriggerBlock\nBegin Triggerblock Fri Nov 27 02:31:00.000 pm 2026\n"
      + ASC_MESSAGES, True),
+    # The end line written without a line end (some tools): complete.
+    (ASC_HEAD + "Begin Triggerblock Fri Nov 27 02:30:00.000 pm 2026\n" + ASC_MESSAGES
+     + "End TriggerBlock", False),
+    # No trigger block, its last message line written in part (python-can reads 4 of its 8
+    # data bytes): cut short.
+    (ASC_HEAD + "no internal events logged\n" + ASC_MESSAGES[:-13], True),
 ])
 def test_an_asc_log_is_cut_short_where_a_trigger_block_it_opened_never_ends(tmp_path, text,
                                                                              cut):

@@ -293,7 +293,8 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"clock\.latency_s: -0\.05 is less than the minimum of 0"),
     (lambda d: {k: v for k, v in d.items() if k != "clock"}, r"\(the document\): 'clock' is a"),
     (lambda d: {**d, "clock": {**d["clock"], "start_offset_s": -1.0}},
-     r"clock\.start_offset_s: -1\.0 is less than the minimum of 0"),
+     r"clock\.start_offset_s: -1 s, a cycle or more before the scene's start \(allowed: "
+     r"above -0\.05"),
     (lambda d: {**d, "clock": {**d["clock"], "jitter_s": 5.0}},
      r"clock\.jitter_s: must not exceed latency_s \(0\), got 5"),
     (lambda d: {**d, "method": "bogus"},
@@ -914,6 +915,53 @@ def test_cycles_from_before_the_scene_are_counted_alike_live_and_re_checked(tmp_
     assert again.report.frames == live.frames
 
 
+def test_a_free_radar_whose_first_cycle_measured_just_before_the_scene_re_checks_on_its_clock(
+        tmp_path):
+    # A radar running free whose messages reach the bus 0.2 ms sooner after it measured than
+    # its profile's latency says: its phase from the bus puts the scene's first cycle 0.2 ms
+    # before the scene's start, within three standard errors of the phase (0.45 ms): it is
+    # the scene's first, measured at -0.2 ms. The sidecar keeps that phase, signed, so the
+    # re-check times every cycle where the run did.
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.004,
+                        counter_start="auto")
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml", {**QUIET, "radar.profile": radar})
+    log = tmp_path / "free.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.05, latency_s=0.13, counter_start=100)
+        publisher = pipeline._publisher
+
+        def stamp(cycles):
+            t = np.array([c.t_s for c in cycles])
+            publisher.publish_many(cycles, pipeline._bus_origin_s + t + 0.13 - 0.0002)
+
+        pipeline.output._sink = stamp
+        live = pipeline.run(scene).report
+    assert live.radar_clock["start_from"] == "bus"
+    assert live.radar_clock["start_offset_s"] == pytest.approx(-0.0002, abs=2e-5)
+    assert live.frames["total"] == 240 and live.frames["before_scene"] == 0
+    sidecar = json.loads(Path(str(log) + ".rts.json").read_text())
+    assert sidecar["clock"]["start_offset_s"] == pytest.approx(-0.0002, abs=2e-5)
+    again = check_log(scene, log).report
+    for key in ("counter_start", "cycle_s", "start_offset_s"):
+        assert again.radar_clock[key] == pytest.approx(live.radar_clock[key], abs=1e-6), key
+    assert again.frames == live.frames and again.reasons == live.reasons
+    # A sidecar of an older version kept the phase clamped at the scene's start: read as before.
+    sidecar["clock"]["start_offset_s"] = 0.0
+    (tmp_path / "old").mkdir()
+    old = check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar))).report
+    assert old.radar_clock["start_offset_s"] == 0.0
+    assert old.frames["total"] == 240 and old.passed == live.passed
+    # A phase more than a cycle before the scene's start is no scene's first cycle's.
+    sidecar["clock"]["start_offset_s"] = -0.06
+    with pytest.raises(LogError, match=r"clock.start_offset_s: -0.06 s, a cycle or more before "
+                                       r"the scene's start \(allowed: above -0.05: "):
+        check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
+
+
 def run_scattered(tmp_path, radar_cycle_s, step_s):
     """Run the cut-in scene with a radar of ``radar_cycle_s`` whose latency jitters +-12 ms
     (its profile: 50 ms, +-4 ms), ``step_s`` longer from cycle 120 on; its log re-checked."""
@@ -1090,3 +1138,113 @@ def test_a_damaged_log_is_one_error_line_without_a_traceback(tmp_path, suffix):
     assert "Traceback" not in err and "Exception ignored" not in err, err
     (line,) = err.strip().splitlines()
     assert line.startswith(f"error: --log {damaged}: ")
+
+
+def _mid_line_cut(log: Path, fraction: float) -> tuple[bytes, int]:
+    """The log's bytes cut in the middle of the line at ``fraction`` of it (not its last), and
+    that line's number (from 1)."""
+    data = log.read_bytes()
+    lines = data.splitlines(keepends=True)
+    at = min(int(len(lines) * fraction), len(lines) - 2)
+    start = sum(len(line) for line in lines[:at])
+    return data[:start + len(lines[at].rstrip()) // 2], at + 1
+
+
+@pytest.mark.parametrize("suffix", [".log", ".trc", ".asc", ".csv"])
+def test_a_text_log_cut_in_the_middle_of_a_line_fails_its_re_check_naming_the_line(
+        tmp_path, capsys, suffix):
+    # A recorder killed mid-write, a copy cut short: the last line is written in part.
+    # python-can reads it as it is (a data field cut short, its half byte made up), fails on
+    # it, or skips it; the re-check reads the complete lines and fails naming the line.
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"  # 7.5 s: 150 cycles
+    log = tmp_path / f"run{suffix}"
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    capsys.readouterr()
+    data, line = _mid_line_cut(log, 0.6)
+    cut = tmp_path / f"cut{suffix}"
+    cut.write_bytes(data)
+    shutil.copy(str(log) + ".rts.json", str(cut) + ".rts.json")
+    # The reference: the complete lines alone, as python-can reads them.
+    whole = tmp_path / f"whole{suffix}"
+    whole.write_bytes(data[:data.rfind(b"\n") + 1])
+    kept = list(can.LogReader(str(whole)))
+    headers = sum(1 for m in kept if m.arbitration_id == 0x100)
+    assert 0 < headers < 150
+    out_json = tmp_path / "check.json"
+    code = cli.main(["check", str(scene), "--log", str(cut), "--json", str(out_json)])
+    out, err = capsys.readouterr()
+    assert code == 1 and "Traceback" not in err, out + err
+    report = json.loads(out_json.read_text())
+    lacks = " (and the 'End TriggerBlock' line an ASC log ends with)" if suffix == ".asc" else ""
+    expected = (f"the log {cut} was cut short: its line {line} ends without a line end{lacks}, "
+                f"{len(data) - len(whole.read_bytes())} bytes of it written: not read; it ends at "
+                f"log time {kept[-1].timestamp:.6f} s (its last message read): what the radar "
+                f"sent after it is not in it")
+    assert expected in report["reasons"], report["reasons"]
+    assert expected in out
+    assert report["alignment"]["log_cut_short"] == {
+        "header_bytes": None, "file_bytes": len(data), "line": line,
+        "last_message_t_s": kept[-1].timestamp}
+    # The cycles the complete lines hold are judged, the rest missing: none read from half a
+    # line.
+    frames = report["frames"]
+    assert frames["total"] == 150 and frames["missing"] == 150 - headers
+    assert frames["received"] + frames["incomplete"] == headers
+    assert report["bus"]["messages"] == len(kept)
+    # The whole log has nothing of the kind.
+    assert cli.main(["check", str(scene), "--log", str(log), "--json", str(out_json)]) == 0
+    capsys.readouterr()
+    assert json.loads(out_json.read_text())["alignment"]["log_cut_short"] is None
+
+
+@pytest.mark.parametrize("suffix", [".log", ".trc"])
+def test_a_text_log_cut_after_the_cycles_counted_is_noted_and_re_checks_to_the_live_verdict(
+        tmp_path, suffix):
+    # The radar went on for 10 cycles after the scene's end (12 s, cycles of 50 ms from 0):
+    # 5 of them (12.00 s to 12.20 s) within a cycle and 0.2 s of the end are counted, live
+    # and re-checked. A log cut in its last line, after those, lacks nothing counted: noted.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / f"run{suffix}"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        sink = pipeline.output._sink
+
+        def going_on(cycles):
+            if cycles and cycles[-1].cycle == 239:
+                cycles = list(cycles) + [Detections.empty(240 + k, 12.0 + 0.05 * k, ())
+                                         for k in range(10)]
+            sink(cycles)
+
+        pipeline.output._sink = going_on
+        live = pipeline.run(scene).report
+    assert live.passed and live.frames["after_scene"] == 5
+    again = check_log(scene, log)
+    assert again.report.frames == live.frames and again.report.passed
+    data = log.read_bytes()
+    cut = tmp_path / f"cut{suffix}"
+    cut.write_bytes(data[:len(data.rstrip()) - 3])
+    shutil.copy(str(log) + ".rts.json", str(cut) + ".rts.json")
+    line = data.rstrip().count(b"\n") + 1
+    result = check_log(scene, cut)
+    assert result.report.passed, result.report.reasons
+    assert result.report.frames == live.frames
+    assert result.alignment.log_cut_short["line"] == line
+    assert any(note.startswith(f"the log {cut} was cut short: its line {line} ends without a "
+                               f"line end") and note.endswith("nothing counted is lost")
+               for note in result.alignment.notes), result.alignment.notes
+
+
+@pytest.mark.parametrize("suffix", [".log", ".csv", ".trc"])
+def test_a_damaged_line_inside_a_text_log_is_one_error_naming_it(tmp_path, capsys, suffix):
+    # python-can's readers fail on it, or skip it with a warning (TRC): either way a message
+    # is lost in the middle of the log, which is not read as a shorter one.
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / f"run{suffix}"
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    capsys.readouterr()
+    lines = log.read_bytes().splitlines(keepends=True)
+    lines[99] = b"(garbage\n"
+    log.write_bytes(b"".join(lines))
+    assert cli.main(["check", str(scene), "--log", str(log)]) == 2
+    err = capsys.readouterr().err
+    (said,) = err.strip().splitlines()
+    assert said.startswith(f"error: --log {log}: line 100: cannot read: "), said
