@@ -49,10 +49,11 @@ XTOL_S = 1e-9
 # Radar mount when the ego has no bounding box: the shipped scenes' front-bumper radar.
 DEFAULT_MOUNT_X_M = 3.7
 MOUNT_HEIGHT_M = 0.5
-# The scene format's lane change is a quintic ramp: its peak slope and acceleration for a unit
+# The scene format's lane change is a quintic ramp: its peak slope, acceleration and jerk for a unit
 # offset over a unit time.
 QUINTIC_PEAK_SLOPE = 15.0 / 8.0
 QUINTIC_PEAK_ACCEL = 10.0 / math.sqrt(3.0)
+QUINTIC_PEAK_JERK = 60.0
 
 # Transition shapes over u in [0, 1]: value, peak slope, peak |second derivative|.
 _SHAPES: dict[str, tuple[Callable[[float], float], float, float]] = {
@@ -818,20 +819,23 @@ class _Importer:
         distance = action.number("distance", 0.0)
         if distance < 0.0:
             raise action.error("<LateralDistanceAction distance> must be >= 0")
+        # The constraints limit the lateral motion the action makes (OpenSCENARIO's
+        # DynamicConstraints: acceleration, deceleration, speed and their rates).
+        limits = {"acc": math.inf, "speed": math.inf, "jerk": math.inf}
         constraints = action.child("DynamicConstraints", required=False)
-        max_acc = math.inf
         if constraints is not None:
-            for limit in ("maxAcceleration", "maxDeceleration", "maxSpeed",
-                          "maxAccelerationRate", "maxDecelerationRate"):
-                if constraints.has(limit):
-                    constraints.number(limit)  # longitudinal limits: the speed is not changed
-            if constraints.has("maxLateralAcc"):
-                max_acc = constraints.number("maxLateralAcc")
-                if max_acc <= 0.0:
-                    raise constraints.error("<DynamicConstraints maxLateralAcc> must be > 0")
+            for attr, limit in (("maxAcceleration", "acc"), ("maxDeceleration", "acc"),
+                                ("maxSpeed", "speed"), ("maxAccelerationRate", "jerk"),
+                                ("maxDecelerationRate", "jerk")):
+                if constraints.has(attr):
+                    value = constraints.number(attr)
+                    if value <= 0.0:
+                        raise constraints.error(f"<DynamicConstraints {attr}="
+                                                f"\"{constraints.attrs[attr]}\">: must be > 0")
+                    limits[limit] = min(limits[limit], value)
         return "lateral_distance", {
             "ref": self._entity(action, action.text("entityRef")), "distance_m": distance,
-            "side": side, "max_acc_mps2": max_acc,
+            "side": side, "limits": limits,
             "continuous": action.boolean("continuous", False)}
 
     def _trigger(self, trigger: _El) -> list[list[_Condition]]:
@@ -1078,8 +1082,10 @@ class _Importer:
                 p["side"], gap <= 0.0)
             shift = gap + (p["distance_m"] if left else -p["distance_m"])
             body.lane_offset_m += shift
-            duration = 0.0 if math.isinf(p["max_acc_mps2"]) else math.sqrt(
-                QUINTIC_PEAK_ACCEL * abs(shift) / p["max_acc_mps2"])
+            limits = p["limits"]
+            duration = max(math.sqrt(QUINTIC_PEAK_ACCEL * abs(shift) / limits["acc"]),
+                           QUINTIC_PEAK_SLOPE * abs(shift) / limits["speed"],
+                           (QUINTIC_PEAK_JERK * abs(shift) / limits["jerk"]) ** (1.0 / 3.0))
             self._shift(action, body, t, shift, duration, "LateralDistanceAction")
             if p["continuous"]:
                 self.notes.append(f"{where}: continuous lateral distance of {action.actor!r} "

@@ -183,7 +183,7 @@ def test_lateral_distance_to_the_ego(tmp_path):
         tmp_path,
         """<LateralDistanceAction entityRef="Ego" distance="0.5" freespace="false"
                         continuous="false" displacement="leftToReferencedEntity">
-                      <DynamicConstraints maxLateralAcc="1.0" maxSpeed="30"/>
+                      <DynamicConstraints maxAcceleration="1.0" maxSpeed="30"/>
                     </LateralDistanceAction>""")
     _, scene = imported(tmp_path, path)
     (change,) = scene.targets[0].trajectory.lane_changes
@@ -574,3 +574,46 @@ def test_a_reversing_speed_is_refused_naming_the_import_s_range_not_the_scene_s(
     assert "scenes allow 0 to 150" not in message
     assert "the import takes 0 to 150 m/s (it does not import reversing" in message
     assert "speed_mps" in message
+
+
+# ----------------------------------------------------- nothing the file says is dropped
+
+def lateral_distance(tmp_path, constraints):
+    """The cut-in with its lane change replaced by a lateral distance of 0.5 m to the ego."""
+    return replace_lane_change(
+        tmp_path,
+        f"""<LateralDistanceAction entityRef="Ego" distance="0.5" freespace="false"
+                        continuous="false" displacement="leftToReferencedEntity">
+                      <DynamicConstraints {constraints}/>
+                    </LateralDistanceAction>""")
+
+
+@pytest.mark.parametrize("constraints, duration_s", [
+    # A lateral action's constraints limit its lateral motion; the quintic's peak lateral
+    # acceleration is 10 / sqrt(3) * offset / T^2, its speed 15 / 8 * offset / T, its jerk
+    # 60 * offset / T^3 (offset 3 m here).
+    ('maxAcceleration="1.0"', math.sqrt(10 / math.sqrt(3) * 3.0 / 1.0)),
+    ('maxAcceleration="4" maxDeceleration="1.0"', math.sqrt(10 / math.sqrt(3) * 3.0 / 1.0)),
+    ('maxSpeed="0.5"', 15 / 8 * 3.0 / 0.5),
+    ('maxAcceleration="1" maxSpeed="0.5"', 15 / 8 * 3.0 / 0.5),
+    ('maxAccelerationRate="0.5"', (60 * 3.0 / 0.5) ** (1 / 3)),
+    ('maxAcceleration="100" maxDecelerationRate="0.5" maxAccelerationRate="9"',
+     (60 * 3.0 / 0.5) ** (1 / 3)),
+])
+def test_lateral_distance_constraints_limit_the_lateral_motion(tmp_path, constraints,
+                                                                duration_s):
+    _, scene = imported(tmp_path, lateral_distance(tmp_path, constraints))
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.offset_m == pytest.approx(-3.0)
+    assert change.start_s == pytest.approx(2.0, abs=1e-9)
+    assert change.duration_s == pytest.approx(duration_s, abs=1e-9)  # the file's rounding
+
+
+def test_lateral_distance_non_standard_limit_is_located(tmp_path):
+    path = lateral_distance(tmp_path, 'maxLateralAcc="1.0"')
+    line = line_of(path, "maxLateralAcc")
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(f"{path}:{line}: <DynamicConstraints "
+                                      f"maxLateralAcc=\"1.0\">: attribute maxLateralAcc is not "
+                                      f"supported by import")
