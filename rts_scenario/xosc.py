@@ -453,6 +453,18 @@ class _Act:
 
 
 @dataclass
+class _Run:
+    """An action under way on one entity: what it changes, until when."""
+
+    action: _Action
+    event: int | None  # index in the importer's events; None in Init
+    domain: str  # "speed" or "lateral": a new action of the domain ends the running one
+    start_s: float
+    end_s: float  # when the action ends (inf: continuous)
+    move_end_s: float  # when the motion it makes is complete
+
+
+@dataclass
 class _Body:
     """An entity: its place, speed over time (knots) and lateral shifts."""
 
@@ -467,6 +479,7 @@ class _Body:
     knots_mps: list[float] = field(default_factory=lambda: [0.0])
     lane_changes: list[LaneChange] = field(default_factory=list)
     lane_offset_m: float = 0.0
+    runs: dict[str, _Run] = field(default_factory=dict)  # by domain: the latest action
 
     def trajectory(self) -> Trajectory:
         assert self.position_m is not None
@@ -518,6 +531,13 @@ class _Body:
             self.knots_s.append(t0 + duration_s * i / pieces)
             self.knots_mps.append(v0 + delta * f(i / pieces))
 
+    def hold_speed(self, t: float) -> None:
+        """Keep the speed the entity has at ``t`` from then on (a stopped transition)."""
+        v = self.speed(t)
+        self._truncate(t)
+        self.knots_s.append(t)
+        self.knots_mps.append(v)
+
     def _truncate(self, t: float) -> None:
         keep = [i for i, k in enumerate(self.knots_s) if k < t]
         self.knots_s = [self.knots_s[i] for i in keep]
@@ -552,6 +572,7 @@ class _Importer:
         self.event_start: dict[int, float] = {}
         self.event_end: dict[int, float] = {}
         self.action_times: dict[str, tuple[float, float]] = {}
+        self.runs: list[_Run] = []  # the storyboard's actions as they were applied
         self._read_root()
         self.ego = self._choose_ego(ego)
 
@@ -927,7 +948,7 @@ class _Importer:
         self._place()
         for action in self.init_actions:
             if action.kind != "teleport":
-                self._apply(action, 0.0)
+                self._run(action, 0.0, None)
         pending_acts = list(self.acts)
         pending = list(range(len(self.events)))
         while True:
@@ -1004,23 +1025,86 @@ class _Importer:
 
     def _start_event(self, index: int, t: float) -> None:
         event = self.events[index]
-        if event.priority == "skip":
-            running = [j for j, start in self.event_start.items()
-                       if self.events[j].maneuver == event.maneuver
-                       and start <= t < self.event_end[j]]
-            if running:
-                self.notes.append(f"{self.file}:{event.el.line}: event {event.name!r} skipped "
-                                  f"at {t:g} s (priority skip, event "
-                                  f"{self.events[running[0]].name!r} still running)")
-                self.event_start[index] = self.event_end[index] = math.inf
-                return
+        running = self._running_in_maneuver(index, t)
+        if event.priority == "skip" and running:
+            self.notes.append(f"{self.file}:{event.el.line}: event {event.name!r} skipped "
+                              f"at {t:g} s (priority skip, event "
+                              f"{self.events[running[0]].name!r} still running)")
+            self.event_start[index] = self.event_end[index] = math.inf
+            return
         self.event_start[index] = t
-        end = t
+        if event.priority in ("overwrite", "override"):
+            for j in running:
+                self._stop_event(j, index, t)
         for action in event.actions:
-            duration = self._apply(action, t)
-            self.action_times[action.name] = (t, t + duration)
-            end = max(end, t + duration)
-        self.event_end[index] = end
+            self._run(action, t, index)
+        self._refresh(index)
+
+    def _running_in_maneuver(self, index: int, t: float) -> list[int]:
+        """Return the other events of ``index``'s maneuver running at ``t``."""
+        maneuver = self.events[index].el.parent
+        return [j for j, start in self.event_start.items()
+                if j != index and self.events[j].el.parent is maneuver
+                and start <= t < self.event_end[j]]
+
+    def _stop_event(self, index: int, by: int, t: float) -> None:
+        """Stop a running event at ``t`` (priority overwrite of event ``by``).
+
+        Its speed transitions end where they are; a lateral move cannot stop midway in a scene.
+        """
+        event, stopper = self.events[index], self.events[by]
+        for run in [r for r in self.runs if r.event == index and r.end_s > t]:
+            body = self.bodies[run.action.actor]
+            if run.move_end_s > t and run.domain == "lateral":
+                raise stopper.el.error(
+                    f"event {stopper.name!r} (priority {stopper.priority}) starts at {t:g} s "
+                    f"and would stop event {event.name!r} (line {event.el.line}) in the middle "
+                    f"of the lateral move of {run.action.actor!r} (until "
+                    f"{run.move_end_s:g} s): a scene's lane change cannot stop midway, this is "
+                    f"not supported by import")
+            if run.move_end_s > t and body.runs.get("speed") is run:
+                body.hold_speed(t)
+            run.end_s = t
+        self._refresh(index)
+        self.notes.append(f"{self.file}:{stopper.el.line}: event {event.name!r} stopped at "
+                          f"{t:g} s by event {stopper.name!r} (priority {stopper.priority})")
+
+    def _run(self, action: _Action, t: float, event: int | None) -> None:
+        """Apply an action of an event (None: Init) from ``t`` on and record it."""
+        body = self.bodies[action.actor]
+        domain = "speed" if action.kind == "speed" else "lateral"
+        old = body.runs.get(domain)
+        if old is not None and old.end_s > t:
+            # A new action of the same domain ends the running one.
+            if domain == "lateral" and old.move_end_s > t:
+                self.notes.append(
+                    f"{self.file}:{action.el.line}: lateral move of {action.actor!r} starts at "
+                    f"{t:g} s while the one of line {old.action.el.line} is under way (until "
+                    f"{old.move_end_s:g} s): played as the sum of both quintics, which ends "
+                    f"where the new move aims")
+            old.end_s = t
+            if old.event is not None:
+                self._refresh(old.event)
+        changes = len(body.lane_changes)
+        duration = self._apply(action, t)
+        if domain == "lateral":
+            move_end = max((lc.start_s + lc.duration_s for lc in body.lane_changes[changes:]),
+                           default=t)
+        else:
+            move_end = t + duration
+        run = _Run(action, event, domain, t, t + duration, move_end)
+        body.runs[domain] = run
+        if event is not None:
+            self.runs.append(run)
+
+    def _refresh(self, index: int) -> None:
+        """Set an event's and its actions' end times from its runs (the latest actor's)."""
+        runs = [r for r in self.runs if r.event == index]
+        self.event_end[index] = max((r.end_s for r in runs), default=self.event_start[index])
+        for name in {r.action.name for r in runs}:
+            mine = [r for r in runs if r.action.name == name]
+            self.action_times[name] = (min(r.start_s for r in mine),
+                                       max(r.end_s for r in mine))
 
     def _apply(self, action: _Action, t: float) -> float:
         """Apply an action from ``t`` on; return its duration."""

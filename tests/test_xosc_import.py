@@ -617,3 +617,144 @@ def test_lateral_distance_non_standard_limit_is_located(tmp_path):
     assert str(info.value).startswith(f"{path}:{line}: <DynamicConstraints "
                                       f"maxLateralAcc=\"1.0\">: attribute maxLateralAcc is not "
                                       f"supported by import")
+
+
+def speed_event(name, priority, speed, shape, dyn_value, condition, delay=0.0):
+    """An event of the braking lead's maneuver: a speed action of the lead."""
+    return f"""<Event name="{name}" priority="{priority}">
+              <Action name="{name}A">
+                <PrivateAction><LongitudinalAction><SpeedAction>
+                  <SpeedActionDynamics dynamicsShape="{shape}" value="{dyn_value}"
+                                       dynamicsDimension="time"/>
+                  <SpeedActionTarget><AbsoluteTargetSpeed value="{speed}"/></SpeedActionTarget>
+                </SpeedAction></LongitudinalAction></PrivateAction>
+              </Action>
+              <StartTrigger><ConditionGroup>
+                <Condition name="{name}C" delay="{delay}" conditionEdge="none">
+                  <ByValueCondition>{condition}</ByValueCondition>
+                </Condition>
+              </ConditionGroup></StartTrigger>
+            </Event>
+"""
+
+
+def at_time(t_s):
+    return f'<SimulationTimeCondition value="{t_s}" rule="greaterThan"/>'
+
+
+def with_events(tmp_path, *events, filename="braking_lead.xosc"):
+    """The braking lead with events added to its maneuver (after the brake event)."""
+    return variant(tmp_path, "braking_lead", "          </Maneuver>",
+                   "".join(events) + "          </Maneuver>", filename)
+
+
+def speed_at(law, t_s):
+    k = np.searchsorted(law.knots_s, t_s, side="right") - 1
+    return law.v0_mps[k] + law.a_mps2[k] * (t_s - law.knots_s[k])
+
+
+def test_an_overriding_event_stops_the_running_events_of_its_maneuver(tmp_path):
+    # The brake (20 to 10 m/s at 4 m/s^2 from 2 s) is stopped at 3 s by an event of the same
+    # maneuver with priority overwrite: the lead keeps 16 m/s from then on. The stopping
+    # event's own action changes nothing (a lane offset of 0).
+    hold = f"""<Event name="Hold" priority="overwrite">
+              <Action name="HoldA">
+                <PrivateAction><LateralAction><LaneOffsetAction continuous="false">
+                  <LaneOffsetActionDynamics dynamicsShape="step"/>
+                  <LaneOffsetTarget><AbsoluteTargetLaneOffset value="0"/></LaneOffsetTarget>
+                </LaneOffsetAction></LateralAction></PrivateAction>
+              </Action>
+              <StartTrigger><ConditionGroup>
+                <Condition name="HoldC" delay="0" conditionEdge="none">
+                  <ByValueCondition>{at_time(3)}</ByValueCondition>
+                </Condition>
+              </ConditionGroup></StartTrigger>
+            </Event>
+"""
+    result, scene = imported(tmp_path, with_events(tmp_path, hold))
+    assert any("event 'BrakeEvent' stopped at 3 s by event 'Hold' (priority overwrite)" in note
+               for note in result.notes)
+    t = np.array([0.0, 1.0, 2.0, 2.5, 2.99, 3.0, 3.5, 4.5, 5.9])
+    dt = np.clip(t - 2.0, 0.0, 1.0)
+    x = 40.0 + 20.0 * t - 2.0 * dt**2 - 4.0 * np.clip(t - 3.0, 0.0, None)
+    lead_p, lead_v = straight(x, 20.0 - 4.0 * dt, z_m=0.75)
+    assert_tracks(scene, t, *ego_radar(t, 20.0), lead_p, lead_v)
+    # priority override (OpenSCENARIO 1.2's name) is the same.
+    path = with_events(tmp_path, hold.replace('"overwrite"', '"override"'), filename="o.xosc")
+    _, scene = imported(tmp_path, path)
+    assert_tracks(scene, t, *ego_radar(t, 20.0), lead_p, lead_v)
+
+
+def test_an_overriding_event_that_would_stop_a_lateral_move_midway_is_located(tmp_path):
+    # The speed-up starts 1 s into the 3 s cut-in with priority overwrite: the cut-in would
+    # stop with the cutter between the lanes, which a scene's lane change cannot play.
+    path = variant(tmp_path, "cut_in", '<Event name="SpeedUpEvent" priority="parallel">',
+                   '<Event name="SpeedUpEvent" priority="overwrite">')
+    path.write_text(path.read_text()
+                    .replace('storyboardElementRef="CutInEvent" state="endTransition"',
+                             'storyboardElementRef="CutInEvent" state="startTransition"')
+                    .replace('<Condition name="CutInDone" delay="0"',
+                             '<Condition name="CutInDone" delay="1"'))
+    line = line_of(path, '<Event name="SpeedUpEvent"')
+    cut_in = line_of(path, '<Event name="CutInEvent"')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(
+        f"{path}:{line}: event 'SpeedUpEvent' (priority overwrite) starts at 3 s and would stop "
+        f"event 'CutInEvent' (line {cut_in}) in the middle of the lateral move of 'Cutter'")
+
+
+def test_an_overridden_action_ends_when_a_new_one_takes_over(tmp_path):
+    # The brake (2 s to 4.5 s) is overridden at 3 s by a step to 18 m/s (another event, in
+    # parallel): the brake action ends at 3 s, so the event waiting for its end (plus 1 s)
+    # speeds the lead up to 25 m/s from 4 s, not from 5.5 s.
+    done = ('<StoryboardElementStateCondition storyboardElementType="action" '
+            'storyboardElementRef="Brake" state="{}"/>')
+    for state in ("completeState", "endTransition"):
+        path = with_events(tmp_path, speed_event("Cruise", "parallel", 18, "step", 0, at_time(3)),
+                           speed_event("After", "parallel", 25, "linear", 1,
+                                       done.format(state), delay=1.0))
+        _, scene = imported(tmp_path, path)
+        law = scene.targets[0].trajectory.law
+        speeds = [speed_at(law, t) for t in (2.5, 2.99, 3.5, 3.99, 4.5, 5.0, 5.5)]
+        assert speeds == pytest.approx([18.0, 16.04, 18.0, 18.0, 21.5, 25.0, 25.0])
+
+
+def test_an_action_of_several_actors_ends_when_the_last_actor_s_part_ends(tmp_path):
+    # The ego joins the cut-in: its own lane change is empty (it is in the target lane), the
+    # cutter's 3.5 m at a peak lateral speed of 1.75 m/s take 15/8 * 3.5 / 1.75 = 3.75 s. The
+    # speed-up waits for the action's end: 2 + 3.75 s.
+    path = variant(tmp_path, "cut_in", '<EntityRef entityRef="Cutter"/></Actors>',
+                   '<EntityRef entityRef="Cutter"/><EntityRef entityRef="Ego"/></Actors>')
+    path.write_text(path.read_text()
+                    .replace('value="$LaneChangeTime" dynamicsDimension="time"',
+                             'value="1.75" dynamicsDimension="rate"')
+                    .replace('storyboardElementType="event" storyboardElementRef="CutInEvent"',
+                             'storyboardElementType="action" storyboardElementRef="CutIn"'))
+    _, scene = imported(tmp_path, path)
+    law = scene.targets[0].trajectory.law
+    assert [speed_at(law, t) for t in (5.74, 5.75, 6.75, 7.75, 9.0)] == pytest.approx(
+        [20.0, 20.0, 22.5, 25.0, 25.0])
+
+
+def test_a_lateral_move_started_during_another_gets_a_note(tmp_path):
+    text = (DATA / "cut_in.xosc").read_text()
+    speed_up = re.search(r"<LongitudinalAction>\s*<SpeedAction>\s*<SpeedActionDynamics "
+                         r"dynamicsShape=\"linear\".*?</LongitudinalAction>", text,
+                         flags=re.DOTALL).group(0)
+    path = tmp_path / "cut_in.xosc"
+    path.write_text(text.replace(speed_up, """<LateralAction><LaneOffsetAction continuous="false">
+                      <LaneOffsetActionDynamics maxLateralAcc="0.5" dynamicsShape="cubic"/>
+                      <LaneOffsetTarget><AbsoluteTargetLaneOffset value="0.5"/></LaneOffsetTarget>
+                    </LaneOffsetAction></LateralAction>""")
+                    .replace('storyboardElementRef="CutInEvent" state="endTransition"',
+                             'storyboardElementRef="CutInEvent" state="startTransition"')
+                    .replace('<Condition name="CutInDone" delay="0"',
+                             '<Condition name="CutInDone" delay="1"'))
+    result, scene = imported(tmp_path, path)
+    first, second = scene.targets[0].trajectory.lane_changes
+    assert (first.start_s, first.offset_m, second.start_s, second.offset_m) == pytest.approx(
+        (2.0, -3.5, 3.0, 0.5))
+    assert (f"{path}:{line_of(path, '<LaneOffsetAction')}: lateral move of 'Cutter' starts at "
+            f"3 s while the one of line {line_of(path, '<LaneChangeAction>')} is under way "
+            f"(until 5 s)") in "\n".join(result.notes)
