@@ -347,6 +347,79 @@ def _check_type(name: str, kind: str, value: str) -> str | None:
     return None
 
 
+def _resolve(value: str, params: dict[str, Parameter], where: str, file: str,
+             line: int | None) -> str:
+    """Resolve a declaration's value: ``$name`` or ``${expression}`` over earlier ones."""
+    if value.startswith("${") and value.endswith("}"):
+        try:
+            return _evaluate(value[2:-1], params)
+        except ValueError as exc:
+            raise ScenarioError(f"{where}: {exc}", file=file, line=line) from None
+    if value.startswith("$"):
+        if value[1:] not in params:
+            raise ScenarioError(f"{where}: unknown parameter {value}; declared: "
+                                f"{', '.join(params) or 'none'}", file=file, line=line)
+        return params[value[1:]].value
+    return value
+
+
+_NUMERIC_TYPES = ("double", "integer", "unsignedInt", "unsignedShort")
+
+
+def _constraints(raw: Any, kind: str, params: dict[str, Parameter],
+                 file: str) -> list[list[tuple[str, str]]]:
+    """Read a declaration's value constraint groups (OR-ed; their constraints AND-ed)."""
+    from lxml import etree
+
+    groups = []
+    for group in raw:
+        if not isinstance(group.tag, str) or etree.QName(group).localname != "ConstraintGroup":
+            continue  # anything else is reported by the element sweep
+        constraints = []
+        for c in group:
+            if not isinstance(c.tag, str) or etree.QName(c).localname != "ValueConstraint":
+                continue
+            rule, value = c.get("rule"), c.get("value")
+            if rule is None or value is None:
+                raise ScenarioError("<ValueConstraint> needs rule and value", file=file,
+                                    line=c.sourceline)
+            allowed = tuple(_RULES) if kind in _NUMERIC_TYPES else ("equalTo", "notEqualTo")
+            if rule not in allowed:
+                raise ScenarioError(f"<ValueConstraint rule=\"{rule}\"> is not supported by "
+                                    f"import; supported: {', '.join(allowed)}"
+                                    + ("" if kind in _NUMERIC_TYPES else
+                                       f" (for a {kind} parameter)"),
+                                    file=file, line=c.sourceline)
+            where = f"<ValueConstraint value=\"{value}\">"
+            value = _resolve(value, params, where, file, c.sourceline)
+            if kind in _NUMERIC_TYPES:
+                try:
+                    float(value)
+                except ValueError:
+                    raise ScenarioError(f"{where}: must be a number (the parameter is a "
+                                        f"{kind})", file=file, line=c.sourceline) from None
+            constraints.append((rule, value))
+        if not constraints:
+            raise ScenarioError("<ConstraintGroup> needs at least one <ValueConstraint>",
+                                file=file, line=group.sourceline)
+        groups.append(constraints)
+    return groups
+
+
+def _allowed(value: str, kind: str, groups: list[list[tuple[str, str]]]) -> bool:
+    if not groups:
+        return True
+    if kind in _NUMERIC_TYPES:
+        return any(all(_RULES[rule](float(value), float(bound)) for rule, bound in group)
+                   for group in groups)
+    return any(all(_RULES[rule](value, bound) for rule, bound in group) for group in groups)
+
+
+def _describe(groups: list[list[tuple[str, str]]]) -> str:
+    return " or ".join("(" + " and ".join(f"{rule} {bound}" for rule, bound in group) + ")"
+                       for group in groups)
+
+
 def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str, Parameter]:
     """Read the root's parameter declarations and apply the overrides."""
     from lxml import etree
@@ -373,28 +446,25 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
                                     f"unknown type; valid: {', '.join(_PARAMETER_TYPES)}",
                                     file=file, line=raw.sourceline)
             where = f"<ParameterDeclaration name=\"{name}\">"
-            if value.startswith("${") and value.endswith("}"):
-                try:
-                    value = _evaluate(value[2:-1], params)
-                except ValueError as exc:
-                    raise ScenarioError(f"{where}: {exc}", file=file,
-                                        line=raw.sourceline) from None
-            elif value.startswith("$"):
-                if value[1:] not in params:
-                    raise ScenarioError(f"{where}: unknown parameter {value}; declared: "
-                                        f"{', '.join(params) or 'none'}", file=file,
-                                        line=raw.sourceline)
-                value = params[value[1:]].value
+            value = _resolve(value, params, where, file, raw.sourceline)
             problem = _check_type(name, kind, value)
             if problem:
                 raise ScenarioError(f"<ParameterDeclaration>: {problem}", file=file,
                                     line=raw.sourceline)
+            groups = _constraints(raw, kind, params, file)
+            if not _allowed(value, kind, groups):
+                raise ScenarioError(f"{where}: value {value} is outside the values allowed: "
+                                    f"{_describe(groups)}", file=file, line=raw.sourceline)
             params[name] = Parameter(name, kind, value, "declared")
             if name in given:
                 option, override = given[name]
                 problem = _check_type(name, kind, override)
                 if problem:
                     raise RtsError(f"--param {option}={override}: {problem}")
+                if not _allowed(override, kind, groups):
+                    raise RtsError(f"--param {option}={override}: outside the values "
+                                   f"{file}:{raw.sourceline} allows for {name}: "
+                                   f"{_describe(groups)}")
                 params[name] = Parameter(name, kind, override, "--param")
     for name, value in overrides.items():
         if name.removeprefix("$") not in params:
@@ -591,7 +661,14 @@ class _Importer:
         for block in root.kids("ParameterDeclarations"):
             block.used = True
             for decl in block.kids("ParameterDeclaration"):
-                decl.skip()
+                # Read (and checked) by _parameters before anything else.
+                for attr in ("name", "value", "parameterType" if decl.has("parameterType")
+                             else "type"):
+                    decl.text(attr)
+                for group in decl.kids("ConstraintGroup"):
+                    for constraint in group.kids("ValueConstraint"):
+                        constraint.text("rule")
+                        constraint.text("value")
         for block in root.kids("CatalogLocations"):
             if block.children:  # only a CatalogReference would use them, and that is an error
                 self.notes.append(f"{self.file}:{block.line}: <CatalogLocations> not used: "

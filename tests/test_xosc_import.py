@@ -758,3 +758,63 @@ def test_a_lateral_move_started_during_another_gets_a_note(tmp_path):
     assert (f"{path}:{line_of(path, '<LaneOffsetAction')}: lateral move of 'Cutter' starts at "
             f"3 s while the one of line {line_of(path, '<LaneChangeAction>')} is under way "
             f"(until 5 s)") in "\n".join(result.notes)
+
+
+def constrained(tmp_path, groups):
+    """The cut-in with constraint groups on its parameter EgoSpeed (declared 25)."""
+    return variant(tmp_path, "cut_in",
+                   '<ParameterDeclaration name="EgoSpeed" parameterType="double" value="25"/>',
+                   '<ParameterDeclaration name="EgoSpeed" parameterType="double" value="25">'
+                   f'{groups}</ParameterDeclaration>')
+
+
+def test_parameter_value_constraints_are_checked(tmp_path):
+    # Groups are OR-ed, the constraints of a group AND-ed (OpenSCENARIO 1.1).
+    groups = ('<ConstraintGroup><ValueConstraint rule="greaterOrEqual" value="20"/>'
+              '<ValueConstraint rule="lessOrEqual" value="30"/></ConstraintGroup>'
+              '<ConstraintGroup><ValueConstraint rule="equalTo" value="40"/></ConstraintGroup>')
+    path = constrained(tmp_path, groups)
+    for speed in ("20", "30", "40"):
+        _, scene = imported(tmp_path, path, parameters={"EgoSpeed": speed})
+        assert scene.ego.law.v0_mps[0] == pytest.approx(float(speed))
+    with pytest.raises(RtsError) as info:
+        imported(tmp_path, path, parameters={"EgoSpeed": "35"})
+    line = line_of(path, '<ParameterDeclaration name="EgoSpeed"')
+    assert str(info.value) == (
+        f"--param EgoSpeed=35: outside the values {path}:{line} allows for EgoSpeed: "
+        f"(greaterOrEqual 20 and lessOrEqual 30) or (equalTo 40)")
+    # A declared value outside its own constraints is located.
+    path = constrained(tmp_path, '<ConstraintGroup><ValueConstraint rule="lessThan" '
+                                 'value="20"/></ConstraintGroup>')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (f"{path}:{line}: <ParameterDeclaration name=\"EgoSpeed\">: value "
+                               f"25 is outside the values allowed: (lessThan 20)")
+
+
+@pytest.mark.parametrize("groups, needle, message", [
+    ('<ConstraintGroup><ValueConstraint rule="lessThan" value="30" unit="m"/></ConstraintGroup>',
+     'unit="m"', '<ValueConstraint unit="m">: attribute unit is not supported by import'),
+    ('<ConstraintGroup><ValueConstraint rule="below" value="30"/></ConstraintGroup>',
+     'rule="below"', '<ValueConstraint rule="below"> is not supported by import; supported: '
+                     'greaterThan, greaterOrEqual, lessThan, lessOrEqual, equalTo, notEqualTo'),
+    ('<Range lower="1"/>', '<Range', '<Range> in <ParameterDeclaration> is not supported'),
+    ('<ConstraintGroup/>', '<ConstraintGroup/>', '<ConstraintGroup> needs at least one '
+                                                 '<ValueConstraint>'),
+])
+def test_bad_parameter_constraints_are_located(tmp_path, groups, needle, message):
+    path = constrained(tmp_path, groups)
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(f"{path}:{line_of(path, needle)}: ")
+    assert message in str(info.value)
+
+
+def test_parameter_declaration_attributes_are_checked(tmp_path):
+    path = variant(tmp_path, "cut_in", 'name="EgoSpeed" parameterType="double" value="25"',
+                   'name="EgoSpeed" parameterType="double" value="25" unit="km/h"')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(
+        f"{path}:{line_of(path, 'unit=')}: <ParameterDeclaration unit=\"km/h\">: attribute unit "
+        f"is not supported by import")
