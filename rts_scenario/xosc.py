@@ -34,6 +34,7 @@ from .scenario.trajectory import LaneChange, Trajectory, TrajectorySet, TravelLa
 from .scenario.trajectory import Path as TrajectoryPath
 
 MAX_FILE_BYTES = 16 * 1024 * 1024
+XSI_NAMESPACE = "http://www.w3.org/2001/XMLSchema-instance"
 DEFAULT_FRAME_RATE_HZ = 20.0
 DEFAULT_LANE_WIDTH_M = 3.5
 # A step transition is played as a linear ramp this long, centred on its start time: positions
@@ -118,22 +119,38 @@ class _El:
         self.tag = raw.tag.rsplit("}", 1)[-1]
         self.line: int | None = raw.sourceline
         self.parent = parent
-        self.attrs = {k: v for k, v in raw.attrib.items() if not k.startswith("{")}
+        self.attrs: dict[str, str] = {}
+        for key, value in raw.attrib.items():
+            if key.startswith("{"):  # another namespace: only the schema's hints are known
+                uri, local = key[1:].split("}", 1)
+                if uri == XSI_NAMESPACE:
+                    continue
+                prefix = next((p for p, u in (raw.nsmap or {}).items() if u == uri and p), None)
+                key = f"{prefix}:{local}" if prefix else key
+            self.attrs[key] = value
+        # OpenSCENARIO gives every value as an attribute: text in an element is not read.
+        self.content = " ".join(filter(None, [(raw.text or "").strip(),
+                                              *((c.tail or "").strip() for c in raw)]))
         self.children = [_El(file, c, self) for c in raw if isinstance(c.tag, str)]
         self.used = False
+        self.skipped = False
         self.read: set[str] = set()
+        self.known: set[str] = set()  # attributes the import looks for, for the messages
+        self.asked: set[str] = set()  # children the import looks for, for the messages
 
     def error(self, message: str) -> ScenarioError:
         return ScenarioError(message, file=self.file, line=self.line)
 
     def text(self, name: str, default: str | None = None) -> str:
         self.read.add(name)
+        self.known.add(name)
         value = self.attrs.get(name, default)
         if value is None:
             raise self.error(f"<{self.tag}> needs the attribute {name}")
         return value
 
     def has(self, name: str) -> bool:
+        self.known.add(name)
         return name in self.attrs
 
     def number(self, name: str, default: float | None = None) -> float:
@@ -156,10 +173,11 @@ class _El:
         value = self.text(name, default)
         if value not in allowed:
             raise self.error(f"<{self.tag} {name}=\"{value}\"> is not supported by import; "
-                             f"supported: {', '.join(allowed)}")
+                             f"supported: {', '.join(allowed)} (at {self.path()})")
         return value
 
     def kids(self, *names: str) -> list[_El]:
+        self.asked.update(names)
         out = [c for c in self.children if c.tag in names]
         for c in out:
             c.used = True
@@ -184,15 +202,16 @@ class _El:
             raise self.error(f"<{self.tag}> needs exactly one child element, got "
                              f"{len(self.children)}")
         c = self.children[0]
+        self.asked.update(supported)
         if c.tag not in supported:
             raise c.error(f"<{c.tag}> is not supported by import; supported {what}: "
-                          f"{', '.join(listed or supported)}")
+                          f"{', '.join(listed or supported)} (at {c.path()})")
         c.used = True
         return c
 
     def skip(self) -> None:
         """Mark the whole subtree as read: it does not change the scene."""
-        self.used = True
+        self.used = self.skipped = True
         self.read |= set(self.attrs)
         for c in self.children:
             c.skip()
@@ -204,6 +223,14 @@ class _El:
             c = self.children[0]
             raise c.error(f"<{c.tag}> in <{self.tag}> is not supported by import")
 
+    def path(self) -> str:
+        """Return the element's tags from below the root, e.g. ``Storyboard/Init/Actions``."""
+        parts, el = [], self
+        while el.parent is not None:
+            parts.append(el.tag)
+            el = el.parent
+        return "/".join(reversed(parts)) or self.tag
+
     def walk(self) -> list[_El]:
         out = [self]
         for c in self.children:
@@ -214,13 +241,20 @@ class _El:
 def _check_all_read(root: _El) -> None:
     for el in root.walk():
         if not el.used:
-            where = f" in <{el.parent.tag}>" if el.parent is not None else ""
-            raise el.error(f"<{el.tag}>{where} is not supported by import (docs/import.md lists "
-                           f"the subset)")
+            assert el.parent is not None  # the root is always read
+            supported = ", ".join(sorted(el.parent.asked)) or "nothing"
+            raise el.error(f"<{el.tag}> in <{el.parent.tag}> is not supported by import; "
+                           f"supported in <{el.parent.tag}>: {supported} (at {el.path()})")
         unread = [a for a in el.attrs if a not in el.read]
         if unread:
+            supported = ", ".join(sorted(el.known)) or "none"
             raise el.error(f"<{el.tag} {unread[0]}=\"{el.attrs[unread[0]]}\">: attribute "
-                           f"{unread[0]} is not supported by import")
+                           f"{unread[0]} is not supported by import; supported: {supported} "
+                           f"(at {el.path()})")
+        if el.content and not el.skipped:
+            raise el.error(f"<{el.tag}> contains text ({el.content[:40]!r}): OpenSCENARIO "
+                           f"gives values as attributes, text is not read by import (at "
+                           f"{el.path()})")
 
 
 # --------------------------------------------------------------------------------- parameters
@@ -887,7 +921,7 @@ class _Importer:
             ("RelativeTargetLane (AbsoluteTargetLane needs a road network)",))
         return "lane_change", {
             "dynamics": dynamics, "ref": self._entity(target, target.text("entityRef")),
-            "lanes": target.number("value"),
+            "lanes": _lanes(target),
             "target_offset_m": action.number("targetLaneOffset", 0.0)}
 
     def _lane_offset(self, action: _El) -> tuple[str, dict[str, Any]]:
@@ -938,6 +972,12 @@ class _Importer:
 
     def _trigger(self, trigger: _El) -> list[list[_Condition]]:
         trigger.used = True
+        if trigger.tag == "StartTrigger" and not trigger.kids("ConditionGroup"):
+            owner = trigger.parent.tag if trigger.parent is not None else "element"
+            raise trigger.error(f"an empty <StartTrigger> is not supported by import: "
+                                f"OpenSCENARIO gives an empty trigger no meaning (the import "
+                                f"would start the {owner} at once); give it a "
+                                f"<ConditionGroup> (a SimulationTimeCondition for a time)")
         groups = []
         for group in trigger.kids("ConditionGroup"):
             conditions = [self._condition(c) for c in group.kids("Condition")]
@@ -1444,6 +1484,14 @@ class _Importer:
             self.notes.append(f"entity {name!r} is target {out!r} (names allow letters, digits "
                               f"and _ . -)")
         return out
+
+
+def _lanes(target: _El) -> float:
+    lanes = target.number("value")
+    if not lanes.is_integer():
+        raise target.error(f"<{target.tag} value=\"{target.attrs['value']}\">: must be a whole "
+                           f"number of lanes")
+    return lanes
 
 
 def _round(x: float) -> float:

@@ -818,3 +818,56 @@ def test_parameter_declaration_attributes_are_checked(tmp_path):
     assert str(info.value).startswith(
         f"{path}:{line_of(path, 'unit=')}: <ParameterDeclaration unit=\"km/h\">: attribute unit "
         f"is not supported by import")
+
+
+@pytest.mark.parametrize("old, new, needle, message", [
+    # An empty trigger means nothing in OpenSCENARIO (1.0 allows it, 1.1 calls it not
+    # meaningful): the event would start at once.
+    (r"<StartTrigger>\s*<ConditionGroup>\s*<Condition name=\"EgoClose\".*?</StartTrigger>",
+     "<StartTrigger/>", "<StartTrigger/>",
+     "an empty <StartTrigger> is not supported by import"),
+    (r"<StartTrigger>\s*<ConditionGroup>\s*<Condition name=\"ActStart\".*?</StartTrigger>",
+     "<StartTrigger></StartTrigger>", "<StartTrigger></StartTrigger>",
+     "an empty <StartTrigger> is not supported by import"),
+    # Lanes are whole: half a lane is no OpenSCENARIO value.
+    (r'<RelativeTargetLane entityRef="Ego" value="0"/>',
+     '<RelativeTargetLane entityRef="Ego" value="0.5"/>', 'value="0.5"',
+     '<RelativeTargetLane value="0.5">: must be a whole number of lanes'),
+    # An attribute in another namespace is no OpenSCENARIO attribute.
+    (r'<WorldPosition x="0" y="0" h="0"/>',
+     '<WorldPosition xmlns:f="urn:x" x="0" y="0" h="0" f:z="5"/>', 'f:z="5"',
+     '<WorldPosition f:z="5">: attribute f:z is not supported by import'),
+    # Text inside an element is no OpenSCENARIO data.
+    (r'<AbsoluteTargetSpeed value="\$EgoSpeed"/>',
+     '<AbsoluteTargetSpeed value="$EgoSpeed">30</AbsoluteTargetSpeed>', ">30<",
+     "<AbsoluteTargetSpeed> contains text ('30'): OpenSCENARIO gives values as attributes"),
+])
+def test_constructs_the_import_cannot_honour_are_located(tmp_path, old, new, needle, message):
+    text = (DATA / "cut_in.xosc").read_text()
+    path = tmp_path / "cut_in.xosc"
+    path.write_text(re.sub(old, lambda _: new, text, count=1, flags=re.DOTALL))
+    assert path.read_text() != text
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(f"{path}:{line_of(path, needle)}: ")
+    assert message in str(info.value)
+
+
+def test_unsupported_attribute_names_the_element_path_and_the_supported_ones(tmp_path):
+    path = variant(tmp_path, "braking_lead", 'dynamicsShape="linear" value="$Deceleration"',
+                   'dynamicsShape="linear" value="$Deceleration" extra="1"')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (
+        f"{path}:{line_of(path, 'extra=')}: <SpeedActionDynamics extra=\"1\">: attribute extra "
+        f"is not supported by import; supported: dynamicsDimension, dynamicsShape, "
+        f"followingMode, value (at Storyboard/Story/Act/ManeuverGroup/Maneuver/Event/Action/"
+        f"PrivateAction/LongitudinalAction/SpeedAction/SpeedActionDynamics)")
+    path = variant(tmp_path, "braking_lead", "<Properties/>\n      </Vehicle>",
+                   "<Properties/>\n        <Trailer/>\n      </Vehicle>")
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (
+        f"{path}:{line_of(path, '<Trailer/>')}: <Trailer> in <Vehicle> is not supported by "
+        f"import; supported in <Vehicle>: Axles, BoundingBox, ParameterDeclarations, "
+        f"Performance, Properties (at Entities/ScenarioObject/Vehicle/Trailer)")
