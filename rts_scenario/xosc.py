@@ -1275,6 +1275,10 @@ class _Importer:
             duration = 0.0 if p["shape"] == "step" else math.sqrt(
                 QUINTIC_PEAK_ACCEL * abs(shift) / p["max_acc_mps2"])
             self._shift(action, body, t, shift, duration, p["shape"])
+            if p["continuous"] and "ref" in p:
+                self.notes.append(f"{where}: continuous lane offset of {action.actor!r} "
+                                  f"relative to {p['ref']!r} set once at {t:g} s; later "
+                                  f"lateral moves of {p['ref']!r} are not followed")
             return math.inf if p["continuous"] else duration
         if action.kind == "lateral_distance":
             ref = self.bodies[p["ref"]]

@@ -871,3 +871,20 @@ def test_unsupported_attribute_names_the_element_path_and_the_supported_ones(tmp
         f"{path}:{line_of(path, '<Trailer/>')}: <Trailer> in <Vehicle> is not supported by "
         f"import; supported in <Vehicle>: Axles, BoundingBox, ParameterDeclarations, "
         f"Performance, Properties (at Entities/ScenarioObject/Vehicle/Trailer)")
+
+
+def test_a_continuous_relative_lane_offset_is_set_once_with_a_note(tmp_path):
+    path = replace_lane_change(
+        tmp_path,
+        """<LaneOffsetAction continuous="true">
+                      <LaneOffsetActionDynamics maxLateralAcc="0.5" dynamicsShape="linear"/>
+                      <LaneOffsetTarget>
+                        <RelativeTargetLaneOffset entityRef="Ego" value="0.4"/>
+                      </LaneOffsetTarget>
+                    </LaneOffsetAction>""")
+    result, scene = imported(tmp_path, path)
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert (change.start_s, change.offset_m) == pytest.approx((2.0, 0.4))
+    assert (f"{path}:{line_of(path, '<LaneOffsetAction')}: continuous lane offset of 'Cutter' "
+            f"relative to 'Ego' set once at 2 s; later lateral moves of 'Ego' are not "
+            f"followed") in result.notes
