@@ -1063,9 +1063,8 @@ class _Importer:
     def play(self) -> float:
         """Apply Init, then every event in time order; return the scene's duration."""
         self._place()
-        for action in self.init_actions:
-            if action.kind != "teleport":
-                self._run(action, 0.0, None)
+        for action in self._init_order():
+            self._run(action, 0.0, None)
         pending_acts = list(self.acts)
         pending = list(range(len(self.events)))
         while True:
@@ -1139,6 +1138,34 @@ class _Importer:
             if body.position_m is None:
                 raise body.el.error(f"entity {body.name!r} is never placed: give it a "
                                     f"<TeleportAction> in <Init>")
+
+    def _init_order(self) -> list[_Action]:
+        """Order Init's actions: one relative to another entity follows that entity's own.
+
+        An action relative to another entity (its speed, lane or lateral place) comes after
+        that entity's Init actions of its kind: Init happens at t = 0 as a whole, whatever the
+        order of the file.
+        """
+        todo = [a for a in self.init_actions if a.kind != "teleport"]
+
+        def domain(a: _Action) -> str:
+            return "speed" if a.kind == "speed" else "lateral"
+
+        out: list[_Action] = []
+        while todo:
+            # Ready: nothing pending of the entity it refers to, nor earlier of its own.
+            ready = [a for i, a in enumerate(todo) if not any(
+                domain(b) == domain(a) and (b.actor == a.params.get("ref") != a.actor
+                                            or b.actor == a.actor and j < i)
+                for j, b in enumerate(todo))]
+            if not ready:
+                a = todo[0]
+                raise a.el.error(f"the initial {domain(a)} action of {a.actor!r} refers to "
+                                 f"{a.params['ref']!r}, whose initial {domain(a)} action "
+                                 f"refers back to it (Init happens at t = 0 as a whole)")
+            out += ready
+            todo = [a for a in todo if not any(a is r for r in ready)]
+        return out
 
     def _start_event(self, index: int, t: float) -> None:
         event = self.events[index]

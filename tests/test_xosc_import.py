@@ -944,3 +944,46 @@ def test_a_parameterized_file_imports_equal_to_its_literal_twin(tmp_path, name, 
     if overrides:
         plain = import_xosc(DATA / f"{name}.xosc", radar="awr1843boost", rig="wide-3x5")
         assert plain.scene != literal.scene
+
+
+def init_relative_speed(tmp_path, cutter_first, ego_target=None):
+    """The cut-in with the cutter's initial speed 0.8 times the ego's (its Private listed
+    first or second in Init); ``ego_target`` replaces the ego's own initial target speed."""
+    text = (DATA / "cut_in.xosc").read_text()
+    ego = re.search(r'        <Private entityRef="Ego">.*?</Private>\n', text,
+                    flags=re.DOTALL).group(0)
+    cut = re.search(r'        <Private entityRef="Cutter">.*?</Private>\n', text,
+                    flags=re.DOTALL).group(0)
+    if cutter_first:
+        text = text.replace(ego + cut, cut + ego)
+    text = text.replace('<AbsoluteTargetSpeed value="$CutterSpeed"/>',
+                        '<RelativeTargetSpeed entityRef="Ego" value="0.8" '
+                        'speedTargetValueType="factor" continuous="false"/>')
+    if ego_target:
+        text = text.replace('<AbsoluteTargetSpeed value="$EgoSpeed"/>', ego_target)
+    path = tmp_path / ("cutter_first.xosc" if cutter_first else "ego_first.xosc")
+    path.write_text(text)
+    return path
+
+
+def test_init_actions_relative_to_another_entity_do_not_depend_on_the_file_order(tmp_path):
+    # Init happens at t = 0: the cutter starts at 0.8 * 25 = 20 m/s whichever Private comes
+    # first (listed first, it took the ego's speed before the ego had one: 0 m/s).
+    for cutter_first in (False, True):
+        _, scene = imported(tmp_path, init_relative_speed(tmp_path, cutter_first))
+        law = scene.targets[0].trajectory.law
+        assert speed_at(law, 0.0) == pytest.approx(20.0)
+        assert speed_at(law, 1.0) == pytest.approx(20.0)
+
+
+def test_init_actions_relative_to_each_other_are_located(tmp_path):
+    path = init_relative_speed(tmp_path, True, '<RelativeTargetSpeed entityRef="Cutter" '
+                               'value="1" speedTargetValueType="delta" continuous="false"/>')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    rows = path.read_text().splitlines()
+    target = line_of(path, 'value="0.8" speedTargetValueType="factor"')
+    line = max(i for i, row in enumerate(rows[:target], 1) if "<SpeedAction>" in row)
+    assert str(info.value).startswith(
+        f"{path}:{line}: the initial speed action of 'Cutter' refers to 'Ego', whose "
+        f"initial speed action refers back to it")
