@@ -533,6 +533,7 @@ class _Condition:
     kind: str  # time, distance, state
     delay_s: float
     params: dict[str, Any]
+    rising: bool = False
 
 
 @dataclass
@@ -987,6 +988,11 @@ class _Importer:
         return groups
 
     def _condition(self, cond: _El) -> _Condition:
+        out = self._read_condition(cond)
+        out.rising = cond.attrs.get("conditionEdge") == "rising"
+        return out
+
+    def _read_condition(self, cond: _El) -> _Condition:
         cond.text("name", "")
         delay = cond.number("delay", 0.0)
         if delay < 0.0:
@@ -1081,9 +1087,12 @@ class _Importer:
             if order == 2 or not math.isfinite(t):
                 break
             if order == 0:
+                self._note_rising(item.trigger, 0.0, t)
                 pending_acts.remove(item)
                 self.act_start[self.acts.index(item)] = t
             else:
+                self._note_rising(self.events[item].trigger, self.act_start[
+                    self.events[item].act], t)
                 pending.remove(item)
                 self._start_event(item, t)
         if not math.isfinite(stop):
@@ -1376,6 +1385,29 @@ class _Importer:
                           f"format's quintic lane change")
 
     # -- conditions ---------------------------------------------------------------------
+
+    def _note_rising(self, trigger: list[list[_Condition]] | None, lower: float,
+                     t: float) -> None:
+        """Note a rising edge that fired at ``t`` because it was true from ``lower`` on."""
+        for group in trigger or []:
+            if max(self._condition_time(c, lower) for c in group) != t:
+                continue
+            for c in group:
+                fired = self._condition_time(c, lower) - c.delay_s
+                if c.rising and c.kind != "state" and abs(fired - lower) <= XTOL_S and \
+                        self._true_at(c, lower):
+                    self.notes.append(
+                        f"{self.file}:{c.el.line}: condition {c.el.attrs.get('name', '')!r} "
+                        f"(conditionEdge rising) is already true when its evaluation starts at "
+                        f"{lower:g} s: fired then (a simulator may instead wait for it to turn "
+                        f"false and true again)")
+
+    def _true_at(self, cond: _Condition, t: float) -> bool:
+        p = cond.params
+        if cond.kind == "time":
+            return bool(_RULES[p["rule"]](t, p["value"]))
+        # A distance condition whose search finds it at ``t`` holds there.
+        return True
 
     def _trigger_time(self, trigger: list[list[_Condition]] | None, lower: float) -> float:
         """First time from ``lower`` the trigger fires on the motion known now (inf: not now).

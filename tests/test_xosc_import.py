@@ -987,3 +987,23 @@ def test_init_actions_relative_to_each_other_are_located(tmp_path):
     assert str(info.value).startswith(
         f"{path}:{line}: the initial speed action of 'Cutter' refers to 'Ego', whose "
         f"initial speed action refers back to it")
+
+
+def test_a_rising_edge_already_true_when_evaluated_gets_a_note(tmp_path):
+    # The gap is 30 m at the act's start: below 40 m already. Read as firing then (what a
+    # simulator that starts with "false" does); a note says a rising edge may wait instead.
+    result, scene = imported(tmp_path, "cut_in", parameters={"TriggerDistance": "40"})
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert change.start_s == pytest.approx(0.0)
+    line = line_of(DATA / "cut_in.xosc", '<Condition name="EgoClose"')
+    assert (f"{DATA / 'cut_in.xosc'}:{line}: condition 'EgoClose' (conditionEdge rising) is "
+            f"already true when its evaluation starts at 0 s: fired then (a simulator may "
+            f"instead wait for it to turn false and true again)") in result.notes
+    # Edge none: no note; a rising edge that turns true later: none either.
+    path = variant(tmp_path, "cut_in", '<Condition name="EgoClose" delay="0" '
+                   'conditionEdge="rising">', '<Condition name="EgoClose" delay="0" '
+                   'conditionEdge="none">')
+    result, _ = imported(tmp_path, path, parameters={"TriggerDistance": "40"})
+    assert not any("conditionEdge" in note for note in result.notes)
+    result, _ = imported(tmp_path, "cut_in")
+    assert not any("conditionEdge" in note for note in result.notes)
