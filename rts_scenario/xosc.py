@@ -267,6 +267,7 @@ class Parameter:
     type: str
     value: str
     source: str  # "declared" or "--param"
+    line: int | None = None  # of the declaration
 
 
 _PARAM_REF = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
@@ -475,6 +476,10 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
             if not name or kind is None or value is None:
                 raise ScenarioError("<ParameterDeclaration> needs name, parameterType and value",
                                     file=file, line=raw.sourceline)
+            if name in params:
+                raise ScenarioError(f"<ParameterDeclaration name=\"{name}\">: declared twice "
+                                    f"(first at line {params[name].line})", file=file,
+                                    line=raw.sourceline)
             if kind not in _PARAMETER_TYPES:
                 raise ScenarioError(f"<ParameterDeclaration parameterType=\"{kind}\">: "
                                     f"unknown type; valid: {', '.join(_PARAMETER_TYPES)}",
@@ -489,7 +494,7 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
             if not _allowed(value, kind, groups):
                 raise ScenarioError(f"{where}: value {value} is outside the values allowed: "
                                     f"{_describe(groups)}", file=file, line=raw.sourceline)
-            params[name] = Parameter(name, kind, value, "declared")
+            params[name] = Parameter(name, kind, value, "declared", raw.sourceline)
             if name in given:
                 option, override = given[name]
                 problem = _check_type(name, kind, override)
@@ -499,7 +504,7 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
                     raise RtsError(f"--param {option}={override}: outside the values "
                                    f"{file}:{raw.sourceline} allows for {name}: "
                                    f"{_describe(groups)}")
-                params[name] = Parameter(name, kind, override, "--param")
+                params[name] = Parameter(name, kind, override, "--param", raw.sourceline)
     for name, value in overrides.items():
         if name.removeprefix("$") not in params:
             raise RtsError(f"--param {name}={value}: no such parameter in {file}; declared: "
@@ -671,7 +676,7 @@ class _Importer:
         self.acts: list[_Act] = []
         self.events: list[_Event] = []
         self.stop: list[list[_Condition]] = []
-        self.names: dict[str, set[str]] = {}  # storyboard element type -> names
+        self.names: dict[str, dict[str, int]] = {}  # element type -> name -> how many
         self.description = ""
         self.act_start: dict[int, float] = {}  # by index in self.acts
         self.event_start: dict[int, float] = {}
@@ -839,7 +844,8 @@ class _Importer:
                     self._trigger(start) if start is not None else None))
 
     def _named(self, kind: str, name: str) -> None:
-        self.names.setdefault(kind, set()).add(name)
+        names = self.names.setdefault(kind, {})
+        names[name] = names.get(name, 0) + 1
 
     def _private_action(self, private: _El, name: str, actors: list[str],
                         init: bool = False) -> list[_Action]:
@@ -1040,13 +1046,18 @@ class _Importer:
 
     def _check_references(self) -> None:
         for cond in self._conditions():
-            if cond.kind == "state" and cond.params["ref"] not in self.names.get(
-                    cond.params["type"], set()):
-                known = sorted(self.names.get(cond.params["type"], set()))
+            if cond.kind != "state":
+                continue
+            kind, ref = cond.params["type"], cond.params["ref"]
+            names = self.names.get(kind, {})
+            if ref not in names:
                 raise cond.params["el"].error(
-                    f"<StoryboardElementStateCondition>: no {cond.params['type']} named "
-                    f"{cond.params['ref']!r}; {cond.params['type']}s: "
-                    f"{', '.join(known) or 'none'}")
+                    f"<StoryboardElementStateCondition>: no {kind} named {ref!r}; {kind}s: "
+                    f"{', '.join(sorted(names)) or 'none'}")
+            if names[ref] > 1:
+                raise cond.params["el"].error(
+                    f"<StoryboardElementStateCondition>: {names[ref]} {kind}s are named "
+                    f"{ref!r}: the reference is ambiguous (give them distinct names)")
 
     def _conditions(self) -> list[_Condition]:
         triggers = [self.stop, *(a.trigger for a in self.acts),

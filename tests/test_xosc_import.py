@@ -1007,3 +1007,32 @@ def test_a_rising_edge_already_true_when_evaluated_gets_a_note(tmp_path):
     assert not any("conditionEdge" in note for note in result.notes)
     result, _ = imported(tmp_path, "cut_in")
     assert not any("conditionEdge" in note for note in result.notes)
+
+
+def test_a_parameter_declared_twice_is_located(tmp_path):
+    path = variant(tmp_path, "cut_in",
+                   '<ParameterDeclaration name="LaneChangeTime" parameterType="double" '
+                   'value="3"/>',
+                   '<ParameterDeclaration name="LaneChangeTime" parameterType="double" '
+                   'value="3"/>\n    <ParameterDeclaration name="EgoSpeed" '
+                   'parameterType="double" value="30"/>')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    second, first = line_of(path, 'value="30"'), line_of(path, 'name="EgoSpeed"')
+    assert str(info.value) == (f"{path}:{second}: <ParameterDeclaration name=\"EgoSpeed\">: "
+                               f"declared twice (first at line {first})")
+
+
+def test_a_state_condition_on_a_name_two_elements_share_is_located(tmp_path):
+    # Two events named CutInEvent: which one's end starts the speed-up is not said.
+    path = variant(tmp_path, "cut_in", '<Event name="SpeedUpEvent" priority="parallel">',
+                   '<Event name="CutInEvent" priority="parallel">')
+    path.write_text(path.read_text().replace(
+        'storyboardElementRef="CutInEvent" state="endTransition"',
+        'storyboardElementRef="CutInEvent" state="startTransition"'))
+    line = line_of(path, "<StoryboardElementStateCondition")
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (
+        f"{path}:{line}: <StoryboardElementStateCondition>: 2 events are named 'CutInEvent': "
+        f"the reference is ambiguous (give them distinct names)")
