@@ -34,6 +34,8 @@ from .scenario.trajectory import LaneChange, Trajectory, TrajectorySet, TravelLa
 from .scenario.trajectory import Path as TrajectoryPath
 
 MAX_FILE_BYTES = 16 * 1024 * 1024
+# An XML Schema double (Python's float() also reads "1_0" and other digits than 0-9).
+_DOUBLE = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 XSI_NAMESPACE = "http://www.w3.org/2001/XMLSchema-instance"
 DEFAULT_FRAME_RATE_HZ = 20.0
 DEFAULT_LANE_WIDTH_M = 3.5
@@ -155,11 +157,13 @@ class _El:
 
     def number(self, name: str, default: float | None = None) -> float:
         raw = self.text(name, None if default is None else repr(default))
-        try:
-            value = float(raw)
-        except ValueError:
-            raise self.error(f"<{self.tag} {name}=\"{raw}\">: must be a number") from None
-        if not math.isfinite(value):
+        text = raw.strip()
+        if not _DOUBLE.fullmatch(text):
+            if text.lstrip("+-").lower() in ("inf", "infinity", "nan"):
+                raise self.error(f"<{self.tag} {name}=\"{raw}\">: must be a finite number")
+            raise self.error(f"<{self.tag} {name}=\"{raw}\">: must be a number")
+        value = float(text)
+        if not math.isfinite(value):  # beyond a double's range
             raise self.error(f"<{self.tag} {name}=\"{raw}\">: must be a finite number")
         return value
 

@@ -1036,3 +1036,15 @@ def test_a_state_condition_on_a_name_two_elements_share_is_located(tmp_path):
     assert str(info.value) == (
         f"{path}:{line}: <StoryboardElementStateCondition>: 2 events are named 'CutInEvent': "
         f"the reference is ambiguous (give them distinct names)")
+
+
+@pytest.mark.parametrize("value", ["1_0", "0x10", "٣"])
+def test_a_number_outside_xml_schema_s_form_is_located(tmp_path, value):
+    # Python's float() reads these (10, -, 3); OpenSCENARIO's doubles are XML Schema doubles.
+    path = variant(tmp_path, "cut_in", '<RelativeWorldPosition entityRef="Ego" dx="30"',
+                   f'<RelativeWorldPosition entityRef="Ego" dx="{value}"')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(
+        f"{path}:{line_of(path, '<RelativeWorldPosition')}: <RelativeWorldPosition "
+        f"dx=\"{value}\">: must be a number")
