@@ -906,6 +906,10 @@ class _Importer:
         if value < 0.0 or (value == 0.0 and shape != "step" and dimension != "time"):
             raise el.error(f"<{el.tag} value=\"{el.attrs['value']}\">: must be > 0 for "
                            f"dynamicsDimension {dimension}")
+        if shape == "step" and value > 0.0:
+            self.notes.append(f"{self.file}:{el.line}: <{el.tag} dynamicsShape=\"step\" "
+                              f"value=\"{el.attrs['value']}\">: played as an immediate change "
+                              f"(a step takes no time; the value is not used)")
         return _Dynamics(shape, dimension, value)
 
     def _speed_action(self, action: _El) -> tuple[str, dict[str, Any]]:

@@ -1048,3 +1048,15 @@ def test_a_number_outside_xml_schema_s_form_is_located(tmp_path, value):
     assert str(info.value).startswith(
         f"{path}:{line_of(path, '<RelativeWorldPosition')}: <RelativeWorldPosition "
         f"dx=\"{value}\">: must be a number")
+
+
+def test_a_step_with_a_value_gets_a_note(tmp_path):
+    path = variant(tmp_path, "pedestrian_crossing", 'dynamicsShape="step" value="0"',
+                   'dynamicsShape="step" value="2"')
+    result, _ = imported(tmp_path, path, ego="Hero")
+    line = line_of(path, 'dynamicsShape="step" value="2"')
+    assert (f"{path}:{line}: <SpeedActionDynamics dynamicsShape=\"step\" value=\"2\">: played "
+            f"as an immediate change (a step takes no time; the value is not used)") \
+        in result.notes
+    result, _ = imported(tmp_path, "pedestrian_crossing", ego="Hero")
+    assert not any("immediate change" in note for note in result.notes)
