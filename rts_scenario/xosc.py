@@ -1227,7 +1227,8 @@ class _Importer:
         event, stopper = self.events[index], self.events[by]
         for run in [r for r in self.runs if r.event == index and r.end_s > t]:
             body = self.bodies[run.action.actor]
-            if run.move_end_s > t and run.domain == "lateral":
+            # (A lateral step, a 1 ms quintic centred on its start, is complete at once.)
+            if run.move_end_s > t + STEP_S and run.domain == "lateral":
                 raise stopper.el.error(
                     f"event {stopper.name!r} (priority {stopper.priority}) starts at {t:g} s "
                     f"and would stop event {event.name!r} (line {event.el.line}) in the middle "
