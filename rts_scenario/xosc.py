@@ -34,6 +34,9 @@ from .scenario.trajectory import LaneChange, Trajectory, TrajectorySet, TravelLa
 from .scenario.trajectory import Path as TrajectoryPath
 
 MAX_FILE_BYTES = 16 * 1024 * 1024
+# An XML Schema double (Python's float() also reads "1_0" and other digits than 0-9).
+_DOUBLE = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+XSI_NAMESPACE = "http://www.w3.org/2001/XMLSchema-instance"
 DEFAULT_FRAME_RATE_HZ = 20.0
 DEFAULT_LANE_WIDTH_M = 3.5
 # A step transition is played as a linear ramp this long, centred on its start time: positions
@@ -49,10 +52,11 @@ XTOL_S = 1e-9
 # Radar mount when the ego has no bounding box: the shipped scenes' front-bumper radar.
 DEFAULT_MOUNT_X_M = 3.7
 MOUNT_HEIGHT_M = 0.5
-# The scene format's lane change is a quintic ramp: its peak slope and acceleration for a unit
+# The scene format's lane change is a quintic ramp: its peak slope, acceleration and jerk for a unit
 # offset over a unit time.
 QUINTIC_PEAK_SLOPE = 15.0 / 8.0
 QUINTIC_PEAK_ACCEL = 10.0 / math.sqrt(3.0)
+QUINTIC_PEAK_JERK = 60.0
 
 # Transition shapes over u in [0, 1]: value, peak slope, peak |second derivative|.
 _SHAPES: dict[str, tuple[Callable[[float], float], float, float]] = {
@@ -117,31 +121,49 @@ class _El:
         self.tag = raw.tag.rsplit("}", 1)[-1]
         self.line: int | None = raw.sourceline
         self.parent = parent
-        self.attrs = {k: v for k, v in raw.attrib.items() if not k.startswith("{")}
+        self.attrs: dict[str, str] = {}
+        for key, value in raw.attrib.items():
+            if key.startswith("{"):  # another namespace: only the schema's hints are known
+                uri, local = key[1:].split("}", 1)
+                if uri == XSI_NAMESPACE:
+                    continue
+                prefix = next((p for p, u in (raw.nsmap or {}).items() if u == uri and p), None)
+                key = f"{prefix}:{local}" if prefix else key
+            self.attrs[key] = value
+        # OpenSCENARIO gives every value as an attribute: text in an element is not read.
+        self.content = " ".join(filter(None, [(raw.text or "").strip(),
+                                              *((c.tail or "").strip() for c in raw)]))
         self.children = [_El(file, c, self) for c in raw if isinstance(c.tag, str)]
         self.used = False
+        self.skipped = False
         self.read: set[str] = set()
+        self.known: set[str] = set()  # attributes the import looks for, for the messages
+        self.asked: set[str] = set()  # children the import looks for, for the messages
 
     def error(self, message: str) -> ScenarioError:
         return ScenarioError(message, file=self.file, line=self.line)
 
     def text(self, name: str, default: str | None = None) -> str:
         self.read.add(name)
+        self.known.add(name)
         value = self.attrs.get(name, default)
         if value is None:
             raise self.error(f"<{self.tag}> needs the attribute {name}")
         return value
 
     def has(self, name: str) -> bool:
+        self.known.add(name)
         return name in self.attrs
 
     def number(self, name: str, default: float | None = None) -> float:
         raw = self.text(name, None if default is None else repr(default))
-        try:
-            value = float(raw)
-        except ValueError:
-            raise self.error(f"<{self.tag} {name}=\"{raw}\">: must be a number") from None
-        if not math.isfinite(value):
+        text = raw.strip()
+        if not _DOUBLE.fullmatch(text):
+            if text.lstrip("+-").lower() in ("inf", "infinity", "nan"):
+                raise self.error(f"<{self.tag} {name}=\"{raw}\">: must be a finite number")
+            raise self.error(f"<{self.tag} {name}=\"{raw}\">: must be a number")
+        value = float(text)
+        if not math.isfinite(value):  # beyond a double's range
             raise self.error(f"<{self.tag} {name}=\"{raw}\">: must be a finite number")
         return value
 
@@ -155,10 +177,11 @@ class _El:
         value = self.text(name, default)
         if value not in allowed:
             raise self.error(f"<{self.tag} {name}=\"{value}\"> is not supported by import; "
-                             f"supported: {', '.join(allowed)}")
+                             f"supported: {', '.join(allowed)} (at {self.path()})")
         return value
 
     def kids(self, *names: str) -> list[_El]:
+        self.asked.update(names)
         out = [c for c in self.children if c.tag in names]
         for c in out:
             c.used = True
@@ -183,15 +206,16 @@ class _El:
             raise self.error(f"<{self.tag}> needs exactly one child element, got "
                              f"{len(self.children)}")
         c = self.children[0]
+        self.asked.update(supported)
         if c.tag not in supported:
             raise c.error(f"<{c.tag}> is not supported by import; supported {what}: "
-                          f"{', '.join(listed or supported)}")
+                          f"{', '.join(listed or supported)} (at {c.path()})")
         c.used = True
         return c
 
     def skip(self) -> None:
         """Mark the whole subtree as read: it does not change the scene."""
-        self.used = True
+        self.used = self.skipped = True
         self.read |= set(self.attrs)
         for c in self.children:
             c.skip()
@@ -203,6 +227,14 @@ class _El:
             c = self.children[0]
             raise c.error(f"<{c.tag}> in <{self.tag}> is not supported by import")
 
+    def path(self) -> str:
+        """Return the element's tags from below the root, e.g. ``Storyboard/Init/Actions``."""
+        parts, el = [], self
+        while el.parent is not None:
+            parts.append(el.tag)
+            el = el.parent
+        return "/".join(reversed(parts)) or self.tag
+
     def walk(self) -> list[_El]:
         out = [self]
         for c in self.children:
@@ -213,13 +245,20 @@ class _El:
 def _check_all_read(root: _El) -> None:
     for el in root.walk():
         if not el.used:
-            where = f" in <{el.parent.tag}>" if el.parent is not None else ""
-            raise el.error(f"<{el.tag}>{where} is not supported by import (docs/import.md lists "
-                           f"the subset)")
+            assert el.parent is not None  # the root is always read
+            supported = ", ".join(sorted(el.parent.asked)) or "nothing"
+            raise el.error(f"<{el.tag}> in <{el.parent.tag}> is not supported by import; "
+                           f"supported in <{el.parent.tag}>: {supported} (at {el.path()})")
         unread = [a for a in el.attrs if a not in el.read]
         if unread:
+            supported = ", ".join(sorted(el.known)) or "none"
             raise el.error(f"<{el.tag} {unread[0]}=\"{el.attrs[unread[0]]}\">: attribute "
-                           f"{unread[0]} is not supported by import")
+                           f"{unread[0]} is not supported by import; supported: {supported} "
+                           f"(at {el.path()})")
+        if el.content and not el.skipped:
+            raise el.error(f"<{el.tag}> contains text ({el.content[:40]!r}): OpenSCENARIO "
+                           f"gives values as attributes, text is not read by import (at "
+                           f"{el.path()})")
 
 
 # --------------------------------------------------------------------------------- parameters
@@ -232,6 +271,7 @@ class Parameter:
     type: str
     value: str
     source: str  # "declared" or "--param"
+    line: int | None = None  # of the declaration
 
 
 _PARAM_REF = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
@@ -346,6 +386,79 @@ def _check_type(name: str, kind: str, value: str) -> str | None:
     return None
 
 
+def _resolve(value: str, params: dict[str, Parameter], where: str, file: str,
+             line: int | None) -> str:
+    """Resolve a declaration's value: ``$name`` or ``${expression}`` over earlier ones."""
+    if value.startswith("${") and value.endswith("}"):
+        try:
+            return _evaluate(value[2:-1], params)
+        except ValueError as exc:
+            raise ScenarioError(f"{where}: {exc}", file=file, line=line) from None
+    if value.startswith("$"):
+        if value[1:] not in params:
+            raise ScenarioError(f"{where}: unknown parameter {value}; declared: "
+                                f"{', '.join(params) or 'none'}", file=file, line=line)
+        return params[value[1:]].value
+    return value
+
+
+_NUMERIC_TYPES = ("double", "integer", "unsignedInt", "unsignedShort")
+
+
+def _constraints(raw: Any, kind: str, params: dict[str, Parameter],
+                 file: str) -> list[list[tuple[str, str]]]:
+    """Read a declaration's value constraint groups (OR-ed; their constraints AND-ed)."""
+    from lxml import etree
+
+    groups = []
+    for group in raw:
+        if not isinstance(group.tag, str) or etree.QName(group).localname != "ConstraintGroup":
+            continue  # anything else is reported by the element sweep
+        constraints = []
+        for c in group:
+            if not isinstance(c.tag, str) or etree.QName(c).localname != "ValueConstraint":
+                continue
+            rule, value = c.get("rule"), c.get("value")
+            if rule is None or value is None:
+                raise ScenarioError("<ValueConstraint> needs rule and value", file=file,
+                                    line=c.sourceline)
+            allowed = tuple(_RULES) if kind in _NUMERIC_TYPES else ("equalTo", "notEqualTo")
+            if rule not in allowed:
+                raise ScenarioError(f"<ValueConstraint rule=\"{rule}\"> is not supported by "
+                                    f"import; supported: {', '.join(allowed)}"
+                                    + ("" if kind in _NUMERIC_TYPES else
+                                       f" (for a {kind} parameter)"),
+                                    file=file, line=c.sourceline)
+            where = f"<ValueConstraint value=\"{value}\">"
+            value = _resolve(value, params, where, file, c.sourceline)
+            if kind in _NUMERIC_TYPES:
+                try:
+                    float(value)
+                except ValueError:
+                    raise ScenarioError(f"{where}: must be a number (the parameter is a "
+                                        f"{kind})", file=file, line=c.sourceline) from None
+            constraints.append((rule, value))
+        if not constraints:
+            raise ScenarioError("<ConstraintGroup> needs at least one <ValueConstraint>",
+                                file=file, line=group.sourceline)
+        groups.append(constraints)
+    return groups
+
+
+def _allowed(value: str, kind: str, groups: list[list[tuple[str, str]]]) -> bool:
+    if not groups:
+        return True
+    if kind in _NUMERIC_TYPES:
+        return any(all(_RULES[rule](float(value), float(bound)) for rule, bound in group)
+                   for group in groups)
+    return any(all(_RULES[rule](value, bound) for rule, bound in group) for group in groups)
+
+
+def _describe(groups: list[list[tuple[str, str]]]) -> str:
+    return " or ".join("(" + " and ".join(f"{rule} {bound}" for rule, bound in group) + ")"
+                       for group in groups)
+
+
 def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str, Parameter]:
     """Read the root's parameter declarations and apply the overrides."""
     from lxml import etree
@@ -367,34 +480,35 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
             if not name or kind is None or value is None:
                 raise ScenarioError("<ParameterDeclaration> needs name, parameterType and value",
                                     file=file, line=raw.sourceline)
+            if name in params:
+                raise ScenarioError(f"<ParameterDeclaration name=\"{name}\">: declared twice "
+                                    f"(first at line {params[name].line})", file=file,
+                                    line=raw.sourceline)
             if kind not in _PARAMETER_TYPES:
                 raise ScenarioError(f"<ParameterDeclaration parameterType=\"{kind}\">: "
                                     f"unknown type; valid: {', '.join(_PARAMETER_TYPES)}",
                                     file=file, line=raw.sourceline)
             where = f"<ParameterDeclaration name=\"{name}\">"
-            if value.startswith("${") and value.endswith("}"):
-                try:
-                    value = _evaluate(value[2:-1], params)
-                except ValueError as exc:
-                    raise ScenarioError(f"{where}: {exc}", file=file,
-                                        line=raw.sourceline) from None
-            elif value.startswith("$"):
-                if value[1:] not in params:
-                    raise ScenarioError(f"{where}: unknown parameter {value}; declared: "
-                                        f"{', '.join(params) or 'none'}", file=file,
-                                        line=raw.sourceline)
-                value = params[value[1:]].value
+            value = _resolve(value, params, where, file, raw.sourceline)
             problem = _check_type(name, kind, value)
             if problem:
                 raise ScenarioError(f"<ParameterDeclaration>: {problem}", file=file,
                                     line=raw.sourceline)
-            params[name] = Parameter(name, kind, value, "declared")
+            groups = _constraints(raw, kind, params, file)
+            if not _allowed(value, kind, groups):
+                raise ScenarioError(f"{where}: value {value} is outside the values allowed: "
+                                    f"{_describe(groups)}", file=file, line=raw.sourceline)
+            params[name] = Parameter(name, kind, value, "declared", raw.sourceline)
             if name in given:
                 option, override = given[name]
                 problem = _check_type(name, kind, override)
                 if problem:
                     raise RtsError(f"--param {option}={override}: {problem}")
-                params[name] = Parameter(name, kind, override, "--param")
+                if not _allowed(override, kind, groups):
+                    raise RtsError(f"--param {option}={override}: outside the values "
+                                   f"{file}:{raw.sourceline} allows for {name}: "
+                                   f"{_describe(groups)}")
+                params[name] = Parameter(name, kind, override, "--param", raw.sourceline)
     for name, value in overrides.items():
         if name.removeprefix("$") not in params:
             raise RtsError(f"--param {name}={value}: no such parameter in {file}; declared: "
@@ -428,6 +542,7 @@ class _Condition:
     kind: str  # time, distance, state
     delay_s: float
     params: dict[str, Any]
+    rising: bool = False
 
 
 @dataclass
@@ -452,6 +567,18 @@ class _Act:
 
 
 @dataclass
+class _Run:
+    """An action under way on one entity: what it changes, until when."""
+
+    action: _Action
+    event: int | None  # index in the importer's events; None in Init
+    domain: str  # "speed" or "lateral": a new action of the domain ends the running one
+    start_s: float
+    end_s: float  # when the action ends (inf: continuous)
+    move_end_s: float  # when the motion it makes is complete
+
+
+@dataclass
 class _Body:
     """An entity: its place, speed over time (knots) and lateral shifts."""
 
@@ -466,6 +593,7 @@ class _Body:
     knots_mps: list[float] = field(default_factory=lambda: [0.0])
     lane_changes: list[LaneChange] = field(default_factory=list)
     lane_offset_m: float = 0.0
+    runs: dict[str, _Run] = field(default_factory=dict)  # by domain: the latest action
 
     def trajectory(self) -> Trajectory:
         assert self.position_m is not None
@@ -517,6 +645,13 @@ class _Body:
             self.knots_s.append(t0 + duration_s * i / pieces)
             self.knots_mps.append(v0 + delta * f(i / pieces))
 
+    def hold_speed(self, t: float) -> None:
+        """Keep the speed the entity has at ``t`` from then on (a stopped transition)."""
+        v = self.speed(t)
+        self._truncate(t)
+        self.knots_s.append(t)
+        self.knots_mps.append(v)
+
     def _truncate(self, t: float) -> None:
         keep = [i for i, k in enumerate(self.knots_s) if k < t]
         self.knots_s = [self.knots_s[i] for i in keep]
@@ -545,12 +680,13 @@ class _Importer:
         self.acts: list[_Act] = []
         self.events: list[_Event] = []
         self.stop: list[list[_Condition]] = []
-        self.names: dict[str, set[str]] = {}  # storyboard element type -> names
+        self.names: dict[str, dict[str, int]] = {}  # element type -> name -> how many
         self.description = ""
         self.act_start: dict[int, float] = {}  # by index in self.acts
         self.event_start: dict[int, float] = {}
         self.event_end: dict[int, float] = {}
         self.action_times: dict[str, tuple[float, float]] = {}
+        self.runs: list[_Run] = []  # the storyboard's actions as they were applied
         self._read_root()
         self.ego = self._choose_ego(ego)
 
@@ -569,7 +705,14 @@ class _Importer:
         for block in root.kids("ParameterDeclarations"):
             block.used = True
             for decl in block.kids("ParameterDeclaration"):
-                decl.skip()
+                # Read (and checked) by _parameters before anything else.
+                for attr in ("name", "value", "parameterType" if decl.has("parameterType")
+                             else "type"):
+                    decl.text(attr)
+                for group in decl.kids("ConstraintGroup"):
+                    for constraint in group.kids("ValueConstraint"):
+                        constraint.text("rule")
+                        constraint.text("value")
         for block in root.kids("CatalogLocations"):
             if block.children:  # only a CatalogReference would use them, and that is an error
                 self.notes.append(f"{self.file}:{block.line}: <CatalogLocations> not used: "
@@ -705,7 +848,8 @@ class _Importer:
                     self._trigger(start) if start is not None else None))
 
     def _named(self, kind: str, name: str) -> None:
-        self.names.setdefault(kind, set()).add(name)
+        names = self.names.setdefault(kind, {})
+        names[name] = names.get(name, 0) + 1
 
     def _private_action(self, private: _El, name: str, actors: list[str],
                         init: bool = False) -> list[_Action]:
@@ -762,6 +906,10 @@ class _Importer:
         if value < 0.0 or (value == 0.0 and shape != "step" and dimension != "time"):
             raise el.error(f"<{el.tag} value=\"{el.attrs['value']}\">: must be > 0 for "
                            f"dynamicsDimension {dimension}")
+        if shape == "step" and value > 0.0:
+            self.notes.append(f"{self.file}:{el.line}: <{el.tag} dynamicsShape=\"step\" "
+                              f"value=\"{el.attrs['value']}\">: played as an immediate change "
+                              f"(a step takes no time; the value is not used)")
         return _Dynamics(shape, dimension, value)
 
     def _speed_action(self, action: _El) -> tuple[str, dict[str, Any]]:
@@ -788,7 +936,7 @@ class _Importer:
             ("RelativeTargetLane (AbsoluteTargetLane needs a road network)",))
         return "lane_change", {
             "dynamics": dynamics, "ref": self._entity(target, target.text("entityRef")),
-            "lanes": target.number("value"),
+            "lanes": _lanes(target),
             "target_offset_m": action.number("targetLaneOffset", 0.0)}
 
     def _lane_offset(self, action: _El) -> tuple[str, dict[str, Any]]:
@@ -818,24 +966,33 @@ class _Importer:
         distance = action.number("distance", 0.0)
         if distance < 0.0:
             raise action.error("<LateralDistanceAction distance> must be >= 0")
+        # The constraints limit the lateral motion the action makes (OpenSCENARIO's
+        # DynamicConstraints: acceleration, deceleration, speed and their rates).
+        limits = {"acc": math.inf, "speed": math.inf, "jerk": math.inf}
         constraints = action.child("DynamicConstraints", required=False)
-        max_acc = math.inf
         if constraints is not None:
-            for limit in ("maxAcceleration", "maxDeceleration", "maxSpeed",
-                          "maxAccelerationRate", "maxDecelerationRate"):
-                if constraints.has(limit):
-                    constraints.number(limit)  # longitudinal limits: the speed is not changed
-            if constraints.has("maxLateralAcc"):
-                max_acc = constraints.number("maxLateralAcc")
-                if max_acc <= 0.0:
-                    raise constraints.error("<DynamicConstraints maxLateralAcc> must be > 0")
+            for attr, limit in (("maxAcceleration", "acc"), ("maxDeceleration", "acc"),
+                                ("maxSpeed", "speed"), ("maxAccelerationRate", "jerk"),
+                                ("maxDecelerationRate", "jerk")):
+                if constraints.has(attr):
+                    value = constraints.number(attr)
+                    if value <= 0.0:
+                        raise constraints.error(f"<DynamicConstraints {attr}="
+                                                f"\"{constraints.attrs[attr]}\">: must be > 0")
+                    limits[limit] = min(limits[limit], value)
         return "lateral_distance", {
             "ref": self._entity(action, action.text("entityRef")), "distance_m": distance,
-            "side": side, "max_acc_mps2": max_acc,
+            "side": side, "limits": limits,
             "continuous": action.boolean("continuous", False)}
 
     def _trigger(self, trigger: _El) -> list[list[_Condition]]:
         trigger.used = True
+        if trigger.tag == "StartTrigger" and not trigger.kids("ConditionGroup"):
+            owner = trigger.parent.tag if trigger.parent is not None else "element"
+            raise trigger.error(f"an empty <StartTrigger> is not supported by import: "
+                                f"OpenSCENARIO gives an empty trigger no meaning (the import "
+                                f"would start the {owner} at once); give it a "
+                                f"<ConditionGroup> (a SimulationTimeCondition for a time)")
         groups = []
         for group in trigger.kids("ConditionGroup"):
             conditions = [self._condition(c) for c in group.kids("Condition")]
@@ -845,6 +1002,11 @@ class _Importer:
         return groups
 
     def _condition(self, cond: _El) -> _Condition:
+        out = self._read_condition(cond)
+        out.rising = cond.attrs.get("conditionEdge") == "rising"
+        return out
+
+    def _read_condition(self, cond: _El) -> _Condition:
         cond.text("name", "")
         delay = cond.number("delay", 0.0)
         if delay < 0.0:
@@ -892,13 +1054,18 @@ class _Importer:
 
     def _check_references(self) -> None:
         for cond in self._conditions():
-            if cond.kind == "state" and cond.params["ref"] not in self.names.get(
-                    cond.params["type"], set()):
-                known = sorted(self.names.get(cond.params["type"], set()))
+            if cond.kind != "state":
+                continue
+            kind, ref = cond.params["type"], cond.params["ref"]
+            names = self.names.get(kind, {})
+            if ref not in names:
                 raise cond.params["el"].error(
-                    f"<StoryboardElementStateCondition>: no {cond.params['type']} named "
-                    f"{cond.params['ref']!r}; {cond.params['type']}s: "
-                    f"{', '.join(known) or 'none'}")
+                    f"<StoryboardElementStateCondition>: no {kind} named {ref!r}; {kind}s: "
+                    f"{', '.join(sorted(names)) or 'none'}")
+            if names[ref] > 1:
+                raise cond.params["el"].error(
+                    f"<StoryboardElementStateCondition>: {names[ref]} {kind}s are named "
+                    f"{ref!r}: the reference is ambiguous (give them distinct names)")
 
     def _conditions(self) -> list[_Condition]:
         triggers = [self.stop, *(a.trigger for a in self.acts),
@@ -921,9 +1088,8 @@ class _Importer:
     def play(self) -> float:
         """Apply Init, then every event in time order; return the scene's duration."""
         self._place()
-        for action in self.init_actions:
-            if action.kind != "teleport":
-                self._apply(action, 0.0)
+        for action in self._init_order():
+            self._run(action, 0.0, None)
         pending_acts = list(self.acts)
         pending = list(range(len(self.events)))
         while True:
@@ -940,9 +1106,12 @@ class _Importer:
             if order == 2 or not math.isfinite(t):
                 break
             if order == 0:
+                self._note_rising(item.trigger, 0.0, t)
                 pending_acts.remove(item)
                 self.act_start[self.acts.index(item)] = t
             else:
+                self._note_rising(self.events[item].trigger, self.act_start[
+                    self.events[item].act], t)
                 pending.remove(item)
                 self._start_event(item, t)
         if not math.isfinite(stop):
@@ -998,25 +1167,117 @@ class _Importer:
                 raise body.el.error(f"entity {body.name!r} is never placed: give it a "
                                     f"<TeleportAction> in <Init>")
 
+    def _init_order(self) -> list[_Action]:
+        """Order Init's actions: one relative to another entity follows that entity's own.
+
+        An action relative to another entity (its speed, lane or lateral place) comes after
+        that entity's Init actions of its kind: Init happens at t = 0 as a whole, whatever the
+        order of the file.
+        """
+        todo = [a for a in self.init_actions if a.kind != "teleport"]
+
+        def domain(a: _Action) -> str:
+            return "speed" if a.kind == "speed" else "lateral"
+
+        out: list[_Action] = []
+        while todo:
+            # Ready: nothing pending of the entity it refers to, nor earlier of its own.
+            ready = [a for i, a in enumerate(todo) if not any(
+                domain(b) == domain(a) and (b.actor == a.params.get("ref") != a.actor
+                                            or b.actor == a.actor and j < i)
+                for j, b in enumerate(todo))]
+            if not ready:
+                a = todo[0]
+                raise a.el.error(f"the initial {domain(a)} action of {a.actor!r} refers to "
+                                 f"{a.params['ref']!r}, whose initial {domain(a)} action "
+                                 f"refers back to it (Init happens at t = 0 as a whole)")
+            out += ready
+            todo = [a for a in todo if not any(a is r for r in ready)]
+        return out
+
     def _start_event(self, index: int, t: float) -> None:
         event = self.events[index]
-        if event.priority == "skip":
-            running = [j for j, start in self.event_start.items()
-                       if self.events[j].maneuver == event.maneuver
-                       and start <= t < self.event_end[j]]
-            if running:
-                self.notes.append(f"{self.file}:{event.el.line}: event {event.name!r} skipped "
-                                  f"at {t:g} s (priority skip, event "
-                                  f"{self.events[running[0]].name!r} still running)")
-                self.event_start[index] = self.event_end[index] = math.inf
-                return
+        running = self._running_in_maneuver(index, t)
+        if event.priority == "skip" and running:
+            self.notes.append(f"{self.file}:{event.el.line}: event {event.name!r} skipped "
+                              f"at {t:g} s (priority skip, event "
+                              f"{self.events[running[0]].name!r} still running)")
+            self.event_start[index] = self.event_end[index] = math.inf
+            return
         self.event_start[index] = t
-        end = t
+        if event.priority in ("overwrite", "override"):
+            for j in running:
+                self._stop_event(j, index, t)
         for action in event.actions:
-            duration = self._apply(action, t)
-            self.action_times[action.name] = (t, t + duration)
-            end = max(end, t + duration)
-        self.event_end[index] = end
+            self._run(action, t, index)
+        self._refresh(index)
+
+    def _running_in_maneuver(self, index: int, t: float) -> list[int]:
+        """Return the other events of ``index``'s maneuver running at ``t``."""
+        maneuver = self.events[index].el.parent
+        return [j for j, start in self.event_start.items()
+                if j != index and self.events[j].el.parent is maneuver
+                and start <= t < self.event_end[j]]
+
+    def _stop_event(self, index: int, by: int, t: float) -> None:
+        """Stop a running event at ``t`` (priority overwrite of event ``by``).
+
+        Its speed transitions end where they are; a lateral move cannot stop midway in a scene.
+        """
+        event, stopper = self.events[index], self.events[by]
+        for run in [r for r in self.runs if r.event == index and r.end_s > t]:
+            body = self.bodies[run.action.actor]
+            # (A lateral step, a 1 ms quintic centred on its start, is complete at once.)
+            if run.move_end_s > t + STEP_S and run.domain == "lateral":
+                raise stopper.el.error(
+                    f"event {stopper.name!r} (priority {stopper.priority}) starts at {t:g} s "
+                    f"and would stop event {event.name!r} (line {event.el.line}) in the middle "
+                    f"of the lateral move of {run.action.actor!r} (until "
+                    f"{run.move_end_s:g} s): a scene's lane change cannot stop midway, this is "
+                    f"not supported by import")
+            if run.move_end_s > t and body.runs.get("speed") is run:
+                body.hold_speed(t)
+            run.end_s = t
+        self._refresh(index)
+        self.notes.append(f"{self.file}:{stopper.el.line}: event {event.name!r} stopped at "
+                          f"{t:g} s by event {stopper.name!r} (priority {stopper.priority})")
+
+    def _run(self, action: _Action, t: float, event: int | None) -> None:
+        """Apply an action of an event (None: Init) from ``t`` on and record it."""
+        body = self.bodies[action.actor]
+        domain = "speed" if action.kind == "speed" else "lateral"
+        old = body.runs.get(domain)
+        if old is not None and old.end_s > t:
+            # A new action of the same domain ends the running one.
+            if domain == "lateral" and old.move_end_s > t:
+                self.notes.append(
+                    f"{self.file}:{action.el.line}: lateral move of {action.actor!r} starts at "
+                    f"{t:g} s while the one of line {old.action.el.line} is under way (until "
+                    f"{old.move_end_s:g} s): played as the sum of both quintics, which ends "
+                    f"where the new move aims")
+            old.end_s = t
+            if old.event is not None:
+                self._refresh(old.event)
+        changes = len(body.lane_changes)
+        duration = self._apply(action, t)
+        if domain == "lateral":
+            move_end = max((lc.start_s + lc.duration_s for lc in body.lane_changes[changes:]),
+                           default=t)
+        else:
+            move_end = t + duration
+        run = _Run(action, event, domain, t, t + duration, move_end)
+        body.runs[domain] = run
+        if event is not None:
+            self.runs.append(run)
+
+    def _refresh(self, index: int) -> None:
+        """Set an event's and its actions' end times from its runs (the latest actor's)."""
+        runs = [r for r in self.runs if r.event == index]
+        self.event_end[index] = max((r.end_s for r in runs), default=self.event_start[index])
+        for name in {r.action.name for r in runs}:
+            mine = [r for r in runs if r.action.name == name]
+            self.action_times[name] = (min(r.start_s for r in mine),
+                                       max(r.end_s for r in mine))
 
     def _apply(self, action: _Action, t: float) -> float:
         """Apply an action from ``t`` on; return its duration."""
@@ -1070,6 +1331,10 @@ class _Importer:
             duration = 0.0 if p["shape"] == "step" else math.sqrt(
                 QUINTIC_PEAK_ACCEL * abs(shift) / p["max_acc_mps2"])
             self._shift(action, body, t, shift, duration, p["shape"])
+            if p["continuous"] and "ref" in p:
+                self.notes.append(f"{where}: continuous lane offset of {action.actor!r} "
+                                  f"relative to {p['ref']!r} set once at {t:g} s; later "
+                                  f"lateral moves of {p['ref']!r} are not followed")
             return math.inf if p["continuous"] else duration
         if action.kind == "lateral_distance":
             ref = self.bodies[p["ref"]]
@@ -1078,8 +1343,10 @@ class _Importer:
                 p["side"], gap <= 0.0)
             shift = gap + (p["distance_m"] if left else -p["distance_m"])
             body.lane_offset_m += shift
-            duration = 0.0 if math.isinf(p["max_acc_mps2"]) else math.sqrt(
-                QUINTIC_PEAK_ACCEL * abs(shift) / p["max_acc_mps2"])
+            limits = p["limits"]
+            duration = max(math.sqrt(QUINTIC_PEAK_ACCEL * abs(shift) / limits["acc"]),
+                           QUINTIC_PEAK_SLOPE * abs(shift) / limits["speed"],
+                           (QUINTIC_PEAK_JERK * abs(shift) / limits["jerk"]) ** (1.0 / 3.0))
             self._shift(action, body, t, shift, duration, "LateralDistanceAction")
             if p["continuous"]:
                 self.notes.append(f"{where}: continuous lateral distance of {action.actor!r} "
@@ -1138,6 +1405,29 @@ class _Importer:
                           f"format's quintic lane change")
 
     # -- conditions ---------------------------------------------------------------------
+
+    def _note_rising(self, trigger: list[list[_Condition]] | None, lower: float,
+                     t: float) -> None:
+        """Note a rising edge that fired at ``t`` because it was true from ``lower`` on."""
+        for group in trigger or []:
+            if max(self._condition_time(c, lower) for c in group) != t:
+                continue
+            for c in group:
+                fired = self._condition_time(c, lower) - c.delay_s
+                if c.rising and c.kind != "state" and abs(fired - lower) <= XTOL_S and \
+                        self._true_at(c, lower):
+                    self.notes.append(
+                        f"{self.file}:{c.el.line}: condition {c.el.attrs.get('name', '')!r} "
+                        f"(conditionEdge rising) is already true when its evaluation starts at "
+                        f"{lower:g} s: fired then (a simulator may instead wait for it to turn "
+                        f"false and true again)")
+
+    def _true_at(self, cond: _Condition, t: float) -> bool:
+        p = cond.params
+        if cond.kind == "time":
+            return bool(_RULES[p["rule"]](t, p["value"]))
+        # A distance condition whose search finds it at ``t`` holds there.
+        return True
 
     def _trigger_time(self, trigger: list[list[_Condition]] | None, lower: float) -> float:
         """First time from ``lower`` the trigger fires on the motion known now (inf: not now).
@@ -1277,6 +1567,14 @@ class _Importer:
             self.notes.append(f"entity {name!r} is target {out!r} (names allow letters, digits "
                               f"and _ . -)")
         return out
+
+
+def _lanes(target: _El) -> float:
+    lanes = target.number("value")
+    if not lanes.is_integer():
+        raise target.error(f"<{target.tag} value=\"{target.attrs['value']}\">: must be a whole "
+                           f"number of lanes")
+    return lanes
 
 
 def _round(x: float) -> float:
