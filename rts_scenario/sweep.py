@@ -56,8 +56,13 @@ class SweepTask:
     error_type: str = "bad_input"
 
 
-def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
+def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
+                  ) -> list[SweepTask]:
     """Expand folders (every scene file in them, recursively, sorted) and parametrize blocks.
+
+    A scene file reached twice (given twice, or given and inside a folder given) runs once,
+    so that its variants count once in the pass rates; ``notes`` (if given) receives a line
+    for each repeat.
 
     A path that is neither a scene file nor a folder holding one, or a scene whose
     ``parametrize`` block is invalid, becomes one task carrying its error; so does a file in a
@@ -68,6 +73,7 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
     from .scenario import SCENE_SUFFIX, parametrizations
 
     tasks: list[SweepTask] = []
+    seen: dict[Path, str] = {}  # each scene file (resolved) and the name it first came as
     for given in paths:
         path = Path(given)
         misnamed: set[Path] = set()
@@ -90,6 +96,12 @@ def collect_tasks(paths: Iterable[str | Path]) -> list[SweepTask]:
             continue
         for file in files:
             name = str(given) if file is path else str(file)
+            key = file.resolve()
+            if key in seen:
+                if notes is not None:
+                    notes.append(f"{name}: given again (as {seen[key]} first): run once")
+                continue
+            seen[key] = name
             if file in dangling:
                 tasks.append(SweepTask(len(tasks), name, error=dangling_link(file)))
                 continue

@@ -516,3 +516,23 @@ def test_the_euro_ncap_scenes_write_one_offset_two_ways():
         "targets.0.motion.position_m.1"] for n in ("ccrs", "ccrb")]
     zeros = [next(v for v in values if v == 0) for values in offsets]
     assert {type(z) for z in zeros} == {int, float}
+
+
+def test_a_scene_given_twice_runs_once_and_the_sweep_says_so(scenes, tmp_path, capsys):
+    # `sweep DIR DIR/sub/a_plain.scenario.yaml ./DIR`: each scene once (its variants counted
+    # once in the pass rate), with a note naming the repeats.
+    report = tmp_path / "s.json"
+    code, out, err = sweep(capsys, scenes, scenes / "sub" / "a_plain.scenario.yaml",
+                           f"{scenes}/./sub/../sub/a_plain.scenario.yaml", "--json", report)
+    runs = json.loads(report.read_text())["runs"]
+    # The folder holds 6 swept variants, the plain scene and the broken one: 8 runs.
+    assert len(runs) == 8
+    assert sum(run["file"].endswith("a_plain.scenario.yaml") for run in runs) == 1
+    assert err.count("note: ") == 2
+    assert f"note: {scenes / 'sub' / 'a_plain.scenario.yaml'}: given again (as " in err
+    assert "run once" in err
+    # The same path twice, in library use.
+    path = scenes / "sub" / "a_plain.scenario.yaml"
+    notes = []
+    assert len(collect_tasks([path, path], notes)) == 1
+    assert notes == [f"{path}: given again (as {path} first): run once"]

@@ -85,7 +85,10 @@ def _do_sweep(args: argparse.Namespace) -> int:
             raise RtsError(f"--plot {args.plot}: must name a .png file")
         check_writable_file("--plot", args.plot)
 
-    tasks = collect_tasks(args.scenes)
+    notes: list[str] = []
+    tasks = collect_tasks(args.scenes, notes)
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
     # As many workers as there are runs at most (`run_sweep`); one runs in this process.
     used = max(1, min(workers, len(tasks)))
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, LOCAL_SCHEDULER)
