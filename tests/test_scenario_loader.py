@@ -482,6 +482,25 @@ def test_combinations_with_the_same_id_are_refused(tmp_path):
                                             r"'rcs_dbsm=10'"):
         parametrizations(path)
 
+
+@pytest.mark.parametrize("values, first, second, ids", [
+    ("[10, 12, 10.0]", 1, 3, "'rcs_dbsm=10' and 'rcs_dbsm=10.0'"),
+    ("[1.0e+1, 10]", 1, 2, "'rcs_dbsm=10.0' and 'rcs_dbsm=10'"),
+])
+def test_combinations_playing_equal_values_are_refused(tmp_path, values, first, second, ids):
+    # 10 and 10.0 are one value under two ids: the same run twice, counted twice in a sweep's
+    # pass rate.
+    path = tmp_path / "twice.scenario.yaml"
+    path.write_text(GOOD + f"parametrize:\n  targets.0.rcs.rcs_dbsm: {values}\n")
+    with pytest.raises(ScenarioError, match=rf"twice.scenario.yaml:15:\d+: parametrize: "
+                                            rf"combinations {first} and {second} \({ids}\) "
+                                            rf"play the same values"):
+        parametrizations(path)
+    # A bool is no number here: true and 1 stay two values.
+    path.write_text(GOOD + "parametrize:\n  radar.noise: [true, false]\n")
+    assert len(parametrizations(path)) == 2
+
+
 @pytest.mark.parametrize("fc", ["1.0e+15", "5.0e+8"])
 def test_a_carrier_outside_the_radar_bands_is_a_located_error(tmp_path, fc):
     # 1e15 Hz made the estimator's angle grid 349 GiB (MemoryError, exit 3).

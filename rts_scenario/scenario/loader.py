@@ -260,6 +260,7 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     axes = [_parameter_axis(doc, key, values) for key, values in block.items()]
     combos: list[tuple[str, dict[str, Any]]] = []
     seen: dict[str, int] = {}
+    values_seen: dict[str, int] = {}
     for choice in itertools.product(*axes):
         overrides = {path: value for group in choice for path, value in group}
         name = variant_id(overrides)
@@ -270,8 +271,27 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
                             f"id {name!r}: list each value once; keys whose paths end alike "
                             f"need values that differ")
         seen[name] = len(combos)
+        # 10 and 10.0 differ in their ids, not in what they play.
+        played = repr({path: _number_value(value) for path, value in overrides.items()})
+        if played in values_seen:
+            before = values_seen[played]
+            raise doc.error(("parametrize",),
+                            f"combinations {before + 1} and {len(combos) + 1} "
+                            f"({combos[before][0]!r} and {name!r}) play the same values: list "
+                            f"each value once")
+        values_seen[played] = len(combos)
         combos.append((name, overrides))
     return combos
+
+
+def _number_value(value: Any) -> Any:
+    """Return a number as the float it plays (bools and other values as they are)."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        # An integer no float holds exactly stays itself: 2**60 and 2**60 + 1 differ.
+        return float(value) if float(value) == value else value
+    if isinstance(value, list):
+        return [_number_value(v) for v in value]
+    return value
 
 
 def variant_id(overrides: dict[str, Any]) -> str:
