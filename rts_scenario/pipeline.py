@@ -965,6 +965,8 @@ class Pipeline:
             track.first_at(after_scene_until_s(scene.duration_s, track.cycle_s)))
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
+        # Cycles of the stream before, dropped at the restart of the radar's count.
+        bus["stale_cycles"] = self.receiver.stale_cycles
         if self._publisher is not None:
             # Detections the simulated radar made that the bus could not carry (out of a
             # signal's range): the checker never saw them.

@@ -1248,3 +1248,39 @@ def test_a_damaged_line_inside_a_text_log_is_one_error_naming_it(tmp_path, capsy
     err = capsys.readouterr().err
     (said,) = err.strip().splitlines()
     assert said.startswith(f"error: --log {log}: line 100: cannot read: "), said
+
+
+def test_a_recording_opening_with_the_stream_before_s_last_cycles_re_checks_to_the_live_verdict(
+        tmp_path):
+    # A radar counting from its profile's counter start (0) with each stream: the stream
+    # before's last two cycles (counters 238, 239) reach the bus after this run's receiver was
+    # reset, before this stream's cycle 0. The run drops them at the restart of the count and
+    # says how many; the recording holds them, and its re-check drops the same ones: the same
+    # counts and verdict, not 224 cycles taken for late ones.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+
+    def cycle(k, t_s):
+        return Detections(cycle=k, t_s=t_s, range_m=np.array([30.0]),
+                          radial_velocity_mps=np.array([0.0]), az_deg=np.array([0.0]),
+                          el_deg=np.array([0.0]))
+
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        sink = pipeline.output._sink
+        first = [True]
+
+        def stale_first(cycles):
+            if first[0]:
+                first[0] = False
+                cycles = [cycle(238, -0.02), cycle(239, -0.01), *cycles]
+            sink(cycles)
+
+        pipeline.output._sink = stale_first
+        live = pipeline.run(scene).report
+    assert live.passed, live.reasons
+    assert live.frames["total"] == live.frames["checked"] == 240
+    assert live.bus["stale_cycles"] == 2
+    again = check_log(scene, log).report
+    assert again.frames == live.frames
+    assert again.passed and again.reasons == []
+    assert again.bus["stale_cycles"] == 2
