@@ -728,18 +728,28 @@ class _HeadBytes(io.RawIOBase):
 
 
 class _CountedLines(io.TextIOWrapper):
-    """A text log's complete lines (`_TextEnd`), counting those read (``lines``)."""
+    """A text log's complete lines (`_TextEnd`), counting those read (``lines``).
+
+    Lines of white space alone hold no message and are passed over (python-can's CSV reader
+    fails on them: an empty line after the last is no damage). ``at``: the number of the line
+    being read, or last read: where a reader failed (a line that cannot be decoded in the
+    locale's encoding fails as it is read, up to a few kilobytes before the bad byte).
+    """
 
     def __init__(self, path: Path, limit: int) -> None:
         head = io.BufferedReader(_HeadBytes(path.open("rb"), limit))
         # As python-can opens a text log: the locale's encoding, universal line ends.
         super().__init__(head, encoding=locale.getpreferredencoding(False))
         self.lines = 0
+        self.at = 0
 
     def __next__(self) -> str:  # type: ignore[override]  # text lines, as read
-        line = super().__next__()
-        self.lines += 1
-        return line
+        while True:
+            self.at = self.lines + 1
+            line = super().__next__()
+            self.lines += 1
+            if line.strip():
+                return line
 
 
 def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | None:
@@ -826,7 +836,7 @@ def _messages(path: Path) -> Iterator[can.Message]:
             problem = (f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "
                        f"'rts-scenario[mf4]')")
         except Exception as exc:  # noqa: BLE001 - each format fails in its own way
-            where = f"line {text.lines}: " if text is not None and text.lines else ""
+            where = f"line {text.at}: " if text is not None and text.at else ""
             problem = f"--log {path}: {where}cannot read: {type(exc).__name__}: {exc}"
             if text is not None:
                 text.close()
@@ -844,7 +854,7 @@ def _messages(path: Path) -> Iterator[can.Message]:
             except StopIteration:
                 msg = None
             except Exception as exc:  # noqa: BLE001 - a damaged log, in the format's words
-                where = f"line {text.lines}: " if text is not None else ""
+                where = f"line {text.at}: " if text is not None else ""
                 raise LogError(f"--log {path}: {where}cannot read: {type(exc).__name__}: "
                                f"{exc}") from None
             if skipped:
