@@ -197,7 +197,8 @@ class RunOptions:
     method : {"exact", "paper", "estimator"}
         Weight solver.
     drain_s : float
-        Longest wait for the radar's last detections after the last frame.
+        Longest wait for the simulated radar's last detections after the last frame (a radar
+        on the bus is waited for as long as its clock's latency, jitter and cycle say).
     batch_frames : int, optional
         Frames per streamed batch; default `BATCH_FRAMES`, fewer for scenes with many targets
         (`rts_scenario.preflight.frames_per_batch`: memory stays bounded).
@@ -413,8 +414,9 @@ class Pipeline:
         With the simulated radar, waits until every message it published has arrived. For a
         real radar, returns what is there, except at the end (``final``): then waits the radar
         clock's latency, jitter and one cycle plus `QUIET_S`, and until ``until_monotonic_s``
-        on the host's monotonic clock where given (at most ``drain_s`` in all), and hands on
-        the cycles still being assembled, as incomplete where parts are missing.
+        on the host's monotonic clock where given (however much longer than ``drain_s``, the
+        most the simulated radar's messages are waited for, that is), and hands on the cycles
+        still being assembled, as incomplete where parts are missing.
         """
         start = time.perf_counter()
         deadline = start + self.options.drain_s
@@ -423,6 +425,11 @@ class Pipeline:
         # and it may never fall quiet (it keeps measuring what the RTS holds): wait that long.
         clock = self.radar.radar_clock
         settle_s = clock.latency_s + clock.jitter_s + clock.cycle_s + QUIET_S
+        if expected is None and final:
+            # However slow the radar: its cycles do not come sooner for a shorter wait.
+            wait_s = max(settle_s, 0.0 if until_monotonic_s is None
+                         else until_monotonic_s - monotonic_s())
+            deadline = max(deadline, start + wait_s + 0.05)
         stats = self.receiver.stats
         while time.perf_counter() < deadline:
             count = stats.messages
@@ -965,6 +972,8 @@ class Pipeline:
             track.first_at(after_scene_until_s(scene.duration_s, track.cycle_s)))
         checker.settle()
         bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
+        # Cycles of the stream before, dropped at the restart of the radar's count.
+        bus["stale_cycles"] = self.receiver.stale_cycles
         if self._publisher is not None:
             # Detections the simulated radar made that the bus could not carry (out of a
             # signal's range): the checker never saw them.

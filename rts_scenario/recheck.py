@@ -486,30 +486,37 @@ def _variant_text(variant: str) -> str:
 
 
 def read_cycles(log: str | Path, mapping: CanMapping | None, cycle_s: float | None = None,
-                *, channel: str | None = None) -> tuple[list[_LoggedCycle], dict[str, int]]:
+                *, channel: str | None = None,
+                restart: int | None = None) -> tuple[list[_LoggedCycle], dict[str, int]]:
     """Decode a log's radar cycles, each with the bus time of its header message.
 
     ``cycle_s``: the radar's cycle, so that a counter repeated after a long silence is told
     from a copy (`DetectionReceiver`). ``channel``: read only the messages of this channel
-    (python-can's ``Message.channel`` as text), None: every message.
+    (python-can's ``Message.channel`` as text), None: every message. ``restart``: the counter
+    the radar's count starts afresh at with the run's stream, as the run's receiver took it
+    (`DetectionReceiver.reset`): the stream before's cycles logged before it are dropped.
     """
     stats: dict[str, int] = {}
-    return list(_iter_cycles(log, mapping, stats, cycle_s, channel=channel)), stats
+    return list(_iter_cycles(log, mapping, stats, cycle_s, channel=channel,
+                             restart=restart)), stats
 
 
 def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, int],
                  cycle_s: float | None = None, *, channel: str | None = None,
                  channels: Counter[str | None] | None = None,
-                 last_t_s: list[float] | None = None) -> Iterator[_LoggedCycle]:
+                 last_t_s: list[float] | None = None,
+                 restart: int | None = None) -> Iterator[_LoggedCycle]:
     """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end.
 
     ``channel``: read only its messages (the others count as ``other_channels``).
+    ``restart``: the counter the run's stream restarted the radar's count at (`read_cycles`).
     ``channels`` gets, per channel, how many messages of the radar's identifiers it holds;
     ``last_t_s`` the timestamp of the log's last message (of any channel), if it has one.
     """
     check_log_file(log)
     path = Path(log)
     receiver = DetectionReceiver(mapping, cycle_s)
+    receiver.reset(restart=restart)  # as the run's receiver was, when its stream started
     m = receiver.mapping
     header = m.db.get_message_by_name(m.header)
     header_id = (header.frame_id, bool(header.is_extended_frame))
@@ -550,6 +557,7 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
     # header of is not a silent bus).
     stats["messages"] += skipped
     stats["before_first_cycle"] = skipped
+    stats["stale_cycles"] = receiver.stale_cycles
     stats["other_channels"] = other
 
 
@@ -571,13 +579,15 @@ class _LogIndex:
 
     @classmethod
     def scan(cls, log: str | Path, mapping: CanMapping | None,
-             cycle_s: float | None = None, *, channel: str | None = None) -> _LogIndex:
+             cycle_s: float | None = None, *, channel: str | None = None,
+             restart: int | None = None) -> _LogIndex:
         stats: dict[str, int] = {}
         channels: Counter[str | None] = Counter()
         last: list[float] = []
         counters, times, counts = array("q"), array("d"), array("l")
         for c in _iter_cycles(log, mapping, stats, cycle_s, channel=channel,
-                              channels=channels, last_t_s=last):  # one per radar cycle
+                              channels=channels, last_t_s=last,
+                              restart=restart):  # one per radar cycle
             counters.append(c.detections.cycle)
             times.append(c.bus_t_s)
             counts.append(c.detections.count)
@@ -591,11 +601,12 @@ class _LogIndex:
 
 
 def _cycles_at(log: str | Path, mapping: CanMapping | None, positions: IntArray,
-               cycle_s: float | None = None, *, channel: str | None = None) -> list[Detections]:
+               cycle_s: float | None = None, *, channel: str | None = None,
+               restart: int | None = None) -> list[Detections]:
     """Read the log again for the cycles at ``positions`` (increasing)."""
     want = set(positions.tolist())
     return [c.detections for i, c in enumerate(_iter_cycles(log, mapping, {}, cycle_s,
-                                                            channel=channel))
+                                                            channel=channel, restart=restart))
             if i in want]
 
 
@@ -604,10 +615,12 @@ class _ReadAhead:
 
     def __init__(self, log: str | Path, mapping: CanMapping | None,
                  kept: NDArray[np.bool_], cycle_s: float | None = None, *,
-                 channel: str | None = None, shifts: FloatArray | None = None) -> None:
+                 channel: str | None = None, shifts: FloatArray | None = None,
+                 restart: int | None = None) -> None:
         self._log = log
         self._shifts = shifts  # per position, what its bus time is brought back by
-        self._cycles = enumerate(_iter_cycles(log, mapping, {}, cycle_s, channel=channel))
+        self._cycles = enumerate(_iter_cycles(log, mapping, {}, cycle_s, channel=channel,
+                                              restart=restart))
         self._kept = kept  # positions ever asked for: the others are not held
         self._held: dict[int, Detections] = {}
         self._read = -1
@@ -715,18 +728,28 @@ class _HeadBytes(io.RawIOBase):
 
 
 class _CountedLines(io.TextIOWrapper):
-    """A text log's complete lines (`_TextEnd`), counting those read (``lines``)."""
+    """A text log's complete lines (`_TextEnd`), counting those read (``lines``).
+
+    Lines of white space alone hold no message and are passed over (python-can's CSV reader
+    fails on them: an empty line after the last is no damage). ``at``: the number of the line
+    being read, or last read: where a reader failed (a line that cannot be decoded in the
+    locale's encoding fails as it is read, up to a few kilobytes before the bad byte).
+    """
 
     def __init__(self, path: Path, limit: int) -> None:
         head = io.BufferedReader(_HeadBytes(path.open("rb"), limit))
         # As python-can opens a text log: the locale's encoding, universal line ends.
         super().__init__(head, encoding=locale.getpreferredencoding(False))
         self.lines = 0
+        self.at = 0
 
     def __next__(self) -> str:  # type: ignore[override]  # text lines, as read
-        line = super().__next__()
-        self.lines += 1
-        return line
+        while True:
+            self.at = self.lines + 1
+            line = super().__next__()
+            self.lines += 1
+            if line.strip():
+                return line
 
 
 def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | None:
@@ -813,7 +836,7 @@ def _messages(path: Path) -> Iterator[can.Message]:
             problem = (f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "
                        f"'rts-scenario[mf4]')")
         except Exception as exc:  # noqa: BLE001 - each format fails in its own way
-            where = f"line {text.lines}: " if text is not None and text.lines else ""
+            where = f"line {text.at}: " if text is not None and text.at else ""
             problem = f"--log {path}: {where}cannot read: {type(exc).__name__}: {exc}"
             if text is not None:
                 text.close()
@@ -831,7 +854,7 @@ def _messages(path: Path) -> Iterator[can.Message]:
             except StopIteration:
                 msg = None
             except Exception as exc:  # noqa: BLE001 - a damaged log, in the format's words
-                where = f"line {text.lines}: " if text is not None else ""
+                where = f"line {text.at}: " if text is not None else ""
                 raise LogError(f"--log {path}: {where}cannot read: {type(exc).__name__}: "
                                f"{exc}") from None
             if skipped:
@@ -1131,13 +1154,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                      and method != sidecar.get("method"))
     method = method or (sidecar or {}).get("method") or "exact"
     # The profile's cycle: a radar silent for half its counter's range is told by its bus time.
-    index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s, channel=channel)
+    restart = _counter_restart(scene, can_mapping)
+    index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s, channel=channel,
+                           restart=restart)
     receiver_mapping = (can_mapping or CanMapping.builtin())
     picked, channel_note = pick_channel(log, channel, index.channels, receiver_mapping, sidecar)
     if picked != channel:  # the sidecar's: read again, that channel alone
         channel = picked
         index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s,
-                               channel=channel)
+                               channel=channel, restart=restart)
     bus = index.bus
     # Where the host's clock stepped while the run recorded (its sidecar): the stamps after it
     # are brought back onto the clock the scene's start was taken on, as live.
@@ -1214,7 +1239,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         _check_timestamps(log, bus_t, profile_clock.cycle_s, numbers)
         # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
         chosen = _alignment_cycles(index)
-        dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s, channel=channel)
+        dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s, channel=channel,
+                          restart=restart)
         # Detections of targets are what the data align by: an empty bench has none to match.
         aligned_by_data = bool(scene.targets) and any(d.count for d in dets)
         if time_offset_s is None and not scene.targets:
@@ -1521,6 +1547,17 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
                       counter_start=int((counters[0] + shift) % modulus) if counters.size else 0)
 
 
+def _counter_restart(scene: Scenario, mapping: CanMapping | None) -> int | None:
+    """Return the counter the run's stream restarted the radar's count at, as live.
+
+    The profile's counter start (`rts_scenario.pipeline.Pipeline`, its receiver's reset): the
+    cycles the log holds before it, of the stream before, are dropped as the run dropped
+    them. None for a radar running free.
+    """
+    start = scene.radar.radar_clock.counter_start
+    return None if start is None else start % (mapping or CanMapping.builtin()).counter_modulus
+
+
 def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counters: IntArray,
            bus_t_s: FloatArray, clock: RadarClock,
            modulus: int, method: str, batch_frames: int | None, bus: dict[str, int],
@@ -1563,7 +1600,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     inside = (rel >= 0) & (rel < total)
     alignment.cycles_outside_scene = int((~inside).sum())
     logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s, channel=channel,
-                        shifts=shifts)
+                        shifts=shifts, restart=_counter_restart(scene, mapping))
     digest = hashlib.sha256()
     order = np.argsort(rel, kind="stable")
     rel_sorted = rel[order]

@@ -130,8 +130,10 @@ def dangling_link(path: Path) -> str:
     return f"{path}: cannot read file: a link to {os.readlink(path)}, which does not exist"
 
 
-# A scene's version key, at the start of a line: a key of the file's top-level mapping.
-_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:", re.MULTILINE)
+# A scene's version key, at the start of a line (a key of the file's top-level mapping), with
+# its value on that line: the format version, a scalar. A section of that name holding a
+# mapping or a list (a project's own settings) is no scene.
+_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:[ \t]*[^\s#{\[]", re.MULTILINE)
 # How much of a YAML file is read to find it (a scene starts with it, after its comments).
 _HEAD_BYTES = 65536
 

@@ -441,3 +441,22 @@ def test_without_a_frame_counter_a_detection_beyond_the_count_is_still_a_conflic
         receiver.on_message_received(msg)
     assert [c.cycle for c in receiver.flush()] == [0, 1]
     assert (receiver.stats.conflicts, receiver.stats.orphans) == (1, 0)
+
+
+def test_a_stream_s_first_cycle_held_up_behind_its_second_is_not_dropped_at_the_restart():
+    # A radar counting afresh from 0 with each stream: its first cycle's header reaches the bus
+    # after its second cycle. Both are the stream's own: the count restarting at 0 follows
+    # the cycle after it by one, no stream before's. The stream before's last cycle (7 ahead
+    # of the restart, not counting on from it) is still dropped.
+    receiver = DetectionReceiver()
+    cycles = [one_cycle(k, [10.0 + k]) for k in range(6)]
+    for before, order, dropped in (([], [1, 0, 2, 3, 4, 5], 0),
+                                   ([one_cycle(7, [3.0])], [0, 1, 2, 3, 4, 5], 1)):
+        receiver.reset(restart=0)
+        for cycle in [*before, *(cycles[k] for k in order)]:
+            for msg in _messages(cycle):
+                receiver.on_message_received(msg)
+        got = receiver.flush()
+        assert sorted(c.cycle for c in got) == list(range(6))
+        assert all(c.complete for c in got)
+        assert receiver.stale_cycles == dropped

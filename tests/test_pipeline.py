@@ -152,3 +152,24 @@ def test_frames_slower_than_the_radar_stream_in_batches_of_cycles(tmp_path, monk
     report = run_scene(path, RunOptions(drain_s=1.0)).report
     assert report.frames["total"] == 6000 and report.frames["missing"] == 0
     assert sum(sizes) == 6000 and max(sizes) <= BATCH_FRAMES
+
+
+def test_a_run_listens_at_its_end_as_long_as_a_slow_radar_s_last_cycles_take(monkeypatch):
+    # A radar on the bus (no simulated radar in process) whose messages come 1.9 s after it
+    # measured, cycles of 0.2 s: its last cycle reaches the bus up to latency + cycle + 0.2 s
+    # (2.3 s) after the frames ended, beyond the 2 s `drain_s` a quick bus is given. The
+    # run's end waits for it, and for the scene time it was asked to listen until.
+    from rts_scenario.hostclock import monotonic_s
+
+    scene = load_scenario(CUT_IN)
+    with Pipeline.for_scene(scene, RunOptions()) as pipeline:
+        clock = pipeline.radar.radar_clock
+        pipeline.radar = dataclasses.replace(pipeline.radar, clock=dataclasses.replace(
+            clock, cycle_s=0.2, latency_s=1.9, jitter_s=0.0))
+        pipeline._publisher = None
+        start = monotonic_s()
+        pipeline.receive(final=True)
+        assert monotonic_s() - start >= 1.9 + 0.2 + 0.2
+        start = monotonic_s()
+        pipeline.receive(final=True, until_monotonic_s=start + 2.5)
+        assert monotonic_s() - start >= 2.5

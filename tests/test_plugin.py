@@ -367,6 +367,24 @@ def test_a_scene_with_a_mistyped_suffix_fails_instead_of_being_left_out(pytester
     pytester.runpytest().assert_outcomes(passed=1)
 
 
+def test_a_project_s_own_yaml_with_an_rts_scenario_section_is_no_misnamed_scene(pytester):
+    # A scene's rts_scenario key is its format version, a number. A project's settings file
+    # may keep its own section under that name (a mapping, block or flow), or a list; neither
+    # is a scene, and a session with them is as green as without.
+    pytester.makefile(".scenario.yaml", fine=scene("fine"))
+    pytester.makefile(".yaml", bench="rts_scenario:\n  interface: pcan\n  channel: 1\n",
+                      flow="rts_scenario: {interface: pcan}  # the bench's\n",
+                      listed="rts_scenario:\n- cut_in\n- cut_out\n",
+                      nested="lab:\n  rts_scenario: 1\n")
+    pytester.makefile(".yml", commented="rts_scenario:   # our settings\n  seed: 4\n")
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(passed=1)
+    # A scene's version written as a scene writes it is one, whatever follows it.
+    pytester.makefile(".yaml", quoted=scene("quoted").replace("rts_scenario: 1",
+                                                              "rts_scenario: '1'  # v1"))
+    pytester.runpytest().assert_outcomes(passed=1, failed=1)
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="symbolic links")
 def test_a_scene_link_that_leads_nowhere_fails_instead_of_being_left_out(pytester):
     # A scene linked from elsewhere (a shared folder, a checkout not made): pytest walks past a

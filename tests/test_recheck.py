@@ -1248,3 +1248,76 @@ def test_a_damaged_line_inside_a_text_log_is_one_error_naming_it(tmp_path, capsy
     err = capsys.readouterr().err
     (said,) = err.strip().splitlines()
     assert said.startswith(f"error: --log {log}: line 100: cannot read: "), said
+
+
+def test_a_recording_opening_with_the_stream_before_s_last_cycles_re_checks_to_the_live_verdict(
+        tmp_path):
+    # A radar counting from its profile's counter start (0) with each stream: the stream
+    # before's last two cycles (counters 238, 239) reach the bus after this run's receiver was
+    # reset, before this stream's cycle 0. The run drops them at the restart of the count and
+    # says how many; the recording holds them, and its re-check drops the same ones: the same
+    # counts and verdict, not 224 cycles taken for late ones.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+
+    def cycle(k, t_s):
+        return Detections(cycle=k, t_s=t_s, range_m=np.array([30.0]),
+                          radial_velocity_mps=np.array([0.0]), az_deg=np.array([0.0]),
+                          el_deg=np.array([0.0]))
+
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        sink = pipeline.output._sink
+        first = [True]
+
+        def stale_first(cycles):
+            if first[0]:
+                first[0] = False
+                cycles = [cycle(238, -0.02), cycle(239, -0.01), *cycles]
+            sink(cycles)
+
+        pipeline.output._sink = stale_first
+        live = pipeline.run(scene).report
+    assert live.passed, live.reasons
+    assert live.frames["total"] == live.frames["checked"] == 240
+    assert live.bus["stale_cycles"] == 2
+    again = check_log(scene, log).report
+    assert again.frames == live.frames
+    assert again.passed and again.reasons == []
+    assert again.bus["stale_cycles"] == 2
+
+
+@pytest.mark.parametrize("suffix", [".log", ".trc", ".asc", ".csv"])
+def test_a_text_log_ending_in_an_empty_line_re_checks_to_the_live_verdict(tmp_path, capsys,
+                                                                          suffix):
+    # An editor, or a tool joining logs, leaves an empty line (or one of blanks) after the
+    # last: no message is lost, and none is cut short.
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / f"run{suffix}"
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    capsys.readouterr()
+    for n, tail in enumerate((b"\n", b"  \r\n\n")):
+        padded = tmp_path / f"padded{n}{suffix}"
+        padded.write_bytes(log.read_bytes() + tail)
+        shutil.copy(str(log) + ".rts.json", str(padded) + ".rts.json")
+        result = check_log(load_scenario(scene), padded)
+        assert result.report.passed, result.report.reasons
+        assert result.report.frames["checked"] == result.report.frames["total"] == 150
+        assert result.alignment.log_cut_short is None
+
+
+@pytest.mark.parametrize("suffix", [".log", ".csv"])
+def test_a_text_log_that_is_no_text_is_one_error_naming_its_first_line(tmp_path, capsys,
+                                                                       suffix):
+    # A compressed log named as a text one: its first line cannot be decoded.
+    import gzip
+
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / f"run{suffix}"
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    capsys.readouterr()
+    packed = tmp_path / f"packed{suffix}"
+    packed.write_bytes(gzip.compress(log.read_bytes()))
+    assert cli.main(["check", str(scene), "--log", str(packed)]) == 2
+    err = capsys.readouterr().err
+    (said,) = err.strip().splitlines()
+    assert said.startswith(f"error: --log {packed}: line 1: cannot read: "), said

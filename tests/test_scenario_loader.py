@@ -767,3 +767,44 @@ def test_a_spline_reversal_passed_at_speed_is_refused(tmp_path, path, speed, ref
     assert ("the path reverses at this waypoint (it turns 162 deg, more than 90 deg): a spline "
             "path has a cusp there, where the object stops and backs out; speed_mps must be 0 "
             "here, got 1.5") in str(err)
+
+
+def test_a_spline_reversal_just_beyond_a_right_angle_says_by_how_much(tmp_path):
+    # The path turns 90.000001 deg at the second waypoint: a reversal (more than 90 deg), and
+    # the refusal says the angle to the digit that makes it one.
+    import math
+
+    a = math.radians(90.000001)
+    third = f"[{30 + 6 * math.cos(a)!r}, {6 * math.sin(a)!r}, 0.6]"
+    motion = REVERSAL.format(path="spline", speed=1.5).replace("[24, 2, 0.6]", third)
+    text = GOOD.replace("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], "
+                        "speed_mps: 19.0}\n", motion)
+    scene = tmp_path / "right.scenario.yaml"
+    scene.write_text(text)
+    with pytest.raises(ScenarioError, match=r"\(it turns 90\.000001 deg, more than 90 deg\)"):
+        load_scenario(scene)
+
+
+def test_two_spline_reversals_in_a_row_say_how_to_write_them(tmp_path):
+    # Forward to 40 m, back to 25 m, forward again: both turns are reversals (speed 0 at each),
+    # and a piece from standstill to standstill never moves: the refusal says what to add.
+    motion = """\
+    motion:
+      type: waypoints
+      path: spline
+      points:
+        - {position_m: [20, 0, 0.6], speed_mps: 4}
+        - {position_m: [40, 0, 0.6], speed_mps: 0}
+        - {position_m: [25, 0, 0.6], speed_mps: 0}
+        - {position_m: [35, 0, 0.6], speed_mps: 2}
+"""
+    text = GOOD.replace("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], "
+                        "speed_mps: 19.0}\n", motion)
+    scene = tmp_path / "twice.scenario.yaml"
+    scene.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    assert info.value.key_path == "targets[0].motion.points[2].speed_mps"
+    assert ("waypoints 1 and 2 both have speed 0: the object would never get from one to the "
+            "other (to stop at both, add a waypoint between them with a speed above 0)"
+            ) in str(info.value)

@@ -264,6 +264,17 @@ def test_a_scene_with_a_mistyped_suffix_in_a_folder_is_an_erred_run(scenes, tmp_
     assert runs[1]["error_type"] == "bad_input"
 
 
+def test_a_project_s_own_yaml_with_an_rts_scenario_section_is_no_misnamed_scene(tmp_path):
+    # A scene's rts_scenario key is its format version, a number; a settings section of that
+    # name (a mapping or a list) is none, and the folder's sweep is its scenes alone.
+    (tmp_path / "a.scenario.yaml").write_text(tiny_scene("a"))
+    (tmp_path / "bench.yaml").write_text("rts_scenario:\n  interface: pcan\n")
+    (tmp_path / "flow.yml").write_text("rts_scenario: {interface: pcan}\n")
+    (tmp_path / "listed.yaml").write_text("rts_scenario:   # ours\n- cut_in\n")
+    tasks = collect_tasks([tmp_path])
+    assert [(Path(t.file).name, t.error) for t in tasks] == [("a.scenario.yaml", None)]
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="symbolic links")
 def test_a_scene_link_that_leads_nowhere_is_an_erred_run(scenes, tmp_path, capsys):
     gone = scenes / "sub" / "gone.scenario.yaml"

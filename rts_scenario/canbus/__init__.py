@@ -697,8 +697,9 @@ class DetectionReceiver(can.Listener):
         radar's count starts afresh with what comes next: a bench that starts the radar per
         stream (as `emulate` does for each run and measurement) may still deliver the stream
         before's last cycles after this reset. When a header with that counter comes after
-        other cycles whose count does not lead up to it, those were measured before the
-        restart: they are dropped (counted in `stale_cycles`) and every counter is forgotten,
+        other cycles whose count neither leads up to it nor counts on from it without a gap
+        (its header held up behind the next ones), those were measured before the restart:
+        they are dropped (counted in `stale_cycles`) and every counter is forgotten,
         so the new count is neither taken for late cycles nor for copies. A restart not seen
         within `OPEN_CYCLES` headers (half the counter's range, if less; its header lost) is
         no longer waited for.
@@ -746,7 +747,13 @@ class DetectionReceiver(can.Listener):
         return len(self._ready)
 
     def pop(self) -> list[Detections]:
-        """Take the finished cycles, oldest first."""
+        """Take the finished cycles, oldest first.
+
+        None while a restart of the count (`reset`) is still awaited: the cycles before it may
+        be the stream before's, dropped when it comes (at most `OPEN_CYCLES` headers later).
+        """
+        if self._restart is not None:
+            return []
         out = []
         while self._ready:
             out.append(self._ready.popleft())
@@ -760,6 +767,7 @@ class DetectionReceiver(can.Listener):
             while self._open:
                 self._finish(next(iter(self._open)))
             self._current = None
+            self._restart = None  # the bus has said all it will: no restart is awaited
         return self.pop()
 
     def on_message_received(self, msg: can.Message) -> None:
@@ -877,10 +885,7 @@ class DetectionReceiver(can.Listener):
         half = self._counter_modulus // 2
         if self._restart is not None:
             if counter == self._restart:
-                # Cycles counting up to it (a radar measuring before the stream's start) are
-                # the stream's own; the count coming back to it restarted.
-                step = (counter - self._latest) % self._counter_modulus
-                if self._latest >= 0 and not 0 < step < min(OPEN_CYCLES, half):
+                if not self._own_before_restart(counter):
                     self._drop_before_restart()
                 self._restart = None
             elif self._headers_before_restart >= min(OPEN_CYCLES, half):
@@ -1047,6 +1052,22 @@ class DetectionReceiver(can.Listener):
         self._content.clear()
         self._current = None
         self._latest = -1
+
+    def _own_before_restart(self, restart: int) -> bool:
+        """Whether the cycles received before the restart's header are the stream's own.
+
+        Cycles counting up to it (a radar measuring before the stream's start; some may be
+        lost) are, and so are the cycles right after it, counting on from it without a gap:
+        the restart's header was held up behind them. Any other count is the stream before's.
+        """
+        modulus = self._counter_modulus
+        half = modulus // 2
+        limit = min(OPEN_CYCLES, half)
+        offsets = {(c - restart + half) % modulus - half
+                   for c in [*(d.cycle for d in self._ready), *self._open]}
+        ahead = sorted(d for d in offsets if d > 0)
+        return (all(-limit < d < limit for d in offsets)
+                and ahead == list(range(1, len(ahead) + 1)))
 
     def _drop_before_restart(self) -> None:
         """Drop the cycles received since the reset: the stream before's (see `reset`)."""

@@ -656,16 +656,20 @@ def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
         if speeds[i] == 0.0 and speeds[i + 1] == 0.0:
             raise doc.error((*key, "points", i + 1, "speed_mps"),
                             f"waypoints {i} and {i + 1} both have speed 0: the object would "
-                            f"never get from one to the other")
+                            f"never get from one to the other (to stop at both, add a waypoint "
+                            f"between them with a speed above 0)")
     if motion.get("path", "polyline") == "spline":
         for i in reversal_waypoints(points):
             if speeds[i] != 0.0:
                 before, after = points[i] - points[i - 1], points[i + 1] - points[i]
                 cos = before @ after / (np.linalg.norm(before) * np.linalg.norm(after))
                 angle = math.degrees(math.acos(max(-1.0, float(cos))))
+                # As many digits as show the turn beyond the limit (90.000001, not 90).
+                shown = next((f"{angle:.{d}g}" for d in range(3, 17)
+                              if float(f"{angle:.{d}g}") > REVERSAL_DEG), f"{angle!r}")
                 raise doc.error(
                     (*key, "points", i, "speed_mps"),
-                    f"the path reverses at this waypoint (it turns {angle:.3g} deg, more than "
+                    f"the path reverses at this waypoint (it turns {shown} deg, more than "
                     f"{REVERSAL_DEG:g} deg): a spline path has a cusp there, where the object "
                     f"stops and backs out; speed_mps must be 0 here, got {speeds[i]:g} (to "
                     f"drive round the turn instead, add waypoints that turn by at most "
