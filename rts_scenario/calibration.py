@@ -312,6 +312,14 @@ def _check_pattern_limits(rig: Rig, fe: NDArray[np.int64], active: NDArray[np.bo
 
 
 def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
+    if not d.complete:
+        # No cycle for the frame: lost on the bus, later than the measurement waited for, or
+        # not told from the frame before's (docs/bench.md section 6). The radar may well see
+        # the rig: say what is missing.
+        raise MeasurementError(f"no cycle for FE pair {pair[0]}-{pair[1]}'s frame {d.cycle}: "
+                               f"the radar's cycle measuring it did not come back (lost, "
+                               f"later than the measurement waited for, or not told from the "
+                               f"frame before's); measure again")
     k = d.strongest()
     values = getattr(d, what)
     if k is None or values is None:
@@ -371,6 +379,10 @@ class _PairModel:
         if len(dets) != len(delays) + 2:
             raise RtsError(f"calibration: FE pair {a}-{b}: {len(dets)} cycles reported for "
                            f"{len(delays) + 2} frames played; the radar must report every frame")
+        if not any(d.complete for d in dets):
+            # Not one cycle came back: the radar does not see the rig, or reports elsewhere.
+            raise MeasurementError(f"no detection with rcs_dbsm for FE pair {a}-{b} in cycle "
+                                   f"{dets[0].cycle}; check that the radar sees the rig")
         level_db = _strongest(dets[0], "rcs_dbsm", pair) - _strongest(dets[1], "rcs_dbsm", pair)
         sweep = dets[2:]
         az = np.array([_strongest(d, "az_deg", pair) for d in sweep])
@@ -451,7 +463,9 @@ def _close(n_fe: int, pairs: list[PairMeasurement], field: str,
     solution = np.linalg.lstsq(design, values, rcond=None)[0]
     residual = values - design @ solution
     if circular:
-        residual = _wrap(residual)
+        # Each channel's phase in [-180, 180), as the rig file and the report give it: the
+        # solution grown along the grid may be more than a turn from the reference.
+        return np.concatenate([[0.0], _wrap(solution)]), _wrap(residual)
     return np.concatenate([[0.0], solution]), residual
 
 
