@@ -137,3 +137,39 @@ def test_udp_multicast_buses_of_two_groups_do_not_hear_each_other():
         if a2.recv(1.0) is None:
             pytest.skip("udp_multicast does not loop back on this host")
         assert b.recv(0.3) is None
+
+
+def test_radar_channel_on_an_interface_that_names_no_channel_says_so(capsys, monkeypatch):
+    # udp_multicast (the two-process rehearsal's bus) gives every message channel None: there
+    # is one channel, and --radar-channel cannot pick it. The error says that, not "(none)".
+    from rts_scenario.canbus import ListenerBus
+
+    class Unnamed(ListenerBus):
+        def send(self, msg, timeout=None):
+            msg.channel, msg.is_rx = None, True
+            for listener in self._listeners:
+                listener.on_message_received(msg)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Unnamed)
+    code = cli.main(["survey", "kit-table1", "--radar-channel", "239.74.163.2"])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert "(none)" not in err, err
+    assert "names no channel" in err and "leave --radar-channel out" in err, err
+
+
+def test_calibrate_shows_its_progress_by_fe_pairs_on_a_terminal(monkeypatch, capsys):
+    # A calibration over UDP takes minutes on a wide rig (38 pairs): on a terminal it shows
+    # how many FE pairs it measured (it counted pairs against a 200-frame minimum: never).
+    import io
+    import sys
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    assert cli.main(["calibrate", "kit-table1"]) == 0
+    shown = terminal.getvalue()
+    assert "1/6 FE pairs measured" in shown and "6/6 FE pairs measured" in shown, shown

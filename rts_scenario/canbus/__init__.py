@@ -824,6 +824,12 @@ class DetectionReceiver(can.Listener):
         if self.channel is not None:
             if self.channel in held:
                 return None
+            if held and set(held) == {None}:
+                # python-can's udp_multicast and virtual buses name no channel: one channel.
+                return (f"--radar-channel {self.channel}: the interface names no channel on "
+                        f"its messages (python-can gives Message.channel None; {what}: "
+                        f"{held[None]} messages): it reads one channel, which --radar-channel "
+                        f"cannot pick; leave --radar-channel out")
             found = f"the channels they came on: {listing}" if held else "none came on any"
             return (f"--radar-channel {self.channel}: none of {what} came on channel "
                     f"{self.channel}; {found}")
