@@ -412,12 +412,19 @@ class _PairModel:
             out = np.concatenate([p_az[0] - az, p_el[0] - el])
             return np.where(np.isfinite(out), out, 10.0)
 
-        # Start from the best phase on a coarse grid at equal gains, then fit both.
-        coarse = np.arange(0.0, 360.0, 5.0)
-        c_az, c_el = self.predict(a, b, sweep_deg, level, coarse, np.zeros_like(coarse),
-                                  steps_db, steps_deg)
+        # Start from the best phase and gain on a coarse grid, then fit both. The gains tried
+        # lie about the one the channels' single levels give (a coarse measurement: the
+        # radar's RCS, on its bus's steps) and at equal gains: a start at equal gains alone
+        # leaves channels a few dB apart in a wrong minimum.
+        gains = np.arange(-3.0, 4.0) + (np.round(level_db) if np.isfinite(level_db) else 0.0)
+        gains = np.unique(np.concatenate([gains, [0.0]]))
+        phases = np.arange(0.0, 360.0, 5.0)
+        coarse_p, coarse_g = (g.ravel() for g in np.meshgrid(phases, gains))
+        c_az, c_el = self.predict(a, b, sweep_deg, level, coarse_p, coarse_g, steps_db,
+                                  steps_deg)
         cost = np.nansum(np.minimum((c_az - az) ** 2 + (c_el - el) ** 2, 100.0), axis=1)
-        start = np.array([coarse[np.argmin(cost)], 0.0])
+        best = int(np.argmin(cost))
+        start = np.array([coarse_p[best], coarse_g[best]])
         fit = least_squares(residual, start, x_scale=np.array([1.0, 0.1]), diff_step=1e-7,
                             loss="soft_l1", f_scale=0.05, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         phase, gain = float(_wrap(fit.x[0])), float(fit.x[1])
