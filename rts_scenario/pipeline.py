@@ -523,12 +523,12 @@ class Pipeline:
         if rts is not None and (lost := lost_frames(rts)):
             counts = ", ".join(f"{k.replace('_', ' ')} {rts[k]}" for k in LOST_COUNTERS
                                if rts.get(k))
-            why = (" (the RTS's rig lacks FEs of the measured rig, or lays them out in other "
-                   f"rows and columns: measure the rig the RTS has, {self.rig.name!r} is not)"
+            why = (f"; malformed frames: the RTS's rig lacks FEs of rig {self.rig.name!r}, or "
+                   f"lays them out in other rows and columns: measure the rig the RTS has"
                    if rts.get("malformed") else "")
             return (f"the RTS did not apply {lost} of the {frames} frames of {which} "
-                    f"({counts}){why}: it held the frame before, and what the radar measured "
-                    f"then is not the frame's")
+                    f"({counts}): it held the frame before, and what the radar measured then "
+                    f"is not the frame's{why}")
         if rig is not None and not rig["matches_run"]:
             return (f"rts_rig: the RTS plays a rig of {rig['front_ends']} FEs whose geometry "
                     f"(sha256 {rig['geometry_sha256'][:12]}) is not the measured rig's "
