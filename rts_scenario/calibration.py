@@ -312,6 +312,14 @@ def _check_pattern_limits(rig: Rig, fe: NDArray[np.int64], active: NDArray[np.bo
 
 
 def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
+    if not d.complete:
+        # No cycle for the frame: lost on the bus, later than the measurement waited for, or
+        # not told from the frame before's (docs/bench.md section 6). The radar may well see
+        # the rig: say what is missing.
+        raise MeasurementError(f"no cycle for FE pair {pair[0]}-{pair[1]}'s frame {d.cycle}: "
+                               f"the radar's cycle measuring it did not come back (lost, "
+                               f"later than the measurement waited for, or not told from the "
+                               f"frame before's); measure again")
     k = d.strongest()
     values = getattr(d, what)
     if k is None or values is None:
@@ -371,6 +379,10 @@ class _PairModel:
         if len(dets) != len(delays) + 2:
             raise RtsError(f"calibration: FE pair {a}-{b}: {len(dets)} cycles reported for "
                            f"{len(delays) + 2} frames played; the radar must report every frame")
+        if not any(d.complete for d in dets):
+            # Not one cycle came back: the radar does not see the rig, or reports elsewhere.
+            raise MeasurementError(f"no detection with rcs_dbsm for FE pair {a}-{b} in cycle "
+                                   f"{dets[0].cycle}; check that the radar sees the rig")
         level_db = _strongest(dets[0], "rcs_dbsm", pair) - _strongest(dets[1], "rcs_dbsm", pair)
         sweep = dets[2:]
         az = np.array([_strongest(d, "az_deg", pair) for d in sweep])
@@ -400,12 +412,19 @@ class _PairModel:
             out = np.concatenate([p_az[0] - az, p_el[0] - el])
             return np.where(np.isfinite(out), out, 10.0)
 
-        # Start from the best phase on a coarse grid at equal gains, then fit both.
-        coarse = np.arange(0.0, 360.0, 5.0)
-        c_az, c_el = self.predict(a, b, sweep_deg, level, coarse, np.zeros_like(coarse),
-                                  steps_db, steps_deg)
+        # Start from the best phase and gain on a coarse grid, then fit both. The gains tried
+        # lie about the one the channels' single levels give (a coarse measurement: the
+        # radar's RCS, on its bus's steps) and at equal gains: a start at equal gains alone
+        # leaves channels a few dB apart in a wrong minimum.
+        gains = np.arange(-3.0, 4.0) + (np.round(level_db) if np.isfinite(level_db) else 0.0)
+        gains = np.unique(np.concatenate([gains, [0.0]]))
+        phases = np.arange(0.0, 360.0, 5.0)
+        coarse_p, coarse_g = (g.ravel() for g in np.meshgrid(phases, gains))
+        c_az, c_el = self.predict(a, b, sweep_deg, level, coarse_p, coarse_g, steps_db,
+                                  steps_deg)
         cost = np.nansum(np.minimum((c_az - az) ** 2 + (c_el - el) ** 2, 100.0), axis=1)
-        start = np.array([coarse[np.argmin(cost)], 0.0])
+        best = int(np.argmin(cost))
+        start = np.array([coarse_p[best], coarse_g[best]])
         fit = least_squares(residual, start, x_scale=np.array([1.0, 0.1]), diff_step=1e-7,
                             loss="soft_l1", f_scale=0.05, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         phase, gain = float(_wrap(fit.x[0])), float(fit.x[1])
@@ -451,7 +470,9 @@ def _close(n_fe: int, pairs: list[PairMeasurement], field: str,
     solution = np.linalg.lstsq(design, values, rcond=None)[0]
     residual = values - design @ solution
     if circular:
-        residual = _wrap(residual)
+        # Each channel's phase in [-180, 180), as the rig file and the report give it: the
+        # solution grown along the grid may be more than a turn from the reference.
+        return np.concatenate([[0.0], _wrap(solution)]), _wrap(residual)
     return np.concatenate([[0.0], solution]), residual
 
 

@@ -29,7 +29,7 @@ from .hostclock import HostClockWatch, monotonic_s, wall_s
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
-from .playback import Playback, rts_rig_record
+from .playback import LOST_COUNTERS, Playback, lost_frames, rts_rig_record
 from .preflight import Preflight, angle_tolerance_deg, frames_per_batch, preflight, scene_limits
 from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
 from .radar.profile import RadarProfile
@@ -495,7 +495,7 @@ class Pipeline:
         self.measurement_other_channels += self.receiver.other_channels
         # The radar's identifiers on several channels (or none on --radar-channel): the
         # cycles would mix another bus's in; nothing is measured from them.
-        reason = self.receiver.channel_reason()
+        reason = self.receiver.channel_reason() or self._rts_refusal(played.n_frames)
         if reason:
             raise MeasurementError(reason)
         self.host_clock.sample()  # a step is told by the measurement, if no cycle told it
@@ -513,6 +513,36 @@ class Pipeline:
         return [found.get(int(i) * hold + hold - 1,
                           Detections.empty(int(f), float(t), (), complete=False))
                 for i, f, t in zip(n, schedule.frame_index, schedule.t_s, strict=True)]
+
+    def _rts_refusal(self, frames: int) -> str | None:
+        """Say why the RTS's own word on a measurement's stream makes its cycles untrustworthy.
+
+        An RTS that reports its counters (docs/udp-protocol.md, status replies) and did not
+        apply some frames held the frame before instead: the cycles measured then show that
+        one, and would be taken for the frames it refused. An RTS that says its rig (rig
+        replies) and plays another geometry than the measured rig's played the pattern from
+        other directions. None where neither happened, or the RTS says nothing.
+        """
+        assert self.output is not None
+        rts = self.output.rts_status(settle_s=RTS_SETTLE_S)
+        rig = rts_rig_record(self.output.rts_rig(), self.rig)
+        which = f"measurement {self.measurements}"
+        if rts is not None and (lost := lost_frames(rts)):
+            counts = ", ".join(f"{k.replace('_', ' ')} {rts[k]}" for k in LOST_COUNTERS
+                               if rts.get(k))
+            why = (f"; malformed frames: the RTS's rig lacks FEs of rig {self.rig.name!r}, or "
+                   f"lays them out in other rows and columns: measure the rig the RTS has"
+                   if rts.get("malformed") else "")
+            return (f"the RTS did not apply {lost} of the {frames} frames of {which} "
+                    f"({counts}): it held the frame before, and what the radar measured then "
+                    f"is not the frame's{why}")
+        if rig is not None and not rig["matches_run"]:
+            return (f"rts_rig: the RTS plays a rig of {rig['front_ends']} FEs whose geometry "
+                    f"(sha256 {rig['geometry_sha256'][:12]}) is not the measured rig's "
+                    f"({rig['run']}, {rig['run_geometry_sha256'][:12]}), in {which}: its "
+                    f"echoes came from other directions than the pattern put them in; measure "
+                    f"the rig the RTS has (emulate: --rig the measured rig's)")
+        return None
 
     def _counter_restart(self) -> int | None:
         """Return the counter a run's or measurement's stream restarts the radar's count at.

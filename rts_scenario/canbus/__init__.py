@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import itertools
 import operator
+import socket
+import sys
 import threading
 import time
 from collections import Counter, OrderedDict, deque
@@ -54,10 +56,35 @@ def open_bus(interface: str = DEFAULT_INTERFACE, channel: str = DEFAULT_CHANNEL,
         raise BusError(f"CAN interface {interface!r} unknown; valid interfaces: "
                        f"{', '.join(valid)}")
     try:
-        return can.Bus(interface=interface, channel=channel, fd=fd, **options)
+        bus = can.Bus(interface=interface, channel=channel, fd=fd, **options)
     except (can.CanError, OSError, ImportError, ValueError, TypeError) as exc:
         raise BusError(f"cannot open CAN interface {interface!r} channel {channel!r}: "
                        f"{exc}") from None
+    if interface == "udp_multicast":
+        _own_group_only(bus)
+    return bus
+
+
+# Linux's IP_MULTICAST_ALL (linux/in.h); Python's socket module does not name it.
+_IP_MULTICAST_ALL = 49
+
+
+def _own_group_only(bus: can.BusABC) -> None:
+    """Make a python-can ``udp_multicast`` bus hear its own group only.
+
+    python-can binds every such bus to the same port on every address; Linux then hands it the
+    datagrams of every group any socket of the host joined on that port, so two benches on two
+    groups of one host would hear each other's radar. Elsewhere (no such option) nothing
+    changes.
+    """
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is None or not sys.platform.startswith("linux"):
+        return
+    try:
+        if sock.family == socket.AF_INET:
+            sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
+    except OSError:
+        pass  # a kernel without it: as python-can opened it
 
 
 class ListenerBus(can.BusABC):
@@ -805,6 +832,12 @@ class DetectionReceiver(can.Listener):
         if self.channel is not None:
             if self.channel in held:
                 return None
+            if held and set(held) == {None}:
+                # python-can's udp_multicast and virtual buses name no channel: one channel.
+                return (f"--radar-channel {self.channel}: the interface names no channel on "
+                        f"its messages (python-can gives Message.channel None; {what}: "
+                        f"{held[None]} messages): it reads one channel, which --radar-channel "
+                        f"cannot pick; leave --radar-channel out")
             found = f"the channels they came on: {listing}" if held else "none came on any"
             return (f"--radar-channel {self.channel}: none of {what} came on channel "
                     f"{self.channel}; {found}")

@@ -93,7 +93,8 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         with bench(rig) as pipeline:
             before = cal.check_grid(rig, radar, pipeline.play, method, args.estimator)
             result = cal.calibrate(rig, radar, pipeline.play, estimator=args.estimator,
-                                   progress=Progress("calibrate"))
+                                   progress=Progress("calibrate", unit="FE pairs measured",
+                                                     minimum=1))
         steps += pipeline.measurement_steps
         other_channels += pipeline.measurement_other_channels
         calibrated = result.apply(rig)

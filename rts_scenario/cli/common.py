@@ -114,22 +114,26 @@ def stdout_reader_gone() -> bool:
 
 
 class Progress:
-    """A one-line progress bar on stderr, only when it is a terminal."""
+    """A one-line progress bar on stderr, only when it is a terminal.
 
-    def __init__(self, label: str) -> None:
-        self.label = label
+    ``unit`` names what is counted; fewer than ``minimum`` of them show nothing (a short run).
+    """
+
+    def __init__(self, label: str, unit: str = "frames", minimum: int = 200) -> None:
+        self.label, self.unit, self.minimum = label, unit, minimum
         self.active = sys.stderr.isatty()
 
     def __call__(self, done: int, total: int) -> None:
-        """Show ``done`` of ``total`` frames; short runs (< 200 frames) show nothing."""
-        if not self.active or total < 200:
+        """Show ``done`` of ``total``; fewer than ``minimum`` in all show nothing."""
+        if not self.active or total < self.minimum:
             return
         width = 30
         filled = int(width * done / total)
-        sys.stderr.write(f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] "
-                         f"{done}/{total} frames")
+        line = (f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {done}/{total} "
+                f"{self.unit}")
+        sys.stderr.write(line)
         if done >= total:
-            sys.stderr.write("\r" + " " * (len(self.label) + width + 24) + "\r")
+            sys.stderr.write("\r" + " " * len(line) + "\r")
         sys.stderr.flush()
 
 
