@@ -329,6 +329,15 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
      r"^--inject-phase-deg: must be within 0..180, got -5"),
     ("calibrate-phase-inf", ["calibrate", "kit-table1", "--inject-phase-deg", "inf"], 2,
      r"^--inject-phase-deg: must be within 0..180, got inf"),
+    # Options of the built-in simulated radar mean nothing for a radar on the bench.
+    ("calibrate-fidelity-over-udp", ["calibrate", "kit-table1", "--output",
+                                     "udp://127.0.0.1:45990", "--fidelity", "adc"], 2,
+     r"^--fidelity: an option of the built-in simulated radar; with --output "
+     r"udp://127.0.0.1:45990 the radar on the bench measures"),
+    ("survey-noise-over-udp", ["survey", "kit-table1", "--output", "udp://127.0.0.1:45990",
+                               "--noise"], 2,
+     r"^--noise: an option of the built-in simulated radar; with --output "
+     r"udp://127.0.0.1:45990"),
     ("calibrate-seed-negative", ["calibrate", "kit-table1", "--seed", "-1"], 2,
      r"^--seed: must be >= 0, got -1"),
     ("calibrate-write-folder", ["calibrate", "kit-table1", "--write", "{dir}"], 2,

@@ -402,7 +402,9 @@ def add_bench_arguments(parser: argparse.ArgumentParser, radar_default: str) -> 
     parser.add_argument("--mapping", default=None,
                         help="*.mapping.yaml for a third-party radar's DBC (the simulated "
                              "radar speaks it, the measurement reads it)")
-    parser.add_argument("--fidelity", default="analytic", choices=["analytic", "adc"])
+    # None: not given (the simulated radar's analytic; refused with a real radar's output).
+    parser.add_argument("--fidelity", default=None, choices=["analytic", "adc"],
+                        help="the simulated radar's (default analytic)")
     parser.add_argument("--noise", action="store_true", help="thermal noise (simulated)")
     parser.add_argument("--estimator", default="bartlett",
                         help="the radar's angle estimator (the simulated radar's, and the one "
@@ -450,6 +452,14 @@ def bench_of(args: argparse.Namespace, command: str = "a measurement",
         raise RtsError(f"--estimator: unknown estimator {args.estimator!r}; valid: "
                        f"{', '.join(estimator_names())}")
     check_output("--output", args.output, run=True)
+    if args.output != "simulated-radar" and (args.fidelity is not None or args.noise):
+        # They would be taken and change nothing: the radar under test measures.
+        which = "--fidelity" if args.fidelity is not None else "--noise"
+        raise RtsError(f"{which}: an option of the built-in simulated radar; with --output "
+                       f"{args.output} the radar on the bench measures (to rehearse, give it "
+                       f"to `rts-scenario emulate`)")
+    if args.fidelity is None:
+        args.fidelity = "analytic"
     check_can_interface("--can-interface", args.can_interface, args.can_channel)
     check_radar_channel(args.radar_channel)
     if args.mapping is not None:
