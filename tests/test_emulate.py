@@ -912,3 +912,37 @@ def test_an_emulated_radar_whose_thread_starts_late_keeps_its_clock_from_the_fir
         emulator.stop()
     assert report.passed, report.reasons
     assert report.targets[0].detection_rate == 1.0
+
+
+def test_a_scene_starts_when_its_first_frame_goes_out(tmp_path):
+    # The sender wakes for the first frame and is held 15 ms before its datagram goes out (a
+    # loaded host): the RTS, and the radar it starts, begin with that datagram, and so does
+    # the scene. Timed from the wake-up, the in-step radar would measure 15 ms into every
+    # frame while the run takes it at the changes, and frames 5, 10 and 15, 10 ms late, would
+    # be judged as not yet played where the radar saw them.
+    from rts_scenario.outputs.udp import HEADER
+
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
+                          {"duration_s": 2.0, "radar.noise": False,
+                           "expectations.expected_limits": ["frames_sent_late"]})
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False).start()
+    try:
+        host, port = emulator.address
+        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
+                             can_channel=channel)
+        with Pipeline.for_scene(scene, options) as pipeline:
+            transmit = pipeline.output.transmit
+
+            def held(datagram: bytes) -> None:
+                frame = HEADER.unpack_from(datagram)[4]
+                if frame in (0, 5, 10, 15):
+                    time.sleep(0.015 if frame == 0 else 0.01)
+                transmit(datagram)
+
+            pipeline.output.send = held
+            report = pipeline.run(scene).report
+    finally:
+        emulator.stop()
+    assert report.passed, report.reasons
+    assert report.targets[0].detection_rate == 1.0

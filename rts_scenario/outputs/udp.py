@@ -193,6 +193,10 @@ class UdpOutput(Output):
             self._transmitted_s = None
             for datagram in datagrams:
                 self.send(datagram)
+            if self.pacing == "realtime" and self._transmitted_s is not None \
+                    and self._frames_sent == 0:
+                self._restart_at(self._transmitted_s)
+                late = 0.0
             if self.pacing == "realtime" and self._transmitted_s is not None:
                 # The frame is out with its last datagram: a host that holds the sender
                 # between its wake-up and that datagram delays the frame as much. (Read as
@@ -288,6 +292,21 @@ class UdpOutput(Output):
                     self._rts_rig = rig
         finally:
             self._socket.setblocking(True)
+
+    def _restart_at(self, at: float) -> None:
+        """Start the scene at perf_counter time ``at``: when its first frame went out.
+
+        The RTS (and the radar it starts) begin with that frame's datagram, not with the
+        sender's wake-up before it (a loaded host may hold the sender between the two).
+        """
+        assert self._start is not None
+        held = at - self._start
+        if held > 0.0:
+            self._start = at
+            assert self.scene_origin_monotonic_s is not None
+            assert self.scene_origin_wall_s is not None
+            self.scene_origin_monotonic_s += held
+            self.scene_origin_wall_s += held
 
     def _late_s(self, t_s: float, at: float) -> float:
         """How late perf_counter time ``at`` is for scene time ``t_s`` of the paced stream (s)."""
