@@ -125,8 +125,15 @@ class Emulator:
         self.receiver = UdpReceiver(host, port, n_front_ends=rig.n_front_ends,
                                     quads=rig.quads, rig_digest=rig.geometry_digest())
         self._own_bus = bus is None
+        # The radar's messages are stamped when it put them on the bus, its latency after
+        # measuring, not when the publishing thread got round to them (a loaded host wakes
+        # it late): python-can's virtual bus keeps a sender's stamp when told to. An interface
+        # that stamps messages itself, as they pass, stamps them when they were sent.
+        options = {"preserve_timestamps": True} if bus is None and \
+            can_interface == "virtual" else {}
         try:
-            self.bus = bus if bus is not None else open_bus(can_interface, can_channel)
+            self.bus = bus if bus is not None else open_bus(can_interface, can_channel,
+                                                            **options)
         except BaseException:
             self.receiver.stop(drain_s=0.0)
             raise
@@ -235,12 +242,15 @@ class Emulator:
                     self._due.clear()
                 self.stats = self._radar_of(stream)
             if origin is None:
-                snap = self.receiver.snapshot()
-                if snap is None:
+                self.receiver.poll()
+                first = self.receiver.first
+                if first is None or self.receiver.streams != stream:
                     time.sleep(TICK_S)
                     continue
-                _, t_s, arrival, _ = snap
-                origin = arrival - t_s  # scene time 0 in perf_counter time
+                # Scene time 0 in perf_counter time, by the stream's first frame however
+                # late this thread looks: the RTS starts the radar as that frame arrives.
+                _, t_s, arrival = first
+                origin = arrival - t_s
             due = origin + float(self.clock.time_of(np.array([n]))[0])
             while (not self._stop.is_set() and time.perf_counter() < due
                    and self.receiver.streams == stream):
@@ -261,7 +271,10 @@ class Emulator:
 
         It sees the frame the RTS held at ``due``, however late the thread got here: a radar
         measures on its own clock, not on its host's (a loaded machine wakes a thread late).
+        Datagrams that reached the RTS by then are applied first, as of when they arrived,
+        whether or not its receiving thread woke to them yet.
         """
+        self.receiver.poll()
         snap = self.receiver.snapshot(at=due)
         if snap is None:  # a new stream began, its first frame not applied yet
             return
@@ -299,7 +312,8 @@ class Emulator:
                     continue
                 heapq.heappop(self._due)
             sent, unsendable = self.publisher.sent, self.publisher.unsendable_detections
-            self.publisher.publish(report)
+            # When it was due on the bus, on the wall clock python-can stamps with.
+            self.publisher.publish(report, time.time() - (time.perf_counter() - at))
             stats.published += 1
             stats.detections += report.count
             stats.can_messages += self.publisher.sent - sent

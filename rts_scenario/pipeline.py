@@ -300,6 +300,9 @@ class Pipeline:
         self.measurement_steps: list[dict[str, float | str | int]] = []
         # The messages of other channels than ``radar_channel`` the measurements skipped.
         self.measurement_other_channels = 0
+        # Frames of the measurements that went out too late for the cycle that measures them
+        # (`play`): not measured.
+        self.measurement_late_frames = 0
         self.output: Output | None = None
         self._new_output: Callable[[], Output] | None = None
         # Whether a measurement (`play`) was made: the next starts a stream of its own.
@@ -490,7 +493,8 @@ class Pipeline:
             schedule.take(np.repeat(n, hold)),
             frame_index=(np.repeat(schedule.frame_index, hold) * hold
                          + np.tile(np.arange(hold), schedule.n_frames)))
-        self.write(replace(played, t_s=clock.time_of(np.arange(played.n_frames))))
+        played = replace(played, t_s=clock.time_of(np.arange(played.n_frames)))
+        self.write(played)
         received = self.receive(final=True)
         self.measurement_other_channels += self.receiver.other_channels
         # The radar's identifiers on several channels (or none on --radar-channel): the
@@ -510,6 +514,16 @@ class Pipeline:
             # Each cycle may be up to ``spread`` cycles earlier than numbered: the last of a
             # frame's hold may be one of the frame before's. None is taken for a frame.
             found = {}
+        if not self.output.applies_frames_on_time:
+            # A frame that went out later than its measuring cycle (the last of its hold)
+            # less the ambiguity window may not have been played yet when that cycle measured:
+            # it may show the frame before. Such a frame is not measured, never taken from
+            # the frame before.
+            late_s = self.output.sent_t_s(played) - played.t_s
+            allowed_s = (hold - 1) * clock.cycle_s - ambiguity_window_s(self.radar, self.rig)
+            for i in np.flatnonzero(late_s[n * hold] > allowed_s):
+                found.pop(int(i) * hold + hold - 1, None)
+                self.measurement_late_frames += 1
         return [found.get(int(i) * hold + hold - 1,
                           Detections.empty(int(f), float(t), (), complete=False))
                 for i, f, t in zip(n, schedule.frame_index, schedule.t_s, strict=True)]

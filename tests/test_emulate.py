@@ -8,6 +8,7 @@ import dataclasses
 import itertools
 import json
 import shutil
+import threading
 import time
 from pathlib import Path
 
@@ -743,3 +744,205 @@ def test_a_count_reaching_the_restart_value_later_in_the_stream_is_no_restart():
         receiver.on_message_received(msg)
     assert [c.cycle for c in receiver.flush()] == list(range(10))
     assert receiver.stale_cycles == 1
+
+
+def test_an_rts_whose_receiving_thread_wakes_late_applies_each_frame_as_it_arrived(tmp_path,
+                                                                                   monkeypatch):
+    # A loaded machine wakes the emulated RTS's receiving thread late: every second frame's
+    # datagram waits 30 ms in the socket after it arrived. An RTS applies a frame when it
+    # arrives, not when its host gets round to it: the radar, measuring 25 ms into each
+    # frame (its profile's start offset), sees each frame as sent. Applied 30 ms late, half
+    # of its cycles would show the frame before: the target 0.4 m farther, beyond the
+    # scene's 0.3 m tolerance.
+    from rts_scenario.outputs.udp import HEADER, UdpReceiver
+
+    handle = UdpReceiver.handle
+
+    def starved(self, datagram, sender=None, *args, **kwargs):
+        if self._thread is threading.current_thread() and len(datagram) >= HEADER.size \
+                and HEADER.unpack_from(datagram)[4] % 2 == 1:
+            time.sleep(0.03)
+        handle(self, datagram, sender, *args, **kwargs)
+
+    monkeypatch.setattr(UdpReceiver, "handle", starved)
+    shutil.copy(ROOT / "scenarios" / "approaching_target.scenario.yaml", tmp_path)
+    data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
+                          .read_text())
+    data["clock"] = {"cycle_s": 0.05, "start_offset_s": 0.025, "counter_start": 0}
+    (tmp_path / "mid.radar.yaml").write_text(yaml.safe_dump(data))
+    scene = load_scenario(tmp_path / "approaching_target.scenario.yaml",
+                          {"duration_s": 2.0, "radar.noise": False,
+                           "radar.profile": "mid.radar.yaml",
+                           "expectations.expected_limits": ["frames_sent_late"]})
+    report, stats = rehearse(scene, mapping=None)
+    assert stats["udp"]["frames_applied"] == scene.n_frames
+    assert report.passed, report.reasons
+    assert report.targets[0].detection_rate == 1.0
+    assert report.frames["adjacent_frame"] == 0
+
+
+def test_the_emulated_radar_s_messages_carry_when_it_put_them_on_the_bus(tmp_path,
+                                                                         monkeypatch):
+    # A loaded machine wakes the emulated radar's publishing thread late, most at the start
+    # (20 ms, less by 0.5 ms a cycle): a radar puts its messages on the bus at its latency
+    # after measuring, whatever its host's threads do, and the bus stamps them then. Stamped
+    # when the thread got round to them, the cycles' bus times would draw a line 1% off the
+    # radar's cycle, and the run would follow it and judge cycles against the wrong frames.
+    from rts_scenario.canbus import DetectionPublisher
+
+    publish = DetectionPublisher.publish
+
+    def held(self, frame, *args, **kwargs):
+        if threading.current_thread() is not threading.main_thread():
+            time.sleep(max(0.0, 0.02 - 0.0005 * frame.cycle))
+        publish(self, frame, *args, **kwargs)
+
+    monkeypatch.setattr(DetectionPublisher, "publish", held)
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
+                          {"duration_s": 2.0, "radar.noise": False,
+                           "expectations.expected_limits": ["frames_sent_late"]})
+    report, _ = rehearse(scene, mapping=None)
+    assert report.passed, report.reasons
+    assert report.radar_clock["cycle_from"] == "profile"
+    assert report.radar_clock["bus_cycle_s"] == pytest.approx(0.05, rel=1e-3)
+    assert report.frames["checked"] == report.frames["total"] == 40
+
+
+def test_a_sender_held_between_its_wake_up_and_the_datagram_is_reported_late(tmp_path):
+    # The sender wakes on time and is then held 60 ms (a loaded host preempts it) before each
+    # frame after the first is out: the frames reach the RTS late, which the run says, and
+    # judges the radar by when they went out, not by when the sender woke.
+    from rts_scenario.outputs.udp import HEADER
+
+    scene = bench_scene(tmp_path, duration_s=3.2, late_expected=False)
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False).start()
+    try:
+        host, port = emulator.address
+        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
+                             can_channel=channel)
+        with Pipeline.for_scene(scene, options) as pipeline:
+            transmit = pipeline.output.transmit
+
+            def held(datagram: bytes) -> None:
+                if HEADER.unpack_from(datagram)[4] > 0:  # the frame's index
+                    time.sleep(0.06)
+                transmit(datagram)
+
+            pipeline.output.send = held
+            report = pipeline.run(scene).report
+    finally:
+        emulator.stop()
+    assert report.playback["late_frames"] == scene.n_frames - 1
+    assert report.playback["lateness_s"]["max"] >= 0.06
+    assert report.targets[0].detection_rate == 1.0
+    assert any(r.startswith("frames_sent_late: 63 of 64 frames") for r in report.reasons), \
+        report.reasons
+
+
+def test_a_survey_frame_that_reached_the_rts_after_its_measuring_cycle_is_not_measured():
+    # FE 2's frame leaves 60 ms late (a loaded host held the sender), after the cycle that
+    # measures it (a cycle after it was due): that cycle saw FE 1 still played. The survey
+    # reports FE 2 as not seen, never at FE 1's angle; the other FEs are measured as ever.
+    from rts_scenario import Rig
+    from rts_scenario.outputs.udp import HEADER
+    from rts_scenario.scenario.model import RadarOptions
+    from rts_scenario.survey import survey
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
+    with emulated_bench(rig, radar) as bench:
+        transmit = bench.output.transmit
+
+        def held(datagram: bytes) -> None:
+            if HEADER.unpack_from(datagram)[4] == 4:  # FE 2's frame, its first cycle
+                time.sleep(0.06)
+            transmit(datagram)
+
+        bench.output.send = held
+        seen = survey(rig, radar, bench.play, repeats=1)
+    with Pipeline(rig, radar, radar_options=RadarOptions(fidelity="analytic",
+                                                         noise=False)) as desk:
+        reference = survey(rig, radar, desk.play, repeats=1)
+    assert np.isnan(seen.seen_az_deg[2]) and np.isnan(seen.seen_el_deg[2])
+    others = [0, 1, 3]
+    np.testing.assert_allclose(seen.seen_az_deg[others], reference.seen_az_deg[others],
+                               atol=0.006)
+    np.testing.assert_allclose(seen.seen_el_deg[others], reference.seen_el_deg[others],
+                               atol=0.006)
+
+
+def test_an_emulated_radar_whose_thread_starts_late_keeps_its_clock_from_the_first_frame(
+        tmp_path, monkeypatch):
+    # The radar's thread first looks after the second frame arrived, 30 ms late: its clock
+    # still starts with the stream's first frame (the RTS starts it), not with the second.
+    # Started with the second, it would measure every cycle 30 ms after each frame change,
+    # and see frame 5 (15 ms late, after the cycle the run takes it to be held at) where the
+    # run judges frame 4: the target 0.4 m nearer, beyond the scene's 0.3 m tolerance.
+    from rts_scenario.outputs.udp import HEADER
+
+    measure = Emulator._measure
+
+    def late_start(self):
+        while self.receiver.stats.frames_applied < 2 and not self._stop.is_set():
+            time.sleep(0.001)
+        measure(self)
+
+    monkeypatch.setattr(Emulator, "_measure", late_start)
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
+                          {"duration_s": 2.0, "radar.noise": False,
+                           "expectations.expected_limits": ["frames_sent_late"]})
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False).start()
+    try:
+        host, port = emulator.address
+        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
+                             can_channel=channel)
+        with Pipeline.for_scene(scene, options) as pipeline:
+            transmit = pipeline.output.transmit
+
+            def held(datagram: bytes) -> None:
+                frame = HEADER.unpack_from(datagram)[4]
+                if frame in (1, 5):
+                    time.sleep(0.03 if frame == 1 else 0.015)
+                transmit(datagram)
+
+            pipeline.output.send = held
+            report = pipeline.run(scene).report
+    finally:
+        emulator.stop()
+    assert report.passed, report.reasons
+    assert report.targets[0].detection_rate == 1.0
+
+
+def test_a_scene_starts_when_its_first_frame_goes_out(tmp_path):
+    # The sender wakes for the first frame and is held 15 ms before its datagram goes out (a
+    # loaded host): the RTS, and the radar it starts, begin with that datagram, and so does
+    # the scene. Timed from the wake-up, the in-step radar would measure 15 ms into every
+    # frame while the run takes it at the changes, and frames 5, 10 and 15, 10 ms late, would
+    # be judged as not yet played where the radar saw them.
+    from rts_scenario.outputs.udp import HEADER
+
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
+                          {"duration_s": 2.0, "radar.noise": False,
+                           "expectations.expected_limits": ["frames_sent_late"]})
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False).start()
+    try:
+        host, port = emulator.address
+        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
+                             can_channel=channel)
+        with Pipeline.for_scene(scene, options) as pipeline:
+            transmit = pipeline.output.transmit
+
+            def held(datagram: bytes) -> None:
+                frame = HEADER.unpack_from(datagram)[4]
+                if frame in (0, 5, 10, 15):
+                    time.sleep(0.015 if frame == 0 else 0.01)
+                transmit(datagram)
+
+            pipeline.output.send = held
+            report = pipeline.run(scene).report
+    finally:
+        emulator.stop()
+    assert report.passed, report.reasons
+    assert report.targets[0].detection_rate == 1.0

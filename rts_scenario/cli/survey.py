@@ -66,6 +66,9 @@ def _do_survey(args: argparse.Namespace) -> int:
               f"nothing written", file=sys.stderr)
         return EXIT_FAIL
     print(result.table())
+    if bench.measurement_late_frames:
+        print(f"note: {bench.measurement_late_frames} pattern frames went out after the radar "
+              f"cycle that measures them (the host held the sender): not measured")
     for line in host_clock_lines(steps):
         print(line)
     from ..radar.simulate import near_field_warning

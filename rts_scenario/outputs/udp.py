@@ -18,8 +18,11 @@ frames so a receiver that lost a delta can resynchronize.
 from __future__ import annotations
 
 import contextlib
+import platform
+import select
 import socket
 import struct
+import sys
 import threading
 import time
 import zlib
@@ -149,6 +152,8 @@ class UdpOutput(Output):
         # Every datagram goes through ``send``; tests swap in a `FaultInjector` around
         # ``transmit``.
         self.send: Callable[[bytes], None] = self.transmit
+        # When `transmit` last put a datagram out (perf_counter), None before the first.
+        self._transmitted_s: float | None = None
         self._sequence = 0
         self._start: float | None = None
         self._t0 = 0.0
@@ -164,6 +169,7 @@ class UdpOutput(Output):
 
     def transmit(self, datagram: bytes) -> None:
         """Put one datagram on the network."""
+        self._transmitted_s = time.perf_counter()
         try:
             self._socket.sendto(datagram, self._sockaddr)
         except OSError as exc:
@@ -181,10 +187,23 @@ class UdpOutput(Output):
                 entries, kind=KIND_FULL if keyframe else KIND_DELTA,
                 frame=int(batch.frame_index[pos]), t_s=float(batch.t_s[pos]),
                 first_sequence=self._sequence)
+            late = 0.0
             if self.pacing == "realtime":
-                self._sent_t_s[pos] += self._wait_for(float(batch.t_s[pos]))
+                late = self._wait_for(float(batch.t_s[pos]))
+            self._transmitted_s = None
             for datagram in datagrams:
                 self.send(datagram)
+            if self.pacing == "realtime" and self._transmitted_s is not None \
+                    and self._frames_sent == 0:
+                self._restart_at(self._transmitted_s)
+                late = 0.0
+            if self.pacing == "realtime" and self._transmitted_s is not None:
+                # The frame is out with its last datagram: a host that holds the sender
+                # between its wake-up and that datagram delays the frame as much. (Read as
+                # the datagram goes: once it is out, the receiver it wakes may hold the
+                # sender a while, which delays nothing.)
+                self._sent_t_s[pos] += max(late, self._late_s(float(batch.t_s[pos]),
+                                                              self._transmitted_s))
             self._sequence += len(datagrams)
             self.datagrams_sent += len(datagrams)
             self.entries_sent += entries.size
@@ -273,6 +292,26 @@ class UdpOutput(Output):
                     self._rts_rig = rig
         finally:
             self._socket.setblocking(True)
+
+    def _restart_at(self, at: float) -> None:
+        """Start the scene at perf_counter time ``at``: when its first frame went out.
+
+        The RTS (and the radar it starts) begin with that frame's datagram, not with the
+        sender's wake-up before it (a loaded host may hold the sender between the two).
+        """
+        assert self._start is not None
+        held = at - self._start
+        if held > 0.0:
+            self._start = at
+            assert self.scene_origin_monotonic_s is not None
+            assert self.scene_origin_wall_s is not None
+            self.scene_origin_monotonic_s += held
+            self.scene_origin_wall_s += held
+
+    def _late_s(self, t_s: float, at: float) -> float:
+        """How late perf_counter time ``at`` is for scene time ``t_s`` of the paced stream (s)."""
+        assert self._start is not None
+        return at - self._start - (t_s - self._t0)
 
     def _wait_for(self, t_s: float) -> float:
         """Wait until scene time ``t_s``; return how late that is (s)."""
@@ -373,6 +412,26 @@ class ReceiverStats:
                     or self.stale_frames or self.unsynced_frames)
 
 
+# The socket option that stamps each datagram with its arrival (Linux; elsewhere a datagram
+# is stamped when it is read).
+# Python names no such option; Linux's (asm-generic) value is 35 on the common machines.
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform == "linux" and (
+    platform.machine() in ("x86_64", "i386", "i686", "aarch64", "riscv64", "ppc64le", "s390x")
+    or platform.machine().startswith("arm")) else None)
+TIMESPEC = struct.Struct("@ll")  # struct timespec: seconds, nanoseconds
+
+
+def _enable_receive_stamps(sock: socket.socket) -> bool:
+    """Ask the kernel to stamp each datagram ``sock`` receives; whether it will."""
+    if SO_TIMESTAMPNS is None or not hasattr(sock, "recvmsg"):
+        return False
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    except OSError:
+        return False
+    return True
+
+
 class UdpReceiver:
     """Reference RTS endpoint: validates, reassembles and applies schedule datagrams.
 
@@ -395,7 +454,15 @@ class UdpReceiver:
         self._socket = socket.socket(family, socket.SOCK_DGRAM)
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
         self._socket.bind((host, port))
-        self._socket.settimeout(0.02)
+        # Read without blocking (`poll`): the receiving thread waits for datagrams with
+        # `select`, and any thread may take those waiting.
+        self._socket.setblocking(False)
+        # Each datagram keeps when it reached the socket (the kernel's receive time), not
+        # when a thread got round to it: a loaded host wakes the receiving thread late, while
+        # an RTS applies a frame as it arrives.
+        self._stamped = _enable_receive_stamps(self._socket)
+        # One reader at a time takes datagrams off the socket and handles them, in order.
+        self._reading = threading.Lock()
         self.address: tuple[str, int] = self._socket.getsockname()[:2]
         self._closed = False
         self.keep_applied = keep_applied
@@ -446,6 +513,8 @@ class UdpReceiver:
         self._top_frame = -1
         self._synced = True
         self.current: tuple[int, float, float] | None = None  # frame, t_s, arrival (perf)
+        # The stream's first frame applied: frame, t_s, arrival (perf).
+        self.first: tuple[int, float, float] | None = None
         # The last `STATE_HISTORY` states applied: arrival (perf), frame, t_s, entries held.
         self._states: deque[tuple[float, int, float, np.ndarray]] = deque(maxlen=STATE_HISTORY)
 
@@ -511,15 +580,50 @@ class UdpReceiver:
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                datagram, sender = self._socket.recvfrom(65536)
-            except TimeoutError:
-                continue
-            except ConnectionRefusedError:  # a status reply's sender is gone: keep listening
-                continue
-            except OSError:
+                ready, _, _ = select.select([self._socket], [], [], 0.02)
+            except (OSError, ValueError):  # closed
                 break
-            self.handle(datagram, sender)
-            self._reply(sender)
+            if ready and not self.poll():
+                break
+
+    def poll(self) -> bool:
+        """Handle every datagram waiting on the socket now, each as of when it arrived.
+
+        Called by the receiving thread as datagrams come, and by a reader of the state that
+        must see every frame that arrived before a moment (`snapshot` at it), whichever
+        thread the host runs first. Returns False once the socket is closed.
+        """
+        with self._reading:
+            while True:
+                try:
+                    datagram, sender, arrival = self._receive()
+                except (BlockingIOError, InterruptedError):
+                    return True
+                except ConnectionRefusedError:  # a status reply's sender is gone
+                    continue
+                except OSError:
+                    return False
+                self.handle(datagram, sender, arrival_s=arrival)
+                self._reply(sender)
+
+    def _receive(self) -> tuple[bytes, tuple[str, int], float]:
+        """Take one datagram off the socket: its bytes, sender and arrival (perf_counter)."""
+        if not self._stamped:
+            datagram, sender = self._socket.recvfrom(65536)
+            return datagram, sender, time.perf_counter()
+        datagram, ancillary, _, sender = self._socket.recvmsg(65536, 256)
+        now = time.perf_counter()
+        arrival = now
+        for level, kind, data in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS \
+                    and len(data) >= TIMESPEC.size:
+                sec, nsec = TIMESPEC.unpack(data[:TIMESPEC.size])
+                # The kernel stamps on the wall clock: how long ago it arrived, on the
+                # perf_counter clock (a wall clock stepped in between: taken as just now).
+                ago = time.clock_gettime(time.CLOCK_REALTIME) - (sec + nsec * 1e-9)
+                if 0.0 <= ago < 1.0:
+                    arrival = now - ago
+        return datagram, sender, arrival
 
     def _reply(self, sender: tuple[str, int]) -> None:
         """Tell the sender what this RTS has received and applied so far (a status datagram).
@@ -561,8 +665,12 @@ class UdpReceiver:
                    - self.stats.stale_frames
                    - (len(self._pending) if pending is None else pending))
 
-    def handle(self, datagram: bytes, sender: tuple[str, int] | None = None) -> None:
+    def handle(self, datagram: bytes, sender: tuple[str, int] | None = None, *,
+               arrival_s: float | None = None) -> None:
         """Validate and process one datagram (from ``sender``, where known).
+
+        ``arrival_s``: when it arrived (`time.perf_counter` time; default now): a frame is
+        applied as its last datagram arrived.
 
         Each run opens a stream from a sender of its own: a datagram from another sender
         than the current stream's that opens a stream (the first datagram of a full frame,
@@ -573,7 +681,7 @@ class UdpReceiver:
         get the same port), and another sender's first datagram of any full frame opens one
         (the next run's very first datagram may be lost).
         """
-        now = time.perf_counter()
+        now = time.perf_counter() if arrival_s is None else arrival_s
         quiet = now - self._last_datagram_s > STREAM_QUIET_S
         self._last_datagram_s = now
         if sender is not None and (sender != self._sender or quiet):
@@ -650,7 +758,7 @@ class UdpReceiver:
         self._pending.setdefault(frame, {})[part] = entries
         self._pending_meta[frame] = (kind, parts, t_s)
         if len(self._pending[frame]) == parts:
-            self._apply(frame)
+            self._apply(frame, now)
 
     def _unwrap(self, seq: int) -> int:
         """Return ``seq`` (modulo 2^32) as the stream's count: the nearest to the newest.
@@ -706,11 +814,11 @@ class UdpReceiver:
         return magic == MAGIC and version == VERSION and kind == KIND_FULL \
             and (seq == 0 or any_sequence) and part == 0
 
-    def _apply(self, frame: int) -> None:
+    def _apply(self, frame: int, arrival: float) -> None:
         with self._lock:
-            self._apply_locked(frame)
+            self._apply_locked(frame, arrival)
 
-    def _apply_locked(self, frame: int) -> None:
+    def _apply_locked(self, frame: int, arrival: float) -> None:
         kind, parts, t_s = self._pending_meta.pop(frame)
         chunks = self._pending.pop(frame)
         entries = np.concatenate([chunks[p] for p in range(parts)])
@@ -735,8 +843,12 @@ class UdpReceiver:
         self._table[target[on], channel[on]] = entries[on]
         self._live[target, channel] = on
         self._last_frame = frame
-        arrival = time.perf_counter()
+        # States stay in order of arrival (`snapshot` searches them).
+        if self._states:
+            arrival = max(arrival, self._states[-1][0])
         self.current = (frame, t_s, arrival)
+        if self.first is None:
+            self.first = self.current
         self._states.append((arrival, frame, t_s, self._table[self._live].copy()))
         if self.keep_applied:
             self.applied.append((frame, t_s, entries))
