@@ -416,15 +416,22 @@ class _PairModel:
         # lie about the one the channels' single levels give (a coarse measurement: the
         # radar's RCS, on its bus's steps) and at equal gains: a start at equal gains alone
         # leaves channels a few dB apart in a wrong minimum.
-        gains = np.arange(-3.0, 4.0) + (np.round(level_db) if np.isfinite(level_db) else 0.0)
-        gains = np.unique(np.concatenate([gains, [0.0]]))
+        # Phases first, at equal gains and at the single levels' gain; then the gains about
+        # the latter at the best phase (a full grid of both costs 4x as many predictions).
+        levels = np.round(level_db) if np.isfinite(level_db) else 0.0
         phases = np.arange(0.0, 360.0, 5.0)
-        coarse_p, coarse_g = (g.ravel() for g in np.meshgrid(phases, gains))
-        c_az, c_el = self.predict(a, b, sweep_deg, level, coarse_p, coarse_g, steps_db,
-                                  steps_deg)
-        cost = np.nansum(np.minimum((c_az - az) ** 2 + (c_el - el) ** 2, 100.0), axis=1)
-        best = int(np.argmin(cost))
-        start = np.array([coarse_p[best], coarse_g[best]])
+
+        def best_of(p: FloatArray, g: FloatArray) -> tuple[float, float]:
+            c_az, c_el = self.predict(a, b, sweep_deg, level, p, g, steps_db, steps_deg)
+            cost = np.nansum(np.minimum((c_az - az) ** 2 + (c_el - el) ** 2, 100.0), axis=1)
+            i = int(np.argmin(cost))
+            return float(p[i]), float(g[i])
+
+        first = np.unique([0.0, levels])
+        coarse_p, coarse_g = (g.ravel() for g in np.meshgrid(phases, first))
+        phase0, _ = best_of(coarse_p, coarse_g)
+        gains = np.unique(np.concatenate([np.arange(-3.0, 4.0) + levels, [0.0]]))
+        start = np.array(best_of(np.full(gains.size, phase0), gains))
         fit = least_squares(residual, start, x_scale=np.array([1.0, 0.1]), diff_step=1e-7,
                             loss="soft_l1", f_scale=0.05, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         phase, gain = float(_wrap(fit.x[0])), float(fit.x[1])
