@@ -7,6 +7,7 @@ unknown.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -68,3 +69,28 @@ def refuse_other_kind(file: str | Path, data: Any, expected: str) -> None:
 
 
 __all__ = ["KINDS", "kind_by_name", "kind_name", "refuse_other_kind"]
+
+
+# A scene's version key, at the start of a line (a key of the file's top-level mapping), with
+# its value on that line: the format version, a scalar. A section of that name holding a
+# mapping or a list (a project's own settings) is no scene.
+_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:[ \t]*[^\s#{\[]", re.MULTILINE)
+# How much of a YAML file is read to find it (a scene starts with it, after its comments).
+_HEAD_BYTES = 65536
+
+
+def holds_scene(path: Path) -> bool:
+    """Whether ``path``, a ``.yaml``/``.yml`` file, holds a scene (its ``rts_scenario`` key).
+
+    The key at the top level with a value on its line, as a scene gives its format version:
+    `sweep` and the pytest plugin take such a file under another name than
+    ``*.scenario.yaml`` for a misnamed scene.
+    """
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        with path.open("rb") as file:
+            head = file.read(_HEAD_BYTES)
+    except OSError:
+        return False
+    return _SCENE_KEY.search(head) is not None

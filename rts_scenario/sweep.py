@@ -15,7 +15,6 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
-import re
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
@@ -24,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import RtsError
+from .file_kinds import holds_scene
 
 # Runs the summary lists as the worst ones (failed and erred runs first).
 WORST_RUNS = 10
@@ -128,29 +128,6 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
 def dangling_link(path: Path) -> str:
     """Say that ``path`` is a link to nothing (a scene linked from a folder that is not there)."""
     return f"{path}: cannot read file: a link to {os.readlink(path)}, which does not exist"
-
-
-# A scene's version key, at the start of a line (a key of the file's top-level mapping), with
-# its value on that line: the format version, a scalar. A section of that name holding a
-# mapping or a list (a project's own settings) is no scene.
-_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:[ \t]*[^\s#{\[]", re.MULTILINE)
-# How much of a YAML file is read to find it (a scene starts with it, after its comments).
-_HEAD_BYTES = 65536
-
-
-def holds_scene(path: Path) -> bool:
-    """Whether ``path``, a ``.yaml``/``.yml`` file, holds a scene (its ``rts_scenario`` key).
-
-    The pytest plugin tells such files apart alike (without importing the library).
-    """
-    if path.suffix.lower() not in (".yaml", ".yml"):
-        return False
-    try:
-        with path.open("rb") as file:
-            head = file.read(_HEAD_BYTES)
-    except OSError:
-        return False
-    return _SCENE_KEY.search(head) is not None
 
 
 def run_task(task: SweepTask, method: str = "exact") -> Entry:

@@ -175,27 +175,11 @@ def pytest_make_collect_report(collector: pytest.Collector
     return report
 
 
-# A scene's version key, at the start of a line (a key of the file's top-level mapping), with
-# its value on that line: the format version, a scalar. A section of that name holding a
-# mapping or a list (a project's own settings) is no scene.
-_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:[ \t]*[^\s#{\[]", re.MULTILINE)
-# How much of a YAML file is read to find it (a scene starts with it, after its comments).
-_HEAD_BYTES = 65536
-
-
 def holds_scene(path: Path) -> bool:
-    """Whether ``path``, a ``.yaml``/``.yml`` file, holds a scene (its ``rts_scenario`` key).
+    """Whether ``path`` holds a scene (`rts_scenario.file_kinds.holds_scene`)."""
+    from rts_scenario.file_kinds import holds_scene as holds
 
-    The key at the top level with a value on its line, as a scene gives its format version.
-    """
-    if path.suffix.lower() not in (".yaml", ".yml"):
-        return False
-    try:
-        with path.open("rb") as file:
-            head = file.read(_HEAD_BYTES)
-    except OSError:
-        return False
-    return _SCENE_KEY.search(head) is not None
+    return holds(path)
 
 
 def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
