@@ -21,7 +21,7 @@ import rts_scenario.cli as cli
 from rts_scenario.canbus.mapping import CanMapping
 from rts_scenario.detections import Detections
 from rts_scenario.emulator import Emulator, schedule_of_entries
-from rts_scenario.outputs.udp import FaultInjector, frame_entries
+from rts_scenario.outputs.udp import HEADER, FaultInjector, frame_entries
 from rts_scenario.pipeline import Pipeline, RunOptions
 from rts_scenario.radar.profile import RadarProfile
 from rts_scenario.recheck import check_log
@@ -77,10 +77,11 @@ def emulated_bench(rig, radar):
 
 
 def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=None, bus_log=None,
-             emulator_rig=None):
+             emulator_rig=None, hold=None):
     """Play ``scene`` over UDP to the emulator; its radar (``radar``, else the scene's) speaks
     ``mapping``'s protocol (the object list with Motorola signals by default) on a virtual CAN
-    bus."""
+    bus. ``hold(frame)``: seconds the sender is held before each datagram of frame ``frame``
+    goes out (a loaded host preempting it after it woke on time)."""
     channel = f"rts-emulate-test-{next(_channels)}-bus"
     emulator = Emulator(emulator_rig or scene.rig, radar or scene.radar, can_channel=channel,
                         noise=False, tamper=tamper,
@@ -95,6 +96,16 @@ def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=Non
                 injector = FaultInjector(pipeline.output.transmit, np.random.default_rng(2),
                                          **udp_faults)
                 pipeline.output.send = injector
+            if hold is not None:
+                transmit = pipeline.output.transmit
+
+                def held(datagram: bytes) -> None:
+                    delay = hold(HEADER.unpack_from(datagram)[4])  # the frame's index
+                    if delay:
+                        time.sleep(delay)
+                    transmit(datagram)
+
+                pipeline.output.send = held
             report = pipeline.run(scene).report
     finally:
         stats = emulator.stop()
@@ -776,27 +787,8 @@ def test_a_sender_held_between_its_wake_up_and_the_datagram_is_reported_late(tmp
     # The sender wakes on time and is then held 60 ms (a loaded host preempts it) before each
     # frame after the first is out: the frames reach the RTS late, which the run says, and
     # judges the radar by when they went out, not by when the sender woke.
-    from rts_scenario.outputs.udp import HEADER
-
     scene = bench_scene(tmp_path, duration_s=3.2, late_expected=False)
-    channel = f"rts-emulate-test-{next(_channels)}-bus"
-    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False).start()
-    try:
-        host, port = emulator.address
-        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
-                             can_channel=channel)
-        with Pipeline.for_scene(scene, options) as pipeline:
-            transmit = pipeline.output.transmit
-
-            def held(datagram: bytes) -> None:
-                if HEADER.unpack_from(datagram)[4] > 0:  # the frame's index
-                    time.sleep(0.06)
-                transmit(datagram)
-
-            pipeline.output.send = held
-            report = pipeline.run(scene).report
-    finally:
-        emulator.stop()
+    report, _ = rehearse(scene, mapping=None, hold=lambda frame: 0.06 if frame > 0 else 0.0)
     assert report.playback["late_frames"] == scene.n_frames - 1
     assert report.playback["lateness_s"]["max"] >= 0.06
     assert report.targets[0].detection_rate == 1.0
@@ -842,8 +834,6 @@ def test_an_emulated_radar_whose_thread_starts_late_keeps_its_clock_from_the_fir
     # Started with the second, it would measure every cycle 30 ms after each frame change,
     # and see frame 5 (15 ms late, after the cycle the run takes it to be held at) where the
     # run judges frame 4: the target 0.4 m nearer, beyond the scene's 0.3 m tolerance.
-    from rts_scenario.outputs.udp import HEADER
-
     measure = Emulator._measure
 
     def late_start(self):
@@ -855,25 +845,8 @@ def test_an_emulated_radar_whose_thread_starts_late_keeps_its_clock_from_the_fir
     scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
                           {"duration_s": 2.0, "radar.noise": False,
                            "expectations.expected_limits": ["frames_sent_late"]})
-    channel = f"rts-emulate-test-{next(_channels)}-bus"
-    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False).start()
-    try:
-        host, port = emulator.address
-        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
-                             can_channel=channel)
-        with Pipeline.for_scene(scene, options) as pipeline:
-            transmit = pipeline.output.transmit
-
-            def held(datagram: bytes) -> None:
-                frame = HEADER.unpack_from(datagram)[4]
-                if frame in (1, 5):
-                    time.sleep(0.03 if frame == 1 else 0.015)
-                transmit(datagram)
-
-            pipeline.output.send = held
-            report = pipeline.run(scene).report
-    finally:
-        emulator.stop()
+    report, _ = rehearse(scene, mapping=None,
+                         hold=lambda frame: {1: 0.03, 5: 0.015}.get(frame, 0.0))
     assert report.passed, report.reasons
     assert report.targets[0].detection_rate == 1.0
 
@@ -884,29 +857,11 @@ def test_a_scene_starts_when_its_first_frame_goes_out(tmp_path):
     # the scene. Timed from the wake-up, the in-step radar would measure 15 ms into every
     # frame while the run takes it at the changes, and frames 5, 10 and 15, 10 ms late, would
     # be judged as not yet played where the radar saw them.
-    from rts_scenario.outputs.udp import HEADER
-
     scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
                           {"duration_s": 2.0, "radar.noise": False,
                            "expectations.expected_limits": ["frames_sent_late"]})
-    channel = f"rts-emulate-test-{next(_channels)}-bus"
-    emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False).start()
-    try:
-        host, port = emulator.address
-        options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
-                             can_channel=channel)
-        with Pipeline.for_scene(scene, options) as pipeline:
-            transmit = pipeline.output.transmit
-
-            def held(datagram: bytes) -> None:
-                frame = HEADER.unpack_from(datagram)[4]
-                if frame in (0, 5, 10, 15):
-                    time.sleep(0.015 if frame == 0 else 0.01)
-                transmit(datagram)
-
-            pipeline.output.send = held
-            report = pipeline.run(scene).report
-    finally:
-        emulator.stop()
+    report, _ = rehearse(scene, mapping=None,
+                         hold=lambda frame: {0: 0.015, 5: 0.01, 10: 0.01, 15: 0.01}.get(frame,
+                                                                                   0.0))
     assert report.passed, report.reasons
     assert report.targets[0].detection_rate == 1.0
