@@ -31,10 +31,11 @@ ROOT = Path(__file__).resolve().parents[1]
 _channels = itertools.count()
 
 
-def bench_scene(tmp_path: Path, duration_s: float = 4.0, counter_start="4242",
+def bench_scene(tmp_path: Path, duration_s: float = 2.0, counter_start="4242",
                 late_expected: bool = True):
-    """cut-in, shortened, on a radar that measures every 72 ms, reports 130 ms later and
-    counts from 4242 (the scene's profile may say ``auto``: not known).
+    """cut-in, shortened (its car moves over from a quarter of the way in), on a radar that
+    measures every 72 ms, reports 130 ms later and counts from 4242 (the scene's profile may
+    say ``auto``: not known).
 
     The sender is paced in real time on a machine a parallel test run shares, which can hold
     it past a frame period now and then: the scene declares ``frames_sent_late`` expected
@@ -54,6 +55,7 @@ def bench_scene(tmp_path: Path, duration_s: float = 4.0, counter_start="4242",
     return load_scenario(tmp_path / "cut_in.scenario.yaml", {
         "radar.profile": "radars/scene.radar.yaml", "radar.noise": False,
         "radar.fidelity": "analytic", "duration_s": duration_s,
+        "targets.0.lane_changes.0.start_s": duration_s / 4,
         "expectations.expected_limits": ["frame_rate_above_radar"]
         + (["frames_sent_late"] if late_expected else [])})
 
@@ -132,20 +134,20 @@ def test_a_recorded_rehearsal_re_checks_to_the_live_counts(tmp_path):
     # one does, and the recorder goes on logging them until the bench closes, after the run
     # stopped listening: the re-check of the recording counts those cycles as the run did.
     # Both count the cycles measured within a cycle and the quiet time (0.2 s) after the
-    # scene's end: 4 s of 72 ms cycles from 0 end with cycle 55; cycles 56 to 59 (4.032 s to
-    # 4.248 s) are before 4.272 s.
+    # scene's end: 2 s of 72 ms cycles from 0 end with cycle 27; cycles 28 to 31 (2.016 s to
+    # 2.232 s) are before 2.272 s.
     scene = bench_scene(tmp_path)
     log = tmp_path / "bench.blf"
     live, _ = rehearse(scene, mapping=None, bus_log=str(log))
     again = check_log(scene, log)
-    assert live.frames["total"] == 56
+    assert live.frames["total"] == 28
     assert live.frames["after_scene"] == 4
     with can.LogReader(str(log)) as reader:
         counters = {m.data[0] | m.data[1] << 8 for m in reader if m.arbitration_id == 0x100}
     assert again.report.frames == live.frames
     assert again.report.passed == live.passed
     # The cycles the recorder logged after them are not counted, and said.
-    logged_after = sum(1 for c in counters if c >= 4242 + 56 + 4)
+    logged_after = sum(1 for c in counters if c >= 4242 + 28 + 4)
     assert again.alignment.cycles_outside_scene == 4 + logged_after
     if logged_after:
         assert any(f"{logged_after} cycles in the log were measured after" in note
@@ -597,17 +599,17 @@ def test_a_late_sender_is_reported_and_fails_unless_expected(tmp_path, monkeypat
         return lateness
 
     monkeypatch.setattr(UdpOutput, "_wait_for", late)
-    scene = bench_scene(tmp_path, duration_s=3.2, late_expected=False)
+    scene = bench_scene(tmp_path, duration_s=1.6, late_expected=False)
     report, _ = rehearse(scene)
     # The emulated RTS applied the frames late and its radar measured them so: judged by
     # the send times, the radar is right; the scene was not played as timed.
     assert report.targets[0].detection_rate == 1.0
     assert report.playback["late_frames"] == scene.n_frames - 1
     assert report.playback["lateness_s"]["max"] >= 0.06
-    assert any(r.startswith("frames_sent_late: 63 of 64 frames") for r in report.reasons)
+    assert any(r.startswith("frames_sent_late: 31 of 32 frames") for r in report.reasons)
     expected = load_scenario(tmp_path / "cut_in.scenario.yaml", {
         "radar.profile": "radars/scene.radar.yaml", "radar.noise": False,
-        "radar.fidelity": "analytic", "duration_s": 3.2,
+        "radar.fidelity": "analytic", "duration_s": 1.6, "targets.0.lane_changes.0.start_s": 0.4,
         "expectations.expected_limits": ["frame_rate_above_radar", "frames_sent_late"]})
     report, _ = rehearse(expected)
     assert report.passed, report.reasons
@@ -787,12 +789,12 @@ def test_a_sender_held_between_its_wake_up_and_the_datagram_is_reported_late(tmp
     # The sender wakes on time and is then held 60 ms (a loaded host preempts it) before each
     # frame after the first is out: the frames reach the RTS late, which the run says, and
     # judges the radar by when they went out, not by when the sender woke.
-    scene = bench_scene(tmp_path, duration_s=3.2, late_expected=False)
+    scene = bench_scene(tmp_path, duration_s=1.6, late_expected=False)
     report, _ = rehearse(scene, mapping=None, hold=lambda frame: 0.06 if frame > 0 else 0.0)
     assert report.playback["late_frames"] == scene.n_frames - 1
     assert report.playback["lateness_s"]["max"] >= 0.06
     assert report.targets[0].detection_rate == 1.0
-    assert any(r.startswith("frames_sent_late: 63 of 64 frames") for r in report.reasons), \
+    assert any(r.startswith("frames_sent_late: 31 of 32 frames") for r in report.reasons), \
         report.reasons
 
 

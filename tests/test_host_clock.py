@@ -165,7 +165,7 @@ def emulated_run(monkeypatch, tmp_path, step_s, log=None):
     machine)."""
     from rts_scenario.outputs.udp import UdpOutput
 
-    scene = bench_scene(tmp_path, counter_start="auto")
+    scene = bench_scene(tmp_path, duration_s=4.0, counter_start="auto")
     radar = RadarProfile.from_file(tmp_path / "radars" / "bench.radar.yaml")
     wall = SteppedWallClock(monkeypatch)
     timer = threading.Timer(2.0, wall.step, [step_s])

@@ -52,7 +52,7 @@ def _scene(folder: Path, rig: str) -> Path:
     x, az, el = 12.0, np.radians(0.8), np.radians(1.5)
     path = folder / f"on-{Path(rig).stem}.scenario.yaml"
     path.write_text(yaml.safe_dump({
-        "rts_scenario": 1, "name": f"on-{Path(rig).stem}", "duration_s": 3.0,
+        "rts_scenario": 1, "name": f"on-{Path(rig).stem}", "duration_s": 1.5,
         "frame_rate_hz": 20.0, "radar": {"profile": "awr1843boost", "noise": False,
                                          "fidelity": "analytic"},
         "rig": rig,
