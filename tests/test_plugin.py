@@ -442,10 +442,13 @@ def test_xdist_gives_the_same_verdicts(pytester):
     ("--rts-can-interface", "udp_multicast", "--rts-can-channel", "239.74.163.2"),
     ("--rts-output", "udp://127.0.0.1:45871"),
 ])
-def test_xdist_workers_sharing_one_bench_are_refused(pytester, options, workers):
+def test_xdist_workers_sharing_one_bench_are_refused(pytester, monkeypatch, options, workers):
     # One bench (an RTS on UDP, a bus other processes hear) driven by two workers at once
     # would mix their frames and their radars' detections: each verdict judged the other's.
     # Two workers as -n 2 or xdist's --tx 2*popen (which each worker refused with a traceback).
+    # The session under test runs in this process: not as a worker of this run's own xdist.
+    for name in ("PYTEST_XDIST_WORKER", "PYTEST_XDIST_WORKER_COUNT"):
+        monkeypatch.delenv(name, raising=False)
     pytester.makefile(".scenario.yaml", one=scene("one"), two=scene("two"))
     result = pytester.runpytest(*workers, "-p", "no:benchmark", *options)
     text = result.stderr.str() + result.stdout.str()
