@@ -678,7 +678,9 @@ def _text_end(path: Path) -> _TextEnd:
     Every tool ends each line of a log with a line end; python-can's readers take a line
     without one as it is (a data field cut in the middle of a byte as a shorter message, with
     a made-up half byte), or fail on it. A last line of white space alone, or an ASC log's
-    ``End TriggerBlock`` without a line end, is complete.
+    ``End TriggerBlock`` without a line end, is complete. Line ends are the ones python-can
+    reads a text log by (universal line ends): a line feed, a carriage return and line feed,
+    or a carriage return alone, as some loggers write.
     """
     size = path.stat().st_size
     with path.open("rb") as f:
@@ -687,7 +689,7 @@ def _text_end(path: Path) -> _TextEnd:
             start = max(0, end - _TAIL_CHUNK_BYTES)
             f.seek(start)
             chunk = f.read(end - start)
-            at = chunk.rfind(b"\n")  # a line end, alone or after a carriage return
+            at = max(chunk.rfind(b"\n"), chunk.rfind(b"\r"))
             if at >= 0:
                 end = start + at + 1
                 break
@@ -697,10 +699,13 @@ def _text_end(path: Path) -> _TextEnd:
         if not partial or (path.suffix.lower() == ".asc" and partial.lower() == _ASC_END):
             return _TextEnd(size, None, 0)
         f.seek(0)
-        lines, left = 0, end
+        lines, left, after_cr = 0, end, False
         while left > 0:  # the line's number: the line ends before it, a chunk at a time
             chunk = f.read(min(left, 1 << 20))
-            lines += chunk.count(b"\n")
+            # A carriage return and line feed end one line, also across two chunks.
+            lines += (chunk.count(b"\n") + chunk.count(b"\r") - chunk.count(b"\r\n")
+                      - (after_cr and chunk.startswith(b"\n")))
+            after_cr = chunk.endswith(b"\r")
             left -= len(chunk)
         return _TextEnd(end, lines + 1, size - end)
 
