@@ -1381,3 +1381,85 @@ def test_a_cut_line_is_numbered_as_python_can_counts_lines_across_any_read_size(
     assert len(lines) == count + 4  # with the empty line after the last CR LF
     cut = log_cut_short(log, 2.0)
     assert cut is not None and cut["line"] == count + 4
+
+
+def _radar_line_numbers(lines: list[bytes], identifier: bytes) -> list[int]:
+    """The indexes of a text log's lines whose words include ``identifier``."""
+    return [i for i, line in enumerate(lines) if identifier in line.split()]
+
+
+def test_trc_records_python_can_does_not_read_fail_a_re_check_where_they_may_be_the_radar_s(
+        tmp_path):
+    # python-can's TRC reader drops a record of a type it has no parser for with an info line
+    # of its logger alone. Status records (ST, EC, EV) hold no identifier: noted, the verdict
+    # the live one. Records of such a type holding the radar's detection identifier (0101,
+    # rts-scenario's first detection message) may be its detections: the re-check fails.
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml", QUIET)
+    log = tmp_path / "run.trc"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    assert live.passed
+    lines = log.read_bytes().splitlines(keepends=True)
+    detections = _radar_line_numbers(lines, b"0101")
+    assert len(detections) > 40
+    status = [b"      9      1500.000 ST  1     -    Rx -  4    00 00 00 08\r\n",
+              b"      9      1500.000 EC  1     -    Rx -  2    80 00\r\n",
+              b"      9      1500.000 ST  1     -    Rx -  4    00 00 00 04\r\n"]
+    noted = tmp_path / "status.trc"
+    noted.write_bytes(b"".join(lines[:detections[10]] + status + lines[detections[10]:]))
+    shutil.copy(str(log) + ".rts.json", str(noted) + ".rts.json")
+    result = check_log(scene, noted)
+    assert result.report.passed, result.report.reasons
+    assert result.report.frames == live.frames
+    assert (f"the log {noted} holds 3 records python-can's reader does not read (2 of type "
+            f"'ST', 1 of type 'EC'), none of them with the radar's identifiers"
+            in result.alignment.notes), result.alignment.notes
+    # Four of the radar's detections in records of a type python-can has no parser for.
+    for i in detections[20:24]:
+        lines[i] = lines[i].replace(b" DT ", b" XD ")
+    dropped = tmp_path / "dropped.trc"
+    dropped.write_bytes(b"".join(lines))
+    shutil.copy(str(log) + ".rts.json", str(dropped) + ".rts.json")
+    result = check_log(scene, dropped)
+    assert not result.report.passed
+    assert (f"the log {dropped} holds 4 records python-can's reader does not read (4 of type "
+            f"'XD'), 4 of them with the radar's identifiers (the first at line "
+            f"{detections[20] + 1}): the cycles they belong to are judged without them"
+            in result.report.reasons), result.report.reasons
+
+
+def test_asc_lines_python_can_does_not_read_fail_a_re_check_where_they_may_be_the_radar_s(
+        tmp_path):
+    # python-can's ASC reader reads error and remote frames (counted in the report's bus) and
+    # passes over every other line without a word. Lines of other events (a CAN controller's
+    # status, bus statistics) hold no radar message: noted. A radar frame's line it does not
+    # read (its time written without a fraction) is one lost: the re-check fails.
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml", QUIET)
+    log = tmp_path / "run.asc"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    assert live.passed
+    lines = log.read_bytes().splitlines(keepends=True)
+    detections = _radar_line_numbers(lines, b"101")
+    assert len(detections) > 40
+    events = [b"   1.500000 CAN 1 Status:chip status error active\n",
+              b"   1.500000 1 Statistic: D 257 R 0 XD 0 XR 0 E 0 O 0 B 3.21%\n"]
+    noted = tmp_path / "events.asc"
+    noted.write_bytes(b"".join(lines[:detections[10]] + events + lines[detections[10]:]))
+    shutil.copy(str(log) + ".rts.json", str(noted) + ".rts.json")
+    result = check_log(scene, noted)
+    assert result.report.passed, result.report.reasons
+    assert result.report.frames == live.frames
+    assert (f"the log {noted} holds 2 records python-can's reader does not read (1 of type "
+            f"'CAN', 1 of type 'Statistic'), none of them with the radar's identifiers"
+            in result.alignment.notes), result.alignment.notes
+    at = detections[20]
+    time_s, rest = lines[at].split(None, 1)
+    lines[at] = b"   " + str(round(float(time_s))).encode() + b" " + rest
+    dropped = tmp_path / "dropped.asc"
+    dropped.write_bytes(b"".join(lines))
+    shutil.copy(str(log) + ".rts.json", str(dropped) + ".rts.json")
+    result = check_log(scene, dropped)
+    assert not result.report.passed
+    assert (f"the log {dropped} holds 1 record python-can's reader does not read (1 of type "
+            f"'Rx'), 1 of them with the radar's identifiers (the first at line {at + 1}): the "
+            f"cycles they belong to are judged without them"
+            in result.report.reasons), result.report.reasons
