@@ -26,6 +26,7 @@ import io
 import json
 import locale
 import logging
+import re
 import sys
 from array import array
 from collections import Counter
@@ -505,13 +506,15 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
                  cycle_s: float | None = None, *, channel: str | None = None,
                  channels: Counter[str | None] | None = None,
                  last_t_s: list[float] | None = None,
-                 restart: int | None = None) -> Iterator[_LoggedCycle]:
+                 restart: int | None = None,
+                 unread: list[_Unread] | None = None) -> Iterator[_LoggedCycle]:
     """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end.
 
     ``channel``: read only its messages (the others count as ``other_channels``).
     ``restart``: the counter the run's stream restarted the radar's count at (`read_cycles`).
     ``channels`` gets, per channel, how many messages of the radar's identifiers it holds;
-    ``last_t_s`` the timestamp of the log's last message (of any channel), if it has one.
+    ``last_t_s`` the timestamp of the log's last message (of any channel), if it has one;
+    ``unread`` the records of a text log python-can's reader read no message of (`_Unread`).
     """
     check_log_file(log)
     path = Path(log)
@@ -531,7 +534,11 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
 
     started = False
     skipped = other = 0
-    for msg in _messages(path):  # one per logged message
+    not_read = None
+    if unread is not None:
+        not_read = _Unread(path.suffix.lower(), radar_ids)
+        unread.append(not_read)
+    for msg in _messages(path, not_read):  # one per logged message
         if channels is not None or channel is not None:
             label = channel_label(msg.channel)
             if channels is not None and not (msg.is_error_frame or msg.is_remote_frame) and (
@@ -576,6 +583,8 @@ class _LogIndex:
     channels: Counter[str | None] = field(default_factory=Counter)
     # The timestamp of the log's last message (None: it holds none).
     last_t_s: float | None = None
+    # A text log's records python-can's reader read no message of (None: not a text log).
+    unread: _Unread | None = None
 
     @classmethod
     def scan(cls, log: str | Path, mapping: CanMapping | None,
@@ -584,17 +593,18 @@ class _LogIndex:
         stats: dict[str, int] = {}
         channels: Counter[str | None] = Counter()
         last: list[float] = []
+        unread: list[_Unread] = []
         counters, times, counts = array("q"), array("d"), array("l")
         for c in _iter_cycles(log, mapping, stats, cycle_s, channel=channel,
                               channels=channels, last_t_s=last,
-                              restart=restart):  # one per radar cycle
+                              restart=restart, unread=unread):  # one per radar cycle
             counters.append(c.detections.cycle)
             times.append(c.bus_t_s)
             counts.append(c.detections.count)
         return cls(np.frombuffer(counters, dtype=np.int64).copy(),
                    np.frombuffer(times, dtype=np.float64).copy(),
                    np.asarray(counts, dtype=np.int64), stats, channels,
-                   last[0] if last else None)
+                   last[0] if last else None, unread[0] if unread else None)
 
     def __len__(self) -> int:
         return int(self.counters.size)
@@ -678,7 +688,9 @@ def _text_end(path: Path) -> _TextEnd:
     Every tool ends each line of a log with a line end; python-can's readers take a line
     without one as it is (a data field cut in the middle of a byte as a shorter message, with
     a made-up half byte), or fail on it. A last line of white space alone, or an ASC log's
-    ``End TriggerBlock`` without a line end, is complete.
+    ``End TriggerBlock`` without a line end, is complete. Line ends are the ones python-can
+    reads a text log by (universal line ends): a line feed, a carriage return and line feed,
+    or a carriage return alone, as some loggers write.
     """
     size = path.stat().st_size
     with path.open("rb") as f:
@@ -687,7 +699,7 @@ def _text_end(path: Path) -> _TextEnd:
             start = max(0, end - _TAIL_CHUNK_BYTES)
             f.seek(start)
             chunk = f.read(end - start)
-            at = chunk.rfind(b"\n")  # a line end, alone or after a carriage return
+            at = max(chunk.rfind(b"\n"), chunk.rfind(b"\r"))
             if at >= 0:
                 end = start + at + 1
                 break
@@ -697,10 +709,13 @@ def _text_end(path: Path) -> _TextEnd:
         if not partial or (path.suffix.lower() == ".asc" and partial.lower() == _ASC_END):
             return _TextEnd(size, None, 0)
         f.seek(0)
-        lines, left = 0, end
+        lines, left, after_cr = 0, end, False
         while left > 0:  # the line's number: the line ends before it, a chunk at a time
             chunk = f.read(min(left, 1 << 20))
-            lines += chunk.count(b"\n")
+            # A carriage return and line feed end one line, also across two chunks.
+            lines += (chunk.count(b"\n") + chunk.count(b"\r") - chunk.count(b"\r\n")
+                      - (after_cr and chunk.startswith(b"\n")))
+            after_cr = chunk.endswith(b"\r")
             left -= len(chunk)
         return _TextEnd(end, lines + 1, size - end)
 
@@ -736,20 +751,33 @@ class _CountedLines(io.TextIOWrapper):
     locale's encoding fails as it is read, up to a few kilobytes before the bad byte).
     """
 
-    def __init__(self, path: Path, limit: int) -> None:
+    def __init__(self, path: Path, limit: int,
+                 unread: Callable[[int, str], None] | None = None) -> None:
         head = io.BufferedReader(_HeadBytes(path.open("rb"), limit))
         # As python-can opens a text log: the locale's encoding, universal line ends.
         super().__init__(head, encoding=locale.getpreferredencoding(False))
         self.lines = 0
         self.at = 0
+        self.last = ""  # the last line given to the reader
+        self.given = 0  # ... and its number
+        self.answered = 0  # the number of the last line the reader gave a message of
+        self._unread = unread  # told each line the reader gave no message of
 
     def __next__(self) -> str:  # type: ignore[override]  # text lines, as read
+        self.passed_over()
         while True:
             self.at = self.lines + 1
             line = super().__next__()
             self.lines += 1
             if line.strip():
+                self.last, self.given = line, self.lines
                 return line
+
+    def passed_over(self) -> None:
+        """Tell ``unread`` of the line last given, where the reader gave no message of it."""
+        if self._unread is not None and self.given > self.answered:
+            self._unread(self.given, self.last)
+            self.answered = self.given
 
 
 def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | None:
@@ -814,12 +842,13 @@ def log_cut_short(log: str | Path, last_t_s: float | None) -> dict[str, Any] | N
     return None
 
 
-def _messages(path: Path) -> Iterator[can.Message]:
+def _messages(path: Path, unread: _Unread | None = None) -> Iterator[can.Message]:
     """Yield the log's messages; a file python-can cannot parse is a `LogError`.
 
     A text log's lines are read up to its last line end: a last line without one was cut in
     the middle of writing it (`log_cut_short` says so), and a line python-can cannot parse is
-    named by its number.
+    named by its number. ``unread`` gets the text log's lines python-can's reader gave no
+    message of (`_Unread`).
     """
     problem = None
     text: _CountedLines | None = None
@@ -828,7 +857,8 @@ def _messages(path: Path) -> Iterator[can.Message]:
         try:
             suffix = path.suffix.lower()
             if suffix in TEXT_LOG_READERS:
-                text = _CountedLines(path, _text_end(path).complete_bytes)
+                text = _CountedLines(path, _text_end(path).complete_bytes,
+                                     None if unread is None else unread.line)
                 reader = TEXT_LOG_READERS[suffix](file=text)
             else:
                 reader = can.LogReader(str(path))
@@ -846,13 +876,15 @@ def _messages(path: Path) -> Iterator[can.Message]:
             gc.collect()
     if problem is not None:
         raise LogError(problem)
-    with reader, _skipped_lines(text) as skipped:
+    with reader, _skipped_lines(text, unread) as skipped:
         iterator = iter(reader)
         while True:
             try:
                 msg = next(iterator)
             except StopIteration:
                 msg = None
+                if text is not None:
+                    text.passed_over()
             except Exception as exc:  # noqa: BLE001 - a damaged log, in the format's words
                 where = f"line {text.at}: " if text is not None else ""
                 raise LogError(f"--log {path}: {where}cannot read: {type(exc).__name__}: "
@@ -865,33 +897,133 @@ def _messages(path: Path) -> Iterator[can.Message]:
                                f"skipped it ({said})")
             if msg is None:
                 return
+            if text is not None:
+                text.answered = text.given
             yield msg
 
 
-class _SkippedLines(logging.Handler):
-    """Collects the lines python-can's TRC reader skips (``(line, its words)``)."""
+# Lines of an ASC log that hold no message: its header, comments, its trigger block's begin and
+# end, the start of the measurement (python-can's ASC reader passes over them).
+_ASC_NO_MESSAGE = re.compile(
+    r"(//|date\s|base\s|(no\s+)?internal\s+events\s+logged|begin\s+triggerblock|"
+    r"end\s+triggerblock|\d+\.\d+\s+start\s+of\s+measurement)", re.IGNORECASE)
+# A word of a TRC record that is an identifier as TRC writes them: 4 hex digits (11 bits),
+# 8 (29 bits).
+_TRC_IDENTIFIER = re.compile(r"[0-9A-Fa-f]{4}|[0-9A-Fa-f]{8}")
 
-    def __init__(self, text: _CountedLines) -> None:
-        super().__init__(logging.WARNING)
-        self.text = text
+
+class _Unread:
+    """The records of a text log python-can's reader gave no message of, by type.
+
+    python-can's TRC reader drops a record of a type it does not read with an info line of
+    its logger (its type, told in ``kinds`` by line); its ASC reader passes over every line
+    that is not a CAN frame (error and remote frames it reads) without a word. Either way the
+    log would be judged shorter than it is: `check_log` fails where such a record holds one
+    of the radar's identifiers, and notes the others.
+    """
+
+    def __init__(self, suffix: str, radar_ids: set[tuple[int, bool]]) -> None:
+        self.suffix = suffix
+        self.radar_ids = radar_ids
+        self.kinds: dict[int, str] = {}  # by line: the type python-can's TRC reader named
+        self.counts: Counter[str] = Counter()  # records not read, by type
+        self.radar = 0  # ... of them holding one of the radar's identifiers
+        self.first_radar_line: int | None = None
+        self._base = 16  # an ASC log's numbers' (its header's ``base``)
+
+    def line(self, number: int, text: str) -> None:
+        """Take the line ``number`` (from 1) the reader gave no message of."""
+        kind = self.kinds.pop(number, None)
+        words = text.split()
+        if kind is None and self._holds_no_message(number, text):
+            return
+        if kind is None:  # a line of an ASC log: its first word after the time
+            kind = next((w.rstrip(":") for w in words[1:] if w[:1].isalpha()), "line")
+        self.counts[kind] += 1
+        if self._holds_radar_id(words):
+            self.radar += 1
+            if self.first_radar_line is None:
+                self.first_radar_line = number
+
+    def _holds_no_message(self, number: int, text: str) -> bool:
+        line = text.strip()
+        if self.suffix == ".trc":
+            return line.startswith(";")
+        if self.suffix == ".asc":
+            if line.lower().startswith("base "):
+                self._base = 10 if line.split()[1].lower() == "dec" else 16
+            return _ASC_NO_MESSAGE.match(line) is not None
+        return self.suffix == ".csv" and number == 1  # its header
+
+    def _holds_radar_id(self, words: list[str]) -> bool:
+        if self.suffix == ".trc":
+            return any((int(w, 16), len(w) == 8) in self.radar_ids for w in words
+                       if _TRC_IDENTIFIER.fullmatch(w))
+        if self.suffix == ".asc":
+            # Where an ASC frame line holds its identifier: after its time and channel, or
+            # after ``CANFD``, its channel and direction; an ``x`` ends an extended one.
+            at = 4 if len(words) > 1 and words[1].upper() == "CANFD" else 2
+            if len(words) <= at:
+                return False
+            word = words[at]
+            extended = word[-1:].lower() == "x"
+            try:
+                number = int(word[:-1] if extended else word, self._base)
+            except ValueError:
+                return False
+            return (number, extended) in self.radar_ids
+        return True  # a format whose reader gives a message of each line or fails
+
+    def verdict(self, log: str | Path) -> tuple[str | None, str | None]:
+        """Return ``(reason, note)``: a reason where a record not read may be the radar's."""
+        total = sum(self.counts.values())
+        if not total:
+            return None, None
+        kinds = ", ".join(f"{n} of type {kind!r}" for kind, n in self.counts.most_common())
+        said = (f"the log {log} holds {total} record{'s' if total != 1 else ''} python-can's "
+                f"reader does not read ({kinds}), ")
+        if self.radar:
+            return (said + f"{self.radar} of them with the radar's identifiers (the first at "
+                    f"line {self.first_radar_line}): the cycles they belong to are judged "
+                    f"without them"), None
+        return None, said + "none of them with the radar's identifiers"
+
+
+class _SkippedLines(logging.Handler):
+    """Collects the lines python-can's TRC reader skips (``(line, its words)``).
+
+    It tells ``unread`` the type of each record the reader drops as one it does not read.
+    """
+
+    def __init__(self, text: _CountedLines, unread: _Unread | None) -> None:
+        super().__init__(logging.INFO)
+        self.text, self.unread = text, unread
         self.lines: list[tuple[int, str]] = []
 
     def emit(self, record: logging.LogRecord) -> None:
-        if record.getMessage().startswith("TRCReader: Failed to parse"):
-            self.lines.append((self.text.lines, record.getMessage()))
+        said = record.getMessage()
+        if record.levelno >= logging.WARNING and said.startswith("TRCReader: Failed to parse"):
+            self.lines.append((self.text.lines, said))
+        elif self.unread is not None and said.startswith("TRCReader: Unsupported type"):
+            args = record.args if isinstance(record.args, tuple) else ()
+            self.unread.kinds[self.text.given] = str(args[0] if args else "")
+        elif self.unread is not None and said.startswith("TRCReader: Dropping bus info"):
+            self.unread.kinds[self.text.given] = "FFFFFFFF"  # a bus's state, no message
 
 
 @contextmanager
-def _skipped_lines(text: _CountedLines | None) -> Iterator[list[tuple[int, str]]]:
+def _skipped_lines(text: _CountedLines | None,
+                   unread: _Unread | None = None) -> Iterator[list[tuple[int, str]]]:
     """Collect, while reading ``text``, the lines python-can's TRC reader skips."""
     if text is None:
         yield []
         return
     logger = logging.getLogger("can.io.trc")
-    handler, level = _SkippedLines(text), logger.level
+    handler, level = _SkippedLines(text, unread), logger.level
     logger.addHandler(handler)
-    if not logger.isEnabledFor(logging.WARNING):
-        logger.setLevel(logging.WARNING)
+    wanted = logging.WARNING if unread is None else logging.INFO
+    if not logger.isEnabledFor(wanted):
+        logger.setLevel(wanted)
     try:
         yield handler.lines
     finally:
@@ -1335,6 +1467,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if unused_method:
         alignment.notes.append(f"--method {method} is not used: the sidecar keeps the statuses "
                                f"the RTS played (with {(sidecar or {}).get('method')})")
+    unread_reason, unread_note = (index.unread.verdict(log) if index.unread is not None
+                                  else (None, None))
+    if unread_reason:
+        # Records that may be the radar's, which python-can does not read: judged without
+        # them, its cycles would be judged by what the log does not hold.
+        result.reasons.append(unread_reason)
+        result.passed = False
+    elif unread_note:
+        alignment.notes.append(unread_note)
     if cut_short is not None and ends_early:
         # Its missing cycles may not all show (a cycle's tail, those after the scene counted
         # as the run counts them): the log itself fails.

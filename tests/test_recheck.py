@@ -1321,3 +1321,145 @@ def test_a_text_log_that_is_no_text_is_one_error_naming_its_first_line(tmp_path,
     err = capsys.readouterr().err
     (said,) = err.strip().splitlines()
     assert said.startswith(f"error: --log {packed}: line 1: cannot read: "), said
+
+
+def _carriage_returns_only(data: bytes) -> bytes:
+    """A text log's bytes with each line ended by a carriage return alone (old Mac style)."""
+    return data.replace(b"\r\n", b"\n").replace(b"\n", b"\r")
+
+
+@pytest.mark.parametrize("suffix", [".log", ".trc", ".asc", ".csv"])
+def test_a_text_log_with_carriage_returns_alone_re_checks_to_the_live_verdict(tmp_path, capsys,
+                                                                              suffix):
+    # Some loggers end each line with a carriage return alone. python-can opens a text log
+    # with universal line ends and reads every message of it; so does the re-check, which
+    # neither takes the log for one cut line nor misses a cycle.
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"  # 7.5 s: 150 cycles
+    log = tmp_path / f"run{suffix}"
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    capsys.readouterr()
+    old_mac = tmp_path / f"mac{suffix}"
+    old_mac.write_bytes(_carriage_returns_only(log.read_bytes()))
+    assert b"\n" not in old_mac.read_bytes()
+    shutil.copy(str(log) + ".rts.json", str(old_mac) + ".rts.json")
+    assert len(list(can.LogReader(str(old_mac)))) == len(list(can.LogReader(str(log))))
+    whole = check_log(load_scenario(scene), log)
+    result = check_log(load_scenario(scene), old_mac)
+    assert result.alignment.log_cut_short is None
+    assert result.report.passed, result.report.reasons
+    assert result.report.frames == whole.report.frames
+    assert result.report.frames["checked"] == result.report.frames["total"] == 150
+    assert result.report.bus == whole.report.bus
+    # Cut in the middle of a line, it names that line, counted as python-can reads its lines.
+    data, line = _mid_line_cut(log, 0.6)
+    cut = tmp_path / f"cut{suffix}"
+    cut.write_bytes(_carriage_returns_only(data))
+    shutil.copy(str(log) + ".rts.json", str(cut) + ".rts.json")
+    result = check_log(load_scenario(scene), cut)
+    assert not result.report.passed
+    assert result.alignment.log_cut_short["line"] == line
+    assert result.alignment.log_cut_short["file_bytes"] == len(cut.read_bytes())
+
+
+def test_a_cut_line_is_numbered_as_python_can_counts_lines_across_any_read_size(tmp_path):
+    # Line ends of every kind in one log (a line feed, a carriage return and line feed, a
+    # carriage return alone), one of them split across 1 MiB of the file: the cut line's
+    # number is the one python-can's universal line ends give it.
+    from rts_scenario.recheck import log_cut_short
+
+    line = b"(1.000000) can0 100#0011223344556677\r\n"  # 38 bytes
+    # A first line of a length that puts one of the carriage returns at the 1 MiB mark.
+    lead = 30 + ((1 << 20) - 37 - 30) % len(line)
+    first = b"(0.500000) can0 100#" + b"0" * (lead - 21) + b"\r"
+    count = (1 << 20) // len(line) + 1
+    data = (first + line * count + b"\n(2.000000) can0 100#00\r(3.0000")
+    assert len(first) == lead
+    assert data[(1 << 20) - 1:(1 << 20) + 1] == b"\r\n"
+    log = tmp_path / "mixed.log"
+    log.write_bytes(data)
+    lines = data.decode().splitlines()
+    assert len(lines) == count + 4  # with the empty line after the last CR LF
+    cut = log_cut_short(log, 2.0)
+    assert cut is not None and cut["line"] == count + 4
+
+
+def _radar_line_numbers(lines: list[bytes], identifier: bytes) -> list[int]:
+    """The indexes of a text log's lines whose words include ``identifier``."""
+    return [i for i, line in enumerate(lines) if identifier in line.split()]
+
+
+def test_trc_records_python_can_does_not_read_fail_a_re_check_where_they_may_be_the_radar_s(
+        tmp_path):
+    # python-can's TRC reader drops a record of a type it has no parser for with an info line
+    # of its logger alone. Status records (ST, EC, EV) hold no identifier: noted, the verdict
+    # the live one. Records of such a type holding the radar's detection identifier (0101,
+    # rts-scenario's first detection message) may be its detections: the re-check fails.
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml", QUIET)
+    log = tmp_path / "run.trc"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    assert live.passed
+    lines = log.read_bytes().splitlines(keepends=True)
+    detections = _radar_line_numbers(lines, b"0101")
+    assert len(detections) > 40
+    status = [b"      9      1500.000 ST  1     -    Rx -  4    00 00 00 08\r\n",
+              b"      9      1500.000 EC  1     -    Rx -  2    80 00\r\n",
+              b"      9      1500.000 ST  1     -    Rx -  4    00 00 00 04\r\n"]
+    noted = tmp_path / "status.trc"
+    noted.write_bytes(b"".join(lines[:detections[10]] + status + lines[detections[10]:]))
+    shutil.copy(str(log) + ".rts.json", str(noted) + ".rts.json")
+    result = check_log(scene, noted)
+    assert result.report.passed, result.report.reasons
+    assert result.report.frames == live.frames
+    assert (f"the log {noted} holds 3 records python-can's reader does not read (2 of type "
+            f"'ST', 1 of type 'EC'), none of them with the radar's identifiers"
+            in result.alignment.notes), result.alignment.notes
+    # Four of the radar's detections in records of a type python-can has no parser for.
+    for i in detections[20:24]:
+        lines[i] = lines[i].replace(b" DT ", b" XD ")
+    dropped = tmp_path / "dropped.trc"
+    dropped.write_bytes(b"".join(lines))
+    shutil.copy(str(log) + ".rts.json", str(dropped) + ".rts.json")
+    result = check_log(scene, dropped)
+    assert not result.report.passed
+    assert (f"the log {dropped} holds 4 records python-can's reader does not read (4 of type "
+            f"'XD'), 4 of them with the radar's identifiers (the first at line "
+            f"{detections[20] + 1}): the cycles they belong to are judged without them"
+            in result.report.reasons), result.report.reasons
+
+
+def test_asc_lines_python_can_does_not_read_fail_a_re_check_where_they_may_be_the_radar_s(
+        tmp_path):
+    # python-can's ASC reader reads error and remote frames (counted in the report's bus) and
+    # passes over every other line without a word. Lines of other events (a CAN controller's
+    # status, bus statistics) hold no radar message: noted. A radar frame's line it does not
+    # read (its time written without a fraction) is one lost: the re-check fails.
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml", QUIET)
+    log = tmp_path / "run.asc"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    assert live.passed
+    lines = log.read_bytes().splitlines(keepends=True)
+    detections = _radar_line_numbers(lines, b"101")
+    assert len(detections) > 40
+    events = [b"   1.500000 CAN 1 Status:chip status error active\n",
+              b"   1.500000 1 Statistic: D 257 R 0 XD 0 XR 0 E 0 O 0 B 3.21%\n"]
+    noted = tmp_path / "events.asc"
+    noted.write_bytes(b"".join(lines[:detections[10]] + events + lines[detections[10]:]))
+    shutil.copy(str(log) + ".rts.json", str(noted) + ".rts.json")
+    result = check_log(scene, noted)
+    assert result.report.passed, result.report.reasons
+    assert result.report.frames == live.frames
+    assert (f"the log {noted} holds 2 records python-can's reader does not read (1 of type "
+            f"'CAN', 1 of type 'Statistic'), none of them with the radar's identifiers"
+            in result.alignment.notes), result.alignment.notes
+    at = detections[20]
+    time_s, rest = lines[at].split(None, 1)
+    lines[at] = b"   " + str(round(float(time_s))).encode() + b" " + rest
+    dropped = tmp_path / "dropped.asc"
+    dropped.write_bytes(b"".join(lines))
+    shutil.copy(str(log) + ".rts.json", str(dropped) + ".rts.json")
+    result = check_log(scene, dropped)
+    assert not result.report.passed
+    assert (f"the log {dropped} holds 1 record python-can's reader does not read (1 of type "
+            f"'Rx'), 1 of them with the radar's identifiers (the first at line {at + 1}): the "
+            f"cycles they belong to are judged without them"
+            in result.report.reasons), result.report.reasons
