@@ -768,3 +768,16 @@ def test_the_plot_shows_every_status_and_rates_the_runs_that_ran(monkeypatch, tm
     rts_scenario.plots.write_sweep_plot([run("pass", a=1, b=1, c=1),
                                          run("skipped", a=2, b=2, c=2)], tmp_path / "three.png")
     assert [t.get_text() for t in figures[2].axes[0].texts] == ["1/1", "0/0"]
+
+
+def test_a_combination_s_marks_are_the_scene_s_with_its_overrides():
+    from rts_scenario.scenario import written_marks
+
+    data = {"marks": ["slow", "hard"], "name": "x"}
+    assert written_marks(data, {}) == ("slow", "hard")
+    assert written_marks(data, {"marks": ["nightly"], "name": "y"}) == ("nightly",)
+    assert written_marks(data, {"marks.1": "bench"}) == ("slow", "bench")
+    assert data == {"marks": ["slow", "hard"], "name": "x"}  # the scene itself is left alone
+    assert written_marks(data, {"marks.5": "bench"}) == ()  # no such mark: its load says so
+    assert written_marks({"marks": ["ok", "_private", 3]}, {}) == ("ok",)
+    assert written_marks(["not", "a", "scene"], {}) == ()
