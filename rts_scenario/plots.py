@@ -168,17 +168,21 @@ def write_calibration_plot(result: Any, folder: str | Path, name: str) -> Path:
 def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
     """Plot a sweep's verdicts over its parameters into one PNG; return the file.
 
-    One parameter: each run's verdict (pass, fail, error) against the parameter's value, one
-    row per scene. Two: a grid of the pass rate over both values, each cell marked
-    ``passed/runs``. More (or none): the pass rate per value of each parameter (per scene when
-    no run has a parameter), one panel each.
+    One parameter: each run's verdict (pass, fail, error, xfail, xpass, skipped) against the
+    parameter's value, one row per scene. Two: a grid of the pass rate over both values, each
+    cell marked ``passed/runs``. More (or none): the pass rate per value of each parameter (per
+    scene when no run has a parameter), one panel each. Rates are over the runs that ran, as
+    in the sweep's summary (skipped runs left out).
     """
     from .sweep import value_name
 
     plt = _pyplot()
     keys = list(dict.fromkeys(k for e in entries for k in e["parameters"]))
-    colors = {"pass": "tab:green", "fail": "tab:red", "error": "tab:orange"}
-    markers = {"pass": "o", "fail": "X", "error": "s"}
+    colors = {"pass": "tab:green", "fail": "tab:red", "error": "tab:orange",
+              "xfail": "tab:purple", "xpass": "tab:blue", "skipped": "tab:gray"}
+    markers = {"pass": "o", "fail": "X", "error": "s", "xfail": "x", "xpass": "P",
+               "skipped": "_"}
+    ran = [e for e in entries if e["status"] != "skipped"]
 
     def values_of(key: str) -> list[str]:
         return list(dict.fromkeys(value_name(e["parameters"][key]) for e in entries
@@ -206,7 +210,7 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
         (kx, ky), (xs, ys) = keys, (values_of(keys[0]), values_of(keys[1]))
         runs = np.zeros((len(ys), len(xs)))
         passed = np.zeros_like(runs)
-        for e in entries:
+        for e in ran:
             p = e["parameters"]
             if kx in p and ky in p:
                 cell = (ys.index(value_name(p[ky])), xs.index(value_name(p[kx])))
@@ -237,8 +241,9 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
 
         fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.2 * len(groups)), squeeze=False)
         for ax, (label, values, key) in zip(axes[:, 0], groups, strict=True):
-            runs_of = [[e for e in entries if value_of(e, key) == v] for v in values]
-            rates = [sum(e["status"] == "pass" for e in r) / len(r) for r in runs_of]
+            runs_of = [[e for e in ran if value_of(e, key) == v] for v in values]
+            rates = [sum(e["status"] == "pass" for e in r) / len(r) if r else 0.0
+                     for r in runs_of]
             ax.bar(range(len(values)), rates, color=[plt.cm.RdYlGn(r) for r in rates])
             for i, r in enumerate(runs_of):
                 ax.text(i, 0.02, f"{sum(e['status'] == 'pass' for e in r)}/{len(r)}",

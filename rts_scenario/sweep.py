@@ -6,8 +6,9 @@ JSON-ready entry; it depends only on the scene file and its overrides (every ran
 seeded from the scene), so it gives the same verdict in this process, in a process pool or on
 a Dask worker. `run_sweep` runs a whole list in one of those three places and never loses a
 result: a run that raises, or a worker that dies, becomes an entry with status ``error`` and a
-one-line message. `summarize` counts the verdicts overall and per parameter value and picks
-the worst runs.
+one-line message. A scene's ``marks`` judge its runs as the pytest plugin does (`judged`), and
+`select_tasks` picks runs by a mark expression as ``pytest -m`` does. `summarize` counts the
+verdicts overall and per parameter value and picks the worst runs.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
+from fnmatch import fnmatch
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +33,15 @@ WORST_RUNS = 10
 LOCAL_SCHEDULER = "local"
 # How long to try reaching a Dask scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
+# The folders a folder's sweep does not walk into: pytest's default ``norecursedirs``, and
+# ``__pycache__`` (pytest leaves it out too, as it does a virtual environment: `_left_out`).
+NORECURSE_PATTERNS = ("*.egg", ".*", "_darcs", "build", "CVS", "dist", "node_modules", "venv",
+                      "{arch}", "__pycache__")
+# Marks that skip a run (``skipif`` without a condition skips, as in pytest).
+SKIP_MARKS = ("skip", "skipif")
+# Statuses of runs whose check was judged, and the summary's count of each.
+COUNTS = {"pass": "passed", "fail": "failed", "error": "errors", "xfail": "xfailed",
+          "xpass": "xpassed", "skipped": "skipped"}
 
 Entry = dict[str, Any]
 
@@ -44,7 +55,8 @@ class SweepTask:
     ``error_type`` says which exit code the error gives (``runtime`` when listing the
     combinations raised something else than bad input). ``path``, when set, is where the run
     reads ``file`` (its absolute path, for a worker whose current folder is another); the
-    entry and its messages still name ``file``.
+    entry and its messages still name ``file``. ``marks`` are the scene's marks for this
+    combination (`rts_scenario.scenario.written_marks`), which judge its run (`judged`).
     """
 
     index: int
@@ -54,23 +66,33 @@ class SweepTask:
     error: str | None = None
     path: str | None = None
     error_type: str = "bad_input"
+    marks: tuple[str, ...] = ()
+
+    @property
+    def skipped(self) -> bool:
+        """Whether its marks skip it (it then runs nothing, as pytest skips its item)."""
+        return any(mark in SKIP_MARKS for mark in self.marks)
 
 
 def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
                   ) -> list[SweepTask]:
     """Expand folders (every scene file in them, recursively, sorted) and parametrize blocks.
 
-    A scene file reached twice (given twice, or given and inside a folder given) runs once,
-    so that its variants count once in the pass rates; ``notes`` (if given) receives a line
-    for each repeat.
+    A folder's sweep does not walk into the folders pytest leaves out (`folder_files`); a
+    file or folder given is always swept. A scene file reached twice (given twice, or given
+    and inside a folder given) runs once, so that its variants count once in the pass rates;
+    ``notes`` (if given) receives a line for each repeat.
 
     A path that is neither a scene file nor a folder holding one, or a scene whose
     ``parametrize`` block is invalid, becomes one task carrying its error; so does a file in a
     folder that holds a scene under another name than ``*.scenario.yaml`` (`holds_scene`),
     or a ``*.scenario.yaml`` there that is a link to nothing: either would otherwise never run
-    without the sweep saying so.
+    without the sweep saying so. Each task carries its combination's marks, as the pytest
+    plugin gives them to its item (none for a file whose combinations cannot be listed as
+    bad input).
     """
-    from .scenario import SCENE_SUFFIX, parametrizations
+    from .located_yaml import load_yaml
+    from .scenario import SCENE_SUFFIX, parametrizations, written_marks
 
     tasks: list[SweepTask] = []
     seen: dict[Path, str] = {}  # each scene file (resolved) and the name it first came as
@@ -79,15 +101,17 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
         misnamed: set[Path] = set()
         dangling: set[Path] = set()
         if path.is_dir():
-            misnamed = {p for p in path.rglob("*") if not p.name.endswith(SCENE_SUFFIX)
+            found, left_out = folder_files(path)
+            scenes = [p for p in found if p.name.endswith(SCENE_SUFFIX)]
+            misnamed = {p for p in found if not p.name.endswith(SCENE_SUFFIX)
                         and p.is_file() and holds_scene(p)}
-            dangling = {p for p in path.rglob(f"*{SCENE_SUFFIX}")
-                        if p.is_symlink() and not p.exists()}
-            files = sorted([*(p for p in path.rglob(f"*{SCENE_SUFFIX}") if p.is_file()),
-                            *misnamed, *dangling], key=str)
+            dangling = {p for p in scenes if p.is_symlink() and not p.exists()}
+            files = sorted([*(p for p in scenes if p.is_file()), *misnamed, *dangling],
+                           key=str)
             if not files:
                 tasks.append(SweepTask(len(tasks), str(given),
-                                       error=f"{given}: no *{SCENE_SUFFIX} files in this folder"))
+                                       error=f"{given}: no *{SCENE_SUFFIX} files in this folder"
+                                             + _left_out_note(path, left_out)))
         elif path.is_file():
             files = [path]
         else:
@@ -113,16 +137,70 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
                           f"*{SCENE_SUFFIX}, so it does not run as one; rename it "
                           f"{stem}{SCENE_SUFFIX}"))
                 continue
+
+            def marks_of(overrides: dict[str, Any], file: Path = file) -> tuple[str, ...]:
+                try:
+                    data = load_yaml(file).data
+                except Exception:  # the run that loads it says what is wrong
+                    return ()
+                return written_marks(data, overrides)
+
             try:
                 combos = parametrizations(file)
             except Exception as exc:  # the file's one run reports it; the others still run
+                bad = isinstance(exc, RtsError)
                 tasks.append(SweepTask(len(tasks), name, error=_message(name, exc),
-                                       error_type="bad_input" if isinstance(exc, RtsError)
-                                       else "runtime"))
+                                       error_type="bad_input" if bad else "runtime",
+                                       marks=() if bad else marks_of({})))
                 continue
-            tasks += [SweepTask(len(tasks) + i, name, ident, overrides)
+            written = marks_of({})
+            tasks += [SweepTask(len(tasks) + i, name, ident, overrides,
+                                marks=marks_of(overrides) if any(
+                                    k.split(".", 1)[0] == "marks" for k in overrides)
+                                else written)
                       for i, (ident, overrides) in enumerate(combos)]
     return tasks
+
+
+def folder_files(folder: Path) -> tuple[list[Path], list[Path]]:
+    """Every file under ``folder`` and the folders in it a sweep leaves out, as pytest does.
+
+    Left out (not walked into), as by pytest's defaults: a folder matching
+    `NORECURSE_PATTERNS` (hidden ones, ``build``, ``dist``, ``node_modules``, ``venv``,
+    ``*.egg``, ``__pycache__``, ...) and a virtual environment (a folder holding
+    ``pyvenv.cfg`` or ``conda-meta/history``). ``folder`` itself is walked whatever its name.
+    Linked folders are not followed.
+    """
+    files: list[Path] = []
+    left_out: list[Path] = []
+    for root, folders, names in os.walk(folder):
+        here = Path(root)
+        kept: list[Path] = []
+        for name in sorted(folders):
+            (left_out if _left_out(here / name) else kept).append(here / name)
+        folders[:] = [p.name for p in kept]
+        files += [here / name for name in names]
+    return files, left_out
+
+
+def _left_out(folder: Path) -> bool:
+    if any(fnmatch(folder.name, pattern) for pattern in NORECURSE_PATTERNS):
+        return True
+    try:
+        return ((folder / "pyvenv.cfg").is_file()
+                or (folder / "conda-meta" / "history").is_file())
+    except OSError:
+        return False
+
+
+def _left_out_note(folder: Path, left_out: list[Path]) -> str:
+    """Name the folders left out, where that is why a folder has no scene to sweep."""
+    if not left_out:
+        return ""
+    shown = [str(p.relative_to(folder)) for p in left_out[:5]]
+    more = f" and {len(left_out) - 5} more" if len(left_out) > 5 else ""
+    return (f" ({len(left_out)} folder{'s' if len(left_out) != 1 else ''} in it left out, as "
+            f"pytest leaves them out: {', '.join(shown)}{more}; name one to sweep it)")
 
 
 def dangling_link(path: Path) -> str:
@@ -133,10 +211,14 @@ def dangling_link(path: Path) -> str:
 def run_task(task: SweepTask, method: str = "exact") -> Entry:
     """Run one task end to end on the simulated radar; never raises.
 
-    Returns the entry ``{"scene", "file", "id", "parameters", "passed", "status", ...}``:
-    ``status`` is ``pass``, ``fail`` or ``error``; a failed run adds ``reason``; an erred one
-    ``reason`` (its one-line message) and ``error_type`` (``bad_input``: the scene does not
-    load or its schedule cannot be built; ``runtime``: anything else). Finished runs add
+    Returns the entry ``{"scene", "file", "id", "parameters", "marks", "passed", "status",
+    ...}``: ``status`` is ``pass``, ``fail`` or ``error``, judged by the scene's marks as the
+    pytest plugin judges its item: ``skipped`` (a ``skip`` or ``skipif`` mark; nothing runs),
+    and with an ``xfail`` mark ``xfail`` for a failed check or ``xpass`` for a passed one (a
+    run that errs stays an error). ``passed`` says whether the check passed. A failed run
+    (``fail``, ``xfail``) adds ``reason``, a skipped one too; an erred one ``reason`` (its
+    one-line message) and ``error_type`` (``bad_input``: the scene does not load or its
+    schedule cannot be built; ``runtime``: anything else). Finished runs add
     ``detection_rate``, ``false_detections``, ``errors`` (rms and max per quantity),
     ``max_error_ratio`` and ``max_error_quantity`` (the largest max error over its tolerance),
     ``solver_plan`` (where its solver plan came from: ``built``, ``memory`` or ``disk``) and
@@ -148,11 +230,19 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     from .schedule import ScheduleError
 
     start = time.perf_counter()
-    entry: Entry = {"scene": _file_scene(task.file), "file": task.file,
-                    "id": task.ident, "parameters": dict(task.parameters)}
+    entry = _task_entry(task)
+    source = task.path if task.path is not None else task.file
+    if task.skipped:  # before its error, as pytest skips an item before running it
+        if task.error is None:
+            try:  # named as the pytest plugin names its item: by its scene, if it loads
+                entry["scene"] = load_scenario(source, task.parameters).name
+            except Exception:  # as in pytest, skipped all the same, named after its file
+                pass
+        mark = next(m for m in task.marks if m in SKIP_MARKS)
+        return {**entry, "passed": False, "status": "skipped",
+                "reason": f"the scene's marks: {mark}"}
     if task.error is not None:
         return error_entry(entry, task.error, task.error_type)
-    source = task.path if task.path is not None else task.file
 
     def message(exc: BaseException) -> str:
         # Named as given, also where the run read it by its absolute path.
@@ -175,7 +265,10 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     from .check import QUANTITIES
     from .report import strict
 
-    entry.update(passed=report.passed, status="pass" if report.passed else "fail")
+    status = "pass" if report.passed else "fail"
+    if "xfail" in task.marks:  # a known failure of the check; a run that errs is none
+        status = "x" + status
+    entry.update(passed=report.passed, status=status)
     if not report.passed:
         entry["reason"] = "; ".join(report.reasons)
     ratio, worst = -1.0, None
@@ -195,6 +288,12 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     entry["solver_plan"] = report.solver_plan
     entry["seconds"] = round(time.perf_counter() - start, 3)
     return entry
+
+
+def _task_entry(task: SweepTask) -> Entry:
+    """Return the part of a task's entry known before it runs (named after its file)."""
+    return {"scene": _file_scene(task.file), "file": task.file, "id": task.ident,
+            "parameters": dict(task.parameters), "marks": list(task.marks)}
 
 
 def _file_scene(file: str) -> str:
@@ -264,9 +363,10 @@ def run_sweep(tasks: Sequence[SweepTask], *, method: str = "exact", workers: int
         if on_result is not None:
             on_result(entry)
 
-    runnable = [t for t in tasks if t.error is None]
+    # Skipped and erred tasks run nothing: reported here, at once.
+    runnable = [t for t in tasks if t.error is None and not t.skipped]
     for task in tasks:
-        if task.error is not None:
+        if task.error is not None or task.skipped:
             finish(task, run_task(task, method))
     # A pool for one run would only cost its start.
     workers = max(1, min(workers, len(runnable)))
@@ -351,8 +451,7 @@ def _collect(futures: dict[Any, SweepTask], completed: Iterable[Future[Entry]],
             entry = future.result()
         except Exception as exc:  # the worker died or the task could not be shipped to it
             entry = error_entry(
-                {"scene": _file_scene(task.file), "file": task.file, "id": task.ident,
-                 "parameters": dict(task.parameters)},
+                _task_entry(task),
                 f"{task.file}: worker failed: {type(exc).__name__}: {one_line(exc)} "
                 f"(a runtime error)", "runtime")
         finish(task, entry)
@@ -400,60 +499,116 @@ def value_name(value: Any) -> str:
     return repr(value + 0.0)  # -0.0 + 0.0 is 0.0
 
 
-def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS) -> dict[str, Any]:
+def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS,
+              deselected: int = 0) -> dict[str, Any]:
     """Count verdicts overall and per parameter value; pick the worst runs.
 
-    ``by_parameter`` maps each parameter's key path to its values (named by
-    :func:`value_name`, in the order they first appear) and each value to ``{"runs", "passed",
-    "failed", "errors", "pass_rate"}``: equal numbers are one value (``0`` and ``0.0``).
-    ``worst`` lists erred runs, then failed ones, then passing ones, each by their largest
-    error over tolerance, at most ``worst`` runs (a pass with no error to rate is none of
-    them).
+    The counts are ``runs`` (every entry) and, by status, ``passed``, ``failed``, ``errors``,
+    ``xfailed``, ``xpassed`` and ``skipped``; ``pass_rate`` is ``passed`` over the runs that
+    ran (skipped ones left out; 0.0 if none ran). ``deselected``: the runs a mark expression
+    left out (`select_tasks`), which are not among ``entries``. ``by_parameter`` maps each
+    parameter's key path to its values (named by :func:`value_name`, in the order they first
+    appear) and each value to the same counts and its ``pass_rate``: equal numbers are one
+    value (``0`` and ``0.0``). ``worst`` lists erred runs, then failed, xpassed and xfailed
+    ones, then passing ones, each by their largest error over tolerance, at most ``worst``
+    runs (a pass with no error to rate is none of them, nor is a skipped run).
     """
-    by_parameter: dict[str, dict[str, dict[str, Any]]] = {}
+    def counts_of(group: Iterable[Entry]) -> dict[str, Any]:
+        counts = {"runs": 0, **dict.fromkeys(COUNTS.values(), 0)}
+        for entry in group:
+            counts["runs"] += 1
+            counts[COUNTS[entry["status"]]] += 1
+        ran = counts["runs"] - counts["skipped"]
+        return {**counts, "pass_rate": counts["passed"] / ran if ran else 0.0}
+
+    groups: dict[str, dict[str, list[Entry]]] = {}
     for entry in entries:
         for key, value in entry["parameters"].items():
-            counts = by_parameter.setdefault(key, {}).setdefault(
-                value_name(value), {"runs": 0, "passed": 0, "failed": 0, "errors": 0})
-            _count(counts, entry)
-    for values in by_parameter.values():
-        for counts in values.values():
-            counts["pass_rate"] = counts["passed"] / counts["runs"]
-    totals = {"runs": 0, "passed": 0, "failed": 0, "errors": 0}
-    for entry in entries:
-        _count(totals, entry)
-    order = {"error": 0, "fail": 1}
+            groups.setdefault(key, {}).setdefault(value_name(value), []).append(entry)
+    by_parameter = {key: {value: counts_of(group) for value, group in values.items()}
+                    for key, values in groups.items()}
+    order = {"error": 0, "fail": 1, "xpass": 2, "xfail": 3}
 
     def badness(entry: Entry) -> tuple[int, float]:
         ratio = entry.get("max_error_ratio")
         # A failed run with nothing to rate (nothing detected) leads its group.
-        return order.get(entry["status"], 2), -(ratio if ratio is not None else math.inf)
+        return order.get(entry["status"], 4), -(ratio if ratio is not None else math.inf)
 
     # A pass with nothing to rate is no close call: the worst runs leave it out.
-    ranked = sorted((e for e in entries if e["status"] != "pass"
+    ranked = sorted((e for e in entries if e["status"] not in ("pass", "skipped")
                      or e.get("max_error_ratio") is not None), key=badness)[:worst]
     keys = ("scene", "file", "id", "status", "reason", "max_error_ratio", "max_error_quantity")
-    return {**totals, "pass_rate": totals["passed"] / totals["runs"] if totals["runs"] else 0.0,
-            "by_parameter": by_parameter,
+    return {**counts_of(entries), "deselected": deselected, "by_parameter": by_parameter,
             "worst": [{k: e[k] for k in keys if k in e} for e in ranked]}
 
 
-def _count(counts: dict[str, Any], entry: Entry) -> None:
-    counts["runs"] += 1
-    key = {"pass": "passed", "fail": "failed"}.get(entry["status"], "errors")
-    counts[key] += 1
-
-
 def exit_code(entries: Sequence[Entry]) -> int:
-    """Return the command line's exit code: 3 runtime error, 2 bad input, 1 a failure, else 0."""
+    """Return the command line's exit code: 3 runtime error, 2 bad input, 1 a failure, else 0.
+
+    As pytest's for the same scenes: an xfailed, xpassed or skipped run fails nothing.
+    """
     types = {e.get("error_type") for e in entries if e["status"] == "error"}
     if "runtime" in types:
         return 3
     if types:
         return 2
-    return 0 if all(e["status"] == "pass" for e in entries) else 1
+    return 1 if any(e["status"] == "fail" for e in entries) else 0
 
 
-__all__ = ["LOCAL_SCHEDULER", "WORST_RUNS", "SweepTask", "collect_tasks", "default_workers",
-           "error_entry", "exit_code", "require_dask", "run_label", "run_sweep", "run_task",
-           "summarize", "warm_plans"]
+def mark_expression(text: str) -> Callable[[Sequence[str]], bool]:
+    """Compile a ``pytest -m`` mark expression; return whether a run's marks match it.
+
+    pytest's own parser reads it (``slow and not hardware``, ``(a or b) and not c``), so it
+    selects what ``pytest -m`` selects from the same scenes. A scene's marks carry no
+    arguments: ``name(key=value)`` matches none.
+
+    Raises
+    ------
+    RtsError
+        pytest is not installed, or ``text`` is no mark expression (the message says where).
+    """
+    try:
+        from _pytest.mark.expression import Expression
+    except ImportError:
+        raise RtsError("-m/--marks needs pytest (its mark expressions): pip install "
+                       "pytest") from None
+    try:
+        expression = Expression.compile(text)
+    except SyntaxError as exc:
+        raise RtsError(f"-m/--marks {text!r}: not a mark expression: at column {exc.offset}: "
+                       f"{exc.msg}") from None
+
+    def matches(marks: Sequence[str]) -> bool:
+        def has(name: str, /, **arguments: str | int | bool | None) -> bool:
+            return name in marks and not arguments
+
+        return expression.evaluate(has)
+
+    return matches
+
+
+def select_tasks(tasks: Sequence[SweepTask], text: str) -> tuple[list[SweepTask], int]:
+    """Keep the tasks whose marks match the ``pytest -m`` expression ``text``.
+
+    Returns the kept tasks (renumbered in order) and how many were left out.
+
+    Raises
+    ------
+    RtsError
+        ``text`` is no mark expression, or it selects none of the tasks: a sweep of nothing
+        would pass.
+    """
+    matches = mark_expression(text)
+    kept = [replace(task, index=i) for i, task in enumerate(t for t in tasks if matches(t.marks))]
+    if tasks and not kept:
+        marks = sorted({mark for task in tasks for mark in task.marks})
+        raise RtsError(f"-m/--marks {text!r}: selects none of the {len(tasks)} run"
+                       f"{'s' if len(tasks) != 1 else ''} (their marks: "
+                       f"{', '.join(marks) or 'none'})")
+    return kept, len(tasks) - len(kept)
+
+
+__all__ = ["LOCAL_SCHEDULER", "NORECURSE_PATTERNS", "WORST_RUNS", "SweepTask", "collect_tasks",
+           "default_workers", "error_entry", "exit_code", "folder_files", "mark_expression",
+           "require_dask", "run_label", "run_sweep", "run_task", "select_tasks", "summarize",
+           "warm_plans"]

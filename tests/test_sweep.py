@@ -9,9 +9,14 @@ from pathlib import Path
 
 import pytest
 
+# pytester runs pytest in this process and drops the modules a run imported; numpy's and
+# scipy's extension modules cannot load twice, so the library is imported here, once.
+import rts_scenario.pipeline  # noqa: F401
 from rts_scenario.cli import main
 from rts_scenario.cli.sweep import SweepProgress
 from rts_scenario.sweep import collect_tasks, run_sweep, summarize
+
+pytest_plugins = ["pytester"]
 
 # Two of the six combinations put the car 20 m to the side, outside the rig's coverage, and the
 # scene does not declare that limit: those runs fail by design.
@@ -200,7 +205,6 @@ def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
     code, _, err = sweep(capsys, plain, "--workers", "0")
     assert code == 2 and err.strip() == "error: --workers: must be >= 1, got 0"
 
-    import rts_scenario.pipeline
 
     real = rts_scenario.pipeline.run_scene
 
@@ -386,7 +390,6 @@ def test_plot_of_pass_and_fail_over_two_parameters(scenes, tmp_path, capsys):
 
 
 def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
-    import rts_scenario.pipeline
 
     real = rts_scenario.pipeline.run_scene
     calls = []
@@ -410,7 +413,6 @@ def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeyp
 def test_interrupted_sweep_prints_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
     """Without --json too: the verdicts that finished are printed, as `run` prints them, and a
     run that erred at run time before Ctrl-C keeps its exit code."""
-    import rts_scenario.pipeline
 
     real = rts_scenario.pipeline.run_scene
     calls = []
@@ -439,7 +441,6 @@ def test_interrupted_sweep_prints_the_runs_done(scenes, tmp_path, capsys, monkey
 def test_a_worker_that_dies_loses_no_run(scenes, tmp_path, capsys, monkeypatch):
     import os
 
-    import rts_scenario.pipeline
 
     real = rts_scenario.pipeline.run_scene
 
@@ -553,3 +554,230 @@ def test_a_scene_given_twice_runs_once_and_the_sweep_says_so(scenes, tmp_path, c
     notes = []
     assert len(collect_tasks([path, path], notes)) == 1
     assert notes == [f"{path}: given again (as {path} first): run once"]
+
+
+# --- the pytest plugin's verdicts for the same scenes ---------------------------------------
+
+def missed(name: str, extra: str = "") -> str:
+    """A scene whose check fails: its car is 20 m to the side, outside the rig's coverage."""
+    return tiny_scene(name).replace("[30, 0, 0.6]", "[30, 20, 0.6]") + extra
+
+
+# What pytest -v prints after an item's id, and the status sweep gives the same run.
+PLUGIN_STATUS = {"PASSED": "pass", "FAILED": "fail", "XFAIL": "xfail", "XPASS": "xpass",
+                 "SKIPPED": "skipped", "ERROR": "error"}
+
+
+def plugin_verdicts(pytester, *args):
+    """Run pytest over the pytester folder: ``{item name: sweep's status for it}``, exit code.
+
+    A scene that does not load is a failed item in pytest and an erred run in the sweep.
+    """
+    result = pytester.runpytest("-v", "-p", "no:cacheprovider", *args)
+    verdicts = {}
+    for line in result.stdout.lines:
+        head, sep, rest = line.partition("::")
+        words = rest.split()
+        if sep and head.endswith(".yaml") and len(words) >= 2 and words[1] in PLUGIN_STATUS:
+            verdicts[words[0]] = PLUGIN_STATUS[words[1]]
+    return verdicts, result.ret
+
+
+def sweep_verdicts(capsys, tmp_path, *args):
+    """Sweep ``args`` in this process: ``{run label: status}``, exit code, the JSON."""
+    from rts_scenario.sweep import run_label
+
+    out = tmp_path / "verdicts.json"
+    code, stdout, err = sweep(capsys, *args, "--workers", "1", "--json", out)
+    assert "Traceback" not in stdout + err
+    payload = json.loads(out.read_text())
+    return {run_label(r): r["status"] for r in payload["runs"]}, code, payload, stdout
+
+
+def as_plugin_sees_it(verdicts):
+    # The plugin has no erred item of its own: a scene that does not load fails.
+    return {name: "fail" if status == "error" else status for name, status in verdicts.items()}
+
+
+def test_marks_give_the_verdicts_the_pytest_plugin_gives(pytester, capsys, tmp_path):
+    """xfail expects the check to fail (a pass is an xpass, not a failure, as pytest's default
+    xfail_strict says), skip and skipif skip, and a scene that does not load is an error even
+    when marked xfail; a skip mark skips a variant that does not load, as in pytest, but a
+    broken parametrize block has no marks to read."""
+    pytester.makefile(".scenario.yaml", **{
+        "a_plain": tiny_scene("plain"),
+        "b_known": missed("known", "marks: [xfail, slow]\n"),
+        "c_fixed": tiny_scene("fixed") + "marks: [xfail]\n",
+        "d_parked": missed("parked", "marks: [skip]\n"),
+        "e_later": missed("later", "marks: [skipif]\n"),
+        "f_broken": tiny_scene("broken") + "marks: [xfail]\ncolour: red\n",
+        "g_mixed": missed("mixed", "marks: [xfail]\nparametrize:\n  rig: [wide-3x5, "
+                                   "lab.rig.yaml]\n"),
+        "h_shelved": tiny_scene("shelved") + "marks: [skip]\nparametrize:\n  rig: "
+                                             "[lab.rig.yaml]\n",
+        "i_block": tiny_scene("block") + "marks: [skip]\nparametrize:\n  radar.estimator: ti\n",
+    })
+    expected = {"plain": "pass", "known": "xfail", "fixed": "xpass", "parked": "skipped",
+                "later": "skipped", "f_broken": "error", "mixed[rig=wide-3x5]": "xfail",
+                "g_mixed[rig=lab.rig.yaml]": "error", "h_shelved[rig=lab.rig.yaml]": "skipped",
+                "i_block": "error"}
+    plugin, plugin_code = plugin_verdicts(pytester)
+    assert plugin == as_plugin_sees_it(expected)
+    assert plugin_code == pytest.ExitCode.TESTS_FAILED
+    swept, code, payload, stdout = sweep_verdicts(capsys, tmp_path, pytester.path)
+    assert swept == expected
+    assert code == 2  # bad input, as the scenes that do not load are
+    runs = {r["scene"] + (f"[{r['id']}]" if r["id"] else ""): r for r in payload["runs"]}
+    assert runs["known"]["passed"] is False and "out_of_coverage" in runs["known"]["reason"]
+    assert runs["fixed"]["passed"] is True
+    assert runs["parked"]["passed"] is False and "detection_rate" not in runs["parked"]
+    assert runs["known"]["marks"] == ["xfail", "slow"] and runs["plain"]["marks"] == []
+    assert runs["i_block"]["reason"].startswith(
+        f"{pytester.path / 'i_block.scenario.yaml'}:15:3: parametrize.radar.estimator: must be "
+        f"of type array, got 'ti'")
+    # Counted, each under its own name, never as passed or failed.
+    summary = payload["summary"]
+    assert {k: summary[k] for k in ("runs", "passed", "failed", "errors", "xfailed", "xpassed",
+                                    "skipped", "deselected")} == {
+        "runs": 10, "passed": 1, "failed": 0, "errors": 3, "xfailed": 2, "xpassed": 1,
+        "skipped": 3, "deselected": 0}
+    # The pass rate is over the runs that ran: 1 of 7.
+    assert summary["pass_rate"] == pytest.approx(1 / 7)
+    assert "sweep: 10 runs, 1 passed, 0 failed, 3 errors, 2 xfailed, 1 xpassed, 3 skipped; " \
+           "pass rate 14.3%" in stdout
+    assert f"XFAIL known ({pytester.path / 'b_known.scenario.yaml'}): " in stdout
+    assert f"SKIPPED parked ({pytester.path / 'd_parked.scenario.yaml'}): the scene's marks: " \
+           f"skip" in stdout
+    rig = summary["by_parameter"]["rig"]
+    assert {v: (c["runs"], c["passed"], c["xfailed"], c["errors"], c["skipped"])
+            for v, c in rig.items()} == {"wide-3x5": (1, 0, 1, 0, 0),
+                                         "lab.rig.yaml": (2, 0, 0, 1, 1)}
+
+
+def test_exit_code_is_pytest_s_for_known_failures_and_skips(pytester, capsys, tmp_path):
+    pytester.makefile(".scenario.yaml", known=missed("known", "marks: [xfail]\n"),
+                      fixed=tiny_scene("fixed") + "marks: [xfail]\n",
+                      parked=missed("parked", "marks: [skip]\n"), plain=tiny_scene("plain"))
+    plugin, plugin_code = plugin_verdicts(pytester)
+    swept, code, _, _ = sweep_verdicts(capsys, tmp_path, pytester.path)
+    assert swept == plugin == {"known": "xfail", "fixed": "xpass", "parked": "skipped",
+                               "plain": "pass"}
+    assert plugin_code == code == 0
+    # A failure beside them fails both.
+    pytester.makefile(".scenario.yaml", lost=missed("lost"))
+    plugin, plugin_code = plugin_verdicts(pytester)
+    swept, code, _, _ = sweep_verdicts(capsys, tmp_path, pytester.path)
+    assert swept == plugin and swept["lost"] == "fail"
+    assert plugin_code == code == 1
+
+
+def test_marks_expression_selects_the_runs_pytest_selects(pytester, capsys, tmp_path):
+    pytester.makefile(".scenario.yaml", **{
+        "a_plain": tiny_scene("plain"),
+        "b_slow": tiny_scene("slow_one") + "marks: [slow]\n",
+        "c_bench": tiny_scene("bench") + "marks: [hardware, slow]\nparametrize:\n  rig: "
+                                         "[wide-3x5, lab.rig.yaml]\n",
+    })
+    for expression, expected in [
+            ("slow", {"slow_one", "bench[rig=wide-3x5]", "c_bench[rig=lab.rig.yaml]"}),
+            ("slow and not hardware", {"slow_one"}),
+            ("not slow", {"plain"})]:
+        plugin, _ = plugin_verdicts(pytester, "-m", expression)
+        swept, code, payload, stdout = sweep_verdicts(capsys, tmp_path, pytester.path,
+                                                      "-m", expression)
+        assert set(swept) == set(plugin) == expected, expression
+        assert as_plugin_sees_it(swept) == plugin
+        assert payload["summary"]["deselected"] == 4 - len(expected)
+        assert f"{4 - len(expected)} deselected" in stdout
+    _, _, payload, _ = sweep_verdicts(capsys, tmp_path, pytester.path, "--marks", "slow")
+    assert len(payload["runs"]) == 3
+
+
+def test_a_bad_or_empty_marks_selection_is_one_line_of_bad_input(scenes, capsys):
+    code, out, err = sweep(capsys, scenes, "-m", "slow and", "--workers", "1")
+    assert code == 2 and out == ""
+    assert err.startswith("error: -m/--marks 'slow and': ") and err.count("\n") == 1
+    # Selecting none of the runs would be a pass of nothing.
+    code, out, err = sweep(capsys, scenes, "-m", "nightly", "--workers", "1")
+    assert code == 2
+    assert err.strip().splitlines()[-1] == (
+        "error: -m/--marks 'nightly': selects none of the 8 runs (their marks: none)")
+
+
+# --- which folders a folder's sweep walks -----------------------------------------------------
+
+def test_a_folder_s_sweep_leaves_out_the_folders_pytest_leaves_out(pytester, capsys, tmp_path):
+    """Hidden folders, virtual environments, __pycache__, build output, node_modules: not
+    walked, as pytest's default norecursedirs; a file or folder named on the command line
+    always runs, as in pytest."""
+    root = pytester.path
+    for folder in (".venv", ".git", ".hidden/deep", "node_modules/pkg", "__pycache__", "build",
+                   "dist", "venv", "CVS", "_darcs", "{arch}", "thing.egg", "env", "kept/sub",
+                   "kept/.tox"):
+        (root / folder).mkdir(parents=True)
+        name = folder.replace("/", "_").strip("._{}") or "x"
+        (root / folder / f"{name}.scenario.yaml").write_text(tiny_scene(name))
+    (root / "env" / "pyvenv.cfg").write_text("home = /usr/bin\n")
+    (root / "top.scenario.yaml").write_text(tiny_scene("top"))
+    plugin, _ = plugin_verdicts(pytester, str(root))
+    swept, code, _, _ = sweep_verdicts(capsys, tmp_path, root)
+    assert set(swept) == set(plugin) == {"top", "kept_sub"}
+    assert code == 0
+    hidden = root / ".hidden"
+    named = root / ".venv" / "venv.scenario.yaml"
+    plugin, _ = plugin_verdicts(pytester, str(hidden), str(named))
+    swept, code, _, _ = sweep_verdicts(capsys, tmp_path, hidden, named)
+    assert set(swept) == set(plugin) == {"hidden_deep", "venv"}
+    # A misnamed scene in a folder left out is no erred run either.
+    (root / ".git" / "typo.scenario.yml").write_text(tiny_scene("typo"))
+    swept, code, _, _ = sweep_verdicts(capsys, tmp_path, root)
+    assert set(swept) == {"top", "kept_sub"} and code == 0
+
+
+def test_a_folder_whose_scenes_are_all_in_folders_left_out_says_so(tmp_path, capsys):
+    (tmp_path / "scenes" / ".drafts").mkdir(parents=True)
+    (tmp_path / "scenes" / ".drafts" / "a.scenario.yaml").write_text(tiny_scene("a"))
+    (tmp_path / "scenes" / "build").mkdir()
+    code, out, _ = sweep(capsys, tmp_path / "scenes", "--workers", "1")
+    assert code == 2
+    assert f"{tmp_path / 'scenes'}: no *.scenario.yaml files in this folder (2 folders in it " \
+           f"left out, as pytest leaves them out: .drafts, build; name one to sweep it)" in out
+
+
+def test_the_plot_shows_every_status_and_rates_the_runs_that_ran(monkeypatch, tmp_path):
+    pytest.importorskip("matplotlib")
+    import rts_scenario.plots
+
+    figures = []
+    monkeypatch.setattr(rts_scenario.plots, "_save", lambda fig, path: figures.append(fig))
+
+    def run(status, **parameters):
+        return {"scene": "s", "file": "s.scenario.yaml", "id": "", "parameters": parameters,
+                "status": status}
+
+    statuses = ["pass", "fail", "error", "xfail", "xpass", "skipped"]
+    rts_scenario.plots.write_sweep_plot([run(s, a=i) for i, s in enumerate(statuses)],
+                                        tmp_path / "one.png")
+    legend = [t.get_text() for t in figures[0].axes[0].get_legend().get_texts()]
+    assert legend == statuses
+    # Two parameters: the cell's skipped run is not one that failed to pass.
+    rts_scenario.plots.write_sweep_plot([run("pass", a=1, b=1), run("skipped", a=1, b=1)],
+                                        tmp_path / "two.png")
+    assert [t.get_text() for t in figures[1].axes[0].texts] == ["1/1"]
+    # Three: a value whose runs were all skipped has no pass rate to draw (and no division).
+    rts_scenario.plots.write_sweep_plot([run("pass", a=1, b=1, c=1),
+                                         run("skipped", a=2, b=2, c=2)], tmp_path / "three.png")
+    assert [t.get_text() for t in figures[2].axes[0].texts] == ["1/1", "0/0"]
+
+
+def test_a_combination_s_marks_are_the_scene_s_with_its_overrides():
+    from rts_scenario.scenario import written_marks
+
+    data = {"marks": ["slow", "hard"], "name": "x"}
+    assert written_marks(data, {}) == ("slow", "hard")
+    assert written_marks(data, {"marks": ["nightly"], "name": "y"}) == ("nightly",)
+    assert written_marks(data, {"marks.1": "bench"}) == ("slow", "bench")
+    assert data == {"marks": ["slow", "hard"], "name": "x"}  # the scene itself is left alone
+    assert written_marks(data, {"marks.5": "bench"}) == ()  # no such mark: its load says so
+    assert written_marks({"marks": ["ok", "_private", 3]}, {}) == ("ok",)
+    assert written_marks(["not", "a", "scene"], {}) == ()

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import uuid
 from collections.abc import Callable, Generator, Iterator
 from fnmatch import fnmatch
@@ -288,21 +287,16 @@ def _written_marks(path: Path, overrides: dict[str, Any]) -> tuple[str, ...]:
     """Return the marks a scene file gives itself, read from its text (or its combination).
 
     For a combination that does not load: ``-m`` selects it, and ``skip`` skips it, as the
-    scene says; marks pytest could not take are left out.
+    scene says (`rts_scenario.scenario.written_marks`).
     """
     from rts_scenario.located_yaml import load_yaml
+    from rts_scenario.scenario import written_marks
 
-    marks = overrides.get("marks")
-    if marks is None:
-        try:
-            data = load_yaml(path).data
-        except Exception:  # the item's error says what is wrong with the file
-            return ()
-        marks = data.get("marks") if isinstance(data, dict) else None
-    if not isinstance(marks, list):
+    try:
+        data = load_yaml(path).data
+    except Exception:  # the item's error says what is wrong with the file
         return ()
-    return tuple(m for m in marks
-                 if isinstance(m, str) and re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", m))
+    return written_marks(data, overrides)
 
 
 class ScenarioFailed(Exception):

@@ -57,8 +57,11 @@ def _do_sweep(args: argparse.Namespace) -> int:
         collect_tasks,
         default_workers,
         exit_code,
+        folder_files,
+        mark_expression,
         require_dask,
         run_sweep,
+        select_tasks,
         summarize,
     )
 
@@ -70,9 +73,12 @@ def _do_sweep(args: argparse.Namespace) -> int:
         if args.scheduler == "":
             raise RtsError(f"--scheduler: needs an address (tcp://HOST:PORT) or "
                            f"{LOCAL_SCHEDULER!r}, got an empty one")
+    if args.marks is not None:
+        mark_expression(args.marks)  # a bad expression stops the sweep before anything runs
     scene_files: list[Path] = []
     for given in map(Path, args.scenes):  # a folder: the scene files it holds
-        scene_files += sorted(given.rglob(f"*{SCENE_SUFFIX}")) if given.is_dir() else [given]
+        scene_files += ([p for p in folder_files(given)[0] if p.name.endswith(SCENE_SUFFIX)]
+                        if given.is_dir() else [given])
     check_distinct_paths([("--json", args.json), ("--plot", args.plot)],
                          [("SCENE", scene) for scene in scene_files])
     if args.json:
@@ -89,13 +95,18 @@ def _do_sweep(args: argparse.Namespace) -> int:
     tasks = collect_tasks(args.scenes, notes)
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
+    deselected = 0
+    if args.marks is not None:
+        tasks, deselected = select_tasks(tasks, args.marks)
     # As many workers as there are runs at most (`run_sweep`); one runs in this process.
     used = max(1, min(workers, len(tasks)))
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, LOCAL_SCHEDULER)
              else "this process" if used == 1 and args.scheduler is None
              else f"{used} worker{'s' if used > 1 else ''}"
              + (" (local Dask cluster)" if args.scheduler == LOCAL_SCHEDULER else ""))
-    print(f"sweep: {len(tasks)} run{'s' if len(tasks) != 1 else ''} on {where}", file=sys.stderr)
+    print(f"sweep: {len(tasks)} run{'s' if len(tasks) != 1 else ''} on {where}"
+          + (f" ({deselected} deselected by -m {args.marks!r})" if deselected else ""),
+          file=sys.stderr)
     start = time.perf_counter()
     progress = SweepProgress(len(tasks))
     finished: list[dict[str, Any]] = []
@@ -114,12 +125,13 @@ def _do_sweep(args: argparse.Namespace) -> int:
         done = sorted(finished, key=lambda e: order.get((e["file"], e["id"]), len(order)))
         if progress.tty:  # off the progress bar's line
             progress.stream.write("\n")
-        _print_runs(done, {**summarize(done), "interrupted": True},
+        _print_runs(done, {**summarize(done, deselected=deselected), "interrupted": True},
                     time.perf_counter() - start, args, total=len(tasks))
         print("error: interrupted", file=sys.stderr)
         # Never a pass; a run that erred before keeps its exit code.
         return max(exit_code(done), EXIT_FAIL)
-    _print_runs(entries, summarize(entries), time.perf_counter() - start, args)
+    _print_runs(entries, summarize(entries, deselected=deselected),
+                time.perf_counter() - start, args)
     if args.plot:
         from ..plots import write_sweep_plot
 
@@ -141,7 +153,7 @@ def _print_runs(entries: list[dict[str, Any]], summary: dict[str, Any], seconds:
 
     for entry in entries:
         line = f"{entry['status'].upper()} {run_label(entry)} ({entry['file']})"
-        print(line + (f": {entry['reason']}" if entry["status"] != "pass" else ""))
+        print(line + (f": {entry['reason']}" if "reason" in entry else ""))
     print()
     print(_summary_text(summary, seconds, total))
     if args.json:
@@ -162,8 +174,9 @@ def _summary_text(summary: dict[str, Any], seconds: float, total: int | None = N
     runs = summary["runs"]
     count = f"{runs} runs" if total is None else f"{runs} of {total} runs (interrupted)"
     lines = [f"sweep: {count}, {summary['passed']} passed, {summary['failed']} failed, "
-             f"{summary['errors']} errors; pass rate {summary['pass_rate']:.1%} "
-             f"({seconds:.1f} s, {runs / seconds if seconds > 0 else 0.0:.2f} runs/s)"]
+             f"{summary['errors']} errors{_marked_counts(summary)}; pass rate "
+             f"{summary['pass_rate']:.1%} ({seconds:.1f} s, "
+             f"{runs / seconds if seconds > 0 else 0.0:.2f} runs/s)"]
     by_parameter = summary["by_parameter"]
     if by_parameter:
         # The key path's last part names a parameter, unless it is a list index or two
@@ -175,9 +188,11 @@ def _summary_text(summary: dict[str, Any], seconds: float, total: int | None = N
         for key, name in zip(by_parameter, short, strict=True):
             label = name if short.count(name) == 1 else key
             for value, counts in by_parameter[key].items():
-                extra = f" ({counts['errors']} errors)" if counts["errors"] else ""
+                extra = (f"{counts['errors']} errors" if counts["errors"] else ""
+                         ) + _marked_counts(counts)
+                extra = f" ({extra.removeprefix(', ')})" if extra else ""
                 lines.append(f"  {label}={value}: {counts['passed']}/{counts['runs']}{extra}")
-    worst = [w for w in summary["worst"] if w["status"] != "pass"
+    worst = [w for w in summary["worst"] if w["status"] not in ("pass", "xpass")
              or w.get("max_error_ratio") is not None]
     if worst:
         lines.append("worst runs:")
@@ -185,10 +200,16 @@ def _summary_text(summary: dict[str, Any], seconds: float, total: int | None = N
         ratio = w.get("max_error_ratio")
         error = (f" largest error {w['max_error_quantity']} at {ratio:.0%} of tolerance"
                  if ratio is not None else "")
-        reason = f": {w['reason']}" if w["status"] != "pass" else ""
+        reason = f": {w['reason']}" if "reason" in w else ""
         lines.append(f"  {w['status'].upper()} {run_label(w)} ({w['file']}){reason}"
                      + (f" -{error}" if error and reason else error))
     return "\n".join(lines)
+
+
+def _marked_counts(counts: dict[str, Any]) -> str:
+    """``, 2 xfailed, 1 skipped``: the runs a scene's marks judged, those there are."""
+    return "".join(f", {counts[key]} {key}" for key in ("xfailed", "xpassed", "skipped",
+                                                         "deselected") if counts.get(key))
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
@@ -200,11 +221,14 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                     "one runs once; a folder means every *.scenario.yaml in it, recursively) on "
                     "the simulated radar, in parallel, and print the pass rate overall and per "
                     "parameter value and the worst runs. Every run is reported, even if others "
-                    "err. Exit 0 if every run passes, 1 if one fails, 2 on bad input, 3 on a "
+                    "err. A scene's marks judge its runs as the pytest plugin does (xfail, "
+                    "skip). Exit 0 if no run fails, 1 if one fails, 2 on bad input, 3 on a "
                     "runtime error.",
     )
     parser.add_argument("scenes", nargs="+", metavar="SCENE",
-                        help="*.scenario.yaml files or folders of them")
+                        help="*.scenario.yaml files or folders of them (a folder's sweep "
+                             "leaves out the folders pytest leaves out: hidden ones, virtual "
+                             "environments, build, dist, node_modules, __pycache__, ...)")
     parser.add_argument("--json", metavar="OUT", help="write every run and the summary as JSON")
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help="worker processes (default: the number of CPUs); 1 runs in this "
@@ -216,6 +240,9 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                              "(needs pip install 'rts-scenario[sweep]')")
     parser.add_argument("--method", default="exact", choices=METHODS,
                         help="weight solver (default exact)")
+    parser.add_argument("-m", "--marks", default=None, metavar="EXPR",
+                        help="run only the runs whose scene's marks match this expression, as "
+                             "pytest -m selects them ('slow and not hardware'; needs pytest)")
     parser.add_argument("--plot", metavar="FILE.png",
                         help="plot pass/fail over the parameters (needs matplotlib)")
     parser.set_defaults(handler=_do_sweep)

@@ -7,6 +7,7 @@ from .loader import (
     scenario_schema,
     select_variant,
     variant_id,
+    written_marks,
 )
 from .model import Effects, Expectations, Mount, RcsModel, Scenario, TargetSpec, run_label
 
@@ -24,4 +25,5 @@ __all__ = [
     "scenario_schema",
     "select_variant",
     "variant_id",
+    "written_marks",
 ]

@@ -9,9 +9,11 @@ names, files inside the scene's folder tree). Every error is one `ScenarioError`
 
 from __future__ import annotations
 
+import copy
 import itertools
 import json
 import math
+import re
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
@@ -282,6 +284,35 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
         values_seen[played] = len(combos)
         combos.append((name, overrides))
     return combos
+
+
+# A mark pytest can take (the schema's pattern for ``marks``).
+MARK_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+
+
+def written_marks(data: Any, overrides: dict[str, Any]) -> tuple[str, ...]:
+    """Return the marks a scene gives one of its combinations, read from its data as written.
+
+    ``data`` is the scene file's YAML data and ``overrides`` the combination (a ``marks`` key
+    path among them sets the marks as it does for `load_scenario`). For a scene that loads,
+    these are its ``marks``; for one that does not, what selecting or skipping it by its marks
+    goes by. Marks pytest could not take, and marks a broken file does not give, are left out
+    (loading it reports what is wrong).
+    """
+    if not isinstance(data, dict):
+        return ()
+    # Only the marks, so that a sweep of many combinations does not copy whole scenes.
+    marks_only = Document({"marks": copy.deepcopy(data.get("marks"))}, "", {})
+    for key, value in overrides.items():
+        if key.split(".", 1)[0] == "marks":
+            try:
+                _override(marks_only, key, value)
+            except ScenarioError:
+                return ()
+    marks = marks_only.data.get("marks")
+    if not isinstance(marks, list):
+        return ()
+    return tuple(m for m in marks if isinstance(m, str) and MARK_NAME.fullmatch(m))
 
 
 def _number_value(value: Any) -> Any:
