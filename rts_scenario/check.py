@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import csv
 import heapq
+from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO
@@ -274,6 +275,9 @@ class Checker:
         self._unchecked_k = np.zeros(n, dtype=np.int64)
         self._blocks: list[_Block] = []
         self._cycles: dict[int, Detections] = {}
+        # Per cycle number in `_cycles`, the further cycles received with it: counted as
+        # repeated when it is settled, or, after the scene, where it counts as after_scene.
+        self._copies: Counter[int] = Counter()
         self._settled = 0  # frames before this one are done
         self._last_cycle: int | None = None  # the number of the last cycle taken
         self._last_bus_t = np.nan  # and when it reached the bus
@@ -386,7 +390,7 @@ class Checker:
             elif frame < self._settled:
                 self.frames["late"] += 1
             elif frame in self._cycles:
-                self.frames["repeated"] += 1
+                self._copies[frame] += 1
             else:
                 self._cycles[frame] = cycle
         return frames
@@ -402,12 +406,18 @@ class Checker:
             # (taken before the scene's first cycle was known), after its end (a radar keeps
             # measuring what the RTS holds) or carry a counter the scene does not have. Of
             # those after it, the ones within the window after its end (`after_scene_end`).
+            # A second cycle with the number of one after the scene is repeated where that one
+            # counts; those before the scene all count as before_scene, as a re-check does.
             end = self.after_scene_end
-            before = sum(1 for f in self._cycles if f < self._scene_first)
-            self.frames["before_scene"] += before
-            self.frames["after_scene"] += sum(1 for f in self._cycles if f >= self._scene_first
-                                              and (end is None or f < end))
+            for f in self._cycles:
+                copies = self._copies.pop(f, 0)
+                if f < self._scene_first:
+                    self.frames["before_scene"] += 1 + copies
+                elif end is None or f < end:
+                    self.frames["after_scene"] += 1
+                    self.frames["repeated"] += copies
             self._cycles.clear()
+            self._copies.clear()
 
     def _check_block(self, block: _Block) -> None:
         n_frames = block.end - block.first
@@ -418,6 +428,7 @@ class Checker:
             cycle = self._cycles.pop(f, None)
             if cycle is None:
                 continue
+            self.frames["repeated"] += self._copies.pop(f, 0)
             if not cycle.complete:
                 status[f - block.first] = _INCOMPLETE
                 continue

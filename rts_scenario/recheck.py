@@ -1772,10 +1772,14 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     # Cycles measured after the scene's last (a radar keeps measuring what the RTS holds) or
     # before its first are counted as the run counted them; they were never handed to the
     # checker. After it, those within the window the run counts (`after_scene_until_s`): a
-    # recorder goes on after the run stopped listening.
+    # recorder goes on after the run stopped listening. A second cycle with the number of one
+    # of those is repeated, as live.
     until_s = after_scene_until_s(scene.duration_s, clock.cycle_s)
     end = max(total, clock.first_at(until_s))
-    checker.frames["after_scene"] += int(((rel >= total) & (rel < end)).sum())
+    after = rel[(rel >= total) & (rel < end)]
+    distinct = int(np.unique(after).size)
+    checker.frames["after_scene"] += distinct
+    checker.frames["repeated"] += int(after.size) - distinct
     checker.frames["before_scene"] += int((rel < 0).sum())
     later = int((rel >= end).sum())
     if later:

@@ -297,6 +297,44 @@ def test_a_run_and_its_recheck_pass_with_e2e_checksums_and_a_counter_wrapping_af
     assert cli.main(["check", str(scene), "--log", str(log)]) == 0, capsys.readouterr().out
 
 
+def test_an_after_scene_cycle_whose_counter_comes_again_counts_alike_live_and_re_checked(
+        autosar, tmp_path):
+    # After the scene's 150 cycles the radar sends cycles 150..157, then cycle 150's messages
+    # again. A counter wrapping after 14 reads 150 (alive 0) after 157 (alive 7) as seven
+    # steps back, and the receiver remembers seven counters: it is a second cycle numbered
+    # 150. The first five (150..154) are measured within the window after the scene's end:
+    # five after_scene and one repeated, live and in the re-check of the recording.
+    import dataclasses
+
+    from rts_scenario.pipeline import Pipeline, RunOptions
+    from rts_scenario.recheck import check_log
+    from rts_scenario.scenario import load_scenario
+
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    log = tmp_path / "drive.blf"
+    options = RunOptions(mapping=str(autosar), bus_log=str(log))
+    with Pipeline.for_scene(scene, options) as pipeline:
+        sink = pipeline.output._sink
+
+        def with_copy_after_the_scene(cycles):
+            if cycles and cycles[-1].cycle == 149:
+                last = cycles[-1]
+                after = [dataclasses.replace(last, cycle=150 + k, t_s=last.t_s + 0.05 * (k + 1))
+                         for k in range(8)]
+                cycles = [*cycles, *after, after[0]]
+            sink(cycles)
+
+        pipeline.output._sink = with_copy_after_the_scene
+        live = pipeline.run(scene).report
+    again = check_log(scene, log).report
+    for report in (live, again):
+        assert report.frames["total"] == report.frames["checked"] == 150
+        assert (report.frames["after_scene"], report.frames["repeated"]) == (5, 1)
+        assert report.bus["duplicates"] == report.bus["conflicts"] == 0
+        assert report.passed, report.reasons
+    assert again.frames == live.frames
+
+
 # A radar whose alive counter runs 1 to 14 (0 and 15 are never sent), header and detections.
 ONE_BASED_DBC = AUTOSAR_DBC.replace("Hdr_Alive : 8|4@1+ (1,0) [0|14]",
                                     "Hdr_Alive : 8|4@1+ (1,0) [1|14]")

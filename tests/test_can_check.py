@@ -443,6 +443,35 @@ def test_without_a_frame_counter_a_detection_beyond_the_count_is_still_a_conflic
     assert (receiver.stats.conflicts, receiver.stats.orphans) == (1, 0)
 
 
+def test_the_stream_s_second_cycle_is_kept_where_the_stream_before_s_tail_comes_with_its_first():
+    # The stream before's last cycles (238, 239, or 7) reach the bus after the reset, and this
+    # stream's first cycle (counter 0) is held up behind its second (1, or 1 and 2), or comes
+    # among the stale ones. The cycles counting on from the restart without a gap are the
+    # stream's own; only the stream before's are dropped, and only the held-up header of
+    # cycle 0 counts as reordered.
+    receiver = DetectionReceiver()
+    cycles = {k: one_cycle(k, [10.0 + k]) for k in range(6)}
+    stale = {k: one_cycle(k, [3.0]) for k in (7, 238, 239)}
+    for order, dropped in (([238, 239, 1, 0, 2, 3, 4, 5], 2),
+                           ([238, 1, 239, 0, 2, 3, 4, 5], 2),
+                           ([7, 1, 0, 2, 3, 4, 5], 1),
+                           ([239, 1, 2, 0, 3, 4, 5], 1)):
+        receiver.reset(restart=0)
+        reordered = receiver.stats.reordered
+        for k in order:
+            for msg in _messages({**cycles, **stale}[k]):
+                receiver.on_message_received(msg)
+        got = receiver.flush()
+        assert sorted(c.cycle for c in got) == list(range(6)), order
+        assert all(c.complete for c in got)
+        np.testing.assert_allclose([c.range_m[0] for c in sorted(got, key=lambda c: c.cycle)],
+                                   10.0 + np.arange(6))
+        assert receiver.stale_cycles == dropped, order
+        assert receiver.stats.reordered - reordered == 1, order
+        assert (receiver.stats.duplicates, receiver.stats.conflicts,
+                receiver.stats.orphans) == (0, 0, 0)
+
+
 def test_a_stream_s_first_cycle_held_up_behind_its_second_is_not_dropped_at_the_restart():
     # A radar counting afresh from 0 with each stream: its first cycle's header reaches the bus
     # after its second cycle. Both are the stream's own: the count restarting at 0 follows

@@ -1286,6 +1286,44 @@ def test_a_recording_opening_with_the_stream_before_s_last_cycles_re_checks_to_t
     assert again.bus["stale_cycles"] == 2
 
 
+def test_a_stream_s_first_cycle_held_up_behind_its_second_after_the_stale_tail_re_checks_alike(
+        tmp_path):
+    # The stream before's last two cycles (238, 239) come after the reset, and this stream's
+    # cycle 0 is held up behind its cycle 1. The run keeps cycles 0 and 1 (its own: 1 counts on
+    # from the restart) and drops the stale two; the re-check of its recording keeps and drops
+    # the same ones: every cycle of the scene checked, in both.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+
+    def stale(k, t_s):
+        return Detections(cycle=k, t_s=t_s, range_m=np.array([30.0]),
+                          radial_velocity_mps=np.array([0.0]), az_deg=np.array([0.0]),
+                          el_deg=np.array([0.0]))
+
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        sink = pipeline.output._sink
+        first = [True]
+
+        def stale_and_held_up(cycles):
+            if first[0]:
+                first[0] = False
+                assert [c.cycle for c in cycles[:2]] == [0, 1]
+                cycles = [stale(238, -0.02), stale(239, -0.01), cycles[1], cycles[0],
+                          *cycles[2:]]
+            sink(cycles)
+
+        pipeline.output._sink = stale_and_held_up
+        live = pipeline.run(scene).report
+    assert live.passed, live.reasons
+    assert live.frames["total"] == live.frames["checked"] == 240
+    assert live.frames["missing"] == 0
+    assert live.bus["stale_cycles"] == 2 and live.bus["reordered"] == 1
+    again = check_log(scene, log).report
+    assert again.frames == live.frames
+    assert again.passed and again.reasons == []
+    assert again.bus["stale_cycles"] == 2 and again.bus["reordered"] == 1
+
+
 @pytest.mark.parametrize("suffix", [".log", ".trc", ".asc", ".csv"])
 def test_a_text_log_ending_in_an_empty_line_re_checks_to_the_live_verdict(tmp_path, capsys,
                                                                           suffix):

@@ -724,12 +724,13 @@ class DetectionReceiver(can.Listener):
         radar's count starts afresh with what comes next: a bench that starts the radar per
         stream (as `emulate` does for each run and measurement) may still deliver the stream
         before's last cycles after this reset. When a header with that counter comes after
-        other cycles whose count neither leads up to it nor counts on from it without a gap
-        (its header held up behind the next ones), those were measured before the restart:
-        they are dropped (counted in `stale_cycles`) and every counter is forgotten,
-        so the new count is neither taken for late cycles nor for copies. A restart not seen
-        within `OPEN_CYCLES` headers (half the counter's range, if less; its header lost) is
-        no longer waited for.
+        other cycles, those counting on from it without a gap (its header held up behind
+        them) are the stream's own, and so are the others if their count leads up to it;
+        otherwise the others were measured before the restart: they are dropped (counted in
+        `stale_cycles`) and their counters forgotten (a header they made look reordered no
+        longer counts so), so the new count is neither taken for late cycles nor for copies.
+        A restart not seen within `OPEN_CYCLES` headers (half the counter's range, if less;
+        its header lost) is no longer waited for.
         """
         with self._lock:
             self._reset(restart)
@@ -760,6 +761,9 @@ class DetectionReceiver(can.Listener):
         # the stream before dropped at the restart.
         self._restart = restart
         self._headers_before_restart = 0
+        # While the restart is awaited: the counters of the cycles begun, in the order their
+        # headers came, and whether each was counted as reordered.
+        self._begun_before_restart: list[tuple[int, bool]] = []
         self.stale_cycles = 0
         # Detections that came before their cycle's header, by counter (low 8 bits).
         self._waiting: OrderedDict[int, list[tuple[_PartRule, dict[str, float]]]] = OrderedDict()
@@ -918,13 +922,13 @@ class DetectionReceiver(can.Listener):
         half = self._counter_modulus // 2
         if self._restart is not None:
             if counter == self._restart:
-                if not self._own_before_restart(counter):
-                    self._drop_before_restart()
+                self._drop_before_restart(self._stale_before_restart(counter))
                 self._restart = None
             elif self._headers_before_restart >= min(OPEN_CYCLES, half):
                 # The restart's header was lost: the count later coming round to it again is
                 # no restart.
                 self._restart = None
+                self._begun_before_restart = []
             self._headers_before_restart += 1
         if self._unplaced:
             self._place_after(counter)
@@ -942,10 +946,13 @@ class DetectionReceiver(can.Listener):
             else:
                 self.stats.conflicts += 1
             return
-        if self._latest >= 0 and _behind(counter, self._latest, self._counter_modulus):
+        reordered = self._latest >= 0 and _behind(counter, self._latest, self._counter_modulus)
+        if reordered:
             self.stats.reordered += 1
         else:
             self._latest = counter
+        if self._restart is not None:
+            self._begun_before_restart.append((counter, reordered))
         frame = _Assembly(
             counter=counter, low=value % self._low_modulus,
             expected=int(sum(values[c] for c in m.count)),
@@ -960,12 +967,14 @@ class DetectionReceiver(can.Listener):
             self._finish(counter)
         # An incomplete cycle waits for late parts while `OPEN_CYCLES` newer cycles begin (fewer
         # for a narrow counter), then goes on as incomplete: held longer, the counter that
-        # names it could come round again and its place among the cycles be lost.
+        # names it could come round again and its place among the cycles be lost. Not while a
+        # restart is awaited: the latest counter may be the stream before's, far from the new
+        # count (the wait lasts `OPEN_CYCLES` headers at most, half the counter's range if less).
         held = min(OPEN_CYCLES, max(1, self._counter_modulus // 4))
-        half = self._counter_modulus // 2
-        for old in [c for c in self._open if held <= (self._latest - c) % self._counter_modulus
-                    < half]:
-            self._finish(old)
+        if self._restart is None:
+            for old in [c for c in self._open
+                        if held <= (self._latest - c) % self._counter_modulus < half]:
+                self._finish(old)
         while len(self._open) > OPEN_CYCLES:
             self._finish(next(iter(self._open)))
 
@@ -1086,32 +1095,56 @@ class DetectionReceiver(can.Listener):
         self._current = None
         self._latest = -1
 
-    def _own_before_restart(self, restart: int) -> bool:
-        """Whether the cycles received before the restart's header are the stream's own.
+    def _stale_before_restart(self, restart: int) -> set[int]:
+        """Return which cycles received before the restart's header are the stream before's.
 
-        Cycles counting up to it (a radar measuring before the stream's start; some may be
-        lost) are, and so are the cycles right after it, counting on from it without a gap:
-        the restart's header was held up behind them. Any other count is the stream before's.
+        The cycles right after it, counting on from it without a gap, are the stream's own:
+        the restart's header was held up behind them. So are the others if they all count up
+        to it (a radar measuring before the stream's start; some may be lost); otherwise
+        they are the stream before's.
         """
         modulus = self._counter_modulus
         half = modulus // 2
         limit = min(OPEN_CYCLES, half)
-        offsets = {(c - restart + half) % modulus - half
+        offsets = {c: (c - restart + half) % modulus - half
                    for c in [*(d.cycle for d in self._ready), *self._open]}
-        ahead = sorted(d for d in offsets if d > 0)
-        return (all(-limit < d < limit for d in offsets)
-                and ahead == list(range(1, len(ahead) + 1)))
+        ahead = set(offsets.values())
+        run = 0
+        while run + 1 < limit and run + 1 in ahead:
+            run += 1
+        others = {c for c, d in offsets.items() if not 0 < d <= run}
+        if all(-limit < offsets[c] < 0 for c in others):
+            return set()
+        return others
 
-    def _drop_before_restart(self) -> None:
-        """Drop the cycles received since the reset: the stream before's (see `reset`)."""
-        self.stale_cycles += len(self._ready) + len(self._open)
-        self._ready.clear()
-        self._open.clear()
-        self._unplaced.clear()
-        self._recent.clear()
-        self._content.clear()
-        self._current = None
+    def _drop_before_restart(self, stale: set[int]) -> None:
+        """Drop the cycles received since the reset that are the stream before's (`reset`).
+
+        Their counters are forgotten, and the other headers that came meanwhile are counted
+        as reordered or not again, as if the dropped ones had never come.
+        """
+        begun, self._begun_before_restart = self._begun_before_restart, []
+        if not stale:
+            return
+        self.stale_cycles += (sum(d.cycle in stale for d in self._ready)
+                              + sum(c in stale for c in self._open))
+        self._ready = deque(d for d in self._ready if d.cycle not in stale)
+        for counter in stale:
+            self._open.pop(counter, None)
+            self._recent.pop(counter, None)
+            self._content.pop(counter, None)
+        self._unplaced = [u for u in self._unplaced if u[0] not in stale]
+        if self._current is not None and self._current.counter in stale:
+            self._current = None
         self._latest = -1
+        for counter, reordered in begun:
+            self.stats.reordered -= reordered
+            if counter in stale:
+                continue
+            if self._latest >= 0 and _behind(counter, self._latest, self._counter_modulus):
+                self.stats.reordered += 1
+            else:
+                self._latest = counter
 
     def _finish(self, counter: int) -> None:
         """Hand on an open cycle as `Detections`."""
