@@ -176,8 +176,9 @@ def calibration_report(result: Any, errors: Any, before: Any, after: Any, estima
     """Return the ``--json`` document (docs/cli.md).
 
     The verdict (``passed`` and the ``reasons`` it failed), per channel the injected and
-    recovered offsets (relative to FE 0; injected ones null on a real bench), the pair residuals
-    and the check grid's errors (`GridCheck.summary`) before and after.
+    recovered offsets (relative to FE 0; injected ones null on a real bench) and its level
+    played alone, per pair the swept channel's weight played and the residuals, and the check
+    grid's errors (`GridCheck.summary`) before and after.
     """
     import numpy as np
 
@@ -197,8 +198,10 @@ def calibration_report(result: Any, errors: Any, before: Any, after: Any, estima
             "injected_gain_db": None if errors is None
             else float(errors.gain_db[q] - errors.gain_db[0]),
             "recovered_gain_db": float(result.gain_db[q]),
+            "single_rcs_dbsm": number(result.single_rcs_dbsm[q]),
         })
     pairs = [{"fe_a": p.a, "fe_b": p.b, "phase_deg": p.phase_deg, "gain_db": p.gain_db,
+              "swept_weight_db": p.weight_db,
               "phase_residual_deg": float(rp), "gain_residual_db": float(rg),
               "fit_rms_deg": number(p.fit_rms_deg)}
              for p, rp, rg in zip(result.pairs, result.phase_residual_deg,
@@ -212,11 +215,14 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     """Add the ``calibrate`` subcommand."""
     parser = subparsers.add_parser(
         "calibrate", help="calibrate the phase and gain of the RTS channels", parents=parents,
-        description="Pairwise delay sweeps (converted to phase by the rig's RTS delay model) "
-                    "through the output and the CAN checker, each fitted with the radar's "
-                    "array, its modeled FE responses and its estimator; least squares over all "
-                    "pairs gives per-channel phase and gain offsets. On the simulated radar, "
-                    "--inject-* adds random channel errors to recover.",
+        description="Each FE alone first (its level at the radar, the RCS it reports), "
+                    "then pairwise delay sweeps (converted to phase by the rig's RTS delay "
+                    "model), the swept channel's weight set from those levels so that it "
+                    "arrives at half the other's amplitude, through the output and the CAN "
+                    "checker; each sweep fitted with the radar's array, its modeled FE "
+                    "responses and its estimator; least squares over all pairs gives "
+                    "per-channel phase and gain offsets. On the simulated radar, --inject-* "
+                    "adds random channel errors to recover.",
     )
     add_bench_arguments(parser, "paper")
     parser.add_argument("--json", metavar="OUT",
