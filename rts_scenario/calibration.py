@@ -111,7 +111,9 @@ class CalibrationResult:
     """Per-channel offsets relative to the reference FE, and the evidence for them.
 
     ``single_rcs_dbsm`` (F,) is each FE's level played alone, the RCS the radar reported (NaN
-    for an FE in no pair): what each pair's weights were set from.
+    for an FE in no pair): what each pair's weights were set from. ``remeasured`` names the
+    measurements played a second time (``"FEs alone"``, ``"FE pair 0-2"``): some of their
+    cycles did not come back the first time.
     """
 
     phase_deg: FloatArray
@@ -120,6 +122,7 @@ class CalibrationResult:
     phase_residual_deg: FloatArray
     gain_residual_db: FloatArray
     single_rcs_dbsm: FloatArray
+    remeasured: tuple[str, ...] = ()
 
     @property
     def suspects(self) -> list[str]:
@@ -200,7 +203,8 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     then plays the swept channel at the weight that makes it arrive at ``weight_ratio`` of the
     other's amplitude given those levels, the stronger channel at weight 1; a weight beyond
     the attenuator's range stops at it. The fit takes the weights as the attenuators played
-    them.
+    them. A measurement some of whose cycles did not come back (a frame the host sent after
+    the cycle measuring it, a cycle lost) is played once more; the second one is taken.
 
     Parameters
     ----------
@@ -238,7 +242,8 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     fes = sorted({q for pair in pairs for q in pair})
     singles = pattern_schedule(rig, radar, [[(q, 1.0, 0.0)] for q in fes], range_m,
                                attenuation_db)
-    level = _single_levels(rig, fes, measure(singles))
+    remeasured: list[str] = []
+    level = _single_levels(rig, fes, _measured(measure, singles, "FEs alone", remeasured))
     delays, sweep_deg = sweep_delays(rig, radar, steps, range_m)
     rows: list[Row] = []
     for a, b in pairs:
@@ -247,7 +252,9 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     schedule = pattern_schedule(rig, radar, rows, range_m, attenuation_db)
     dets: list[list[Detections]] = []
     for i in range(len(pairs)):  # one pair at a time, like on the bench
-        dets.append(measure(schedule.frames(i * steps, (i + 1) * steps)))
+        a, b = pairs[i]
+        dets.append(_measured(measure, schedule.frames(i * steps, (i + 1) * steps),
+                              f"FE pair {a}-{b}", remeasured))
         if progress is not None:
             progress(i + 1, len(pairs))
     model = _PairModel(rig, radar, estimator, range_m)
@@ -258,7 +265,30 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     gain, gain_res = _close(rig.n_front_ends, measured, "gain_db", circular=False)
     return CalibrationResult(phase_deg=phase, gain_db=gain, pairs=tuple(measured),
                              phase_residual_deg=phase_res, gain_residual_db=gain_res,
-                             single_rcs_dbsm=level)
+                             single_rcs_dbsm=level, remeasured=tuple(remeasured))
+
+
+# Why a frame's cycle is missing after `_measured` played its measurement a second time.
+_TWICE = ("measured twice: the radar's cycle measuring it did not come back either time "
+          "(lost, later than the measurement waited for, or not told from the frame before's: "
+          "a frame the host sent after that cycle); check the host's load and the bus")
+
+
+def _measured(measure: Measure, schedule: Schedule, what: str,
+              remeasured: list[str]) -> list[Detections]:
+    """Play ``schedule``; once more where some of its cycles did not come back.
+
+    A bench has hiccups: a loaded host sends a frame after the radar's cycle measuring it, a
+    cycle is lost on the bus. The second measurement is taken whole (its cycles are never
+    mixed with the first's); where it misses cycles too, the fit says which. Where none came
+    back the radar does not report at all: measuring again would not help.
+    """
+    cycles = measure(schedule)
+    back = [d.complete for d in cycles]
+    if any(back) and not all(back):
+        remeasured.append(what)
+        cycles = measure(schedule)
+    return cycles
 
 
 def _single_levels(rig: Rig, fes: list[int], cycles: list[Detections]) -> FloatArray:
@@ -277,10 +307,8 @@ def _single_levels(rig: Rig, fes: list[int], cycles: list[Detections]) -> FloatA
         if not d.complete and not none_back:
             # No cycle for the frame: lost on the bus, later than the measurement waited for,
             # or not told from the frame before's (docs/bench.md section 6).
-            raise MeasurementError(f"no cycle for FE {q} played alone (frame {d.cycle}): the "
-                                   f"radar's cycle measuring it did not come back (lost, later "
-                                   f"than the measurement waited for, or not told from the "
-                                   f"frame before's); measure again")
+            raise MeasurementError(f"no cycle for FE {q} played alone (frame {d.cycle}), "
+                                   f"{_TWICE}")
         k = d.strongest()
         if k is not None and d.rcs_dbsm is not None and np.isfinite(d.rcs_dbsm[k]):
             level[q] = d.rcs_dbsm[k]
@@ -401,10 +429,8 @@ def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
         # No cycle for the frame: lost on the bus, later than the measurement waited for, or
         # not told from the frame before's (docs/bench.md section 6). The radar may well see
         # the rig: say what is missing.
-        raise MeasurementError(f"no cycle for FE pair {pair[0]}-{pair[1]}'s frame {d.cycle}: "
-                               f"the radar's cycle measuring it did not come back (lost, "
-                               f"later than the measurement waited for, or not told from the "
-                               f"frame before's); measure again")
+        raise MeasurementError(f"no cycle for FE pair {pair[0]}-{pair[1]}'s frame {d.cycle}, "
+                               f"{_TWICE}")
     k = d.strongest()
     values = getattr(d, what)
     if k is None or values is None:

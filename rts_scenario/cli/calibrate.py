@@ -81,9 +81,18 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     # The check grid's weights: exact for a Bartlett radar, aimed at any other estimator.
     method = "exact" if args.estimator == "bartlett" else "estimator"
 
+    benches: list[Pipeline] = []
+
     def bench(on: Rig) -> Pipeline:
         # The same physical bench (injected errors included) driven with the rig's settings.
-        return Pipeline(on, radar, options, radar_options=radar_options, errors=errors, rng=rng)
+        benches.append(Pipeline(on, radar, options, radar_options=radar_options, errors=errors,
+                                rng=rng))
+        return benches[-1]
+
+    def late_note() -> str:
+        late = sum(b.measurement_late_frames for b in benches)
+        return (f"{late} pattern frames went out after the radar cycle that measures them "
+                f"(the host held the sender)" if late else "")
 
     # The steps of the host's clock during the measurements, numbered over both benches.
     steps: list[dict[str, Any]] = []
@@ -107,7 +116,9 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         # The radar's cycles mixed with another bus's (or none on --radar-channel), or a
         # pair it did not report: a measurement that failed, as a calibration that did not
         # pass does.
-        print(f"error: calibrate: {exc}; nothing written", file=sys.stderr)
+        late = late_note()
+        print(f"error: calibrate: {exc}{f'; {late}' if late else ''}; nothing written",
+              file=sys.stderr)
         return EXIT_FAIL
     failed = cal.failures(result, before, after, args.max_error_deg)
     injected = args.output == "simulated-radar" and (args.inject_phase_deg or args.inject_gain_db)
@@ -124,6 +135,10 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         zip(result.pairs, result.phase_residual_deg, result.gain_residual_db, strict=True)))
     for suspect in result.suspects:
         print(f"suspect: {suspect}")
+    if result.remeasured:
+        late = late_note()
+        print(f"note: measured again, some cycles missing the first time: "
+              f"{', '.join(result.remeasured)}{f'; {late}' if late else ''}")
 
     def summary(grid: cal.GridCheck) -> str:
         stats = grid.summary()
@@ -177,8 +192,9 @@ def calibration_report(result: Any, errors: Any, before: Any, after: Any, estima
 
     The verdict (``passed`` and the ``reasons`` it failed), per channel the injected and
     recovered offsets (relative to FE 0; injected ones null on a real bench) and its level
-    played alone, per pair the swept channel's weight played and the residuals, and the check
-    grid's errors (`GridCheck.summary`) before and after.
+    played alone, per pair the swept channel's weight played and the residuals, the
+    measurements played a second time, and the check grid's errors (`GridCheck.summary`)
+    before and after.
     """
     import numpy as np
 
@@ -208,6 +224,7 @@ def calibration_report(result: Any, errors: Any, before: Any, after: Any, estima
                                   result.gain_residual_db, strict=True)]
     return {"passed": not failed, "reasons": failed, "estimator": estimator, "method": method,
             "channels": channels, "pairs": pairs, "suspects": result.suspects,
+            "remeasured": list(result.remeasured),
             "before": before.summary(), "after": after.summary()}
 
 
