@@ -147,10 +147,12 @@ def test_a_pair_whose_frame_went_out_late_is_measured_again(monkeypatch):
     # The frame reached the RTS after the cycle that measures it: not measured. The pair is
     # measured once more, on time, and the calibration finds the emulator's channels as they
     # are (no errors: every offset 0).
+    # (A loaded host may hold the sender elsewhere too: other measurements may be played
+    # again, pair 0-2 must be.)
     result, late, held = _held_calibration(monkeypatch, times=1)
-    assert held == 1 and late == 1
+    assert held == 1 and late >= 1
     assert isinstance(result, cal.CalibrationResult), result
-    assert result.remeasured == ("FE pair 0-2",)
+    assert "FE pair 0-2" in result.remeasured
     assert not result.suspects
     np.testing.assert_allclose(_wrap(result.phase_deg), 0.0, atol=0.05)
     np.testing.assert_allclose(result.gain_db, 0.0, atol=0.005)
@@ -158,7 +160,7 @@ def test_a_pair_whose_frame_went_out_late_is_measured_again(monkeypatch):
 
 def test_a_pair_whose_frame_went_out_late_twice_stops_the_calibration(monkeypatch):
     error, late, held = _held_calibration(monkeypatch, times=2)
-    assert held == 2 and late == 2
+    assert held == 2 and late >= 2
     assert isinstance(error, MeasurementError), error
     message = str(error)
     assert "FE pair 0-2's frame 30" in message and "measured twice" in message, message
@@ -292,7 +294,8 @@ def test_calibrate_recovers_a_pair_whose_swept_channel_is_6_db_stronger():
     assert _recovered(result, errors)
 
 
-def test_calibrate_recovers_channels_within_6_db_for_every_seed():
+@pytest.mark.parametrize("estimator", ["bartlett", "ti"])
+def test_calibrate_recovers_channels_within_6_db_for_every_seed(estimator):
     # +-6 dB puts some pairs' channels about 6 dB apart, in either order: 24 seeds, every
     # injected phase within 0.5 deg and gain within 0.05 dB, no pair suspect.
     rig, radar = rs.Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
@@ -300,7 +303,8 @@ def test_calibrate_recovers_channels_within_6_db_for_every_seed():
     for seed in range(24):
         errors = ChannelErrors.random(4, np.random.default_rng(seed), phase_deg=180.0,
                                       gain_db=6.0)
-        result = cal.calibrate(rig, radar, cal.simulated_measure(radar, rig, errors))
+        measure = cal.simulated_measure(radar, rig, errors, estimator=estimator)
+        result = cal.calibrate(rig, radar, measure, estimator=estimator)
         if result.suspects or not _recovered(result, errors):
             failed.append((seed, result.suspects))
     assert failed == []

@@ -546,3 +546,13 @@ def test_a_channel_alone_whose_cycle_did_not_come_back_fails_naming_its_fe():
         calibrate(KIT, AWR, measure)
     message = str(info.value)
     assert "FE 3 played alone" in message and "did not come back" in message, message
+
+
+@pytest.mark.parametrize("ratio", [0.0, 1.0, 1.5, float("nan")])
+def test_a_weight_ratio_outside_0_to_1_is_refused(ratio):
+    # At 1 the pair's echoes arrive equally strong: the sweep passes through cancellation.
+    from rts_scenario.errors import RtsError
+
+    with pytest.raises(RtsError, match=r"weight_ratio must be within 0 and 1 \(exclusive\)"):
+        calibrate(KIT, PAPER, simulated_measure(PAPER, KIT, ChannelErrors.none(4)),
+                  weight_ratio=ratio)
