@@ -4,10 +4,15 @@ Pairwise delay sweeps, each fitted with the radar's own array and estimator, clo
 squares over all pairs.
 
 The paper calibrates two FEs at a time: with both on, it sweeps one channel's *delay* and
-watches the angle of the superimposed target. Here each pair plays a target with unequal weights
-(1 and ``weight_ratio``) while the weak channel's delay steps over one turn of the phase the RTS
-gives a delay: ``2 pi f_if tau`` for a digital RTS that delays at an intermediate frequency,
-``2 pi f_c tau`` for an RF delay line (the rig's ``rts.delay_model``), on the RTS's delay grid.
+watches the angle of the superimposed target. Here a first measurement plays each FE alone and
+reads its level at the radar (the RCS it reports). Then each pair plays a target whose swept
+channel arrives at ``weight_ratio`` of the other's amplitude, its weight set from those levels
+(on the attenuator's steps, within its range), while its delay steps over one turn of the phase
+the RTS gives a delay: ``2 pi f_if tau`` for a digital RTS that delays at an intermediate
+frequency, ``2 pi f_c tau`` for an RF delay line (the rig's ``rts.delay_model``), on the RTS's
+delay grid. Unequal echoes make the angle follow the phase; echoes of equal strength would
+cancel at one phase, where the angle tells little (a channel about 6 dB stronger than its
+weight says at a fixed 0.5 does that).
 
 Each sweep is fitted with a model of what the radar reports, which assumes neither a symmetric
 array nor a Bartlett radar:
@@ -20,9 +25,10 @@ array nor a Bartlett radar:
   the range cell the radar reports;
 - the radar's own angle estimator (`bartlett`, `ti` or one registered in the estimator registry).
 
-The fit's two unknowns per pair are the channels' phase and gain difference. Calibration results
-are channel phase and gain offsets, applied by the RTS per channel (the schedule's ``phase_rad``
-and attenuation), so calibrated channels keep their ranges.
+The fit's two unknowns per pair are the channels' phase and gain difference; it takes the
+weights as played (the attenuators' settings), the single levels only as its starting point.
+Calibration results are channel phase and gain offsets, applied by the RTS per channel (the
+schedule's ``phase_rad`` and attenuation), so calibrated channels keep their ranges.
 
 Phase coherence is only measurable in pairs but needed between all channels at once: the
 differences of all pairs (6 per quad) are solved together by least squares for one offset per
@@ -74,13 +80,15 @@ MAX_EXCESS_ERROR_DEG = 0.1
 
 @dataclass(frozen=True)
 class PairMeasurement:
-    """One pair's measurement: FE ``a`` (strong) and ``b`` (weak, its delay swept).
+    """One pair's measurement: FE ``a`` (the reference) and ``b`` (its delay swept).
 
     ``delay_s`` are the delays added to b, ``sweep_deg`` the phases they give b's echo (the
     rig's delay model); ``az_deg``/``el_deg`` what the radar reported, ``shift_deg`` its
     projection on the pair's axis and ``model_shift_deg`` the fitted model's.
-    ``phase_deg`` and ``gain_db`` are a minus b; ``level_db`` is the difference of the detected
-    single-channel levels (coarse, for the record); ``fit_rms_deg`` how well the model fits.
+    ``phase_deg`` and ``gain_db`` are a minus b; ``level_db`` is the difference of the
+    single-channel levels (a minus b, the radar's RCS: coarse); ``weight_db`` b's weight over
+    a's as the attenuators played it (their calibration gains taken out), set so that b
+    arrives at ``weight_ratio`` of a; ``fit_rms_deg`` how well the model fits.
     """
 
     a: int
@@ -94,18 +102,27 @@ class PairMeasurement:
     phase_deg: float
     gain_db: float
     level_db: float
+    weight_db: float
     fit_rms_deg: float
 
 
 @dataclass(frozen=True)
 class CalibrationResult:
-    """Per-channel offsets relative to the reference FE, and the evidence for them."""
+    """Per-channel offsets relative to the reference FE, and the evidence for them.
+
+    ``single_rcs_dbsm`` (F,) is each FE's level played alone, the RCS the radar reported (NaN
+    for an FE in no pair): what each pair's weights were set from. ``remeasured`` names the
+    measurements played a second time (``"FEs alone"``, ``"FE pair 0-2"``): some of their
+    cycles did not come back the first time.
+    """
 
     phase_deg: FloatArray
     gain_db: FloatArray
     pairs: tuple[PairMeasurement, ...]
     phase_residual_deg: FloatArray
     gain_residual_db: FloatArray
+    single_rcs_dbsm: FloatArray
+    remeasured: tuple[str, ...] = ()
 
     @property
     def suspects(self) -> list[str]:
@@ -179,7 +196,15 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
               steps: int = 24, weight_ratio: float = 0.5, range_m: float = 10.0,
               attenuation_db: float = 40.0,
               progress: Callable[[int, int], None] | None = None) -> CalibrationResult:
-    """Measure every pair with a delay sweep and solve for per-channel phase and gain offsets.
+    """Measure each FE alone, then every pair with a delay sweep; solve for per-channel offsets.
+
+    The first measurement plays each FE alone at weight 1 (``attenuation_db``) and reads its
+    level, the RCS the radar reports. Each pair's measurement (one per pair, as on the bench)
+    then plays the swept channel at the weight that makes it arrive at ``weight_ratio`` of the
+    other's amplitude given those levels, the stronger channel at weight 1; a weight beyond
+    the attenuator's range stops at it. The fit takes the weights as the attenuators played
+    them. A measurement some of whose cycles did not come back (a frame the host sent after
+    the cycle measuring it, a cycle lost) is played once more; the second one is taken.
 
     Parameters
     ----------
@@ -194,35 +219,123 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     steps : int
         Delay steps per sweep (over one phase turn).
     weight_ratio : float
-        Amplitude of the swept channel relative to the other (unequal weights make the angle
-        depend on the phase).
+        Amplitude at which the swept channel arrives at the radar relative to the other
+        (unequal echoes make the angle depend on the phase).
+    range_m : float
+        The pattern's target range (m).
+    attenuation_db : float
+        The pattern's attenuation at weight 1 (plus each channel's calibration gain).
+    progress : callable, optional
+        Called with (pairs measured, pairs) after each pair's measurement.
+
+    Raises
+    ------
+    MeasurementError
+        An FE alone, or a pair, came back without a detection or without its cycle.
     """
     if steps < 8:
         raise RtsError(f"calibration: steps must be >= 8, got {steps}")
+    if not 0.0 < weight_ratio < 1.0:
+        raise RtsError(f"calibration: weight_ratio must be within 0 and 1 (exclusive), got "
+                       f"{weight_ratio}")
     pairs = pairs_of(rig)
+    fes = sorted({q for pair in pairs for q in pair})
+    singles = pattern_schedule(rig, radar, [[(q, 1.0, 0.0)] for q in fes], range_m,
+                               attenuation_db)
+    remeasured: list[str] = []
+    level = _single_levels(rig, fes, _measured(measure, singles, "FEs alone", remeasured))
     delays, sweep_deg = sweep_delays(rig, radar, steps, range_m)
     rows: list[Row] = []
     for a, b in pairs:
-        rows += [[(a, 1.0, 0.0)], [(b, 1.0, 0.0)]]
-        rows += [[(a, 1.0, 0.0, 0.0), (b, weight_ratio, 0.0, float(d))] for d in delays]
-    batch = steps + 2
+        w_a, w_b = _pair_weights(rig, a, b, level, weight_ratio, attenuation_db)
+        rows += [[(a, w_a, 0.0, 0.0), (b, w_b, 0.0, float(d))] for d in delays]
     schedule = pattern_schedule(rig, radar, rows, range_m, attenuation_db)
-    dets: list[Detections] = []
+    dets: list[list[Detections]] = []
     for i in range(len(pairs)):  # one pair at a time, like on the bench
-        dets += measure(schedule.frames(i * batch, (i + 1) * batch))
+        a, b = pairs[i]
+        dets.append(_measured(measure, schedule.frames(i * steps, (i + 1) * steps),
+                              f"FE pair {a}-{b}", remeasured))
         if progress is not None:
             progress(i + 1, len(pairs))
-    model = _PairModel(rig, radar, estimator, weight_ratio, range_m)
-    measured = []
-    for i, (a, b) in enumerate(pairs):
-        frames = slice(i * batch + 2, (i + 1) * batch)
-        measured.append(model.fit(a, b, delays, sweep_deg, schedule.frames(frames.start,
-                                                                          frames.stop),
-                                  dets[i * batch : (i + 1) * batch]))
+    model = _PairModel(rig, radar, estimator, range_m)
+    measured = [model.fit(a, b, delays, sweep_deg, schedule.frames(i * steps, (i + 1) * steps),
+                          dets[i], float(level[a] - level[b]))
+                for i, (a, b) in enumerate(pairs)]
     phase, phase_res = _close(rig.n_front_ends, measured, "phase_deg", circular=True)
     gain, gain_res = _close(rig.n_front_ends, measured, "gain_db", circular=False)
     return CalibrationResult(phase_deg=phase, gain_db=gain, pairs=tuple(measured),
-                             phase_residual_deg=phase_res, gain_residual_db=gain_res)
+                             phase_residual_deg=phase_res, gain_residual_db=gain_res,
+                             single_rcs_dbsm=level, remeasured=tuple(remeasured))
+
+
+# Why a frame's cycle is missing after `_measured` played its measurement a second time.
+_TWICE = ("measured twice: the radar's cycle measuring it did not come back either time "
+          "(lost, later than the measurement waited for, or not told from the frame before's: "
+          "a frame the host sent after that cycle); check the host's load and the bus")
+
+
+def _measured(measure: Measure, schedule: Schedule, what: str,
+              remeasured: list[str]) -> list[Detections]:
+    """Play ``schedule``; once more where some of its cycles did not come back.
+
+    A bench has hiccups: a loaded host sends a frame after the radar's cycle measuring it, a
+    cycle is lost on the bus. The second measurement is taken whole (its cycles are never
+    mixed with the first's); where it misses cycles too, the fit says which. Where none came
+    back the radar does not report at all: measuring again would not help.
+    """
+    cycles = measure(schedule)
+    back = [d.complete for d in cycles]
+    if any(back) and not all(back):
+        remeasured.append(what)
+        cycles = measure(schedule)
+    return cycles
+
+
+def _single_levels(rig: Rig, fes: list[int], cycles: list[Detections]) -> FloatArray:
+    """Each FE's level played alone (the RCS of its strongest detection), NaN for the others.
+
+    Every FE must be measured: its level sets its pairs' weights, and a guessed level could
+    play a pair through cancellation.
+    """
+    if len(cycles) != len(fes):
+        raise RtsError(f"calibration: {len(cycles)} cycles reported for the {len(fes)} FEs "
+                       f"played alone; the radar must report every frame")
+    level = np.full(rig.n_front_ends, np.nan)
+    # Not one cycle came back: the radar does not see the rig, or reports elsewhere.
+    none_back = not any(d.complete for d in cycles)
+    for q, d in zip(fes, cycles, strict=True):
+        if not d.complete and not none_back:
+            # No cycle for the frame: lost on the bus, later than the measurement waited for,
+            # or not told from the frame before's (docs/bench.md section 6).
+            raise MeasurementError(f"no cycle for FE {q} played alone (frame {d.cycle}), "
+                                   f"{_TWICE}")
+        k = d.strongest()
+        if k is not None and d.rcs_dbsm is not None and np.isfinite(d.rcs_dbsm[k]):
+            level[q] = d.rcs_dbsm[k]
+    unseen = [i for i, q in enumerate(fes) if not np.isfinite(level[q])]
+    if unseen:
+        names = ", ".join(str(fes[i]) for i in unseen)
+        where = ", ".join(str(cycles[i].cycle) for i in unseen)
+        what = "the rig" if len(unseen) == len(fes) else f"FE {names}"
+        raise MeasurementError(f"no detection with rcs_dbsm of FE {names} played alone "
+                               f"(cycle{'s' if len(unseen) > 1 else ''} {where}): its level at "
+                               f"the radar sets the weights of its pairs; check that the radar "
+                               f"sees {what}")
+    return level
+
+
+def _pair_weights(rig: Rig, a: int, b: int, level_dbsm: FloatArray, ratio: float,
+                  attenuation_db: float) -> tuple[float, float]:
+    """Weights of a and b that make b arrive at ``ratio`` of a, given their single levels.
+
+    The stronger weight is 1 (the level the single channels were measured at); the other
+    stops where its attenuation would pass the attenuator's maximum.
+    """
+    want_db = 20.0 * np.log10(ratio) + level_dbsm[a] - level_dbsm[b]  # b over a
+    weights_db = np.array([min(0.0, -want_db), min(0.0, want_db)])
+    lowest_db = attenuation_db + rig.cal_gain_db[[a, b]] - rig.limits.attenuation_max_db
+    w_a, w_b = 10.0 ** (np.maximum(weights_db, lowest_db) / 20.0)
+    return float(w_a), float(w_b)
 
 
 def pattern_schedule(rig: Rig, radar: RadarProfile, rows: Sequence[Row], range_m: float,
@@ -316,10 +429,8 @@ def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
         # No cycle for the frame: lost on the bus, later than the measurement waited for, or
         # not told from the frame before's (docs/bench.md section 6). The radar may well see
         # the rig: say what is missing.
-        raise MeasurementError(f"no cycle for FE pair {pair[0]}-{pair[1]}'s frame {d.cycle}: "
-                               f"the radar's cycle measuring it did not come back (lost, "
-                               f"later than the measurement waited for, or not told from the "
-                               f"frame before's); measure again")
+        raise MeasurementError(f"no cycle for FE pair {pair[0]}-{pair[1]}'s frame {d.cycle}, "
+                               f"{_TWICE}")
     k = d.strongest()
     values = getattr(d, what)
     if k is None or values is None:
@@ -330,13 +441,12 @@ def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
 
 
 class _PairModel:
-    """What the radar reports for a pair (a at weight 1, b at ``ratio``), given a - b."""
+    """What the radar reports for a pair (b at a weight relative to a), given a - b."""
 
-    def __init__(self, rig: Rig, radar: RadarProfile, estimator: str, ratio: float,
-                 range_m: float) -> None:
+    def __init__(self, rig: Rig, radar: RadarProfile, estimator: str, range_m: float) -> None:
         array, fe_model = solver_inputs(radar, "modeled")
         assert fe_model is not None
-        self.rig, self.radar, self.ratio, self.range_m = rig, radar, ratio, range_m
+        self.rig, self.radar, self.range_m = rig, radar, range_m
         self.vectors = fe_model.vectors(rig, np.arange(rig.n_front_ends), array)  # (M, F)
         self.estimate = make_estimator(estimator, array)
         self.n = radar.adc_samples
@@ -350,15 +460,16 @@ class _PairModel:
         return self.radar.range_bin(total, schedule.doppler_hz[:, 0, :])
 
     def predict(self, a: int, b: int, theta_deg: FloatArray, level: FloatArray,
-                phase_deg: FloatArray, gain_db: FloatArray, steps_db: float = 0.0,
+                phase_deg: FloatArray, gain_db: FloatArray, weight_db: float,
                 steps_deg: float = 0.0) -> tuple[FloatArray, FloatArray]:
         """Return the reported (az, el) for candidates ``phase_deg``/``gain_db`` (P,): (P, S).
 
         ``level`` (S, 2) is each echo's amplitude through the range window at the cell read;
-        ``steps_db`` how much more b was attenuated than a on the attenuator's steps than asked,
-        ``steps_deg`` how much more b's phase than a's the phase shifter's steps turned.
+        ``weight_db`` b's weight over a's as played (the attenuators' settings less the
+        channels' calibration gains), ``steps_deg`` how much more b's phase than a's the phase
+        shifter's steps turned.
         """
-        rel = (self.ratio * 10.0 ** (-(np.asarray(gain_db)[:, None] + steps_db) / 20.0)
+        rel = (10.0 ** ((weight_db - np.asarray(gain_db)[:, None]) / 20.0)
                * np.exp(1j * np.radians(theta_deg[None, :] + steps_deg
                                         - np.asarray(phase_deg)[:, None])))
         x = (level[None, :, 0, None] * self.vectors[:, a][None, None, :]
@@ -373,18 +484,19 @@ class _PairModel:
         return az.reshape(shape), el.reshape(shape)
 
     def fit(self, a: int, b: int, delays: FloatArray, sweep_deg: FloatArray,
-            schedule: Schedule, dets: list[Detections]) -> PairMeasurement:
-        """Fit phase and gain difference (a - b) to one pair's sweep."""
+            schedule: Schedule, sweep: list[Detections], level_db: float) -> PairMeasurement:
+        """Fit phase and gain difference (a - b) to one pair's sweep.
+
+        ``level_db`` is the single channels' level difference (a - b): the fit's start.
+        """
         pair = (a, b)
-        if len(dets) != len(delays) + 2:
-            raise RtsError(f"calibration: FE pair {a}-{b}: {len(dets)} cycles reported for "
-                           f"{len(delays) + 2} frames played; the radar must report every frame")
-        if not any(d.complete for d in dets):
+        if len(sweep) != len(delays):
+            raise RtsError(f"calibration: FE pair {a}-{b}: {len(sweep)} cycles reported for "
+                           f"{len(delays)} frames played; the radar must report every frame")
+        if not any(d.complete for d in sweep):
             # Not one cycle came back: the radar does not see the rig, or reports elsewhere.
-            raise MeasurementError(f"no detection with rcs_dbsm for FE pair {a}-{b} in cycle "
-                                   f"{dets[0].cycle}; check that the radar sees the rig")
-        level_db = _strongest(dets[0], "rcs_dbsm", pair) - _strongest(dets[1], "rcs_dbsm", pair)
-        sweep = dets[2:]
+            raise MeasurementError(f"no detection for FE pair {a}-{b} in cycle "
+                                   f"{sweep[0].cycle}; check that the radar sees the rig")
         az = np.array([_strongest(d, "az_deg", pair) for d in sweep])
         el = np.array([_strongest(d, "el_deg", pair) for d in sweep])
         rng = np.array([_strongest(d, "range_m", pair) for d in sweep])
@@ -395,11 +507,11 @@ class _PairModel:
         offset = bins[:, channel] - cell[:, None]
         offset = np.mod(offset + self.n / 2.0, self.n) - self.n / 2.0
         level = self.radar.range_response(offset)
-        # What the attenuators' steps added to b's attenuation over a's: the sweep played b
-        # at (attenuation b - a) less the asked (calibration b - a - 20 log10 ratio).
+        # b's weight over a's as the attenuators played it (on their steps, within their
+        # range), the channels' calibration gains taken out: what the fit's gain is beyond.
         att = schedule.attenuation_db[0, 0, channel]
-        steps_db = float((att[1] - att[0]) - (self.rig.cal_gain_db[b] - self.rig.cal_gain_db[a])
-                         + 20.0 * np.log10(self.ratio))
+        weight_db = float(-(att[1] - att[0]) + (self.rig.cal_gain_db[b]
+                                                 - self.rig.cal_gain_db[a]))
         # Likewise the phase shifter's steps: each channel's phase as played less the one asked
         # (its calibration phase and the delay rounding's compensation), b's less a's.
         _, asked = channel_delays(self.rig, self.radar, np.asarray(self.range_m),
@@ -408,7 +520,8 @@ class _PairModel:
         steps_deg = float(_wrap(np.degrees(turned[1] - turned[0])))
 
         def residual(x: FloatArray) -> FloatArray:
-            p_az, p_el = self.predict(a, b, sweep_deg, level, x[:1], x[1:], steps_db, steps_deg)
+            p_az, p_el = self.predict(a, b, sweep_deg, level, x[:1], x[1:], weight_db,
+                                      steps_deg)
             out = np.concatenate([p_az[0] - az, p_el[0] - el])
             return np.where(np.isfinite(out), out, 10.0)
 
@@ -418,11 +531,11 @@ class _PairModel:
         # leaves channels a few dB apart in a wrong minimum.
         # Phases first, at equal gains and at the single levels' gain; then the gains about
         # the latter at the best phase (a full grid of both costs 4x as many predictions).
-        levels = np.round(level_db) if np.isfinite(level_db) else 0.0
+        levels = np.round(level_db)
         phases = np.arange(0.0, 360.0, 5.0)
 
         def best_of(p: FloatArray, g: FloatArray) -> tuple[float, float]:
-            c_az, c_el = self.predict(a, b, sweep_deg, level, p, g, steps_db, steps_deg)
+            c_az, c_el = self.predict(a, b, sweep_deg, level, p, g, weight_db, steps_deg)
             cost = np.nansum(np.minimum((c_az - az) ** 2 + (c_el - el) ** 2, 100.0), axis=1)
             i = int(np.argmin(cost))
             return float(p[i]), float(g[i])
@@ -436,13 +549,13 @@ class _PairModel:
                             loss="soft_l1", f_scale=0.05, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         phase, gain = float(_wrap(fit.x[0])), float(fit.x[1])
         m_az, m_el = self.predict(a, b, sweep_deg, level, np.array([phase]), np.array([gain]),
-                                  steps_db, steps_deg)
+                                  weight_db, steps_deg)
         axis = _axis(self.rig, a, b)
         return PairMeasurement(
             a=a, b=b, delay_s=delays, sweep_deg=sweep_deg, az_deg=az, el_deg=el,
             shift_deg=az * axis[0] + el * axis[1],
             model_shift_deg=m_az[0] * axis[0] + m_el[0] * axis[1], phase_deg=phase,
-            gain_db=gain, level_db=level_db,
+            gain_db=gain, level_db=level_db, weight_db=weight_db,
             fit_rms_deg=float(np.sqrt(np.mean((m_az[0] - az) ** 2 + (m_el[0] - el) ** 2))))
 
 

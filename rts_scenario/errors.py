@@ -81,7 +81,8 @@ class MeasurementError(CheckError):
 
     The radar's identifiers came on several channels, or none on ``--radar-channel``: what
     was measured would mix another bus's cycles in, or hold none of the radar's; or a
-    calibration's pair was not reported at all. ``survey`` and ``calibrate`` fail with it
+    calibration's FE alone or pair was not reported, or missed cycles when measured twice.
+    ``survey`` and ``calibrate`` fail with it
     (exit 1), as with any other measurement that failed.
     """
 

@@ -13,6 +13,7 @@ from rts_scenario.calibration import (
     pairs_of,
     simulated_measure,
 )
+from rts_scenario.detections import Detections
 from rts_scenario.radar import RadarProfile
 from rts_scenario.radar.simulate import ChannelErrors
 
@@ -444,6 +445,114 @@ def test_cli_calibrate_of_a_silent_radar_is_a_failed_measurement(tmp_path, capsy
                      str(rig_out)])
     assert code == 1
     err = capsys.readouterr().err
-    assert err == ("error: calibrate: no detection with rcs_dbsm for FE pair 0-1 in cycle 0; "
+    assert err == ("error: calibrate: no detection with rcs_dbsm of FE 0, 1, 2, 3 played alone "
+                   "(cycles 0, 1, 2, 3): its level at the radar sets the weights of its pairs; "
                    "check that the radar sees the rig; nothing written\n")
     assert not out_json.exists() and not rig_out.exists()
+
+
+def _spied(measure):
+    """``measure`` that keeps every schedule it plays."""
+    played = []
+
+    def spy(schedule):
+        played.append(schedule)
+        return measure(schedule)
+
+    return spy, played
+
+
+def test_each_pair_plays_its_swept_channel_at_half_the_reference_s_level_at_the_radar():
+    # Channels up to 6 dB off: each FE is measured alone first (one frame each), then each
+    # pair is played so that the swept channel's echo arrives at half the reference's
+    # amplitude (-6.02 dB), its weight making up for the channels' gains.
+    errors = ChannelErrors.random(4, np.random.default_rng(3), phase_deg=180.0, gain_db=6.0)
+    spy, played = _spied(simulated_measure(AWR, KIT, errors))
+    result = calibrate(KIT, AWR, spy)
+    singles = played[0]
+    assert singles.active[:, 0].sum(axis=1).tolist() == [1, 1, 1, 1]
+    assert singles.fe[:, 0, 0].tolist() == [0, 1, 2, 3]
+    assert len(played) == 1 + len(pairs_of(KIT))
+    for schedule, (a, b), pair in zip(played[1:], pairs_of(KIT), result.pairs, strict=True):
+        assert schedule.fe[0, 0, :2].tolist() == [a, b]
+        att = schedule.attenuation_db[:, 0, :2]
+        # b's echo over a's at the radar: the attenuation played less the channels' gains.
+        arrives_db = -(att[:, 1] - att[:, 0]) + errors.gain_db[b] - errors.gain_db[a]
+        # The single levels are the radar's RCS (unrounded in process: no bus): kit-table1's
+        # FEs, all 1 m away, differ by 4e-5 dB in it beyond their injected gains.
+        np.testing.assert_allclose(arrives_db, 20.0 * np.log10(0.5), atol=0.001)
+        assert min(att[0]) == pytest.approx(40.0)  # the stronger at the pattern's level
+        np.testing.assert_allclose(pair.weight_db, -(att[0, 1] - att[0, 0]), atol=1e-9)
+    recovered_within(result, errors, 0.5, 0.05)
+
+
+def test_a_swept_channel_s_weight_stops_at_the_attenuator_s_range_and_is_fitted_as_played():
+    # FE 1 is 4 dB stronger than FE 0: pair 0-1 wants FE 1 10 dB below FE 0's 40 dB, beyond
+    # the attenuator's 48 dB. It plays at 48 dB (arriving 4 dB below FE 0, not 6), within
+    # the rig's limits, and the fit takes the weight played: the offsets are recovered.
+    import dataclasses
+
+    rig = dataclasses.replace(KIT, limits=dataclasses.replace(KIT.limits,
+                                                              attenuation_max_db=48.0))
+    errors = ChannelErrors(gain_db=np.array([0.0, 4.0, 0.0, -4.0]),
+                           phase_deg=np.array([0.0, 120.0, -70.0, 160.0]),
+                           delay_s=np.zeros(4), az_deg=np.zeros(4), el_deg=np.zeros(4),
+                           distance_m=np.zeros(4))
+    spy, played = _spied(simulated_measure(AWR, rig, errors))
+    result = calibrate(rig, AWR, spy)
+    for schedule in played:
+        assert np.nanmax(schedule.attenuation_db) <= 48.0
+    first = played[1]
+    assert first.fe[0, 0, :2].tolist() == [0, 1]
+    np.testing.assert_allclose(first.attenuation_db[:, 0, :2], [[40.0, 48.0]] * 24)
+    assert result.pairs[0].weight_db == pytest.approx(-8.0)
+    recovered_within(result, errors, 0.5, 0.05)
+    assert not result.suspects
+
+
+def _blank_fe_alone(measure, fe, complete):
+    """``measure`` whose cycle of ``fe`` played alone has no detection (or did not come)."""
+    def blanked(schedule):
+        cycles = measure(schedule)
+        alone = schedule.active[:, 0].sum(axis=1) == 1
+        for i in np.flatnonzero(alone & (schedule.fe[:, 0, 0] == fe)):
+            cycles[i] = Detections.empty(cycles[i].cycle, cycles[i].t_s, complete=complete)
+        return cycles
+
+    return blanked
+
+
+def test_a_channel_the_radar_does_not_see_alone_fails_naming_its_fe():
+    # FE 2's level cannot be measured: the pairs' weights cannot be set from it, and the
+    # calibration stops there rather than play its pairs at a guessed level.
+    from rts_scenario.errors import MeasurementError
+
+    spy, played = _spied(_blank_fe_alone(simulated_measure(AWR, KIT, ChannelErrors.none(4)),
+                                         2, complete=True))
+    with pytest.raises(MeasurementError) as info:
+        calibrate(KIT, AWR, spy)
+    message = str(info.value)
+    assert "FE 2 played alone" in message and "sees FE 2" in message, message
+    assert "FE 0" not in message and "FE 1" not in message, message
+    assert len(played) == 1  # no pair played
+
+
+def test_a_channel_alone_whose_cycle_did_not_come_back_fails_naming_its_fe():
+    from rts_scenario.errors import MeasurementError
+
+    measure = _blank_fe_alone(simulated_measure(AWR, KIT, ChannelErrors.none(4)), 3,
+                              complete=False)
+    with pytest.raises(MeasurementError) as info:
+        calibrate(KIT, AWR, measure)
+    message = str(info.value)
+    assert "FE 3 played alone" in message and "did not come back" in message, message
+
+
+@pytest.mark.parametrize("ratio", [0.0, 1.0, 1.5, float("nan")])
+def test_a_weight_ratio_outside_0_to_1_is_refused(ratio):
+    # At 1 the pair's echoes arrive equally strong: the sweep passes through cancellation.
+    from rts_scenario.errors import RtsError
+
+    with pytest.raises(RtsError, match=r"weight_ratio must be within 0 and 1 \(exclusive\)"):
+        calibrate(KIT, PAPER, simulated_measure(PAPER, KIT, ChannelErrors.none(4)),
+                  weight_ratio=ratio)

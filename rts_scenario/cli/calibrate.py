@@ -81,9 +81,18 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     # The check grid's weights: exact for a Bartlett radar, aimed at any other estimator.
     method = "exact" if args.estimator == "bartlett" else "estimator"
 
+    benches: list[Pipeline] = []
+
     def bench(on: Rig) -> Pipeline:
         # The same physical bench (injected errors included) driven with the rig's settings.
-        return Pipeline(on, radar, options, radar_options=radar_options, errors=errors, rng=rng)
+        benches.append(Pipeline(on, radar, options, radar_options=radar_options, errors=errors,
+                                rng=rng))
+        return benches[-1]
+
+    def late_note() -> str:
+        late = sum(b.measurement_late_frames for b in benches)
+        return (f"{late} pattern frames went out after the radar cycle that measures them "
+                f"(the host held the sender)" if late else "")
 
     # The steps of the host's clock during the measurements, numbered over both benches.
     steps: list[dict[str, Any]] = []
@@ -107,7 +116,9 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         # The radar's cycles mixed with another bus's (or none on --radar-channel), or a
         # pair it did not report: a measurement that failed, as a calibration that did not
         # pass does.
-        print(f"error: calibrate: {exc}; nothing written", file=sys.stderr)
+        late = late_note()
+        print(f"error: calibrate: {exc}{f'; {late}' if late else ''}; nothing written",
+              file=sys.stderr)
         return EXIT_FAIL
     failed = cal.failures(result, before, after, args.max_error_deg)
     injected = args.output == "simulated-radar" and (args.inject_phase_deg or args.inject_gain_db)
@@ -124,6 +135,10 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         zip(result.pairs, result.phase_residual_deg, result.gain_residual_db, strict=True)))
     for suspect in result.suspects:
         print(f"suspect: {suspect}")
+    if result.remeasured:
+        late = late_note()
+        print(f"note: measured again, some cycles missing the first time: "
+              f"{', '.join(result.remeasured)}{f'; {late}' if late else ''}")
 
     def summary(grid: cal.GridCheck) -> str:
         stats = grid.summary()
@@ -176,8 +191,10 @@ def calibration_report(result: Any, errors: Any, before: Any, after: Any, estima
     """Return the ``--json`` document (docs/cli.md).
 
     The verdict (``passed`` and the ``reasons`` it failed), per channel the injected and
-    recovered offsets (relative to FE 0; injected ones null on a real bench), the pair residuals
-    and the check grid's errors (`GridCheck.summary`) before and after.
+    recovered offsets (relative to FE 0; injected ones null on a real bench) and its level
+    played alone, per pair the swept channel's weight played and the residuals, the
+    measurements played a second time, and the check grid's errors (`GridCheck.summary`)
+    before and after.
     """
     import numpy as np
 
@@ -197,14 +214,17 @@ def calibration_report(result: Any, errors: Any, before: Any, after: Any, estima
             "injected_gain_db": None if errors is None
             else float(errors.gain_db[q] - errors.gain_db[0]),
             "recovered_gain_db": float(result.gain_db[q]),
+            "single_rcs_dbsm": number(result.single_rcs_dbsm[q]),
         })
     pairs = [{"fe_a": p.a, "fe_b": p.b, "phase_deg": p.phase_deg, "gain_db": p.gain_db,
+              "swept_weight_db": p.weight_db,
               "phase_residual_deg": float(rp), "gain_residual_db": float(rg),
               "fit_rms_deg": number(p.fit_rms_deg)}
              for p, rp, rg in zip(result.pairs, result.phase_residual_deg,
                                   result.gain_residual_db, strict=True)]
     return {"passed": not failed, "reasons": failed, "estimator": estimator, "method": method,
             "channels": channels, "pairs": pairs, "suspects": result.suspects,
+            "remeasured": list(result.remeasured),
             "before": before.summary(), "after": after.summary()}
 
 
@@ -212,11 +232,14 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     """Add the ``calibrate`` subcommand."""
     parser = subparsers.add_parser(
         "calibrate", help="calibrate the phase and gain of the RTS channels", parents=parents,
-        description="Pairwise delay sweeps (converted to phase by the rig's RTS delay model) "
-                    "through the output and the CAN checker, each fitted with the radar's "
-                    "array, its modeled FE responses and its estimator; least squares over all "
-                    "pairs gives per-channel phase and gain offsets. On the simulated radar, "
-                    "--inject-* adds random channel errors to recover.",
+        description="Each FE alone first (its level at the radar, the RCS it reports), "
+                    "then pairwise delay sweeps (converted to phase by the rig's RTS delay "
+                    "model), the swept channel's weight set from those levels so that it "
+                    "arrives at half the other's amplitude, through the output and the CAN "
+                    "checker; each sweep fitted with the radar's array, its modeled FE "
+                    "responses and its estimator; least squares over all pairs gives "
+                    "per-channel phase and gain offsets. On the simulated radar, --inject-* "
+                    "adds random channel errors to recover.",
     )
     add_bench_arguments(parser, "paper")
     parser.add_argument("--json", metavar="OUT",
