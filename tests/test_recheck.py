@@ -1250,6 +1250,33 @@ def test_a_damaged_line_inside_a_text_log_is_one_error_naming_it(tmp_path, capsy
     assert said.startswith(f"error: --log {log}: line 100: cannot read: "), said
 
 
+def _stale_cycle(k, t_s):
+    """A cycle of the stream before, as the radar sent it (one detection 30 m ahead)."""
+    return Detections(cycle=k, t_s=t_s, range_m=np.array([30.0]),
+                      radial_velocity_mps=np.array([0.0]), az_deg=np.array([0.0]),
+                      el_deg=np.array([0.0]))
+
+
+def _live_and_re_checked(tmp_path, first_batch):
+    """Run the quiet cut-in recording its bus, the radar's first batch of cycles given by
+    ``first_batch(cycles)``; return the live report and that of the recording's re-check."""
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        sink = pipeline.output._sink
+        first = [True]
+
+        def tampered(cycles):
+            if first[0]:
+                first[0] = False
+                cycles = first_batch(cycles)
+            sink(cycles)
+
+        pipeline.output._sink = tampered
+        live = pipeline.run(scene).report
+    return live, check_log(scene, log).report
+
+
 def test_a_recording_opening_with_the_stream_before_s_last_cycles_re_checks_to_the_live_verdict(
         tmp_path):
     # A radar counting from its profile's counter start (0) with each stream: the stream
@@ -1257,30 +1284,11 @@ def test_a_recording_opening_with_the_stream_before_s_last_cycles_re_checks_to_t
     # reset, before this stream's cycle 0. The run drops them at the restart of the count and
     # says how many; the recording holds them, and its re-check drops the same ones: the same
     # counts and verdict, not 224 cycles taken for late ones.
-    scene = load_scenario(CUT_IN, QUIET)
-    log = tmp_path / "run.blf"
-
-    def cycle(k, t_s):
-        return Detections(cycle=k, t_s=t_s, range_m=np.array([30.0]),
-                          radial_velocity_mps=np.array([0.0]), az_deg=np.array([0.0]),
-                          el_deg=np.array([0.0]))
-
-    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
-        sink = pipeline.output._sink
-        first = [True]
-
-        def stale_first(cycles):
-            if first[0]:
-                first[0] = False
-                cycles = [cycle(238, -0.02), cycle(239, -0.01), *cycles]
-            sink(cycles)
-
-        pipeline.output._sink = stale_first
-        live = pipeline.run(scene).report
+    live, again = _live_and_re_checked(tmp_path, lambda cycles: [
+        _stale_cycle(238, -0.02), _stale_cycle(239, -0.01), *cycles])
     assert live.passed, live.reasons
     assert live.frames["total"] == live.frames["checked"] == 240
     assert live.bus["stale_cycles"] == 2
-    again = check_log(scene, log).report
     assert again.frames == live.frames
     assert again.passed and again.reasons == []
     assert again.bus["stale_cycles"] == 2
@@ -1292,33 +1300,16 @@ def test_a_stream_s_first_cycle_held_up_behind_its_second_after_the_stale_tail_r
     # cycle 0 is held up behind its cycle 1. The run keeps cycles 0 and 1 (its own: 1 counts on
     # from the restart) and drops the stale two; the re-check of its recording keeps and drops
     # the same ones: every cycle of the scene checked, in both.
-    scene = load_scenario(CUT_IN, QUIET)
-    log = tmp_path / "run.blf"
+    def stale_and_held_up(cycles):
+        assert [c.cycle for c in cycles[:2]] == [0, 1]
+        return [_stale_cycle(238, -0.02), _stale_cycle(239, -0.01), cycles[1], cycles[0],
+                *cycles[2:]]
 
-    def stale(k, t_s):
-        return Detections(cycle=k, t_s=t_s, range_m=np.array([30.0]),
-                          radial_velocity_mps=np.array([0.0]), az_deg=np.array([0.0]),
-                          el_deg=np.array([0.0]))
-
-    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
-        sink = pipeline.output._sink
-        first = [True]
-
-        def stale_and_held_up(cycles):
-            if first[0]:
-                first[0] = False
-                assert [c.cycle for c in cycles[:2]] == [0, 1]
-                cycles = [stale(238, -0.02), stale(239, -0.01), cycles[1], cycles[0],
-                          *cycles[2:]]
-            sink(cycles)
-
-        pipeline.output._sink = stale_and_held_up
-        live = pipeline.run(scene).report
+    live, again = _live_and_re_checked(tmp_path, stale_and_held_up)
     assert live.passed, live.reasons
     assert live.frames["total"] == live.frames["checked"] == 240
     assert live.frames["missing"] == 0
     assert live.bus["stale_cycles"] == 2 and live.bus["reordered"] == 1
-    again = check_log(scene, log).report
     assert again.frames == live.frames
     assert again.passed and again.reasons == []
     assert again.bus["stale_cycles"] == 2 and again.bus["reordered"] == 1
