@@ -57,6 +57,8 @@ class SweepTask:
     reads ``file`` (its absolute path, for a worker whose current folder is another); the
     entry and its messages still name ``file``. ``marks`` are the scene's marks for this
     combination (`rts_scenario.scenario.written_marks`), which judge its run (`judged`).
+    ``given_path`` marks the error of a path given that is no scene to run (not there, or a
+    folder holding none): no mark expression selects it away (`select_tasks`).
     """
 
     index: int
@@ -67,6 +69,7 @@ class SweepTask:
     path: str | None = None
     error_type: str = "bad_input"
     marks: tuple[str, ...] = ()
+    given_path: bool = False
 
     @property
     def skipped(self) -> bool:
@@ -111,12 +114,13 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
             if not files:
                 tasks.append(SweepTask(len(tasks), str(given),
                                        error=f"{given}: no *{SCENE_SUFFIX} files in this folder"
-                                             + _left_out_note(path, left_out)))
+                                             + _left_out_note(path, left_out),
+                                       given_path=True))
         elif path.is_file():
             files = [path]
         else:
             tasks.append(SweepTask(len(tasks), str(given),
-                                   error=f"{given}: no such file or folder"))
+                                   error=f"{given}: no such file or folder", given_path=True))
             continue
         for file in files:
             name = str(given) if file is path else str(file)
@@ -590,7 +594,9 @@ def mark_expression(text: str) -> Callable[[Sequence[str]], bool]:
 def select_tasks(tasks: Sequence[SweepTask], text: str) -> tuple[list[SweepTask], int]:
     """Keep the tasks whose marks match the ``pytest -m`` expression ``text``.
 
-    Returns the kept tasks (renumbered in order) and how many were left out.
+    A path given that is no scene to run (``given_path``) is kept whatever ``text`` says: it
+    is bad input, as pytest stops on a path that is not there, ``-m`` or not. Returns the kept
+    tasks (renumbered in order) and how many were left out.
 
     Raises
     ------
@@ -599,7 +605,8 @@ def select_tasks(tasks: Sequence[SweepTask], text: str) -> tuple[list[SweepTask]
         would pass.
     """
     matches = mark_expression(text)
-    kept = [replace(task, index=i) for i, task in enumerate(t for t in tasks if matches(t.marks))]
+    kept = [replace(task, index=i) for i, task in enumerate(
+        t for t in tasks if t.given_path or matches(t.marks))]
     if tasks and not kept:
         marks = sorted({mark for task in tasks for mark in task.marks})
         raise RtsError(f"-m/--marks {text!r}: selects none of the {len(tasks)} run"

@@ -781,3 +781,21 @@ def test_a_combination_s_marks_are_the_scene_s_with_its_overrides():
     assert written_marks(data, {"marks.5": "bench"}) == ()  # no such mark: its load says so
     assert written_marks({"marks": ["ok", "_private", 3]}, {}) == ("ok",)
     assert written_marks(["not", "a", "scene"], {}) == ()
+
+
+def test_a_path_that_is_not_there_is_bad_input_whatever_the_marks_selection(pytester, capsys,
+                                                                           tmp_path):
+    """A mark expression selects runs of scenes, not the paths given: a path that does not
+    exist, or a folder with no scene, is no run it could leave out. pytest stops with a usage
+    error for a path that is not there, -m or not; the sweep never passes such a command."""
+    pytester.makefile(".scenario.yaml", slow=tiny_scene("slow_one") + "marks: [slow]\n")
+    (pytester.path / "empty").mkdir()
+    missing = pytester.path / "nothere.scenario.yaml"
+    result = pytester.runpytest("-p", "no:cacheprovider", str(missing), str(pytester.path),
+                                "-m", "slow")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    for given in (missing, pytester.path / "empty"):
+        code, out, _ = sweep(capsys, given, pytester.path, "-m", "slow", "--workers", "1")
+        assert code == 2, out
+        assert f"ERROR {given.name.removesuffix('.scenario.yaml')} ({given}): {given}: " in out
+        assert "PASS slow_one" in out
