@@ -508,14 +508,14 @@ def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS,
     """Count verdicts overall and per parameter value; pick the worst runs.
 
     The counts are ``runs`` (every entry) and, by status, ``passed``, ``failed``, ``errors``,
-    ``xfailed``, ``xpassed`` and ``skipped``; ``pass_rate`` is ``passed`` over the runs that
-    ran (skipped ones left out; 0.0 if none ran). ``deselected``: the runs a mark expression
-    left out (`select_tasks`), which are not among ``entries``. ``by_parameter`` maps each
-    parameter's key path to its values (named by :func:`value_name`, in the order they first
-    appear) and each value to the same counts and its ``pass_rate``: equal numbers are one
+    ``xfailed``, ``xpassed`` and ``skipped``; ``pass_rate`` is ``passed`` over the runs that ran
+    (skipped ones left out; None if none ran: no rate to give). ``deselected``: the runs a mark
+    expression left out (`select_tasks`), which are not among ``entries``. ``by_parameter`` maps
+    each parameter's key path to its values (named by :func:`value_name`, in the order they
+    first appear) and each value to the same counts and its ``pass_rate``: equal numbers are one
     value (``0`` and ``0.0``). ``worst`` lists erred runs, then failed, xpassed and xfailed
-    ones, then passing ones, each by their largest error over tolerance, at most ``worst``
-    runs (a pass with no error to rate is none of them, nor is a skipped run).
+    ones, then passing ones, each by their largest error over tolerance, at most ``worst`` runs
+    (a pass with no error to rate is none of them, nor is a skipped run).
     """
     def counts_of(group: Iterable[Entry]) -> dict[str, Any]:
         counts = {"runs": 0, **dict.fromkeys(COUNTS.values(), 0)}
@@ -523,7 +523,7 @@ def summarize(entries: Sequence[Entry], worst: int = WORST_RUNS,
             counts["runs"] += 1
             counts[COUNTS[entry["status"]]] += 1
         ran = counts["runs"] - counts["skipped"]
-        return {**counts, "pass_rate": counts["passed"] / ran if ran else 0.0}
+        return {**counts, "pass_rate": counts["passed"] / ran if ran else None}
 
     groups: dict[str, dict[str, list[Entry]]] = {}
     for entry in entries:

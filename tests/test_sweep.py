@@ -671,6 +671,22 @@ def test_exit_code_is_pytest_s_for_known_failures_and_skips(pytester, capsys, tm
     assert plugin_code == code == 1
 
 
+def test_a_sweep_whose_runs_were_all_skipped_has_no_pass_rate(pytester, capsys, tmp_path):
+    # As pytest: nothing failed, exit 0; but no run ran, so there is no rate to give (0 % would
+    # read as every run failed, 100 % as every run passed).
+    pytester.makefile(".scenario.yaml", parked=missed("parked", "marks: [skip]\n"),
+                      shelved=tiny_scene("shelved") + "marks: [skip]\nparametrize:\n  "
+                                                      "radar.estimator: [bartlett, ti]\n")
+    plugin, plugin_code = plugin_verdicts(pytester)
+    swept, code, payload, stdout = sweep_verdicts(capsys, tmp_path, pytester.path)
+    assert swept == plugin and set(swept.values()) == {"skipped"}
+    assert plugin_code == code == 0
+    assert payload["summary"]["pass_rate"] is None
+    assert payload["summary"]["by_parameter"]["radar.estimator"]["ti"]["pass_rate"] is None
+    assert "3 skipped; no run ran, no pass rate (" in stdout
+    assert "  estimator=ti: 0/0 (1 skipped)" in stdout
+
+
 def test_marks_expression_selects_the_runs_pytest_selects(pytester, capsys, tmp_path):
     pytester.makefile(".scenario.yaml", **{
         "a_plain": tiny_scene("plain"),

@@ -164,6 +164,11 @@ def _print_runs(entries: list[dict[str, Any]], summary: dict[str, Any], seconds:
                                       if total is not None else ""))
 
 
+def _rate_text(rate: float | None) -> str:
+    """Render the pass rate for people; none where no run ran (every one skipped)."""
+    return "no run ran, no pass rate" if rate is None else f"pass rate {rate:.1%}"
+
+
 def _summary_text(summary: dict[str, Any], seconds: float, total: int | None = None) -> str:
     """Render the summary for people: totals, pass rate per parameter value, worst runs.
 
@@ -174,8 +179,8 @@ def _summary_text(summary: dict[str, Any], seconds: float, total: int | None = N
     runs = summary["runs"]
     count = f"{runs} runs" if total is None else f"{runs} of {total} runs (interrupted)"
     lines = [f"sweep: {count}, {summary['passed']} passed, {summary['failed']} failed, "
-             f"{summary['errors']} errors{_marked_counts(summary)}; pass rate "
-             f"{summary['pass_rate']:.1%} ({seconds:.1f} s, "
+             f"{summary['errors']} errors{_marked_counts(summary)}; "
+             f"{_rate_text(summary['pass_rate'])} ({seconds:.1f} s, "
              f"{runs / seconds if seconds > 0 else 0.0:.2f} runs/s)"]
     by_parameter = summary["by_parameter"]
     if by_parameter:
@@ -191,7 +196,8 @@ def _summary_text(summary: dict[str, Any], seconds: float, total: int | None = N
                 extra = (f"{counts['errors']} errors" if counts["errors"] else ""
                          ) + _marked_counts(counts)
                 extra = f" ({extra.removeprefix(', ')})" if extra else ""
-                lines.append(f"  {label}={value}: {counts['passed']}/{counts['runs']}{extra}")
+                ran = counts["runs"] - counts["skipped"]
+                lines.append(f"  {label}={value}: {counts['passed']}/{ran}{extra}")
     worst = [w for w in summary["worst"] if w["status"] not in ("pass", "xpass")
              or w.get("max_error_ratio") is not None]
     if worst:
