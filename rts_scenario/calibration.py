@@ -201,10 +201,12 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     The first measurement plays each FE alone at weight 1 (``attenuation_db``) and reads its
     level, the RCS the radar reports. Each pair's measurement (one per pair, as on the bench)
     then plays the swept channel at the weight that makes it arrive at ``weight_ratio`` of the
-    other's amplitude given those levels, the stronger channel at weight 1; a weight beyond
-    the attenuator's range stops at it. The fit takes the weights as the attenuators played
-    them. A measurement some of whose cycles did not come back (a frame the host sent after
-    the cycle measuring it, a cycle lost) is played once more; the second one is taken.
+    other's amplitude given those levels, the stronger channel at weight 1 (both stronger
+    where the other's attenuation would pass the attenuator's maximum; on coarse steps, the
+    steps nearest the wanted contrast); a pair the attenuator cannot play at least half that
+    many dB apart is refused. The fit takes the weights as the attenuators played them. A
+    measurement some of whose cycles did not come back (a frame the host sent after the cycle
+    measuring it, a cycle lost) is played once more; the second one is taken.
 
     Parameters
     ----------
@@ -232,6 +234,8 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     ------
     MeasurementError
         An FE alone, or a pair, came back without a detection or without its cycle.
+    RtsError
+        A pair the attenuator's range and steps cannot play far enough from equal echoes.
     """
     if steps < 8:
         raise RtsError(f"calibration: steps must be >= 8, got {steps}")
@@ -324,17 +328,50 @@ def _single_levels(rig: Rig, fes: list[int], cycles: list[Detections]) -> FloatA
     return level
 
 
-def _pair_weights(rig: Rig, a: int, b: int, level_dbsm: FloatArray, ratio: float,
+def _pair_weights(rig: Rig, a: int, b: int, level_db: FloatArray, ratio: float,
                   attenuation_db: float) -> tuple[float, float]:
     """Weights of a and b that make b arrive at ``ratio`` of a, given their single levels.
 
-    The stronger weight is 1 (the level the single channels were measured at); the other
-    stops where its attenuation would pass the attenuator's maximum.
+    The stronger weight is 1 (the level the single channels were measured at); where the
+    other's attenuation would pass the attenuator's maximum, both are played that much
+    stronger. On an attenuator with steps, of the settings about the wanted ones the pair
+    whose echoes' sum swings closest to the wanted depth over the sweep is played (the nearest
+    steps may put the echoes at equal strength). A pair the attenuator cannot play at least
+    half the wanted dB apart is refused: its sweep would pass near cancellation.
     """
-    want_db = 20.0 * np.log10(ratio) + level_dbsm[a] - level_dbsm[b]  # b over a
-    weights_db = np.array([min(0.0, -want_db), min(0.0, want_db)])
-    lowest_db = attenuation_db + rig.cal_gain_db[[a, b]] - rig.limits.attenuation_max_db
-    w_a, w_b = 10.0 ** (np.maximum(weights_db, lowest_db) / 20.0)
+    lim = rig.limits
+    want_db = 20.0 * np.log10(ratio)  # b's echo over a's at the radar
+    weight_db = want_db + level_db[a] - level_db[b]  # b's weight over a's
+    nominal = attenuation_db + rig.cal_gain_db[[a, b]]  # each channel's attenuation at weight 1
+    att = nominal - np.array([min(0.0, -weight_db), min(0.0, weight_db)])
+    att -= max(0.0, float(att.max()) - lim.attenuation_max_db)
+    att = np.clip(att, lim.attenuation_min_db, lim.attenuation_max_db)
+    step = lim.attenuation_step_db
+    if step > 0.0:
+        top = np.floor((lim.attenuation_max_db - lim.attenuation_min_db) / step + 1e-9)
+        k = (att - lim.attenuation_min_db) / step
+        ks = [np.clip(np.array([np.floor(k[i] + 1e-9), np.ceil(k[i] - 1e-9)]), 0.0, top)
+              for i in range(2)]
+        grid_a, grid_b = (g.ravel() for g in np.meshgrid(*ks))
+        options = lim.attenuation_min_db + np.stack([grid_a, grid_b], axis=-1) * step
+    else:
+        options = att[None, :]
+    # b's echo over a's at the radar for each option, and how deep the sum of the two swings
+    # over the sweep (0: cancellation; the wanted ratio's depth is the aim).
+    arrives_db = (level_db[b] - (options[:, 1] - nominal[1])
+                  - (level_db[a] - (options[:, 0] - nominal[0])))
+    depth = np.abs(np.tanh(arrives_db * np.log(10.0) / 40.0))
+    best = int(np.argmin(np.abs(depth - abs(np.tanh(want_db * np.log(10.0) / 40.0)))))
+    if abs(arrives_db[best]) < abs(want_db) / 2.0:
+        raise RtsError(
+            f"rig {rig.name!r}: FE pair {a}-{b} cannot be played with FE {b}'s echo at least "
+            f"{abs(want_db) / 2.0:.1f} dB from FE {a}'s at the radar (it wants {want_db:+.1f} "
+            f"dB; their levels alone {level_db[a]:.2f} and {level_db[b]:.2f} dBsm; the "
+            f"attenuator's limits.attenuation_min_db = {lim.attenuation_min_db:g}, "
+            f"limits.attenuation_max_db = {lim.attenuation_max_db:g}, "
+            f"limits.attenuation_step_db = {step:g} allow {arrives_db[best]:+.1f} dB at best): "
+            f"its sweep would pass near cancellation, where the angle tells little")
+    w_a, w_b = 10.0 ** ((nominal - options[best]) / 20.0)
     return float(w_a), float(w_b)
 
 

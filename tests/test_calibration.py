@@ -488,8 +488,9 @@ def test_each_pair_plays_its_swept_channel_at_half_the_reference_s_level_at_the_
 
 def test_a_swept_channel_s_weight_stops_at_the_attenuator_s_range_and_is_fitted_as_played():
     # FE 1 is 4 dB stronger than FE 0: pair 0-1 wants FE 1 10 dB below FE 0's 40 dB, beyond
-    # the attenuator's 48 dB. It plays at 48 dB (arriving 4 dB below FE 0, not 6), within
-    # the rig's limits, and the fit takes the weight played: the offsets are recovered.
+    # the attenuator's 48 dB. It plays at 48 dB and FE 0 2 dB stronger than at weight 1
+    # (arriving 6 dB below FE 0, within the rig's limits), and the fit takes the weights
+    # played: the offsets are recovered.
     import dataclasses
 
     rig = dataclasses.replace(KIT, limits=dataclasses.replace(KIT.limits,
@@ -504,8 +505,11 @@ def test_a_swept_channel_s_weight_stops_at_the_attenuator_s_range_and_is_fitted_
         assert np.nanmax(schedule.attenuation_db) <= 48.0
     first = played[1]
     assert first.fe[0, 0, :2].tolist() == [0, 1]
-    np.testing.assert_allclose(first.attenuation_db[:, 0, :2], [[40.0, 48.0]] * 24)
-    assert result.pairs[0].weight_db == pytest.approx(-8.0)
+    want_db = 20.0 * np.log10(0.5)
+    # Within the FEs' 4e-5 dB level difference beyond the injected gains (1 m away each).
+    np.testing.assert_allclose(first.attenuation_db[:, 0, :2],
+                               [[48.0 - 4.0 + want_db, 48.0]] * 24, atol=0.001)
+    assert result.pairs[0].weight_db == pytest.approx(want_db - 4.0, abs=0.001)
     recovered_within(result, errors, 0.5, 0.05)
     assert not result.suspects
 
@@ -556,3 +560,77 @@ def test_a_weight_ratio_outside_0_to_1_is_refused(ratio):
     with pytest.raises(RtsError, match=r"weight_ratio must be within 0 and 1 \(exclusive\)"):
         calibrate(KIT, PAPER, simulated_measure(PAPER, KIT, ChannelErrors.none(4)),
                   weight_ratio=ratio)
+
+
+def _arrival_db(schedule, errors, a, b):
+    """FE b's echo over FE a's at the radar (dB) in each frame of a pair's pattern.
+
+    kit-table1's FEs all sit 1 m away: their echoes differ by the attenuators' settings and
+    the injected channel gains alone (4e-5 dB apart beyond them).
+    """
+    att = schedule.attenuation_db[:, 0, :2]
+    return -(att[:, 1] - att[:, 0]) + errors.gain_db[b] - errors.gain_db[a]
+
+
+def test_a_swept_weight_beyond_the_attenuator_s_range_raises_the_reference_instead():
+    # FE 1 is 6 dB stronger than the others: pair 0-1 wants FE 1 12 dB below FE 0's 40 dB,
+    # beyond the attenuator's 46 dB. Stopping FE 1 at 46 dB would play both echoes equally
+    # strong at the radar, the cancellation the single levels are measured to avoid; FE 0 is
+    # played 6 dB stronger instead (about 34 dB: the attenuator goes down to 0 dB).
+    import dataclasses
+
+    rig = dataclasses.replace(KIT, limits=dataclasses.replace(KIT.limits,
+                                                              attenuation_max_db=46.0))
+    errors = ChannelErrors(gain_db=np.array([0.0, 6.0, 0.0, 0.0]),
+                           phase_deg=np.array([0.0, 120.0, -70.0, 160.0]),
+                           delay_s=np.zeros(4), az_deg=np.zeros(4), el_deg=np.zeros(4),
+                           distance_m=np.zeros(4))
+    spy, played = _spied(simulated_measure(AWR, rig, errors))
+    result = calibrate(rig, AWR, spy)
+    for schedule, (a, b) in zip(played[1:], pairs_of(rig), strict=True):
+        assert np.nanmax(schedule.attenuation_db) <= 46.0
+        np.testing.assert_allclose(_arrival_db(schedule, errors, a, b), 20.0 * np.log10(0.5),
+                                   atol=0.001, err_msg=f"pair {a}-{b}")
+    np.testing.assert_allclose(played[1].attenuation_db[0, 0, :2],
+                               [46.0 - 6.0 + 20.0 * np.log10(0.5), 46.0], atol=0.001)
+    recovered_within(result, errors, 0.5, 0.05)
+
+
+def test_a_coarse_attenuator_never_rounds_a_pair_into_equal_echoes():
+    # 12 dB steps (4, 16, 28, 40, 52 dB): FE 1 is 0.5 dB weaker than FE 0, so pair 0-1 wants
+    # FE 1 at 45.5 dB. The nearest step, 40 dB, plays it 0.5 dB below FE 0 (close to
+    # cancellation); 52 dB plays it 12.5 dB below, far from it.
+    import dataclasses
+
+    rig = dataclasses.replace(KIT, limits=dataclasses.replace(
+        KIT.limits, attenuation_min_db=4.0, attenuation_step_db=12.0))
+    errors = ChannelErrors(gain_db=np.array([0.0, -0.5, 0.0, 0.0]),
+                           phase_deg=np.array([0.0, 120.0, -70.0, 160.0]),
+                           delay_s=np.zeros(4), az_deg=np.zeros(4), el_deg=np.zeros(4),
+                           distance_m=np.zeros(4))
+    spy, played = _spied(simulated_measure(AWR, rig, errors))
+    result = calibrate(rig, AWR, spy)
+    for schedule, (a, b), pair in zip(played[1:], pairs_of(rig), result.pairs, strict=True):
+        arrival = _arrival_db(schedule, errors, a, b)
+        assert np.all(np.abs(arrival) >= 3.0), (a, b, arrival[0])
+        np.testing.assert_allclose(pair.weight_db, -np.diff(schedule.attenuation_db[0, 0, :2]),
+                                   atol=1e-9)
+    recovered_within(result, errors, 0.5, 0.05)
+
+
+def test_a_pair_the_attenuator_cannot_play_apart_is_refused_naming_it():
+    # A 2 dB attenuator range cannot put FE 1's echo (as strong as FE 0's) 6 dB below it:
+    # the sweep would pass near cancellation. The calibration stops before playing the pair.
+    import dataclasses
+
+    from rts_scenario.errors import RtsError
+
+    rig = dataclasses.replace(KIT, limits=dataclasses.replace(
+        KIT.limits, attenuation_min_db=39.0, attenuation_max_db=41.0))
+    spy, played = _spied(simulated_measure(AWR, rig, ChannelErrors.none(4)))
+    with pytest.raises(RtsError) as info:
+        calibrate(rig, AWR, spy)
+    message = str(info.value)
+    assert "FE pair 0-1" in message and "limits.attenuation_min_db = 39" in message, message
+    assert "limits.attenuation_max_db = 41" in message, message
+    assert len(played) == 1  # the FEs alone only
