@@ -14,19 +14,6 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 
-def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
-    """``-n auto``: one worker more than the CPUs this process may run on.
-
-    The emulated-bench tests play scenes in real time and spend most of their run waiting on
-    sockets and the clock; a worker more keeps the CPUs busy meanwhile (the run took 217 s
-    against 273-283 s with one worker per CPU on two cores, every test passing both ways).
-    ``PYTEST_XDIST_AUTO_NUM_WORKERS`` still decides when set.
-    """
-    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
-        return None  # xdist's own hook reads it
-    return len(os.sched_getaffinity(0)) + 1 if hasattr(os, "sched_getaffinity") else None
-
-
 @pytest.fixture(scope="session", autouse=True)
 def plan_cache_dir(tmp_path_factory: pytest.TempPathFactory):
     """Keep the solver's disk cache of plans out of the user's cache directory.
