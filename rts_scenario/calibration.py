@@ -259,6 +259,8 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
         a, b = pairs[i]
         dets.append(_measured(measure, schedule.frames(i * steps, (i + 1) * steps),
                               f"FE pair {a}-{b}", remeasured))
+        # A pair that failed twice fails the calibration now, not after the pairs after it.
+        _require_cycles((a, b), dets[-1])
         if progress is not None:
             progress(i + 1, len(pairs))
     model = _PairModel(rig, radar, estimator, range_m)
@@ -461,13 +463,23 @@ def _check_pattern_limits(rig: Rig, fe: NDArray[np.int64], active: NDArray[np.bo
                            f"limits.{key} = {limit:g} {unit}{why}: the RTS cannot play it")
 
 
+def _require_cycles(pair: tuple[int, int], sweep: list[Detections]) -> None:
+    """Raise `MeasurementError` unless every frame of a pair's measurement has its cycle."""
+    if not any(d.complete for d in sweep):
+        # Not one cycle came back: the radar does not see the rig, or reports elsewhere.
+        raise MeasurementError(f"no detection for FE pair {pair[0]}-{pair[1]} in cycle "
+                               f"{sweep[0].cycle}; check that the radar sees the rig")
+    for d in sweep:
+        if not d.complete:
+            # No cycle for the frame: lost on the bus, later than the measurement waited for,
+            # or not told from the frame before's (docs/bench.md section 6). The radar may
+            # well see the rig: say what is missing.
+            raise MeasurementError(f"no cycle for FE pair {pair[0]}-{pair[1]}'s frame "
+                                   f"{d.cycle}, {_TWICE}")
+
+
 def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
-    if not d.complete:
-        # No cycle for the frame: lost on the bus, later than the measurement waited for, or
-        # not told from the frame before's (docs/bench.md section 6). The radar may well see
-        # the rig: say what is missing.
-        raise MeasurementError(f"no cycle for FE pair {pair[0]}-{pair[1]}'s frame {d.cycle}, "
-                               f"{_TWICE}")
+    # Every cycle of the pair's measurement came back (`_require_cycles`).
     k = d.strongest()
     values = getattr(d, what)
     if k is None or values is None:
@@ -530,10 +542,7 @@ class _PairModel:
         if len(sweep) != len(delays):
             raise RtsError(f"calibration: FE pair {a}-{b}: {len(sweep)} cycles reported for "
                            f"{len(delays)} frames played; the radar must report every frame")
-        if not any(d.complete for d in sweep):
-            # Not one cycle came back: the radar does not see the rig, or reports elsewhere.
-            raise MeasurementError(f"no detection for FE pair {a}-{b} in cycle "
-                                   f"{sweep[0].cycle}; check that the radar sees the rig")
+        _require_cycles((a, b), sweep)
         az = np.array([_strongest(d, "az_deg", pair) for d in sweep])
         el = np.array([_strongest(d, "el_deg", pair) for d in sweep])
         rng = np.array([_strongest(d, "range_m", pair) for d in sweep])

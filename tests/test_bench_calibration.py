@@ -115,7 +115,8 @@ def _held_calibration(monkeypatch, times):
     """Calibrate kit-table1 over UDP to an emulated RTS (no channel errors) whose sender is
     held 60 ms before pair 0-2's frame 30 goes out (after the radar's cycle measuring it, 50
     ms later), the first ``times`` times, as a loaded host may. Return the result (or the
-    error), how many frames the bench found sent late and how often the sender was held."""
+    error), how many frames the bench found sent late, how often the sender was held and how
+    many measurements were played."""
     from rts_scenario.outputs.udp import HEADER, UdpOutput
     from rts_scenario.pipeline import Pipeline, RunOptions
 
@@ -136,11 +137,17 @@ def _held_calibration(monkeypatch, times):
         options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
                              can_channel=channel)
         with Pipeline(rig, radar, options) as bench:
+            plays = []
+
+            def play(schedule):
+                plays.append(schedule.n_frames)
+                return bench.play(schedule)
+
             try:
-                outcome = cal.calibrate(rig, radar, bench.play)
+                outcome = cal.calibrate(rig, radar, play)
             except MeasurementError as exc:
                 outcome = exc
-    return outcome, bench.measurement_late_frames, len(held)
+    return outcome, bench.measurement_late_frames, len(held), len(plays)
 
 
 def test_a_pair_whose_frame_went_out_late_is_measured_again(monkeypatch):
@@ -149,7 +156,7 @@ def test_a_pair_whose_frame_went_out_late_is_measured_again(monkeypatch):
     # are (no errors: every offset 0).
     # (A loaded host may hold the sender elsewhere too: other measurements may be played
     # again, pair 0-2 must be.)
-    result, late, held = _held_calibration(monkeypatch, times=1)
+    result, late, held, _ = _held_calibration(monkeypatch, times=1)
     assert held == 1 and late >= 1
     assert isinstance(result, cal.CalibrationResult), result
     assert "FE pair 0-2" in result.remeasured
@@ -159,8 +166,10 @@ def test_a_pair_whose_frame_went_out_late_is_measured_again(monkeypatch):
 
 
 def test_a_pair_whose_frame_went_out_late_twice_stops_the_calibration(monkeypatch):
-    error, late, held = _held_calibration(monkeypatch, times=2)
-    assert held == 2 and late >= 2
+    # It stops there: the FEs alone, pair 0-1, pair 0-2 twice; the four pairs after it are not
+    # played (a failed calibration, minutes of bench time on a wide rig).
+    error, late, held, plays = _held_calibration(monkeypatch, times=2)
+    assert held == 2 and late >= 2 and plays == 4
     assert isinstance(error, MeasurementError), error
     message = str(error)
     assert "FE pair 0-2's frame 30" in message and "measured twice" in message, message
