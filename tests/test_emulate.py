@@ -637,7 +637,11 @@ def test_a_radar_thread_that_wakes_late_measures_what_the_rts_held_at_its_cycle(
                            "expectations.expected_limits": ["frames_sent_late"]})
     report, _ = rehearse(scene, mapping=None)
     assert report.passed, report.reasons
-    assert report.targets[0].detection_rate == 1.0
+    # Taken at the next frame, every third cycle would be out of tolerance (20 of 60). A host
+    # loaded beyond its cores may also hold the sender between a frame's recorded send time
+    # and its datagram (one cycle of 60 seen so): a margin for that, far from 20.
+    assert report.targets[0].out_of_tolerance_frames <= 2
+    assert report.targets[0].missed_frames == 0
     assert report.frames["checked"] == report.frames["total"] == 60
 
 
