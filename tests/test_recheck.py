@@ -1417,26 +1417,39 @@ def _radar_line_numbers(lines: list[bytes], identifier: bytes) -> list[int]:
     return [i for i, line in enumerate(lines) if identifier in line.split()]
 
 
+def _recorded_lines(tmp_path, suffix, identifier):
+    """Record a quiet approaching-target run as ``run{suffix}``: the scene, the log, the live
+    report, the log's lines and the indexes of those holding ``identifier``."""
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml", QUIET)
+    log = tmp_path / f"run{suffix}"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    assert live.passed
+    lines = log.read_bytes().splitlines(keepends=True)
+    detections = _radar_line_numbers(lines, identifier)
+    assert len(detections) > 40
+    return scene, log, live, lines, detections
+
+
+def _re_checked_as(scene, log, lines, path):
+    """Write ``lines`` to ``path`` with ``log``'s sidecar; return its re-check."""
+    path.write_bytes(b"".join(lines))
+    shutil.copy(str(log) + ".rts.json", str(path) + ".rts.json")
+    return check_log(scene, path)
+
+
 def test_trc_records_python_can_does_not_read_fail_a_re_check_where_they_may_be_the_radar_s(
         tmp_path):
     # python-can's TRC reader drops a record of a type it has no parser for with an info line
     # of its logger alone. Status records (ST, EC, EV) hold no identifier: noted, the verdict
     # the live one. Records of such a type holding the radar's detection identifier (0101,
     # rts-scenario's first detection message) may be its detections: the re-check fails.
-    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml", QUIET)
-    log = tmp_path / "run.trc"
-    live = run_scene(scene, RunOptions(bus_log=str(log))).report
-    assert live.passed
-    lines = log.read_bytes().splitlines(keepends=True)
-    detections = _radar_line_numbers(lines, b"0101")
-    assert len(detections) > 40
+    scene, log, live, lines, detections = _recorded_lines(tmp_path, ".trc", b"0101")
     status = [b"      9      1500.000 ST  1     -    Rx -  4    00 00 00 08\r\n",
               b"      9      1500.000 EC  1     -    Rx -  2    80 00\r\n",
               b"      9      1500.000 ST  1     -    Rx -  4    00 00 00 04\r\n"]
     noted = tmp_path / "status.trc"
-    noted.write_bytes(b"".join(lines[:detections[10]] + status + lines[detections[10]:]))
-    shutil.copy(str(log) + ".rts.json", str(noted) + ".rts.json")
-    result = check_log(scene, noted)
+    result = _re_checked_as(scene, log, lines[:detections[10]] + status + lines[detections[10]:],
+                            noted)
     assert result.report.passed, result.report.reasons
     assert result.report.frames == live.frames
     assert (f"the log {noted} holds 3 records python-can's reader does not read (2 of type "
@@ -1446,9 +1459,7 @@ def test_trc_records_python_can_does_not_read_fail_a_re_check_where_they_may_be_
     for i in detections[20:24]:
         lines[i] = lines[i].replace(b" DT ", b" XD ")
     dropped = tmp_path / "dropped.trc"
-    dropped.write_bytes(b"".join(lines))
-    shutil.copy(str(log) + ".rts.json", str(dropped) + ".rts.json")
-    result = check_log(scene, dropped)
+    result = _re_checked_as(scene, log, lines, dropped)
     assert not result.report.passed
     assert (f"the log {dropped} holds 4 records python-can's reader does not read (4 of type "
             f"'XD'), 4 of them with the radar's identifiers (the first at line "
@@ -1462,19 +1473,12 @@ def test_asc_lines_python_can_does_not_read_fail_a_re_check_where_they_may_be_th
     # passes over every other line without a word. Lines of other events (a CAN controller's
     # status, bus statistics) hold no radar message: noted. A radar frame's line it does not
     # read (its time written without a fraction) is one lost: the re-check fails.
-    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml", QUIET)
-    log = tmp_path / "run.asc"
-    live = run_scene(scene, RunOptions(bus_log=str(log))).report
-    assert live.passed
-    lines = log.read_bytes().splitlines(keepends=True)
-    detections = _radar_line_numbers(lines, b"101")
-    assert len(detections) > 40
+    scene, log, live, lines, detections = _recorded_lines(tmp_path, ".asc", b"101")
     events = [b"   1.500000 CAN 1 Status:chip status error active\n",
               b"   1.500000 1 Statistic: D 257 R 0 XD 0 XR 0 E 0 O 0 B 3.21%\n"]
     noted = tmp_path / "events.asc"
-    noted.write_bytes(b"".join(lines[:detections[10]] + events + lines[detections[10]:]))
-    shutil.copy(str(log) + ".rts.json", str(noted) + ".rts.json")
-    result = check_log(scene, noted)
+    result = _re_checked_as(scene, log, lines[:detections[10]] + events + lines[detections[10]:],
+                            noted)
     assert result.report.passed, result.report.reasons
     assert result.report.frames == live.frames
     assert (f"the log {noted} holds 2 records python-can's reader does not read (1 of type "
@@ -1484,9 +1488,7 @@ def test_asc_lines_python_can_does_not_read_fail_a_re_check_where_they_may_be_th
     time_s, rest = lines[at].split(None, 1)
     lines[at] = b"   " + str(round(float(time_s))).encode() + b" " + rest
     dropped = tmp_path / "dropped.asc"
-    dropped.write_bytes(b"".join(lines))
-    shutil.copy(str(log) + ".rts.json", str(dropped) + ".rts.json")
-    result = check_log(scene, dropped)
+    result = _re_checked_as(scene, log, lines, dropped)
     assert not result.report.passed
     assert (f"the log {dropped} holds 1 record python-can's reader does not read (1 of type "
             f"'Rx'), 1 of them with the radar's identifiers (the first at line {at + 1}): the "
