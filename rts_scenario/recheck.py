@@ -142,6 +142,8 @@ class Alignment:
     notes: list[str] = field(default_factory=list)
     # How the log was cut short, where its format tells (`log_cut_short`); None: it was not.
     log_cut_short: dict[str, Any] | None = None
+    # Records of a text log python-can's reader passes over (`_Unread.summary`); None: none.
+    log_unread: dict[str, Any] | None = None
 
     def describe(self) -> str:
         """One line for people."""
@@ -187,6 +189,7 @@ class Alignment:
                 "statuses": self.statuses,
                 "log_cut_short": None if self.log_cut_short is None else {
                     k: v for k, v in self.log_cut_short.items() if k != "why"},
+                "log_unread": self.log_unread,
                 "notes": list(self.notes)}
 
 
@@ -974,6 +977,14 @@ class _Unread:
             return (number, extended) in self.radar_ids
         return True  # a format whose reader gives a message of each line or fails
 
+    def summary(self) -> dict[str, Any] | None:
+        """Plain data for JSON: the records not read, by type; None where there were none."""
+        total = sum(self.counts.values())
+        if not total:
+            return None
+        return {"records": total, "by_type": dict(self.counts.most_common()),
+                "with_radar_identifiers": self.radar, "first_radar_line": self.first_radar_line}
+
     def verdict(self, log: str | Path) -> tuple[str | None, str | None]:
         """Return ``(reason, note)``: a reason where a record not read may be the radar's."""
         total = sum(self.counts.values())
@@ -1469,6 +1480,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                                f"the RTS played (with {(sidecar or {}).get('method')})")
     unread_reason, unread_note = (index.unread.verdict(log) if index.unread is not None
                                   else (None, None))
+    alignment.log_unread = index.unread.summary() if index.unread is not None else None
     if unread_reason:
         # Records that may be the radar's, which python-can does not read: judged without
         # them, its cycles would be judged by what the log does not hold.

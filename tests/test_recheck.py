@@ -1455,6 +1455,9 @@ def test_trc_records_python_can_does_not_read_fail_a_re_check_where_they_may_be_
     assert (f"the log {noted} holds 3 records python-can's reader does not read (2 of type "
             f"'ST', 1 of type 'EC'), none of them with the radar's identifiers"
             in result.alignment.notes), result.alignment.notes
+    assert result.alignment.to_dict()["log_unread"] == {
+        "records": 3, "by_type": {"ST": 2, "EC": 1}, "with_radar_identifiers": 0,
+        "first_radar_line": None}
     # Four of the radar's detections in records of a type python-can has no parser for.
     for i in detections[20:24]:
         lines[i] = lines[i].replace(b" DT ", b" XD ")
@@ -1465,6 +1468,10 @@ def test_trc_records_python_can_does_not_read_fail_a_re_check_where_they_may_be_
             f"'XD'), 4 of them with the radar's identifiers (the first at line "
             f"{detections[20] + 1}): the cycles they belong to are judged without them"
             in result.report.reasons), result.report.reasons
+    assert result.alignment.to_dict()["log_unread"] == {
+        "records": 4, "by_type": {"XD": 4}, "with_radar_identifiers": 4,
+        "first_radar_line": detections[20] + 1}
+    assert check_log(scene, log).alignment.to_dict()["log_unread"] is None  # all read
 
 
 def test_asc_lines_python_can_does_not_read_fail_a_re_check_where_they_may_be_the_radar_s(
@@ -1484,6 +1491,9 @@ def test_asc_lines_python_can_does_not_read_fail_a_re_check_where_they_may_be_th
     assert (f"the log {noted} holds 2 records python-can's reader does not read (1 of type "
             f"'CAN', 1 of type 'Statistic'), none of them with the radar's identifiers"
             in result.alignment.notes), result.alignment.notes
+    assert result.alignment.to_dict()["log_unread"] == {
+        "records": 2, "by_type": {"CAN": 1, "Statistic": 1}, "with_radar_identifiers": 0,
+        "first_radar_line": None}
     at = detections[20]
     time_s, rest = lines[at].split(None, 1)
     lines[at] = b"   " + str(round(float(time_s))).encode() + b" " + rest
@@ -1494,3 +1504,6 @@ def test_asc_lines_python_can_does_not_read_fail_a_re_check_where_they_may_be_th
             f"'Rx'), 1 of them with the radar's identifiers (the first at line {at + 1}): the "
             f"cycles they belong to are judged without them"
             in result.report.reasons), result.report.reasons
+    assert result.alignment.to_dict()["log_unread"] == {
+        "records": 1, "by_type": {"Rx": 1}, "with_radar_identifiers": 1,
+        "first_radar_line": at + 1}
