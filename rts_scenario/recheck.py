@@ -863,6 +863,8 @@ def _messages(path: Path, unread: _Unread | None = None) -> Iterator[can.Message
                 text = _CountedLines(path, _text_end(path).complete_bytes,
                                      None if unread is None else unread.line)
                 reader = TEXT_LOG_READERS[suffix](file=text)
+                if unread is not None:
+                    unread.reader = reader
             else:
                 reader = can.LogReader(str(path))
         except ImportError as exc:
@@ -915,6 +917,24 @@ _ASC_NO_MESSAGE = re.compile(
 _TRC_IDENTIFIER = re.compile(r"[0-9A-Fa-f]{4}|[0-9A-Fa-f]{8}")
 
 
+def _trc_identifier_column(reader: object) -> int | None:
+    """Return the word of a TRC record holding its identifier, as python-can's reader reads it.
+
+    Versions 1.1 and 1.3 put it at a fixed place; 2.x names it in the header's ``$COLUMNS``
+    (``I``). None where the reader read no version or columns that place it.
+    """
+    version = getattr(reader, "file_version", None)
+    name = getattr(version, "name", "")
+    if name == "V1_1":
+        return 3
+    if name == "V1_3":
+        return 4
+    if name in ("V2_0", "V2_1"):
+        column = (getattr(reader, "columns", None) or {}).get("I")
+        return column if isinstance(column, int) else None
+    return None
+
+
 class _Unread:
     """The records of a text log python-can's reader gave no message of, by type.
 
@@ -933,6 +953,9 @@ class _Unread:
         self.radar = 0  # ... of them holding one of the radar's identifiers
         self.first_radar_line: int | None = None
         self._base = 16  # an ASC log's numbers' (its header's ``base``)
+        # The text log's reader: a TRC reader knows, once it has read the header, which of a
+        # record's words holds its identifier.
+        self.reader: object = None
 
     def line(self, number: int, text: str) -> None:
         """Take the line ``number`` (from 1) the reader gave no message of."""
@@ -960,7 +983,12 @@ class _Unread:
 
     def _holds_radar_id(self, words: list[str]) -> bool:
         if self.suffix == ".trc":
-            return any((int(w, 16), len(w) == 8) in self.radar_ids for w in words
+            at = _trc_identifier_column(self.reader)
+            if at is not None:  # the word python-can reads the identifier of a frame from
+                candidates = words[at:at + 1]
+            else:  # a version it names no column for: any word written as an identifier
+                candidates = words
+            return any((int(w, 16), len(w) == 8) in self.radar_ids for w in candidates
                        if _TRC_IDENTIFIER.fullmatch(w))
         if self.suffix == ".asc":
             # Where an ASC frame line holds its identifier: after its time and channel, or

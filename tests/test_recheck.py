@@ -1458,6 +1458,14 @@ def test_trc_records_python_can_does_not_read_fail_a_re_check_where_they_may_be_
     assert result.alignment.to_dict()["log_unread"] == {
         "records": 3, "by_type": {"ST": 2, "EC": 1}, "with_radar_identifiers": 0,
         "first_radar_line": None}
+    # A word elsewhere in a record that reads as the radar's identifier (a record number
+    # written with leading zeros) is not its identifier: the header's $COLUMNS places that.
+    numbered = tmp_path / "numbered.trc"
+    padded = [b"   0101      1500.000 ST  1     -    Rx -  4    00 00 00 08\r\n"]
+    result = _re_checked_as(scene, log, lines[:detections[10]] + padded + lines[detections[10]:],
+                            numbered)
+    assert result.report.passed, result.report.reasons
+    assert result.alignment.to_dict()["log_unread"]["with_radar_identifiers"] == 0
     # Four of the radar's detections in records of a type python-can has no parser for.
     for i in detections[20:24]:
         lines[i] = lines[i].replace(b" DT ", b" XD ")
