@@ -297,6 +297,28 @@ def test_a_counter_of_sixteen_values_keeps_a_step_of_eight_forward(tmp_path):
     assert (receiver.stats.duplicates, receiver.stats.reordered) == (1, 0)
 
 
+def test_a_counter_wrapping_after_14_restarts_within_seven_steps_either_way(autosar):
+    # The restart's counter 0 on 15 values: up to seven cycles counting on from it (1..7)
+    # are the stream's own, its first header held up behind them; a cycle up to seven before
+    # it (8, seven before 0) leads up to it (a radar measuring before the stream's start);
+    # cycles ahead of it that do not count on from it (5; 3 and 4) are the stream before's,
+    # dropped.
+    receiver = DetectionReceiver(CanMapping.from_file(autosar))
+    for before, order, dropped in (([], [*range(1, 8), 0, *range(8, 12)], 0),
+                                   ([8], [0, 1, 2], 0),
+                                   ([5], [0, 1, 2], 1),
+                                   ([3, 4], [0, 1, 2], 2)):
+        receiver.reset(restart=0)
+        got = []
+        for a in [*before, *order]:
+            receiver.on_message_received(header_p2(a, 0))
+            got += receiver.pop()
+        got += receiver.flush()
+        assert sorted(c.cycle for c in got) == sorted([*before, *order][dropped:]), before
+        assert receiver.stale_cycles == dropped, before
+    assert (receiver.stats.duplicates, receiver.stats.conflicts) == (0, 0)
+
+
 def test_the_invalid_value_15_of_a_counter_wrapping_after_14_is_refused(autosar):
     receiver, got = receive(autosar, [header_p2(14, 0), header_p2(15, 0), header_p2(0, 0)])
     assert receiver.stats.decode_errors == 1
