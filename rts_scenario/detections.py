@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -131,14 +131,45 @@ def unwrap_counter(counter: NDArray[np.int64], near: NDArray[np.int64] | int,
     return counter + k * modulus
 
 
+@overload
+def signed_step(counter: int, reference: int, modulus: int) -> int: ...
+
+
+@overload
+def signed_step(counter: NDArray[np.int64], reference: NDArray[np.int64] | int,
+                modulus: int) -> NDArray[np.int64]: ...
+
+
+def signed_step(counter: Any, reference: Any, modulus: int) -> Any:
+    """Return the step from ``reference`` to ``counter``, a counter of ``modulus`` values.
+
+    One of ``-largest_step_back(modulus)`` to ``modulus // 2``: negative where ``counter`` is
+    behind ``reference`` (a reordered or repeated cycle), positive where it is ahead (a new
+    cycle). A counter of 16 values steps -7..8 (8 on is forward), one of 15 values -7..7.
+    Whole numbers or arrays of them.
+    """
+    step = (counter - reference) % modulus
+    return step - modulus * (step > modulus // 2)
+
+
+def largest_step_back(modulus: int) -> int:
+    """Return how far back a counter of ``modulus`` values steps at most (`signed_step`).
+
+    A receiver remembering the latest counter and this many before it knows every counter
+    behind the latest, and none ahead of it: (modulus - 1) // 2, 7 for 15 or 16 values.
+    """
+    return (modulus - 1) // 2
+
+
 def sequential_numbers(counters: NDArray[np.int64], modulus: int,
                        bus_t_s: NDArray[np.float64] | None = None,
                        cycle_s: float | None = None) -> NDArray[np.int64]:
     """Cycle numbers of counters in arrival order, the first 0: each a step from the one before.
 
-    A step is taken modulo the counter's wrap and is less than half of it (a step back is a
-    reordered cycle). A counter narrower than the cycles in flight (an 8-bit one wraps every
-    256 cycles) names its cycle only this way, never by where the cycle is expected.
+    A step is taken modulo the counter's wrap (`signed_step`): forward by half of it at most,
+    back by less (a step back is a reordered cycle). A counter narrower than the cycles in
+    flight (an 8-bit one wraps every 256 cycles) names its cycle only this way, never by where
+    the cycle is expected.
 
     With the cycles' bus times (``bus_t_s``, NaN where not known) and the radar's ``cycle_s``,
     a gap longer than half the counter's range is told by the time it took: the step is the one
@@ -149,8 +180,7 @@ def sequential_numbers(counters: NDArray[np.int64], modulus: int,
     counters = np.asarray(counters, dtype=np.int64)
     if counters.size == 0:
         return counters
-    step = np.mod(np.diff(counters), modulus)
-    step = np.where(step > modulus // 2, step - modulus, step)
+    step = signed_step(counters[1:], counters[:-1], modulus)
     if bus_t_s is not None and cycle_s is not None and counters.size > 1:
         elapsed = np.diff(np.asarray(bus_t_s, dtype=np.float64)) / cycle_s
         long = np.isfinite(elapsed) & (elapsed > modulus // 2 - GAP_TOLERANCE_CYCLES)
@@ -168,4 +198,4 @@ GAP_TOLERANCE_CYCLES = 2.0
 
 
 __all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "Detections", "bus_times", "host_times",
-           "sequential_numbers", "unwrap_counter"]
+           "largest_step_back", "sequential_numbers", "signed_step", "unwrap_counter"]

@@ -269,6 +269,56 @@ def test_a_counter_wrapping_after_14_tells_reordered_and_copied_cycles_over_the_
     assert [c.cycle for c in got] == [13, 14, 1, 0, 2]
 
 
+def test_a_header_seven_back_on_a_counter_wrapping_after_14_is_behind_not_a_new_cycle(autosar):
+    # Fifteen values: a step is -7..7, so a counter seven before the latest is behind it (and
+    # one seven after is ahead). Cycles 0..7, then 0 again: a copy of the cycle seven back.
+    # Then 8..11, cycle 9's header held up behind 10's (one back): reordered.
+    sent = [*range(8), 0, 8, 10, 9, 11]
+    receiver, got = receive(autosar, [header_p2(a, 0) for a in sent])
+    assert receiver.stats.duplicates == 1
+    assert receiver.stats.reordered == 1  # 9 only
+    assert [c.cycle for c in got] == [*range(9), 10, 9, 11]
+    # A cycle seen for the first time seven back (0 after 1..7) is late, not the next one:
+    # the latest stays 7, and 8 is one step on from it.
+    receiver, got = receive(autosar, [header_p2(a, 0) for a in (*range(1, 8), 0, 8)])
+    assert receiver.stats.reordered == 1 and receiver.stats.duplicates == 0
+    assert [c.cycle for c in got] == [*range(1, 8), 0, 8]
+
+
+def test_a_counter_of_sixteen_values_keeps_a_step_of_eight_forward(tmp_path):
+    # Sixteen values: a step is -7..8; a counter eight before the latest is eight after it, a
+    # new cycle, and seven before is behind.
+    path = _mapping(tmp_path, "sixteen", AUTOSAR_MAPPING.replace("  counter_max: 14\n", ""))
+    assert CanMapping.from_file(path).counter_modulus == 16
+    receiver, got = receive(path, [header_p2(a, 0) for a in (*range(9), 0)])
+    assert (receiver.stats.duplicates, receiver.stats.reordered) == (0, 0)
+    assert [c.cycle for c in got] == [*range(9), 0]
+    receiver, got = receive(path, [header_p2(a, 0) for a in (*range(8), 0)])
+    assert (receiver.stats.duplicates, receiver.stats.reordered) == (1, 0)
+
+
+def test_a_counter_wrapping_after_14_restarts_within_seven_steps_either_way(autosar):
+    # The restart's counter 0 on 15 values: up to seven cycles counting on from it (1..7)
+    # are the stream's own, its first header held up behind them; a cycle up to seven before
+    # it (8, seven before 0) leads up to it (a radar measuring before the stream's start);
+    # cycles ahead of it that do not count on from it (5; 3 and 4) are the stream before's,
+    # dropped.
+    receiver = DetectionReceiver(CanMapping.from_file(autosar))
+    for before, order, dropped in (([], [*range(1, 8), 0, *range(8, 12)], 0),
+                                   ([8], [0, 1, 2], 0),
+                                   ([5], [0, 1, 2], 1),
+                                   ([3, 4], [0, 1, 2], 2)):
+        receiver.reset(restart=0)
+        got = []
+        for a in [*before, *order]:
+            receiver.on_message_received(header_p2(a, 0))
+            got += receiver.pop()
+        got += receiver.flush()
+        assert sorted(c.cycle for c in got) == sorted([*before, *order][dropped:]), before
+        assert receiver.stale_cycles == dropped, before
+    assert (receiver.stats.duplicates, receiver.stats.conflicts) == (0, 0)
+
+
 def test_the_invalid_value_15_of_a_counter_wrapping_after_14_is_refused(autosar):
     receiver, got = receive(autosar, [header_p2(14, 0), header_p2(15, 0), header_p2(0, 0)])
     assert receiver.stats.decode_errors == 1
@@ -301,9 +351,11 @@ def test_an_after_scene_cycle_whose_counter_comes_again_counts_alike_live_and_re
         autosar, tmp_path):
     # After the scene's 150 cycles the radar sends cycles 150..157, then cycle 150's messages
     # again. A counter wrapping after 14 reads 150 (alive 0) after 157 (alive 7) as seven
-    # steps back, and the receiver remembers seven counters: it is a second cycle numbered
-    # 150. The first five (150..154) are measured within the window after the scene's end:
-    # five after_scene and one repeated, live and in the re-check of the recording.
+    # steps back, and the receiver remembers the latest counter and the seven before it: its
+    # header and detections are copies (duplicates), the detections also parts of a cycle
+    # before the latest (reordered). The first five (150..154) are measured within the window
+    # after the scene's end: five after_scene and none repeated, live and in the re-check of
+    # the recording.
     import dataclasses
 
     from rts_scenario.pipeline import Pipeline, RunOptions
@@ -313,12 +365,14 @@ def test_an_after_scene_cycle_whose_counter_comes_again_counts_alike_live_and_re
     scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml")
     log = tmp_path / "drive.blf"
     options = RunOptions(mapping=str(autosar), bus_log=str(log))
+    copied = []
     with Pipeline.for_scene(scene, options) as pipeline:
         sink = pipeline.output._sink
 
         def with_copy_after_the_scene(cycles):
             if cycles and cycles[-1].cycle == 149:
                 last = cycles[-1]
+                copied.append(last.count)
                 after = [dataclasses.replace(last, cycle=150 + k, t_s=last.t_s + 0.05 * (k + 1))
                          for k in range(8)]
                 cycles = [*cycles, *after, after[0]]
@@ -329,9 +383,86 @@ def test_an_after_scene_cycle_whose_counter_comes_again_counts_alike_live_and_re
     again = check_log(scene, log).report
     for report in (live, again):
         assert report.frames["total"] == report.frames["checked"] == 150
-        assert (report.frames["after_scene"], report.frames["repeated"]) == (5, 1)
-        assert report.bus["duplicates"] == report.bus["conflicts"] == 0
+        assert (report.frames["after_scene"], report.frames["repeated"]) == (5, 0)
+        assert report.bus["duplicates"] == 1 + copied[0]
+        assert report.bus["reordered"] == copied[0]
+        assert report.bus["conflicts"] == 0
         assert report.passed, report.reasons
+    assert again.frames == live.frames
+
+
+def _live_and_re_checked(autosar, tmp_path, monkeypatch, *, copy_before=None, lost=()):
+    """Run the approaching target with the AUTOSAR-style radar, recording its bus, and
+    re-check the recording: return both reports and the messages of each cycle sent.
+
+    ``copy_before``: (k, j): cycle j's messages go on the bus again just before cycle k's
+    header (a gateway repeating them). ``lost``: cycles that never reach the bus.
+    """
+    from rts_scenario.canbus import ListenerBus
+    from rts_scenario.pipeline import Pipeline, RunOptions
+    from rts_scenario.recheck import check_log
+    from rts_scenario.scenario import load_scenario
+
+    sent: list[list[can.Message]] = []
+
+    class Repeating(ListenerBus):
+        def send(self, msg, timeout=None):
+            if msg.arbitration_id == HEADER_ID:
+                if copy_before is not None and len(sent) == copy_before[0]:
+                    for old in sent[copy_before[1]]:
+                        super().send(can.Message(
+                            arbitration_id=old.arbitration_id, is_extended_id=False,
+                            data=old.data, timestamp=msg.timestamp - 0.001))
+                sent.append([])
+            sent[-1].append(msg)
+            super().send(msg)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Repeating)
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    log = tmp_path / "drive.blf"
+    with Pipeline.for_scene(scene, RunOptions(mapping=str(autosar), bus_log=str(log))) as run:
+        sink = run.output._sink
+        run.output._sink = lambda cycles: sink([c for c in cycles if c.cycle not in lost])
+        live = run.run(scene).report
+    return live, check_log(scene, log).report, sent
+
+
+def test_a_cycle_repeated_seven_back_on_a_counter_wrapping_after_14_is_a_copy_live_and_re_checked(
+        autosar, tmp_path, monkeypatch):
+    # Cycle 20's messages come again just before cycle 28's header: alive 5 after alive 12,
+    # seven back on a counter of 15 values. Every message of it is a copy (duplicates), its
+    # detections parts of a cycle before the latest too (reordered, counted as late); no
+    # cycle is numbered anew: the 150 cycles are all checked and none is repeated or missing,
+    # live and in the re-check of the recording.
+    live, again, sent = _live_and_re_checked(autosar, tmp_path, monkeypatch,
+                                             copy_before=(28, 20))
+    assert [m.data[1] & 0x0F for m in (sent[20][0], sent[27][0])] == [5, 12]
+    for report in (live, again):
+        assert report.frames["total"] == report.frames["checked"] == 150
+        assert (report.frames["missing"], report.frames["repeated"],
+                report.frames["after_scene"]) == (0, 0, 0)
+        assert report.bus["duplicates"] == len(sent[20])
+        assert report.bus["reordered"] == report.frames["late"] == len(sent[20]) - 1
+        assert report.bus["conflicts"] == 0
+        assert report.passed, report.reasons
+    assert again.frames == live.frames
+    assert again.bus["duplicates"] == live.bus["duplicates"]
+    assert again.bus["reordered"] == live.bus["reordered"]
+
+
+def test_a_counter_wrapping_after_14_jumping_seven_on_is_six_missing_cycles_live_and_re_checked(
+        autosar, tmp_path, monkeypatch):
+    # Cycles 21..26 never come: alive 12 (cycle 27) follows alive 5 (cycle 20), seven steps on
+    # on a counter of 15 values. Six cycles are missing, the other 144 checked, live and in
+    # the re-check of the recording.
+    live, again, sent = _live_and_re_checked(autosar, tmp_path, monkeypatch,
+                                             lost=range(21, 27))
+    assert [m[0].data[1] & 0x0F for m in sent[20:22]] == [5, 12]
+    for report in (live, again):
+        assert report.frames["total"] == 150
+        assert (report.frames["missing"], report.frames["checked"]) == (6, 144)
+        assert (report.frames["repeated"], report.frames["late"]) == (0, 0)
+        assert report.bus["duplicates"] == report.bus["reordered"] == 0
     assert again.frames == live.frames
 
 

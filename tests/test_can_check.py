@@ -1,3 +1,4 @@
+import dataclasses
 import json
 from pathlib import Path
 
@@ -5,12 +6,14 @@ import can
 import cantools
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rts_scenario import CheckError
 from rts_scenario.canbus import DetectionPublisher, DetectionReceiver, open_bus
 from rts_scenario.canbus.mapping import CanMapping
 from rts_scenario.check import check_cycles as check
-from rts_scenario.detections import Detections
+from rts_scenario.detections import Detections, sequential_numbers
 from rts_scenario.kinematics import compute_tracks
 from rts_scenario.radar.simulate import SimulatedRadar
 from rts_scenario.scenario import load_scenario
@@ -327,6 +330,36 @@ def _receive(messages):
     for msg in messages:
         receiver.on_message_received(msg)
     return receiver
+
+
+BUILTIN = CanMapping.builtin()
+
+
+@settings(max_examples=60, deadline=None)
+@given(modulus=st.integers(2, 300), latest=st.integers(0, 299))
+def test_the_receiver_and_the_cycle_numbering_agree_on_behind_for_every_step(modulus, latest):
+    # A counter of `modulus` values: the step from the latest counter to another is the one
+    # of the counter's differences with -modulus < 2 * step <= modulus (for 15 values -7..7,
+    # for 16 -7..8). The cycle numbering takes that step, and the receiver takes a header
+    # with a negative one for a reordered cycle, a positive one for a new cycle.
+    latest %= modulus
+    mapping = dataclasses.replace(BUILTIN, counter_max=modulus - 1)
+    receiver = DetectionReceiver(mapping)
+    publisher = DetectionPublisher(recorder := Recorder(), mapping=mapping)
+    for other in range(modulus):
+        if other == latest:
+            continue
+        (step,) = [s for s in range(-modulus + 1, modulus)
+                   if (s - (other - latest)) % modulus == 0 and -modulus < 2 * s <= modulus]
+        assert sequential_numbers(np.array([latest, other]), modulus)[1] == step
+        receiver.reset()
+        before = receiver.stats.reordered
+        recorder.clear()
+        publisher.publish_many([Detections.empty(latest, None), Detections.empty(other, None)])
+        for msg in recorder:
+            receiver.on_message_received(msg)
+        assert [c.cycle for c in receiver.flush()] == [latest, other]
+        assert receiver.stats.reordered - before == (step < 0), (modulus, latest, other)
 
 
 def test_a_copy_of_a_whole_cycle_is_a_duplicate_not_a_conflict():

@@ -28,7 +28,7 @@ import cantools
 import numpy as np
 from cantools.database.utils import create_encode_decode_formats
 
-from ..detections import GAP_TOLERANCE_CYCLES, Detections
+from ..detections import GAP_TOLERANCE_CYCLES, Detections, largest_step_back, signed_step
 from ..errors import BusError, OutputError
 from ..hostclock import HostClockWatch
 from .checksums import Seal, Verify, checksum_of
@@ -690,6 +690,9 @@ class DetectionReceiver(can.Listener):
                        for part in self._read}
         self.stats = BusStats()
         self._counter_modulus = m.counter_modulus
+        # The latest counter and those that can be behind it (`largest_step_back`): any other
+        # is ahead of it.
+        self._reach = largest_step_back(m.counter_modulus) + 1
         detection = {sg.name: sg for n in m.messages for sg in db.get_message_by_name(n).signals}
         # Detection messages carry the low bits of the cycle counter (if any).
         self._low_modulus = (1 << detection[m.frame_counter].length
@@ -729,8 +732,8 @@ class DetectionReceiver(can.Listener):
         otherwise the others were measured before the restart: they are dropped (counted in
         `stale_cycles`) and their counters forgotten (a header they made look reordered no
         longer counts so), so the new count is neither taken for late cycles nor for copies.
-        A restart not seen within `OPEN_CYCLES` headers (half the counter's range, if less;
-        its header lost) is no longer waited for.
+        A restart not seen within `OPEN_CYCLES` headers (half the counter's range, rounded up,
+        if less; its header lost) is no longer waited for.
         """
         with self._lock:
             self._reset(restart)
@@ -919,12 +922,11 @@ class DetectionReceiver(can.Listener):
             # of one running 1..14): the message is invalid.
             self.stats.decode_errors += 1
             return
-        half = self._counter_modulus // 2
         if self._restart is not None:
             if counter == self._restart:
                 self._drop_before_restart(self._stale_before_restart(counter))
                 self._restart = None
-            elif self._headers_before_restart >= min(OPEN_CYCLES, half):
+            elif self._headers_before_restart >= min(OPEN_CYCLES, self._reach):
                 # The restart's header was lost: the count later coming round to it again is
                 # no restart.
                 self._restart = None
@@ -946,7 +948,8 @@ class DetectionReceiver(can.Listener):
             else:
                 self.stats.conflicts += 1
             return
-        reordered = self._latest >= 0 and _behind(counter, self._latest, self._counter_modulus)
+        reordered = self._latest >= 0 and signed_step(counter, self._latest,
+                                                      self._counter_modulus) < 0
         if reordered:
             self.stats.reordered += 1
         else:
@@ -969,11 +972,12 @@ class DetectionReceiver(can.Listener):
         # for a narrow counter), then goes on as incomplete: held longer, the counter that
         # names it could come round again and its place among the cycles be lost. Not while a
         # restart is awaited: the latest counter may be the stream before's, far from the new
-        # count (the wait lasts `OPEN_CYCLES` headers at most, half the counter's range if less).
+        # count (the wait lasts `OPEN_CYCLES` headers at most, half the counter's range rounded
+        # up if less).
         held = min(OPEN_CYCLES, max(1, self._counter_modulus // 4))
         if self._restart is None:
             for old in [c for c in self._open
-                        if held <= (self._latest - c) % self._counter_modulus < half]:
+                        if -signed_step(c, self._latest, self._counter_modulus) >= held]:
                 self._finish(old)
         while len(self._open) > OPEN_CYCLES:
             self._finish(next(iter(self._open)))
@@ -1057,8 +1061,7 @@ class DetectionReceiver(can.Listener):
         """
         unplaced, self._unplaced = self._unplaced, []
         for after, rule, values in unplaced:
-            step = None if counter is None else (counter - after) % self._counter_modulus
-            if step is not None and 2 <= step < max(2, self._counter_modulus // 2) + 1:
+            if counter is not None and signed_step(counter, after, self._counter_modulus) >= 2:
                 self.stats.orphans += 1
             else:
                 self._after(after, rule, values)
@@ -1103,10 +1106,8 @@ class DetectionReceiver(can.Listener):
         to it (a radar measuring before the stream's start; some may be lost); otherwise
         they are the stream before's.
         """
-        modulus = self._counter_modulus
-        half = modulus // 2
-        limit = min(OPEN_CYCLES, half)
-        offsets = {c: (c - restart + half) % modulus - half
+        limit = min(OPEN_CYCLES, self._reach)
+        offsets = {c: signed_step(c, restart, self._counter_modulus)
                    for c in [*(d.cycle for d in self._ready), *self._open]}
         ahead = set(offsets.values())
         run = 0
@@ -1141,7 +1142,8 @@ class DetectionReceiver(can.Listener):
             self.stats.reordered -= reordered
             if counter in stale:
                 continue
-            if self._latest >= 0 and _behind(counter, self._latest, self._counter_modulus):
+            if self._latest >= 0 and signed_step(counter, self._latest,
+                                                 self._counter_modulus) < 0:
                 self.stats.reordered += 1
             else:
                 self._latest = counter
@@ -1151,11 +1153,12 @@ class DetectionReceiver(can.Listener):
         frame = self._open.pop(counter)
         complete = frame.complete()
         self._recent[counter] = complete
-        # Half the counter's range at most: a wrapped counter is a new cycle, not a copy.
-        while len(self._recent) > min(RECENT_CYCLES, self._counter_modulus // 2):
+        # Those within reach behind the latest at most: a wrapped counter is a new cycle, not
+        # a copy.
+        while len(self._recent) > min(RECENT_CYCLES, self._reach):
             self._recent.popitem(last=False)
         self._content[counter] = frame
-        while len(self._content) > min(OPEN_CYCLES, self._counter_modulus // 2):  # bounded
+        while len(self._content) > min(OPEN_CYCLES, self._reach):  # bounded
             self._content.popitem(last=False)
         if self._current is frame and not complete:
             self._current = None
@@ -1197,11 +1200,6 @@ class DetectionReceiver(can.Listener):
             out["radial_velocity_mps"] = (x * get("vx_mps") + y * get("vy_mps")) / np.where(
                 rng > 0, rng, 1.0)
         return out
-
-
-def _behind(counter: int, latest: int, modulus: int) -> bool:
-    """Whether a cycle counter is older than the latest seen (with wrap-around)."""
-    return 0 < (latest - counter) % modulus < modulus // 2
 
 
 __all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "ListenerBus",
