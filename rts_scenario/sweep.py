@@ -7,8 +7,10 @@ seeded from the scene), so it gives the same verdict in this process, in a proce
 a Dask worker. `run_sweep` runs a whole list in one of those three places and never loses a
 result: a run that raises, or a worker that dies, becomes an entry with status ``error`` and a
 one-line message. A scene's ``marks`` judge its runs as the pytest plugin does (`judged`), and
-`select_tasks` picks runs by a mark expression as ``pytest -m`` does. `summarize` counts the
-verdicts overall and per parameter value and picks the worst runs.
+`select_tasks` picks runs by a mark expression as ``pytest -m`` does. The project's pytest
+settings that change which scenes run and how they are judged (``norecursedirs``,
+``xfail_strict``) are read from the config file pytest would read (`pytest_settings`).
+`summarize` counts the verdicts overall and per parameter value and picks the worst runs.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from fnmatch import fnmatch
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from .errors import RtsError
 from .file_kinds import holds_scene
@@ -33,10 +35,19 @@ WORST_RUNS = 10
 LOCAL_SCHEDULER = "local"
 # How long to try reaching a Dask scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
-# The folders a folder's sweep does not walk into: pytest's default ``norecursedirs``, and
-# ``__pycache__`` (pytest leaves it out too, as it does a virtual environment: `_left_out`).
+# pytest's default ``norecursedirs``: the folders a folder's sweep does not walk into, unless
+# the project's pytest settings name others. ``__pycache__`` and virtual environments are left
+# out whatever they say, as pytest leaves them out (`_left_out`).
 NORECURSE_PATTERNS = ("*.egg", ".*", "_darcs", "build", "CVS", "dist", "node_modules", "venv",
-                      "{arch}", "__pycache__")
+                      "{arch}")
+# The files pytest reads its settings from (`_pytest.config.findpaths`), looked for in the
+# folders of the paths given and above them.
+PYTEST_CONFIG_NAMES = ("pytest.toml", ".pytest.toml", "pytest.ini", ".pytest.ini",
+                       "pyproject.toml", "tox.ini", "setup.cfg")
+# The settings that make an xpass fail, in the order pytest's xfail marks read them: the first
+# that is set decides (``strict_xfail``, called ``xfail_strict`` before pytest 9, then pytest
+# 9's ``strict``); a name this pytest does not know is skipped.
+XFAIL_STRICT_OPTIONS = ("strict_xfail", "xfail_strict", "strict")
 # Marks that skip a run (``skipif`` without a condition skips, as in pytest).
 SKIP_MARKS = ("skip", "skipif")
 # Statuses of runs whose check was judged, and the summary's count of each.
@@ -44,6 +55,76 @@ COUNTS = {"pass": "passed", "fail": "failed", "error": "errors", "xfail": "xfail
           "xpass": "xpassed", "skipped": "skipped"}
 
 Entry = dict[str, Any]
+
+
+class NoRunSelected(RtsError):
+    """A mark expression selects none of the runs (pytest's exit code 5: no tests ran)."""
+
+
+@dataclass(frozen=True)
+class PytestSettings:
+    """The project's pytest settings that change which scenes a sweep runs and their verdicts.
+
+    ``inifile`` is the config file pytest reads them from and ``rootdir`` pytest's rootdir
+    (both None where no config file is found: pytest's defaults apply). ``xfail_strict``: an
+    xpassed run fails (pytest's ``XPASS(strict)``). ``norecursedirs``: the patterns of the
+    folders a folder's sweep does not walk into (`folder_files`).
+    """
+
+    inifile: Path | None = None
+    rootdir: Path | None = None
+    xfail_strict: bool = False
+    norecursedirs: tuple[str, ...] = NORECURSE_PATTERNS
+
+    def as_json(self) -> dict[str, Any]:
+        """Return the settings as the sweep's JSON gives them (paths as text)."""
+        return {"inifile": None if self.inifile is None else str(self.inifile),
+                "rootdir": None if self.rootdir is None else str(self.rootdir),
+                "xfail_strict": self.xfail_strict, "norecursedirs": list(self.norecursedirs)}
+
+
+def pytest_settings(paths: Iterable[str | Path]) -> PytestSettings:
+    """Read the pytest settings ``pytest PATHS`` would run with, from the same config file.
+
+    pytest finds it (`pytest.Config`): the first ``pytest.ini``, ``pyproject.toml`` with a
+    ``[tool.pytest.ini_options]`` table, ``tox.ini`` with ``[pytest]``, ``setup.cfg`` with
+    ``[tool:pytest]`` (...) from the common folder of ``paths`` upwards. Only the file is read:
+    neither ``addopts``, ``PYTEST_ADDOPTS`` nor the ``conftest.py`` files. Where none of
+    `PYTEST_CONFIG_NAMES` is in those folders, or pytest is not installed, pytest's defaults
+    apply, without importing pytest (which takes a while).
+
+    Raises
+    ------
+    RtsError
+        pytest cannot read the config file (pytest would stop on it too).
+    """
+    given = [Path(os.path.abspath(p)) for p in paths]
+    if not any((folder / name).is_file() for path in given for folder in (path, *path.parents)
+               for name in PYTEST_CONFIG_NAMES):
+        return PytestSettings()
+    try:
+        import pytest
+    except ImportError:
+        return PytestSettings()
+    try:
+        # No capture, no assertion rewriting and no conftest: nothing this process keeps.
+        config = pytest.Config.fromdictargs(
+            {}, ["--capture=no", "--assert=plain", "--noconftest", *map(str, given)])
+    except (Exception, pytest.fail.Exception) as exc:
+        from .errors import one_line
+
+        raise RtsError(f"cannot read pytest's settings: {one_line(exc)}") from None
+    strict = False
+    for name in XFAIL_STRICT_OPTIONS:
+        try:
+            value = config.getini(name)
+        except ValueError:
+            continue
+        if value is not None:
+            strict = bool(value)
+            break
+    return PytestSettings(config.inipath, config.rootpath, strict,
+                          tuple(config.getini("norecursedirs")))
 
 
 @dataclass(frozen=True)
@@ -59,6 +140,8 @@ class SweepTask:
     combination (`rts_scenario.scenario.written_marks`), which judge its run (`judged`).
     ``given_path`` marks the error of a path given that is no scene to run (not there, or a
     folder holding none): no mark expression selects it away (`select_tasks`).
+    ``xfail_strict``: the project's pytest setting (`PytestSettings`), with which an ``xfail``
+    mark fails the run whose check passes.
     """
 
     index: int
@@ -70,6 +153,7 @@ class SweepTask:
     error_type: str = "bad_input"
     marks: tuple[str, ...] = ()
     given_path: bool = False
+    xfail_strict: bool = False
 
     @property
     def skipped(self) -> bool:
@@ -77,14 +161,16 @@ class SweepTask:
         return any(mark in SKIP_MARKS for mark in self.marks)
 
 
-def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
-                  ) -> list[SweepTask]:
+def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None,
+                  settings: PytestSettings | None = None) -> list[SweepTask]:
     """Expand folders (every scene file in them, recursively, sorted) and parametrize blocks.
 
-    A folder's sweep does not walk into the folders pytest leaves out (`folder_files`); a
-    file or folder given is always swept. A scene file reached twice (given twice, or given
-    and inside a folder given) runs once, so that its variants count once in the pass rates;
-    ``notes`` (if given) receives a line for each repeat.
+    ``settings``: the project's pytest settings (by default read for ``paths``:
+    `pytest_settings`). A folder's sweep does not walk into the folders pytest leaves out
+    (`folder_files`); a file or folder given is always swept. A scene file reached twice
+    (given twice, given and inside a folder given, or through a linked folder) runs once, so
+    that its variants count once in the pass rates; ``notes`` (if given) receives a line for
+    each repeat and each linked folder not walked because it holds itself.
 
     A path that is neither a scene file nor a folder holding one, or a scene whose
     ``parametrize`` block is invalid, becomes one task carrying its error; so does a file in a
@@ -97,14 +183,21 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
     from .located_yaml import load_yaml
     from .scenario import SCENE_SUFFIX, parametrizations, written_marks
 
+    paths = list(paths)
+    if settings is None:
+        settings = pytest_settings(paths)
     tasks: list[SweepTask] = []
     seen: dict[Path, str] = {}  # each scene file (resolved) and the name it first came as
     for given in paths:
         path = Path(given)
         misnamed: set[Path] = set()
         dangling: set[Path] = set()
+        walked: set[Path] = set()  # the scene files (resolved) this folder gave
         if path.is_dir():
-            found, left_out = folder_files(path)
+            found, left_out, loops = folder_files(path, settings.norecursedirs)
+            if notes is not None:
+                notes += [f"{loop}: a link to {os.readlink(loop)}, a folder that holds it: "
+                          f"not walked again" for loop in loops]
             scenes = [p for p in found if p.name.endswith(SCENE_SUFFIX)]
             misnamed = {p for p in found if not p.name.endswith(SCENE_SUFFIX)
                         and p.is_file() and holds_scene(p)}
@@ -127,9 +220,13 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
             key = file.resolve()
             if key in seen:
                 if notes is not None:
-                    notes.append(f"{name}: given again (as {seen[key]} first): run once")
+                    notes.append(f"{name}: the same file as {seen[key]} (through a link): run "
+                                 f"once" if key in walked else
+                                 f"{name}: given again (as {seen[key]} first): run once")
                 continue
             seen[key] = name
+            if file is not path:
+                walked.add(key)
             if file in dangling:
                 tasks.append(SweepTask(len(tasks), name, error=dangling_link(file)))
                 continue
@@ -155,46 +252,90 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None
                 bad = isinstance(exc, RtsError)
                 tasks.append(SweepTask(len(tasks), name, error=_message(name, exc),
                                        error_type="bad_input" if bad else "runtime",
-                                       marks=() if bad else marks_of({})))
+                                       marks=() if bad else marks_of({}),
+                                       xfail_strict=settings.xfail_strict))
                 continue
             written = marks_of({})
             tasks += [SweepTask(len(tasks) + i, name, ident, overrides,
                                 marks=marks_of(overrides) if any(
                                     k.split(".", 1)[0] == "marks" for k in overrides)
-                                else written)
+                                else written, xfail_strict=settings.xfail_strict)
                       for i, (ident, overrides) in enumerate(combos)]
     return tasks
 
 
-def folder_files(folder: Path) -> tuple[list[Path], list[Path]]:
-    """Every file under ``folder`` and the folders in it a sweep leaves out, as pytest does.
+class FolderFiles(NamedTuple):
+    """What a folder's sweep finds in it (`folder_files`)."""
 
-    Left out (not walked into), as by pytest's defaults: a folder matching
-    `NORECURSE_PATTERNS` (hidden ones, ``build``, ``dist``, ``node_modules``, ``venv``,
-    ``*.egg``, ``__pycache__``, ...) and a virtual environment (a folder holding
-    ``pyvenv.cfg`` or ``conda-meta/history``). ``folder`` itself is walked whatever its name.
-    Linked folders are not followed.
+    files: list[Path]
+    left_out: list[Path]  # the folders it does not walk into, as pytest does not
+    loops: list[Path]  # the linked folders it does not walk: each holds the link itself
+
+
+def folder_files(folder: Path, norecursedirs: Sequence[str] = NORECURSE_PATTERNS
+                 ) -> FolderFiles:
+    """Every file under ``folder``, and the folders in it a sweep leaves out, as pytest does.
+
+    Left out (not walked into): a folder matching one of the ``norecursedirs`` patterns (the
+    project's pytest setting; by default pytest's: hidden ones, ``build``, ``dist``,
+    ``node_modules``, ``venv``, ``*.egg``, ...), ``__pycache__`` and a virtual environment (a
+    folder holding ``pyvenv.cfg`` or ``conda-meta/history``). A pattern is matched against
+    the folder's name, or against its path when it holds a ``/`` (``scenarios/drafts``), as
+    pytest matches it. ``folder`` itself is walked whatever its name. Linked folders are
+    followed, as pytest follows them, but never into a folder the walk is already in (a link
+    to an enclosing folder, which pytest follows until the system refuses): such links are
+    ``loops``.
     """
     files: list[Path] = []
     left_out: list[Path] = []
-    for root, folders, names in os.walk(folder):
-        here = Path(root)
-        kept: list[Path] = []
-        for name in sorted(folders):
-            (left_out if _left_out(here / name) else kept).append(here / name)
-        folders[:] = [p.name for p in kept]
-        files += [here / name for name in names]
-    return files, left_out
+    loops: list[Path] = []
+    # Each folder to walk and the real paths of the folders it is in (itself among them).
+    stack = [(folder, frozenset({folder.resolve()}))]
+    while stack:
+        here, within = stack.pop()
+        try:
+            entries = sorted(os.scandir(here), key=lambda entry: entry.name)
+        except OSError:  # unreadable: what pytest could not collect either
+            continue
+        inner: list[tuple[Path, frozenset[Path]]] = []
+        for entry in entries:
+            path = here / entry.name
+            try:
+                is_folder = entry.is_dir()  # through a link, as pytest's walk
+            except OSError:
+                is_folder = False
+            if not is_folder:
+                files.append(path)
+            elif _left_out(path, norecursedirs):
+                left_out.append(path)
+            elif (real := path.resolve()) in within:
+                loops.append(path)
+            else:
+                inner.append((path, within | {real}))
+        stack += reversed(inner)
+    return FolderFiles(files, left_out, loops)
 
 
-def _left_out(folder: Path) -> bool:
-    if any(fnmatch(folder.name, pattern) for pattern in NORECURSE_PATTERNS):
+def _left_out(folder: Path, norecursedirs: Sequence[str]) -> bool:
+    if folder.name == "__pycache__" or any(_matches(pattern, folder)
+                                           for pattern in norecursedirs):
         return True
     try:
         return ((folder / "pyvenv.cfg").is_file()
                 or (folder / "conda-meta" / "history").is_file())
     except OSError:
         return False
+
+
+def _matches(pattern: str, folder: Path) -> bool:
+    """Whether a ``norecursedirs`` pattern matches ``folder``, as pytest matches it."""
+    pattern = pattern.replace("/", os.sep)
+    if os.sep not in pattern:
+        return fnmatch(folder.name, pattern)
+    # A pattern with a separator matches the whole path; unless absolute, at any depth.
+    if not os.path.isabs(pattern):
+        pattern = f"*{os.sep}{pattern}"
+    return fnmatch(os.path.abspath(folder), pattern)
 
 
 def _left_out_note(folder: Path, left_out: list[Path]) -> str:
@@ -219,8 +360,10 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     ...}``: ``status`` is ``pass``, ``fail`` or ``error``, judged by the scene's marks as the
     pytest plugin judges its item: ``skipped`` (a ``skip`` or ``skipif`` mark; nothing runs),
     and with an ``xfail`` mark ``xfail`` for a failed check or ``xpass`` for a passed one (a
-    run that errs stays an error). ``passed`` says whether the check passed. A failed run
-    (``fail``, ``xfail``) adds ``reason``, a skipped one too; an erred one ``reason`` (its
+    run that errs stays an error), or ``fail`` for a passed one where the task's
+    ``xfail_strict`` is set (pytest's ``XPASS(strict)``). ``passed`` says whether the check
+    passed. A failed run (``fail``, ``xfail``) adds ``reason``, a skipped one too; an erred one
+    ``reason`` (its
     one-line message) and ``error_type`` (``bad_input``: the scene does not load or its
     schedule cannot be built; ``runtime``: anything else). Finished runs add
     ``detection_rate``, ``false_detections``, ``errors`` (rms and max per quantity),
@@ -272,9 +415,12 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     status = "pass" if report.passed else "fail"
     if "xfail" in task.marks:  # a known failure of the check; a run that errs is none
         status = "x" + status
-    entry.update(passed=report.passed, status=status)
+    strict_xpass = status == "xpass" and task.xfail_strict
+    entry.update(passed=report.passed, status="fail" if strict_xpass else status)
     if not report.passed:
         entry["reason"] = "; ".join(report.reasons)
+    elif strict_xpass:  # worded as pytest's report of it
+        entry["reason"] = "[XPASS(strict)] the scene's marks: xfail"
     ratio, worst = -1.0, None
     for quantity, tolerance_key in QUANTITIES:
         stats = report.errors[quantity]
@@ -600,22 +746,24 @@ def select_tasks(tasks: Sequence[SweepTask], text: str) -> tuple[list[SweepTask]
 
     Raises
     ------
+    NoRunSelected
+        ``text`` selects none of the tasks: a sweep of nothing would pass.
     RtsError
-        ``text`` is no mark expression, or it selects none of the tasks: a sweep of nothing
-        would pass.
+        ``text`` is no mark expression.
     """
     matches = mark_expression(text)
     kept = [replace(task, index=i) for i, task in enumerate(
         t for t in tasks if t.given_path or matches(t.marks))]
     if tasks and not kept:
         marks = sorted({mark for task in tasks for mark in task.marks})
-        raise RtsError(f"-m/--marks {text!r}: selects none of the {len(tasks)} run"
+        raise NoRunSelected(f"-m/--marks {text!r}: selects none of the {len(tasks)} run"
                        f"{'s' if len(tasks) != 1 else ''} (their marks: "
                        f"{', '.join(marks) or 'none'})")
     return kept, len(tasks) - len(kept)
 
 
-__all__ = ["LOCAL_SCHEDULER", "NORECURSE_PATTERNS", "WORST_RUNS", "SweepTask", "collect_tasks",
+__all__ = ["LOCAL_SCHEDULER", "NORECURSE_PATTERNS", "PYTEST_CONFIG_NAMES", "WORST_RUNS",
+           "FolderFiles", "NoRunSelected", "PytestSettings", "SweepTask", "collect_tasks",
            "default_workers", "error_entry", "exit_code", "folder_files", "mark_expression",
-           "require_dask", "run_label", "run_sweep", "run_task", "select_tasks", "summarize",
-           "warm_plans"]
+           "pytest_settings", "require_dask", "run_label", "run_sweep", "run_task",
+           "select_tasks", "summarize", "warm_plans"]

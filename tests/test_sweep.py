@@ -105,7 +105,7 @@ def test_json_layout_and_summary_counted_independently(scenes, tmp_path, capsys)
     code, stdout, _ = sweep(capsys, scenes, "--json", out, "--workers", "1")
     assert code == 2  # the broken scene is bad input; the others still ran
     payload = json.loads(out.read_text())
-    assert set(payload) == {"runs", "summary"}
+    assert set(payload) == {"runs", "summary", "config"}
     runs = payload["runs"]
     # Folder order: sorted paths, recursively; combinations in parametrize order.
     assert [(Path(r["file"]).name, r["id"]) for r in runs] == (
@@ -709,13 +709,13 @@ def test_marks_expression_selects_the_runs_pytest_selects(pytester, capsys, tmp_
     assert len(payload["runs"]) == 3
 
 
-def test_a_bad_or_empty_marks_selection_is_one_line_of_bad_input(scenes, capsys):
+def test_a_bad_or_empty_marks_selection_is_one_line(scenes, capsys):
     code, out, err = sweep(capsys, scenes, "-m", "slow and", "--workers", "1")
     assert code == 2 and out == ""
     assert err.startswith("error: -m/--marks 'slow and': ") and err.count("\n") == 1
-    # Selecting none of the runs would be a pass of nothing.
+    # Selecting none of the runs would be a pass of nothing: pytest's "no tests ran".
     code, out, err = sweep(capsys, scenes, "-m", "nightly", "--workers", "1")
-    assert code == 2
+    assert code == 5
     assert err.strip().splitlines()[-1] == (
         "error: -m/--marks 'nightly': selects none of the 8 runs (their marks: none)")
 
@@ -815,3 +815,176 @@ def test_a_path_that_is_not_there_is_bad_input_whatever_the_marks_selection(pyte
         assert code == 2, out
         assert f"ERROR {given.name.removesuffix('.scenario.yaml')} ({given}): {given}: " in out
         assert "PASS slow_one" in out
+
+
+# --- the project's pytest settings --------------------------------------------------------------
+
+DEFAULT_NORECURSE = ["*.egg", ".*", "_darcs", "build", "CVS", "dist", "node_modules", "venv",
+                     "{arch}"]
+# One scene whose check fails and one that passes, both marked xfail, and a plain one.
+MARKED = {"known": missed("known", "marks: [xfail]\n"),
+          "fixed": tiny_scene("fixed") + "marks: [xfail]\n", "plain": tiny_scene("plain")}
+
+
+@pytest.mark.parametrize("name, text", [
+    ("pytest.ini", "[pytest]\nxfail_strict = true\n"),
+    ("pyproject.toml", "[tool.pytest.ini_options]\nxfail_strict = true\n"),
+    ("tox.ini", "[pytest]\nxfail_strict = yes\n"),
+    ("setup.cfg", "[tool:pytest]\nxfail_strict = 1\n"),
+    pytest.param("pytest.ini", "[pytest]\nstrict = true\n", id="strict",
+                 marks=pytest.mark.skipif(pytest.version_tuple < (9,),
+                                          reason="pytest 9 added the strict option")),
+])
+def test_xfail_strict_in_the_project_s_config_fails_an_xpass_as_pytest_does(
+        pytester, capsys, tmp_path, name, text):
+    (pytester.path / name).write_text(text)
+    pytester.makefile(".scenario.yaml", **MARKED)
+    plugin, plugin_code = plugin_verdicts(pytester)
+    capsys.readouterr()  # pytest's own report
+    swept, code, payload, stdout = sweep_verdicts(capsys, tmp_path, pytester.path)
+    assert swept == plugin == {"known": "xfail", "fixed": "fail", "plain": "pass"}
+    assert plugin_code == code == 1
+    fixed = next(r for r in payload["runs"] if r["scene"] == "fixed")
+    assert fixed["passed"] is True  # its check passed; the mark said it would not
+    assert fixed["reason"] == "[XPASS(strict)] the scene's marks: xfail"
+    assert payload["summary"]["failed"] == 1 and payload["summary"]["xpassed"] == 0
+    assert payload["config"] == {"inifile": str(pytester.path / name),
+                                 "rootdir": str(pytester.path), "xfail_strict": True,
+                                 "norecursedirs": DEFAULT_NORECURSE}
+    assert stdout.splitlines()[0] == (
+        f"pytest settings: configfile {name} (rootdir {pytester.path}): xfail_strict = true, "
+        f"norecursedirs = *.egg .* _darcs build CVS dist node_modules venv {{arch}}")
+
+
+def test_without_a_config_file_the_sweep_says_it_takes_pytest_s_defaults(scenes, capsys,
+                                                                         tmp_path):
+    report = tmp_path / "s.json"
+    _, out, _ = sweep(capsys, scenes / "sub", "--json", report, "--workers", "1")
+    assert json.loads(report.read_text())["config"] == {
+        "inifile": None, "rootdir": None, "xfail_strict": False,
+        "norecursedirs": DEFAULT_NORECURSE}
+    assert out.splitlines()[0] == (
+        "pytest settings: none found, pytest's defaults: xfail_strict = false, "
+        "norecursedirs = *.egg .* _darcs build CVS dist node_modules venv {arch}")
+
+
+def test_pytest_is_not_imported_for_scenes_without_a_config_file(tmp_path):
+    """A folder with no config file around it needs nothing from pytest (it takes a while to
+    import); a project's config file does."""
+    import subprocess
+
+    code = ("import sys; from rts_scenario.sweep import pytest_settings; "
+            "s = pytest_settings([sys.argv[1]]); "
+            "print(s.inifile, s.xfail_strict, 'pytest' in sys.modules, '_pytest' in sys.modules)")
+    env = {**__import__("os").environ, "PYTHONPATH": str(Path(__file__).parents[1])}
+
+    def settings_in(folder):
+        done = subprocess.run([sys.executable, "-c", code, str(folder)], env=env, text=True,
+                              capture_output=True, check=True)
+        return done.stdout.split()
+
+    (tmp_path / "bare").mkdir()
+    assert settings_in(tmp_path / "bare") == ["None", "False", "False", "False"]
+    (tmp_path / "project" / "scenes").mkdir(parents=True)
+    (tmp_path / "project" / "tox.ini").write_text("[pytest]\nxfail_strict = true\n")
+    assert settings_in(tmp_path / "project" / "scenes") == [
+        str(tmp_path / "project" / "tox.ini"), "True", "True", "True"]
+
+
+def test_the_config_files_looked_for_are_those_pytest_reads():
+    """pytest is imported only where one of these files could hold its settings; a name pytest
+    adds to its list must be added here too."""
+    import inspect
+    import re
+
+    from _pytest.config import findpaths
+
+    from rts_scenario.sweep import PYTEST_CONFIG_NAMES
+
+    names = re.findall(r'"(\.?[\w.]+\.(?:toml|ini|cfg))"', inspect.getsource(findpaths))
+    assert names and set(names) <= set(PYTEST_CONFIG_NAMES)
+
+
+def test_a_folder_s_sweep_leaves_out_the_folders_the_project_s_norecursedirs_names(
+        pytester, capsys, tmp_path):
+    """The project's norecursedirs replaces pytest's default list: a hidden folder or build is
+    walked unless it names them; a pattern with a slash matches the folder's path; virtual
+    environments and __pycache__ stay out whatever it says."""
+    root = pytester.path
+    (root / "pyproject.toml").write_text(
+        '[tool.pytest.ini_options]\nnorecursedirs = ["drafts", "*-ncap", "kept/sub"]\n')
+    for folder in ("drafts", "euro-ncap", ".hidden", "build", "kept/sub", "kept/other", "env",
+                   "__pycache__"):
+        (root / folder).mkdir(parents=True)
+        name = folder.replace("/", "_").replace("-", "_").strip("._")
+        (root / folder / f"{name}.scenario.yaml").write_text(tiny_scene(name))
+    (root / "env" / "pyvenv.cfg").write_text("home = /usr/bin\n")
+    plugin, _ = plugin_verdicts(pytester, str(root))
+    swept, code, payload, _ = sweep_verdicts(capsys, tmp_path, root)
+    assert set(swept) == set(plugin) == {"hidden", "build", "kept_other"}
+    assert code == 0
+    assert payload["config"]["norecursedirs"] == ["drafts", "*-ncap", "kept/sub"]
+    # A folder named on the command line is swept whatever the setting says.
+    swept, _, _, _ = sweep_verdicts(capsys, tmp_path, root / "euro-ncap")
+    assert set(swept) == {"euro_ncap"}
+
+
+def test_this_project_s_sweep_of_its_scenes_leaves_out_the_euro_ncap_catalogue():
+    # pyproject.toml leaves scenarios/euro-ncap out of pytest's run of scenarios/.
+    scenarios = Path(__file__).resolve().parents[1] / "scenarios"
+    files = {Path(t.file).parent.name for t in collect_tasks([scenarios])}
+    assert files == {"scenarios"}
+    assert {Path(t.file).parent.name for t in collect_tasks([scenarios / "euro-ncap"])} == {
+        "euro-ncap"}
+
+
+def test_a_marks_selection_of_no_run_exits_as_pytest_does(pytester, capsys, tmp_path):
+    pytester.makefile(".scenario.yaml", slow=tiny_scene("slow_one") + "marks: [slow]\n")
+    result = pytester.runpytest("-p", "no:cacheprovider", "-m", "nightly")
+    capsys.readouterr()
+    code, out, err = sweep(capsys, pytester.path, "-m", "nightly", "--workers", "1")
+    assert result.ret == code == pytest.ExitCode.NO_TESTS_COLLECTED
+    assert out == ""
+    assert err.strip().splitlines()[-1] == (
+        "error: -m/--marks 'nightly': selects none of the 1 run (their marks: slow)")
+
+
+def pytest_collected(pytester, *args):
+    """The item names pytest collects (``--collect-only``), each once."""
+    result = pytester.runpytest("--collect-only", "-q", "-p", "no:cacheprovider", *args)
+    return {line.split("::")[1] for line in result.stdout.lines if "::" in line}
+
+
+def test_a_folder_s_sweep_follows_linked_folders_as_pytest_does_and_stops_at_loops(
+        pytester, capsys, tmp_path):
+    root = pytester.path
+    elsewhere = tmp_path / "elsewhere"
+    (elsewhere / "more").mkdir(parents=True)
+    (elsewhere / "more" / "away.scenario.yaml").write_text(tiny_scene("away"))
+    (root / "real" / "deep").mkdir(parents=True)
+    (root / "real" / "deep" / "home.scenario.yaml").write_text(tiny_scene("home"))
+    (root / "linked").symlink_to(elsewhere)
+    (root / "real" / "deep" / "loop").symlink_to(root)  # pytest walks it 40 deep
+    (root / "gone").symlink_to(tmp_path / "nothing")
+    assert pytest_collected(pytester, str(root)) == {"home", "away"}
+    swept, code, payload, _ = sweep_verdicts(capsys, tmp_path, root)
+    assert swept == {"home": "pass", "away": "pass"} and code == 0
+    assert {r["file"] for r in payload["runs"]} == {
+        str(root / "real" / "deep" / "home.scenario.yaml"),
+        str(root / "linked" / "more" / "away.scenario.yaml")}
+    # The linked folder is left out by its own name, as pytest matches it.
+    (root / "pytest.ini").write_text("[pytest]\nnorecursedirs = linked\n")
+    assert pytest_collected(pytester, str(root)) == {"home"}
+    swept, code, _, _ = sweep_verdicts(capsys, tmp_path, root)
+    assert swept == {"home": "pass"}
+
+
+def test_a_config_file_pytest_cannot_read_stops_the_sweep_as_it_stops_pytest(pytester, capsys):
+    pytester.makefile(".scenario.yaml", plain=tiny_scene("plain"))
+    (pytester.path / "pyproject.toml").write_text("[tool.pytest.ini_options\n")
+    assert pytester.runpytest("-p", "no:cacheprovider").ret == pytest.ExitCode.USAGE_ERROR
+    capsys.readouterr()
+    code, out, err = sweep(capsys, pytester.path, "--workers", "1")
+    assert code == 2 and out == ""
+    assert err.startswith(f"error: cannot read pytest's settings: "
+                          f"{pytester.path / 'pyproject.toml'}: ") and err.count("\n") == 1

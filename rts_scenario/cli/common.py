@@ -24,6 +24,8 @@ EXIT_OK = 0
 EXIT_FAIL = 1
 EXIT_BAD_INPUT = 2
 EXIT_RUNTIME_ERROR = 3
+# pytest's exit code when no test ran (none collected, or all deselected).
+EXIT_NO_RUNS = 5
 
 
 class _ReaderGone:

@@ -7,9 +7,19 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
-from .common import EXIT_FAIL, METHODS, check_distinct_paths, check_writable_file, writing
+from .common import (
+    EXIT_FAIL,
+    EXIT_NO_RUNS,
+    METHODS,
+    check_distinct_paths,
+    check_writable_file,
+    writing,
+)
+
+if TYPE_CHECKING:
+    from ..sweep import PytestSettings
 
 # Without a terminal, a progress line each time another tenth of the runs is done.
 PLAIN_PROGRESS_STEPS = 10
@@ -54,11 +64,13 @@ def _do_sweep(args: argparse.Namespace) -> int:
     from ..scenario import SCENE_SUFFIX
     from ..sweep import (
         LOCAL_SCHEDULER,
+        NoRunSelected,
         collect_tasks,
         default_workers,
         exit_code,
         folder_files,
         mark_expression,
+        pytest_settings,
         require_dask,
         run_sweep,
         select_tasks,
@@ -75,10 +87,11 @@ def _do_sweep(args: argparse.Namespace) -> int:
                            f"{LOCAL_SCHEDULER!r}, got an empty one")
     if args.marks is not None:
         mark_expression(args.marks)  # a bad expression stops the sweep before anything runs
+    settings = pytest_settings(args.scenes)
     scene_files: list[Path] = []
     for given in map(Path, args.scenes):  # a folder: the scene files it holds
-        scene_files += ([p for p in folder_files(given)[0] if p.name.endswith(SCENE_SUFFIX)]
-                        if given.is_dir() else [given])
+        scene_files += ([p for p in folder_files(given, settings.norecursedirs).files
+                         if p.name.endswith(SCENE_SUFFIX)] if given.is_dir() else [given])
     check_distinct_paths([("--json", args.json), ("--plot", args.plot)],
                          [("SCENE", scene) for scene in scene_files])
     if args.json:
@@ -92,12 +105,16 @@ def _do_sweep(args: argparse.Namespace) -> int:
         check_writable_file("--plot", args.plot)
 
     notes: list[str] = []
-    tasks = collect_tasks(args.scenes, notes)
+    tasks = collect_tasks(args.scenes, notes, settings)
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     deselected = 0
     if args.marks is not None:
-        tasks, deselected = select_tasks(tasks, args.marks)
+        try:
+            tasks, deselected = select_tasks(tasks, args.marks)
+        except NoRunSelected as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_NO_RUNS
     # As many workers as there are runs at most (`run_sweep`); one runs in this process.
     used = max(1, min(workers, len(tasks)))
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, LOCAL_SCHEDULER)
@@ -126,12 +143,12 @@ def _do_sweep(args: argparse.Namespace) -> int:
         if progress.tty:  # off the progress bar's line
             progress.stream.write("\n")
         _print_runs(done, {**summarize(done, deselected=deselected), "interrupted": True},
-                    time.perf_counter() - start, args, total=len(tasks))
+                    time.perf_counter() - start, args, settings, total=len(tasks))
         print("error: interrupted", file=sys.stderr)
         # Never a pass; a run that erred before keeps its exit code.
         return max(exit_code(done), EXIT_FAIL)
     _print_runs(entries, summarize(entries, deselected=deselected),
-                time.perf_counter() - start, args)
+                time.perf_counter() - start, args, settings)
     if args.plot:
         from ..plots import write_sweep_plot
 
@@ -142,8 +159,9 @@ def _do_sweep(args: argparse.Namespace) -> int:
 
 
 def _print_runs(entries: list[dict[str, Any]], summary: dict[str, Any], seconds: float,
-                args: argparse.Namespace, total: int | None = None) -> None:
-    """Print a line per run and the summary, and write ``--json``.
+                args: argparse.Namespace, settings: PytestSettings,
+                total: int | None = None) -> None:
+    """Print the pytest settings, a line per run and the summary, and write ``--json``.
 
     ``total``: the runs the sweep had, when it was interrupted before all of them finished.
     """
@@ -151,17 +169,35 @@ def _print_runs(entries: list[dict[str, Any]], summary: dict[str, Any], seconds:
 
     from ..sweep import run_label
 
+    print(_settings_text(settings))
     for entry in entries:
         line = f"{entry['status'].upper()} {run_label(entry)} ({entry['file']})"
         print(line + (f": {entry['reason']}" if "reason" in entry else ""))
     print()
     print(_summary_text(summary, seconds, total))
     if args.json:
-        payload = {"runs": entries, "summary": summary}
+        payload = {"runs": entries, "summary": summary, "config": settings.as_json()}
         with writing("--json", args.json):
             Path(args.json).write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
         print(f"wrote {args.json}" + (f" ({len(entries)} of {total} runs)"
                                       if total is not None else ""))
+
+
+def _settings_text(settings: PytestSettings) -> str:
+    """Say where the pytest settings the sweep took came from, and what they are.
+
+    ``pytest settings: configfile pyproject.toml (rootdir /project): xfail_strict = false,
+    norecursedirs = .* build``; ``none found, pytest's defaults`` without a config file.
+    """
+    if settings.inifile is None:
+        where = "none found, pytest's defaults"
+    else:
+        rootdir = settings.rootdir
+        inifile = (settings.inifile.relative_to(rootdir) if rootdir is not None
+                   and settings.inifile.is_relative_to(rootdir) else settings.inifile)
+        where = f"configfile {inifile} (rootdir {rootdir})"
+    return (f"pytest settings: {where}: xfail_strict = {str(settings.xfail_strict).lower()}, "
+            f"norecursedirs = {' '.join(settings.norecursedirs)}")
 
 
 def _rate_text(rate: float | None) -> str:
@@ -228,13 +264,15 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                     "the simulated radar, in parallel, and print the pass rate overall and per "
                     "parameter value and the worst runs. Every run is reported, even if others "
                     "err. A scene's marks judge its runs as the pytest plugin does (xfail, "
-                    "skip). Exit 0 if no run fails, 1 if one fails, 2 on bad input, 3 on a "
-                    "runtime error.",
+                    "skip), with the project's pytest settings (norecursedirs, xfail_strict, "
+                    "from the config file pytest would read). Exit 0 if no run fails, 1 if one "
+                    "fails, 2 on bad input, 3 on a runtime error, 5 if -m selects no run.",
     )
     parser.add_argument("scenes", nargs="+", metavar="SCENE",
                         help="*.scenario.yaml files or folders of them (a folder's sweep "
-                             "leaves out the folders pytest leaves out: hidden ones, virtual "
-                             "environments, build, dist, node_modules, __pycache__, ...)")
+                             "leaves out the folders pytest leaves out: the project's "
+                             "norecursedirs, by default hidden ones, build, dist, "
+                             "node_modules, ...; virtual environments, __pycache__)")
     parser.add_argument("--json", metavar="OUT", help="write every run and the summary as JSON")
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help="worker processes (default: the number of CPUs); 1 runs in this "
