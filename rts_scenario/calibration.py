@@ -35,6 +35,11 @@ differences of all pairs (6 per quad) are solved together by least squares for o
 channel (the first FE is the reference). A pair whose closure residual stands out, or whose sweep
 the model does not fit, reveals a bad channel or a moved FE.
 
+Every measurement reads each cycle at its strongest detection within the pattern's gate
+(`rts_scenario.gate`: about the range its delay gives and the radial velocity its Doppler
+gives), never at a stronger reflection in the room; an FE alone or a pair with detections but
+none in the gate is a measurement that failed, named with the strongest detection outside it.
+
 Measurements run through `measure` - schedule in, one `Detections` per frame out - so the same
 procedure drives the built-in simulated radar directly (`simulated_measure`) or any bench through
 the pipeline (`rts_scenario.pipeline.Pipeline.play`: an output plus the radar's CAN bus).
@@ -52,6 +57,7 @@ from scipy.optimize import least_squares
 
 from .detections import Detections
 from .errors import MeasurementError, RtsError
+from .gate import Gate, echo_delays_s
 from .propagation import C0_MPS
 from .radar.angle import make_estimator
 from .radar.profile import RadarProfile
@@ -206,7 +212,9 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     steps nearest the wanted contrast); a pair the attenuator cannot play at least half that
     many dB apart is refused. The fit takes the weights as the attenuators played them. A
     measurement some of whose cycles did not come back (a frame the host sent after the cycle
-    measuring it, a cycle lost) is played once more; the second one is taken.
+    measuring it, a cycle lost) is played once more; the second one is taken. Each cycle is
+    read at its strongest detection in the pattern's gate (`rts_scenario.gate.Gate`), never at
+    a reflection in the room.
 
     Parameters
     ----------
@@ -233,7 +241,8 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     Raises
     ------
     MeasurementError
-        An FE alone, or a pair, came back without a detection or without its cycle.
+        An FE alone, or a pair, came back without a detection in its gate or without its
+        cycle.
     RtsError
         A pair the attenuator's range and steps cannot play far enough from equal echoes.
     """
@@ -247,7 +256,8 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
     singles = pattern_schedule(rig, radar, [[(q, 1.0, 0.0)] for q in fes], range_m,
                                attenuation_db)
     remeasured: list[str] = []
-    level = _single_levels(rig, fes, _measured(measure, singles, "FEs alone", remeasured))
+    level = _single_levels(rig, fes, Gate.of(rig, radar, singles),
+                           _measured(measure, singles, "FEs alone", remeasured))
     delays, sweep_deg = sweep_delays(rig, radar, steps, range_m)
     rows: list[Row] = []
     for a, b in pairs:
@@ -263,9 +273,9 @@ def calibrate(rig: Rig, radar: RadarProfile, measure: Measure, *, estimator: str
         _require_cycles((a, b), dets[-1])
         if progress is not None:
             progress(i + 1, len(pairs))
-    model = _PairModel(rig, radar, estimator, range_m)
+    model = _PairModel(rig, radar, estimator, range_m, attenuation_db)
     measured = [model.fit(a, b, delays, sweep_deg, schedule.frames(i * steps, (i + 1) * steps),
-                          dets[i], float(level[a] - level[b]))
+                          dets[i], (float(level[a]), float(level[b])))
                 for i, (a, b) in enumerate(pairs)]
     phase, phase_res = _close(rig.n_front_ends, measured, "phase_deg", circular=True)
     gain, gain_res = _close(rig.n_front_ends, measured, "gain_db", circular=False)
@@ -297,11 +307,13 @@ def _measured(measure: Measure, schedule: Schedule, what: str,
     return cycles
 
 
-def _single_levels(rig: Rig, fes: list[int], cycles: list[Detections]) -> FloatArray:
-    """Each FE's level played alone (the RCS of its strongest detection), NaN for the others.
+def _single_levels(rig: Rig, fes: list[int], gate: Gate,
+                   cycles: list[Detections]) -> FloatArray:
+    """Each FE's level played alone (its strongest detection's RCS in ``gate``), else NaN.
 
     Every FE must be measured: its level sets its pairs' weights, and a guessed level could
-    play a pair through cancellation.
+    play a pair through cancellation. A detection outside the gate is not the FE's (a
+    reflection in the room): an FE with only such detections is named with the strongest.
     """
     if len(cycles) != len(fes):
         raise RtsError(f"calibration: {len(cycles)} cycles reported for the {len(fes)} FEs "
@@ -309,24 +321,32 @@ def _single_levels(rig: Rig, fes: list[int], cycles: list[Detections]) -> FloatA
     level = np.full(rig.n_front_ends, np.nan)
     # Not one cycle came back: the radar does not see the rig, or reports elsewhere.
     none_back = not any(d.complete for d in cycles)
-    for q, d in zip(fes, cycles, strict=True):
+    misses: list[str] = []
+    unseen: list[int] = []
+    for i, (q, d) in enumerate(zip(fes, cycles, strict=True)):
         if not d.complete and not none_back:
             # No cycle for the frame: lost on the bus, later than the measurement waited for,
             # or not told from the frame before's (docs/bench.md section 6).
             raise MeasurementError(f"no cycle for FE {q} played alone (frame {d.cycle}), "
                                    f"{_TWICE}")
-        k = d.strongest()
+        k = gate.strongest(d, i)
         if k is not None and d.rcs_dbsm is not None and np.isfinite(d.rcs_dbsm[k]):
             level[q] = d.rcs_dbsm[k]
-    unseen = [i for i, q in enumerate(fes) if not np.isfinite(level[q])]
+            continue
+        miss = gate.miss(f"FE {q} played alone", d, i)
+        if miss is None:
+            unseen.append(i)
+        else:
+            misses.append(miss)
     if unseen:
         names = ", ".join(str(fes[i]) for i in unseen)
         where = ", ".join(str(cycles[i].cycle) for i in unseen)
         what = "the rig" if len(unseen) == len(fes) else f"FE {names}"
-        raise MeasurementError(f"no detection with rcs_dbsm of FE {names} played alone "
-                               f"(cycle{'s' if len(unseen) > 1 else ''} {where}): its level at "
-                               f"the radar sets the weights of its pairs; check that the radar "
-                               f"sees {what}")
+        misses.append(f"no detection with rcs_dbsm of FE {names} played alone "
+                      f"(cycle{'s' if len(unseen) > 1 else ''} {where}): its level at the "
+                      f"radar sets the weights of its pairs; check that the radar sees {what}")
+    if misses:
+        raise MeasurementError("; ".join(misses))
     return level
 
 
@@ -478,35 +498,49 @@ def _require_cycles(pair: tuple[int, int], sweep: list[Detections]) -> None:
                                    f"{d.cycle}, {_TWICE}")
 
 
-def _strongest(d: Detections, what: str, pair: tuple[int, int]) -> float:
-    # Every cycle of the pair's measurement came back (`_require_cycles`).
-    k = d.strongest()
-    values = getattr(d, what)
-    if k is None or values is None:
-        # A measurement that failed (the radar does not see the rig, or reports elsewhere).
-        raise MeasurementError(f"no detection with {what} for FE pair {pair[0]}-{pair[1]} in "
-                               f"cycle {d.cycle}; check that the radar sees the rig")
-    return float(values[k])
+def _pair_readings(gate: Gate, sweep: list[Detections], pair: tuple[int, int],
+                   quantities: Sequence[str], levels: str) -> list[FloatArray]:
+    """Each quantity of the strongest detection in ``gate`` of every cycle of a pair's sweep.
+
+    Every cycle came back (`_require_cycles`); one without a detection in the gate is a
+    measurement that failed, named with the strongest detection outside it where there is one
+    (a reflection in the room), else with ``levels``: the FEs' levels alone and as the pair
+    played them (its sum dips below the radar's threshold where the FEs alone were near it).
+    """
+    name = f"FE pair {pair[0]}-{pair[1]}"
+    out = np.full((len(quantities), len(sweep)), np.nan)
+    for i, d in enumerate(sweep):
+        k = gate.strongest(d, i)
+        if k is None:
+            raise MeasurementError(gate.miss(name, d, i)
+                                   or f"no detection for {name} in cycle {d.cycle}: {levels}")
+        for j, what in enumerate(quantities):
+            values = getattr(d, what)
+            if values is None:
+                # The radar does not see the rig, or reports elsewhere.
+                raise MeasurementError(f"no detection with {what} for {name} in cycle "
+                                       f"{d.cycle}; check that the radar sees the rig")
+            out[j, i] = values[k]
+    return list(out)
 
 
 class _PairModel:
     """What the radar reports for a pair (b at a weight relative to a), given a - b."""
 
-    def __init__(self, rig: Rig, radar: RadarProfile, estimator: str, range_m: float) -> None:
+    def __init__(self, rig: Rig, radar: RadarProfile, estimator: str, range_m: float,
+                 attenuation_db: float) -> None:
         array, fe_model = solver_inputs(radar, "modeled")
         assert fe_model is not None
         self.rig, self.radar, self.range_m = rig, radar, range_m
+        self.attenuation_db = attenuation_db
         self.vectors = fe_model.vectors(rig, np.arange(rig.n_front_ends), array)  # (M, F)
         self.estimate = make_estimator(estimator, array)
         self.n = radar.adc_samples
 
     def _echo_bins(self, schedule: Schedule) -> FloatArray:
         """Fractional range bin of each channel's echo (frames, 4), from its total delay."""
-        rig = self.rig
-        fe = np.maximum(schedule.fe[:, 0, :], 0)
-        total = (schedule.delay_s[:, 0, :] + 2.0 * rig.distance_m[fe] / C0_MPS
-                 + rig.limits.latency_s)
-        return self.radar.range_bin(total, schedule.doppler_hz[:, 0, :])
+        return self.radar.range_bin(echo_delays_s(self.rig, schedule)[:, 0, :],
+                                    schedule.doppler_hz[:, 0, :])
 
     def predict(self, a: int, b: int, theta_deg: FloatArray, level: FloatArray,
                 phase_deg: FloatArray, gain_db: FloatArray, weight_db: float,
@@ -533,29 +567,40 @@ class _PairModel:
         return az.reshape(shape), el.reshape(shape)
 
     def fit(self, a: int, b: int, delays: FloatArray, sweep_deg: FloatArray,
-            schedule: Schedule, sweep: list[Detections], level_db: float) -> PairMeasurement:
+            schedule: Schedule, sweep: list[Detections],
+            alone_dbsm: tuple[float, float]) -> PairMeasurement:
         """Fit phase and gain difference (a - b) to one pair's sweep.
 
-        ``level_db`` is the single channels' level difference (a - b): the fit's start.
+        ``alone_dbsm`` are a's and b's levels played alone (the radar's RCS at weight 1);
+        their difference is the fit's start.
         """
         pair = (a, b)
+        level_db = alone_dbsm[0] - alone_dbsm[1]
         if len(sweep) != len(delays):
             raise RtsError(f"calibration: FE pair {a}-{b}: {len(sweep)} cycles reported for "
                            f"{len(delays)} frames played; the radar must report every frame")
         _require_cycles((a, b), sweep)
-        az = np.array([_strongest(d, "az_deg", pair) for d in sweep])
-        el = np.array([_strongest(d, "el_deg", pair) for d in sweep])
-        rng = np.array([_strongest(d, "range_m", pair) for d in sweep])
+        channel = [int(np.flatnonzero(schedule.fe[0, 0] == q)[0]) for q in pair]
+        att = schedule.attenuation_db[0, 0, channel]
+        # Each FE's level as the pair played it: alone less the attenuation beyond weight 1's.
+        played = (np.asarray(alone_dbsm)
+                  - (att - self.attenuation_db - self.rig.cal_gain_db[[a, b]]))
+        dip = 20.0 * np.log10(abs(10.0 ** (played[0] / 20.0) - 10.0 ** (played[1] / 20.0)))
+        levels = (f"FE {a} seen alone at {alone_dbsm[0]:.2f} dBsm and played in the pair at "
+                  f"{played[0]:.2f} dBsm, FE {b} seen alone at {alone_dbsm[1]:.2f} dBsm and "
+                  f"played at {played[1]:.2f} dBsm: as the sweep turns their echoes against "
+                  f"each other their sum falls towards {dip:.2f} dBsm; below the radar's "
+                  f"detection threshold?")
+        az, el, rng = _pair_readings(Gate.of(self.rig, self.radar, schedule), sweep, pair,
+                                     ("az_deg", "el_deg", "range_m"), levels)
         # Each echo through the range window at the cell the radar read (folding included).
         cell = np.round(rng / self.radar.range_bin_m)
         bins = self._echo_bins(schedule)
-        channel = [int(np.flatnonzero(schedule.fe[0, 0] == q)[0]) for q in pair]
         offset = bins[:, channel] - cell[:, None]
         offset = np.mod(offset + self.n / 2.0, self.n) - self.n / 2.0
         level = self.radar.range_response(offset)
         # b's weight over a's as the attenuators played it (on their steps, within their
         # range), the channels' calibration gains taken out: what the fit's gain is beyond.
-        att = schedule.attenuation_db[0, 0, channel]
         weight_db = float(-(att[1] - att[0]) + (self.rig.cal_gain_db[b]
                                                  - self.rig.cal_gain_db[a]))
         # Likewise the phase shifter's steps: each channel's phase as played less the one asked
@@ -657,7 +702,8 @@ def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
     """Measure detected minus set angle (deg, (G, 2)) over a grid inside the rig's quads.
 
     The grid is the paper's (azimuth -3..3 deg x elevation -6..6 deg) for kit-table1, and a
-    6 x 5 grid over the middle of every quad otherwise. NaN where the radar reported nothing.
+    6 x 5 grid over the middle of every quad otherwise. NaN where the radar reported nothing
+    in the point's gate (`rts_scenario.gate`).
     """
     return check_grid(rig, radar, measure, method, estimator).error_deg
 
@@ -666,7 +712,8 @@ def grid_errors(rig: Rig, radar: RadarProfile, measure: Measure,
 class GridCheck:
     """The angle errors over the check grid (`grid_errors`), and what the schedule expected.
 
-    ``error_deg`` (G, 2) is detected minus set angle, NaN where the radar reported nothing;
+    ``error_deg`` (G, 2) is detected minus set angle (the strongest detection in the point's
+    gate), NaN where the radar reported nothing there;
     ``predicted_deg`` (G, 2) the error the schedule predicts from the rig's attenuator and delay
     steps (the bench's own limit, not the calibration's) for a Bartlett radar, zero for other
     estimators (the schedule's prediction is the beamformer's), NaN where nothing was played;
@@ -727,9 +774,10 @@ def check_grid(rig: Rig, radar: RadarProfile, measure: Measure, method: str = "e
                     in_velocity=one)
     schedule = build_schedule(tracks, rig, radar, method=method, estimator=estimator)
     dets = measure(schedule)
+    gate = Gate.of(rig, radar, schedule)
     out = np.full((n, 2), np.nan)
-    for i, d in enumerate(dets):  # one target per frame
-        k = d.strongest()
+    for i, d in enumerate(dets):  # one target per frame, read in its gate
+        k = gate.strongest(d, i)
         if k is not None and d.az_deg is not None and d.el_deg is not None:
             out[i] = d.az_deg[k] - az[i], d.el_deg[k] - el[i]
     played: NDArray[np.bool_] = np.any(schedule.active[:, 0], axis=1)

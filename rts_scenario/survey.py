@@ -1,11 +1,12 @@
 """Survey: where the radar sees each front end alone, and how strong.
 
 Each FE plays a target alone at full weight, at the rig's reference range and level; the radar's
-strongest detection gives the direction it sees the FE in and its level. On the bench the seen
-direction differs from the FE's mechanical direction by the radar's near field, the FE's antenna
-offsets and any misplacement; that difference is what synthesis must account for. Measurements
-run through a ``measure`` (schedule in, one `Detections` per frame out): the simulated radar, or
-a real bench through `rts_scenario.pipeline.Pipeline.play`.
+strongest detection where the pattern's echo shows (`rts_scenario.gate`: about its range and
+radial velocity; not a reflection in the room) gives the direction it sees the FE in and its
+level. On the bench the seen direction differs from the FE's mechanical direction by the radar's
+near field, the FE's antenna offsets and any misplacement; that difference is what synthesis
+must account for. Measurements run through a ``measure`` (schedule in, one `Detections` per
+frame out): the simulated radar, or a real bench through `rts_scenario.pipeline.Pipeline.play`.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from numpy.typing import NDArray
 
 from .calibration import pattern_schedule
 from .detections import Detections
+from .gate import Gate
 from .radar.profile import RadarProfile
 from .rig import Rig
 from .schedule import Schedule
@@ -73,14 +75,20 @@ class SurveyResult:
 
 def survey(rig: Rig, radar: RadarProfile, measure: Measure, repeats: int = REPEATS
            ) -> SurveyResult:
-    """Play each FE alone ``repeats`` times; return where the radar sees it, averaged."""
+    """Play each FE alone ``repeats`` times; return where the radar sees it, averaged.
+
+    Each cycle is read at its strongest detection in the pattern's gate (`rts_scenario.gate`);
+    an FE with none there in any of its cycles is not seen (NaN).
+    """
     n = rig.n_front_ends
     ref = rig.reference
     rows = [[(q, 1.0, 0.0)] for q in np.repeat(np.arange(n), repeats).tolist()]
-    cycles = measure(pattern_schedule(rig, radar, rows, ref.range_m, ref.attenuation_db))
+    pattern = pattern_schedule(rig, radar, rows, ref.range_m, ref.attenuation_db)
+    cycles = measure(pattern)
+    gate = Gate.of(rig, radar, pattern)
     seen = np.full((len(rows), 3), np.nan)
     for i, cycle in enumerate(cycles):  # one cycle per frame of the pattern
-        k = cycle.strongest()
+        k = gate.strongest(cycle, i)
         if k is None:
             continue
         for j, values in enumerate((cycle.az_deg, cycle.el_deg, cycle.rcs_dbsm)):

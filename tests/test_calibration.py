@@ -1,3 +1,5 @@
+import dataclasses
+import re
 import warnings
 from pathlib import Path
 
@@ -9,6 +11,7 @@ import rts_scenario as rs
 import rts_scenario.cli as cli
 from rts_scenario.calibration import (
     calibrate,
+    check_grid,
     grid_errors,
     pairs_of,
     simulated_measure,
@@ -634,3 +637,157 @@ def test_a_pair_the_attenuator_cannot_play_apart_is_refused_naming_it():
     assert "FE pair 0-1" in message and "limits.attenuation_min_db = 39" in message, message
     assert "limits.attenuation_max_db = 41" in message, message
     assert len(played) == 1  # the FEs alone only
+
+
+# The awr1843boost's range bin (c0 fs / (2 S N): 20 MHz, 40 MHz/us, 256 samples) and velocity
+# bin (lambda / (2 N_tx L T_slot): 3 TX, 64 loops, 30 us slots at 77.5 GHz), two of each: the
+# gate about the pattern's echo.
+AWR_GATE = "+-0.59 m, +-0.67 m/s"
+# kit-table1 with FE 3 12 dB weaker than FE 0 (FEs 1 and 2 within a dB of it).
+WEAK_FE_3 = ChannelErrors(gain_db=np.array([0.0, 0.6, -0.4, -12.0]),
+                          phase_deg=np.array([0.0, 120.0, -70.0, 160.0]),
+                          delay_s=np.zeros(4), az_deg=np.zeros(4), el_deg=np.zeros(4),
+                          distance_m=np.zeros(4))
+
+
+@pytest.mark.parametrize("where", [(4.0, -10.0), (10.0, 6.0)], ids=["wall", "same-range"])
+def test_a_room_reflector_stronger_than_a_weak_fe_is_not_taken_for_its_echo(where):
+    # A static reflector (-10 dBsm at 4 m, or 6 dBsm at the pattern's 10 m but standing still)
+    # the radar reports stronger than FE 3 alone (12 dB weak: about -2 dBsm at 10 m) and than
+    # the pairs' sums at their dips, weaker than FEs 0 to 2 alone (about 10 dBsm at 10 m). Each
+    # measurement reads the strongest detection where the pattern's echo shows (10 m,
+    # approaching at 1 m/s): the calibration is the one without the room.
+    from room import with_reflector
+
+    range_m, rcs_dbsm = where
+    clean = calibrate(KIT, AWR, simulated_measure(AWR, KIT, WEAK_FE_3))
+    room = calibrate(KIT, AWR, with_reflector(simulated_measure(AWR, KIT, WEAK_FE_3), range_m,
+                                              0.0, rcs_dbsm, az_deg=1.0, el_deg=2.0))
+    recovered_within(room, WEAK_FE_3, 0.5, 0.05)
+    assert not room.suspects
+    # FE 3's level alone is FE 0's less its 12 dB, not the reflector's RCS (all FEs 1 m away).
+    assert room.single_rcs_dbsm[3] == pytest.approx(room.single_rcs_dbsm[0] - 12.0, abs=0.01)
+    np.testing.assert_array_equal(room.phase_deg, clean.phase_deg)
+    np.testing.assert_array_equal(room.gain_db, clean.gain_db)
+
+
+def test_the_check_grid_is_read_where_its_target_shows_not_at_a_stronger_reflector():
+    # A static reflector at 4 m the radar reports stronger than every grid point's target
+    # (10 dBsm at 10 m): each point is read where its echo shows (10 m, approaching at 1 m/s).
+    from room import with_reflector
+
+    clean = check_grid(KIT, AWR, simulated_measure(AWR, KIT, WEAK_FE_3))
+    room = check_grid(KIT, AWR, with_reflector(simulated_measure(AWR, KIT, WEAK_FE_3), 4.0, 0.0,
+                                               10.0, az_deg=1.0, el_deg=2.0))
+    assert np.isfinite(room.error_deg).all()
+    np.testing.assert_array_equal(room.error_deg, clean.error_deg)
+
+
+def test_a_reflector_where_an_fe_alone_is_not_seen_fails_naming_the_fe_gate_and_reflector():
+    # The radar does not see FE 2 alone; a reflector is there all the same. Its RCS is not FE
+    # 2's level: the calibration stops before any pair is played, naming the FE, where its
+    # echo was looked for and the detection outside that.
+    from room import with_reflector
+
+    from rts_scenario.errors import MeasurementError
+
+    spy, played = _spied(with_reflector(
+        _blank_fe_alone(simulated_measure(AWR, KIT, WEAK_FE_3), 2, complete=True),
+        4.0, 0.0, -10.0))
+    with pytest.raises(MeasurementError) as info:
+        calibrate(KIT, AWR, spy)
+    assert str(info.value) == (
+        f"FE 2 played alone not seen at 10.00 m / -1.00 m/s in cycle 2 (gate {AWR_GATE}); "
+        f"strongest detection at 4.00 m, 0.00 m/s, -10.0 dBsm: a reflection in the room?")
+    assert len(played) == 1  # no pair played
+
+
+def test_a_reflector_where_a_pair_is_not_seen_fails_naming_the_pair_gate_and_reflector():
+    from room import with_reflector
+
+    from rts_scenario.errors import MeasurementError
+
+    def blank_pair_frame(schedule):
+        cycles = simulated_measure(AWR, KIT, WEAK_FE_3)(schedule)
+        if schedule.fe[0, 0, :2].tolist() == [0, 2]:
+            cycles[5] = Detections.empty(cycles[5].cycle, cycles[5].t_s)
+        return cycles
+
+    with pytest.raises(MeasurementError) as info:
+        calibrate(KIT, AWR, with_reflector(blank_pair_frame, 4.0, 0.0, -10.0))
+    message = str(info.value)
+    # Pair 0-2 plays the pattern's frames 24 to 47 (the simulated radar numbers its cycles by
+    # them). Its swept echo lies up to half a turn of the RTS's IF delay (500 MHz or more: 1 ns,
+    # 0.15 m) from 10 m: the gate is centred between the two echoes' ranges and widened by
+    # half their spread.
+    assert re.fullmatch(
+        r"FE pair 0-2 not seen at (9\.9\d|10\.0\d) m / -1\.00 m/s in cycle 29 \(gate "
+        r"\+-0\.(59|6\d) m, "
+        r"\+-0\.67 m/s\); strongest detection at 4\.00 m, 0\.00 m/s, -10\.0 dBsm: a "
+        r"reflection in the room\?", message), message
+
+
+def test_cli_calibrate_in_a_room_where_an_fe_alone_is_not_seen_fails_naming_it(
+        tmp_path, capsys, monkeypatch):
+    # Through the CAN bus (classic: RCS in 0.5 dB steps) and the command's error path: a
+    # failed measurement, exit 1, one line, nothing written.
+    from room import in_room
+
+    from rts_scenario.radar.simulate import SimulatedRadar
+
+    process = SimulatedRadar.process
+
+    def fe_3_unseen_in_room(self, schedule):
+        cycles = process(self, schedule)
+        alone = schedule.active[:, 0].sum(axis=1) == 1
+        for i in np.flatnonzero(alone & (schedule.fe[:, 0, 0] == 3)):
+            cycles[i] = Detections.empty(cycles[i].cycle, cycles[i].t_s)
+        return in_room(cycles, 4.0, 0.0, -10.0)
+
+    monkeypatch.setattr(SimulatedRadar, "process", fe_3_unseen_in_room)
+    out_json, rig_out = tmp_path / "cal.json", tmp_path / "cal.rig.yaml"
+    code = cli.main(["calibrate", "kit-table1", "--radar", "awr1843boost", "--json",
+                     str(out_json), "--write", str(rig_out)])
+    assert code == 1
+    assert capsys.readouterr().err == (
+        f"error: calibrate: FE 3 played alone not seen at 10.00 m / -1.00 m/s in cycle 3 "
+        f"(gate {AWR_GATE}); strongest detection at 4.00 m, 0.00 m/s, -10.0 dBsm: a "
+        f"reflection in the room?; nothing written\n")
+    assert not out_json.exists() and not rig_out.exists()
+
+
+def _threshold(measure, rcs_dbsm):
+    """``measure`` of a radar that reports no detection weaker than ``rcs_dbsm`` at 10 m.
+
+    Its detection threshold (a fixed SNR) is reached by that RCS at the patterns' range.
+    """
+    def thresholded(schedule):
+        out = []
+        for d in measure(schedule):
+            keep = d.rcs_dbsm >= rcs_dbsm
+            out.append(dataclasses.replace(d, **{q: getattr(d, q)[keep] for q in d.present}))
+        return out
+
+    return thresholded
+
+
+def test_a_pair_whose_sum_dips_below_the_radar_s_threshold_names_the_levels_alone_and_played():
+    # Every FE alone comes back at about 10 dBsm, 4 dB above the radar's threshold; a pair
+    # plays the swept echo at half the other's amplitude, so their sum dips to about 4 dBsm
+    # where the sweep turns them against each other: the radar loses those cycles. The
+    # message gives the levels alone and as the pair played them.
+    from rts_scenario.errors import MeasurementError
+
+    with pytest.raises(MeasurementError) as info:
+        calibrate(KIT, AWR, _threshold(simulated_measure(AWR, KIT, ChannelErrors.none(4)), 6.0))
+    message = str(info.value)
+    # FE 0 at weight 1 (40 dB: 10 dBsm at 10 m, the rig's reference), FE 2 6.02 dB below it:
+    # their sum falls towards 6.02 dB below FE 0's where they meet in antiphase (the radar's
+    # array tells pair 0-1's directions apart better, in azimuth: its dip is shallower).
+    # Pair 0-2 plays frames 24 to 47 (the simulated radar numbers its cycles by them).
+    assert re.fullmatch(
+        r"no detection for FE pair 0-2 in cycle 2\d: FE 0 seen alone at (9\.99|10\.00) dBsm "
+        r"and played in the pair at (9\.99|10\.00) dBsm, FE 2 seen alone at (9\.99|10\.00) "
+        r"dBsm and played at 3\.9\d dBsm: as the sweep turns their echoes against each other "
+        r"their sum falls towards 3\.9\d dBsm; below the radar's detection threshold\?",
+        message), message

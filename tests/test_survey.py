@@ -419,3 +419,25 @@ def test_survey_through_a_third_party_mapping_decodes_the_radar_speaking_it(tmp_
     # The built-in DBC's steps are finer: the near field's directions are off the object list's.
     el_own = np.array([fe["seen_el_deg"] for fe in own]) / OBJECT_LIST_STEP_DEG
     assert np.abs(el_own - np.round(el_own)).max() > 0.05
+
+
+def test_a_room_reflector_stronger_than_a_weak_front_end_is_not_taken_for_it():
+    # A static reflector (-10 dBsm at 4 m, 0 m/s) the radar reports stronger than FE 3 alone
+    # (12 dB weak: about -2 dBsm at the reference's 10 m), weaker than the others. The survey
+    # reads each cycle where the pattern's echo shows (10 m, approaching at 1 m/s): FE 3 is
+    # seen where it is seen without the room, at its own level.
+    from room import with_reflector
+
+    from rts_scenario.calibration import simulated_measure
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
+    weak = ChannelErrors(gain_db=np.array([0.0, 0.6, -0.4, -12.0]), phase_deg=np.zeros(4),
+                         delay_s=np.zeros(4), az_deg=np.zeros(4), el_deg=np.zeros(4),
+                         distance_m=np.zeros(4))
+    clean = survey(rig, radar, simulated_measure(radar, rig, weak), repeats=1)
+    room = survey(rig, radar, with_reflector(simulated_measure(radar, rig, weak), 4.0, 0.0,
+                                             -10.0, az_deg=1.0, el_deg=2.0), repeats=1)
+    # The injected gains (kit-table1's FEs all 1 m away: 4e-5 dB apart beyond them).
+    np.testing.assert_allclose(room.level_db, weak.gain_db, atol=0.01)
+    np.testing.assert_array_equal(room.seen_az_deg, clean.seen_az_deg)
+    np.testing.assert_array_equal(room.seen_el_deg, clean.seen_el_deg)

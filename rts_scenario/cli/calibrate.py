@@ -238,8 +238,13 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                     "arrives at half the other's amplitude, through the output and the CAN "
                     "checker; each sweep fitted with the radar's array, its modeled FE "
                     "responses and its estimator; least squares over all pairs gives "
-                    "per-channel phase and gain offsets. On the simulated radar, --inject-* "
-                    "adds random channel errors to recover.",
+                    "per-channel phase and gain offsets. Each cycle is read at its strongest "
+                    "detection within a gate about the pattern's echo (its range, from the "
+                    "played delay, plus or minus two range bins; its radial velocity, -1 m/s, "
+                    "plus or minus two velocity bins), never at a stronger reflection in the "
+                    "room; an FE or pair with detections but none in the gate fails, naming "
+                    "the strongest outside it. On the simulated radar, --inject-* adds random "
+                    "channel errors to recover.",
     )
     add_bench_arguments(parser, "paper")
     parser.add_argument("--json", metavar="OUT",
