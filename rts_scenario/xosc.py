@@ -585,6 +585,7 @@ class _Body:
     name: str
     kind: str
     el: _El
+    vehicle: bool = False  # described by a <Vehicle>
     center_m: np.ndarray | None = None
     size_m: np.ndarray | None = None
     position_m: np.ndarray | None = None
@@ -770,7 +771,7 @@ class _Importer:
                            "Pedestrian": ("pedestrianCategory", PEDESTRIAN_KINDS),
                            "MiscObject": ("miscObjectCategory", MISC_KINDS)}[what.tag]
         kind = kinds[what.choice(category, tuple(kinds))]
-        body = _Body(name=name, kind=kind, el=obj)
+        body = _Body(name=name, kind=kind, el=obj, vehicle=what.tag == "Vehicle")
         # Descriptive attributes and parts that do not change what the radar sees.
         for attr in ("name", "mass", "model", "model3d", "role"):
             what.read.add(attr)
@@ -1079,9 +1080,16 @@ class _Importer:
                                f"{', '.join(self.bodies)}")
             return ego
         for name in self.bodies:
-            if name.lower() == "ego":
+            if name.lower() in ("ego", "hero"):  # "hero": CARLA's name for the ego
                 return name
-        return next(iter(self.bodies))
+        # A radar rides a vehicle: the first one, else the first entity, said in a note.
+        vehicles = [name for name, body in self.bodies.items() if body.vehicle]
+        chosen = vehicles[0] if vehicles else next(iter(self.bodies))
+        which = ("the first vehicle" if vehicles else
+                 "the first entity (no vehicle, no entity named Ego or Hero)")
+        self.notes.append(f"{self.file}: the ego (radar carrier) is {chosen!r}, {which}; "
+                          f"--ego NAME names another")
+        return chosen
 
     # -- playing -------------------------------------------------------------------------
 

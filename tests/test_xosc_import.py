@@ -134,9 +134,17 @@ def test_pedestrian_crossing_tracks_match_closed_form(tmp_path):
     assert_tracks(scene, t, *ego_radar(t, 6.0), ped_p, ped_v)
 
 
-def test_ego_defaults_to_entity_named_ego_else_the_first(tmp_path):
+def test_ego_defaults_to_entity_named_ego_or_hero_else_the_first_vehicle(tmp_path):
     result, _ = imported(tmp_path, "pedestrian_crossing")
-    assert result.ego == "Pedestrian"  # no entity named Ego: the first one
+    assert result.ego == "Hero"  # CARLA's name for the ego, after the pedestrian
+    assert not any("radar carrier" in note for note in result.notes)
+    # Named neither: the first vehicle (a radar rides a vehicle), not the first entity.
+    car = variant(tmp_path, "pedestrian_crossing", 'name="Hero"', 'name="Car"', "car.xosc")
+    car.write_text(car.read_text().replace('"Hero"', '"Car"'))
+    result, _ = imported(tmp_path, car)
+    assert result.ego == "Car"
+    assert (f"{car}: the ego (radar carrier) is 'Car', the first vehicle; --ego NAME names "
+            f"another") in result.notes
     renamed = variant(tmp_path, "braking_lead", 'name="Ego"', 'name="EGO"')
     text = renamed.read_text().replace('"Ego"', '"EGO"')
     renamed.write_text(text)
