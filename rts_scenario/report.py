@@ -310,8 +310,8 @@ class Report:
             lines.append(f"time alignment: the detections fit the scene {abs(lag) * 1e3:.1f} ms "
                          f"(+-{3e3 * error:.1f} ms) {'before' if lag > 0 else 'after'} the "
                          f"cycles' times"
-                         + (f" (the radar's range-Doppler coupling: {coupling * 1e3:+.1f} ms)"
-                            if coupling else ""))
+                         + (f" (the radar's range-Doppler coupling: {abs(coupling) * 1e3:.1f} "
+                            f"ms {'before' if coupling > 0 else 'after'})" if coupling else ""))
         untold = self.radar_clock.get("detection_lag_untold")
         if untold:
             lines.append(f"time alignment: not told ({untold})")
