@@ -139,7 +139,8 @@ class Gate:
             (cycle.rcs_dbsm, 1, "dBsm")) if values is not None]
         return (f"{what} not seen at {' / '.join(where)} in cycle {cycle.cycle} (gate "
                 f"{', '.join(width)}); strongest detection at {', '.join(seen)}: a reflection "
-                f"in the room?")
+                f"in the room? (at every FE about the same offset: the rig's "
+                f"limits.latency_s or its FEs' calibration.delay_s)")
 
 
 __all__ = ["GATE_BINS", "Gate", "echo_delays_s"]

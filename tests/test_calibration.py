@@ -698,7 +698,9 @@ def test_a_reflector_where_an_fe_alone_is_not_seen_fails_naming_the_fe_gate_and_
         calibrate(KIT, AWR, spy)
     assert str(info.value) == (
         f"FE 2 played alone not seen at 10.00 m / -1.00 m/s in cycle 2 (gate {AWR_GATE}); "
-        f"strongest detection at 4.00 m, 0.00 m/s, -10.0 dBsm: a reflection in the room?")
+        f"strongest detection at 4.00 m, 0.00 m/s, -10.0 dBsm: a reflection in the room? (at "
+        f"every FE about the same offset: the rig's limits.latency_s or its FEs' "
+        f"calibration.delay_s)")
     assert len(played) == 1  # no pair played
 
 
@@ -724,7 +726,8 @@ def test_a_reflector_where_a_pair_is_not_seen_fails_naming_the_pair_gate_and_ref
         r"FE pair 0-2 not seen at (9\.9\d|10\.0\d) m / -1\.00 m/s in cycle 29 \(gate "
         r"\+-0\.(59|6\d) m, "
         r"\+-0\.67 m/s\); strongest detection at 4\.00 m, 0\.00 m/s, -10\.0 dBsm: a "
-        r"reflection in the room\?", message), message
+        r"reflection in the room\? \(at every FE about the same offset: the rig's "
+        r"limits\.latency_s or its FEs' calibration\.delay_s\)", message), message
 
 
 def test_cli_calibrate_in_a_room_where_an_fe_alone_is_not_seen_fails_naming_it(
@@ -752,7 +755,8 @@ def test_cli_calibrate_in_a_room_where_an_fe_alone_is_not_seen_fails_naming_it(
     assert capsys.readouterr().err == (
         f"error: calibrate: FE 3 played alone not seen at 10.00 m / -1.00 m/s in cycle 3 "
         f"(gate {AWR_GATE}); strongest detection at 4.00 m, 0.00 m/s, -10.0 dBsm: a "
-        f"reflection in the room?; nothing written\n")
+        f"reflection in the room? (at every FE about the same offset: the rig's "
+        f"limits.latency_s or its FEs' calibration.delay_s); nothing written\n")
     assert not out_json.exists() and not rig_out.exists()
 
 
