@@ -210,7 +210,8 @@ def test_masks(tmp_path):
     assert not tr.checkable[:, 2].any()
 
 
-@pytest.mark.parametrize("n_frames_expected, duration, rate", [(200, 10.0, 20.0), (1, 0.01, 20.0)])
+@pytest.mark.parametrize("n_frames_expected, duration, rate", [(200, 10.0, 20.0), (1, 0.05, 20.0),
+                                                          (1, 2.0, 0.5)])
 def test_frame_count(tmp_path, n_frames_expected, duration, rate):
     tr = tracks_of(tmp_path, [{"name": "a", "rcs": {"rcs_dbsm": 0},
                                "motion": {"type": "stationary", "position_m": [20, 0, 0]}}],
