@@ -51,7 +51,7 @@ from .detections import Detections, bus_times, sequential_numbers, unwrap_counte
 from .errors import CheckError
 from .kinematics import Tracks
 from .report import FrameRecord, Report, RunningStats, TargetResult
-from .scenario.model import LIMITS, SCENE_LIMITS, Expectations
+from .scenario.model import LIMITS, PLANNED_SCENE_LIMITS, SCENE_LIMITS, Expectations
 from .schedule.model import BLOCKING, Status
 
 FloatArray = NDArray[np.float64]
@@ -922,9 +922,9 @@ class Checker:
         # edge of the bench may not reach it): said, not failed.
         declared = [lim for lim in exp.expected_limits if lim not in SCENE_LIMITS
                     and not any(lim in t.limits for t in targets)]
-        if "frame_rate_above_radar" in exp.expected_limits and self._scene_limits_known \
-                and "frame_rate_above_radar" not in self._scene_limits:
-            declared.append("frame_rate_above_radar")
+        if self._scene_limits_known:
+            declared += [lim for lim in PLANNED_SCENE_LIMITS
+                         if lim in exp.expected_limits and lim not in self._scene_limits]
         own = [f"{t.name}: {lim}" for k, t in enumerate(targets)
                for lim in sorted(self._expected[k] - exp.expected_limits)
                if lim not in t.limits]

@@ -87,7 +87,48 @@ def scene_limits(scene: Scenario) -> dict[str, str]:
             f"the scene runs at {scene.frame_rate_hz:g} frames/s but radar "
             f"{scene.radar.name!r} measures {radar_hz:g} cycles/s (cycle {cycle_s:g} s): "
             f"it cannot report every frame")
+    staircase = _staircase(scene)
+    if staircase is not None:
+        out["motion_staircase"] = staircase
     return out
+
+
+# A frame held over at least this many radar cycles is measured as it stands by all of them.
+STAIRCASE_CYCLES = 3.0
+
+
+def _staircase(scene: Scenario) -> str | None:
+    """Why the radar would see a target's motion as a staircase, or None.
+
+    Each frame is held for a frame period; where that spans `STAIRCASE_CYCLES` radar cycles or
+    more, every one of them measures (and is judged against) the frame held, while the scene's
+    target moves on. Flagged where a present target moves farther than the range tolerance
+    within one frame period (from its frame's time to the next, the last frame's to the
+    scene's end).
+    """
+    period_s = 1.0 / scene.frame_rate_hz
+    cycle_s = scene.radar.radar_clock.cycle_s
+    if period_s < STAIRCASE_CYCLES * cycle_s or not scene.targets:
+        return None
+    tolerance_m = scene.expectations.tolerances["range_m"]
+    worst = (0.0, 0, 0)  # distance, frame, target
+    step = frames_per_batch(len(scene.targets))
+    for first in range(0, scene.n_frames, step):
+        frames = np.arange(first, min(first + step, scene.n_frames) + 1)
+        tracks = compute_tracks(scene, frames / scene.frame_rate_hz, frames)
+        moved = np.linalg.norm(np.diff(tracks.position_m, axis=0), axis=-1)
+        moved = np.where(tracks.present[:-1], moved, 0.0)
+        f, k = np.unravel_index(int(np.argmax(moved)), moved.shape)
+        if moved[f, k] > worst[0]:
+            worst = (float(moved[f, k]), first + int(f), int(k))
+    distance_m, frame, target = worst
+    if distance_m <= tolerance_m:
+        return None
+    return (f"the scene holds each frame {period_s:g} s, {period_s / cycle_s:.3g} radar cycles "
+            f"(cycle {cycle_s:g} s), while target {scene.targets[target].name!r} moves "
+            f"{distance_m:.3g} m in one (from {frame / scene.frame_rate_hz:g} s), more than the "
+            f"range tolerance {tolerance_m:g} m: the radar sees its motion as a staircase, each "
+            f"cycle judged against the frame held; raise frame_rate_hz")
 
 
 def track_batches(scene: Scenario, batch_frames: int | None = None

@@ -30,6 +30,7 @@ import yaml
 from scipy.optimize import brentq
 
 from .errors import RtsError, ScenarioError
+from .scenario.loader import FRAME_SLACK
 from .scenario.trajectory import LaneChange, Trajectory, TrajectorySet, TravelLaw
 from .scenario.trajectory import Path as TrajectoryPath
 
@@ -1559,6 +1560,13 @@ class _Importer:
             targets.append(target)
         source = self.description.strip().rstrip(".")
         description = (f"{source}. " if source else "") + f"Imported from {Path(self.file).name}."
+        # A scene plays whole frames, each held a frame period: the last one covers the stop.
+        n_frames = max(1, math.ceil(duration_s * frame_rate_hz - FRAME_SLACK))
+        if abs(n_frames - duration_s * frame_rate_hz) > FRAME_SLACK:
+            self.notes.append(f"{self.file}:{self.stop_el.line}: the storyboard stops at "
+                              f"{duration_s:.6g} s, rounded up to {n_frames} frames at "
+                              f"{frame_rate_hz:g} Hz: duration_s {n_frames / frame_rate_hz:g}")
+        duration_s = n_frames / frame_rate_hz
         return {"rts_scenario": 1, "name": name, "description": description,
                 "duration_s": _round(duration_s), "frame_rate_hz": frame_rate_hz,
                 "radar": {"profile": radar,

@@ -110,9 +110,31 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}:4:1: frame_rate_hz: must be <= 1000"),
     # A scene has at least one frame, held for its frame period: here 11 days.
     ("frames-span-too-long", sub("frame_rate_hz: 10.0", "frame_rate_hz: 1e-6"),
-     r"^{f}:4:1: frame_rate_hz: duration_s x frame_rate_hz = 0.5 s x 1e-06 Hz: the scene's 1 "
-     r"frame would span 1e\+06 s \(each held for 1 / frame_rate_hz = 1e\+06 s\), more than "
-     r"the 86400 s a scene may last; raise frame_rate_hz$"),
+     r"^{f}:4:1: frame_rate_hz: duration_s = 0.5 s at frame_rate_hz = 1e-06 Hz is 5e-07 frame "
+     r"periods, not a whole number of them: the scene would play 1 frame held 1e\+06 s, "
+     r"1e\+06 s in all, not the 0.5 s declared \(frame_rate_hz counts frames per second, the "
+     r"inverse of the frame period\); "),
+    # A frame period written where the rate goes: one frame frozen for 20 s, none of the 6 s of
+    # motion played; 0.05 s is a frame period that covers 6 s.
+    ("frames-frozen", sub("duration_s: 0.5", "duration_s: 6.0").replace(
+        "frame_rate_hz: 10.0", "frame_rate_hz: 0.05"),
+     r"^{f}:4:1: frame_rate_hz: duration_s = 6 s at frame_rate_hz = 0.05 Hz is 0.3 frame "
+     r"periods, not a whole number of them: the scene would play 1 frame held 20 s, 20 s in "
+     r"all, not the 6 s declared \(frame_rate_hz counts frames per second: if 0.05 s is the "
+     r"frame period, frame_rate_hz: 20\); the frames must cover duration_s to within 0.001 of a "
+     r"frame period: e.g. duration_s: 20 \(1 frame\) or frame_rate_hz: 0.166667$"),
+    # 1.5 frame periods play as 2: 1.33 s of a 1 s scene.
+    ("frames-overrun", sub("duration_s: 0.5", "duration_s: 1.0").replace(
+        "frame_rate_hz: 10.0", "frame_rate_hz: 1.5"),
+     r"^{f}:3:1: duration_s: duration_s = 1 s at frame_rate_hz = 1.5 Hz is 1.5 frame periods, "
+     r"not a whole number of them: the scene would play 2 frames held 0.666667 s each, 1.33333 "
+     r"s in all, not the 1 s declared; the frames must cover duration_s to within 0.001 of a "
+     r"frame period: e.g. duration_s: 0.666667 or 1.33333 \(1 or 2 frames\) or frame_rate_hz: "
+     r"1 or 2$"),
+    ("frames-short-of-duration", sub("duration_s: 0.5", "duration_s: 0.52"),
+     r"^{f}:3:1: duration_s: duration_s = 0.52 s at frame_rate_hz = 10 Hz is 5.2 frame periods"
+     r".* would play 5 frames held 0.1 s each, 0.5 s in all, not the 0.52 s declared; .* e.g. "
+     r"duration_s: 0.5 or 0.6 \(5 or 6 frames\) or frame_rate_hz: 9.61538 or 11.5385$"),
     ("frame-rate-above-rig", sub("frame_rate_hz: 10.0", "frame_rate_hz: 500"),
      r"^{f}:4:1: frame_rate_hz: the scene runs at 500 Hz but rig 'wide-3x5' updates at most"),
     ("target-frames-too-many", sub("duration_s: 0.5", "duration_s: 86400").replace(

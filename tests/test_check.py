@@ -560,10 +560,11 @@ def test_a_scene_wide_limit_is_said_not_hit_only_where_scene_limits_were_judged(
     from rts_scenario.check import Checker
 
     # check_cycles judges no scene-wide limits: it cannot tell that the radar kept up.
-    expect = Expectations(expected_limits=frozenset({"frame_rate_above_radar"}))
+    expect = Expectations(expected_limits=frozenset({"frame_rate_above_radar",
+                                                     "motion_staircase"}))
     assert Checker("s", ("a",), expect).report().expected_not_hit == []
     judged = Checker("s", ("a",), expect, scene_limits={})
-    assert judged.report().expected_not_hit == ["frame_rate_above_radar"]
+    assert judged.report().expected_not_hit == ["frame_rate_above_radar", "motion_staircase"]
 
 
 # -- echoes beyond the radar's unambiguous range or velocity: where the radar folds them --------

@@ -210,7 +210,8 @@ def test_masks(tmp_path):
     assert not tr.checkable[:, 2].any()
 
 
-@pytest.mark.parametrize("n_frames_expected, duration, rate", [(200, 10.0, 20.0), (1, 0.01, 20.0)])
+@pytest.mark.parametrize("n_frames_expected, duration, rate", [(200, 10.0, 20.0), (1, 0.05, 20.0),
+                                                          (1, 2.0, 0.5)])
 def test_frame_count(tmp_path, n_frames_expected, duration, rate):
     tr = tracks_of(tmp_path, [{"name": "a", "rcs": {"rcs_dbsm": 0},
                                "motion": {"type": "stationary", "position_m": [20, 0, 0]}}],
@@ -397,3 +398,16 @@ def test_ego_backing_out_on_a_spline_keeps_its_radar_facing_forward(tmp_path):
     x = np.where(t <= 10, 2 * t - 0.1 * t * t, 10 - 0.1 * (t - 10) ** 2)
     np.testing.assert_allclose(tr.az_deg[:, 0], 0.0, atol=1e-9)
     np.testing.assert_allclose(tr.range_m[:, 0], 40.0 - 3.7 - x, atol=1e-9)
+
+
+def test_a_target_at_the_radar_s_reference_point_is_within_its_unambiguous_range(tmp_path):
+    # Range 0 (the target on the mount point) and 0.1 um from it: the radar's range FFT shows
+    # both in its first cell, well inside [0, max_range_m); only a target at max_range_m or
+    # beyond folds.
+    tr = tracks_of(tmp_path, [
+        {"name": name, "rcs": {"rcs_dbsm": 10},
+         "motion": {"type": "stationary", "position_m": [3.7 + dx, 0, 0.5]}}
+        for name, dx in (("on", 0.0), ("near", 1e-7))
+    ], radar={"profile": "awr1843boost", "mount": {"x_m": 3.7, "z_m": 0.5}}, duration_s=1.0)
+    np.testing.assert_allclose(tr.range_m[0], [0.0, 1e-7], atol=1e-12)
+    assert tr.in_range.all()

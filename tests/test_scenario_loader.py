@@ -9,6 +9,7 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from scene_helpers import write_scene
 
 import rts_scenario.cli as cli
 from rts_scenario import ScenarioError
@@ -808,3 +809,81 @@ def test_two_spline_reversals_in_a_row_say_how_to_write_them(tmp_path):
     assert ("waypoints 1 and 2 both have speed 0: the object would never get from one to the "
             "other (to stop at both, add a waypoint between them with a speed above 0)"
             ) in str(info.value)
+
+
+@pytest.mark.parametrize("duration_s, frame_rate_hz, n_frames", [
+    (7.35, 20.0, 147),  # 147.00000000000003 frame periods in floating point
+    (7.333333, 30.0, 220),  # a duration written to six decimals: 220 - 1e-5 frame periods
+    (1.0 + 0.9e-3 / 20.0, 20.0, 20),  # 0.9 thousandths of a frame period too long
+    (2.0, 0.5, 1),  # one frame held its whole 2 s period
+])
+def test_frames_that_cover_the_duration_load(tmp_path, duration_s, frame_rate_hz, n_frames):
+    scene = load_scenario(write_scene(tmp_path, [{
+        "name": "car", "rcs": {"rcs_dbsm": 10},
+        "motion": {"type": "stationary", "position_m": [20, 0, 0.5]}}],
+        duration_s=duration_s, frame_rate_hz=frame_rate_hz))
+    assert scene.n_frames == n_frames
+    assert abs(n_frames / frame_rate_hz - duration_s) <= 1e-3 / frame_rate_hz
+
+
+@pytest.mark.parametrize("duration_s, frame_rate_hz, key", [
+    (1.0 + 1.1e-3 / 20.0, 20.0, "duration_s"),  # 1.1 thousandths of a frame period too long
+    (1.0 - 1.1e-3 / 20.0, 20.0, "duration_s"),
+    (6.0, 0.05, "frame_rate_hz"),  # under one frame period: the rate is the suspect
+    (1.0, 1.5, "duration_s"),
+])
+def test_frames_that_do_not_cover_the_duration_are_refused(tmp_path, duration_s,
+                                                            frame_rate_hz, key):
+    with pytest.raises(ScenarioError, match=rf":\d+:\d+: {key}: duration_s = .* frame periods, "
+                                            rf"not a whole number of them"):
+        load_scenario(write_scene(tmp_path, [{
+            "name": "car", "rcs": {"rcs_dbsm": 10},
+            "motion": {"type": "stationary", "position_m": [20, 0, 0.5]}}],
+            duration_s=duration_s, frame_rate_hz=frame_rate_hz))
+
+
+def accelerating(speed_mps, acceleration_mps2):
+    return {"type": "constant_acceleration", "position_m": [20, 0, 0.5],
+            "speed_mps": speed_mps, "acceleration_mps2": acceleration_mps2}
+
+
+@pytest.mark.parametrize("speed_mps, acceleration_mps2, reaches_s", [
+    (0.0, 15.0, 10.0),  # 150 m/s after 150 / 15 s
+    (15.0, 15.0, 9.0),
+    (-30.0, -12.0, 10.0),  # backwards, faster and faster: -150 m/s after 120 / 12 s
+])
+def test_a_motion_whose_speed_leaves_the_limit_within_the_scene_is_refused(
+        tmp_path, speed_mps, acceleration_mps2, reaches_s):
+    limit = 150.0 if acceleration_mps2 > 0 else -150.0
+    path = write_scene(tmp_path, [{"name": "rocket", "rcs": {"rcs_dbsm": 10},
+                                   "motion": accelerating(speed_mps, acceleration_mps2)}],
+                       duration_s=20.0)
+    with pytest.raises(ScenarioError, match=(
+            rf":\d+:\d+: targets\[0\]\.motion\.acceleration_mps2: target 'rocket' reaches "
+            rf"{limit:g} m/s at {reaches_s:g} s \({acceleration_mps2:g} m/s2 from "
+            rf"{speed_mps:g} m/s\), before the scene's last frame at 19.95 s .*speeds run from "
+            rf"-150 to 150 m/s")):
+        load_scenario(path)
+
+
+def test_the_ego_s_speed_is_held_to_the_same_limit(tmp_path):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                   "motion": accelerating(0.0, 0.0)}],
+                       duration_s=20.0, ego={"motion": accelerating(100.0, 10.0)})
+    with pytest.raises(ScenarioError, match=r":\d+:\d+: ego\.motion\.acceleration_mps2: the ego "
+                                            r"reaches 150 m/s at 5 s "):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize("speed_mps, acceleration_mps2", [
+    (100.0, 2.5),  # 150 m/s at exactly 20 s: after the last frame (19.95 s)
+    (150.0, -15.0),  # braking from the limit: it stops at 10 s and stands
+    (-150.0, 15.0),
+    (150.0, 0.0),
+])
+def test_a_motion_within_the_speed_limit_loads(tmp_path, speed_mps, acceleration_mps2):
+    scene = load_scenario(write_scene(tmp_path, [{
+        "name": "car", "rcs": {"rcs_dbsm": 10},
+        "motion": accelerating(speed_mps, acceleration_mps2)}], duration_s=20.0))
+    # Radial speed is at most the speed: at most the limit in every frame.
+    assert np.abs(compute_tracks(scene).radial_velocity_mps).max() <= 150.0 + 1e-9

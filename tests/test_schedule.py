@@ -509,3 +509,12 @@ def test_the_aware_phase_search_never_leaves_settings_that_play_no_peak(step_deg
         x = (sch.weight[0, i] * np.exp(1j * np.where(on[i], sch.phase_rad[0, i], 0.0))) @ sources
         np.testing.assert_allclose(_bartlett_peak(radar.array, x, az[i], el[i]), [az[i], el[i]],
                                    atol=0.01)
+
+
+@pytest.mark.parametrize("range_m", [0.0, 1e-7, 0.5])
+def test_a_target_at_or_near_the_radar_is_too_close_for_the_rts(range_m):
+    # The FEs are 1 m away: an echo from under 1 m would need a negative RTS delay,
+    # 2 (R - 1) / c < 0, however close, the radar's own reference point (range 0) included.
+    sch = build_schedule(tracks([0.0], [0.0], range_m=range_m), rig_with(), RADAR)
+    assert Status.TOO_CLOSE in Status(int(sch.status[0, 0]))
+    assert not sch.emitted[0, 0] and not sch.active[0, 0].any()

@@ -253,3 +253,35 @@ def test_every_detection_of_a_target_played_off_its_angle_is_its_own_not_a_false
     assert target.limits.get("angle_quantized", 0) > 0, target.limits
     assert report.false_detections == 0
     assert report.passed, report.reasons
+
+
+MOVER = ("- {name: car, rcs: {rcs_dbsm: 10.0}, motion: {type: constant_velocity, "
+         "position_m: [40, 0, 1.1], speed_mps: 2.0}}\n")
+
+
+@pytest.mark.parametrize("expected", [False, True])
+def test_motion_held_frozen_over_many_radar_cycles_fails_unless_expected(tmp_path, expected):
+    # One frame a second, the radar a cycle every 50 ms: each frame is held for 20 cycles
+    # while the car drives 2 m, more than the 0.3 m range tolerance. The radar sees the motion
+    # as a staircase, every cycle judged against the frame held: the scene says so.
+    path = scene(tmp_path, f"staircase-{expected}", MOVER, rate=1.0,
+                 expectations="  expected_limits: [motion_staircase]\n" if expected else "")
+    report = run_scene(path, RunOptions(drain_s=1.0)).report
+    assert "motion_staircase" in report.scene_limits
+    assert report.passed == expected, report.reasons
+    if not expected:
+        (reason,) = [r for r in report.reasons if r.startswith("motion_staircase")]
+        assert "1 s, 20 radar cycles" in reason and "'car' moves 2 m" in reason, reason
+
+
+@pytest.mark.parametrize("rate, targets", [
+    (20.0, MOVER),  # a frame per radar cycle: the car moves 0.1 m per frame
+    (1.0, CAR),  # held 20 cycles, but nothing moves
+    (5.0, MOVER.replace("2.0}", "1.0}")),  # held 4 cycles, the car moves 0.2 m in one
+])
+def test_frames_that_keep_up_with_the_motion_are_no_staircase(tmp_path, rate, targets):
+    from rts_scenario.preflight import scene_limits
+    from rts_scenario.scenario import load_scenario
+
+    assert "motion_staircase" not in scene_limits(load_scenario(scene(tmp_path, "smooth",
+                                                                      targets, rate=rate)))

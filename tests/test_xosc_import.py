@@ -229,7 +229,13 @@ def test_storyboard_features(tmp_path):
     (change,) = truck.trajectory.lane_changes
     assert (change.start_s, change.duration_s, change.offset_m) == pytest.approx(
         (t_slow + 4.0, 8.0, 3.7), abs=1e-8)
-    assert scene.duration_s == pytest.approx(t_slow + 12.0, abs=1e-8)
+    # The scene plays whole frames: the stop time rounded up to the next 20 Hz frame period,
+    # the last frame held past it, and a note says so.
+    stop_s = t_slow + 12.0
+    assert scene.duration_s == pytest.approx(math.ceil(stop_s * 20.0) / 20.0, abs=1e-9)
+    assert scene.n_frames == math.ceil(stop_s * 20.0)
+    assert any(f"stops at {stop_s:.6g} s" in note and "rounded up to 491 frames" in note
+               for note in result.notes), result.notes
     assert any("'never' never starts" in note for note in result.notes)
     assert any("is target 'truck_1'" in note for note in result.notes)
     assert any("<RoadNetwork> not used" in note for note in result.notes)

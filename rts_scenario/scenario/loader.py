@@ -55,9 +55,9 @@ SCENE_SUFFIX = ".scenario.yaml"
 # What a run can stream and check in reasonable time and memory (a 24 h scene at 20 Hz with 28
 # targets); the schema states it on duration_s and frame_rate_hz.
 MAX_TARGET_FRAMES = 50_000_000
-# The longest a scene may last, its frames held for their frame period (the schema's
-# duration_s bound).
-MAX_SCENE_S = 86400.0
+# The scene's frames, each held for its frame period, must play duration_s to within this share
+# of a frame period: a duration written to a few decimals passes, half a frame more does not.
+FRAME_SLACK = 1e-3
 
 
 @lru_cache(maxsize=1)
@@ -216,20 +216,53 @@ def _radar_options(radar: dict[str, Any], empty: bool) -> RadarOptions:
 
 
 def _check_frames(doc: Document, frames: _Frames) -> None:
-    """Refuse frames that span more than a scene may last (`MAX_SCENE_S`).
+    """Refuse frames that do not play the scene's duration.
 
-    A scene has at least one frame, and each is held for its frame period: a scene of one
-    frame at a rate far below its duration's inverse would last that whole period.
+    Frame f plays from ``f / frame_rate_hz`` for one frame period: the ``n`` frames play
+    ``n / frame_rate_hz`` s. Where ``duration_s`` is not a whole number of frame periods (to
+    within `FRAME_SLACK`), they would play longer or shorter than declared: a scene under one
+    frame period long would hold its first frame, frozen, for the whole period.
     """
-    span = frames.n / frames.rate_hz
-    if span > MAX_SCENE_S * (1.0 + 1e-9):
-        raise doc.error(
-            ("frame_rate_hz",),
-            f"duration_s x frame_rate_hz = {frames.duration_s:g} s x {frames.rate_hz:g} Hz: "
-            f"the scene's {frames.n} frame{'s' if frames.n > 1 else ''} would span {span:g} s "
-            f"(each held for 1 / frame_rate_hz = {1.0 / frames.rate_hz:g} s), more than the "
-            f"{MAX_SCENE_S:g} s a scene may last; raise frame_rate_hz",
-        )
+    periods = frames.duration_s * frames.rate_hz
+    if abs(periods - frames.n) <= FRAME_SLACK:
+        return
+    rate, declared = frames.rate_hz, frames.duration_s
+    period = 1.0 / rate
+    played = frames.n * period
+    counts = sorted({max(1, math.floor(periods)), max(1, math.ceil(periods))})
+
+    def whole(n_periods: float) -> bool:
+        return abs(n_periods - round(n_periods)) <= FRAME_SLACK and round(n_periods) >= 1
+
+    durations = " or ".join(_shown(n * period, lambda d: whole(d * rate)) for n in counts)
+    rates = " or ".join(_shown(n / declared, lambda r: whole(declared * r)) for n in counts)
+    plural = "s" if frames.n > 1 else ""
+    held = f"held {period:g} s each" if frames.n > 1 else f"held {period:g} s"
+    if periods >= 1.0:
+        key, hint = "duration_s", ""
+    elif whole(declared / rate) and 1.0 / rate <= scenario_schema()["properties"][
+            "frame_rate_hz"]["maximum"]:
+        key = "frame_rate_hz"
+        hint = (f" (frame_rate_hz counts frames per second: if {rate:g} s is the frame period, "
+                f"frame_rate_hz: {_shown(1.0 / rate, lambda r: whole(declared * r))})")
+    else:
+        key = "frame_rate_hz"
+        hint = " (frame_rate_hz counts frames per second, the inverse of the frame period)"
+    raise doc.error(
+        (key,),
+        f"duration_s = {declared:g} s at frame_rate_hz = {rate:g} Hz is {periods:.6g} frame "
+        f"periods, not a whole number of them: the scene would play {frames.n} frame{plural} "
+        f"{held}, {played:g} s in all, not the {declared:g} s declared{hint}; the frames must "
+        f"cover duration_s to within {FRAME_SLACK:g} of a frame period: e.g. duration_s: "
+        f"{durations} ({' or '.join(map(str, counts))} frame{'s' if counts[-1] > 1 else ''}) "
+        f"or frame_rate_hz: {rates}",
+    )
+
+
+def _shown(value: float, fits: Any) -> str:
+    """``value`` in as few digits (from 6) as keep ``fits(shown value)`` true."""
+    return next((f"{value:.{d}g}" for d in range(6, 18) if fits(float(f"{value:.{d}g}"))),
+                repr(value))
 
 
 def _check_size(doc: Document, frames: _Frames, n_targets: int) -> None:
@@ -581,7 +614,38 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
             law = TravelLaw.pieces([0.0], [v0], [max(a, 0.0) if v0 == 0.0 else a])
     else:  # speed_profile
         law = _speed_profile(doc, (*mkey, "profile"), motion["profile"])
+    who = f"target {spec['name']!r}" if "name" in spec else "the ego"
+    _check_speed(doc, (*mkey, "acceleration_mps2") if "acceleration_mps2" in motion else mkey,
+                 law, frames, who)
     return Trajectory(path=path, law=law, lane_changes=lane_changes)
+
+
+# Speeds along a path run from -MAX_SPEED_MPS to MAX_SPEED_MPS (the schema's bound on each
+# speed given; the loader holds a motion's every speed within the scene to it).
+MAX_SPEED_MPS = 150.0
+
+
+def _check_speed(doc: Document, key: KeyPath, law: TravelLaw, frames: _Frames,
+                 who: str) -> None:
+    """Refuse a motion whose speed leaves +-`MAX_SPEED_MPS` by the scene's last frame.
+
+    The speed is linear in time on each piece of ``law``: it peaks at a piece's ends.
+    """
+    starts = law.knots_s
+    ends = np.minimum(np.append(starts[1:], np.inf), frames.last_s)
+    within = starts <= frames.last_s
+    end_speed = law.v0_mps + law.a_mps2 * np.maximum(ends - starts, 0.0)
+    over = within & (np.abs(end_speed) > MAX_SPEED_MPS * (1.0 + 1e-12))
+    if not over.any():
+        return
+    k = int(np.argmax(over))
+    v0, a = float(law.v0_mps[k]), float(law.a_mps2[k])
+    limit = math.copysign(MAX_SPEED_MPS, end_speed[k])
+    at_s = float(starts[k]) + (limit - v0) / a
+    raise doc.error(key, f"{who} reaches {limit:g} m/s at {at_s:.6g} s ({a:g} m/s2 from "
+                         f"{v0:g} m/s), before {frames.describe_end()}: speeds run from "
+                         f"{-MAX_SPEED_MPS:g} to {MAX_SPEED_MPS:g} m/s; accelerate less, or "
+                         f"end the scene before the speed leaves them")
 
 
 def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]]) -> TravelLaw:

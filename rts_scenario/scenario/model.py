@@ -34,13 +34,17 @@ LIMITS = {
     "beyond_radar_range": "beyond the radar's unambiguous range",
     "beyond_radar_velocity": "beyond the radar's unambiguous radial velocity",
     "frame_rate_above_radar": "the scene's frames come faster than the radar's cycles",
+    "motion_staircase": "a frame is held over several radar cycles while a target moves more "
+                        "than the range tolerance: the radar sees its motion as a staircase",
     "frames_sent_late": "schedule frames went out more than a frame period late",
     "frames_lost": "the RTS reports schedule frames it lost or could not apply",
 }
 
 # Limits of the whole scene, not of a target-frame: only ``expectations.expected_limits``
 # declares them.
-SCENE_LIMITS = ("frame_rate_above_radar", "frames_sent_late", "frames_lost")
+SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase", "frames_sent_late", "frames_lost")
+# Those known from the scene before anything plays (`rts_scenario.preflight.scene_limits`).
+PLANNED_SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase")
 
 DEFAULT_TOLERANCES = {
     "range_m": 0.3,

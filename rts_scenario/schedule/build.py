@@ -218,7 +218,10 @@ def build_schedule(
     attenuation[~active] = np.nan
     status |= np.where(clipped, Status.ATTENUATION_CLIPPED, 0).astype(np.uint16)
 
-    too_close = (active & (delay < limits.delay_min_s - DELAY_SLACK_S)).any(axis=-1)
+    # Judged on the channels the solver wants, whatever level the attenuator can give them: at
+    # range 0 the level is infinite and the steps leave no channel on.
+    wanted = active | (ok[..., None] & (solved > 0.0))
+    too_close = (wanted & (delay < limits.delay_min_s - DELAY_SLACK_S)).any(axis=-1)
     status |= np.where(too_close, Status.TOO_CLOSE, 0).astype(np.uint16)
     if limits.delay_max_s is not None:
         too_far = (active & (delay > limits.delay_max_s + DELAY_SLACK_S)).any(axis=-1)
