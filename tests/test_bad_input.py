@@ -71,7 +71,12 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}: document larger than the limit of 4 MB"),
     ("invalid-yaml", TINY + "description: [unclosed\n", r"^{f}:\d+:\d+: invalid YAML"),
     ("tab-indent", sub("  profile: awr1843boost", "\tprofile: awr1843boost"),
-     r"^{f}:\d+:\d+: invalid YAML"),
+     r"^{f}:6:1: a tab indents this line; YAML indents with spaces$"),
+    ("tab-after-dash", sub(TARGET, "  -\tname: car\n"),
+     r"^{f}:12:4: a tab after '-' on this line; YAML separates with spaces$"),
+    ("key-indented-between", sub("  mount:", " mount:"),
+     r"^{f}:7:2: invalid YAML: this line is indented 1 space, but the mapping from line 1 has "
+     r"its keys at 0 spaces and line 6 above it at 2; keys of one mapping line up$"),
     ("duplicate-key", TINY + "name: again\n", r"^{f}:15:1: name: duplicate key"),
     ("non-string-key", TINY + "1: one\n", r"^{f}:\d+:\d+: keys must be strings"),
     ("python-tag", TINY + "description: !!python/object:os.system x\n",
