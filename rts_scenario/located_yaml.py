@@ -244,6 +244,53 @@ def _check_bounds(text: str, file: str) -> None:
         loader.dispose()
 
 
+# The messages of libyaml and of PyYAML's own parser for a block mapping that ended where a key
+# was expected: after a line indented out of line with the keys around it.
+_NO_KEY = ("did not find expected key", "expected <block end>, but found '<block mapping start>'")
+# A key at the start of a line (after list dashes): plain, up to its colon.
+_KEY_LINE = re.compile(r"^( *(?:- +)*)[^\s#\-?:'\"{\[][^#]*?:(?: |$)")
+
+
+def _spaces(count: int) -> str:
+    return f"{count} space" if count == 1 else f"{count} spaces"
+
+
+def _plain_words(error: yaml.MarkedYAMLError, text: str) -> str:
+    """PyYAML's message for ``error``, or what went wrong in words that say how to fix it.
+
+    A tab where YAML takes only spaces: both parsers point at it, each with its own words. A
+    line indented between the keys of two mappings: the parser says a key is missing; the
+    indentations of that mapping's keys and of the line above tell which to line it up with.
+    Where a report is ambiguous (a list item at the keys' column: a list, or a key left out?)
+    the parser's words stand.
+    """
+    problem = error.problem or error.context or "invalid YAML"
+    mark = error.problem_mark
+    if mark is None:
+        return f"invalid YAML: {problem}"
+    lines = text.splitlines()
+    line = lines[mark.line] if mark.line < len(lines) else ""
+    before = line[:mark.column]
+    if line[mark.column:mark.column + 1] == "\t":
+        if not before.strip():
+            return "a tab indents this line; YAML indents with spaces"
+        return f"a tab after {before.strip()!r} on this line; YAML separates with spaces"
+    context = error.context_mark
+    if (problem in _NO_KEY and error.context == "while parsing a block mapping"
+            and context is not None and not before.strip()
+            and mark.column != context.column):
+        hint = (f"this line is indented {_spaces(mark.column)}, but the mapping from line "
+                f"{context.line + 1} has its keys at {_spaces(context.column)}")
+        above = next((i for i in range(mark.line - 1, context.line - 1, -1)
+                      if lines[i].strip() and not lines[i].lstrip().startswith("#")), None)
+        key = _KEY_LINE.match(lines[above]) if above is not None else None
+        if (above is not None and key is not None
+                and len(key.group(1)) not in (context.column, mark.column)):
+            hint += f" and line {above + 1} above it at {len(key.group(1))}"
+        return f"invalid YAML: {hint}; keys of one mapping line up"
+    return f"invalid YAML: {problem}"
+
+
 def load_yaml(path: str | Path, text: str | None = None) -> Document:
     """Load one YAML document with a safe loader, keeping line/column marks.
 
@@ -271,8 +318,7 @@ def load_yaml(path: str | Path, text: str | None = None) -> Document:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark else None
         column = mark.column + 1 if mark else None
-        problem = exc.problem or exc.context or "invalid YAML"
-        raise ScenarioError(f"invalid YAML: {problem}", file=file, line=line,
+        raise ScenarioError(_plain_words(exc, text), file=file, line=line,
                             column=column) from None
     except yaml.reader.ReaderError as exc:
         line = text.count("\n", 0, exc.position) + 1

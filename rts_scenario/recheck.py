@@ -45,8 +45,10 @@ from .canbus import DetectionReceiver, channel_label
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
-from .errors import RtsError
+from .errors import RtsError, ScenarioError
+from .file_kinds import identify
 from .kinematics import Tracks, compute_tracks
+from .located_yaml import load_yaml
 from .pipeline import (
     BUS_CLOCK_SLACK_S,
     LOG_SIDECAR_SUFFIX,
@@ -368,10 +370,26 @@ def read_sidecar(log: str | Path) -> dict[str, Any] | None:
     return dict(data)
 
 
+def _yaml_data(path: Path) -> Any:
+    """Return the data of a YAML file given as a log, to tell its kind by (``None``: none)."""
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        return None
+    try:
+        return load_yaml(path).data
+    except ScenarioError:
+        return None
+
+
 def check_log_file(log: str | Path) -> None:
     """Refuse a log of a format python-can does not read, or one that is not there."""
     path = Path(log)
     if path.suffix.lower() not in LOG_SUFFIXES:
+        kind = identify(log, _yaml_data(path)) if path.is_file() else None
+        if kind is not None:
+            what, evidence, _ = kind
+            raise LogError(f"--log {log} is {what} ({evidence}), not a CAN log; check takes the "
+                           f"scene as SCENE and, as --log, the log rts-scenario run --record "
+                           f"wrote ({', '.join(LOG_SUFFIXES)})")
         raise LogError(f"--log {log}: unknown log format {path.suffix!r}; valid: "
                        f"{', '.join(LOG_SUFFIXES)}")
     if not path.is_file():

@@ -23,7 +23,7 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import RigError
-from .file_kinds import refuse_other_kind
+from .file_kinds import load_kind
 from .located_yaml import Document, load_yaml, validate
 
 FloatArray = NDArray[np.float64]
@@ -382,9 +382,7 @@ class Rig:
     @classmethod
     def from_file(cls, path: str | Path) -> Rig:
         """Load a ``*.rig.yaml`` file (format: see ``scenarios/rigs/README.md``)."""
-        doc = load_yaml(path)
-        refuse_other_kind(path, doc.data, ".rig.yaml")
-        return cls.from_document(doc)
+        return cls.from_document(load_kind(path, ".rig.yaml"))
 
     @classmethod
     def from_document(cls, doc: Document) -> Rig:

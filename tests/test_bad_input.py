@@ -71,7 +71,12 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"^{f}: document larger than the limit of 4 MB"),
     ("invalid-yaml", TINY + "description: [unclosed\n", r"^{f}:\d+:\d+: invalid YAML"),
     ("tab-indent", sub("  profile: awr1843boost", "\tprofile: awr1843boost"),
-     r"^{f}:\d+:\d+: invalid YAML"),
+     r"^{f}:6:1: a tab indents this line; YAML indents with spaces$"),
+    ("tab-after-dash", sub(TARGET, "  -\tname: car\n"),
+     r"^{f}:12:4: a tab after '-' on this line; YAML separates with spaces$"),
+    ("key-indented-between", sub("  mount:", " mount:"),
+     r"^{f}:7:2: invalid YAML: this line is indented 1 space, but the mapping from line 1 has "
+     r"its keys at 0 spaces and line 6 above it at 2; keys of one mapping line up$"),
     ("duplicate-key", TINY + "name: again\n", r"^{f}:15:1: name: duplicate key"),
     ("non-string-key", TINY + "1: one\n", r"^{f}:\d+:\d+: keys must be strings"),
     ("python-tag", TINY + "description: !!python/object:os.system x\n",
@@ -150,6 +155,9 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     # A file of another kind in its place: named as such, not by its every key unknown.
     ("rig-file-as-radar", sub("profile: awr1843boost", "profile: lab.rig.yaml"),
      r"^{f}:6:3: radar.profile: 'lab.rig.yaml' is a rig file \(\*.rig.yaml\); radar.profile "
+     r"takes a preset \(awr1843boost, cascade-12x16, paper\) or a \*.radar.yaml file$"),
+    ("dbc-as-radar", sub("profile: awr1843boost", "profile: cluster_list.dbc"),
+     r"^{f}:6:3: radar.profile: 'cluster_list.dbc' is a DBC file \(\*.dbc\); radar.profile "
      r"takes a preset \(awr1843boost, cascade-12x16, paper\) or a \*.radar.yaml file$"),
     ("radar-file-as-rig", sub("rig: wide-3x5", "rig: long.radar.yaml"),
      r"^{f}:8:1: rig: 'long.radar.yaml' is a radar profile \(\*.radar.yaml\); rig takes a "
@@ -468,6 +476,9 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
         r"--json would overwrite"),
     ("run-detections-named-like-a-dbc", ["run", "{scene}", "--detections", "{tmp}/radar.DBC"],
      2, r"^--detections {tmp}/radar.DBC: named like a DBC file \(.dbc\)"),
+    ("run-json-named-like-a-can-database", ["run", "{scene}", "--json", "{tmp}/radar.arxml"],
+     2, r"^--json {tmp}/radar.arxml: named like an AUTOSAR CAN database \(.arxml\), which "
+        r"--json would overwrite"),
     ("run-json-is-mapping", ["run", "{scene}", "--mapping", "{tmp}/m.mapping.yaml", "--json",
                              "{tmp}/m.mapping.yaml"], 2,
      r"^--json {tmp}/m.mapping.yaml: the same file as --mapping {tmp}/m.mapping.yaml"),
@@ -892,15 +903,20 @@ def test_an_unknown_jit_setting_is_an_error_in_library_use(monkeypatch):
 
 
 RIG_FILE = str(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml")
+DBC_FILE = str(ROOT / "scenarios" / "can" / "cluster_list.dbc")
+XOSC_FILE = str(ROOT / "tests" / "data" / "xosc" / "cut_in.xosc")
+FRAGMENT_FILE = str(ROOT / "scenarios" / "fragments" / "parked_cars.yaml")
 RADAR_FILE = str(ROOT / "rts_scenario" / "data" / "radars" / "paper.radar.yaml")
 MAPPING_FILE = str(ROOT / "rts_scenario" / "data" / "can" / "rts_detections.mapping.yaml")
 
 
 @pytest.fixture
 def disguised(tmp_path):
-    """The shipped rig, radar profile and mapping under names that do not say what they are."""
+    """The shipped rig, radar profile, mapping, a DBC and an OpenSCENARIO file under names that
+    do not say what they are."""
     names = {}
-    for kind, source in (("rig", RIG_FILE), ("radar", RADAR_FILE), ("mapping", MAPPING_FILE)):
+    for kind, source in (("rig", RIG_FILE), ("radar", RADAR_FILE), ("mapping", MAPPING_FILE),
+                         ("dbc", DBC_FILE), ("xosc", XOSC_FILE)):
         path = tmp_path / f"{kind}-copy.yaml"
         path.write_text(Path(source).read_text())
         names[kind] = str(path)
@@ -945,6 +961,44 @@ WRONG_KIND_CASES = [
       "--rig", RADAR_FILE, "--output", "{tmp}/x.scenario.yaml"],
      rf"^--rig {re.escape(RADAR_FILE)} is a radar profile \(\*\.radar\.yaml\), not a rig "
      r"file"),
+    # Files of other formats: a CAN database, an OpenSCENARIO file, a scene fragment, a scene
+    # as a log.
+    (["run", "{scene}", "--mapping", DBC_FILE],
+     rf"^--mapping {re.escape(DBC_FILE)} is a DBC file \(\*\.dbc\), not a CAN mapping "
+     r"\(\*\.mapping\.yaml\); --mapping takes a CAN mapping that names a DBC and which of its "
+     r"signals carry what \(docs/can-mapping\.md\): "
+     rf"{re.escape(str(Path(DBC_FILE).with_name('cluster_list.mapping.yaml')))} names this one$"),
+    (["check", "{scene}", "--log", "{tmp}/junk.blf", "--mapping", "{dbc}"],
+     r"^--mapping {dbc} is a DBC file \(by its content\), not a CAN mapping "
+     r"\(\*\.mapping\.yaml\); --mapping takes a CAN mapping that names a DBC and which of its "
+     r"signals carry what \(docs/can-mapping\.md\)$"),
+    (["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1", "--radar", DBC_FILE],
+     rf"^--radar {re.escape(DBC_FILE)} is a DBC file \(\*\.dbc\), not a radar profile"),
+    (["import", str(ROOT / "tests" / "data" / "xosc" / "cut_in.xosc"), "--radar", "{dbc}",
+      "--rig", "wide-3x5", "--output", "{tmp}/x.scenario.yaml"],
+     r"^--radar {dbc} is a DBC file \(by its content\), not a radar profile"),
+    (["run", XOSC_FILE],
+     rf"^{re.escape(XOSC_FILE)} is an OpenSCENARIO file \(\*\.xosc\), not a scene "
+     rf"\(\*\.scenario\.yaml\); rts-scenario import {re.escape(XOSC_FILE)} --radar P --rig R "
+     r"--output cut_in\.scenario\.yaml converts it to a scene \(docs/import\.md\)$"),
+    (["validate", "{xosc}"], r"^{xosc} is an OpenSCENARIO file \(by its content\), not a scene"),
+    (["validate", FRAGMENT_FILE],
+     rf"^{re.escape(FRAGMENT_FILE)} is a scene fragment \(only targets and a description\), "
+     r"not a scene \(\*\.scenario\.yaml\); a scene lists it under include: "
+     r"\(scenarios/README\.md, Fragments\)$"),
+    (["survey", FRAGMENT_FILE],
+     rf"^RIG {re.escape(FRAGMENT_FILE)} is a scene fragment \(only targets and a description\), "
+     r"not a rig file"),
+    (["check", "{scene}", "--log", "{scene}"],
+     r"^--log {scene} is a scene file \(\*\.scenario\.yaml\), not a CAN log; check takes the "
+     r"scene as SCENE and, as --log, the log rts-scenario run --record wrote \(\.asc, \.blf, "
+     r"\.csv, \.db, \.log, \.mf4, \.trc\)$"),
+    (["check", "{scene}", "--log", FRAGMENT_FILE],
+     rf"^--log {re.escape(FRAGMENT_FILE)} is a scene fragment \(only targets and a "
+     r"description\), not a CAN log"),
+    (["validate", "{tmp}/junk.blf"],
+     r"^{tmp}/junk.blf is a CAN log \(\*\.blf\), not a scene \(\*\.scenario\.yaml\); "
+     r"rts-scenario check SCENE --log LOG checks it against its scene$"),
 ]
 
 
@@ -960,6 +1014,15 @@ def test_a_file_of_another_kind_says_what_it_is(places, disguised, capsys, argv,
     for key, value in names.items():
         expected = expected.replace("{" + key + "}", re.escape(value))
     assert re.search(expected, message), message
+
+
+def test_a_scene_without_its_version_key_is_no_fragment(tmp_path, capsys):
+    """Only a file holding nothing but targets (and a description) is named a fragment."""
+    path = tmp_path / "tiny.yaml"
+    path.write_text(sub("rts_scenario: 1\n", ""))
+    assert call(["validate", str(path)]) == 2
+    message = one_error(capsys.readouterr().err)
+    assert message == f"{path}:1:1: 'rts_scenario' is required but missing; allowed values: 1"
 
 
 def test_a_sweep_of_a_rig_file_says_what_it_is(capsys):

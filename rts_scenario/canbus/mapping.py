@@ -26,7 +26,7 @@ from typing import Any
 
 import cantools
 
-from ..file_kinds import refuse_other_kind
+from ..file_kinds import load_kind
 from ..located_yaml import Document, format_key_path, load_yaml, validate
 
 QUANTITIES = ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps", "x_m", "y_m",
@@ -362,8 +362,7 @@ class CanMapping:
     def from_file(cls, path: str | Path) -> CanMapping:
         """Load a ``*.mapping.yaml`` and the DBC it names (relative to it)."""
         path = Path(path)
-        doc = load_yaml(path)
-        refuse_other_kind(path, doc.data, ".mapping.yaml")
+        doc = load_kind(path, ".mapping.yaml")
         validate(doc, MAPPING_SCHEMA)
         dbc_path = path.parent / doc.data["dbc"]
         try:

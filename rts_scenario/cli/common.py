@@ -149,11 +149,6 @@ def writing(option: str, path: str | Path) -> Iterator[None]:
         raise RtsError(f"{option} {path}: cannot write: {reason}") from exc
 
 
-# File kinds the tool reads: never an output's name.
-_INPUT_KINDS = {".scenario.yaml": "scene", ".rig.yaml": "rig", ".radar.yaml": "radar profile",
-                ".mapping.yaml": "CAN mapping", ".dbc": "DBC file", ".xosc": "OpenSCENARIO file"}
-
-
 def check_writable_file(option: str, path: str | Path, kind: str | None = None) -> None:
     """Fail now, before a long run, if the file ``option`` names could not be written later.
 
@@ -165,11 +160,13 @@ def check_writable_file(option: str, path: str | Path, kind: str | None = None) 
     target = Path(path)
     if str(path) == "":
         raise RtsError(f"{option}: needs a file path, got an empty one")
-    named = next((k for k in _INPUT_KINDS if target.name.lower().endswith(k)), None)
-    if named is not None and named != kind:
+    from ..file_kinds import read_only_kind
+
+    named = read_only_kind(target.name)
+    if named is not None and named[0] != kind:
         # An output named like one of the files the tool reads would replace a scene, a rig or
         # a radar's DBC that another run needs.
-        raise RtsError(f"{option} {path}: named like a {_INPUT_KINDS[named]} ({named}), which "
+        raise RtsError(f"{option} {path}: named like {named[1]} ({named[0]}), which "
                        f"{option} would overwrite; give the output another name")
     if target.is_dir():
         raise RtsError(f"{option} {path}: cannot write: is a folder; give a file path")

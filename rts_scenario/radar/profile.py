@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from ..arrays import ANTENNA_PRESETS, Antennas, VirtualArray
 from ..errors import ArrayError, ScenarioError
-from ..file_kinds import refuse_other_kind
+from ..file_kinds import load_kind
 from ..located_yaml import Document, load_yaml, validate
 from ..propagation import C0_MPS
 from ..responses import FrontEndModel
@@ -280,9 +280,7 @@ class RadarProfile:
     @classmethod
     def from_file(cls, path: str | Path) -> RadarProfile:
         """Load a ``*.radar.yaml`` file."""
-        doc = load_yaml(path)
-        refuse_other_kind(path, doc.data, ".radar.yaml")
-        return cls.from_document(doc)
+        return cls.from_document(load_kind(path, ".radar.yaml"))
 
     @classmethod
     def from_document(cls, doc: Document) -> RadarProfile:

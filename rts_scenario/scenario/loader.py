@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import RtsError, ScenarioError
-from ..file_kinds import kind_by_name, kind_name, refuse_other_kind
+from ..file_kinds import kind_by_name, kind_name, load_kind
 from ..located_yaml import Document, KeyPath, format_key_path, load_yaml, validate
 from ..radar.profile import RadarProfile
 from ..radar.profile import preset_names as radar_presets
@@ -94,8 +94,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         With file, line, column, key path, the offending value and what is allowed.
     """
     path = Path(path)
-    doc = load_yaml(path)
-    refuse_other_kind(path, doc.data, ".scenario.yaml")
+    doc = load_kind(path, ".scenario.yaml")
     if not isinstance(doc.data, dict):
         got = "an empty file" if doc.data is None else type(doc.data).__name__
         raise doc.error((), f"a scene must be a mapping of keys, got {got}")

@@ -1,0 +1,89 @@
+"""YAML's own errors in plain words: tabs and a key indented out of line."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from rts_scenario import located_yaml
+from rts_scenario.errors import ScenarioError
+from rts_scenario.located_yaml import load_yaml
+
+
+class _PurePython(yaml.SafeLoader):
+    """PyYAML's own parser, used where libyaml is not installed."""
+
+
+@pytest.fixture(params=["libyaml", "python"])
+def parser(request, monkeypatch):
+    """Both of PyYAML's parsers: their messages and marks differ."""
+    if request.param == "python":
+        monkeypatch.setattr(located_yaml, "_Loader", _PurePython)
+    elif not hasattr(yaml, "CSafeLoader"):
+        pytest.skip("libyaml is not installed")
+    return request.param
+
+
+def error_of(text: str) -> ScenarioError:
+    with pytest.raises(ScenarioError) as caught:
+        load_yaml("x.yaml", text)
+    return caught.value
+
+
+INDENT_TAB = "a tab indents this line; YAML indents with spaces"
+
+
+@pytest.mark.parametrize(("text", "line", "column", "message"), [
+    ("radar:\n\tprofile: awr1843boost\n", 2, 1, INDENT_TAB),
+    ("radar:\n  profile: x\n\testimator: y\n", 3, 1, INDENT_TAB),
+    ("radar:\n  \tprofile: x\n", 2, 3, INDENT_TAB),
+    ("\tname: x\n", 1, 1, INDENT_TAB),
+    ("targets:\n\t- a\n", 2, 1, INDENT_TAB),
+    ("targets:\n  -\tname: a\n", 2, 4, "a tab after '-' on this line; YAML separates with spaces"),
+])
+def test_a_tab_is_named_where_it_is(parser, text, line, column, message):
+    error = error_of(text)
+    assert (error.detail, error.line, error.column) == (message, line, column)
+    assert str(error) == f"x.yaml:{line}:{column}: {message}"
+
+
+@pytest.mark.parametrize(("text", "line", "column", "message"), [
+    # PyYAML's own parser refuses tabs after a key and inside a flow, where libyaml takes them.
+    ("a:\t1\n", 1, 3, "a tab after 'a:' on this line; YAML separates with spaces"),
+    ("a: [1,\n\t2]\n", 2, 1, INDENT_TAB),
+])
+def test_a_tab_only_the_python_parser_refuses(monkeypatch, text, line, column, message):
+    monkeypatch.setattr(located_yaml, "_Loader", _PurePython)
+    error = error_of(text)
+    assert (error.detail, error.line, error.column) == (message, line, column)
+
+
+BETWEEN = "radar:\n  profile: x\n mount: y\n"
+
+
+@pytest.mark.parametrize(("text", "line", "column", "hint"), [
+    (BETWEEN, 3, 2, "this line is indented 1 space, but the mapping from line 1 has its keys "
+                    "at 0 spaces and line 2 above it at 2"),
+    ("a:\n  b:\n    c: 1\n   d: 2\n", 4, 4, "this line is indented 3 spaces, but the mapping "
+                                            "from line 2 has its keys at 2 spaces and line 3 "
+                                            "above it at 4"),
+    ("targets:\n  - name: a\n    motion:\n      type: x\n     speed: 1\n", 5, 6,
+     "this line is indented 5 spaces, but the mapping from line 2 has its keys at 4 spaces and "
+     "line 4 above it at 6"),
+    # Comments and blank lines are no keys; a line above at the mapping's own indentation adds
+    # nothing.
+    ("a: 1\n # note\n\n c: 2\n", 4, 2, "this line is indented 1 space, but the mapping from "
+                                       "line 1 has its keys at 0 spaces"),
+])
+def test_a_key_out_of_line_names_the_indentations_around_it(parser, text, line, column, hint):
+    error = error_of(text)
+    assert (error.line, error.column) == (line, column)
+    assert error.detail == f"invalid YAML: {hint}; keys of one mapping line up"
+
+
+@pytest.mark.parametrize("text", [
+    "a: b\n- c\n",             # a list item at the keys' column: a list or a key left out?
+    "a:\n  b: 1\n  - c\n",
+])
+def test_an_ambiguous_indentation_keeps_the_parsers_words(parser, text):
+    assert "indented" not in error_of(text).detail
