@@ -45,11 +45,13 @@ GATE_BINS = 2.0
 def echo_delays_s(rig: Rig, schedule: Schedule) -> FloatArray:
     """Total delay of each channel's echo, (frames, targets, 4) s, NaN where it is off.
 
-    The RTS's delay as scheduled, the FE's distance there and back and the RTS's latency.
+    The RTS's delay as scheduled, the FE's distance there and back and the RTS's latency, less
+    the FE's ``calibration.delay_s``: the schedule adds that to make up for the channel's own
+    delay, which takes it off again on the way (where the rig's calibration is right).
     """
     fe = np.maximum(schedule.fe, 0)
-    delay: FloatArray = (schedule.delay_s + 2.0 * rig.distance_m[fe] / C0_MPS
-                         + rig.limits.latency_s)
+    delay: FloatArray = (schedule.delay_s - rig.cal_delay_s[fe]
+                         + 2.0 * rig.distance_m[fe] / C0_MPS + rig.limits.latency_s)
     return delay
 
 

@@ -795,3 +795,17 @@ def test_a_pair_whose_sum_dips_below_the_radar_s_threshold_names_the_levels_alon
         r"dBsm and played at 3\.9\d dBsm: as the sweep turns their echoes against each other "
         r"their sum falls towards 3\.9\d dBsm; below the radar's detection threshold\?",
         message), message
+
+
+def test_a_channel_whose_delay_the_rig_calibrates_is_read_where_its_echo_lands():
+    # FE 2's channel is 5 ns longer than the others (a metre of cable), and the rig file says
+    # so (calibration.delay_s): the schedule plays its delay 5 ns shorter and its echo lands at
+    # the pattern's 10 m like the others'. The gate must look there, not 0.75 m farther (the
+    # delay as scheduled), where it saw nothing of FE 2 and stopped: "a reflection in the room?"
+    # The gains and phases found are the channel's errors, none but the delay.
+    delay = np.array([0.0, 0.0, 5e-9, 0.0])
+    rig = dataclasses.replace(KIT, cal_delay_s=delay)
+    errors = dataclasses.replace(ChannelErrors.none(4), delay_s=-delay)
+    result = calibrate(rig, AWR, simulated_measure(AWR, rig, errors))
+    np.testing.assert_allclose(wrapped(result.phase_deg), 0.0, atol=0.05)
+    np.testing.assert_allclose(result.gain_db, 0.0, atol=0.005)
