@@ -427,14 +427,11 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     from .check import QUANTITIES
     from .report import strict
 
-    status = "pass" if report.passed else "fail"
-    if "xfail" in task.marks:  # a known failure of the check; a run that errs is none
-        status = "x" + status
-    strict_xpass = status == "xpass" and task.xfail_strict
-    entry.update(passed=report.passed, status="fail" if strict_xpass else status)
+    status = marked_status(task.marks, report.passed, task.xfail_strict)
+    entry.update(passed=report.passed, status=status)
     if not report.passed:
         entry["reason"] = "; ".join(report.reasons)
-    elif strict_xpass:  # worded as pytest's report of it
+    elif status == "fail":  # an xpass under xfail_strict, worded as pytest's report of it
         entry["reason"] = "[XPASS(strict)] the scene's marks: xfail"
     ratio, worst = -1.0, None
     for quantity, tolerance_key in QUANTITIES:
@@ -453,6 +450,20 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     entry["solver_plan"] = report.solver_plan
     entry["seconds"] = round(time.perf_counter() - start, 3)
     return entry
+
+
+def marked_status(marks: Sequence[str], passed: bool, xfail_strict: bool = False) -> str:
+    """Return the status of a finished run whose check ``passed`` or not, by its scene's marks.
+
+    As the pytest plugin's item: ``pass`` or ``fail``; with an ``xfail`` mark (a known failure
+    of the check) ``xfail``, or ``xpass`` for a passed check, ``fail`` where ``xfail_strict``
+    is set. A skip mark skips a run before it runs (`SweepTask.skipped`): not judged here.
+    """
+    if "xfail" not in marks:
+        return "pass" if passed else "fail"
+    if not passed:
+        return "xfail"
+    return "fail" if xfail_strict else "xpass"
 
 
 def _task_entry(task: SweepTask) -> Entry:
@@ -781,5 +792,5 @@ def select_tasks(tasks: Sequence[SweepTask], text: str) -> tuple[list[SweepTask]
 __all__ = ["LOCAL_SCHEDULER", "NORECURSE_PATTERNS", "PYTEST_CONFIG_NAMES", "WORST_RUNS",
            "FolderFiles", "NoRunSelected", "PytestSettings", "SweepTask", "collect_tasks",
            "default_workers", "error_entry", "exit_code", "folder_files", "mark_expression",
-           "pytest_settings", "require_dask", "run_label", "run_sweep", "run_task",
-           "select_tasks", "summarize", "warm_plans"]
+           "marked_status", "pytest_settings", "require_dask", "run_label", "run_sweep",
+           "run_task", "select_tasks", "summarize", "warm_plans"]
