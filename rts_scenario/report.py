@@ -262,7 +262,7 @@ class Report:
 
     def table(self) -> str:
         """Render the report as a text table for people."""
-        head = (f"{'target':<18} {'frames':>6} {'det. rate':>9} {'missed':>6} {'out tol':>7}  "
+        head = (f"{'target':<18} {'cycles':>6} {'det. rate':>9} {'missed':>6} {'out tol':>7}  "
                 f"{'range rms/max m':>15}  {'vel rms/max m/s':>15}  {'az rms/max deg':>14}  "
                 f"{'el rms/max deg':>14}  {'rcs rms/max dB':>14}  verdict")
         # An empty bench has no target rows: say what its run checks instead.

@@ -267,6 +267,10 @@ def test_a_target_nothing_was_checked_of_says_so_and_does_not_read_as_passed(tmp
     assert ped.checkable_frames == 0 and ped.limits == {"out_of_coverage": 20}
     assert (car.checked, ped.checked) == (True, False)
     assert ped.passed  # it fails nothing: its limit is expected
-    rows = {line.split()[0]: line for line in report.table().splitlines()[2:4]}
+    head, _, *lines = report.table().splitlines()
+    rows = {line.split()[0]: line for line in lines[:2]}
     assert rows["car"].endswith("  pass") and rows["ped"].endswith("  not checked")
+    # The column counts the radar's cycles in which the target was checkable, not frames.
+    assert head.split()[:2] == ["target", "cycles"]
+    assert rows["car"].split()[1] == str(car.checkable_frames)
     assert [t["checked"] for t in report.to_dict()["targets"]] == [True, False]
