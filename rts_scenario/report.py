@@ -150,7 +150,13 @@ class FrameRecord:
 
 @dataclass
 class TargetResult:
-    """One target's result."""
+    """One target's result.
+
+    ``passed``: the target fails none of the verdict's rules. ``checked``: some radar cycle
+    in which it was checkable was received whole and judged; a target never checked (under
+    limits the scene expects all along, say) has ``passed`` true and ``checked`` false, and the
+    table says ``not checked``, not ``pass``.
+    """
 
     name: str
     checkable_frames: int
@@ -164,6 +170,17 @@ class TargetResult:
     limits: dict[str, int] = field(default_factory=dict)
     unexpected_limits: list[str] = field(default_factory=list)
     played_frames: int = 0
+    checked: bool = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.checked = self.checkable_frames > self.unchecked_frames
+
+    @property
+    def verdict(self) -> str:
+        """The table's verdict: ``pass``, ``not checked``, ``FAIL`` or ``FAIL (not checked)``."""
+        if self.passed:
+            return "pass" if self.checked else "not checked"
+        return "FAIL" if self.checked else "FAIL (not checked)"
 
 
 @dataclass
@@ -245,7 +262,7 @@ class Report:
 
     def table(self) -> str:
         """Render the report as a text table for people."""
-        head = (f"{'target':<18} {'frames':>6} {'det. rate':>9} {'missed':>6} {'out tol':>7}  "
+        head = (f"{'target':<18} {'cycles':>6} {'det. rate':>9} {'missed':>6} {'out tol':>7}  "
                 f"{'range rms/max m':>15}  {'vel rms/max m/s':>15}  {'az rms/max deg':>14}  "
                 f"{'el rms/max deg':>14}  {'rcs rms/max dB':>14}  verdict")
         # An empty bench has no target rows: say what its run checks instead.
@@ -263,7 +280,7 @@ class Report:
                 f"{t.out_of_tolerance_frames:>7}  "
                 f"{pair(e['range_m']):>15}  {pair(e['radial_velocity_mps']):>15}  "
                 f"{pair(e['az_deg']):>14}  {pair(e['el_deg']):>14}  {pair(e['rcs_dbsm']):>14}  "
-                f"{'pass' if t.passed else 'FAIL'}")
+                f"{t.verdict}")
         limited = [t for t in self.targets if t.limits]
         if limited or self.scene_limits:
             lines.append("limits (target-frames not played or not measurable as specified): "

@@ -9,7 +9,9 @@ result: a run that raises, or a worker that dies, becomes an entry with status `
 one-line message. A scene's ``marks`` judge its runs as the pytest plugin does (`judged`), and
 `select_tasks` picks runs by a mark expression as ``pytest -m`` does. The project's pytest
 settings that change which scenes run and how they are judged (``norecursedirs``,
-``xfail_strict``) are read from the config file pytest would read (`pytest_settings`).
+``xfail_strict``, ``rts_scenario_pattern``) are read from the config file pytest would read
+(`pytest_settings`); which files are scenes is the plugin's rule
+(`rts_scenario.scene_files.scene_file_kind`).
 `summarize` counts the verdicts overall and per parameter value and picks the worst runs.
 """
 
@@ -27,7 +29,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from .errors import RtsError
-from .file_kinds import holds_scene
+from .scene_files import DEFAULT_PATTERN, PATTERN_OPTION, misnamed_scene, scene_file_kind
 
 # Runs the summary lists as the worst ones (failed and erred runs first).
 WORST_RUNS = 10
@@ -68,19 +70,22 @@ class PytestSettings:
     ``inifile`` is the config file pytest reads them from and ``rootdir`` pytest's rootdir
     (both None where no config file is found: pytest's defaults apply). ``xfail_strict``: an
     xpassed run fails (pytest's ``XPASS(strict)``). ``norecursedirs``: the patterns of the
-    folders a folder's sweep does not walk into (`folder_files`).
+    folders a folder's sweep does not walk into (`folder_files`). ``rts_scenario_pattern``:
+    the names of the scene files (`scene_file_kind`).
     """
 
     inifile: Path | None = None
     rootdir: Path | None = None
     xfail_strict: bool = False
     norecursedirs: tuple[str, ...] = NORECURSE_PATTERNS
+    rts_scenario_pattern: str = DEFAULT_PATTERN
 
     def as_json(self) -> dict[str, Any]:
         """Return the settings as the sweep's JSON gives them (paths as text)."""
         return {"inifile": None if self.inifile is None else str(self.inifile),
                 "rootdir": None if self.rootdir is None else str(self.rootdir),
-                "xfail_strict": self.xfail_strict, "norecursedirs": list(self.norecursedirs)}
+                "xfail_strict": self.xfail_strict, "norecursedirs": list(self.norecursedirs),
+                PATTERN_OPTION: self.rts_scenario_pattern}
 
 
 def pytest_settings(paths: Iterable[str | Path]) -> PytestSettings:
@@ -89,7 +94,9 @@ def pytest_settings(paths: Iterable[str | Path]) -> PytestSettings:
     pytest finds it (`pytest.Config`): the first ``pytest.ini``, ``pyproject.toml`` with a
     ``[tool.pytest.ini_options]`` table, ``tox.ini`` with ``[pytest]``, ``setup.cfg`` with
     ``[tool:pytest]`` (...) from the common folder of ``paths`` upwards. Only the file is read:
-    neither ``addopts``, ``PYTEST_ADDOPTS`` nor the ``conftest.py`` files. Where none of
+    neither ``addopts``, ``PYTEST_ADDOPTS`` nor the ``conftest.py`` files. The plugin's
+    ``rts_scenario_pattern`` is read with the plugin loaded, also where pytest loads no plugin
+    on its own. Where none of
     `PYTEST_CONFIG_NAMES` is in those folders, or pytest is not installed, pytest's defaults
     apply, without importing pytest (which takes a while).
 
@@ -106,10 +113,17 @@ def pytest_settings(paths: Iterable[str | Path]) -> PytestSettings:
         import pytest
     except ImportError:
         return PytestSettings()
+    # No capture, no assertion rewriting and no conftest: nothing this process keeps.
+    args = ["--capture=no", "--assert=plain", "--noconftest", *map(str, given)]
     try:
-        # No capture, no assertion rewriting and no conftest: nothing this process keeps.
-        config = pytest.Config.fromdictargs(
-            {}, ["--capture=no", "--assert=plain", "--noconftest", *map(str, given)])
+        config = pytest.Config.fromdictargs({}, args)
+        try:
+            pattern = str(config.getini(PATTERN_OPTION))
+        except ValueError:
+            # Plugins not loaded on their own (PYTEST_DISABLE_PLUGIN_AUTOLOAD): the plugin's
+            # setting is read with the plugin named, as a session that runs scenes names it.
+            config = pytest.Config.fromdictargs({}, ["-p", "pytest_rts_scenario", *args])
+            pattern = str(config.getini(PATTERN_OPTION))
     except (Exception, pytest.fail.Exception) as exc:
         from .errors import one_line
 
@@ -124,7 +138,7 @@ def pytest_settings(paths: Iterable[str | Path]) -> PytestSettings:
             strict = bool(value)
             break
     return PytestSettings(config.inipath, config.rootpath, strict,
-                          tuple(config.getini("norecursedirs")))
+                          tuple(config.getini("norecursedirs")), pattern)
 
 
 @dataclass(frozen=True)
@@ -141,7 +155,9 @@ class SweepTask:
     ``given_path`` marks the error of a path given that is no scene to run (not there, or a
     folder holding none): no mark expression selects it away (`select_tasks`).
     ``xfail_strict``: the project's pytest setting (`PytestSettings`), with which an ``xfail``
-    mark fails the run whose check passes.
+    mark fails the run whose check passes. ``misnamed``: the file holds a scene under a name
+    the project's ``rts_scenario_pattern`` does not give a scene (`scene_file_kind`); its run
+    is named after the whole file name, as the plugin names its item.
     """
 
     index: int
@@ -154,6 +170,7 @@ class SweepTask:
     marks: tuple[str, ...] = ()
     given_path: bool = False
     xfail_strict: bool = False
+    misnamed: bool = False
 
     @property
     def skipped(self) -> bool:
@@ -172,20 +189,22 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None,
     that its variants count once in the pass rates; ``notes`` (if given) receives a line for
     each repeat and each linked folder not walked because it holds itself.
 
-    A path that is neither a scene file nor a folder holding one, or a scene whose
-    ``parametrize`` block is invalid, becomes one task carrying its error; so does a file in a
-    folder that holds a scene under another name than ``*.scenario.yaml`` (`holds_scene`),
-    or a ``*.scenario.yaml`` there that is a link to nothing: either would otherwise never run
-    without the sweep saying so. Each task carries its combination's marks, as the pytest
+    A folder's scene files are those the project's ``rts_scenario_pattern`` names (by default
+    ``*.scenario.yaml``). A path that is neither a scene file nor a folder holding one, or a
+    scene whose ``parametrize`` block is invalid, becomes one task carrying its error; so does
+    a file in a folder that holds a scene under another name (`scene_file_kind`), or a scene
+    file there that is a link to nothing: either would otherwise never run without the sweep
+    saying so. Each task carries its combination's marks, as the pytest
     plugin gives them to its item (none for a file whose combinations cannot be listed as
     bad input).
     """
     from .located_yaml import load_yaml
-    from .scenario import SCENE_SUFFIX, parametrizations, written_marks
+    from .scenario import parametrizations, written_marks
 
     paths = list(paths)
     if settings is None:
         settings = pytest_settings(paths)
+    pattern = settings.rts_scenario_pattern
     tasks: list[SweepTask] = []
     seen: dict[Path, str] = {}  # each scene file (resolved) and the name it first came as
     for given in paths:
@@ -198,15 +217,15 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None,
             if notes is not None:
                 notes += [f"{loop}: a link to {os.readlink(loop)}, a folder that holds it: "
                           f"not walked again" for loop in loops]
-            scenes = [p for p in found if p.name.endswith(SCENE_SUFFIX)]
-            misnamed = {p for p in found if not p.name.endswith(SCENE_SUFFIX)
-                        and p.is_file() and holds_scene(p)}
+            kinds = {p: scene_file_kind(p, pattern) for p in found}
+            scenes = [p for p, kind in kinds.items() if kind == "scene"]
+            misnamed = {p for p, kind in kinds.items() if kind == "misnamed"}
             dangling = {p for p in scenes if p.is_symlink() and not p.exists()}
             files = sorted([*(p for p in scenes if p.is_file()), *misnamed, *dangling],
                            key=str)
             if not files:
                 tasks.append(SweepTask(len(tasks), str(given),
-                                       error=f"{given}: no *{SCENE_SUFFIX} files in this folder"
+                                       error=f"{given}: no {pattern} files in this folder"
                                              + _left_out_note(path, left_out),
                                        given_path=True))
         elif path.is_file():
@@ -231,12 +250,8 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None,
                 tasks.append(SweepTask(len(tasks), name, error=dangling_link(file)))
                 continue
             if file in misnamed:
-                stem = file.name.split(".", 1)[0]
-                tasks.append(SweepTask(
-                    len(tasks), name,
-                    error=f"{name} holds a scene (its rts_scenario key) but is not named "
-                          f"*{SCENE_SUFFIX}, so it does not run as one; rename it "
-                          f"{stem}{SCENE_SUFFIX}"))
+                tasks.append(SweepTask(len(tasks), name, error=misnamed_scene(name, pattern),
+                                       misnamed=True))
                 continue
 
             def marks_of(overrides: dict[str, Any], file: Path = file) -> tuple[str, ...]:
@@ -412,14 +427,11 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     from .check import QUANTITIES
     from .report import strict
 
-    status = "pass" if report.passed else "fail"
-    if "xfail" in task.marks:  # a known failure of the check; a run that errs is none
-        status = "x" + status
-    strict_xpass = status == "xpass" and task.xfail_strict
-    entry.update(passed=report.passed, status="fail" if strict_xpass else status)
+    status = marked_status(task.marks, report.passed, task.xfail_strict)
+    entry.update(passed=report.passed, status=status)
     if not report.passed:
         entry["reason"] = "; ".join(report.reasons)
-    elif strict_xpass:  # worded as pytest's report of it
+    elif status == "fail":  # an xpass under xfail_strict, worded as pytest's report of it
         entry["reason"] = "[XPASS(strict)] the scene's marks: xfail"
     ratio, worst = -1.0, None
     for quantity, tolerance_key in QUANTITIES:
@@ -440,9 +452,24 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     return entry
 
 
+def marked_status(marks: Sequence[str], passed: bool, xfail_strict: bool = False) -> str:
+    """Return the status of a finished run whose check ``passed`` or not, by its scene's marks.
+
+    As the pytest plugin's item: ``pass`` or ``fail``; with an ``xfail`` mark (a known failure
+    of the check) ``xfail``, or ``xpass`` for a passed check, ``fail`` where ``xfail_strict``
+    is set. A skip mark skips a run before it runs (`SweepTask.skipped`): not judged here.
+    """
+    if "xfail" not in marks:
+        return "pass" if passed else "fail"
+    if not passed:
+        return "xfail"
+    return "fail" if xfail_strict else "xpass"
+
+
 def _task_entry(task: SweepTask) -> Entry:
     """Return the part of a task's entry known before it runs (named after its file)."""
-    return {"scene": _file_scene(task.file), "file": task.file, "id": task.ident,
+    scene = Path(task.file).name if task.misnamed else _file_scene(task.file)
+    return {"scene": scene, "file": task.file, "id": task.ident,
             "parameters": dict(task.parameters), "marks": list(task.marks)}
 
 
@@ -765,5 +792,5 @@ def select_tasks(tasks: Sequence[SweepTask], text: str) -> tuple[list[SweepTask]
 __all__ = ["LOCAL_SCHEDULER", "NORECURSE_PATTERNS", "PYTEST_CONFIG_NAMES", "WORST_RUNS",
            "FolderFiles", "NoRunSelected", "PytestSettings", "SweepTask", "collect_tasks",
            "default_workers", "error_entry", "exit_code", "folder_files", "mark_expression",
-           "pytest_settings", "require_dask", "run_label", "run_sweep", "run_task",
-           "select_tasks", "summarize", "warm_plans"]
+           "marked_status", "pytest_settings", "require_dask", "run_label", "run_sweep",
+           "run_task", "select_tasks", "summarize", "warm_plans"]

@@ -570,3 +570,31 @@ def test_a_can_interface_that_opens_is_opened_once_up_front_and_closed(monkeypat
     monkeypatch.setattr(can, "Bus", Probe)
     check_can_opens("--can-interface", "socketcan", "vcan0", "--can-channel", fd=True)
     assert events == [("open", "socketcan", "vcan0", True), ("shutdown",)]
+
+
+def test_run_runs_a_marked_scene_as_written_and_says_what_pytest_and_sweep_would_report(
+        tmp_path, capsys):
+    """run is the direct command: it plays a skip-marked scene and judges an xfail-marked one
+    by its check, and says that pytest and sweep judge them by their marks."""
+    text = (ROOT / "scenarios" / "cut_in.scenario.yaml").read_text().replace(
+        "duration_s: 12.0", "duration_s: 4.0").replace(
+        "parametrize:                   # the pytest plugin runs the scene once per estimator\n"
+        "  radar.estimator: [bartlett, ti]\n", "")
+    known = tmp_path / "known.scenario.yaml"  # its car far outside the rig's coverage: fails
+    known.write_text(text.replace("name: cut-in", "name: known").replace(
+        "[30.0, 3.5, 0.6]", "[30.0, 40.0, 0.6]") + "marks: [xfail, slow]\n")
+    parked = tmp_path / "parked.scenario.yaml"
+    parked.write_text(text.replace("name: cut-in", "name: parked") + "marks: [skip]\n")
+    out = tmp_path / "r.json"
+    assert cli.main(["run", str(known), str(parked), "--json", str(out)]) == 1
+    stdout = capsys.readouterr().out
+    assert ("note: known is marked xfail: pytest and rts-scenario sweep report its failed "
+            "check as XFAIL (a known failure, which fails nothing); run judges the check as "
+            "written") in stdout
+    assert ("note: parked is marked skip: pytest and rts-scenario sweep skip it; run ran it "
+            "as written") in stdout
+    assert f"FAIL known ({known}) - marked xfail: XFAIL in pytest and sweep" in stdout
+    assert f"PASS parked ({parked}) - marked skip: SKIPPED in pytest and sweep" in stdout
+    entries = json.loads(out.read_text())
+    assert [(e["scene"], e["status"], e["marks"]) for e in entries] == [
+        ("known", "fail", ["xfail", "slow"]), ("parked", "pass", ["skip"])]

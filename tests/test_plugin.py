@@ -142,12 +142,14 @@ def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):
         def test_relative(rts_run):
             assert rts_run("data/near.scenario.yaml").report.passed
     """))
-    pytester.makeini("[pytest]\nrts_scenario_pattern = *.nothing\n")
+    # The scene is the test's data, not a test of its own: its folder is not collected.
+    pytester.makeini("[pytest]\nnorecursedirs = data\n")
     pytester.runpytest().assert_outcomes(passed=1)
 
 
 def test_rts_run_of_a_parametrized_scene_needs_its_variant(pytester):
-    (pytester.path / "two.scenario.yaml").write_text(scene(
+    pytester.mkdir("data")
+    (pytester.path / "data" / "two.scenario.yaml").write_text(scene(
         "two", extra="parametrize:\n  radar.estimator: [bartlett, ti]\n"))
     pytester.makepyfile(test_two=textwrap.dedent("""
         import pytest
@@ -157,13 +159,13 @@ def test_rts_run_of_a_parametrized_scene_needs_its_variant(pytester):
             with pytest.raises(RtsError, match="a parametrized scene [(]2 variants[)]: "
                                                "choose one with variant= ID: "
                                                "estimator=bartlett, estimator=ti"):
-                rts_run("two.scenario.yaml")
+                rts_run("data/two.scenario.yaml")
 
         def test_with_variant(rts_run):
-            result = rts_run("two.scenario.yaml", variant="estimator=ti")
+            result = rts_run("data/two.scenario.yaml", variant="estimator=ti")
             assert result.report.passed and result.report.variant == "estimator=ti"
     """))
-    pytester.makeini("[pytest]\nrts_scenario_pattern = *.nothing\n")
+    pytester.makeini("[pytest]\nnorecursedirs = data\n")
     pytester.runpytest().assert_outcomes(passed=2)
 
 def test_failing_detection_rate_lists_worst_frames(pytester):
@@ -362,9 +364,15 @@ def test_a_scene_with_a_mistyped_suffix_fails_instead_of_being_left_out(pytester
         f"but is not named *.scenario.yaml, so it does not run as one; rename it "
         f"typo.scenario.yaml"])
     assert "Traceback" not in result.stdout.str()
-    # A pattern of one's own chooses the scenes: the others are left out on purpose.
+    # A pattern of one's own names the scene files; a scene under another name is still no
+    # scene left out unseen (scenes are chosen by their marks, -m, or folders, norecursedirs).
     pytester.makeini("[pytest]\nrts_scenario_pattern = fine.*\n")
-    pytester.runpytest().assert_outcomes(passed=1)
+    result = pytester.runpytest("-rA")
+    result.assert_outcomes(passed=1, failed=2)
+    result.stdout.fnmatch_lines([
+        f"*error: {pytester.path / 'plain.yaml'} holds a scene (its rts_scenario key) but is "
+        f"not named fine.* (the project's rts_scenario_pattern), so it does not run as one; "
+        f"rename it to match that pattern"])
 
 
 def test_a_project_s_own_yaml_with_an_rts_scenario_section_is_no_misnamed_scene(pytester):

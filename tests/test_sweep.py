@@ -850,10 +850,12 @@ def test_xfail_strict_in_the_project_s_config_fails_an_xpass_as_pytest_does(
     assert payload["summary"]["failed"] == 1 and payload["summary"]["xpassed"] == 0
     assert payload["config"] == {"inifile": str(pytester.path / name),
                                  "rootdir": str(pytester.path), "xfail_strict": True,
-                                 "norecursedirs": DEFAULT_NORECURSE}
+                                 "norecursedirs": DEFAULT_NORECURSE,
+                                 "rts_scenario_pattern": "*.scenario.yaml"}
     assert stdout.splitlines()[0] == (
         f"pytest settings: configfile {name} (rootdir {pytester.path}): xfail_strict = true, "
-        f"norecursedirs = *.egg .* _darcs build CVS dist node_modules venv {{arch}}")
+        f"norecursedirs = *.egg .* _darcs build CVS dist node_modules venv {{arch}}, "
+        f"rts_scenario_pattern = *.scenario.yaml")
 
 
 def test_without_a_config_file_the_sweep_says_it_takes_pytest_s_defaults(scenes, capsys,
@@ -862,10 +864,11 @@ def test_without_a_config_file_the_sweep_says_it_takes_pytest_s_defaults(scenes,
     _, out, _ = sweep(capsys, scenes / "sub", "--json", report, "--workers", "1")
     assert json.loads(report.read_text())["config"] == {
         "inifile": None, "rootdir": None, "xfail_strict": False,
-        "norecursedirs": DEFAULT_NORECURSE}
+        "norecursedirs": DEFAULT_NORECURSE, "rts_scenario_pattern": "*.scenario.yaml"}
     assert out.splitlines()[0] == (
         "pytest settings: none found, pytest's defaults: xfail_strict = false, "
-        "norecursedirs = *.egg .* _darcs build CVS dist node_modules venv {arch}")
+        "norecursedirs = *.egg .* _darcs build CVS dist node_modules venv {arch}, "
+        "rts_scenario_pattern = *.scenario.yaml")
 
 
 def test_pytest_is_not_imported_for_scenes_without_a_config_file(tmp_path):
@@ -988,3 +991,52 @@ def test_a_config_file_pytest_cannot_read_stops_the_sweep_as_it_stops_pytest(pyt
     assert code == 2 and out == ""
     assert err.startswith(f"error: cannot read pytest's settings: "
                           f"{pytester.path / 'pyproject.toml'}: ") and err.count("\n") == 1
+
+
+def test_the_project_s_scene_pattern_chooses_the_scenes_and_reports_those_it_leaves_out(
+        pytester, capsys, tmp_path):
+    """A scene under the project's rts_scenario_pattern runs; one under another name, the
+    default's among them, is reported, in pytest and in the sweep alike, never left out."""
+    root = pytester.path
+    pytester.makeini("[pytest]\nrts_scenario_pattern = *.scn.yaml\n")
+    (root / "a.scn.yaml").write_text(tiny_scene("ped-a"))
+    (root / "b.scenario.yaml").write_text(tiny_scene("ped-b"))
+    (root / "lab.yaml").write_text("rts_scenario:\n  interface: pcan\n")  # no scene
+    expected = {"ped-a": "pass", "b.scenario.yaml": "error"}
+    plugin, plugin_code = plugin_verdicts(pytester)
+    assert plugin == as_plugin_sees_it(expected)
+    assert plugin_code == pytest.ExitCode.TESTS_FAILED
+    capsys.readouterr()  # pytest's own report
+    swept, code, payload, stdout = sweep_verdicts(capsys, tmp_path, root)
+    assert swept == expected
+    assert code == 2  # bad input, as for a scene misnamed under the default pattern
+    message = (f"{root / 'b.scenario.yaml'} holds a scene (its rts_scenario key) but is not "
+               f"named *.scn.yaml (the project's rts_scenario_pattern), so it does not run as "
+               f"one; rename it b.scn.yaml")
+    assert payload["runs"][1]["reason"] == message
+    result = pytester.runpytest("-p", "no:cacheprovider", "-rA")
+    result.stdout.fnmatch_lines([f"*error: {message}"])
+    assert payload["config"]["rts_scenario_pattern"] == "*.scn.yaml"
+    assert "rts_scenario_pattern = *.scn.yaml" in stdout.splitlines()[0]
+
+
+def test_a_pattern_without_a_plain_suffix_asks_for_a_name_that_matches_it(pytester, capsys,
+                                                                          tmp_path):
+    root = pytester.path
+    pytester.makeini("[pytest]\nrts_scenario_pattern = scene_*.yaml\n")
+    (root / "scene_a.yaml").write_text(tiny_scene("a"))
+    (root / "b.scenario.yaml").write_text(tiny_scene("b"))
+    _, _, payload, _ = sweep_verdicts(capsys, tmp_path, root)
+    assert [r["status"] for r in payload["runs"]] == ["error", "pass"]
+    assert payload["runs"][0]["reason"].endswith(
+        "but is not named scene_*.yaml (the project's rts_scenario_pattern), so it does not "
+        "run as one; rename it to match that pattern")
+
+
+def test_the_scene_pattern_is_read_where_plugins_are_not_loaded_on_their_own(tmp_path,
+                                                                             monkeypatch):
+    from rts_scenario.sweep import pytest_settings
+
+    (tmp_path / "pytest.ini").write_text("[pytest]\nrts_scenario_pattern = *.scn.yaml\n")
+    monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
+    assert pytest_settings([tmp_path]).rts_scenario_pattern == "*.scn.yaml"

@@ -49,6 +49,7 @@ def test_a_target_that_lost_its_echo_slot_fails_naming_the_limit(tmp_path):
     car = next(t for t in report.targets if t.name == "car")
     assert car.limits == {"no_echo_slot": 20} and car.unexpected_limits == ["no_echo_slot"]
     assert car.checkable_frames == 0 and not car.passed
+    assert not car.checked and car.verdict == "FAIL (not checked)"
     assert any(r.startswith("car: ") and "no_echo_slot 20" in r for r in report.reasons)
     # The posts that lost theirs were expected to: they do not fail the verdict.
     assert not any(r.startswith("post-") for r in report.reasons)
@@ -285,3 +286,23 @@ def test_frames_that_keep_up_with_the_motion_are_no_staircase(tmp_path, rate, ta
 
     assert "motion_staircase" not in scene_limits(load_scenario(scene(tmp_path, "smooth",
                                                                       targets, rate=rate)))
+
+
+def test_a_target_nothing_was_checked_of_says_so_and_does_not_read_as_passed(tmp_path):
+    # Behind the radar all scene long, its limit expected: the scene passes on the car, and the
+    # pedestrian's row must not claim a pass nothing was checked for.
+    behind = ("- {name: ped, rcs: {rcs_dbsm: 0.0}, expected_limits: [out_of_coverage], "
+              "motion: {type: stationary, position_m: [-20, 0, 1.1]}}\n")
+    report = run_scene(scene(tmp_path, "behind", CAR + behind), RunOptions(drain_s=1.0)).report
+    assert report.passed, report.reasons
+    car, ped = report.targets
+    assert ped.checkable_frames == 0 and ped.limits == {"out_of_coverage": 20}
+    assert (car.checked, ped.checked) == (True, False)
+    assert ped.passed  # it fails nothing: its limit is expected
+    head, _, *lines = report.table().splitlines()
+    rows = {line.split()[0]: line for line in lines[:2]}
+    assert rows["car"].endswith("  pass") and rows["ped"].endswith("  not checked")
+    # The column counts the radar's cycles in which the target was checkable, not frames.
+    assert head.split()[:2] == ["target", "cycles"]
+    assert rows["car"].split()[1] == str(car.checkable_frames)
+    assert [t["checked"] for t in report.to_dict()["targets"]] == [True, False]

@@ -22,12 +22,11 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
+from rts_scenario.scene_files import DEFAULT_PATTERN, PATTERN_OPTION
+
 if TYPE_CHECKING:
     from rts_scenario.pipeline import RunOptions, RunResult
     from rts_scenario.report import Report
-
-DEFAULT_PATTERN = "*.scenario.yaml"
-
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     """Options mirroring ``rts-scenario run``."""
@@ -47,8 +46,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                          "the radar's identifiers on several channels fails")
     group.addoption("--rts-method", default="exact", choices=["exact", "paper", "estimator"],
                     help="weight solver (default exact)")
-    parser.addini("rts_scenario_pattern", "glob of the scene files to collect",
-                  default=DEFAULT_PATTERN)
+    parser.addini(PATTERN_OPTION, "glob of the scene files to collect (a file holding a scene "
+                                  "under another name fails)", default=DEFAULT_PATTERN)
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -139,14 +138,18 @@ def pytest_collect_file(parent: pytest.Collector,
                         file_path: Path) -> ScenarioFile | MisnamedScene | None:
     """Collect scene files matching the ``rts_scenario_pattern`` ini option.
 
-    With the default pattern, a YAML file that holds a scene (its ``rts_scenario`` key) under
-    another name (``cut_in.scenario.yml``, ``cut_in.yaml``) is one failing item: the scene it
-    holds would otherwise never run, and the session would not say so.
+    A YAML file that holds a scene (its ``rts_scenario`` key) under another name
+    (``cut_in.scenario.yml``, ``cut_in.yaml``, or ``cut_in.scenario.yaml`` where the project's
+    pattern is another) is one failing item: the scene it holds would otherwise never run, and
+    the session would not say so (`rts_scenario.scene_files.scene_file_kind`, the sweep's rule
+    too).
     """
-    pattern = parent.config.getini("rts_scenario_pattern")
-    if fnmatch(file_path.name, pattern):
+    from rts_scenario.scene_files import scene_file_kind
+
+    kind = scene_file_kind(file_path, parent.config.getini(PATTERN_OPTION))
+    if kind == "scene":
         return ScenarioFile.from_parent(parent, path=file_path)
-    if pattern == DEFAULT_PATTERN and holds_scene(file_path):
+    if kind == "misnamed":
         return MisnamedScene.from_parent(parent, path=file_path)
     return None
 
@@ -161,7 +164,7 @@ def pytest_make_collect_report(collector: pytest.Collector
     """
     report = yield
     if isinstance(collector, pytest.Directory) and report.passed:
-        pattern = collector.config.getini("rts_scenario_pattern")
+        pattern = collector.config.getini(PATTERN_OPTION)
         try:
             entries = sorted(os.scandir(collector.path), key=lambda e: e.name)
         except OSError:
@@ -172,13 +175,6 @@ def pytest_make_collect_report(collector: pytest.Collector
                 report.result.append(DanglingScene.from_parent(collector,
                                                                path=Path(entry.path)))
     return report
-
-
-def holds_scene(path: Path) -> bool:
-    """Whether ``path`` holds a scene (`rts_scenario.file_kinds.holds_scene`)."""
-    from rts_scenario.file_kinds import holds_scene as holds
-
-    return holds(path)
 
 
 def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
@@ -261,13 +257,11 @@ class MisnamedScene(pytest.File):
 
     def collect(self) -> Iterator[ScenarioItem]:
         """Yield the item that says so and how to name the file."""
-        from rts_scenario.scenario import SCENE_SUFFIX
+        from rts_scenario.scene_files import misnamed_scene
 
-        stem = self.path.name.split(".", 1)[0]
         yield ScenarioItem.from_parent(
             self, name=self.path.name, overrides={}, marks=(),
-            error=f"{self.path} holds a scene (its rts_scenario key) but is not named "
-                  f"*{SCENE_SUFFIX}, so it does not run as one; rename it {stem}{SCENE_SUFFIX}")
+            error=misnamed_scene(str(self.path), self.config.getini(PATTERN_OPTION)))
 
 
 class DanglingScene(pytest.File):

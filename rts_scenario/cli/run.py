@@ -6,6 +6,7 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -168,6 +169,9 @@ def _do_run(args: argparse.Namespace) -> int:
                                        detections_out=detections, on_preflight=warn, timing=loaded)
                     report = result.report
                     print(report.table())
+                    marked = marks_note(scene.marks, report.passed)
+                    if marked is not None:
+                        print(f"note: {scene.label} is marked {marked[0]}")
                     if log:
                         print(f"wrote {log} and {log}.rts.json")
                     print("timing: " + ", ".join(
@@ -196,7 +200,7 @@ def _do_run(args: argparse.Namespace) -> int:
                 finally:
                     print()
                 entries.append({"file": path, "status": "pass" if report.passed else "fail",
-                                **report.to_dict()})
+                                "marks": list(scene.marks), **report.to_dict()})
     except KeyboardInterrupt:
         # What finished is kept and reported; nothing cut short is left looking complete.
         interrupted = True
@@ -222,6 +226,9 @@ def _do_run(args: argparse.Namespace) -> int:
         for entry in entries:
             name = run_label(entry["scene"], entry["variant"])
             line = f"{entry['status'].upper()} {name} ({entry['file']})"
+            marked = marks_note(entry.get("marks", ()), entry["status"] == "pass")
+            if marked is not None:
+                line += f" - marked {marked[1]}"
             print(line + (f": {entry['error']}" if entry["status"] == "error" else ""))
     if args.json:
         payload = entries[0] if len(entries) == 1 else entries
@@ -235,6 +242,30 @@ def _do_run(args: argparse.Namespace) -> int:
     if interrupted:  # even before the first scene started: never a pass
         return EXIT_FAIL
     return EXIT_OK if all(e["status"] == "pass" for e in entries) else EXIT_FAIL
+
+
+def marks_note(marks: Sequence[str], passed: bool) -> tuple[str, str] | None:
+    """Say how pytest and ``sweep`` judge a run that ``run`` judged by its check alone.
+
+    ``run`` runs a scene as written, whatever its marks: a ``skip`` mark does not keep it from
+    playing, an ``xfail`` mark does not turn its verdict or exit code. Where the marks would
+    change what pytest and ``sweep`` report (`rts_scenario.sweep.marked_status`), returns
+    the note's text after ``is marked`` and the summary line's after ``marked``; else None.
+    """
+    from ..sweep import SKIP_MARKS, marked_status
+
+    skip = next((mark for mark in marks if mark in SKIP_MARKS), None)
+    if skip is not None:
+        return (f"{skip}: pytest and rts-scenario sweep skip it; run ran it as written",
+                f"{skip}: SKIPPED in pytest and sweep")
+    if "xfail" not in marks:
+        return None
+    status = marked_status(marks, passed)
+    what = ("its failed check as XFAIL (a known failure, which fails nothing)" if not passed
+            else "its passed check as XPASS (which fails nothing, unless the project sets "
+                 "xfail_strict)")
+    return (f"xfail: pytest and rts-scenario sweep report {what}; run judges the check as "
+            f"written", f"xfail: {status.upper()} in pytest and sweep")
 
 
 def variant_logs(log: str, variants: list[str]) -> dict[str, str]:
@@ -272,7 +303,9 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
         description="Load each scene, build its schedule, play it (by default on the built-in "
                     "simulated radar), read the detections over CAN and check them. Every "
                     "combination of a scene's parametrize block is its own run, named as pytest "
-                    "names it (SCENE[ID]). Every run happens even if another errs. Exit 0 if "
+                    "names it (SCENE[ID]). A scene runs as written, whatever its marks (skip, "
+                    "xfail: pytest and sweep apply them), with a note saying what they would "
+                    "report. Every run happens even if another errs. Exit 0 if "
                     "every run passes, 1 if one fails, 2 on bad input (arguments, a scene that "
                     "does not load), 3 on a runtime error.",
     )

@@ -60,8 +60,9 @@ class SweepProgress:
 
 
 def _do_sweep(args: argparse.Namespace) -> int:
+    from fnmatch import fnmatch
+
     from ..errors import RtsError
-    from ..scenario import SCENE_SUFFIX
     from ..sweep import (
         LOCAL_SCHEDULER,
         NoRunSelected,
@@ -91,7 +92,8 @@ def _do_sweep(args: argparse.Namespace) -> int:
     scene_files: list[Path] = []
     for given in map(Path, args.scenes):  # a folder: the scene files it holds
         scene_files += ([p for p in folder_files(given, settings.norecursedirs).files
-                         if p.name.endswith(SCENE_SUFFIX)] if given.is_dir() else [given])
+                         if fnmatch(p.name, settings.rts_scenario_pattern)]
+                        if given.is_dir() else [given])
     check_distinct_paths([("--json", args.json), ("--plot", args.plot)],
                          [("SCENE", scene) for scene in scene_files])
     if args.json:
@@ -187,7 +189,8 @@ def _settings_text(settings: PytestSettings) -> str:
     """Say where the pytest settings the sweep took came from, and what they are.
 
     ``pytest settings: configfile pyproject.toml (rootdir /project): xfail_strict = false,
-    norecursedirs = .* build``; ``none found, pytest's defaults`` without a config file.
+    norecursedirs = .* build, rts_scenario_pattern = *.scenario.yaml``; ``none found, pytest's
+    defaults`` without a config file.
     """
     if settings.inifile is None:
         where = "none found, pytest's defaults"
@@ -197,7 +200,8 @@ def _settings_text(settings: PytestSettings) -> str:
                    and settings.inifile.is_relative_to(rootdir) else settings.inifile)
         where = f"configfile {inifile} (rootdir {rootdir})"
     return (f"pytest settings: {where}: xfail_strict = {str(settings.xfail_strict).lower()}, "
-            f"norecursedirs = {' '.join(settings.norecursedirs)}")
+            f"norecursedirs = {' '.join(settings.norecursedirs)}, "
+            f"rts_scenario_pattern = {settings.rts_scenario_pattern}")
 
 
 def _rate_text(rate: float | None) -> str:
