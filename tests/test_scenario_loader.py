@@ -831,6 +831,7 @@ def test_frames_that_cover_the_duration_load(tmp_path, duration_s, frame_rate_hz
     (1.0 - 1.1e-3 / 20.0, 20.0, "duration_s"),
     (6.0, 0.05, "frame_rate_hz"),  # under one frame period: the rate is the suspect
     (1.0, 1.5, "duration_s"),
+    (0.02, 20.0, "duration_s"),  # under one frame of a usual rate: the duration is the suspect
 ])
 def test_frames_that_do_not_cover_the_duration_are_refused(tmp_path, duration_s,
                                                             frame_rate_hz, key):
@@ -887,3 +888,20 @@ def test_a_motion_within_the_speed_limit_loads(tmp_path, speed_mps, acceleration
         "motion": accelerating(speed_mps, acceleration_mps2)}], duration_s=20.0))
     # Radial speed is at most the speed: at most the limit in every frame.
     assert np.abs(compute_tracks(scene).radial_velocity_mps).max() <= 150.0 + 1e-9
+
+
+def test_a_target_is_held_to_the_speed_limit_while_it_is_present(tmp_path):
+    # 100 m/s, 10 m/s2: 150 m/s at 5 s. Gone at 4 s (its last frame 3.95 s, at 139.5 m/s) it
+    # never plays faster than the limit; gone at 6 s, it does, and the error says when it goes.
+    def bike(disappear_s):
+        return write_scene(tmp_path, [{"name": "bike", "rcs": {"rcs_dbsm": 0},
+                                       "disappear_s": disappear_s,
+                                       "motion": accelerating(100.0, 10.0)}], duration_s=12.0)
+
+    scene = load_scenario(bike(4.0))
+    assert np.abs(compute_tracks(scene).radial_velocity_mps[scene.t_s < 4.0]).max() <= 150.0
+    with pytest.raises(ScenarioError, match=(
+            r"target 'bike' reaches 150 m/s at 5 s \(10 m/s2 from 100 m/s\), before its last "
+            r"frame at 5.95 s \(disappear_s; duration_s = 12 s at 20 Hz\): .* accelerate less, "
+            r"or let it disappear before the speed leaves them")):
+        load_scenario(bike(6.0))

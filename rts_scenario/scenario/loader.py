@@ -244,9 +244,11 @@ def _check_frames(doc: Document, frames: _Frames) -> None:
         key = "frame_rate_hz"
         hint = (f" (frame_rate_hz counts frames per second: if {rate:g} s is the frame period, "
                 f"frame_rate_hz: {_shown(1.0 / rate, lambda r: whole(declared * r))})")
-    else:
+    elif rate < 1.0:  # frames held over a second each: the rate is the suspect
         key = "frame_rate_hz"
         hint = " (frame_rate_hz counts frames per second, the inverse of the frame period)"
+    else:  # a usual rate, a duration shorter than one of its frames
+        key, hint = "duration_s", ""
     raise doc.error(
         (key,),
         f"duration_s = {declared:g} s at frame_rate_hz = {rate:g} Hz is {periods:.6g} frame "
@@ -614,8 +616,12 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
     else:  # speed_profile
         law = _speed_profile(doc, (*mkey, "profile"), motion["profile"])
     who = f"target {spec['name']!r}" if "name" in spec else "the ego"
+    # A target is held to the limit while present: up to its last frame before disappear_s.
+    disappear = float(spec.get("disappear_s", np.inf))
+    gone = frames.first_at_or_after(disappear) if disappear < frames.last_s else frames.n
+    until = (gone - 1) / frames.rate_hz if gone < frames.n else None
     _check_speed(doc, (*mkey, "acceleration_mps2") if "acceleration_mps2" in motion else mkey,
-                 law, frames, who)
+                 law, frames, who, until)
     return Trajectory(path=path, law=law, lane_changes=lane_changes)
 
 
@@ -625,14 +631,17 @@ MAX_SPEED_MPS = 150.0
 
 
 def _check_speed(doc: Document, key: KeyPath, law: TravelLaw, frames: _Frames,
-                 who: str) -> None:
+                 who: str, until_s: float | None = None) -> None:
     """Refuse a motion whose speed leaves +-`MAX_SPEED_MPS` by the scene's last frame.
 
-    The speed is linear in time on each piece of ``law``: it peaks at a piece's ends.
+    ``until_s``: the last frame of a target that disappears before the scene's last (None:
+    the scene's). The speed is linear in time on each piece of ``law``: it peaks at a piece's
+    ends.
     """
+    last_s = frames.last_s if until_s is None else until_s
     starts = law.knots_s
-    ends = np.minimum(np.append(starts[1:], np.inf), frames.last_s)
-    within = starts <= frames.last_s
+    ends = np.minimum(np.append(starts[1:], np.inf), last_s)
+    within = starts <= last_s
     end_speed = law.v0_mps + law.a_mps2 * np.maximum(ends - starts, 0.0)
     over = within & (np.abs(end_speed) > MAX_SPEED_MPS * (1.0 + 1e-12))
     if not over.any():
@@ -641,10 +650,13 @@ def _check_speed(doc: Document, key: KeyPath, law: TravelLaw, frames: _Frames,
     v0, a = float(law.v0_mps[k]), float(law.a_mps2[k])
     limit = math.copysign(MAX_SPEED_MPS, end_speed[k])
     at_s = float(starts[k]) + (limit - v0) / a
+    end = (frames.describe_end() if until_s is None else
+           f"its last frame at {until_s:g} s (disappear_s; {frames.describe()})")
     raise doc.error(key, f"{who} reaches {limit:g} m/s at {at_s:.6g} s ({a:g} m/s2 from "
-                         f"{v0:g} m/s), before {frames.describe_end()}: speeds run from "
-                         f"{-MAX_SPEED_MPS:g} to {MAX_SPEED_MPS:g} m/s; accelerate less, or "
-                         f"end the scene before the speed leaves them")
+                         f"{v0:g} m/s), before {end}: speeds run from {-MAX_SPEED_MPS:g} to "
+                         f"{MAX_SPEED_MPS:g} m/s; accelerate less, or "
+                         + ("end the scene" if until_s is None else "let it disappear")
+                         + " before the speed leaves them")
 
 
 def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]]) -> TravelLaw:
