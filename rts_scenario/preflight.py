@@ -102,7 +102,8 @@ def _staircase(scene: Scenario) -> str | None:
 
     Each frame is held for a frame period; where that spans `STAIRCASE_CYCLES` radar cycles or
     more, every one of them measures (and is judged against) the frame held, while the scene's
-    target moves on. Flagged where a present target moves farther than the range tolerance
+    target moves on. Flagged where a target present and in the rig's coverage moves farther
+    than the range tolerance
     within one frame period (from its frame's time to the next, the last frame's to the
     scene's end).
     """
@@ -117,7 +118,8 @@ def _staircase(scene: Scenario) -> str | None:
         frames = np.arange(first, min(first + step, scene.n_frames) + 1)
         tracks = compute_tracks(scene, frames / scene.frame_rate_hz, frames)
         moved = np.linalg.norm(np.diff(tracks.position_m, axis=0), axis=-1)
-        moved = np.where(tracks.present[:-1], moved, 0.0)
+        # Of what the RTS plays the radar: a target out of the rig's coverage is not played.
+        moved = np.where(tracks.present[:-1] & tracks.in_coverage[:-1], moved, 0.0)
         f, k = np.unravel_index(int(np.argmax(moved)), moved.shape)
         if moved[f, k] > worst[0]:
             worst = (float(moved[f, k]), first + int(f), int(k))

@@ -279,6 +279,11 @@ def test_motion_held_frozen_over_many_radar_cycles_fails_unless_expected(tmp_pat
     (20.0, MOVER),  # a frame per radar cycle: the car moves 0.1 m per frame
     (1.0, CAR),  # held 20 cycles, but nothing moves
     (5.0, MOVER.replace("2.0}", "1.0}")),  # held 4 cycles, the car moves 0.2 m in one
+    # Held 20 cycles, the car standing; the one moving drives behind the radar, out of the
+    # rig's coverage all scene long: the RTS plays it in no frame (its limit expected).
+    (1.0, CAR + MOVER.replace("name: car", "name: behind").replace("[40, 0, 1.1]",
+                                                                    "[-20, 0, 1.1]")
+     .replace("{name: behind,", "{name: behind, expected_limits: [out_of_coverage],")),
 ])
 def test_frames_that_keep_up_with_the_motion_are_no_staircase(tmp_path, rate, targets):
     from rts_scenario.preflight import scene_limits
