@@ -218,10 +218,12 @@ def build_schedule(
     attenuation[~active] = np.nan
     status |= np.where(clipped, Status.ATTENUATION_CLIPPED, 0).astype(np.uint16)
 
-    # Judged on the channels the solver wants, whatever level the attenuator can give them: at
-    # range 0 the level is infinite and the steps leave no channel on.
-    wanted = active | (ok[..., None] & (solved > 0.0))
-    too_close = (wanted & (delay < limits.delay_min_s - DELAY_SLACK_S)).any(axis=-1)
+    # Judged on the channels played; where the attenuator left none on, on those the solver
+    # wants (at range 0 the level needed is infinite and the steps leave no channel on). A
+    # channel the steps switched off is not played: its delay does not matter.
+    close = delay < limits.delay_min_s - DELAY_SLACK_S
+    wanted = ok[..., None] & (solved > 0.0) & ~active.any(axis=-1, keepdims=True)
+    too_close = ((active | wanted) & close).any(axis=-1)
     status |= np.where(too_close, Status.TOO_CLOSE, 0).astype(np.uint16)
     if limits.delay_max_s is not None:
         too_far = (active & (delay > limits.delay_max_s + DELAY_SLACK_S)).any(axis=-1)
