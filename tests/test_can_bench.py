@@ -297,6 +297,56 @@ def test_a_counter_of_sixteen_values_keeps_a_step_of_eight_forward(tmp_path):
     assert (receiver.stats.duplicates, receiver.stats.reordered) == (1, 0)
 
 
+def _counter(tmp_path, counter_max):
+    """The J1850 radar's mapping with its counter wrapping after ``counter_max`` (None: the
+    4-bit signal's width, 16 values)."""
+    line = "" if counter_max is None else f"  counter_max: {counter_max}\n"
+    return _mapping(tmp_path, f"max{counter_max}",
+                    J1850_MAPPING.replace("  counter_max: 14\n", line))
+
+
+@pytest.mark.parametrize(("counter_max", "modulus"), [(14, 15), (None, 16)])
+def test_an_incomplete_cycle_handed_on_late_is_no_copy_of_a_new_cycle_after_lost_headers(
+        tmp_path, counter_max, modulus):
+    # Cycle 0 announces a detection that never comes: it waits for it while the next cycles
+    # come (3 on 15 values, 4 on 16), then goes on incomplete, after them. Cycles 1..8 are
+    # whole; then the headers up to the wrap are lost, and 0 is 7 (15 values) or 8 (16) on
+    # from 8: a new cycle, as it would be had the first 0 been whole. So is 1 after it.
+    path = _counter(tmp_path, counter_max)
+    assert CanMapping.from_file(path).counter_modulus == modulus
+    receiver, got = receive(path, [header_j1850(0, 1), *(header_j1850(a, 0) for a in range(1, 9)),
+                                   header_j1850(0, 0), header_j1850(1, 0)])
+    assert (receiver.stats.duplicates, receiver.stats.reordered,
+            receiver.stats.conflicts) == (0, 0, 0)
+    assert [c.cycle for c in got if not c.complete] == [0]
+    assert [c.cycle for c in got if c.complete] == [*range(1, 9), 0, 1]
+
+
+def test_an_incomplete_cycle_on_a_counter_of_four_values_is_no_copy_after_a_lost_header(
+        tmp_path):
+    # Four values: a step is -1..2. Cycle 0 is incomplete and goes on once 1 came; 2 is lost,
+    # and 3 is two on from 1. Then 0 is one on from 3: a new cycle, not the old 0 again.
+    path = _counter(tmp_path, 3)
+    receiver, got = receive(path, [header_j1850(0, 1), *(header_j1850(a, 0) for a in (1, 3, 0, 1))])
+    assert (receiver.stats.duplicates, receiver.stats.reordered,
+            receiver.stats.conflicts) == (0, 0, 0)
+    assert [(c.cycle, c.complete) for c in got] == [(1, True), (0, False), (3, True),
+                                                    (0, True), (1, True)]
+
+
+def test_an_incomplete_cycle_the_counter_left_behind_in_one_jump_goes_on(tmp_path):
+    # Sixteen values: cycle 0 is incomplete, still waited for when 3 comes (3 back); 7 headers
+    # are lost and 11 comes, 8 on from 3. 0 is no longer behind 11 (5 ahead of it): it goes
+    # on incomplete, and the 0 of the next lap is a new cycle, not a conflicting header.
+    path = _counter(tmp_path, None)
+    receiver, got = receive(path, [header_j1850(0, 1),
+                                   *(header_j1850(a, 0) for a in (3, *range(11, 16), 0))])
+    assert (receiver.stats.duplicates, receiver.stats.reordered,
+            receiver.stats.conflicts) == (0, 0, 0)
+    assert [(c.cycle, c.complete) for c in got] == [(3, True), (11, True), (0, False),
+                                                    *((a, True) for a in (12, 13, 14, 15, 0))]
+
+
 def test_a_counter_wrapping_after_14_restarts_within_seven_steps_either_way(autosar):
     # The restart's counter 0 on 15 values: up to seven cycles counting on from it (1..7)
     # are the stream's own, its first header held up behind them; a cycle up to seven before
