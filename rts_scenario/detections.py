@@ -161,6 +161,13 @@ def largest_step_back(modulus: int) -> int:
     return (modulus - 1) // 2
 
 
+# The fewest values a cycle counter may take. One of 4 steps forward by 2 at most: the header
+# after one lost cycle is a new cycle. One of 3 values steps back by 1 there, and one of 2 comes
+# back to the same value: the header after one lost cycle cannot be told from a copy of a cycle
+# before (a counter of 16 values tells up to 7 lost cycles).
+SMALLEST_COUNTER_MODULUS = 4
+
+
 def sequential_numbers(counters: NDArray[np.int64], modulus: int,
                        bus_t_s: NDArray[np.float64] | None = None,
                        cycle_s: float | None = None) -> NDArray[np.int64]:
@@ -197,5 +204,6 @@ def sequential_numbers(counters: NDArray[np.int64], modulus: int,
 GAP_TOLERANCE_CYCLES = 2.0
 
 
-__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "Detections", "bus_times", "host_times",
-           "largest_step_back", "sequential_numbers", "signed_step", "unwrap_counter"]
+__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "SMALLEST_COUNTER_MODULUS", "Detections",
+           "bus_times", "host_times", "largest_step_back", "sequential_numbers", "signed_step",
+           "unwrap_counter"]

@@ -602,19 +602,41 @@ class Recorder(list):
 
 BAD = [
     ("counter-max-beyond-width", ("counter_max: 14", "counter_max: 16"), "header.counter_max",
-     r"got 16: the 4-bit signal 'Hdr_Alive' counts to 15 at most; allowed: 1 to 15"),
+     r"got 16: the 4-bit signal 'Hdr_Alive' counts to 15 at most; allowed: 3 to 15"),
     ("counter-min-not-below-max", ("counter_max: 14", "counter_min: 14\n  counter_max: 14"),
-     "header.counter_min", r"got 14: the counter must take two values at least, from "
-                           r"counter_min to 14 \(counter_max\); allowed: 0 to 13, or dbc"),
+     "header.counter_min", r"got 14: the counter must take 4 values at least, from "
+                           r"counter_min to 14 \(counter_max\): with fewer, the header after "
+                           r"one lost cycle cannot be told from a copy of a cycle before; "
+                           r"allowed: 0 to 11, or dbc"),
+    # A counter of 2 or 3 values takes one lost cycle's header for a copy of a cycle before.
+    ("counter-max-three-values", ("counter_max: 14", "counter_max: 2"), "header.counter_max",
+     r"got 2: the counter must take 4 values at least, from 0 to counter_max: with fewer, "
+     r"the header after one lost cycle cannot be told from a copy of a cycle before; "
+     r"allowed: 3 to 15, or dbc"),
+    ("counter-max-two-values", ("counter_max: 14", "counter_max: 1"), "header.counter_max",
+     r"got 1: the counter must take 4 values at least"),
+    ("counter-max-dbc-three-values", (("counter_max: 14", "counter_max: dbc"),
+                                      ("[0|14]", "[0|2]")), "header.counter_max",
+     r"dbc: the DBC states no whole maximum from 3 to 15"),
+    ("counter-min-three-values", ("counter_max: 14", "counter_min: 1\n  counter_max: 3"),
+     "header.counter_min", r"got 1: the counter must take 4 values at least, from "
+                           r"counter_min to 3 \(counter_max\): with fewer, the header after "
+                           r"one lost cycle cannot be told from a copy of a cycle before; "
+                           r"allowed: 0 to 0, or dbc"),
+    ("counter-of-one-bit", (("  counter_max: 14\n", ""),
+                            ("Hdr_Alive : 8|4@1+ (1,0) [0|14]", "Hdr_Alive : 8|1@1+ (1,0) [0|1]")),
+     "header.counter", r"got 'Hdr_Alive': the 1-bit signal takes 2 values; a counter must "
+                       r"take 4 at least: with fewer, the header after one lost cycle cannot "
+                       r"be told from a copy of a cycle before$"),
     ("counter-min-negative", ("counter_max: 14", "counter_min: -1\n  counter_max: 14"),
      "header.counter_min", r"must be >= 0, got -1"),
     ("counter-min-dbc-without-minimum", (("counter_max: 14",
                                           "counter_min: dbc\n  counter_max: 14"),
                                          ("[0|14]", "[-0.5|14]")), "header.counter_min",
-     r"dbc: the DBC states no whole minimum from 0 to 13"),
+     r"dbc: the DBC states no whole minimum from 0 to 11"),
     ("counter-max-dbc-without-maximum", (("counter_max: 14", "counter_max: dbc"),
                                          ("[0|14]", "[0|0]")), "header.counter_max",
-     r"dbc: the DBC states no whole maximum from 1 to 15"),
+     r"dbc: the DBC states no whole maximum from 3 to 15"),
     ("unknown-scheme", ("scheme: autosar-e2e-p5", "scheme: crc16"),
      "detection.checksum.scheme", r"got 'crc16'; allowed values: 'crc32-low-byte', "
                                   r"'crc8-sae-j1850', 'autosar-e2e-p2', 'autosar-e2e-p5'$"),

@@ -369,6 +369,7 @@ def test_an_incomplete_cycle_of_a_counter_of_two_or_three_values_goes_on_at_the_
     # counter of two values steps back by none, one of three by one: once the next header
     # came, 0 is no longer behind the latest (or as far back as the receiver waits) and goes on
     # incomplete, and each later header is a new cycle, never a copy of it or a conflict.
+    # (A mapping file with such a counter is refused; a mapping built in code is not.)
     mapping = dataclasses.replace(BUILTIN, counter_max=modulus - 1)
     recorder = Recorder()
     publisher = DetectionPublisher(recorder, mapping=mapping)
