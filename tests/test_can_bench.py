@@ -15,7 +15,7 @@ import pytest
 import rts_scenario.cli as cli
 from rts_scenario.canbus import DetectionPublisher, DetectionReceiver
 from rts_scenario.canbus.mapping import CanMapping
-from rts_scenario.detections import Detections
+from rts_scenario.detections import Detections, sequential_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -345,6 +345,59 @@ def test_an_incomplete_cycle_the_counter_left_behind_in_one_jump_goes_on(tmp_pat
             receiver.stats.conflicts) == (0, 0, 0)
     assert [(c.cycle, c.complete) for c in got] == [(3, True), (11, True), (0, False),
                                                     *((a, True) for a in (12, 13, 14, 15, 0))]
+
+
+def _timed(path, headers):
+    """Receive headers ``(counter, bus time)`` of 50 ms cycles; return the receiver and the
+    cycles."""
+    receiver = DetectionReceiver(CanMapping.from_file(path), cycle_s=0.05)
+    got = []
+    for alive, t in headers:
+        receiver.on_message_received(header_j1850(alive, 0, stamp=t))
+        got += receiver.pop()
+    return receiver, got + receiver.flush()
+
+
+@pytest.mark.parametrize("counter_max", [3, 4, None])
+def test_a_header_again_a_millisecond_on_is_a_copy_on_a_counter_of_few_values(tmp_path,
+                                                                              counter_max):
+    # 50 ms cycles: headers 0, 1, 2, then 2 again 1 ms on, then 3. On a counter of 4 or 5
+    # values as on one of 16, a gap of 1 ms is no silence after which every counter is new:
+    # the second 2 is a copy.
+    receiver, got = _timed(_counter(tmp_path, counter_max),
+                           [(0, 0.0), (1, 0.05), (2, 0.10), (2, 0.101), (3, 0.15)])
+    assert [c.cycle for c in got] == [0, 1, 2, 3]
+    assert (receiver.stats.duplicates, receiver.stats.reordered) == (1, 0)
+
+
+@pytest.mark.parametrize(("counter_max", "modulus"), [(3, 4), (4, 5)])
+def test_on_a_counter_of_few_values_a_gap_over_two_cycles_is_told_by_its_time_alike(
+        tmp_path, counter_max, modulus):
+    # Headers 0 and 1, then cycles 2 and 3 are lost: 4's header, 3 cycles after 1's, carries
+    # 0 (4 values, one back from 1 by the counter) or 4 (5 values, two back). Its time tells
+    # it: a new cycle three on, live and in the re-check's numbering.
+    path = _counter(tmp_path, counter_max)
+    headers = [(0, 0.0), (1, 0.05), (4 % modulus, 0.20)]
+    receiver, got = _timed(path, headers)
+    assert [c.cycle for c in got] == [0, 1, 4 % modulus]
+    assert (receiver.stats.duplicates, receiver.stats.reordered) == (0, 0)
+    numbers = sequential_numbers(np.array([c for c, _ in headers]), modulus,
+                                 np.array([t for _, t in headers]), 0.05)
+    assert list(numbers) == [0, 1, 4]
+
+
+def test_a_header_held_up_a_cycle_on_a_counter_of_four_values_is_reordered_alike(tmp_path):
+    # 50 ms cycles: cycle 1's header is held up behind 2's and comes 1.2 cycles after it. A gap
+    # of 2 cycles or less is no silence, whatever the counter's range: by the counter, 1 is
+    # one back from 2, a reordered cycle, live and in the re-check's numbering (not three
+    # cycles on, as the time alone would have it).
+    headers = [(0, 0.0), (2, 0.10), (1, 0.16)]
+    receiver, got = _timed(_counter(tmp_path, 3), headers)
+    assert [c.cycle for c in got] == [0, 2, 1]
+    assert (receiver.stats.duplicates, receiver.stats.reordered) == (0, 1)
+    numbers = sequential_numbers(np.array([c for c, _ in headers]), 4,
+                                 np.array([t for _, t in headers]), 0.05)
+    assert list(numbers) == [0, 2, 1]
 
 
 def test_a_counter_wrapping_after_14_restarts_within_seven_steps_either_way(autosar):

@@ -28,7 +28,7 @@ import cantools
 import numpy as np
 from cantools.database.utils import create_encode_decode_formats
 
-from ..detections import GAP_TOLERANCE_CYCLES, Detections, largest_step_back, signed_step
+from ..detections import Detections, largest_step_back, long_gap_cycles, signed_step
 from ..errors import BusError, OutputError
 from ..hostclock import HostClockWatch
 from .checksums import Seal, Verify, checksum_of
@@ -599,9 +599,10 @@ class DetectionReceiver(can.Listener):
     are at or behind the latest counter (`largest_step_back`), whatever order they went in.
 
     With the radar's ``cycle_s``, a header that reaches the bus more than half the counter's
-    range of cycles after the one before (less `GAP_TOLERANCE_CYCLES`) starts afresh: every
-    counter remembered is from before that silence, so one that comes again is a new cycle,
-    not a copy (an 8-bit counter repeats after 12.8 s of 50 ms cycles).
+    range of cycles after the one before (less `GAP_TOLERANCE_CYCLES`, and 2 cycles at least:
+    `long_gap_cycles`) starts afresh: every counter remembered is from before that silence,
+    so one that comes again is a new cycle, not a copy (an 8-bit counter repeats after 12.8 s
+    of 50 ms cycles).
 
     Each cycle keeps when its header was on the bus (the message's timestamp, on whatever
     clock the interface stamps with) and when the host received it: ``received_at(message)``,
@@ -939,7 +940,7 @@ class DetectionReceiver(can.Listener):
             self._place_after(counter)
         if bus_t_s is not None:
             if self.cycle_s is not None and bus_t_s - self._last_header_t > (
-                    self._counter_modulus // 2 - GAP_TOLERANCE_CYCLES) * self.cycle_s:
+                    long_gap_cycles(self._counter_modulus) * self.cycle_s):
                 self._after_silence()
             self._last_header_t = bus_t_s
         known = self._open.get(counter) or self._content.get(counter)
