@@ -161,6 +161,26 @@ def largest_step_back(modulus: int) -> int:
     return (modulus - 1) // 2
 
 
+# The fewest values a cycle counter may take. One of 4 steps forward by 2 at most: the header
+# after one lost cycle is a new cycle. One of 3 values steps back by 1 there, and one of 2 comes
+# back to the same value: the header after one lost cycle cannot be told from a copy of a cycle
+# before (a counter of 16 values tells up to 7 lost cycles).
+SMALLEST_COUNTER_MODULUS = 4
+
+
+def long_gap_cycles(modulus: int) -> float:
+    """Return how many cycles apart two headers are for their gap's time to tell the step.
+
+    Half the range of a counter of ``modulus`` values, less `GAP_TOLERANCE_CYCLES`: a gap
+    that long may be one the counter wrapped in. Never under `SHORTEST_LONG_GAP_CYCLES`, so
+    that on a counter of few values (half of 4 or 5 values less the tolerance is none) a
+    header on time, late by a cycle or copied is still told by its counter. The receiver
+    takes a longer gap for a silence (`DetectionReceiver`), the re-check's numbering reads
+    the step from its time (`sequential_numbers`).
+    """
+    return max(modulus // 2 - GAP_TOLERANCE_CYCLES, SHORTEST_LONG_GAP_CYCLES)
+
+
 def sequential_numbers(counters: NDArray[np.int64], modulus: int,
                        bus_t_s: NDArray[np.float64] | None = None,
                        cycle_s: float | None = None) -> NDArray[np.int64]:
@@ -172,7 +192,8 @@ def sequential_numbers(counters: NDArray[np.int64], modulus: int,
     the cycle is expected.
 
     With the cycles' bus times (``bus_t_s``, NaN where not known) and the radar's ``cycle_s``,
-    a gap longer than half the counter's range is told by the time it took: the step is the one
+    a gap longer than half the counter's range (`long_gap_cycles`) is told by the time it
+    took: the step is the one
     the counter allows nearest the gap's time in cycles, where it lies within
     `GAP_TOLERANCE_CYCLES` of it (or 0.2 % of the gap: a crystal off its profile); times that
     match no such step (stamps out of step with the cycles) leave the counter's.
@@ -183,7 +204,7 @@ def sequential_numbers(counters: NDArray[np.int64], modulus: int,
     step = signed_step(counters[1:], counters[:-1], modulus)
     if bus_t_s is not None and cycle_s is not None and counters.size > 1:
         elapsed = np.diff(np.asarray(bus_t_s, dtype=np.float64)) / cycle_s
-        long = np.isfinite(elapsed) & (elapsed > modulus // 2 - GAP_TOLERANCE_CYCLES)
+        long = np.isfinite(elapsed) & (elapsed > long_gap_cycles(modulus))
         if long.any():
             timed = step + np.round((elapsed - step) / modulus).astype(np.int64) * modulus
             off = np.abs(elapsed - timed)
@@ -195,7 +216,12 @@ def sequential_numbers(counters: NDArray[np.int64], modulus: int,
 # How far (cycles) a long gap's time may put it from a step its counters allow: the latency's
 # jitter at both ends, and a crystal off its profile over the gap (1000 ppm: 1 cycle in 1000).
 GAP_TOLERANCE_CYCLES = 2.0
+# The shortest gap (cycles) whose time tells its step (`long_gap_cycles`): up to a cycle late
+# with the latency's jitter, a header is told by its counter.
+SHORTEST_LONG_GAP_CYCLES = 2.0
 
 
-__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "Detections", "bus_times", "host_times",
-           "largest_step_back", "sequential_numbers", "signed_step", "unwrap_counter"]
+__all__ = ["GAP_TOLERANCE_CYCLES", "QUANTITIES", "SHORTEST_LONG_GAP_CYCLES",
+           "SMALLEST_COUNTER_MODULUS", "Detections", "bus_times", "host_times",
+           "largest_step_back", "long_gap_cycles", "sequential_numbers", "signed_step",
+           "unwrap_counter"]

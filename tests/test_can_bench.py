@@ -15,7 +15,7 @@ import pytest
 import rts_scenario.cli as cli
 from rts_scenario.canbus import DetectionPublisher, DetectionReceiver
 from rts_scenario.canbus.mapping import CanMapping
-from rts_scenario.detections import Detections
+from rts_scenario.detections import Detections, sequential_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -297,6 +297,109 @@ def test_a_counter_of_sixteen_values_keeps_a_step_of_eight_forward(tmp_path):
     assert (receiver.stats.duplicates, receiver.stats.reordered) == (1, 0)
 
 
+def _counter(tmp_path, counter_max):
+    """The J1850 radar's mapping with its counter wrapping after ``counter_max`` (None: the
+    4-bit signal's width, 16 values)."""
+    line = "" if counter_max is None else f"  counter_max: {counter_max}\n"
+    return _mapping(tmp_path, f"max{counter_max}",
+                    J1850_MAPPING.replace("  counter_max: 14\n", line))
+
+
+@pytest.mark.parametrize(("counter_max", "modulus"), [(14, 15), (None, 16)])
+def test_an_incomplete_cycle_handed_on_late_is_no_copy_of_a_new_cycle_after_lost_headers(
+        tmp_path, counter_max, modulus):
+    # Cycle 0 announces a detection that never comes: it waits for it while the next cycles
+    # come (3 on 15 values, 4 on 16), then goes on incomplete, after them. Cycles 1..8 are
+    # whole; then the headers up to the wrap are lost, and 0 is 7 (15 values) or 8 (16) on
+    # from 8: a new cycle, as it would be had the first 0 been whole. So is 1 after it.
+    path = _counter(tmp_path, counter_max)
+    assert CanMapping.from_file(path).counter_modulus == modulus
+    receiver, got = receive(path, [header_j1850(0, 1), *(header_j1850(a, 0) for a in range(1, 9)),
+                                   header_j1850(0, 0), header_j1850(1, 0)])
+    assert (receiver.stats.duplicates, receiver.stats.reordered,
+            receiver.stats.conflicts) == (0, 0, 0)
+    assert [c.cycle for c in got if not c.complete] == [0]
+    assert [c.cycle for c in got if c.complete] == [*range(1, 9), 0, 1]
+
+
+def test_an_incomplete_cycle_on_a_counter_of_four_values_is_no_copy_after_a_lost_header(
+        tmp_path):
+    # Four values: a step is -1..2. Cycle 0 is incomplete and goes on once 1 came; 2 is lost,
+    # and 3 is two on from 1. Then 0 is one on from 3: a new cycle, not the old 0 again.
+    path = _counter(tmp_path, 3)
+    receiver, got = receive(path, [header_j1850(0, 1), *(header_j1850(a, 0) for a in (1, 3, 0, 1))])
+    assert (receiver.stats.duplicates, receiver.stats.reordered,
+            receiver.stats.conflicts) == (0, 0, 0)
+    assert [(c.cycle, c.complete) for c in got] == [(1, True), (0, False), (3, True),
+                                                    (0, True), (1, True)]
+
+
+def test_an_incomplete_cycle_the_counter_left_behind_in_one_jump_goes_on(tmp_path):
+    # Sixteen values: cycle 0 is incomplete, still waited for when 3 comes (3 back); 7 headers
+    # are lost and 11 comes, 8 on from 3. 0 is no longer behind 11 (5 ahead of it): it goes
+    # on incomplete, and the 0 of the next lap is a new cycle, not a conflicting header.
+    path = _counter(tmp_path, None)
+    receiver, got = receive(path, [header_j1850(0, 1),
+                                   *(header_j1850(a, 0) for a in (3, *range(11, 16), 0))])
+    assert (receiver.stats.duplicates, receiver.stats.reordered,
+            receiver.stats.conflicts) == (0, 0, 0)
+    assert [(c.cycle, c.complete) for c in got] == [(3, True), (11, True), (0, False),
+                                                    *((a, True) for a in (12, 13, 14, 15, 0))]
+
+
+def _timed(path, headers):
+    """Receive headers ``(counter, bus time)`` of 50 ms cycles; return the receiver and the
+    cycles."""
+    receiver = DetectionReceiver(CanMapping.from_file(path), cycle_s=0.05)
+    got = []
+    for alive, t in headers:
+        receiver.on_message_received(header_j1850(alive, 0, stamp=t))
+        got += receiver.pop()
+    return receiver, got + receiver.flush()
+
+
+@pytest.mark.parametrize("counter_max", [3, 4, None])
+def test_a_header_again_a_millisecond_on_is_a_copy_on_a_counter_of_few_values(tmp_path,
+                                                                              counter_max):
+    # 50 ms cycles: headers 0, 1, 2, then 2 again 1 ms on, then 3. On a counter of 4 or 5
+    # values as on one of 16, a gap of 1 ms is no silence after which every counter is new:
+    # the second 2 is a copy.
+    receiver, got = _timed(_counter(tmp_path, counter_max),
+                           [(0, 0.0), (1, 0.05), (2, 0.10), (2, 0.101), (3, 0.15)])
+    assert [c.cycle for c in got] == [0, 1, 2, 3]
+    assert (receiver.stats.duplicates, receiver.stats.reordered) == (1, 0)
+
+
+@pytest.mark.parametrize(("counter_max", "modulus"), [(3, 4), (4, 5)])
+def test_on_a_counter_of_few_values_a_gap_over_two_cycles_is_told_by_its_time_alike(
+        tmp_path, counter_max, modulus):
+    # Headers 0 and 1, then cycles 2 and 3 are lost: 4's header, 3 cycles after 1's, carries
+    # 0 (4 values, one back from 1 by the counter) or 4 (5 values, two back). Its time tells
+    # it: a new cycle three on, live and in the re-check's numbering.
+    path = _counter(tmp_path, counter_max)
+    headers = [(0, 0.0), (1, 0.05), (4 % modulus, 0.20)]
+    receiver, got = _timed(path, headers)
+    assert [c.cycle for c in got] == [0, 1, 4 % modulus]
+    assert (receiver.stats.duplicates, receiver.stats.reordered) == (0, 0)
+    numbers = sequential_numbers(np.array([c for c, _ in headers]), modulus,
+                                 np.array([t for _, t in headers]), 0.05)
+    assert list(numbers) == [0, 1, 4]
+
+
+def test_a_header_held_up_a_cycle_on_a_counter_of_four_values_is_reordered_alike(tmp_path):
+    # 50 ms cycles: cycle 1's header is held up behind 2's and comes 1.2 cycles after it. A gap
+    # of 2 cycles or less is no silence, whatever the counter's range: by the counter, 1 is
+    # one back from 2, a reordered cycle, live and in the re-check's numbering (not three
+    # cycles on, as the time alone would have it).
+    headers = [(0, 0.0), (2, 0.10), (1, 0.16)]
+    receiver, got = _timed(_counter(tmp_path, 3), headers)
+    assert [c.cycle for c in got] == [0, 2, 1]
+    assert (receiver.stats.duplicates, receiver.stats.reordered) == (0, 1)
+    numbers = sequential_numbers(np.array([c for c, _ in headers]), 4,
+                                 np.array([t for _, t in headers]), 0.05)
+    assert list(numbers) == [0, 2, 1]
+
+
 def test_a_counter_wrapping_after_14_restarts_within_seven_steps_either_way(autosar):
     # The restart's counter 0 on 15 values: up to seven cycles counting on from it (1..7)
     # are the stream's own, its first header held up behind them; a cycle up to seven before
@@ -552,19 +655,41 @@ class Recorder(list):
 
 BAD = [
     ("counter-max-beyond-width", ("counter_max: 14", "counter_max: 16"), "header.counter_max",
-     r"got 16: the 4-bit signal 'Hdr_Alive' counts to 15 at most; allowed: 1 to 15"),
+     r"got 16: the 4-bit signal 'Hdr_Alive' counts to 15 at most; allowed: 3 to 15"),
     ("counter-min-not-below-max", ("counter_max: 14", "counter_min: 14\n  counter_max: 14"),
-     "header.counter_min", r"got 14: the counter must take two values at least, from "
-                           r"counter_min to 14 \(counter_max\); allowed: 0 to 13, or dbc"),
+     "header.counter_min", r"got 14: the counter must take 4 values at least, from "
+                           r"counter_min to 14 \(counter_max\): with fewer, the header after "
+                           r"one lost cycle cannot be told from a copy of a cycle before; "
+                           r"allowed: 0 to 11, or dbc"),
+    # A counter of 2 or 3 values takes one lost cycle's header for a copy of a cycle before.
+    ("counter-max-three-values", ("counter_max: 14", "counter_max: 2"), "header.counter_max",
+     r"got 2: the counter must take 4 values at least, from 0 to counter_max: with fewer, "
+     r"the header after one lost cycle cannot be told from a copy of a cycle before; "
+     r"allowed: 3 to 15, or dbc"),
+    ("counter-max-two-values", ("counter_max: 14", "counter_max: 1"), "header.counter_max",
+     r"got 1: the counter must take 4 values at least"),
+    ("counter-max-dbc-three-values", (("counter_max: 14", "counter_max: dbc"),
+                                      ("[0|14]", "[0|2]")), "header.counter_max",
+     r"dbc: the DBC states no whole maximum from 3 to 15"),
+    ("counter-min-three-values", ("counter_max: 14", "counter_min: 1\n  counter_max: 3"),
+     "header.counter_min", r"got 1: the counter must take 4 values at least, from "
+                           r"counter_min to 3 \(counter_max\): with fewer, the header after "
+                           r"one lost cycle cannot be told from a copy of a cycle before; "
+                           r"allowed: 0 to 0, or dbc"),
+    ("counter-of-one-bit", (("  counter_max: 14\n", ""),
+                            ("Hdr_Alive : 8|4@1+ (1,0) [0|14]", "Hdr_Alive : 8|1@1+ (1,0) [0|1]")),
+     "header.counter", r"got 'Hdr_Alive': the 1-bit signal takes 2 values; a counter must "
+                       r"take 4 at least: with fewer, the header after one lost cycle cannot "
+                       r"be told from a copy of a cycle before$"),
     ("counter-min-negative", ("counter_max: 14", "counter_min: -1\n  counter_max: 14"),
      "header.counter_min", r"must be >= 0, got -1"),
     ("counter-min-dbc-without-minimum", (("counter_max: 14",
                                           "counter_min: dbc\n  counter_max: 14"),
                                          ("[0|14]", "[-0.5|14]")), "header.counter_min",
-     r"dbc: the DBC states no whole minimum from 0 to 13"),
+     r"dbc: the DBC states no whole minimum from 0 to 11"),
     ("counter-max-dbc-without-maximum", (("counter_max: 14", "counter_max: dbc"),
                                          ("[0|14]", "[0|0]")), "header.counter_max",
-     r"dbc: the DBC states no whole maximum from 1 to 15"),
+     r"dbc: the DBC states no whole maximum from 3 to 15"),
     ("unknown-scheme", ("scheme: autosar-e2e-p5", "scheme: crc16"),
      "detection.checksum.scheme", r"got 'crc16'; allowed values: 'crc32-low-byte', "
                                   r"'crc8-sae-j1850', 'autosar-e2e-p2', 'autosar-e2e-p5'$"),

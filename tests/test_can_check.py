@@ -362,6 +362,29 @@ def test_the_receiver_and_the_cycle_numbering_agree_on_behind_for_every_step(mod
         assert receiver.stats.reordered - before == (step < 0), (modulus, latest, other)
 
 
+@pytest.mark.parametrize("modulus", [2, 3])
+def test_an_incomplete_cycle_of_a_counter_of_two_or_three_values_goes_on_at_the_next_header(
+        modulus):
+    # Cycle 0's detection is lost; then the counter runs on three laps, every cycle whole. A
+    # counter of two values steps back by none, one of three by one: once the next header
+    # came, 0 is no longer behind the latest (or as far back as the receiver waits) and goes on
+    # incomplete, and each later header is a new cycle, never a copy of it or a conflict.
+    # (A mapping file with such a counter is refused; a mapping built in code is not.)
+    mapping = dataclasses.replace(BUILTIN, counter_max=modulus - 1)
+    recorder = Recorder()
+    publisher = DetectionPublisher(recorder, mapping=mapping)
+    publisher.publish(one_cycle(0, [10.0]))
+    del recorder[1:]  # its detection is lost
+    publisher.publish_many([Detections.empty(a % modulus, None)
+                            for a in range(1, 3 * modulus + 1)])
+    receiver = DetectionReceiver(mapping)
+    for msg in recorder:
+        receiver.on_message_received(msg)
+    assert [(c.cycle, c.complete) for c in receiver.flush()] == [
+        (1, True), (0, False), *((a % modulus, True) for a in range(2, 3 * modulus + 1))]
+    assert (receiver.stats.duplicates, receiver.stats.conflicts) == (0, 0)
+
+
 def test_a_copy_of_a_whole_cycle_is_a_duplicate_not_a_conflict():
     frame = one_cycle(3, [10.0, 20.0], az_deg=[1.0, -2.0])
     messages = _messages(frame)

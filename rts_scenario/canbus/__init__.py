@@ -28,7 +28,7 @@ import cantools
 import numpy as np
 from cantools.database.utils import create_encode_decode_formats
 
-from ..detections import GAP_TOLERANCE_CYCLES, Detections, largest_step_back, signed_step
+from ..detections import Detections, largest_step_back, long_gap_cycles, signed_step
 from ..errors import BusError, OutputError
 from ..hostclock import HostClockWatch
 from .checksums import Seal, Verify, checksum_of
@@ -593,12 +593,16 @@ class DetectionReceiver(can.Listener):
 
     Finished cycles queue up until `pop` takes them (`flush` also hands on the ones still
     open, as incomplete). Only `OPEN_CYCLES` cycles are assembled at a time, and an incomplete
-    one is handed on once the header of a cycle `OPEN_CYCLES` later came.
+    one is handed on once the header of a cycle `OPEN_CYCLES` later came (a quarter of the
+    counter's range, if less), or one whose counter leaves it no longer behind the latest.
+    The counters of the cycles handed on are remembered (copies of them are told) while they
+    are at or behind the latest counter (`largest_step_back`), whatever order they went in.
 
     With the radar's ``cycle_s``, a header that reaches the bus more than half the counter's
-    range of cycles after the one before (less `GAP_TOLERANCE_CYCLES`) starts afresh: every
-    counter remembered is from before that silence, so one that comes again is a new cycle,
-    not a copy (an 8-bit counter repeats after 12.8 s of 50 ms cycles).
+    range of cycles after the one before (less `GAP_TOLERANCE_CYCLES`, and 2 cycles at least:
+    `long_gap_cycles`) starts afresh: every counter remembered is from before that silence,
+    so one that comes again is a new cycle, not a copy (an 8-bit counter repeats after 12.8 s
+    of 50 ms cycles).
 
     Each cycle keeps when its header was on the bus (the message's timestamp, on whatever
     clock the interface stamps with) and when the host received it: ``received_at(message)``,
@@ -936,7 +940,7 @@ class DetectionReceiver(can.Listener):
             self._place_after(counter)
         if bus_t_s is not None:
             if self.cycle_s is not None and bus_t_s - self._last_header_t > (
-                    self._counter_modulus // 2 - GAP_TOLERANCE_CYCLES) * self.cycle_s:
+                    long_gap_cycles(self._counter_modulus) * self.cycle_s):
                 self._after_silence()
             self._last_header_t = bus_t_s
         known = self._open.get(counter) or self._content.get(counter)
@@ -954,6 +958,7 @@ class DetectionReceiver(can.Listener):
             self.stats.reordered += 1
         else:
             self._latest = counter
+            self._forget_out_of_reach()
         if self._restart is not None:
             self._begun_before_restart.append((counter, reordered))
         frame = _Assembly(
@@ -970,14 +975,15 @@ class DetectionReceiver(can.Listener):
             self._finish(counter)
         # An incomplete cycle waits for late parts while `OPEN_CYCLES` newer cycles begin (fewer
         # for a narrow counter), then goes on as incomplete: held longer, the counter that
-        # names it could come round again and its place among the cycles be lost. Not while a
-        # restart is awaited: the latest counter may be the stream before's, far from the new
-        # count (the wait lasts `OPEN_CYCLES` headers at most, half the counter's range rounded
-        # up if less).
+        # names it could come round again and its place among the cycles be lost. So does one
+        # the latest counter jumped past (headers lost): no longer behind it, it is out of
+        # reach. Not while a restart is awaited: the latest counter may be the stream before's,
+        # far from the new count (the wait lasts `OPEN_CYCLES` headers at most, half the
+        # counter's range rounded up if less).
         held = min(OPEN_CYCLES, max(1, self._counter_modulus // 4))
         if self._restart is None:
             for old in [c for c in self._open
-                        if -signed_step(c, self._latest, self._counter_modulus) >= held]:
+                        if not -held < signed_step(c, self._latest, self._counter_modulus) <= 0]:
                 self._finish(old)
         while len(self._open) > OPEN_CYCLES:
             self._finish(next(iter(self._open)))
@@ -1153,12 +1159,12 @@ class DetectionReceiver(can.Listener):
         frame = self._open.pop(counter)
         complete = frame.complete()
         self._recent[counter] = complete
-        # Those within reach behind the latest at most: a wrapped counter is a new cycle, not
-        # a copy.
-        while len(self._recent) > min(RECENT_CYCLES, self._reach):
-            self._recent.popitem(last=False)
         self._content[counter] = frame
-        while len(self._content) > min(OPEN_CYCLES, self._reach):  # bounded
+        self._forget_out_of_reach()
+        # Bounded: the cycles handed on last are kept.
+        while len(self._recent) > RECENT_CYCLES:
+            self._recent.popitem(last=False)
+        while len(self._content) > OPEN_CYCLES:
             self._content.popitem(last=False)
         if self._current is frame and not complete:
             self._current = None
@@ -1166,6 +1172,23 @@ class DetectionReceiver(can.Listener):
                                       bus_t_s=frame.bus_t_s, host_t_s=frame.host_t_s,
                                       host_step_s=frame.host_step_s,
                                       **self._quantities(frame)))
+
+    def _forget_out_of_reach(self) -> None:
+        """Forget the cycles handed on that are not at or behind the latest counter.
+
+        Kept are the counters from the latest back by `largest_step_back` at most, whatever
+        the order their cycles were handed on in (an incomplete one goes on after the cycles
+        that came while it waited): any other counter is ahead of the latest, so its header is
+        a new cycle's, not a copy of one remembered.
+        """
+        if self._latest < 0:
+            return
+        latest, modulus = self._latest, self._counter_modulus
+        back = self._reach - 1
+        for known in (self._recent, self._content):
+            for counter in [c for c in known
+                            if not -back <= signed_step(c, latest, modulus) <= 0]:
+                del known[counter]
 
     def _quantities(self, frame: _Assembly) -> dict[str, np.ndarray]:
         """Arrays of the quantities the mapping carries (polar, rts-scenario's names)."""

@@ -26,6 +26,7 @@ from typing import Any
 
 import cantools
 
+from ..detections import SMALLEST_COUNTER_MODULUS
 from ..file_kinds import load_kind
 from ..located_yaml import Document, format_key_path, load_yaml, validate
 
@@ -34,6 +35,9 @@ QUANTITIES = ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps", 
 
 # Classic messages per detection (a radar's general, quality and extended-information messages).
 MAX_MESSAGES = 8
+# Why a cycle counter takes `SMALLEST_COUNTER_MODULUS` values at least.
+_TOO_FEW_VALUES = ("with fewer, the header after one lost cycle cannot be told from a copy of a "
+                   "cycle before")
 
 _SIGNAL: dict[str, Any] = {
     "oneOf": [
@@ -393,11 +397,28 @@ class CanMapping:
             checksum_spec=Checksum.parse(det.get("checksum")),
         )
         mapping._check(doc)
+        mapping._check_counter_width(doc)
         if "counter_max" in head:
             object.__setattr__(mapping, "counter_max", mapping._counter_max(doc))
         if "counter_min" in head:
             object.__setattr__(mapping, "counter_min", mapping._counter_min(doc))
         return mapping
+
+    def _counter_top(self) -> int:
+        """Return the largest whole value the header's counter signal carries."""
+        sig = self.db.get_message_by_name(self.header).get_signal_by_name(self.counter)
+        raw_top = (1 << (sig.length - (1 if sig.is_signed else 0))) - 1
+        return int(math.floor(raw_top * sig.scale + sig.offset + 1e-9))
+
+    def _check_counter_width(self, doc: Document) -> None:
+        """Refuse a counter signal carrying fewer than `SMALLEST_COUNTER_MODULUS` values."""
+        sig = self.db.get_message_by_name(self.header).get_signal_by_name(self.counter)
+        values = self._counter_top() + 1
+        if values < SMALLEST_COUNTER_MODULUS:
+            raise doc.error(("header", "counter"),
+                            f"got {self.counter!r}: the {sig.length}-bit signal takes {values} "
+                            f"values; a counter must take {SMALLEST_COUNTER_MODULUS} at least: "
+                            f"{_TOO_FEW_VALUES}")
 
     def _counter_min(self, doc: Document) -> int:
         """Return the header's ``counter_min``: given, or the DBC's minimum of the counter."""
@@ -409,18 +430,22 @@ class CanMapping:
         else:
             top = (1 << sig.length) - 1
             said = f"{top} (what the {sig.length}-bit signal {self.counter!r} carries)"
+        # The counter takes the values from counter_min to top.
+        highest = top + 1 - SMALLEST_COUNTER_MODULUS
         if value == "dbc":
             minimum = sig.minimum
-            if minimum is None or float(minimum) != int(minimum) or not 0 <= minimum < top:
-                raise doc.error(key, f"dbc: the DBC states no whole minimum from 0 to {top - 1} "
+            if (minimum is None or float(minimum) != int(minimum)
+                    or not 0 <= minimum <= highest):
+                raise doc.error(key, f"dbc: the DBC states no whole minimum from 0 to {highest} "
                                      f"for signal {self.counter!r} of message "
                                      f"{self.header!r} (got {minimum}); give the counter's "
                                      f"first value as a number instead")
             return int(minimum)
-        if not value < top:
-            raise doc.error(key, f"got {value}: the counter must take two values at least, "
-                                 f"from counter_min to {said}; allowed: 0 to {top - 1}, or "
-                                 f"dbc (the DBC's minimum)")
+        if not value <= highest:
+            raise doc.error(key, f"got {value}: the counter must take "
+                                 f"{SMALLEST_COUNTER_MODULUS} values at least, from "
+                                 f"counter_min to {said}: {_TOO_FEW_VALUES}; allowed: 0 to "
+                                 f"{highest}, or dbc (the DBC's minimum)")
         return int(value)
 
     def _counter_max(self, doc: Document) -> int:
@@ -428,20 +453,26 @@ class CanMapping:
         key = ("header", "counter_max")
         value = doc.data["header"]["counter_max"]
         sig = self.db.get_message_by_name(self.header).get_signal_by_name(self.counter)
-        raw_top = (1 << (sig.length - (1 if sig.is_signed else 0))) - 1
-        top = int(math.floor(raw_top * sig.scale + sig.offset + 1e-9))
+        top = self._counter_top()
+        lowest = SMALLEST_COUNTER_MODULUS - 1  # from 0 (counter_min is checked after)
         if value == "dbc":
             maximum = sig.maximum
-            if maximum is None or float(maximum) != int(maximum) or not 1 <= maximum <= top:
-                raise doc.error(key, f"dbc: the DBC states no whole maximum from 1 to {top} "
-                                     f"for signal {self.counter!r} of message "
+            if (maximum is None or float(maximum) != int(maximum)
+                    or not lowest <= maximum <= top):
+                raise doc.error(key, f"dbc: the DBC states no whole maximum from {lowest} to "
+                                     f"{top} for signal {self.counter!r} of message "
                                      f"{self.header!r} (got {maximum}); give the counter's "
                                      f"last value as a number instead")
             return int(maximum)
-        if not 1 <= value <= top:
+        if value > top:
             raise doc.error(key, f"got {value}: the {sig.length}-bit signal {self.counter!r} "
-                                 f"counts to {top} at most; allowed: 1 to {top}, or dbc (the "
-                                 f"DBC's maximum)")
+                                 f"counts to {top} at most; allowed: {lowest} to {top}, or dbc "
+                                 f"(the DBC's maximum)")
+        if value < lowest:
+            raise doc.error(key, f"got {value}: the counter must take "
+                                 f"{SMALLEST_COUNTER_MODULUS} values at least, from 0 to "
+                                 f"counter_max: {_TOO_FEW_VALUES}; allowed: {lowest} to {top}, "
+                                 f"or dbc (the DBC's maximum)")
         return int(value)
 
     def _check(self, doc: Document) -> None:
