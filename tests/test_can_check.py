@@ -545,3 +545,34 @@ def test_a_stream_s_first_cycle_held_up_behind_its_second_is_not_dropped_at_the_
         assert sorted(c.cycle for c in got) == list(range(6))
         assert all(c.complete for c in got)
         assert receiver.stale_cycles == dropped
+
+
+@settings(max_examples=80, deadline=None)
+@given(modulus=st.sampled_from([4, 5, 15, 16, 256]),
+       cycles=st.lists(st.tuples(st.integers(-3, 12), st.booleans()), min_size=1,
+                       max_size=60))
+def test_the_receiver_remembers_no_counter_out_of_reach_of_the_latest(modulus, cycles):
+    # Any course of counters (steps back, lost headers, jumps) and cycles that lose their
+    # detection: after every message, each counter the receiver remembers as handed on lies
+    # at or behind the latest by at most the counter's largest step back. A counter out of
+    # that reach read as remembered would make the next lap's cycle a copy or a conflict.
+    from rts_scenario.detections import largest_step_back, signed_step
+
+    mapping = dataclasses.replace(BUILTIN, counter_max=modulus - 1)
+    recorder = Recorder()
+    publisher = DetectionPublisher(recorder, mapping=mapping)
+    counter = 0
+    for step, whole in cycles:
+        counter = (counter + step) % modulus
+        first = len(recorder)
+        publisher.publish(one_cycle(counter, [10.0]))
+        if not whole:
+            del recorder[first + 1:]  # its detection is lost
+    receiver = DetectionReceiver(mapping)
+    back = largest_step_back(modulus)
+    for msg in recorder:
+        receiver.on_message_received(msg)
+        latest = receiver._latest
+        for known in (receiver._recent, receiver._content):
+            assert all(-back <= signed_step(c, latest, modulus) <= 0 for c in known), (
+                latest, list(known))

@@ -763,6 +763,9 @@ class DetectionReceiver(can.Listener):
         self._content: OrderedDict[int, _Assembly] = OrderedDict()
         self._current: _Assembly | None = None
         self._latest = -1
+        # How far the latest counter may step on before a remembered one may fall out of
+        # reach (a lower bound; negative: look, `_forget_out_of_reach`).
+        self._slack = -1.0
         self._last_header_t = np.nan  # when the last header reached the bus
         # The counter the radar's count restarts at (`reset`), until it came; the cycles of
         # the stream before dropped at the restart.
@@ -957,6 +960,8 @@ class DetectionReceiver(can.Listener):
         if reordered:
             self.stats.reordered += 1
         else:
+            self._slack = (self._slack - signed_step(counter, self._latest, self._counter_modulus)
+                           if self._latest >= 0 else -1.0)
             self._latest = counter
             self._forget_out_of_reach()
         if self._restart is not None:
@@ -1144,6 +1149,7 @@ class DetectionReceiver(can.Listener):
         if self._current is not None and self._current.counter in stale:
             self._current = None
         self._latest = -1
+        self._slack = -1.0
         for counter, reordered in begun:
             self.stats.reordered -= reordered
             if counter in stale:
@@ -1160,6 +1166,9 @@ class DetectionReceiver(can.Listener):
         complete = frame.complete()
         self._recent[counter] = complete
         self._content[counter] = frame
+        if self._latest >= 0:  # ahead of the latest (an incomplete one left behind): look
+            step = signed_step(counter, self._latest, self._counter_modulus)
+            self._slack = min(self._slack, self._reach - 1 + step) if step <= 0 else -1.0
         self._forget_out_of_reach()
         # Bounded: the cycles handed on last are kept.
         while len(self._recent) > RECENT_CYCLES:
@@ -1181,14 +1190,19 @@ class DetectionReceiver(can.Listener):
         that came while it waited): any other counter is ahead of the latest, so its header is
         a new cycle's, not a copy of one remembered.
         """
-        if self._latest < 0:
-            return
+        if self._latest < 0 or self._slack >= 0:
+            return  # none can be out of reach yet: the usual case, no look at each
         latest, modulus = self._latest, self._counter_modulus
         back = self._reach - 1
+        slack = np.inf
         for known in (self._recent, self._content):
-            for counter in [c for c in known
-                            if not -back <= signed_step(c, latest, modulus) <= 0]:
-                del known[counter]
+            for counter in list(known):
+                step = signed_step(counter, latest, modulus)
+                if -back <= step <= 0:
+                    slack = min(slack, back + step)
+                else:
+                    del known[counter]
+        self._slack = slack
 
     def _quantities(self, frame: _Assembly) -> dict[str, np.ndarray]:
         """Arrays of the quantities the mapping carries (polar, rts-scenario's names)."""
