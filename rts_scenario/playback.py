@@ -119,6 +119,12 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
                    f"{rig['run_geometry_sha256'][:12]}): its echoes came from other directions "
                    f"than the schedule put them in; run on the rig the RTS has (emulate: "
                    f"--rig the run's)")
+    if rts and rts.get("foreign_datagrams"):
+        # Whatever the scene expects: the counters, and what the RTS played, are not the run's.
+        out.append(f"rts_stream: the RTS's counters count {rts['foreign_datagrams']} datagrams "
+                   f"more than this run sent ({int(rts['datagrams'])} in all): another "
+                   f"sender's stream took the RTS over (a second run against it?), so what it "
+                   f"played and counted is not this run's")
     lost = lost_frames(rts)
     if lost and "frames_lost" not in expected:
         out.append(f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("

@@ -480,3 +480,30 @@ def test_a_schedule_without_targets_round_trips_as_npz_and_is_refused_as_csv(tmp
             open_output(f"file:{tmp_path / 'e.csv'}") as out:
         out.write(empty)
     assert not list(tmp_path.glob("e.csv*"))
+
+
+def test_a_run_whose_rts_another_sender_took_over_does_not_take_its_counters(schedule):
+    # Run A streams to the RTS; run B's stream takes it over (a second run against the same
+    # RTS); A's datagrams after that are stale there. The RTS's counters are per stream: the
+    # replies A reads count B's datagrams. A must not report them as its own playback.
+    from rts_scenario.playback import playback_reasons
+
+    receiver = UdpReceiver().start()
+    address = f"udp://127.0.0.1:{receiver.address[1]}"
+    with open_output(address, pacing="fast") as a, open_output(address, pacing="fast") as b:
+        a.write(schedule.frames(0, 2))
+        alone = a.rts_status(settle_s=0.5)
+        b.write(schedule)
+        a.write(schedule.frames(2, 4))
+        taken = a.rts_status(settle_s=0.5)
+        own = b.rts_status(settle_s=0.5)
+    receiver.stop()
+    assert alone is not None and "foreign_datagrams" not in alone
+    assert own is not None and "foreign_datagrams" not in own
+    assert taken is not None
+    # B's stream counts B's datagrams and A's late ones as stale: beyond what A sent.
+    assert taken["foreign_datagrams"] == taken["datagrams"] - a.datagrams_sent > 0
+    playback = {"late_frames": 0, "frames_sent": 4, "rts": taken}
+    (reason,) = [r for r in playback_reasons(playback, frozenset({"frames_lost"}))
+                 if r.startswith("rts_stream:")]
+    assert f"count {taken['foreign_datagrams']} datagrams more than this run sent" in reason

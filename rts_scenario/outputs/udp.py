@@ -264,6 +264,11 @@ class UdpOutput(Output):
         out = dict(status)
         unplayed = self._frames_sent - out.get("frames_applied", 0) - out.get("unsynced_frames", 0)
         out["lost_frames"] = max(out.get("lost_frames", 0), unplayed)
+        # Counters are per stream: more datagrams than this run sent are another sender's
+        # stream's (a second run against the RTS took it over), not this run's.
+        foreign = out.get("datagrams", 0) - out.get("duplicates", 0) - self.datagrams_sent
+        if foreign > 0:
+            out["foreign_datagrams"] = foreign
         return out
 
     def rts_rig(self) -> tuple[int, bytes] | None:
