@@ -114,11 +114,13 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
                    f"frame before was held instead (worst {worst * 1e3:.3g} ms)")
     rig = playback.get("rts_rig")
     if rig is not None and not rig["matches_run"]:
+        played = rts is None or int(rts.get("frames_applied", 0)) > 0
         out.append(f"rts_rig: the RTS plays a rig of {rig['front_ends']} FEs whose geometry "
                    f"(sha256 {rig['geometry_sha256'][:12]}) is not the run's ({rig['run']}, "
-                   f"{rig['run_geometry_sha256'][:12]}): its echoes came from other directions "
-                   f"than the schedule put them in; run on the rig the RTS has (emulate: "
-                   f"--rig the run's)")
+                   f"{rig['run_geometry_sha256'][:12]}): "
+                   + ("its echoes came from other directions than the schedule put them in"
+                      if played else "it applied none of the run's frames")
+                   + "; run on the rig the RTS has (emulate: --rig the run's)")
     if rts and rts.get("foreign_datagrams"):
         # Whatever the scene expects: the counters, and what the RTS played, are not the run's.
         out.append(f"rts_stream: the RTS's counters count {rts['foreign_datagrams']} datagrams "

@@ -394,6 +394,8 @@ def check_log_file(log: str | Path) -> None:
                        f"{', '.join(LOG_SUFFIXES)}")
     if not path.is_file():
         raise LogError(f"--log {log}: no such file")
+    if path.stat().st_size == 0:  # a recorder that never wrote, a copy that did not happen
+        raise LogError(f"--log {log}: the file is empty (0 bytes): nothing was recorded in it")
 
 
 def log_variant(scene: str | Path, log: str | Path,

@@ -507,3 +507,23 @@ def test_a_run_whose_rts_another_sender_took_over_does_not_take_its_counters(sch
     (reason,) = [r for r in playback_reasons(playback, frozenset({"frames_lost"}))
                  if r.startswith("rts_stream:")]
     assert f"count {taken['foreign_datagrams']} datagrams more than this run sent" in reason
+
+
+@pytest.mark.parametrize("applied, said", [
+    (12, "its echoes came from other directions than the schedule put them in"),
+    (0, "it applied none of the run's frames"),
+])
+def test_a_rig_the_rts_does_not_have_is_said_as_what_it_did(applied, said):
+    # An RTS of another rig that played the frames put the echoes elsewhere; one that refused
+    # them all played nothing, and the reason must not say it played them from elsewhere.
+    from rts_scenario.playback import playback_reasons
+
+    rig = {"front_ends": 4, "geometry_sha256": "a" * 64, "matches_run": False,
+           "run": "wide-3x5 (15 FEs)", "run_geometry_sha256": "b" * 64}
+    playback = {"late_frames": 0, "frames_sent": 12, "rts_rig": rig,
+                "rts": {"datagrams": 12, "frames_applied": applied}}
+    (reason,) = [r for r in playback_reasons(playback, frozenset({"frames_lost"}))
+                 if r.startswith("rts_rig:")]
+    assert reason == (f"rts_rig: the RTS plays a rig of 4 FEs whose geometry (sha256 "
+                      f"aaaaaaaaaaaa) is not the run's (wide-3x5 (15 FEs), bbbbbbbbbbbb): {said}; "
+                      f"run on the rig the RTS has (emulate: --rig the run's)")

@@ -1515,3 +1515,15 @@ def test_asc_lines_python_can_does_not_read_fail_a_re_check_where_they_may_be_th
     assert result.alignment.to_dict()["log_unread"] == {
         "records": 1, "by_type": {"Rx": 1}, "with_radar_identifiers": 1,
         "first_radar_line": at + 1}
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc", ".trc", ".log", ".csv", ".mf4"])
+def test_an_empty_log_is_said_to_be_empty(tmp_path, capsys, suffix):
+    # A recorder that never wrote leaves a file of 0 bytes: said so, not in a reader's words
+    # ("unpack requires a buffer of 72 bytes") or as a log holding no radar cycle.
+    log = tmp_path / f"empty{suffix}"
+    log.write_bytes(b"")
+    scene = str(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    assert cli.main(["check", scene, "--log", str(log)]) == 2
+    assert capsys.readouterr().err == (f"error: --log {log}: the file is empty (0 bytes): "
+                                       f"nothing was recorded in it\n")
