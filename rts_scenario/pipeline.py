@@ -1385,6 +1385,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "variant": scene.variant, "parameters": scene.parameters,
         "frames": scene.n_frames, "frame_rate_hz": scene.frame_rate_hz,
         "radar": radar.name,
+        # The rig the run played on (`Rig.played_digest`): a re-check on another is refused.
+        "rig": {"name": scene.rig.name, "sha256": scene.rig.played_digest()},
         "clock": {"cycle_s": c.cycle_s, "start_offset_s": start_offset_s,
                   "latency_s": c.latency_s, "jitter_s": c.jitter_s,
                   "counter_start": c.counter_start if counter_start is None

@@ -251,6 +251,9 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         "frames": {"type": "integer", "minimum": 0},
         "frame_rate_hz": _number(exclusiveMinimum=0),
         "radar": {"type": "string"},
+        "rig": {"type": "object", "required": ["name", "sha256"], "properties": {
+            "name": {"type": "string"},
+            "sha256": {"type": "string", "pattern": "^[0-9a-f]{64}$"}}},
         "clock": {
             "type": "object",
             "required": ["cycle_s", "start_offset_s", "latency_s", "jitter_s", "counter_start"],
@@ -1408,6 +1411,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if sidecar.get("scene", scene.name) != scene.name:
             raise LogError(f"--log {log}: recorded for scene {sidecar.get('scene')!r} (its "
                            f"sidecar), not {scene.name!r}: check it against that scene's file")
+        played_rig = sidecar.get("rig")  # absent in sidecars of older versions
+        if played_rig is not None and played_rig["sha256"] != scene.rig.played_digest():
+            same = played_rig["name"] == scene.rig.name
+            raise LogError(f"--log {log}: played on rig {played_rig['name']!r} (its sidecar), "
+                           f"not on the scene's {scene.rig.name!r}"
+                           + (" as it is now (its FEs, calibration or limits were edited since)"
+                              if same else "")
+                           + ": another rig plays other levels and statuses; check the log "
+                           "against the scene file and rig it was played with")
         if sidecar.get("frames", scene.n_frames) != scene.n_frames:
             raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: frames: the recording played "
                            f"{sidecar['frames']} frames, the scene {scene.file} has "

@@ -307,6 +307,25 @@ class Rig:
             digest.update(rounded.astype("<f8").tobytes())
         return digest.digest()
 
+    def played_digest(self) -> str:
+        """Return the SHA-256 (hex) of all a schedule depends on of the rig.
+
+        That is `geometry_digest`, each FE's calibration, the hardware limits, the reference
+        and the RTS's delay model (not the name). A recording keeps it (its sidecar's
+        ``rig``): a log is re-checked only against the rig it was played on, since another
+        calibration or limits play other levels and statuses.
+        """
+        import hashlib
+        from dataclasses import astuple
+
+        digest = hashlib.sha256(self.geometry_digest())
+        for values in (self.cal_delay_s, self.cal_phase_deg, self.cal_gain_db):
+            rounded = np.round(np.asarray(values, dtype=np.float64), 12) + 0.0  # no -0.0
+            digest.update(rounded.astype("<f8").tobytes())
+        for part in (self.limits, self.reference, self.rts):
+            digest.update(repr(astuple(part)).encode())
+        return digest.hexdigest()
+
     @classmethod
     def from_angles(
         cls,

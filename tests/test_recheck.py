@@ -1527,3 +1527,33 @@ def test_an_empty_log_is_said_to_be_empty(tmp_path, capsys, suffix):
     assert cli.main(["check", scene, "--log", str(log)]) == 2
     assert capsys.readouterr().err == (f"error: --log {log}: the file is empty (0 bytes): "
                                        f"nothing was recorded in it\n")
+
+
+@pytest.mark.parametrize("name, limits", [
+    ("wide-3x5", "limits: {attenuation_step_db: 0.5}\n"),  # the rig file edited since the run
+    ("lab", "limits: {attenuation_step_db: 0.5}\n"),  # another rig of the same FEs
+    ("lab", ""),  # the same rig under another name: it plays the same
+])
+def test_a_log_re_checked_on_another_rig_than_it_was_played_on_is_refused(
+        recorded, tmp_path, capsys, name, limits):
+    # The sidecar keeps the rig the run played on (its name and a digest of its FEs,
+    # calibration and limits): another rig would have played other levels and statuses, so
+    # a re-check on it would judge a run that never happened.
+    text = (ROOT / "rts_scenario" / "data" / "rigs" / "wide-3x5.rig.yaml").read_text()
+    rig = tmp_path / "edited.rig.yaml"
+    rig.write_text(text.replace("name: wide-3x5\n", f"name: {name}\n") + limits)
+    scene = tmp_path / "highway_following.scenario.yaml"
+    scene.write_text(re.sub(r"(?m)^rig: .*$", f"rig: {rig.name}",
+                            (ROOT / "scenarios" / "highway_following.scenario.yaml").read_text()))
+    code = cli.main(["check", str(scene), "--log", str(recorded)])
+    err = capsys.readouterr().err
+    if not limits:
+        assert code == 0, err
+        return
+    assert code == 2
+    assert err == (
+        f"error: --log {recorded}: played on rig 'wide-3x5' (its sidecar), not on the scene's "
+        f"{name!r}" + (" as it is now (its FEs, calibration or limits were edited since)"
+                       if name == "wide-3x5" else "")
+        + ": another rig plays other levels and statuses; check the log against the scene "
+        "file and rig it was played with\n")
