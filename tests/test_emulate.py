@@ -79,16 +79,18 @@ def emulated_bench(rig, radar):
 
 
 def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=None, bus_log=None,
-             emulator_rig=None, hold=None, drop_before=0):
+             emulator_rig=None, hold=None, drop_before=0, radar_mapping=...):
     """Play ``scene`` over UDP to the emulator; its radar (``radar``, else the scene's) speaks
     ``mapping``'s protocol (the object list with Motorola signals by default) on a virtual CAN
     bus. ``hold(frame)``: seconds the sender is held before each datagram of frame ``frame``
     goes out (a loaded host preempting it after it woke on time). Datagrams of frames before
-    ``drop_before`` never reach the emulator (an RTS that came up late)."""
+    ``drop_before`` never reach the emulator (an RTS that came up late). ``radar_mapping``:
+    the protocol the radar speaks where it is not the one the run is given."""
     channel = f"rts-emulate-test-{next(_channels)}-bus"
+    speaks = mapping if radar_mapping is ... else radar_mapping
     emulator = Emulator(emulator_rig or scene.rig, radar or scene.radar, can_channel=channel,
                         noise=False, tamper=tamper,
-                        mapping=CanMapping.from_file(mapping) if mapping else None).start()
+                        mapping=CanMapping.from_file(speaks) if speaks else None).start()
     try:
         host, port = emulator.address
         options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
@@ -155,6 +157,26 @@ def test_a_recorded_rehearsal_re_checks_to_the_live_counts(tmp_path):
     if logged_after:
         assert any(f"{logged_after} cycles in the log were measured after" in note
                    for note in again.alignment.notes), again.alignment.notes
+
+
+def test_a_run_given_another_radar_s_mapping_says_so_live_and_re_checked(tmp_path):
+    # The radar speaks rts-scenario's own messages; the run is given the object list's
+    # mapping: none of its messages is the mapping's header, and every one of them is unknown
+    # to it, as the run and a re-check of its recording count them.
+    scene = bench_scene(tmp_path, duration_s=1.0)
+    log = tmp_path / "wrong.blf"
+    live, _ = rehearse(scene, mapping=OBJECT_LIST, radar_mapping=None, bus_log=str(log))
+    again = check_log(scene, log, mapping=str(OBJECT_LIST)).report
+    for report in (live, again):
+        assert not report.passed
+        unknown = report.bus["unknown_ids"]
+        assert unknown == report.bus["messages"] > 20
+        assert (f"no message matched the mapping's header (Obj_Status of mapping "
+                f"'object-list'); {unknown} messages with identifiers the mapping does not "
+                f"know: is --mapping the radar's?") in report.reasons, report.reasons
+    assert again.bus["before_first_cycle"] == 0
+    assert again.bus["unknown_ids"] == live.bus["unknown_ids"]
+    assert again.reasons == live.reasons
 
 
 def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
