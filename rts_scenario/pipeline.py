@@ -20,7 +20,7 @@ from typing import Any, TextIO
 import can
 import numpy as np
 
-from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, open_bus
+from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, mapping_reason, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, bus_times, host_times, sequential_numbers, unwrap_counter
@@ -1026,6 +1026,8 @@ class Pipeline:
             bus["other_channels"] = self.receiver.other_channels
         report = checker.report(bus)
         for drifted in (self.receiver.channel_reason(),
+                        mapping_reason(self.receiver.mapping, self.receiver.headers,
+                                       bus["unknown_ids"]),
                         track.off_profile_reason(0.5 * window_s),
                         track.latency_change_reason(0.5 * window_s),
                         checker.lag_reason(1.0 / scene.frame_rate_hz,

@@ -41,7 +41,7 @@ import jsonschema
 import numpy as np
 from numpy.typing import NDArray
 
-from .canbus import DetectionReceiver, channel_label
+from .canbus import DetectionReceiver, channel_label, mapping_reason
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
@@ -533,14 +533,16 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
                  channels: Counter[str | None] | None = None,
                  last_t_s: list[float] | None = None,
                  restart: int | None = None,
-                 unread: list[_Unread] | None = None) -> Iterator[_LoggedCycle]:
+                 unread: list[_Unread] | None = None,
+                 headers: list[int] | None = None) -> Iterator[_LoggedCycle]:
     """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end.
 
     ``channel``: read only its messages (the others count as ``other_channels``).
     ``restart``: the counter the run's stream restarted the radar's count at (`read_cycles`).
     ``channels`` gets, per channel, how many messages of the radar's identifiers it holds;
     ``last_t_s`` the timestamp of the log's last message (of any channel), if it has one;
-    ``unread`` the records of a text log python-can's reader read no message of (`_Unread`).
+    ``unread`` the records of a text log python-can's reader read no message of (`_Unread`);
+    ``headers`` how many messages had the identifier of the mapping's header.
     """
     check_log_file(log)
     path = Path(log)
@@ -574,16 +576,19 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
                 other += 1  # another bus's
                 continue
         if not started:
-            if (msg.is_error_frame or msg.is_remote_frame
-                    or (msg.arbitration_id, msg.is_extended_id) != header_id):
+            data = not (msg.is_error_frame or msg.is_remote_frame)
+            ident = (msg.arbitration_id, msg.is_extended_id)
+            if data and ident in radar_ids and ident != header_id:
                 # The log began inside a cycle: its tail before the first header is no cycle.
                 skipped += 1
                 continue
-            started = True
+            # Error and remote frames, and identifiers the mapping does not know, count as
+            # the run's receiver counts them, wherever they come.
+            started = data and ident == header_id
         receiver.on_message_received(msg)
         yield from take(receiver.pop())
     yield from take(receiver.flush())
-    if last_t_s is not None and started | skipped | other:
+    if last_t_s is not None and (started or skipped or other or receiver.stats.messages):
         last_t_s.append(float(msg.timestamp))
     stats.update({k: int(v) for k, v in vars(receiver.stats).items()})
     # Messages before the first cycle's header are the log's too (a log the mapping reads no
@@ -592,6 +597,8 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
     stats["before_first_cycle"] = skipped
     stats["stale_cycles"] = receiver.stale_cycles
     stats["other_channels"] = other
+    if headers is not None:
+        headers.append(receiver.headers)
 
 
 @dataclass(frozen=True)
@@ -611,6 +618,8 @@ class _LogIndex:
     last_t_s: float | None = None
     # A text log's records python-can's reader read no message of (None: not a text log).
     unread: _Unread | None = None
+    # Messages with the identifier of the mapping's header.
+    headers: int = 0
 
     @classmethod
     def scan(cls, log: str | Path, mapping: CanMapping | None,
@@ -620,17 +629,19 @@ class _LogIndex:
         channels: Counter[str | None] = Counter()
         last: list[float] = []
         unread: list[_Unread] = []
+        headers: list[int] = []
         counters, times, counts = array("q"), array("d"), array("l")
         for c in _iter_cycles(log, mapping, stats, cycle_s, channel=channel,
                               channels=channels, last_t_s=last,
-                              restart=restart, unread=unread):  # one per radar cycle
+                              restart=restart, unread=unread,
+                              headers=headers):  # one per radar cycle
             counters.append(c.detections.cycle)
             times.append(c.bus_t_s)
             counts.append(c.detections.count)
         return cls(np.frombuffer(counters, dtype=np.int64).copy(),
                    np.frombuffer(times, dtype=np.float64).copy(),
                    np.asarray(counts, dtype=np.int64), stats, channels,
-                   last[0] if last else None, unread[0] if unread else None)
+                   last[0] if last else None, unread[0] if unread else None, headers[0])
 
     def __len__(self) -> int:
         return int(self.counters.size)
@@ -1559,6 +1570,12 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         alignment.notes.append(f"{cut_short['why']}; its last cycle read was measured after "
                                f"the scene and the cycles counted after it, so nothing counted "
                                f"is lost")
+    # Messages none of which is the mapping's header, of identifiers it does not know: the
+    # radar spoke another protocol than the one given, as live.
+    spoken = mapping_reason(receiver_mapping, index.headers, bus.get("unknown_ids", 0))
+    if spoken:
+        result.reasons.append(spoken)
+        result.passed = False
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)

@@ -79,15 +79,18 @@ def emulated_bench(rig, radar):
 
 
 def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=None, bus_log=None,
-             emulator_rig=None, hold=None):
+             emulator_rig=None, hold=None, drop_before=0, radar_mapping=...):
     """Play ``scene`` over UDP to the emulator; its radar (``radar``, else the scene's) speaks
     ``mapping``'s protocol (the object list with Motorola signals by default) on a virtual CAN
     bus. ``hold(frame)``: seconds the sender is held before each datagram of frame ``frame``
-    goes out (a loaded host preempting it after it woke on time)."""
+    goes out (a loaded host preempting it after it woke on time). Datagrams of frames before
+    ``drop_before`` never reach the emulator (an RTS that came up late). ``radar_mapping``:
+    the protocol the radar speaks where it is not the one the run is given."""
     channel = f"rts-emulate-test-{next(_channels)}-bus"
+    speaks = mapping if radar_mapping is ... else radar_mapping
     emulator = Emulator(emulator_rig or scene.rig, radar or scene.radar, can_channel=channel,
                         noise=False, tamper=tamper,
-                        mapping=CanMapping.from_file(mapping) if mapping else None).start()
+                        mapping=CanMapping.from_file(speaks) if speaks else None).start()
     try:
         host, port = emulator.address
         options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
@@ -98,14 +101,16 @@ def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=Non
                 injector = FaultInjector(pipeline.output.transmit, np.random.default_rng(2),
                                          **udp_faults)
                 pipeline.output.send = injector
-            if hold is not None:
+            if hold is not None or drop_before:
                 transmit = pipeline.output.transmit
 
                 def held(datagram: bytes) -> None:
-                    delay = hold(HEADER.unpack_from(datagram)[4])  # the frame's index
+                    frame = HEADER.unpack_from(datagram)[4]  # the frame's index
+                    delay = hold(frame) if hold is not None else 0.0
                     if delay:
                         time.sleep(delay)
-                    transmit(datagram)
+                    if frame >= drop_before:
+                        transmit(datagram)
 
                 pipeline.output.send = held
             report = pipeline.run(scene).report
@@ -152,6 +157,26 @@ def test_a_recorded_rehearsal_re_checks_to_the_live_counts(tmp_path):
     if logged_after:
         assert any(f"{logged_after} cycles in the log were measured after" in note
                    for note in again.alignment.notes), again.alignment.notes
+
+
+def test_a_run_given_another_radar_s_mapping_says_so_live_and_re_checked(tmp_path):
+    # The radar speaks rts-scenario's own messages; the run is given the object list's
+    # mapping: none of its messages is the mapping's header, and every one of them is unknown
+    # to it, as the run and a re-check of its recording count them.
+    scene = bench_scene(tmp_path, duration_s=1.0)
+    log = tmp_path / "wrong.blf"
+    live, _ = rehearse(scene, mapping=OBJECT_LIST, radar_mapping=None, bus_log=str(log))
+    again = check_log(scene, log, mapping=str(OBJECT_LIST)).report
+    for report in (live, again):
+        assert not report.passed
+        unknown = report.bus["unknown_ids"]
+        assert unknown == report.bus["messages"] > 20
+        assert (f"no message matched the mapping's header (Obj_Status of mapping "
+                f"'object-list'); {unknown} messages with identifiers the mapping does not "
+                f"know: is --mapping the radar's?") in report.reasons, report.reasons
+    assert again.bus["before_first_cycle"] == 0
+    assert again.bus["unknown_ids"] == live.bus["unknown_ids"]
+    assert again.reasons == live.reasons
 
 
 def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
@@ -585,6 +610,37 @@ def test_the_last_frame_lost_on_the_way_fails_the_run(tmp_path):
     assert not report.passed
     assert any(r.startswith("frames_lost: the RTS reports 1 schedule frames") for r in
                report.reasons)
+
+
+def test_an_rts_up_late_fails_on_its_lost_frames_not_on_the_radar_s_clock(tmp_path,
+                                                                         monkeypatch):
+    # The RTS comes up 2 s into a 3 s scene: its radar (on its profile's 50 ms cycle) reports
+    # from cycle 40 on, its messages reaching the bus 1.5 to 5.8 ms late while it has a target
+    # to process and 0.1 ms late once the scene has ended (a bench's). The bus times of those
+    # 1.4 s of cycles tilt by more than half the check's window, within what the fit can
+    # tell: the run fails on the frames the RTS never applied, and advises no clock.
+    from rts_scenario.radar.clock import RadarClock
+
+    late_ms = iter([5.82, 3.01, 3.43, 2.88, 2.56, 3.37, 1.79, 1.88, 1.64, 1.82, 1.65, 2.31,
+                    1.62, 1.69, 2.68, 1.56, 3.8, 2.3, 2.49, 1.85, 1.43, 0.51, 1.33])
+    monkeypatch.setattr(RadarClock, "bus_delay",
+                        lambda self, n, rng: np.full(n, next(late_ms, 0.1) * 1e-3))
+    scene = bench_scene(tmp_path, duration_s=3.0)
+    data = yaml.safe_load((tmp_path / "radars" / "scene.radar.yaml").read_text())
+    data["clock"] = {"cycle_s": 0.05, "latency_s": 0.0, "jitter_s": 0.0, "counter_start": 0}
+    (tmp_path / "radars" / "scene.radar.yaml").write_text(yaml.safe_dump(data))
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml", {
+        "radar.profile": "radars/scene.radar.yaml", "radar.noise": False,
+        "radar.fidelity": "analytic", "duration_s": 3.0, "targets.0.lane_changes.0.start_s": 0.75,
+        "expectations.expected_limits": ["frame_rate_above_radar", "frames_sent_late"]})
+    report, stats = rehearse(scene, drop_before=40)
+    assert stats["udp"]["frames_applied"] == 20
+    assert report.playback["rts"]["lost_frames"] == 40
+    assert not report.passed
+    assert any(r.startswith("frames_lost: the RTS reports 40 schedule frames") for r in
+               report.reasons)
+    assert not [r for r in report.reasons if r.startswith("radar_clock:")], report.reasons
+
 
 def test_a_late_sender_is_reported_and_fails_unless_expected(tmp_path, monkeypatch):
     from rts_scenario.outputs.udp import UdpOutput

@@ -1064,6 +1064,35 @@ def test_host_delays_that_fade_after_the_first_cycles_are_not_a_crystal(seed):
     assert off.latency_change_reason(0.00288) is None
 
 
+def test_a_short_run_s_latency_that_fell_is_not_told_for_a_radar_off_its_profile():
+    from rts_scenario.radar.clock import ClockTrack
+
+    # A radar on its profile's 50 ms cycle, reported from cycle 57 on (its RTS came up late
+    # in a 4 s scene): 38 cycles, 1.85 s. Its cycles reached the bus 1.5 to 5.8 ms late while
+    # it had a target to process and 0.1 ms late once the scene had ended (bus times of a
+    # bench). Their line tilts by 3.9 ms over the cycles (-2088 ppm), more than half the
+    # check's 5.76 ms window, but within 3 sigma of the fit (1.3 ms) of it: not beyond what
+    # the bus tells, so no other radar's clock to advise.
+    late_ms = [5.82, 3.01, 3.43, 2.88, 2.56, 3.37, 1.79, 1.88, 1.64, 1.82, 1.65, 2.31, 1.62,
+               1.69, 2.68, 1.56, 3.8, 2.3, 2.49, 1.85, 1.43, 0.51, 1.33, 0.04, 0.13, 0.07,
+               0.08, 0.17, 0.12, 0.11, 0.08, 0.29, 0.2, 0.26, 0.0, 0.08, 0.02, 0.04]
+    n = np.arange(57, 57 + len(late_ms))
+    track = ClockTrack(RadarClock(cycle_s=0.05, counter_start=0))
+    track.add(n, 1.8e9 + 0.05 * n + np.array(late_ms) * 1e-3)
+    slope, se = track.fit.cycle_s()
+    assert (0.05 - slope) * track.fit.span > 0.00288 > (0.05 - slope - 3 * se) * track.fit.span
+    assert track.off_profile_reason(0.00288) is None
+    # A radar 2000 ppm slow, its cycles late by those delays drawn at random, over 8 s: 16 ms
+    # by its last cycle, beyond doubt.
+    n = np.arange(57, 217)
+    late = np.random.default_rng(1).choice(late_ms, n.size) * 1e-3
+    slow = ClockTrack(RadarClock(cycle_s=0.05, counter_start=0))
+    slow.add(n, 1.8e9 + 0.0501 * n + late)
+    reason = slow.off_profile_reason(0.00288)
+    assert reason is not None and "more than a crystal's 1000 ppm" in reason
+    assert slow.cycle_s == pytest.approx(0.0501, abs=1e-5)
+
+
 # -- the detections' lag: a radar whose latency is not its profile's ---------------------------
 
 @pytest.mark.parametrize("true_latency_s, lag_s", [(0.13, 0.0), (0.17, 0.05), (0.09, -0.05)])

@@ -1067,7 +1067,8 @@ def test_targets_listed_in_another_order_are_judged_by_their_own_recorded_status
 
 def test_a_log_the_mapping_reads_no_cycle_of_counts_its_messages(recorded, tmp_path, capsys):
     # Checked with a third-party radar's mapping, rts-scenario's own messages hold no header
-    # of it: the log is not silent, it holds every message the run recorded.
+    # of it: the log is not silent, it holds every message the run recorded, each of an
+    # identifier the mapping does not know (as a run given that mapping counts them).
     with can.LogReader(str(recorded)) as reader:
         n_messages = sum(1 for _ in reader)
     assert n_messages > 400
@@ -1075,8 +1076,12 @@ def test_a_log_the_mapping_reads_no_cycle_of_counts_its_messages(recorded, tmp_p
     mapping = str(ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml")
     again = check_log(load_scenario(scene), recorded, mapping=mapping)
     assert not again.report.passed and again.report.frames["missing"] == 400
-    assert again.report.bus["messages"] == again.report.bus["before_first_cycle"] == n_messages
+    assert again.report.bus["messages"] == again.report.bus["unknown_ids"] == n_messages
+    assert again.report.bus["before_first_cycle"] == 0
     assert not any("silent" in r for r in again.report.reasons)
+    assert (f"no message matched the mapping's header (Cluster_Status of mapping "
+            f"'cluster-list'); {n_messages} messages with identifiers the mapping does not "
+            f"know: is --mapping the radar's?") in again.report.reasons
     bare = _copy(recorded, tmp_path)
     Path(str(bare) + ".rts.json").unlink()
     assert cli.main(["check", scene, "--log", str(bare), "--mapping", mapping]) == 2

@@ -748,6 +748,8 @@ class DetectionReceiver(can.Listener):
         # channels than `channel`, not read.
         self._heard: Counter[str | None] = Counter()
         self.other_channels = 0
+        # Messages with the identifier of the mapping's header (`mapping_reason`).
+        self.headers = 0
         # The channel of the last message (python-can's object), its label, how many of the
         # radar's messages came on it since it became the current one, and whether it is
         # another channel than `channel`: a bus keeps to one channel object for long runs.
@@ -884,6 +886,8 @@ class DetectionReceiver(can.Listener):
             return
         self._ch_count += 1  # a message of the radar's identifiers, on the current channel
         message, checksum, mux, decode, part = known
+        if message is self._header:
+            self.headers += 1
         data = msg.data
         if checksum is not None and not checksum(data):
             stats.checksum_errors += 1
@@ -1239,5 +1243,19 @@ class DetectionReceiver(can.Listener):
         return out
 
 
+def mapping_reason(mapping: CanMapping, headers: int, unknown_ids: int) -> str | None:
+    """Why a bus's messages are not the mapping's radar's, or None.
+
+    Where no message had the identifier of the mapping's header (``headers``) and some had
+    identifiers the mapping does not know (``unknown_ids``): the radar spoke, in another
+    protocol than the one given; its cycles all count as missing.
+    """
+    if headers or not unknown_ids:
+        return None
+    return (f"no message matched the mapping's header ({mapping.header} of mapping "
+            f"{mapping.name!r}); {unknown_ids} messages with identifiers the mapping does not "
+            f"know: is --mapping the radar's?")
+
+
 __all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "ListenerBus",
-           "channel_label", "open_bus"]
+           "channel_label", "mapping_reason", "open_bus"]

@@ -579,15 +579,18 @@ class ClockTrack:
         """Why the radar's clock fails the run (its cycle too far from the profile's), or None.
 
         Beyond `CLOCK_TOLERANCE_PPM` (and three standard errors), and by more than
-        ``tolerance_s`` over the cycles seen: on a short run a latency that changed on the way
-        tilts the line as much.
+        ``tolerance_s`` over the cycles seen beyond three standard errors of that drift (as
+        `CycleTimeFit.drift_reason`): on a short run (a radar reporting for a second or two,
+        its RTS up late) a latency that changed on the way, a few milliseconds while it had
+        targets to process, tilts the line as much.
         """
         fit = self._fit_s()
         if fit is None or not self.cycle_from_bus:
             return None
         ppm = (fit[0] / self.profile.cycle_s - 1.0) * 1e6
         if (abs(ppm) - 3e6 * fit[1] / self.profile.cycle_s <= CLOCK_TOLERANCE_PPM
-                or abs(fit[0] - self.profile.cycle_s) * self.fit.span <= tolerance_s):
+                or (abs(fit[0] - self.profile.cycle_s) - 3.0 * fit[1]) * self.fit.span
+                <= tolerance_s):
             return None
         return (f"radar_clock: the radar's cycles reached the bus every {fit[0] * 1e3:.6f} ms, "
                 f"its profile says {self.profile.cycle_s * 1e3:.6f} ms ({ppm:+.1f} ppm), more "
