@@ -29,7 +29,7 @@ from .hostclock import HostClockWatch, monotonic_s, wall_s
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
-from .playback import LOST_COUNTERS, Playback, lost_frames, rts_rig_record
+from .playback import LOST_COUNTERS, Playback, lost_frames, rts_rig_record, unreachable_reason
 from .preflight import Preflight, angle_tolerance_deg, frames_per_batch, preflight, scene_limits
 from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
 from .radar.profile import RadarProfile
@@ -541,6 +541,9 @@ class Pipeline:
         rts = self.output.rts_status(settle_s=RTS_SETTLE_S)
         rig = rts_rig_record(self.output.rts_rig(), self.rig)
         which = f"measurement {self.measurements}"
+        gone = self.output.rts_unreachable()
+        if gone is not None:
+            return unreachable_reason(gone, f"of {which}")
         if rts is not None and (lost := lost_frames(rts)):
             counts = ", ".join(f"{k.replace('_', ' ')} {rts[k]}" for k in LOST_COUNTERS
                                if rts.get(k))
@@ -1039,6 +1042,7 @@ class Pipeline:
         # The stream has ended: its last frames' report may still be on the way.
         playback.rts = self.output.rts_status(settle_s=RTS_SETTLE_S)
         playback.rts_rig = rts_rig_record(self.output.rts_rig(), scene.rig)
+        playback.rts_unreachable = self.output.rts_unreachable()
         report.playback = playback.to_dict()
         failures = playback.reasons(scene.expectations.expected_limits)
         report.add_expected_not_hit(playback.not_hit(scene.expectations.expected_limits))

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import base64
 import binascii
+import errno
+import os
 import zlib
 from collections.abc import Mapping
 from typing import Any
@@ -56,6 +58,8 @@ class Playback:
         self.frames = 0
         self.late_frames = 0
         self.rts: dict[str, int] | None = None
+        # What the network said of datagrams nothing received (`Output.rts_unreachable`).
+        self.rts_unreachable: dict[str, Any] | None = None
         # What the RTS said of its rig (`rts_rig_record`), None where it said nothing.
         self.rts_rig: dict[str, Any] | None = None
         # Every frame's lateness, compressed as it comes (a few bytes per frame where the
@@ -90,7 +94,7 @@ class Playback:
                 "lateness_s": {"p50": stats.p50, "p95": stats.p95, "max": stats.max},
                 "late_after_s": self.late_after_s,
                 "ambiguity_window_s": self.ambiguity_window_s, "rts": self.rts,
-                "rts_rig": self.rts_rig}
+                "rts_rig": self.rts_rig, "rts_unreachable": self.rts_unreachable}
 
     def reasons(self, expected: frozenset[str] | set[str]) -> list[str]:
         """Why the playback fails the run (nothing when it does not)."""
@@ -127,6 +131,9 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
                    f"more than this run sent ({int(rts['datagrams'])} in all): another "
                    f"sender's stream took the RTS over (a second run against it?), so what it "
                    f"played and counted is not this run's")
+    gone = playback.get("rts_unreachable")
+    if gone and "frames_lost" not in expected:
+        out.append(unreachable_reason(gone))
     lost = lost_frames(rts)
     if lost and "frames_lost" not in expected:
         out.append(f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("
@@ -145,11 +152,23 @@ def playback_not_hit(playback: Mapping[str, Any], expected: frozenset[str] | set
     """
     out = []
     if "frames_lost" in expected and playback.get("rts") is not None \
-            and not lost_frames(playback["rts"]):
+            and not lost_frames(playback["rts"]) and not playback.get("rts_unreachable"):
         out.append("frames_lost")
     if "frames_sent_late" in expected and not int(playback["late_frames"]):
         out.append("frames_sent_late")
     return out
+
+
+def unreachable_reason(gone: Mapping[str, Any], within: str = "of the scene") -> str:
+    """Why datagrams the network sent back (`Output.rts_unreachable`) fail a run."""
+    why = ("nothing listened on that port: is the RTS running, and on this address and port?"
+           if gone["error"] == os.strerror(errno.ECONNREFUSED)
+           else "check the RTS's address and the network to it")
+    span = (f"at {gone['first_s']:.2f} s" if gone["first_s"] == gone["last_s"]
+            else f"from {gone['first_s']:.2f} s to {gone['last_s']:.2f} s")
+    return (f"rts_unreachable: {gone['datagrams']} datagrams to udp://{gone['address']} came "
+            f"back undelivered ({gone['error']}) {span} {within}: the RTS never played their "
+            f"frames; {why}")
 
 
 def rts_rig_record(said: tuple[int, bytes] | None, rig: Any) -> dict[str, Any] | None:
@@ -200,4 +219,5 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
 
 
 __all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "lost_frames",
-           "playback_not_hit", "playback_reasons", "rts_rig_record", "unpack_send_lateness"]
+           "playback_not_hit", "playback_reasons", "rts_rig_record", "unpack_send_lateness",
+           "unreachable_reason"]

@@ -321,6 +321,12 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "late_after_s": _number(minimum=0), "ambiguity_window_s": _number(minimum=0),
                 "rts": {"type": ["object", "null"],
                         "additionalProperties": {"type": "integer", "minimum": 0}},
+                "rts_unreachable": {
+                    "type": ["object", "null"],
+                    "required": ["address", "datagrams", "error", "first_s", "last_s"],
+                    "properties": {"address": {"type": "string"}, "error": {"type": "string"},
+                                   "datagrams": {"type": "integer", "minimum": 1},
+                                   "first_s": _number(), "last_s": _number()}},
             },
         },
         "send_lateness": {

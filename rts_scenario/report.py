@@ -362,6 +362,10 @@ def _playback_line(p: dict[str, Any]) -> str:
     else:
         text += "; RTS: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in rts.items()
                                       if v or k == "frames_applied")
+    gone = p.get("rts_unreachable")
+    if gone:
+        text += (f"; {gone['datagrams']} datagrams came back undelivered from "
+                 f"{gone['address']} ({gone['error']})")
     return text
 
 

@@ -272,7 +272,10 @@ REPORT_VALUES = {"true", "false", "null", "profile", "bus", "built", "memory", "
                  "host_clock_steps", "at_s", "within_s", "size_s",
                  # Written only where another sender's stream took the RTS over
                  # (tests/test_outputs.py).
-                 "foreign_datagrams"}
+                 "foreign_datagrams",
+                 # Written only where datagrams came back undelivered (tests/test_outputs.py),
+                 # and the commands that stop on them.
+                 "address", "datagrams", "error", "first_s", "last_s", "calibrate", "survey"}
 
 
 def _report_entries(out: dict[str, Any]) -> list[dict[str, Any]]:

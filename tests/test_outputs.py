@@ -1,3 +1,7 @@
+import errno
+import os
+import socket
+import sys
 import time
 from importlib.metadata import EntryPoint
 from pathlib import Path
@@ -507,6 +511,58 @@ def test_a_run_whose_rts_another_sender_took_over_does_not_take_its_counters(sch
     (reason,) = [r for r in playback_reasons(playback, frozenset({"frames_lost"}))
                  if r.startswith("rts_stream:")]
     assert f"count {taken['foreign_datagrams']} datagrams more than this run sent" in reason
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="ICMP errors reach an unconnected socket "
+                                                    "on Linux only")
+def test_datagrams_nothing_received_are_counted_and_the_next_ones_still_go_out(schedule):
+    # Nothing listens on the port at first: the host answers each datagram "port unreachable",
+    # and the socket fails the send after each. That send did not go out; it must be sent
+    # again, or the RTS that comes up misses a datagram of every frame told an error.
+    from rts_scenario.playback import playback_not_hit, playback_reasons
+
+    port = _free_udp_port()
+    with open_output(f"udp://127.0.0.1:{port}", pacing="fast") as out:
+        out.write(schedule.frames(0, 3))
+        refused = out.datagrams_sent
+        receiver = UdpReceiver(port=port).start()
+        try:
+            out.write(schedule.frames(3, 6))
+            status = out.rts_status(settle_s=0.5)
+            gone = out.rts_unreachable()
+        finally:
+            receiver.stop()
+    assert status is not None and status["datagrams"] == out.datagrams_sent - refused
+    assert status["frames_applied"] == 3
+    assert gone == {"address": f"127.0.0.1:{port}", "datagrams": refused,
+                    "error": os.strerror(errno.ECONNREFUSED),
+                    "first_s": float(schedule.t_s[0]), "last_s": float(schedule.t_s[2])}
+    playback = {"late_frames": 0, "frames_sent": 6, "rts": status, "rts_unreachable": gone}
+    (reason,) = [r for r in playback_reasons(playback, frozenset())
+                 if r.startswith("rts_unreachable:")]
+    assert reason.startswith(f"rts_unreachable: {refused} datagrams to udp://127.0.0.1:{port} "
+                             f"came back undelivered (Connection refused) from 0.00 s to 0.10 s")
+    assert "nothing listened on that port" in reason
+    # Frames the RTS never had are frames lost: expected, they are hit.
+    assert playback_reasons(playback, frozenset({"frames_lost"})) == []
+    assert playback_not_hit(playback, frozenset({"frames_lost"})) == []
+
+
+def test_a_stream_everyone_received_says_nothing_came_back(schedule):
+    receiver = UdpReceiver().start()
+    try:
+        with open_output(f"udp://127.0.0.1:{receiver.address[1]}", pacing="fast") as out:
+            out.write(schedule.frames(0, 3))
+            assert out.rts_status(settle_s=0.5) is not None
+            assert out.rts_unreachable() is None
+    finally:
+        receiver.stop()
 
 
 @pytest.mark.parametrize("applied, said", [

@@ -410,6 +410,19 @@ def test_a_re_check_fails_on_the_playback_the_run_failed_on(recorded, tmp_path, 
     assert "frames_lost: the RTS reports 3 schedule frames it did not apply" in \
         capsys.readouterr().out
     assert cli.main(["check", scene, "--log", str(recorded)]) == 0
+    # Datagrams that came back undelivered: frames the RTS never played.
+    data["playback"]["rts"] = None
+    data["playback"]["rts_unreachable"] = {"address": "127.0.0.1:5006", "datagrams": 40,
+                                           "error": "Connection refused", "first_s": 0.0,
+                                           "last_s": 1.95}
+    log = _copy(recorded, tmp_path, json.dumps(data))
+    assert cli.main(["check", scene, "--log", str(log)]) == 1
+    assert ("rts_unreachable: 40 datagrams to udp://127.0.0.1:5006 came back undelivered "
+            "(Connection refused) from 0.00 s to 1.95 s of the scene") in capsys.readouterr().out
+    del data["playback"]["rts_unreachable"]["address"]  # not one a run writes
+    log = _copy(recorded, tmp_path, json.dumps(data))
+    assert cli.main(["check", scene, "--log", str(log)]) == 2
+    assert "rts_unreachable" in capsys.readouterr().err
 
 def test_a_re_check_says_the_playback_limits_the_run_did_not_hit(tmp_path):
     # The scene expects frames sent late and frames lost; the run (in-process, every frame at

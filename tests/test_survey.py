@@ -1,6 +1,8 @@
 """Survey: each front end alone, where the radar sees it and how strong."""
 
 import json
+import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -130,21 +132,41 @@ def test_survey_place_writes_the_placed_rig(tmp_path, capsys):
     assert "placed at" in capsys.readouterr().out
 
 
-def test_survey_that_sees_nothing_fails_and_writes_nothing(tmp_path, capsys):
-    # Nothing listens on the UDP port and no radar reports on the bus.
+@pytest.mark.parametrize("rts", [
+    pytest.param(True, id="rts-listening"),
+    pytest.param(False, id="nothing-listening", marks=pytest.mark.skipif(
+        sys.platform != "linux", reason="ICMP errors reach an unconnected socket on Linux only")),
+])
+def test_survey_that_sees_nothing_fails_and_writes_nothing(tmp_path, capsys, rts):
+    # No radar reports on the bus; an RTS listens on the UDP port, or nothing does (a mistyped
+    # port: the host answers every datagram "port unreachable", and the survey says so rather
+    # than what a silent radar would suggest).
     import socket
+
+    from rts_scenario.outputs.udp import UdpReceiver
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
+    receiver = UdpReceiver(port=port).start() if rts else None
     json_out, rig_out = tmp_path / "sv.json", tmp_path / "placed.rig.yaml"
-    code = cli.main(["survey", "kit-table1", "--radar", "awr1843boost", "--output",
-                     f"udp://127.0.0.1:{port}", "--json", str(json_out), "--place", "--write",
-                     str(rig_out)])
+    try:
+        code = cli.main(["survey", "kit-table1", "--radar", "awr1843boost", "--output",
+                         f"udp://127.0.0.1:{port}", "--json", str(json_out), "--place",
+                         "--write", str(rig_out)])
+    finally:
+        if receiver is not None:
+            receiver.stop()
     # A measurement that failed (exit 1, as one missing an FE), not bad input.
     assert code == 1
     err = capsys.readouterr().err
-    assert err.startswith("error: survey: the radar saw none of the 4 front ends")
+    if rts:
+        assert err.startswith("error: survey: the radar saw none of the 4 front ends")
+    else:
+        assert re.match(rf"error: survey: rts_unreachable: \d+ datagrams to "
+                        rf"udp://127\.0\.0\.1:{port} came back undelivered \(Connection "
+                        r"refused\) from 0\.00 s to [\d.]+ s of measurement 0: .*nothing "
+                        r"listened on that port", err), err
     assert err.count("\n") == 1 and "nothing written" in err
     assert not json_out.exists() and not rig_out.exists()
 

@@ -6,7 +6,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
-from typing import TYPE_CHECKING, ClassVar, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from ..errors import OutputError
 from ..schedule import Schedule
@@ -98,6 +98,14 @@ class Output(ABC):
         None (the default) when the output has no RTS that reports: a lost frame then shows
         only in what the radar measured. ``settle_s``: at the end of a stream, how long to
         wait for the RTS's last report.
+        """
+        return None
+
+    def rts_unreachable(self) -> dict[str, Any] | None:
+        """Return what the network said of datagrams nothing received, if it said anything.
+
+        None (the default) when the output sends nothing over a network, or nothing came back
+        (`rts_scenario.outputs.udp.UdpOutput.rts_unreachable`).
         """
         return None
 

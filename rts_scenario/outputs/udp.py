@@ -18,6 +18,8 @@ frames so a receiver that lost a delta can resynchronize.
 from __future__ import annotations
 
 import contextlib
+import errno
+import os
 import platform
 import select
 import socket
@@ -82,6 +84,19 @@ SEQUENCE_MODULUS = 1 << 32
 
 PACING = ("realtime", "fast")
 MODES = ("full", "delta")
+
+# A datagram nothing receives comes back as an ICMP error (port unreachable: nothing listens on
+# that port; host or network unreachable). Linux tells an unconnected socket of it only with
+# IP_RECVERR (IPV6_RECVERR) set, and then queues each error, with the address it is about, on
+# the socket's error queue; the next send or read fails once, and that send does not go out.
+_RECVERR: dict[int, tuple[int, int]] = {
+    socket.AF_INET: (socket.IPPROTO_IP, getattr(socket, "IP_RECVERR", 11)),
+    socket.AF_INET6: (socket.IPPROTO_IPV6, getattr(socket, "IPV6_RECVERR", 25))}
+_MSG_ERRQUEUE = getattr(socket, "MSG_ERRQUEUE", 0x2000)
+_MSG_DONTWAIT = getattr(socket, "MSG_DONTWAIT", 0x40)
+# ``struct sock_extended_err``: ee_errno u32, ee_origin u8, ee_type u8, ee_code u8, ...
+_EXTENDED_ERR = struct.Struct("=IBBB")
+_ICMP_ERRORS = frozenset({errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.ENETUNREACH})
 
 
 def frame_entries(schedule: Schedule, pos: int, changed: NDArray[np.bool_] | None) -> np.ndarray:
@@ -149,6 +164,12 @@ class UdpOutput(Output):
             self._socket = socket.socket(family, socket.SOCK_DGRAM)
         except OSError as exc:
             raise OutputError(f"udp://{address}: cannot open a socket: {exc}") from None
+        self._error_queue = _enable_icmp_errors(self._socket, family)
+        # Datagrams the network sent back (`rts_unreachable`): by error number, and the scene
+        # times of the frames being sent when the first and the last were told.
+        self._refused: dict[int, int] = {}
+        self._refused_s: list[float] = []
+        self._sent_frame_t_s: float | None = None  # the last frame out, as errors are told
         # Every datagram goes through ``send``; tests swap in a `FaultInjector` around
         # ``transmit``.
         self.send: Callable[[bytes], None] = self.transmit
@@ -170,11 +191,17 @@ class UdpOutput(Output):
     def transmit(self, datagram: bytes) -> None:
         """Put one datagram on the network."""
         self._transmitted_s = time.perf_counter()
-        try:
-            self._socket.sendto(datagram, self._sockaddr)
-        except OSError as exc:
-            raise OutputError(f"udp://{self.address[0]}:{self.address[1]}: send failed: "
-                              f"{exc}") from None
+        for attempt in range(4):
+            try:
+                self._socket.sendto(datagram, self._sockaddr)
+                return
+            except OSError as exc:
+                # An earlier datagram's error, told at this send, which did not go out.
+                told = self._take_errors()
+                if not (self._error_queue and attempt < 3
+                        and (told or exc.errno in _ICMP_ERRORS)):
+                    raise OutputError(f"udp://{self.address[0]}:{self.address[1]}: send "
+                                      f"failed: {exc}") from None
 
     def _write(self, batch: Schedule) -> None:
         self._check_fits(batch)
@@ -193,6 +220,7 @@ class UdpOutput(Output):
             self._transmitted_s = None
             for datagram in datagrams:
                 self.send(datagram)
+            self._sent_frame_t_s = float(batch.t_s[pos])
             if self.pacing == "realtime" and self._transmitted_s is not None \
                     and self._frames_sent == 0:
                 self._restart_at(self._transmitted_s)
@@ -279,8 +307,54 @@ class UdpOutput(Output):
         self._read_replies()
         return self._rts_rig
 
+    def rts_unreachable(self) -> dict[str, Any] | None:
+        """Return what the network said of datagrams nothing received, None where it said nothing.
+
+        ``address``; ``datagrams``: how many came back as ICMP errors (a host answers a
+        limited number per second, except on the loopback: at least this many);
+        ``error``: the most frequent (``Connection refused``: nothing listens on the port);
+        ``first_s``, ``last_s``: the scene times of the last frames sent when the first and the
+        last were told (their datagrams went out with them or a little before). Linux only:
+        elsewhere an unconnected socket is told nothing, and this is None.
+        """
+        self._read_replies()
+        if not self._refused:
+            return None
+        most = max(self._refused, key=lambda e: self._refused[e])
+        return {"address": f"{self.address[0]}:{self.address[1]}",
+                "datagrams": sum(self._refused.values()), "error": os.strerror(most),
+                "first_s": self._refused_s[0], "last_s": self._refused_s[-1]}
+
+    def _take_errors(self) -> int:
+        """Take the errors waiting on the socket's error queue (see `_RECVERR`); their number.
+
+        Those of datagrams nothing received are counted (`rts_unreachable`); others (a path
+        whose MTU is smaller than a datagram) only taken off.
+        """
+        taken = 0
+        while self._error_queue:
+            try:
+                _, ancillary, _, _ = self._socket.recvmsg(1, 512, _MSG_ERRQUEUE | _MSG_DONTWAIT)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:  # nothing queued after all, or a kernel without the queue
+                break
+            taken += 1
+            for _level, _kind, data in ancillary:
+                code = _EXTENDED_ERR.unpack_from(data)[0] if len(data) >= _EXTENDED_ERR.size \
+                    else 0
+                if code in _ICMP_ERRORS:
+                    self._refused[code] = self._refused.get(code, 0) + 1
+                    # The datagram went out with this frame or before it.
+                    at = self._sent_frame_t_s if self._sent_frame_t_s is not None else 0.0
+                    if not self._refused_s:
+                        self._refused_s.append(at)
+                    self._refused_s[1:] = [at]
+        return taken
+
     def _read_replies(self) -> None:
         """Take every status reply waiting on the socket (the last valid one is kept)."""
+        self._take_errors()
         self._socket.setblocking(False)
         try:
             while True:
@@ -288,7 +362,8 @@ class UdpOutput(Output):
                     data = self._socket.recv(65536)
                 except (BlockingIOError, InterruptedError):
                     break
-                except OSError:  # e.g. an ICMP error of an earlier datagram: nothing to read
+                except OSError:  # an ICMP error of an earlier datagram: counted below
+                    self._take_errors()
                     continue
                 status = decode_status(data)
                 if status is not None:
@@ -336,6 +411,17 @@ class UdpOutput(Output):
 
     def _close(self) -> None:
         self._socket.close()
+
+
+def _enable_icmp_errors(sock: socket.socket, family: int) -> bool:
+    """Have the kernel queue the ICMP errors of ``sock``'s datagrams (Linux; see `_RECVERR`)."""
+    if sys.platform != "linux" or family not in _RECVERR:
+        return False
+    try:
+        sock.setsockopt(*_RECVERR[family], 1)
+    except OSError:
+        return False
+    return True
 
 
 def _resolve(host: str, port: int) -> tuple[Any, ...]:
