@@ -362,7 +362,9 @@ class UdpOutput(Output):
                     data = self._socket.recv(65536)
                 except (BlockingIOError, InterruptedError):
                     break
-                except OSError:  # an ICMP error of an earlier datagram: counted below
+                except OSError as exc:  # an earlier datagram's error: counted, read on
+                    if exc.errno in (errno.EBADF, errno.ENOTSOCK):  # closed: nothing to read
+                        break
                     self._take_errors()
                     continue
                 status = decode_status(data)
