@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .check import limit_masks
+from .check import checkable, limit_masks
 from .kinematics import Tracks, compute_tracks
 from .scenario.model import LIMITS, Scenario
 from .schedule import Schedule, build_schedule
@@ -46,6 +46,8 @@ class Preflight:
         Per target name: the limits the scene declares expected for it.
     scene_expected : frozenset of str
         Scene-wide limits the scene declares expected.
+    checkable_frames : int or None
+        Target-frames under no limit, all targets together (None: not counted).
     """
 
     scene: str
@@ -53,11 +55,19 @@ class Preflight:
     scene_limits: dict[str, str]
     expected: dict[str, frozenset[str]]
     scene_expected: frozenset[str]
+    checkable_frames: int | None = None
 
     def unexpected(self) -> list[str]:
-        """One line per limit the scene does not declare (these fail a run's verdict)."""
+        """One line per limit the scene does not declare (these fail a run's verdict).
+
+        Also one where the scene has targets and none is checkable in any frame: whatever it
+        expects, a run has nothing to check and fails.
+        """
         out = [f"{name}: {why}" for name, why in self.scene_limits.items()
                if name not in self.scene_expected]
+        if self.expected and self.checkable_frames == 0:
+            out.append("no target is checkable in any frame (each is under a limit "
+                       "throughout): a run has nothing to check and fails")
         for target, hits in self.targets.items():
             bad = {lim: n for lim, n in hits.items() if lim not in self.expected[target]}
             if bad:
@@ -171,9 +181,11 @@ def preflight(scene: Scenario, method: str = "exact",
     """Count the limits ``scene`` hits with the weight solver ``method``."""
     names = tuple(t.name for t in scene.targets)
     counts = {lim: np.zeros(len(names), dtype=np.int64) for lim in LIMITS}
+    n_checkable = 0
     for _, tracks, schedule in schedule_batches(scene, method, batch_frames):
         for lim, mask in limit_masks(tracks, schedule.status).items():
             counts[lim] += mask.sum(axis=0)
+        n_checkable += int(checkable(tracks, schedule.status).sum())
     expected = scene.expectations.expected_limits
     return Preflight(
         scene=scene.name,
@@ -182,4 +194,4 @@ def preflight(scene: Scenario, method: str = "exact",
                  if any(c[k] for c in counts.values())},
         scene_limits=scene_limits(scene),
         expected={t.name: expected | t.expected_limits for t in scene.targets},
-        scene_expected=expected)
+        scene_expected=expected, checkable_frames=n_checkable)
