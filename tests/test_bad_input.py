@@ -574,6 +574,22 @@ def test_bad_arguments_are_one_error_line(places, capsys, argv, code, pattern):
     assert "timing:" not in out  # checked before anything ran
 
 
+@pytest.mark.parametrize("argv", [["run", "{scene}", "--json", "-"],
+                                  ["run", "{scene}", "--detections", "-"],
+                                  ["sweep", "{scene}", "--json", "-"]],
+                         ids=["run-json", "run-detections", "sweep-json"])
+def test_a_dash_for_an_output_file_is_refused_not_written_as_a_file(places, capsys, monkeypatch,
+                                                                     tmp_path, argv):
+    # "-" reads as standard output, where the text report goes: not a file named "-".
+    monkeypatch.chdir(tmp_path)
+    argv = [a.format(**places) for a in argv]
+    assert call(argv) == 2
+    out, err = capsys.readouterr()
+    assert one_error(err) == (f"{argv[2]} -: a file path, not standard output (which carries "
+                              f"the text report); to name a file '-', write ./-")
+    assert "timing:" not in out and not (tmp_path / "-").exists()
+
+
 def test_catalogue_is_complete():
     assert len(SCENE_CASES) + len(CLI_CASES) >= 50
 
