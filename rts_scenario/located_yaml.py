@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -334,8 +335,11 @@ def load_yaml(path: str | Path, text: str | None = None) -> Document:
     return Document(data=data, file=file, marks=marks)
 
 
-def validate(document: Document, schema: dict[str, Any]) -> None:
+def validate(document: Document, schema: dict[str, Any],
+             skip: Iterable[KeyPath] = ()) -> None:
     """Check ``document`` against a JSON Schema; raise the most relevant error, located.
+
+    ``skip``: key paths whose values are not judged (errors at or below them are left out).
 
     Raises
     ------
@@ -346,7 +350,10 @@ def validate(document: Document, schema: dict[str, Any]) -> None:
         raise document.error((), "the file is empty: expected a mapping of keys")
     _reject_non_finite(document, document.data, ())
     validator = jsonschema.Draft202012Validator(schema)
-    best = jsonschema.exceptions.best_match(validator.iter_errors(document.data))
+    skipped = [tuple(path) for path in skip]
+    errors = (e for e in validator.iter_errors(document.data)
+              if not any(tuple(e.absolute_path)[:len(p)] == p for p in skipped))
+    best = jsonschema.exceptions.best_match(errors)
     if best is None:
         return
     path: KeyPath = tuple(best.absolute_path)

@@ -473,6 +473,24 @@ def test_key_paths_joined_by_commas_vary_together(tmp_path):
     assert scene.radar_options.estimator == "bartlett"
 
 
+def test_a_value_the_parametrize_block_puts_in_place_may_be_a_placeholder(tmp_path):
+    # The file as written is none of the runs: each combination is validated, with its values
+    # in place, not the placeholder.
+    path = tmp_path / "placeholder.scenario.yaml"
+    path.write_text(GOOD.replace("speed_mps: 19.0}", "speed_mps: null}")
+                    + "parametrize:\n  targets.0.motion.speed_mps: [18.0, 19.0]\n")
+    combos = parametrizations(path)
+    assert [ident for ident, _ in combos] == ["speed_mps=18.0", "speed_mps=19.0"]
+    assert load_scenario(path, combos[1][1]).name == "good"
+    # Any other bad value of the file is still one error naming it.
+    path.write_text(GOOD.replace("speed_mps: 19.0}", "speed_mps: null}")
+                    + "parametrize:\n  targets.0.rcs.rcs_dbsm: [8.0, 10.0]\n")
+    with pytest.raises(ScenarioError, match=r"placeholder.scenario.yaml:13:\d+: "
+                                            r"targets\[0\]\.motion\.speed_mps: must be of type "
+                                            r"number, got None"):
+        parametrizations(path)
+
+
 def test_combinations_with_the_same_id_are_refused(tmp_path):
     # Runs are told apart by their id: two alike would share a pytest item, a report entry
     # and a recorded log.
