@@ -183,8 +183,27 @@ def test_run_writes_every_detection_as_csv(tmp_path, capsys):
                        for t in entry["targets"])
         assert len(mine) == detected + entry["false_detections"]
     assert list(rows[0]) == ["scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
-                             "el_deg", "snr_db", "rcs_dbsm", "target", "variant"]
+                             "el_deg", "snr_db", "rcs_dbsm", "target", "variant", "file"]
     assert {r["target"] for r in rows} <= {"cutting-car", "overtaker", ""}
+    assert {r["file"] for r in rows} == set(scenes)
+
+
+def test_detections_of_two_scene_files_of_one_name_are_told_apart(tmp_path):
+    # An edited copy of a scene keeps its name: the CSV's file column says which run is which.
+    import csv
+
+    text = (ROOT / "scenarios" / "approaching_target.scenario.yaml").read_text()
+    text = text.replace("duration_s: 7.5", "duration_s: 0.5")
+    first, second = tmp_path / "a.scenario.yaml", tmp_path / "b.scenario.yaml"
+    first.write_text(text.replace("rcs_dbsm: 12.0", "rcs_dbsm: 10.0"))
+    second.write_text(text)
+    out = tmp_path / "d.csv"
+    assert cli.main(["run", str(first), str(second), "--detections", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert {r["scene"] for r in rows} == {"approaching-target"}
+    by_file = {f: {r["rcs_dbsm"] for r in rows if r["file"] == f} for f in (str(first),
+                                                                            str(second))}
+    assert by_file == {str(first): {"10"}, str(second): {"12"}}
 
 
 def two_variant_scene(folder: Path) -> Path:
