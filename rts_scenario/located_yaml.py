@@ -335,6 +335,10 @@ def load_yaml(path: str | Path, text: str | None = None) -> Document:
     return Document(data=data, file=file, marks=marks)
 
 
+# The top-level keys that carry a file's format version (scene, rig, radar profile, CAN mapping).
+VERSION_KEYS = frozenset({"rts_scenario", "rts_rig", "rts_radar", "rts_can_mapping"})
+
+
 def validate(document: Document, schema: dict[str, Any],
              skip: Iterable[KeyPath] = ()) -> None:
     """Check ``document`` against a JSON Schema; raise the most relevant error, located.
@@ -351,8 +355,16 @@ def validate(document: Document, schema: dict[str, Any],
     _reject_non_finite(document, document.data, ())
     validator = jsonschema.Draft202012Validator(schema)
     skipped = [tuple(path) for path in skip]
-    errors = (e for e in validator.iter_errors(document.data)
-              if not any(tuple(e.absolute_path)[:len(p)] == p for p in skipped))
+    errors = [e for e in validator.iter_errors(document.data)
+              if not any(tuple(e.absolute_path)[:len(p)] == p for p in skipped)]
+    # The format version first: a file of another version is not judged by this version's
+    # keys (those a later format added are no typos).
+    version = next((e for e in errors if e.validator == "enum" and len(e.absolute_path) == 1
+                    and e.absolute_path[0] in VERSION_KEYS), None)
+    if version is not None:
+        raise document.error(tuple(version.absolute_path),
+                             f"{_describe(version)} (the file's format version: this version "
+                             f"of rts-scenario reads no other)")
     best = jsonschema.exceptions.best_match(errors)
     if best is None:
         return

@@ -373,6 +373,27 @@ def test_cli_validate_exit_codes(tmp_path, capsys):
     assert err.startswith(f"error: {bad}:1:") and "Traceback" not in err
 
 
+@pytest.mark.parametrize("kind", ["scene", "rig"])
+def test_a_file_of_another_format_version_is_told_so_before_its_keys(tmp_path, kind):
+    # A file a later format wrote has keys this one does not know: its version is the error,
+    # not the first key it does not know.
+    scene = tmp_path / "later.scenario.yaml"
+    if kind == "scene":
+        scene.write_text(GOOD.replace("rts_scenario: 1", "rts_scenario: 2")
+                         + "weather: {rain_mm_per_h: 5}\n")
+        where = f"{scene}:1:1: rts_scenario"
+    else:
+        rig = tmp_path / "later.rig.yaml"
+        rig.write_text("rts_rig: 2\nname: later\nmirrors: 3\n"
+                       "layout: {az_deg: [-10, 10], el_deg: [-5, 5]}\n")
+        scene.write_text(GOOD.replace("rig: wide-3x5", "rig: later.rig.yaml"))
+        where = f"{rig}:1:1: rts_rig"
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    assert str(info.value) == (f"{where}: got 2; allowed values: 1 (the file's format version: "
+                               f"this version of rts-scenario reads no other)")
+
+
 # --- fuzzing: only ScenarioError may escape the loader ---------------------------------------
 
 # Each example writes its own file into tmp_path, so sharing the fixture is intended.
