@@ -320,6 +320,21 @@ def test_check_log_refuses_a_scene_other_than_the_recorded_variant(tmp_path):
                      log).report.passed
 
 
+def test_validate_says_which_variants_an_error_is_of(tmp_path, capsys):
+    # One line per error; its variants named, not only the first that hit it.
+    scene = two_variant_scene(tmp_path)
+    scene.write_text(scene.read_text().replace("rig: wide-3x5", "rig: nowhere.rig.yaml"))
+    assert cli.main(["validate", str(scene)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {scene}:") and err[0].endswith(
+        "nowhere.rig.yaml' (looked in " + str(tmp_path) + ") [every variant]"), err
+    scene.write_text(scene.read_text().replace("rig: nowhere.rig.yaml", "rig: wide-3x5")
+                     .replace("[3.5, 40.0]", "[3.5, 40.0, 1.0e+6]"))
+    assert cli.main(["validate", str(scene)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert [line for line in err if line.startswith("error: ")][0].endswith(" [1=1000000.0]")
+
+
 def test_list_validate_and_schedule_show_the_variants(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
     assert cli.main(["list"]) == 0
