@@ -119,6 +119,37 @@ def test_run_exit_codes_json_and_plots(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: ")
 
 
+def test_plots_draw_the_schedule_the_run_played(tmp_path, monkeypatch):
+    # --method paper plays the paper's weights: the schedule plot is of those, not the exact
+    # solver's, with the statuses the run judged by.
+    pytest.importorskip("matplotlib")
+    import rts_scenario.schedule as schedule
+
+    real, calls = schedule.build_schedule, []
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(schedule, "build_schedule", spy)
+    import matplotlib.pyplot as plt
+
+    from rts_scenario import plots
+
+    def no_drawing(fig, path):  # what is drawn is the question, not the pixels
+        plt.close(fig)
+        return path
+
+    monkeypatch.setattr(plots, "_save", no_drawing)
+    scene = tmp_path / "short.scenario.yaml"
+    scene.write_text((ROOT / "scenarios" / "approaching_target.scenario.yaml").read_text()
+                     .replace("duration_s: 7.5", "duration_s: 0.5"))
+    assert cli.main(["run", str(scene), "--method", "paper", "--plot", str(tmp_path / "p")]) == 0
+    # Every schedule built, the plot's among them, as the run played it.
+    assert calls and {(c.get("method"), c.get("angle_tolerance_deg")) for c in calls} == {
+        ("paper", (0.5, 1.0))}
+
+
 def test_a_can_channel_that_cannot_be_opened_is_bad_input(capsys):
     # The arguments name a CAN channel this machine does not have: exit 2 (as emulate), not
     # a runtime error, with one line naming the interface and the channel.

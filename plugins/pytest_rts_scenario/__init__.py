@@ -403,15 +403,19 @@ class HtmlReport:
         report = yield
         failure = call.excinfo.value if call.excinfo is not None else None
         if isinstance(failure, ScenarioFailed):
-            extras = [*getattr(report, "extras", []), *_html_extras(failure.result)]
+            extras = [*getattr(report, "extras", []),
+                      *_html_extras(failure.result, item.config.getoption("--rts-method"))]
             report.extras = extras  # type: ignore[attr-defined]  # pytest-html reads it
             if failure.result.report.record is not None:
                 failure.result.report.record.close()  # the plots are drawn; free the disk
         return report
 
 
-def _html_extras(result: RunResult) -> list[dict[str, Any]]:
-    """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG."""
+def _html_extras(result: RunResult, method: str) -> list[dict[str, Any]]:
+    """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG.
+
+    ``method``: the weight solver the run played with (``--rts-method``).
+    """
     import base64
     import html
     import importlib.util
@@ -428,7 +432,7 @@ def _html_extras(result: RunResult) -> list[dict[str, Any]]:
                                   "'rts-scenario[plot]').</p>")]
     with tempfile.TemporaryDirectory(prefix="rts-scenario-html-") as folder:
         try:
-            written = write_plots(result, folder)
+            written = write_plots(result, folder, method=method)
         except Exception as exc:  # a report that cannot draw must not break the test session
             return [*out, extras.html(f"<p>No plots: {html.escape(type(exc).__name__)}: "
                                       f"{html.escape(str(exc))}</p>")]
