@@ -374,10 +374,12 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
 def _render(result: RunResult) -> str:
     """Render the report table and the worst frames (misses first, then largest errors)."""
     report = result.report
-    lines = [f"FAIL: {report.label} - {'; '.join(report.reasons)}", "", report.table(), "",
-             "worst frames (error / tolerance):",
-             f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
-             f"{'el':>8}"]
+    lines = [f"FAIL: {report.label} - {'; '.join(report.reasons)}", "", report.table(), ""]
+    if not report.worst_frames:
+        return "\n".join([*lines, "worst frames: none (no target-frame was judged)"])
+    lines += ["worst frames (error / tolerance):",
+              f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
+              f"{'el':>8}"]
     tolerances = result.scene.expectations.tolerances
     for row in report.worst_frames:
         # Each error over its tolerance (as the frames are ranked): beyond +-1 is out of it.
