@@ -87,7 +87,8 @@ def write_plots(result: RunResult, folder: str | Path, stem: str | None = None,
         ring = np.vstack([poly, poly[:1]])
         angles.fill(ring[:, 0], ring[:, 1], color="0.85", zorder=0)
         angles.plot(ring[:, 0], ring[:, 1], color="0.6", lw=0.8, zorder=0)
-    angles.plot(scene.rig.az_deg, scene.rig.el_deg, "k^", ms=6, label="front ends")
+    # Under the targets' tracks: a target straight ahead is often in an FE's direction.
+    angles.plot(scene.rig.az_deg, scene.rig.el_deg, "k^", ms=6, label="front ends", zorder=1)
     top.set(xlabel="y (m, left)", ylabel="x (m, forward)", title="targets seen from the radar")
     top.invert_xaxis()
     top.legend(fontsize=7, loc="best")

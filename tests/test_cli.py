@@ -136,7 +136,10 @@ def test_plots_draw_the_schedule_the_run_played(tmp_path, monkeypatch):
 
     from rts_scenario import plots
 
+    drawn = {}
+
     def no_drawing(fig, path):  # what is drawn is the question, not the pixels
+        drawn[path.name] = [(line.get_label(), line.get_zorder()) for line in fig.axes[-1].lines]
         plt.close(fig)
         return path
 
@@ -148,6 +151,11 @@ def test_plots_draw_the_schedule_the_run_played(tmp_path, monkeypatch):
     # Every schedule built, the plot's among them, as the run played it.
     assert calls and {(c.get("method"), c.get("angle_tolerance_deg")) for c in calls} == {
         ("paper", (0.5, 1.0))}
+    # The car straight ahead sits on the middle FE's direction: its track is drawn over the
+    # FE's marker, not hidden under it (the quads' outlines, zorder 0, are the background).
+    lines = drawn["approaching-target-scene.png"]
+    fe = next(z for label, z in lines if label == "front ends")
+    assert fe < min(z for label, z in lines if label != "front ends" and z > 0)
 
 
 def test_a_can_channel_that_cannot_be_opened_is_bad_input(capsys):
