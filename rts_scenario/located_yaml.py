@@ -343,7 +343,8 @@ def validate(document: Document, schema: dict[str, Any],
              skip: Iterable[KeyPath] = ()) -> None:
     """Check ``document`` against a JSON Schema; raise the most relevant error, located.
 
-    ``skip``: key paths whose values are not judged (errors at or below them are left out).
+    ``skip``: key paths whose values are not judged (errors at or below them are left out,
+    and a key among them missing is none).
 
     Raises
     ------
@@ -355,8 +356,16 @@ def validate(document: Document, schema: dict[str, Any],
     _reject_non_finite(document, document.data, ())
     validator = jsonschema.Draft202012Validator(schema)
     skipped = [tuple(path) for path in skip]
-    errors = [e for e in validator.iter_errors(document.data)
-              if not any(tuple(e.absolute_path)[:len(p)] == p for p in skipped)]
+
+    def judged(error: jsonschema.ValidationError) -> bool:
+        at = tuple(error.absolute_path)
+        if error.validator == "required" and isinstance(error.instance, dict):
+            missing = [k for k in error.validator_value if k not in error.instance]
+            if missing and all((*at, k) in skipped for k in missing):
+                return False
+        return not any(at[:len(p)] == p for p in skipped)
+
+    errors = [e for e in validator.iter_errors(document.data) if judged(e)]
     # The format version first: a file of another version is not judged by this version's
     # keys (those a later format added are no typos).
     version = next((e for e in errors if e.validator == "enum" and len(e.absolute_path) == 1

@@ -503,6 +503,10 @@ def test_a_value_the_parametrize_block_puts_in_place_may_be_a_placeholder(tmp_pa
     combos = parametrizations(path)
     assert [ident for ident, _ in combos] == ["speed_mps=18.0", "speed_mps=19.0"]
     assert load_scenario(path, combos[1][1]).name == "good"
+    # Or left out: the block puts it in place.
+    path.write_text(GOOD.replace(", speed_mps: 19.0}", "}")
+                    + "parametrize:\n  targets.0.motion.speed_mps: [18.0, 19.0]\n")
+    assert [ident for ident, _ in parametrizations(path)] == ["speed_mps=18.0", "speed_mps=19.0"]
     # Any other bad value of the file is still one error naming it.
     path.write_text(GOOD.replace("speed_mps: 19.0}", "speed_mps: null}")
                     + "parametrize:\n  targets.0.rcs.rcs_dbsm: [8.0, 10.0]\n")
