@@ -203,6 +203,15 @@ def test_validate_a_directory_is_a_clear_error(tmp_path, capsys):
     assert "Traceback" not in err
 
 
+@pytest.mark.parametrize("command", ["run", "validate"])
+def test_a_folder_given_as_a_scene_says_which_commands_take_folders(tmp_path, capsys, command):
+    # `sweep scenarios/` and `pytest scenarios/` take a folder; run and validate take files.
+    assert cli.main([command, str(tmp_path)]) == 2
+    assert capsys.readouterr().err.splitlines()[0] == (
+        f"error: {tmp_path}: cannot read file: a folder, where a scene file goes "
+        f"({tmp_path}/*.scenario.yaml); rts-scenario sweep and pytest take folders")
+
+
 def test_run_writes_every_detection_as_csv(tmp_path, capsys):
     import csv
 

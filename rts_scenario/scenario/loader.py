@@ -286,6 +286,10 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     together (as in ``pytest.mark.parametrize("a,b", ...)``): each of its values is then a list
     with one value per path. The combinations are the product over the keys.
     """
+    if Path(path).is_dir():  # `sweep DIR` and `pytest DIR` take one; a scene is a file
+        raise ScenarioError(f"cannot read file: a folder, where a scene file goes "
+                            f"({Path(path) / '*'}{SCENE_SUFFIX}); rts-scenario sweep and "
+                            f"pytest take folders", file=str(path))
     doc = load_yaml(path)
     block = doc.data.get("parametrize") if isinstance(doc.data, dict) else None
     if not block:
