@@ -327,6 +327,25 @@ def test_a_fragment_included_twice_is_named_once(tmp_path):
                              "include[0] 'fr/ok.yaml'); include each fragment once")
 
 
+@pytest.mark.parametrize("name, text, what", [
+    ("other.scenario.yaml", GOOD, "a scene file (*.scenario.yaml)"),
+    ("lab.yaml", "rts_rig: 1\nname: r\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n",
+     "a rig file (its rts_rig key)"),
+])
+def test_a_file_of_another_kind_under_include_is_named_as_what_it_is(tmp_path, name, text,
+                                                                      what):
+    # Not its keys listed as unknown to a fragment: what it is, where the scene lists it.
+    (tmp_path / name).write_text(text)
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("targets:", f"include: [{name}]\ntargets:"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    err = info.value
+    assert (err.file, err.line, err.key_path) == (str(scene), 11, "include[0]")
+    assert str(err).split(": ", 2)[2].startswith(
+        f"{name!r} is {what}, not a scene fragment (only targets and a description); ")
+
+
 def test_relative_rig_and_profile_files_inside_the_tree(tmp_path):
     (tmp_path / "rigs").mkdir()
     shutil.copy(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml", tmp_path / "rigs")

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import RtsError, ScenarioError
-from ..file_kinds import kind_by_name, kind_name, load_kind
+from ..file_kinds import kind_by_name, kind_name, load_kind, other_than_fragment
 from ..located_yaml import Document, KeyPath, format_key_path, load_yaml, validate
 from ..radar.profile import RadarProfile
 from ..radar.profile import preset_names as radar_presets
@@ -120,6 +120,9 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                             f"{data['include'][first]!r}); include each fragment once")
         included[fragment_path] = i
         fragment = load_yaml(fragment_path)
+        other = other_than_fragment(fragment_path, fragment.data)
+        if other is not None:
+            raise doc.error(("include", i), f"{name!r} is {other}")
         if not isinstance(fragment.data, dict):
             raise fragment.error((), "a fragment must be a mapping with a 'targets' list")
         _check_target_limits(fragment)
