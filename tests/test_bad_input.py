@@ -237,6 +237,12 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"key path: duration_s, seed\), got \[2.0\]"),
     ("parametrize-group-empty-path", TINY + "parametrize:\n  'duration_s,': [[1.0, 2]]\n",
      r"^{f}:16:\d+: parametrize.duration_s,: 'duration_s,': an empty key path"),
+    ("parametrize-empty-path", TINY + "parametrize:\n  '': [1.0, 2.0]\n",
+     r"^{f}:16:\d+: parametrize.*: '': an empty key path, or an empty part between dots; write "
+     r"a key path such as 'radar.estimator' or 'targets.0.rcs.rcs_dbsm'$"),
+    ("parametrize-empty-part", TINY + "parametrize:\n  targets..name: [a, b]\n",
+     r"^{f}:16:\d+: parametrize.targets..name: 'targets..name': an empty key path, or an empty "
+     r"part between dots"),
     # A YAML date is no value a report can hold (run --json, sweep --json lost every verdict).
     ("parametrize-date", TINY + "parametrize:\n  description: [2024-01-01, plain]\n",
      r"^{f}:16:\d+: parametrize.description\[0\]: got a date \(2024-01-01\); a value must be "

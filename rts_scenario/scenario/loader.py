@@ -433,11 +433,15 @@ def _parameter_axis(doc: Document, key: str,
                     values: list[Any]) -> list[list[tuple[str, Any]]]:
     """One axis of the product: per value, the (key path, value) pairs it sets."""
     paths = [p.strip() for p in key.split(",")]
-    if len(paths) == 1:
-        return [[(key, value)] for value in values]
-    if not all(paths):
+    if len(paths) > 1 and not all(paths):
         raise doc.error(("parametrize", key),
                         f"{key!r}: an empty key path between commas; write 'a.b, c.d'")
+    if not all(paths) or any(not part for path in paths for part in path.split(".")):
+        raise doc.error(("parametrize", key),
+                        f"{key!r}: an empty key path, or an empty part between dots; write a "
+                        f"key path such as 'radar.estimator' or 'targets.0.rcs.rcs_dbsm'")
+    if len(paths) == 1:
+        return [[(key, value)] for value in values]
     axis = []
     for i, value in enumerate(values):
         if not isinstance(value, list) or len(value) != len(paths):
