@@ -65,14 +65,14 @@ class Preflight:
         """
         out = [f"{name}: {why}" for name, why in self.scene_limits.items()
                if name not in self.scene_expected]
-        if self.expected and self.checkable_frames == 0:
-            out.append("no target is checkable in any frame (each is under a limit "
-                       "throughout): a run has nothing to check and fails")
         for target, hits in self.targets.items():
             bad = {lim: n for lim, n in hits.items() if lim not in self.expected[target]}
             if bad:
                 out.append(f"{target}: " + ", ".join(
                     f"{lim} in {n} frames ({LIMITS[lim]})" for lim, n in bad.items()))
+        if self.expected and self.checkable_frames == 0:
+            out.append("no target is checkable in any frame (each is under a limit "
+                       "throughout): a run has nothing to check and fails")
         return out
 
     def expected_lines(self) -> list[str]:
@@ -176,22 +176,38 @@ def angle_tolerance_deg(scene: Scenario) -> tuple[float, float]:
     return float(tol["az_deg"]), float(tol["el_deg"])
 
 
+class LimitCounter:
+    """Count a scene's limits batch by batch (`add`), as its schedule is built; `result`."""
+
+    def __init__(self, scene: Scenario) -> None:
+        self.scene = scene
+        self._counts = {lim: np.zeros(len(scene.targets), dtype=np.int64) for lim in LIMITS}
+        self._checkable = 0
+
+    def add(self, tracks: Tracks, schedule: Schedule) -> None:
+        """Count one batch's target-frames under each limit, and the checkable ones."""
+        for lim, mask in limit_masks(tracks, schedule.status).items():
+            self._counts[lim] += mask.sum(axis=0)
+        self._checkable += int(checkable(tracks, schedule.status).sum())
+
+    def result(self) -> Preflight:
+        """Return the `Preflight` of the batches added."""
+        scene, counts = self.scene, self._counts
+        expected = scene.expectations.expected_limits
+        return Preflight(
+            scene=scene.name,
+            targets={t.name: {lim: int(c[k]) for lim, c in counts.items() if c[k]}
+                     for k, t in enumerate(scene.targets)
+                     if any(c[k] for c in counts.values())},
+            scene_limits=scene_limits(scene),
+            expected={t.name: expected | t.expected_limits for t in scene.targets},
+            scene_expected=expected, checkable_frames=self._checkable)
+
+
 def preflight(scene: Scenario, method: str = "exact",
               batch_frames: int | None = None) -> Preflight:
     """Count the limits ``scene`` hits with the weight solver ``method``."""
-    names = tuple(t.name for t in scene.targets)
-    counts = {lim: np.zeros(len(names), dtype=np.int64) for lim in LIMITS}
-    n_checkable = 0
+    counter = LimitCounter(scene)
     for _, tracks, schedule in schedule_batches(scene, method, batch_frames):
-        for lim, mask in limit_masks(tracks, schedule.status).items():
-            counts[lim] += mask.sum(axis=0)
-        n_checkable += int(checkable(tracks, schedule.status).sum())
-    expected = scene.expectations.expected_limits
-    return Preflight(
-        scene=scene.name,
-        targets={name: {lim: int(c[k]) for lim, c in counts.items() if c[k]}
-                 for k, name in enumerate(names)
-                 if any(c[k] for c in counts.values())},
-        scene_limits=scene_limits(scene),
-        expected={t.name: expected | t.expected_limits for t in scene.targets},
-        scene_expected=expected, checkable_frames=n_checkable)
+        counter.add(tracks, schedule)
+    return counter.result()

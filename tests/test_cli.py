@@ -403,6 +403,18 @@ def test_list_validate_and_schedule_show_the_variants(tmp_path, capsys, monkeypa
     assert capsys.readouterr().out.startswith(f"{scene}[1=40.0]: 80 frames")
 
 
+def test_schedule_warns_of_what_it_does_not_play(tmp_path, capsys):
+    # As validate and run say it: a target the export leaves unplayed is named, not only
+    # counted in the share of entries emitted.
+    scene = two_variant_scene(tmp_path)
+    target = tmp_path / "s.npz"
+    assert cli.main(["schedule", str(scene), "--output", f"file:{target}", "--variant",
+                     "1=40.0"]) == 0
+    out, err = capsys.readouterr()
+    assert err.startswith(f"warning: {scene}[1=40.0]: cutting-car: out_of_coverage in "), err
+    assert out.startswith(f"{scene}[1=40.0]: 80 frames")
+
+
 def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_complete(
         tmp_path, capsys, monkeypatch):
     import rts_scenario.pipeline as pipeline
