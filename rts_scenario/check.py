@@ -100,7 +100,7 @@ _LIMIT_FLAGS = {
 }
 # Columns of the detections CSV (``run --detections``), in order.
 DETECTION_COLUMNS = ("scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
-                     "el_deg", "snr_db", "rcs_dbsm", "target", "variant")
+                     "el_deg", "snr_db", "rcs_dbsm", "target", "variant", "file")
 
 
 def limit_masks(tracks: Tracks, status: NDArray[np.uint16]) -> dict[str, BoolArray]:
@@ -235,6 +235,9 @@ class Checker:
     variant, parameters : str, mapping of str to any, optional
         The combination of the scene's ``parametrize`` block that runs (`Scenario.variant`,
         `Scenario.parameters`): the report and every detection row name it.
+    file : str, optional
+        The scene's file (`Scenario.file`): every detection row names it, so that two scene
+        files of one name are told apart.
     cycle_s : float, optional
         The radar's cycle: a gap in its counters longer than half their range is told by the
         cycles' bus times (`sequential_numbers`). Without it, by the counters alone.
@@ -247,9 +250,10 @@ class Checker:
                  scene_limits: Mapping[str, str] | None = None,
                  detections_out: TextIO | None = None, variant: str = "",
                  parameters: Mapping[str, Any] | None = None,
-                 cycle_s: float | None = None) -> None:
+                 cycle_s: float | None = None, file: str = "") -> None:
         self.scene = scene
         self.variant = variant
+        self.file = file
         self.parameters = dict(parameters or {})
         self.names = names
         self.expectations = expectations
@@ -828,6 +832,7 @@ class Checker:
         names = np.array(("", *self.names), dtype=object)
         columns.append(names[match + 1].tolist())
         columns.append([self.variant] * frame_of.size)
+        columns.append([self.file] * frame_of.size)
         self._csv.writerows(zip(*columns, strict=True))
 
     def _keep_worst(self, block: _Block, truth: BoolArray, assigned: BoolArray,

@@ -176,6 +176,23 @@ def refuse_other_kind(file: str | Path, data: Any, expected: str) -> None:
     raise error
 
 
+def other_than_fragment(file: str | Path, data: Any) -> str | None:
+    """Say what ``file``, listed under a scene's ``include:``, is instead of a fragment.
+
+    ``data``: its YAML data. ``None`` when it may be a fragment (left to the fragment schema).
+
+    Returns
+    -------
+    str or None
+        ``a rig file (its rts_rig key), not a scene fragment (...); where it goes``.
+    """
+    found = identify(file, data)
+    if found is None or found == _FRAGMENT:
+        return None
+    what, evidence, goes = found
+    return f"{what} ({evidence}), not {_FRAGMENT[0]} ({_FRAGMENT[1]}); {goes}"
+
+
 def load_kind(path: str | Path, expected: str) -> Document:
     """Load ``path`` as a file of the kind ``expected`` (a suffix of `KINDS`).
 
@@ -195,7 +212,7 @@ def load_kind(path: str | Path, expected: str) -> Document:
 
 
 __all__ = ["FOREIGN", "KINDS", "identify", "kind_by_name", "kind_name", "load_kind",
-           "read_only_kind", "refuse_other_kind"]
+           "other_than_fragment", "read_only_kind", "refuse_other_kind"]
 
 
 # A scene's version key, at the start of a line (a key of the file's top-level mapping), with

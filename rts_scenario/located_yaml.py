@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -334,8 +335,16 @@ def load_yaml(path: str | Path, text: str | None = None) -> Document:
     return Document(data=data, file=file, marks=marks)
 
 
-def validate(document: Document, schema: dict[str, Any]) -> None:
+# The top-level keys that carry a file's format version (scene, rig, radar profile, CAN mapping).
+VERSION_KEYS = frozenset({"rts_scenario", "rts_rig", "rts_radar", "rts_can_mapping"})
+
+
+def validate(document: Document, schema: dict[str, Any],
+             skip: Iterable[KeyPath] = ()) -> None:
     """Check ``document`` against a JSON Schema; raise the most relevant error, located.
+
+    ``skip``: key paths whose values are not judged (errors at or below them are left out,
+    and a key among them missing is none).
 
     Raises
     ------
@@ -346,7 +355,26 @@ def validate(document: Document, schema: dict[str, Any]) -> None:
         raise document.error((), "the file is empty: expected a mapping of keys")
     _reject_non_finite(document, document.data, ())
     validator = jsonschema.Draft202012Validator(schema)
-    best = jsonschema.exceptions.best_match(validator.iter_errors(document.data))
+    skipped = [tuple(path) for path in skip]
+
+    def judged(error: jsonschema.ValidationError) -> bool:
+        at = tuple(error.absolute_path)
+        if error.validator == "required" and isinstance(error.instance, dict):
+            missing = [k for k in error.validator_value if k not in error.instance]
+            if missing and all((*at, k) in skipped for k in missing):
+                return False
+        return not any(at[:len(p)] == p for p in skipped)
+
+    errors = [e for e in validator.iter_errors(document.data) if judged(e)]
+    # The format version first: a file of another version is not judged by this version's
+    # keys (those a later format added are no typos).
+    version = next((e for e in errors if e.validator == "enum" and len(e.absolute_path) == 1
+                    and e.absolute_path[0] in VERSION_KEYS), None)
+    if version is not None:
+        raise document.error(tuple(version.absolute_path),
+                             f"{_describe(version)} (the file's format version: this version "
+                             f"of rts-scenario reads no other)")
+    best = jsonschema.exceptions.best_match(errors)
     if best is None:
         return
     path: KeyPath = tuple(best.absolute_path)

@@ -42,15 +42,20 @@ def safe_stem(name: str) -> str:
     return stem or "scene"
 
 
-def write_plots(result: RunResult, folder: str | Path, stem: str | None = None) -> list[Path]:
+def write_plots(result: RunResult, folder: str | Path, stem: str | None = None,
+                method: str = "exact") -> list[Path]:
     """Write the run's plots into ``folder``; return the files written.
 
-    ``stem`` starts every file name (default: the scene's name, made safe by `safe_stem`).
+    ``stem`` starts every file name (default: the scene's name, made safe by `safe_stem`);
+    ``method``: the weight solver the run played with (`RunOptions.method`), whose schedule
+    the plots draw.
     """
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    from .check import checkable
     from .kinematics import compute_tracks
+    from .preflight import angle_tolerance_deg
     from .schedule import build_schedule
 
     scene, report = result.scene, result.report
@@ -59,7 +64,12 @@ def write_plots(result: RunResult, folder: str | Path, stem: str | None = None) 
         raise RtsError("plots need the per-frame record: run with RunOptions(record=True)")
     # The run streamed its frames; the plots draw the whole scene, so it is evaluated again.
     tracks = compute_tracks(scene)
-    schedule = build_schedule(tracks, scene.rig, scene.radar, frame_rate_hz=scene.frame_rate_hz)
+    # As the run built it: the statuses it judged by, the weights it played.
+    schedule = build_schedule(tracks, scene.rig, scene.radar, method=method,
+                              estimator=scene.radar_options.estimator,
+                              frame_rate_hz=scene.frame_rate_hz,
+                              angle_tolerance_deg=angle_tolerance_deg(scene))
+    judged = checkable(tracks, schedule.status)
     stem = safe_stem(stem if stem is not None else scene.name)
     names = tracks.names
     colors = plt.cm.tab10(np.arange(len(names)) % 10)
@@ -71,13 +81,14 @@ def write_plots(result: RunResult, folder: str | Path, stem: str | None = None) 
         top.plot(tracks.position_m[seen, k, 1], tracks.position_m[seen, k, 0], color=colors[k],
                  label=name)
         angles.plot(tracks.az_deg[seen, k], tracks.el_deg[seen, k], color=colors[k])
-        ok = tracks.checkable[:, k]
+        ok = judged[:, k]
         angles.plot(tracks.az_deg[ok, k], tracks.el_deg[ok, k], ".", ms=2, color=colors[k])
     for poly in quad_polygons(scene.rig):
         ring = np.vstack([poly, poly[:1]])
         angles.fill(ring[:, 0], ring[:, 1], color="0.85", zorder=0)
         angles.plot(ring[:, 0], ring[:, 1], color="0.6", lw=0.8, zorder=0)
-    angles.plot(scene.rig.az_deg, scene.rig.el_deg, "k^", ms=6, label="front ends")
+    # Under the targets' tracks: a target straight ahead is often in an FE's direction.
+    angles.plot(scene.rig.az_deg, scene.rig.el_deg, "k^", ms=6, label="front ends", zorder=1)
     top.set(xlabel="y (m, left)", ylabel="x (m, forward)", title="targets seen from the radar")
     top.invert_xaxis()
     top.legend(fontsize=7, loc="best")

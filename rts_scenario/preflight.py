@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .check import limit_masks
+from .check import checkable, limit_masks
 from .kinematics import Tracks, compute_tracks
 from .scenario.model import LIMITS, Scenario
 from .schedule import Schedule, build_schedule
@@ -46,6 +46,8 @@ class Preflight:
         Per target name: the limits the scene declares expected for it.
     scene_expected : frozenset of str
         Scene-wide limits the scene declares expected.
+    checkable_frames : int or None
+        Target-frames under no limit, all targets together (None: not counted).
     """
 
     scene: str
@@ -53,9 +55,14 @@ class Preflight:
     scene_limits: dict[str, str]
     expected: dict[str, frozenset[str]]
     scene_expected: frozenset[str]
+    checkable_frames: int | None = None
 
     def unexpected(self) -> list[str]:
-        """One line per limit the scene does not declare (these fail a run's verdict)."""
+        """One line per limit the scene does not declare (these fail a run's verdict).
+
+        Also one where the scene has targets and none is checkable in any frame: whatever it
+        expects, a run has nothing to check and fails.
+        """
         out = [f"{name}: {why}" for name, why in self.scene_limits.items()
                if name not in self.scene_expected]
         for target, hits in self.targets.items():
@@ -63,6 +70,9 @@ class Preflight:
             if bad:
                 out.append(f"{target}: " + ", ".join(
                     f"{lim} in {n} frames ({LIMITS[lim]})" for lim, n in bad.items()))
+        if self.expected and self.checkable_frames == 0:
+            out.append("no target is checkable in any frame (each is under a limit "
+                       "throughout): a run has nothing to check and fails")
         return out
 
     def expected_lines(self) -> list[str]:
@@ -166,20 +176,38 @@ def angle_tolerance_deg(scene: Scenario) -> tuple[float, float]:
     return float(tol["az_deg"]), float(tol["el_deg"])
 
 
+class LimitCounter:
+    """Count a scene's limits batch by batch (`add`), as its schedule is built; `result`."""
+
+    def __init__(self, scene: Scenario) -> None:
+        self.scene = scene
+        self._counts = {lim: np.zeros(len(scene.targets), dtype=np.int64) for lim in LIMITS}
+        self._checkable = 0
+
+    def add(self, tracks: Tracks, schedule: Schedule) -> None:
+        """Count one batch's target-frames under each limit, and the checkable ones."""
+        for lim, mask in limit_masks(tracks, schedule.status).items():
+            self._counts[lim] += mask.sum(axis=0)
+        self._checkable += int(checkable(tracks, schedule.status).sum())
+
+    def result(self) -> Preflight:
+        """Return the `Preflight` of the batches added."""
+        scene, counts = self.scene, self._counts
+        expected = scene.expectations.expected_limits
+        return Preflight(
+            scene=scene.name,
+            targets={t.name: {lim: int(c[k]) for lim, c in counts.items() if c[k]}
+                     for k, t in enumerate(scene.targets)
+                     if any(c[k] for c in counts.values())},
+            scene_limits=scene_limits(scene),
+            expected={t.name: expected | t.expected_limits for t in scene.targets},
+            scene_expected=expected, checkable_frames=self._checkable)
+
+
 def preflight(scene: Scenario, method: str = "exact",
               batch_frames: int | None = None) -> Preflight:
     """Count the limits ``scene`` hits with the weight solver ``method``."""
-    names = tuple(t.name for t in scene.targets)
-    counts = {lim: np.zeros(len(names), dtype=np.int64) for lim in LIMITS}
+    counter = LimitCounter(scene)
     for _, tracks, schedule in schedule_batches(scene, method, batch_frames):
-        for lim, mask in limit_masks(tracks, schedule.status).items():
-            counts[lim] += mask.sum(axis=0)
-    expected = scene.expectations.expected_limits
-    return Preflight(
-        scene=scene.name,
-        targets={name: {lim: int(c[k]) for lim, c in counts.items() if c[k]}
-                 for k, name in enumerate(names)
-                 if any(c[k] for c in counts.values())},
-        scene_limits=scene_limits(scene),
-        expected={t.name: expected | t.expected_limits for t in scene.targets},
-        scene_expected=expected)
+        counter.add(tracks, schedule)
+    return counter.result()

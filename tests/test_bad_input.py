@@ -237,6 +237,12 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"key path: duration_s, seed\), got \[2.0\]"),
     ("parametrize-group-empty-path", TINY + "parametrize:\n  'duration_s,': [[1.0, 2]]\n",
      r"^{f}:16:\d+: parametrize.duration_s,: 'duration_s,': an empty key path"),
+    ("parametrize-empty-path", TINY + "parametrize:\n  '': [1.0, 2.0]\n",
+     r"^{f}:16:\d+: parametrize.*: '': an empty key path, or an empty part between dots; write "
+     r"a key path such as 'radar.estimator' or 'targets.0.rcs.rcs_dbsm'$"),
+    ("parametrize-empty-part", TINY + "parametrize:\n  targets..name: [a, b]\n",
+     r"^{f}:16:\d+: parametrize.targets..name: 'targets..name': an empty key path, or an empty "
+     r"part between dots"),
     # A YAML date is no value a report can hold (run --json, sweep --json lost every verdict).
     ("parametrize-date", TINY + "parametrize:\n  description: [2024-01-01, plain]\n",
      r"^{f}:16:\d+: parametrize.description\[0\]: got a date \(2024-01-01\); a value must be "
@@ -572,6 +578,22 @@ def test_bad_arguments_are_one_error_line(places, capsys, argv, code, pattern):
         expected = expected.replace("{" + key + "}", re.escape(value))
     assert re.search(expected, message), message
     assert "timing:" not in out  # checked before anything ran
+
+
+@pytest.mark.parametrize("argv", [["run", "{scene}", "--json", "-"],
+                                  ["run", "{scene}", "--detections", "-"],
+                                  ["sweep", "{scene}", "--json", "-"]],
+                         ids=["run-json", "run-detections", "sweep-json"])
+def test_a_dash_for_an_output_file_is_refused_not_written_as_a_file(places, capsys, monkeypatch,
+                                                                     tmp_path, argv):
+    # "-" reads as standard output, where the text report goes: not a file named "-".
+    monkeypatch.chdir(tmp_path)
+    argv = [a.format(**places) for a in argv]
+    assert call(argv) == 2
+    out, err = capsys.readouterr()
+    assert one_error(err) == (f"{argv[2]} -: a file path, not standard output (which carries "
+                              f"the text report); to name a file '-', write ./-")
+    assert "timing:" not in out and not (tmp_path / "-").exists()
 
 
 def test_catalogue_is_complete():

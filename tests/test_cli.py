@@ -119,6 +119,45 @@ def test_run_exit_codes_json_and_plots(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: ")
 
 
+def test_plots_draw_the_schedule_the_run_played(tmp_path, monkeypatch):
+    # --method paper plays the paper's weights: the schedule plot is of those, not the exact
+    # solver's, with the statuses the run judged by.
+    pytest.importorskip("matplotlib")
+    import rts_scenario.schedule as schedule
+
+    real, calls = schedule.build_schedule, []
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(schedule, "build_schedule", spy)
+    import matplotlib.pyplot as plt
+
+    from rts_scenario import plots
+
+    drawn = {}
+
+    def no_drawing(fig, path):  # what is drawn is the question, not the pixels
+        drawn[path.name] = [(line.get_label(), line.get_zorder()) for line in fig.axes[-1].lines]
+        plt.close(fig)
+        return path
+
+    monkeypatch.setattr(plots, "_save", no_drawing)
+    scene = tmp_path / "short.scenario.yaml"
+    scene.write_text((ROOT / "scenarios" / "approaching_target.scenario.yaml").read_text()
+                     .replace("duration_s: 7.5", "duration_s: 0.5"))
+    assert cli.main(["run", str(scene), "--method", "paper", "--plot", str(tmp_path / "p")]) == 0
+    # Every schedule built, the plot's among them, as the run played it.
+    assert calls and {(c.get("method"), c.get("angle_tolerance_deg")) for c in calls} == {
+        ("paper", (0.5, 1.0))}
+    # The car straight ahead sits on the middle FE's direction: its track is drawn over the
+    # FE's marker, not hidden under it (the quads' outlines, zorder 0, are the background).
+    lines = drawn["approaching-target-scene.png"]
+    fe = next(z for label, z in lines if label == "front ends")
+    assert fe < min(z for label, z in lines if label != "front ends" and z > 0)
+
+
 def test_a_can_channel_that_cannot_be_opened_is_bad_input(capsys):
     # The arguments name a CAN channel this machine does not have: exit 2 (as emulate), not
     # a runtime error, with one line naming the interface and the channel.
@@ -164,6 +203,15 @@ def test_validate_a_directory_is_a_clear_error(tmp_path, capsys):
     assert "Traceback" not in err
 
 
+@pytest.mark.parametrize("command", ["run", "validate"])
+def test_a_folder_given_as_a_scene_says_which_commands_take_folders(tmp_path, capsys, command):
+    # `sweep scenarios/` and `pytest scenarios/` take a folder; run and validate take files.
+    assert cli.main([command, str(tmp_path)]) == 2
+    assert capsys.readouterr().err.splitlines()[0] == (
+        f"error: {tmp_path}: cannot read file: a folder, where a scene file goes "
+        f"({tmp_path}/*.scenario.yaml); rts-scenario sweep and pytest take folders")
+
+
 def test_run_writes_every_detection_as_csv(tmp_path, capsys):
     import csv
 
@@ -183,8 +231,27 @@ def test_run_writes_every_detection_as_csv(tmp_path, capsys):
                        for t in entry["targets"])
         assert len(mine) == detected + entry["false_detections"]
     assert list(rows[0]) == ["scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
-                             "el_deg", "snr_db", "rcs_dbsm", "target", "variant"]
+                             "el_deg", "snr_db", "rcs_dbsm", "target", "variant", "file"]
     assert {r["target"] for r in rows} <= {"cutting-car", "overtaker", ""}
+    assert {r["file"] for r in rows} == set(scenes)
+
+
+def test_detections_of_two_scene_files_of_one_name_are_told_apart(tmp_path):
+    # An edited copy of a scene keeps its name: the CSV's file column says which run is which.
+    import csv
+
+    text = (ROOT / "scenarios" / "approaching_target.scenario.yaml").read_text()
+    text = text.replace("duration_s: 7.5", "duration_s: 0.5")
+    first, second = tmp_path / "a.scenario.yaml", tmp_path / "b.scenario.yaml"
+    first.write_text(text.replace("rcs_dbsm: 12.0", "rcs_dbsm: 10.0"))
+    second.write_text(text)
+    out = tmp_path / "d.csv"
+    assert cli.main(["run", str(first), str(second), "--detections", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert {r["scene"] for r in rows} == {"approaching-target"}
+    by_file = {f: {r["rcs_dbsm"] for r in rows if r["file"] == f} for f in (str(first),
+                                                                            str(second))}
+    assert by_file == {str(first): {"10"}, str(second): {"12"}}
 
 
 def two_variant_scene(folder: Path) -> Path:
@@ -301,6 +368,21 @@ def test_check_log_refuses_a_scene_other_than_the_recorded_variant(tmp_path):
                      log).report.passed
 
 
+def test_validate_says_which_variants_an_error_is_of(tmp_path, capsys):
+    # One line per error; its variants named, not only the first that hit it.
+    scene = two_variant_scene(tmp_path)
+    scene.write_text(scene.read_text().replace("rig: wide-3x5", "rig: nowhere.rig.yaml"))
+    assert cli.main(["validate", str(scene)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {scene}:") and err[0].endswith(
+        "nowhere.rig.yaml' (looked in " + str(tmp_path) + ") [every variant]"), err
+    scene.write_text(scene.read_text().replace("rig: nowhere.rig.yaml", "rig: wide-3x5")
+                     .replace("[3.5, 40.0]", "[3.5, 40.0, 1.0e+6]"))
+    assert cli.main(["validate", str(scene)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert [line for line in err if line.startswith("error: ")][0].endswith(" [1=1000000.0]")
+
+
 def test_list_validate_and_schedule_show_the_variants(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
     assert cli.main(["list"]) == 0
@@ -319,6 +401,18 @@ def test_list_validate_and_schedule_show_the_variants(tmp_path, capsys, monkeypa
     assert cli.main(["schedule", str(scene), "--output", f"file:{target}", "--variant",
                      "1=40.0"]) == 0
     assert capsys.readouterr().out.startswith(f"{scene}[1=40.0]: 80 frames")
+
+
+def test_schedule_warns_of_what_it_does_not_play(tmp_path, capsys):
+    # As validate and run say it: a target the export leaves unplayed is named, not only
+    # counted in the share of entries emitted.
+    scene = two_variant_scene(tmp_path)
+    target = tmp_path / "s.npz"
+    assert cli.main(["schedule", str(scene), "--output", f"file:{target}", "--variant",
+                     "1=40.0"]) == 0
+    out, err = capsys.readouterr()
+    assert err.startswith(f"warning: {scene}[1=40.0]: cutting-car: out_of_coverage in "), err
+    assert out.startswith(f"{scene}[1=40.0]: 80 frames")
 
 
 def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_complete(

@@ -32,3 +32,12 @@ def test_the_cli_runs_as_a_module():
                           capture_output=True, text=True, env=env, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == f"rts-scenario {rts_scenario.__version__}"
+
+
+def test_the_package_runs_as_the_cli():
+    # `python -m rts_scenario`, as `python -m pytest` runs pytest.
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-m", "rts_scenario", "--version"],
+                          capture_output=True, text=True, env=env, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == f"rts-scenario {rts_scenario.__version__}"

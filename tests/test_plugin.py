@@ -196,6 +196,19 @@ def test_worst_frames_are_error_over_tolerance_as_their_heading_says():
     assert line.split() == ["7", "0.35", "car", "-0.500", "+0.250", "-1.250", "+0.250"]
 
 
+def test_no_worst_frames_is_said_not_an_empty_table():
+    # Nothing was judged (a target never checkable): no heading over no rows.
+    from types import SimpleNamespace
+
+    from pytest_rts_scenario import _render
+
+    scene_ = SimpleNamespace(expectations=SimpleNamespace(tolerances={}))
+    report = SimpleNamespace(label="s", reasons=["nothing to check"], table=lambda: "TABLE",
+                             worst_frames=[])
+    text = _render(SimpleNamespace(scene=scene_, report=report))
+    assert text.splitlines()[-1] == "worst frames: none (no target-frame was judged)"
+
+
 def test_bad_scene_is_one_failing_item_naming_file_and_line(pytester):
     # One scene that does not load fails as one item, named after its file (as
     # `rts-scenario run` names it); the session still runs the others.

@@ -327,6 +327,25 @@ def test_a_fragment_included_twice_is_named_once(tmp_path):
                              "include[0] 'fr/ok.yaml'); include each fragment once")
 
 
+@pytest.mark.parametrize("name, text, what", [
+    ("other.scenario.yaml", GOOD, "a scene file (*.scenario.yaml)"),
+    ("lab.yaml", "rts_rig: 1\nname: r\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n",
+     "a rig file (its rts_rig key)"),
+])
+def test_a_file_of_another_kind_under_include_is_named_as_what_it_is(tmp_path, name, text,
+                                                                      what):
+    # Not its keys listed as unknown to a fragment: what it is, where the scene lists it.
+    (tmp_path / name).write_text(text)
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit("targets:", f"include: [{name}]\ntargets:"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    err = info.value
+    assert (err.file, err.line, err.key_path) == (str(scene), 11, "include[0]")
+    assert str(err).split(": ", 2)[2].startswith(
+        f"{name!r} is {what}, not a scene fragment (only targets and a description); ")
+
+
 def test_relative_rig_and_profile_files_inside_the_tree(tmp_path):
     (tmp_path / "rigs").mkdir()
     shutil.copy(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml", tmp_path / "rigs")
@@ -371,6 +390,27 @@ def test_cli_validate_exit_codes(tmp_path, capsys):
     assert cli.main(["validate", str(good), str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"error: {bad}:1:") and "Traceback" not in err
+
+
+@pytest.mark.parametrize("kind", ["scene", "rig"])
+def test_a_file_of_another_format_version_is_told_so_before_its_keys(tmp_path, kind):
+    # A file a later format wrote has keys this one does not know: its version is the error,
+    # not the first key it does not know.
+    scene = tmp_path / "later.scenario.yaml"
+    if kind == "scene":
+        scene.write_text(GOOD.replace("rts_scenario: 1", "rts_scenario: 2")
+                         + "weather: {rain_mm_per_h: 5}\n")
+        where = f"{scene}:1:1: rts_scenario"
+    else:
+        rig = tmp_path / "later.rig.yaml"
+        rig.write_text("rts_rig: 2\nname: later\nmirrors: 3\n"
+                       "layout: {az_deg: [-10, 10], el_deg: [-5, 5]}\n")
+        scene.write_text(GOOD.replace("rig: wide-3x5", "rig: later.rig.yaml"))
+        where = f"{rig}:1:1: rts_rig"
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    assert str(info.value) == (f"{where}: got 2; allowed values: 1 (the file's format version: "
+                               f"this version of rts-scenario reads no other)")
 
 
 # --- fuzzing: only ScenarioError may escape the loader ---------------------------------------
@@ -471,6 +511,28 @@ def test_key_paths_joined_by_commas_vary_together(tmp_path):
     scene = load_scenario(path, combos[2][1])
     assert scene.duration_s == 8.0
     assert scene.radar_options.estimator == "bartlett"
+
+
+def test_a_value_the_parametrize_block_puts_in_place_may_be_a_placeholder(tmp_path):
+    # The file as written is none of the runs: each combination is validated, with its values
+    # in place, not the placeholder.
+    path = tmp_path / "placeholder.scenario.yaml"
+    path.write_text(GOOD.replace("speed_mps: 19.0}", "speed_mps: null}")
+                    + "parametrize:\n  targets.0.motion.speed_mps: [18.0, 19.0]\n")
+    combos = parametrizations(path)
+    assert [ident for ident, _ in combos] == ["speed_mps=18.0", "speed_mps=19.0"]
+    assert load_scenario(path, combos[1][1]).name == "good"
+    # Or left out: the block puts it in place.
+    path.write_text(GOOD.replace(", speed_mps: 19.0}", "}")
+                    + "parametrize:\n  targets.0.motion.speed_mps: [18.0, 19.0]\n")
+    assert [ident for ident, _ in parametrizations(path)] == ["speed_mps=18.0", "speed_mps=19.0"]
+    # Any other bad value of the file is still one error naming it.
+    path.write_text(GOOD.replace("speed_mps: 19.0}", "speed_mps: null}")
+                    + "parametrize:\n  targets.0.rcs.rcs_dbsm: [8.0, 10.0]\n")
+    with pytest.raises(ScenarioError, match=r"placeholder.scenario.yaml:13:\d+: "
+                                            r"targets\[0\]\.motion\.speed_mps: must be of type "
+                                            r"number, got None"):
+        parametrizations(path)
 
 
 def test_combinations_with_the_same_id_are_refused(tmp_path):

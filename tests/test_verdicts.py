@@ -311,3 +311,23 @@ def test_a_target_nothing_was_checked_of_says_so_and_does_not_read_as_passed(tmp
     assert head.split()[:2] == ["target", "cycles"]
     assert rows["car"].split()[1] == str(car.checkable_frames)
     assert [t["checked"] for t in report.to_dict()["targets"]] == [True, False]
+
+
+def test_validate_refuses_a_scene_with_nothing_checkable_under_strict(tmp_path, capsys):
+    # Every target behind the radar all scene long, its limit expected: a run has nothing to
+    # check and fails, so validate says so before a bench is booked for it.
+    import rts_scenario.cli as cli
+    from rts_scenario.preflight import preflight
+    from rts_scenario.scenario import load_scenario
+
+    behind = ("- {name: ped, rcs: {rcs_dbsm: 0.0}, expected_limits: [out_of_coverage], "
+              "motion: {type: stationary, position_m: [-20, 0, 1.1]}}\n")
+    path = scene(tmp_path, "nothing", behind)
+    assert preflight(load_scenario(path)).unexpected() == [
+        "no target is checkable in any frame (each is under a limit throughout): a run has "
+        "nothing to check and fails"]
+    assert cli.main(["validate", str(path)]) == 0
+    assert cli.main(["validate", "--strict", str(path)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1] == (f"error: {path}: no target is checkable in any frame (each is under a "
+                       f"limit throughout): a run has nothing to check and fails")

@@ -452,6 +452,18 @@ def test_cli_import_then_validate_and_run(tmp_path, capsys):
     assert "PASS: lead" in capsys.readouterr().out
 
 
+def test_cli_import_warns_of_the_limits_a_run_would_fail_on(tmp_path, capsys):
+    # The cutter starts beside the ego, outside the rig's field: the scene is written, and the
+    # import says, as validate does, what a run of it will fail on unless it is declared.
+    out = tmp_path / "cut.scenario.yaml"
+    assert main(["import", str(DATA / "cut_in.xosc"), "--radar", "awr1843boost", "--rig",
+                 "wide-3x5", "--output", str(out)]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"warning: {out}: Cutter: out_of_coverage in "), err
+    assert main(["validate", str(out)]) == 0
+    assert capsys.readouterr().err.splitlines() == err
+
+
 def test_cli_errors_are_one_line_exit_2(tmp_path, capsys):
     out = tmp_path / "x.scenario.yaml"
     base = [str(DATA / "cut_in.xosc"), "--radar", "awr1843boost", "--rig", "wide-3x5",

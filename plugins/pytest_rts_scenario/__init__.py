@@ -374,10 +374,12 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
 def _render(result: RunResult) -> str:
     """Render the report table and the worst frames (misses first, then largest errors)."""
     report = result.report
-    lines = [f"FAIL: {report.label} - {'; '.join(report.reasons)}", "", report.table(), "",
-             "worst frames (error / tolerance):",
-             f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
-             f"{'el':>8}"]
+    lines = [f"FAIL: {report.label} - {'; '.join(report.reasons)}", "", report.table(), ""]
+    if not report.worst_frames:
+        return "\n".join([*lines, "worst frames: none (no target-frame was judged)"])
+    lines += ["worst frames (error / tolerance):",
+              f"{'frame':>6} {'t_s':>7} {'target':<18} {'range':>8} {'vel':>8} {'az':>8} "
+              f"{'el':>8}"]
     tolerances = result.scene.expectations.tolerances
     for row in report.worst_frames:
         # Each error over its tolerance (as the frames are ranked): beyond +-1 is out of it.
@@ -403,15 +405,19 @@ class HtmlReport:
         report = yield
         failure = call.excinfo.value if call.excinfo is not None else None
         if isinstance(failure, ScenarioFailed):
-            extras = [*getattr(report, "extras", []), *_html_extras(failure.result)]
+            extras = [*getattr(report, "extras", []),
+                      *_html_extras(failure.result, item.config.getoption("--rts-method"))]
             report.extras = extras  # type: ignore[attr-defined]  # pytest-html reads it
             if failure.result.report.record is not None:
                 failure.result.report.record.close()  # the plots are drawn; free the disk
         return report
 
 
-def _html_extras(result: RunResult) -> list[dict[str, Any]]:
-    """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG."""
+def _html_extras(result: RunResult, method: str) -> list[dict[str, Any]]:
+    """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG.
+
+    ``method``: the weight solver the run played with (``--rts-method``).
+    """
     import base64
     import html
     import importlib.util
@@ -428,7 +434,7 @@ def _html_extras(result: RunResult) -> list[dict[str, Any]]:
                                   "'rts-scenario[plot]').</p>")]
     with tempfile.TemporaryDirectory(prefix="rts-scenario-html-") as folder:
         try:
-            written = write_plots(result, folder)
+            written = write_plots(result, folder, method=method)
         except Exception as exc:  # a report that cannot draw must not break the test session
             return [*out, extras.html(f"<p>No plots: {html.escape(type(exc).__name__)}: "
                                       f"{html.escape(str(exc))}</p>")]

@@ -160,6 +160,9 @@ def check_writable_file(option: str, path: str | Path, kind: str | None = None) 
     target = Path(path)
     if str(path) == "":
         raise RtsError(f"{option}: needs a file path, got an empty one")
+    if str(path) == "-":  # read as standard output, not a file named "-" in the current folder
+        raise RtsError(f"{option} -: a file path, not standard output (which carries the text "
+                       f"report); to name a file '-', write ./-")
     from ..file_kinds import read_only_kind
 
     named = read_only_kind(target.name)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -96,7 +97,7 @@ def _do_import(args: argparse.Namespace) -> int:
                            f"beyond the scene format's or the bench's limits); {output} not "
                            f"written: {reason}") from None
         try:
-            preflight(scene)  # its whole schedule, built as validate and run build it
+            pre = preflight(scene)  # its whole schedule, built as validate and run build it
         except RtsError as exc:
             reason = located(str(output), exc).replace(str(draft), str(output))
             raise RtsError(f"{args.file}: the scene it converts to cannot be played (its "
@@ -108,6 +109,10 @@ def _do_import(args: argparse.Namespace) -> int:
         draft.unlink(missing_ok=True)
     for note in result.notes:
         print(f"note: {note}")
+    # What a run of it fails on unless the scene declares it (expected_limits), as validate
+    # says it.
+    for line in pre.unexpected():
+        print(f"warning: {output}: {line}", file=sys.stderr)
     print(f"imported {args.file} -> {output}: ego {result.ego}, {len(scene.targets)} targets, "
           f"{scene.duration_s:g} s")
     return EXIT_OK

@@ -183,7 +183,7 @@ def _do_run(args: argparse.Namespace) -> int:
 
                         stem = _unique(safe_stem(scene.label), stems)
                         with writing("--plot", args.plot):
-                            written_plots = write_plots(result, args.plot, stem)
+                            written_plots = write_plots(result, args.plot, stem, args.method)
                         for written in written_plots:
                             print(f"wrote {written}")
                 except Exception as exc:

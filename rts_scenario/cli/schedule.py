@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from .common import EXIT_OK, METHODS, check_distinct_paths, check_output
@@ -12,7 +13,7 @@ def _do_schedule(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from ..outputs import open_output, split_spec
-    from ..preflight import schedule_batches
+    from ..preflight import LimitCounter, schedule_batches
     from ..scenario import load_scenario, select_variant
 
     check_output("--output", args.output, run=False)
@@ -22,13 +23,18 @@ def _do_schedule(args: argparse.Namespace) -> int:
     _, overrides = select_variant(args.scene, args.variant)
     scene = load_scenario(args.scene, overrides)
     emitted = total = 0
+    limits = LimitCounter(scene)
     with open_output(args.output) as out:
         # In batches of bounded size, as a run streams them: memory does not grow with the scene.
-        for frames, _, schedule in schedule_batches(scene, args.method):
+        for frames, tracks, schedule in schedule_batches(scene, args.method):
             out.write(replace(schedule, frame_index=frames))
             emitted += int(schedule.emitted.sum())
             total += schedule.emitted.size
+            limits.add(tracks, schedule)
     label = f"{args.scene}[{scene.variant}]" if scene.variant else args.scene
+    # What the schedule does not play as specified, as validate and run say it.
+    for line in limits.result().unexpected():
+        print(f"warning: {label}: {line}", file=sys.stderr)
     print(f"{label}: {scene.n_frames} frames x {len(scene.targets)} targets, "
           f"{emitted / max(total, 1):.0%} of entries emitted -> {args.output}")
     return EXIT_OK

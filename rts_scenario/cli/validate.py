@@ -26,6 +26,7 @@ def _do_validate(args: argparse.Namespace) -> int:
             bad += 1
             continue
         reported: set[str] = set()
+        errors: dict[str, list[str]] = {}  # message -> the combinations that hit it
         for ident, overrides in combos:
             label = f"{path}[{ident}]" if ident else str(path)
             try:
@@ -33,11 +34,7 @@ def _do_validate(args: argparse.Namespace) -> int:
                 pre = preflight(scene, args.method)
             except RtsError as exc:
                 bad += 1
-                message = located(path, exc)
-                if message not in reported:  # an error every combination shares, once
-                    reported.add(message)
-                    where = f" [{ident}]" if ident else ""
-                    print(f"error: {message}{where}", file=sys.stderr)
+                errors.setdefault(located(path, exc), []).append(ident)
                 continue
             # Limits the scene does not declare fail a run's verdict: a warning here, an error
             # with --strict. Declared ones are shown and fail nothing.
@@ -56,6 +53,12 @@ def _do_validate(args: argparse.Namespace) -> int:
             if not (args.strict and unexpected):
                 print(f"ok: {label}: {scene.n_frames} frames, {len(scene.targets)} targets, "
                       f"schedule built")
+        # An error several combinations share, once, naming them all.
+        for message, idents in errors.items():
+            where = ("" if idents == [""] else
+                     " [every variant]" if len(idents) == len(combos) > 1 else
+                     f" [{', '.join(idents)}]")
+            print(f"error: {message}{where}", file=sys.stderr)
     return EXIT_BAD_INPUT if bad else EXIT_OK
 
 

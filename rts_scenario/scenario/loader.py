@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import RtsError, ScenarioError
-from ..file_kinds import kind_by_name, kind_name, load_kind
+from ..file_kinds import kind_by_name, kind_name, load_kind, other_than_fragment
 from ..located_yaml import Document, KeyPath, format_key_path, load_yaml, validate
 from ..radar.profile import RadarProfile
 from ..radar.profile import preset_names as radar_presets
@@ -120,6 +120,9 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                             f"{data['include'][first]!r}); include each fragment once")
         included[fragment_path] = i
         fragment = load_yaml(fragment_path)
+        other = other_than_fragment(fragment_path, fragment.data)
+        if other is not None:
+            raise doc.error(("include", i), f"{name!r} is {other}")
         if not isinstance(fragment.data, dict):
             raise fragment.error((), "a fragment must be a mapping with a 'targets' list")
         _check_target_limits(fragment)
@@ -286,11 +289,20 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     together (as in ``pytest.mark.parametrize("a,b", ...)``): each of its values is then a list
     with one value per path. The combinations are the product over the keys.
     """
+    if Path(path).is_dir():  # `sweep DIR` and `pytest DIR` take one; a scene is a file
+        raise ScenarioError(f"cannot read file: a folder, where a scene file goes "
+                            f"({Path(path) / '*'}{SCENE_SUFFIX}); rts-scenario sweep and "
+                            f"pytest take folders", file=str(path))
     doc = load_yaml(path)
     block = doc.data.get("parametrize") if isinstance(doc.data, dict) else None
     if not block:
         return [("", {})]
-    validate(doc, scenario_schema())
+    # The file as written is none of the runs: what the block puts in place is judged in each
+    # combination (`load_scenario`), so a placeholder there is no error of the file.
+    placed = [tuple(int(p) if p.isdigit() else p for p in path.strip().split("."))
+              for key in block if isinstance(key, str) for path in key.split(",")
+              ] if isinstance(block, dict) else []
+    validate(doc, scenario_schema(), skip=placed)
     for key, values in block.items():
         _check_plain(doc, ("parametrize", key), values)
     axes = [_parameter_axis(doc, key, values) for key, values in block.items()]
@@ -421,11 +433,15 @@ def _parameter_axis(doc: Document, key: str,
                     values: list[Any]) -> list[list[tuple[str, Any]]]:
     """One axis of the product: per value, the (key path, value) pairs it sets."""
     paths = [p.strip() for p in key.split(",")]
-    if len(paths) == 1:
-        return [[(key, value)] for value in values]
-    if not all(paths):
+    if len(paths) > 1 and not all(paths):
         raise doc.error(("parametrize", key),
                         f"{key!r}: an empty key path between commas; write 'a.b, c.d'")
+    if not all(paths) or any(not part for path in paths for part in path.split(".")):
+        raise doc.error(("parametrize", key),
+                        f"{key!r}: an empty key path, or an empty part between dots; write a "
+                        f"key path such as 'radar.estimator' or 'targets.0.rcs.rcs_dbsm'")
+    if len(paths) == 1:
+        return [[(key, value)] for value in values]
     axis = []
     for i, value in enumerate(values):
         if not isinstance(value, list) or len(value) != len(paths):
