@@ -747,8 +747,13 @@ class GridCheck:
 
 
 def check_grid(rig: Rig, radar: RadarProfile, measure: Measure, method: str = "exact",
-               estimator: str = "bartlett") -> GridCheck:
-    """Play the check grid of `grid_errors` once; return the errors and the schedule's view."""
+               estimator: str = "bartlett", remeasured: list[str] | None = None,
+               what: str = "check grid") -> GridCheck:
+    """Play the check grid of `grid_errors`; return the errors and the schedule's view.
+
+    Played once more where some of its cycles did not come back (a bench's hiccup, as the
+    calibration's measurements are); ``what`` is then added to ``remeasured``.
+    """
     from .evaluation import evaluation_grid
     from .kinematics import Tracks
     from .schedule import build_schedule
@@ -773,7 +778,7 @@ def check_grid(rig: Rig, radar: RadarProfile, measure: Measure, method: str = "e
                     position_m=np.zeros((n, 1, 3)), present=one, in_coverage=one, in_range=one,
                     in_velocity=one)
     schedule = build_schedule(tracks, rig, radar, method=method, estimator=estimator)
-    dets = measure(schedule)
+    dets = _measured(measure, schedule, what, [] if remeasured is None else remeasured)
     gate = Gate.of(rig, radar, schedule)
     out = np.full((n, 2), np.nan)
     for i, d in enumerate(dets):  # one target per frame, read in its gate

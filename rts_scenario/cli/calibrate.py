@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from typing import Any
 
@@ -99,8 +100,11 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     # The messages of other channels than --radar-channel skipped, over both benches.
     other_channels = 0
     try:
+        # Check-grid measurements played a second time (the calibration's are its own).
+        grid_again: list[str] = []
         with bench(rig) as pipeline:
-            before = cal.check_grid(rig, radar, pipeline.play, method, args.estimator)
+            before = cal.check_grid(rig, radar, pipeline.play, method, args.estimator,
+                                    grid_again, "check grid before calibration")
             result = cal.calibrate(rig, radar, pipeline.play, estimator=args.estimator,
                                    progress=Progress("calibrate", unit="FE pairs measured",
                                                      minimum=1))
@@ -108,7 +112,9 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         other_channels += pipeline.measurement_other_channels
         calibrated = result.apply(rig)
         with bench(calibrated) as checked:
-            after = cal.check_grid(calibrated, radar, checked.play, method, args.estimator)
+            after = cal.check_grid(calibrated, radar, checked.play, method, args.estimator,
+                                   grid_again, "check grid after calibration")
+        result = dataclasses.replace(result, remeasured=(*result.remeasured, *grid_again))
         steps += [{**s, "measurement": int(s["measurement"]) + pipeline.measurements}
                   for s in checked.measurement_steps]
         other_channels += checked.measurement_other_channels
