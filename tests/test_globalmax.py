@@ -9,6 +9,7 @@ import pytest
 from cascade_arrays import cascade_like, compact_cascade, ti_cascade
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from scene_helpers import write_scene
 
 import rts_scenario as rs
 from rts_scenario.solver import globalmax
@@ -266,3 +267,21 @@ def test_a_ghost_the_radar_would_report_splits_the_target():
             kinds.append("clear")
     # The set covers all three cases, the ghost alone among them.
     assert set(kinds) == {"clear", "ghost", "brighter"}, kinds
+
+
+def test_a_run_names_the_ghost_a_limit_not_the_radar_s_false_detections(tmp_path):
+    """The cascade straight ahead on wide-3x5: the solver's weights on the middle quads put
+    a ghost 0.5 dB weaker beside the target, which the radar reported as a false detection
+    every cycle; the run now says the target is not playable there."""
+    path = write_scene(tmp_path, [{
+        "name": "car", "kind": "car", "rcs": {"rcs_dbsm": 10.0},
+        "motion": {"type": "constant_velocity", "position_m": [33.7, 0.0, 0.5827],
+                   "speed_mps": 20.0}}],
+        duration_s=1.0, frame_rate_hz=10.0,
+        radar={"profile": "cascade-12x16", "mount": {"x_m": 3.7, "z_m": 0.5}},
+        ego={"motion": {"type": "constant_velocity", "position_m": [0, 0, 0],
+                        "speed_mps": 20.0}})
+    report = rs.run_scene(rs.load_scenario(path), rs.RunOptions()).report
+    (car,) = report.targets
+    assert report.false_detections == 0
+    assert set(car.limits) == {"not_synthesizable"} and not report.passed
