@@ -6,9 +6,10 @@ from the definition (DESIGN.md section 5.1); they share no code with the solver.
 
 import numpy as np
 import pytest
-from cascade_arrays import cascade_like, compact_cascade
+from cascade_arrays import cascade_like, compact_cascade, ti_cascade
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from scene_helpers import write_scene
 
 import rts_scenario as rs
 from rts_scenario.solver import globalmax
@@ -167,8 +168,23 @@ def test_pruned_probes_decide_as_all_probes(array_name, kit_rig):
     at_set = np.abs(np.einsum("qn,nq->n", b, weights))
     far = (((check.probe_u - u[:, None]) / check.cell_u) ** 2
            + ((check.probe_s - s[:, None]) / check.cell_s) ** 2) > globalmax.EXCLUSION_CELLS**2
-    strongest = np.where(far, np.abs(weights @ f), 0.0).max(axis=1)
-    expected = strongest >= at_set * (1 - globalmax.SAMPLING_LOSS)
+    level = np.abs(weights @ f) ** 2
+    strongest = np.where(far, level, 0.0).max(axis=1)
+    expected = strongest >= (at_set * (1 - globalmax.SAMPLING_LOSS)) ** 2
+    # Ghosts, over every probe: far local maxima of the probe grid of at least GHOST_POWER of
+    # the set direction's power where the array's own pattern stays below it.
+    n_u, n_s = check.grid_shape
+    grid = np.full((300, n_u + 2, n_s + 2), -np.inf)
+    iu, js = np.divmod(check.probe_cell, n_s)
+    grid[:, iu + 1, js + 1] = level
+    around = np.max([grid[:, 1 + a : 1 + a + n_u, 1 + b : 1 + b + n_s][:, iu, js]
+                     for a in (-1, 0, 1) for b in (-1, 0, 1) if a or b], axis=0)
+    du, ds = check.probe_u - u[:, None], check.probe_s - s[:, None]
+    own = np.abs(np.exp(1j * array.wavenumber_rad_per_m * (
+        du[..., None] * array.y_m + ds[..., None] * array.z_m)).mean(axis=-1)) ** 2
+    ghost = far & (level >= around) & (own < globalmax.GHOST_POWER) & (
+        level >= globalmax.GHOST_POWER * (at_set[:, None] * (1 - globalmax.SAMPLING_LOSS)) ** 2)
+    expected |= ghost.any(axis=1)
     assert 0 < expected.sum() < expected.size
     np.testing.assert_array_equal(check.splits(az, el, weights), expected)
 
@@ -179,3 +195,93 @@ def test_probes_cover_the_field_of_view(kit_rig):
     u_max, s_max = globalmax.FIELD_OF_VIEW
     assert check.probe_u.min() <= -u_max and check.probe_u.max() >= u_max
     assert check.probe_s.min() <= -s_max and check.probe_s.max() >= s_max
+
+
+def spectrum_peaks(array, x, u, s):
+    """Local maxima of ``|B|^2`` over the field of view beyond half a resolution cell.
+
+    The brute-force reference of the ghost test: the snapshot ``x`` (shape (M,)) scanned on a
+    grid of `REFERENCE_PER_CELL` points per cell, a point a peak where it is at least each of
+    its eight neighbours. Returns ``(power, du, ds)`` of each far peak, offsets from ``(u, s)``.
+    """
+    k = 2 * np.pi / array.wavelength_m
+    y, z = array.y_m, array.z_m
+    cell_u, cell_s = array.wavelength_m / np.ptp(y), array.wavelength_m / np.ptp(z)
+    gu = np.linspace(-U_MAX, U_MAX, int(2 * U_MAX / cell_u * REFERENCE_PER_CELL) + 1)
+    gs = np.linspace(-S_MAX, S_MAX, int(2 * S_MAX / cell_s * REFERENCE_PER_CELL) + 1)
+    look_u, look_s = np.exp(-1j * k * np.outer(gu, y)), np.exp(-1j * k * np.outer(z, gs))
+    power = np.abs((look_u * x) @ look_s) ** 2
+    padded = np.pad(power, 1, constant_values=-np.inf)
+    around = np.max([padded[1 + a : 1 + a + gu.size, 1 + b : 1 + b + gs.size]
+                     for a in (-1, 0, 1) for b in (-1, 0, 1) if a or b], axis=0)
+    i, j = np.nonzero(power >= around)
+    du, ds = gu[i] - u, gs[j] - s
+    far = (du / cell_u) ** 2 + (ds / cell_s) ** 2 > 0.25
+    return power[i, j][far], du[far], ds[far]
+
+
+def own_pattern(array, du, ds):
+    """Power of the array factor ``du, ds`` off a plane wave's direction, 1 on it."""
+    k = 2 * np.pi / array.wavelength_m
+    return np.abs(np.exp(1j * k * (np.outer(du, array.y_m) + np.outer(ds, array.z_m)))
+                  .mean(axis=1)) ** 2
+
+
+# The radar's estimator reports a secondary peak of at least half the strongest one's power
+# (`Bartlett2D`'s default peak_ratio): a target whose echoes show one it does not show for a
+# real target comes out as two detections. The ghost test's references read both levels with
+# the probe grid's sampling loss either way.
+PEAK_RATIO = 0.5
+GHOST_TOL = 2 * SAMPLING_TOL + 0.02
+
+
+def test_a_ghost_the_radar_would_report_splits_the_target():
+    """Targets on the edge of a wide quad on the cascade: two FEs 9 deg apart in elevation, less
+    than the cascade's elevation cell, synthesize the peak and a weaker ghost beside it."""
+    array = ti_cascade()
+    rig = rs.Rig.from_angles([-21.0, -10.5, -21.0, -10.5], [-9.0, -9.0, 0.0, 0.0])
+    fes = rig.quads[0]
+    el = np.r_[np.linspace(-8.5, -0.5, 17), np.linspace(-8.0, -1.0, 8)]
+    az = np.r_[np.full(17, -21.0), np.full(8, -15.75)]
+    weights, reason = ExactQuad.build(rig, array, fes).solve(np.radians(az), np.radians(el))
+    ok = np.flatnonzero(reason == rs.Reason.OK)
+    split = GlobalMaxCheck.build(rig, array, fes).splits(np.radians(az[ok]), np.radians(el[ok]),
+                                                         weights[ok])
+    u, s = cosines(az[ok], el[ok])
+    x = snapshots(array, weights[ok], rig.az_deg[fes], rig.el_deg[fes])
+    at_set = beam(array, x, u, s) ** 2
+    kinds = []
+    for n in range(ok.size):
+        power, du, ds = spectrum_peaks(array, x[n], u[n], s[n])
+        ratio = power / at_set[n]
+        own = own_pattern(array, du, ds)
+        brighter = np.any(ratio >= 1 - GHOST_TOL)
+        ghost_at = (ratio >= PEAK_RATIO * (1 - GHOST_TOL)) & (own < PEAK_RATIO * (1 + GHOST_TOL))
+        clear = np.all((ratio < PEAK_RATIO * (1 + GHOST_TOL))
+                       | (own >= PEAK_RATIO * (1 - GHOST_TOL)))
+        if split[n]:
+            assert brighter or ghost_at.any(), (az[ok][n], el[ok][n], ratio.max())
+            kinds.append("brighter" if brighter else "ghost")
+        else:
+            assert clear and not brighter, (az[ok][n], el[ok][n], ratio[~(own >= PEAK_RATIO)])
+            kinds.append("clear")
+    # The set covers all three cases, the ghost alone among them.
+    assert set(kinds) == {"clear", "ghost", "brighter"}, kinds
+
+
+def test_a_run_names_the_ghost_a_limit_not_the_radar_s_false_detections(tmp_path):
+    """The cascade straight ahead on wide-3x5: the solver's weights on the middle quads put
+    a ghost 0.5 dB weaker beside the target, which the radar reported as a false detection
+    every cycle; the run now says the target is not playable there."""
+    path = write_scene(tmp_path, [{
+        "name": "car", "kind": "car", "rcs": {"rcs_dbsm": 10.0},
+        "motion": {"type": "constant_velocity", "position_m": [33.7, 0.0, 0.5827],
+                   "speed_mps": 20.0}}],
+        duration_s=1.0, frame_rate_hz=10.0,
+        radar={"profile": "cascade-12x16", "mount": {"x_m": 3.7, "z_m": 0.5}},
+        ego={"motion": {"type": "constant_velocity", "position_m": [0, 0, 0],
+                        "speed_mps": 20.0}})
+    report = rs.run_scene(rs.load_scenario(path), rs.RunOptions()).report
+    (car,) = report.targets
+    assert report.false_detections == 0
+    assert set(car.limits) == {"not_synthesizable"} and not report.passed

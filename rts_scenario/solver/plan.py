@@ -281,7 +281,7 @@ def _tuning() -> tuple[float | int, ...]:
     return (
         SPLIT_MAP_NODES, CLEAR_MAXIMUM, SURVEY_MARGIN,
         *globalmax.FIELD_OF_VIEW, globalmax.PROBES_PER_CELL, globalmax.EXCLUSION_CELLS,
-        globalmax.SAMPLING_LOSS,
+        globalmax.SAMPLING_LOSS, globalmax.GHOST_POWER,
         PhaseMap.NODES, exact._NEGATIVE_TOL, exact._RANK_TOL, exact._MAX_ITERATIONS,
         exact._PHASE_TOL, exact._GAIN_TOL, exact._RESIDUAL_TOL,
         quads_module.DEGENERATE_AREA_DEG2,

@@ -29,6 +29,7 @@ _DESCRIPTIONS = {
     Reason.DEGENERATE: "the quad is degenerate (FEs share an azimuth or an elevation) and the "
                        "target is off the line it spans",
     Reason.SPLIT: "the echoes would split: the beamformer's global maximum is not at the set "
-                  "angle (FE spacing too wide for this radar)",
+                  "angle, or a second peak the radar would report as another target lies "
+                  "elsewhere (FE spacing too wide for this radar)",
     Reason.NOT_CONVERGED: "the iteration for this non-centro-symmetric array did not converge",
 }
