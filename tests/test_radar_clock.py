@@ -308,6 +308,35 @@ def test_a_run_follows_a_radar_whose_crystal_runs_off_its_profile(tmp_path, cycl
     assert rechecked["bus_cycle_s"] == pytest.approx(cycle_s, rel=1e-9)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_a_radar_of_another_cycle_is_told_through_more_jitter_than_its_profile_says(
+        tmp_path, seed):
+    # The profile says 50 ms cycles and no jitter; the radar measures every 60 ms and its
+    # messages wobble by +-4 ms on the bus (2.3 ms rms): 25 cycles over a 1.5 s scene, too few
+    # for the lack-of-fit test on segments of one cycle each. Whatever the jitter draws, the
+    # run names the profile's cycle as not the radar's and judges the cycles at its own,
+    # live and re-checked.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, counter_start=4242)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml",
+                          {"radar.profile": "radars/own.radar.yaml", "radar.noise": False,
+                           "radar.fidelity": "analytic", "duration_s": 1.5,
+                           "targets.0.lane_changes.0.start_s": 0.375,
+                           "expectations.expected_limits": ["frame_rate_above_radar"]})
+    rng = np.random.default_rng(seed)
+    log = tmp_path / "other.blf"
+    radar = dataclasses.replace(scene.radar.radar_clock, cycle_s=0.06)
+    report = run_stamped(scene, lambda n: 0.13 + rng.uniform(-0.004, 0.004, n.size), log,
+                         radar)
+    assert report.radar_clock["cycle_from"] == "bus"
+    assert report.radar_clock["cycle_s"] == pytest.approx(0.06, abs=2e-4)
+    assert report.frames["total"] == report.frames["checked"] == 25
+    assert len(report.reasons) == 1, report.reasons
+    assert "its profile says 50.000000 ms" in report.reasons[0]
+    assert report.reasons[0].startswith("radar_clock: the radar's cycles reached the bus every")
+    again = check_log(scene, log).report
+    assert again.reasons == report.reasons and again.frames == report.frames
+
+
 def test_a_radar_running_free_is_checked_at_the_phase_its_bus_times_show(tmp_path):
     # The profile knows the radar's cycle and latency, not when it was switched on: it measures
     # 31 ms into each 50 ms frame (and runs 300 ppm slow). Its bus times less its latency give

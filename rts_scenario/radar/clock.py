@@ -220,12 +220,13 @@ class LineSegments:
         degrees of freedom: ``K - 1 - rho`` between K segments, ``N - K - 1 + rho`` within,
         ``rho`` the share of the numbers' spread that lies between the segments) follows
         Fisher's F distribution there; a step or a bend in the points adds to the segments'
-        residuals alone. None before four segments, or with fewer degrees of freedom within
-        the segments than between them (too few points to measure their scatter).
+        residuals alone. Where the segments are too short to measure the points' scatter within
+        them (fewer degrees of freedom within than between: a short run's first cycles, one a
+        segment), neighbours are taken in pairs until they are not: the test does not depend on
+        what scatter anyone expected. None with fewer than four segments left.
         """
         s = self.segments
-        n_seg = len(s)
-        if n_seg < 4:
+        if len(s) < 4:
             return None
         total = s[0]
         for row in s[1:]:
@@ -234,13 +235,19 @@ class LineSegments:
         if sxx <= 0.0:
             return None
         slope = sxy / sxx
+        while True:
+            n_seg = len(s)
+            rho = float(s[:, 0] @ (s[:, 1] - mx) ** 2) / sxx
+            df_between, df_within = n_seg - 1.0 - rho, k - n_seg - 1.0 + rho
+            if df_within >= df_between and df_between > 0.0:
+                break
+            if n_seg < 8:
+                return None
+            even = n_seg - n_seg % 2
+            s = np.vstack([_combine(s[0:even:2], s[1:even:2]), s[even:]])
         residual = (s[:, 2] - my) - slope * (s[:, 1] - mx)
         between = float(s[:, 0] @ (residual * residual))
         within = float(np.sum(s[:, 5] - 2.0 * slope * s[:, 4] + slope * slope * s[:, 3]))
-        rho = float(s[:, 0] @ (s[:, 1] - mx) ** 2) / sxx
-        df_between, df_within = n_seg - 1.0 - rho, k - n_seg - 1.0 + rho
-        if df_within < df_between or df_between <= 0.0:
-            return None
         scatter = np.sqrt(max(within, 0.0) / df_within)
         if scatter > 0.0:
             f = (between / df_between) / scatter ** 2
@@ -437,9 +444,9 @@ class ClockTrack:
         off its profile leaves them on one, however large their latency's jitter, while a
         latency that changed on the way (messages held up by a loaded bus or machine from some
         cycle on) bends them, tilting the line without the radar's clock running off, and is
-        not followed (`latency_change_s`). Where the cycles are too few to tell (`SEGMENTS` or
-        fewer), they must keep to the line as the profile's jitter lets them (1.5
-        times its spread, at least `STAMP_NOISE_S`).
+        not followed (`latency_change_s`). Where the cycles are too few to tell (fewer than
+        eight: `LineSegments.test` has no four segments of two), they must keep to the line as
+        the profile's jitter lets them (1.5 times its spread, at least `STAMP_NOISE_S`).
         """
         fit = self._fit_s()
         if fit is None:
