@@ -67,6 +67,7 @@ from .playback import (
 from .preflight import scene_limits, schedule_batches, track_batches
 from .radar.clock import (
     CLOCK_TOLERANCE_PPM,
+    DRIFT_FLOOR_S,
     STAMP_NOISE_S,
     TIME_EPS_S,
     ClockTrack,
@@ -1768,10 +1769,16 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
         spread = 1.4826 * np.median(np.abs(residual - np.median(residual)))
         keep = np.abs(residual) <= max(5.0 * spread, FIT_OUTLIER_FLOOR_S)
         if not keep.all() and np.ptp(n[keep]) > 0:
-            cycle_s, first_s = np.polyfit(n[keep], t[keep], 1)
+            n, t = n[keep], t[keep]
+            cycle_s, first_s = np.polyfit(n, t, 1)
         if not cycle_s > 0:
             raise LogError(f"the log's timestamps go back as its radar cycles go on (a cycle of "
                            f"{cycle_s:.6g} s fits them); it cannot be aligned by them")
+        # A cycle the stamps cannot tell from the profile's (within three standard errors, or
+        # by less than rounding over the cycles), as live (`ClockTrack.cycle_from_bus`): the
+        # profile's, not the fit's noise.
+        if _indistinguishable(n, t, float(cycle_s), nominal_cycle_s):
+            cycle_s, first_s = nominal_cycle_s, float(np.mean(t - nominal_cycle_s * n))
     else:
         cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - t0 - numbers[ok][0]
                                                   * nominal_cycle_s)
@@ -1781,6 +1788,24 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
                       start_offset_s=max(0.0, float(start + shift * cycle_s)),
                       latency_s=latency_s,
                       counter_start=int((counters[0] + shift) % modulus) if counters.size else 0)
+
+
+def _indistinguishable(n: FloatArray, t: FloatArray, cycle_s: float,
+                       nominal_cycle_s: float) -> bool:
+    """Whether the cycle fitted to stamps ``t`` of cycles ``n`` may be ``nominal_cycle_s``.
+
+    Within three standard errors of the fit, or by less than `DRIFT_FLOOR_S` over the cycles'
+    span (stamps rounded to a microsecond).
+    """
+    off = abs(cycle_s - nominal_cycle_s)
+    if off * float(np.ptp(n)) <= DRIFT_FLOOR_S:
+        return True
+    if n.size < 3:
+        return False
+    dn = n - n.mean()
+    residual = t - t.mean() - cycle_s * dn
+    error = float(np.sqrt(residual @ residual / (n.size - 2) / (dn @ dn)))
+    return off <= 3.0 * error
 
 
 def _counter_restart(scene: Scenario, mapping: CanMapping | None) -> int | None:
