@@ -73,6 +73,7 @@ from .radar.clock import (
     ClockTrack,
     CycleTimeFit,
     RadarClock,
+    late_start_s,
 )
 from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
 from .report import Report
@@ -1514,7 +1515,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                     f"the radar's latency from the data, {latency * 1e3:.1f} ms, differs from "
                     f"its profile's {profile_clock.latency_s * 1e3:.1f} ms")
         clock = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
-                              profile_clock.cycle_s)
+                              profile_clock.cycle_s, restart)
         alignment.cycle_s = clock.cycle_s
     alignment.cycles_in_log = len(index)
     jump = None
@@ -1604,6 +1605,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     change = track.latency_change_s()
     if change is not None:
         result.radar_clock["latency_change_s"] = change[0]
+    late = (late_start_s(profile_clock, clock.start_offset_s)
+            if profile_clock.counter_start is not None else None)
+    if late is not None:
+        result.radar_clock["late_start_s"] = late
     result.radar_clock.update(lag)
     steps = ((sidecar or {}).get("clock") or {}).get("host_clock_steps") or []
     if steps:
@@ -1747,12 +1752,15 @@ def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float,
 
 
 def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
-                  offset_s: float, modulus: int, nominal_cycle_s: float) -> RadarClock:
+                  offset_s: float, modulus: int, nominal_cycle_s: float,
+                  restart: int | None = None) -> RadarClock:
     """Return the radar's clock in scene time fitted to the header timestamps.
 
     Its cycle 0 is the first one measured at or after the scene's time 0, whether the log
     holds it or not: a log that begins after the scene did lacks the cycles before, and those
-    are missing.
+    are missing. Unless the log's first cycle carries the counter the radar's count starts at
+    (``restart``, its profile's): a radar started after the scene began measured none
+    before it.
     """
     ok = np.isfinite(bus_t)
     if not ok.any():
@@ -1784,6 +1792,8 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
                                                   * nominal_cycle_s)
     start = (t0 - offset_s) - latency_s + first_s  # scene time of the log's cycle number 0
     shift = int(np.ceil((-start - START_TOLERANCE_S) / cycle_s))
+    if restart is not None and counters.size and int(counters[0]) == restart:
+        shift = max(shift, 0)
     return RadarClock(cycle_s=float(cycle_s),
                       start_offset_s=max(0.0, float(start + shift * cycle_s)),
                       latency_s=latency_s,
