@@ -67,11 +67,13 @@ from .playback import (
 from .preflight import scene_limits, schedule_batches, track_batches
 from .radar.clock import (
     CLOCK_TOLERANCE_PPM,
+    DRIFT_FLOOR_S,
     STAMP_NOISE_S,
     TIME_EPS_S,
     ClockTrack,
     CycleTimeFit,
     RadarClock,
+    late_start_s,
 )
 from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
 from .report import Report
@@ -1513,7 +1515,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                     f"the radar's latency from the data, {latency * 1e3:.1f} ms, differs from "
                     f"its profile's {profile_clock.latency_s * 1e3:.1f} ms")
         clock = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
-                              profile_clock.cycle_s)
+                              profile_clock.cycle_s, restart)
         alignment.cycle_s = clock.cycle_s
     alignment.cycles_in_log = len(index)
     jump = None
@@ -1603,6 +1605,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     change = track.latency_change_s()
     if change is not None:
         result.radar_clock["latency_change_s"] = change[0]
+    late = (late_start_s(profile_clock, clock.start_offset_s)
+            if profile_clock.counter_start is not None else None)
+    if late is not None:
+        result.radar_clock["late_start_s"] = late
     result.radar_clock.update(lag)
     steps = ((sidecar or {}).get("clock") or {}).get("host_clock_steps") or []
     if steps:
@@ -1746,12 +1752,15 @@ def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float,
 
 
 def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
-                  offset_s: float, modulus: int, nominal_cycle_s: float) -> RadarClock:
+                  offset_s: float, modulus: int, nominal_cycle_s: float,
+                  restart: int | None = None) -> RadarClock:
     """Return the radar's clock in scene time fitted to the header timestamps.
 
     Its cycle 0 is the first one measured at or after the scene's time 0, whether the log
     holds it or not: a log that begins after the scene did lacks the cycles before, and those
-    are missing.
+    are missing. Unless the log's first cycle carries the counter the radar's count starts at
+    (``restart``, its profile's): a radar started after the scene began measured none
+    before it.
     """
     ok = np.isfinite(bus_t)
     if not ok.any():
@@ -1768,19 +1777,45 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
         spread = 1.4826 * np.median(np.abs(residual - np.median(residual)))
         keep = np.abs(residual) <= max(5.0 * spread, FIT_OUTLIER_FLOOR_S)
         if not keep.all() and np.ptp(n[keep]) > 0:
-            cycle_s, first_s = np.polyfit(n[keep], t[keep], 1)
+            n, t = n[keep], t[keep]
+            cycle_s, first_s = np.polyfit(n, t, 1)
         if not cycle_s > 0:
             raise LogError(f"the log's timestamps go back as its radar cycles go on (a cycle of "
                            f"{cycle_s:.6g} s fits them); it cannot be aligned by them")
+        # A cycle the stamps cannot tell from the profile's (within three standard errors, or
+        # by less than rounding over the cycles), as live (`ClockTrack.cycle_from_bus`): the
+        # profile's, not the fit's noise.
+        if _indistinguishable(n, t, float(cycle_s), nominal_cycle_s):
+            cycle_s, first_s = nominal_cycle_s, float(np.mean(t - nominal_cycle_s * n))
     else:
         cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - t0 - numbers[ok][0]
                                                   * nominal_cycle_s)
     start = (t0 - offset_s) - latency_s + first_s  # scene time of the log's cycle number 0
     shift = int(np.ceil((-start - START_TOLERANCE_S) / cycle_s))
+    if restart is not None and counters.size and int(counters[0]) == restart:
+        shift = max(shift, 0)
     return RadarClock(cycle_s=float(cycle_s),
                       start_offset_s=max(0.0, float(start + shift * cycle_s)),
                       latency_s=latency_s,
                       counter_start=int((counters[0] + shift) % modulus) if counters.size else 0)
+
+
+def _indistinguishable(n: FloatArray, t: FloatArray, cycle_s: float,
+                       nominal_cycle_s: float) -> bool:
+    """Whether the cycle fitted to stamps ``t`` of cycles ``n`` may be ``nominal_cycle_s``.
+
+    Within three standard errors of the fit, or by less than `DRIFT_FLOOR_S` over the cycles'
+    span (stamps rounded to a microsecond).
+    """
+    off = abs(cycle_s - nominal_cycle_s)
+    if off * float(np.ptp(n)) <= DRIFT_FLOOR_S:
+        return True
+    if n.size < 3:
+        return False
+    dn = n - n.mean()
+    residual = t - t.mean() - cycle_s * dn
+    error = float(np.sqrt(residual @ residual / (n.size - 2) / (dn @ dn)))
+    return off <= 3.0 * error
 
 
 def _counter_restart(scene: Scenario, mapping: CanMapping | None) -> int | None:

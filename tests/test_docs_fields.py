@@ -268,6 +268,8 @@ REPORT_VALUES = {"true", "false", "null", "profile", "bus", "built", "memory", "
                  "frame_period_s", "clock", "parametrize", "latency_change_s", "interface",
                  "detection_lag_s", "detection_lag_error_s", "detection_lag_coupling_s",
                  "range_doppler_coupling", "corrected", "early_s",
+                 # Written only where a radar started its count after the scene began.
+                 "late_start_s",
                  # Written only where the host's wall clock stepped during the run.
                  "host_clock_steps", "at_s", "within_s", "size_s",
                  # Written only where another sender's stream took the RTS over

@@ -1,6 +1,7 @@
 """The radar on its own clock: cycles, counters, the RTS's hold, time-aligned checking."""
 
 import dataclasses
+import json
 import re
 import shutil
 import textwrap
@@ -306,6 +307,77 @@ def test_a_run_follows_a_radar_whose_crystal_runs_off_its_profile(tmp_path, cycl
     assert rechecked["counter_start"] == clock["counter_start"]
     assert rechecked["cycle_s"] == pytest.approx(clock["cycle_s"], rel=1e-12)
     assert rechecked["bus_cycle_s"] == pytest.approx(cycle_s, rel=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_radar_of_another_cycle_is_told_through_more_jitter_than_its_profile_says(
+        tmp_path, seed):
+    # The profile says 50 ms cycles and no jitter; the radar measures every 60 ms and its
+    # messages wobble by +-4 ms on the bus (2.3 ms rms): 25 cycles over a 1.5 s scene, too few
+    # for the lack-of-fit test on segments of one cycle each. Whatever the jitter draws, the
+    # run names the profile's cycle as not the radar's and judges the cycles at its own,
+    # live and re-checked.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, counter_start=4242)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml",
+                          {"radar.profile": "radars/own.radar.yaml", "radar.noise": False,
+                           "radar.fidelity": "analytic", "duration_s": 1.5,
+                           "targets.0.lane_changes.0.start_s": 0.375,
+                           "expectations.expected_limits": ["frame_rate_above_radar"]})
+    rng = np.random.default_rng(seed)
+    log = tmp_path / "other.blf"
+    radar = dataclasses.replace(scene.radar.radar_clock, cycle_s=0.06)
+    report = run_stamped(scene, lambda n: 0.13 + rng.uniform(-0.004, 0.004, n.size), log,
+                         radar)
+    assert report.radar_clock["cycle_from"] == "bus"
+    assert report.radar_clock["cycle_s"] == pytest.approx(0.06, abs=2e-4)
+    assert report.frames["total"] == report.frames["checked"] == 25
+    assert len(report.reasons) == 1, report.reasons
+    assert "its profile says 50.000000 ms" in report.reasons[0]
+    assert report.reasons[0].startswith("radar_clock: the radar's cycles reached the bus every")
+    again = check_log(scene, log).report
+    assert again.reasons == report.reasons and again.frames == report.frames
+
+
+@pytest.mark.parametrize("late_s", [0.3, 0.335])
+def test_a_radar_started_after_the_scene_is_checked_from_its_first_cycle_not_missing(tmp_path,
+                                                                                   late_s):
+    # The profile says the radar counts from 4242 at the scene's start; it was switched on
+    # late, its count's cycle 0 measured 300 (or 335) ms into the scene, its messages 130 ms
+    # +- 3 ms later. Its bus times less its latency say when: the cycles are judged at their
+    # times, none missing (the profile's first six were never measured), and the report says
+    # when cycle 0 was measured, live, re-checked by the sidecar and without it.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.003,
+                             counter_start=4242)
+    log = tmp_path / "late.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        pipeline.output.clock = dataclasses.replace(scene.radar.radar_clock,
+                                                    start_offset_s=late_s)
+        live = pipeline.run(scene).report
+    cycles = int(np.ceil((scene.duration_s - late_s) / 0.05))
+    sidecar = check_log(scene, log).report
+    Path(str(log) + ".rts.json").unlink()
+    blind = check_log(scene, log).report
+    # (without the sidecar, the phase within a frame is the plateau's: a radar in step with
+    # the frames fits as well anywhere in the frame, docs/bench.md section 4)
+    for report, within_s in ((live, 0.004), (sidecar, 0.004), (blind, 0.05)):
+        assert report.passed, report.reasons
+        assert report.frames["total"] == report.frames["checked"] == cycles
+        assert report.frames["missing"] == 0
+        clock = report.radar_clock
+        assert clock["counter_start"] == 4242
+        assert clock["start_offset_s"] == pytest.approx(late_s, abs=within_s)
+        assert clock["late_start_s"] == clock["start_offset_s"]
+    assert live.radar_clock["start_from"] == "bus"
+    json.dumps(live.to_dict(), allow_nan=False)
+
+
+def test_a_radar_reporting_less_than_a_cycle_late_is_no_late_start(tmp_path):
+    # 40 ms later than its profile's latency: a latency not the profile's, which the
+    # detections' lag tells (`test_a_radar_whose_latency_is_not_its_profile_s_fails_...`).
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, counter_start=4242)
+    report = run_stamped(scene, lambda n: np.full(n.size, 0.17), tmp_path / "slow.blf")
+    assert "late_start_s" not in report.radar_clock
+    assert report.radar_clock["start_from"] == "profile"
 
 
 def test_a_radar_running_free_is_checked_at_the_phase_its_bus_times_show(tmp_path):

@@ -211,6 +211,27 @@ def test_a_log_of_another_tool_is_aligned_within_20_ms(tmp_path, seed, suffix, b
         assert result.report.bus["before_first_cycle"] >= 2  # the cycle the log began in
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_a_log_without_sidecar_keeps_the_profile_s_cycle_its_stamps_cannot_tell_from(tmp_path,
+                                                                                    seed):
+    # A radar on its profile's 72 ms cycle, its stamps +-4 ms about its latency: the cycle
+    # fitted to them is off the profile's by noise (a standard error of 4 us over 167
+    # cycles), which a check by it would carry into every cycle's time. Within three standard
+    # errors, the profile's cycle is kept, exactly; a radar 2000 ppm off it is the stamps'.
+    origin = 1.7e9 + 55.5
+    scene, log, _ = foreign_log(tmp_path, origin, seed)
+    result = check_log(scene, log)
+    assert result.alignment.cycle_s == 0.072
+    assert result.report.radar_clock["cycle_s"] == 0.072
+    assert "cycle 72.00 ms fitted" in result.alignment.describe()
+    assert result.report.passed, result.report.reasons
+    (tmp_path / "off").mkdir()
+    _, log, _ = foreign_log(tmp_path / "off", origin, seed, clock={**OWN_CLOCK,
+                                                                   "cycle_s": 0.072144})
+    result = check_log(scene, log)
+    assert result.alignment.cycle_s == pytest.approx(0.072144, abs=1.5e-5)
+
+
 def test_a_long_log_is_aligned_by_where_its_detections_begin(tmp_path):
     # Ten minutes of radar cycles before the scene: too long to try every offset, the search
     # starts where the first detections put the scene's first visible target.

@@ -220,12 +220,13 @@ class LineSegments:
         degrees of freedom: ``K - 1 - rho`` between K segments, ``N - K - 1 + rho`` within,
         ``rho`` the share of the numbers' spread that lies between the segments) follows
         Fisher's F distribution there; a step or a bend in the points adds to the segments'
-        residuals alone. None before four segments, or with fewer degrees of freedom within
-        the segments than between them (too few points to measure their scatter).
+        residuals alone. Where the segments are too short to measure the points' scatter within
+        them (fewer degrees of freedom within than between: a short run's first cycles, one a
+        segment), neighbours are taken in pairs until they are not: the test does not depend on
+        what scatter anyone expected. None with fewer than four segments left.
         """
         s = self.segments
-        n_seg = len(s)
-        if n_seg < 4:
+        if len(s) < 4:
             return None
         total = s[0]
         for row in s[1:]:
@@ -234,13 +235,19 @@ class LineSegments:
         if sxx <= 0.0:
             return None
         slope = sxy / sxx
+        while True:
+            n_seg = len(s)
+            rho = float(s[:, 0] @ (s[:, 1] - mx) ** 2) / sxx
+            df_between, df_within = n_seg - 1.0 - rho, k - n_seg - 1.0 + rho
+            if df_within >= df_between and df_between > 0.0:
+                break
+            if n_seg < 8:
+                return None
+            even = n_seg - n_seg % 2
+            s = np.vstack([_combine(s[0:even:2], s[1:even:2]), s[even:]])
         residual = (s[:, 2] - my) - slope * (s[:, 1] - mx)
         between = float(s[:, 0] @ (residual * residual))
         within = float(np.sum(s[:, 5] - 2.0 * slope * s[:, 4] + slope * slope * s[:, 3]))
-        rho = float(s[:, 0] @ (s[:, 1] - mx) ** 2) / sxx
-        df_between, df_within = n_seg - 1.0 - rho, k - n_seg - 1.0 + rho
-        if df_within < df_between or df_between <= 0.0:
-            return None
         scatter = np.sqrt(max(within, 0.0) / df_within)
         if scatter > 0.0:
             f = (between / df_between) / scatter ** 2
@@ -380,6 +387,17 @@ class CycleTimeFit:
                 f"{fit[0]:.10g} in the radar profile")
 
 
+def late_start_s(profile: RadarClock, zero_s: float) -> float | None:
+    """How much later than ``profile`` says cycle 0 was measured, at scene time ``zero_s``.
+
+    None unless a cycle or more later, beyond the profile's jitter and the stamps' noise
+    (`ClockTrack.late_start_s`).
+    """
+    late = float(zero_s - profile.start_offset_s)
+    spread = max(profile.jitter_s / np.sqrt(3.0), STAMP_NOISE_S)
+    return late if late > profile.cycle_s + 3.0 * spread else None
+
+
 class ClockTrack:
     """When a radar measures, as a run learns it from the times its cycles reached the bus.
 
@@ -420,8 +438,35 @@ class ClockTrack:
 
     @property
     def phase_from_bus(self) -> bool:
-        """Whether the phase comes from the bus (a radar running free, the origin known)."""
-        return self.free and self.origin_s is not None
+        """Whether the phase comes from the bus (the scene's start known on its clock).
+
+        For a radar running free, and for one whose count began later than its profile says
+        (`late_start_s`).
+        """
+        return self.origin_s is not None and (self.free or self.late_start_s() is not None)
+
+    def _bus_zero_s(self) -> float | None:
+        """Scene time of cycle 0 by the bus times (less the profile's latency); None unknown."""
+        zero = self.fit.zero_s(self.cycle_s / self.scale) if self.origin_s is not None else None
+        if zero is None:
+            return None
+        assert self.origin_s is not None
+        return (zero - self.origin_s) * self.scale - self.profile.latency_s
+
+    def late_start_s(self) -> float | None:
+        """How much later than its profile says a radar with a known count measured cycle 0.
+
+        A radar started after the scene began (powered or triggered late) counts from its
+        profile's ``counter_start`` all the same: its cycle 0 lies a cycle or more (beyond its
+        jitter and the stamps' noise) after the profile's ``start_offset_s``, and the cycles
+        the profile puts before it were never measured, not lost. Less than a cycle is a
+        latency or phase not the profile's, which the detections' lag tells. None where the
+        radar runs free, the scene's start is not known on the bus's clock, or it is not late.
+        """
+        if self.free or self.origin_s is None or not self.fit.count:
+            return None
+        zero = self._bus_zero_s()
+        return None if zero is None else late_start_s(self.profile, zero)
 
     def add(self, n: IntArray, bus_t_s: FloatArray) -> None:
         """Take cycles ``n`` and when they reached the bus (NaN: not known, left out)."""
@@ -437,9 +482,9 @@ class ClockTrack:
         off its profile leaves them on one, however large their latency's jitter, while a
         latency that changed on the way (messages held up by a loaded bus or machine from some
         cycle on) bends them, tilting the line without the radar's clock running off, and is
-        not followed (`latency_change_s`). Where the cycles are too few to tell (`SEGMENTS` or
-        fewer), they must keep to the line as the profile's jitter lets them (1.5
-        times its spread, at least `STAMP_NOISE_S`).
+        not followed (`latency_change_s`). Where the cycles are too few to tell (fewer than
+        eight: `LineSegments.test` has no four segments of two), they must keep to the line as
+        the profile's jitter lets them (1.5 times its spread, at least `STAMP_NOISE_S`).
         """
         fit = self._fit_s()
         if fit is None:
@@ -516,11 +561,8 @@ class ClockTrack:
     @property
     def start_offset_s(self) -> float:
         """Scene time of cycle 0 (negative where it was measured before the scene began)."""
-        zero = self.fit.zero_s(self.cycle_s / self.scale) if self.phase_from_bus else None
-        if zero is None:
-            return self.profile.start_offset_s
-        assert self.origin_s is not None
-        return (zero - self.origin_s) * self.scale - self.profile.latency_s
+        zero = self._bus_zero_s() if self.phase_from_bus else None
+        return self.profile.start_offset_s if zero is None else zero
 
     def time_of(self, n: IntArray) -> FloatArray:
         """Measurement time (scene time) of cycles ``n``."""
@@ -559,11 +601,14 @@ class ClockTrack:
     def start_known(self, t_s: float) -> bool:
         """Whether the clock tells which is the first cycle at or after scene time ``t_s``.
 
-        It does where its phase is the profile's. From the bus, once `START_CYCLES` cycles
+        It does where its phase is the profile's, once a radar whose count is known sent a
+        cycle (it may have started late: `late_start_s`). From the bus, once `START_CYCLES` cycles
         are in and the cycle nearest ``t_s`` lies further from it than `start_tolerance_s`
         (more cycles will not move it across); a radar that measures at ``t_s`` itself never
         tells, and the first cycle is then the one within the tolerance before it.
         """
+        if not self.free and self.origin_s is not None and not self.fit.count:
+            return False  # a radar whose count is known may yet have started late
         if not self.phase_from_bus:
             return True
         if self.fit.count < START_CYCLES:
@@ -611,8 +656,11 @@ class ClockTrack:
         change = self.latency_change_s()
         if change is not None:
             clock["latency_change_s"] = change[0]
+        late = self.late_start_s()
+        if late is not None:
+            clock["late_start_s"] = float(late)
         return clock
 
 
 __all__ = ["CLOCK_TOLERANCE_PPM", "SEGMENTS", "TIME_EPS_S", "Bend", "ClockTrack", "CycleTimeFit",
-           "LineSegments", "RadarClock"]
+           "LineSegments", "RadarClock", "late_start_s"]
