@@ -10,6 +10,8 @@ calibration all run through it.
 
 from __future__ import annotations
 
+import contextlib
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -272,6 +274,7 @@ class Pipeline:
         self._publisher: DetectionPublisher | None = None
         self._notifier: can.Notifier | None = None
         self._logger: can.Listener | None = None
+        self._recording: _Recording | None = None
         self.counter_start_learnt: tuple[int, str] | None = None
         # The scene's start on the bus's clock where the simulated radar stamps its messages.
         self._bus_origin_s: float | None = None
@@ -321,7 +324,8 @@ class Pipeline:
                 # stop before its own is written (Ctrl-C, an error).
                 Path(str(options.bus_log) + LOG_SIDECAR_SUFFIX).unlink(missing_ok=True)
                 self._logger = can.Logger(options.bus_log)
-                self._listeners.append(self._logger)
+                self._recording = _Recording(self.receiver, self._logger)
+                self._listeners = [self._recording]
             self._notifier = can.Notifier(listen, self._listeners, timeout=0.05)
             name, argument = split_spec(options.output)
             context = RunContext(rig=rig, radar=radar, radar_options=radar_options
@@ -931,7 +935,8 @@ class Pipeline:
         if on_preflight is not None:
             on_preflight(preflight(scene, options.method))
             mark = timer.add("preflight_s", mark)
-        self.receiver.reset(restart=self._counter_restart())
+        with self._recorded(True):
+            self.receiver.reset(restart=self._counter_restart())
         self._bus_clock_checked = self._bus_clock_foreign = False
         self._link = ClockLink()
         self._run_level_s = self.host_clock.sample()
@@ -1018,7 +1023,9 @@ class Pipeline:
             scene_first + n_cycles,
             track.first_at(after_scene_until_s(scene.duration_s, track.cycle_s)))
         checker.settle()
-        bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
+        # The log ends with the last message counted: a re-check counts what the run did.
+        with self._recorded(False):
+            bus = {k: int(v) for k, v in vars(self.receiver.stats).items()}
         # Cycles of the stream before, dropped at the restart of the radar's count.
         bus["stale_cycles"] = self.receiver.stale_cycles
         if self._publisher is not None:
@@ -1087,6 +1094,16 @@ class Pipeline:
             # Said where the host's clock stepped: the times were brought back (`_unstep`).
             report.radar_clock["host_clock_steps"] = steps
         return RunResult(scene=scene, report=report)
+
+    def _recorded(self, on: bool) -> _Recording | contextlib.nullcontext[None]:
+        """Hold the bus's messages back while the block runs; the log records after it or not.
+
+        With no log: nothing to hold back.
+        """
+        if self._recording is None:
+            return contextlib.nullcontext()
+        self._recording.after = on
+        return self._recording
 
     # -- closing ---------------------------------------------------------------------------
 
@@ -1445,3 +1462,42 @@ def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
 __all__ = ["BATCH_FRAMES", "LOG_SIDECAR_SUFFIX", "Pipeline", "RunOptions", "RunResult",
            "CycleTruth", "after_scene_until_s", "ambiguity_window_s", "run_scene",
            "write_log_sidecar"]
+
+
+class _Recording(can.Listener):
+    """The run's receiver and its bus log as one listener: the log holds what the run counted.
+
+    A message reaches both, or the receiver alone while the log is not recording. Used as a
+    context (`Pipeline._recorded`), it holds messages back while a run resets the receiver or
+    takes its counts, and then records (``after``) from that message on or stops recording:
+    the log's messages are the ones the run counted, however many more arrive before the bus
+    is shut.
+    """
+
+    def __init__(self, receiver: DetectionReceiver, logger: can.Listener) -> None:
+        self.receiver, self.logger = receiver, logger
+        self.recording = True
+        self.after = True
+        self._lock = threading.Lock()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        with self._lock:
+            self.receiver.on_message_received(msg)
+            if self.recording:
+                self.logger.on_message_received(msg)
+
+    def on_error(self, exc: Exception) -> None:
+        self.receiver.on_error(exc)
+
+    def stop(self) -> None:
+        try:
+            self.receiver.stop()
+        finally:
+            self.logger.stop()
+
+    def __enter__(self) -> None:
+        self._lock.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.recording = self.after
+        self._lock.release()

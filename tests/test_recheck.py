@@ -6,6 +6,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -1596,3 +1597,26 @@ def test_a_log_re_checked_on_another_rig_than_it_was_played_on_is_refused(
                        if name == "wide-3x5" else "")
         + ": another rig plays other levels and statuses; check the log against the scene "
         "file and rig it was played with\n")
+
+
+def test_a_recording_ends_with_the_last_message_the_run_counted(tmp_path):
+    # The bus stays open after the run has taken its counts, until the pipeline closes: what
+    # arrives then (a radar that keeps measuring, another node) is neither counted by the run
+    # nor recorded, so a re-check of the log counts what the run did.
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    with Pipeline.for_scene(scene, RunOptions(bus_log=str(log))) as pipeline:
+        live = pipeline.run(scene).report
+        counted = pipeline.receiver.stats.messages
+        with can.Bus(interface="virtual", channel=pipeline.channel) as other:
+            for n in range(3):
+                other.send(can.Message(arbitration_id=0x7F0 + n, data=bytes(8),
+                                       is_extended_id=False))
+            deadline = time.monotonic() + 5.0
+            while pipeline.receiver.stats.messages < counted + 3 and time.monotonic() < deadline:
+                time.sleep(0.01)
+        assert pipeline.receiver.stats.messages == counted + 3  # received, after the counts
+    again = check_log(scene, log).report
+    assert live.passed and again.passed
+    assert again.bus["messages"] == live.bus["messages"]
+    assert again.bus["unknown_ids"] == live.bus["unknown_ids"] == 0
