@@ -136,6 +136,9 @@ class Alignment:
     latency_s: float = 0.0
     latency_source: str = "profile"  # or "estimated" (the offset given, the latency not)
     latency_uncertainty_s: float | None = None
+    # Where ``cycle_s`` came from: "sidecar" (the run's), "fitted" (to the log's timestamps)
+    # or "profile" (kept: the timestamps could not tell a cycle apart from the profile's).
+    cycle_source: str = "sidecar"
     cycles_in_log: int = 0
     cycles_outside_scene: int = 0
     schedule_matches_recording: bool | None = None
@@ -172,8 +175,11 @@ class Alignment:
                             f"shorter, the longest is taken)")
             else:
                 lat = f"latency {self.latency_s * 1e3:.0f} ms (profile)"
+            cycle = (f"cycle {self.cycle_s * 1e3:.2f} ms fitted" if self.cycle_source == "fitted"
+                     else f"cycle {self.cycle_s * 1e3:.2f} ms (profile; the timestamps fit it "
+                     f"within their scatter)")
             text = (f"aligned by timestamps: scene time 0 at log time {self.offset_s:.6f} s "
-                    f"({how}{pm}), {lat}, cycle {self.cycle_s * 1e3:.2f} ms fitted")
+                    f"({how}{pm}), {lat}, {cycle}")
         text += f"; {self.cycles_in_log} cycles in the log"
         if self.cycles_outside_scene:
             text += f", {self.cycles_outside_scene} outside the scene"
@@ -186,6 +192,7 @@ class Alignment:
                 "latency_s": self.latency_s,
                 "latency_source": self.latency_source,
                 "latency_uncertainty_s": self.latency_uncertainty_s,
+                "cycle_source": self.cycle_source,
                 "cycles_in_log": self.cycles_in_log,
                 "cycles_outside_scene": self.cycles_outside_scene,
                 "schedule_matches_recording": self.schedule_matches_recording,
@@ -1514,9 +1521,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 alignment.notes.append(
                     f"the radar's latency from the data, {latency * 1e3:.1f} ms, differs from "
                     f"its profile's {profile_clock.latency_s * 1e3:.1f} ms")
-        clock = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
-                              profile_clock.cycle_s, restart)
+        clock, kept = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
+                                    profile_clock.cycle_s, restart)
         alignment.cycle_s = clock.cycle_s
+        alignment.cycle_source = "profile" if kept else "fitted"
     alignment.cycles_in_log = len(index)
     jump = None
     if "bus_time_shifts" not in ((sidecar or {}).get("clock") or {}):
@@ -1753,8 +1761,11 @@ def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float,
 
 def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
                   offset_s: float, modulus: int, nominal_cycle_s: float,
-                  restart: int | None = None) -> RadarClock:
+                  restart: int | None = None) -> tuple[RadarClock, bool]:
     """Return the radar's clock in scene time fitted to the header timestamps.
+
+    And whether its cycle is the profile's (``nominal_cycle_s``), kept where the timestamps
+    cannot tell the fitted one apart from it or cannot give one.
 
     Its cycle 0 is the first one measured at or after the scene's time 0, whether the log
     holds it or not: a log that begins after the scene did lacks the cycles before, and those
@@ -1785,9 +1796,11 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
         # A cycle the stamps cannot tell from the profile's (within three standard errors, or
         # by less than rounding over the cycles), as live (`ClockTrack.cycle_from_bus`): the
         # profile's, not the fit's noise.
-        if _indistinguishable(n, t, float(cycle_s), nominal_cycle_s):
+        kept = _indistinguishable(n, t, float(cycle_s), nominal_cycle_s)
+        if kept:
             cycle_s, first_s = nominal_cycle_s, float(np.mean(t - nominal_cycle_s * n))
     else:
+        kept = True
         cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - t0 - numbers[ok][0]
                                                   * nominal_cycle_s)
     start = (t0 - offset_s) - latency_s + first_s  # scene time of the log's cycle number 0
@@ -1797,7 +1810,8 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
     return RadarClock(cycle_s=float(cycle_s),
                       start_offset_s=max(0.0, float(start + shift * cycle_s)),
                       latency_s=latency_s,
-                      counter_start=int((counters[0] + shift) % modulus) if counters.size else 0)
+                      counter_start=int((counters[0] + shift) % modulus) if counters.size
+                      else 0), kept
 
 
 def _indistinguishable(n: FloatArray, t: FloatArray, cycle_s: float,

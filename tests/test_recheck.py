@@ -224,13 +224,17 @@ def test_a_log_without_sidecar_keeps_the_profile_s_cycle_its_stamps_cannot_tell_
     result = check_log(scene, log)
     assert result.alignment.cycle_s == 0.072
     assert result.report.radar_clock["cycle_s"] == 0.072
-    assert "cycle 72.00 ms fitted" in result.alignment.describe()
+    assert result.alignment.cycle_source == "profile"
+    assert ("cycle 72.00 ms (profile; the timestamps fit it within their scatter)"
+            in result.alignment.describe())
     assert result.report.passed, result.report.reasons
     (tmp_path / "off").mkdir()
     _, log, _ = foreign_log(tmp_path / "off", origin, seed, clock={**OWN_CLOCK,
                                                                    "cycle_s": 0.072144})
     result = check_log(scene, log)
     assert result.alignment.cycle_s == pytest.approx(0.072144, abs=1.5e-5)
+    assert result.alignment.cycle_source == "fitted"
+    assert "ms fitted" in result.alignment.describe()
 
 
 def test_a_long_log_is_aligned_by_where_its_detections_begin(tmp_path):
