@@ -568,7 +568,7 @@ def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else None)
     with ProcessPoolExecutor(max_workers=workers, mp_context=context,
-                             initializer=_one_blas_thread) as pool:
+                             initializer=_init_worker) as pool:
         futures = {pool.submit(run_task, task, method): task for task in tasks}
         try:
             _collect(futures, as_completed(futures), finish)
@@ -577,10 +577,17 @@ def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
             raise
 
 
-def _one_blas_thread() -> None:
-    """Keep each worker process to one BLAS thread: the processes already fill the CPUs."""
+def _init_worker() -> None:
+    """Keep each worker process to one BLAS thread: the processes already fill the CPUs.
+
+    SIGTERM ends a worker again (the command's handler, forked with it, would turn it into an
+    interrupt): the pool itself stops its workers so, and the command stops on its own SIGTERM.
+    """
+    import signal
+
     from threadpoolctl import threadpool_limits
 
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threadpool_limits(limits=1, user_api="blas")
 
 

@@ -449,6 +449,72 @@ def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_compl
     assert f"wrote {detections}.partial (cut short: the run was interrupted)" in out
 
 
+@pytest.fixture
+def sigterm_swallowed():
+    """A SIGTERM handler that only counts, in place of the default that would end pytest.
+
+    A command that handles SIGTERM itself replaces it while it runs, and puts it back.
+    """
+    import signal
+
+    received = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: received.append(signum))
+    yield received
+    signal.signal(signal.SIGTERM, previous)
+
+
+def test_sigterm_stops_a_run_as_ctrl_c_does(tmp_path, capsys, monkeypatch, sigterm_swallowed):
+    # A CI job's timeout or `kill` sends SIGTERM: the run keeps what finished, marks the run
+    # under way interrupted, leaves its detections as .partial and exits 1, as for Ctrl-C.
+    import os
+    import signal
+
+    import rts_scenario.pipeline as pipeline
+
+    real = pipeline.run_scene
+    calls = []
+
+    def second_is_terminated(scene, options, **kwargs):
+        calls.append(scene.name)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(scene, options, **kwargs)
+
+    monkeypatch.setattr(pipeline, "run_scene", second_is_terminated)
+    scenes = [str(ROOT / "scenarios" / f"{name}.scenario.yaml")
+              for name in ("approaching_target", "cut_out", "motorcycle")]
+    detections, report = tmp_path / "d.csv", tmp_path / "r.json"
+    code = cli.main(["run", *scenes, "--detections", str(detections), "--json", str(report)])
+    out, err = capsys.readouterr()
+    assert code == 1 and calls == ["approaching-target", "cut-out"], err
+    assert "cut_out.scenario.yaml: interrupted (Ctrl-C) while running: no verdict" in err
+    assert [(e["scene"], e["status"]) for e in json.loads(report.read_text())] == [
+        ("approaching-target", "pass"), ("cut-out", "error")]
+    assert not detections.exists() and (tmp_path / "d.csv.partial").exists()
+    # The handler the command found is back in place.
+    assert sigterm_swallowed == []
+    os.kill(os.getpid(), signal.SIGTERM)
+    assert sigterm_swallowed == [signal.SIGTERM]
+
+
+def test_sigterm_before_a_command_runs_anything_exits_as_ctrl_c(tmp_path, capsys, monkeypatch,
+                                                                 sigterm_swallowed):
+    import os
+    import signal
+
+    import rts_scenario.cli.check as check_command
+
+    def terminated(args):
+        os.kill(os.getpid(), signal.SIGTERM)
+        return 0
+
+    monkeypatch.setattr(check_command, "_do_check", terminated)
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    code = cli.main(["check", str(scene), "--log", str(tmp_path / "x.blf")])
+    _, err = capsys.readouterr()
+    assert code == 1 and err == "error: interrupted\n"
+
+
 def test_a_reader_that_stops_early_loses_neither_the_verdict_nor_the_report(tmp_path):
     # `rts-scenario run SCENE --json R | head -1`: the reader goes away after one line. The
     # rest of the output has nowhere to go, but every variant still runs, the report is written

@@ -410,6 +410,36 @@ def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeyp
     assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
 
 
+def test_sigterm_stops_a_sweep_as_ctrl_c_does(scenes, tmp_path, capsys, monkeypatch):
+    """SIGTERM (a CI job's timeout, ``kill``) keeps the runs done and exits as Ctrl-C does."""
+    import os
+    import signal
+
+    real = rts_scenario.pipeline.run_scene
+    calls = []
+
+    def terminated_at_the_third(scene, options):
+        calls.append(scene.name)
+        if len(calls) == 3:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", terminated_at_the_third)
+    # Counted, not pytest's end, where the command does not handle it.
+    received = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: received.append(signum))
+    try:
+        out = tmp_path / "partial.json"
+        code, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1",
+                             "--json", out)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert received == [] and code == 1 and err.endswith("error: interrupted\n"), err
+    payload = json.loads(out.read_text())
+    assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
+    assert payload["summary"]["interrupted"] is True
+
+
 def test_interrupted_sweep_prints_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
     """Without --json too: the verdicts that finished are printed, as `run` prints them, and a
     run that erred at run time before Ctrl-C keeps its exit code."""
