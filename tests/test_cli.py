@@ -1,4 +1,5 @@
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -513,6 +514,50 @@ def test_sigterm_before_a_command_runs_anything_exits_as_ctrl_c(tmp_path, capsys
     code = cli.main(["check", str(scene), "--log", str(tmp_path / "x.blf")])
     _, err = capsys.readouterr()
     assert code == 1 and err == "error: interrupted\n"
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="file size limits are POSIX's")
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_a_json_report_that_cannot_be_written_whole_leaves_the_old_one(tmp_path, command):
+    # A file system that takes the first 300 bytes only (a full disk, a quota): the report is
+    # replaced whole or not at all, so a CI system reading it never gets half a file, neither
+    # while it is written nor after a write that failed.
+    import os
+    import resource
+    import signal
+    import subprocess
+
+    report = tmp_path / "r.json"
+    report.write_text('{"previous": "report"}\n')
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+
+    def limited() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past it fails, EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (300, 300))
+
+    # Out of the repository, and git (which a pytest plugin the sweep loads runs) takes no
+    # optional lock: a git command under the limit would leave the repository's index locked.
+    env = {**os.environ, "RTS_SCENARIO_CACHE_DIR": "off", "GIT_OPTIONAL_LOCKS": "0",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    extra = ["--workers", "1"] if command == "sweep" else []
+    proc = subprocess.run(
+        [sys.executable, "-m", "rts_scenario", command, str(scene), "--json", str(report),
+         *extra], capture_output=True, text=True, env=env, preexec_fn=limited, timeout=300,
+        cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().endswith(f"error: --json {report}: cannot write: File too large")
+    assert report.read_text() == '{"previous": "report"}\n'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]  # no draft left behind
+
+
+def test_a_json_report_keeps_its_file_s_permissions(tmp_path, capsys):
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+    report = tmp_path / "r.json"
+    report.write_text("{}\n")
+    report.chmod(0o640)
+    assert cli.main(["run", str(scene), "--json", str(report)]) == 0
+    assert json.loads(report.read_text())["status"] == "pass"
+    assert report.stat().st_mode & 0o777 == 0o640
 
 
 def test_a_reader_that_stops_early_loses_neither_the_verdict_nor_the_report(tmp_path):
