@@ -498,6 +498,35 @@ def test_sigterm_stops_a_run_as_ctrl_c_does(tmp_path, capsys, monkeypatch, sigte
     assert sigterm_swallowed == [signal.SIGTERM]
 
 
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_a_schedule_export_stopped_by_sigterm_leaves_only_its_draft(tmp_path, capsys, monkeypatch,
+                                                                     sigterm_swallowed, suffix):
+    # The export goes to PATH.partial and is named PATH once whole: one stopped part way (a CI
+    # job's timeout) leaves nothing named like a whole schedule, nor the export before it.
+    import os
+    import signal
+
+    import rts_scenario.preflight as preflight
+
+    real = preflight.schedule_batches
+
+    def terminated_after_the_first_batch(scene, method="exact", batch_frames=None):
+        for n, batch in enumerate(real(scene, method, batch_frames=40)):
+            if n == 1:
+                os.kill(os.getpid(), signal.SIGTERM)
+            yield batch
+
+    monkeypatch.setattr(preflight, "schedule_batches", terminated_after_the_first_batch)
+    scene = ROOT / "scenarios" / "cut_in.scenario.yaml"
+    target = tmp_path / f"s{suffix}"
+    target.write_text("an earlier export")
+    code = cli.main(["schedule", str(scene), "--output", f"file:{target}", "--variant",
+                     "estimator=ti"])
+    _, err = capsys.readouterr()
+    assert code == 1 and err.endswith("error: interrupted\n"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"s{suffix}.partial"]
+
+
 def test_sigterm_before_a_command_runs_anything_exits_as_ctrl_c(tmp_path, capsys, monkeypatch,
                                                                  sigterm_swallowed):
     import os
