@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .arrays import PRESETS, VirtualArray
+from .atomic import write_atomic
 from .evaluation import GRID_AZ_DEG, GRID_EL_DEG, angle_errors, evaluation_grid
 from .peak_search import find_peak
 from .report import strict
@@ -335,4 +336,4 @@ def write_json(rows: list[BenchRow], quantized: list[QuantizationRow], path: str
                                "honest": [asdict(r) for r in honest_rows or []],
                                "end_to_end": None if end is None else asdict(end),
                                "performance": [asdict(f) for f in figures or []]}
-    Path(path).write_text(json.dumps(strict(data), indent=2, allow_nan=False) + "\n")
+    write_atomic(path, json.dumps(strict(data), indent=2, allow_nan=False) + "\n")

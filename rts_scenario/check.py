@@ -50,7 +50,7 @@ from scipy.sparse.csgraph import connected_components
 from .detections import Detections, bus_times, sequential_numbers, unwrap_counter
 from .errors import CheckError
 from .kinematics import Tracks
-from .report import FrameRecord, Report, RunningStats, TargetResult
+from .report import FailReason, FrameRecord, Report, RunningStats, TargetResult
 from .scenario.model import LIMITS, PLANNED_SCENE_LIMITS, SCENE_LIMITS, Expectations
 from .schedule.model import BLOCKING, Status
 
@@ -870,10 +870,10 @@ class Checker:
             hit = {lim: int(c[k]) for lim, c in self._limits.items() if c[k]}
             unexpected = [lim for lim in hit if lim not in self._expected[k]]
             if unexpected:
-                limit_reasons.append(
+                limit_reasons.append(FailReason(
                     f"{name}: target-frames not played or not measurable as specified: "
                     + ", ".join(f"{lim} {hit[lim]}" for lim in unexpected)
-                    + " (list them in expected_limits if the scene means it)")
+                    + " (list them in expected_limits if the scene means it)", *unexpected))
             targets.append(TargetResult(
                 name=name, checkable_frames=n_check, detected_frames=n_det, detection_rate=rate,
                 errors={q: self._stats[q].result(k) for q, _ in QUANTITIES},
@@ -882,46 +882,57 @@ class Checker:
                 out_of_tolerance_frames=int(self._out_of_tolerance[k]),
                 missed_frames=int(self._missed[k]), unchecked_frames=int(self._unchecked_k[k]),
                 limits=hit, unexpected_limits=unexpected, played_frames=int(self._played[k])))
-        reasons = [f"{lim}: {why}" for lim, why in self._scene_limits.items()
-                   if lim not in exp.expected_limits]
-        reasons += [f"{t.name}: detection rate {t.detection_rate:.1%} < "
-                    f"{exp.detection_rate:.1%}" for t in targets
+        reasons: list[str] = [FailReason(f"{lim}: {why}", lim)
+                              for lim, why in self._scene_limits.items()
+                              if lim not in exp.expected_limits]
+        reasons += [FailReason(f"{t.name}: detection rate {t.detection_rate:.1%} < "
+                               f"{exp.detection_rate:.1%}", "detection_rate") for t in targets
                     if t.checkable_frames and t.detection_rate < exp.detection_rate - 1e-12]
         reasons += limit_reasons
-        reasons += [f"{t.name}: never checked: no radar cycle measured the "
-                    + (f"{t.played_frames} frames" if t.played_frames > 1 else "frame")
-                    + " it was played in" for t in targets
+        reasons += [FailReason(f"{t.name}: never checked: no radar cycle measured the "
+                               + (f"{t.played_frames} frames" if t.played_frames > 1
+                                  else "frame")
+                               + " it was played in", "never_checked") for t in targets
                     if t.played_frames and not t.checkable_frames]
         frames = self.frames
         per_frame = self._false / max(frames["received"], 1)
         if per_frame > exp.max_false_detections_per_frame:
-            reasons.append(f"{per_frame:.3f} false detections per radar cycle > "
-                           f"{exp.max_false_detections_per_frame:g}")
+            reasons.append(FailReason(f"{per_frame:.3f} false detections per radar cycle > "
+                                      f"{exp.max_false_detections_per_frame:g}",
+                                      "false_detections"))
         if self._invalid:
-            reasons.append(f"{self._invalid} detections with a reported quantity that is not a "
-                           f"number (NaN or infinite): they match no target")
+            reasons.append(FailReason(f"{self._invalid} detections with a reported quantity "
+                                      f"that is not a number (NaN or infinite): they match no "
+                                      f"target", "invalid_detections"))
         if frames["missing"] or frames["incomplete"]:
             # A cycle with no checkable target still had its false detections to check.
-            reasons.append(f"{frames['missing']} radar cycles missing and "
-                           f"{frames['incomplete']} incomplete: {self._unchecked} target-cycles "
-                           f"and the cycles' false detections could not be checked")
+            reasons.append(FailReason(f"{frames['missing']} radar cycles missing and "
+                                      f"{frames['incomplete']} incomplete: {self._unchecked} "
+                                      f"target-cycles and the cycles' false detections could "
+                                      f"not be checked", "missing_cycles"))
         if bus is not None:
             if bus.get("messages", 0) == 0:
-                reasons.append("the bus was silent: no message received")
-            lost = {"checksum errors": bus.get("checksum_errors", 0),
-                    "undecodable messages": bus.get("decode_errors", 0),
-                    "detections without a frame header": bus.get("orphans", 0),
-                    "conflicting messages (a cycle's header or detections came again with other "
-                    "values, or beyond the count its header announced)": bus.get("conflicts", 0),
-                    "detections the radar could not put on the bus (a value its protocol's "
-                    "signals cannot carry)": bus.get("unsendable_detections", 0)}
-            reasons += [f"{v} {k}" for k, v in lost.items() if v]
+                reasons.append(FailReason("the bus was silent: no message received",
+                                          "bus_silent"))
+            # Each with its code: the bus counter's name.
+            lost = {"checksum_errors": "checksum errors",
+                    "decode_errors": "undecodable messages",
+                    "orphans": "detections without a frame header",
+                    "conflicts": "conflicting messages (a cycle's header or detections came "
+                                 "again with other values, or beyond the count its header "
+                                 "announced)",
+                    "unsendable_detections": "detections the radar could not put on the bus (a "
+                                             "value its protocol's signals cannot carry)"}
+            reasons += [FailReason(f"{bus[key]} {what}", key) for key, what in lost.items()
+                        if bus.get(key, 0)]
         n_truth = int(self._checkable.sum())
         if not self.names:  # an empty bench: only false detections are checked
             if frames["received"] == 0:
-                reasons.append("nothing to check: no radar cycle was received")
+                reasons.append(FailReason("nothing to check: no radar cycle was received",
+                                          "nothing_checked"))
         elif n_truth == 0:
-            reasons.append("nothing to check: no target was checkable in any frame")
+            reasons.append(FailReason("nothing to check: no target was checkable in any frame",
+                                      "nothing_checked"))
         worst = [entry for *_, entry in sorted(self._worst, key=lambda w: w[:3], reverse=True)]
         # Limits the scene declares for its targets that none hit (a scene meant to test an
         # edge of the bench may not reach it): said, not failed.

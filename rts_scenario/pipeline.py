@@ -37,7 +37,7 @@ from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .recording import PlayedRecord
-from .report import FrameRecord, Report, strict
+from .report import FailReason, FrameRecord, Report, strict
 from .rig import Rig
 from .scenario import Scenario, load_scenario
 from .scenario.model import RadarOptions
@@ -1035,15 +1035,16 @@ class Pipeline:
         if options.radar_channel is not None:
             bus["other_channels"] = self.receiver.other_channels
         report = checker.report(bus)
-        for drifted in (self.receiver.channel_reason(),
-                        mapping_reason(self.receiver.mapping, self.receiver.headers,
-                                       bus["unknown_ids"]),
-                        track.off_profile_reason(0.5 * window_s),
-                        track.latency_change_reason(0.5 * window_s),
-                        checker.lag_reason(1.0 / scene.frame_rate_hz,
-                                           scene.radar.coupling_lag_s)):
+        for code, drifted in (
+                ("radar_channel", self.receiver.channel_reason()),
+                ("mapping", mapping_reason(self.receiver.mapping, self.receiver.headers,
+                                           bus["unknown_ids"])),
+                ("radar_clock", track.off_profile_reason(0.5 * window_s)),
+                ("radar_clock", track.latency_change_reason(0.5 * window_s)),
+                ("time_alignment", checker.lag_reason(1.0 / scene.frame_rate_hz,
+                                                      scene.radar.coupling_lag_s))):
             if drifted:
-                report.reasons.append(drifted)
+                report.reasons.append(FailReason(drifted, code))
                 report.passed = False
         assert self.output is not None
         # The stream has ended: its last frames' report may still be on the way.

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .report import RunningStats
+from .report import FailReason, RunningStats
 from .schedule.model import SAME_TIME_S
 
 # RTS counters that mean frames were not played as sent.
@@ -108,37 +108,41 @@ class Playback:
 def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set[str]
                      ) -> list[str]:
     """Why a playback (`Playback.to_dict`, e.g. from a log's sidecar) fails the run."""
-    out = []
+    out: list[str] = []
     late, frames = int(playback["late_frames"]), int(playback["frames_sent"])
     rts = playback.get("rts")
     if late and "frames_sent_late" not in expected:
         worst = playback["lateness_s"]["max"]
-        out.append(f"frames_sent_late: {late} of {frames} frames went out more than a frame "
-                   f"period ({playback['late_after_s'] * 1e3:.3g} ms) after their time: the "
-                   f"frame before was held instead (worst {worst * 1e3:.3g} ms)")
+        out.append(FailReason(
+            f"frames_sent_late: {late} of {frames} frames went out more than a frame period "
+            f"({playback['late_after_s'] * 1e3:.3g} ms) after their time: the frame before was "
+            f"held instead (worst {worst * 1e3:.3g} ms)", "frames_sent_late"))
     rig = playback.get("rts_rig")
     if rig is not None and not rig["matches_run"]:
         played = rts is None or int(rts.get("frames_applied", 0)) > 0
-        out.append(f"rts_rig: the RTS plays a rig of {rig['front_ends']} FEs whose geometry "
-                   f"(sha256 {rig['geometry_sha256'][:12]}) is not the run's ({rig['run']}, "
-                   f"{rig['run_geometry_sha256'][:12]}): "
-                   + ("its echoes came from other directions than the schedule put them in"
-                      if played else "it applied none of the run's frames")
-                   + "; run on the rig the RTS has (emulate: --rig the run's)")
+        out.append(FailReason(
+            f"rts_rig: the RTS plays a rig of {rig['front_ends']} FEs whose geometry (sha256 "
+            f"{rig['geometry_sha256'][:12]}) is not the run's ({rig['run']}, "
+            f"{rig['run_geometry_sha256'][:12]}): "
+            + ("its echoes came from other directions than the schedule put them in"
+               if played else "it applied none of the run's frames")
+            + "; run on the rig the RTS has (emulate: --rig the run's)", "rts_rig"))
     if rts and rts.get("foreign_datagrams"):
         # Whatever the scene expects: the counters, and what the RTS played, are not the run's.
-        out.append(f"rts_stream: the RTS's counters count {rts['foreign_datagrams']} datagrams "
-                   f"more than this run sent ({int(rts['datagrams'])} in all): another "
-                   f"sender's stream took the RTS over (a second run against it?), so what it "
-                   f"played and counted is not this run's")
+        out.append(FailReason(
+            f"rts_stream: the RTS's counters count {rts['foreign_datagrams']} datagrams more "
+            f"than this run sent ({int(rts['datagrams'])} in all): another sender's stream took "
+            f"the RTS over (a second run against it?), so what it played and counted is not "
+            f"this run's", "rts_stream"))
     gone = playback.get("rts_unreachable")
     if gone and "frames_lost" not in expected:
-        out.append(unreachable_reason(gone))
+        out.append(FailReason(unreachable_reason(gone), "rts_unreachable"))
     lost = lost_frames(rts)
     if lost and "frames_lost" not in expected:
-        out.append(f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("
-                   + ", ".join(f"{k.replace('_', ' ')} {rts[k]}"
-                               for k in LOST_COUNTERS if rts and rts.get(k)) + ")")
+        out.append(FailReason(
+            f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("
+            + ", ".join(f"{k.replace('_', ' ')} {rts[k]}"
+                        for k in LOST_COUNTERS if rts and rts.get(k)) + ")", "frames_lost"))
     return out
 
 

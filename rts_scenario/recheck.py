@@ -76,7 +76,7 @@ from .radar.clock import (
     late_start_s,
 )
 from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
-from .report import Report
+from .report import FailReason, Report
 from .scenario import Scenario, parametrizations, select_variant
 from .solver.estimator_aware import SCHEDULE_METHODS
 
@@ -1546,17 +1546,18 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     half_window_s = 0.5 * ambiguity_window_s(scene.radar, scene.rig)
     if jump is not None and sidecar is None and abs(jump[1]) > half_window_s:
         # Aligned by its timestamps, the cycles after the jump are judged that far off.
-        result.reasons.append(
+        result.reasons.append(FailReason(
             f"log_stamps: the log's stamps jump by {jump[1] * 1e3:+.1f} ms from its cycle "
             f"{jump[0] + 1} on, more than half the ambiguity window ({half_window_s * 1e3:.3g}"
             f" ms): aligned by its timestamps, the cycles after it may be judged against the "
             f"wrong frames (a step of the host's clock as it was recorded, or the radar's "
-            f"latency changed); a recording's sidecar says where the host's clock stepped")
+            f"latency changed); a recording's sidecar says where the host's clock stepped",
+            "log_stamps"))
         result.passed = False
     if unplaced:
         # Stamps the run brought back that this check cannot find: judged as they are, they
         # may put cycles against the wrong frames.
-        result.reasons.append(unplaced)
+        result.reasons.append(FailReason(unplaced, "host_clock"))
         result.passed = False
     if other_mapping:
         spoken = recorded_mapping or "rts-scenario's messages"
@@ -1571,14 +1572,14 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if unread_reason:
         # Records that may be the radar's, which python-can does not read: judged without
         # them, its cycles would be judged by what the log does not hold.
-        result.reasons.append(unread_reason)
+        result.reasons.append(FailReason(unread_reason, "log_unread"))
         result.passed = False
     elif unread_note:
         alignment.notes.append(unread_note)
     if cut_short is not None and ends_early:
         # Its missing cycles may not all show (a cycle's tail, those after the scene counted
         # as the run counts them): the log itself fails.
-        result.reasons.append(cut_short["why"])
+        result.reasons.append(FailReason(cut_short["why"], "log_cut_short"))
         result.passed = False
     elif cut_short is not None:
         # Its last cycle read was measured after every cycle counted: what it lacks counts
@@ -1590,7 +1591,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     # radar spoke another protocol than the one given, as live.
     spoken = mapping_reason(receiver_mapping, index.headers, bus.get("unknown_ids", 0))
     if spoken:
-        result.reasons.append(spoken)
+        result.reasons.append(FailReason(spoken, "mapping"))
         result.passed = False
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
@@ -1598,7 +1599,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     for off_profile in (track.off_profile_reason(half_window_s),
                         track.latency_change_reason(half_window_s)):
         if off_profile:
-            result.reasons.append(off_profile)
+            result.reasons.append(FailReason(off_profile, "radar_clock"))
             result.passed = False
     # When the radar measured, as this check took it (the run's clock from the sidecar, or the
     # one fitted to the log's timestamps), in the live report's terms.
@@ -1942,7 +1943,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     _compare_truth(truth_sums, sidecar, alignment, report)
     lagged = checker.lag_reason(1.0 / scene.frame_rate_hz, scene.radar.coupling_lag_s)
     if lagged:
-        report.reasons.append(lagged)
+        report.reasons.append(FailReason(lagged, "time_alignment"))
         report.passed = False
     report.radar_clock.update(lag_dict(checker, scene.radar.coupling_lag_s, truths.early_s))
     return report, not (rel.size and rel[-1] >= end)
@@ -2005,12 +2006,12 @@ def _compare_truth(truth_sums: TruthChecksums, sidecar: dict[str, Any] | None,
         if len(differing) > 5:
             named[-1:] = [named[-1], f"{len(differing) - 5} more"]
         shown = named[0] if len(named) == 1 else ", ".join(named[:-1]) + " and " + named[-1]
-        report.reasons.append(
+        report.reasons.append(FailReason(
             f"scene: the ground truth of {shown} differs from the one the recorded run "
             f"played (the scene file, its radar profile or the version computing it changed "
             f"since): the log "
             f"is judged against a scene that did not play; check it against the scene file "
-            f"as it was")
+            f"as it was", "ground_truth"))
         report.passed = False
 
 

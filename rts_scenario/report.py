@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import tempfile
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -242,6 +243,11 @@ class Report:
         return run_label(self.scene, self.variant)
 
     @property
+    def reason_codes(self) -> list[str]:
+        """The codes of the reasons the run failed, each once (`reason_codes`)."""
+        return reason_codes(self.reasons)
+
+    @property
     def per_frame(self) -> dict[str, np.ndarray]:
         """Every frame's arrays, read back from the record (empty without one).
 
@@ -367,6 +373,37 @@ def _playback_line(p: dict[str, Any]) -> str:
         text += (f"; {gone['datagrams']} datagrams came back undelivered from "
                  f"{gone['address']} ({gone['error']})")
     return text
+
+
+class FailReason(str):
+    """Why a run fails: the sentence people read, and its ``codes``, names tools can match.
+
+    A code is the name of what failed the run (docs/report.md, reason codes): a limit's
+    (``too_close``, ``frames_lost``), or ``detection_rate``, ``radar_clock``, ... It is a
+    `str`, so a report's ``reasons`` read, print and serialize as the sentences they are.
+    """
+
+    codes: tuple[str, ...]
+
+    def __new__(cls, text: str, *codes: str) -> FailReason:
+        """Make the reason ``text`` with its ``codes`` (at least one)."""
+        reason = super().__new__(cls, text)
+        reason.codes = codes
+        return reason
+
+    def __reduce__(self) -> tuple[Any, tuple[str, ...]]:
+        return FailReason, (str(self), *self.codes)
+
+
+# The code of a reason given as a plain sentence, without its codes.
+UNCODED_REASON = "other"
+
+
+def reason_codes(reasons: Iterable[str]) -> list[str]:
+    """Return the codes of ``reasons`` (`FailReason`), each once, in the order they come."""
+    codes = (code for reason in reasons
+             for code in (getattr(reason, "codes", None) or (UNCODED_REASON,)))
+    return list(dict.fromkeys(codes))
 
 
 def _without_record(report: Report) -> Report:

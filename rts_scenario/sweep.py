@@ -378,13 +378,12 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     run that errs stays an error), or ``fail`` for a passed one where the task's
     ``xfail_strict`` is set (pytest's ``XPASS(strict)``). ``passed`` says whether the check
     passed. A failed run (``fail``, ``xfail``) adds ``reason``, a skipped one too; an erred one
-    ``reason`` (its
-    one-line message) and ``error_type`` (``bad_input``: the scene does not load or its
-    schedule cannot be built; ``runtime``: anything else). Finished runs add
-    ``detection_rate``, ``false_detections``, ``errors`` (rms and max per quantity),
-    ``max_error_ratio`` and ``max_error_quantity`` (the largest max error over its tolerance),
-    ``solver_plan`` (where its solver plan came from: ``built``, ``memory`` or ``disk``) and
-    ``seconds``.
+    ``reason`` (its one-line message), ``error_type`` (``bad_input``: the scene does not load
+    or its schedule cannot be built; ``runtime``: anything else) and the quantities of
+    `QUANTITY_KEYS`, each None. Finished runs add ``detection_rate``, ``false_detections``,
+    ``errors`` (rms and max per quantity), ``max_error_ratio`` and ``max_error_quantity`` (the
+    largest max error over its tolerance), ``solver_plan`` (where its solver plan came from:
+    ``built``, ``memory`` or ``disk``) and ``seconds``.
     """
     from .errors import ScenarioError
     from .pipeline import RunOptions, run_scene
@@ -480,10 +479,19 @@ def _file_scene(file: str) -> str:
     return Path(file).name.removesuffix(SCENE_SUFFIX)
 
 
+# What a finished run measured (`run_task`): an erred run has each of them, as null.
+QUANTITY_KEYS = ("detection_rate", "false_detections", "errors", "max_error_ratio",
+                 "max_error_quantity")
+
+
 def error_entry(entry: Entry, message: str, error_type: str) -> Entry:
-    """Complete ``entry`` as a run that erred with ``message`` (one line)."""
-    return {**entry, "passed": False, "status": "error", "reason": message,
-            "error_type": error_type}
+    """Complete ``entry`` as a run that erred with ``message`` (one line).
+
+    Every quantity a finished run gives (`QUANTITY_KEYS`) is None: the run measured nothing,
+    and a number there, one it had before it erred or a default, would read as a result.
+    """
+    return {**entry, **dict.fromkeys(QUANTITY_KEYS), "passed": False, "status": "error",
+            "reason": message, "error_type": error_type}
 
 
 def _message(path: str, exc: BaseException) -> str:
@@ -568,7 +576,7 @@ def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else None)
     with ProcessPoolExecutor(max_workers=workers, mp_context=context,
-                             initializer=_one_blas_thread) as pool:
+                             initializer=_init_worker) as pool:
         futures = {pool.submit(run_task, task, method): task for task in tasks}
         try:
             _collect(futures, as_completed(futures), finish)
@@ -577,10 +585,17 @@ def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
             raise
 
 
-def _one_blas_thread() -> None:
-    """Keep each worker process to one BLAS thread: the processes already fill the CPUs."""
+def _init_worker() -> None:
+    """Keep each worker process to one BLAS thread: the processes already fill the CPUs.
+
+    SIGTERM ends a worker again (the command's handler, forked with it, would turn it into an
+    interrupt): the pool itself stops its workers so, and the command stops on its own SIGTERM.
+    """
+    import signal
+
     from threadpoolctl import threadpool_limits
 
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threadpool_limits(limits=1, user_api="blas")
 
 

@@ -677,3 +677,21 @@ def test_every_detection_of_an_echo_played_off_its_angle_is_its_own():
     assert report.false_detections == 0 and report.targets[0].limits == {"angle_quantized": 20}
     report = check("s", tracks, status, reported(tracks, 43.0, 5.0, [(5, 1), (-1, 1)]), expect)
     assert report.false_detections == 40 and not report.passed
+
+
+def test_a_fail_reason_is_its_sentence_with_codes():
+    """Reasons read, print and serialize as the sentences they are; their codes survive a copy
+    and a pickle (a report crossing to another process); a plain sentence's code is other."""
+    import copy
+    import json
+    import pickle
+
+    from rts_scenario.report import FailReason, reason_codes
+
+    reason = FailReason("car: target-frames ...: too_close 3, split 1", "too_close", "split")
+    assert reason == "car: target-frames ...: too_close 3, split 1"
+    assert json.dumps([reason]) == json.dumps([str(reason)])
+    for copied in (copy.deepcopy(reason), pickle.loads(pickle.dumps(reason))):
+        assert copied == reason and copied.codes == ("too_close", "split")
+    assert reason_codes([reason, FailReason("x", "split"), FailReason("y", "bus_silent"),
+                         "an uncoded sentence"]) == ["too_close", "split", "bus_silent", "other"]

@@ -1,4 +1,5 @@
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -447,6 +448,145 @@ def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_compl
     rows = (tmp_path / "d.csv.partial").read_text().splitlines()
     assert len(rows) > 100 and all(r.startswith("approaching-target,") for r in rows[1:])
     assert f"wrote {detections}.partial (cut short: the run was interrupted)" in out
+
+
+@pytest.fixture
+def sigterm_swallowed():
+    """A SIGTERM handler that only counts, in place of the default that would end pytest.
+
+    A command that handles SIGTERM itself replaces it while it runs, and puts it back.
+    """
+    import signal
+
+    received = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: received.append(signum))
+    yield received
+    signal.signal(signal.SIGTERM, previous)
+
+
+def test_sigterm_stops_a_run_as_ctrl_c_does(tmp_path, capsys, monkeypatch, sigterm_swallowed):
+    # A CI job's timeout or `kill` sends SIGTERM: the run keeps what finished, marks the run
+    # under way interrupted, leaves its detections as .partial and exits 1, as for Ctrl-C.
+    import os
+    import signal
+
+    import rts_scenario.pipeline as pipeline
+
+    real = pipeline.run_scene
+    calls = []
+
+    def second_is_terminated(scene, options, **kwargs):
+        calls.append(scene.name)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(scene, options, **kwargs)
+
+    monkeypatch.setattr(pipeline, "run_scene", second_is_terminated)
+    scenes = [str(ROOT / "scenarios" / f"{name}.scenario.yaml")
+              for name in ("approaching_target", "cut_out", "motorcycle")]
+    detections, report = tmp_path / "d.csv", tmp_path / "r.json"
+    code = cli.main(["run", *scenes, "--detections", str(detections), "--json", str(report)])
+    out, err = capsys.readouterr()
+    assert code == 1 and calls == ["approaching-target", "cut-out"], err
+    assert "cut_out.scenario.yaml: interrupted (Ctrl-C) while running: no verdict" in err
+    assert [(e["scene"], e["status"]) for e in json.loads(report.read_text())] == [
+        ("approaching-target", "pass"), ("cut-out", "error")]
+    assert not detections.exists() and (tmp_path / "d.csv.partial").exists()
+    # The handler the command found is back in place.
+    assert sigterm_swallowed == []
+    os.kill(os.getpid(), signal.SIGTERM)
+    assert sigterm_swallowed == [signal.SIGTERM]
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_a_schedule_export_stopped_by_sigterm_leaves_only_its_draft(tmp_path, capsys, monkeypatch,
+                                                                     sigterm_swallowed, suffix):
+    # The export goes to PATH.partial and is named PATH once whole: one stopped part way (a CI
+    # job's timeout) leaves nothing named like a whole schedule, nor the export before it.
+    import os
+    import signal
+
+    import rts_scenario.preflight as preflight
+
+    real = preflight.schedule_batches
+
+    def terminated_after_the_first_batch(scene, method="exact", batch_frames=None):
+        for n, batch in enumerate(real(scene, method, batch_frames=40)):
+            if n == 1:
+                os.kill(os.getpid(), signal.SIGTERM)
+            yield batch
+
+    monkeypatch.setattr(preflight, "schedule_batches", terminated_after_the_first_batch)
+    scene = ROOT / "scenarios" / "cut_in.scenario.yaml"
+    target = tmp_path / f"s{suffix}"
+    target.write_text("an earlier export")
+    code = cli.main(["schedule", str(scene), "--output", f"file:{target}", "--variant",
+                     "estimator=ti"])
+    _, err = capsys.readouterr()
+    assert code == 1 and err.endswith("error: interrupted\n"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"s{suffix}.partial"]
+
+
+def test_sigterm_before_a_command_runs_anything_exits_as_ctrl_c(tmp_path, capsys, monkeypatch,
+                                                                 sigterm_swallowed):
+    import os
+    import signal
+
+    import rts_scenario.cli.check as check_command
+
+    def terminated(args):
+        os.kill(os.getpid(), signal.SIGTERM)
+        return 0
+
+    monkeypatch.setattr(check_command, "_do_check", terminated)
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    code = cli.main(["check", str(scene), "--log", str(tmp_path / "x.blf")])
+    _, err = capsys.readouterr()
+    assert code == 1 and err == "error: interrupted\n"
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="file size limits are POSIX's")
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_a_json_report_that_cannot_be_written_whole_leaves_the_old_one(tmp_path, command):
+    # A file system that takes the first 300 bytes only (a full disk, a quota): the report is
+    # replaced whole or not at all, so a CI system reading it never gets half a file, neither
+    # while it is written nor after a write that failed.
+    import os
+    import resource
+    import signal
+    import subprocess
+
+    report = tmp_path / "r.json"
+    report.write_text('{"previous": "report"}\n')
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+
+    def limited() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past it fails, EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (300, 300))
+
+    # Out of the repository, and git (which a pytest plugin the sweep loads runs) takes no
+    # optional lock: a git command under the limit would leave the repository's index locked.
+    env = {**os.environ, "RTS_SCENARIO_CACHE_DIR": "off", "GIT_OPTIONAL_LOCKS": "0",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    extra = ["--workers", "1"] if command == "sweep" else []
+    proc = subprocess.run(
+        [sys.executable, "-m", "rts_scenario", command, str(scene), "--json", str(report),
+         *extra], capture_output=True, text=True, env=env, preexec_fn=limited, timeout=300,
+        cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().endswith(f"error: --json {report}: cannot write: File too large")
+    assert report.read_text() == '{"previous": "report"}\n'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]  # no draft left behind
+
+
+def test_a_json_report_keeps_its_file_s_permissions(tmp_path, capsys):
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+    report = tmp_path / "r.json"
+    report.write_text("{}\n")
+    report.chmod(0o640)
+    assert cli.main(["run", str(scene), "--json", str(report)]) == 0
+    assert json.loads(report.read_text())["status"] == "pass"
+    assert report.stat().st_mode & 0o777 == 0o640
 
 
 def test_a_reader_that_stops_early_loses_neither_the_verdict_nor_the_report(tmp_path):

@@ -787,3 +787,15 @@ def test_time_alignment_line_is_the_documented_lag():
     assert m.group(3) == ("before" if lag > 0 else "after")
     row = report_rows()["radar_clock"]
     assert re.search(r"`time alignment:` line[^;]*plus or minus three standard errors", row)
+
+
+def test_sweep_s_exit_codes_are_documented():
+    """docs/cli.md has a table of the codes `sweep` exits with, each of them once."""
+    from rts_scenario.cli import common
+
+    text = section(doc("cli.md"), "`sweep`")
+    lines = text[text.index("| code | `sweep` |"):].splitlines()[2:]
+    rows = lines[:next(i for i, line in enumerate(lines) if not line.startswith("|"))]
+    documented = [int(line.strip("|").split("|")[0]) for line in rows]
+    assert documented == [common.EXIT_OK, common.EXIT_FAIL, common.EXIT_BAD_INPUT,
+                          common.EXIT_RUNTIME_ERROR, common.EXIT_NO_RUNS]

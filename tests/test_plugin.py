@@ -441,6 +441,38 @@ def test_junit_properties_and_rts_run_fixture(pytester):
     assert 'name="detection_rate"' in xml and 'name="az_deg_rms"' in xml
 
 
+def test_junit_says_why_a_scene_failed_or_was_skipped(pytester):
+    """Each failed or skipped scene's testcase has a ``reasons`` property, the reason codes
+    (docs/report.md), comma-separated; a skipped scene's <skipped> gives its reason."""
+    import xml.etree.ElementTree as ET
+
+    pytester.makefile(".scenario.yaml", **{
+        "a_pass": scene("a-pass"),
+        # Far outside the rig's coverage: never played, nothing checkable.
+        "b_fail": scene("b-fail").replace("[30, 0, 0.6]", "[30, 20, 0.6]"),
+        "c_parked": scene("c-parked", extra="marks: [skip]\n"),
+        "d_shelved": scene("d-shelved", extra="marks: [skipif]\n"),
+        "e_known": scene("e-known", extra="marks: [xfail]\n").replace("[30, 0, 0.6]",
+                                                                        "[30, 20, 0.6]"),
+        "f_broken": scene("f-broken", extra="colour: red\n"),
+    })
+    result = pytester.runpytest("--junitxml=out.xml")
+    result.assert_outcomes(passed=1, failed=2, skipped=2, xfailed=1)
+    cases = {case.get("name"): case
+             for case in ET.parse(pytester.path / "out.xml").getroot().iter("testcase")}
+
+    def properties(name):
+        return {p.get("name"): p.get("value") for p in cases[name].iter("property")}
+
+    assert "reasons" not in properties("a-pass")
+    assert properties("b-fail")["reasons"] == "out_of_coverage,nothing_checked"
+    assert properties("e-known")["reasons"] == "out_of_coverage,nothing_checked"
+    assert properties("f_broken")["reasons"] == "bad_input"
+    for name, mark in (("c-parked", "skip"), ("d-shelved", "skipif")):
+        assert properties(name) == {"reasons": mark}
+        assert cases[name].find("skipped").get("message") == f"the scene's marks: {mark}"
+
+
 def test_xdist_gives_the_same_verdicts(pytester):
     for name in ("cut_in", "highway_following", "hard_quad_sweep", "overtaking"):
         shutil.copy(ROOT / "scenarios" / f"{name}.scenario.yaml", pytester.path)

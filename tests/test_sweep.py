@@ -225,6 +225,44 @@ def test_exit_codes(scenes, tmp_path, capsys, monkeypatch):
     assert "Traceback" not in stdout + err
 
 
+def test_an_erred_point_has_every_quantity_null_and_its_error(scenes, tmp_path, capsys,
+                                                               monkeypatch):
+    """A point that erred measured nothing: its quantities are null, never a number a tool
+    would read as a result, and its entry says why (``reason``, ``error_type``)."""
+    from rts_scenario.sweep import error_entry
+
+    # The quantities a finished run gives (docs/cli.md, sweep's keys of a run).
+    quantities = ("detection_rate", "false_detections", "errors", "max_error_ratio",
+                  "max_error_quantity")
+    real = rts_scenario.pipeline.run_scene
+
+    def second_point_fails(scene, options):
+        if scene.variant.endswith("rcs_dbsm=10.0"):
+            raise RuntimeError("the bench fell over")
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", second_point_fails)
+    out = tmp_path / "sweep.json"
+    code, _, _ = sweep(capsys, scenes, "--workers", "1", "--json", out)
+    assert code == 3
+    runs = json.loads(out.read_text())["runs"]
+    erred = [r for r in runs if r["status"] == "error"]
+    assert {(r["scene"], r["error_type"]) for r in erred} == {("swept", "runtime"),
+                                                               ("c_broken", "bad_input")}
+    for run in erred:
+        assert {k: run[k] for k in quantities} == dict.fromkeys(quantities), run
+        assert run["reason"]
+    passed = [r for r in runs if r["status"] == "pass"]
+    assert passed and all(isinstance(r["detection_rate"], float) for r in passed)
+    # Numbers an entry held before its run erred do not survive into the erred entry.
+    stale = {"scene": "s", "file": "s.scenario.yaml", "id": "", "parameters": {}, "marks": [],
+             "detection_rate": 1.0, "false_detections": 0, "errors": {"az_deg": {"rms": 0.1,
+             "max": 0.2}}, "max_error_ratio": 0.4, "max_error_quantity": "az_deg"}
+    entry = error_entry(stale, "s.scenario.yaml: worker failed", "runtime")
+    assert {k: entry[k] for k in quantities} == dict.fromkeys(quantities)
+    assert entry["reason"] == "s.scenario.yaml: worker failed" and not entry["passed"]
+
+
 def test_a_scene_whose_combinations_cannot_be_listed_for_a_bug_loses_no_other_run(
         scenes, tmp_path, capsys, monkeypatch):
     # Listing a scene's combinations raised something else than bad input: that scene is a
@@ -408,6 +446,36 @@ def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeyp
     payload = json.loads(out.read_text())
     assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
     assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
+
+
+def test_sigterm_stops_a_sweep_as_ctrl_c_does(scenes, tmp_path, capsys, monkeypatch):
+    """SIGTERM (a CI job's timeout, ``kill``) keeps the runs done and exits as Ctrl-C does."""
+    import os
+    import signal
+
+    real = rts_scenario.pipeline.run_scene
+    calls = []
+
+    def terminated_at_the_third(scene, options):
+        calls.append(scene.name)
+        if len(calls) == 3:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(scene, options)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", terminated_at_the_third)
+    # Counted, not pytest's end, where the command does not handle it.
+    received = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: received.append(signum))
+    try:
+        out = tmp_path / "partial.json"
+        code, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1",
+                             "--json", out)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert received == [] and code == 1 and err.endswith("error: interrupted\n"), err
+    payload = json.loads(out.read_text())
+    assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
+    assert payload["summary"]["interrupted"] is True
 
 
 def test_interrupted_sweep_prints_the_runs_done(scenes, tmp_path, capsys, monkeypatch):

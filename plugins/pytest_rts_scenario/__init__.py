@@ -307,6 +307,8 @@ class ScenarioItem(pytest.Item):
     def __init__(self, *, overrides: dict[str, Any], marks: tuple[str, ...],
                  error: str | None = None, crash: Exception | None = None,
                  **kwargs: Any) -> None:
+        from rts_scenario.sweep import SKIP_MARKS
+
         super().__init__(**kwargs)
         self.overrides = overrides
         self.error = error  # the scene did not load: the item fails with this message
@@ -317,6 +319,12 @@ class ScenarioItem(pytest.Item):
                 # no such failure, and fails.
                 self.add_marker(pytest.mark.xfail(raises=ScenarioFailed,
                                                   reason="the scene's marks: xfail"))
+            elif mark in SKIP_MARKS:
+                # Said as sweep says it: without a reason, pytest's report (and the JUnit XML's
+                # <skipped>) would say "unconditional skip", or nothing for skipif.
+                reason = f"the scene's marks: {mark}"
+                self.add_marker(pytest.mark.skip(reason=reason) if mark == "skip"
+                                else pytest.mark.skipif(True, reason=reason))
             else:
                 self.add_marker(mark)
 
@@ -358,6 +366,46 @@ class ScenarioItem(pytest.Item):
         return self.path, 0, f"scenario: {self.name}"
 
 
+# The JUnit XML property listing why a test failed or was skipped (`_outcome_codes`).
+REASONS_PROPERTY = "reasons"
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
+                              ) -> Generator[None, pytest.TestReport, pytest.TestReport]:
+    """Give a scene that failed or was skipped its ``reasons`` property (JUnit XML).
+
+    A scene whose check failed has it from its report (`ScenarioItem.runtest`); one that was
+    skipped, did not load or erred while it ran gets it here.
+    """
+    report = yield
+    if (isinstance(item, ScenarioItem) and report.when in ("setup", "call")
+            and (report.failed or report.skipped)
+            and all(name != REASONS_PROPERTY for name, _ in item.user_properties)):
+        item.user_properties.append((REASONS_PROPERTY, _outcome_codes(item, call)))
+    return report
+
+
+def _outcome_codes(item: ScenarioItem, call: pytest.CallInfo[None]) -> str:
+    """Return the reason code of a scene that did not run to a verdict.
+
+    The mark that skipped it (``skip``, ``skipif``; ``skipped`` for a skip of another's
+    making); ``bad_input`` where it did not load or its schedule or CAN interface could not be
+    had (as ``rts-scenario run`` exits 2); else ``runtime`` (exit 3).
+    """
+    from rts_scenario.errors import BusError, ScenarioError
+    from rts_scenario.schedule import ScheduleError
+    from rts_scenario.sweep import SKIP_MARKS
+
+    error = call.excinfo.value if call.excinfo is not None else None
+    if call.excinfo is not None and call.excinfo.errisinstance(pytest.skip.Exception):
+        return next((mark.name for mark in item.iter_markers() if mark.name in SKIP_MARKS),
+                    "skipped")
+    if item.error is not None or isinstance(error, ScenarioError | ScheduleError | BusError):
+        return "bad_input"
+    return "runtime"
+
+
 def _metrics(report: Report) -> list[tuple[str, object]]:
     # No detection rate where nothing was checkable (an empty bench): "null", as in the JSON.
     rate = report.detection_rate
@@ -368,6 +416,9 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
     for name, stats in report.errors.items():
         if stats.count:
             out += [(f"{name}_rms", round(stats.rms, 5)), (f"{name}_max", round(stats.max, 5))]
+    if not report.passed:
+        # What failed it, by name (docs/report.md, reason codes), comma-separated.
+        out.append((REASONS_PROPERTY, ",".join(report.reason_codes)))
     return out
 
 

@@ -5,15 +5,17 @@ imports the library only when it runs, so ``rts-scenario --help`` stays fast.
 
 Exit codes: 0 success, 1 a check failed, 2 bad input (arguments or files), 3 runtime error.
 Errors print one ``error: ...`` line; ``--debug`` adds the traceback before it (the exit code
-stays the same).
+stays the same). SIGTERM stops a command as Ctrl-C does.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 from collections.abc import Sequence
-from typing import TextIO, cast
+from typing import Any, TextIO, cast
 
 from .._version import __version__
 from ..errors import RtsError
@@ -126,9 +128,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout = cast(TextIO, out_guard)
     if err_guard is not None:
         sys.stderr = cast(TextIO, err_guard)
+    previous = _interrupt_on_sigterm()
     try:
         code = _handle(args)
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
         if out_guard is not None:
             out_guard.restore()
             sys.stdout = stdout
@@ -148,6 +153,25 @@ def main(argv: Sequence[str] | None = None) -> int:
                     pass  # standard error itself is lost: the exit code is all that is left
         return EXIT_RUNTIME_ERROR
     return code
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def _interrupt_on_sigterm() -> Any:
+    """Make SIGTERM raise `KeyboardInterrupt`, as Ctrl-C does; return the handler it replaced.
+
+    A CI job's timeout, ``kill`` or a container's stop sends SIGTERM: its default killed the
+    command on the spot, leaving a report half written or not at all and no verdict. Handled as
+    Ctrl-C, a command keeps what finished and exits with Ctrl-C's exit code. None where no
+    handler can be set (a thread other than the main one).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    # None: a handler set outside Python, which cannot be put back; the default is its nearest.
+    return signal.SIG_DFL if previous is None else previous
 
 
 def _handle(args: argparse.Namespace) -> int:

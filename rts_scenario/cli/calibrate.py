@@ -20,6 +20,7 @@ from .common import (
     check_writable_folder,
     host_clock_lines,
     mapping_record,
+    write_json,
     writing,
 )
 
@@ -32,9 +33,6 @@ MEASURED = ("range_m", "azimuth_deg", "elevation_deg", "rcs_dbsm")
 
 
 def _do_calibrate(args: argparse.Namespace) -> int:
-    import json
-    from pathlib import Path
-
     import numpy as np
 
     from .. import calibration as cal
@@ -160,15 +158,13 @@ def _do_calibrate(args: argparse.Namespace) -> int:
     for line in host_clock_lines(steps):
         print(line)
     if args.json:
-        with writing("--json", args.json):
-            Path(args.json).write_text(json.dumps(
-                {**calibration_report(result, errors if injected else None, before, after,
-                                      args.estimator, method, failed),
-                 "mapping": mapping_record(args.mapping), "can_fd": args.can_fd,
-                 "radar_channel": args.radar_channel,
-                 "other_channels": None if args.radar_channel is None else other_channels,
-                 "host_clock_steps": steps},
-                indent=2, allow_nan=False) + "\n")
+        write_json("--json", args.json, {
+            **calibration_report(result, errors if injected else None, before, after,
+                                 args.estimator, method, failed),
+            "mapping": mapping_record(args.mapping), "can_fd": args.can_fd,
+            "radar_channel": args.radar_channel,
+            "other_channels": None if args.radar_channel is None else other_channels,
+            "host_clock_steps": steps})
         print(f"wrote {args.json}")
     if args.plot:
         from ..plots import write_calibration_plot

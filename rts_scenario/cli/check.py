@@ -13,14 +13,11 @@ from .common import (
     check_number,
     check_writable_file,
     named_file,
-    writing,
+    write_json,
 )
 
 
 def _do_check(args: argparse.Namespace) -> int:
-    import json
-    from pathlib import Path
-
     from ..canbus.mapping import CanMapping
     from ..errors import RtsError
     from ..recheck import check_log, check_log_file, log_variant
@@ -56,8 +53,7 @@ def _do_check(args: argparse.Namespace) -> int:
         entry = {"file": args.scene, "log": args.log,
                  "status": "pass" if report.passed else "fail", **report.to_dict(),
                  "alignment": result.alignment.to_dict()}
-        with writing("--json", args.json):
-            Path(args.json).write_text(json.dumps(entry, indent=2, allow_nan=False) + "\n")
+        write_json("--json", args.json, entry)
         print(f"wrote {args.json}")
     return EXIT_OK if report.passed else EXIT_FAIL
 

@@ -149,6 +149,21 @@ def writing(option: str, path: str | Path) -> Iterator[None]:
         raise RtsError(f"{option} {path}: cannot write: {reason}") from exc
 
 
+def write_json(option: str, path: str | Path, data: Any) -> None:
+    """Write ``data`` as strict JSON to the file ``option`` names, replacing it whole.
+
+    A reader (a CI system polling the report) never sees half a file, and a write that fails
+    leaves the file as it was, not cut short.
+    """
+    import json
+
+    from ..atomic import write_atomic
+
+    text = json.dumps(data, indent=2, allow_nan=False) + "\n"
+    with writing(option, path):
+        write_atomic(path, text)
+
+
 def check_writable_file(option: str, path: str | Path, kind: str | None = None) -> None:
     """Fail now, before a long run, if the file ``option`` names could not be written later.
 

@@ -28,13 +28,12 @@ from .common import (
     check_writable_folder,
     named_file,
     show_traceback,
+    write_json,
     writing,
 )
 
 
 def _do_run(args: argparse.Namespace) -> int:
-    import json
-
     from ..canbus.mapping import CanMapping
     from ..check import DETECTION_COLUMNS
     from ..errors import BusError, RtsError, ScenarioError
@@ -232,8 +231,7 @@ def _do_run(args: argparse.Namespace) -> int:
             print(line + (f": {entry['error']}" if entry["status"] == "error" else ""))
     if args.json:
         payload = entries[0] if len(entries) == 1 else entries
-        with writing("--json", args.json):
-            Path(args.json).write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+        write_json("--json", args.json, payload)
         print(f"wrote {args.json}")
     if runtime_error:
         return EXIT_RUNTIME_ERROR

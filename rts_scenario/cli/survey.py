@@ -17,6 +17,7 @@ from .common import (
     check_writable_file,
     host_clock_lines,
     mapping_record,
+    write_json,
     writing,
 )
 
@@ -25,9 +26,6 @@ MEASURED = ("azimuth_deg", "elevation_deg", "rcs_dbsm")
 
 
 def _do_survey(args: argparse.Namespace) -> int:
-    import json
-    from pathlib import Path
-
     import numpy as np
 
     from ..pipeline import Pipeline, RunOptions
@@ -77,13 +75,12 @@ def _do_survey(args: argparse.Namespace) -> int:
     if note:
         print(f"note: {note}")
     if args.json:
-        with writing("--json", args.json):
-            data = {**result.to_dict(), "mapping": mapping_record(args.mapping),
-                    "can_fd": args.can_fd, "radar_channel": args.radar_channel,
-                    "other_channels": None if args.radar_channel is None
-                    else bench.measurement_other_channels,
-                    "host_clock_steps": steps}
-            Path(args.json).write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
+        write_json("--json", args.json, {
+            **result.to_dict(), "mapping": mapping_record(args.mapping),
+            "can_fd": args.can_fd, "radar_channel": args.radar_channel,
+            "other_channels": None if args.radar_channel is None
+            else bench.measurement_other_channels,
+            "host_clock_steps": steps})
         print(f"wrote {args.json}")
     missed = [str(q) for q in np.flatnonzero(~seen)]
     if missed:

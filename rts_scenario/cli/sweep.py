@@ -15,6 +15,7 @@ from .common import (
     METHODS,
     check_distinct_paths,
     check_writable_file,
+    write_json,
     writing,
 )
 
@@ -167,8 +168,6 @@ def _print_runs(entries: list[dict[str, Any]], summary: dict[str, Any], seconds:
 
     ``total``: the runs the sweep had, when it was interrupted before all of them finished.
     """
-    import json
-
     from ..sweep import run_label
 
     print(_settings_text(settings))
@@ -179,8 +178,7 @@ def _print_runs(entries: list[dict[str, Any]], summary: dict[str, Any], seconds:
     print(_summary_text(summary, seconds, total))
     if args.json:
         payload = {"runs": entries, "summary": summary, "config": settings.as_json()}
-        with writing("--json", args.json):
-            Path(args.json).write_text(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+        write_json("--json", args.json, payload)
         print(f"wrote {args.json}" + (f" ({len(entries)} of {total} runs)"
                                       if total is not None else ""))
 
