@@ -213,6 +213,30 @@ def test_a_new_sender_s_first_frame_starts_a_new_stream():
     assert [f for f, _, _ in receiver.applied] == [0, 1, 2, 3, 4, 0, 1]  # for a consumer
 
 
+def test_a_stream_opens_by_its_header_whatever_its_entries():
+    """udp-protocol.md, receiver rules: a run on another rig is a stream of its own, counted
+    malformed there; a datagram too short for a header is malformed, not corrupted."""
+    receiver = UdpReceiver(n_front_ends=4)
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = 0, np.arange(4), 1
+    entries["fe"] = np.arange(4)
+    other_rig = entries.copy()
+    other_rig["fe"] = [5, 6, 10, 11]
+
+    def frame(values, n):
+        return encode_frame(values, kind=KIND_FULL, frame=n, t_s=n / 20.0, first_sequence=n)[0]
+
+    receiver.handle(frame(entries, 0), ("127.0.0.1", 40001))
+    receiver.handle(frame(entries, 1), ("127.0.0.1", 40001))
+    receiver.handle(frame(other_rig, 0), ("127.0.0.1", 40002))
+    assert receiver.streams == 2
+    receiver.handle(frame(other_rig, 1), ("127.0.0.1", 40002))
+    receiver.handle(b"RTSS\x01", ("127.0.0.1", 40002))
+    counters = receiver.status_counters()
+    assert (counters["datagrams"], counters["malformed"], counters["corrupted"],
+            counters["frames_applied"]) == (3, 3, 0, 0)
+
+
 @pytest.mark.parametrize("field, value", [("channel", 4), ("channel", 255), ("fe", 6),
                                           ("fe", -1)])
 def test_an_entry_naming_a_channel_or_fe_the_rts_lacks_is_malformed_not_applied(field, value):
