@@ -799,3 +799,25 @@ def test_sweep_s_exit_codes_are_documented():
     documented = [int(line.strip("|").split("|")[0]) for line in rows]
     assert documented == [common.EXIT_OK, common.EXIT_FAIL, common.EXIT_BAD_INPUT,
                           common.EXIT_RUNTIME_ERROR, common.EXIT_NO_RUNS]
+
+
+def test_udp_status_bits_are_the_schedule_s_status_flags():
+    """An RTS reads an entry's `status` bit by bit from the table in udp-protocol.md."""
+    from rts_scenario.check import _LIMIT_FLAGS
+    from rts_scenario.outputs.udp import ENTRY
+    from rts_scenario.schedule import BLOCKING, Status
+
+    text = doc("udp-protocol.md")
+    rows = re.findall(r"^\| (\d+) \| (\d+) \| `([A-Z_]+)` \|", text, re.M)
+    documented = {name: (int(bit), int(value)) for bit, value, name in rows}
+    flags = {f.name: f.value for f in Status if f.value}
+    assert set(documented) == set(flags)
+    for name, (bit, value) in documented.items():
+        assert value == flags[name] == 1 << bit, name
+    # Every flag fits the entry's field, and the played ones are the two the doc names.
+    assert sum(flags.values()) < 1 << (8 * ENTRY["status"].itemsize)
+    played = {f.name for f in Status if f.value and not f & BLOCKING}
+    assert played == {"ATTENUATION_CLIPPED", "ANGLE_QUANTIZED"}
+    assert all(f"`{name}`" in text for name in played)
+    # The report's limits are the flags' names in lower case.
+    assert {name.lower() for name in flags} - {"not_present"} == set(_LIMIT_FLAGS)

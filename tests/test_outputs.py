@@ -213,6 +213,30 @@ def test_a_new_sender_s_first_frame_starts_a_new_stream():
     assert [f for f, _, _ in receiver.applied] == [0, 1, 2, 3, 4, 0, 1]  # for a consumer
 
 
+def test_a_stream_opens_by_its_header_whatever_its_entries():
+    """udp-protocol.md, receiver rules: a run on another rig is a stream of its own, counted
+    malformed there; a datagram too short for a header is malformed, not corrupted."""
+    receiver = UdpReceiver(n_front_ends=4)
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = 0, np.arange(4), 1
+    entries["fe"] = np.arange(4)
+    other_rig = entries.copy()
+    other_rig["fe"] = [5, 6, 10, 11]
+
+    def frame(values, n):
+        return encode_frame(values, kind=KIND_FULL, frame=n, t_s=n / 20.0, first_sequence=n)[0]
+
+    receiver.handle(frame(entries, 0), ("127.0.0.1", 40001))
+    receiver.handle(frame(entries, 1), ("127.0.0.1", 40001))
+    receiver.handle(frame(other_rig, 0), ("127.0.0.1", 40002))
+    assert receiver.streams == 2
+    receiver.handle(frame(other_rig, 1), ("127.0.0.1", 40002))
+    receiver.handle(b"RTSS\x01", ("127.0.0.1", 40002))
+    counters = receiver.status_counters()
+    assert (counters["datagrams"], counters["malformed"], counters["corrupted"],
+            counters["frames_applied"]) == (3, 3, 0, 0)
+
+
 @pytest.mark.parametrize("field, value", [("channel", 4), ("channel", 255), ("fe", 6),
                                           ("fe", -1)])
 def test_an_entry_naming_a_channel_or_fe_the_rts_lacks_is_malformed_not_applied(field, value):
@@ -583,3 +607,53 @@ def test_a_rig_the_rts_does_not_have_is_said_as_what_it_did(applied, said):
     assert reason == (f"rts_rig: the RTS plays a rig of 4 FEs whose geometry (sha256 "
                       f"aaaaaaaaaaaa) is not the run's (wide-3x5 (15 FEs), bbbbbbbbbbbb): {said}; "
                       f"run on the rig the RTS has (emulate: --rig the run's)")
+
+
+def test_stream_settings_keep_to_the_rig_limits_udp_protocol_md_promises():
+    """What an RTS may rely on (docs/udp-protocol.md, Datagram): bounds, grids, stopped entries."""
+    import dataclasses
+    import struct
+
+    from rts_scenario.outputs.udp import frame_entries
+    from rts_scenario.schedule import Status
+
+    scene = load_scenario(ROOT / "scenarios" / "dense_traffic.scenario.yaml")
+    limits = dataclasses.replace(scene.rig.limits, attenuation_min_db=2.0,
+                                 attenuation_max_db=80.0, attenuation_step_db=0.5,
+                                 delay_step_s=1e-10, phase_step_deg=5.625, echoes_per_channel=3)
+    rig = dataclasses.replace(scene.rig, limits=limits,
+                              cal_phase_deg=np.linspace(-170.0, 170.0, scene.rig.n_front_ends))
+    s = build_schedule(compute_tracks(scene), rig, scene.radar, angle_tolerance_deg=(0.5, 1.0))
+    changed = s.changed()
+    entry = struct.Struct(">HBBhHfdff")
+    step_rad = 2.0 * np.pi / round(360.0 / limits.phase_step_deg)
+    played = Status.ATTENUATION_CLIPPED | Status.ANGLE_QUANTIZED
+    seen = {"emitting": 0, "stopped": 0, "clipped": 0}
+    for pos in range(s.n_frames):
+        for kind, which in ((KIND_FULL, None), (KIND_DELTA, changed)):
+            (datagram,) = encode_frame(frame_entries(s, pos, which), kind=kind, frame=pos,
+                                       t_s=float(s.t_s[pos]), first_sequence=0)
+            per_fe: dict[int, int] = {}
+            for i in range(struct.unpack_from(">H", datagram, 26)[0]):
+                _, _, flags, fe, status, att, delay, doppler, phase = entry.unpack_from(
+                    datagram, 28 + 28 * i)
+                assert flags in (0, 1)
+                if not flags:
+                    seen["stopped"] += 1
+                    assert (fe, att, delay, doppler, phase) == (-1, 0.0, 0.0, 0.0, 0.0)
+                    continue
+                seen["emitting"] += 1
+                seen["clipped"] += bool(status & Status.ATTENUATION_CLIPPED)
+                per_fe[fe] = per_fe.get(fe, 0) + 1
+                assert status & ~played == 0
+                assert limits.attenuation_min_db <= att <= limits.attenuation_max_db
+                k = (att - limits.attenuation_min_db) / limits.attenuation_step_db
+                assert k == round(k)
+                assert delay >= limits.delay_min_s
+                assert abs(delay / limits.delay_step_s - round(delay / limits.delay_step_s)) < 1e-6
+                assert limits.doppler_min_hz <= doppler <= limits.doppler_max_hz
+                assert -np.pi - 1e-6 <= phase < np.pi
+                assert abs(phase / step_rad - round(phase / step_rad)) < 1e-5
+            if kind == KIND_FULL:
+                assert max(per_fe.values(), default=0) <= limits.echoes_per_channel
+    assert all(seen.values()), seen
