@@ -657,3 +657,26 @@ def test_stream_settings_keep_to_the_rig_limits_udp_protocol_md_promises():
             if kind == KIND_FULL:
                 assert max(per_fe.values(), default=0) <= limits.echoes_per_channel
     assert all(seen.values()), seen
+
+
+def test_the_receiver_remembers_the_last_sequence_window_numbers_as_documented():
+    """udp-protocol.md: the last 4096 sequence numbers tell a copy from a new datagram; an
+    older one is stale, however long ago the receiver last pruned what it remembers."""
+    entries = np.zeros(4, dtype=ENTRY)
+    entries["target"], entries["channel"], entries["flags"] = 0, np.arange(4), 1
+
+    def datagram(n):
+        return encode_frame(entries, kind=KIND_FULL, frame=n, t_s=n / 20.0,
+                            first_sequence=n)[0]
+
+    for extra in (0, SEQUENCE_WINDOW // 2):  # just after a pruning, and half a window later
+        receiver = UdpReceiver()
+        newest = 2 * SEQUENCE_WINDOW + 1 + extra
+        for n in range(newest + 1):
+            receiver.handle(datagram(n))
+        receiver.handle(datagram(newest - SEQUENCE_WINDOW + 1))  # the oldest remembered
+        assert (receiver.stats.duplicates, receiver.stats.stale) == (1, 0)
+        receiver.handle(datagram(newest - SEQUENCE_WINDOW))  # one older: stale
+        assert (receiver.stats.duplicates, receiver.stats.stale) == (1, 1)
+        receiver.handle(datagram(newest - SEQUENCE_WINDOW - 100))
+        assert (receiver.stats.duplicates, receiver.stats.stale) == (1, 2)

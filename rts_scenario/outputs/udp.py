@@ -818,12 +818,13 @@ class UdpReceiver:
             stats.malformed += 1
             stats.other_rig += 1
             return
+        if seq <= self._max_sequence - SEQUENCE_WINDOW:
+            # Too old to tell from a copy (the last SEQUENCE_WINDOW numbers are remembered,
+            # the newest's among them): its frame was applied or given up long ago.
+            stats.stale += 1
+            return
         if seq in self._seen:
             stats.duplicates += 1
-            return
-        if seq < self._max_sequence - SEQUENCE_WINDOW:
-            # Too old to tell from a copy: its frame was applied or given up long ago.
-            stats.stale += 1
             return
         if seq < self._max_sequence:
             stats.reordered += 1
@@ -833,7 +834,7 @@ class UdpReceiver:
             self._max_sequence = seq
             if len(self._seen) > 2 * SEQUENCE_WINDOW:
                 oldest = seq - SEQUENCE_WINDOW
-                self._seen = {s for s in self._seen if s >= oldest}
+                self._seen = {s for s in self._seen if s > oldest}
         self._min_sequence = seq if self._min_sequence is None else min(self._min_sequence, seq)
         self._first_frame = frame if self._first_frame is None else min(self._first_frame, frame)
         self._top_frame = max(self._top_frame, frame)
