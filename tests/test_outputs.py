@@ -680,3 +680,20 @@ def test_the_receiver_remembers_the_last_sequence_window_numbers_as_documented()
         assert (receiver.stats.duplicates, receiver.stats.stale) == (1, 1)
         receiver.handle(datagram(newest - SEQUENCE_WINDOW - 100))
         assert (receiver.stats.duplicates, receiver.stats.stale) == (1, 2)
+
+
+def test_a_part_that_disagrees_with_its_frame_s_other_parts_is_malformed():
+    """The parts of a frame share its kind, part count and time (udp-protocol.md); a part that
+    does not is not assembled into the frame."""
+    entries = np.zeros(60, dtype=ENTRY)  # two parts per frame
+    entries["target"], entries["channel"], entries["flags"] = np.arange(60) // 4, \
+        np.arange(60) % 4, 1
+    receiver = UdpReceiver(keep_applied=True)
+    first, _ = encode_frame(entries, kind=KIND_FULL, frame=0, t_s=0.0, first_sequence=0)
+    _, other_time = encode_frame(entries, kind=KIND_FULL, frame=0, t_s=0.05, first_sequence=0)
+    receiver.handle(first)
+    receiver.handle(other_time)
+    assert (receiver.stats.malformed, receiver.stats.frames_applied) == (1, 0)
+    _, second = encode_frame(entries, kind=KIND_FULL, frame=0, t_s=0.0, first_sequence=0)
+    receiver.handle(second)
+    assert (receiver.stats.malformed, receiver.stats.frames_applied) == (1, 1)

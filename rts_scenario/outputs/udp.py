@@ -818,6 +818,10 @@ class UdpReceiver:
             stats.malformed += 1
             stats.other_rig += 1
             return
+        if self._pending_meta.get(frame, (kind, parts, t_s)) != (kind, parts, t_s):
+            # A part of a frame whose other parts came with another kind, part count or time.
+            stats.malformed += 1
+            return
         if seq <= self._max_sequence - SEQUENCE_WINDOW:
             # Too old to tell from a copy (the last SEQUENCE_WINDOW numbers are remembered,
             # the newest's among them): its frame was applied or given up long ago.
