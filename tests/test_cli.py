@@ -765,7 +765,11 @@ def test_a_can_interface_that_cannot_be_opened_is_one_error_before_the_first_sce
     assert len(lines) == 1, err
     assert lines[0].startswith("error: --can-interface socketcan --can-channel rts-no-such0: "
                                "cannot open CAN interface 'socketcan' channel 'rts-no-such0'")
-    assert out == "" and not report.exists()  # nothing ran
+    assert out == ""
+    # Nothing ran: each scene given is an error entry, none a verdict.
+    entries = json.loads(report.read_text())
+    assert [e["status"] for e in entries] == ["error", "error"]
+    assert all(e["error"] == "not run: " + lines[0].removeprefix("error: ") for e in entries)
     # Without --can-channel the run would use a private channel name: said so.
     assert cli.main(["run", scene, "--can-interface", "socketcan"]) == 2
     out, err = capsys.readouterr()
@@ -832,3 +836,19 @@ def test_run_runs_a_marked_scene_as_written_and_says_what_pytest_and_sweep_would
     entries = json.loads(out.read_text())
     assert [(e["scene"], e["status"], e["marks"]) for e in entries] == [
         ("known", "fail", ["xfail", "slow"]), ("parked", "pass", ["skip"])]
+
+
+def test_a_run_stopped_by_a_bad_option_leaves_no_earlier_report_in_its_json(tmp_path, capsys):
+    # A CI job reading the --json of a command that stopped on its options must not read the
+    # report an earlier run left there as this one's.
+    scene = Path(__file__).resolve().parents[1] / "scenarios" / "cut_in.scenario.yaml"
+    out = tmp_path / "report.json"
+    out.write_text('{"scene": "cut-in", "status": "pass", "passed": true}\n')
+    assert cli.main(["run", str(scene), "--json", str(out), "--can-interface", "nosuch"]) == 2
+    assert "unknown python-can interface" in capsys.readouterr().err
+    report = json.loads(out.read_text())
+    assert report["status"] == "error" and "passed" not in report
+    assert report["error"].startswith("not run: --can-interface 'nosuch': unknown python-can")
+    assert report["file"] == str(scene) and report["scene"] == "cut_in"
+    # An error of --json itself leaves the file alone: it names what cannot be written.
+    assert cli.main(["run", str(scene), "--json", str(tmp_path / "no" / "r.json")]) == 2

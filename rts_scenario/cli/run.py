@@ -54,52 +54,62 @@ def _do_run(args: argparse.Namespace) -> int:
             expanded.append((path, exc))
 
     # Everything the options name is checked before the first scene runs, not after it.
-    check_output("--output", args.output, run=True)
-    check_can_interface("--can-interface", args.can_interface, args.can_channel)
-    check_radar_channel(args.radar_channel)
-    if args.mapping:
-        mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
-        check_fd_mapping(args.can_fd, args.mapping, mapping)
-    check_distinct_paths(
-        [("--json", args.json), ("--detections", args.detections), ("--record", args.record),
-         ("--record's sidecar", f"{args.record}.rts.json" if args.record else None),
-         ("--plot", args.plot)],
-        [*(("SCENE", scene) for scene in args.scenes), ("--mapping", args.mapping)])
-    if args.json:
-        check_writable_file("--json", args.json)
-    if args.detections:
-        check_writable_file("--detections", args.detections)
+    # An option at fault stops the command before any scene runs: a --json report of an
+    # earlier run must not stay in place to be read as this one's.
     logs: dict[str, str] = {}  # variant -> the file its bus is recorded to
-    if args.record:
-        from ..recheck import LOG_SUFFIXES
+    try:
+        check_output("--output", args.output, run=True)
+        check_can_interface("--can-interface", args.can_interface, args.can_channel)
+        check_radar_channel(args.radar_channel)
+        if args.mapping:
+            mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
+            check_fd_mapping(args.can_fd, args.mapping, mapping)
+        check_distinct_paths(
+            [("--json", args.json), ("--detections", args.detections), ("--record", args.record),
+             ("--record's sidecar", f"{args.record}.rts.json" if args.record else None),
+             ("--plot", args.plot)],
+            [*(("SCENE", scene) for scene in args.scenes), ("--mapping", args.mapping)])
+        if args.json:
+            check_writable_file("--json", args.json)
+        if args.detections:
+            check_writable_file("--detections", args.detections)
+        if args.record:
+            from ..recheck import LOG_SUFFIXES
 
-        if len(args.scenes) > 1:
-            raise RtsError(f"--record: records the bus of one scene, got {len(args.scenes)} "
-                           f"scenes")
-        suffix = Path(args.record).suffix.lower()
-        if suffix not in LOG_SUFFIXES:
-            raise RtsError(f"--record {args.record}: unknown log format {suffix!r}; valid: "
-                           f"{', '.join(LOG_SUFFIXES)}")
-        if suffix == ".mf4":
-            try:
-                import asammdf  # noqa: F401 - python-can writes MF4 through it
-            except ImportError:
-                raise RtsError("--record: .mf4 logs need asammdf (pip install "
-                               "'rts-scenario[mf4]')") from None
-        combos = expanded[0][1]
-        logs = variant_logs(args.record, [] if isinstance(combos, Exception)
-                            else [ident for ident, _ in combos])
-        for log in logs.values() or [args.record]:
-            check_writable_file("--record", log)
-    if args.plot:
-        from ..plots import require_matplotlib
+            if len(args.scenes) > 1:
+                raise RtsError(f"--record: records the bus of one scene, got {len(args.scenes)} "
+                               f"scenes")
+            suffix = Path(args.record).suffix.lower()
+            if suffix not in LOG_SUFFIXES:
+                raise RtsError(f"--record {args.record}: unknown log format {suffix!r}; valid: "
+                               f"{', '.join(LOG_SUFFIXES)}")
+            if suffix == ".mf4":
+                try:
+                    import asammdf  # noqa: F401 - python-can writes MF4 through it
+                except ImportError:
+                    raise RtsError("--record: .mf4 logs need asammdf (pip install "
+                                   "'rts-scenario[mf4]')") from None
+            combos = expanded[0][1]
+            logs = variant_logs(args.record, [] if isinstance(combos, Exception)
+                                else [ident for ident, _ in combos])
+            for log in logs.values() or [args.record]:
+                check_writable_file("--record", log)
+        if args.plot:
+            from ..plots import require_matplotlib
 
-        require_matplotlib()
-        check_writable_folder("--plot", args.plot)
-    # Last: the interface opens once (and closes) only when every other option is good.
-    check_can_opens("--can-interface", args.can_interface, args.can_channel, "--can-channel",
-                    fd=args.can_fd)
-
+            require_matplotlib()
+            check_writable_folder("--plot", args.plot)
+        # Last: the interface opens once (and closes) only when every other option is good.
+        check_can_opens("--can-interface", args.can_interface, args.can_channel, "--can-channel",
+                        fd=args.can_fd)
+    except RtsError as exc:
+        if args.json and not str(exc).startswith("--json"):
+            message = f"not run: {exc}"
+            unrun = [{"scene": Path(path).name.removesuffix(SCENE_SUFFIX), "file": path,
+                      "status": "error", "error": message, "variant": "", "parameters": {}}
+                     for path in args.scenes]
+            write_json("--json", args.json, unrun[0] if len(unrun) == 1 else unrun)
+        raise
     entries: list[dict[str, Any]] = []
     stems: set[str] = set()
     bad_input = runtime_error = False
