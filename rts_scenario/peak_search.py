@@ -9,6 +9,9 @@ steps on finite differences (no analytic derivatives).
 
 from __future__ import annotations
 
+from functools import lru_cache
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -20,6 +23,9 @@ ComplexArray = NDArray[np.complex128]
 _FD_STEP_DEG = 1e-3
 _NEWTON_STEPS = 12
 _MAX_STEP_DEG = 0.5
+# Search grids up to this size are kept between calls (the default window on a 12-element array
+# is 11 MB); a larger one (a cascade radar's 192 elements) is built once per call and dropped.
+_MAX_CACHED_GRID_BYTES = 64 * 2**20
 
 
 def snapshot(
@@ -42,12 +48,22 @@ def snapshot(
 def bartlett_power(array: VirtualArray, x: ComplexArray, az_deg: FloatArray,
                    el_deg: FloatArray) -> FloatArray:
     """``|a(az, el)^H x|^2`` for look directions ``(N, K)`` and snapshots ``(N, M)``."""
+    return _power(_conjugate_steering(array.y_m, array.z_m, array.wavelength_m, az_deg, el_deg), x)
+
+
+def _conjugate_steering(y_m: FloatArray, z_m: FloatArray, wavelength_m: float,
+                        az_deg: FloatArray, el_deg: FloatArray) -> ComplexArray:
+    """``conj(a(az, el))`` for look directions ``(N, K)``: shape ``(N, K, M)``."""
     az, el = np.radians(az_deg), np.radians(el_deg)
-    two_pi_over_lambda = 2.0 * np.pi / array.wavelength_m
+    two_pi_over_lambda = 2.0 * np.pi / wavelength_m
     phase = two_pi_over_lambda * (
-        (np.cos(el) * np.sin(az))[..., None] * array.y_m + np.sin(el)[..., None] * array.z_m
+        (np.cos(el) * np.sin(az))[..., None] * y_m + np.sin(el)[..., None] * z_m
     )
-    out = np.einsum("nkv,nv->nk", np.exp(-1j * phase), x)
+    return np.exp(-1j * phase)
+
+
+def _power(conjugate_steering: ComplexArray, x: ComplexArray) -> FloatArray:
+    out = np.einsum("nkv,nv->nk", conjugate_steering, x)
     return out.real**2 + out.imag**2
 
 
@@ -78,14 +94,41 @@ def find_peak(
         Peak direction, refined to ~1e-7 deg.
     """
     x = np.atleast_2d(x)
-    grid_az = np.arange(az_range_deg[0], az_range_deg[1] + grid_step_deg / 2, grid_step_deg)
-    grid_el = np.arange(el_range_deg[0], el_range_deg[1] + grid_step_deg / 2, grid_step_deg)
-    g_az, g_el = (v.ravel() for v in np.meshgrid(grid_az, grid_el))
+    key = (array.key, (float(az_range_deg[0]), float(az_range_deg[1])),
+           (float(el_range_deg[0]), float(el_range_deg[1])), float(grid_step_deg))
+    n_looks = _grid_axis(*key[1], key[3]).size * _grid_axis(*key[2], key[3]).size
+    cached = n_looks * array.n_elements * 16 <= _MAX_CACHED_GRID_BYTES
+    g_az, g_el, steering = (_search_grid if cached else _search_grid.__wrapped__)(*key)
     best = np.empty(len(x), dtype=np.int64)
     for i in range(len(x)):  # one spectrum per snapshot keeps memory at grid size
-        best[i] = np.argmax(bartlett_power(array, x[i : i + 1], g_az[None], g_el[None])[0])
+        best[i] = np.argmax(_power(steering, x[i : i + 1])[0])
     az, el = g_az[best], g_el[best]
     return _newton_refine(array, x, az, el)
+
+
+def _grid_axis(lo_deg: float, hi_deg: float, step_deg: float) -> FloatArray:
+    return np.arange(lo_deg, hi_deg + step_deg / 2, step_deg)
+
+
+@lru_cache(maxsize=8)
+def _search_grid(
+    array_key: tuple[Any, ...],
+    az_range_deg: tuple[float, float],
+    el_range_deg: tuple[float, float],
+    grid_step_deg: float,
+) -> tuple[FloatArray, FloatArray, ComplexArray]:
+    """Look directions ``(K,)`` of the coarse grid and their conjugate steering ``(1, K, M)``.
+
+    Keyed by the array's value (`VirtualArray.key`), so equal arrays share one grid.
+    """
+    y_bytes, z_bytes, wavelength_m = array_key
+    y_m, z_m = np.frombuffer(y_bytes), np.frombuffer(z_bytes)
+    g_az, g_el = (v.ravel() for v in np.meshgrid(_grid_axis(*az_range_deg, grid_step_deg),
+                                                 _grid_axis(*el_range_deg, grid_step_deg)))
+    steering = _conjugate_steering(y_m, z_m, wavelength_m, g_az[None], g_el[None])
+    for values in (g_az, g_el, steering):
+        values.setflags(write=False)  # shared by every later call
+    return g_az, g_el, steering
 
 
 def _newton_refine(array: VirtualArray, x: ComplexArray, az: FloatArray,

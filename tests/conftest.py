@@ -13,6 +13,44 @@ settings.register_profile("ci", derandomize=True, print_blob=True)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
+# The slowest tests (`pytest --durations=40` on two workers), slowest first. They run before
+# the rest, so that under pytest-xdist no worker is left with a long test when the other has
+# run out of work; a test not listed keeps its place after them. (A test using a fixture of
+# module scope is not listed: moved away from its module, it would build the fixture again.)
+SLOW_FIRST = (
+    "tests/test_phase_search.py::test_the_phase_search_chooses_what_the_reference_chooses",
+    "tests/test_two_processes.py::test_calibrate_an_emulated_rts_over_the_network_then_run_on",
+    "tests/test_plugin.py::test_xdist_gives_the_same_verdicts",
+    "tests/test_calibration.py::test_cli_calibrate_fails_when_the_check_grid_cannot_be_played",
+    "tests/test_sweep.py::test_the_euro_ncap_catalogue_sweeps_to_the_same_verdicts_everywhere",
+    "tests/test_honest_bench.py::test_cascade_sees_each_fe_where_the_reference_says",
+    "tests/test_bench_calibration.py::test_a_pair_whose_frame_went_out_late_is_measured_again",
+    "tests/test_bench_calibration.py::test_calibrate_recovers_channels_within_6_db_for_every",
+    "tests/test_bad_input.py::test_random_command_lines_never_raise",
+    "tests/test_radar_clock.py::test_a_free_radar_just_before_the_frames_is_numbered_by_all",
+    "tests/test_solver.py::test_plane_waves_leave_no_gap_between_the_slanted_quads_of_lab_2x3",
+    "tests/test_globalmax.py::test_feasible_targets_are_the_global_peak_over_the_field_of_view",
+    "tests/test_solver.py::test_ten_million_targets",
+    "tests/test_bench_calibration.py::test_a_pair_whose_frame_went_out_late_twice_stops_the",
+    "tests/test_emulate.py::test_udp_losses_show_in_the_rts_statistics_and_in_the_detections",
+    "tests/test_honest_bench.py::test_100_ps_delay_step_keeps_the_angle_on_a_calibrated_rig",
+    "tests/test_recheck.py::test_a_damaged_log_is_one_error_line_without_a_traceback",
+    "tests/test_radar_clock.py::test_cycles_on_one_line_read_as_bent_as_rarely_as_the_test_says",
+    "tests/test_recheck.py::test_a_long_log_is_aligned_by_where_its_detections_begin",
+    "tests/test_recheck.py::test_an_8_bit_counter_names_every_cycle_live_and_in_the_re_checks",
+    "tests/test_bench_calibration.py::test_a_survey_of_a_rig_the_rts_does_not_have_fails_naming",
+    "tests/test_cli.py::test_bench_prints_table_and_writes_json",
+    "tests/test_sweep.py::test_relative_paths_reach_dask_workers_started_in_another_folder",
+)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    def rank(item: pytest.Item) -> int:
+        return next((i for i, prefix in enumerate(SLOW_FIRST) if item.nodeid.startswith(prefix)),
+                    len(SLOW_FIRST))
+
+    items.sort(key=rank)  # stable: the rest keep pytest's order
+
 
 @pytest.fixture(scope="session", autouse=True)
 def plan_cache_dir(tmp_path_factory: pytest.TempPathFactory):

@@ -31,3 +31,23 @@ def test_finds_the_global_not_the_nearest_peak():
     x = snapshot(arr, [[0.3, 1.0]], [-25.0, 20.0], [0.0, 5.0])
     peak_az, peak_el = find_peak(arr, x)
     assert abs(peak_az[0] - 20.0) < 0.5 and abs(peak_el[0] - 5.0) < 2.0
+
+
+def test_kept_search_grid_gives_the_same_bits_as_a_fresh_one(monkeypatch):
+    from rts_scenario import peak_search
+
+    arr = rs.VirtualArray.preset("awr1843boost")
+    x = snapshot(arr, [[1.0, 0.4j], [0.7, 0.2]], [[-9.1, 13.0], [3.3, -4.0]],
+                 [[2.5, -8.0], [0.0, 6.0]])
+    window = {"az_range_deg": (-14.0, 15.0), "el_range_deg": (-12.0, 11.0)}
+    peak_search._search_grid.cache_clear()
+    first = find_peak(arr, x, **window)
+    # An equal array built anew finds its grid kept; the answer is bit for bit the same.
+    again = find_peak(rs.VirtualArray.preset("awr1843boost"), x, **window)
+    assert peak_search._search_grid.cache_info().hits == 1
+    monkeypatch.setattr(peak_search, "_MAX_CACHED_GRID_BYTES", 0)  # every grid built anew
+    fresh = find_peak(arr, x, **window)
+    assert peak_search._search_grid.cache_info().hits == 1
+    for got in (again, fresh):
+        np.testing.assert_array_equal(got[0], first[0])
+        np.testing.assert_array_equal(got[1], first[1])

@@ -585,14 +585,16 @@ def write_log(path: Path, cycles: list[list[can.Message]]) -> Path:
     return path
 
 
-def desk_log(tmp_path: Path) -> tuple[object, Path, float]:
+@pytest.fixture(scope="module")
+def desk_log(tmp_path_factory) -> tuple[object, Path, float]:
     """A desk recording of the cut-in scene without its sidecar, and its scene start.
 
     The built-in radar measures every 50 ms from the scene's start, in step with the frames,
-    and reports at once: the first header's stamp is the log time of scene time 0.
+    and reports at once: the first header's stamp is the log time of scene time 0. Tests only
+    read it (what they change, they write to a log of their own).
     """
     scene = load_scenario(CUT_IN, QUIET)
-    log = tmp_path / "desk.blf"
+    log = tmp_path_factory.mktemp("desk") / "desk.blf"
     assert run_scene(scene, RunOptions(bus_log=str(log))).report.passed
     Path(str(log) + ".rts.json").unlink()
     return scene, log, radar_cycles(log)[0][0].timestamp
@@ -632,8 +634,8 @@ def test_a_radar_in_step_with_the_frames_is_aligned_to_the_frame_it_saw(tmp_path
     assert given.notes == []
 
 
-def test_a_desk_recording_without_sidecar_re_checks_like_live(tmp_path):
-    scene, log, origin = desk_log(tmp_path)
+def test_a_desk_recording_without_sidecar_re_checks_like_live(desk_log):
+    scene, log, origin = desk_log
     estimated = check_log(scene, log)
     assert abs(estimated.alignment.offset_s - origin) <= 2e-4
     assert estimated.alignment.uncertainty_s >= 0.045
@@ -650,9 +652,9 @@ def test_a_desk_recording_without_sidecar_re_checks_like_live(tmp_path):
 
 
 @pytest.mark.parametrize("desk", [True, False])
-def test_a_log_cut_at_the_start_misses_the_cycles_before_it(tmp_path, desk):
+def test_a_log_cut_at_the_start_misses_the_cycles_before_it(tmp_path, desk, request):
     if desk:
-        scene, log, origin = desk_log(tmp_path)
+        scene, log, origin = request.getfixturevalue("desk_log")
     else:
         scene, log, origin = foreign_log(tmp_path, 1.7e9 + 12.3)
     cycles = radar_cycles(log)
@@ -666,10 +668,10 @@ def test_a_log_cut_at_the_start_misses_the_cycles_before_it(tmp_path, desk):
         assert report.frames["checked"] == len(cycles) - cut
 
 
-def test_a_first_cycle_held_up_on_the_bus_is_still_the_scene_s_first(tmp_path):
+def test_a_first_cycle_held_up_on_the_bus_is_still_the_scene_s_first(tmp_path, desk_log):
     # The first cycle reaches the bus after the second (50 ms late): all 240 cycles are still
     # the scene's, none missing, none outside.
-    scene, log, _ = desk_log(tmp_path)
+    scene, log, _ = desk_log
     cycles = radar_cycles(log)
     second_t = cycles[1][0].timestamp
     held = [can.Message(arbitration_id=m.arbitration_id, data=m.data, is_extended_id=False,

@@ -20,6 +20,7 @@ import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -353,8 +354,13 @@ class CanMapping:
                          if mapped & set(page_signals(message, page)))
 
     @classmethod
+    @lru_cache(maxsize=1)
     def builtin(cls) -> CanMapping:
-        """rts-scenario's own detection messages."""
+        """rts-scenario's own detection messages.
+
+        Parsed once per process (a DBC takes about 10 ms; every publisher and receiver without
+        a mapping of its own asks for this one) and shared: its `db` is not to be modified.
+        """
         folder = resources.files("rts_scenario").joinpath("data/can")
         text = folder.joinpath("rts_detections.mapping.yaml").read_text()
         doc = load_yaml("<mapping rts-detections>", text)
