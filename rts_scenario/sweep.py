@@ -580,8 +580,14 @@ def _run_pool(tasks: Sequence[SweepTask], method: str, workers: int,
         futures = {pool.submit(run_task, task, method): task for task in tasks}
         try:
             _collect(futures, as_completed(futures), finish)
-        except BaseException:  # Ctrl-C: do not wait for the runs not started yet
+        except BaseException:  # Ctrl-C, SIGTERM: do not wait for the runs not started yet,
+            # nor for those under way: SIGTERM reaches this process alone (Ctrl-C reaches the
+            # workers too), and leaving the pool waits for its workers' runs to end.
+            # (The pool's own map of them: it has no public handle on them before Python 3.14.)
+            workers_running = list((getattr(pool, "_processes", None) or {}).values())
             pool.shutdown(wait=False, cancel_futures=True)
+            for process in workers_running:
+                process.terminate()
             raise
 
 
@@ -589,7 +595,8 @@ def _init_worker() -> None:
     """Keep each worker process to one BLAS thread: the processes already fill the CPUs.
 
     SIGTERM ends a worker again (the command's handler, forked with it, would turn it into an
-    interrupt): the pool itself stops its workers so, and the command stops on its own SIGTERM.
+    interrupt): an interrupted sweep stops its workers so (`_run_pool`), and the command stops
+    on its own SIGTERM.
     """
     import signal
 

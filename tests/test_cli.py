@@ -1,4 +1,5 @@
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -587,6 +588,42 @@ def test_a_json_report_keeps_its_file_s_permissions(tmp_path, capsys):
     assert cli.main(["run", str(scene), "--json", str(report)]) == 0
     assert json.loads(report.read_text())["status"] == "pass"
     assert report.stat().st_mode & 0o777 == 0o640
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="/dev/stdout as a path is Linux's")
+def test_a_json_report_to_dev_stdout_is_written_into_the_pipe(tmp_path):
+    # `rts-scenario run SCENE --json /dev/stdout | jq ...`: the pipe has no folder to put a
+    # draft in (before: exit 2, "cannot write", after the run).
+    import os
+    import subprocess
+
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-m", "rts_scenario", "run", str(scene), "--json",
+                           "/dev/stdout"], capture_output=True, text=True, env=env, timeout=300,
+                          cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    report = proc.stdout[proc.stdout.index("{"):proc.stdout.rindex("}") + 1]
+    assert json.loads(report)["status"] == "pass"
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0,
+                    reason="making a device node takes root")
+def test_a_json_report_to_a_device_writes_into_it_and_leaves_the_device(tmp_path, capsys):
+    # `--json /dev/null` in a CI job run as root: renamed over, the device node became a
+    # regular file holding the report, for every program after it.
+    import stat
+
+    null = tmp_path / "null"
+    os.mknod(null, 0o666 | stat.S_IFCHR, os.makedev(1, 3))  # /dev/null's numbers
+    link = tmp_path / "r.json"
+    link.symlink_to(null)
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+    for path in (null, link):
+        assert cli.main(["run", str(scene), "--json", str(path)]) == 0
+        assert stat.S_ISCHR(null.stat().st_mode) and link.is_symlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["null", "r.json"]  # no draft left
 
 
 def test_a_reader_that_stops_early_loses_neither_the_verdict_nor_the_report(tmp_path):

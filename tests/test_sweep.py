@@ -478,6 +478,54 @@ def test_sigterm_stops_a_sweep_as_ctrl_c_does(scenes, tmp_path, capsys, monkeypa
     assert payload["summary"]["interrupted"] is True
 
 
+# A sweep whose runs each take two minutes, its first run's flag written as it starts.
+LONG_RUNS = """\
+import sys, time
+from pathlib import Path
+import rts_scenario.pipeline
+from rts_scenario.cli import main
+
+def long_run(scene, options):
+    Path(sys.argv[1]).touch()
+    time.sleep(120)
+
+rts_scenario.pipeline.run_scene = long_run
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def test_sigterm_stops_a_sweep_s_pool_without_waiting_for_its_runs(scenes, tmp_path):
+    """SIGTERM reaches the sweep's process alone, not its workers (Ctrl-C reaches all of them):
+    the sweep stops the runs under way and exits, instead of waiting for them to end, which a
+    CI job's timeout would not (it kills the sweep a few seconds after its SIGTERM, and its
+    exit code with it)."""
+    import signal
+    import subprocess
+    import time
+
+    flag, out = tmp_path / "started", tmp_path / "partial.json"
+    command = [sys.executable, "-c", LONG_RUNS, str(flag), "sweep",
+               str(scenes / "b_swept.scenario.yaml"), "--workers", "2", "--json", str(out)]
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          text=True) as sweeping:
+        deadline = time.monotonic() + 60.0
+        while not flag.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert flag.exists(), "no run started"
+        sweeping.send_signal(signal.SIGTERM)
+        start = time.monotonic()
+        try:
+            _, err = sweeping.communicate(timeout=60.0)
+        except subprocess.TimeoutExpired:
+            sweeping.kill()
+            raise
+        elapsed = time.monotonic() - start
+    assert sweeping.returncode == 1 and err.endswith("error: interrupted\n"), err
+    assert elapsed < 30.0
+    payload = json.loads(out.read_text())
+    assert payload["runs"] == [] and payload["summary"]["interrupted"] is True
+
+
 def test_interrupted_sweep_prints_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
     """Without --json too: the verdicts that finished are printed, as `run` prints them, and a
     run that erred at run time before Ctrl-C keeps its exit code."""
