@@ -1041,6 +1041,7 @@ class Pipeline:
                                            bus["unknown_ids"])),
                 ("radar_clock", track.off_profile_reason(0.5 * window_s)),
                 ("radar_clock", track.latency_change_reason(0.5 * window_s)),
+                ("radar_clock", track.late_start_reason()),
                 ("time_alignment", checker.lag_reason(1.0 / scene.frame_rate_hz,
                                                       scene.radar.coupling_lag_s))):
             if drifted:

@@ -73,6 +73,7 @@ from .radar.clock import (
     ClockTrack,
     CycleTimeFit,
     RadarClock,
+    late_start_reason,
     late_start_s,
 )
 from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
@@ -1596,8 +1597,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     # A radar whose cycle is further from its profile's than a crystal strays fails, as live.
     track = ClockTrack(profile_clock)
     track.add(numbers, index.bus_t_s)
+    late_reason = (late_start_reason(profile_clock, clock.start_offset_s)
+                   if profile_clock.counter_start is not None else None)
     for off_profile in (track.off_profile_reason(half_window_s),
-                        track.latency_change_reason(half_window_s)):
+                        track.latency_change_reason(half_window_s), late_reason):
         if off_profile:
             result.reasons.append(FailReason(off_profile, "radar_clock"))
             result.passed = False

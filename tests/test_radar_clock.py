@@ -345,7 +345,8 @@ def test_a_radar_started_after_the_scene_is_checked_from_its_first_cycle_not_mis
     # late, its count's cycle 0 measured 300 (or 335) ms into the scene, its messages 130 ms
     # +- 3 ms later. Its bus times less its latency say when: the cycles are judged at their
     # times, none missing (the profile's first six were never measured), and the report says
-    # when cycle 0 was measured, live, re-checked by the sidecar and without it.
+    # when cycle 0 was measured, live, re-checked by the sidecar and without it. The scene's
+    # first 300 ms were not seen: the run fails for that alone, and says so.
     scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.003,
                              counter_start=4242)
     log = tmp_path / "late.blf"
@@ -360,7 +361,16 @@ def test_a_radar_started_after_the_scene_is_checked_from_its_first_cycle_not_mis
     # (without the sidecar, the phase within a frame is the plateau's: a radar in step with
     # the frames fits as well anywhere in the frame, docs/bench.md section 4)
     for report, within_s in ((live, 0.004), (sidecar, 0.004), (blind, 0.05)):
-        assert report.passed, report.reasons
+        assert not report.passed
+        (late,) = [r for r in report.reasons if r.startswith("radar_clock: ")]
+        assert late in report.reasons and len(report.reasons) == 1, report.reasons
+        assert re.fullmatch(
+            r"radar_clock: the radar measured its cycle 0 at scene time ([\d.]+) s, ([\d.]+) s "
+            r"later than its profile says \(0\.000 s\): it started after the scene began, and "
+            r"the scene's frames before that were not measured \(about (\d+) cycles\); start "
+            r"the radar before the scene, or set clock.start_offset_s in its profile where it "
+            r"starts late on purpose", late)
+        assert late.codes == ("radar_clock",)
         assert report.frames["total"] == report.frames["checked"] == cycles
         assert report.frames["missing"] == 0
         clock = report.radar_clock

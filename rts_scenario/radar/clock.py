@@ -398,6 +398,23 @@ def late_start_s(profile: RadarClock, zero_s: float) -> float | None:
     return late if late > profile.cycle_s + 3.0 * spread else None
 
 
+def late_start_reason(profile: RadarClock, zero_s: float) -> str | None:
+    """Why a radar whose cycle 0 was measured at scene time ``zero_s`` fails the run, or None.
+
+    A radar that started its count after the scene began (`late_start_s`) measured nothing of
+    the scene before: those frames were not seen, whatever the cycles after them show.
+    """
+    late = late_start_s(profile, zero_s)
+    if late is None:
+        return None
+    return (f"radar_clock: the radar measured its cycle 0 at scene time {zero_s:.3f} s, "
+            f"{late:.3f} s later than its profile says ({profile.start_offset_s:.3f} s): it "
+            f"started after the scene began, and the scene's frames before that were not "
+            f"measured (about {int(late / profile.cycle_s)} cycles); start the radar before "
+            f"the scene, or set clock.start_offset_s in its profile where it starts late on "
+            f"purpose")
+
+
 class ClockTrack:
     """When a radar measures, as a run learns it from the times its cycles reached the bus.
 
@@ -467,6 +484,12 @@ class ClockTrack:
             return None
         zero = self._bus_zero_s()
         return None if zero is None else late_start_s(self.profile, zero)
+
+    def late_start_reason(self) -> str | None:
+        """Why a radar that started its count late fails the run (`late_start_reason`)."""
+        late = self.late_start_s()
+        return None if late is None else late_start_reason(
+            self.profile, self.profile.start_offset_s + late)
 
     def add(self, n: IntArray, bus_t_s: FloatArray) -> None:
         """Take cycles ``n`` and when they reached the bus (NaN: not known, left out)."""
@@ -663,4 +686,4 @@ class ClockTrack:
 
 
 __all__ = ["CLOCK_TOLERANCE_PPM", "SEGMENTS", "TIME_EPS_S", "Bend", "ClockTrack", "CycleTimeFit",
-           "LineSegments", "RadarClock", "late_start_s"]
+           "LineSegments", "RadarClock", "late_start_reason", "late_start_s"]
