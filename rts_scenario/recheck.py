@@ -177,8 +177,8 @@ class Alignment:
             else:
                 lat = f"latency {self.latency_s * 1e3:.0f} ms (profile)"
             cycle = (f"cycle {self.cycle_s * 1e3:.2f} ms fitted" if self.cycle_source == "fitted"
-                     else f"cycle {self.cycle_s * 1e3:.2f} ms (profile; the timestamps fit it "
-                     f"within their scatter)")
+                     else f"cycle {self.cycle_s * 1e3:.2f} ms (profile; the timestamps cannot "
+                     f"tell another)")
             text = (f"aligned by timestamps: scene time 0 at log time {self.offset_s:.6f} s "
                     f"({how}{pm}), {lat}, {cycle}")
         text += f"; {self.cycles_in_log} cycles in the log"

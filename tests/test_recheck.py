@@ -225,7 +225,7 @@ def test_a_log_without_sidecar_keeps_the_profile_s_cycle_its_stamps_cannot_tell_
     assert result.alignment.cycle_s == 0.072
     assert result.report.radar_clock["cycle_s"] == 0.072
     assert result.alignment.cycle_source == "profile"
-    assert ("cycle 72.00 ms (profile; the timestamps fit it within their scatter)"
+    assert ("cycle 72.00 ms (profile; the timestamps cannot tell another)"
             in result.alignment.describe())
     assert result.report.passed, result.report.reasons
     (tmp_path / "off").mkdir()
