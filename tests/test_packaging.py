@@ -6,6 +6,8 @@ import sys
 import tomllib
 from pathlib import Path
 
+import pytest
+
 import rts_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -25,19 +27,12 @@ def test_the_cli_s_methods_are_the_schedule_s():
     assert METHODS == SCHEDULE_METHODS
 
 
-def test_the_cli_runs_as_a_module():
-    # `python -m rts_scenario.cli` where the console script is not on PATH.
+@pytest.mark.parametrize("module", ["rts_scenario.cli", "rts_scenario"])
+def test_the_cli_runs_as_a_module(module):
+    # `python -m rts_scenario` (as `python -m pytest` runs pytest) or `python -m
+    # rts_scenario.cli`, where the console script is not on PATH.
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    done = subprocess.run([sys.executable, "-m", "rts_scenario.cli", "--version"],
-                          capture_output=True, text=True, env=env, timeout=60)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == f"rts-scenario {rts_scenario.__version__}"
-
-
-def test_the_package_runs_as_the_cli():
-    # `python -m rts_scenario`, as `python -m pytest` runs pytest.
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    done = subprocess.run([sys.executable, "-m", "rts_scenario", "--version"],
+    done = subprocess.run([sys.executable, "-m", module, "--version"],
                           capture_output=True, text=True, env=env, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == f"rts-scenario {rts_scenario.__version__}"

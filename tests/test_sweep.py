@@ -427,7 +427,11 @@ def test_plot_of_pass_and_fail_over_two_parameters(scenes, tmp_path, capsys):
     assert png.read_bytes().startswith(b"\x89PNG")
 
 
-def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeypatch, stop):
+    """Ctrl-C, or SIGTERM (a CI job's timeout, ``kill``): the runs done are kept."""
+    import os
+    import signal
 
     real = rts_scenario.pipeline.run_scene
     calls = []
@@ -435,34 +439,13 @@ def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeyp
     def interrupted_at_the_third(scene, options):
         calls.append(scene.name)
         if len(calls) == 3:
-            raise KeyboardInterrupt
+            if stop == "sigterm":
+                os.kill(os.getpid(), signal.SIGTERM)
+            else:
+                raise KeyboardInterrupt
         return real(scene, options)
 
     monkeypatch.setattr(rts_scenario.pipeline, "run_scene", interrupted_at_the_third)
-    out = tmp_path / "partial.json"
-    code, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1",
-                         "--json", out)
-    assert code == 1 and err.endswith("error: interrupted\n")
-    payload = json.loads(out.read_text())
-    assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
-    assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
-
-
-def test_sigterm_stops_a_sweep_as_ctrl_c_does(scenes, tmp_path, capsys, monkeypatch):
-    """SIGTERM (a CI job's timeout, ``kill``) keeps the runs done and exits as Ctrl-C does."""
-    import os
-    import signal
-
-    real = rts_scenario.pipeline.run_scene
-    calls = []
-
-    def terminated_at_the_third(scene, options):
-        calls.append(scene.name)
-        if len(calls) == 3:
-            os.kill(os.getpid(), signal.SIGTERM)
-        return real(scene, options)
-
-    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", terminated_at_the_third)
     # Counted, not pytest's end, where the command does not handle it.
     received = []
     previous = signal.signal(signal.SIGTERM, lambda signum, frame: received.append(signum))
@@ -475,7 +458,7 @@ def test_sigterm_stops_a_sweep_as_ctrl_c_does(scenes, tmp_path, capsys, monkeypa
     assert received == [] and code == 1 and err.endswith("error: interrupted\n"), err
     payload = json.loads(out.read_text())
     assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
-    assert payload["summary"]["interrupted"] is True
+    assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
 
 
 # A sweep whose runs each take two minutes, its first run's flag written as it starts.
