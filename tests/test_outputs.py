@@ -17,6 +17,7 @@ from rts_scenario.outputs import available_outputs, open_output
 from rts_scenario.outputs.file import read_schedule
 from rts_scenario.outputs.udp import (
     ENTRY,
+    HEADER,
     KIND_DELTA,
     KIND_FULL,
     SEQUENCE_WINDOW,
@@ -701,3 +702,37 @@ def test_a_part_that_disagrees_with_its_frame_s_other_parts_is_malformed():
     _, second = encode_frame(entries, kind=KIND_FULL, frame=0, t_s=0.0, first_sequence=0)
     receiver.handle(second)
     assert (receiver.stats.malformed, receiver.stats.frames_applied) == (1, 1)
+
+
+def test_a_delta_stream_is_the_same_however_the_frames_come_in_batches(schedule):
+    """A delta lists the targets that changed since the frame before, also across the batches
+    a run writes: the first frame of a batch is no full table of every target."""
+    def stream(batch_frames):
+        out = open_output("udp://127.0.0.1:9", pacing="fast", mode="delta", keyframe_every=20)
+        sent = []
+        out.send = sent.append
+        for start in range(0, schedule.n_frames, batch_frames):
+            out.write(schedule.frames(start, start + batch_frames))
+        out.close()
+        return sent
+
+    whole = stream(schedule.n_frames)
+    for size in (1, 37):
+        assert stream(size) == whole
+    # Against the changes counted frame by frame (keyframes: every active entry).
+    receiver = UdpReceiver(keep_applied=True)
+    for datagram in whole:
+        receiver.handle(datagram)
+    assert receiver.stats.clean and receiver.stats.frames_applied == schedule.n_frames
+    changed = np.ones(schedule.status.shape, dtype=bool)
+    for f in range(1, schedule.n_frames):
+        for k in range(schedule.status.shape[1]):
+            changed[f, k] = not (
+                schedule.status[f, k] == schedule.status[f - 1, k]
+                and all(np.array_equal(getattr(schedule, n)[f, k], getattr(schedule, n)[f - 1, k],
+                                       equal_nan=getattr(schedule, n).dtype.kind == "f")
+                        for n in ("fe", "attenuation_db", "delay_s", "doppler_hz", "phase_rad",
+                                  "active")))
+    entries = sum(int(schedule.active[f].sum()) if f % 20 == 0
+                  else 4 * int(changed[f].sum()) for f in range(schedule.n_frames))
+    assert sum(HEADER.unpack_from(d)[8] for d in whole) == entries

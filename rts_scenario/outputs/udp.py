@@ -170,6 +170,7 @@ class UdpOutput(Output):
         self._refused: dict[int, int] = {}
         self._refused_s: list[float] = []
         self._sent_frame_t_s: float | None = None  # the last frame out, as errors are told
+        self._last_sent: Schedule | None = None  # delta mode: the last frame written
         # Every datagram goes through ``send``; tests swap in a `FaultInjector` around
         # ``transmit``.
         self.send: Callable[[bytes], None] = self.transmit
@@ -205,7 +206,11 @@ class UdpOutput(Output):
 
     def _write(self, batch: Schedule) -> None:
         self._check_fits(batch)
-        changed = batch.changed() if self.mode == "delta" else None
+        # Frame 0 of a batch is a delta against the last frame of the batch before (kept as a
+        # copy: one frame, whatever the scene's length).
+        changed = batch.changed(self._last_sent) if self.mode == "delta" else None
+        if self.mode == "delta" and batch.n_frames:
+            self._last_sent = batch.take(np.array([batch.n_frames - 1]))
         self._sent_t_s = batch.t_s.astype(np.float64, copy=True)
         for pos in range(batch.n_frames):  # frames go out one by one, at their own time
             keyframe = changed is None or self._frames_sent % self.keyframe_every == 0

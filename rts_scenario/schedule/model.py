@@ -122,21 +122,30 @@ class Schedule:
         return replace(out, t_s=np.asarray(clock_t_s, dtype=np.float64)[keep],
                        frame_index=np.asarray(counters, dtype=np.int64)[keep])
 
-    def changed(self) -> BoolArray:
-        """Entries (F, K) that differ from the previous frame (all of frame 0).
+    def changed(self, before: Schedule | None = None) -> BoolArray:
+        """Entries (F, K) that differ from the previous frame.
 
-        Static targets and unchanged entries need not be sent again: an output in delta mode
-        sends only these.
+        Frame 0 is compared with ``before``'s last frame (the batch sent before this one, of
+        the same targets); without it, all of frame 0 counts as changed. Static targets and
+        unchanged entries need not be sent again: an output in delta mode sends only these,
+        the same entries however the frames were cut into batches.
         """
         out = np.ones(self.status.shape, dtype=bool)
         if self.n_frames > 1:
-            same = self.status[1:] == self.status[:-1]
-            for name in ("fe", "attenuation_db", "delay_s", "doppler_hz", "phase_rad", "active"):
-                a = getattr(self, name)
-                same &= np.all((a[1:] == a[:-1]) | (np.isnan(a[1:]) & np.isnan(a[:-1]))
-                               if a.dtype.kind == "f" else a[1:] == a[:-1], axis=-1)
-            out[1:] = ~same
+            out[1:] = ~self._same(slice(1, None), self, slice(None, -1))
+        if (self.n_frames and before is not None and before.n_frames
+                and before.status.shape[1:] == self.status.shape[1:]):
+            out[:1] = ~self._same(slice(0, 1), before, slice(-1, None))
         return out
+
+    def _same(self, rows: slice, other: Schedule, other_rows: slice) -> BoolArray:
+        """Whether each target's entries in frames ``rows`` equal ``other``'s ``other_rows``."""
+        same = self.status[rows] == other.status[other_rows]
+        for name in ("fe", "attenuation_db", "delay_s", "doppler_hz", "phase_rad", "active"):
+            a, b = getattr(self, name)[rows], getattr(other, name)[other_rows]
+            same &= np.all((a == b) | (np.isnan(a) & np.isnan(b)) if a.dtype.kind == "f"
+                           else a == b, axis=-1)
+        return same
 
 
 
