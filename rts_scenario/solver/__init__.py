@@ -288,9 +288,12 @@ def _retry_neighbours(
     reason: NDArray[np.uint8],
 ) -> None:
     pending = np.flatnonzero(reason == Reason.NO_SOLUTION)
+    # Targets a neighbouring quad puts at their angle only with their echoes split: split,
+    # not unsynthesizable, where no quad places them cleanly.
+    split = np.zeros(reason.shape, dtype=bool)
     for q in range(len(plan.kernels)):
         if pending.size == 0:
-            return
+            break
         idx = pending[quad[pending] != q]
         idx = idx[plan.geometry.within(az_deg[idx], el_deg[idx], q, RETRY_MARGIN_DEG)]
         if idx.size == 0:
@@ -300,7 +303,9 @@ def _retry_neighbours(
         weights[solved] = w[r == Reason.OK]
         quad[solved] = q
         reason[solved] = Reason.OK
+        split[idx[r == Reason.SPLIT]] = True
         pending = np.setdiff1d(pending, solved, assume_unique=True)
+    reason[pending[split[pending]]] = Reason.SPLIT
 
 
 __all__ = [
