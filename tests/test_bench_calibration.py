@@ -167,9 +167,11 @@ def test_a_pair_whose_frame_went_out_late_is_measured_again(monkeypatch):
 
 def test_a_pair_whose_frame_went_out_late_twice_stops_the_calibration(monkeypatch):
     # It stops there: the FEs alone, pair 0-1, pair 0-2 twice; the four pairs after it are not
-    # played (a failed calibration, minutes of bench time on a wide rig).
+    # played (a failed calibration, minutes of bench time on a wide rig). A loaded host may
+    # hold the sender elsewhere too: each measurement with a frame late for another reason
+    # is played once more, at most one play per such frame.
     error, late, held, plays = _held_calibration(monkeypatch, times=2)
-    assert held == 2 and late >= 2 and plays == 4
+    assert held == 2 and late >= 2 and 4 <= plays <= 4 + (late - held), (late, plays)
     assert isinstance(error, MeasurementError), error
     message = str(error)
     assert "FE pair 0-2's frame 30" in message and "measured twice" in message, message
