@@ -790,7 +790,14 @@ def test_rts_listen_prints_each_applied_frame(tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     frames = [line for line in lines if line.startswith("frame ")]
     assert len(frames) == 3
-    assert re.match(r"frame 0 t 0.000 s: \d+ entries, \d+ active", frames[0])
+    parsed = [re.fullmatch(r"frame (\d+) t ([\d.]+) s: (\d+) entries, (\d+) active", f)
+              for f in frames]
+    assert all(parsed), frames
+    # Consecutive frames of one stream, at their times (the listener may have bound its
+    # socket part way through the first stream sent).
+    numbers = [int(m[1]) for m in parsed if m]
+    assert numbers == list(range(numbers[0], numbers[0] + 3)), frames
+    assert [m[2] for m in parsed if m] == [f"{schedule.t_s[n]:.3f}" for n in numbers]
 
 
 # A pool of good and bad values per option; the CLI may exit 0..3, never raise.
