@@ -13,7 +13,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
@@ -1097,15 +1097,14 @@ class Pipeline:
             report.radar_clock["host_clock_steps"] = steps
         return RunResult(scene=scene, report=report)
 
-    def _recorded(self, on: bool) -> _Recording | contextlib.nullcontext[None]:
+    def _recorded(self, on: bool) -> contextlib.AbstractContextManager[None]:
         """Hold the bus's messages back while the block runs; the log records after it or not.
 
         With no log: nothing to hold back.
         """
         if self._recording is None:
             return contextlib.nullcontext()
-        self._recording.after = on
-        return self._recording
+        return self._recording.switched(on)
 
     # -- closing ---------------------------------------------------------------------------
 
@@ -1461,25 +1460,18 @@ def run_scene(scene: Scenario | str | Path, options: RunOptions | None = None,
 
 
 
-__all__ = ["BATCH_FRAMES", "LOG_SIDECAR_SUFFIX", "Pipeline", "RunOptions", "RunResult",
-           "CycleTruth", "after_scene_until_s", "ambiguity_window_s", "run_scene",
-           "write_log_sidecar"]
-
-
 class _Recording(can.Listener):
     """The run's receiver and its bus log as one listener: the log holds what the run counted.
 
-    A message reaches both, or the receiver alone while the log is not recording. Used as a
-    context (`Pipeline._recorded`), it holds messages back while a run resets the receiver or
-    takes its counts, and then records (``after``) from that message on or stops recording:
-    the log's messages are the ones the run counted, however many more arrive before the bus
-    is shut.
+    A message reaches both, or the receiver alone while the log is not recording. While a run
+    resets the receiver or takes its counts (`switched`), messages are held back; the log then
+    records from the next message on, or stops: its messages are the ones the run counted,
+    however many more arrive before the bus is shut.
     """
 
     def __init__(self, receiver: DetectionReceiver, logger: can.Listener) -> None:
         self.receiver, self.logger = receiver, logger
         self.recording = True
-        self.after = True
         self._lock = threading.Lock()
 
     def on_message_received(self, msg: can.Message) -> None:
@@ -1497,9 +1489,14 @@ class _Recording(can.Listener):
         finally:
             self.logger.stop()
 
-    def __enter__(self) -> None:
-        self._lock.acquire()
+    @contextlib.contextmanager
+    def switched(self, on: bool) -> Iterator[None]:
+        """Hold messages back while the block runs; then record them (``on``) or not."""
+        with self._lock:
+            yield
+            self.recording = on
 
-    def __exit__(self, *exc: object) -> None:
-        self.recording = self.after
-        self._lock.release()
+
+__all__ = ["BATCH_FRAMES", "LOG_SIDECAR_SUFFIX", "Pipeline", "RunOptions", "RunResult",
+           "CycleTruth", "after_scene_until_s", "ambiguity_window_s", "run_scene",
+           "write_log_sidecar"]
