@@ -33,6 +33,13 @@ from .common import (
 )
 
 
+def _error_entry(scene: str, path: str, message: str, variant: str = "",
+                 parameters: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Return a run's `--json` entry with no verdict: status error, its message (docs/cli.md)."""
+    return {"scene": scene, "file": path, "status": "error", "error": message,
+            "variant": variant, "parameters": dict(parameters or {})}
+
+
 def _do_run(args: argparse.Namespace) -> int:
     from ..canbus.mapping import CanMapping
     from ..check import DETECTION_COLUMNS
@@ -105,8 +112,7 @@ def _do_run(args: argparse.Namespace) -> int:
     except RtsError as exc:
         if args.json and not str(exc).startswith("--json"):
             message = f"not run: {exc}"
-            unrun = [{"scene": Path(path).name.removesuffix(SCENE_SUFFIX), "file": path,
-                      "status": "error", "error": message, "variant": "", "parameters": {}}
+            unrun = [_error_entry(Path(path).name.removesuffix(SCENE_SUFFIX), path, message)
                      for path in args.scenes]
             write_json("--json", args.json, unrun[0] if len(unrun) == 1 else unrun)
         raise
@@ -128,8 +134,7 @@ def _do_run(args: argparse.Namespace) -> int:
         if variant:
             message += f" [{variant}]"
         print(f"error: {message}", file=sys.stderr)
-        entries.append({"scene": scene, "file": path, "status": "error", "error": message,
-                        "variant": variant, "parameters": dict(parameters or {})})
+        entries.append(_error_entry(scene, path, message, variant, parameters))
 
     # The run under way when Ctrl-C came: (scene name, or file name until it loaded, path,
     # variant, overrides, log).
