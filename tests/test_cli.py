@@ -527,6 +527,42 @@ def test_sigterm_before_a_command_runs_anything_exits_as_ctrl_c(tmp_path, capsys
     assert code == 1 and err == "error: interrupted\n"
 
 
+@pytest.mark.parametrize("when", ["as the command returns", "as its handler is put back"])
+def test_sigterm_as_a_command_ends_exits_as_ctrl_c_without_a_traceback(
+        capsys, monkeypatch, sigterm_swallowed, when):
+    # Between the command's end and the old handler back in place, a SIGTERM raised out of
+    # main() as a traceback; it ends the command as interrupted, and the old handler is back.
+    import os
+    import signal
+
+    if when == "as the command returns":
+        real = cli._handle
+
+        def handle_then_terminated(args):
+            code = real(args)
+            os.kill(os.getpid(), signal.SIGTERM)
+            return code
+
+        monkeypatch.setattr(cli, "_handle", handle_then_terminated)
+    else:
+        real_signal = signal.signal
+
+        def terminated_first(signum, handler):
+            if signum == signal.SIGTERM and not isinstance(handler, cli._SigtermAsInterrupt):
+                os.kill(os.getpid(), signal.SIGTERM)  # the command's handler still in place
+            return real_signal(signum, handler)
+
+        monkeypatch.setattr(cli.signal, "signal", terminated_first)
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    code = cli.main(["validate", str(scene)])
+    out, err = capsys.readouterr()
+    assert code == 1 and err.endswith("error: interrupted\n"), err
+    assert "Traceback" not in err and "approaching_target" in out
+    assert sigterm_swallowed == []
+    os.kill(os.getpid(), signal.SIGTERM)
+    assert sigterm_swallowed == [signal.SIGTERM]
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="file size limits are POSIX's")
 @pytest.mark.parametrize("command", ["run", "sweep"])
 def test_a_json_report_that_cannot_be_written_whole_leaves_the_old_one(tmp_path, command):

@@ -114,6 +114,19 @@ __all__ = ["EXIT_BAD_INPUT", "EXIT_FAIL", "EXIT_OK", "EXIT_RUNTIME_ERROR", "buil
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        # Ctrl-C, or a SIGTERM while the command's handler was being put back: the command
+        # itself handles both while it runs (`_handle`), this is the few instructions around it.
+        try:
+            print("error: interrupted", file=sys.stderr)
+        except (OSError, KeyboardInterrupt):
+            pass  # the exit code says it
+        return EXIT_FAIL
+
+
+def _main(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -128,12 +141,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout = cast(TextIO, out_guard)
     if err_guard is not None:
         sys.stderr = cast(TextIO, err_guard)
-    previous = _interrupt_on_sigterm()
+    sigterm = _SigtermAsInterrupt()
     try:
+        sigterm.install()
         code = _handle(args)
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        sigterm.armed = False  # first: a plain store, no point for a signal to come in
+        sigterm.uninstall()
         if out_guard is not None:
             out_guard.restore()
             sys.stdout = stdout
@@ -152,26 +166,47 @@ def main(argv: Sequence[str] | None = None) -> int:
                 except OSError:
                     pass  # standard error itself is lost: the exit code is all that is left
         return EXIT_RUNTIME_ERROR
+    if sigterm.late:
+        # Stopped as the command ended: what it printed stands, its exit code says stopped.
+        print("error: interrupted", file=sys.stderr)
+        return EXIT_FAIL
     return code
 
 
-def _raise_interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
-
-
-def _interrupt_on_sigterm() -> Any:
-    """Make SIGTERM raise `KeyboardInterrupt`, as Ctrl-C does; return the handler it replaced.
+class _SigtermAsInterrupt:
+    """SIGTERM as Ctrl-C (`KeyboardInterrupt`) while a command runs.
 
     A CI job's timeout, ``kill`` or a container's stop sends SIGTERM: its default killed the
     command on the spot, leaving a report half written or not at all and no verdict. Handled as
-    Ctrl-C, a command keeps what finished and exits with Ctrl-C's exit code. None where no
-    handler can be set (a thread other than the main one).
+    Ctrl-C, a command keeps what finished and exits with Ctrl-C's exit code. Once the command
+    has ended (``armed`` false) a SIGTERM is only noted (``late``): raised while the handler is
+    put back and the output restored, it would end in a traceback. Nothing is set outside the
+    main thread, where no handler can be.
     """
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
-    # None: a handler set outside Python, which cannot be put back; the default is its nearest.
-    return signal.SIG_DFL if previous is None else previous
+
+    def __init__(self) -> None:
+        self.armed = True
+        self.late = False
+        self.previous: Any = None  # the handler replaced, once installed
+
+    def __call__(self, signum: int, frame: object) -> None:
+        if self.armed:
+            raise KeyboardInterrupt
+        self.late = True
+
+    def install(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        found = signal.getsignal(signal.SIGTERM)
+        # None: a handler set outside Python, which cannot be put back; the default is its
+        # nearest.
+        self.previous = signal.SIG_DFL if found is None else found
+        signal.signal(signal.SIGTERM, self)
+
+    def uninstall(self) -> None:
+        if self.previous is not None:
+            signal.signal(signal.SIGTERM, self.previous)
+            self.previous = None
 
 
 def _handle(args: argparse.Namespace) -> int:
