@@ -43,6 +43,21 @@ def write_atomic(path: str | Path, text: str) -> None:
         file.write(text)
 
 
+def check_draft(path: str | Path) -> None:
+    """Make and remove the draft `open_atomic` would make for ``path`` (which need not exist).
+
+    Raises the `OSError` making it raises (a folder that takes no new file), so that a caller
+    can find it before the work whose result goes to ``path``. For a folder, a draft of a file
+    in it; nothing for a device or a pipe, which are written into.
+    """
+    target = (Path(os.path.realpath(path)) / "new" if os.path.isdir(path)
+              else _replaced(path))
+    if target is not None:
+        file, draft = _open_draft(target, "wb")
+        file.close()
+        os.unlink(draft)
+
+
 @contextlib.contextmanager
 def _replacing(path: str | Path, mode: str) -> Iterator[IO[Any]]:
     target = _replaced(path)
