@@ -22,6 +22,7 @@ from typing import Any, TextIO
 import can
 import numpy as np
 
+from .atomic import write_atomic
 from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, mapping_reason, open_bus
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
@@ -1435,7 +1436,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         # cycles by the frames the RTS held, as the run did.
         "send_lateness": send_lateness,
     }
-    path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
+    write_atomic(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
     return path
 
 

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .atomic import open_atomic
 from .errors import RtsError
 from .quads import quad_polygons
 
@@ -142,8 +143,10 @@ def write_plots(result: RunResult, folder: str | Path, stem: str | None = None,
 
 
 def _save(fig: Any, path: Path) -> Path:
+    """Save ``fig`` as the PNG ``path``, replaced whole (`open_atomic`), and close it."""
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with open_atomic(path, "wb") as file:
+        fig.savefig(file, dpi=110, format="png")
     fig.clf()
     import matplotlib.pyplot as plt
 

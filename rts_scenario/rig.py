@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
+from .atomic import write_atomic
 from .errors import RigError
 from .file_kinds import load_kind
 from .located_yaml import Document, load_yaml, validate
@@ -512,8 +513,8 @@ class Rig:
                 "reference": asdict(self.reference)}
 
     def write(self, path: str | Path) -> None:
-        """Write the rig as a ``*.rig.yaml`` file (`from_file` reads it back)."""
-        Path(path).write_text(yaml.safe_dump(self.to_document(), sort_keys=False, width=100))
+        """Write the rig as a ``*.rig.yaml`` file (`from_file` reads it back), replaced whole."""
+        write_atomic(path, yaml.safe_dump(self.to_document(), sort_keys=False, width=100))
 
 
 def _fe_key(exc: RigError, layout: bool, columns: int) -> tuple[str | int, ...]:

@@ -97,3 +97,45 @@ def no_bus_left_open(monkeypatch):
     for b in left:
         b.shutdown()
     assert not left, f"{len(left)} CAN bus(es) left open"
+
+
+class _CutShort:
+    """A draft whose first write writes half its data, then raises ``exc``."""
+
+    def __init__(self, file, exc):
+        self._file, self._exc = file, exc
+
+    def write(self, data):
+        self._file.write(data[:len(data) // 2])
+        self._file.flush()  # on disk: a file replaced in place would now be half a file
+        raise self._exc
+
+    def __getattr__(self, name):
+        return getattr(self._file, name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info):
+        self._file.close()
+
+
+@pytest.fixture
+def cut_short_drafts(monkeypatch):
+    """``arm(exc)``: from then on, every file replaced whole fails part way with ``exc``.
+
+    A full disk (``OSError(ENOSPC)``) or an interrupt (``KeyboardInterrupt``) while the
+    draft is written: what it replaces must stay as it was, and no draft stay behind.
+    """
+    import rts_scenario.atomic
+
+    opened = rts_scenario.atomic._open_draft
+
+    def arm(exc):
+        def open_draft(target, mode):
+            file, draft = opened(target, mode)
+            return _CutShort(file, exc), draft
+
+        monkeypatch.setattr(rts_scenario.atomic, "_open_draft", open_draft)
+
+    return arm

@@ -121,6 +121,48 @@ def test_run_exit_codes_json_and_plots(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: ")
 
 
+def test_a_plot_is_the_png_matplotlib_saves(tmp_path):
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from rts_scenario import plots
+
+    def figure():
+        fig, ax = plt.subplots()
+        ax.plot([0, 1, 2], [1, 0, 2])
+        return fig
+
+    reference = figure()
+    reference.tight_layout()
+    reference.savefig(tmp_path / "reference.png", dpi=110)
+    plt.close(reference)
+    plots._save(figure(), tmp_path / "p.png")
+    assert (tmp_path / "p.png").read_bytes() == (tmp_path / "reference.png").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.png", "reference.png"]
+
+
+@pytest.mark.parametrize("exc", [KeyboardInterrupt(), OSError(28, "No space left on device")],
+                         ids=["interrupt", "full-disk"])
+def test_plots_written_part_way_leave_the_previous_ones(tmp_path, capsys, cut_short_drafts,
+                                                        exc):
+    # A run's --plot PNGs over an earlier run's, stopped part way: each stays the earlier
+    # whole picture, never half a PNG.
+    pytest.importorskip("matplotlib")
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+    folder = tmp_path / "plots"
+    assert cli.main(["run", str(scene), "--plot", str(folder)]) == 0
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    assert len(before) == 3 and all(data.startswith(b"\x89PNG") for data in before.values())
+    capsys.readouterr()
+    cut_short_drafts(exc)
+    try:
+        code = cli.main(["run", str(scene), "--plot", str(folder)])
+    except KeyboardInterrupt:
+        code = None
+    assert code != 0
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before  # no draft among them
+
+
 def test_plots_draw_the_schedule_the_run_played(tmp_path, monkeypatch):
     # --method paper plays the paper's weights: the schedule plot is of those, not the exact
     # solver's, with the statuses the run judged by.

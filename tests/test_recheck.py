@@ -291,6 +291,21 @@ def test_check_command_writes_the_report_and_the_alignment(tmp_path, capsys):
 
 
 
+def test_a_recording_s_sidecar_is_whole_or_absent(tmp_path, capsys, cut_short_drafts):
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+    log = tmp_path / "run.blf"
+    sidecar = Path(f"{log}.rts.json")
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    text = sidecar.read_text()
+    assert text == json.dumps(json.loads(text), indent=2, allow_nan=False) + "\n"
+    # A disk that fills as the sidecar is written: no half sidecar beside the log, which a
+    # re-check would take for a damaged one (the earlier recording's goes as the run starts).
+    cut_short_drafts(OSError(28, "No space left on device"))
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 3
+    assert "No space left on device" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.blf"]
+
+
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     """A recording of the highway-following scene by `run --record`, with its sidecar."""

@@ -301,3 +301,28 @@ def test_write_keeps_offsets_delay_model_calibration_and_survey(tmp_path):
                  "seen"):
         np.testing.assert_allclose(getattr(back, name), getattr(rig, name), err_msg=name)
     assert back.rts == rig.rts and back.limits == rig.limits
+
+
+def test_a_rig_file_is_written_as_before(tmp_path):
+    import yaml
+
+    rig = rs.Rig.preset("kit-table1")
+    path = tmp_path / "r.rig.yaml"
+    rig.write(path)
+    assert path.read_text() == yaml.safe_dump(rig.to_document(), sort_keys=False, width=100)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rig.yaml"]
+
+
+@pytest.mark.parametrize("exc", [KeyboardInterrupt(), OSError(28, "No space left on device")],
+                         ids=["interrupt", "full-disk"])
+def test_a_rig_file_written_part_way_leaves_the_previous_one(tmp_path, cut_short_drafts, exc):
+    # `survey --write` and `calibrate --write` over the rig a bench runs on: stopped part way,
+    # the bench kept half a rig file, which no command reads.
+    path = tmp_path / "r.rig.yaml"
+    rs.Rig.preset("wide-3x5").write(path)
+    before = path.read_bytes()
+    cut_short_drafts(exc)
+    with pytest.raises(type(exc)):
+        rs.Rig.preset("kit-table1").write(path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rig.yaml"]

@@ -93,6 +93,20 @@ def test_survey_write_stores_the_seen_directions_in_the_rig_file(tmp_path):
     assert rig.limits == kit.limits and rig.rts == kit.rts
 
 
+def test_a_survey_whose_rig_file_is_cut_short_leaves_the_previous_one(tmp_path, capsys,
+                                                                      cut_short_drafts):
+    # A disk that fills while --write writes: the rig file the bench ran on stays whole.
+    out = tmp_path / "surveyed.rig.yaml"
+    Rig.preset("wide-3x5").write(out)
+    before = out.read_bytes()
+    cut_short_drafts(OSError(28, "No space left on device"))
+    assert cli.main(["survey", "kit-table1", "--write", str(out)]) == 2
+    assert capsys.readouterr().err == (f"error: --write {out}: cannot write: No space left on "
+                                       f"device\n")
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["surveyed.rig.yaml"]
+
+
 @pytest.mark.parametrize("fidelity", ["analytic", "adc"])
 def test_placing_misplaced_front_ends_by_the_survey_restores_exact_synthesis(fidelity):
     # FEs mounted a few tenths of a degree off the rig file, on the honest bench (1 m, near

@@ -7,13 +7,13 @@ import ipaddress
 import math
 import os
 import sys
-import tempfile
 import traceback
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TextIO
 
+from ..atomic import check_draft, write_atomic
 from ..errors import RtsError, one_line
 
 # Weight solver methods a command line can choose (``--method``).
@@ -157,20 +157,21 @@ def write_json(option: str, path: str | Path, data: Any) -> None:
     """
     import json
 
-    from ..atomic import write_atomic
-
     text = json.dumps(data, indent=2, allow_nan=False) + "\n"
     with writing(option, path):
         write_atomic(path, text)
 
 
-def check_writable_file(option: str, path: str | Path, kind: str | None = None) -> None:
+def check_writable_file(option: str, path: str | Path, kind: str | None = None, *,
+                        in_place: bool = False) -> None:
     """Fail now, before a long run, if the file ``option`` names could not be written later.
 
     The probe opens the file for appending (and removes it again if it did not exist), so
-    read-only file systems and missing permissions are found whoever runs it. An output is
-    never named like a file the tool reads (a scene, rig, DBC, ...), unless it is one:
-    ``kind``, the suffix of what ``option`` writes (e.g. ``".rig.yaml"``).
+    read-only file systems and missing permissions are found whoever runs it. A file replaced
+    whole (all but those written ``in_place``, as they come) is written to a draft beside it:
+    one is made and removed too, or a folder that takes no new file would lose the result after
+    the run. An output is never named like a file the tool reads (a scene, rig, DBC, ...),
+    unless it is one: ``kind``, the suffix of what ``option`` writes (e.g. ``".rig.yaml"``).
     """
     target = Path(path)
     if str(path) == "":
@@ -198,6 +199,8 @@ def check_writable_file(option: str, path: str | Path, kind: str | None = None) 
             pass
         if not existed:
             target.unlink()
+        if not in_place:
+            check_draft(target)
 
 
 def show_traceback(args: argparse.Namespace) -> None:
@@ -263,8 +266,7 @@ def check_writable_folder(option: str, path: str | Path) -> None:
     with writing(option, path):
         if not os.access(probe, os.W_OK | os.X_OK):
             raise PermissionError(13, "Permission denied")
-        with tempfile.TemporaryFile(dir=probe):
-            pass
+        check_draft(probe)  # the files written in it are replaced whole
 
 
 def check_number(option: str, value: float, *, low: float | None = None,

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ..atomic import check_draft
 from ..errors import located, one_line
 from .common import (
     EXIT_BAD_INPUT,
@@ -44,7 +45,7 @@ def _do_run(args: argparse.Namespace) -> int:
     from ..canbus.mapping import CanMapping
     from ..check import DETECTION_COLUMNS
     from ..errors import BusError, RtsError, ScenarioError
-    from ..pipeline import RunOptions, run_scene
+    from ..pipeline import LOG_SIDECAR_SUFFIX, RunOptions, run_scene
     from ..plots import safe_stem
     from ..preflight import Preflight
     from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
@@ -79,7 +80,7 @@ def _do_run(args: argparse.Namespace) -> int:
         if args.json:
             check_writable_file("--json", args.json)
         if args.detections:
-            check_writable_file("--detections", args.detections)
+            check_writable_file("--detections", args.detections, in_place=True)
         if args.record:
             from ..recheck import LOG_SUFFIXES
 
@@ -100,7 +101,11 @@ def _do_run(args: argparse.Namespace) -> int:
             logs = variant_logs(args.record, [] if isinstance(combos, Exception)
                                 else [ident for ident, _ in combos])
             for log in logs.values() or [args.record]:
-                check_writable_file("--record", log)
+                # The log is written as the bus goes, its sidecar whole, through a draft.
+                check_writable_file("--record", log, in_place=True)
+                sidecar = f"{log}{LOG_SIDECAR_SUFFIX}"
+                with writing("--record", sidecar):
+                    check_draft(sidecar)
         if args.plot:
             from ..plots import require_matplotlib
 
