@@ -1038,7 +1038,7 @@ class Pipeline:
         for code, drifted in (
                 ("radar_channel", self.receiver.channel_reason()),
                 ("mapping", mapping_reason(self.receiver.mapping, self.receiver.headers,
-                                           bus["unknown_ids"])),
+                                           bus["unknown_ids"], report.frames)),
                 ("radar_clock", track.off_profile_reason(0.5 * window_s)),
                 ("radar_clock", track.latency_change_reason(0.5 * window_s)),
                 ("radar_clock", track.late_start_reason()),

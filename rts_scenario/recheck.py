@@ -1589,9 +1589,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         alignment.notes.append(f"{cut_short['why']}; its last cycle read was measured after "
                                f"the scene and the cycles counted after it, so nothing counted "
                                f"is lost")
-    # Messages none of which is the mapping's header, of identifiers it does not know: the
-    # radar spoke another protocol than the one given, as live.
-    spoken = mapping_reason(receiver_mapping, index.headers, bus.get("unknown_ids", 0))
+    # Messages none of which is the mapping's header (or headers of no cycle that came
+    # whole), of identifiers it does not know: the radar spoke another protocol than the one
+    # given, as live.
+    spoken = mapping_reason(receiver_mapping, index.headers, bus.get("unknown_ids", 0),
+                            result.frames)
     if spoken:
         result.reasons.append(FailReason(spoken, "mapping"))
         result.passed = False
