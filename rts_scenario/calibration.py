@@ -793,9 +793,12 @@ def check_grid(rig: Rig, radar: RadarProfile, measure: Measure, method: str = "e
 
 
 def failures(result: CalibrationResult, before: GridCheck, after: GridCheck,
-             max_excess_deg: float = MAX_EXCESS_ERROR_DEG) -> list[str]:
+             max_excess_deg: float = MAX_EXCESS_ERROR_DEG, radar: str | None = None,
+             estimator: str | None = None) -> list[str]:
     """Return why a calibration cannot be trusted, one sentence per reason (none: it passed).
 
+    ``radar`` and ``estimator``: the radar profile and estimator the pairs were fitted with,
+    named where suspect pairs may mean either is not the radar's (the command's options).
     It fails when a pair is suspect (its measurement contradicts the others or the model),
     when a point of the check grid could not be played or was not detected after calibration
     (the calibrated rig is unverified there), or when the angle error after calibration exceeds
@@ -809,7 +812,11 @@ def failures(result: CalibrationResult, before: GridCheck, after: GridCheck,
         out.append(f"{len(result.suspects)} of {len(result.pairs)} FE pairs are suspect "
                    f"(closure residual above {SUSPECT_PHASE_DEG:g} deg or {SUSPECT_GAIN_DB:g} "
                    f"dB, or sweep fit worse than {SUSPECT_FIT_DEG:g} deg rms): a bad channel, a "
-                   f"moved FE or the wrong estimator")
+                   f"moved FE or the wrong estimator"
+                   + ("" if radar is None or estimator is None else
+                      f" (--estimator {estimator}) or radar profile (--radar {radar}"
+                      + (", calibrate's default" if radar == "paper" else "")
+                      + "): name the radar under test"))
     stats, was = after.summary(), before.summary()
     points = stats["points"]
     blocked = int(stats["not_played"] or 0)

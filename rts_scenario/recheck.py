@@ -83,6 +83,7 @@ from .solver.estimator_aware import SCHEDULE_METHODS
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 # Log formats python-can reads (``can.LogReader``), by extension.
 LOG_SUFFIXES = (".asc", ".blf", ".csv", ".db", ".log", ".mf4", ".trc")
@@ -430,8 +431,18 @@ def log_variant(scene: str | Path, log: str | Path,
         The scene is parametrized and neither says which variant the log is of, or the
         variant is not one of the scene's; the message lists the scene's variants.
     """
-    recorded = (read_sidecar(log) or {}).get("variant")
+    sidecar = read_sidecar(log) or {}
+    recorded = sidecar.get("variant")
+
+    def another_scene() -> None:
+        # A log of another scene: that is the mistake to name, not a variant it lacks.
+        name = (_yaml_data(Path(scene)) or {}).get("name")
+        if isinstance(name, str) and sidecar.get("scene", name) != name:
+            raise LogError(f"--log {log}: recorded for scene {sidecar['scene']!r} (its "
+                           f"sidecar), not {name!r}: check it against that scene's file")
+
     if variant is not None and recorded is not None and variant != recorded:
+        another_scene()
         raise LogError(f"--variant {variant}: the log {log} was recorded for "
                        f"{_variant_text(recorded)} (its sidecar)")
     if variant is None and recorded is not None:
@@ -440,6 +451,7 @@ def log_variant(scene: str | Path, log: str | Path,
             return recorded, combos[recorded]
         has = ("it has no parametrize block" if list(combos) == [""]
                else f"its variants: {', '.join(combos)}")
+        another_scene()
         raise LogError(f"--log {log}: recorded for {_variant_text(recorded)} (its sidecar), "
                        f"which {scene} does not have; {has}")
     return select_variant(scene, variant, unnamed=f" and no sidecar of the log {log} names the "
@@ -1588,9 +1600,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         alignment.notes.append(f"{cut_short['why']}; its last cycle read was measured after "
                                f"the scene and the cycles counted after it, so nothing counted "
                                f"is lost")
-    # Messages none of which is the mapping's header, of identifiers it does not know: the
-    # radar spoke another protocol than the one given, as live.
-    spoken = mapping_reason(receiver_mapping, index.headers, bus.get("unknown_ids", 0))
+    # Messages none of which is the mapping's header (or headers of no cycle that came
+    # whole), of identifiers it does not know: the radar spoke another protocol than the one
+    # given, as live.
+    spoken = mapping_reason(receiver_mapping, index.headers, bus.get("unknown_ids", 0),
+                            result.frames)
     if spoken:
         result.reasons.append(FailReason(spoken, "mapping"))
         result.passed = False
@@ -1847,6 +1861,50 @@ def _counter_restart(scene: Scenario, mapping: CanMapping | None) -> int | None:
     return None if start is None else start % (mapping or CanMapping.builtin()).counter_modulus
 
 
+# Stamps of a wall clock, seconds since 1970 (2001 on): a host's, a recorder's. A log whose
+# reader gives times from its start (python-can's ASC reader), or an interface's own clock
+# (seconds since it was plugged in), is on another time base than its sidecar's scene start.
+WALL_CLOCK_STAMP_S = 1e9
+# A time zone moves a log's wall-clock stamps by whole quarter hours (a tool converting it,
+# another machine reading it).
+TIME_ZONE_STEP_S = 900.0
+
+
+def _refuse_another_run(log: str | Path, origin_bus_s: float | None, clock: RadarClock,
+                        bus_t_s: FloatArray, rel: IntArray, inside: BoolArray) -> None:
+    """Refuse a log whose cycles were stamped elsewhere than its sidecar's run timed them.
+
+    The sidecar keeps the scene's start on the bus's clock (``origin_bus_s``): the run's
+    cycles reached the bus at that start, plus the clock's latency and phase, plus their
+    number of cycles, within the jitter. Where the log's stamps keep to that cycle but lie
+    seconds off (less whole quarter hours: a time zone), the log is another run's beside this
+    sidecar (a log copied over the run's, a recorder of its own writing to its name), and its
+    counters would name its cycles as the run's. Stamps on another time base, or that keep to
+    no cycle (a logger writing one time for all), are left to the counters, as before.
+    """
+    sel = inside & np.isfinite(bus_t_s)
+    if origin_bus_s is None or not sel.any():
+        return
+    if not min(float(origin_bus_s), float(np.min(bus_t_s[sel]))) > WALL_CLOCK_STAMP_S:
+        return
+    zero_bus_s = float(origin_bus_s) + clock.latency_s + clock.start_offset_s
+    off = bus_t_s[sel] - (zero_bus_s + rel[sel] * clock.cycle_s)
+    mid = float(np.median(off))
+    tolerance_s = max(0.5, 2.0 * clock.cycle_s + 3.0 * clock.jitter_s)
+    if float(np.median(np.abs(off - mid))) > tolerance_s:
+        return  # stamps that keep to no cycle: the counters tell
+    miss = mid - round(mid / TIME_ZONE_STEP_S) * TIME_ZONE_STEP_S
+    if abs(miss) <= tolerance_s:
+        return
+    raise LogError(f"--log {log}: its radar cycles were stamped {abs(miss):.1f} s "
+                   f"{'before' if miss < 0 else 'after'} the times the run its sidecar "
+                   f"({log}{LOG_SIDECAR_SUFFIX}) records timed them (its scene's start at bus "
+                   f"time {float(origin_bus_s):.6f} s, clock.origin_bus_s): a log of another run "
+                   f"beside this sidecar (copied over the run's log, or written by another "
+                   f"recorder?); check it with the sidecar its run wrote, or a copy of it "
+                   f"without one to align it by its timestamps")
+
+
 def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counters: IntArray,
            bus_t_s: FloatArray, clock: RadarClock,
            modulus: int, method: str, batch_frames: int | None, bus: dict[str, int],
@@ -1887,6 +1945,8 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
                     - modulus // 2) if counters.size else 0
         rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
+    _refuse_another_run(log, (sidecar or {}).get("clock", {}).get("origin_bus_s"), clock,
+                        bus_t_s, rel, inside)
     alignment.cycles_outside_scene = int((~inside).sum())
     logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s, channel=channel,
                         shifts=shifts, restart=_counter_restart(scene, mapping))

@@ -382,6 +382,11 @@ def test_cli_calibrate_fails_on_suspect_pairs_and_a_grid_beyond_tolerance(tmp_pa
     assert code == 1
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("error: calibration failed: 6 of 6 FE pairs are suspect")
+    # The radar and estimator the pairs were fitted with are named: on a bench, calibrate's
+    # default radar (paper) where another measures fails so.
+    assert err[0].endswith("a bad channel, a moved FE or the wrong estimator (--estimator "
+                           "bartlett) or radar profile (--radar awr1843boost): name the radar "
+                           "under test"), err[0]
     assert err[1].startswith("error: calibration failed: after calibration the radar sees the "
                              "check grid up to ")
     assert "(tolerance 0.1 deg); max angle error" in err[1]

@@ -179,6 +179,31 @@ def test_a_run_given_another_radar_s_mapping_says_so_live_and_re_checked(tmp_pat
     assert again.reasons == live.reasons
 
 
+def test_a_run_given_a_mapping_sharing_the_radar_s_header_says_so_live_and_re_checked(
+        tmp_path):
+    # The radar speaks the object list; the run is given the cluster list, whose status
+    # message has the same identifier (0x600: one radar's two modes): every cycle's header
+    # matches and none of its detections does. The run failed on incomplete cycles alone,
+    # its only hint the count of unknown identifiers on the bus line; it names the mapping.
+    scene = load_scenario(ROOT / "scenarios" / "cut_in.scenario.yaml",
+                          {"radar.noise": False, "radar.estimator": "bartlett", "duration_s": 4.0})
+    log = tmp_path / "modes.blf"
+    cluster = ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml"
+    live, _ = rehearse(scene, mapping=cluster, radar_mapping=OBJECT_LIST, bus_log=str(log))
+    again = check_log(scene, log, mapping=str(cluster)).report
+    for report in (live, again):
+        assert not report.passed
+        assert report.frames["received"] == 0 and report.frames["incomplete"] > 5, (
+            report.frames, report.bus, report.reasons)
+        unknown = report.bus["unknown_ids"]
+        assert unknown > 5
+        assert (f"the mapping's header (Cluster_Status of mapping 'cluster-list') came, but "
+                f"none of its {report.frames['incomplete']} cycles whole; {unknown} messages "
+                f"with identifiers the mapping does not know: is --mapping the radar's?"
+                ) in report.reasons, report.reasons
+    assert again.reasons == live.reasons
+
+
 def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
     # Every frame but the first reaches the RTS 15 ms after its time (transport, the RTS's
     # own update; beyond the chirp time): a cycle measured at a frame's time still shows the
@@ -204,6 +229,31 @@ def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
         reference = survey(rig, radar, desk.play)
     np.testing.assert_allclose(seen.seen_az_deg, reference.seen_az_deg, atol=0.006)
     np.testing.assert_allclose(seen.seen_el_deg, reference.seen_el_deg, atol=0.006)
+
+
+def test_a_survey_reading_another_protocol_than_the_radar_s_names_the_mapping(capsys):
+    # The emulated radar speaks rts-scenario's messages; the survey is given the object
+    # list's mapping: its messages came, none of them a header the mapping knows. It said
+    # "no detection came over CAN ...; check that the radar sees the rig and reports on that
+    # bus", sending the engineer to the wiring; a run says "is --mapping the radar's?".
+    from rts_scenario import Rig
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(rig, radar, can_channel=channel, noise=False).start()
+    try:
+        host, port = emulator.address
+        code = cli.main(["survey", "kit-table1", "--radar", "awr1843boost", "--output",
+                         f"udp://{host}:{port}", "--can-channel", channel,
+                         "--mapping", str(OBJECT_LIST)])
+    finally:
+        emulator.stop()
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.startswith("error: survey: no message matched the mapping's header (Obj_Status "
+                          "of mapping 'object-list'); "), err
+    assert err.endswith("messages with identifiers the mapping does not know: is --mapping the "
+                        "radar's?; nothing written\n"), err
 
 
 def test_a_second_measurement_over_udp_is_paced_and_numbered_like_the_first():

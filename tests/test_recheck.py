@@ -420,6 +420,20 @@ def test_a_log_of_another_scene_or_a_time_offset_beside_the_sidecar_is_refused(r
     assert "the log's sidecar aligns it by the radar's counters" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("variant", [None, "estimator=ti"])
+def test_a_log_of_another_scene_is_refused_naming_the_scenes_not_the_variants(recorded, capsys,
+                                                                             variant):
+    # A parametrized scene given a log of a scene without parametrize (the wrong scene file
+    # on the command line): the sidecar names the scene it was recorded for, and that is the
+    # mistake to name, not a variant the scene lacks.
+    cut_in = str(CUT_IN)
+    assert cli.main(["check", cut_in, "--log", str(recorded),
+                     *(["--variant", variant] if variant else [])]) == 2
+    assert capsys.readouterr().err == (
+        f"error: --log {recorded}: recorded for scene 'highway-following' (its sidecar), not "
+        f"'cut-in': check it against that scene's file\n")
+
+
 @pytest.mark.parametrize("send_times", [True, False], ids=["sidecar", "older-sidecar"])
 def test_a_scene_of_other_frames_than_the_recording_is_refused(recorded, tmp_path, capsys,
                                                                send_times):
@@ -1641,3 +1655,30 @@ def test_a_recording_ends_with_the_last_message_the_run_counted(tmp_path):
     assert live.passed and again.passed
     assert again.bus["messages"] == live.bus["messages"]
     assert again.bus["unknown_ids"] == live.bus["unknown_ids"] == 0
+
+
+@pytest.mark.parametrize("shift_s, code", [(5.7, 2), (-2.0, 2), (-300.0, 2), (86400.0 + 7.3, 2),
+                                           (3600.0, 0), (-1800.0, 0), (0.0, 0)])
+def test_a_log_beside_the_sidecar_of_another_run_is_refused(recorded, tmp_path, capsys,
+                                                            shift_s, code):
+    # The sidecar of a run whose scene started shift_s later on the bus's clock than this
+    # log's (a log copied over another run's, a logger of its own writing to the same name):
+    # its counters name the cycles as that run's, and a log of a passing run re-checked as a
+    # failing one passed. Its cycles lie seconds off where the run timed them: refused. A
+    # whole number of quarter hours is a tool or another machine's time zone moving the
+    # stamps: judged by the counters, as before.
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    data["clock"]["origin_bus_s"] += shift_s
+    log = _copy(recorded, tmp_path, json.dumps(data))
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert cli.main(["check", scene, "--log", str(log)]) == code
+    err = capsys.readouterr().err
+    if code == 0:
+        assert "error:" not in err
+        return
+    when = "before" if shift_s > 0 else "after"
+    off = abs(shift_s) % 900.0 if shift_s > 0 else abs(shift_s)
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith(f"error: --log {log}: its radar cycles were stamped {off:.1f} s {when} "
+                          f"the times the run its sidecar ({log}.rts.json) records timed them"), err
+    assert "a log of another run" in err

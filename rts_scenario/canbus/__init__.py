@@ -1243,18 +1243,28 @@ class DetectionReceiver(can.Listener):
         return out
 
 
-def mapping_reason(mapping: CanMapping, headers: int, unknown_ids: int) -> str | None:
+def mapping_reason(mapping: CanMapping, headers: int, unknown_ids: int,
+                   frames: dict[str, int] | None = None) -> str | None:
     """Why a bus's messages are not the mapping's radar's, or None.
 
     Where no message had the identifier of the mapping's header (``headers``) and some had
     identifiers the mapping does not know (``unknown_ids``): the radar spoke, in another
-    protocol than the one given; its cycles all count as missing.
+    protocol than the one given; its cycles all count as missing. Where the headers came but
+    no cycle came whole (the check's ``frames``: none ``received``, some ``incomplete``) and
+    messages of unknown identifiers did: another protocol whose status message has the same
+    identifier (one radar's two modes, a cluster and an object list), its detections unread.
     """
-    if headers or not unknown_ids:
+    if not unknown_ids:
         return None
-    return (f"no message matched the mapping's header ({mapping.header} of mapping "
-            f"{mapping.name!r}); {unknown_ids} messages with identifiers the mapping does not "
-            f"know: is --mapping the radar's?")
+    if not headers:
+        return (f"no message matched the mapping's header ({mapping.header} of mapping "
+                f"{mapping.name!r}); {unknown_ids} messages with identifiers the mapping does "
+                f"not know: is --mapping the radar's?")
+    if frames is None or frames.get("received", 0) or not frames.get("incomplete", 0):
+        return None
+    return (f"the mapping's header ({mapping.header} of mapping {mapping.name!r}) came, but "
+            f"none of its {frames['incomplete']} cycles whole; {unknown_ids} messages with "
+            f"identifiers the mapping does not know: is --mapping the radar's?")
 
 
 __all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "ListenerBus",

@@ -124,7 +124,8 @@ def _do_calibrate(args: argparse.Namespace) -> int:
         print(f"error: calibrate: {exc}{f'; {late}' if late else ''}; nothing written",
               file=sys.stderr)
         return EXIT_FAIL
-    failed = cal.failures(result, before, after, args.max_error_deg)
+    failed = cal.failures(result, before, after, args.max_error_deg, radar=radar.name,
+                          estimator=args.estimator)
     injected = args.output == "simulated-radar" and (args.inject_phase_deg or args.inject_gain_db)
     print(f"{'FE':>3} {'phase deg':>10} {'gain dB':>8}"
           + (f" {'injected phase':>15} {'injected gain':>14}" if injected else ""))
