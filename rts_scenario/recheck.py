@@ -431,8 +431,18 @@ def log_variant(scene: str | Path, log: str | Path,
         The scene is parametrized and neither says which variant the log is of, or the
         variant is not one of the scene's; the message lists the scene's variants.
     """
-    recorded = (read_sidecar(log) or {}).get("variant")
+    sidecar = read_sidecar(log) or {}
+    recorded = sidecar.get("variant")
+
+    def another_scene() -> None:
+        # A log of another scene: that is the mistake to name, not a variant it lacks.
+        name = (_yaml_data(Path(scene)) or {}).get("name")
+        if isinstance(name, str) and sidecar.get("scene", name) != name:
+            raise LogError(f"--log {log}: recorded for scene {sidecar['scene']!r} (its "
+                           f"sidecar), not {name!r}: check it against that scene's file")
+
     if variant is not None and recorded is not None and variant != recorded:
+        another_scene()
         raise LogError(f"--variant {variant}: the log {log} was recorded for "
                        f"{_variant_text(recorded)} (its sidecar)")
     if variant is None and recorded is not None:
@@ -441,6 +451,7 @@ def log_variant(scene: str | Path, log: str | Path,
             return recorded, combos[recorded]
         has = ("it has no parametrize block" if list(combos) == [""]
                else f"its variants: {', '.join(combos)}")
+        another_scene()
         raise LogError(f"--log {log}: recorded for {_variant_text(recorded)} (its sidecar), "
                        f"which {scene} does not have; {has}")
     return select_variant(scene, variant, unnamed=f" and no sidecar of the log {log} names the "

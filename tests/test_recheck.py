@@ -405,6 +405,20 @@ def test_a_log_of_another_scene_or_a_time_offset_beside_the_sidecar_is_refused(r
     assert "the log's sidecar aligns it by the radar's counters" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("variant", [None, "estimator=ti"])
+def test_a_log_of_another_scene_is_refused_naming_the_scenes_not_the_variants(recorded, capsys,
+                                                                             variant):
+    # A parametrized scene given a log of a scene without parametrize (the wrong scene file
+    # on the command line): the sidecar names the scene it was recorded for, and that is the
+    # mistake to name, not a variant the scene lacks.
+    cut_in = str(CUT_IN)
+    assert cli.main(["check", cut_in, "--log", str(recorded),
+                     *(["--variant", variant] if variant else [])]) == 2
+    assert capsys.readouterr().err == (
+        f"error: --log {recorded}: recorded for scene 'highway-following' (its sidecar), not "
+        f"'cut-in': check it against that scene's file\n")
+
+
 @pytest.mark.parametrize("send_times", [True, False], ids=["sidecar", "older-sidecar"])
 def test_a_scene_of_other_frames_than_the_recording_is_refused(recorded, tmp_path, capsys,
                                                                send_times):
