@@ -1070,3 +1070,26 @@ def test_negative_numbers_are_values_of_number_options(value):
     expected = float(value)
     assert (math.isnan(args.time_offset_s) if math.isnan(expected)
             else args.time_offset_s == expected)
+
+
+def test_emulate_names_its_options_when_it_cannot_listen_or_open_the_bus(capsys):
+    # A second emulate on the port the first listens on, or a CAN interface this machine cannot
+    # open: the line named neither --listen nor --can-interface (a CAN error read "cannot
+    # open CAN interface 'socketcan' channel 'rts-emulator'": a name the user never gave).
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        assert call(["emulate", "--listen", f"udp://127.0.0.1:{port}", "--rig", "kit-table1",
+                     "--radar", "paper", "--wait", "0.01"]) == 2
+    message = one_error(capsys.readouterr().err)
+    assert message.startswith(f"--listen udp://127.0.0.1:{port}: cannot listen: "), message
+    assert message.endswith("another emulate or RTS receiver listening on that port? stop it, "
+                            "or give another"), message
+    assert call(["emulate", "--listen", "udp://127.0.0.1:0", "--rig", "kit-table1", "--radar",
+                 "paper", "--can-interface", "socketcan", "--can-channel", "nosuchcan9",
+                 "--wait", "0.01"]) == 2
+    message = one_error(capsys.readouterr().err)
+    assert message.startswith("--can-interface socketcan --can-channel nosuchcan9: cannot open "
+                              "CAN interface 'socketcan' channel 'nosuchcan9'"), message

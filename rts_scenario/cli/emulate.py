@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import time
 from typing import TYPE_CHECKING, Any
 
 from .calibrate import MAX_INJECT_GAIN_DB
-from .common import EXIT_FAIL, EXIT_OK, check_can_interface, check_number
+from .common import EXIT_FAIL, EXIT_OK, check_can_interface, check_number, one_line
 
 if TYPE_CHECKING:
     from ..rig import Rig
@@ -18,7 +19,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
 
     from ..canbus.mapping import CanMapping
     from ..emulator import Emulator
-    from ..errors import RtsError
+    from ..errors import BusError, RtsError
     from ..radar.angle import estimator_names
     from ..radar.profile import RadarProfile
     from ..radar.profile import preset_names as radar_presets
@@ -30,6 +31,8 @@ def _do_emulate(args: argparse.Namespace) -> int:
 
     host, port = _address(args.listen, "--listen")
     check_can_interface("--can-interface", args.can_interface, args.can_channel)
+    given_channel = (f"--can-channel {args.can_channel}" if args.can_channel is not None
+                     else "(no --can-channel: a private channel name)")
     if args.can_channel is None:
         args.can_channel = "rts-emulator"
     check_number("--seconds", args.seconds, low=0.001, high=86400.0)
@@ -58,8 +61,14 @@ def _do_emulate(args: argparse.Namespace) -> int:
                             can_channel=args.can_channel, fidelity=args.fidelity,
                             estimator=args.estimator, noise=args.noise, rng=rng,
                             mapping=mapping, fd=args.can_fd, errors=errors)
+    except BusError as exc:
+        raise BusError(f"--can-interface {args.can_interface} {given_channel}: "
+                       f"{one_line(exc)}") from None
     except OSError as exc:
-        raise RtsError(f"{args.listen}: cannot listen: {exc.strerror or exc}") from None
+        busy = ("; another emulate or RTS receiver listening on that port? stop it, or give "
+                "another" if exc.errno == errno.EADDRINUSE else "")
+        raise RtsError(f"--listen {args.listen}: cannot listen: {exc.strerror or exc}"
+                       f"{busy}") from None
     emulator.start()
     bound_host, bound_port = emulator.address
     clock = radar.radar_clock
