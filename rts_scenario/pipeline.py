@@ -475,6 +475,7 @@ class Pipeline:
         # Each frame is held for a cycle (or two, below): never a run's frame period.
         self.output.frame_period_s = None
         self.receiver.reset(restart=self._counter_restart())
+        unknown_before = self.receiver.stats.unknown_ids
         # A measurement places its cycles itself (`_cycle_numbers`): no run's clock link holds.
         self._bus_clock_checked = self._bus_clock_foreign = False
         self._link = ClockLink()
@@ -503,7 +504,11 @@ class Pipeline:
         self.measurement_other_channels += self.receiver.other_channels
         # The radar's identifiers on several channels (or none on --radar-channel): the
         # cycles would mix another bus's in; nothing is measured from them.
-        reason = self.receiver.channel_reason() or self._rts_refusal(played.n_frames)
+        # So does a radar speaking another protocol than the mapping's: no header of it came,
+        # messages of identifiers it does not know did.
+        reason = (self.receiver.channel_reason() or self._rts_refusal(played.n_frames)
+                  or mapping_reason(self.receiver.mapping, self.receiver.headers,
+                                    self.receiver.stats.unknown_ids - unknown_before))
         if reason:
             raise MeasurementError(reason)
         self.host_clock.sample()  # a step is told by the measurement, if no cycle told it

@@ -231,6 +231,31 @@ def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
     np.testing.assert_allclose(seen.seen_el_deg, reference.seen_el_deg, atol=0.006)
 
 
+def test_a_survey_reading_another_protocol_than_the_radar_s_names_the_mapping(capsys):
+    # The emulated radar speaks rts-scenario's messages; the survey is given the object
+    # list's mapping: its messages came, none of them a header the mapping knows. It said
+    # "no detection came over CAN ...; check that the radar sees the rig and reports on that
+    # bus", sending the engineer to the wiring; a run says "is --mapping the radar's?".
+    from rts_scenario import Rig
+
+    rig, radar = Rig.preset("kit-table1"), RadarProfile.preset("awr1843boost")
+    channel = f"rts-emulate-test-{next(_channels)}-bus"
+    emulator = Emulator(rig, radar, can_channel=channel, noise=False).start()
+    try:
+        host, port = emulator.address
+        code = cli.main(["survey", "kit-table1", "--radar", "awr1843boost", "--output",
+                         f"udp://{host}:{port}", "--can-channel", channel,
+                         "--mapping", str(OBJECT_LIST)])
+    finally:
+        emulator.stop()
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.startswith("error: survey: no message matched the mapping's header (Obj_Status "
+                          "of mapping 'object-list'); "), err
+    assert err.endswith("messages with identifiers the mapping does not know: is --mapping the "
+                        "radar's?; nothing written\n"), err
+
+
 def test_a_second_measurement_over_udp_is_paced_and_numbered_like_the_first():
     # `calibrate --output udp://...` measures one FE pair after the other on one bench: each
     # measurement must be played in real time and its cycles found as the first's were.
