@@ -21,6 +21,7 @@ sidecar's digest of the statuses tells whether the rebuilt schedule plays the sa
 from __future__ import annotations
 
 import gc
+import glob
 import hashlib
 import io
 import json
@@ -413,7 +414,12 @@ def check_log_file(log: str | Path) -> None:
         raise LogError(f"--log {log}: unknown log format {path.suffix!r}; valid: "
                        f"{', '.join(LOG_SUFFIXES)}")
     if not path.is_file():
-        raise LogError(f"--log {log}: no such file")
+        # `run --record LOG` of a parametrized scene writes STEM[ID].SUFFIX per variant.
+        variants = sorted(str(p) for p in path.parent.glob(
+            f"{glob.escape(path.stem)}[[]*[]]{glob.escape(path.suffix)}") if p.is_file())
+        beside = (f"; beside it, the logs run --record wrote for each variant of a "
+                  f"parametrized scene: {', '.join(variants)}" if variants else "")
+        raise LogError(f"--log {log}: no such file{beside}")
     if path.stat().st_size == 0:  # a recorder that never wrote, a copy that did not happen
         raise LogError(f"--log {log}: the file is empty (0 bytes): nothing was recorded in it")
 

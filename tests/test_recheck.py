@@ -1667,3 +1667,19 @@ def test_a_log_beside_the_sidecar_of_another_run_is_refused(recorded, tmp_path, 
     assert err.startswith(f"error: --log {log}: its radar cycles were stamped {off:.1f} s {when} "
                           f"the times the run its sidecar ({log}.rts.json) records timed them"), err
     assert "a log of another run" in err
+
+
+def test_a_log_named_as_given_to_record_for_a_parametrized_scene_names_the_variants_logs(
+        tmp_path, capsys):
+    # `run cut_in --record drive.blf` writes drive[estimator=bartlett].blf and
+    # drive[estimator=ti].blf; `check cut_in --log drive.blf` said only "no such file".
+    for variant in ("estimator=bartlett", "estimator=ti"):
+        (tmp_path / f"drive[{variant}].blf").write_bytes(b"x")
+    log = tmp_path / "drive.blf"
+    assert cli.main(["check", str(CUT_IN), "--log", str(log)]) == 2
+    assert capsys.readouterr().err == (
+        f"error: --log {log}: no such file; beside it, the logs run --record wrote for each "
+        f"variant of a parametrized scene: {tmp_path}/drive[estimator=bartlett].blf, "
+        f"{tmp_path}/drive[estimator=ti].blf\n")
+    assert cli.main(["check", str(CUT_IN), "--log", str(tmp_path / "other.blf")]) == 2
+    assert capsys.readouterr().err == f"error: --log {tmp_path / 'other.blf'}: no such file\n"
