@@ -21,6 +21,7 @@ sidecar's digest of the statuses tells whether the rebuilt schedule plays the sa
 from __future__ import annotations
 
 import gc
+import glob
 import hashlib
 import io
 import json
@@ -413,7 +414,12 @@ def check_log_file(log: str | Path) -> None:
         raise LogError(f"--log {log}: unknown log format {path.suffix!r}; valid: "
                        f"{', '.join(LOG_SUFFIXES)}")
     if not path.is_file():
-        raise LogError(f"--log {log}: no such file")
+        # `run --record LOG` of a parametrized scene writes STEM[ID].SUFFIX per variant.
+        variants = sorted(str(p) for p in path.parent.glob(
+            f"{glob.escape(path.stem)}[[]*[]]{glob.escape(path.suffix)}") if p.is_file())
+        beside = (f"; beside it, the logs run --record wrote for each variant of a "
+                  f"parametrized scene: {', '.join(variants)}" if variants else "")
+        raise LogError(f"--log {log}: no such file{beside}")
     if path.stat().st_size == 0:  # a recorder that never wrote, a copy that did not happen
         raise LogError(f"--log {log}: the file is empty (0 bytes): nothing was recorded in it")
 
@@ -1945,8 +1951,12 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
                     - modulus // 2) if counters.size else 0
         rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
-    _refuse_another_run(log, (sidecar or {}).get("clock", {}).get("origin_bus_s"), clock,
-                        bus_t_s, rel, inside)
+    recorded_clock = (sidecar or {}).get("clock") or {}
+    if not recorded_clock.get("bus_time_shifts"):
+        # (Where the host's clock stepped, its stamps are brought back from the cycle the
+        # sidecar names, which another run's log lacks: `host_clock` fails it.)
+        _refuse_another_run(log, recorded_clock.get("origin_bus_s"), clock, bus_t_s, rel,
+                            inside)
     alignment.cycles_outside_scene = int((~inside).sum())
     logged = _ReadAhead(log, mapping, inside, scene.radar.radar_clock.cycle_s, channel=channel,
                         shifts=shifts, restart=_counter_restart(scene, mapping))

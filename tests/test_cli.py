@@ -389,7 +389,7 @@ def test_check_takes_the_variant_from_the_sidecar_or_refuses(tmp_path, capsys):
     assert cli.main(["check", str(scene), "--log", str(passing), "--variant", "1=40.0"]) == 2
     assert capsys.readouterr().err == (f"error: --variant 1=40.0: the log {passing} was recorded "
                                        f"for variant '1=3.5' (its sidecar)\n")
-    # A log of a variant is no log of another scene.
+    # A log of a variant is no log of another scene: the scenes are named, the mistake made.
     other = ROOT / "scenarios" / "highway_following.scenario.yaml"
     assert cli.main(["check", str(other), "--log", str(passing)]) == 2
     assert capsys.readouterr().err == (

@@ -1682,3 +1682,33 @@ def test_a_log_beside_the_sidecar_of_another_run_is_refused(recorded, tmp_path, 
     assert err.startswith(f"error: --log {log}: its radar cycles were stamped {off:.1f} s {when} "
                           f"the times the run its sidecar ({log}.rts.json) records timed them"), err
     assert "a log of another run" in err
+
+
+def test_a_log_named_as_given_to_record_for_a_parametrized_scene_names_the_variants_logs(
+        tmp_path, capsys):
+    # `run cut_in --record drive.blf` writes drive[estimator=bartlett].blf and
+    # drive[estimator=ti].blf; `check cut_in --log drive.blf` said only "no such file".
+    for variant in ("estimator=bartlett", "estimator=ti"):
+        (tmp_path / f"drive[{variant}].blf").write_bytes(b"x")
+    log = tmp_path / "drive.blf"
+    assert cli.main(["check", str(CUT_IN), "--log", str(log)]) == 2
+    assert capsys.readouterr().err == (
+        f"error: --log {log}: no such file; beside it, the logs run --record wrote for each "
+        f"variant of a parametrized scene: {tmp_path}/drive[estimator=bartlett].blf, "
+        f"{tmp_path}/drive[estimator=ti].blf\n")
+    assert cli.main(["check", str(CUT_IN), "--log", str(tmp_path / "other.blf")]) == 2
+    assert capsys.readouterr().err == f"error: --log {tmp_path / 'other.blf'}: no such file\n"
+
+
+def test_a_sidecar_with_host_clock_steps_the_log_lacks_fails_on_them_not_as_another_run(
+        recorded, tmp_path, capsys):
+    # Stamps the run brought back from a cycle the log lacks are judged as they are: the
+    # re-check fails with host_clock, whatever the stamps' offset from the sidecar's start.
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    data["clock"]["origin_bus_s"] += 5.7
+    data["clock"]["bus_time_shifts"] = [{"bus_s": 1.0, "counter": 5, "shift_s": 0.5}]
+    log = _copy(recorded, tmp_path, json.dumps(data))
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert cli.main(["check", scene, "--log", str(log)]) == 1
+    out = capsys.readouterr().out
+    assert "host_clock: the host's wall clock stepped while the run recorded" in out
