@@ -337,3 +337,27 @@ def write_json(rows: list[BenchRow], quantized: list[QuantizationRow], path: str
                                "end_to_end": None if end is None else asdict(end),
                                "performance": [asdict(f) for f in figures or []]}
     write_atomic(path, json.dumps(strict(data), indent=2, allow_nan=False) + "\n")
+
+
+def write_markdown(rows: list[BenchRow], quantized: list[QuantizationRow], path: str | Path,
+                   end: EndToEndRow | None = None, honest_rows: list[HonestRow] | None = None,
+                   figures: list[Any] | None = None) -> None:
+    """Write the tables as Markdown, as the README shows them (``rts-scenario bench --markdown``).
+
+    The speed-against-error tables as printed, in fenced blocks, then the performance figures
+    (`rts_scenario.perf.Figure`) as a Markdown table; a section not measured is left out.
+    """
+    from .perf import format_markdown
+
+    def block(text: str) -> str:
+        return f"```\n{text}\n```"
+
+    parts = ["### Speed against error", block(f"{format_table(rows)}\n\n"
+                                              f"{format_quantization(quantized)}")]
+    if honest_rows:
+        parts += ["### The honest simulated bench", block(format_honest(honest_rows))]
+    if end is not None:
+        parts += ["### End to end", block(format_end_to_end(end))]
+    if figures:
+        parts += ["### Performance against its comparisons", format_markdown(figures)]
+    write_atomic(path, "\n\n".join(parts) + "\n")

@@ -8,7 +8,7 @@ in one run means more than two absolute figures from different runs.
 - CAN: messages per second from cycles to checked detections, in process, against python-can's
   virtual bus with a reader (a copy of each message and a queue).
 - Solver: the exact method's target-frames per second against the paper method's; its memory
-  traffic against a large copy (the streaming bandwidth).
+  traffic against a copy of arrays four times the last-level cache (the streaming bandwidth).
 - Radar: an `adc` frame against its two windowed FFTs alone; `analytic` frames per second.
 - Quantization: the quantization-aware schedule against the continuous one.
 - Scale: time per target-frame of a 60 s run with 512 targets against 8 targets; peak memory.
@@ -172,7 +172,7 @@ def solver_speed(array_name: str, rig_name: str = "kit-table1", targets: int = 1
     exact_s, paper_s = alternating(
         lambda: solve_weights(az, el, rig=rig, array=array, method="exact"),
         lambda: solve_weights(az, el, rig=rig, array=array, method="paper"), rounds)
-    bandwidth = streaming_copy_bandwidth(targets * 8, rounds * 2)
+    bandwidth = streaming_copy_bandwidth(rounds * 2)
     # The solver's traffic: az and el in, weights (4 x float64), quad (int64) and reason out.
     solver_bytes = targets * (8 + 8 + 32 + 8 + 1)
     rate = targets / exact_s
@@ -186,18 +186,47 @@ def solver_speed(array_name: str, rig_name: str = "kit-table1", targets: int = 1
     ]
 
 
-def streaming_copy_bandwidth(n: int, rounds: int) -> float:
-    """Return the streaming limit (bytes/s): a copy of ``n`` float64, read plus written.
+# Where sysfs gives no cache sizes: the largest last-level cache of the machines this runs on.
+_DEFAULT_CACHE_BYTES = 32 << 20
+_CACHE_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30}
+
+
+def last_level_cache_bytes(root: Path = Path("/sys/devices/system/cpu/cpu0/cache")) -> int:
+    """Return the largest CPU cache (bytes) that sysfs lists, else `_DEFAULT_CACHE_BYTES`."""
+    sizes = []
+    for entry in root.glob("index*/size"):
+        try:
+            text = entry.read_text().strip().upper()
+        except OSError:
+            continue
+        digits, unit = text.rstrip("KMG"), text[len(text.rstrip("KMG")):]
+        if digits.isdigit() and unit in _CACHE_UNITS:
+            sizes.append(int(digits) * _CACHE_UNITS[unit])
+    return max(sizes, default=_DEFAULT_CACHE_BYTES)
+
+
+def streaming_copy_bytes(cache_bytes: int | None = None) -> int:
+    """Size of each array of the streaming copy: four times the last-level cache, >= 64 MiB.
+
+    STREAM's rule: with arrays this large the copy reads and writes memory, not the cache
+    (a copy that fits in the cache measures the cache, several times faster).
+    """
+    cache = last_level_cache_bytes() if cache_bytes is None else cache_bytes
+    return max(4 * cache, 64 << 20)
+
+
+def streaming_copy_bandwidth(rounds: int) -> float:
+    """Return the streaming limit (bytes/s): a copy of `streaming_copy_bytes`, read plus written.
 
     The faster of one thread and the solver's worker threads (each copying its share): the
     solver runs on all of them, and one core alone may not reach what the memory gives.
     """
     from .workers import THREADS, run_parts
 
-    source = np.ones(n)
+    source = np.ones(streaming_copy_bytes() // 8)
     sink = np.empty_like(source)
     one_s = best_of(lambda: np.copyto(sink, source), rounds)
-    bounds = np.linspace(0, n, THREADS + 1).astype(int)
+    bounds = np.linspace(0, source.size, THREADS + 1).astype(int)
     shares = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
     def copy_share(share: slice) -> None:
@@ -401,11 +430,30 @@ def all_figures(cut_in: str | Path | None = None, scale_s: float = 60.0) -> list
     return figures
 
 
+def _number(value: float) -> str:
+    """Render a value for a table: whole thousands grouped, else three significant digits."""
+    return f"{value:,.0f}" if abs(value) >= 1000 else f"{value:.3g}"
+
+
+def format_markdown(figures: list[Figure]) -> str:
+    """Render the figures as the Markdown table of the README (`rts-scenario bench --markdown`)."""
+    lines = ["| figure | measured | comparison (same run) | ratio | goal | |",
+             "|---|---|---|---|---|---|"]
+    for f in figures:
+        lines.append(f"| {f.name} | {_number(f.value)} {f.unit} | {f.comparison}: "
+                     f"{_number(f.comparison_value)} {f.unit} | {f.ratio:.3g}× | "
+                     f"{f.goal.replace('>=', '≥').replace('<=', '≤')} | "
+                     f"{'met' if f.met else '**not met**'} |")
+    return "\n".join(lines)
+
+
 def format_figures(figures: list[Figure]) -> str:
     """Render the figures as a table for people."""
     return "\n".join(["performance (each against its comparison, same run)",
                       *(f.line() for f in figures)])
 
 
-__all__ = ["Figure", "all_figures", "can_rate", "format_figures", "quantization_ratio",
-           "radar_rates", "scale", "solver_speed", "startup"]
+__all__ = ["Figure", "all_figures", "can_rate", "format_figures", "format_markdown",
+           "last_level_cache_bytes",
+           "quantization_ratio", "radar_rates", "scale", "solver_speed", "startup",
+           "streaming_copy_bandwidth", "streaming_copy_bytes"]

@@ -21,15 +21,33 @@ def test_bench_reports_performance_figures_in_text_and_json(tmp_path, capsys, mo
         return perf.startup(None, rounds=1)
 
     monkeypatch.setattr(perf, "all_figures", quick)
-    out = tmp_path / "bench.json"
+    out, md = tmp_path / "bench.json", tmp_path / "bench.md"
     code = cli.main(["bench", "--targets", "200", "--repeats", "1", "--scene-s", "0",
-                     "--no-honest", "--scale-s", "0", "--json", str(out)])
+                     "--no-honest", "--scale-s", "0", "--json", str(out), "--markdown", str(md)])
     assert code == 0 and calls and calls[0][1] == 0.0
     text = capsys.readouterr().out
     assert "import rts_scenario (fresh interpreter)" in text and "vs import numpy" in text
     (figure,) = json.loads(out.read_text())["performance"]
     assert figure["unit"] == "ms" and figure["value"] > 0 and figure["comparison_value"] > 0
     assert figure["met"] == (figure["value"] <= 150.0)
+    # The Markdown file: the same figure in the README's table, the solver table fenced.
+    markdown = md.read_text()
+    row = next(line for line in markdown.splitlines() if line.startswith("| import"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[0] == figure["name"] and cells[4] == "≤ 150 ms"
+    assert float(cells[1].removesuffix(" ms")) == pytest.approx(figure["value"], rel=5e-3)
+    assert cells[5] == ("met" if figure["met"] else "**not met**")
+    assert "### Speed against error\n\n```\nmethod" in markdown
+    assert "### End to end" not in markdown and "### The honest" not in markdown
+
+
+def test_bench_markdown_and_json_may_not_name_one_file(tmp_path, capsys):
+    same = tmp_path / "bench.out"
+    assert cli.main(["bench", "--no-performance", "--json", str(same),
+                     "--markdown", str(same)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "--json" in err and "--markdown" in err
+    assert not same.exists()
 
 
 def test_bench_json_has_every_section_when_one_is_skipped(tmp_path):

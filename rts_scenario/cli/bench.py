@@ -30,6 +30,11 @@ def _do_bench(args: argparse.Namespace) -> int:
                        f"{', '.join(preset_names())} (--rig)")
     if args.json:
         check_writable_file("--json", args.json)
+    if args.markdown:
+        check_writable_file("--markdown", args.markdown)
+        if args.json and Path(args.json).resolve() == Path(args.markdown).resolve():
+            raise RtsError(f"--json {args.json} and --markdown {args.markdown}: the same file; "
+                           f"give each its own")
     rows = bench.run(targets=args.targets, repeats=args.repeats, rig_name=args.rig)
     print(bench.format_table(rows))
     quantized = bench.quantization(rig_name=args.rig)
@@ -62,6 +67,10 @@ def _do_bench(args: argparse.Namespace) -> int:
         with writing("--json", args.json):
             bench.write_json(rows, quantized, args.json, end, honest_rows, figures)
         print(f"wrote {args.json}")
+    if args.markdown:
+        with writing("--markdown", args.markdown):
+            bench.write_markdown(rows, quantized, args.markdown, end, honest_rows, figures)
+        print(f"wrote {args.markdown}")
     return EXIT_OK
 
 
@@ -73,6 +82,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                     "angle error measured by an independent beamformer peak search.",
     )
     parser.add_argument("--json", metavar="OUT", help="also write the table as JSON")
+    parser.add_argument("--markdown", metavar="OUT",
+                        help="also write the tables as Markdown, as the README shows them")
     parser.add_argument("--scene-s", type=float, default=60.0,
                         help="length of the motorway scene run end to end through the pipeline "
                              "(default 60 s; 0 skips it)")

@@ -16,6 +16,7 @@ from cascade_arrays import compact_cascade, ti_cascade
 
 import rts_scenario as rs
 import rts_scenario.solver as solver_module
+from rts_scenario import perf
 from rts_scenario.solver import compiled
 from rts_scenario.solver.plan import build_plan
 
@@ -115,17 +116,6 @@ def test_solve_weights_modeled_responses_1e6(benchmark, targets, fe_responses):
     record_rate(benchmark, "target_frames_per_s", N)
 
 
-def _copy_bandwidth_bytes_per_s(rounds=ROUNDS, size=1 << 25):
-    """Streaming bandwidth: bytes read plus written per second by a large ``np.copyto``."""
-    src, dst = np.ones(size), np.empty(size)
-    best = np.inf
-    for _ in range(rounds):
-        start = time.perf_counter()
-        np.copyto(dst, src)
-        best = min(best, time.perf_counter() - start)
-    return 2 * src.nbytes / best
-
-
 def _best_alternating(runs, rounds=ROUNDS):
     """Best wall time of each callable, the callables alternated round by round."""
     best = [np.inf] * len(runs)
@@ -190,9 +180,9 @@ def test_exact_against_paper(benchmark, case, monkeypatch):
     for run in runs:  # plans built or loaded, the kernel compiled or loaded
         run()
     assert exact().feasible.all()
-    copy_bps = _copy_bandwidth_bytes_per_s()
+    copy_bps = perf.streaming_copy_bandwidth(ROUNDS)
     times = _best_alternating(runs)
-    copy_bps = max(copy_bps, _copy_bandwidth_bytes_per_s())
+    copy_bps = max(copy_bps, perf.streaming_copy_bandwidth(ROUNDS))
     exact_s, numpy_s = times[0], times[1]
     solver_bps = BYTES_PER_TARGET * N / exact_s
     line = (f"\n{case}: exact {N / exact_s / 1e6:.2f} M/s (numpy path {N / numpy_s / 1e6:.2f}, "
@@ -202,7 +192,8 @@ def test_exact_against_paper(benchmark, case, monkeypatch):
         line += (f"; paper {N / paper_s / 1e6:.2f} M/s; exact/paper {paper_s / exact_s:.2f}x")
     line += (f"; exact streams {solver_bps / 1e9:.2f} GB/s ({BYTES_PER_TARGET} B/target) = "
              f"{100 * solver_bps / copy_bps:.1f} % of copy bandwidth {copy_bps / 1e9:.1f} GB/s "
-             f"(np.copyto, read + written); {solver_module.WORKERS} threads")
+             f"(np.copyto of 4x the last-level cache, read + written); "
+             f"{solver_module.WORKERS} threads")
     print(line)
     benchmark.group = f"solve_weights N=1e6 {case}: exact vs paper"
     benchmark.extra_info.update(
