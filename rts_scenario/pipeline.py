@@ -23,7 +23,14 @@ import can
 import numpy as np
 
 from .atomic import write_atomic
-from .canbus import DetectionPublisher, DetectionReceiver, ListenerBus, mapping_reason, open_bus
+from .canbus import (
+    DetectionPublisher,
+    DetectionReceiver,
+    ListenerBus,
+    mapping_reason,
+    open_bus,
+    with_mapping_hint,
+)
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, bus_times, host_times, sequential_numbers, unwrap_counter
@@ -1051,6 +1058,9 @@ class Pipeline:
                 ("time_alignment", checker.lag_reason(1.0 / scene.frame_rate_hz,
                                                       scene.radar.coupling_lag_s))):
             if drifted:
+                if code == "radar_clock":
+                    drifted = with_mapping_hint(drifted, self.receiver.mapping,
+                                                bus["unknown_ids"])
                 report.reasons.append(FailReason(drifted, code))
                 report.passed = False
         assert self.output is not None

@@ -42,7 +42,7 @@ import jsonschema
 import numpy as np
 from numpy.typing import NDArray
 
-from .canbus import DetectionReceiver, channel_label, mapping_reason
+from .canbus import DetectionReceiver, channel_label, mapping_reason, with_mapping_hint
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
 from .detections import Detections, sequential_numbers
@@ -1622,6 +1622,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     for off_profile in (track.off_profile_reason(half_window_s),
                         track.latency_change_reason(half_window_s), late_reason):
         if off_profile:
+            off_profile = with_mapping_hint(off_profile, receiver_mapping,
+                                            bus.get("unknown_ids", 0))
             result.reasons.append(FailReason(off_profile, "radar_clock"))
             result.passed = False
     # When the radar measured, as this check took it (the run's clock from the sidecar, or the

@@ -204,6 +204,31 @@ def test_a_run_given_a_mapping_sharing_the_radar_s_header_says_so_live_and_re_ch
     assert again.reasons == live.reasons
 
 
+@pytest.mark.parametrize("given", ["cluster", "object"])
+def test_a_counter_read_with_another_protocol_s_mapping_names_the_mapping(tmp_path, given):
+    # One radar's two modes share the status message's identifier: read with the other
+    # mode's mapping, its cycles come whole with their counters from another signal (near
+    # 4096), which reads as a radar started minutes after the scene. The radar_clock reason
+    # names --mapping, live and re-checked, because messages the mapping does not know came.
+    scene = bench_scene(tmp_path, duration_s=2.0)
+    cluster = ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml"
+    mapping, speaks = (cluster, OBJECT_LIST) if given == "cluster" else (OBJECT_LIST, cluster)
+    log = tmp_path / "modes.blf"
+    live, _ = rehearse(scene, mapping=mapping, radar_mapping=speaks, bus_log=str(log))
+    again = check_log(scene, log, mapping=str(mapping)).report
+    name = CanMapping.from_file(mapping).name
+    for report in (live, again):
+        assert not report.passed
+        clock = [r for r in report.reasons if r.startswith("radar_clock:")]
+        assert len(clock) == 1, report.reasons
+        assert "started after the scene began" in clock[0]
+        assert clock[0].endswith(
+            f"; {report.bus['unknown_ids']} messages with identifiers mapping {name!r} does not "
+            f"know came too: is --mapping the radar's (a counter read from another protocol's "
+            f"signal reads as this)?"), clock[0]
+        assert report.bus["unknown_ids"] > 10
+
+
 def test_a_survey_over_udp_measures_each_front_end_after_the_rts_applied_it():
     # Every frame but the first reaches the RTS 15 ms after its time (transport, the RTS's
     # own update; beyond the chirp time): a cycle measured at a frame's time still shows the

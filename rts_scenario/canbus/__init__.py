@@ -1267,5 +1267,20 @@ def mapping_reason(mapping: CanMapping, headers: int, unknown_ids: int,
             f"identifiers the mapping does not know: is --mapping the radar's?")
 
 
+def with_mapping_hint(reason: str, mapping: CanMapping | None, unknown_ids: int) -> str:
+    """``reason`` of the radar's clock, with the mapping named where the bus hints at it.
+
+    A radar read with another protocol's mapping whose header has the same identifier (a
+    cluster list read as an object list) has its cycles read whole, their counters from
+    another signal: a count far off reads as a radar started late or on another cycle. Where
+    messages of identifiers the mapping does not know came too, the reason says so.
+    """
+    if mapping is None or not unknown_ids:
+        return reason
+    return (f"{reason}; {unknown_ids} messages with identifiers mapping {mapping.name!r} does "
+            f"not know came too: is --mapping the radar's (a counter read from another "
+            f"protocol's signal reads as this)?")
+
+
 __all__ = ["BusStats", "CanMapping", "DetectionPublisher", "DetectionReceiver", "ListenerBus",
-           "channel_label", "mapping_reason", "open_bus"]
+           "channel_label", "mapping_reason", "open_bus", "with_mapping_hint"]
