@@ -11,6 +11,7 @@ import json
 import math
 import os
 import re
+import stat
 import subprocess
 import sys
 import textwrap
@@ -1163,3 +1164,26 @@ def test_emulate_names_its_options_when_it_cannot_listen_or_open_the_bus(capsys)
     message = one_error(capsys.readouterr().err)
     assert message.startswith("--can-interface socketcan --can-channel nosuchcan9: cannot open "
                               "CAN interface 'socketcan' channel 'nosuchcan9'"), message
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_an_output_named_pipe_is_not_opened_by_the_early_check(tmp_path):
+    # Opening a named pipe for writing waits for a reader: the check before a run must not
+    # hang the command there (the result is written into the pipe at the end, as to any pipe).
+    import threading
+
+    from rts_scenario.cli.common import check_writable_file
+
+    fifo = tmp_path / "report.fifo"
+    os.mkfifo(fifo)
+    done = threading.Event()
+    probe = threading.Thread(target=lambda: (check_writable_file("--json", fifo), done.set()),
+                             daemon=True)
+    probe.start()
+    try:
+        assert done.wait(10.0), "the check waited for a reader of the pipe"
+    finally:
+        if not done.is_set():  # release the blocked probe: a reader comes and goes
+            os.close(os.open(fifo, os.O_RDONLY | os.O_NONBLOCK))
+        probe.join(10.0)
+    assert stat.S_ISFIFO(fifo.stat().st_mode)  # still the pipe, not replaced by a file

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import ipaddress
 import math
 import os
+import stat
 import sys
 import traceback
 from collections.abc import Iterable, Iterator
@@ -195,6 +197,13 @@ def check_writable_file(option: str, path: str | Path, kind: str | None = None, 
         raise RtsError(f"{option} {path}: cannot write: folder {parent} {what}")
     existed = target.exists()
     with writing(option, path):
+        if existed and stat.S_ISFIFO(target.stat().st_mode):
+            # A named pipe opened for writing waits for a reader: the probe would hang the
+            # command before it starts. Permission is what can be checked (the writer waits
+            # for the reader at the end, as a pipe does).
+            if not os.access(target, os.W_OK):
+                raise PermissionError(errno.EACCES, os.strerror(errno.EACCES))
+            return
         with open(target, "ab"):
             pass
         if not existed:
