@@ -131,6 +131,11 @@ def _exp_rows(out_re, out_im, step_re, step_im, k, coords, direct, indirect, mir
     else:
         for i in direct:
             phase = -k * coords[i]
+            if phase == 0.0:  # a centre coordinate (the paper array's middle row): exp(0) = 1
+                for b in range(nb):
+                    out_re[i, b] = 1.0
+                    out_im[i, b] = 0.0
+                continue
             for b in range(nb):
                 sin_t, cos_t = _sincos(phase * x[b])
                 out_re[i, b] = cos_t
