@@ -874,7 +874,7 @@ def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_ele
     `_solve_one` would leave, and the rest move down to keep the columns contiguous. Same steps
     and same results as `_solve_one` target by target, which ran one scalar step after
     another: on the AWR1843BOOST (6 % of targets iterate) the iteration and the stores took
-    14 ns per target that way and take 1.5 now (measured by running that part twice).
+    14 ns per target that way and take 5.8 now (measured by running that part twice).
 
     ``batch``: scratch ``(5, 12, B)``.
     """
@@ -908,8 +908,11 @@ def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_ele
         for k in range(active):  # vector loops over the targets still iterating
             sin_p, cos_p = _sincos(phi[k])
             cos_phi[k], sin_phi[k] = cos_p, sin_p
-            for r in range(12):
-                rot[r, k] = cos_p * f_re[r, k] + sin_p * f_im[r, k]
+        # Row by row: rotating the twelve rows in the loop above, target by target, took 120 ns
+        # per iterating target, this 3 (measured on a batch of the AWR1843BOOST's).
+        for r in range(12):
+            for k in range(active):
+                rot[r, k] = cos_phi[k] * f_re[r, k] + sin_phi[k] * f_im[r, k]
         _max_gain_weights_block(rot, active, row_scale, tol, work)
         for k in range(active):
             w = _row(work, 0, k)
