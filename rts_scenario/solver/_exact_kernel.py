@@ -755,13 +755,25 @@ def solve_targets(  # pragma: no cover
                     ss[b] = sin_el
                 _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct, y_indirect,
                           y_mirror, y_progression, us, nb)
-                _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
-                          z_mirror, z_progression, ss, nb)
                 if has_phase:
                     # Evaluate in the frame rotated by the expected phase of B (see `exact`).
                     origin = phase_origin[qd]
                     u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
                     table = phase_table[qd]
+                if has_phase and z_direct.size == z_coords.size and not z_progression:
+                    # exp(-j (k z s + phase)) in one: a sine and cosine per coordinate, not one
+                    # more per target and a product per coordinate (the AWR1843BOOST's two z:
+                    # 1.02-1.03x). Coordinates taken as conjugates or by steps keep the product.
+                    _phase_block(us, ss, u0, s0, du, ds, table, step_re, patch, nb)
+                    for i in range(z_coords.size):
+                        phase = -k * z_coords[i]
+                        for b in range(nb):
+                            sin_t, cos_t = _sincos(phase * ss[b] - step_re[b])
+                            ez_re[i, b] = cos_t
+                            ez_im[i, b] = sin_t
+                elif has_phase:
+                    _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
+                              z_mirror, z_progression, ss, nb)
                     _phase_block(us, ss, u0, s0, du, ds, table, step_re, patch, nb)
                     for b in range(nb):  # apart from the table look-ups: vectorizes
                         sin_p, cos_p = _sincos(step_re[b])
@@ -772,6 +784,9 @@ def solve_targets(  # pragma: no cover
                             re, im = ez_re[i, b], ez_im[i, b]
                             ez_re[i, b] = re * step_re[b] - im * step_im[b]
                             ez_im[i, b] = re * step_im[b] + im * step_re[b]
+                else:
+                    _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
+                              z_mirror, z_progression, ss, nb)
                 # Real responses: the looks of the folded elements only (their mirrors' are
                 # their conjugates, folded into the table); on a grid none.
                 n_looks = fold_iy.size if real_only else n_elements
