@@ -424,24 +424,57 @@ def _locate(az, el, column_az, row_el, lines, boxes, slack, quad):  # pragma: no
             inside &= l30 * a + l31 * e + l32 >= -slack
             quad[n] = 0 if inside else -1
         return
-    for n in range(az.size):
-        # Without branches (random targets would mispredict them): searchsorted (left) as a
-        # count of the sorted means below, minus one, clipped to the cells.
-        a, e = az[n], el[n]
-        col = 0
+    # A chunk at a time (in the caches), every step a vector loop over it: the candidate cell
+    # by counts of the sorted means below (searchsorted, left, minus one, clipped to the
+    # cells), then each quad's test with its constants hoisted, kept where it is the
+    # candidate. Target by target, with each quad's constants read per target, this took
+    # 11 ns per target on the wide-3x5 grid (8 quads), 6.6 so (1.06x on the whole kernel).
+    # Slices, not offset indices, and counts in floats: so the loops vectorize (with offsets
+    # and integer counts the counts alone took 6 ns).
+    col = np.empty(min(_LOCATE_CHUNK, az.size))
+    row = np.empty_like(col)
+    for start in range(0, az.size, _LOCATE_CHUNK):
+        stop = min(start + _LOCATE_CHUNK, az.size)
+        a_part, e_part, q_part = az[start:stop], el[start:stop], quad[start:stop]
+        m = stop - start
+        for n in range(m):
+            col[n] = -1.0
+            row[n] = -1.0
         for c in range(columns):
-            col += column_az[c] < a
-        col = min(max(col - 1, 0), columns - 2)
-        row = 0
+            mean = column_az[c]
+            for n in range(m):
+                col[n] += 1.0 if mean < a_part[n] else 0.0
         for r in range(rows):
-            row += row_el[r] < e
-        row = min(max(row - 1, 0), rows - 2)
-        q = row * (columns - 1) + col
-        inside = (a >= boxes[q, 0] - slack) & (a <= boxes[q, 1] + slack)
-        inside &= (e >= boxes[q, 2] - slack) & (e <= boxes[q, 3] + slack)
-        for i in range(4):
-            inside &= lines[q, i, 0] * a + lines[q, i, 1] * e + lines[q, i, 2] >= -slack
-        quad[n] = q if inside else -1
+            mean = row_el[r]
+            for n in range(m):
+                row[n] += 1.0 if mean < e_part[n] else 0.0
+        last_col, last_row = float(columns - 2), float(rows - 2)
+        for n in range(m):
+            c = min(max(col[n], 0.0), last_col)
+            r = min(max(row[n], 0.0), last_row)
+            col[n] = r * (last_col + 1.0) + c  # the candidate quad
+            q_part[n] = -1
+        for q in range(boxes.shape[0]):
+            a_lo, a_hi = boxes[q, 0] - slack, boxes[q, 1] + slack
+            e_lo, e_hi = boxes[q, 2] - slack, boxes[q, 3] + slack
+            l00, l01, l02 = lines[q, 0, 0], lines[q, 0, 1], lines[q, 0, 2]
+            l10, l11, l12 = lines[q, 1, 0], lines[q, 1, 1], lines[q, 1, 2]
+            l20, l21, l22 = lines[q, 2, 0], lines[q, 2, 1], lines[q, 2, 2]
+            l30, l31, l32 = lines[q, 3, 0], lines[q, 3, 1], lines[q, 3, 2]
+            cand = float(q)
+            for n in range(m):
+                a, e = a_part[n], e_part[n]
+                inside = (col[n] == cand) & (a >= a_lo) & (a <= a_hi) & (e >= e_lo) & (e <= e_hi)
+                inside &= l00 * a + l01 * e + l02 >= -slack
+                inside &= l10 * a + l11 * e + l12 >= -slack
+                inside &= l20 * a + l21 * e + l22 >= -slack
+                inside &= l30 * a + l31 * e + l32 >= -slack
+                q_part[n] = q if inside else q_part[n]
+
+
+# Targets located at a time on a grid of quads: their angles, quads and scratch stay in L1
+# (256 to 2,048 measured within 8 %, 256 the fastest).
+_LOCATE_CHUNK = 256
 
 
 # Inlined by numba (helpers of the response sums' loops over a block).
