@@ -11,7 +11,8 @@ Two sums differ in form, not in value: a centro-symmetric array's real responses
 over one place of each mirror pair, with the table entries of the elements there and at the
 mirror folded into one (`exact.ExactTables`), half the multiply-adds of the full sum; and on a
 full grid (the paper array) they are products of a sum over y and one over z (`_grid_sums`),
-equal to rounding.
+equal to rounding. Likewise on complex responses an exponential over z takes the phase map's
+rotation into its argument where the numpy code multiplies by it.
 
 Targets go in blocks of `_BLOCK`: sines and cosines (polynomials with Cody-Waite reduction,
 ~1.5 ulp, instead of libm's ~20 ns calls), exponentials, response sums and the weights up to the
