@@ -405,6 +405,7 @@ class SourceResponse:
         tol = 1e-9 * array.wavelength_m
         self.k = k
         self.n_sources = int(source_u.size)
+        self.source_u, self.source_s = source_u, source_s
         self.y_distinct = _distinct(array.y_m, tol)
         self.z_distinct = _distinct(array.z_m, tol)
         iy = np.abs(array.y_m[:, None] - self.y_distinct[None, :]).argmin(axis=1)

@@ -50,6 +50,20 @@ def _grid_3x3():
     return rs.VirtualArray(y_m=y.ravel(), z_m=z.ravel(), wavelength_m=lam, name="grid-3x3")
 
 
+def _grid_5x4():
+    """A centro-symmetric 5 x 4 grid: an odd number of y computed (0, d, 2d), none at z = 0."""
+    lam = rs.VirtualArray.preset("paper").wavelength_m
+    y, z = np.meshgrid(np.arange(-2, 3) * lam / 2, (np.arange(4) - 1.5) * lam / 2)
+    return rs.VirtualArray(y_m=y.ravel(), z_m=z.ravel(), wavelength_m=lam, name="grid-5x4")
+
+
+def _doubled_grid():
+    """The paper's array with every element twice."""
+    paper = rs.VirtualArray.preset("paper")
+    return rs.VirtualArray.from_positions(np.r_[paper.y_m, paper.y_m], np.r_[paper.z_m, paper.z_m],
+                                          wavelength_m=paper.wavelength_m, name="paper x2")
+
+
 def _scattered_pairs():
     """Centro-symmetric but no grid: five elements and their mirrors, in shuffled order."""
     lam = rs.VirtualArray.preset("paper").wavelength_m
@@ -116,6 +130,8 @@ CASES = {
     "wide-3x5 paper": lambda: (rs.Rig.preset("wide-3x5"), rs.VirtualArray.preset("paper"), None),
     # Centro-symmetric layouts other than the paper's (the kernel folds mirror pairs).
     "grid-3x3": lambda: (rs.Rig.preset("kit-table1"), _grid_3x3(), None),
+    "grid-5x4": lambda: (rs.Rig.preset("kit-table1"), _grid_5x4(), None),
+    "doubled grid": lambda: (rs.Rig.preset("kit-table1"), _doubled_grid(), None),
     "scattered pairs": lambda: (NARROW, _scattered_pairs(), None),
     # Several elements at one place, and positions within the tolerance of a mirror's.
     "duplicated pair": lambda: (rs.Rig.preset("kit-table1"), _duplicated_pair(), None),
@@ -146,6 +162,19 @@ def test_kernel_matches_numpy_path(case, monkeypatch):
     np.testing.assert_array_equal(fast.quad, reference.quad)
     np.testing.assert_allclose(fast.weights, reference.weights, rtol=0, atol=WEIGHT_TOL)
     assert fast.feasible.sum() >= 30  # the comparison covers solved targets, not only misses
+
+
+# Centro-symmetric layouts whose real responses the kernel sums as products over y and over z.
+GRIDS = {"paper", "wide-3x5 paper", "grid-3x3", "grid-5x4", "doubled grid"}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_grid_sums_are_taken_on_full_grids_only(case):
+    """Full grids (every place held by as many elements) take the grid's factored sums; other
+    layouts, and a grid off by more than rounding from its mirror, keep the folded sums."""
+    rig, array, model = CASES[case]()
+    tables = solver_plan(rig, array, "exact", model).exact_tables
+    assert (tables.sep_z_re.shape[2] > 0) == (case in GRIDS)
 
 
 @pytest.mark.parametrize("case", ["awr1843boost", "wide-3x5 awr1843boost"])

@@ -392,6 +392,12 @@ class ExactTables:
         (`_fold`). Shape ``(Q, 12, 0)`` otherwise.
     fold_iy, fold_iz : ndarray of int, shape (H,)
         The distinct-coordinate indices of the places kept.
+    sep_y_re, sep_y_im : ndarray, shape (Q, 8, ny)
+    sep_z_re, sep_z_im : ndarray, shape (Q, 8, nz)
+        For a centro-symmetric grid, the real responses' factors over y and over z
+        (`_grid_factors`): rows ``fe`` and ``4 + fe`` the FE's factor and its derivative,
+        columns the distinct coordinates, folded as the places are. Shape ``(Q, 8, 0)``
+        otherwise.
     """
 
     tab_re: FloatArray
@@ -408,6 +414,10 @@ class ExactTables:
     fold_im: FloatArray
     fold_iy: NDArray[np.int64]
     fold_iz: NDArray[np.int64]
+    sep_y_re: FloatArray
+    sep_y_im: FloatArray
+    sep_z_re: FloatArray
+    sep_z_im: FloatArray
 
     @classmethod
     def of(cls, quads: Sequence[ExactQuad]) -> ExactTables:
@@ -431,6 +441,12 @@ class ExactTables:
         else:
             fold = np.zeros((len(quads), 12, 0), dtype=np.complex128)
             fold_iy = fold_iz = np.zeros(0, dtype=np.int64)
+        factors = [_grid_factors(q.response) if first.centrosymmetric else None for q in quads]
+        if all(f is not None for f in factors):
+            sep_y = np.stack([f[0] for f in factors if f is not None])
+            sep_z = np.stack([f[1] for f in factors if f is not None])
+        else:
+            sep_y = sep_z = np.zeros((len(quads), 8, 0), dtype=np.complex128)
         return cls(
             tab_re=np.ascontiguousarray(tables.real), tab_im=np.ascontiguousarray(tables.imag),
             phase_origin=origin, phase_table=np.ascontiguousarray(phase),
@@ -440,6 +456,8 @@ class ExactTables:
             z_indirect=_indirect(first.response._z_plan),
             fold_re=np.ascontiguousarray(fold.real), fold_im=np.ascontiguousarray(fold.imag),
             fold_iy=fold_iy, fold_iz=fold_iz,
+            sep_y_re=np.ascontiguousarray(sep_y.real), sep_y_im=np.ascontiguousarray(sep_y.imag),
+            sep_z_re=np.ascontiguousarray(sep_z.real), sep_z_im=np.ascontiguousarray(sep_z.imag),
         )
 
     def solve(
@@ -476,7 +494,8 @@ class ExactTables:
             resp.y_distinct, y_plan.direct, self.y_indirect, y_plan.mirror, y_plan.progression,
             resp.z_distinct, z_plan.direct, self.z_indirect, z_plan.mirror, z_plan.progression,
             self.phase_origin, self.phase_table, self.centrosymmetric, self.fold_re,
-            self.fold_im, self.fold_iy, self.fold_iz, self.row_scale,
+            self.fold_im, self.fold_iy, self.fold_iz, self.sep_y_re, self.sep_y_im,
+            self.sep_z_re, self.sep_z_im, self.row_scale,
             self.curvature if curvature is None else curvature, _TOLERANCES, _CODES,
             weights, reason, margin, locate,
             # Copies (tiny): one type for every geometry, so the kernel compiles once.
@@ -529,6 +548,54 @@ def _fold(
     index = np.array(kept, dtype=np.int64)
     return (np.stack(columns, axis=-1), np.ascontiguousarray(cell_y[index], dtype=np.int64),
             np.ascontiguousarray(cell_z[index], dtype=np.int64))
+
+
+def _grid_factors(resp: SourceResponse) -> tuple[ComplexArray, ComplexArray] | None:
+    """Factor a grid's real responses into products of a factor over y and one over z.
+
+    Returns ``(y, z)``, shapes ``(8, ny)`` and ``(8, nz)`` (rows ``fe``: the FE's plane wave
+    along the axis, ``4 + fe``: times ``-j k`` times the coordinate; columns the distinct
+    coordinates), or ``None``. When every place of the ``ny x nz`` grid holds the same number
+    of elements and each element's table entries (``f, f_u, f_s``) are, to rounding, the
+    products of its y's and its z's factors, ``f = Y Z``, ``f_u = Y' Z`` and ``f_s = Y Z'``
+    with ``Y = sum_i y[fe, i] e_y[i]`` over the distinct y (and so on). A factor is real when
+    each of its axis' coordinates is exactly 0 or the exact negative of one whose exponential
+    the kernel conjugates (`arrays._ExpPlan`); with one of the two real (the paper array's z:
+    its y differ from their mirrors' negatives by rounding), ``Re(Y Z) = Re(Y) Re(Z)``, and
+    each axis is folded onto its coordinates computed, ``Re(a e + b conj(e)) = Re((a +
+    conj(b)) e)``. ``None`` when the responses do not factor so.
+    """
+    ny, nz = resp.y_distinct.size, resp.z_distinct.size
+    counts = np.bincount(resp._iy * nz + resp._iz, minlength=ny * nz)
+    if counts.min() != counts.max():
+        return None
+    k = resp.k
+    axes = []
+    for coords, source in ((resp.y_distinct, resp.source_u), (resp.z_distinct, resp.source_s)):
+        wave = np.exp(1j * k * np.outer(source, coords))
+        axes.append(np.concatenate([wave, -1j * k * coords * wave]))
+    y, z = axes
+    iy, iz = resp._iy, resp._iz
+    products = np.stack([y[:4, iy] * z[:4, iz], y[4:, iy] * z[:4, iz], y[:4, iy] * z[4:, iz]])
+    table = resp.table[:3]
+    scale = np.abs(table).max(axis=(1, 2), keepdims=True)
+    if not np.all(np.abs(products - table) <= 1e-13 * scale):
+        return None
+    y = y * counts[0]  # the elements at each place
+    folded, real = [], []
+    for factor, coords, plan in ((y, resp.y_distinct, resp._y_plan),
+                                 (z, resp.z_distinct, resp._z_plan)):
+        out = np.zeros_like(factor)
+        out[:, plan.direct] = factor[:, plan.direct]
+        exact = np.zeros(coords.size, dtype=bool)
+        exact[plan.direct] = coords[plan.direct] == 0.0
+        for j in _indirect(plan):
+            m = plan.mirror[j]
+            out[:, m] += np.conj(factor[:, j])
+            exact[m] = coords[j] == -coords[m]
+        folded.append(out)
+        real.append(bool(np.all(exact[plan.direct])))
+    return (folded[0], folded[1]) if any(real) else None
 
 
 def _conjugate_looks(phases: FloatArray, plan: _ExpPlan) -> NDArray[np.bool_]:
