@@ -266,6 +266,28 @@ def test_other_bad_calls(kit_rig):
 
 
 @pytest.mark.parametrize("method", METHODS)
+def test_bad_angles_in_later_chunks_are_named_by_their_index_in_all(kit_rig, method):
+    # Angles are range-checked chunk by chunk on the worker threads: the error still names the
+    # first bad angle of all of them, and counts them all, whichever chunk found one first.
+    from rts_scenario.solver import CHUNK
+
+    n = 3 * CHUNK + 5
+    az, el = np.zeros(n), np.zeros(n)
+    az[[2 * CHUNK + 7, 3 * CHUNK + 1]] = np.nan
+    el[CHUNK + 3] = 95.0  # az is checked first, as before
+    array = rs.VirtualArray.preset("paper")
+    with pytest.raises(rs.SolverError, match=(rf"^az_deg\[{2 * CHUNK + 7}\]: must be a finite "
+                                              rf"angle in degrees, got nan \(2 non-finite")):
+        rs.solve_weights(az, el, rig=kit_rig, array=array, method=method)
+    az[:] = 0.0
+    with pytest.raises(rs.SolverError, match=rf"^el_deg\[{CHUNK + 3}\]: must be within "):
+        rs.solve_weights(az, el, rig=kit_rig, array=array, method=method)
+    el[CHUNK + 3] = 0.0
+    sol = rs.solve_weights(az, el, rig=kit_rig, array=array, method=method)
+    assert sol.feasible.all() and (sol.quad == 0).all()
+
+
+@pytest.mark.parametrize("method", METHODS)
 def test_no_targets(kit_rig, method):
     sol = rs.solve_weights([], [], rig=kit_rig, array=rs.VirtualArray.preset("paper"),
                            method=method)
