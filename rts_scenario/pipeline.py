@@ -367,6 +367,15 @@ class Pipeline:
             return None
         return held[0] if held and held[0] is not None else self.channel
 
+    def _radar_channel_named(self) -> bool | None:
+        """Whether the radar's messages named the channel they came on (``Message.channel``).
+
+        False where they named none (python-can's ``udp_multicast``): a log file gives them
+        its format's default channel, not the one listened on. None where none came.
+        """
+        held = [c for c, n in self.receiver.channels.items() if n]
+        return None if not held else None not in held
+
     def _open_bus(self) -> can.BusABC:
         o = self.options
         bus = open_bus(o.can_interface, self.channel, fd=o.can_fd)
@@ -1085,6 +1094,7 @@ class Pipeline:
                               else track.origin_s, early_s=truths.early_s,
                               channel=self._radar_channel(),
                               channel_unknown=self._radar_channel() is None,
+                              channel_named=self._radar_channel_named(),
                               host_clock_steps=self.host_clock_steps(),
                               bus_time_shifts=self._bus_shifts)
         timer.add("check_s", mark)
@@ -1378,6 +1388,7 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       cycles: int | None = None, origin_bus_s: float | None = None,
                       early_s: float = 0.0, channel: str | None = None,
                       channel_unknown: bool = False,
+                      channel_named: bool | None = None,
                       host_clock_steps: list[dict[str, float | str]] | None = None,
                       bus_time_shifts: list[dict[str, float | int]] | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
@@ -1403,6 +1414,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
     when not given; `Pipeline._radar_channel`), kept with the interface so that a re-check of
     a log holding several channels reads the radar's; ``channel_unknown``: they came on
     several and none was chosen (``can_channel`` null: a re-check does not pick one);
+    ``channel_named``: whether the messages named their channel (`Pipeline._radar_channel_named`;
+    a log file gives those that name none its format's default channel);
     ``host_clock_steps`` the steps of the host's clock the run saw (`Pipeline.host_clock_steps`)
     and ``bus_time_shifts`` where they moved the log's stamps: from the cycle of that counter
     stamped ``bus_s`` on (in log order), its bus times less ``shift_s`` are on the clock the
@@ -1436,6 +1449,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         "can_interface": options.can_interface,
         "can_channel": None if channel_unknown else (
             channel if channel is not None else options.can_channel),
+        # False: the radar's messages named no channel, and a log file gives them its
+        # format's default one (a re-check reads that as the run's).
+        "can_channel_named": channel_named,
         # The channel ``run --radar-channel`` read alone (null: not given): a re-check reads
         # no other in its place.
         "radar_channel": options.radar_channel,

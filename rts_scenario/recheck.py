@@ -295,6 +295,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
         # The bus the run listened on (python-can's interface and channel).
         "can_interface": {"type": ["string", "null"]},
         "can_channel": {"type": ["string", "null"]},
+        "can_channel_named": {"type": ["boolean", "null"]},
         "radar_channel": {"type": ["string", "null"]},
         "can_fd": {"type": "boolean"},
         "method": {"type": ["string", "null"]},
@@ -464,6 +465,11 @@ def log_variant(scene: str | Path, log: str | Path,
                                                   f"one it records")
 
 
+# The channel python-can's writers give a message that names none, as their readers read it
+# back (BLF and ASC number it 1 and read it as 0; canutils writes vcan0).
+_UNNAMED_CHANNEL = {".blf": "0", ".asc": "0", ".log": "vcan0"}
+
+
 def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | None],
                  mapping: CanMapping, sidecar: dict[str, Any] | None,
                  ) -> tuple[str | None, str | None]:
@@ -474,7 +480,9 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
     one channel (or says of no message which channel it came on) is read whole, with a note
     where the sidecar says the run listened on another; on several,
     the channel the run listened on (its sidecar's ``can_channel``) where the log names one
-    so, else the log is refused: which one is the radar's is not guessed.
+    so, else the log is refused: which one is the radar's is not guessed. Where the sidecar
+    says the run's messages named no channel (``can_channel_named`` false), the log names
+    theirs as its writer does such a message's (`_UNNAMED_CHANNEL`).
 
     Raises
     ------
@@ -505,6 +513,10 @@ def pick_channel(log: str | Path, channel: str | None, channels: Counter[str | N
         names.append(str(0 if number is None else number))
     elif recorded is not None and suffix == ".log" and str(recorded).isdigit():
         names.append(f"can{recorded}")  # python-can's canutils writer: channel 1 as can1
+    if (sidecar or {}).get("can_channel_named") is False and suffix in _UNNAMED_CHANNEL:
+        # The run's messages named no channel (udp_multicast's): the log's writer put them on
+        # its default one.
+        names.append(_UNNAMED_CHANNEL[suffix])
     if len(held) <= 1:
         only = next(iter(held), None)
         if recorded is None or only is None or only in names:
