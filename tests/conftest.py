@@ -81,6 +81,21 @@ def rng() -> np.random.Generator:
 
 
 @pytest.fixture
+def unnamed_channel(monkeypatch):
+    """Make the run's in-process bus an interface naming no channel on its messages, as
+    python-can's ``udp_multicast`` (the two-process rehearsal's bus) gives ``channel`` None."""
+    from rts_scenario.canbus import ListenerBus
+
+    class Unnamed(ListenerBus):
+        def send(self, msg, timeout=None):
+            msg.channel, msg.is_rx = None, True
+            for listener in self._listeners:
+                listener.on_message_received(msg)
+
+    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Unnamed)
+
+
+@pytest.fixture
 def no_bus_left_open(monkeypatch):
     """Fail the test if it leaves a CAN bus open (virtual or in-process); yields the buses."""
     from rts_scenario.canbus import ListenerBus

@@ -237,18 +237,10 @@ def test_udp_multicast_buses_of_two_groups_do_not_hear_each_other():
         assert b.recv(0.3) is None
 
 
-def test_radar_channel_on_an_interface_that_names_no_channel_says_so(capsys, monkeypatch):
+@pytest.mark.usefixtures("unnamed_channel")
+def test_radar_channel_on_an_interface_that_names_no_channel_says_so(capsys):
     # udp_multicast (the two-process rehearsal's bus) gives every message channel None: there
     # is one channel, and --radar-channel cannot pick it. The error says that, not "(none)".
-    from rts_scenario.canbus import ListenerBus
-
-    class Unnamed(ListenerBus):
-        def send(self, msg, timeout=None):
-            msg.channel, msg.is_rx = None, True
-            for listener in self._listeners:
-                listener.on_message_received(msg)
-
-    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Unnamed)
     code = cli.main(["survey", "kit-table1", "--radar-channel", "239.74.163.2"])
     err = capsys.readouterr().err
     assert code == 1, err

@@ -870,23 +870,15 @@ def test_a_log_holding_the_radar_on_another_channel_than_the_run_s_says_so():
                         None) == (None, None)
 
 
+@pytest.mark.usefixtures("unnamed_channel")
 @pytest.mark.parametrize("suffix", [".blf", ".asc", ".log"])
 def test_a_log_of_messages_that_named_no_channel_is_read_as_the_run_s_without_a_note(
-        tmp_path, monkeypatch, capsys, suffix):
+        tmp_path, capsys, suffix):
     # An interface that names no channel on its messages (python-can's udp_multicast): a log
     # writes them on its format's default channel (0 in a .blf or .asc, vcan0 in a .log),
     # not on the one the run listened on. They are the run's: no note says otherwise.
     import json
 
-    from rts_scenario.canbus import ListenerBus
-
-    class Unnamed(ListenerBus):
-        def send(self, msg, timeout=None):
-            msg.channel, msg.is_rx = None, True
-            for listener in self._listeners:
-                listener.on_message_received(msg)
-
-    monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Unnamed)
     log = tmp_path / f"bench{suffix}"
     code = cli.main(["run", str(APPROACH), "--can-channel", "239.74.163.2", "--record",
                      str(log)])
