@@ -362,7 +362,7 @@ class Pipeline:
         """
         if self.options.radar_channel is not None:
             return self.options.radar_channel
-        held = [c for c, n in self.receiver.channels.items() if n]
+        held = self._radar_channels()
         if len(held) > 1:
             return None
         return held[0] if held and held[0] is not None else self.channel
@@ -373,8 +373,12 @@ class Pipeline:
         False where they named none (python-can's ``udp_multicast``): a log file gives them
         its format's default channel, not the one listened on. None where none came.
         """
-        held = [c for c, n in self.receiver.channels.items() if n]
+        held = self._radar_channels()
         return None if not held else None not in held
+
+    def _radar_channels(self) -> list[str | None]:
+        """Return the channels the radar's messages came on (None: a message named none)."""
+        return [c for c, n in self.receiver.channels.items() if n]
 
     def _open_bus(self) -> can.BusABC:
         o = self.options
