@@ -9,7 +9,7 @@ import pytest
 from rts_scenario.check import Checker, checkable
 from rts_scenario.check import check_cycles as check
 from rts_scenario.detections import Detections, unwrap_counter
-from rts_scenario.kinematics import Tracks
+from rts_scenario.kinematics import Tracks, compute_tracks
 from rts_scenario.report import FrameRecord, RunningStats
 from rts_scenario.scenario import load_scenario
 from rts_scenario.scenario.model import Expectations
@@ -340,16 +340,22 @@ def test_detections_the_radar_could_not_send_fail_the_run():
 
 # -- cycles measured at a frame change (`rts_scenario.pipeline.CycleTruth`) ------------------
 
-def _radar_run(scene, clock, window_s, lag_frames, radar_window_s=None, applied_delay_s=0.0):
+def _radar_run(scene, clock, window_s, lag_frames, radar_window_s=None, applied_delay_s=0.0,
+               expected=(), range_offset_m=0.0):
     """Check a noise-free radar on ``clock`` that shows the frame ``lag_frames`` before the
     one the RTS holds when measured within ``radar_window_s`` (default: the checker's
     ``window_s``) after the change, the held frame otherwise; the RTS applies every frame
-    ``applied_delay_s`` after its time, and the checker is told so."""
+    ``applied_delay_s`` after its time, and the checker is told so. ``expected``: limits the
+    scene declares besides its own; ``range_offset_m`` added to every reported range."""
+    from dataclasses import replace
+
     from rts_scenario.kinematics import compute_tracks
     from rts_scenario.pipeline import CycleTruth
 
     radar_window_s = window_s if radar_window_s is None else radar_window_s
-    checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations)
+    expectations = replace(scene.expectations,
+                           expected_limits=scene.expectations.expected_limits | set(expected))
+    checker = Checker(scene.name, tuple(t.name for t in scene.targets), expectations)
     truths = CycleTruth(checker, scene, clock, window_s)
     frames = np.arange(scene.n_frames)
     status = np.zeros((scene.n_frames, len(scene.targets)), dtype=np.uint16)
@@ -364,7 +370,7 @@ def _radar_run(scene, clock, window_s, lag_frames, radar_window_s=None, applied_
     shown = np.maximum(np.where(near, held - lag_frames, held), 0)
     seen = compute_tracks(scene, scene.t_s[shown], shown)
     checker.add_cycles(
-        Detections(cycle=int(c), t_s=float(tc), range_m=seen.range_m[i],
+        Detections(cycle=int(c), t_s=float(tc), range_m=seen.range_m[i] + range_offset_m,
                    radial_velocity_mps=seen.radial_velocity_mps[i], az_deg=seen.az_deg[i],
                    el_deg=seen.el_deg[i], rcs_dbsm=seen.rcs_dbsm[i],
                    snr_db=np.full(len(scene.targets), 30.0))
@@ -389,10 +395,13 @@ def test_a_cycle_measured_at_a_frame_change_may_show_the_frame_before(closing_sc
     from rts_scenario.radar.clock import RadarClock
 
     # In step with the frames (every shipped profile): each cycle is measured exactly when
-    # the next frame is due, and this radar always shows the frame before.
+    # the next frame is due, and this radar always shows the frame before. The scene declares
+    # that race known (the verdict rests on those cycles: see the test below).
     report, n = _radar_run(closing_scene, RadarClock(cycle_s=0.05), window_s=0.006,
-                           lag_frames=1)
+                           lag_frames=1, expected=["adjacent_frame"])
     assert report.passed, report.reasons
+    assert report.scene_limits["adjacent_frame"]["expected"]
+    assert report.expected_not_hit == []
     assert report.frames["checked"] == report.frames["total"] == n == 60
     # Every cycle but the first (no frame before it) is measured at a change; all of those
     # matched the frame before, and the report says so.
@@ -405,6 +414,53 @@ def test_a_cycle_measured_at_a_frame_change_may_show_the_frame_before(closing_sc
     assert ("59 cycles measured within the ambiguity window of a frame change (11 ms more "
             "after one: the interface's clock is tied to the host's within that), 59 of them "
             "judged against the frame across it") in report.table()
+
+
+def test_a_verdict_resting_on_the_frame_across_each_change_fails_unless_declared(closing_scene):
+    from rts_scenario.radar.clock import RadarClock
+
+    # The target closes 0.4 m per frame (tolerance 0.3 m). A radar in step with the frames
+    # that shows the frame held but reads every range 0.4 m long (a delay on the bench)
+    # matches the frame before each change: judged against it, every cycle would pass.
+    clock = RadarClock(cycle_s=0.05)
+    travel = float(np.abs(np.diff(compute_tracks(closing_scene).range_m[:, 0])).max())
+    assert 0.3 < travel < 0.45
+    offset, _ = _radar_run(closing_scene, clock, window_s=0.006, lag_frames=0,
+                           range_offset_m=travel)
+    # Some cycles (the first, none across it) cannot be judged across: out of tolerance.
+    assert offset.frames["adjacent_frame"] > 50
+    assert not offset.passed
+    [reason] = [r for r in offset.reasons if "adjacent_frame" in r.codes]
+    assert "against the frames held alone, oncoming-car detection rate" in reason
+    assert f"up to {travel:.2f} m here" in reason
+    assert offset.scene_limits["adjacent_frame"] == {"why": reason.removeprefix(
+        "adjacent_frame: "), "expected": False}
+    # A radar that shows the frame before in every cycle is the same verdict: the run cannot
+    # tell the two apart; declared, the scene passes.
+    before, _ = _radar_run(closing_scene, clock, window_s=0.006, lag_frames=1)
+    assert [r.codes for r in before.reasons] == [("adjacent_frame",)]
+    # The same radar in step and without an offset: nothing rests on the frame across.
+    right, _ = _radar_run(closing_scene, clock, window_s=0.006, lag_frames=0,
+                          expected=["adjacent_frame"])
+    assert right.passed and right.frames["adjacent_frame"] == 0
+    assert right.expected_not_hit == ["adjacent_frame"]
+    assert "adjacent_frame" not in right.scene_limits
+
+
+def test_a_race_at_the_frame_changes_that_goes_both_ways_passes(closing_scene):
+    from rts_scenario.radar.clock import RadarClock
+
+    # A radar whose cycle drifts 0.1 ms a cycle past the changes, and that shows the frame
+    # before only when measured within 1 ms of one: every cycle is measured within the 6 ms
+    # window, some show the frame across. Against the frames held alone, more than 5 % of the
+    # cycles would miss (the verdict rests on them), but the race went both ways: an offset of
+    # one frame's travel would leave the others out of tolerance.
+    report, n = _radar_run(closing_scene, RadarClock(cycle_s=0.0501), window_s=0.006,
+                           lag_frames=1, radar_window_s=0.001)
+    adjacent, ambiguous = report.frames["adjacent_frame"], report.frames["ambiguous"]
+    assert adjacent > 0.05 * n and ambiguous > 2 * adjacent
+    assert report.passed, report.reasons
+    assert "adjacent_frame" not in report.scene_limits
 
 
 def test_a_radar_two_frames_behind_fails(closing_scene):

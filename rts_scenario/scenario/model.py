@@ -38,11 +38,15 @@ LIMITS = {
                         "than the range tolerance: the radar sees its motion as a staircase",
     "frames_sent_late": "schedule frames went out more than a frame period late",
     "frames_lost": "the RTS reports schedule frames it lost or could not apply",
+    "adjacent_frame": "the verdict rests on radar cycles judged against the frame across a "
+                      "frame change, not the frame held (a radar showing that frame and a "
+                      "range offset of the targets' travel in one frame look alike)",
 }
 
 # Limits of the whole scene, not of a target-frame: only ``expectations.expected_limits``
 # declares them.
-SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase", "frames_sent_late", "frames_lost")
+SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase", "frames_sent_late", "frames_lost",
+                "adjacent_frame")
 # Those known from the scene before anything plays (`rts_scenario.preflight.scene_limits`).
 PLANNED_SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase")
 
