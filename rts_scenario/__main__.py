@@ -1,7 +1,5 @@
 """``python -m rts_scenario``: the ``rts-scenario`` command."""
 
-import sys
+from .cli import console
 
-from .cli import main
-
-sys.exit(main())
+console()

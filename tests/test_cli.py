@@ -967,3 +967,35 @@ def test_a_run_stopped_by_a_bad_option_leaves_no_earlier_report_in_its_json(tmp_
     assert report["file"] == str(scene) and report["scene"] == "cut_in"
     # An error of --json itself leaves the file alone: it names what cannot be written.
     assert cli.main(["run", str(scene), "--json", str(tmp_path / "no" / "r.json")]) == 2
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_a_stop_while_the_process_exits_never_kills_it_without_a_word(signum):
+    # After the command printed its verdict, the process exits: it waits for threads, runs
+    # its exit hooks, then tears its modules down without Python's signal handlers. A Ctrl-C
+    # or SIGTERM there killed it by the signal (exit -2 / -15), silently.
+    import subprocess
+
+    def run(body):
+        script = ("import os, signal, sys, threading, atexit, time\n"
+                  "import rts_scenario.cli as cli\n" + body +
+                  "cli.main = main\ncli.console()\n")
+        return subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                              timeout=60)
+
+    # While it waits for a thread (one that never ended would hang it): stopped as a command
+    # that ends then is, what it printed standing.
+    waiting = run(f"def main():\n    print('PASS: scene')\n"
+                  f"    threading.Thread(target=lambda: (time.sleep(0.3), os.kill(os.getpid(), "
+                  f"signal.{signum}), time.sleep(0.5))).start()\n    return 0\n")
+    assert waiting.returncode == 1, waiting
+    assert waiting.stdout == "PASS: scene\n" and waiting.stderr == "error: interrupted\n"
+    # In the last exit hook or after (the modules' teardown): nothing is left to stop; the
+    # command's exit code stands.
+    tearing = run(f"atexit.register(lambda: os.kill(os.getpid(), signal.{signum}))\n"
+                  f"def main():\n    print('FAIL: scene')\n    return 1\n")
+    assert tearing.returncode == 1 and tearing.stderr == "", tearing
+    passing = run(f"atexit.register(lambda: os.kill(os.getpid(), signal.{signum}))\n"
+                  f"def main():\n    return 0\n")
+    assert passing.returncode == 0 and passing.stderr == "", passing

@@ -11,11 +11,13 @@ stays the same). SIGTERM stops a command as Ctrl-C does.
 from __future__ import annotations
 
 import argparse
+import atexit
+import os
 import signal
 import sys
 import threading
 from collections.abc import Sequence
-from typing import Any, TextIO, cast
+from typing import Any, NoReturn, TextIO, cast
 
 from .._version import __version__
 from ..errors import RtsError
@@ -109,7 +111,7 @@ def _not_empty(value: str) -> str:
 
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_FAIL", "EXIT_OK", "EXIT_RUNTIME_ERROR", "build_parser",
-           "main"]
+           "console", "main"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -124,6 +126,44 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (OSError, KeyboardInterrupt):
             pass  # the exit code says it
         return EXIT_FAIL
+
+
+def console() -> NoReturn:
+    """Run the ``rts-scenario`` command: `main`, then exit with its code.
+
+    Ctrl-C or SIGTERM after the command has printed all it prints, while the process exits,
+    used to kill it by its signal without a word. While Python still waits for threads and
+    runs its exit hooks (where a stuck thread would hang), either stops the command as one
+    that ended then does (`_main`): ``error: interrupted`` and exit 1, what was printed and
+    written standing. The last hook ignores them: tearing the modules down (a few tenths of a
+    second) runs with no signal handlers of Python's, and a signal would kill it, while the
+    command has ended and nothing of its is left to stop.
+    """
+    if threading.current_thread() is threading.main_thread():
+        atexit.register(_ignore_stops)  # registered first: run last
+    code = main()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, _stopped_at_exit)
+        signal.signal(signal.SIGTERM, _stopped_at_exit)
+    sys.exit(code)
+
+
+def _stopped_at_exit(signum: int, frame: object) -> None:
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    try:
+        print("error: interrupted", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass  # the exit code says it
+    os._exit(EXIT_FAIL)  # what is left is the interpreter's shutdown: nothing of the command's
+
+
+def _ignore_stops() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def _main(argv: Sequence[str] | None) -> int:
