@@ -28,6 +28,7 @@ import json
 import locale
 import logging
 import re
+import struct
 import sys
 from array import array
 from collections import Counter
@@ -405,6 +406,12 @@ def _yaml_data(path: Path) -> Any:
 def check_log_file(log: str | Path) -> None:
     """Refuse a log of a format python-can does not read, or one that is not there."""
     path = Path(log)
+    if path.is_dir():
+        raise LogError(f"--log {log}: a folder, not a log file ({', '.join(LOG_SUFFIXES)})")
+    if path.name.endswith(LOG_SIDECAR_SUFFIX) and path.name != LOG_SIDECAR_SUFFIX:
+        recorded = str(log).removesuffix(LOG_SIDECAR_SUFFIX)
+        raise LogError(f"--log {log} is the sidecar run --record wrote beside its log; give "
+                       f"the log: --log {recorded}")
     if path.suffix.lower() not in LOG_SUFFIXES:
         kind = identify(log, _yaml_data(path)) if path.is_file() else None
         if kind is not None:
@@ -952,7 +959,7 @@ def _messages(path: Path, unread: _Unread | None = None) -> Iterator[can.Message
                        f"'rts-scenario[mf4]')")
         except Exception as exc:  # noqa: BLE001 - each format fails in its own way
             where = f"line {text.at}: " if text is not None and text.at else ""
-            problem = f"--log {path}: {where}cannot read: {type(exc).__name__}: {exc}"
+            problem = f"--log {path}: {where}cannot read: {_unreadable(path, exc)}"
             if text is not None:
                 text.close()
         if problem is not None:
@@ -972,8 +979,8 @@ def _messages(path: Path, unread: _Unread | None = None) -> Iterator[can.Message
                     text.passed_over()
             except Exception as exc:  # noqa: BLE001 - a damaged log, in the format's words
                 where = f"line {text.at}: " if text is not None else ""
-                raise LogError(f"--log {path}: {where}cannot read: {type(exc).__name__}: "
-                               f"{exc}") from None
+                raise LogError(f"--log {path}: {where}cannot read: "
+                               f"{_unreadable(path, exc)}") from None
             if skipped:
                 # A line python-can's reader skipped with a warning (its TRC reader, on a
                 # line of too few columns): a message lost, not a shorter log.
@@ -985,6 +992,21 @@ def _messages(path: Path, unread: _Unread | None = None) -> Iterator[can.Message
             if text is not None:
                 text.answered = text.given
             yield msg
+
+
+def _unreadable(path: Path, exc: Exception) -> str:
+    """Why python-can's reader of ``path``'s format failed: the bytes are not that format's.
+
+    In the reader's words, named by module where its name alone says nothing (``struct.error``,
+    not ``error``).
+    """
+    kind = type(exc)
+    name = (kind.__qualname__ if kind.__module__ == "builtins"
+            else f"{kind.__module__}.{kind.__qualname__}")
+    if isinstance(exc, struct.error | UnicodeDecodeError):
+        return (f"not a {path.suffix.lower()} log as python-can reads one, or a damaged one "
+                f"({name}: {exc})")
+    return f"{name}: {exc}"
 
 
 # Lines of an ASC log that hold no message: its header, comments, its trigger block's begin and
@@ -1513,6 +1535,13 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             offset = found.offset_s
             alignment = Alignment("estimated", 0.0, offset, found.uncertainty_s,
                                   found.plateau_s, latency)
+            span_s = (found.plateau_s or 0.0) + (found.uncertainty_s or 0.0)
+            alignment.notes.append(
+                f"no sidecar ({Path(log).name}{LOG_SIDECAR_SUFFIX}): scene time 0 is estimated "
+                f"from the detections themselves, so a scene that differs from the one played by "
+                f"its targets' motion over {span_s * 1e3:.1f} ms (the estimate's span) fits "
+                f"the log as well, and is not told; give --time-offset-s, or check the log "
+                f"with the sidecar its recording wrote")
         elif not aligned_by_data:
             # The scene's start given, nothing to estimate the latency on: the profile's.
             offset = float(time_offset_s)

@@ -292,6 +292,7 @@ def places(tmp_path):
     plain = tmp_path / "plain.txt"
     plain.write_text("x")
     (tmp_path / "junk.blf").write_text("not a BLF log")
+    (tmp_path / "other.blf.rts.json").write_text("{}")
     # rts-scenario's own mapping without its CAN FD message.
     can = ROOT / "rts_scenario" / "data" / "can"
     (tmp_path / "rts_detections.dbc").write_text((can / "rts_detections.dbc").read_text())
@@ -418,7 +419,13 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("check-log-format", ["check", "{scene}", "--log", "{file}"], 2,
      r"^--log {file}: unknown log format '.*'; valid: .asc, .blf"),
     ("check-log-not-a-log", ["check", "{scene}", "--log", "{tmp}/junk.blf"], 2,
-     r"^--log {tmp}/junk.blf: cannot read"),
+     r"^--log {tmp}/junk.blf: cannot read: not a \.blf log as python-can reads one, or a "
+     r"damaged one \(struct\.error: "),
+    ("check-log-folder", ["check", "{scene}", "--log", "{dir}"], 2,
+     r"^--log {dir}: a folder, not a log file \(\.asc, \.blf"),
+    ("check-log-sidecar", ["check", "{scene}", "--log", "{tmp}/other.blf.rts.json"], 2,
+     r"^--log {tmp}/other.blf.rts.json is the sidecar run --record wrote beside its log; give "
+     r"the log: --log {tmp}/other.blf$"),
     ("check-offset-nan", ["check", "{scene}", "--log", "{tmp}/none.blf", "--time-offset-s",
                           "nan"], 2, r"^--time-offset-s: must be a finite number"),
     ("check-without-log", ["check", "{scene}"], 2, r"--log"),

@@ -207,6 +207,11 @@ def test_a_log_of_another_tool_is_aligned_within_20_ms(tmp_path, seed, suffix, b
     assert a.cycle_s == pytest.approx(0.072, abs=1e-4)
     assert result.report.passed, result.report.reasons
     assert result.report.frames["missing"] == 0
+    # That the scene is the one played rests on the estimate alone: said.
+    span_ms = (a.plateau_s + a.uncertainty_s) * 1e3
+    assert (f"no sidecar ({log.name}.rts.json): scene time 0 is estimated from the detections "
+            f"themselves, so a scene that differs from the one played by its targets' motion "
+            f"over {span_ms:.1f} ms") in a.notes[0]
     if busy:
         assert result.report.bus["unknown_ids"] > 1000
         assert result.report.bus["before_first_cycle"] >= 2  # the cycle the log began in
