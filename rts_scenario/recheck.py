@@ -1638,8 +1638,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         alignment.notes.append(unread_note)
     if cut_short is not None and ends_early:
         # Its missing cycles may not all show (a cycle's tail, those after the scene counted
-        # as the run counts them): the log itself fails.
-        result.reasons.append(FailReason(cut_short["why"], "log_cut_short"))
+        # as the run counts them): the log itself fails, first. A log cut short before any
+        # message tells nothing of the bus: not said to have been silent.
+        result.reasons[:] = [FailReason(cut_short["why"], "log_cut_short"),
+                             *(r for r in result.reasons
+                               if "bus_silent" not in getattr(r, "codes", ()))]
         result.passed = False
     elif cut_short is not None:
         # Its last cycle read was measured after every cycle counted: what it lacks counts

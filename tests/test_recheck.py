@@ -1717,3 +1717,28 @@ def test_a_sidecar_with_host_clock_steps_the_log_lacks_fails_on_them_not_as_anot
     assert cli.main(["check", scene, "--log", str(log)]) == 1
     out = capsys.readouterr().out
     assert "host_clock: the host's wall clock stepped while the run recorded" in out
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc"])
+def test_a_log_cut_short_before_any_message_is_not_a_silent_bus(tmp_path, capsys, suffix):
+    # A recorder killed before it wrote a message: the log holds its header alone. That says
+    # nothing of the bus: the log's fault comes first, and the bus is not called silent.
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    log = tmp_path / f"run{suffix}"
+    assert cli.main(["run", str(scene), "--record", str(log)]) == 0
+    capsys.readouterr()
+    data = log.read_bytes()
+    cut = tmp_path / f"cut{suffix}"
+    if suffix == ".blf":
+        cut.write_bytes(data[:144])  # the file header alone
+    else:
+        head = data.index(b"Start of measurement")  # its header and first line
+        cut.write_bytes(data[:data.index(b"\n", head) + 1])
+    shutil.copy(str(log) + ".rts.json", str(cut) + ".rts.json")
+    out_json = tmp_path / "check.json"
+    assert cli.main(["check", str(scene), "--log", str(cut), "--json", str(out_json)]) == 1
+    capsys.readouterr()
+    report = json.loads(out_json.read_text())
+    assert report["reasons"][0].startswith(f"the log {cut} was cut short"), report["reasons"]
+    assert not any("silent" in r for r in report["reasons"]), report["reasons"]
+    assert report["bus"]["messages"] == 0
