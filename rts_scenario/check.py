@@ -1022,7 +1022,11 @@ class Checker:
             scene_limits={name: {"why": why, "expected": name in exp.expected_limits}
                           for name, why in scene_limits.items()},
             variant=self.variant, parameters=dict(self.parameters),
-            expected_not_hit=sorted(declared) + own, worst_frames=worst, record=self.record)
+            expected_not_hit=sorted(declared) + own, worst_frames=worst, record=self.record,
+            expectations={"tolerances": dict(exp.tolerances),
+                          "detection_rate": exp.detection_rate,
+                          "max_false_detections_per_frame":
+                              exp.max_false_detections_per_frame})
 
 
 def _status_flags(status: ArrayLike, tracks: Tracks) -> NDArray[np.uint16]:

@@ -225,6 +225,9 @@ class Report:
     variant: str = ""
     parameters: dict[str, Any] = field(default_factory=dict)
     expected_not_hit: list[str] = field(default_factory=list)
+    # What the run was held to: ``tolerances`` per quantity, ``detection_rate`` (per target)
+    # and ``max_false_detections_per_frame``, as the scene gives them or their defaults.
+    expectations: dict[str, Any] = field(default_factory=dict)
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
     record: FrameRecord | None = field(default=None, repr=False, compare=False)
 
@@ -287,6 +290,15 @@ class Report:
                 f"{pair(e['range_m']):>15}  {pair(e['radial_velocity_mps']):>15}  "
                 f"{pair(e['az_deg']):>14}  {pair(e['el_deg']):>14}  {pair(e['rcs_dbsm']):>14}  "
                 f"{t.verdict}")
+        held = self.expectations
+        if held:
+            # A verdict says what it was held to, a pass as much as a fail.
+            tol = held["tolerances"]
+            lines.append("held to: " + ", ".join(
+                f"{name} {tol[key]:g} {unit}" for key, name, unit in _HELD_TO if key in tol)
+                + (f"; detection rate >= {held['detection_rate']:.1%} per target"
+                   if self.targets else "")
+                + f"; false detections <= {held['max_false_detections_per_frame']:g} per cycle")
         limited = [t for t in self.targets if t.limits]
         if limited or self.scene_limits:
             lines.append("limits (target-frames not played or not measurable as specified): "
@@ -373,6 +385,11 @@ def _playback_line(p: dict[str, Any]) -> str:
         text += (f"; {gone['datagrams']} datagrams came back undelivered from "
                  f"{gone['address']} ({gone['error']})")
     return text
+
+
+# The tolerances as the `held to:` line names them.
+_HELD_TO = (("range_m", "range", "m"), ("radial_velocity_mps", "radial velocity", "m/s"),
+            ("az_deg", "az", "deg"), ("el_deg", "el", "deg"), ("rcs_db", "rcs", "dB"))
 
 
 class FailReason(str):

@@ -80,6 +80,23 @@ def test_perfect_cycles_pass_with_every_frame_checked():
     assert report.errors["range_m"].max == 0.0
 
 
+def test_a_verdict_says_what_it_was_held_to():
+    # A reviewer of a pass sees its standard, not only a fail's numbers.
+    tr = truth(20)
+    held = Expectations(tolerances={"range_m": 0.25, "radial_velocity_mps": 0.1, "az_deg": 0.4,
+                                    "el_deg": 1.5, "rcs_db": 8.0},
+                        detection_rate=0.97, max_false_detections_per_frame=0.05)
+    report = check("s", tr, OK(20, 2), cycles_from(tr), held)
+    assert report.passed
+    assert ("held to: range 0.25 m, radial velocity 0.1 m/s, az 0.4 deg, el 1.5 deg, rcs 8 dB; "
+            "detection rate >= 97.0% per target; false detections <= 0.05 per cycle\n"
+            ) in report.table()
+    assert report.to_dict()["expectations"] == {
+        "tolerances": {"range_m": 0.25, "radial_velocity_mps": 0.1, "az_deg": 0.4,
+                       "el_deg": 1.5, "rcs_db": 8.0},
+        "detection_rate": 0.97, "max_false_detections_per_frame": 0.05}
+
+
 def test_streaming_in_blocks_equals_one_shot():
     tr = truth(400)
     played = OK(400, 2)
