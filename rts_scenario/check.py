@@ -308,6 +308,8 @@ class Checker:
         self._detected_held = np.zeros(n, dtype=np.int64)
         self._false_held = 0
         self._adjacent_travel_m = 0.0
+        # Cycles at a change (received) whose two frames differ by more than a tolerance.
+        self._ambiguous_apart = 0
         self._matched = 0
         self._unchecked = 0
         self._false = 0
@@ -463,7 +465,7 @@ class Checker:
         if invalid.any():  # out of the search and the costs (an infinite value overflows)
             for q, _ in QUANTITIES:
                 values[q][invalid] = np.nan
-        judged = self._judge(block.tracks, block.status, frame_of, values, invalid)
+        judged = held = self._judge(block.tracks, block.status, frame_of, values, invalid)
         ok = status == _OK
         use_other = np.zeros(n_frames, dtype=bool)
         if block.other is not None and block.ambiguous is not None:
@@ -473,8 +475,16 @@ class Checker:
             # can be judged better against the frame across the change: those alone are judged
             # again.
             o_tracks, o_flags = block.other
-            undetected = (checkable(o_tracks, o_flags) & judged.truth
-                          & ~(judged.assigned & judged.within))
+            both = checkable(o_tracks, o_flags) & judged.truth
+            # Those at a change whose two frames differ by more than a tolerance for some
+            # target: where they do not, the frame held passes whichever the radar showed.
+            apart = np.zeros(both.shape, dtype=bool)
+            tol = self.expectations.tolerances
+            for q, key in QUANTITIES[:4]:
+                apart |= np.abs(getattr(o_tracks, q) - getattr(block.tracks, q)) > tol[key]
+            self._ambiguous_apart += int((block.ambiguous & ok & (both & apart).any(axis=1))
+                                         .sum())
+            undetected = both & ~(judged.assigned & judged.within)
             again = np.flatnonzero(block.ambiguous & ok & undetected.any(axis=1))
             if again.size:
                 keep = np.isin(frame_of, again)
@@ -489,12 +499,10 @@ class Checker:
                     if travel.size:
                         self._adjacent_travel_m = max(self._adjacent_travel_m,
                                                       float(travel.max()))
-                    self._add_held(judged, invalid)
                     judged = judged.where(use_other, other.spread(again, keep, n_frames),
                                           frame_of)
             self.frames["adjacent_frame"] += int(use_other.sum())
-        if not use_other.any():
-            self._add_held(judged, invalid)
+        self._add_held(held, invalid)
         truth, assigned, within = judged.truth, judged.assigned, judged.within
         errors, match = judged.errors, judged.match
         matched = match >= 0
@@ -885,16 +893,18 @@ class Checker:
 
         Where no target's detection rate nor the false detections would fail against the
         frames held alone, it does not; nor where the cycles at a change went both ways (a
-        race: fewer than the detection rate's share of them across). Otherwise the radar
-        showed the frame across (nearly) every change, and cannot be told from one whose ranges
-        are off by the targets' travel in a frame (a delay, an RTS latency): with such an
-        offset, the cycles at a change that stay with the frame held are out of tolerance, so
-        a pass needs about the detection rate's share of them across. The run then passes
-        only where the scene declares it.
+        race: fewer than the detection rate's share of them across). Only the changes whose
+        two frames differ by more than a tolerance count there (`_ambiguous_apart`): where
+        they do not (a target standing, or slow), the frame held passes whatever the radar
+        showed. Otherwise the radar showed the frame across (nearly) every change that tells,
+        and cannot be told from one whose ranges are off by the targets' travel in a frame (a
+        delay, an RTS latency): with such an offset, the cycles at those changes that stay
+        with the frame held are out of tolerance, so a pass needs about the detection rate's
+        share of them across. The run then passes only where the scene declares it.
         """
-        adjacent, ambiguous = self.frames["adjacent_frame"], self.frames["ambiguous"]
+        adjacent, apart = self.frames["adjacent_frame"], self._ambiguous_apart
         exp = self.expectations
-        if not adjacent or adjacent < exp.detection_rate * ambiguous:
+        if not adjacent or adjacent < exp.detection_rate * apart:
             return None
         fails = []
         for k, t in enumerate(targets):
@@ -908,8 +918,8 @@ class Checker:
         if not fails:
             return None
         return (f"the verdict rests on radar cycles judged against the frame across a change "
-                f"({adjacent} of the {ambiguous} measured at one): against the frames held "
-                f"alone, "
+                f"({adjacent} of the {apart} measured at one whose frames differ by more than "
+                f"a tolerance): against the frames held alone, "
                 + ", ".join(fails) + "; a radar that shows the frame across each change and "
                 f"one whose ranges are off by the targets' travel in a frame (up to "
                 f"{self._adjacent_travel_m:.2f} m here: a delay, an RTS latency) look alike "

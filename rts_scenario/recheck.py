@@ -1003,7 +1003,7 @@ def _unreadable(path: Path, exc: Exception) -> str:
     kind = type(exc)
     name = (kind.__qualname__ if kind.__module__ == "builtins"
             else f"{kind.__module__}.{kind.__qualname__}")
-    if isinstance(exc, struct.error | UnicodeDecodeError):
+    if isinstance(exc, struct.error | UnicodeDecodeError | can.io.blf.BLFParseError):
         return (f"not a {path.suffix.lower()} log as python-can reads one, or a damaged one "
                 f"({name}: {exc})")
     return f"{name}: {exc}"
@@ -1540,8 +1540,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 f"no sidecar ({Path(log).name}{LOG_SIDECAR_SUFFIX}): scene time 0 is estimated "
                 f"from the detections themselves, so a scene that differs from the one played by "
                 f"its targets' motion over {span_s * 1e3:.1f} ms (the estimate's span) fits "
-                f"the log as well, and is not told; give --time-offset-s, or check the log "
-                f"with the sidecar its recording wrote")
+                f"the log as well, and is not told (with --time-offset-s, the latency estimated "
+                f"from the data takes it up); a log checked with the sidecar its recording "
+                f"wrote is aligned by the run's own record")
         elif not aligned_by_data:
             # The scene's start given, nothing to estimate the latency on: the profile's.
             offset = float(time_offset_s)

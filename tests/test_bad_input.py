@@ -292,6 +292,7 @@ def places(tmp_path):
     plain = tmp_path / "plain.txt"
     plain.write_text("x")
     (tmp_path / "junk.blf").write_text("not a BLF log")
+    (tmp_path / "text.blf").write_text("not a BLF log, longer than its header\n" * 10)
     (tmp_path / "other.blf.rts.json").write_text("{}")
     # rts-scenario's own mapping without its CAN FD message.
     can = ROOT / "rts_scenario" / "data" / "can"
@@ -421,6 +422,9 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("check-log-not-a-log", ["check", "{scene}", "--log", "{tmp}/junk.blf"], 2,
      r"^--log {tmp}/junk.blf: cannot read: not a \.blf log as python-can reads one, or a "
      r"damaged one \(struct\.error: "),
+    ("check-log-text", ["check", "{scene}", "--log", "{tmp}/text.blf"], 2,
+     r"^--log {tmp}/text.blf: cannot read: not a \.blf log as python-can reads one, or a "
+     r"damaged one \(can\.io\.blf\.BLFParseError: "),
     ("check-log-folder", ["check", "{scene}", "--log", "{dir}"], 2,
      r"^--log {dir}: a folder, not a log file \(\.asc, \.blf"),
     ("check-log-sidecar", ["check", "{scene}", "--log", "{tmp}/other.blf.rts.json"], 2,
@@ -651,6 +655,9 @@ def test_validate_builds_every_combination_and_strict_turns_warnings_into_errors
     assert call(["validate", str(path)]) == 0
     out, err = capsys.readouterr()
     assert out.count("ok: ") == 2 and "[estimator=ti]" in out
+    # Valid, and a run of it fails: the ok line says so beside the warnings.
+    assert out.count(", 2 targets, schedule built; a run fails as the 1 warning say "
+                     "(--strict: errors)\n") == 2, out
     warnings = [line for line in err.splitlines() if line.startswith("warning: ")]
     assert len(warnings) == 2 and all(": aside: out_of_coverage in 5 frames" in w
                                       for w in warnings)
@@ -667,7 +674,7 @@ def test_validate_builds_every_combination_and_strict_turns_warnings_into_errors
                                              "parametrize"))
     assert call(["validate", "--strict", str(path)]) == 0
     out, err = capsys.readouterr()
-    assert out.count("ok: ") == 2
+    assert out.count("ok: ") == 2 and out.count(", 2 targets, schedule built\n") == 2, out
     assert out.count("aside: out_of_coverage in 5 frames, beyond_radar_velocity in 1 frames "
                      "(expected)") == 2
     assert err == ""

@@ -464,6 +464,51 @@ def test_a_verdict_resting_on_the_frame_across_each_change_fails_unless_declared
     assert "adjacent_frame" not in right.scene_limits
 
 
+def test_changes_a_standing_target_makes_do_not_hide_a_radar_a_frame_off(tmp_path):
+    from rts_scenario.radar.clock import RadarClock
+
+    # Standing 1.4 s, then closing at 8 m/s: at the changes while it stands, the frame held
+    # passes whatever the radar showed. A radar always showing the frame before (a delay of
+    # a frame on the bench looks the same) must not pass for those: only the changes whose
+    # frames differ by more than a tolerance count towards the rule.
+    path = tmp_path / "stop_then_close.scenario.yaml"
+    path.write_text(STOP_THEN_CLOSE)
+    report, _ = _radar_run(load_scenario(path), RadarClock(cycle_s=0.05), window_s=0.006,
+                           lag_frames=1)
+    assert 25 < report.frames["adjacent_frame"] < report.frames["ambiguous"] - 20
+    assert [r.codes for r in report.reasons] == [("adjacent_frame",)], report.reasons
+    assert "against the frames held alone, oncoming-car detection rate" in report.reasons[0]
+
+
+STOP_THEN_CLOSE = """\
+rts_scenario: 1
+name: stop-then-close
+duration_s: 3.0
+frame_rate_hz: 20.0
+radar:
+  profile: awr1843boost
+  mount: {x_m: 3.7, z_m: 0.5}
+rig: wide-3x5
+ego:
+  motion: {type: stationary, position_m: [0, 0, 0]}
+targets:
+  - name: oncoming-car
+    kind: car
+    motion:
+      type: speed_profile
+      position_m: [50.0, 0.0, 0.6]
+      heading_deg: 180
+      profile:
+        - {t_s: 0.0, speed_mps: 0.0}
+        - {t_s: 1.4, speed_mps: 0.0}
+        - {t_s: 1.5, speed_mps: 8.0}
+    rcs: {rcs_dbsm: 12.0}
+expectations:
+  tolerances: {range_m: 0.3, radial_velocity_mps: 0.3, az_deg: 0.5, el_deg: 1.0}
+  detection_rate: 0.9
+"""
+
+
 def test_a_race_at_the_frame_changes_that_goes_both_ways_passes(closing_scene):
     from rts_scenario.radar.clock import RadarClock
 

@@ -991,6 +991,11 @@ def test_a_stop_while_the_process_exits_never_kills_it_without_a_word(signum):
                   f"signal.{signum}), time.sleep(0.5))).start()\n    return 0\n")
     assert waiting.returncode == 1, waiting
     assert waiting.stdout == "PASS: scene\n" and waiting.stderr == "error: interrupted\n"
+    # A bad input's exit code stands (never 0, and not made 1).
+    erred = run(f"def main():\n"
+                f"    threading.Thread(target=lambda: (time.sleep(0.3), os.kill(os.getpid(), "
+                f"signal.{signum}), time.sleep(0.5))).start()\n    return 2\n")
+    assert erred.returncode == 2 and erred.stderr == "error: interrupted\n", erred
     # In the last exit hook or after (the modules' teardown): nothing is left to stop; the
     # command's exit code stands.
     tearing = run(f"atexit.register(lambda: os.kill(os.getpid(), signal.{signum}))\n"
@@ -999,3 +1004,20 @@ def test_a_stop_while_the_process_exits_never_kills_it_without_a_word(signum):
     passing = run(f"atexit.register(lambda: os.kill(os.getpid(), signal.{signum}))\n"
                   f"def main():\n    return 0\n")
     assert passing.returncode == 0 and passing.stderr == "", passing
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_sigterm_as_the_command_hands_back_its_handler_is_acted_on_not_fatal():
+    # Between the command putting back the handler it found and the exit's handlers in place,
+    # a SIGTERM used to meet the default and kill the process silently: it is noted, then the
+    # command stops as interrupted.
+    import subprocess
+
+    script = ("import os, signal\nimport rts_scenario.cli as cli\n"
+              "def main():\n    print('PASS: scene')\n"
+              "    os.kill(os.getpid(), signal.SIGTERM)\n    return 0\n"
+              "cli.main = main\ncli.console()\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 1 and done.stdout == "PASS: scene\n", done
+    assert done.stderr == "error: interrupted\n", done

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import functools
 import os
 import signal
 import sys
@@ -134,21 +135,34 @@ def console() -> NoReturn:
     Ctrl-C or SIGTERM after the command has printed all it prints, while the process exits,
     used to kill it by its signal without a word. While Python still waits for threads and
     runs its exit hooks (where a stuck thread would hang), either stops the command as one
-    that ended then does (`_main`): ``error: interrupted`` and exit 1, what was printed and
-    written standing. The last hook ignores them: tearing the modules down (a few tenths of a
-    second) runs with no signal handlers of Python's, and a signal would kill it, while the
-    command has ended and nothing of its is left to stop.
+    that ended then does (`_main`): ``error: interrupted`` and exit 1 (or the command's own
+    2 or 3), what was printed and written standing. The exit hooks not run yet are skipped:
+    the command has closed what it writes (its files, its pools) before `main` returns. The
+    last hook ignores them: tearing the modules down (a few tenths of a second) runs with no
+    signal handlers of Python's, and a signal would kill it, while the command has ended and
+    nothing of its is left to stop. A SIGTERM between the command's handler put back and
+    these is noted, and acted on once they are in place.
     """
-    if threading.current_thread() is threading.main_thread():
+    main_thread = threading.current_thread() is threading.main_thread()
+    noted: list[int] = []
+    if main_thread:
         atexit.register(_ignore_stops)  # registered first: run last
-    code = main()
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, _stopped_at_exit)
-        signal.signal(signal.SIGTERM, _stopped_at_exit)
+        # What `_main` puts back when the command ends.
+        signal.signal(signal.SIGTERM, lambda signum, frame: noted.append(signum))
+    code = EXIT_FAIL
+    try:
+        code = main()
+        if main_thread:
+            signal.signal(signal.SIGINT, functools.partial(_stopped_at_exit, code))
+            signal.signal(signal.SIGTERM, functools.partial(_stopped_at_exit, code))
+    except KeyboardInterrupt:  # in the instants after `main` returned, before the above
+        _stopped_at_exit(code, signal.SIGINT, None)
+    if noted:
+        _stopped_at_exit(code, noted[0], None)
     sys.exit(code)
 
 
-def _stopped_at_exit(signum: int, frame: object) -> None:
+def _stopped_at_exit(code: int, signum: int, frame: object) -> NoReturn:
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
@@ -158,7 +172,8 @@ def _stopped_at_exit(signum: int, frame: object) -> None:
         print("error: interrupted", file=sys.stderr, flush=True)
     except (OSError, ValueError):
         pass  # the exit code says it
-    os._exit(EXIT_FAIL)  # what is left is the interpreter's shutdown: nothing of the command's
+    # Never 0; a bad input's or a runtime error's code stands.
+    os._exit(code if code != EXIT_OK else EXIT_FAIL)
 
 
 def _ignore_stops() -> None:

@@ -51,8 +51,13 @@ def _do_validate(args: argparse.Namespace) -> int:
                     reported.add(note)
                     print(f"note: {label}: {note}")
             if not (args.strict and unexpected):
-                print(f"ok: {label}: {scene.n_frames} frames, {len(scene.targets)} targets, "
-                      f"schedule built")
+                # The file is valid; what a run of it would fail on is said beside it.
+                n = len(scene.targets)
+                print(f"ok: {label}: {scene.n_frames} frames, {n} target{'' if n == 1 else 's'}"
+                      f", schedule built"
+                      + (f"; a run fails as the {len(unexpected)} warning"
+                         f"{'' if len(unexpected) == 1 else 's'} say (--strict: errors)"
+                         if unexpected else ""))
         # An error several combinations share, once, naming them all.
         for message, idents in errors.items():
             where = ("" if idents == [""] else
