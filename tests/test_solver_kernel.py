@@ -118,6 +118,36 @@ def _uneven_mirror_counts():
                                           name="uneven")
 
 
+def _two_rows(row0, row1, dz=0.5, name="two rows"):
+    """Two rows of elements (y in half wavelengths), the second ``dz`` half wavelengths up."""
+    lam = rs.VirtualArray.preset("awr1843boost").wavelength_m
+    y = np.r_[row0, row1] * lam / 2
+    z = np.r_[np.zeros(len(row0)), np.full(len(row1), dz)] * lam / 2
+    return rs.VirtualArray.from_positions(y, z, wavelength_m=lam, name=name)
+
+
+def _rows_with_centres():
+    """Odd rows (an element at each centre, two at one), centres apart in y and z."""
+    return _two_rows([-2, -1, 0, 1, 2], [0.5, 1.5, 1.5, 2.5], dz=0.7, name="odd rows")
+
+
+def _rows_uneven_offsets():
+    """Rows whose offsets from their centres are no progression (0.5, 1.5, 4)."""
+    return _two_rows([-4, -1.5, -0.5, 0.5, 1.5, 4], [-0.5, 0.5], name="uneven rows")
+
+
+def _doubled_awr():
+    """The AWR1843BOOST's array with every element twice."""
+    awr = rs.VirtualArray.preset("awr1843boost")
+    return rs.VirtualArray.from_positions(np.r_[awr.y_m, awr.y_m], np.r_[awr.z_m, awr.z_m],
+                                          wavelength_m=awr.wavelength_m, name="awr x2")
+
+
+def _asymmetric_row():
+    """Two rows, the second not symmetric in y: summed element by element."""
+    return _two_rows([0, 1, 2, 3], [0, 1, 3], name="asymmetric row")
+
+
 CASES = {
     "paper": lambda: (rs.Rig.preset("kit-table1"), rs.VirtualArray.preset("paper"), None),
     "awr1843boost": lambda: (rs.Rig.preset("kit-table1"), rs.VirtualArray.preset("awr1843boost"),
@@ -139,7 +169,15 @@ CASES = {
     "nearly centro-symmetric": lambda: (rs.Rig.preset("kit-table1"),
                                         _nearly_centrosymmetric(), None),
     "uneven mirror counts": lambda: (rs.Rig.preset("kit-table1"), _uneven_mirror_counts(), None),
+    # Complex responses summed row by row (`exact.RowFactors`), and layouts that are not.
+    "odd rows": lambda: (rs.Rig.preset("kit-table1"), _rows_with_centres(), None),
+    "uneven rows": lambda: (NARROW, _rows_uneven_offsets(), None),
+    "doubled awr1843boost": lambda: (rs.Rig.preset("kit-table1"), _doubled_awr(), None),
+    "asymmetric row": lambda: (rs.Rig.preset("kit-table1"), _asymmetric_row(), None),
 }
+# Layouts whose complex responses of plane-wave FEs the kernel sums row by row.
+ROW_LAYOUTS = {"awr1843boost", "wide-3x5 awr1843boost", "odd rows", "uneven rows",
+               "doubled awr1843boost"}
 
 
 def targets(rig, n, seed, margin_deg=2.0):
@@ -175,6 +213,50 @@ def test_the_grid_sums_are_taken_on_full_grids_only(case):
     rig, array, model = CASES[case]()
     tables = solver_plan(rig, array, "exact", model).exact_tables
     assert (tables.sep_z_re.shape[2] > 0) == (case in GRIDS)
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_row_sums_are_taken_on_symmetric_rows_of_plane_waves_only(case):
+    """Two rows, each symmetric in y, with plane-wave FEs: summed by rows. Modeled responses
+    (the "modeled" case), other row counts and a row not symmetric keep the element sums."""
+    rig, array, model = CASES[case]()
+    rows = solver_plan(rig, array, "exact", model).exact_tables.rows
+    assert (rows.z.size > 0) == (case in ROW_LAYOUTS)
+
+
+@pytest.mark.parametrize("case", ["awr1843boost", "odd rows", "uneven rows",
+                                  "doubled awr1843boost"])
+def test_row_sums_are_the_responses_summed_element_by_element(case):
+    """`_row_sums` against ``f_q = sum_v exp(j k (y_v (u_q - u) + z_v (s_q - s)))`` and its
+    derivatives in u and s (times ``-j k y_v`` and ``-j k z_v``), rotated by ``exp(-j phi)``,
+    summed element by element here from the array's positions and the FEs' directions."""
+    kernel = kernel_or_skip()
+    rig, array, model = CASES[case]()
+    tables = solver_plan(rig, array, "exact", model).exact_tables
+    rows, k = tables.rows, array.wavenumber_rad_per_m
+    u_q, s_q = direction_cosines(np.radians(rig.az_deg[rig.quads[0]]),
+                                 np.radians(rig.el_deg[rig.quads[0]]))
+    rng = np.random.default_rng(3)
+    block = kernel._BLOCK
+    u, s = rng.uniform(-0.3, 0.3, block), rng.uniform(-0.3, 0.3, block)
+    phi = rng.uniform(-np.pi, np.pi, block)
+    acc_re, acc_im = np.full((24, block), np.nan), np.full((24, block), np.nan)
+    trig = np.empty((2 * kernel.OFFSETS + 2 * kernel.ROWS, block))
+    kernel._row_sums(acc_re, acc_im, u, s, phi, k, rows.z, rows.y, rows.centre, rows.offsets,
+                     rows.offset_step, rows.pair[0], rows.p_re[0], rows.p_im[0], trig, block)
+    phase = k * (array.y_m[None, :, None] * (u_q[:, None, None] - u[None, None, :])
+                 + array.z_m[None, :, None] * (s_q[:, None, None] - s[None, None, :]))
+    terms = np.exp(1j * (phase - phi[None, None, :]))  # (fe, element, target)
+    expected = np.concatenate([
+        terms.sum(axis=1),
+        (-1j * k * array.y_m[None, :, None] * terms).sum(axis=1),
+        (-1j * k * array.z_m[None, :, None] * terms).sum(axis=1),
+    ])
+    got = acc_re[:12] + 1j * acc_im[:12]
+    scale = array.n_elements * np.r_[1.0, k * np.abs(array.y_m).max(),
+                                     k * np.abs(array.z_m).max()].repeat(4)[:, None]
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-13 * scale.max())
+    assert np.all(np.abs(got - expected) <= 1e-13 * scale)
 
 
 @pytest.mark.parametrize("case", ["awr1843boost", "wide-3x5 awr1843boost"])
@@ -247,7 +329,8 @@ def test_batched_iteration_is_the_target_by_target_iteration(elements, iteration
     state = np.zeros((6, block))
     state[:, :n] = work[:6, index]
     kernel._iterate_batch(pend_n, pend_re, pend_im, state, n, t_re, t_im, m,
-                          np.empty((5, 12, block)), 1.0, tol, _CODES, w_all, r_all, m_all)
+                          np.empty((5, 12, block)), 1.0, tol, _CODES, w_all, r_all, m_all,
+                          False)
     np.testing.assert_array_equal(w_all, w_one)
     np.testing.assert_array_equal(r_all, r_one)
     np.testing.assert_array_equal(m_all, m_one)

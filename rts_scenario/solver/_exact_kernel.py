@@ -12,7 +12,10 @@ over one place of each mirror pair, with the table entries of the elements there
 mirror folded into one (`exact.ExactTables`), half the multiply-adds of the full sum; and on a
 full grid (the paper array) they are products of a sum over y and one over z (`_grid_sums`),
 equal to rounding. Likewise on complex responses an exponential over z takes the phase map's
-rotation into its argument where the numpy code multiplies by it.
+rotation into its argument where the numpy code multiplies by it, and where the array is two
+rows each symmetric in y and the FEs are plane waves (the AWR1843BOOST), the complex responses
+are summed row by row (`_row_sums`): a real sum over each row's mirror pairs times one
+exponential per row, about half the multiply-adds and no per-element looks.
 
 Targets go in blocks of `_BLOCK`: sines and cosines (polynomials with Cody-Waite reduction,
 ~1.5 ulp, instead of libm's ~20 ns calls), exponentials, response sums and the weights up to the
@@ -676,6 +679,90 @@ def _grid_sums(acc_re, scratch, y_re, y_im, ey_re, ey_im, y_direct, z_re, z_im, 
 # a block. 128 ran 1.2-1.4x faster than 32; with the batched iteration 256 ran 5-8 % faster
 # than 128 on the AWR1843BOOST and equal on the paper array (64 to 512 measured, one thread,
 # alternating in one process). The block's scratch rows then live in L2, not L1.
+# `_row_sums`' layout: rows and offsets per row, at most (fewer are padded with zeros). Fixed,
+# so that the loops over them unroll inside the vector loop over the block.
+ROWS, OFFSETS = 2, 4
+
+
+@_jit
+def _row_sums(acc_re, acc_im, us, ss, phi, k, row_z, row_yc, row_center, deltas, delta_step,
+              pair, p_re, p_im, trig, nb):  # pragma: no cover
+    """Responses ``f, f_u, f_s`` of plane-wave FEs (all 12 rows complex), row by row.
+
+    The elements of row ``r`` share ``z_r`` and lie symmetric about ``y_r`` (`exact.RowFactors`),
+    so FE ``q``'s sum over them is ``P_qr L_r R_qr(u)``: ``P_qr = exp(j k (y_r u_q + z_r s_q))``
+    (the table ``p_re, p_im``), ``L_r = exp(-j (k (y_r u + z_r s) + phi))`` per target (``phi``
+    the phase map's rotation) and a real ``R_qr = c_r + sum_i 2 m_ri cos(k d_i (u_q - u))`` over
+    the pairs at offsets ``+-d_i``, ``c_r`` elements at the centre. With ``M = P L``:
+    ``f = sum_r M R``, ``f_u = sum_r M (R' - j k y_r R)``, ``f_s = sum_r -j k z_r M R``. ``R``
+    and ``R'`` are sums of ``cos(k d_i u)`` and ``sin(k d_i u)`` times the table ``pair``
+    ``(4, ROWS, OFFSETS, 4)``: ``2 m cos(k d u_q)``, ``2 m sin(k d u_q)`` and those times
+    ``k d`` (zero where a row has no pair at ``d_i``). The same sums as the element-by-element
+    table's in another order: equal to rounding, with about half the multiply-adds and no
+    per-element looks.
+
+    ``delta_step``: the offsets' common difference (0.0: none; the cosines and sines then come
+    from the first and that step by rotation). Scratch: ``trig`` ``(2 OFFSETS + 2 ROWS, B)``,
+    the cosines, the sines, then ``L`` (real and imaginary parts): one array, so that the
+    vector loops need few checks that it does not overlap the sums.
+    """
+    if delta_step != 0.0:
+        first, step = k * deltas[0], k * delta_step
+        for b in range(nb):
+            sin_t, cos_t = _sincos(first * us[b])
+            sin_d, cos_d = _sincos(step * us[b])
+            trig[0, b], trig[OFFSETS, b] = cos_t, sin_t
+            for i in range(1, OFFSETS):
+                cos_t, sin_t = cos_t * cos_d - sin_t * sin_d, sin_t * cos_d + cos_t * sin_d
+                trig[i, b], trig[OFFSETS + i, b] = cos_t, sin_t
+    else:
+        for i in range(OFFSETS):
+            phase = k * deltas[i]
+            for b in range(nb):
+                sin_t, cos_t = _sincos(phase * us[b])
+                trig[i, b], trig[OFFSETS + i, b] = cos_t, sin_t
+    for r in range(ROWS):
+        ky, kz = k * row_yc[r], k * row_z[r]
+        for b in range(nb):
+            sin_t, cos_t = _sincos(-(ky * us[b] + kz * ss[b]) - phi[b])
+            trig[2 * OFFSETS + r, b], trig[2 * OFFSETS + ROWS + r, b] = cos_t, sin_t
+    ky0, kz0, ky1, kz1 = k * row_yc[0], k * row_z[0], k * row_yc[1], k * row_z[1]
+    c0, c1 = row_center[0], row_center[1]
+    for q in range(4):
+        t = pair[q]
+        a0, a1, a2, a3 = t[0, 0, 0], t[0, 1, 0], t[0, 2, 0], t[0, 3, 0]
+        b0, b1, b2, b3 = t[0, 0, 1], t[0, 1, 1], t[0, 2, 1], t[0, 3, 1]
+        g0, g1, g2, g3 = t[0, 0, 2], t[0, 1, 2], t[0, 2, 2], t[0, 3, 2]
+        h0, h1, h2, h3 = t[0, 0, 3], t[0, 1, 3], t[0, 2, 3], t[0, 3, 3]
+        d0, d1, d2, d3 = t[1, 0, 0], t[1, 1, 0], t[1, 2, 0], t[1, 3, 0]
+        e0, e1, e2, e3 = t[1, 0, 1], t[1, 1, 1], t[1, 2, 1], t[1, 3, 1]
+        m0, m1, m2, m3 = t[1, 0, 2], t[1, 1, 2], t[1, 2, 2], t[1, 3, 2]
+        n0, n1, n2, n3 = t[1, 0, 3], t[1, 1, 3], t[1, 2, 3], t[1, 3, 3]
+        pr0, pi0, pr1, pi1 = p_re[q, 0], p_im[q, 0], p_re[q, 1], p_im[q, 1]
+        for b in range(nb):
+            x0, x1, x2, x3 = trig[0, b], trig[1, b], trig[2, b], trig[3, b]
+            y0, y1, y2, y3 = trig[4, b], trig[5, b], trig[6, b], trig[7, b]
+            big0 = c0 + a0 * x0 + b0 * y0 + a1 * x1 + b1 * y1 + a2 * x2 + b2 * y2 + a3 * x3 \
+                + b3 * y3
+            slope0 = h0 * x0 - g0 * y0 + h1 * x1 - g1 * y1 + h2 * x2 - g2 * y2 + h3 * x3 \
+                - g3 * y3
+            big1 = c1 + d0 * x0 + e0 * y0 + d1 * x1 + e1 * y1 + d2 * x2 + e2 * y2 + d3 * x3 \
+                + e3 * y3
+            slope1 = n0 * x0 - m0 * y0 + n1 * x1 - m1 * y1 + n2 * x2 - m2 * y2 + n3 * x3 \
+                - m3 * y3
+            lr, li = trig[8, b], trig[10, b]
+            mr0, mi0 = pr0 * lr - pi0 * li, pr0 * li + pi0 * lr
+            lr, li = trig[9, b], trig[11, b]
+            mr1, mi1 = pr1 * lr - pi1 * li, pr1 * li + pi1 * lr
+            nr0, ni0, nr1, ni1 = mr0 * big0, mi0 * big0, mr1 * big1, mi1 * big1
+            acc_re[q, b] = nr0 + nr1
+            acc_im[q, b] = ni0 + ni1
+            acc_re[4 + q, b] = mr0 * slope0 + ky0 * ni0 + mr1 * slope1 + ky1 * ni1
+            acc_im[4 + q, b] = mi0 * slope0 - ky0 * nr0 + mi1 * slope1 - ky1 * nr1
+            acc_re[8 + q, b] = kz0 * ni0 + kz1 * ni1
+            acc_im[8 + q, b] = -(kz0 * nr0 + kz1 * nr1)
+
+
 _BLOCK = 256
 # Targets sorted by quad at a time (their angles, quads, order and weights come to about
 # 1 MiB, this machine's L2 per core), so that on a grid each quad's share fills fuller
@@ -692,6 +779,7 @@ def solve_targets(  # pragma: no cover
     phase_origin, phase_table, centrosymmetric, fold_re, fold_im, fold_iy, fold_iz,
     sep_y_re, sep_y_im, sep_z_re, sep_z_im, row_scale, curvature, tol, codes, weights, reason,
     margin, locate, column_az, row_el, lines, boxes, edge_tol,
+    row_z, row_yc, row_center, deltas, delta_step, pair, row_p_re, row_p_im,
 ):
     """Solve every target whose ``quad`` is >= 0; other rows are left as they are.
 
@@ -711,7 +799,10 @@ def solve_targets(  # pragma: no cover
     folded onto one element of each mirror pair (`exact.ExactTables`), summed over the ``H``
     elements kept where only the real part is needed. ``sep_y_re, sep_y_im`` ``(Q, 8, ny)``
     and ``sep_z_re, sep_z_im`` ``(Q, 8, nz)``: on a grid, the real rows' factors over y and z
-    (`exact.ExactTables`; ``nz == 0``: none), used instead of the fold. Writes ``weights``
+    (`exact.ExactTables`; ``nz == 0``: none), used instead of the fold. ``row_z ... row_p_im``:
+    the array's rows of equal z, each symmetric in y about its centre (`exact.RowFactors`;
+    ``row_z.size == 0``: none), from which complex responses of plane-wave FEs are summed
+    (`_row_sums`) where no curvature is tested. Writes ``weights``
     ``(N, 4)`` (normalized, 0 unless OK), ``reason`` and, where tested, ``margin`` (NaN
     elsewhere; an empty ``margin``: not wanted).
 
@@ -750,6 +841,8 @@ def solve_targets(  # pragma: no cover
     pend_look_im = np.empty((n_elements, _BLOCK))
     pend_state = np.empty((6, _BLOCK))
     batch = np.empty((5, 12, _BLOCK))
+    by_rows = row_z.size > 0
+    row_trig = np.empty((2 * OFFSETS + 2 * ROWS, _BLOCK))
     # Spans of targets small enough for the caches; in each, a counting sort by quad (each
     # quad's table is then read for whole blocks).
     count = np.zeros(n_quads + 1, dtype=np.int64)
@@ -787,14 +880,28 @@ def solve_targets(  # pragma: no cover
                     sin_el, cos_el = _sincos(ss[b])
                     us[b] = cos_el * sin_az
                     ss[b] = sin_el
-                _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct, y_indirect,
-                          y_mirror, y_progression, us, nb)
                 if has_phase:
                     # Evaluate in the frame rotated by the expected phase of B (see `exact`).
                     origin = phase_origin[qd]
                     u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
                     table = phase_table[qd]
-                if has_phase and z_direct.size == z_coords.size and not z_progression:
+                rows = by_rows and not test and not centrosymmetric
+                if rows:
+                    # Complex responses of plane-wave FEs, row by row: no looks, half the
+                    # multiply-adds (`_row_sums`); every row complex (their phase may iterate).
+                    if has_phase:
+                        _phase_block(us, ss, u0, s0, du, ds, table, step_re, patch, nb)
+                    else:
+                        step_re[:nb] = 0.0
+                    _row_sums(acc_re, acc_im, us, ss, step_re, k, row_z, row_yc, row_center,
+                              deltas, delta_step, pair[qd], row_p_re[qd], row_p_im[qd], row_trig,
+                              nb)
+                else:
+                    _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct,
+                              y_indirect, y_mirror, y_progression, us, nb)
+                if rows:
+                    pass
+                elif has_phase and z_direct.size == z_coords.size and not z_progression:
                     # exp(-j (k z s + phase)) in one: a sine and cosine per coordinate, not one
                     # more per target and a product per coordinate (the AWR1843BOOST's two z:
                     # 1.02-1.03x). Coordinates taken as conjugates or by steps keep the product.
@@ -822,9 +929,9 @@ def solve_targets(  # pragma: no cover
                     _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
                               z_mirror, z_progression, ss, nb)
                 # Real responses: the looks of the folded elements only (their mirrors' are
-                # their conjugates, folded into the table); on a grid none.
+                # their conjugates, folded into the table); on a grid, or by rows, none.
                 n_looks = fold_iy.size if real_only else n_elements
-                if real_only and separable:
+                if (real_only and separable) or rows:
                     n_looks = 0
                 look_y = fold_iy if real_only else iy
                 look_z = fold_iz if real_only else iz
@@ -834,7 +941,9 @@ def solve_targets(  # pragma: no cover
                         yr, yi, zr, zi = ey_re[jy, b], ey_im[jy, b], ez_re[jz, b], ez_im[jz, b]
                         look_re[v, b] = yr * zr - yi * zi
                         look_im[v, b] = yr * zi + yi * zr
-                if real_only and separable:
+                if rows:
+                    pass
+                elif real_only and separable:
                     # Products of sums over y and over z (acc_im: scratch).
                     _grid_sums(acc_re, acc_im, sep_y_re[qd], sep_y_im[qd], ey_re, ey_im,
                                y_direct, sep_z_re[qd], sep_z_im[qd], ez_re, ez_im, z_direct, nb)
@@ -893,24 +1002,31 @@ def solve_targets(  # pragma: no cover
                         if pending == _BLOCK:
                             _iterate_batch(pend_n, pend_look_re, pend_look_im, pend_state,
                                            pending, table_re, table_im, n_elements, batch,
-                                           row_scale, tol, codes, weights, reason, margin)
+                                           row_scale, tol, codes, weights, reason, margin,
+                                           rows)
                             pending = 0
                         pend_n[pending] = order[start + b]
-                        for v in range(n_elements):
-                            pend_look_re[v, pending] = look_re[v, b]
-                            pend_look_im[v, pending] = look_im[v, b]
+                        if rows:  # their sums, every row complex (`_iterate_batch`)
+                            for r in range(12):
+                                batch[0, r, pending] = acc_re[r, b]
+                                batch[1, r, pending] = acc_im[r, b]
+                        else:
+                            for v in range(n_elements):
+                                pend_look_re[v, pending] = look_re[v, b]
+                                pend_look_im[v, pending] = look_im[v, b]
                         for i in range(6):
                             pend_state[i, pending] = work[i, b]
                         pending += 1
             if pending:
                 _iterate_batch(pend_n, pend_look_re, pend_look_im, pend_state, pending,
                                table_re, table_im, n_elements, batch, row_scale, tol, codes,
-                               weights, reason, margin)
+                               weights, reason, margin, by_rows and not test)
 
 
 @_jit
 def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_elements, batch,
-                   row_scale, tol, codes, weights, reason, margin):  # pragma: no cover
+                   row_scale, tol, codes, weights, reason, margin,
+                   summed):  # pragma: no cover
     """`_solve_one` (no curvature test) of ``m`` targets of one quad, together.
 
     ``pend_n`` the targets' indices, ``look_re, look_im`` their looks (columns ``< m``),
@@ -926,14 +1042,16 @@ def _iterate_batch(pend_n, look_re, look_im, state, m, table_re, table_im, n_ele
     14 ns per target that way and 5.8 so (measured by running that part twice), less since
     targets that stay in place are not moved by a call (`_move`).
 
-    ``batch``: scratch ``(5, 12, B)``.
+    ``batch``: scratch ``(5, 12, B)``; with ``summed`` its first two hold the targets'
+    responses already (all 12 rows complex, `_row_sums`), and the looks are not read.
     """
     f_re, f_im, rot, work, per = batch[0], batch[1], batch[2], batch[3], batch[4]
     phi, prev_phi, prev_res, cos_phi, sin_phi, y, x, bad = (per[0], per[1], per[2], per[3],
                                                             per[4], per[5], per[6], per[7])
     infeasible_steps, far = tol[_INFEASIBLE], tol[_FAR]
     phase_tol = tol[_PHASE]
-    _complex_sums(f_re, f_im, table_re, table_im, look_re, look_im, 0, 12, n_elements, m)
+    if not summed:
+        _complex_sums(f_re, f_im, table_re, table_im, look_re, look_im, 0, 12, n_elements, m)
     # The start, as `_solve_one`: targets converged once their residual is computed leave.
     active = 0
     for j in range(m):

@@ -398,6 +398,10 @@ class ExactTables:
         (`_grid_factors`): rows ``fe`` and ``4 + fe`` the FE's factor and its derivative,
         columns the distinct coordinates, folded as the places are. Shape ``(Q, 8, 0)``
         otherwise.
+    rows : RowFactors
+        For complex responses of plane-wave FEs on an array whose rows of equal z are each
+        symmetric in y, the rows' factors (`RowFactors`, `_exact_kernel._row_sums`); none
+        (``rows.z.size == 0``) otherwise.
     """
 
     tab_re: FloatArray
@@ -418,6 +422,7 @@ class ExactTables:
     sep_y_im: FloatArray
     sep_z_re: FloatArray
     sep_z_im: FloatArray
+    rows: RowFactors
 
     @classmethod
     def of(cls, quads: Sequence[ExactQuad]) -> ExactTables:
@@ -458,6 +463,8 @@ class ExactTables:
             fold_iy=fold_iy, fold_iz=fold_iz,
             sep_y_re=np.ascontiguousarray(sep_y.real), sep_y_im=np.ascontiguousarray(sep_y.imag),
             sep_z_re=np.ascontiguousarray(sep_z.real), sep_z_im=np.ascontiguousarray(sep_z.imag),
+            rows=(RowFactors.none(len(quads)) if first.centrosymmetric
+                  else RowFactors.of([q.response for q in quads])),
         )
 
     def solve(
@@ -502,7 +509,118 @@ class ExactTables:
             *(np.array(a, dtype=np.float64, order="C") for a in (
                 geometry.column_az_deg, geometry.row_el_deg, geometry.lines, geometry.boxes)),
             EDGE_TOL_DEG,
+            self.rows.z, self.rows.y, self.rows.centre, self.rows.offsets,
+            self.rows.offset_step, self.rows.pair, self.rows.p_re, self.rows.p_im,
         )
+
+
+# As `_exact_kernel.ROWS` and `_exact_kernel.OFFSETS` (that module loads numba).
+ROWS, OFFSETS = 2, 4
+
+
+@dataclass(frozen=True)
+class RowFactors:
+    """An array's rows of equal z, each symmetric in y, and FE factors over them (per quad).
+
+    For plane-wave FEs the sum of FE ``q``'s response over row ``r`` is ``P_qr L_r(u, s)
+    R_qr(u)`` with ``R_qr = centre_r + sum_i 2 count_ri cos(k offsets_i (u_q - u))`` real
+    (`_exact_kernel._row_sums`): about half the multiply-adds of the sum element by element,
+    and no per-element looks. The kernel's loops are unrolled for `ROWS` rows and up to
+    `OFFSETS` offsets (the AWR1843BOOST's 2 and 4). Empty (``z.size == 0``) where the layout or
+    the FE responses (modeled, not plane waves) do not factor so, or are of another size.
+
+    Attributes
+    ----------
+    z, y : ndarray, shape (ROWS,)
+        Each row's z and the y of its centre (metres).
+    centre : ndarray, shape (ROWS,)
+        Elements at the row's centre.
+    count : ndarray of int, shape (ROWS, OFFSETS)
+        Element pairs of the row at ``y +- offsets[i]``.
+    offsets : ndarray, shape (OFFSETS,)
+        The distinct offsets from a row's centre (> 0, increasing) over all rows, padded with
+        zeros (no pair there).
+    offset_step : float
+        Their common difference when they form a progression of 3 or more, else 0.0.
+    pair : ndarray, shape (Q, 4, ROWS, OFFSETS, 4)
+        Per quad and FE: ``2 count cos(k d u_q)``, ``2 count sin(k d u_q)`` and the two times
+        ``k d`` (``d = offsets[i]``).
+    p_re, p_im : ndarray, shape (Q, 4, ROWS)
+        ``P_qr = exp(j k (y_r u_q + z_r s_q))``.
+    """
+
+    z: FloatArray
+    y: FloatArray
+    centre: FloatArray
+    count: NDArray[np.int64]
+    offsets: FloatArray
+    offset_step: float
+    pair: FloatArray
+    p_re: FloatArray
+    p_im: FloatArray
+
+    @classmethod
+    def none(cls, n_quads: int) -> RowFactors:
+        """Return no rows: the kernel then sums element by element."""
+        empty = np.zeros(0)
+        return cls(z=empty, y=empty, centre=empty, count=np.zeros((0, 0), dtype=np.int64),
+                   offsets=empty, offset_step=0.0,
+                   pair=np.zeros((n_quads, 4, ROWS, OFFSETS, 4)),
+                   p_re=np.zeros((n_quads, 4, ROWS)), p_im=np.zeros((n_quads, 4, ROWS)))
+
+    @classmethod
+    def of(cls, responses: Sequence[SourceResponse]) -> RowFactors:
+        """Find the rows of the responses' layout and each quad's factors, else `none`."""
+        first = responses[0]
+        tol = 1e-9 * 2 * np.pi / first.k  # as `SourceResponse` merges coordinates
+        y = first.y_distinct[first._iy]
+        z = first.z_distinct[first._iz]
+        rows_z, rows_y, centres, halves = [], [], [], []
+        for iz in range(first.z_distinct.size):
+            ys = np.sort(y[first._iz == iz])
+            if ys.size == 0:
+                continue
+            mid = (ys[0] + ys[-1]) / 2
+            if not np.all(np.abs((ys - mid) + (ys - mid)[::-1]) <= tol):
+                return cls.none(len(responses))  # this row is not symmetric in y
+            offsets = ys - mid
+            rows_z.append(first.z_distinct[iz])
+            rows_y.append(mid)
+            centres.append(float(np.sum(np.abs(offsets) <= tol)))
+            halves.append(offsets[offsets > tol])
+        every = np.sort(np.concatenate(halves)) if halves else np.zeros(0)
+        distinct = every[np.concatenate([[True], np.diff(every) > tol])] if every.size else every
+        if len(rows_z) != ROWS or distinct.size > OFFSETS:
+            return cls.none(len(responses))  # the kernel's loops are unrolled for this size
+        count = np.zeros((ROWS, OFFSETS), dtype=np.int64)
+        for r, half in enumerate(halves):
+            for d in half:
+                count[r, np.abs(distinct - d).argmin()] += 1
+        steps = np.diff(distinct)
+        step = float(steps[0]) if distinct.size >= 3 and np.all(
+            np.abs(steps - steps[0]) <= tol) else 0.0
+        distinct = np.concatenate([distinct, np.zeros(OFFSETS - distinct.size)])
+        k = first.k
+        rz, ry = np.array(rows_z), np.array(rows_y)
+        pairs, p_all = [], []
+        for resp in responses:
+            u_q, s_q = resp.source_u, resp.source_s
+            # The factors hold only for plane-wave FEs: compare with the table's f rows.
+            p = np.exp(1j * k * (np.outer(u_q, ry) + np.outer(s_q, rz)))  # (4, nr)
+            r_of = np.searchsorted(rz, z) if rz.size else np.zeros(0, dtype=np.int64)
+            wave = p[:, r_of] * np.exp(1j * k * np.outer(u_q, y - ry[r_of]))
+            if not np.allclose(wave, resp.table[0], rtol=0, atol=1e-13 * y.size):
+                return cls.none(len(responses))
+            cos = 2 * count[None] * np.cos(k * np.outer(u_q, distinct))[:, None, :]
+            sin = 2 * count[None] * np.sin(k * np.outer(u_q, distinct))[:, None, :]
+            kd = k * distinct
+            pairs.append(np.stack([cos, sin, kd * cos, kd * sin], axis=-1))
+            p_all.append(p)
+        p_stack = np.stack(p_all)
+        return cls(z=rz, y=ry, centre=np.array(centres), count=count, offsets=distinct,
+                   offset_step=step, pair=np.ascontiguousarray(np.stack(pairs)),
+                   p_re=np.ascontiguousarray(p_stack.real),
+                   p_im=np.ascontiguousarray(p_stack.imag))
 
 
 # The largest phase per unit direction cosine whose exponential is taken as real: it differs
