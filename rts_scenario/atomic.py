@@ -9,7 +9,7 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
-from typing import IO, Any, BinaryIO, Literal, TextIO, overload
+from typing import IO, Any, BinaryIO, Literal, TextIO, cast, overload
 
 
 @overload
@@ -43,6 +43,69 @@ def write_atomic(path: str | Path, text: str) -> None:
         file.write(text)
 
 
+class Draft:
+    """A file written over a long time (a run's detections): a draft beside ``path`` until done.
+
+    ``file`` (UTF-8 text, ``newline`` as `open`'s) is a draft in ``path``'s folder, so a process
+    killed while writing leaves no file named ``path`` that looks whole, and runs writing the
+    same path at once each write their own. What ``path`` held before is removed at the start:
+    it is not this run's. `keep` names the draft ``path``; `cut_short` names it
+    ``path.partial``. What is not a regular file (``/dev/null``, a pipe) is written into, and
+    so is a file whose folder takes no new file (then `cut_short` renames it, which such a
+    folder may refuse: the `OSError` is raised).
+    """
+
+    def __init__(self, path: str | Path, newline: str | None = None) -> None:
+        self.path = Path(path)
+        target = _replaced(path)
+        self._target = target
+        self._draft: str | None = None
+        if target is not None:
+            permissions = _permissions(target)
+            try:
+                handle, self._draft = _open_draft(target, "w", newline)
+            except OSError:
+                pass  # a folder that takes no new file: written into
+            else:
+                self.file = cast(TextIO, handle)
+                try:
+                    os.fchmod(handle.fileno(), permissions)
+                    target.unlink(missing_ok=True)
+                except BaseException:
+                    self.discard()
+                    raise
+                return
+        self.file = open(path, "w", encoding="utf-8", newline=newline)
+
+    def keep(self) -> Path:
+        """Close the file and name it ``path``; return that."""
+        return self._close_as(self._target)
+
+    def cut_short(self) -> Path:
+        """Close the file and name it ``path.partial`` (``path`` not a regular file: itself)."""
+        partial = None if self._target is None else self._target.with_name(
+            self._target.name + ".partial")
+        return self._close_as(partial)
+
+    def discard(self) -> None:
+        """Close the file and remove the draft (nothing written stays)."""
+        self.file.close()
+        if self._draft is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self._draft)
+
+    def _close_as(self, name: Path | None) -> Path:
+        self.file.close()
+        if name is None or (self._draft is None and name == self._target):
+            return self.path
+        os.replace(self.path if self._draft is None else self._draft, name)
+        if name == self._target:
+            return self.path
+        # As the caller named it, unless ``path`` is a link (the draft is beside the file).
+        given = self.path.with_name(self.path.name + ".partial")
+        return given if Path(os.path.realpath(self.path)) == self._target else name
+
+
 def check_draft(path: str | Path) -> None:
     """Make and remove the draft `open_atomic` would make for ``path`` (which need not exist).
 
@@ -65,12 +128,7 @@ def _replacing(path: str | Path, mode: str) -> Iterator[IO[Any]]:
         with open(path, mode, encoding=None if "b" in mode else "utf-8") as file:
             yield file
         return
-    try:
-        permissions = target.stat().st_mode & 0o7777
-    except FileNotFoundError:
-        umask = os.umask(0)
-        os.umask(umask)
-        permissions = 0o666 & ~umask
+    permissions = _permissions(target)
     file, draft = _open_draft(target, mode)
     try:
         with file:
@@ -84,6 +142,16 @@ def _replacing(path: str | Path, mode: str) -> Iterator[IO[Any]]:
         raise
 
 
+def _permissions(target: Path) -> int:
+    """Return the permissions of ``target``, or those a new file gets (the umask)."""
+    try:
+        return target.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
+
+
 def _replaced(path: str | Path) -> Path | None:
     """Return the file a draft is renamed over for ``path`` (links followed); None: write into."""
     try:
@@ -95,7 +163,9 @@ def _replaced(path: str | Path) -> Path | None:
     return Path(os.path.realpath(path))
 
 
-def _open_draft(target: Path, mode: str) -> tuple[IO[Any], str]:
+def _open_draft(target: Path, mode: str, newline: str | None = None) -> tuple[IO[Any], str]:
     """Create a draft for ``target`` in its folder: the draft open in ``mode``, and its path."""
     fd, draft = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".draft")
-    return os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8"), draft
+    if "b" in mode:
+        return os.fdopen(fd, mode), draft
+    return os.fdopen(fd, mode, encoding="utf-8", newline=newline), draft

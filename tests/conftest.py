@@ -147,8 +147,8 @@ def cut_short_drafts(monkeypatch):
     opened = rts_scenario.atomic._open_draft
 
     def arm(exc):
-        def open_draft(target, mode):
-            file, draft = opened(target, mode)
+        def open_draft(target, mode, *args):
+            file, draft = opened(target, mode, *args)
             return _CutShort(file, exc), draft
 
         monkeypatch.setattr(rts_scenario.atomic, "_open_draft", open_draft)

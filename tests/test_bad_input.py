@@ -938,7 +938,7 @@ def test_a_folder_that_takes_no_draft_stops_the_command_before_it_runs(places, c
     for name in ("out.json", "out.png", "out.rig.yaml", "r.blf", "r.blf.rts.json"):
         Path(places["tmp"], name).write_text("previous\n")
 
-    def refused(target, mode):
+    def refused(target, mode, *args):
         raise PermissionError(13, "Permission denied")
 
     def ran(*args, **kwargs):
@@ -959,7 +959,7 @@ def test_detections_written_as_they_come_need_no_draft(places, capsys, monkeypat
     # a writable one is no reason to refuse it.
     import rts_scenario.atomic
 
-    def refused(target, mode):
+    def refused(target, mode, *args):
         raise PermissionError(13, "Permission denied")
 
     detections = Path(places["tmp"], "d.csv")

@@ -478,6 +478,71 @@ def test_schedule_warns_of_what_it_does_not_play(tmp_path, capsys):
     assert out.startswith(f"{scene}[1=40.0]: 80 frames")
 
 
+def test_a_run_killed_part_way_leaves_no_detections_named_as_the_runs(tmp_path):
+    # A process killed (SIGKILL, the machine's memory exhausted, a power cut) runs no handler:
+    # its detections were written under their own name and looked like a whole run's.
+    import subprocess
+
+    scenes = [str(ROOT / "scenarios" / f"{name}.scenario.yaml")
+              for name in ("approaching_target", "cut_out")]
+    detections = tmp_path / "d.csv"
+    detections.write_text("a previous run's\n")
+    script = (
+        "import os, sys\n"
+        "import rts_scenario.pipeline as pipeline\n"
+        "import rts_scenario.cli as cli\n"
+        "real, calls = pipeline.run_scene, []\n"
+        "def killed(scene, options, **kwargs):\n"
+        "    calls.append(scene.name)\n"
+        "    if len(calls) == 2:\n"
+        "        sys.stdout.flush()\n"
+        "        os._exit(137)\n"
+        "    return real(scene, options, **kwargs)\n"
+        "pipeline.run_scene = killed\n"
+        "cli.main(sys.argv[1:])\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, "run", *scenes,
+                           "--detections", str(detections)], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 137, done.stderr
+    # Neither the previous run's file (not this run's) nor a file of this run's name.
+    assert not detections.exists()
+    drafts = [p for p in tmp_path.iterdir() if p.name != "d.csv"]
+    assert len(drafts) == 1 and drafts[0].name.startswith(".d.csv.")
+    assert drafts[0].name.endswith(".draft")
+    rows = drafts[0].read_text().splitlines()
+    assert len(rows) > 100 and all(r.startswith("approaching-target,") for r in rows[1:])
+
+
+def test_runs_writing_one_detections_file_at_once_each_write_their_own(tmp_path):
+    from rts_scenario.atomic import Draft
+
+    path = tmp_path / "d.csv"
+    path.write_text("previous\n")
+    os.chmod(path, 0o640)
+    first, second = Draft(path), Draft(path)
+    assert not path.exists()  # the previous run's rows are not this run's
+    for n in range(1000):
+        first.file.write(f"first,{n}\n")
+        second.file.write(f"second,{n}\n")
+    assert first.keep() == path
+    assert path.read_text() == "".join(f"first,{n}\n" for n in range(1000))
+    assert second.cut_short() == tmp_path / "d.csv.partial"
+    assert path.read_text().startswith("first,0\n")
+    assert (tmp_path / "d.csv.partial").read_text().startswith("second,0\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.csv", "d.csv.partial"]
+    assert path.stat().st_mode & 0o777 == 0o640  # the file's permissions, not the draft's
+
+
+def test_detections_to_a_device_are_written_into_it(tmp_path):
+    from rts_scenario.atomic import Draft
+
+    draft = Draft(os.devnull)
+    draft.file.write("rows\n")
+    assert draft.cut_short() == Path(os.devnull)
+    assert Path(os.devnull).exists() and not Path(os.devnull + ".partial").exists()
+
+
 @pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
 def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_complete(
         tmp_path, capsys, monkeypatch, request, stop):

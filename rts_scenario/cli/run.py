@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..atomic import check_draft
+from ..atomic import Draft, check_draft
 from ..errors import located, one_line
 from .common import (
     EXIT_BAD_INPUT,
@@ -125,9 +124,12 @@ def _do_run(args: argparse.Namespace) -> int:
     stems: set[str] = set()
     bad_input = runtime_error = False
     detections = None
+    draft: Draft | None = None
     if args.detections:
         with writing("--detections", args.detections):
-            detections = open(args.detections, "w", newline="")  # closed after the last scene
+            # A draft beside it until the last scene ends (`atomic.Draft`).
+            draft = Draft(args.detections, newline="")
+        detections = draft.file
         detections.write(",".join(DETECTION_COLUMNS) + "\n")
 
     def failed(scene: str, path: str, exc: BaseException, variant: str = "",
@@ -232,15 +234,12 @@ def _do_run(args: argparse.Namespace) -> int:
                       f"by its timestamps and fails on the cycles it lacks", file=sys.stderr)
         else:
             print("error: interrupted", file=sys.stderr)
-    if detections is not None:
-        detections.close()
-        if interrupted:
-            partial = f"{args.detections}.partial"
-            with writing("--detections", args.detections):
-                os.replace(args.detections, partial)
-            print(f"wrote {partial} (cut short: the run was interrupted)")
-        else:
-            print(f"wrote {args.detections}")
+    if draft is not None:
+        with writing("--detections", args.detections):
+            if interrupted:
+                print(f"wrote {draft.cut_short()} (cut short: the run was interrupted)")
+            else:
+                print(f"wrote {draft.keep()}")
     if len(entries) > 1:
         for entry in entries:
             name = run_label(entry["scene"], entry["variant"])
