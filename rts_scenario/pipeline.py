@@ -239,6 +239,9 @@ class RunResult:
 
     scene: Scenario
     report: Report
+    # Why the recorded log's sidecar (``LOG.rts.json``) could not be written, else None: the
+    # verdict stands, but a check of the log then aligns it by its data alone.
+    sidecar_error: str | None = None
 
 
 @dataclass
@@ -1087,20 +1090,14 @@ class Pipeline:
         if failures:
             report.reasons += failures
             report.passed = False
+        sidecar_error = None
         if options.bus_log and played is not None:
-            write_log_sidecar(options.bus_log, scene, self.radar, options, played,
-                              counter_start=None if checker.counter_start is None
-                              else (checker.counter_start + scene_first) % self.counter_modulus,
-                              playback=report.playback,
-                              send_lateness=playback.send_lateness(), clock=track,
-                              first_cycle=scene_first, cycles=n_cycles,
-                              origin_bus_s=self._scene_origin_s() if track.origin_s is None
-                              else track.origin_s, early_s=truths.early_s,
-                              channel=self._radar_channel(),
-                              channel_unknown=self._radar_channel() is None,
-                              channel_named=self._radar_channel_named(),
-                              host_clock_steps=self.host_clock_steps(),
-                              bus_time_shifts=self._bus_shifts)
+            try:
+                self._write_sidecar(options, scene, played, checker, scene_first, report,
+                                    playback, track, n_cycles, truths)
+            except OSError as exc:  # a disk filled while the scene ran: the verdict is kept
+                sidecar_error = (f"{options.bus_log}{LOG_SIDECAR_SUFFIX}: cannot write: "
+                                 f"{exc.strerror or exc}")
         timer.add("check_s", mark)
         timer.stages["total_s"] = timer.stages.get("load_s", 0.0) + time.perf_counter() - start
         report.timing = timer.stages
@@ -1125,7 +1122,26 @@ class Pipeline:
         if steps:
             # Said where the host's clock stepped: the times were brought back (`_unstep`).
             report.radar_clock["host_clock_steps"] = steps
-        return RunResult(scene=scene, report=report)
+        return RunResult(scene=scene, report=report, sidecar_error=sidecar_error)
+
+    def _write_sidecar(self, options: RunOptions, scene: Scenario, played: PlayedRecord,
+                       checker: Checker, scene_first: int, report: Report, playback: Playback,
+                       track: ClockTrack, n_cycles: int, truths: CycleTruth) -> None:
+        """Write the recorded log's sidecar (`write_log_sidecar`) from the run's state."""
+        assert options.bus_log is not None
+        write_log_sidecar(options.bus_log, scene, self.radar, options, played,
+                          counter_start=None if checker.counter_start is None
+                          else (checker.counter_start + scene_first) % self.counter_modulus,
+                          playback=report.playback,
+                          send_lateness=playback.send_lateness(), clock=track,
+                          first_cycle=scene_first, cycles=n_cycles,
+                          origin_bus_s=self._scene_origin_s() if track.origin_s is None
+                          else track.origin_s, early_s=truths.early_s,
+                          channel=self._radar_channel(),
+                          channel_unknown=self._radar_channel() is None,
+                          channel_named=self._radar_channel_named(),
+                          host_clock_steps=self.host_clock_steps(),
+                          bus_time_shifts=self._bus_shifts)
 
     def _recorded(self, on: bool) -> contextlib.AbstractContextManager[None]:
         """Hold the bus's messages back while the block runs; the log records after it or not.

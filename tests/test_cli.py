@@ -514,6 +514,28 @@ def test_a_run_killed_part_way_leaves_no_detections_named_as_the_runs(tmp_path):
     assert len(rows) > 100 and all(r.startswith("approaching-target,") for r in rows[1:])
 
 
+def test_a_sidecar_that_cannot_be_written_keeps_the_verdict(tmp_path, capsys, monkeypatch):
+    # A disk that fills while the scene runs: the sidecar's write failed after the check, and
+    # the run ended as an error with its verdict lost.
+    import rts_scenario.pipeline as pipeline
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pipeline, "write_log_sidecar", full)
+    log, report = tmp_path / "r.blf", tmp_path / "r.json"
+    scene = str(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    code = cli.main(["run", scene, "--record", str(log), "--json", str(report)])
+    out, err = capsys.readouterr()
+    assert code == 3  # a runtime error, as the exit codes say
+    assert "PASS: approaching-target" in out
+    assert (f"error: --record {log}: {log}.rts.json: cannot write: No space left on device; "
+            f"the verdict above stands, but a check of {log} has no sidecar") in err
+    entry = json.loads(report.read_text())
+    assert entry["status"] == "pass" and entry["passed"] is True
+    assert log.exists() and not Path(f"{log}.rts.json").exists()
+
+
 def test_runs_writing_one_detections_file_at_once_each_write_their_own(tmp_path):
     from rts_scenario.atomic import Draft
 

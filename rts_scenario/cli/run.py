@@ -193,7 +193,13 @@ def _do_run(args: argparse.Namespace) -> int:
                     marked = marks_note(scene.marks, report.passed)
                     if marked is not None:
                         print(f"note: {scene.label} is marked {marked[0]}")
-                    if log:
+                    if log and result.sidecar_error is not None:
+                        # The verdict above stands; what re-checks the log lacks is said.
+                        print(f"error: --record {log}: {result.sidecar_error}; the verdict "
+                              f"above stands, but a check of {log} has no sidecar and aligns "
+                              f"it by its detections alone", file=sys.stderr)
+                        runtime_error = True
+                    elif log:
                         print(f"wrote {log} and {log}.rts.json")
                     print("timing: " + ", ".join(
                         f"{k.removesuffix('_s')} {v * 1e3:.0f} ms"
