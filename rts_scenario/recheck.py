@@ -1428,6 +1428,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     method = method or (sidecar or {}).get("method") or "exact"
     # The profile's cycle: a radar silent for half its counter's range is told by its bus time.
     restart = _counter_restart(scene, can_mapping)
+    # Without a sidecar: where the log's timing contradicts the radar's profile (fails).
+    count_reason: str | None = None
+    latency_reason: str | None = None
     index = _LogIndex.scan(log, can_mapping, scene.radar.radar_clock.cycle_s, channel=channel,
                            restart=restart)
     receiver_mapping = (can_mapping or CanMapping.builtin())
@@ -1529,6 +1532,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             raise LogError(f"--log {log}: scene {scene.name!r} has no targets, so its log's "
                            f"detections cannot tell when the scene started; give "
                            f"--time-offset-s (the log time of the scene's time 0)")
+        span_s = 0.0
         if time_offset_s is None:
             # The profile's latency, the offset from the data.
             found = estimate_offset(scene, bus_t[chosen], dets, latency)
@@ -1582,8 +1586,47 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 alignment.notes.append(
                     f"the radar's latency from the data, {latency * 1e3:.1f} ms, differs from "
                     f"its profile's {profile_clock.latency_s * 1e3:.1f} ms")
+                half_frame = 0.5 / scene.frame_rate_hz
+                if not (latency - plateau - slack - half_frame <= profile_clock.latency_s
+                        <= latency + slack + half_frame):
+                    # As live (`time_alignment`): more than half a frame off, the detections
+                    # were judged against frames the radar had not seen.
+                    latency_reason = (
+                        f"given the scene's start, the radar's latency from the data is "
+                        f"{latency * 1e3:.1f} ms (the data fit as well down to "
+                        f"{(latency - plateau) * 1e3:.1f} ms), its profile's "
+                        f"{profile_clock.latency_s * 1e3:.1f} ms: more than half a frame "
+                        f"({half_frame * 1e3:.0f} ms) apart, the radar reports at other times "
+                        f"than its profile says (or --time-offset-s is not the scene's start)")
         clock, kept = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
                                     profile_clock.cycle_s, restart)
+        if (time_offset_s is None and restart is not None and counters.size
+                and int(counters[0]) == restart):
+            # The log's first cycle carries the count the radar restarts at with the scene
+            # (its profile's): the scene's first cycle, unless the detections say otherwise
+            # beyond what they leave open.
+            after = ((clock.counter_start or 0) - restart) % modulus
+            if after:  # the count decides; beyond what the detections leave open, it fails
+                offset -= after * clock.cycle_s
+                alignment.offset_s = offset
+                clock, kept = _fitted_clock(numbers, bus_t, counters, latency, offset,
+                                            modulus, profile_clock.cycle_s, restart)
+            if after and after * clock.cycle_s <= span_s + START_TOLERANCE_S:
+                alignment.notes.append(
+                    f"the detections fit as well a scene {after} cycle(s) later, within the "
+                    f"estimate's span; the log's first cycle carries the count the radar "
+                    f"restarts at with the scene ({restart}, its profile's), so the scene "
+                    f"is taken to start there")
+            elif after:
+                count_reason = (
+                    f"the log's first cycle carries the count the radar restarts at with the "
+                    f"scene ({restart}, its profile's), but the detections fit the scene only "
+                    f"{after} cycles ({after * clock.cycle_s * 1e3:.0f} ms) later, beyond the "
+                    f"estimate's span ({span_s * 1e3:.0f} ms): the radar reported "
+                    f"{after * clock.cycle_s * 1e3:.0f} ms later than its profile's latency, or "
+                    f"missed the scene's start and saw targets after its end; a check without "
+                    f"the recording's sidecar cannot tell which (check the log with its sidecar, "
+                    f"or give --time-offset-s); the cycles are judged from the count's start")
         alignment.cycle_s = clock.cycle_s
         alignment.cycle_source = "profile" if kept else "fitted"
     alignment.cycles_in_log = len(index)
@@ -1665,12 +1708,15 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     late_reason = (late_start_reason(profile_clock, clock.start_offset_s)
                    if profile_clock.counter_start is not None else None)
     for off_profile in (track.off_profile_reason(half_window_s),
-                        track.latency_change_reason(half_window_s), late_reason):
+                        track.latency_change_reason(half_window_s), late_reason, count_reason):
         if off_profile:
             off_profile = with_mapping_hint(off_profile, receiver_mapping,
                                             bus.get("unknown_ids", 0))
             result.reasons.append(FailReason(off_profile, "radar_clock"))
             result.passed = False
+    if latency_reason:
+        result.reasons.append(FailReason(latency_reason, "time_alignment"))
+        result.passed = False
     # When the radar measured, as this check took it (the run's clock from the sidecar, or the
     # one fitted to the log's timestamps), in the live report's terms.
     lag = result.radar_clock  # the detections' lag (`_check`)

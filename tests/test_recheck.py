@@ -1,5 +1,6 @@
 """Recording the bus and re-checking logs: the live verdict again, or aligned by timestamps."""
 
+import dataclasses
 import json
 import os
 import re
@@ -133,10 +134,11 @@ OWN_CLOCK = {"cycle_s": 0.072, "start_offset_s": 0.013, "latency_s": 0.13, "jitt
 
 
 def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suffix=".blf",
-                busy=False, lead_s=0.0, clock=None):
+                busy=False, lead_s=0.0, clock=None, tail_cycles=0):
     """A log as another tool writes it: the radar on its own clock (``clock``, default
     `OWN_CLOCK`), timestamps in that tool's time base (scene time 0 at ``origin_s``), latency
-    and jitter on every cycle, no sidecar."""
+    and jitter on every cycle, no sidecar; ``tail_cycles`` more cycles after the scene (empty,
+    as ``tamper`` makes them)."""
     shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
     radar = write_radar(tmp_path, **(clock or OWN_CLOCK))
     scene = load_scenario(tmp_path / "cut_in.scenario.yaml",
@@ -155,11 +157,14 @@ def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suf
     rng = np.random.default_rng(seed)
     clock = scene.radar.radar_clock
 
+    last = []
+
     def sink(cycles):
         for cycle in cycles:
             stamp["t"] = origin_s + cycle.t_s + clock.latency_s + rng.uniform(-clock.jitter_s,
                                                                               clock.jitter_s)
             publisher.publish(tamper(cycle) if tamper else cycle)
+            last[:] = [cycle]
 
     # The radar ran before the RTS played the scene: empty cycles, counters before 4242.
     for n in range(-int(lead_s / clock.cycle_s), 0):
@@ -171,6 +176,11 @@ def foreign_log(tmp_path: Path, origin_s: float, seed: int = 0, tamper=None, suf
     radar.write(build_schedule(compute_tracks(scene), scene.rig, scene.radar,
                                frame_rate_hz=scene.frame_rate_hz))
     radar.close()
+    for j in range(1, tail_cycles + 1):  # the log goes on after the scene
+        t = last[0].t_s + j * clock.cycle_s
+        stamp["t"] = origin_s + t + clock.latency_s
+        empty = Detections.empty(last[0].cycle + j, t)
+        publisher.publish(tamper(empty) if tamper else empty)
     if busy:
         # A real bus: the logger started inside a cycle (detections before the first header)
         # and other ECUs talk in between.
@@ -263,16 +273,57 @@ def test_a_given_time_offset_tells_the_latency(tmp_path):
     # An offset too late makes the radar report before it measured: refused.
     with pytest.raises(LogError, match="before the radar measured them"):
         check_log(scene, log, time_offset_s=origin + 0.6)
-    # One too early shows as a latency far from the radar's profile.
+    # One too early shows as a latency far from the radar's profile: more than half a frame
+    # off it, it fails, as live (it passed with a note).
     early = check_log(scene, log, time_offset_s=origin - 0.6)
     assert early.alignment.latency_s == pytest.approx(0.73, abs=0.01)
     assert any("differs from its profile's 130.0 ms" in n for n in early.alignment.notes)
+    assert not early.report.passed
+    assert "time_alignment" in early.report.reason_codes
+    assert any("its profile's 130.0 ms: more than half a frame (25 ms) apart" in r
+               for r in early.report.reasons)
     # One in another time base (seconds since the logger started, for epoch timestamps) would
     # make the radar report decades late: refused, naming the log's time base.
     with pytest.raises(LogError, match=r"--time-offset-s 5\.000000: .*\(at most 5 s\); give the "
                                        r"scene's start in the log's time base \(its first cycle "
                                        r"is at 1700000055\.\d+ s\)"):
         check_log(scene, log, time_offset_s=5.0)
+
+
+class Stale:
+    """A radar reporting in each cycle what it measured ``k`` cycles before."""
+
+    def __init__(self, k):
+        self.k, self.seen = k, []
+
+    def __call__(self, cycle):
+        self.seen.append(cycle)
+        old = (self.seen[-1 - self.k] if len(self.seen) > self.k
+               else Detections.empty(cycle.cycle, cycle.t_s))
+        return dataclasses.replace(old, cycle=cycle.cycle, t_s=cycle.t_s)
+
+
+def test_a_log_without_sidecar_is_judged_from_the_count_the_radar_restarts_at(tmp_path):
+    # A radar 10 cycles late (720 ms beyond its profile's latency), its log going on for 10
+    # cycles after the scene: without the sidecar the scene's start was estimated from the
+    # detections alone, 10 cycles after the radar's count restarted, where everything fitted,
+    # and the run passed. Its first cycle carries the count the profile says the radar
+    # restarts at with the scene: the cycles are judged from there, and the contradiction fails.
+    scene, log, origin = foreign_log(tmp_path, 1.7e9 + 77.0, tamper=Stale(10), tail_cycles=10)
+    result = check_log(scene, log)
+    assert not result.report.passed
+    reasons = " ".join(result.report.reasons)
+    assert ("the log's first cycle carries the count the radar restarts at with the scene "
+            "(4242, its profile's), but the detections fit the scene only 10 cycles (720 ms) "
+            "later") in reasons
+    assert result.report.radar_clock["counter_start"] == 4242
+    assert abs(result.alignment.offset_s - origin) <= 0.02
+    assert result.report.frames["missing"] == 0
+    # An on-time radar's log with the same tail: no reason of the count's.
+    scene, log, origin = foreign_log(tmp_path, 1.7e9 + 77.0, tail_cycles=10)
+    result = check_log(scene, log)
+    assert result.report.passed, result.report.reasons
+    assert abs(result.alignment.offset_s - origin) <= 0.02
 
 
 def test_a_biased_radar_in_another_tool_s_log_fails(tmp_path):

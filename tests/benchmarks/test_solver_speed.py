@@ -206,3 +206,41 @@ def test_exact_against_paper(benchmark, case, monkeypatch):
     assert numpy_s / exact_s >= 1.0  # the kernel never loses to the numpy code
     if model is None:
         assert times[2] / exact_s >= EXACT_OVER_PAPER
+
+
+@pytest.mark.parametrize("rig_name", ["kit-table1", "wide-3x5"])
+def test_row_sums_against_element_sums(benchmark, rig_name):
+    """The AWR1843BOOST's complex responses summed by rows (`exact.RowFactors`) against the
+    same kernel summing element by element (the plan's rows taken away), one run, alternated:
+    ``pytest tests/benchmarks/test_solver_speed.py -s -k row_sums``."""
+    import dataclasses
+
+    from rts_scenario.solver.exact import RowFactors
+
+    if compiled.exact_kernel() is None:
+        pytest.skip("numba (the 'fast' extra) is not installed: nothing to compare")
+    rig, array = rs.Rig.preset(rig_name), rs.VirtualArray.preset("awr1843boost")
+    plan = rs.solver_plan(rig, array, "exact")
+    tables = plan.exact_tables
+    assert tables is not None and tables.rows.z.size > 0
+    by_elements = dataclasses.replace(plan, exact_tables=dataclasses.replace(
+        tables, rows=RowFactors.none(tables.tab_re.shape[0])))
+    rng = np.random.default_rng(0 if rig_name == "kit-table1" else 1)
+    half_az, half_el = (3.0, 6.0) if rig_name == "kit-table1" else (20.0, 8.0)
+    az, el = rng.uniform(-half_az, half_az, N), rng.uniform(-half_el, half_el, N)
+
+    def solve(chosen):
+        return lambda: rs.solve_weights(az, el, rig=rig, array=array, plan=chosen)
+
+    rows, elements = solve(plan)(), solve(by_elements)()
+    np.testing.assert_array_equal(rows.reason, elements.reason)
+    np.testing.assert_allclose(rows.weights, elements.weights, rtol=0, atol=1e-12)
+    rows_s, elements_s = _best_alternating([solve(plan), solve(by_elements)])
+    print(f"\n{rig_name} awr1843boost: row sums {N / rows_s / 1e6:.2f} M/s, element sums "
+          f"{N / elements_s / 1e6:.2f} M/s: {elements_s / rows_s:.3f}x; "
+          f"{solver_module.WORKERS} threads")
+    benchmark.group = f"solve_weights N=1e6 {rig_name} awr1843boost: rows vs elements"
+    benchmark.extra_info.update(rows_targets_per_s=N / rows_s,
+                                elements_targets_per_s=N / elements_s)
+    benchmark.pedantic(solve(plan), rounds=1, iterations=1)
+    assert elements_s / rows_s >= 1.0
