@@ -308,7 +308,8 @@ class Checker:
         self._detected_held = np.zeros(n, dtype=np.int64)
         self._false_held = 0
         self._adjacent_travel_m = 0.0
-        # Cycles at a change (received) whose two frames differ by more than a tolerance.
+        # Cycles at a change (received) whose two frames differ by more than a tolerance, or
+        # judged against the frame across (it matched better: the frames told apart).
         self._ambiguous_apart = 0
         self._matched = 0
         self._unchecked = 0
@@ -482,8 +483,7 @@ class Checker:
             tol = self.expectations.tolerances
             for q, key in QUANTITIES[:4]:
                 apart |= np.abs(getattr(o_tracks, q) - getattr(block.tracks, q)) > tol[key]
-            self._ambiguous_apart += int((block.ambiguous & ok & (both & apart).any(axis=1))
-                                         .sum())
+            apart_rows = block.ambiguous & ok & (both & apart).any(axis=1)
             undetected = both & ~(judged.assigned & judged.within)
             again = np.flatnonzero(block.ambiguous & ok & undetected.any(axis=1))
             if again.size:
@@ -502,6 +502,9 @@ class Checker:
                     judged = judged.where(use_other, other.spread(again, keep, n_frames),
                                           frame_of)
             self.frames["adjacent_frame"] += int(use_other.sum())
+            # A cycle judged across told its frames apart, whatever they differ by (a range
+            # offset makes less than a tolerance tell): it counts among those that tell.
+            self._ambiguous_apart += int((apart_rows | use_other).sum())
         self._add_held(held, invalid)
         truth, assigned, within = judged.truth, judged.assigned, judged.within
         errors, match = judged.errors, judged.match
@@ -894,13 +897,14 @@ class Checker:
         Where no target's detection rate nor the false detections would fail against the
         frames held alone, it does not; nor where the cycles at a change went both ways (a
         race: fewer than the detection rate's share of them across). Only the changes whose
-        two frames differ by more than a tolerance count there (`_ambiguous_apart`): where
-        they do not (a target standing, or slow), the frame held passes whatever the radar
-        showed. Otherwise the radar showed the frame across (nearly) every change that tells,
-        and cannot be told from one whose ranges are off by the targets' travel in a frame (a
-        delay, an RTS latency): with such an offset, the cycles at those changes that stay
-        with the frame held are out of tolerance, so a pass needs about the detection rate's
-        share of them across. The run then passes only where the scene declares it.
+        two frames differ by more than a tolerance count there, and those judged across
+        (`_ambiguous_apart`): where neither (a target standing, or slow), the frame held
+        passes whatever the radar showed. Otherwise the radar showed the frame across (nearly)
+        every change that tells, and cannot be told from one whose ranges are off by the
+        targets' travel in a frame (a delay, an RTS latency): with such an offset, the cycles
+        at those changes that stay with the frame held are out of tolerance, so a pass needs
+        about the detection rate's share of them across. The run then passes only where the
+        scene declares it.
         """
         adjacent, apart = self.frames["adjacent_frame"], self._ambiguous_apart
         exp = self.expectations
@@ -919,7 +923,8 @@ class Checker:
             return None
         return (f"the verdict rests on radar cycles judged against the frame across a change "
                 f"({adjacent} of the {apart} measured at one whose frames differ by more than "
-                f"a tolerance): against the frames held alone, "
+                f"a tolerance or matched the frame across better): against the frames held "
+                f"alone, "
                 + ", ".join(fails) + "; a radar that shows the frame across each change and "
                 f"one whose ranges are off by the targets' travel in a frame (up to "
                 f"{self._adjacent_travel_m:.2f} m here: a delay, an RTS latency) look alike "

@@ -509,6 +509,34 @@ expectations:
 """
 
 
+def test_a_range_offset_beyond_tolerance_on_a_slow_target_fails_counting_what_it_rests_on(
+        tmp_path):
+    import re
+
+    from rts_scenario.radar.clock import RadarClock
+
+    # Closing at 4 m/s: 0.2 m a frame, less than the 0.3 m tolerance, so no change's frames
+    # differ by more than it. A radar in step reading every range 0.32 m long (beyond the
+    # tolerance) matches the frame before each change: judged against it, it passed. The
+    # reason said "62 of the 0 measured at one whose frames differ by more than a
+    # tolerance": the cycles that matched the frame across better count among those.
+    path = tmp_path / "slow.scenario.yaml"
+    path.write_text(STOP_THEN_CLOSE.replace("{t_s: 0.0, speed_mps: 0.0}",
+                                            "{t_s: 0.0, speed_mps: 4.0}")
+                    .replace("{t_s: 1.4, speed_mps: 0.0}", "{t_s: 1.4, speed_mps: 4.0}")
+                    .replace("{t_s: 1.5, speed_mps: 8.0}", "{t_s: 1.5, speed_mps: 4.0}"))
+    scene = load_scenario(path)
+    travel = float(np.abs(np.diff(compute_tracks(scene).range_m[:, 0])).max())
+    assert 0.15 < travel < 0.25
+    report, _ = _radar_run(scene, RadarClock(cycle_s=0.05), window_s=0.006, lag_frames=0,
+                           range_offset_m=0.32)
+    assert not report.passed
+    [reason] = [r for r in report.reasons if "adjacent_frame" in r.codes]
+    across, counted = map(int, re.search(r"\((\d+) of the (\d+) measured", reason).groups())
+    assert 0 < across <= counted and across >= 0.9 * counted
+    assert "against the frames held alone, oncoming-car detection rate" in reason
+
+
 def test_a_race_at_the_frame_changes_that_goes_both_ways_passes(closing_scene):
     from rts_scenario.radar.clock import RadarClock
 
