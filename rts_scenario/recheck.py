@@ -70,6 +70,7 @@ from .preflight import scene_limits, schedule_batches, track_batches
 from .radar.clock import (
     CLOCK_TOLERANCE_PPM,
     DRIFT_FLOOR_S,
+    MIN_CYCLE_S,
     STAMP_NOISE_S,
     TIME_EPS_S,
     ClockTrack,
@@ -271,7 +272,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             "type": "object",
             "required": ["cycle_s", "start_offset_s", "latency_s", "jitter_s", "counter_start"],
             "properties": {
-                "cycle_s": _number(exclusiveMinimum=0),
+                "cycle_s": _number(minimum=MIN_CYCLE_S),
                 # Signed (older versions wrote it clamped at 0): within a cycle of the start.
                 "start_offset_s": _number(),
                 "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),

@@ -517,9 +517,10 @@ def test_a_range_offset_beyond_tolerance_on_a_slow_target_fails_counting_what_it
 
     # Closing at 4 m/s: 0.2 m a frame, less than the 0.3 m tolerance, so no change's frames
     # differ by more than it. A radar in step reading every range 0.32 m long (beyond the
-    # tolerance) matches the frame before each change: judged against it, it passed. The
-    # reason said "62 of the 0 measured at one whose frames differ by more than a
-    # tolerance": the cycles that matched the frame across better count among those.
+    # tolerance) matches the frame before each change: judged against it, every cycle would
+    # pass. The run failed, but its reason said "59 of the 0 measured at one whose frames
+    # differ by more than a tolerance": the cycles that matched the frame across better now
+    # count among those.
     path = tmp_path / "slow.scenario.yaml"
     path.write_text(STOP_THEN_CLOSE.replace("{t_s: 0.0, speed_mps: 0.0}",
                                             "{t_s: 0.0, speed_mps: 4.0}")

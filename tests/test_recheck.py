@@ -383,7 +383,7 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
 @pytest.mark.parametrize("edit, message", [
     (lambda d: [], r"\(the document\): \[\] is not of type 'object'"),
     (lambda d: {**d, "clock": {**d["clock"], "cycle_s": 0}},
-     r"clock\.cycle_s: 0 is less than or equal to the minimum of 0"),
+     r"clock\.cycle_s: 0 is less than the minimum of 0\.001"),
     (lambda d: {**d, "clock": {**d["clock"], "cycle_s": "x"}},
      r"clock\.cycle_s: 'x' is not of type 'number'"),
     (lambda d: {**d, "clock": {**d["clock"], "latency_s": -0.05}},
@@ -402,6 +402,9 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"clock\.cycles: 3, but cycles of 50 ms from 0 s put 400 in the scene's 20 s \(allowed: "
      r"399 to 401\)"),
     (lambda d: {**d, "clock": {**d["clock"], "cycles": 10**30}}, r"clock\.cycles: 10+, but"),
+    # A cycle of a nanosecond counted billions of cycles into the scene: a MemoryError.
+    (lambda d: {**d, "clock": {**d["clock"], "cycle_s": 1e-9}},
+     r"clock\.cycle_s: 1e-09 is less than the minimum of 0\.001"),
     # Beyond what the 16-bit counter counts: 10**30 was a runtime error.
     (lambda d: {**d, "clock": {**d["clock"], "counter_start": 10**30}},
      r"clock\.counter_start: 10+, beyond what the radar's 16-bit counter counts \(allowed: 0 "

@@ -27,6 +27,11 @@ IntArray = NDArray[np.int64]
 TIME_EPS_S = 1e-9
 
 
+# The shortest radar cycle taken (automotive radars measure every 10 to 100 ms): shorter ones
+# are typos, and would count millions of cycles into a scene.
+MIN_CYCLE_S = 1e-3
+
+
 @dataclass(frozen=True)
 class RadarClock:
     """When the radar measures and reports (see the module docstring).
@@ -54,8 +59,9 @@ class RadarClock:
     counter_start: int | None = 0
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.cycle_s) and self.cycle_s > 0):
-            raise ValueError(f"clock.cycle_s: must be > 0, got {self.cycle_s!r}")
+        if not (np.isfinite(self.cycle_s) and self.cycle_s >= MIN_CYCLE_S):
+            raise ValueError(f"clock.cycle_s: must be >= {MIN_CYCLE_S:g} (a radar cycle of a "
+                             f"millisecond or more), got {self.cycle_s!r}")
         for name in ("start_offset_s", "latency_s", "jitter_s"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
@@ -685,5 +691,5 @@ class ClockTrack:
         return clock
 
 
-__all__ = ["CLOCK_TOLERANCE_PPM", "SEGMENTS", "TIME_EPS_S", "Bend", "ClockTrack", "CycleTimeFit",
-           "LineSegments", "RadarClock", "late_start_reason", "late_start_s"]
+__all__ = ["CLOCK_TOLERANCE_PPM", "MIN_CYCLE_S", "SEGMENTS", "TIME_EPS_S", "Bend", "ClockTrack",
+           "CycleTimeFit", "LineSegments", "RadarClock", "late_start_reason", "late_start_s"]
