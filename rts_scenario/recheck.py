@@ -1503,6 +1503,13 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                               if same else "")
                            + ": another rig plays other levels and statuses; check the log "
                            "against the scene file and rig it was played with")
+        played_radar = sidecar.get("radar")
+        if played_radar is not None and played_radar != scene.radar.name:
+            # Its antennas, coverage and clock are what the run solved and judged for.
+            raise LogError(f"--log {log}: recorded with radar {played_radar!r} (its sidecar), "
+                           f"not the scene's {scene.radar.name!r}: another radar's "
+                           f"array, field of view and clock judge other detections; check the "
+                           f"log against the scene file and radar profile it was played with")
         if sidecar.get("frames", scene.n_frames) != scene.n_frames:
             raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: frames: the recording played "
                            f"{sidecar['frames']} frames, the scene {scene.file} has "

@@ -460,6 +460,19 @@ def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, cap
     assert re.search(message, err), err
 
 
+def test_a_log_recorded_with_another_radar_is_refused(recorded, tmp_path, capsys):
+    # Another radar's array, field of view and clock: it re-checked silently.
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    log = _copy(recorded, tmp_path, json.dumps({**data, "radar": "another-radar"}))
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert cli.main(["check", scene, "--log", str(log)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"error: --log {log}: recorded with radar 'another-radar' (its sidecar), not "
+                   f"the scene's '{data['radar']}': another radar's array, field of view and "
+                   f"clock judge other detections; check the log against the scene file and "
+                   f"radar profile it was played with\n")
+
+
 def test_a_sidecar_with_nan_is_bad_input(recorded, tmp_path, capsys):
     text = Path(str(recorded) + ".rts.json").read_text()
     log = _copy(recorded, tmp_path, text.replace('"jitter_s": 0.0', '"jitter_s": NaN'))
