@@ -657,6 +657,65 @@ def test_a_schedule_export_stopped_by_sigterm_leaves_only_its_draft(tmp_path, ca
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"s{suffix}.partial"]
 
 
+def _swallowing_a_stop():
+    """Send SIGTERM and swallow its interrupt, as a library's bare ``except:`` does (asammdf
+    while python-can imports it; numpy inside some of its calls)."""
+    import os
+    import signal
+
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+    except BaseException:  # noqa: BLE001 - the library's, not ours
+        pass
+
+
+def test_a_stop_a_library_swallowed_still_ends_the_run_as_stopped(capsys, monkeypatch,
+                                                                  sigterm_swallowed):
+    # The scene ran on to its end and passed: the command exited 0 after Ctrl-C or SIGTERM.
+    import rts_scenario.pipeline as pipeline
+
+    real = pipeline.run_scene
+
+    def swallowed(scene, options, **kwargs):
+        _swallowing_a_stop()
+        return real(scene, options, **kwargs)
+
+    monkeypatch.setattr(pipeline, "run_scene", swallowed)
+    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    code = cli.main(["run", str(scene)])
+    out, err = capsys.readouterr()
+    assert "PASS: approaching-target" in out  # what it printed stands
+    assert code == 1 and err.endswith("error: interrupted\n"), err
+    # The next command is not stopped by it.
+    monkeypatch.setattr(pipeline, "run_scene", real)
+    assert cli.main(["run", str(scene)]) == 0
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_a_schedule_export_whose_stop_numpy_swallowed_leaves_only_its_draft(
+        tmp_path, capsys, monkeypatch, sigterm_swallowed, suffix):
+    # numpy swallows an interrupt raised inside some of its calls: the export ran on to its
+    # end, was named whole and the command exited 0.
+    import rts_scenario.preflight as preflight
+
+    real = preflight.schedule_batches
+
+    def swallowed_after_the_first_batch(scene, method="exact", batch_frames=None):
+        for n, batch in enumerate(real(scene, method, batch_frames=40)):
+            if n == 1:
+                _swallowing_a_stop()
+            yield batch
+
+    monkeypatch.setattr(preflight, "schedule_batches", swallowed_after_the_first_batch)
+    scene = ROOT / "scenarios" / "cut_in.scenario.yaml"
+    target = tmp_path / f"s{suffix}"
+    code = cli.main(["schedule", str(scene), "--output", f"file:{target}", "--variant",
+                     "estimator=ti"])
+    _, err = capsys.readouterr()
+    assert code == 1 and err.endswith("error: interrupted\n"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"s{suffix}.partial"]
+
+
 def test_sigterm_before_a_command_runs_anything_exits_as_ctrl_c(tmp_path, capsys, monkeypatch,
                                                                  sigterm_swallowed):
     import os

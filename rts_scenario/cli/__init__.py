@@ -18,8 +18,10 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
+from types import FrameType
 from typing import Any, NoReturn, TextIO, cast
 
+from .. import interrupts
 from .._version import __version__
 from ..errors import RtsError
 from ..settings import check_environment
@@ -197,12 +199,15 @@ def _main(argv: Sequence[str] | None) -> int:
     if err_guard is not None:
         sys.stderr = cast(TextIO, err_guard)
     sigterm = _SigtermAsInterrupt()
+    interrupts.reset()
     try:
         sigterm.install()
         code = _handle(args)
     finally:
         sigterm.armed = False  # first: a plain store, no point for a signal to come in
         sigterm.uninstall()
+        swallowed = interrupts.swallowed()
+        interrupts.reset()  # the command has ended: nothing after it is stopped by its stops
         if out_guard is not None:
             out_guard.restore()
             sys.stdout = stdout
@@ -221,10 +226,11 @@ def _main(argv: Sequence[str] | None) -> int:
                 except OSError:
                     pass  # standard error itself is lost: the exit code is all that is left
         return EXIT_RUNTIME_ERROR
-    if sigterm.late:
-        # Stopped as the command ended: what it printed stands, its exit code says stopped.
+    if sigterm.late or swallowed:
+        # Stopped as the command ended, or stopped while a library it called caught the
+        # interrupt (it ran on to its end): what it printed stands, its exit code says stopped.
         print("error: interrupted", file=sys.stderr)
-        return EXIT_FAIL
+        return code if code not in (EXIT_OK, EXIT_FAIL) else EXIT_FAIL
     return code
 
 
@@ -243,9 +249,11 @@ class _SigtermAsInterrupt:
         self.armed = True
         self.late = False
         self.previous: Any = None  # the handler replaced, once installed
+        self.previous_int: Any = None  # SIGINT's, where Python's own was replaced
 
     def __call__(self, signum: int, frame: object) -> None:
         if self.armed:
+            interrupts.note()  # should a library swallow the interrupt
             raise KeyboardInterrupt
         self.late = True
 
@@ -257,11 +265,24 @@ class _SigtermAsInterrupt:
         # nearest.
         self.previous = signal.SIG_DFL if found is None else found
         signal.signal(signal.SIGTERM, self)
+        # Ctrl-C as Python's own handler takes it (`KeyboardInterrupt`), noted as well. Where
+        # something else handles SIGINT (a test, an embedding program), it is left to it.
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self.previous_int = signal.default_int_handler
+            signal.signal(signal.SIGINT, self._interrupt)
+
+    def _interrupt(self, signum: int, frame: FrameType | None) -> None:
+        if self.armed:
+            interrupts.note()
+        signal.default_int_handler(signum, frame)
 
     def uninstall(self) -> None:
         if self.previous is not None:
             signal.signal(signal.SIGTERM, self.previous)
             self.previous = None
+        if self.previous_int is not None:
+            signal.signal(signal.SIGINT, self.previous_int)
+            self.previous_int = None
 
 
 def _handle(args: argparse.Namespace) -> int:
@@ -273,6 +294,7 @@ def _handle(args: argparse.Namespace) -> int:
         print(f"error: {one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
+        interrupts.handled()
         print("error: interrupted", file=sys.stderr)
         return EXIT_FAIL
     except Exception as exc:

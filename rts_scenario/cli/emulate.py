@@ -7,6 +7,7 @@ import errno
 import time
 from typing import TYPE_CHECKING, Any
 
+from .. import interrupts
 from .calibrate import MAX_INJECT_GAIN_DB
 from .common import EXIT_FAIL, EXIT_OK, check_can_interface, check_number, one_line
 
@@ -95,6 +96,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
                 printed += 1
             time.sleep(0.01)
     except KeyboardInterrupt:
+        interrupts.handled()
         interrupted = True
     else:
         interrupted = False

@@ -6,6 +6,7 @@ import argparse
 import time
 from typing import Any
 
+from .. import interrupts
 from .common import EXIT_OK, check_number, stdout_reader_gone
 
 
@@ -49,7 +50,7 @@ def _do_listen(args: argparse.Namespace) -> int:
                 break
             time.sleep(0.01)
     except KeyboardInterrupt:
-        pass
+        interrupts.handled()  # how it is stopped
     finally:
         stats = receiver.stop(drain_s=0.0)
     print(f"{shown} frames shown; {stats.frames_applied} applied, {stats.datagrams} datagrams, "

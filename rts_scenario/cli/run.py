@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from .. import interrupts
 from ..atomic import Draft, check_draft
 from ..errors import located, one_line
 from .common import (
@@ -230,6 +231,7 @@ def _do_run(args: argparse.Namespace) -> int:
                                 "marks": list(scene.marks), **report.to_dict()})
     except KeyboardInterrupt:
         # What finished is kept and reported; nothing cut short is left looking complete.
+        interrupts.handled()
         interrupted = True
         if current is not None:
             name, path, variant, overrides, log = current

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
+from .. import interrupts
 from .common import (
     EXIT_FAIL,
     EXIT_NO_RUNS,
@@ -139,6 +140,7 @@ def _do_sweep(args: argparse.Namespace) -> int:
         entries = run_sweep(tasks, method=args.method, workers=workers,
                             scheduler=args.scheduler, on_result=on_result)
     except KeyboardInterrupt:
+        interrupts.handled()
         # Keep what finished: the runs done so far, in the sweep's order, printed and in the
         # JSON with their summary, as `run` keeps the scenes that ran.
         order = {(t.file, t.ident): t.index for t in tasks}

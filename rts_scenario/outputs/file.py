@@ -32,6 +32,7 @@ from typing import TextIO
 
 import numpy as np
 
+from .. import interrupts
 from ..errors import OutputError
 from ..schedule import Schedule
 from .base import Output
@@ -106,7 +107,10 @@ class FileOutput(Output):
             finally:
                 if self._spill is not None:
                     self._spill.close()
-            if (self._csv is not None or self._spill is not None) and not self._cut_short:
+            # A stop whose interrupt numpy swallowed (it does inside some of its calls) ran
+            # the export on to its end: stopped all the same, it stays `.partial`.
+            if ((self._csv is not None or self._spill is not None) and not self._cut_short
+                    and not interrupts.seen()):
                 os.replace(self.partial, self.path)
 
 
