@@ -236,6 +236,14 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("parametrize-group-short", TINY + "parametrize:\n  duration_s, seed: [[1.0, 2], [2.0]]\n",
      r"^{f}:16:\d+: parametrize.duration_s, seed\[1\]: needs a list of 2 values \(one per "
      r"key path: duration_s, seed\), got \[2.0\]"),
+    # A key path given twice: the second took the place of the first's value without a word.
+    ("parametrize-group-path-twice", TINY + "parametrize:\n  seed, seed: [[1, 2]]\n",
+     r"^{f}:16:3: parametrize.seed, seed: seed: a key path given twice \(in the same entry\); "
+     r"each key path takes one value per run$"),
+    ("parametrize-path-in-two-entries", TINY + "parametrize:\n  seed: [1, 2]\n"
+     "  duration_s, seed: [[1.0, 3]]\n",
+     r"^{f}:17:3: parametrize.duration_s, seed: seed: a key path given twice \(first in "
+     r"'seed'\); each key path takes one value per run$"),
     ("parametrize-group-empty-path", TINY + "parametrize:\n  'duration_s,': [[1.0, 2]]\n",
      r"^{f}:16:\d+: parametrize.duration_s,: 'duration_s,': an empty key path"),
     ("parametrize-empty-path", TINY + "parametrize:\n  '': [1.0, 2.0]\n",

@@ -306,6 +306,17 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     for key, values in block.items():
         _check_plain(doc, ("parametrize", key), values)
     axes = [_parameter_axis(doc, key, values) for key, values in block.items()]
+    # Each key path once: a second one silently took the place of the first's value.
+    first_entry: dict[str, str] = {}
+    for key in block:
+        for path in (p.strip() for p in key.split(",")):
+            if path in first_entry:
+                where = ("in the same entry" if first_entry[path] == key
+                         else f"first in {first_entry[path]!r}")
+                raise doc.error(("parametrize", key),
+                                f"{path}: a key path given twice ({where}); each key path "
+                                f"takes one value per run")
+            first_entry[path] = key
     combos: list[tuple[str, dict[str, Any]]] = []
     seen: dict[str, int] = {}
     values_seen: dict[str, int] = {}
