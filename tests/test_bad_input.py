@@ -1209,3 +1209,48 @@ def test_an_output_named_pipe_is_not_opened_by_the_early_check(tmp_path):
             os.close(os.open(fifo, os.O_RDONLY | os.O_NONBLOCK))
         probe.join(10.0)
     assert stat.S_ISFIFO(fifo.stat().st_mode)  # still the pipe, not replaced by a file
+
+
+@pytest.mark.parametrize(("argv", "linked"), [
+    (["run", "{scene}", "--json", "{tmp}/out.json"], "radar"),
+    (["run", "{scene}", "--detections", "{tmp}/out.csv"], "fragment"),
+    (["run", "{scene}", "--record", "{tmp}/out.asc"], "rig"),
+    (["schedule", "{scene}", "--output", "file:{tmp}/out.csv"], "fragment"),
+], ids=["json-radar", "detections-fragment", "record-rig", "schedule-fragment"])
+@pytest.mark.parametrize("link", ["symbolic", "hard"])
+def test_an_output_that_is_a_file_the_scene_reads_is_refused(tmp_path, capsys, argv, linked,
+                                                              link):
+    # A link (or a hard link) named as an output to the radar profile, rig or fragment the
+    # scene reads: the command wrote through it, destroying the scene's own files. The
+    # same-file check knew only the scene file itself.
+    folder = tmp_path / "scene"
+    (folder / "frag").mkdir(parents=True)
+    files = {
+        "radar": folder / "own.radar.yaml",
+        "rig": folder / "own.rig.yaml",
+        "fragment": folder / "frag" / "parked.yaml",
+    }
+    files["radar"].write_text((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
+                              .read_text())
+    files["rig"].write_text((ROOT / "rts_scenario/data/rigs/wide-3x5.rig.yaml").read_text())
+    files["fragment"].write_text("targets:\n  - name: parked\n    motion: {type: stationary, "
+                                 "position_m: [40, 2, 0.6]}\n    rcs: {rcs_dbsm: 10.0}\n")
+    scene = folder / "s.scenario.yaml"
+    scene.write_text(TINY.replace("profile: awr1843boost", "profile: own.radar.yaml")
+                     .replace("rig: wide-3x5", "rig: own.rig.yaml")
+                     .replace("name: tiny\n", "name: tiny\ninclude: [frag/parked.yaml]\n"))
+    assert call(["validate", str(scene)]) == 0
+    capsys.readouterr()
+    before = {name: path.read_bytes() for name, path in files.items()}
+    out = Path(argv[-1].split(":", 1)[-1].format(tmp=tmp_path))
+    if link == "symbolic":
+        out.symlink_to(files[linked])
+    else:
+        os.link(files[linked], out)
+    code = call([a.format(scene=scene, tmp=tmp_path) for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert one_error(err).endswith(f"the same file as the scene's {files[linked]}, which this "
+                                   f"command reads; writing it would destroy the input; give "
+                                   f"{argv[-2]} another file")
+    assert {name: path.read_bytes() for name, path in files.items()} == before

@@ -254,6 +254,20 @@ def check_distinct_paths(outputs: Paths, inputs: Paths = ()) -> None:
                                f"would overwrite the other; give each option its own file")
 
 
+def read_by_scenes(scenes: Iterable[tuple[str | Path, dict[str, Any]]]
+                   ) -> list[tuple[str, Path]]:
+    """Return ``(label, file)`` for each file the scenes read (`scene_files`), once.
+
+    For `check_distinct_paths`; ``scenes`` are ``(path, overrides)`` of every run.
+    """
+    from ..scenario import scene_files
+
+    found: dict[Path, None] = {}
+    for path, overrides in scenes:
+        found.update(dict.fromkeys(scene_files(path, overrides)))
+    return [("the scene's", path) for path in found]
+
+
 def check_rig_out(option: str, path: str) -> None:
     """Reject a rig file to write whose name does not end in ``.rig.yaml``."""
     if not path.endswith(".rig.yaml") and not Path(path).is_dir():  # a folder: say so

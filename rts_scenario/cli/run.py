@@ -28,6 +28,7 @@ from .common import (
     check_writable_file,
     check_writable_folder,
     named_file,
+    read_by_scenes,
     show_traceback,
     write_json,
     writing,
@@ -76,7 +77,10 @@ def _do_run(args: argparse.Namespace) -> int:
             [("--json", args.json), ("--detections", args.detections), ("--record", args.record),
              ("--record's sidecar", f"{args.record}.rts.json" if args.record else None),
              ("--plot", args.plot)],
-            [*(("SCENE", scene) for scene in args.scenes), ("--mapping", args.mapping)])
+            [*(("SCENE", scene) for scene in args.scenes), ("--mapping", args.mapping),
+             *read_by_scenes((path, overrides) for path, combos in expanded
+                             if not isinstance(combos, Exception)
+                             for _, overrides in combos)])
         if args.json:
             check_writable_file("--json", args.json)
         if args.detections:

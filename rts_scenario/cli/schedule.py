@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from .common import EXIT_OK, METHODS, check_distinct_paths, check_output
+from .common import EXIT_OK, METHODS, check_distinct_paths, check_output, read_by_scenes
 
 
 def _do_schedule(args: argparse.Namespace) -> int:
@@ -21,6 +21,8 @@ def _do_schedule(args: argparse.Namespace) -> int:
     if name == "file":
         check_distinct_paths([("--output", argument)], [("SCENE", args.scene)])
     _, overrides = select_variant(args.scene, args.variant)
+    if name == "file":
+        check_distinct_paths([("--output", argument)], read_by_scenes([(args.scene, overrides)]))
     scene = load_scenario(args.scene, overrides)
     emitted = total = 0
     limits = LimitCounter(scene)

@@ -14,6 +14,7 @@ import itertools
 import json
 import math
 import re
+from contextvars import ContextVar
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
@@ -309,14 +310,14 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     # Each key path once: a second one silently took the place of the first's value.
     first_entry: dict[str, str] = {}
     for key in block:
-        for path in (p.strip() for p in key.split(",")):
-            if path in first_entry:
-                where = ("in the same entry" if first_entry[path] == key
-                         else f"first in {first_entry[path]!r}")
+        for dotted in (p.strip() for p in key.split(",")):
+            if dotted in first_entry:
+                where = ("in the same entry" if first_entry[dotted] == key
+                         else f"first in {first_entry[dotted]!r}")
                 raise doc.error(("parametrize", key),
-                                f"{path}: a key path given twice ({where}); each key path "
+                                f"{dotted}: a key path given twice ({where}); each key path "
                                 f"takes one value per run")
-            first_entry[path] = key
+            first_entry[dotted] = key
     combos: list[tuple[str, dict[str, Any]]] = []
     seen: dict[str, int] = {}
     values_seen: dict[str, int] = {}
@@ -490,6 +491,29 @@ def _override(doc: Document, key: str, value: Any) -> None:
         doc.marks[path] = where
 
 
+# While `scene_files` loads a scene: the files its references resolve to, in order.
+_READING: ContextVar[list[Path] | None] = ContextVar("_READING", default=None)
+
+
+def scene_files(path: str | Path, overrides: dict[str, Any] | None = None) -> list[Path]:
+    """Return the files loading the scene reads besides itself: fragments, rig, radar profile.
+
+    Those it gets to: a scene that does not load gives the ones before its error (the error
+    is the caller's to meet when it loads the scene itself). A command checks its outputs
+    against them before it writes anything: an output that is one of them (a link, a hard
+    link) would destroy what the scene is made of.
+    """
+    found: list[Path] = []
+    token = _READING.set(found)
+    try:
+        load_scenario(path, overrides)
+    except Exception:  # noqa: BLE001 - reported where the command loads the scene
+        pass
+    finally:
+        _READING.reset(token)
+    return list(dict.fromkeys(found))
+
+
 def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:
     """Resolve a relative file reference; refuse anything outside the scene's folder tree."""
     candidate = Path(name)
@@ -502,6 +526,9 @@ def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:
         )
     if not resolved.is_file():
         raise doc.error(key, f"file not found: {name!r} (looked in {root})")
+    reading = _READING.get()
+    if reading is not None:
+        reading.append(resolved)
     return resolved
 
 
