@@ -657,6 +657,26 @@ def test_a_schedule_export_stopped_by_sigterm_leaves_only_its_draft(tmp_path, ca
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"s{suffix}.partial"]
 
 
+def test_a_run_stopped_before_its_first_scene_leaves_no_earlier_report(tmp_path, capsys,
+                                                                        monkeypatch):
+    # Ctrl-C while the scenes' variants were read: the --json of an earlier run stayed in
+    # place, its "pass" to be read as this run's.
+    import rts_scenario.scenario as scenario
+
+    def stopped(path):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(scenario, "parametrizations", stopped)
+    report = tmp_path / "r.json"
+    report.write_text(json.dumps({"scene": "approaching-target", "status": "pass"}))
+    scene = str(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    assert cli.main(["run", scene, "--json", str(report)]) == 1
+    assert capsys.readouterr().err == "error: interrupted\n"
+    entry = json.loads(report.read_text())
+    assert entry["status"] == "error" and entry["file"] == scene
+    assert entry["error"] == "not run: interrupted (Ctrl-C or SIGTERM) before it ran"
+
+
 def _swallowing_a_stop():
     """Send SIGTERM and swallow its interrupt, as a library's bare ``except:`` does (asammdf
     while python-can imports it; numpy inside some of its calls)."""

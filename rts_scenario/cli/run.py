@@ -43,6 +43,27 @@ def _error_entry(scene: str, path: str, message: str, variant: str = "",
 
 
 def _do_run(args: argparse.Namespace) -> int:
+    started = [False]
+    try:
+        return _run(args, started)
+    except KeyboardInterrupt:
+        if args.json and not started[0]:
+            # Stopped before the first scene: an earlier run's report must not stay in place
+            # to be read as this one's.
+            from ..errors import RtsError
+            from ..scenario import SCENE_SUFFIX
+
+            message = "not run: interrupted (Ctrl-C or SIGTERM) before it ran"
+            unrun = [_error_entry(Path(path).name.removesuffix(SCENE_SUFFIX), path, message)
+                     for path in args.scenes]
+            try:
+                write_json("--json", args.json, unrun[0] if len(unrun) == 1 else unrun)
+            except (RtsError, KeyboardInterrupt):
+                pass  # the exit code says it
+        raise
+
+
+def _run(args: argparse.Namespace, started: list[bool]) -> int:
     from ..canbus.mapping import CanMapping
     from ..check import DETECTION_COLUMNS
     from ..errors import BusError, RtsError, ScenarioError
@@ -152,6 +173,7 @@ def _do_run(args: argparse.Namespace) -> int:
     # variant, overrides, log).
     current: tuple[str, str, str, dict[str, Any], str | None] | None = None
     interrupted = False
+    started[0] = True  # from here on the loop keeps what finished (`--json` included)
     try:
         for path, combos in expanded:
             file_name = Path(path).name.removesuffix(SCENE_SUFFIX)
