@@ -494,6 +494,12 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
      r"^--json {tmp}/x and --detections {tmp}/x: the same file; one would overwrite the other"),
     ("run-json-is-record", ["run", "{scene}", "--record", "{tmp}/x.csv", "--json",
                             "{tmp}/x.csv"], 2, r"^--json {tmp}/x.csv and --record {tmp}/x.csv"),
+    # An option given twice: argparse kept the last, and the first report was never written.
+    ("run-json-twice", ["run", "{scene}", "--json", "{tmp}/a.json", "--json", "{tmp}/b.json"],
+     2, r"^argument --json: given twice \('{tmp}/a.json', then '{tmp}/b.json'\); give it once$"),
+    ("check-mapping-twice", ["check", "{scene}", "--log", "{tmp}/x.blf", "--mapping", "a",
+                             "--mapping", "b"], 2,
+     r"^argument --mapping: given twice \('a', then 'b'\); give it once$"),
     ("run-json-is-record-sidecar", ["run", "{scene}", "--record", "{tmp}/x.blf", "--json",
                                     "{tmp}/x.blf.rts.json"], 2,
      r"^--json {tmp}/x.blf.rts.json and --record's sidecar {tmp}/x.blf.rts.json"),
@@ -1254,3 +1260,16 @@ def test_an_output_that_is_a_file_the_scene_reads_is_refused(tmp_path, capsys, a
                                    f"command reads; writing it would destroy the input; give "
                                    f"{argv[-2]} another file")
     assert {name: path.read_bytes() for name, path in files.items()} == before
+
+
+def test_a_command_with_its_standard_output_closed_is_refused(places):
+    # Started with '>&-', Python drops what is printed: the run passed, exit 0, its verdict
+    # printed nowhere and nothing said.
+    done = subprocess.run(
+        [sys.executable, "-m", "rts_scenario", "run", places["scene"]],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=300,
+        preexec_fn=lambda: os.close(1))
+    assert done.returncode == 2
+    assert done.stderr == ("error: standard output is closed: what the command prints (its "
+                           "verdict among it) would be lost; give it a file, or /dev/null to "
+                           "discard it\n")

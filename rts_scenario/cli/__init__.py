@@ -78,7 +78,26 @@ def build_parser() -> argparse.ArgumentParser:
         for action in sub._actions:
             if action.nargs != 0 and action.type in (None, str) and action.choices is None:
                 action.type = _not_empty
+            if type(action) is argparse._StoreAction and action.option_strings:
+                action.__class__ = _StoreOnce
     return parser
+
+
+class _StoreOnce(argparse._StoreAction):
+    """An option that takes one value, refused when given twice.
+
+    argparse keeps the last: ``--json a.json --json b.json`` wrote only ``b.json``, and the
+    report the user asked for first was never written, without a word.
+    """
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        given: dict[str, Any] = namespace.__dict__.setdefault("_rts_given", {})
+        if self.dest in given:
+            parser.error(f"argument {'/'.join(self.option_strings)}: given twice "
+                         f"({given[self.dest]!r}, then {values!r}); give it once")
+        given[self.dest] = values
+        super().__call__(parser, namespace, values, option_string)
 
 
 class _NegativeNumber:
@@ -191,6 +210,14 @@ def _main(argv: Sequence[str] | None) -> int:
         check_environment()
     except RtsError as exc:
         print(f"error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if sys.stdout is None:
+        # Started with its standard output closed (``>&-``): Python drops what is printed to
+        # it without a word, the verdict with it.
+        if sys.stderr is not None:
+            print("error: standard output is closed: what the command prints (its verdict "
+                  "among it) would be lost; give it a file, or /dev/null to discard it",
+                  file=sys.stderr)
         return EXIT_BAD_INPUT
     stdout, stderr = sys.stdout, sys.stderr
     out_guard, err_guard = guarded_output(stdout), guarded_output(stderr)
