@@ -41,7 +41,7 @@ from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .playback import LOST_COUNTERS, Playback, lost_frames, rts_rig_record, unreachable_reason
 from .preflight import Preflight, angle_tolerance_deg, frames_per_batch, preflight, scene_limits
-from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock
+from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock, latency_not_late_start_reason
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
 from .recording import PlayedRecord
@@ -1064,13 +1064,19 @@ class Pipeline:
         if options.radar_channel is not None:
             bus["other_channels"] = self.receiver.other_channels
         report = checker.report(bus)
+        late_reason = track.late_start_reason()
+        late, lag = track.late_start_s(), checker.detection_lag_s(scene.radar.coupling_lag_s)
+        if late_reason and late is not None and lag is not None:
+            # Late on the bus, and the detections as early: a latency, not a late start.
+            late_reason = latency_not_late_start_reason(
+                clock, late, lag[0], lag[1], 1.0 / scene.frame_rate_hz) or late_reason
         for code, drifted in (
                 ("radar_channel", self.receiver.channel_reason()),
                 ("mapping", mapping_reason(self.receiver.mapping, self.receiver.headers,
                                            bus["unknown_ids"], report.frames)),
                 ("radar_clock", track.off_profile_reason(0.5 * window_s)),
                 ("radar_clock", track.latency_change_reason(0.5 * window_s)),
-                ("radar_clock", track.late_start_reason()),
+                ("radar_clock", late_reason),
                 ("time_alignment", checker.lag_reason(1.0 / scene.frame_rate_hz,
                                                       scene.radar.coupling_lag_s))):
             if drifted:

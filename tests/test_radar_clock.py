@@ -381,6 +381,25 @@ def test_a_radar_started_after_the_scene_is_checked_from_its_first_cycle_not_mis
     json.dumps(live.to_dict(), allow_nan=False)
 
 
+def test_a_radar_reporting_cycles_late_is_told_from_one_started_late(tmp_path):
+    # 100 ms (two cycles) later than its profile's latency: its cycles reach the bus as a
+    # radar's started two cycles late would, but its detections fit the scene earlier than
+    # the times that gives, by more than half a frame. It measured on time: the reason said
+    # it "started after the scene began".
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, counter_start=4242)
+    report = run_stamped(scene, lambda n: np.full(n.size, 0.23), tmp_path / "slower.blf")
+    assert not report.passed
+    (clock_reason,) = [r for r in report.reasons if r.codes == ("radar_clock",)]
+    assert re.match(r"radar_clock: the radar's cycles reached the bus 0\.1\d\d s later than "
+                    r"its profile's latency and start say, but its detections fit the scene "
+                    r"0\.\d+ s \(\+-0\.\d+ s\) earlier than the times that gives, more than "
+                    r"half a frame: it measured earlier than a radar started late would have, so "
+                    r"its latency is longer than its profile's \(0\.130 s\) rather than its "
+                    r"start late", clock_reason), clock_reason
+    assert "started after the scene began" not in " ".join(report.reasons)
+    assert "time_alignment" in report.reason_codes
+
+
 def test_a_radar_reporting_less_than_a_cycle_late_is_no_late_start(tmp_path):
     # 40 ms later than its profile's latency: a latency not the profile's, which the
     # detections' lag tells (`test_a_radar_whose_latency_is_not_its_profile_s_fails_...`).

@@ -421,6 +421,28 @@ def late_start_reason(profile: RadarClock, zero_s: float) -> str | None:
             f"purpose")
 
 
+def latency_not_late_start_reason(profile: RadarClock, late_s: float, lag_s: float,
+                                  lag_error_s: float, frame_s: float) -> str | None:
+    """Why a radar that seems to have started ``late_s`` late fails, where its latency may.
+
+    Its cycles reached the bus ``late_s`` later than the profile's latency and start say, as
+    a radar started late would; but a radar started late measured at the times that gives,
+    and its detections fit them. Where they fit the scene ``lag_s`` (``+- lag_error_s``)
+    earlier, by more than half a frame beyond three standard errors (`Checker.lag_reason`'s
+    bound), it measured earlier than a late start puts it: a latency longer than its profile's
+    explains both. None otherwise.
+    """
+    if not lag_s - 3.0 * lag_error_s > 0.5 * frame_s:
+        return None
+    return (f"radar_clock: the radar's cycles reached the bus {late_s:.3f} s later than its "
+            f"profile's latency and start say, but its detections fit the scene {lag_s:.3f} s "
+            f"(+-{3.0 * lag_error_s:.3f} s) earlier than the times that gives, more than half "
+            f"a frame: it measured earlier than a radar started late would have, so its "
+            f"latency is longer than its profile's ({profile.latency_s:.3f} s) rather than "
+            f"its start late; set clock.latency_s in its profile to the radar's (the cycles "
+            f"before the one taken as its first were not counted)")
+
+
 class ClockTrack:
     """When a radar measures, as a run learns it from the times its cycles reached the bus.
 
@@ -692,4 +714,5 @@ class ClockTrack:
 
 
 __all__ = ["CLOCK_TOLERANCE_PPM", "MIN_CYCLE_S", "SEGMENTS", "TIME_EPS_S", "Bend", "ClockTrack",
-           "CycleTimeFit", "LineSegments", "RadarClock", "late_start_reason", "late_start_s"]
+           "CycleTimeFit", "LineSegments", "RadarClock", "late_start_reason", "late_start_s",
+           "latency_not_late_start_reason"]
