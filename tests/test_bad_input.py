@@ -1273,3 +1273,13 @@ def test_a_command_with_its_standard_output_closed_is_refused(places):
     assert done.stderr == ("error: standard output is closed: what the command prints (its "
                            "verdict among it) would be lost; give it a file, or /dev/null to "
                            "discard it\n")
+
+
+def test_a_folder_named_as_a_fragment_says_so(tmp_path, capsys):
+    # It said "file not found: 'sub'" of a folder that is there.
+    (tmp_path / "sub").mkdir()
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(TINY.replace("name: tiny\n", "name: tiny\ninclude: [sub]\n"))
+    assert call(["validate", str(path)]) == 2
+    assert re.fullmatch(rf"{re.escape(str(path))}:3:\d+: include\[0\]: 'sub' is a folder; "
+                        rf"name a file in it", one_error(capsys.readouterr().err))

@@ -435,7 +435,10 @@ def test_cli_calibrate_tolerance_must_be_positive(capsys):
 
     assert CLI_DEFAULT == MAX_EXCESS_ERROR_DEG
     assert cli.main(["calibrate", "kit-table1", "--max-error-deg", "0"]) == 2
-    assert "--max-error-deg: must be > 0" in capsys.readouterr().err
+    assert "--max-error-deg: must be a finite number > 0, got 0.0" in capsys.readouterr().err
+    # NaN named the bound 0 allows (">= 0"), which 0 itself then failed.
+    assert cli.main(["calibrate", "kit-table1", "--max-error-deg", "nan"]) == 2
+    assert "--max-error-deg: must be a finite number > 0, got nan" in capsys.readouterr().err
 
 
 OBJECT_LIST = Path(__file__).resolve().parents[1] / "scenarios" / "can" / "object_list.mapping.yaml"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from typing import Any
 
@@ -53,9 +54,9 @@ def _do_calibrate(args: argparse.Namespace) -> int:
                        f"with --output {args.output} the RTS's channels carry their own (to "
                        f"rehearse, give the errors to `rts-scenario emulate --inject-phase-deg "
                        f"... --inject-gain-db ...`)")
-    check_number("--max-error-deg", args.max_error_deg, low=0.0)
-    if args.max_error_deg == 0.0:
-        raise RtsError("--max-error-deg: must be > 0, got 0.0")
+    if not (math.isfinite(args.max_error_deg) and args.max_error_deg > 0.0):
+        raise RtsError(f"--max-error-deg: must be a finite number > 0, got "
+                       f"{args.max_error_deg}")
     rig, radar = bench_of(args, "calibrate", MEASURED)
     check_bench_paths(args, [("--json", args.json), ("--write", args.write),
                              ("--plot", args.plot)])

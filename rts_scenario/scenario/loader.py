@@ -524,6 +524,8 @@ def _inside(doc: Document, key: KeyPath, root: Path, name: str) -> Path:
         raise doc.error(
             key, f"{name!r} leaves the scene's folder tree ({root}); files must stay inside it"
         )
+    if resolved.is_dir():
+        raise doc.error(key, f"{name!r} is a folder; name a file in it")
     if not resolved.is_file():
         raise doc.error(key, f"file not found: {name!r} (looked in {root})")
     reading = _READING.get()
