@@ -1611,30 +1611,38 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if (time_offset_s is None and restart is not None and counters.size
                 and int(counters[0]) == restart):
             # The log's first cycle carries the count the radar restarts at with the scene
-            # (its profile's): the scene's first cycle, unless the detections say otherwise
-            # beyond what they leave open.
+            # (its profile's): the scene's first cycle, measured at the profile's start, unless
+            # the detections say otherwise beyond what they leave open. Under the estimate it
+            # was measured at `first_s` (its cycle `after` counts from the scene's first).
             after = ((clock.counter_start or 0) - restart) % modulus
-            if after:  # the count decides; beyond what the detections leave open, it fails
-                offset -= after * clock.cycle_s
+            first_s = clock.start_offset_s - after * clock.cycle_s
+            later_s = profile_clock.start_offset_s - first_s  # the estimate's scene, later
+            if later_s >= -span_s - START_TOLERANCE_S:  # else a radar started late
+                offset -= later_s  # the count decides
                 alignment.offset_s = offset
                 clock, kept = _fitted_clock(numbers, bus_t, counters, latency, offset,
                                             modulus, profile_clock.cycle_s, restart)
-            if after and after * clock.cycle_s <= span_s + START_TOLERANCE_S:
-                alignment.notes.append(
-                    f"the detections fit as well a scene {after} cycle(s) later, within the "
-                    f"estimate's span; the log's first cycle carries the count the radar "
-                    f"restarts at with the scene ({restart}, its profile's), so the scene "
-                    f"is taken to start there")
-            elif after:
+            later_cycles = later_s / clock.cycle_s
+            # Beyond the estimate's span and half a cycle (the span is no hard bound: noise
+            # moves the estimate by a millisecond or two beyond it); less is the estimate's
+            # noise, and the detections' lag (`time_alignment`) judges what the count leaves.
+            if later_s > span_s + 0.5 * clock.cycle_s:
                 count_reason = (
                     f"the log's first cycle carries the count the radar restarts at with the "
                     f"scene ({restart}, its profile's), but the detections fit the scene only "
-                    f"{after} cycles ({after * clock.cycle_s * 1e3:.0f} ms) later, beyond the "
-                    f"estimate's span ({span_s * 1e3:.0f} ms): the radar reported "
-                    f"{after * clock.cycle_s * 1e3:.0f} ms later than its profile's latency, or "
-                    f"missed the scene's start and saw targets after its end; a check without "
-                    f"the recording's sidecar cannot tell which (check the log with its sidecar, "
+                    f"{later_cycles:.0f} cycles ({later_s * 1e3:.0f} ms) later, beyond the "
+                    f"estimate's span ({span_s * 1e3:.0f} ms) and half a cycle: the radar "
+                    f"reported "
+                    f"{later_s * 1e3:.0f} ms later than its profile's latency, or missed the "
+                    f"scene's start and saw targets after its end; a check without the "
+                    f"recording's sidecar cannot tell which (check the log with its sidecar, "
                     f"or give --time-offset-s); the cycles are judged from the count's start")
+            elif later_cycles >= 0.5:
+                alignment.notes.append(
+                    f"the detections fit as well a scene {later_s * 1e3:.0f} ms later, within "
+                    f"the estimate's span; the log's first cycle carries the count the radar "
+                    f"restarts at with the scene ({restart}, its profile's), so the scene is "
+                    f"taken to start there")
         alignment.cycle_s = clock.cycle_s
         alignment.cycle_source = "profile" if kept else "fitted"
     alignment.cycles_in_log = len(index)

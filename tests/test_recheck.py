@@ -313,9 +313,9 @@ def test_a_log_without_sidecar_is_judged_from_the_count_the_radar_restarts_at(tm
     result = check_log(scene, log)
     assert not result.report.passed
     reasons = " ".join(result.report.reasons)
-    assert ("the log's first cycle carries the count the radar restarts at with the scene "
-            "(4242, its profile's), but the detections fit the scene only 10 cycles (720 ms) "
-            "later") in reasons
+    assert re.search(r"the log's first cycle carries the count the radar restarts at with the "
+                     r"scene \(4242, its profile's\), but the detections fit the scene only 10 "
+                     r"cycles \(7[12]\d ms\) later, beyond the estimate's span", reasons), reasons
     assert result.report.radar_clock["counter_start"] == 4242
     assert abs(result.alignment.offset_s - origin) <= 0.02
     assert result.report.frames["missing"] == 0
@@ -714,12 +714,12 @@ def test_a_radar_in_step_with_the_frames_is_aligned_to_the_frame_it_saw(tmp_path
     result = check_log(scene, log)
     a = result.alignment
     assert a.source == "estimated"
-    # Measured start_offset_s into each frame, reported 30 +- jitter ms later: the latest
-    # offset that fits is origin + start_offset_s, less the earliest jitter.
-    assert origin + start_offset_s - jitter_s - 2e-4 <= a.offset_s <= origin + start_offset_s
+    # Measured start_offset_s into each frame, reported 30 +- jitter ms later: every offset
+    # up to origin + start_offset_s fits (the plateau). The log's first cycle carries the
+    # count the profile restarts at with the scene (7): measured at the profile's
+    # start_offset_s, it puts the scene's start at the origin, within the jitter.
+    assert abs(a.offset_s - origin) <= jitter_s + 2e-4
     assert a.plateau_s == pytest.approx(0.05 - 2 * jitter_s, abs=0.002)
-    assert (a.offset_s - a.plateau_s - 1e-3 <= origin + start_offset_s
-            <= a.offset_s + jitter_s + 2e-4)
     assert a.uncertainty_s is not None and a.uncertainty_s >= a.plateau_s
     assert abs(a.offset_s - origin) <= a.uncertainty_s
     assert "+- 0.0 ms" not in a.describe()
