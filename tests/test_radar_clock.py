@@ -1606,3 +1606,21 @@ def test_a_range_offset_common_to_all_targets_is_not_taken_for_a_lag(tmp_path, o
     lag = report.radar_clock["detection_lag_s"]
     assert abs(lag) < 3.0 * report.radar_clock["detection_lag_error_s"] + 1e-3, lag
     assert report.passed, report.reasons
+
+
+def test_a_profile_s_cycle_below_a_millisecond_is_bad_input_not_a_log_s(tmp_path):
+    # A profile stating a 0.1 ms cycle counted millions of cycles into a scene; a log whose
+    # stamps fit a cycle that short is the log's (it fails its check as a clock off its
+    # profile), not a crash of a floor meant for profiles.
+    from rts_scenario.errors import RtsError
+    from rts_scenario.radar import RadarProfile
+
+    data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
+                          .read_text())
+    data["clock"] = {"cycle_s": 0.0001}
+    path = tmp_path / "fast.radar.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(RtsError, match=r"clock.cycle_s: .*0\.0001 is less than the minimum of "
+                                       r"0\.001|clock\.cycle_s: must be >= 0\.001"):
+        RadarProfile.from_file(path)
+    assert RadarClock(cycle_s=0.0007).cycle_s == 0.0007  # a fitted cycle is taken

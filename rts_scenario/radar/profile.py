@@ -24,7 +24,7 @@ from ..file_kinds import load_kind
 from ..located_yaml import Document, load_yaml, validate
 from ..propagation import C0_MPS
 from ..responses import FrontEndModel
-from .clock import RadarClock
+from .clock import MIN_CYCLE_S, RadarClock
 
 if TYPE_CHECKING:
     from ..rig import Rig
@@ -422,7 +422,7 @@ PROFILE_SCHEMA: dict[str, Any] = {
             "type": "object",
             "additionalProperties": False,
             "properties": {
-                "cycle_s": _POSITIVE,
+                "cycle_s": {"type": "number", "minimum": MIN_CYCLE_S},
                 "start_offset_s": {"type": "number", "minimum": 0},
                 "latency_s": {"type": "number", "minimum": 0},
                 "jitter_s": {"type": "number", "minimum": 0},
