@@ -101,9 +101,11 @@ class Draft:
         os.replace(self.path if self._draft is None else self._draft, name)
         if name == self._target:
             return self.path
-        # As the caller named it, unless ``path`` is a link (the draft is beside the file).
+        # As the caller named it, unless ``path`` is (or runs through) a link: the draft was
+        # beside the file the link names, and so is what it became.
         given = self.path.with_name(self.path.name + ".partial")
-        return given if Path(os.path.realpath(self.path)) == self._target else name
+        same = os.path.abspath(self.path) == str(self._target)
+        return given if same else name
 
 
 def check_draft(path: str | Path) -> None:

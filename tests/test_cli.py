@@ -556,6 +556,23 @@ def test_runs_writing_one_detections_file_at_once_each_write_their_own(tmp_path)
     assert path.stat().st_mode & 0o777 == 0o640  # the file's permissions, not the draft's
 
 
+def test_detections_through_a_link_cut_short_name_the_file_they_became(tmp_path):
+    from rts_scenario.atomic import Draft
+
+    (tmp_path / "real").mkdir()
+    (tmp_path / "real" / "d.csv").write_text("previous\n")
+    link = tmp_path / "link.csv"
+    link.symlink_to(tmp_path / "real" / "d.csv")
+    draft = Draft(link)
+    draft.file.write("rows\n")
+    # It named link.csv.partial, which does not exist: the draft was beside the real file.
+    assert draft.cut_short() == tmp_path / "real" / "d.csv.partial"
+    assert (tmp_path / "real" / "d.csv.partial").read_text() == "rows\n"
+    draft = Draft(tmp_path / "plain.csv")
+    draft.file.write("rows\n")
+    assert draft.cut_short() == tmp_path / "plain.csv.partial"
+
+
 def test_detections_to_a_device_are_written_into_it(tmp_path):
     from rts_scenario.atomic import Draft
 

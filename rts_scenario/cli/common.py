@@ -234,6 +234,11 @@ def _same_file(a: str | Path, b: str | Path) -> bool:
 Paths = Iterable[tuple[str, str | Path | None]]
 
 
+def same_as_any(path: str | Path, others: Iterable[str | Path | None]) -> bool:
+    """Whether ``path`` names the same file as one of ``others`` (links followed)."""
+    return any(other is not None and _same_file(path, other) for other in others)
+
+
 def check_distinct_paths(outputs: Paths, inputs: Paths = ()) -> None:
     """Refuse, before anything is written, an output that would overwrite an input or output.
 
@@ -263,9 +268,22 @@ def read_by_scenes(scenes: Iterable[tuple[str | Path, dict[str, Any]]]
     from ..scenario import scene_files
 
     found: dict[Path, None] = {}
+    loaded: set[tuple[str, str]] = set()
     for path, overrides in scenes:
+        # Only what a variant sets under these keys changes the files it reads: one load per
+        # scene and distinct such values, not one per variant (thousands in a sweep-like run).
+        refs = {k: v for k, v in overrides.items() if k.split(".")[0] in _FILE_KEYS}
+        key = (os.path.realpath(path), repr(sorted(refs.items())))
+        if key in loaded:
+            continue
+        loaded.add(key)
+        # The variant's whole values: the file as written may hold placeholders for them.
         found.update(dict.fromkeys(scene_files(path, overrides)))
     return [("the scene's", path) for path in found]
+
+
+# The scene keys whose values name files the scene reads (its rig, radar profile, fragments).
+_FILE_KEYS = ("rig", "radar", "include")
 
 
 def check_rig_out(option: str, path: str) -> None:

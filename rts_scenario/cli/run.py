@@ -29,6 +29,7 @@ from .common import (
     check_writable_folder,
     named_file,
     read_by_scenes,
+    same_as_any,
     show_traceback,
     write_json,
     writing,
@@ -42,12 +43,17 @@ def _error_entry(scene: str, path: str, message: str, variant: str = "",
             "variant": variant, "parameters": dict(parameters or {})}
 
 
+def _inputs(args: argparse.Namespace) -> list[str | None]:
+    """Return the files the command line names for reading (not those the scenes read)."""
+    return [*args.scenes, args.mapping]
+
+
 def _do_run(args: argparse.Namespace) -> int:
     started = [False]
     try:
         return _run(args, started)
     except KeyboardInterrupt:
-        if args.json and not started[0]:
+        if args.json and not started[0] and not same_as_any(args.json, _inputs(args)):
             # Stopped before the first scene: an earlier run's report must not stay in place
             # to be read as this one's.
             from ..errors import RtsError
@@ -98,10 +104,16 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
             [("--json", args.json), ("--detections", args.detections), ("--record", args.record),
              ("--record's sidecar", f"{args.record}.rts.json" if args.record else None),
              ("--plot", args.plot)],
-            [*(("SCENE", scene) for scene in args.scenes), ("--mapping", args.mapping),
-             *read_by_scenes((path, overrides) for path, combos in expanded
-                             if not isinstance(combos, Exception)
-                             for _, overrides in combos)])
+            [*(("SCENE", scene) for scene in args.scenes), ("--mapping", args.mapping)])
+        if args.json or args.detections or args.record or args.plot:
+            check_distinct_paths(
+                [("--json", args.json), ("--detections", args.detections),
+                 ("--record", args.record),
+                 ("--record's sidecar", f"{args.record}.rts.json" if args.record else None),
+                 ("--plot", args.plot)],
+                read_by_scenes((path, overrides) for path, combos in expanded
+                               if not isinstance(combos, Exception)
+                               for _, overrides in combos))
         if args.json:
             check_writable_file("--json", args.json)
         if args.detections:
@@ -140,7 +152,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         check_can_opens("--can-interface", args.can_interface, args.can_channel, "--can-channel",
                         fd=args.can_fd)
     except RtsError as exc:
-        if args.json and not str(exc).startswith("--json"):
+        # Not over a file the command reads: the check that refuses that may not have run.
+        if (args.json and not str(exc).startswith("--json")
+                and not same_as_any(args.json, _inputs(args))):
             message = f"not run: {exc}"
             unrun = [_error_entry(Path(path).name.removesuffix(SCENE_SUFFIX), path, message)
                      for path in args.scenes]
