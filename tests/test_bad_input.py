@@ -1222,7 +1222,8 @@ def test_an_output_named_pipe_is_not_opened_by_the_early_check(tmp_path):
     (["run", "{scene}", "--detections", "{tmp}/out.csv"], "fragment"),
     (["run", "{scene}", "--record", "{tmp}/out.asc"], "rig"),
     (["schedule", "{scene}", "--output", "file:{tmp}/out.csv"], "fragment"),
-], ids=["json-radar", "detections-fragment", "record-rig", "schedule-fragment"])
+    (["sweep", "{scene}", "--json", "{tmp}/out.json"], "rig"),
+], ids=["json-radar", "detections-fragment", "record-rig", "schedule-fragment", "sweep-rig"])
 @pytest.mark.parametrize("link", ["symbolic", "hard"])
 def test_an_output_that_is_a_file_the_scene_reads_is_refused(tmp_path, capsys, argv, linked,
                                                               link):

@@ -16,6 +16,7 @@ from .common import (
     METHODS,
     check_distinct_paths,
     check_writable_file,
+    read_by_scenes,
     write_json,
     writing,
 )
@@ -61,6 +62,19 @@ class SweepProgress:
         self.stream.flush()
 
 
+def _variants(scene_files: list[Path]) -> list[tuple[Path, dict[str, Any]]]:
+    """Each scene file with the values of each of its variants (none for one that errs)."""
+    from ..scenario import parametrizations
+
+    found: list[tuple[Path, dict[str, Any]]] = []
+    for path in scene_files:
+        try:
+            found += [(path, overrides) for _, overrides in parametrizations(path)]
+        except Exception:  # noqa: BLE001 - the sweep reports it as that run's error
+            continue
+    return found
+
+
 def _do_sweep(args: argparse.Namespace) -> int:
     from fnmatch import fnmatch
 
@@ -98,6 +112,10 @@ def _do_sweep(args: argparse.Namespace) -> int:
                         if given.is_dir() else [given])
     check_distinct_paths([("--json", args.json), ("--plot", args.plot)],
                          [("SCENE", scene) for scene in scene_files])
+    if args.json or args.plot:
+        # Nor a file the scenes read (their rig, radar profile, fragments), in any variant.
+        check_distinct_paths([("--json", args.json), ("--plot", args.plot)],
+                             read_by_scenes(_variants(scene_files)))
     if args.json:
         check_writable_file("--json", args.json)
     if args.plot:
