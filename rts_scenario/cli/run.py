@@ -53,20 +53,29 @@ def _do_run(args: argparse.Namespace) -> int:
     try:
         return _run(args, started)
     except KeyboardInterrupt:
-        if args.json and not started[0] and not same_as_any(args.json, _inputs(args)):
-            # Stopped before the first scene: an earlier run's report must not stay in place
-            # to be read as this one's.
+        if not started[0]:
             from ..errors import RtsError
-            from ..scenario import SCENE_SUFFIX
 
-            message = "not run: interrupted (Ctrl-C or SIGTERM) before it ran"
-            unrun = [_error_entry(Path(path).name.removesuffix(SCENE_SUFFIX), path, message)
-                     for path in args.scenes]
             try:
-                write_json("--json", args.json, unrun[0] if len(unrun) == 1 else unrun)
+                _write_not_run(args, "not run: interrupted (Ctrl-C or SIGTERM) before it ran")
             except (RtsError, KeyboardInterrupt):
                 pass  # the exit code says it
         raise
+
+
+def _write_not_run(args: argparse.Namespace, message: str) -> None:
+    """Write ``--json`` with every scene an error entry: stopped before any scene ran.
+
+    An earlier run's report must not stay in place to be read as this one's. Never over a
+    file the command reads: the check that refuses that may not have run yet.
+    """
+    from ..scenario import SCENE_SUFFIX
+
+    if not args.json or same_as_any(args.json, _inputs(args)):
+        return
+    unrun = [_error_entry(Path(path).name.removesuffix(SCENE_SUFFIX), path, message)
+             for path in args.scenes]
+    write_json("--json", args.json, unrun[0] if len(unrun) == 1 else unrun)
 
 
 def _run(args: argparse.Namespace, started: list[bool]) -> int:
@@ -152,13 +161,8 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         check_can_opens("--can-interface", args.can_interface, args.can_channel, "--can-channel",
                         fd=args.can_fd)
     except RtsError as exc:
-        # Not over a file the command reads: the check that refuses that may not have run.
-        if (args.json and not str(exc).startswith("--json")
-                and not same_as_any(args.json, _inputs(args))):
-            message = f"not run: {exc}"
-            unrun = [_error_entry(Path(path).name.removesuffix(SCENE_SUFFIX), path, message)
-                     for path in args.scenes]
-            write_json("--json", args.json, unrun[0] if len(unrun) == 1 else unrun)
+        if not str(exc).startswith("--json"):
+            _write_not_run(args, f"not run: {exc}")
         raise
     entries: list[dict[str, Any]] = []
     stems: set[str] = set()
