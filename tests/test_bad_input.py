@@ -1284,3 +1284,21 @@ def test_a_folder_named_as_a_fragment_says_so(tmp_path, capsys):
     assert call(["validate", str(path)]) == 2
     assert re.fullmatch(rf"{re.escape(str(path))}:3:\d+: include\[0\]: 'sub' is a folder; "
                         rf"name a file in it", one_error(capsys.readouterr().err))
+
+
+@pytest.mark.parametrize("data", [bytes(range(256)) * 4, bytes(range(1, 256)) * 4],
+                         ids=["with-nul", "without-nul"])
+def test_a_binary_dbc_is_one_readable_error_line(tmp_path, data):
+    # cantools' error quoted the file's first bytes: raw binary on the terminal.
+    from rts_scenario.canbus.mapping import CanMapping
+    from rts_scenario.errors import RtsError
+
+    mapping = (ROOT / "scenarios" / "can" / "object_list.mapping.yaml").read_text()
+    (tmp_path / "object_list.dbc").write_bytes(data)
+    path = tmp_path / "object_list.mapping.yaml"
+    path.write_text(mapping)
+    with pytest.raises(RtsError) as caught:
+        CanMapping.from_file(path)
+    message = str(caught.value)
+    assert "cannot load DBC" in message and message.isprintable(), message
+    assert len(message) < 600

@@ -164,6 +164,12 @@ def _quiet_cantools() -> Iterator[None]:
         logger.setLevel(before)
 
 
+def _printable(text: str, limit: int = 300) -> str:
+    """``text`` with what a terminal cannot show as text escaped, and cut at ``limit``."""
+    shown = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return shown if len(shown) <= limit else shown[:limit] + "..."
+
+
 def _load_dbc(load: Callable[[], object]) -> cantools.database.can.Database:
     with _quiet_cantools():
         return _can_db(load())
@@ -377,12 +383,18 @@ class CanMapping:
         dbc_path = path.parent / doc.data["dbc"]
         try:
             with open(dbc_path, "rb") as file:
-                # DBC tools write cp1252 (cantools' default); a byte order mark says UTF-8.
-                encoding = ("utf-8-sig" if file.read(3) == b"\xef\xbb\xbf" else None)
+                head = file.read(4096)
+            # DBC tools write cp1252 (cantools' default); a byte order mark says UTF-8.
+            encoding = "utf-8-sig" if head.startswith(b"\xef\xbb\xbf") else None
+            if b"\x00" in head:
+                # cantools' error would quote the bytes, garbage on the terminal.
+                raise doc.error(("dbc",), f"cannot load DBC {dbc_path}: binary data (a NUL "
+                                          f"byte in its first {len(head)} bytes), not a DBC's text")
             db = _load_dbc(lambda: cantools.database.load_file(dbc_path, database_format="dbc",
                                                                encoding=encoding))
         except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
-            raise doc.error(("dbc",), f"cannot load DBC {dbc_path}: {exc}") from None
+            raise doc.error(("dbc",), f"cannot load DBC {dbc_path}: "
+                                      f"{_printable(str(exc))}") from None
         return cls._build(doc, db)
 
     @classmethod
