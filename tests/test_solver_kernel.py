@@ -230,7 +230,11 @@ def test_row_sums_are_the_responses_summed_element_by_element(case):
     """`_row_sums` against ``f_q = sum_v exp(j k (y_v (u_q - u) + z_v (s_q - s)))`` and its
     derivatives in u and s (times ``-j k y_v`` and ``-j k z_v``), rotated by ``exp(-j phi)``,
     summed element by element here from the array's positions and the FEs' directions."""
+    from rts_scenario.solver import exact
+
     kernel = kernel_or_skip()
+    # The tables are shaped by exact's constants, the kernel's loops unrolled by its own.
+    assert (exact.ROWS, exact.OFFSETS) == (kernel.ROWS, kernel.OFFSETS)
     rig, array, model = CASES[case]()
     tables = solver_plan(rig, array, "exact", model).exact_tables
     rows, k = tables.rows, array.wavenumber_rad_per_m
