@@ -588,7 +588,7 @@ class RowFactors:
             rows_y.append(mid)
             centres.append(float(np.sum(np.abs(offsets) <= tol)))
             halves.append(offsets[offsets > tol])
-        every = np.sort(np.concatenate(halves)) if halves else np.zeros(0)
+        every = np.sort(np.concatenate(halves))  # a row each: the array has elements
         distinct = every[np.concatenate([[True], np.diff(every) > tol])] if every.size else every
         if len(rows_z) != ROWS or distinct.size > OFFSETS:
             return cls.none(len(responses))  # the kernel's loops are unrolled for this size
@@ -607,7 +607,7 @@ class RowFactors:
             u_q, s_q = resp.source_u, resp.source_s
             # The factors hold only for plane-wave FEs: compare with the table's f rows.
             p = np.exp(1j * k * (np.outer(u_q, ry) + np.outer(s_q, rz)))  # (4, nr)
-            r_of = np.searchsorted(rz, z) if rz.size else np.zeros(0, dtype=np.int64)
+            r_of = np.searchsorted(rz, z)
             wave = p[:, r_of] * np.exp(1j * k * np.outer(u_q, y - ry[r_of]))
             if not np.allclose(wave, resp.table[0], rtol=0, atol=1e-13 * y.size):
                 return cls.none(len(responses))
