@@ -42,6 +42,11 @@ from numba import njit
 # division by a possible zero is guarded by a select, as in the numpy code. "contract" allows
 # fused multiply-adds (one rounding instead of two; no reordering of sums).
 _jit = njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
+# Inlined by numba: helpers of the loops over a block (LLVM alone does not inline some, and a
+# call keeps a loop from vectorizing), and the block's stages (a call counts the references to
+# its arrays atomically, on entry and exit: per block, 1-3 % of the kernel).
+_inline = njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"},
+               inline="always")
 
 # Indices into the ``tol`` argument.
 _NEGATIVE, _RANK, _GAIN, _RESIDUAL, _PHASE, _ITERATIONS, _INFEASIBLE, _FAR = range(8)
@@ -161,17 +166,18 @@ def _catmull_rom(t):  # pragma: no cover
             0.5 * (-3 * t3 + 4 * t2 + t), 0.5 * (t3 - t2))
 
 
-@_jit
-def _phase_block(us, ss, u0, s0, du, ds, padded, out, patch, nb):  # pragma: no cover
+@_inline
+def _phase_block(us, ss, u0, s0, du, ds, flat, stride, out, patch, nb):  # pragma: no cover
     """Bicubic phase map (`exact.PhaseMap.__call__`) of targets ``b < nb`` into ``out``.
 
-    ``padded``: the map's table with its edge nodes repeated once around it, so a target's
-    4 x 4 nodes are one patch at fixed offsets, with no clamping. The cells and weights are
+    ``flat``: the map's table with its edge nodes repeated once around it (``stride`` nodes a
+    side), flattened, so a target's 4 x 4 nodes are one patch at fixed offsets, with no
+    clamping. Flattened by the caller once per quad: a reshape here (per block) cost a
+    reference count and a call. The cells and weights are
     one vector loop over the block (into ``patch``, shape ``(9, B)``), the table reads one
-    scalar loop (they do not vectorize here). Same sums in the same order as the map's
-    per-target evaluation.
+    scalar loop (they do not vectorize here), with fused multiply-adds and unsigned offsets (no
+    checks for negative indices); equal to the map's per-target sums to rounding.
     """
-    stride = padded.shape[1]
     last = float(stride - 3)  # the last node of the map itself
     for b in range(nb):
         x = (us[b] - u0) / du
@@ -187,17 +193,16 @@ def _phase_block(us, ss, u0, s0, du, ds, padded, out, patch, nb):  # pragma: no 
         for a in range(4):
             patch[1 + a, b] = wx[a]
             patch[5 + a, b] = wy[a]
-    flat = padded.reshape(-1)
+    one, two, three, step = np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(stride)
     for b in range(nb):
         row = np.uint64(patch[0, b])
+        w5, w6, w7, w8 = patch[5, b], patch[6, b], patch[7, b], patch[8, b]
         total = 0.0
         for a in range(4):
-            inner = 0.0 + patch[5, b] * flat[row]
-            inner += patch[6, b] * flat[row + 1]
-            inner += patch[7, b] * flat[row + 2]
-            inner += patch[8, b] * flat[row + 3]
+            inner = w5 * flat[row] + w6 * flat[row + one] + w7 * flat[row + two] \
+                + w8 * flat[row + three]
             total += patch[1 + a, b] * inner
-            row += np.uint64(stride)
+            row += step
         out[b] = total
 
 
@@ -285,7 +290,7 @@ def _boundary_rays(w, e1, e2, gain_floor2, negative_tol):  # pragma: no cover
 
 # Inlined by numba: LLVM alone does not inline it, and the call would keep the loop over a
 # block from being vectorized.
-@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
+@_inline
 def _project(f, r1, r2, rank_floor, gain_tol, negative_tol):  # pragma: no cover
     """Projection of ``f`` onto the null space of ``r1, r2``: ``(w, e1, e2, gain_floor2, ok)``.
 
@@ -325,7 +330,7 @@ def _max_gain_weights(f, r1, r2, row_scale, tol):  # pragma: no cover
     return _finish(w, ok, r1, r2, rank_floor, tol[_RESIDUAL])
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
+@_inline
 def _first_ray(w, e1, e2, gain_floor2, negative_tol):  # pragma: no cover
     """`exact._boundary_ray` without branches: ``(candidate, whether it is the solution)``.
 
@@ -481,9 +486,6 @@ def _locate(az, el, column_az, row_el, lines, boxes, slack, quad):  # pragma: no
 _LOCATE_CHUNK = 256
 
 
-# Inlined by numba (helpers of the response sums' loops over a block).
-_inline = njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"},
-               inline="always")
 
 
 @_inline
@@ -684,7 +686,7 @@ def _grid_sums(acc_re, scratch, y_re, y_im, ey_re, ey_im, y_direct, z_re, z_im, 
 ROWS, OFFSETS = 2, 4
 
 
-@_jit
+@_inline
 def _row_sums(acc_re, acc_im, us, ss, phi, k, row_z, row_yc, row_center, deltas, delta_step,
               pair, p_re, p_im, trig, nb):  # pragma: no cover
     """Responses ``f, f_u, f_s`` of plane-wave FEs (all 12 rows complex), row by row.
@@ -816,6 +818,8 @@ def solve_targets(  # pragma: no cover
     if locate:
         _locate(angle, other, column_az, row_el, lines, boxes, edge_tol, quad)
     has_phase = phase_table.shape[1] > 0
+    stride = phase_table.shape[2]
+    phase_flat = phase_table.reshape(n_quads, -1)
     separable = sep_z_re.shape[2] > 0
     us = np.empty(_BLOCK)
     ss = np.empty(_BLOCK)
@@ -867,6 +871,14 @@ def solve_targets(  # pragma: no cover
             real_only = centrosymmetric and not test
             table_re = tab_re[qd]
             table_im = tab_im[qd]
+            # The quad's views taken here, not per block: each view is a reference count (an
+            # atomic the threads contend for) and their blocks' calls more.
+            pair_q, p_re_q, p_im_q = pair[qd], row_p_re[qd], row_p_im[qd]
+            if has_phase:
+                # Evaluate in the frame rotated by the expected phase of B (see `exact`).
+                origin = phase_origin[qd]
+                u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
+                table = phase_flat[qd]
             pending = 0
             for start in range(count[qd], count[qd + 1], _BLOCK):
                 nb = min(_BLOCK, count[qd + 1] - start)
@@ -880,21 +892,16 @@ def solve_targets(  # pragma: no cover
                     sin_el, cos_el = _sincos(ss[b])
                     us[b] = cos_el * sin_az
                     ss[b] = sin_el
-                if has_phase:
-                    # Evaluate in the frame rotated by the expected phase of B (see `exact`).
-                    origin = phase_origin[qd]
-                    u0, s0, du, ds = origin[0], origin[1], origin[2], origin[3]
-                    table = phase_table[qd]
                 rows = by_rows and not test and not centrosymmetric
                 if rows:
                     # Complex responses of plane-wave FEs, row by row: no looks, half the
                     # multiply-adds (`_row_sums`); every row complex (their phase may iterate).
                     if has_phase:
-                        _phase_block(us, ss, u0, s0, du, ds, table, step_re, patch, nb)
+                        _phase_block(us, ss, u0, s0, du, ds, table, stride, step_re, patch, nb)
                     else:
                         step_re[:nb] = 0.0
                     _row_sums(acc_re, acc_im, us, ss, step_re, k, row_z, row_yc, row_center,
-                              deltas, delta_step, pair[qd], row_p_re[qd], row_p_im[qd], row_trig,
+                              deltas, delta_step, pair_q, p_re_q, p_im_q, row_trig,
                               nb)
                 else:
                     _exp_rows(ey_re, ey_im, step_re, step_im, k, y_coords, y_direct,
@@ -905,7 +912,7 @@ def solve_targets(  # pragma: no cover
                     # exp(-j (k z s + phase)) in one: a sine and cosine per coordinate, not one
                     # more per target and a product per coordinate (the AWR1843BOOST's two z:
                     # 1.02-1.03x). Coordinates taken as conjugates or by steps keep the product.
-                    _phase_block(us, ss, u0, s0, du, ds, table, step_re, patch, nb)
+                    _phase_block(us, ss, u0, s0, du, ds, table, stride, step_re, patch, nb)
                     for i in range(z_coords.size):
                         phase = -k * z_coords[i]
                         for b in range(nb):
@@ -915,7 +922,7 @@ def solve_targets(  # pragma: no cover
                 elif has_phase:
                     _exp_rows(ez_re, ez_im, step_re, step_im, k, z_coords, z_direct, z_indirect,
                               z_mirror, z_progression, ss, nb)
-                    _phase_block(us, ss, u0, s0, du, ds, table, step_re, patch, nb)
+                    _phase_block(us, ss, u0, s0, du, ds, table, stride, step_re, patch, nb)
                     for b in range(nb):  # apart from the table look-ups: vectorizes
                         sin_p, cos_p = _sincos(step_re[b])
                         step_re[b] = cos_p
