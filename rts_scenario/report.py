@@ -415,6 +415,19 @@ class FailReason(str):
 # The code of a reason given as a plain sentence, without its codes.
 UNCODED_REASON = "other"
 
+# Codes that say the bench, not the radar, failed the run: the RTS did not play the schedule
+# (another rig, another sender's stream, datagrams back undelivered, frames it did not apply),
+# or the radar's messages were not seen (a silent bus, messages the mapping does not match or
+# on other channels). A scene's ``xfail`` mark (a known failure of the radar's check) does not
+# cover them: such a run fails (`bench_failures`).
+BENCH_FAILURE_CODES = ("rts_rig", "rts_stream", "rts_unreachable", "frames_lost",
+                       "bus_silent", "mapping", "radar_channel")
+
+
+def bench_failures(codes: Iterable[str]) -> list[str]:
+    """Return those of a failed run's reason ``codes`` that are bench failures, in order."""
+    return [code for code in codes if code in BENCH_FAILURE_CODES]
+
 
 def reason_codes(reasons: Iterable[str]) -> list[str]:
     """Return the codes of ``reasons`` (`FailReason`), each once, in the order they come."""

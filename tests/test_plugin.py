@@ -490,6 +490,25 @@ def test_xdist_gives_the_same_verdicts(pytester):
     parallel.assert_outcomes(passed=5, failed=1)
 
 
+def _closed_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def test_an_xfail_scene_the_bench_never_played_fails(pytester):
+    # `xfail` expects the radar's check to fail; a run whose datagrams reached no RTS and whose
+    # radar said nothing checked no radar, and was an expected failure with the bench unplugged.
+    pytester.makefile(".scenario.yaml", known=scene("known", extra="marks: [xfail]\n"))
+    result = pytester.runpytest("-rA", "--rts-output", f"udp://127.0.0.1:{_closed_udp_port()}")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["the scene's xfail mark expects the radar's check to fail, not "
+                                 "the bench: bus_silent, rts_unreachable",
+                                 "FAILED known.scenario.yaml::known - the scene's xfail mark*"])
+
+
 @pytest.mark.parametrize("workers", [("-n", "2"), ("-d", "--tx", "2*popen")])
 @pytest.mark.parametrize("options", [
     ("--rts-can-interface", "udp_multicast", "--rts-can-channel", "239.74.163.2"),

@@ -1139,3 +1139,18 @@ def test_the_scene_pattern_is_read_where_plugins_are_not_loaded_on_their_own(tmp
     (tmp_path / "pytest.ini").write_text("[pytest]\nrts_scenario_pattern = *.scn.yaml\n")
     monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
     assert pytest_settings([tmp_path]).rts_scenario_pattern == "*.scn.yaml"
+
+
+@pytest.mark.parametrize(("marks", "passed", "codes", "status"), [
+    ((), False, ("detection_rate",), "fail"),
+    (("xfail",), False, ("detection_rate",), "xfail"),
+    (("xfail",), True, (), "xpass"),
+    # The bench failed the run (nothing played, nothing heard): not the radar's known failure.
+    (("xfail",), False, ("detection_rate", "rts_unreachable"), "fail"),
+    (("xfail",), False, ("bus_silent",), "fail"),
+    (("xfail",), False, ("mapping",), "fail"),
+])
+def test_an_xfail_mark_covers_the_radar_s_check_not_the_bench(marks, passed, codes, status):
+    from rts_scenario.sweep import marked_status
+
+    assert marked_status(marks, passed, False, codes) == status

@@ -293,12 +293,24 @@ def _written_marks(path: Path, overrides: dict[str, Any]) -> tuple[str, ...]:
     return written_marks(data, overrides)
 
 
-class ScenarioFailed(Exception):
-    """A scene ran and its check failed."""
+class RunFailed(Exception):
+    """A scene ran and failed (`ScenarioFailed`, `BenchFailed`)."""
 
     def __init__(self, result: RunResult) -> None:
         super().__init__(result.report.scene)
         self.result = result
+
+
+class ScenarioFailed(RunFailed):
+    """A scene ran and its check failed: what a scene's ``xfail`` mark expects."""
+
+
+class BenchFailed(RunFailed):
+    """A scene marked ``xfail`` ran and the bench failed it: not the failure the mark expects.
+
+    The RTS did not play the schedule or the radar's messages were not seen
+    (`rts_scenario.report.BENCH_FAILURE_CODES`): the radar was not checked.
+    """
 
 
 class ScenarioItem(pytest.Item):
@@ -346,6 +358,10 @@ class ScenarioItem(pytest.Item):
         report = result.report
         self.user_properties.extend(_metrics(report))
         if not report.passed:
+            from rts_scenario.report import bench_failures
+
+            if bench_failures(report.reason_codes) and self.get_closest_marker("xfail"):
+                raise BenchFailed(result)
             raise ScenarioFailed(result)
 
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException],
@@ -355,6 +371,11 @@ class ScenarioItem(pytest.Item):
 
         if isinstance(excinfo.value, ScenarioFailed):
             return _render(excinfo.value.result)
+        if isinstance(excinfo.value, BenchFailed):
+            from rts_scenario.sweep import _bench_not_expected
+
+            codes = excinfo.value.result.report.reason_codes
+            return f"{_bench_not_expected(codes)}\n\n{_render(excinfo.value.result)}"
         if isinstance(excinfo.value, RtsError):
             if self.error is not None:  # the load error, located already
                 return f"error: {self.error}"
@@ -455,7 +476,7 @@ class HtmlReport:
         """Add the failed scene's table and plots to the report's ``extras``."""
         report = yield
         failure = call.excinfo.value if call.excinfo is not None else None
-        if isinstance(failure, ScenarioFailed):
+        if isinstance(failure, RunFailed):
             extras = [*getattr(report, "extras", []),
                       *_html_extras(failure.result, item.config.getoption("--rts-method"))]
             report.extras = extras  # type: ignore[attr-defined]  # pytest-html reads it
