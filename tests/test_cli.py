@@ -694,6 +694,37 @@ def test_a_run_stopped_before_its_first_scene_leaves_no_earlier_report(tmp_path,
     assert entry["error"] == "not run: interrupted (Ctrl-C or SIGTERM) before it ran"
 
 
+def test_a_stop_during_the_library_s_import_still_replaces_the_earlier_report(
+        tmp_path, capsys, monkeypatch):
+    # A stop while the scenes' package was half imported (its yaml not yet whole) made the
+    # "not run" --json fail with an error of that import: exit 3, and the earlier report kept.
+    import sys
+
+    import rts_scenario.cli.run as run_cli
+
+    def stopped_while_importing(args, started):
+        monkeypatch.setitem(sys.modules, "rts_scenario.scenario", None)  # import fails
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_cli, "_run", stopped_while_importing)
+    report = tmp_path / "r.json"
+    report.write_text(json.dumps({"scene": "approaching-target", "status": "pass"}))
+    scene = str(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    assert cli.main(["run", scene, "--json", str(report)]) == 1
+    assert capsys.readouterr().err == "error: interrupted\n"
+    entry = json.loads(report.read_text())
+    assert entry["scene"] == "approaching_target" and entry["status"] == "error"
+
+    def broken(*args, **kwargs):
+        raise RecursionError("maximum recursion depth exceeded")
+
+    monkeypatch.setattr(run_cli, "write_json", broken)
+    assert cli.main(["run", scene, "--json", str(report)]) == 1
+    err = capsys.readouterr().err
+    assert err == (f"error: --json {report}: not replaced after the stop: RecursionError: "
+                   f"maximum recursion depth exceeded\nerror: interrupted\n"), err
+
+
 def _swallowing_a_stop():
     """Send SIGTERM and swallow its interrupt, as a library's bare ``except:`` does (asammdf
     while python-can imports it; numpy inside some of its calls)."""

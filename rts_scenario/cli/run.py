@@ -60,6 +60,9 @@ def _do_run(args: argparse.Namespace) -> int:
                 _write_not_run(args, "not run: interrupted (Ctrl-C or SIGTERM) before it ran")
             except (RtsError, KeyboardInterrupt):
                 pass  # the exit code says it
+            except Exception as exc:  # whatever the stop left half-done; the stop is the outcome
+                print(f"error: --json {args.json}: not replaced after the stop: "
+                      f"{type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
         raise
 
 
@@ -69,7 +72,8 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
     An earlier run's report must not stay in place to be read as this one's. Never over a
     file the command reads: the check that refuses that may not have run yet.
     """
-    from ..scenario import SCENE_SUFFIX
+    # Not from the scenes' package: a stop during its import (a yaml half imported) broke that.
+    from ..suffixes import SCENE_SUFFIX
 
     if not args.json or same_as_any(args.json, _inputs(args)):
         return

@@ -29,6 +29,7 @@ from ..radar.profile import RadarProfile
 from ..radar.profile import preset_names as radar_presets
 from ..rig import Rig
 from ..rig import preset_names as rig_presets
+from ..suffixes import SCENE_SUFFIX
 from .model import (
     DEFAULT_TOLERANCES,
     LIMITS,
@@ -50,8 +51,6 @@ from .trajectory import (
     reversal_waypoints,
 )
 from .trajectory import Path as TrajectoryPath
-
-SCENE_SUFFIX = ".scenario.yaml"
 
 # What a run can stream and check in reasonable time and memory (a 24 h scene at 20 Hz with 28
 # targets); the schema states it on duration_s and frame_rate_hz.
