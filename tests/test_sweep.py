@@ -1154,3 +1154,23 @@ def test_an_xfail_mark_covers_the_radar_s_check_not_the_bench(marks, passed, cod
     from rts_scenario.sweep import marked_status
 
     assert marked_status(marks, passed, False, codes) == status
+
+
+def test_a_sweep_stopped_before_its_runs_leaves_no_earlier_report(tmp_path, capsys,
+                                                                   monkeypatch):
+    # Ctrl-C while the sweep collected its runs: the earlier sweep's --json stayed in place.
+    import rts_scenario.sweep as sweep
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep, "collect_tasks", stopped)
+    report = tmp_path / "sweep.json"
+    report.write_text(json.dumps({"runs": [{"status": "pass"}], "summary": {"runs": 1}}))
+    scene = str(Path(__file__).resolve().parents[1] / "scenarios"
+                / "approaching_target.scenario.yaml")
+    assert main(["sweep", scene, "--workers", "1", "--json", str(report)]) == 1
+    assert capsys.readouterr().err.endswith("error: interrupted\n")
+    written = json.loads(report.read_text())
+    assert written["runs"] == [] and written["summary"]["interrupted"] is True
+    assert written["summary"]["runs"] == 0

@@ -75,35 +75,17 @@ def _variants(scene_files: list[Path]) -> list[tuple[Path, dict[str, Any]]]:
     return found
 
 
-def _do_sweep(args: argparse.Namespace) -> int:
+def _outputs_checked(args: argparse.Namespace) -> PytestSettings:
+    """Check ``--json`` and ``--plot`` against the sweep's inputs; return the pytest settings.
+
+    Before anything is written: neither may be a scene file, or a file a scene reads in any
+    variant, and both must be writable.
+    """
     from fnmatch import fnmatch
 
     from ..errors import RtsError
-    from ..sweep import (
-        LOCAL_SCHEDULER,
-        NoRunSelected,
-        collect_tasks,
-        default_workers,
-        exit_code,
-        folder_files,
-        mark_expression,
-        pytest_settings,
-        require_dask,
-        run_sweep,
-        select_tasks,
-        summarize,
-    )
+    from ..sweep import folder_files, pytest_settings
 
-    workers = args.workers if args.workers is not None else default_workers()
-    if workers < 1:
-        raise RtsError(f"--workers: must be >= 1, got {workers}")
-    if args.scheduler is not None:
-        require_dask()
-        if args.scheduler == "":
-            raise RtsError(f"--scheduler: needs an address (tcp://HOST:PORT) or "
-                           f"{LOCAL_SCHEDULER!r}, got an empty one")
-    if args.marks is not None:
-        mark_expression(args.marks)  # a bad expression stops the sweep before anything runs
     settings = pytest_settings(args.scenes)
     scene_files: list[Path] = []
     for given in map(Path, args.scenes):  # a folder: the scene files it holds
@@ -125,9 +107,62 @@ def _do_sweep(args: argparse.Namespace) -> int:
         if Path(args.plot).suffix.lower() != ".png":
             raise RtsError(f"--plot {args.plot}: must name a .png file")
         check_writable_file("--plot", args.plot)
+    return settings
 
-    notes: list[str] = []
-    tasks = collect_tasks(args.scenes, notes, settings)
+
+def _write_interrupted(args: argparse.Namespace) -> None:
+    """Write ``--json`` with no run and ``"interrupted": true``: stopped before any run."""
+    from ..errors import RtsError, one_line
+    from ..sweep import summarize
+
+    if not args.json:
+        return
+    try:
+        settings = _outputs_checked(args)  # again: the stop may have come before the checks
+        write_json("--json", args.json, {"runs": [], "summary": {**summarize([]),
+                                                                 "interrupted": True},
+                                         "config": settings.as_json()})
+    except (RtsError, KeyboardInterrupt):
+        pass  # the exit code says it
+    except Exception as exc:  # whatever the stop left half-done; the stop is the outcome
+        print(f"error: --json {args.json}: not replaced after the stop: "
+              f"{type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
+
+
+def _do_sweep(args: argparse.Namespace) -> int:
+    from ..errors import RtsError
+    from ..sweep import (
+        LOCAL_SCHEDULER,
+        NoRunSelected,
+        collect_tasks,
+        default_workers,
+        exit_code,
+        mark_expression,
+        require_dask,
+        run_sweep,
+        select_tasks,
+        summarize,
+    )
+
+    workers = args.workers if args.workers is not None else default_workers()
+    if workers < 1:
+        raise RtsError(f"--workers: must be >= 1, got {workers}")
+    if args.scheduler is not None:
+        require_dask()
+        if args.scheduler == "":
+            raise RtsError(f"--scheduler: needs an address (tcp://HOST:PORT) or "
+                           f"{LOCAL_SCHEDULER!r}, got an empty one")
+    if args.marks is not None:
+        mark_expression(args.marks)  # a bad expression stops the sweep before anything runs
+    try:
+        settings = _outputs_checked(args)
+        notes: list[str] = []
+        tasks = collect_tasks(args.scenes, notes, settings)
+    except KeyboardInterrupt:
+        # Stopped before any run: an earlier sweep's --json must not stay to be read as this
+        # one's (as `run` writes its "not run" entries).
+        _write_interrupted(args)
+        raise
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     deselected = 0
