@@ -1,5 +1,6 @@
 import json
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -244,6 +245,46 @@ def test_schedule_and_list_outputs(tmp_path, capsys):
     assert read_schedule(target).n_frames == 240
     assert cli.main(["list-outputs"]) == 0
     assert set(capsys.readouterr().out.split()) >= {"file", "udp", "simulated-radar"}
+
+
+SHORT_SCENE = """\
+rts_scenario: 1
+name: short
+duration_s: 1.0
+frame_rate_hz: 20.0
+radar: {profile: awr1843boost, mount: {x_m: 3.7, z_m: 0.5}}
+rig: wide-3x5
+targets:
+  - name: car
+    motion: {type: stationary, position_m: [30.0, 0.0, 0.6]}
+    rcs: {rcs_dbsm: 10.0}
+"""
+
+
+def test_schedule_to_udp_fails_when_nothing_received_it(tmp_path, capsys):
+    # An export whose datagrams all came back undelivered said "100% of entries emitted" and
+    # exited 0, as when an RTS played every frame.
+    import socket
+
+    from rts_scenario.outputs.udp import UdpReceiver
+
+    scene = tmp_path / "short.scenario.yaml"
+    scene.write_text(SHORT_SCENE)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        closed = sock.getsockname()[1]
+    assert cli.main(["schedule", str(scene), "--output", f"udp://127.0.0.1:{closed}"]) == 1
+    out, err = capsys.readouterr()
+    assert "100% of entries emitted" in out
+    assert re.match(rf"error: rts_unreachable: \d+ datagrams to udp://127.0.0.1:{closed} came "
+                    rf"back undelivered \(Connection refused\)", err), err
+    receiver = UdpReceiver().start()
+    try:
+        assert cli.main(["schedule", str(scene), "--output",
+                         f"udp://127.0.0.1:{receiver.address[1]}"]) == 0
+    finally:
+        stats = receiver.stop()
+    assert stats.frames_applied == 20 and capsys.readouterr().err == ""
 
 
 def test_unwritable_json_is_one_line_naming_option_and_path(tmp_path, capsys):

@@ -6,13 +6,22 @@ import argparse
 import sys
 from typing import Any
 
-from .common import EXIT_OK, METHODS, check_distinct_paths, check_output, read_by_scenes
+from .common import (
+    EXIT_FAIL,
+    EXIT_OK,
+    METHODS,
+    check_distinct_paths,
+    check_output,
+    read_by_scenes,
+)
 
 
 def _do_schedule(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from ..outputs import open_output, split_spec
+    from ..pipeline import RTS_SETTLE_S
+    from ..playback import LOST_COUNTERS, lost_frames, unreachable_reason
     from ..preflight import LimitCounter, schedule_batches
     from ..scenario import load_scenario, select_variant
 
@@ -33,13 +42,27 @@ def _do_schedule(args: argparse.Namespace) -> int:
             emitted += int(schedule.emitted.sum())
             total += schedule.emitted.size
             limits.add(tracks, schedule)
+        # What the RTS (or the network) said of the stream, as `run` judges it: an export
+        # nothing received is no success.
+        rts = out.rts_status(settle_s=RTS_SETTLE_S)
+        gone = out.rts_unreachable()
     label = f"{args.scene}[{scene.variant}]" if scene.variant else args.scene
     # What the schedule does not play as specified, as validate and run say it.
     for line in limits.result().unexpected():
         print(f"warning: {label}: {line}", file=sys.stderr)
     print(f"{label}: {scene.n_frames} frames x {len(scene.targets)} targets, "
           f"{emitted / max(total, 1):.0%} of entries emitted -> {args.output}")
-    return EXIT_OK
+    failed = False
+    if gone is not None:
+        print(f"error: {unreachable_reason(gone, 'of the schedule')}", file=sys.stderr)
+        failed = True
+    elif lost := lost_frames(rts):
+        counts = ", ".join(f"{k.replace('_', ' ')} {rts[k]}" for k in LOST_COUNTERS
+                           if rts and rts.get(k))
+        print(f"error: frames_lost: the RTS reports {lost} schedule frames it did not apply "
+              f"({counts})", file=sys.stderr)
+        failed = True
+    return EXIT_FAIL if failed else EXIT_OK
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
