@@ -315,6 +315,14 @@ def places(tmp_path):
 CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("run-json-folder", ["run", "{scene}", "--json", "{dir}"], 2,
      r"^--json {dir}: cannot write: is a folder"),
+    # pathlib drops a trailing slash: the folder name was written as a file.
+    ("run-json-trailing-slash", ["run", "{scene}", "--json", "{tmp}/r.json/"], 2,
+     r"^--json {tmp}/r.json/: names a folder \(it ends in a slash\); give a file path"),
+    ("sweep-json-trailing-slash", ["sweep", "{scene}", "--json", "{tmp}/s.json/"], 2,
+     r"^--json {tmp}/s.json/: names a folder \(it ends in a slash\); give a file path"),
+    ("schedule-file-trailing-slash", ["schedule", "{scene}", "--output", "file:{tmp}/s.csv/"],
+     2, r"^--output file:{tmp}/s.csv/: names a folder \(it ends in a slash\); give a file "
+        r"path"),
     ("run-json-under-file", ["run", "{scene}", "--json", "{file}/r.json"], 2,
      r"^--json {file}/r.json: cannot write: folder {file} is not a folder"),
     ("run-json-missing-folder", ["run", "{scene}", "--json", "{missing}"], 2,
@@ -361,7 +369,7 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("schedule-file-format", ["schedule", "{scene}", "--output", "file:{tmp}/s.txt"], 2,
      r"^--output file:{tmp}/s.txt: unknown file format '.txt'; valid: .npz, .csv"),
     ("schedule-file-folder", ["schedule", "{scene}", "--output", "file:{dir}/"], 2,
-     r"^--output file:{dir}/: unknown file format"),
+     r"^--output file:{dir}/: names a folder \(it ends in a slash\)"),
     ("schedule-file-missing-folder", ["schedule", "{scene}", "--output",
                                       "file:{tmp}/missing/s.npz"], 2,
      r"^--output {tmp}/missing/s.npz: cannot write: folder .* does not exist"),

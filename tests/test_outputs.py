@@ -1,5 +1,6 @@
 import errno
 import os
+import re
 import socket
 import sys
 import time
@@ -736,3 +737,16 @@ def test_a_delta_stream_is_the_same_however_the_frames_come_in_batches(schedule)
     entries = sum(int(schedule.active[f].sum()) if f % 20 == 0
                   else 4 * int(changed[f].sum()) for f in range(schedule.n_frames))
     assert sum(HEADER.unpack_from(d)[8] for d in whole) == entries
+
+
+def test_a_file_export_whose_draft_cannot_be_made_keeps_the_earlier_file(tmp_path, schedule):
+    # PATH.partial a folder: the earlier PATH was removed first, and the error named PATH.
+    for suffix in (".csv", ".npz"):
+        path = tmp_path / f"s{suffix}"
+        path.write_text("an earlier export")
+        (tmp_path / f"s{suffix}.partial").mkdir()
+        with pytest.raises(OutputError, match=rf"^{re.escape(str(path))}.partial: cannot "
+                                              rf"write: Is a directory$"):
+            with open_output(f"file:{path}") as out:
+                out.write(schedule)
+        assert path.read_text() == "an earlier export"

@@ -191,6 +191,9 @@ def check_writable_file(option: str, path: str | Path, kind: str | None = None, 
                        f"{option} would overwrite; give the output another name")
     if target.is_dir():
         raise RtsError(f"{option} {path}: cannot write: is a folder; give a file path")
+    if str(path).endswith(("/", os.sep)):
+        # pathlib drops the slash: "out.json/" would be written as the file out.json.
+        raise RtsError(f"{option} {path}: names a folder (it ends in a slash); give a file path")
     parent = target.parent
     if not parent.is_dir():
         what = "is not a folder" if parent.exists() else "does not exist"
@@ -351,6 +354,9 @@ def check_output(option: str, spec: str, *, run: bool) -> None:
     if name == "file":
         if not argument:
             raise RtsError(f"{option} {spec!r}: file needs a path: file:PATH (.npz or .csv)")
+        if argument.endswith(("/", os.sep)):
+            raise RtsError(f"{option} {spec}: names a folder (it ends in a slash); give a file "
+                           f"path: file:PATH (.npz or .csv)")
         if Path(argument).suffix not in (".npz", ".csv"):
             raise RtsError(f"{option} {spec}: unknown file format "
                            f"{Path(argument).suffix or '(none)'!r}; valid: .npz, .csv")

@@ -60,6 +60,9 @@ class FileOutput(Output):
     def __init__(self, path: str | Path) -> None:
         super().__init__()
         self.path = Path(path)
+        if str(path).endswith(("/", os.sep)):
+            raise OutputError(f"file:{path}: names a folder (it ends in a slash); give a file "
+                              f"path (.npz or .csv)")
         if self.path.suffix not in (".npz", ".csv"):
             raise OutputError(
                 f"file:{path}: unknown format {self.path.suffix!r}; valid: .npz, .csv"
@@ -84,13 +87,17 @@ class FileOutput(Output):
                               f".csv to hold its frames in; use .npz")
         with _writing(self.path):
             if self._csv is None and self._spill is None:
+                # The draft first: where it cannot be made, PATH keeps what it held.
+                draft = self.partial.open("w", encoding="utf-8")
+                if self.path.suffix == ".csv":
+                    self._csv = draft
+                    draft.write(f"{_MAGIC}\n# targets: {','.join(batch.names)}\n")
+                    draft.write(",".join(CSV_COLUMNS) + "\n")
+                else:
+                    draft.close()  # zipped into on close (`_Spill.zip_to`)
                 # What PATH held before is not this schedule, whether it ends whole or not.
                 self.path.unlink(missing_ok=True)
-            if self.path.suffix == ".csv":
-                if self._csv is None:
-                    self._csv = self.partial.open("w", encoding="utf-8")
-                    self._csv.write(f"{_MAGIC}\n# targets: {','.join(batch.names)}\n")
-                    self._csv.write(",".join(CSV_COLUMNS) + "\n")
+            if self._csv is not None:
                 _write_csv_rows(batch, self._csv)
             else:
                 if self._spill is None:
@@ -120,7 +127,9 @@ def _writing(path: Path) -> Iterator[None]:
     try:
         yield
     except OSError as exc:
-        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+        # The file that failed: PATH, or its draft PATH.partial.
+        failed = exc.filename if isinstance(exc.filename, str) else path
+        raise OutputError(f"{failed}: cannot write: {exc.strerror or exc}") from None
 
 
 class _Spill:
