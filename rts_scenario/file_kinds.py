@@ -218,7 +218,8 @@ __all__ = ["FOREIGN", "KINDS", "identify", "kind_by_name", "kind_name", "load_ki
 # A scene's version key, at the start of a line (a key of the file's top-level mapping), with
 # its value on that line: the format version, a scalar. A section of that name holding a
 # mapping or a list (a project's own settings) is no scene.
-_SCENE_KEY = re.compile(rb"^rts_scenario[ \t]*:[ \t]*[^\s#{\[]", re.MULTILINE)
+_SCENE_KEY = re.compile(rb"^(?:rts_scenario|\"rts_scenario\"|'rts_scenario')[ \t]*:[ \t]*[^\s#{\[]",
+                        re.MULTILINE)
 # How much of a YAML file is read to find it (a scene starts with it, after its comments).
 _HEAD_BYTES = 65536
 
@@ -237,4 +238,5 @@ def holds_scene(path: Path) -> bool:
             head = file.read(_HEAD_BYTES)
     except OSError:
         return False
-    return _SCENE_KEY.search(head) is not None
+    # As YAML reads it: after a byte-order mark (some editors write one), the key quoted or not.
+    return _SCENE_KEY.search(head.removeprefix(b"\xef\xbb\xbf")) is not None

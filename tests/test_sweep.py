@@ -306,6 +306,19 @@ def test_a_scene_with_a_mistyped_suffix_in_a_folder_is_an_erred_run(scenes, tmp_
     assert runs[1]["error_type"] == "bad_input"
 
 
+def test_a_misnamed_scene_is_found_as_yaml_reads_it(tmp_path):
+    # A byte-order mark before the key, or the key quoted: YAML reads a scene, and the file
+    # under another name was left out unseen.
+    text = tiny_scene("a")
+    assert text.startswith("rts_scenario: 1\n")
+    (tmp_path / "bom.yaml").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    (tmp_path / "double.yaml").write_text(text.replace("rts_scenario:", '"rts_scenario":', 1))
+    (tmp_path / "single.yml").write_text(text.replace("rts_scenario:", "'rts_scenario' :", 1))
+    tasks = collect_tasks([tmp_path])
+    assert [Path(t.file).name for t in tasks] == ["bom.yaml", "double.yaml", "single.yml"]
+    assert all(t.error and "is not named *.scenario.yaml" in t.error for t in tasks)
+
+
 def test_a_project_s_own_yaml_with_an_rts_scenario_section_is_no_misnamed_scene(tmp_path):
     # A scene's rts_scenario key is its format version, a number; a settings section of that
     # name (a mapping or a list) is none, and the folder's sweep is its scenes alone.
