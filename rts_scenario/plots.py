@@ -179,14 +179,20 @@ def write_calibration_plot(result: Any, folder: str | Path, name: str) -> Path:
     return _save(fig, folder / f"{safe_stem(name)}-calibration.png")
 
 
+# A sweep plot's value for a run without the parameter (another scene's runs).
+_NOT_SET = "(not set)"
+
+
 def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
     """Plot a sweep's verdicts over its parameters into one PNG; return the file.
 
-    One parameter: each run's verdict (pass, fail, error, xfail, xpass, skipped) against the
-    parameter's value, one row per scene. Two: a grid of the pass rate over both values, each
-    cell marked ``passed/runs``. More (or none): the pass rate per value of each parameter (per
-    scene when no run has a parameter), one panel each. Rates are over the runs that ran, as
-    in the sweep's summary (skipped runs left out).
+    One parameter that every run has: each run's verdict (pass, fail, error, xfail, xpass,
+    skipped) against the parameter's value, one row per scene. Two that every run has: a grid
+    of the pass rate over both values, each cell marked ``passed/runs``. Otherwise (more, none,
+    or parameters some runs lack, as scenes parametrized over different keys): the pass rate
+    per value of each parameter (per scene when no run has a parameter), one panel each, the
+    runs without the parameter as the value ``(not set)``: every run is in every panel. Rates
+    are over the runs that ran, as in the sweep's summary (skipped runs left out).
     """
     from .sweep import value_name
 
@@ -199,10 +205,13 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
     ran = [e for e in entries if e["status"] != "skipped"]
 
     def values_of(key: str) -> list[str]:
-        return list(dict.fromkeys(value_name(e["parameters"][key]) for e in entries
-                                  if key in e["parameters"]))
+        return list(dict.fromkeys(value_name(e["parameters"][key]) if key in e["parameters"]
+                                  else _NOT_SET for e in entries))
 
-    if len(keys) == 1:
+    # The verdict and grid plots only where every run has the keys: a run without one had no
+    # place in them and was left out of the plot.
+    everywhere = all(k in e["parameters"] for e in entries for k in keys)
+    if len(keys) == 1 and everywhere:
         key = keys[0]
         values = values_of(key)
         scenes = list(dict.fromkeys(str(e["scene"]) for e in entries))
@@ -220,7 +229,7 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
         ax.set_ylim(-0.5, len(scenes) - 0.5)
         ax.set(xlabel=key, title="sweep: verdict per run")
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
-    elif len(keys) == 2:
+    elif len(keys) == 2 and everywhere:
         (kx, ky), (xs, ys) = keys, (values_of(keys[0]), values_of(keys[1]))
         runs = np.zeros((len(ys), len(xs)))
         passed = np.zeros_like(runs)
@@ -250,8 +259,10 @@ def write_sweep_plot(entries: list[dict[str, Any]], path: str | Path) -> Path:
             ("scene", list(dict.fromkeys(str(e["scene"]) for e in entries)), None)]
 
         def value_of(entry: dict[str, Any], key: str | None) -> str:
-            return (value_name(entry["parameters"].get(key)) if key
-                    else str(entry["scene"]))
+            if key is None:
+                return str(entry["scene"])
+            return value_name(entry["parameters"][key]) if key in entry["parameters"] \
+                else _NOT_SET
 
         fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.2 * len(groups)), squeeze=False)
         for ax, (label, values, key) in zip(axes[:, 0], groups, strict=True):

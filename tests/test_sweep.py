@@ -896,6 +896,18 @@ def test_the_plot_shows_every_status_and_rates_the_runs_that_ran(monkeypatch, tm
     rts_scenario.plots.write_sweep_plot([run("pass", a=1, b=1, c=1),
                                          run("skipped", a=2, b=2, c=2)], tmp_path / "three.png")
     assert [t.get_text() for t in figures[2].axes[0].texts] == ["1/1", "0/0"]
+    # Two scenes over different keys: no grid of combinations no run has; every run is in
+    # each key's panel, those without the key as "(not set)".
+    figures.clear()
+    rts_scenario.plots.write_sweep_plot([run("pass", a=1), run("fail", a=2),
+                                         run("pass", b=1), run("fail", b=2)], tmp_path / "ab.png")
+    panels = figures[0].axes
+    assert [t.get_text() for t in panels[0].get_xticklabels()] == ["1.0", "2.0", "(not set)"]
+    assert [t.get_text() for t in panels[0].texts] == ["1/1", "0/1", "1/2"]
+    assert [t.get_text() for t in panels[1].texts] == ["1/2", "1/1", "0/1"]
+    # One key that one scene lacks: its runs are not dropped from the verdict plot.
+    rts_scenario.plots.write_sweep_plot([run("pass", a=1), run("fail")], tmp_path / "a.png")
+    assert [t.get_text() for t in figures[1].axes[0].texts] == ["1/1", "0/1"]
 
 
 def test_a_combination_s_marks_are_the_scene_s_with_its_overrides():
