@@ -1181,15 +1181,21 @@ def test_an_xfail_mark_covers_the_radar_s_check_not_the_bench(marks, passed, cod
     assert marked_status(marks, passed, False, codes) == status
 
 
+@pytest.mark.parametrize("step", ["pytest_settings", "collect_tasks"])
 def test_a_sweep_stopped_before_its_runs_leaves_no_earlier_report(tmp_path, capsys,
-                                                                   monkeypatch):
+                                                                   monkeypatch, step):
     # Ctrl-C while the sweep collected its runs: the earlier sweep's --json stayed in place.
     import rts_scenario.sweep as sweep
 
-    def stopped(*args, **kwargs):
-        raise KeyboardInterrupt
+    real, calls = getattr(sweep, step), []
 
-    monkeypatch.setattr(sweep, "collect_tasks", stopped)
+    def stopped_once(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweep, step, stopped_once)
     report = tmp_path / "sweep.json"
     report.write_text(json.dumps({"runs": [{"status": "pass"}], "summary": {"runs": 1}}))
     scene = str(Path(__file__).resolve().parents[1] / "scenarios"

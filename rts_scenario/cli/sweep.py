@@ -22,7 +22,7 @@ from .common import (
 )
 
 if TYPE_CHECKING:
-    from ..sweep import PytestSettings
+    from ..sweep import PytestSettings, SweepTask
 
 # Without a terminal, a progress line each time another tenth of the runs is done.
 PLAIN_PROGRESS_STEPS = 10
@@ -129,19 +129,22 @@ def _write_interrupted(args: argparse.Namespace) -> None:
               f"{type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
 
 
-def _do_sweep(args: argparse.Namespace) -> int:
+def _prepare(args: argparse.Namespace
+             ) -> tuple[int, PytestSettings, list[SweepTask], int] | int:
+    """Check the arguments and the outputs, and collect the runs.
+
+    Returns ``(workers, settings, tasks, deselected)``, or the exit code of a sweep that ends
+    here (``-m`` selects no run).
+    """
     from ..errors import RtsError
     from ..sweep import (
         LOCAL_SCHEDULER,
         NoRunSelected,
         collect_tasks,
         default_workers,
-        exit_code,
         mark_expression,
         require_dask,
-        run_sweep,
         select_tasks,
-        summarize,
     )
 
     workers = args.workers if args.workers is not None else default_workers()
@@ -154,15 +157,9 @@ def _do_sweep(args: argparse.Namespace) -> int:
                            f"{LOCAL_SCHEDULER!r}, got an empty one")
     if args.marks is not None:
         mark_expression(args.marks)  # a bad expression stops the sweep before anything runs
-    try:
-        settings = _outputs_checked(args)
-        notes: list[str] = []
-        tasks = collect_tasks(args.scenes, notes, settings)
-    except KeyboardInterrupt:
-        # Stopped before any run: an earlier sweep's --json must not stay to be read as this
-        # one's (as `run` writes its "not run" entries).
-        _write_interrupted(args)
-        raise
+    settings = _outputs_checked(args)
+    notes: list[str] = []
+    tasks = collect_tasks(args.scenes, notes, settings)
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     deselected = 0
@@ -172,6 +169,22 @@ def _do_sweep(args: argparse.Namespace) -> int:
         except NoRunSelected as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_NO_RUNS
+    return workers, settings, tasks, deselected
+
+
+def _do_sweep(args: argparse.Namespace) -> int:
+    from ..sweep import LOCAL_SCHEDULER, exit_code, run_sweep, summarize
+
+    try:
+        prepared = _prepare(args)
+    except KeyboardInterrupt:
+        # Stopped before any run: an earlier sweep's --json must not stay to be read as this
+        # one's (as `run` writes its "not run" entries).
+        _write_interrupted(args)
+        raise
+    if isinstance(prepared, int):
+        return prepared
+    workers, settings, tasks, deselected = prepared
     # As many workers as there are runs at most (`run_sweep`); one runs in this process.
     used = max(1, min(workers, len(tasks)))
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, LOCAL_SCHEDULER)
