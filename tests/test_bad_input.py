@@ -64,6 +64,12 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("alias-bomb", alias_bomb(),
      r"^{f}:\d+:\d+: document expands to more than 1,000,000 YAML nodes"),
     ("recursive-alias", TINY + "description: &d [*d]\n", r"^{f}:15:\d+: alias \*d refers to"),
+    # validate said ok and run stopped it with exit 3, naming no key.
+    ("estimator-not-for-array",
+     TINY.replace("  profile: awr1843boost\n", "  profile: cascade-12x16\n  estimator: ti\n"),
+     r"^{f}:7:3: radar.estimator: 'ti' cannot estimate angles on the radar's array: array "
+     r"'cascade-12x16': TI-style azimuth needs an evenly spaced row; an estimator that can: "
+     r"bartlett$"),
     ("deep-nesting", TINY + "description: " + "[" * 100 + "]" * 100 + "\n",
      r"^{f}:15:\d+: nesting deeper than the limit of 64 levels"),
     ("too-many-nodes", TINY + "marks: [" + ", ".join(["a"] * 1_000_100) + "]\n",
@@ -323,6 +329,10 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
     ("schedule-file-trailing-slash", ["schedule", "{scene}", "--output", "file:{tmp}/s.csv/"],
      2, r"^--output file:{tmp}/s.csv/: names a folder \(it ends in a slash\); give a file "
         r"path"),
+    ("survey-estimator-not-for-array", ["survey", "wide-3x5", "--radar", "cascade-12x16",
+                                        "--estimator", "ti"], 2,
+     r"^--estimator ti: 'ti' cannot estimate angles on the radar's array: array "
+     r"'cascade-12x16': TI-style azimuth needs"),
     ("run-json-under-file", ["run", "{scene}", "--json", "{file}/r.json"], 2,
      r"^--json {file}/r.json: cannot write: folder {file} is not a folder"),
     ("run-json-missing-folder", ["run", "{scene}", "--json", "{missing}"], 2,

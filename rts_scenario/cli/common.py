@@ -508,7 +508,7 @@ def bench_of(args: argparse.Namespace, command: str = "a measurement",
     ``needs``: the quantities (`rts_scenario.canbus.mapping.QUANTITIES`) ``command`` reads of
     each detection; a ``--mapping`` whose detections do not carry one of them is refused.
     """
-    from ..radar.angle import estimator_names
+    from ..radar.angle import estimator_names, estimator_problem
     from ..radar.profile import RadarProfile
     from ..radar.profile import preset_names as radar_presets
     from ..rig import Rig
@@ -542,6 +542,8 @@ def bench_of(args: argparse.Namespace, command: str = "a measurement",
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
                            RadarProfile.from_file, ".radar.yaml")
+    if (problem := estimator_problem(args.estimator, radar.array)) is not None:
+        raise RtsError(f"--estimator {args.estimator}: {problem}")
     return rig, radar
 
 

@@ -245,3 +245,22 @@ def _nothing() -> AngleEstimate:
 def make_estimator(name: str, array: VirtualArray) -> Bartlett2D | TiStyle:
     """Return the estimator called ``name`` (one of `ESTIMATORS`) for ``array``."""
     return _ESTIMATOR_REGISTRY.get(name)(array)
+
+
+def estimator_problem(name: str, array: VirtualArray) -> str | None:
+    """Why the built-in estimator ``name`` cannot estimate angles on ``array``, else None.
+
+    Checked where a scene or a command names the estimator, so that an array it cannot work
+    on is bad input there, not an error of the run. ``"ti"`` needs an evenly spaced azimuth
+    row with a second row above it (`TiStyle`); ``"bartlett"`` works on any 2-D array. An
+    installed estimator is not built here (it may be costly): it says so when a run builds it.
+    """
+    if name != "ti":
+        return None
+    try:
+        TiStyle(array)
+    except RtsError as exc:
+        usable = [n for n in ESTIMATORS if n == "bartlett"]
+        return (f"{name!r} cannot estimate angles on the radar's array: {exc}; an estimator "
+                f"that can: {', '.join(usable)}")
+    return None

@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import RtsError, ScenarioError
 from ..file_kinds import kind_by_name, kind_name, load_kind, other_than_fragment
 from ..located_yaml import Document, KeyPath, format_key_path, load_yaml, validate
+from ..radar.angle import estimator_problem
 from ..radar.profile import RadarProfile
 from ..radar.profile import preset_names as radar_presets
 from ..rig import Rig
@@ -142,6 +143,11 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     radar = _load_referenced(doc, ("radar", "profile"), root, data["radar"]["profile"],
                              radar_presets(), RadarProfile.preset, RadarProfile.from_file,
                              ".radar.yaml")
+    estimator = data["radar"].get("estimator", "bartlett")
+    if (problem := estimator_problem(estimator, radar.array)) is not None:
+        # As bad input here (validate, any --method): the run would stop on it (exit 3).
+        raise doc.error(("radar", "estimator") if "estimator" in data["radar"] else ("radar",),
+                        problem)
     rig = _load_referenced(doc, ("rig",), root, data["rig"], rig_presets(), Rig.preset,
                            Rig.from_file, ".rig.yaml")
     effects = Effects(rcs_fluctuation=data.get("effects", {}).get("rcs_fluctuation", "none"))
