@@ -1457,6 +1457,10 @@ class _Importer:
             elif p["rule"] in ("greaterThan", "greaterOrEqual", "equalTo") and \
                     p["value"] >= lower:
                 t = p["value"]
+            elif p["rule"] == "notEqualTo":
+                # False only at the instant its evaluation starts (the value): true right
+                # after, the limit of the times it holds, as for greaterThan.
+                t = lower
             else:
                 t = math.inf
         elif cond.kind == "state":

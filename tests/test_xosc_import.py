@@ -105,6 +105,22 @@ def test_braking_lead_tracks_match_closed_form(tmp_path):
     assert_tracks(scene, t, *ego_radar(t, 20.0), lead_p, lead_v)
 
 
+@pytest.mark.parametrize("rule", ['value="0" rule="greaterThan"', 'value="0" rule="notEqualTo"'])
+def test_a_strict_time_rule_false_only_at_the_act_s_start_fires_right_after_it(tmp_path, rule):
+    # notEqualTo the time its evaluation starts is false only at that instant: the act (and its
+    # braking) was left out as one that "never starts", with exit 0.
+    path = variant(tmp_path, "braking_lead",
+                   '<SimulationTimeCondition value="0" rule="greaterThan"/>',
+                   f'<SimulationTimeCondition {rule}/>')
+    result, scene = imported(tmp_path, path)
+    assert not any("never starts" in note for note in result.notes), result.notes
+    t = np.array([0.0, 1.95, 2.3, 4.4, 5.2])
+    dt = np.clip(t - 2.0, 0.0, 2.5)
+    x = 40.0 + 20.0 * t - 2.0 * dt**2 - 10.0 * np.clip(t - 4.5, 0.0, None)
+    lead_p, lead_v = straight(x, 20.0 - 4.0 * dt, z_m=0.75)
+    assert_tracks(scene, t, *ego_radar(t, 20.0), lead_p, lead_v)
+
+
 def test_cut_in_tracks_match_closed_form(tmp_path):
     result, scene = imported(tmp_path, "cut_in")
     assert scene.duration_s == 10.0 and scene.targets[0].kind == "car"  # a van
