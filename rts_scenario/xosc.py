@@ -35,6 +35,8 @@ from .scenario.trajectory import LaneChange, Trajectory, TrajectorySet, TravelLa
 from .scenario.trajectory import Path as TrajectoryPath
 
 MAX_FILE_BYTES = 16 * 1024 * 1024
+# The deepest nesting of elements libxml's parser takes without its huge-tree option.
+MAX_XML_DEPTH = 256
 # An XML Schema double (Python's float() also reads "1_0" and other digits than 0-9).
 _DOUBLE = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 XSI_NAMESPACE = "http://www.w3.org/2001/XMLSchema-instance"
@@ -221,12 +223,13 @@ class _El:
         for c in self.children:
             c.skip()
 
-    def empty(self) -> None:
-        """Refuse children: a declaration the import cannot use must stay empty."""
+    def empty(self, why: str = "") -> None:
+        """Refuse children: a declaration the import cannot use must stay empty (``why``)."""
         self.used = True
         if self.children:
             c = self.children[0]
-            raise c.error(f"<{c.tag}> in <{self.tag}> is not supported by import")
+            raise c.error(f"<{c.tag}> in <{self.tag}> is not supported by import"
+                          f"{'; ' + why if why else ''} (at {c.path()})")
 
     def path(self) -> str:
         """Return the element's tags from below the root, e.g. ``Storyboard/Init/Actions``."""
@@ -388,8 +391,11 @@ def _check_type(name: str, kind: str, value: str) -> str | None:
 
 
 def _resolve(value: str, params: dict[str, Parameter], where: str, file: str,
-             line: int | None) -> str:
-    """Resolve a declaration's value: ``$name`` or ``${expression}`` over earlier ones."""
+             line: int | None, lines: dict[str, int] | None = None) -> str:
+    """Resolve a declaration's value: ``$name`` or ``${expression}`` over earlier ones.
+
+    ``lines``: every declaration's line, to say so of a name declared after this one.
+    """
     if value.startswith("${") and value.endswith("}"):
         try:
             return _evaluate(value[2:-1], params)
@@ -397,8 +403,14 @@ def _resolve(value: str, params: dict[str, Parameter], where: str, file: str,
             raise ScenarioError(f"{where}: {exc}", file=file, line=line) from None
     if value.startswith("$"):
         if value[1:] not in params:
-            raise ScenarioError(f"{where}: unknown parameter {value}; declared: "
-                                f"{', '.join(params) or 'none'}", file=file, line=line)
+            before = f"declared before it: {', '.join(params) or 'none'}"
+            if lines and value[1:] in lines:
+                raise ScenarioError(f"{where}: {value} is declared after it (line "
+                                    f"{lines[value[1:]]}); a declaration can use only the "
+                                    f"parameters declared before it; {before}", file=file,
+                                    line=line)
+            raise ScenarioError(f"{where}: unknown parameter {value}; {before}", file=file,
+                                line=line)
         return params[value[1:]].value
     return value
 
@@ -460,6 +472,11 @@ def _describe(groups: list[list[tuple[str, str]]]) -> str:
                        for group in groups)
 
 
+# Why a <ParameterDeclarations> elsewhere than at the root must be empty.
+_ROOT_PARAMETERS_ONLY = ("parameters are declared in the <ParameterDeclarations> at the root of "
+                         "the file (<OpenSCENARIO>), which import supports")
+
+
 def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str, Parameter]:
     """Read the root's parameter declarations and apply the overrides."""
     from lxml import etree
@@ -469,6 +486,12 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
     given = {name.removeprefix("$"): (name, value) for name, value in overrides.items()}
     declarations = [d for d in raw_root if isinstance(d.tag, str)
                     and etree.QName(d).localname == "ParameterDeclarations"]
+    if len(declarations) > 1:  # as for every element allowed once (OpenSCENARIO allows one)
+        raise ScenarioError("<OpenSCENARIO> has more than one <ParameterDeclarations>",
+                            file=file, line=declarations[1].sourceline)
+    # Every declaration's line: one may use only those before it.
+    lines = {raw.get("name"): raw.sourceline for block in declarations for raw in block
+             if isinstance(raw.tag, str) and raw.get("name")}
     for block in declarations:
         for raw in block:
             if not isinstance(raw.tag, str):
@@ -490,7 +513,7 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
                                     f"unknown type; valid: {', '.join(_PARAMETER_TYPES)}",
                                     file=file, line=raw.sourceline)
             where = f"<ParameterDeclaration name=\"{name}\">"
-            value = _resolve(value, params, where, file, raw.sourceline)
+            value = _resolve(value, params, where, file, raw.sourceline, lines)
             problem = _check_type(name, kind, value)
             if problem:
                 raise ScenarioError(f"<ParameterDeclaration>: {problem}", file=file,
@@ -779,7 +802,7 @@ class _Importer:
         for part in what.kids("Performance", "Axles", "Properties"):
             part.skip()
         for block in what.kids("ParameterDeclarations"):
-            block.empty()
+            block.empty(_ROOT_PARAMETERS_ONLY)
         box = what.child("BoundingBox", required=False)
         if box is not None:
             center, size = box.need("Center"), box.need("Dimensions")
@@ -796,7 +819,7 @@ class _Importer:
         story_name = story.text("name", "")
         self._named("story", story_name)
         for block in story.kids("ParameterDeclarations"):
-            block.empty()
+            block.empty(_ROOT_PARAMETERS_ONLY)
         for act in story.kids("Act"):
             act_name = act.text("name", "")
             self._named("act", act_name)
@@ -824,7 +847,7 @@ class _Importer:
             maneuver_name = maneuver.text("name", "")
             self._named("maneuver", maneuver_name)
             for block in maneuver.kids("ParameterDeclarations"):
-                block.empty()
+                block.empty(_ROOT_PARAMETERS_ONLY)
             for event in maneuver.kids("Event"):
                 name = event.text("name", "")
                 self._named("event", name)
@@ -1644,6 +1667,11 @@ def _parse(path: Path) -> Any:
     except etree.XMLSyntaxError as exc:
         line = exc.position[0] if exc.position else None
         message = re.sub(r",? line \d+(, column \d+)?\s*$", "", str(exc.msg))
+        if "Excessive depth" in message:
+            # libxml's own advice (an option of its parser) is none the user can take.
+            raise ScenarioError(f"elements nested deeper than {MAX_XML_DEPTH} levels (import's "
+                                f"limit, for any element, skipped ones included)",
+                                file=str(path), line=line) from None
         raise ScenarioError(f"malformed XML: {message}", file=str(path), line=line) from None
     except OSError as exc:
         raise RtsError(f"{path}: cannot read: {exc}") from None

@@ -326,8 +326,46 @@ def test_a_declaration_naming_an_undeclared_parameter_is_located(tmp_path):
     line = line_of(path, "$TriggerDistanse")
     with pytest.raises(ScenarioError, match=rf"cut_in\.xosc:{line}: <ParameterDeclaration "
                                             r"name=\"Gap\">: unknown parameter "
-                                            r"\$TriggerDistanse; declared: EgoSpeed, "
+                                            r"\$TriggerDistanse; declared before it: EgoSpeed, "
                                             r"CutterSpeed, TriggerDistance, LaneChangeTime$"):
+        imported(tmp_path, path)
+
+
+def test_a_declaration_naming_a_later_one_says_so(tmp_path):
+    # It said "declared: none" of a parameter declared on the next line.
+    path = variant(tmp_path, "cut_in", 'name="EgoSpeed" parameterType="double" value="25"',
+                   'name="EgoSpeed" parameterType="double" value="$CutterSpeed"')
+    line, later = line_of(path, "$CutterSpeed"), line_of(path, 'name="CutterSpeed"')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (
+        f"{path}:{line}: <ParameterDeclaration name=\"EgoSpeed\">: $CutterSpeed is declared "
+        f"after it (line {later}); a declaration can use only the parameters declared before "
+        f"it; declared before it: none")
+
+
+def test_one_root_parameter_block_and_none_elsewhere(tmp_path):
+    # A second root block was merged; one inside a vehicle was refused without saying where
+    # parameters go.
+    text = (DATA / "cut_in.xosc").read_text()
+    block = re.search(r"<ParameterDeclarations>.*?</ParameterDeclarations>", text,
+                      flags=re.DOTALL).group(0)
+    path = tmp_path / "twice.xosc"
+    path.write_text(text.replace(block, block + "\n  <ParameterDeclarations/>", 1))
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (f"{path}:{line_of(path, '<ParameterDeclarations/>')}: "
+                               f"<OpenSCENARIO> has more than one <ParameterDeclarations>")
+    path = tmp_path / "vehicle.xosc"
+    path.write_text(re.sub(r"(<Vehicle [^>]*>)", r'\1<ParameterDeclarations><ParameterDeclaration '
+                           r'name="X" parameterType="double" value="1"/></ParameterDeclarations>',
+                           text, count=1))
+    with pytest.raises(ScenarioError, match=r"<ParameterDeclaration> in <ParameterDeclarations> "
+                                            r"is not supported by import; parameters are "
+                                            r"declared in the <ParameterDeclarations> at the "
+                                            r"root of the file \(<OpenSCENARIO>\), which import "
+                                            r"supports \(at Entities/ScenarioObject/Vehicle/"
+                                            r"ParameterDeclarations/ParameterDeclaration\)$"):
         imported(tmp_path, path)
 
 
