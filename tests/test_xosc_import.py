@@ -1142,3 +1142,15 @@ def test_a_step_with_a_value_gets_a_note(tmp_path):
         in result.notes
     result, _ = imported(tmp_path, "pedestrian_crossing", ego="Hero")
     assert not any("immediate change" in note for note in result.notes)
+
+
+def test_nesting_beyond_the_parser_s_depth_says_the_limit(tmp_path):
+    # libxml's message advised its own parser option ("use XML_PARSE_HUGE"), which users
+    # cannot set.
+    path = tmp_path / "deep.xosc"
+    path.write_text("<OpenSCENARIO>" + "<RoadNetwork>" * 300 + "</RoadNetwork>" * 300
+                    + "</OpenSCENARIO>")
+    with pytest.raises(ScenarioError, match=r"deep\.xosc:1: elements nested deeper than 256 "
+                                            r"levels \(import's limit, for any element, skipped "
+                                            r"ones included\)$"):
+        imported(tmp_path, path)
