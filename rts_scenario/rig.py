@@ -192,6 +192,8 @@ class Rig:
         ``(-sin el cos az, -sin el sin az, cos el)``.
     rts : RtsDelayModel
         How the RTS delays the signal (default: the paper's digital IF RTS at 500 MHz).
+    description : str
+        The file's free text about the rig (kept when the rig is written again).
     """
 
     name: str
@@ -209,6 +211,7 @@ class Rig:
     tx_offset_m: FloatArray = field(default_factory=lambda: np.zeros(2))
     rts: RtsDelayModel = RtsDelayModel()
     seen: FloatArray | None = None
+    description: str = ""
 
     def __post_init__(self) -> None:
         n = self.rows * self.columns
@@ -481,7 +484,7 @@ class Rig:
                 columns=columns, cal_delay_s=cal["delay_s"], cal_phase_deg=cal["phase_deg"],
                 cal_gain_db=cal["gain_db"], limits=limits, reference=reference,
                 rx_offset_m=offsets["rx_offset_m"], tx_offset_m=offsets["tx_offset_m"],
-                rts=delay_model, seen=seen,
+                rts=delay_model, seen=seen, description=data.get("description", ""),
             )
         except RigError as exc:
             message = str(exc).removeprefix(f"{exc.key}: ") if exc.fe is not None else str(exc)
@@ -507,8 +510,9 @@ class Rig:
                                                                       strict=True)
                               if np.isfinite(v)}
             fes.append(fe)
-        return {"rts_rig": 1, "name": self.name, "rows": self.rows, "columns": self.columns,
-                "front_ends": fes, "rts": asdict(self.rts),
+        described = {"description": self.description} if self.description else {}
+        return {"rts_rig": 1, "name": self.name, **described, "rows": self.rows,
+                "columns": self.columns, "front_ends": fes, "rts": asdict(self.rts),
                 "limits": {k: v for k, v in asdict(self.limits).items() if v is not None},
                 "reference": asdict(self.reference)}
 

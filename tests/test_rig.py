@@ -326,3 +326,15 @@ def test_a_rig_file_written_part_way_leaves_the_previous_one(tmp_path, cut_short
         rs.Rig.preset("kit-table1").write(path)
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rig.yaml"]
+
+
+def test_a_written_rig_keeps_its_description(tmp_path):
+    # calibrate --write and survey --write dropped the lab's description of the rig.
+    rig = rs.Rig.from_file(Path(__file__).resolve().parents[1] / "scenarios" / "rigs"
+                           / "lab-2x3.rig.yaml")
+    assert rig.description
+    rig.write(tmp_path / "again.rig.yaml")
+    assert rs.Rig.from_file(tmp_path / "again.rig.yaml").description == rig.description
+    import dataclasses
+
+    assert "description" not in dataclasses.replace(rig, description="").to_document()
