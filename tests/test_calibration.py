@@ -841,3 +841,31 @@ def test_a_channel_whose_delay_the_rig_calibrates_is_read_where_its_echo_lands()
     result = calibrate(rig, AWR, simulated_measure(AWR, rig, errors))
     np.testing.assert_allclose(wrapped(result.phase_deg), 0.0, atol=0.05)
     np.testing.assert_allclose(result.gain_db, 0.0, atol=0.005)
+
+
+def test_a_stopped_calibration_leaves_no_earlier_report(tmp_path, capsys, monkeypatch):
+    # Ctrl-C during the measurement left the earlier --json (a pass, say) to be read as this
+    # calibration's; the one the command line names for another option is never written.
+    import json
+
+    import rts_scenario.calibration as calibration
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(calibration, "check_grid", stopped)
+    report = tmp_path / "cal.json"
+    report.write_text(json.dumps({"passed": True}))
+    argv = ["calibrate", "kit-table1", "--radar", "awr1843boost", "--json", str(report)]
+    assert cli.main(argv) == 1
+    assert capsys.readouterr().err.endswith("error: interrupted\n")
+    assert json.loads(report.read_text()) == {
+        "command": "calibrate", "passed": False, "interrupted": True,
+        "error": "interrupted (Ctrl-C or SIGTERM) before the command wrote its report: no "
+                 "verdict"}
+    mapping = tmp_path / "m.mapping.yaml"
+    mapping.write_text("not read: the stop comes first")
+    argv = ["calibrate", "kit-table1", "--radar", "awr1843boost", "--json", str(mapping)]
+    monkeypatch.setattr("rts_scenario.cli.calibrate.bench_of", stopped)  # before any check
+    assert cli.main([*argv, "--mapping", str(mapping)]) == 1
+    assert mapping.read_text() == "not read: the stop comes first"

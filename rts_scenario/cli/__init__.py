@@ -47,6 +47,7 @@ from .common import (
     EXIT_RUNTIME_ERROR,
     guarded_output,
     one_line,
+    replace_unwritten_report,
     show_traceback,
 )
 
@@ -322,6 +323,7 @@ def _handle(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         interrupts.handled()
+        replace_unwritten_report(args)
         print("error: interrupted", file=sys.stderr)
         return EXIT_FAIL
     except Exception as exc:

@@ -151,6 +151,10 @@ def writing(option: str, path: str | Path) -> Iterator[None]:
         raise RtsError(f"{option} {path}: cannot write: {reason}") from exc
 
 
+# The ``--json`` reports this process wrote (`write_json`), by path as given.
+_written_reports: set[str] = set()
+
+
 def write_json(option: str, path: str | Path, data: Any) -> None:
     """Write ``data`` as strict JSON to the file ``option`` names, replacing it whole.
 
@@ -162,6 +166,35 @@ def write_json(option: str, path: str | Path, data: Any) -> None:
     text = json.dumps(data, indent=2, allow_nan=False) + "\n"
     with writing(option, path):
         write_atomic(path, text)
+    if option == "--json":
+        _written_reports.add(str(path))
+
+
+def replace_unwritten_report(args: argparse.Namespace) -> None:
+    """After a stop, write ``--json`` if the command wrote none: no verdict, interrupted.
+
+    An earlier run's report left in place would be read as this one's. `run` and `sweep` write
+    their own (the scenes not run, the runs that finished); for the others this is their
+    report: ``{"command": ..., "passed": false, "interrupted": true, "error": ...}``. Never
+    over a file the command line names for another option (the command's own check of that
+    may not have run yet).
+    """
+    path = getattr(args, "json", None)
+    if not path or str(path) in _written_reports or args.command in ("run", "sweep"):
+        return
+    named: list[Any] = []
+    for key, value in vars(args).items():
+        if key != "json":
+            named += value if isinstance(value, list) else [value]
+    if same_as_any(path, [v for v in named if isinstance(v, str)]):
+        return
+    try:
+        write_json("--json", path, {"command": args.command, "passed": False,
+                                    "interrupted": True,
+                                    "error": "interrupted (Ctrl-C or SIGTERM) before the "
+                                             "command wrote its report: no verdict"})
+    except (RtsError, KeyboardInterrupt):
+        pass  # the exit code says it
 
 
 def check_writable_file(option: str, path: str | Path, kind: str | None = None, *,
