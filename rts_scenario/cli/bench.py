@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import RtsError
-from .common import EXIT_OK, check_number, check_writable_file, writing
+from .common import EXIT_OK, check_number, check_writable_file, report_written, writing
 
 # One throughput run holds a few arrays of this many targets in memory (about 1 kB each).
 MAX_TARGETS = 10_000_000
@@ -66,6 +66,7 @@ def _do_bench(args: argparse.Namespace) -> int:
     if args.json:
         with writing("--json", args.json):
             bench.write_json(rows, quantized, args.json, end, honest_rows, figures)
+        report_written(args.json)
         print(f"wrote {args.json}")
     if args.markdown:
         with writing("--markdown", args.markdown):

@@ -167,7 +167,12 @@ def write_json(option: str, path: str | Path, data: Any) -> None:
     with writing(option, path):
         write_atomic(path, text)
     if option == "--json":
-        _written_reports.add(str(path))
+        report_written(path)
+
+
+def report_written(path: str | Path) -> None:
+    """Note that this process wrote its ``--json`` report ``path`` (`replace_unwritten_report`)."""
+    _written_reports.add(str(path))
 
 
 def replace_unwritten_report(args: argparse.Namespace) -> None:
