@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import math
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -416,17 +416,26 @@ class FailReason(str):
 UNCODED_REASON = "other"
 
 # Codes that say the bench, not the radar, failed the run: the RTS did not play the schedule
-# (another rig, another sender's stream, datagrams back undelivered, frames it did not apply),
-# or the radar's messages were not seen (a silent bus, messages the mapping does not match or
-# on other channels). A scene's ``xfail`` mark (a known failure of the radar's check) does not
-# cover them: such a run fails (`bench_failures`).
+# (another rig, another sender's stream, datagrams back undelivered, frames it did not apply,
+# frames the host sent late), or the radar's messages were not seen (a silent bus, messages the
+# mapping does not match or on other channels). A scene's ``xfail`` mark (a known failure of
+# the radar's check) does not cover them: such a run fails (`bench_failures`).
 BENCH_FAILURE_CODES = ("rts_rig", "rts_stream", "rts_unreachable", "frames_lost",
-                       "bus_silent", "mapping", "radar_channel")
+                       "frames_sent_late", "bus_silent", "mapping", "radar_channel")
 
 
-def bench_failures(codes: Iterable[str]) -> list[str]:
-    """Return those of a failed run's reason ``codes`` that are bench failures, in order."""
-    return [code for code in codes if code in BENCH_FAILURE_CODES]
+def bench_failures(codes: Iterable[str], playback: Mapping[str, Any] | None = None
+                   ) -> list[str]:
+    """Return those of a failed run's reason ``codes`` that are bench failures, in order.
+
+    ``playback``: the run's (`Report.playback`). Datagrams that came back undelivered count
+    whatever the scene expects: a scene that declares ``frames_lost`` (an RTS that drops some
+    frames) drops the reason, but nothing listening is no RTS at all.
+    """
+    found = [code for code in codes if code in BENCH_FAILURE_CODES]
+    if playback and playback.get("rts_unreachable") and "rts_unreachable" not in found:
+        found.append("rts_unreachable")
+    return found
 
 
 def reason_codes(reasons: Iterable[str]) -> list[str]:

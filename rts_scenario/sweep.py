@@ -424,14 +424,15 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
         bad = isinstance(exc, ScenarioError | ScheduleError)
         return error_entry(entry, message(exc), "bad_input" if bad else "runtime")
     from .check import QUANTITIES
-    from .report import strict
+    from .report import bench_failures, strict
 
-    status = marked_status(task.marks, report.passed, task.xfail_strict, report.reason_codes)
+    bench = bench_failures(report.reason_codes, report.playback)
+    status = marked_status(task.marks, report.passed, task.xfail_strict, bench)
     entry.update(passed=report.passed, status=status)
     if not report.passed:
         entry["reason"] = "; ".join(report.reasons)
         if status == "fail" and "xfail" in task.marks:
-            entry["reason"] += "; " + _bench_not_expected(report.reason_codes)
+            entry["reason"] += "; " + _bench_not_expected(bench)
     elif status == "fail":  # an xpass under xfail_strict, worded as pytest's report of it
         entry["reason"] = "[XPASS(strict)] the scene's marks: xfail"
     ratio, worst = -1.0, None
@@ -454,31 +455,30 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
 
 
 def marked_status(marks: Sequence[str], passed: bool, xfail_strict: bool = False,
-                  codes: Sequence[str] = ()) -> str:
+                  bench: Sequence[str] = ()) -> str:
     """Return the status of a finished run whose check ``passed`` or not, by its scene's marks.
 
     As the pytest plugin's item: ``pass`` or ``fail``; with an ``xfail`` mark (a known failure
     of the check) ``xfail``, or ``xpass`` for a passed check, ``fail`` where ``xfail_strict``
-    is set. A failed run whose reason ``codes`` include a bench failure (the RTS did not play
-    it, the radar's messages were not seen: `rts_scenario.report.BENCH_FAILURE_CODES`) is
-    ``fail`` whatever its marks. A skip mark skips a run before it runs
-    (`SweepTask.skipped`): not judged here.
+    is set. A failed run the ``bench`` failed (its codes from `rts_scenario.report.
+    bench_failures`: the RTS did not play it, the radar's messages were not seen) is ``fail``
+    whatever its marks. A skip mark skips a run before it runs (`SweepTask.skipped`): not
+    judged here.
     """
-    from .report import bench_failures
-
-    if "xfail" not in marks or (not passed and bench_failures(codes)):
+    if "xfail" not in marks or (not passed and bench):
         return "pass" if passed else "fail"
     if not passed:
         return "xfail"
     return "fail" if xfail_strict else "xpass"
 
 
-def _bench_not_expected(codes: Sequence[str]) -> str:
-    """Why a failed run of a scene marked ``xfail`` fails all the same (as the plugin says)."""
-    from .report import bench_failures
+def _bench_not_expected(bench: Sequence[str]) -> str:
+    """Why a failed run of a scene marked ``xfail`` fails all the same (as the plugin says).
 
+    ``bench``: the bench failures (`rts_scenario.report.bench_failures`).
+    """
     return (f"the scene's xfail mark expects the radar's check to fail, not the bench: "
-            f"{', '.join(bench_failures(codes))}")
+            f"{', '.join(bench)}")
 
 
 def _task_entry(task: SweepTask) -> Entry:

@@ -278,6 +278,14 @@ def test_schedule_to_udp_fails_when_nothing_received_it(tmp_path, capsys):
     assert "100% of entries emitted" in out
     assert re.match(rf"error: rts_unreachable: \d+ datagrams to udp://127.0.0.1:{closed} came "
                     rf"back undelivered \(Connection refused\)", err), err
+    # As run judges it: a scene that declares frames_lost is told, not failed.
+    declared = tmp_path / "declared.scenario.yaml"
+    declared.write_text(SHORT_SCENE.replace("name: short", "name: declared")
+                        + "expectations: {expected_limits: [frames_lost]}\n")
+    assert cli.main(["schedule", str(declared), "--output", f"udp://127.0.0.1:{closed}"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("note: rts_unreachable: ") and err.endswith(
+        "(the scene declares frames_lost)\n"), err
     receiver = UdpReceiver().start()
     try:
         assert cli.main(["schedule", str(scene), "--output",

@@ -498,14 +498,19 @@ def _closed_udp_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def test_an_xfail_scene_the_bench_never_played_fails(pytester, monkeypatch):
+@pytest.mark.parametrize("declared", ["", "  expected_limits: [frames_lost]\n"])
+def test_an_xfail_scene_the_bench_never_played_fails(pytester, monkeypatch, declared):
     # `xfail` expects the radar's check to fail; a run whose datagrams reached no RTS and whose
     # radar said nothing checked no radar, and was an expected failure with the bench unplugged.
     # The session under test runs in this process: not as a worker of this run's own xdist
     # (which refuses a bench output).
     for name in ("PYTEST_XDIST_WORKER", "PYTEST_XDIST_WORKER_COUNT"):
         monkeypatch.delenv(name, raising=False)
-    pytester.makefile(".scenario.yaml", known=scene("known", extra="marks: [xfail]\n"))
+    # A scene that declares frames_lost (an RTS that drops some) has no rts_unreachable
+    # reason: nothing listening is no RTS all the same.
+    text = scene("known", extra="marks: [xfail]\n").replace("  detection_rate: 0.9\n",
+                                                             "  detection_rate: 0.9\n" + declared)
+    pytester.makefile(".scenario.yaml", known=text)
     result = pytester.runpytest("-rA", "--rts-output", f"udp://127.0.0.1:{_closed_udp_port()}")
     result.assert_outcomes(failed=1)
     result.stdout.fnmatch_lines(["the scene's xfail mark expects the radar's check to fail, not "

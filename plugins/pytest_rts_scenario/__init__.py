@@ -360,7 +360,8 @@ class ScenarioItem(pytest.Item):
         if not report.passed:
             from rts_scenario.report import bench_failures
 
-            if bench_failures(report.reason_codes) and self.get_closest_marker("xfail"):
+            if bench_failures(report.reason_codes, report.playback) \
+                    and self.get_closest_marker("xfail"):
                 raise BenchFailed(result)
             raise ScenarioFailed(result)
 
@@ -372,10 +373,12 @@ class ScenarioItem(pytest.Item):
         if isinstance(excinfo.value, ScenarioFailed):
             return _render(excinfo.value.result)
         if isinstance(excinfo.value, BenchFailed):
+            from rts_scenario.report import bench_failures
             from rts_scenario.sweep import _bench_not_expected
 
-            codes = excinfo.value.result.report.reason_codes
-            return f"{_bench_not_expected(codes)}\n\n{_render(excinfo.value.result)}"
+            report = excinfo.value.result.report
+            bench = bench_failures(report.reason_codes, report.playback)
+            return f"{_bench_not_expected(bench)}\n\n{_render(excinfo.value.result)}"
         if isinstance(excinfo.value, RtsError):
             if self.error is not None:  # the load error, located already
                 return f"error: {self.error}"

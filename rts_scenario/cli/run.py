@@ -89,6 +89,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
     from ..pipeline import LOG_SIDECAR_SUFFIX, RunOptions, run_scene
     from ..plots import safe_stem
     from ..preflight import Preflight
+    from ..report import bench_failures
     from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
     from ..schedule import ScheduleError
 
@@ -169,6 +170,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
             _write_not_run(args, f"not run: {exc}")
         raise
     entries: list[dict[str, Any]] = []
+    bench_of_run: dict[int, list[str]] = {}  # a failed entry's bench failures, by index
     stems: set[str] = set()
     bad_input = runtime_error = False
     detections = None
@@ -239,7 +241,8 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                                        detections_out=detections, on_preflight=warn, timing=loaded)
                     report = result.report
                     print(report.table())
-                    marked = marks_note(scene.marks, report.passed)
+                    marked = marks_note(scene.marks, report.passed,
+                                        bench_failures(report.reason_codes, report.playback))
                     if marked is not None:
                         print(f"note: {scene.label} is marked {marked[0]}")
                     if log and result.sidecar_error is not None:
@@ -277,6 +280,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                     print()
                 entries.append({"file": path, "status": "pass" if report.passed else "fail",
                                 "marks": list(scene.marks), **report.to_dict()})
+                if not report.passed:  # for the summary's marks note, not the --json
+                    bench_of_run[len(entries) - 1] = bench_failures(report.reason_codes,
+                                                                    report.playback)
     except KeyboardInterrupt:
         # What finished is kept and reported; nothing cut short is left looking complete.
         interrupts.handled()
@@ -297,10 +303,11 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
             else:
                 print(f"wrote {draft.keep()}")
     if len(entries) > 1:
-        for entry in entries:
+        for i, entry in enumerate(entries):
             name = run_label(entry["scene"], entry["variant"])
             line = f"{entry['status'].upper()} {name} ({entry['file']})"
-            marked = marks_note(entry.get("marks", ()), entry["status"] == "pass")
+            marked = marks_note(entry.get("marks", ()), entry["status"] == "pass",
+                                bench_of_run.get(i, ()))
             if marked is not None:
                 line += f" - marked {marked[1]}"
             print(line + (f": {entry['error']}" if entry["status"] == "error" else ""))
@@ -317,13 +324,16 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
     return EXIT_OK if all(e["status"] == "pass" for e in entries) else EXIT_FAIL
 
 
-def marks_note(marks: Sequence[str], passed: bool) -> tuple[str, str] | None:
+def marks_note(marks: Sequence[str], passed: bool, bench: Sequence[str] = ()
+               ) -> tuple[str, str] | None:
     """Say how pytest and ``sweep`` judge a run that ``run`` judged by its check alone.
 
     ``run`` runs a scene as written, whatever its marks: a ``skip`` mark does not keep it from
     playing, an ``xfail`` mark does not turn its verdict or exit code. Where the marks would
     change what pytest and ``sweep`` report (`rts_scenario.sweep.marked_status`), returns
     the note's text after ``is marked`` and the summary line's after ``marked``; else None.
+    ``bench``: the run's bench failures (`rts_scenario.report.bench_failures`), which an
+    ``xfail`` mark does not cover.
     """
     from ..sweep import SKIP_MARKS, marked_status
 
@@ -333,7 +343,11 @@ def marks_note(marks: Sequence[str], passed: bool) -> tuple[str, str] | None:
                 f"{skip}: SKIPPED in pytest and sweep")
     if "xfail" not in marks:
         return None
-    status = marked_status(marks, passed)
+    status = marked_status(marks, passed, bench=bench)
+    if status == "fail" and not passed:
+        return (f"xfail: pytest and rts-scenario sweep fail it all the same: the mark expects "
+                f"the radar's check to fail, not the bench ({', '.join(bench)})",
+                "xfail: FAIL in pytest and sweep (the bench failed it)")
     what = ("its failed check as XFAIL (a known failure, which fails nothing)" if not passed
             else "its passed check as XPASS (which fails nothing, unless the project sets "
                  "xfail_strict)")
