@@ -1284,3 +1284,15 @@ def test_a_sigterm_as_the_command_hands_back_its_handler_is_acted_on_not_fatal()
                           timeout=60)
     assert done.returncode == 1 and done.stdout == "PASS: scene\n", done
     assert done.stderr == "error: interrupted\n", done
+
+
+def test_run_s_marks_note_says_how_pytest_and_sweep_judge_the_run():
+    from rts_scenario.cli.run import marks_note
+
+    assert marks_note((), False) is None
+    assert marks_note(("xfail",), False)[1] == "xfail: XFAIL in pytest and sweep"
+    assert marks_note(("xfail",), True)[1] == "xfail: XPASS in pytest and sweep"
+    # It said XFAIL of a run the bench failed, which pytest and sweep now fail.
+    note, line = marks_note(("xfail",), False, ["bus_silent", "rts_unreachable"])
+    assert line == "xfail: FAIL in pytest and sweep (the bench failed it)"
+    assert note.endswith("not the bench (bus_silent, rts_unreachable)")
