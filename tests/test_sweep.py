@@ -1211,3 +1211,38 @@ def test_a_sweep_stopped_before_its_runs_leaves_no_earlier_report(tmp_path, caps
     written = json.loads(report.read_text())
     assert written["runs"] == [] and written["summary"]["interrupted"] is True
     assert written["summary"]["runs"] == 0
+
+
+def test_a_sweep_stopped_in_an_import_still_replaces_its_report(tmp_path, capsys, monkeypatch):
+    # The stop left a module half imported: the outputs' check could not run again, and the
+    # earlier report stayed ("not replaced after the stop").
+    import rts_scenario.cli.sweep as sweep_cli
+
+    calls = []
+
+    def broken(args):
+        calls.append(1)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        raise AttributeError("partially initialized module 'yaml' has no attribute 'error'")
+
+    monkeypatch.setattr(sweep_cli, "_outputs_checked", broken)
+    report = tmp_path / "sweep.json"
+    report.write_text(json.dumps({"runs": [{"status": "pass"}], "summary": {"runs": 1}}))
+    scene = str(Path(__file__).resolve().parents[1] / "scenarios"
+                / "approaching_target.scenario.yaml")
+    assert main(["sweep", scene, "--workers", "1", "--json", str(report)]) == 1
+    assert capsys.readouterr().err == "error: interrupted\n"
+    assert json.loads(report.read_text()) == {
+        "runs": [], "summary": {"runs": 0, "interrupted": True}, "config": None}
+
+
+def test_a_misnamed_scene_in_a_folder_is_no_place_for_the_report(tmp_path, capsys):
+    # Reported as an erred run, the file was then written over by --json.
+    (tmp_path / "a.scenario.yaml").write_text(tiny_scene("a"))
+    misnamed = tmp_path / "b.yaml"
+    misnamed.write_text(tiny_scene("b"))
+    code = main(["sweep", str(tmp_path), "--workers", "1", "--json", str(misnamed)])
+    assert code == 2
+    assert f"--json {misnamed}: the same file as SCENE {misnamed}" in capsys.readouterr().err
+    assert misnamed.read_text() == tiny_scene("b")

@@ -17,6 +17,7 @@ from .common import (
     check_distinct_paths,
     check_writable_file,
     read_by_scenes,
+    same_as_any,
     write_json,
     writing,
 )
@@ -84,16 +85,23 @@ def _outputs_checked(args: argparse.Namespace) -> PytestSettings:
     from fnmatch import fnmatch
 
     from ..errors import RtsError
+    from ..file_kinds import holds_scene
     from ..sweep import folder_files, pytest_settings
 
     settings = pytest_settings(args.scenes)
     scene_files: list[Path] = []
+    misnamed: list[Path] = []  # reported as erred runs: the user's files all the same
     for given in map(Path, args.scenes):  # a folder: the scene files it holds
-        scene_files += ([p for p in folder_files(given, settings.norecursedirs).files
-                         if fnmatch(p.name, settings.rts_scenario_pattern)]
-                        if given.is_dir() else [given])
+        if not given.is_dir():
+            scene_files.append(given)
+            continue
+        for found in folder_files(given, settings.norecursedirs).files:
+            if fnmatch(found.name, settings.rts_scenario_pattern):
+                scene_files.append(found)
+            elif holds_scene(found):
+                misnamed.append(found)
     check_distinct_paths([("--json", args.json), ("--plot", args.plot)],
-                         [("SCENE", scene) for scene in scene_files])
+                         [("SCENE", scene) for scene in [*scene_files, *misnamed]])
     if args.json or args.plot:
         # Nor a file the scenes read (their rig, radar profile, fragments), in any variant.
         check_distinct_paths([("--json", args.json), ("--plot", args.plot)],
@@ -113,15 +121,27 @@ def _outputs_checked(args: argparse.Namespace) -> PytestSettings:
 def _write_interrupted(args: argparse.Namespace) -> None:
     """Write ``--json`` with no run and ``"interrupted": true``: stopped before any run."""
     from ..errors import RtsError, one_line
-    from ..sweep import summarize
 
     if not args.json:
         return
     try:
-        settings = _outputs_checked(args)  # again: the stop may have come before the checks
-        write_json("--json", args.json, {"runs": [], "summary": {**summarize([]),
+        try:
+            from ..sweep import summarize
+
+            settings = _outputs_checked(args)  # again: the stop may have come before them
+            summary, config = summarize([]), settings.as_json()
+        except (RtsError, KeyboardInterrupt):
+            return  # the exit code says it
+        except Exception:
+            # A module the stop left half imported: the checks cannot run. Never over a scene
+            # named, nor over a YAML file (a scene or a file scenes read, in a folder named).
+            if same_as_any(args.json, args.scenes) or \
+                    Path(args.json).suffix.lower() in (".yaml", ".yml"):
+                return
+            summary, config = {"runs": 0}, None
+        write_json("--json", args.json, {"runs": [], "summary": {**summary,
                                                                  "interrupted": True},
-                                         "config": settings.as_json()})
+                                         "config": config})
     except (RtsError, KeyboardInterrupt):
         pass  # the exit code says it
     except Exception as exc:  # whatever the stop left half-done; the stop is the outcome
@@ -173,10 +193,9 @@ def _prepare(args: argparse.Namespace
 
 
 def _do_sweep(args: argparse.Namespace) -> int:
-    from ..sweep import LOCAL_SCHEDULER, exit_code, run_sweep, summarize
-
     try:
         prepared = _prepare(args)
+        from ..sweep import LOCAL_SCHEDULER, exit_code, run_sweep, summarize
     except KeyboardInterrupt:
         # Stopped before any run: an earlier sweep's --json must not stay to be read as this
         # one's (as `run` writes its "not run" entries).
