@@ -391,26 +391,37 @@ def _check_type(name: str, kind: str, value: str) -> str | None:
 
 
 def _resolve(value: str, params: dict[str, Parameter], where: str, file: str,
-             line: int | None, lines: dict[str, int] | None = None) -> str:
+             line: int | None, lines: dict[str, int] | None = None, own: str = "") -> str:
     """Resolve a declaration's value: ``$name`` or ``${expression}`` over earlier ones.
 
-    ``lines``: every declaration's line, to say so of a name declared after this one.
+    ``lines``: every declaration's line, to say so of a name declared after this one (or of
+    ``own``, the declaration's name).
     """
+    before = f"declared before it: {', '.join(params) or 'none'}"
+
+    def not_yet(name: str) -> ScenarioError | None:
+        """Return the error for ``name`` declared here or after, None if it is not declared."""
+        if not lines or name not in lines:
+            return None
+        if name == own:
+            return ScenarioError(f"{where}: ${name} names the declaration itself; a "
+                                 f"declaration can use only the parameters declared before it; "
+                                 f"{before}", file=file, line=line)
+        return ScenarioError(f"{where}: ${name} is declared after it (line {lines[name]}); a "
+                             f"declaration can use only the parameters declared before it; "
+                             f"{before}", file=file, line=line)
+
     if value.startswith("${") and value.endswith("}"):
         try:
             return _evaluate(value[2:-1], params)
         except ValueError as exc:
-            raise ScenarioError(f"{where}: {exc}", file=file, line=line) from None
+            unknown = re.fullmatch(r"unknown parameter \$(\w+)", str(exc))
+            error = not_yet(unknown.group(1)) if unknown else None
+            raise (error or ScenarioError(f"{where}: {exc}", file=file, line=line)) from None
     if value.startswith("$"):
         if value[1:] not in params:
-            before = f"declared before it: {', '.join(params) or 'none'}"
-            if lines and value[1:] in lines:
-                raise ScenarioError(f"{where}: {value} is declared after it (line "
-                                    f"{lines[value[1:]]}); a declaration can use only the "
-                                    f"parameters declared before it; {before}", file=file,
-                                    line=line)
-            raise ScenarioError(f"{where}: unknown parameter {value}; {before}", file=file,
-                                line=line)
+            raise not_yet(value[1:]) or ScenarioError(
+                f"{where}: unknown parameter {value}; {before}", file=file, line=line)
         return params[value[1:]].value
     return value
 
@@ -513,7 +524,7 @@ def _parameters(raw_root: Any, file: str, overrides: dict[str, str]) -> dict[str
                                     f"unknown type; valid: {', '.join(_PARAMETER_TYPES)}",
                                     file=file, line=raw.sourceline)
             where = f"<ParameterDeclaration name=\"{name}\">"
-            value = _resolve(value, params, where, file, raw.sourceline, lines)
+            value = _resolve(value, params, where, file, raw.sourceline, lines, name)
             problem = _check_type(name, kind, value)
             if problem:
                 raise ScenarioError(f"<ParameterDeclaration>: {problem}", file=file,

@@ -1154,3 +1154,21 @@ def test_nesting_beyond_the_parser_s_depth_says_the_limit(tmp_path):
                                             r"levels \(import's limit, for any element, skipped "
                                             r"ones included\)$"):
         imported(tmp_path, path)
+
+
+@pytest.mark.parametrize(("value", "message"), [
+    # It said "declared after it" with the declaration's own line.
+    ("$EgoSpeed", "$EgoSpeed names the declaration itself"),
+    # An expression said only "unknown parameter", with no line.
+    ("${$CutterSpeed + 5}", "$CutterSpeed is declared after it (line {later})"),
+])
+def test_a_declaration_naming_itself_or_a_later_one_in_an_expression(tmp_path, value, message):
+    path = variant(tmp_path, "cut_in", 'name="EgoSpeed" parameterType="double" value="25"',
+                   f'name="EgoSpeed" parameterType="double" value="{value}"')
+    line, later = line_of(path, 'name="EgoSpeed"'), line_of(path, 'name="CutterSpeed"')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value) == (
+        f"{path}:{line}: <ParameterDeclaration name=\"EgoSpeed\">: "
+        f"{message.format(later=later)}; a declaration can use only the parameters declared "
+        f"before it; declared before it: none")
