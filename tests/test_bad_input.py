@@ -333,6 +333,10 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
                                         "--estimator", "ti"], 2,
      r"^--estimator ti: 'ti' cannot estimate angles on the radar's array: array "
      r"'cascade-12x16': TI-style azimuth needs"),
+    ("emulate-estimator-not-for-array", ["emulate", "--listen", "udp://127.0.0.1:0", "--rig",
+                                         "wide-3x5", "--radar", "cascade-12x16",
+                                         "--estimator", "ti"], 2,
+     r"^--estimator ti: 'ti' cannot estimate angles on the radar's array"),
     ("run-json-under-file", ["run", "{scene}", "--json", "{file}/r.json"], 2,
      r"^--json {file}/r.json: cannot write: folder {file} is not a folder"),
     ("run-json-missing-folder", ["run", "{scene}", "--json", "{missing}"], 2,

@@ -21,7 +21,7 @@ def _do_emulate(args: argparse.Namespace) -> int:
     from ..canbus.mapping import CanMapping
     from ..emulator import Emulator
     from ..errors import BusError, RtsError
-    from ..radar.angle import estimator_names
+    from ..radar.angle import estimator_names, estimator_problem
     from ..radar.profile import RadarProfile
     from ..radar.profile import preset_names as radar_presets
     from ..radar.simulate import ChannelErrors
@@ -52,6 +52,8 @@ def _do_emulate(args: argparse.Namespace) -> int:
                          ".rig.yaml")
     radar = preset_or_file("--radar", args.radar, radar_presets(), RadarProfile.preset,
                            RadarProfile.from_file, ".radar.yaml")
+    if (problem := estimator_problem(args.estimator, radar.array)) is not None:
+        raise RtsError(f"--estimator {args.estimator}: {problem}")
     # The channels' errors first, then the noise, from one generator: `calibrate --inject-*`
     # with the same --seed draws the same errors.
     rng = np.random.default_rng(args.seed)
