@@ -869,3 +869,21 @@ def test_a_stopped_calibration_leaves_no_earlier_report(tmp_path, capsys, monkey
     monkeypatch.setattr("rts_scenario.cli.calibrate.bench_of", stopped)  # before any check
     assert cli.main([*argv, "--mapping", str(mapping)]) == 1
     assert mapping.read_text() == "not read: the stop comes first"
+
+
+def test_a_stopped_command_whose_report_cannot_be_replaced_says_so(tmp_path, capsys,
+                                                                    monkeypatch):
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    def broken(*args, **kwargs):
+        raise RecursionError("maximum recursion depth exceeded")
+
+    monkeypatch.setattr("rts_scenario.cli.calibrate.bench_of", stopped)
+    monkeypatch.setattr("rts_scenario.cli.common.write_json", broken)
+    report = tmp_path / "cal.json"
+    argv = ["calibrate", "kit-table1", "--radar", "awr1843boost", "--json", str(report)]
+    assert cli.main(argv) == 1
+    assert capsys.readouterr().err == (f"error: --json {report}: not replaced after the stop: "
+                                       f"RecursionError: maximum recursion depth exceeded\n"
+                                       f"error: interrupted\n")

@@ -200,6 +200,9 @@ def replace_unwritten_report(args: argparse.Namespace) -> None:
                                              "command wrote its report: no verdict"})
     except (RtsError, KeyboardInterrupt):
         pass  # the exit code says it
+    except Exception as exc:  # whatever the stop left half-done; the stop is the outcome
+        print(f"error: --json {path}: not replaced after the stop: {type(exc).__name__}: "
+              f"{one_line(exc)}", file=sys.stderr)
 
 
 def check_writable_file(option: str, path: str | Path, kind: str | None = None, *,
