@@ -723,46 +723,40 @@ def test_a_schedule_export_stopped_by_sigterm_leaves_only_its_draft(tmp_path, ca
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"s{suffix}.partial"]
 
 
+@pytest.mark.parametrize("where", ["variants", "import"])
 def test_a_run_stopped_before_its_first_scene_leaves_no_earlier_report(tmp_path, capsys,
-                                                                        monkeypatch):
+                                                                        monkeypatch, where):
     # Ctrl-C while the scenes' variants were read: the --json of an earlier run stayed in
-    # place, its "pass" to be read as this run's.
+    # place, its "pass" to be read as this run's. A stop while the scenes' package was half
+    # imported (its yaml not yet whole) made the "not run" --json fail with an error of that
+    # import: exit 3, and the earlier report kept.
+    import sys
+
+    import rts_scenario.cli.run as run_cli
     import rts_scenario.scenario as scenario
 
     def stopped(path):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(scenario, "parametrizations", stopped)
-    report = tmp_path / "r.json"
-    report.write_text(json.dumps({"scene": "approaching-target", "status": "pass"}))
-    scene = str(ROOT / "scenarios" / "approaching_target.scenario.yaml")
-    assert cli.main(["run", scene, "--json", str(report)]) == 1
-    assert capsys.readouterr().err == "error: interrupted\n"
-    entry = json.loads(report.read_text())
-    assert entry["status"] == "error" and entry["file"] == scene
-    assert entry["error"] == "not run: interrupted (Ctrl-C or SIGTERM) before it ran"
-
-
-def test_a_stop_during_the_library_s_import_still_replaces_the_earlier_report(
-        tmp_path, capsys, monkeypatch):
-    # A stop while the scenes' package was half imported (its yaml not yet whole) made the
-    # "not run" --json fail with an error of that import: exit 3, and the earlier report kept.
-    import sys
-
-    import rts_scenario.cli.run as run_cli
-
     def stopped_while_importing(args, started):
         monkeypatch.setitem(sys.modules, "rts_scenario.scenario", None)  # import fails
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(run_cli, "_run", stopped_while_importing)
+    if where == "variants":
+        monkeypatch.setattr(scenario, "parametrizations", stopped)
+    else:
+        monkeypatch.setattr(run_cli, "_run", stopped_while_importing)
     report = tmp_path / "r.json"
     report.write_text(json.dumps({"scene": "approaching-target", "status": "pass"}))
     scene = str(ROOT / "scenarios" / "approaching_target.scenario.yaml")
     assert cli.main(["run", scene, "--json", str(report)]) == 1
     assert capsys.readouterr().err == "error: interrupted\n"
     entry = json.loads(report.read_text())
-    assert entry["scene"] == "approaching_target" and entry["status"] == "error"
+    assert entry["scene"] == "approaching_target" and entry["file"] == scene
+    assert entry["status"] == "error"
+    assert entry["error"] == "not run: interrupted (Ctrl-C or SIGTERM) before it ran"
+    if where == "variants":
+        return
 
     def broken(*args, **kwargs):
         raise RecursionError("maximum recursion depth exceeded")
