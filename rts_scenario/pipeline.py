@@ -1090,7 +1090,8 @@ class Pipeline:
         playback.rts = self.output.rts_status(settle_s=RTS_SETTLE_S)
         playback.rts_rig = rts_rig_record(self.output.rts_rig(), scene.rig)
         playback.rts_unreachable = self.output.rts_unreachable()
-        report.playback = playback.to_dict()
+        # Which output played the scene: "simulated-radar" is no bench (docs/report.md).
+        report.playback = {**playback.to_dict(), "output": options.output}
         failures = playback.reasons(scene.expectations.expected_limits)
         report.add_expected_not_hit(playback.not_hit(scene.expectations.expected_limits))
         if failures:

@@ -1759,7 +1759,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run
         # did.
-        result.playback = playback
+        result.playback = {**playback, "output": playback.get("output",
+                                                             (sidecar or {}).get("output"))}
         failures = playback_reasons(playback, scene.expectations.expected_limits)
         result.add_expected_not_hit(playback_not_hit(playback, scene.expectations.expected_limits))
         if failures:

@@ -369,12 +369,17 @@ class Report:
 def _playback_line(p: dict[str, Any]) -> str:
     """One line on how the schedule went out and what the RTS says it applied."""
     late = p["lateness_s"]
-    text = f"playback: {p['frames_sent']} frames sent"
+    # No RTS took part where the run played to the built-in radar: said, not left to guess.
+    simulated = p.get("output") == "simulated-radar"
+    text = (f"playback: {p['frames_sent']} frames sent"
+            + (" to the built-in simulated radar (no RTS)" if simulated else ""))
     if late.get("max") is not None and math.isfinite(late["max"]):
         text += (f", late by {late['p50'] * 1e3:.2f} ms median, {late['max'] * 1e3:.2f} ms "
                  f"worst ({p['late_frames']} later than a frame period)")
     rts = p.get("rts")
-    if rts is None:
+    if simulated:
+        pass
+    elif rts is None:
         text += ("; the RTS reports no counters: frames lost on the way show only as radar "
                  "misses")
     else:

@@ -1290,3 +1290,21 @@ def test_run_s_marks_note_says_how_pytest_and_sweep_judge_the_run():
     note, line = marks_note(("xfail",), False, ["bus_silent", "rts_unreachable"])
     assert line == "xfail: FAIL in pytest and sweep (the bench failed it)"
     assert note.endswith("not the bench (bus_silent, rts_unreachable)")
+
+
+def test_a_run_on_a_bench_bus_without_an_rts_says_the_simulated_radar_measured(tmp_path,
+                                                                                capsys):
+    # A bench script that forgot --output passed on the built-in radar, which put its
+    # detections on the bench's bus; neither the text nor the --json said so.
+    report = tmp_path / "r.json"
+    scene = str(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    code = cli.main(["run", scene, "--can-interface", "udp_multicast", "--can-channel",
+                     "239.74.163.117", "--json", str(report)])
+    out, err = capsys.readouterr()
+    # The verdict itself is the simulated radar's over a real socket: a cycle late on a loaded
+    # machine fails it, which is not what this test is about.
+    assert code in (0, 1), out + err
+    assert err.startswith("warning: --can-interface udp_multicast without --output: the "
+                          "built-in simulated radar measures (no RTS plays the scene)")
+    assert "playback: 150 frames sent to the built-in simulated radar (no RTS)" in out
+    assert json.loads(report.read_text())["playback"]["output"] == "simulated-radar"

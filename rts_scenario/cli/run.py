@@ -169,6 +169,13 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         if not str(exc).startswith("--json"):
             _write_not_run(args, f"not run: {exc}")
         raise
+    if args.output == "simulated-radar" and args.can_interface != "virtual":
+        # A bench script that forgot --output: no RTS plays, the built-in radar measures and
+        # puts its detections on the bench's bus, and the verdict is its.
+        print(f"warning: --can-interface {args.can_interface} without --output: the built-in "
+              f"simulated radar measures (no RTS plays the scene) and sends its detections on "
+              f"that bus; the verdicts are the simulated radar's; on a bench, give --output "
+              f"udp://HOST:PORT", file=sys.stderr)
     entries: list[dict[str, Any]] = []
     bench_of_run: dict[int, list[str]] = {}  # a failed entry's bench failures, by index
     stems: set[str] = set()
