@@ -1308,3 +1308,19 @@ def test_a_run_on_a_bench_bus_without_an_rts_says_the_simulated_radar_measured(t
                           "built-in simulated radar measures (no RTS plays the scene)")
     assert "playback: 150 frames sent to the built-in simulated radar (no RTS)" in out
     assert json.loads(report.read_text())["playback"]["output"] == "simulated-radar"
+
+
+def test_a_variant_over_the_simulated_radar_s_options_on_a_bench_is_noted(tmp_path, capsys):
+    # cut-in[estimator=ti] got its own PASS on a bench whose radar never ran the ti estimator.
+    import socket
+
+    scene = tmp_path / "short.scenario.yaml"
+    scene.write_text(SHORT_SCENE + "parametrize:\n  radar.estimator: [ti]\n")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        closed = sock.getsockname()[1]
+    cli.main(["run", str(scene), "--output", f"udp://127.0.0.1:{closed}"])
+    out = capsys.readouterr().out
+    assert (f"note: {scene}[estimator=ti]: radar.estimator set the built-in simulated radar; on "
+            f"the bench (udp://127.0.0.1:{closed}) the radar measures as it is set, so this "
+            f"variant runs as the others do") in out
