@@ -377,12 +377,10 @@ def _playback_line(p: dict[str, Any]) -> str:
         text += (f", late by {late['p50'] * 1e3:.2f} ms median, {late['max'] * 1e3:.2f} ms "
                  f"worst ({p['late_frames']} later than a frame period)")
     rts = p.get("rts")
-    if simulated:
-        pass
-    elif rts is None:
+    if rts is None and not simulated:
         text += ("; the RTS reports no counters: frames lost on the way show only as radar "
                  "misses")
-    else:
+    elif rts is not None:
         text += "; RTS: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in rts.items()
                                       if v or k == "frames_applied")
     gone = p.get("rts_unreachable")

@@ -432,7 +432,7 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     if not report.passed:
         entry["reason"] = "; ".join(report.reasons)
         if status == "fail" and "xfail" in task.marks:
-            entry["reason"] += "; " + _bench_not_expected(bench)
+            entry["reason"] += "; " + bench_not_expected(bench)
     elif status == "fail":  # an xpass under xfail_strict, worded as pytest's report of it
         entry["reason"] = "[XPASS(strict)] the scene's marks: xfail"
     ratio, worst = -1.0, None
@@ -472,7 +472,7 @@ def marked_status(marks: Sequence[str], passed: bool, xfail_strict: bool = False
     return "fail" if xfail_strict else "xpass"
 
 
-def _bench_not_expected(bench: Sequence[str]) -> str:
+def bench_not_expected(bench: Sequence[str]) -> str:
     """Why a failed run of a scene marked ``xfail`` fails all the same (as the plugin says).
 
     ``bench``: the bench failures (`rts_scenario.report.bench_failures`).
@@ -828,7 +828,7 @@ def select_tasks(tasks: Sequence[SweepTask], text: str) -> tuple[list[SweepTask]
 
 
 __all__ = ["LOCAL_SCHEDULER", "NORECURSE_PATTERNS", "PYTEST_CONFIG_NAMES", "WORST_RUNS",
-           "FolderFiles", "NoRunSelected", "PytestSettings", "SweepTask", "collect_tasks",
-           "default_workers", "error_entry", "exit_code", "folder_files", "mark_expression",
-           "marked_status", "pytest_settings", "require_dask", "run_label", "run_sweep",
-           "run_task", "select_tasks", "summarize", "warm_plans"]
+           "FolderFiles", "NoRunSelected", "PytestSettings", "SweepTask", "bench_not_expected",
+           "collect_tasks", "default_workers", "error_entry", "exit_code", "folder_files",
+           "mark_expression", "marked_status", "pytest_settings", "require_dask", "run_label",
+           "run_sweep", "run_task", "select_tasks", "summarize", "warm_plans"]

@@ -374,11 +374,11 @@ class ScenarioItem(pytest.Item):
             return _render(excinfo.value.result)
         if isinstance(excinfo.value, BenchFailed):
             from rts_scenario.report import bench_failures
-            from rts_scenario.sweep import _bench_not_expected
+            from rts_scenario.sweep import bench_not_expected
 
             report = excinfo.value.result.report
             bench = bench_failures(report.reason_codes, report.playback)
-            return f"{_bench_not_expected(bench)}\n\n{_render(excinfo.value.result)}"
+            return f"{bench_not_expected(bench)}\n\n{_render(excinfo.value.result)}"
         if isinstance(excinfo.value, RtsError):
             if self.error is not None:  # the load error, located already
                 return f"error: {self.error}"
