@@ -35,9 +35,6 @@ from .common import (
     writing,
 )
 
-# The scene's radar options only the built-in simulated radar takes (`RadarOptions`).
-_SIMULATED_RADAR_KEYS = ("radar.estimator", "radar.fidelity", "radar.noise", "radar.cfar")
-
 
 def _error_entry(scene: str, path: str, message: str, variant: str = "",
                  parameters: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -86,6 +83,8 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
 
 
 def _run(args: argparse.Namespace, started: list[bool]) -> int:
+    from dataclasses import fields
+
     from ..canbus.mapping import CanMapping
     from ..check import DETECTION_COLUMNS
     from ..errors import BusError, RtsError, ScenarioError
@@ -94,6 +93,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
     from ..preflight import Preflight
     from ..report import bench_failures
     from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
+    from ..scenario.model import RadarOptions
     from ..schedule import ScheduleError
 
     # Every combination of a scene's parametrize block is one run, as in the pytest plugin;
@@ -231,7 +231,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                     continue
                 # Loaded: an interrupted run's entry names the scene, not its file.
                 current = (scene.name, *current[1:])
-                unused = [key for key in scene.parameters if key in _SIMULATED_RADAR_KEYS]
+                # The scene's radar options only the built-in simulated radar takes.
+                unused = [key for key in scene.parameters
+                          if key in {f"radar.{f.name}" for f in fields(RadarOptions)}]
                 if unused and args.output != "simulated-radar":
                     # A variant over the built-in radar's options plays the same on a bench:
                     # its label would claim a result for a setting the radar never had.
