@@ -518,6 +518,22 @@ def test_an_xfail_scene_the_bench_never_played_fails(pytester, monkeypatch, decl
                                  "FAILED known.scenario.yaml::known - the scene's xfail mark*"])
 
 
+def test_a_combination_over_the_simulated_radar_s_options_on_a_bench_is_warned(pytester,
+                                                                              monkeypatch):
+    # cut-in[estimator=ti] got its own verdict on a bench whose radar never ran ti.
+    for name in ("PYTEST_XDIST_WORKER", "PYTEST_XDIST_WORKER_COUNT"):
+        monkeypatch.delenv(name, raising=False)
+    extra = "parametrize:\n  radar.estimator: [ti]\n"
+    pytester.makefile(".scenario.yaml", known=scene("known", extra=extra))
+    port = _closed_udp_port()
+    result = pytester.runpytest("-rA", "--rts-output", f"udp://127.0.0.1:{port}")
+    result.assert_outcomes(failed=1, warnings=1)
+    result.stdout.fnmatch_lines([f"*BenchSettingWarning: known[[]estimator=ti[]]: "
+                                 f"radar.estimator set the built-in simulated radar; on the "
+                                 f"bench (udp://127.0.0.1:{port}) the radar measures as it is "
+                                 f"set, so this combination runs as the others do*"])
+
+
 @pytest.mark.parametrize("workers", [("-n", "2"), ("-d", "--tx", "2*popen")])
 @pytest.mark.parametrize("options", [
     ("--rts-can-interface", "udp_multicast", "--rts-can-channel", "239.74.163.2"),

@@ -83,8 +83,6 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
 
 
 def _run(args: argparse.Namespace, started: list[bool]) -> int:
-    from dataclasses import fields
-
     from ..canbus.mapping import CanMapping
     from ..check import DETECTION_COLUMNS
     from ..errors import BusError, RtsError, ScenarioError
@@ -93,7 +91,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
     from ..preflight import Preflight
     from ..report import bench_failures
     from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
-    from ..scenario.model import RadarOptions
+    from ..scenario.model import simulated_radar_parameters
     from ..schedule import ScheduleError
 
     # Every combination of a scene's parametrize block is one run, as in the pytest plugin;
@@ -231,9 +229,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                     continue
                 # Loaded: an interrupted run's entry names the scene, not its file.
                 current = (scene.name, *current[1:])
-                # The scene's radar options only the built-in simulated radar takes.
-                unused = [key for key in scene.parameters
-                          if key in {f"radar.{f.name}" for f in fields(RadarOptions)}]
+                unused = simulated_radar_parameters(scene.parameters)
                 if unused and args.output != "simulated-radar":
                     # A variant over the built-in radar's options plays the same on a bench:
                     # its label would claim a result for a setting the radar never had.

@@ -99,6 +99,18 @@ class RadarOptions:
     noise: bool = True
 
 
+def simulated_radar_parameters(parameters: dict[str, Any]) -> list[str]:
+    """Return a variant's parameters (key paths) that only the built-in simulated radar takes.
+
+    Played to an RTS, a combination over them runs as the others do: the radar on the bench
+    measures as it is set (`rts-scenario run` and the pytest plugin say so).
+    """
+    from dataclasses import fields
+
+    keys = {f"radar.{f.name}" for f in fields(RadarOptions)}
+    return [key for key in parameters if key in keys]
+
+
 @dataclass(frozen=True)
 class RcsModel:
     """Radar cross section of a target.
