@@ -175,6 +175,22 @@ def report_written(path: str | Path) -> None:
     _written_reports.add(str(path))
 
 
+@contextmanager
+def replacing_after_stop(path: str | Path) -> Iterator[None]:
+    """Write a report after a stop: a failure is one line (or, for RtsError, the exit code).
+
+    A stop may leave a module half imported or a write half done; the stop is the command's
+    outcome, so nothing here raises but a second stop.
+    """
+    try:
+        yield
+    except (RtsError, KeyboardInterrupt):
+        pass  # the exit code says it
+    except Exception as exc:  # whatever the stop left half-done
+        print(f"error: --json {path}: not replaced after the stop: {type(exc).__name__}: "
+              f"{one_line(exc)}", file=sys.stderr)
+
+
 def replace_unwritten_report(args: argparse.Namespace) -> None:
     """After a stop, write ``--json`` if the command wrote none: no verdict, interrupted.
 
@@ -193,16 +209,11 @@ def replace_unwritten_report(args: argparse.Namespace) -> None:
             named += value if isinstance(value, list) else [value]
     if same_as_any(path, [v for v in named if isinstance(v, str)]):
         return
-    try:
+    with replacing_after_stop(path):
         write_json("--json", path, {"command": args.command, "passed": False,
                                     "interrupted": True,
                                     "error": "interrupted (Ctrl-C or SIGTERM) before the "
                                              "command wrote its report: no verdict"})
-    except (RtsError, KeyboardInterrupt):
-        pass  # the exit code says it
-    except Exception as exc:  # whatever the stop left half-done; the stop is the outcome
-        print(f"error: --json {path}: not replaced after the stop: {type(exc).__name__}: "
-              f"{one_line(exc)}", file=sys.stderr)
 
 
 def check_writable_file(option: str, path: str | Path, kind: str | None = None, *,

@@ -29,6 +29,7 @@ from .common import (
     check_writable_folder,
     named_file,
     read_by_scenes,
+    replacing_after_stop,
     same_as_any,
     show_traceback,
     write_json,
@@ -54,15 +55,8 @@ def _do_run(args: argparse.Namespace) -> int:
         return _run(args, started)
     except KeyboardInterrupt:
         if not started[0]:
-            from ..errors import RtsError
-
-            try:
+            with replacing_after_stop(args.json):
                 _write_not_run(args, "not run: interrupted (Ctrl-C or SIGTERM) before it ran")
-            except (RtsError, KeyboardInterrupt):
-                pass  # the exit code says it
-            except Exception as exc:  # whatever the stop left half-done; the stop is the outcome
-                print(f"error: --json {args.json}: not replaced after the stop: "
-                      f"{type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
         raise
 
 

@@ -17,6 +17,7 @@ from .common import (
     check_distinct_paths,
     check_writable_file,
     read_by_scenes,
+    replacing_after_stop,
     same_as_any,
     write_json,
     writing,
@@ -120,11 +121,11 @@ def _outputs_checked(args: argparse.Namespace) -> PytestSettings:
 
 def _write_interrupted(args: argparse.Namespace) -> None:
     """Write ``--json`` with no run and ``"interrupted": true``: stopped before any run."""
-    from ..errors import RtsError, one_line
+    from ..errors import RtsError
 
     if not args.json:
         return
-    try:
+    with replacing_after_stop(args.json):
         try:
             from ..sweep import summarize
 
@@ -142,11 +143,6 @@ def _write_interrupted(args: argparse.Namespace) -> None:
         write_json("--json", args.json, {"runs": [], "summary": {**summary,
                                                                  "interrupted": True},
                                          "config": config})
-    except (RtsError, KeyboardInterrupt):
-        pass  # the exit code says it
-    except Exception as exc:  # whatever the stop left half-done; the stop is the outcome
-        print(f"error: --json {args.json}: not replaced after the stop: "
-              f"{type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
 
 
 def _prepare(args: argparse.Namespace
