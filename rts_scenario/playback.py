@@ -134,11 +134,24 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
             f"than this run sent ({int(rts['datagrams'])} in all): another sender's stream took "
             f"the RTS over (a second run against it?), so what it played and counted is not "
             f"this run's", "rts_stream"))
-    gone = playback.get("rts_unreachable")
-    if gone and "frames_lost" not in expected:
-        out.append(FailReason(unreachable_reason(gone), "rts_unreachable"))
+    if "frames_lost" not in expected:
+        out += delivery_reasons(rts, playback.get("rts_unreachable"))
+    return out
+
+
+def delivery_reasons(rts: Mapping[str, int] | None, gone: Mapping[str, Any] | None,
+                     within: str = "of the scene") -> list[str]:
+    """Why the RTS did not play every frame: datagrams back undelivered, frames it lost.
+
+    ``rts``: its counters (`Output.rts_status`); ``gone``: what the network said of datagrams
+    nothing received (`Output.rts_unreachable`). A scene that declares ``frames_lost`` is not
+    failed for them (`playback_reasons`; `rts-scenario schedule` tells them).
+    """
+    out: list[str] = []
+    if gone:
+        out.append(FailReason(unreachable_reason(gone, within), "rts_unreachable"))
     lost = lost_frames(rts)
-    if lost and "frames_lost" not in expected:
+    if lost:
         out.append(FailReason(
             f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("
             + ", ".join(f"{k.replace('_', ' ')} {rts[k]}"
@@ -222,6 +235,7 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
     return int(rts.get("lost_frames", 0)) + int(rts.get("unsynced_frames", 0))
 
 
-__all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "lost_frames",
+__all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "delivery_reasons",
+           "lost_frames",
            "playback_not_hit", "playback_reasons", "rts_rig_record", "unpack_send_lateness",
            "unreachable_reason"]

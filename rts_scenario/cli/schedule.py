@@ -21,7 +21,7 @@ def _do_schedule(args: argparse.Namespace) -> int:
 
     from ..outputs import open_output, split_spec
     from ..pipeline import RTS_SETTLE_S
-    from ..playback import LOST_COUNTERS, lost_frames, unreachable_reason
+    from ..playback import delivery_reasons
     from ..preflight import LimitCounter, schedule_batches
     from ..scenario import load_scenario, select_variant
 
@@ -54,22 +54,12 @@ def _do_schedule(args: argparse.Namespace) -> int:
           f"{emitted / max(total, 1):.0%} of entries emitted -> {args.output}")
     # As `run` judges them: a scene that declares frames_lost (an RTS that drops some) is told
     # of them, not failed.
+    problems = delivery_reasons(rts, gone, "of the schedule")
     declared = "frames_lost" in scene.expectations.expected_limits
-    problem = None
-    if gone is not None:
-        problem = unreachable_reason(gone, "of the schedule")
-    elif lost := lost_frames(rts):
-        counts = ", ".join(f"{k.replace('_', ' ')} {rts[k]}" for k in LOST_COUNTERS
-                           if rts and rts.get(k))
-        problem = (f"frames_lost: the RTS reports {lost} schedule frames it did not apply "
-                   f"({counts})")
-    if problem is None:
-        return EXIT_OK
-    if declared:
-        print(f"note: {problem} (the scene declares frames_lost)", file=sys.stderr)
-        return EXIT_OK
-    print(f"error: {problem}", file=sys.stderr)
-    return EXIT_FAIL
+    for problem in problems:
+        print(f"note: {problem} (the scene declares frames_lost)" if declared
+              else f"error: {problem}", file=sys.stderr)
+    return EXIT_FAIL if problems and not declared else EXIT_OK
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
