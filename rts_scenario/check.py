@@ -1025,7 +1025,7 @@ class Checker:
                if lim not in t.limits]
         return Report(
             scene=self.scene, passed=not reasons, reasons=reasons,
-            frames={**frames, "late": frames["late"] + (bus or {}).get("reordered", 0)},
+            frames=dict(frames),
             targets=targets, errors={q: self._stats[q].result() for q, _ in QUANTITIES},
             detection_rate=float(self._detected.sum() / n_truth) if n_truth else float("nan"),
             false_detections=self._false, false_detections_per_frame=per_frame,

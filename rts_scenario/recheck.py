@@ -582,6 +582,11 @@ def read_cycles(log: str | Path, mapping: CanMapping | None, cycle_s: float | No
                              restart=restart)), stats
 
 
+# Detection messages held before a log's first header, waiting for it: more than a cycle's
+# worth are a tail of cycles before it whatever comes.
+_EARLY_PARTS = 1024
+
+
 def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, int],
                  cycle_s: float | None = None, *, channel: str | None = None,
                  channels: Counter[str | None] | None = None,
@@ -616,6 +621,10 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
 
     started = False
     skipped = other = 0
+    # Detections before the log's first header: where they carry their frame counter, one
+    # of the first cycle's own waits for its header (a radar whose detection identifiers are
+    # lower than its header's sends them first), the rest are the tail of a cycle before.
+    early: list[can.Message] = []
     not_read = None
     if unread is not None:
         not_read = _Unread(path.suffix.lower(), radar_ids)
@@ -633,12 +642,29 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
             data = not (msg.is_error_frame or msg.is_remote_frame)
             ident = (msg.arbitration_id, msg.is_extended_id)
             if data and ident in radar_ids and ident != header_id:
-                # The log began inside a cycle: its tail before the first header is no cycle.
-                skipped += 1
+                # The log began inside a cycle, or the first cycle's detections came first.
+                if receiver.frame_counted and len(early) < _EARLY_PARTS:
+                    early.append(msg)
+                else:
+                    skipped += 1
                 continue
             # Error and remote frames, and identifiers the mapping does not know, count as
             # the run's receiver counts them, wherever they come.
             started = data and ident == header_id
+            if started and early:
+                orphans = receiver.stats.orphans
+                for part in early:
+                    receiver.on_message_received(part)
+                receiver.on_message_received(msg)
+                # Those the first header did not claim: no cycle of the log (not counted as
+                # orphans, nor as messages twice).
+                unclaimed = receiver.forget_waiting() + receiver.stats.orphans - orphans
+                receiver.stats.orphans = orphans
+                receiver.stats.messages -= unclaimed
+                skipped += unclaimed
+                early = []
+                yield from take(receiver.pop())
+                continue
         receiver.on_message_received(msg)
         yield from take(receiver.pop())
     yield from take(receiver.flush())
@@ -699,6 +725,17 @@ class _LogIndex:
 
     def __len__(self) -> int:
         return int(self.counters.size)
+
+
+def _refused_text(bus: dict[str, int]) -> str:
+    """Why a log's detections may be missing: its messages the receiver refused, in words."""
+    refused = [(bus.get("checksum_errors", 0), "failed their checksum"),
+               (bus.get("decode_errors", 0), "could not be decoded")]
+    said = [f"{n} messages {why}" for n, why in refused if n]
+    if not said:
+        return ""
+    return (f" ({' and '.join(said)}: is --mapping the radar's, and did the logger keep "
+            f"each message whole (its CAN FD flag and length)?)")
 
 
 def _cycles_at(log: str | Path, mapping: CanMapping | None, positions: IntArray,
@@ -1376,14 +1413,16 @@ def _offset_uncertainty(table: _TruthTable, det: _Detected, t_log: FloatArray,
     for a slow scene, which frame fits best. Each round takes the latest of its best offsets
     on the grid ``fine``, as `estimate_offset` does.
     """
-    n_cycles = t_log.size
-    if n_cycles < 3:
+    # Cycles with detections drawn (the others weigh nothing in the cost): a draw of only
+    # cycles without any would leave nothing to weigh.
+    owners = np.unique(det.owner)
+    if owners.size < 3:
         return None
     rng = np.random.default_rng(0)
     found = []
     for _ in range(rounds):  # a few dozen resamplings, each a vectorized search
-        pick = np.zeros(n_cycles, dtype=np.int64)
-        np.add.at(pick, rng.integers(0, n_cycles, n_cycles), 1)
+        pick = np.zeros(t_log.size, dtype=np.int64)
+        np.add.at(pick, owners[rng.integers(0, owners.size, owners.size)], 1)
         weight = pick[det.owner].astype(np.float64)
         costs = np.array([table.cost(t_log - s, det, weight) for s in fine])
         found.append(float(fine[_best(costs)[-1]]))
@@ -1542,6 +1581,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"--time-offset-s (the log time of the scene's time 0)")
         span_s = 0.0
         if time_offset_s is None:
+            if not aligned_by_data:
+                raise LogError(f"--log {log}: no detection to align the scene with"
+                               + _refused_text(bus) + "; give --time-offset-s")
             # The profile's latency, the offset from the data.
             found = estimate_offset(scene, bus_t[chosen], dets, latency)
             offset = found.offset_s

@@ -784,6 +784,61 @@ def test_a_first_cycle_held_up_on_the_bus_is_still_the_scene_s_first(tmp_path, d
     assert result.report.passed, result.report.reasons
 
 
+def test_the_first_cycle_s_detections_before_its_header_wait_for_it(tmp_path, desk_log):
+    # A radar whose detection identifiers are lower than its header's sends them first (CAN
+    # arbitration): every cycle, the log's first too, is whole; the detections come before
+    # their header (reordered messages), no cycle came late.
+    scene, log, origin = desk_log
+    cycles = radar_cycles(log)
+    assert len(cycles[0]) > 1  # the first cycle has detections
+    swapped = write_log(tmp_path / "swapped.blf", [c[1:] + c[:1] for c in cycles])
+    for offset in (None, origin):
+        report = check_log(scene, swapped, time_offset_s=offset).report
+        assert report.passed, report.reasons
+        assert (report.frames["total"], report.frames["checked"]) == (240, 240)
+        assert (report.frames["incomplete"], report.frames["late"]) == (0, 0)
+        assert report.bus["before_first_cycle"] == report.bus["orphans"] == 0
+        assert report.bus["reordered"] == sum(len(c) - 1 for c in cycles)
+        assert report.bus["messages"] == sum(len(c) for c in cycles)
+    # A log that began inside a cycle: that cycle's tail is no cycle of the log (not an
+    # orphan, nor a part of a later cycle with the same low counter bits).
+    tail = write_log(tmp_path / "tail.blf", [cycles[0][1:], *cycles[1:]])
+    report = check_log(scene, tail, time_offset_s=origin).report
+    assert report.bus["before_first_cycle"] == len(cycles[0]) - 1
+    assert (report.bus["orphans"], report.bus["reordered"], report.bus["conflicts"]) == (0, 0, 0)
+    assert report.bus["messages"] == sum(len(c) for c in cycles) - 1
+    assert report.frames["missing"] == 1 and report.frames["checked"] == 239
+
+
+def test_a_log_whose_detections_all_fail_their_checksum_says_so(tmp_path, desk_log):
+    # A logger that cut CAN FD messages short, or another radar's checksums: no detection
+    # to align the scene by, and the message says why.
+    scene, log, _ = desk_log
+    broken = [[c[0], *(can.Message(arbitration_id=m.arbitration_id, is_extended_id=False,
+                                   data=bytes(m.data[:-1]) + bytes([m.data[-1] ^ 0xFF]),
+                                   timestamp=m.timestamp) for m in c[1:])]
+              for c in radar_cycles(log)]
+    n_detections = sum(len(c) - 1 for c in broken)
+    with pytest.raises(LogError, match=rf"no detection to align the scene with \({n_detections} "
+                                       rf"messages failed their checksum: is --mapping the "
+                                       rf"radar's, .*\); give --time-offset-s"):
+        check_log(scene, write_log(tmp_path / "broken.blf", broken))
+
+
+@pytest.mark.parametrize("kept", [1, 2, 3])
+def test_a_log_with_detections_in_a_few_cycles_fails_without_a_runtime_error(tmp_path,
+                                                                              desk_log, kept):
+    # A radar that lost its target: the other cycles announce detections that never came.
+    # The offset's uncertainty (a bootstrap over the cycles with detections) has too few to
+    # draw from, or draws all of them again: the check fails on the detection rate.
+    scene, log, _ = desk_log
+    cycles = radar_cycles(log)
+    few = [c if 80 <= i < 80 + kept else c[:1] for i, c in enumerate(cycles)]
+    report = check_log(scene, write_log(tmp_path / "few.blf", few)).report
+    assert not report.passed
+    assert report.frames["incomplete"] == len(cycles) - kept
+
+
 def test_an_8_bit_counter_names_every_cycle_live_and_in_the_re_checks(tmp_path):
     # rts-scenario's own messages with an 8-bit cycle counter: 600 cycles wrap it twice and
     # more, and a batch of 200 frames holds more cycles than it counts.

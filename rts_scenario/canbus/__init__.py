@@ -802,6 +802,24 @@ class DetectionReceiver(can.Listener):
             out.append(self._ready.popleft())
         return out
 
+    @property
+    def frame_counted(self) -> bool:
+        """Whether detections carry their cycle's frame counter (one before its header waits)."""
+        return self._frame_counter is not None
+
+    def forget_waiting(self) -> int:
+        """Drop the detections still waiting for their cycle's header; return how many.
+
+        They are no longer counted as orphans or reordered: for a log's first cycle, the
+        tail of a cycle before it whose header the log does not hold (`recheck`).
+        """
+        with self._lock:
+            n = sum(len(parts) for parts in self._waiting.values())
+            self._waiting.clear()
+            self.stats.orphans -= n
+            self.stats.reordered -= n
+            return n
+
     def flush(self) -> list[Detections]:
         """Hand on every open cycle (incomplete ones marked so) and take all cycles."""
         with self._lock:
