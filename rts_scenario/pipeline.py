@@ -1148,7 +1148,8 @@ class Pipeline:
                           channel_unknown=self._radar_channel() is None,
                           channel_named=self._radar_channel_named(),
                           host_clock_steps=self.host_clock_steps(),
-                          bus_time_shifts=self._bus_shifts)
+                          bus_time_shifts=self._bus_shifts,
+                          mapping_sha256=self.receiver.mapping.sha256)
 
     def _recorded(self, on: bool) -> contextlib.AbstractContextManager[None]:
         """Hold the bus's messages back while the block runs; the log records after it or not.
@@ -1417,7 +1418,8 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
                       channel_unknown: bool = False,
                       channel_named: bool | None = None,
                       host_clock_steps: list[dict[str, float | str]] | None = None,
-                      bus_time_shifts: list[dict[str, float | int]] | None = None) -> Path:
+                      bus_time_shifts: list[dict[str, float | int]] | None = None,
+                      mapping_sha256: str | None = None) -> Path:
     """Write what re-checking a recorded bus log needs next to it (``LOG.rts.json``).
 
     The variant of the scene that played (`Scenario.variant`, its ``parametrize``
@@ -1483,6 +1485,9 @@ def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,
         # no other in its place.
         "radar_channel": options.radar_channel,
         "mapping": str(Path(options.mapping).resolve()) if options.mapping else None,
+        # The mapping's and its DBC's text (`CanMapping.sha256`): a re-check by one edited
+        # since decodes the log otherwise than the run did, and is refused.
+        "mapping_sha256": mapping_sha256 or None,
         "can_fd": options.can_fd, "method": options.method, "output": options.output,
         # The statuses the RTS played (a re-check judges by them) and their digest, and per
         # target a checksum of the ground truth the run judged by (`PlayedRecord`).

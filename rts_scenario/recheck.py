@@ -294,6 +294,7 @@ SIDECAR_SCHEMA: dict[str, Any] = {
             },
         },
         "mapping": {"type": ["string", "null"]},
+        "mapping_sha256": {"type": ["string", "null"], "pattern": "^[0-9a-f]{64}$"},
         # The bus the run listened on (python-can's interface and channel).
         "can_interface": {"type": ["string", "null"]},
         "can_channel": {"type": ["string", "null"]},
@@ -1459,9 +1460,26 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     builtin = Path(__file__).resolve().parent / "data" / "can" / "rts_detections.mapping.yaml"
     other_mapping = (mapping is not None and sidecar is not None
                      and Path(mapping).resolve() != Path(recorded_mapping or builtin).resolve())
-    if mapping is None and recorded_mapping:
+    from_sidecar = mapping is None and bool(recorded_mapping)
+    if from_sidecar:
         mapping = recorded_mapping
+        if not Path(str(mapping)).is_file():
+            raise LogError(f"{log}{LOG_SIDECAR_SUFFIX}: mapping: {mapping}: no such file (the "
+                           f"mapping the run spoke, as the sidecar names it; a log moved from "
+                           f"another machine?); give --mapping with a copy of it")
     can_mapping = CanMapping.from_file(mapping) if mapping else None
+    recorded_digest = (sidecar or {}).get("mapping_sha256")
+    digest = (can_mapping or CanMapping.builtin()).sha256
+    if recorded_digest and digest == recorded_digest:
+        other_mapping = False  # the run's mapping and DBC, wherever they are now
+    elif recorded_digest and not other_mapping:
+        which = (f"mapping {mapping}" if mapping else "rts-scenario's own mapping")
+        raise LogError(f"--log {log}: {which} is not what the run decoded the bus with: its "
+                       f"text or its DBC's changed since the recording (its sidecar's "
+                       f"mapping_sha256 differs), so the log's messages would read otherwise "
+                       f"than the run read them; check with the mapping and DBC the run spoke"
+                       + ("" if mapping is None else ", or copy the edited one to another "
+                          "file and give it as --mapping to read the log as it says"))
     unused_method = (method is not None and sidecar is not None
                      and sidecar.get("statuses") is not None
                      and method != sidecar.get("method"))

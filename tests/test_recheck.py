@@ -1286,6 +1286,50 @@ def test_a_log_the_mapping_reads_no_cycle_of_counts_its_messages(recorded, tmp_p
             f"mapping 'cluster-list')") in capsys.readouterr().err
 
 
+def test_a_mapping_or_dbc_edited_since_the_recording_is_refused_and_a_copy_is_the_same(
+        tmp_path):
+    # A run recorded with a copy of rts-scenario's mapping and DBC. Its DBC edited since
+    # would read the log otherwise (a signal's scale changes every RCS): refused, not a
+    # verdict; a copy of the run's mapping and DBC elsewhere (a log moved to another machine)
+    # reads it as the run did, without a note.
+    builtin = ROOT / "rts_scenario" / "data" / "can"
+    dbc = (builtin / "rts_detections.dbc").read_text()
+    rcs = re.search(r"SG_ RCS : .*", dbc)
+    assert rcs is not None and "(0.5," in rcs.group(0)
+    folder = tmp_path / "can"
+    folder.mkdir()
+    (folder / "rts_detections.mapping.yaml").write_text(
+        (builtin / "rts_detections.mapping.yaml").read_text())
+    (folder / "rts_detections.dbc").write_text(dbc)
+    mapping = folder / "rts_detections.mapping.yaml"
+    scene = load_scenario(CUT_IN, QUIET)
+    log = tmp_path / "run.blf"
+    live = run_scene(scene, RunOptions(mapping=str(mapping), bus_log=str(log))).report
+    sidecar = json.loads(Path(str(log) + ".rts.json").read_text())
+    digest = sidecar["mapping_sha256"]
+    assert re.fullmatch("[0-9a-f]{64}", digest)
+    assert check_log(scene, log).report.frames == live.frames
+    # Moved: the sidecar's path names no file; a copy given with --mapping is the run's.
+    moved = tmp_path / "moved"
+    shutil.copytree(folder, moved)
+    shutil.rmtree(folder)
+    with pytest.raises(LogError, match=r"\.rts\.json: mapping: .*rts_detections\.mapping\.yaml: "
+                                       r"no such file \(the mapping the run spoke.*give "
+                                       r"--mapping with a copy of it"):
+        check_log(scene, log)
+    again = check_log(scene, log, mapping=str(moved / "rts_detections.mapping.yaml"))
+    assert again.alignment.notes == [] and again.report.frames == live.frames
+    # Edited in place (a signal's offset): refused, naming the digest.
+    shutil.copytree(moved, folder)
+    (folder / "rts_detections.dbc").write_text(dbc.replace(rcs.group(0), rcs.group(0).replace(
+        "(0.5,", "(0.25,", 1)))
+    with pytest.raises(LogError, match=r"mapping .* is not what the run decoded the bus with: "
+                                       r"its text or its DBC's changed since the recording"):
+        check_log(scene, log)
+    with pytest.raises(LogError, match="mapping_sha256 differs"):
+        check_log(scene, log, mapping=str(mapping))
+
+
 def test_a_mapping_other_than_the_run_s_is_noted_and_a_changed_target_list_named(recorded,
                                                                                 tmp_path):
     scene_file = ROOT / "scenarios" / "highway_following.scenario.yaml"

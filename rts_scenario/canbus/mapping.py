@@ -15,6 +15,7 @@ as the protocol has them and skipped by the receiver.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 from collections.abc import Callable, Iterator
@@ -279,6 +280,15 @@ class Field:
     offset: float = 0.0
 
 
+def digest_of(mapping_text: bytes, dbc_text: bytes) -> str:
+    """sha256 of a mapping file's bytes and its DBC's, as `CanMapping.sha256` keeps it."""
+    digest = hashlib.sha256(b"rts-scenario mapping\0")
+    for part in (mapping_text, dbc_text):
+        digest.update(len(part).to_bytes(8, "little"))
+        digest.update(part)
+    return digest.hexdigest()
+
+
 @dataclass(frozen=True, eq=False)
 class CanMapping:
     """A DBC and the meaning of its signals for the checker."""
@@ -299,6 +309,9 @@ class CanMapping:
     checksum_spec: Checksum | None = None
     counter_max: int | None = None  # the counter's last value before 0 (None: its width's)
     counter_min: int = 0  # the counter's first value, the one after its last
+    # sha256 of the mapping's text and its DBC's (`digest_of`): what a recording's sidecar
+    # keeps, so that a re-check tells a mapping or DBC edited since.
+    sha256: str = ""
 
     @property
     def header_checksum(self) -> str | None:
@@ -371,8 +384,10 @@ class CanMapping:
         text = folder.joinpath("rts_detections.mapping.yaml").read_text()
         doc = load_yaml("<mapping rts-detections>", text)
         dbc = folder.joinpath("rts_detections.dbc").read_text()
-        return cls._build(doc, _load_dbc(
+        mapping = cls._build(doc, _load_dbc(
             lambda: cantools.database.load_string(dbc, database_format="dbc")))
+        object.__setattr__(mapping, "sha256", digest_of(text.encode(), dbc.encode()))
+        return mapping
 
     @classmethod
     def from_file(cls, path: str | Path) -> CanMapping:
@@ -392,10 +407,16 @@ class CanMapping:
                                           f"byte in its first {len(head)} bytes), not a DBC's text")
             db = _load_dbc(lambda: cantools.database.load_file(dbc_path, database_format="dbc",
                                                                encoding=encoding))
+            dbc_bytes = dbc_path.read_bytes()
         except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
             raise doc.error(("dbc",), f"cannot load DBC {dbc_path}: "
                                       f"{_printable(str(exc))}") from None
-        return cls._build(doc, db)
+        mapping = cls._build(doc, db)
+        try:
+            object.__setattr__(mapping, "sha256", digest_of(path.read_bytes(), dbc_bytes))
+        except OSError as exc:  # read a moment ago
+            raise doc.error((), f"cannot read {path}: {exc.strerror}") from None
+        return mapping
 
     @classmethod
     def _build(cls, doc: Document, db: cantools.database.can.Database) -> CanMapping:
