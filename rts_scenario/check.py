@@ -207,6 +207,14 @@ class _Judged:
             self.limits)
 
 
+# A cycle numbered before the scene came on the bus during it (`Checker.out_of_count_reason`)
+# where it came later than its number says by more than this: a bus that held one up, or
+# a latency's jitter, do not come near (the radar's own cycles before the scene come before
+# its first cycle's time).
+OUT_OF_COUNT_SLACK_CYCLES = 2
+OUT_OF_COUNT_SLACK_S = 0.1
+
+
 class Checker:
     """Streaming check of radar cycles against ground truth.
 
@@ -261,6 +269,14 @@ class Checker:
         self.counter_start = counter_start
         self._started = False
         self._scene_first = 0  # the scene's first cycle: those before it were measured before
+        # Where the run knows when cycle ``n`` reached the bus (`anchor`): cycles numbered
+        # before the scene that came on the bus during it, long after their numbers say (not
+        # this radar's count: another radar's with the same identifiers, or a counter gone
+        # back), by number (those that may be the scene's first: few) and the rest.
+        self._anchor: tuple[int, float] | None = None
+        self._out_of_count: dict[int, int] = {}
+        self._out_of_count_before = 0
+        self._out_of_count_span: tuple[float, float] | None = None
         # The first cycle after the scene not counted in ``frames["after_scene"]`` (None: all
         # are): those measured later than the window after the scene's end
         # (`rts_scenario.pipeline.after_scene_until_s`) depend on how long a bus was listened to.
@@ -371,6 +387,8 @@ class Checker:
         """
         if self._last_cycle is None:
             self._last_cycle, self._last_bus_t = int(number), float(bus_t_s)
+        if self._anchor is None:
+            self._anchor = (int(number), float(bus_t_s))
 
     def add_cycles(self, cycles: Iterable[Detections]) -> IntArray:
         """Take radar cycles, in the order they arrived; each is filed under its counter's frame.
@@ -398,6 +416,7 @@ class Checker:
                 np.r_[self._last_bus_t, bus_t], self.cycle_s)[1:]
         self._last_cycle = int(frames[-1])
         self._last_bus_t = float(bus_t[-1])
+        self.tally_out_of_count(frames, bus_t)
         for frame, cycle in zip(frames.tolist(), cycles, strict=True):  # one per radar cycle
             if frame < self._scene_first:  # measured before the scene's start: not checked
                 self.frames["before_scene"] += 1
@@ -408,6 +427,51 @@ class Checker:
             else:
                 self._cycles[frame] = cycle
         return frames
+
+    def tally_out_of_count(self, frames: IntArray, bus_t: FloatArray) -> None:
+        """Count cycles numbered before cycle 2 that came far later than their numbers say.
+
+        ``frames``: the cycles' numbers, ``bus_t``: their bus times (NaN: none). Called for
+        every cycle taken (`add_cycles`), and by a re-check for those it does not hand on
+        (numbered before the scene). Without `anchor` or a cycle time: nothing to tell by.
+        """
+        if self._anchor is None or self.cycle_s is None:
+            return
+        number, at = self._anchor
+        cycle_s = self.cycle_s
+        came_after_s = bus_t - at
+        late_s = came_after_s - (frames - number) * cycle_s
+        odd = (frames < number + 2) & (late_s > OUT_OF_COUNT_SLACK_CYCLES * cycle_s
+                                       + OUT_OF_COUNT_SLACK_S)
+        if not odd.any():
+            return
+        for f in frames[odd & (frames >= number)].tolist():
+            self._out_of_count[f] = self._out_of_count.get(f, 0) + 1
+        self._out_of_count_before += int((odd & (frames < number)).sum())
+        span = came_after_s[odd]
+        lo, hi = float(span.min()), float(span.max())
+        if self._out_of_count_span is not None:
+            lo, hi = min(lo, self._out_of_count_span[0]), max(hi, self._out_of_count_span[1])
+        self._out_of_count_span = (lo, hi)
+
+    def out_of_count_reason(self) -> str | None:
+        """Cycles numbered before the scene that came on the bus during it: not this radar's.
+
+        One radar's cycles before the scene (measured before it began) come before its first
+        cycle's, not seconds after: those are another radar's with the same identifiers on
+        the bus (a second radar, a recording replayed onto it), or a counter that went back;
+        they were not checked (``frames["before_scene"]``), and the verdict cannot rest on a
+        bus that carries them. Needs the bus time of a cycle (`anchor`); else None.
+        """
+        n = self._out_of_count_before + sum(c for f, c in self._out_of_count.items()
+                                            if f < self._scene_first)
+        if not n or self._out_of_count_span is None:
+            return None
+        lo, hi = self._out_of_count_span
+        return (f"{n} radar cycles numbered before the scene came on the bus {lo:.3f} to "
+                f"{hi:.3f} s after its first cycle's time, later than their numbers allow: "
+                f"not this radar's count (another radar with the same identifiers on the bus, "
+                f"or a counter that went back); counted as before_scene, not checked")
 
     def settle(self, before_frame: int | None = None) -> None:
         """Check every truth block that ends at or before ``before_frame`` (all if None)."""
@@ -981,6 +1045,9 @@ class Checker:
             reasons.append(FailReason(f"{self._invalid} detections with a reported quantity "
                                       f"that is not a number (NaN or infinite): they match no "
                                       f"target", "invalid_detections"))
+        out_of_count = self.out_of_count_reason()
+        if out_of_count:
+            reasons.append(FailReason(out_of_count, "foreign_cycles"))
         if frames["missing"] or frames["incomplete"]:
             # A cycle with no checkable target still had its false detections to check.
             reasons.append(FailReason(f"{frames['missing']} radar cycles missing and "

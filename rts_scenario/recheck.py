@@ -2169,6 +2169,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     checker.frames["after_scene"] += distinct
     checker.frames["repeated"] += int(after.size) - distinct
     checker.frames["before_scene"] += int((rel < 0).sum())
+    checker.tally_out_of_count(rel[rel < 0], bus_t_s[rel < 0])
     later = int((rel >= end).sum())
     if later:
         alignment.notes.append(

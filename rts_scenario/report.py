@@ -421,10 +421,12 @@ UNCODED_REASON = "other"
 # Codes that say the bench, not the radar, failed the run: the RTS did not play the schedule
 # (another rig, another sender's stream, datagrams back undelivered, frames it did not apply,
 # frames the host sent late), or the radar's messages were not seen (a silent bus, messages the
-# mapping does not match or on other channels). A scene's ``xfail`` mark (a known failure of
-# the radar's check) does not cover them: such a run fails (`bench_failures`).
+# mapping does not match or on other channels), or another radar's cycles came with them. A
+# scene's ``xfail`` mark (a known failure of the radar's check) does not cover them: such a
+# run fails (`bench_failures`).
 BENCH_FAILURE_CODES = ("rts_rig", "rts_stream", "rts_unreachable", "frames_lost",
-                       "frames_sent_late", "bus_silent", "mapping", "radar_channel")
+                       "frames_sent_late", "bus_silent", "mapping", "radar_channel",
+                       "foreign_cycles")
 
 
 def bench_failures(codes: Iterable[str], playback: Mapping[str, Any] | None = None

@@ -634,6 +634,43 @@ def test_cycles_measured_before_the_scene_are_counted_as_such_not_late_or_after_
     assert "3 before the scene's start (not checked)" in report.table()
 
 
+@pytest.mark.parametrize("foreign", [0, 2])
+def test_cycles_numbered_before_the_scene_that_come_during_it_are_no_cycles_of_this_radar(
+        foreign):
+    # One radar's cycles before the scene come on the bus before its first cycle's time (the
+    # anchor: cycle 0 at 1000 s, one every 50 ms). A second radar with the same identifiers,
+    # counting elsewhere, puts cycles numbered before the scene on the bus during it: they
+    # fail the verdict (foreign_cycles), not silently counted as before_scene.
+    import dataclasses
+
+    tr = truth(10)
+    checker = Checker("s", tr.names, EXPECT, counter_start=100, cycle_s=0.05)
+    checker.anchor(0, 1000.0)
+
+    def on_bus(cycles, first_s):
+        return [dataclasses.replace(c, bus_t_s=first_s + 0.05 * i) for i, c in enumerate(cycles)]
+
+    early = on_bus([Detections.empty(100 - k, -0.05 * k, ()) for k in (3, 2, 1)], 999.85)
+    scene = on_bus(cycles_from(tr, first=100), 1000.0)
+    other = on_bus([Detections.empty(50 + k, None, ()) for k in range(foreign)], 1000.2)
+    checker.add_truth(0, tr, OK(10, 2))
+    checker.add_frames(checkable(tr, OK(10, 2)))
+    checker.add_cycles(early + scene[:5] + other + scene[5:])
+    checker.settle()
+    report = checker.report()
+    assert report.frames["checked"] == 10
+    assert report.frames["before_scene"] == 3 + foreign
+    if not foreign:
+        assert report.passed, report.reasons
+        return
+    assert not report.passed
+    [reason] = report.reasons
+    assert reason.codes == ("foreign_cycles",)
+    assert reason.startswith("2 radar cycles numbered before the scene came on the bus 0.200 "
+                             "to 0.250 s after its first cycle's time, later than their numbers "
+                             "allow: not this radar's count")
+
+
 def test_limits_a_scene_expects_but_never_hits_are_said(tmp_path):
     # The scene expects its car to leave the rig's coverage and the radar to be slower than
     # the frames, and the car to come too close: none of it happens in its 3 s. The run

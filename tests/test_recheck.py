@@ -1286,6 +1286,37 @@ def test_a_log_the_mapping_reads_no_cycle_of_counts_its_messages(recorded, tmp_p
             f"mapping 'cluster-list')") in capsys.readouterr().err
 
 
+def test_a_second_radar_on_the_recorded_bus_fails_the_re_check(recorded, tmp_path):
+    # Another radar with the same identifiers on the bus, counting from 60000: its cycles are
+    # numbered before the scene (60000 on a 16-bit count from 0), yet came on the bus during
+    # it. Counted as before_scene alone, the re-check passed; they are no cycles of this
+    # radar, and fail it.
+    with can.LogReader(str(recorded)) as reader:
+        messages = list(reader)
+    first = messages[0].timestamp
+    extra: list[can.Message] = []
+    stamp = {"t": 0.0}
+
+    class Recorder:
+        def send(self, msg):
+            msg.timestamp = stamp["t"]
+            extra.append(msg)
+
+    publisher = DetectionPublisher(Recorder())
+    for k in range(40):  # 2 s of a 50 ms radar, from 1 s into the scene
+        stamp["t"] = first + 1.0 + 0.05 * k + 0.021
+        publisher.publish(Detections.empty(60000 + k, 1.0 + 0.05 * k))
+    log = write_log(tmp_path / "two.blf", [sorted(messages + extra, key=lambda m: m.timestamp)])
+    shutil.copy(str(recorded) + ".rts.json", str(log) + ".rts.json")
+    scene = load_scenario(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert check_log(scene, recorded).report.passed
+    report = check_log(scene, log).report
+    assert not report.passed
+    [foreign] = [r for r in report.reasons if "foreign_cycles" in r.codes]
+    assert foreign.startswith("40 radar cycles numbered before the scene came on the bus 1.0")
+    assert report.frames["before_scene"] == 40
+
+
 def test_a_mapping_or_dbc_edited_since_the_recording_is_refused_and_a_copy_is_the_same(
         tmp_path):
     # A run recorded with a copy of rts-scenario's mapping and DBC. Its DBC edited since
