@@ -594,7 +594,8 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
                  last_t_s: list[float] | None = None,
                  restart: int | None = None,
                  unread: list[_Unread] | None = None,
-                 headers: list[int] | None = None) -> Iterator[_LoggedCycle]:
+                 headers: list[int] | None = None,
+                 starts: list[list[float]] | None = None) -> Iterator[_LoggedCycle]:
     """Yield a log's radar cycles in log order; ``stats`` gets the bus counters at the end.
 
     ``channel``: read only its messages (the others count as ``other_channels``).
@@ -680,6 +681,8 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
     stats["other_channels"] = other
     if headers is not None:
         headers.append(receiver.headers)
+    if starts is not None:
+        starts.append(list(receiver.count_starts))
 
 
 @dataclass(frozen=True)
@@ -701,6 +704,9 @@ class _LogIndex:
     unread: _Unread | None = None
     # Messages with the identifier of the mapping's header.
     headers: int = 0
+    # Bus times of the headers that started the radar's count afresh at its profile's start
+    # (`DetectionReceiver.count_starts`).
+    count_starts: tuple[float, ...] = ()
 
     @classmethod
     def scan(cls, log: str | Path, mapping: CanMapping | None,
@@ -711,18 +717,20 @@ class _LogIndex:
         last: list[float] = []
         unread: list[_Unread] = []
         headers: list[int] = []
+        starts: list[list[float]] = []
         counters, times, counts = array("q"), array("d"), array("l")
         for c in _iter_cycles(log, mapping, stats, cycle_s, channel=channel,
                               channels=channels, last_t_s=last,
                               restart=restart, unread=unread,
-                              headers=headers):  # one per radar cycle
+                              headers=headers, starts=starts):  # one per radar cycle
             counters.append(c.detections.cycle)
             times.append(c.bus_t_s)
             counts.append(c.detections.count)
         return cls(np.frombuffer(counters, dtype=np.int64).copy(),
                    np.frombuffer(times, dtype=np.float64).copy(),
                    np.asarray(counts, dtype=np.int64), stats, channels,
-                   last[0] if last else None, unread[0] if unread else None, headers[0])
+                   last[0] if last else None, unread[0] if unread else None, headers[0],
+                   tuple(starts[0]))
 
     def __len__(self) -> int:
         return int(self.counters.size)
@@ -1587,6 +1595,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         latency = profile_clock.latency_s
         bus_t = index.bus_t_s
         _check_timestamps(log, bus_t, profile_clock.cycle_s, numbers)
+        _refuse_runs(log, index.count_starts, restart)
         # The cycles the offset is estimated on, read again (at most `ALIGN_CYCLES`).
         chosen = _alignment_cycles(index)
         dets = _cycles_at(log, can_mapping, chosen, profile_clock.cycle_s, channel=channel,
@@ -2024,6 +2033,25 @@ def _indistinguishable(n: FloatArray, t: FloatArray, cycle_s: float,
     residual = t - t.mean() - cycle_s * dn
     error = float(np.sqrt(residual @ residual / (n.size - 2) / (dn @ dn)))
     return off <= 3.0 * error
+
+
+def _refuse_runs(log: str | Path, starts: tuple[float, ...], restart: int | None) -> None:
+    """Refuse a log without a sidecar whose radar count starts at ``restart`` twice or more.
+
+    The profile's counter start begins each run's count (the RTS's stream restarts it): a
+    log whose headers come back to it from another count holds several runs (a logger left
+    running), and would be judged as one, its reasons about cycles of the other run. A count
+    that wraps round to it from the counter before it, or a copy of its header, is no start
+    (`DetectionReceiver.count_starts`).
+    """
+    if restart is None or len(starts) < 2:
+        return
+    times = ", ".join(f"{t:.3f}" for t in starts[:5]) + (", ..." if len(starts) > 5 else "")
+    raise LogError(f"--log {log}: the radar's count starts at its profile's counter_start "
+                   f"({restart}) {len(starts)} times (log times {times} s): the log holds "
+                   f"{len(starts)} runs of the radar, and a scene is checked against one; "
+                   f"check a log of one run (`run --record` writes one, with the sidecar "
+                   f"that aligns it)")
 
 
 def _counter_restart(scene: Scenario, mapping: CanMapping | None) -> int | None:

@@ -701,6 +701,29 @@ def desk_log(tmp_path_factory) -> tuple[object, Path, float]:
     return scene, log, radar_cycles(log)[0][0].timestamp
 
 
+def test_a_log_holding_two_runs_is_refused_naming_where_each_starts(tmp_path):
+    # A logger left running over two runs of the scene: the radar's count starts at its
+    # profile's 4242 twice. Judged as one run, its reasons were about the other's cycles.
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    scene, first, _ = foreign_log(tmp_path / "a", 1.7e9 + 100.0)
+    _, second, _ = foreign_log(tmp_path / "b", 1.7e9 + 120.0, seed=1)
+    messages = []
+    for log in (first, second):
+        with can.LogReader(str(log)) as reader:
+            messages += list(reader)
+    both = write_log(tmp_path / "both.blf", [messages])
+    assert check_log(scene, first).report.passed
+    starts = [m.timestamp for m in messages if m.arbitration_id == 256
+              and int.from_bytes(m.data[:2], "little") == 4242]
+    assert len(starts) == 2
+    with pytest.raises(LogError, match=rf"the radar's count starts at its profile's "
+                                       rf"counter_start \(4242\) 2 times \(log times "
+                                       rf"{starts[0]:.3f}, {starts[1]:.3f} s\): the log holds 2 "
+                                       rf"runs"):
+        check_log(scene, both)
+
+
 @pytest.mark.parametrize(("start_offset_s", "jitter_s"), [(0.0, 0.0), (0.0, 0.004),
                                                           (0.02, 0.0)])
 def test_a_radar_in_step_with_the_frames_is_aligned_to_the_frame_it_saw(tmp_path, start_offset_s,

@@ -750,6 +750,12 @@ class DetectionReceiver(can.Listener):
         self.other_channels = 0
         # Messages with the identifier of the mapping's header (`mapping_reason`).
         self.headers = 0
+        # Bus times of the headers that started the count afresh at ``restart`` (the first
+        # header, or one further back than `OPEN_CYCLES` from the header before): a log
+        # holding several runs starts it more than once (`rts_scenario.recheck`).
+        self._start_counter = restart
+        self._last_header_counter: int | None = None
+        self.count_starts: list[float] = []
         # The channel of the last message (python-can's object), its label, how many of the
         # radar's messages came on it since it became the current one, and whether it is
         # another channel than `channel`: a bus keeps to one channel object for long runs.
@@ -951,6 +957,13 @@ class DetectionReceiver(can.Listener):
             # of one running 1..14): the message is invalid.
             self.stats.decode_errors += 1
             return
+        if counter == self._start_counter:
+            last = self._last_header_counter
+            # Back by more than reordering or a copy held up on the bus explains (a count
+            # that went on across a wrap is a step forward, whatever it skipped).
+            if last is None or signed_step(counter, last, self._counter_modulus) < -OPEN_CYCLES:
+                self.count_starts.append(float("nan") if bus_t_s is None else bus_t_s)
+        self._last_header_counter = counter
         if self._restart is not None:
             if counter == self._restart:
                 self._drop_before_restart(self._stale_before_restart(counter))
