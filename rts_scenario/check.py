@@ -207,6 +207,27 @@ class _Judged:
             self.limits)
 
 
+# Each tolerance key's quantity and unit, as a reason says them.
+_SAID = {"range_m": ("range", "m"), "radial_velocity_mps": ("radial velocity", "m/s"),
+         "az_deg": ("az", "deg"), "el_deg": ("el", "deg"), "rcs_db": ("rcs", "dB")}
+
+
+def _beyond_tolerance(target: TargetResult, exp: Expectations) -> str:
+    """Say which quantities kept a target's matched detections from counting as detected.
+
+    ``" (N target-cycles out of tolerance: rcs up to 10.2 dB > 6 dB, ...)"``, or "" where
+    none was (the detections were missing, not off).
+    """
+    if not target.out_of_tolerance_frames:
+        return ""
+    over = [f"{_SAID[key][0]} up to {err.max:.3g} {_SAID[key][1]} > "
+            f"{exp.tolerances[key]:g} {_SAID[key][1]}"
+            for q, key in QUANTITIES
+            if (err := target.errors[q]).count and err.max > exp.tolerances[key]]
+    return (f" ({target.out_of_tolerance_frames} target-cycles out of tolerance"
+            + (": " + ", ".join(over) if over else "") + ")")
+
+
 # A cycle numbered before the scene came on the bus during it (`Checker.out_of_count_reason`)
 # where it came later than its number says by more than this: a bus that held one up, or
 # a latency's jitter, do not come near (the radar's own cycles before the scene come before
@@ -1029,7 +1050,8 @@ class Checker:
                               for lim, why in scene_limits.items()
                               if lim not in exp.expected_limits]
         reasons += [FailReason(f"{t.name}: detection rate {t.detection_rate:.1%} < "
-                               f"{exp.detection_rate:.1%}", "detection_rate") for t in targets
+                               f"{exp.detection_rate:.1%}" + _beyond_tolerance(t, exp),
+                               "detection_rate") for t in targets
                     if t.checkable_frames and t.detection_rate < exp.detection_rate - 1e-12]
         reasons += limit_reasons
         reasons += [FailReason(f"{t.name}: never checked: no radar cycle measured the "

@@ -634,6 +634,27 @@ def test_cycles_measured_before_the_scene_are_counted_as_such_not_late_or_after_
     assert "3 before the scene's start (not checked)" in report.table()
 
 
+def test_a_detection_rate_failed_by_detections_off_tolerance_names_the_quantity():
+    # Every detection is there, 0.5 m long (within the 3 x 0.3 m gate, beyond the 0.3 m
+    # tolerance): the rate fails, and the reason says it was the range, by how much.
+    tr = truth(10)
+    checker = Checker("s", tr.names, EXPECT, counter_start=0)
+    checker.add_truth(0, tr, OK(10, 2))
+    checker.add_frames(checkable(tr, OK(10, 2)))
+    checker.add_cycles(cycles_from(tr, offset=0.5))
+    checker.settle()
+    reasons = checker.report().reasons
+    assert reasons[:2] == [f"t{k}: detection rate 0.0% < 90.0% (10 target-cycles out of "
+                           f"tolerance: range up to 0.5 m > 0.3 m)" for k in range(2)]
+    # Missing detections are no quantity off: the reason says the rate alone.
+    checker = Checker("s", tr.names, EXPECT, counter_start=0)
+    checker.add_truth(0, tr, OK(10, 2))
+    checker.add_frames(checkable(tr, OK(10, 2)))
+    checker.add_cycles(cycles_from(tr, drop={(f, 0) for f in range(10)}))
+    checker.settle()
+    assert checker.report().reasons[0] == "t0: detection rate 0.0% < 90.0%"
+
+
 @pytest.mark.parametrize("foreign", [0, 2])
 def test_cycles_numbered_before_the_scene_that_come_during_it_are_no_cycles_of_this_radar(
         foreign):

@@ -486,6 +486,40 @@ def test_a_target_the_rts_s_steps_move_off_its_angle_is_flagged_but_played():
     assert not (sch.status & Status.ANGLE_QUANTIZED).any()
 
 
+def test_a_channel_the_attenuator_s_range_switches_off_is_judged_for_the_angle_it_moves():
+    # A continuous attenuator whose maximum is below what the weakest channels need: those
+    # are switched off (played too loud they would move the angle more). Where that moves the
+    # target, by the radar's own beamformer (the test's, plane waves), more than a third of
+    # the scene's tolerance, the entry is ANGLE_QUANTIZED, as steps that move it are.
+    radar = RadarProfile.preset("awr1843boost")
+    rig = rig_with(echoes_per_channel=200)
+    az, el = np.meshgrid(np.linspace(-3, 3, 9), np.linspace(-6, 6, 9))
+    az, el = az.ravel(), el.ravel()
+    full = build_schedule(tracks(az, el), rig, radar, fe_responses="plane-wave")
+    top = np.nanmax(full.attenuation_db[0], axis=1)
+    cap = float(np.median(top)) - 1.0  # about half the targets lose their weakest channel
+    capped = rig_with(rig, attenuation_max_db=cap)
+    sch = build_schedule(tracks(az, el), capped, radar, fe_responses="plane-wave",
+                         angle_tolerance_deg=(0.1, 0.1))
+    off = (full.active[0] & ~sch.active[0]).any(axis=1)
+    assert 10 <= off.sum() <= az.size - 10
+    flagged = (sch.status[0] & Status.ANGLE_QUANTIZED) != 0
+    fe = np.maximum(sch.fe[0], 0)
+    k = 2.0 * np.pi / radar.array.wavelength_m
+    moved = []
+    for i in range(az.size):
+        a_az, a_el = np.radians(rig.az_deg[fe[i]]), np.radians(rig.el_deg[fe[i]])
+        sources = np.exp(1j * k * (np.outer(np.cos(a_el) * np.sin(a_az), radar.array.y_m)
+                                   + np.outer(np.sin(a_el), radar.array.z_m)))
+        moved.append(np.abs(_bartlett_peak(radar.array, sch.weight[0, i] @ sources, az[i],
+                                           el[i]) - [az[i], el[i]]))
+    over = np.array(moved).max(axis=1) / (0.1 / 3.0)
+    clear = np.abs(over - 1.0) > 0.02
+    assert flagged[clear & (over > 1.0)].all() and not flagged[clear & (over < 1.0)].any()
+    assert flagged.any() and not flagged[~off].any()  # only where a channel went off
+    assert sch.active[0][flagged].any(axis=1).all()  # still played
+
+
 @pytest.mark.parametrize("step_deg", [90.0, 180.0])
 def test_the_aware_phase_search_never_leaves_settings_that_play_no_peak(step_deg):
     # kit-table1 uncalibrated, a continuous attenuator, plane waves: every channel's exact

@@ -29,7 +29,8 @@ def _do_check(args: argparse.Namespace) -> int:
         raise RtsError(f"--log-channel {args.log_channel!r}: empty; give the channel of the "
                        f"radar's messages as python-can reads it from the log (e.g. 0)")
     if args.time_offset_s is not None:
-        check_number("--time-offset-s", args.time_offset_s)
+        # A log time: seconds since 1970 up to the year 2286, or an interface's own clock.
+        check_number("--time-offset-s", args.time_offset_s, low=-1e10, high=1e10)
     check_distinct_paths([("--json", args.json)],
                          [("SCENE", args.scene), ("--log", args.log),
                           ("--log's sidecar", f"{args.log}.rts.json"), ("--mapping", args.mapping)])

@@ -209,10 +209,15 @@ def build_schedule(
             with contextlib.suppress(Exception):
                 finish()
         raise
-    if angle_tolerance_deg is not None and (limits.attenuation_step_db > 0.0
-                                            or limits.phase_step_deg > 0.0):
-        status |= _angle_quantized(angle_error, no_peak, solved, quad, ok, tracks, responses,
-                                   angle_tolerance_deg)
+    if angle_tolerance_deg is not None:
+        # With steps, every entry; on a continuous rig, those whose attenuator's range
+        # switched off a channel the method wanted (it needs more than the maximum): playing
+        # it too loud would move the angle more, leaving it out may move it too.
+        stepped = limits.attenuation_step_db > 0.0 or limits.phase_step_deg > 0.0
+        judged = ok if stepped else ok & ((solved > 0.0) & np.isnan(attenuation)).any(axis=-1)
+        if judged.any():
+            status |= _angle_quantized(angle_error, no_peak, solved, quad, judged, tracks,
+                                       responses, angle_tolerance_deg)
     # Quantization may switch an idle channel on (weakly) to hold the angle.
     active = ok[..., None] & (weight > 0.0)
     attenuation[~active] = np.nan
