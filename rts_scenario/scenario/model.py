@@ -29,8 +29,9 @@ LIMITS = {
     "doppler_out_of_range": "Doppler shift beyond the RTS's range",
     "no_echo_slot": "no echo slot left on a front end it needs",
     "attenuation_clipped": "level beyond the attenuator's range (played distorted)",
-    "angle_quantized": "the RTS's steps move the synthesized angle by more than a third of "
-                       "the angle tolerance (played off its angle)",
+    "angle_quantized": "the RTS's steps, or a channel switched off beyond the attenuator's "
+                       "range, move the synthesized angle by more than a third of the angle "
+                       "tolerance (played off its angle)",
     "beyond_radar_range": "beyond the radar's unambiguous range",
     "beyond_radar_velocity": "beyond the radar's unambiguous radial velocity",
     "frame_rate_above_radar": "the scene's frames come faster than the radar's cycles",
