@@ -967,3 +967,55 @@ def test_a_target_is_held_to_the_speed_limit_while_it_is_present(tmp_path):
             r"frame at 5.95 s \(disappear_s; duration_s = 12 s at 20 Hz\): .* accelerate less, "
             r"or let it disappear before the speed leaves them")):
         load_scenario(bike(6.0))
+
+
+def profile(*points):
+    return {"type": "speed_profile", "position_m": [20, 0, 0.5],
+            "profile": [{"t_s": t, "speed_mps": v} for t, v in points]}
+
+
+def waypoints(*points):
+    return {"type": "waypoints",
+            "points": [{"position_m": [x, 0, 0.5], "speed_mps": v} for x, v in points]}
+
+
+@pytest.mark.parametrize("motion, key, message", [
+    # 0 to 10 m/s in 1 ms: 10 / 0.001.
+    (profile((0, 0), (1, 0), (1.001, 10)), r"profile\[2\]",
+     r"from profile\[1\] to profile\[2\] the speed goes from 0 to 10 m/s in 0.001 s: that is an "
+     r"acceleration of 10000 m/s2"),
+    # Braking from 20 m/s to 0 in 1 s.
+    (profile((0, 20), (1, 0)), r"profile\[1\]", r"an acceleration of -20 m/s2"),
+    # 0 to 150 m/s over 1 m: 150^2 / (2 x 1).
+    (waypoints((20, 0), (21, 150)), r"points\[1\]",
+     r"from waypoint 0 to waypoint 1 the speed goes from 0 to 150 m/s over 1 m of path: that is "
+     r"an acceleration of 11250 m/s2"),
+    # 30 m/s to standstill over 20 m: -900 / 40.
+    (waypoints((20, 30), (40, 0), (60, 10)), r"points\[1\]", r"an acceleration of -22.5 m/s2"),
+])
+def test_an_acceleration_a_motion_implies_beyond_the_bound_is_refused(tmp_path, motion, key,
+                                                                      message):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10}, "motion": motion}])
+    with pytest.raises(ScenarioError, match=(
+            rf":\d+:\d+: targets\[0\]\.motion\.{key}: .*{message}; accelerations run from -15 to "
+            rf"15 m/s2")):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize("motion", [
+    profile((0, 0), (1, 15)),  # 15 m/s2, the bound
+    profile((0, 20), (2, -10)),  # -15 m/s2
+    waypoints((20, 0), (50, 30)),  # 900 / 60 = 15 m/s2
+])
+def test_an_acceleration_a_motion_implies_at_the_bound_loads(tmp_path, motion):
+    scene = load_scenario(write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                                  "motion": motion}]))
+    assert np.abs(scene.targets[0].trajectory.law.a_mps2).max() == pytest.approx(15.0)
+
+
+def test_the_acceleration_bound_is_the_schema_s():
+    from rts_scenario.scenario.loader import MAX_ACCELERATION_MPS2, scenario_schema
+    motions = scenario_schema()["$defs"]["motion"]["allOf"]
+    bound = next(m["then"]["properties"]["acceleration_mps2"] for m in motions
+                 if m["if"]["properties"]["type"]["const"] == "constant_acceleration")
+    assert (bound["minimum"], bound["maximum"]) == (-MAX_ACCELERATION_MPS2, MAX_ACCELERATION_MPS2)

@@ -689,6 +689,24 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
 # Speeds along a path run from -MAX_SPEED_MPS to MAX_SPEED_MPS (the schema's bound on each
 # speed given; the loader holds a motion's every speed within the scene to it).
 MAX_SPEED_MPS = 150.0
+# Accelerations along a path run from -MAX_ACCELERATION_MPS2 to MAX_ACCELERATION_MPS2 (the
+# schema's bound on acceleration_mps2; the loader holds the accelerations a speed profile's or
+# the waypoints' speeds imply to it): beyond any road vehicle's braking, and a speed jump
+# written by mistake (a time or a distance a thousand times too short) shows as one.
+MAX_ACCELERATION_MPS2 = 15.0
+
+
+def _check_acceleration(doc: Document, key: KeyPath, acceleration_mps2: float,
+                        implied_by: str) -> None:
+    """Refuse an acceleration ``implied_by`` (words) beyond +-`MAX_ACCELERATION_MPS2`."""
+    # A hair over the bound: an acceleration of exactly 15 m/s2 computed from speeds and
+    # times written to a few decimals may round above it.
+    if abs(acceleration_mps2) <= MAX_ACCELERATION_MPS2 * (1.0 + 1e-6):
+        return
+    raise doc.error(key, f"{implied_by} is an acceleration of {acceleration_mps2:.6g} m/s2; "
+                         f"accelerations run from {-MAX_ACCELERATION_MPS2:g} to "
+                         f"{MAX_ACCELERATION_MPS2:g} m/s2 (as acceleration_mps2 of "
+                         f"constant_acceleration)")
 
 
 def _check_speed(doc: Document, key: KeyPath, law: TravelLaw, frames: _Frames,
@@ -727,6 +745,11 @@ def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]])
         if times[i] <= times[i - 1]:
             raise doc.error((*key, i, "t_s"),
                             f"times must increase, got {times[i]:g} after {times[i - 1]:g}")
+        _check_acceleration(
+            doc, (*key, i),
+            (speeds[i] - speeds[i - 1]) / (times[i] - times[i - 1]),
+            f"from profile[{i - 1}] to profile[{i}] the speed goes from {speeds[i - 1]:g} to "
+            f"{speeds[i]:g} m/s in {times[i] - times[i - 1]:.6g} s: that")
     return TravelLaw.speed_profile(times, speeds)
 
 
@@ -850,6 +873,10 @@ def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
     t = start
     for i, length in enumerate(lengths):
         a = (speeds[i + 1] ** 2 - speeds[i] ** 2) / (2.0 * length)
+        _check_acceleration(
+            doc, (*key, "points", i + 1),
+            a, f"from waypoint {i} to waypoint {i + 1} the speed goes from {speeds[i]:g} to "
+               f"{speeds[i + 1]:g} m/s over {length:.6g} m of path: that")
         if i > 0 and motion.get("path", "polyline") == "polyline":
             _corner_offset(doc, (*key, "points", i, "position_m"), points[i - 1: i + 2], t,
                            lane_changes)
