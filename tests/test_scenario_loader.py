@@ -1,3 +1,4 @@
+import json
 import re
 import shutil
 import textwrap
@@ -1019,3 +1020,31 @@ def test_the_acceleration_bound_is_the_schema_s():
     bound = next(m["then"]["properties"]["acceleration_mps2"] for m in motions
                  if m["if"]["properties"]["type"]["const"] == "constant_acceleration")
     assert (bound["minimum"], bound["maximum"]) == (-MAX_ACCELERATION_MPS2, MAX_ACCELERATION_MPS2)
+
+
+@pytest.mark.parametrize("name, message", [
+    ("x\nPASS approaching-target (a.scenario.yaml)",
+     r"the control character '\\n' at position 1;"),
+    ("a\x1b[31mred", r"the control character '\\x1b' at position 1;"),
+    ("a\u2028b", r"the control character '\\u2028' at position 1;"),  # a line separator
+    ("left\u202eright", r"the control character '\\u202e' at position 4;"),  # bidi override
+    ("   ", r"got '   ', a blank name;"),
+    ("", r"should be non-empty|a blank name"),
+])
+def test_a_scene_name_that_is_not_one_line_of_printable_text_is_refused(tmp_path, name,
+                                                                          message):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                   "motion": {"type": "stationary", "position_m": [20, 0, 0]}}],
+                       name="t.scenario.yaml")
+    # JSON's string escapes are YAML's double-quoted ones.
+    path.write_text(path.read_text().replace("name: test\n", f"name: {json.dumps(name)}\n"))
+    with pytest.raises(ScenarioError, match=rf"t\.scenario\.yaml:2:1: name: .*(?:{message})"):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize("name", ["cut-in", "CCRs 50 km/h, 75% overlap", "Überholen ü"])
+def test_a_scene_name_of_printable_text_loads(tmp_path, name):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                   "motion": {"type": "stationary", "position_m": [20, 0, 0]}}])
+    path.write_text(path.read_text().replace("name: test\n", f"name: '{name}'\n"))
+    assert load_scenario(path).name == name

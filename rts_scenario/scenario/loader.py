@@ -14,6 +14,7 @@ import itertools
 import json
 import math
 import re
+import unicodedata
 from contextvars import ContextVar
 from functools import lru_cache
 from importlib import resources
@@ -107,6 +108,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                         "not supported; the simulated radar's noise comes from radar.noise")
     _check_target_limits(doc)
     validate(doc, scenario_schema())
+    _check_scene_name(doc)
     data = doc.data
     root = path.resolve().parent
 
@@ -195,6 +197,23 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         marks=tuple(data.get("marks", [])),
         radar_options=_radar_options(data["radar"], empty=not target_sources),
     )
+
+
+def _check_scene_name(doc: Document) -> None:
+    """Refuse a scene name that is blank or holds characters that are not printed as such.
+
+    The name heads the verdict lines (``PASS name (file)``), reports and pytest items: a line
+    break in it would print a verdict line of its own, a terminal escape recolour the output.
+    """
+    name = doc.data["name"]
+    if not name.strip():
+        raise doc.error(("name",), f"got {name!r}, a blank name; a scene's name is one line of "
+                                   f"printable text (e.g. cut-in)")
+    for position, char in enumerate(name):
+        if unicodedata.category(char) in ("Cc", "Cf", "Zl", "Zp"):
+            raise doc.error(("name",), f"got {name!r}: the control character {char!r} at "
+                                       f"position {position}; a scene's name is one line of "
+                                       f"printable text (e.g. cut-in)")
 
 
 def _check_target_limits(doc: Document) -> None:
