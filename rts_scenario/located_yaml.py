@@ -204,7 +204,9 @@ def _check_bounds(text: str, file: str) -> None:
     loader = _Loader(text)
     try:
         sizes: dict[str, int] = {}
-        stack: list[list[Any]] = []  # [anchor, nodes so far] per open collection
+        # [anchor, nodes counted before it] per open collection: a collection's size is what
+        # was counted from its start to its end, itself included; each node is counted once.
+        stack: list[tuple[str | None, int]] = []
         total = 0
 
         def fail(event: Any, message: str) -> ScenarioError:
@@ -218,27 +220,25 @@ def _check_bounds(text: str, file: str) -> None:
             if isinstance(event, yaml.CollectionStartEvent):
                 if len(stack) >= MAX_DEPTH:
                     raise fail(event, f"nesting deeper than the limit of {MAX_DEPTH} levels")
-                stack.append([event.anchor, 1])
-                continue
-            if isinstance(event, yaml.AliasEvent):
+                stack.append((event.anchor, total))
+                total += 1
+            elif isinstance(event, yaml.AliasEvent):
                 if event.anchor not in sizes:
                     raise fail(event, f"alias *{event.anchor} refers to a node that contains "
                                       f"it (recursive data is not allowed)")
-                size = sizes[event.anchor]
+                total += sizes[event.anchor]
             elif isinstance(event, yaml.ScalarEvent):
-                size = 1
+                total += 1
                 if event.anchor is not None:
-                    sizes[event.anchor] = size
+                    sizes[event.anchor] = 1
             elif isinstance(event, yaml.CollectionEndEvent):
-                anchor, size = stack.pop()
+                anchor, before = stack.pop()
                 if anchor is not None:
-                    sizes[anchor] = size
+                    sizes[anchor] = total - before
+                continue
             else:
                 continue
-            if stack:
-                stack[-1][1] += size
-            total += size
-            if (stack[0][1] if stack else total) > MAX_NODES:
+            if total > MAX_NODES:
                 raise fail(event, f"document expands to more than {MAX_NODES:,} YAML nodes "
                                   f"(aliases counted as the nodes they repeat)")
     finally:

@@ -9,6 +9,9 @@ from rts_scenario import located_yaml
 from rts_scenario.errors import ScenarioError
 from rts_scenario.located_yaml import load_yaml
 
+# The documented bound (scenarios/README.md).
+MAX_NODES = 1_000_000
+
 
 class _PurePython(yaml.SafeLoader):
     """PyYAML's own parser, used where libyaml is not installed."""
@@ -87,3 +90,31 @@ def test_a_key_out_of_line_names_the_indentations_around_it(parser, text, line, 
 ])
 def test_an_ambiguous_indentation_keeps_the_parsers_words(parser, text):
     assert "indented" not in error_of(text).detail
+
+
+def nested_nodes(n_items: int) -> str:
+    """A mapping whose list holds ``n_items`` mappings of one key and a 3-list: 3 + 6 n_items
+    nodes, four levels deep."""
+    return "a:\n" + "".join("  - {p: [1, 2, 3]}\n" for _ in range(n_items))
+
+
+@pytest.mark.parametrize("bound", [10_000, 10_001, 10_002])
+def test_each_node_is_counted_once_whatever_its_depth(monkeypatch, bound):
+    # A smaller bound, every offset from it: the root, 'a' and the list, then 6 nodes per item.
+    monkeypatch.setattr(located_yaml, "MAX_NODES", bound)
+    n_items = (bound - 3) // 6
+    assert len(load_yaml("x.yaml", nested_nodes(n_items)).data["a"]) == n_items
+    with pytest.raises(ScenarioError, match=rf"^x\.yaml:\d+:\d+: document expands to more than "
+                                            rf"{bound:,} YAML nodes"):
+        load_yaml("x.yaml", nested_nodes(n_items + 1))
+
+
+def test_an_alias_counts_as_the_nodes_it_repeats():
+    # An anchored list of 10 scalars (11 nodes); root, 'a', the list, and then per alias entry
+    # a key and 11 nodes.
+    head = "a: &x [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]\n"
+    n = (MAX_NODES - 1 - 12) // 12
+    assert 1 + 12 + 12 * n <= MAX_NODES < 1 + 12 + 12 * (n + 1)
+    load_yaml("x.yaml", head + "".join(f"k{i}: *x\n" for i in range(n)))
+    with pytest.raises(ScenarioError, match="more than 1,000,000 YAML nodes"):
+        load_yaml("x.yaml", head + "".join(f"k{i}: *x\n" for i in range(n + 1)))
