@@ -347,6 +347,30 @@ def test_a_file_of_another_kind_under_include_is_named_as_what_it_is(tmp_path, n
         f"{name!r} is {what}, not a scene fragment (only targets and a description); ")
 
 
+FRAGMENT = ("targets:\n  - {name: p, motion: {type: stationary, position_m: [9, 0, 0]}, "
+            "rcs: {rcs_dbsm: 0}}\n")
+
+
+@pytest.mark.parametrize("replace, by, line, key, what", [
+    ("rig: wide-3x5", "rig: fr/parked.yaml", 8, "rig", "a rig file (*.rig.yaml)"),
+    ("profile: awr1843boost", "profile: fr/parked.yaml", 6, "radar.profile",
+     "a radar profile (*.radar.yaml)"),
+])
+def test_a_fragment_named_as_rig_or_radar_profile_is_located_at_the_scene_s_key(
+        tmp_path, replace, by, line, key, what):
+    (tmp_path / "fr").mkdir()
+    (tmp_path / "fr" / "parked.yaml").write_text(FRAGMENT)
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit(replace, by))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    err = info.value
+    assert (err.file, err.line, err.key_path) == (str(scene), line, key)
+    assert err.detail.startswith(
+        f"'fr/parked.yaml' is a scene fragment (only targets and a description), not {what}; "
+        f"a scene lists it under include:")
+
+
 def test_relative_rig_and_profile_files_inside_the_tree(tmp_path):
     (tmp_path / "rigs").mkdir()
     shutil.copy(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml", tmp_path / "rigs")

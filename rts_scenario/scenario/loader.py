@@ -575,10 +575,17 @@ def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets
             key, f"unknown preset {name!r}; valid presets: {', '.join(presets)}, or a relative "
                  f"path to a *{suffix} file",
         )
+    resolved = _inside(doc, key, root, name)
     try:
-        return from_file(_inside(doc, key, root, name))
-    except ScenarioError:
-        raise
+        return from_file(resolved)
+    except ScenarioError as exc:
+        if exc.line is not None:  # located in the file itself
+            raise
+        # About the whole file (another kind of file, unreadable, empty): the scene's key
+        # that names it is where to look.
+        named_first = exc.detail.startswith(f"{resolved} ")
+        raise doc.error(key, f"{name!r}{exc.detail[len(str(resolved)):]}" if named_first
+                        else f"{name}: {exc.detail}") from None
     except RtsError as exc:
         raise doc.error(key, f"{name}: {exc}") from None
 
