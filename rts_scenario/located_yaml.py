@@ -187,7 +187,12 @@ def _read_bounded(path: str | Path, file: str) -> str:
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ScenarioError(f"not UTF-8 text: {exc.reason}", file=file) from None
+        # Where an editor shows it: the line, and the characters before it on that line.
+        line_start = raw.rfind(b"\n", 0, exc.start) + 1
+        column = len(raw[line_start:exc.start].decode("utf-8")) + 1
+        raise ScenarioError(f"not UTF-8 text: {exc.reason} (byte 0x{raw[exc.start]:02x}); save "
+                            f"the file as UTF-8", file=file,
+                            line=raw.count(b"\n", 0, exc.start) + 1, column=column) from None
 
 
 def _too_big() -> str:

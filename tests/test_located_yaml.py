@@ -118,3 +118,17 @@ def test_an_alias_counts_as_the_nodes_it_repeats():
     load_yaml("x.yaml", head + "".join(f"k{i}: *x\n" for i in range(n)))
     with pytest.raises(ScenarioError, match="more than 1,000,000 YAML nodes"):
         load_yaml("x.yaml", head + "".join(f"k{i}: *x\n" for i in range(n + 1)))
+
+
+@pytest.mark.parametrize("raw, line, column", [
+    (b"name: caf\xe9\n", 1, 10),  # Latin-1 e acute after 9 characters
+    (b"a: 1\nname: \xc3\xa9t\xe9\n", 2, 9),  # after 'name: ' and a UTF-8 e acute and 't'
+    (b"a: 1\r\nb: 2\r\nc: \xff\n", 3, 4),  # CRLF lines
+])
+def test_a_byte_that_is_not_utf8_is_located_by_line_and_column(tmp_path, raw, line, column):
+    path = tmp_path / "x.yaml"
+    path.write_bytes(raw)
+    with pytest.raises(ScenarioError) as info:
+        load_yaml(path)
+    assert (info.value.line, info.value.column) == (line, column)
+    assert str(info.value).startswith(f"{path}:{line}:{column}: not UTF-8 text: ")
