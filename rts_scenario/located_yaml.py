@@ -85,12 +85,17 @@ _INT_TAG = "tag:yaml.org,2002:int"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
 
 # Plain scalars YAML 1.1 and YAML 1.2 read differently, and neither as the other guesses: a
-# leading zero (010: octal 8, or 10; 09: a string, or 9) and base 60 (1:30: 90, or a string).
+# leading zero (010: octal 8, or 10; 09: a string, or 9), base 60 (1:30: 90, or a string),
+# digits with underscores (1_0.0: 10.0, or a string), binary (0b1000: 8, or a string), YAML
+# 1.2's octal (0o17: a string, or 15) and YAML 1.1's words for booleans (no: false, or a
+# string).
 _LEADING_ZERO = re.compile(r"^[-+]?0[0-9_]+$")
+_OCTAL_12 = re.compile(r"^0o[0-7]+$")
+_BOOL_TAG = "tag:yaml.org,2002:bool"
 
 
 def _ambiguous_number(node: yaml.ScalarNode, value: Any) -> str | None:
-    """Why a plain scalar is a number only in one YAML version, or None."""
+    """Why a plain scalar is a number or a boolean only in one YAML version, or None."""
     if node.style:  # quoted or a block scalar: a string in both (plain: None, or "" in libyaml)
         return None
     text = node.value
@@ -104,6 +109,21 @@ def _ambiguous_number(node: yaml.ScalarNode, value: Any) -> str | None:
     if node.tag in (_INT_TAG, _FLOAT_TAG) and ":" in text:
         return (f"{text}: reads as the base-60 number {value:g} in YAML 1.1 and as a string in "
                 f"YAML 1.2; write the number ({value:g}), or quote it for a string")
+    if node.tag in (_INT_TAG, _FLOAT_TAG) and "_" in text:
+        return (f"{text}: a number with underscores reads as {value!r} in YAML 1.1 and as a "
+                f"string in YAML 1.2; write it without them ({value!r}), or quote it for a "
+                f"string")
+    if node.tag == _INT_TAG and text.lstrip("+-").startswith("0b"):
+        return (f"{text}: reads as the binary number {value} in YAML 1.1 and as a string in "
+                f"YAML 1.2; write the number ({value}), or quote it for a string")
+    if _OCTAL_12.match(text):
+        number = int(text[2:], 8)
+        return (f"{text}: reads as a string in YAML 1.1 and as the octal number {number} in "
+                f"YAML 1.2; write the number ({number}), or quote it for a string")
+    if node.tag == _BOOL_TAG and text.lower() not in ("true", "false"):
+        word = "true" if value else "false"
+        return (f"{text}: reads as {word} in YAML 1.1 and as the string {text!r} in YAML 1.2; "
+                f"write {word}, or quote it for a string")
     return None
 
 
