@@ -1072,3 +1072,28 @@ def test_a_scene_name_of_printable_text_loads(tmp_path, name):
                                    "motion": {"type": "stationary", "position_m": [20, 0, 0]}}])
     path.write_text(path.read_text().replace("name: test\n", f"name: '{name}'\n"))
     assert load_scenario(path).name == name
+
+
+@pytest.mark.parametrize("mark, message", [
+    ("skp", "'skp' looks like a misspelt 'skip'"),
+    ("xfial", "'xfial' looks like a misspelt 'xfail'"),  # two letters swapped
+    ("Skip", "'Skip' looks like a misspelt 'skip'"),
+    ("skipiff", "'skipiff' looks like a misspelt 'skipif'"),
+    ("parametrize", "'parametrize' is a pytest mark that needs arguments"),
+    ("usefixtures", "'usefixtures' is a pytest mark that needs arguments"),
+    ("filterwarnings", "'filterwarnings' is a pytest mark that needs arguments"),
+])
+def test_a_mark_that_would_silently_not_apply_is_refused(tmp_path, mark, message):
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(GOOD + f"marks: [slow, {mark}]\n")
+    with pytest.raises(ScenarioError, match=rf"s\.scenario\.yaml:15:\d+: marks\[1\]: "
+                                            rf"{re.escape(message)}"):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize("marks", [["skip"], ["skipif"], ["xfail", "slow"],
+                                   ["nightly", "hardware", "ship_lab"]])
+def test_verdict_marks_and_labels_load(tmp_path, marks):
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(GOOD + f"marks: [{', '.join(marks)}]\n")
+    assert load_scenario(path).marks == tuple(marks)

@@ -109,6 +109,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     _check_target_limits(doc)
     validate(doc, scenario_schema())
     _check_scene_name(doc)
+    _check_marks(doc)
     data = doc.data
     root = path.resolve().parent
 
@@ -214,6 +215,67 @@ def _check_scene_name(doc: Document) -> None:
             raise doc.error(("name",), f"got {name!r}: the control character {char!r} at "
                                        f"position {position}; a scene's name is one line of "
                                        f"printable text (e.g. cut-in)")
+
+
+# pytest's own marks that do something only with arguments, which a scene's marks cannot give:
+# bare, pytest applies them as no-ops.
+MARKS_NEEDING_ARGUMENTS = {
+    "parametrize": "vary a scene with its parametrize block (scenarios/README.md, "
+                   "Parametrization)",
+    "usefixtures": "a scene's run uses no fixtures of the test suite",
+    "filterwarnings": "filter warnings in the project's pytest configuration",
+}
+# The marks that change a scene's verdict: a misspelt one would silently run a scene meant to
+# be skipped, or fail a suite on a failure the scene expects.
+VERDICT_MARKS = ("skip", "skipif", "xfail")
+
+
+def _near_miss(word: str, mark: str) -> bool:
+    """Whether ``word`` is a near miss of ``mark``.
+
+    One letter left out, added, changed or two swapped, or ``mark`` in other capitals.
+    """
+    if word == mark:
+        return False
+    a, b = word.lower(), mark.lower()
+    if a == b:
+        return True
+    if abs(len(a) - len(b)) > 1:
+        return False
+    # Optimal string alignment distance, stopped at 1.
+    previous2: list[int] = []
+    previous = list(range(len(b) + 1))
+    for i in range(1, len(a) + 1):
+        current = [i] + [0] * len(b)
+        for j in range(1, len(b) + 1):
+            current[j] = min(previous[j] + 1, current[j - 1] + 1,
+                             previous[j - 1] + (a[i - 1] != b[j - 1]))
+            if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
+                current[j] = min(current[j], previous2[j - 2] + 1)
+        previous2, previous = previous, current
+    return previous[-1] <= 1
+
+
+def _check_marks(doc: Document) -> None:
+    """Refuse marks that would silently do nothing, or not what they look like they do.
+
+    pytest's marks that need arguments (bare, no-ops), and near misses of the marks that change
+    a verdict (``skp``, ``xfial``): the plugin registers every scene mark, so pytest's
+    ``--strict-markers`` cannot catch those.
+    """
+    for i, mark in enumerate(doc.data.get("marks", [])):
+        if mark in MARKS_NEEDING_ARGUMENTS:
+            raise doc.error(("marks", i),
+                            f"{mark!r} is a pytest mark that needs arguments, which a scene's "
+                            f"marks cannot give (bare, pytest ignores it); "
+                            f"{MARKS_NEEDING_ARGUMENTS[mark]}")
+        near = next((m for m in VERDICT_MARKS if _near_miss(mark, m)), None)
+        if near is not None:
+            raise doc.error(("marks", i),
+                            f"{mark!r} looks like a misspelt {near!r}, which would then not "
+                            f"apply; the marks that change a verdict are "
+                            f"{', '.join(map(repr, VERDICT_MARKS))}: write {near!r}, or name "
+                            f"the label so that it is not mistaken for one")
 
 
 def _check_target_limits(doc: Document) -> None:
