@@ -436,6 +436,16 @@ def _reject_non_finite(document: Document, node: Any, path: KeyPath) -> None:
             _reject_non_finite(document, value, (*path, i))
 
 
+# A value quoted in a message is cut to this many characters: a mapping written where a number
+# goes would otherwise print whole.
+_QUOTED_CHARS = 80
+
+
+def _quoted(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= _QUOTED_CHARS else f"{text[:_QUOTED_CHARS - 5]} ...{text[-1]}"
+
+
 def _describe(error: jsonschema.ValidationError) -> str:
     value = error.instance
     kind = error.validator
@@ -445,9 +455,9 @@ def _describe(error: jsonschema.ValidationError) -> str:
         extra = sorted(set(value) - set(allowed)) if isinstance(value, dict) else []
         return f"unknown key {', '.join(map(repr, extra))}; allowed keys: {', '.join(allowed)}"
     if kind == "enum":
-        return f"got {value!r}; allowed values: {', '.join(map(repr, schema_value))}"
+        return f"got {_quoted(value)}; allowed values: {', '.join(map(repr, schema_value))}"
     if kind == "type":
-        return f"must be of type {schema_value}, got {value!r}"
+        return f"must be of type {schema_value}, got {_quoted(value)}"
     if kind == "required":
         message = error.message.replace("is a required property", "is required but missing")
         missing = next((k for k in schema_value if isinstance(value, dict) and k not in value),
@@ -464,7 +474,7 @@ def _describe(error: jsonschema.ValidationError) -> str:
         bound = "at least" if kind == "minItems" else "at most"
         return f"must have {bound} {schema_value} items, got {len(value)}"
     if kind in ("oneOf", "anyOf"):
-        return f"got {value!r}; allowed: {' or '.join(_allowed(s) for s in schema_value)}"
+        return f"got {_quoted(value)}; allowed: {' or '.join(_allowed(s) for s in schema_value)}"
     return f"{error.message}"
 
 

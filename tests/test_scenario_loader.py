@@ -1097,3 +1097,42 @@ def test_verdict_marks_and_labels_load(tmp_path, marks):
     path = tmp_path / "s.scenario.yaml"
     path.write_text(GOOD + f"marks: [{', '.join(marks)}]\n")
     assert load_scenario(path).marks == tuple(marks)
+
+
+def test_a_duration_no_frame_rate_can_play_suggests_no_rate_beyond_the_schema_s(tmp_path):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                   "motion": {"type": "stationary", "position_m": [20, 0, 0]}}],
+                       duration_s=1e-300)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert "frame_rate_hz: 1e+300" not in str(info.value)
+    assert str(info.value).endswith(
+        "e.g. duration_s: 0.05 (1 frame) (no frame rate up to 1000 Hz plays 1e-300 s in whole "
+        "frames)")
+
+
+@pytest.mark.parametrize("replace, by, key, preset, suffix", [
+    ("rig: wide-3x5", "rig: wide-3x5.rig.yaml", "rig", "wide-3x5", ".rig.yaml"),
+    ("profile: awr1843boost", "profile: awr1843boost.radar.yaml", "radar.profile",
+     "awr1843boost", ".radar.yaml"),
+])
+def test_a_preset_named_as_a_file_that_does_not_exist_suggests_the_preset(
+        tmp_path, replace, by, key, preset, suffix):
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(edit(replace, by))
+    with pytest.raises(ScenarioError, match=rf": {re.escape(key)}: file not found: "
+                                            rf"'{preset}{re.escape(suffix)}' .*; the preset "
+                                            rf"'{preset}' is named without "
+                                            rf"{re.escape(suffix)}: {re.escape(key)}: {preset}$"):
+        load_scenario(path)
+
+
+def test_a_mapping_where_a_list_goes_is_quoted_short(tmp_path):
+    targets = "".join(f"  car{i}: {{name: car{i}, kind: car}}\n" for i in range(50))
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(GOOD.split("targets:")[0] + "targets:\n" + targets)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    message = str(info.value).split("targets: ", 1)[1]
+    assert message.startswith("must be of type array, got {'car0': {'name': 'car0'")
+    assert message.endswith(" ...}") and len(message) < 120

@@ -324,7 +324,10 @@ def _check_frames(doc: Document, frames: _Frames) -> None:
         return abs(n_periods - round(n_periods)) <= FRAME_SLACK and round(n_periods) >= 1
 
     durations = " or ".join(_shown(n * period, lambda d: whole(d * rate)) for n in counts)
-    rates = " or ".join(_shown(n / declared, lambda r: whole(declared * r)) for n in counts)
+    max_rate = scenario_schema()["properties"]["frame_rate_hz"]["maximum"]
+    # Only rates the schema takes: a duration of 1e-300 s has none.
+    rates = " or ".join(_shown(n / declared, lambda r: whole(declared * r)) for n in counts
+                        if n / declared <= max_rate)
     plural = "s" if frames.n > 1 else ""
     held = f"held {period:g} s each" if frames.n > 1 else f"held {period:g} s"
     if periods >= 1.0:
@@ -345,8 +348,9 @@ def _check_frames(doc: Document, frames: _Frames) -> None:
         f"periods, not a whole number of them: the scene would play {frames.n} frame{plural} "
         f"{held}, {played:g} s in all, not the {declared:g} s declared{hint}; the frames must "
         f"cover duration_s to within {FRAME_SLACK:g} of a frame period: e.g. duration_s: "
-        f"{durations} ({' or '.join(map(str, counts))} frame{'s' if counts[-1] > 1 else ''}) "
-        f"or frame_rate_hz: {rates}",
+        f"{durations} ({' or '.join(map(str, counts))} frame{'s' if counts[-1] > 1 else ''})"
+        + (f" or frame_rate_hz: {rates}" if rates else
+           f" (no frame rate up to {max_rate:g} Hz plays {declared:g} s in whole frames)"),
     )
 
 
@@ -637,6 +641,10 @@ def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets
             key, f"unknown preset {name!r}; valid presets: {', '.join(presets)}, or a relative "
                  f"path to a *{suffix} file",
         )
+    stem = name.removesuffix(suffix)
+    if stem != name and stem in presets and not (root / name).is_file():
+        raise doc.error(key, f"file not found: {name!r} (looked in {root}); the preset {stem!r} "
+                             f"is named without {suffix}: {format_key_path(key)}: {stem}")
     resolved = _inside(doc, key, root, name)
     try:
         return from_file(resolved)
