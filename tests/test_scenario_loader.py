@@ -1092,7 +1092,8 @@ def test_a_mark_that_would_silently_not_apply_is_refused(tmp_path, mark, message
 
 
 @pytest.mark.parametrize("marks", [["skip"], ["skipif"], ["xfail", "slow"],
-                                   ["nightly", "hardware", "ship_lab"]])
+                                   ["nightly", "hardware", "ship_lab"],
+                                   ["skid", "ship", "slip"]])  # words, one letter apart
 def test_verdict_marks_and_labels_load(tmp_path, marks):
     path = tmp_path / "s.scenario.yaml"
     path.write_text(GOOD + f"marks: [{', '.join(marks)}]\n")
