@@ -85,12 +85,17 @@ _INT_TAG = "tag:yaml.org,2002:int"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
 
 # Plain scalars YAML 1.1 and YAML 1.2 read differently, and neither as the other guesses: a
-# leading zero (010: octal 8, or 10; 09: a string, or 9) and base 60 (1:30: 90, or a string).
+# leading zero (010: octal 8, or 10; 09: a string, or 9), base 60 (1:30: 90, or a string),
+# digits with underscores (1_0.0: 10.0, or a string), binary (0b1000: 8, or a string), YAML
+# 1.2's octal (0o17: a string, or 15) and YAML 1.1's words for booleans (no: false, or a
+# string).
 _LEADING_ZERO = re.compile(r"^[-+]?0[0-9_]+$")
+_OCTAL_12 = re.compile(r"^0o[0-7]+$")
+_BOOL_TAG = "tag:yaml.org,2002:bool"
 
 
 def _ambiguous_number(node: yaml.ScalarNode, value: Any) -> str | None:
-    """Why a plain scalar is a number only in one YAML version, or None."""
+    """Why a plain scalar is a number or a boolean only in one YAML version, or None."""
     if node.style:  # quoted or a block scalar: a string in both (plain: None, or "" in libyaml)
         return None
     text = node.value
@@ -104,6 +109,21 @@ def _ambiguous_number(node: yaml.ScalarNode, value: Any) -> str | None:
     if node.tag in (_INT_TAG, _FLOAT_TAG) and ":" in text:
         return (f"{text}: reads as the base-60 number {value:g} in YAML 1.1 and as a string in "
                 f"YAML 1.2; write the number ({value:g}), or quote it for a string")
+    if node.tag in (_INT_TAG, _FLOAT_TAG) and "_" in text:
+        return (f"{text}: a number with underscores reads as {value!r} in YAML 1.1 and as a "
+                f"string in YAML 1.2; write it without them ({value!r}), or quote it for a "
+                f"string")
+    if node.tag == _INT_TAG and text.lstrip("+-").startswith("0b"):
+        return (f"{text}: reads as the binary number {value} in YAML 1.1 and as a string in "
+                f"YAML 1.2; write the number ({value}), or quote it for a string")
+    if _OCTAL_12.match(text):
+        number = int(text[2:], 8)
+        return (f"{text}: reads as a string in YAML 1.1 and as the octal number {number} in "
+                f"YAML 1.2; write the number ({number}), or quote it for a string")
+    if node.tag == _BOOL_TAG and text.lower() not in ("true", "false"):
+        word = "true" if value else "false"
+        return (f"{text}: reads as {word} in YAML 1.1 and as the string {text!r} in YAML 1.2; "
+                f"write {word}, or quote it for a string")
     return None
 
 
@@ -187,7 +207,12 @@ def _read_bounded(path: str | Path, file: str) -> str:
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ScenarioError(f"not UTF-8 text: {exc.reason}", file=file) from None
+        # Where an editor shows it: the line, and the characters before it on that line.
+        line_start = raw.rfind(b"\n", 0, exc.start) + 1
+        column = len(raw[line_start:exc.start].decode("utf-8")) + 1
+        raise ScenarioError(f"not UTF-8 text: {exc.reason} (byte 0x{raw[exc.start]:02x}); save "
+                            f"the file as UTF-8", file=file,
+                            line=raw.count(b"\n", 0, exc.start) + 1, column=column) from None
 
 
 def _too_big() -> str:
@@ -204,7 +229,9 @@ def _check_bounds(text: str, file: str) -> None:
     loader = _Loader(text)
     try:
         sizes: dict[str, int] = {}
-        stack: list[list[Any]] = []  # [anchor, nodes so far] per open collection
+        # [anchor, nodes counted before it] per open collection: a collection's size is what
+        # was counted from its start to its end, itself included; each node is counted once.
+        stack: list[tuple[str | None, int]] = []
         total = 0
 
         def fail(event: Any, message: str) -> ScenarioError:
@@ -218,27 +245,25 @@ def _check_bounds(text: str, file: str) -> None:
             if isinstance(event, yaml.CollectionStartEvent):
                 if len(stack) >= MAX_DEPTH:
                     raise fail(event, f"nesting deeper than the limit of {MAX_DEPTH} levels")
-                stack.append([event.anchor, 1])
-                continue
-            if isinstance(event, yaml.AliasEvent):
+                stack.append((event.anchor, total))
+                total += 1
+            elif isinstance(event, yaml.AliasEvent):
                 if event.anchor not in sizes:
                     raise fail(event, f"alias *{event.anchor} refers to a node that contains "
                                       f"it (recursive data is not allowed)")
-                size = sizes[event.anchor]
+                total += sizes[event.anchor]
             elif isinstance(event, yaml.ScalarEvent):
-                size = 1
+                total += 1
                 if event.anchor is not None:
-                    sizes[event.anchor] = size
+                    sizes[event.anchor] = 1
             elif isinstance(event, yaml.CollectionEndEvent):
-                anchor, size = stack.pop()
+                anchor, before = stack.pop()
                 if anchor is not None:
-                    sizes[anchor] = size
+                    sizes[anchor] = total - before
+                continue
             else:
                 continue
-            if stack:
-                stack[-1][1] += size
-            total += size
-            if (stack[0][1] if stack else total) > MAX_NODES:
+            if total > MAX_NODES:
                 raise fail(event, f"document expands to more than {MAX_NODES:,} YAML nodes "
                                   f"(aliases counted as the nodes they repeat)")
     finally:
@@ -411,6 +436,16 @@ def _reject_non_finite(document: Document, node: Any, path: KeyPath) -> None:
             _reject_non_finite(document, value, (*path, i))
 
 
+# A value quoted in a message is cut to this many characters: a mapping written where a number
+# goes would otherwise print whole.
+_QUOTED_CHARS = 80
+
+
+def _quoted(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= _QUOTED_CHARS else f"{text[:_QUOTED_CHARS - 5]} ...{text[-1]}"
+
+
 def _describe(error: jsonschema.ValidationError) -> str:
     value = error.instance
     kind = error.validator
@@ -420,9 +455,9 @@ def _describe(error: jsonschema.ValidationError) -> str:
         extra = sorted(set(value) - set(allowed)) if isinstance(value, dict) else []
         return f"unknown key {', '.join(map(repr, extra))}; allowed keys: {', '.join(allowed)}"
     if kind == "enum":
-        return f"got {value!r}; allowed values: {', '.join(map(repr, schema_value))}"
+        return f"got {_quoted(value)}; allowed values: {', '.join(map(repr, schema_value))}"
     if kind == "type":
-        return f"must be of type {schema_value}, got {value!r}"
+        return f"must be of type {schema_value}, got {_quoted(value)}"
     if kind == "required":
         message = error.message.replace("is a required property", "is required but missing")
         missing = next((k for k in schema_value if isinstance(value, dict) and k not in value),
@@ -439,7 +474,7 @@ def _describe(error: jsonschema.ValidationError) -> str:
         bound = "at least" if kind == "minItems" else "at most"
         return f"must have {bound} {schema_value} items, got {len(value)}"
     if kind in ("oneOf", "anyOf"):
-        return f"got {value!r}; allowed: {' or '.join(_allowed(s) for s in schema_value)}"
+        return f"got {_quoted(value)}; allowed: {' or '.join(_allowed(s) for s in schema_value)}"
     return f"{error.message}"
 
 

@@ -30,7 +30,7 @@ import yaml
 from scipy.optimize import brentq
 
 from .errors import RtsError, ScenarioError
-from .scenario.loader import FRAME_SLACK
+from .scenario.loader import FRAME_SLACK, MAX_ACCELERATION_MPS2
 from .scenario.trajectory import LaneChange, Trajectory, TrajectorySet, TravelLaw
 from .scenario.trajectory import Path as TrajectoryPath
 
@@ -42,8 +42,9 @@ _DOUBLE = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?
 XSI_NAMESPACE = "http://www.w3.org/2001/XMLSchema-instance"
 DEFAULT_FRAME_RATE_HZ = 20.0
 DEFAULT_LANE_WIDTH_M = 3.5
-# A step transition is played as a linear ramp this long, centred on its start time: positions
-# after it are exact, speeds differ only inside it.
+# A step transition is played as a linear ramp centred on its start time (positions after it
+# are exact, speeds differ only inside it): at the scene format's greatest acceleration, and at
+# least this long.
 STEP_S = 1e-3
 # Cubic and sinusoidal speed transitions become linear pieces within this speed error.
 SPEED_TOLERANCE_MPS = 2e-3
@@ -657,19 +658,33 @@ class _Body:
             out += lc.offset_m * (1.0 - u * u * u * (10.0 + u * (-15.0 + 6.0 * u)))
         return out
 
-    def set_speed(self, t0: float, target_mps: float, duration_s: float, shape: str) -> None:
-        """Change speed from ``t0`` on; later knots are replaced (a new speed action wins)."""
+    def set_speed(self, t0: float, target_mps: float, duration_s: float, shape: str) -> float:
+        """Change speed from ``t0`` on; later knots are replaced (a new speed action wins).
+
+        Returns how much farther (m) the entity is after a step than the step would put it: a
+        step ramps at `MAX_ACCELERATION_MPS2`, centred on ``t0`` (nothing), or from t = 0 when
+        ``t0`` is sooner than half the ramp.
+        """
         v0 = self.speed(t0)
         if shape == "step" or duration_s < STEP_S:
             if t0 < STEP_S / 2:
                 self.knots_s, self.knots_mps = [0.0], [target_mps]
-                return
-            start = t0 - STEP_S / 2
+                return 0.0
+            # 10 ns over: the scene's times are written to 1 ns.
+            ramp = max(STEP_S, abs(target_mps - v0) / MAX_ACCELERATION_MPS2) + 1e-8
+            # The speed the ramp starts from is the one half a ramp earlier: lengthen the ramp
+            # until it changes that speed at the bound (the speed before changes at most at it).
+            for _ in range(4):
+                before = self.speed(max(0.0, t0 - ramp / 2))
+                ramp = max(ramp, abs(target_mps - before) / MAX_ACCELERATION_MPS2 + 1e-8)
+            start = max(0.0, t0 - ramp / 2)
             before = self.speed(start)
             self._truncate(start)
-            self.knots_s += [start, t0 + STEP_S / 2]
-            self.knots_mps += [before, target_mps]
-            return
+            if not self.knots_s:
+                self.knots_s, self.knots_mps = [0.0], [before]
+            self.knots_s += [start + ramp] if start == 0.0 else [start, start + ramp]
+            self.knots_mps += [target_mps] if start == 0.0 else [before, target_mps]
+            return (target_mps - before) * (t0 - start - ramp / 2)
         self._truncate(t0)
         f, _, bend = _SHAPES[shape]
         # Linear pieces: interpolation error <= h^2 / 8 max|v''| (and positions after the
@@ -680,6 +695,7 @@ class _Body:
         for i in range(pieces + 1):
             self.knots_s.append(t0 + duration_s * i / pieces)
             self.knots_mps.append(v0 + delta * f(i / pieces))
+        return 0.0
 
     def hold_speed(self, t: float) -> None:
         """Keep the speed the entity has at ``t`` from then on (a stopped transition)."""
@@ -1342,7 +1358,21 @@ class _Importer:
                                       f"negative speed_mps on constant_velocity or "
                                       f"speed_profile)")
             duration = self._speed_duration(action, dyn, v0, target)
-            body.set_speed(t, target, duration, dyn.shape)
+            peak = (abs(target - v0) * _SHAPES[dyn.shape][1] / duration
+                    if dyn.shape != "step" and duration >= STEP_S else 0.0)
+            if peak > MAX_ACCELERATION_MPS2 * (1.0 + 1e-6):
+                raise action.el.error(
+                    f"the speed of {action.actor!r} changes from {v0:g} to {target:g} m/s in "
+                    f"{duration:g} s ({dyn.shape}): a peak acceleration of {peak:.6g} m/s2; "
+                    f"a scene's accelerations run from {-MAX_ACCELERATION_MPS2:g} to "
+                    f"{MAX_ACCELERATION_MPS2:g} m/s2 (a step is played at that bound)")
+            ahead_m = body.set_speed(t, target, duration, dyn.shape)
+            if abs(ahead_m) >= 1e-3:
+                self.notes.append(f"{where}: step of {action.actor!r} at {t:g} s played as a "
+                                  f"ramp at {MAX_ACCELERATION_MPS2:g} m/s2 from 0 s (sooner "
+                                  f"than half the ramp): positions after it "
+                                  f"{abs(ahead_m):.3g} m {'ahead of' if ahead_m > 0 else 'behind'}"
+                                  f" a step")
             if dyn.shape in ("cubic", "sinusoidal") and duration >= STEP_S and v0 != target:
                 self.notes.append(f"{where}: {dyn.shape} speed transition of "
                                   f"{action.actor!r} as linear pieces (speed within "

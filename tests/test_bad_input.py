@@ -91,7 +91,8 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("custom-tag", TINY + "seed: !custom 3\n", r"^{f}:\d+:\d+: .*tag"),
     ("top-level-list", "- 1\n- 2\n", r"^{f}:1:1: a scene must be a mapping of keys, got list"),
     ("empty-file", "", r"^{f}: a scene must be a mapping of keys, got an empty file"),
-    ("not-utf8", b"name: \xff\xfe\n", r"^{f}: not UTF-8 text"),
+    ("not-utf8", b"name: \xff\xfe\n",
+     r"^{f}:1:7: not UTF-8 text: invalid start byte \(byte 0xff\)"),
     # YAML 1.1 (PyYAML) reads 010 as octal 8 and 1:30 as the base-60 number 90; YAML 1.2 (what
     # editors and the schema's users read) as 10 and a string: a number either way is a guess.
     ("leading-zero", sub("speed_mps: 19.0}", "speed_mps: 010}"),
@@ -104,6 +105,20 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("sexagesimal", sub("duration_s: 0.5", "duration_s: 1:30"),
      r"^{f}:3:\d+: duration_s: 1:30: reads as the base-60 number 90 in YAML 1.1 and as a "
      r"string in YAML 1.2; write the number \(90\), or quote it for a string$"),
+    ("underscores", sub("speed_mps: 19.0}", "speed_mps: 1_0.0}"),
+     r"^{f}:13:\d+: targets\[0\].motion.speed_mps: 1_0.0: a number with underscores reads as "
+     r"10.0 in YAML 1.1 and as a string in YAML 1.2; write it without them \(10.0\), or quote "
+     r"it for a string$"),
+    ("binary", sub("speed_mps: 19.0}", "speed_mps: 0b1000}"),
+     r"^{f}:13:\d+: targets\[0\].motion.speed_mps: 0b1000: reads as the binary number 8 in "
+     r"YAML 1.1 and as a string in YAML 1.2; write the number \(8\), or quote it for a string$"),
+    ("octal-1.2", sub("duration_s: 0.5", "duration_s: 0o17"),
+     r"^{f}:3:\d+: duration_s: 0o17: reads as a string in YAML 1.1 and as the octal number 15 "
+     r"in YAML 1.2; write the number \(15\), or quote it for a string$"),
+    *((f"bool-{word}", TINY.replace("radar:\n", f"radar:\n  noise: {word}\n"),
+       rf"^{{f}}:\d+:10: radar.noise: {word}: reads as {reading} in YAML 1.1 and as the string "
+       rf"'{word}' in YAML 1.2; write {reading}, or quote it for a string$")
+      for word, reading in (("no", "false"), ("off", "false"), ("yes", "true"), ("On", "true"))),
     ("missing-name", sub("name: tiny\n", ""), r"^{f}.*'name' is required but missing"),
     ("unknown-key", TINY + "colour: red\n", r"^{f}:15:1: colour: unknown key 'colour'; allowed"),
     ("version-2", sub("rts_scenario: 1", "rts_scenario: 2"),

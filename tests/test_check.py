@@ -467,10 +467,11 @@ def test_a_verdict_resting_on_the_frame_across_each_change_fails_unless_declared
 def test_changes_a_standing_target_makes_do_not_hide_a_radar_a_frame_off(tmp_path):
     from rts_scenario.radar.clock import RadarClock
 
-    # Standing 1.4 s, then closing at 8 m/s: at the changes while it stands, the frame held
-    # passes whatever the radar showed. A radar always showing the frame before (a delay of
-    # a frame on the bench looks the same) must not pass for those: only the changes whose
-    # frames differ by more than a tolerance count towards the rule.
+    # Standing 1.2 s, then closing at 8 m/s (from 1.8 s, 13.3 m/s2 between): at the changes
+    # while it stands, the frame held passes whatever the radar showed. A radar always showing
+    # the frame before (a delay of a frame on the bench looks the same) must not pass for
+    # those: only the changes whose frames differ by more than a tolerance count towards the
+    # rule.
     path = tmp_path / "stop_then_close.scenario.yaml"
     path.write_text(STOP_THEN_CLOSE)
     report, _ = _radar_run(load_scenario(path), RadarClock(cycle_s=0.05), window_s=0.006,
@@ -500,8 +501,8 @@ targets:
       heading_deg: 180
       profile:
         - {t_s: 0.0, speed_mps: 0.0}
-        - {t_s: 1.4, speed_mps: 0.0}
-        - {t_s: 1.5, speed_mps: 8.0}
+        - {t_s: 1.2, speed_mps: 0.0}
+        - {t_s: 1.8, speed_mps: 8.0}
     rcs: {rcs_dbsm: 12.0}
 expectations:
   tolerances: {range_m: 0.3, radial_velocity_mps: 0.3, az_deg: 0.5, el_deg: 1.0}
@@ -524,8 +525,8 @@ def test_a_range_offset_beyond_tolerance_on_a_slow_target_fails_counting_what_it
     path = tmp_path / "slow.scenario.yaml"
     path.write_text(STOP_THEN_CLOSE.replace("{t_s: 0.0, speed_mps: 0.0}",
                                             "{t_s: 0.0, speed_mps: 4.0}")
-                    .replace("{t_s: 1.4, speed_mps: 0.0}", "{t_s: 1.4, speed_mps: 4.0}")
-                    .replace("{t_s: 1.5, speed_mps: 8.0}", "{t_s: 1.5, speed_mps: 4.0}"))
+                    .replace("{t_s: 1.2, speed_mps: 0.0}", "{t_s: 1.2, speed_mps: 4.0}")
+                    .replace("{t_s: 1.8, speed_mps: 8.0}", "{t_s: 1.8, speed_mps: 4.0}"))
     scene = load_scenario(path)
     travel = float(np.abs(np.diff(compute_tracks(scene).range_m[:, 0])).max())
     assert 0.15 < travel < 0.25

@@ -9,6 +9,9 @@ from rts_scenario import located_yaml
 from rts_scenario.errors import ScenarioError
 from rts_scenario.located_yaml import load_yaml
 
+# The documented bound (scenarios/README.md).
+MAX_NODES = 1_000_000
+
 
 class _PurePython(yaml.SafeLoader):
     """PyYAML's own parser, used where libyaml is not installed."""
@@ -87,3 +90,45 @@ def test_a_key_out_of_line_names_the_indentations_around_it(parser, text, line, 
 ])
 def test_an_ambiguous_indentation_keeps_the_parsers_words(parser, text):
     assert "indented" not in error_of(text).detail
+
+
+def nested_nodes(n_items: int) -> str:
+    """A mapping whose list holds ``n_items`` mappings of one key and a 3-list: 3 + 6 n_items
+    nodes, four levels deep."""
+    return "a:\n" + "".join("  - {p: [1, 2, 3]}\n" for _ in range(n_items))
+
+
+@pytest.mark.parametrize("bound", [10_000, 10_001, 10_002])
+def test_each_node_is_counted_once_whatever_its_depth(monkeypatch, bound):
+    # A smaller bound, every offset from it: the root, 'a' and the list, then 6 nodes per item.
+    monkeypatch.setattr(located_yaml, "MAX_NODES", bound)
+    n_items = (bound - 3) // 6
+    assert len(load_yaml("x.yaml", nested_nodes(n_items)).data["a"]) == n_items
+    with pytest.raises(ScenarioError, match=rf"^x\.yaml:\d+:\d+: document expands to more than "
+                                            rf"{bound:,} YAML nodes"):
+        load_yaml("x.yaml", nested_nodes(n_items + 1))
+
+
+def test_an_alias_counts_as_the_nodes_it_repeats():
+    # An anchored list of 10 scalars (11 nodes); root, 'a', the list, and then per alias entry
+    # a key and 11 nodes.
+    head = "a: &x [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]\n"
+    n = (MAX_NODES - 1 - 12) // 12
+    assert 1 + 12 + 12 * n <= MAX_NODES < 1 + 12 + 12 * (n + 1)
+    load_yaml("x.yaml", head + "".join(f"k{i}: *x\n" for i in range(n)))
+    with pytest.raises(ScenarioError, match="more than 1,000,000 YAML nodes"):
+        load_yaml("x.yaml", head + "".join(f"k{i}: *x\n" for i in range(n + 1)))
+
+
+@pytest.mark.parametrize("raw, line, column", [
+    (b"name: caf\xe9\n", 1, 10),  # Latin-1 e acute after 9 characters
+    (b"a: 1\nname: \xc3\xa9t\xe9\n", 2, 9),  # after 'name: ' and a UTF-8 e acute and 't'
+    (b"a: 1\r\nb: 2\r\nc: \xff\n", 3, 4),  # CRLF lines
+])
+def test_a_byte_that_is_not_utf8_is_located_by_line_and_column(tmp_path, raw, line, column):
+    path = tmp_path / "x.yaml"
+    path.write_bytes(raw)
+    with pytest.raises(ScenarioError) as info:
+        load_yaml(path)
+    assert (info.value.line, info.value.column) == (line, column)
+    assert str(info.value).startswith(f"{path}:{line}:{column}: not UTF-8 text: ")

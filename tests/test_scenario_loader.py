@@ -1,3 +1,4 @@
+import json
 import re
 import shutil
 import textwrap
@@ -344,6 +345,30 @@ def test_a_file_of_another_kind_under_include_is_named_as_what_it_is(tmp_path, n
     assert (err.file, err.line, err.key_path) == (str(scene), 11, "include[0]")
     assert str(err).split(": ", 2)[2].startswith(
         f"{name!r} is {what}, not a scene fragment (only targets and a description); ")
+
+
+FRAGMENT = ("targets:\n  - {name: p, motion: {type: stationary, position_m: [9, 0, 0]}, "
+            "rcs: {rcs_dbsm: 0}}\n")
+
+
+@pytest.mark.parametrize("replace, by, line, key, what", [
+    ("rig: wide-3x5", "rig: fr/parked.yaml", 8, "rig", "a rig file (*.rig.yaml)"),
+    ("profile: awr1843boost", "profile: fr/parked.yaml", 6, "radar.profile",
+     "a radar profile (*.radar.yaml)"),
+])
+def test_a_fragment_named_as_rig_or_radar_profile_is_located_at_the_scene_s_key(
+        tmp_path, replace, by, line, key, what):
+    (tmp_path / "fr").mkdir()
+    (tmp_path / "fr" / "parked.yaml").write_text(FRAGMENT)
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text(edit(replace, by))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    err = info.value
+    assert (err.file, err.line, err.key_path) == (str(scene), line, key)
+    assert err.detail.startswith(
+        f"'fr/parked.yaml' is a scene fragment (only targets and a description), not {what}; "
+        f"a scene lists it under include:")
 
 
 def test_relative_rig_and_profile_files_inside_the_tree(tmp_path):
@@ -967,3 +992,148 @@ def test_a_target_is_held_to_the_speed_limit_while_it_is_present(tmp_path):
             r"frame at 5.95 s \(disappear_s; duration_s = 12 s at 20 Hz\): .* accelerate less, "
             r"or let it disappear before the speed leaves them")):
         load_scenario(bike(6.0))
+
+
+def profile(*points):
+    return {"type": "speed_profile", "position_m": [20, 0, 0.5],
+            "profile": [{"t_s": t, "speed_mps": v} for t, v in points]}
+
+
+def waypoints(*points):
+    return {"type": "waypoints",
+            "points": [{"position_m": [x, 0, 0.5], "speed_mps": v} for x, v in points]}
+
+
+@pytest.mark.parametrize("motion, key, message", [
+    # 0 to 10 m/s in 1 ms: 10 / 0.001.
+    (profile((0, 0), (1, 0), (1.001, 10)), r"profile\[2\]",
+     r"from profile\[1\] to profile\[2\] the speed goes from 0 to 10 m/s in 0.001 s: that is an "
+     r"acceleration of 10000 m/s2"),
+    # Braking from 20 m/s to 0 in 1 s.
+    (profile((0, 20), (1, 0)), r"profile\[1\]", r"an acceleration of -20 m/s2"),
+    # 0 to 150 m/s over 1 m: 150^2 / (2 x 1).
+    (waypoints((20, 0), (21, 150)), r"points\[1\]",
+     r"from waypoint 0 to waypoint 1 the speed goes from 0 to 150 m/s over 1 m of path: that is "
+     r"an acceleration of 11250 m/s2"),
+    # 30 m/s to standstill over 20 m: -900 / 40.
+    (waypoints((20, 30), (40, 0), (60, 10)), r"points\[1\]", r"an acceleration of -22.5 m/s2"),
+])
+def test_an_acceleration_a_motion_implies_beyond_the_bound_is_refused(tmp_path, motion, key,
+                                                                      message):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10}, "motion": motion}])
+    with pytest.raises(ScenarioError, match=(
+            rf":\d+:\d+: targets\[0\]\.motion\.{key}: .*{message}; accelerations run from -15 to "
+            rf"15 m/s2")):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize("motion", [
+    profile((0, 0), (1, 15)),  # 15 m/s2, the bound
+    profile((0, 20), (2, -10)),  # -15 m/s2
+    waypoints((20, 0), (50, 30)),  # 900 / 60 = 15 m/s2
+])
+def test_an_acceleration_a_motion_implies_at_the_bound_loads(tmp_path, motion):
+    scene = load_scenario(write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                                  "motion": motion}]))
+    assert np.abs(scene.targets[0].trajectory.law.a_mps2).max() == pytest.approx(15.0)
+
+
+def test_the_acceleration_bound_is_the_schema_s():
+    from rts_scenario.scenario.loader import MAX_ACCELERATION_MPS2, scenario_schema
+    motions = scenario_schema()["$defs"]["motion"]["allOf"]
+    bound = next(m["then"]["properties"]["acceleration_mps2"] for m in motions
+                 if m["if"]["properties"]["type"]["const"] == "constant_acceleration")
+    assert (bound["minimum"], bound["maximum"]) == (-MAX_ACCELERATION_MPS2, MAX_ACCELERATION_MPS2)
+
+
+@pytest.mark.parametrize("name, message", [
+    ("x\nPASS approaching-target (a.scenario.yaml)",
+     r"the control character '\\n' at position 1;"),
+    ("a\x1b[31mred", r"the control character '\\x1b' at position 1;"),
+    ("a\u2028b", r"the control character '\\u2028' at position 1;"),  # a line separator
+    ("left\u202eright", r"the control character '\\u202e' at position 4;"),  # bidi override
+    ("   ", r"got '   ', a blank name;"),
+    ("", r"should be non-empty|a blank name"),
+])
+def test_a_scene_name_that_is_not_one_line_of_printable_text_is_refused(tmp_path, name,
+                                                                          message):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                   "motion": {"type": "stationary", "position_m": [20, 0, 0]}}],
+                       name="t.scenario.yaml")
+    # JSON's string escapes are YAML's double-quoted ones.
+    path.write_text(path.read_text().replace("name: test\n", f"name: {json.dumps(name)}\n"))
+    with pytest.raises(ScenarioError, match=rf"t\.scenario\.yaml:2:1: name: .*(?:{message})"):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize("name", ["cut-in", "CCRs 50 km/h, 75% overlap", "Überholen ü"])
+def test_a_scene_name_of_printable_text_loads(tmp_path, name):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                   "motion": {"type": "stationary", "position_m": [20, 0, 0]}}])
+    path.write_text(path.read_text().replace("name: test\n", f"name: '{name}'\n"))
+    assert load_scenario(path).name == name
+
+
+@pytest.mark.parametrize("mark, message", [
+    ("skp", "'skp' looks like a misspelt 'skip'"),
+    ("xfial", "'xfial' looks like a misspelt 'xfail'"),  # two letters swapped
+    ("Skip", "'Skip' looks like a misspelt 'skip'"),
+    ("skipiff", "'skipiff' looks like a misspelt 'skipif'"),
+    ("parametrize", "'parametrize' is a pytest mark that needs arguments"),
+    ("usefixtures", "'usefixtures' is a pytest mark that needs arguments"),
+    ("filterwarnings", "'filterwarnings' is a pytest mark that needs arguments"),
+])
+def test_a_mark_that_would_silently_not_apply_is_refused(tmp_path, mark, message):
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(GOOD + f"marks: [slow, {mark}]\n")
+    with pytest.raises(ScenarioError, match=rf"s\.scenario\.yaml:15:\d+: marks\[1\]: "
+                                            rf"{re.escape(message)}"):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize("marks", [["skip"], ["skipif"], ["xfail", "slow"],
+                                   ["nightly", "hardware", "ship_lab"],
+                                   ["skid", "ship", "slip"]])  # words, one letter apart
+def test_verdict_marks_and_labels_load(tmp_path, marks):
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(GOOD + f"marks: [{', '.join(marks)}]\n")
+    assert load_scenario(path).marks == tuple(marks)
+
+
+def test_a_duration_no_frame_rate_can_play_suggests_no_rate_beyond_the_schema_s(tmp_path):
+    path = write_scene(tmp_path, [{"name": "car", "rcs": {"rcs_dbsm": 10},
+                                   "motion": {"type": "stationary", "position_m": [20, 0, 0]}}],
+                       duration_s=1e-300)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert "frame_rate_hz: 1e+300" not in str(info.value)
+    assert str(info.value).endswith(
+        "e.g. duration_s: 0.05 (1 frame) (no frame rate up to 1000 Hz plays 1e-300 s in whole "
+        "frames)")
+
+
+@pytest.mark.parametrize("replace, by, key, preset, suffix", [
+    ("rig: wide-3x5", "rig: wide-3x5.rig.yaml", "rig", "wide-3x5", ".rig.yaml"),
+    ("profile: awr1843boost", "profile: awr1843boost.radar.yaml", "radar.profile",
+     "awr1843boost", ".radar.yaml"),
+])
+def test_a_preset_named_as_a_file_that_does_not_exist_suggests_the_preset(
+        tmp_path, replace, by, key, preset, suffix):
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(edit(replace, by))
+    with pytest.raises(ScenarioError, match=rf": {re.escape(key)}: file not found: "
+                                            rf"'{preset}{re.escape(suffix)}' .*; the preset "
+                                            rf"'{preset}' is named without "
+                                            rf"{re.escape(suffix)}: {re.escape(key)}: {preset}$"):
+        load_scenario(path)
+
+
+def test_a_mapping_where_a_list_goes_is_quoted_short(tmp_path):
+    targets = "".join(f"  car{i}: {{name: car{i}, kind: car}}\n" for i in range(50))
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(GOOD.split("targets:")[0] + "targets:\n" + targets)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    message = str(info.value).split("targets: ", 1)[1]
+    assert message.startswith("must be of type array, got {'car0': {'name': 'car0'")
+    assert message.endswith(" ...}") and len(message) < 120

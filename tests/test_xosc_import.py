@@ -142,8 +142,9 @@ def test_pedestrian_crossing_tracks_match_closed_form(tmp_path):
     assert result.ego == "Hero"
     assert [(tg.name, tg.kind) for tg in scene.targets] == [("Pedestrian", "pedestrian")]
     # The pedestrian stands at (60, -4) facing +y and walks at 1.4 m/s from 1.5 s on. (A step
-    # is played as a 1 ms ramp centred on its time: positions after it are exact.)
-    t = np.array([0.0, 0.5, 1.49, 1.51, 2.0, 3.3, 4.75, 5.95])
+    # is played as a ramp at 15 m/s2 centred on its time, 1.4 / 15 s: positions after it are
+    # exact.)
+    t = np.array([0.0, 0.5, 1.45, 1.55, 2.0, 3.3, 4.75, 5.95])
     walked = np.clip(t - 1.5, 0.0, None)
     ped_p = np.stack([np.full_like(t, 60.0), -4.0 + 1.4 * walked, np.full_like(t, 0.9)], 1)
     ped_v = np.stack([np.zeros_like(t), np.where(t > 1.5, 1.4, 0.0), np.zeros_like(t)], 1)
@@ -796,8 +797,10 @@ def test_an_overridden_action_ends_when_a_new_one_takes_over(tmp_path):
                                        done.format(state), delay=1.0))
         _, scene = imported(tmp_path, path)
         law = scene.targets[0].trajectory.law
-        speeds = [speed_at(law, t) for t in (2.5, 2.99, 3.5, 3.99, 4.5, 5.0, 5.5)]
-        assert speeds == pytest.approx([18.0, 16.04, 18.0, 18.0, 21.5, 25.0, 25.0])
+        # The step from 16.0 m/s ramps at 15 m/s2 over 2 / 15 s centred on 3 s: at 2.9 s the
+        # brake still holds.
+        speeds = [speed_at(law, t) for t in (2.5, 2.9, 3.5, 3.99, 4.5, 5.0, 5.5)]
+        assert speeds == pytest.approx([18.0, 16.4, 18.0, 18.0, 21.5, 25.0, 25.0])
 
 
 def test_an_action_of_several_actors_ends_when_the_last_actor_s_part_ends(tmp_path):
@@ -1172,3 +1175,31 @@ def test_a_declaration_naming_itself_or_a_later_one_in_an_expression(tmp_path, v
         f"{path}:{line}: <ParameterDeclaration name=\"EgoSpeed\">: "
         f"{message.format(later=later)}; a declaration can use only the parameters declared "
         f"before it; declared before it: none")
+
+
+def test_a_speed_transition_beyond_the_scene_format_s_acceleration_is_refused(tmp_path):
+    # The lead brakes from 20 m/s to 10 m/s at 20 m/s2; scenes take at most 15 m/s2.
+    path = variant(tmp_path, "braking_lead",
+                   'dynamicsShape="linear" value="$Deceleration" dynamicsDimension="rate"',
+                   'dynamicsShape="linear" value="20" dynamicsDimension="rate"')
+    with pytest.raises(ScenarioError) as info:
+        imported(tmp_path, path)
+    assert str(info.value).startswith(f"{path}:")
+    assert ("changes from 20 to 10 m/s in 0.5 s (linear): a peak acceleration of 20 m/s2; a "
+            "scene's accelerations run from -15 to 15 m/s2") in str(info.value)
+    # At the bound it imports, and brakes at 15 m/s2.
+    path = variant(tmp_path, "braking_lead",
+                   'dynamicsShape="linear" value="$Deceleration" dynamicsDimension="rate"',
+                   'dynamicsShape="linear" value="15" dynamicsDimension="rate"')
+    _, scene = imported(tmp_path, path)
+    assert scene.targets[0].trajectory.law.a_mps2.min() == pytest.approx(-15.0)
+
+
+def test_a_step_ramps_at_the_scene_format_s_acceleration_keeping_positions_after_it(tmp_path):
+    result, scene = imported(tmp_path, "pedestrian_crossing", ego="Hero")
+    law = scene.targets[0].trajectory.law
+    # 0 to 1.4 m/s at 15 m/s2 (10 ns longer, for the times written to 1 ns).
+    assert np.abs(law.a_mps2).max() == pytest.approx(15.0, rel=1e-6)
+    assert np.abs(law.a_mps2).max() <= 15.0
+    assert law.knots_s[-1] - law.knots_s[-2] == pytest.approx(1.4 / 15.0, abs=1e-7)
+    assert not any("played as a ramp" in note for note in result.notes)

@@ -10,10 +10,12 @@ names, files inside the scene's folder tree). Every error is one `ScenarioError`
 from __future__ import annotations
 
 import copy
+import difflib
 import itertools
 import json
 import math
 import re
+import unicodedata
 from contextvars import ContextVar
 from functools import lru_cache
 from importlib import resources
@@ -107,6 +109,8 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                         "not supported; the simulated radar's noise comes from radar.noise")
     _check_target_limits(doc)
     validate(doc, scenario_schema())
+    _check_scene_name(doc)
+    _check_marks(doc)
     data = doc.data
     root = path.resolve().parent
 
@@ -197,6 +201,75 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     )
 
 
+def _check_scene_name(doc: Document) -> None:
+    """Refuse a scene name that is blank or holds characters that are not printed as such.
+
+    The name heads the verdict lines (``PASS name (file)``), reports and pytest items: a line
+    break in it would print a verdict line of its own, a terminal escape recolour the output.
+    """
+    name = doc.data["name"]
+    if not name.strip():
+        raise doc.error(("name",), f"got {name!r}, a blank name; a scene's name is one line of "
+                                   f"printable text (e.g. cut-in)")
+    for position, char in enumerate(name):
+        if unicodedata.category(char) in ("Cc", "Cf", "Zl", "Zp"):
+            raise doc.error(("name",), f"got {name!r}: the control character {char!r} at "
+                                       f"position {position}; a scene's name is one line of "
+                                       f"printable text (e.g. cut-in)")
+
+
+# pytest's own marks that do something only with arguments, which a scene's marks cannot give:
+# bare, pytest applies them as no-ops.
+MARKS_NEEDING_ARGUMENTS = {
+    "parametrize": "vary a scene with its parametrize block (scenarios/README.md, "
+                   "Parametrization)",
+    "usefixtures": "a scene's run uses no fixtures of the test suite",
+    "filterwarnings": "filter warnings in the project's pytest configuration",
+}
+# The marks that change a scene's verdict: a misspelt one would silently run a scene meant to
+# be skipped, or fail a suite on a failure the scene expects.
+VERDICT_MARKS = ("skip", "skipif", "xfail")
+
+
+def _near_miss(word: str, mark: str) -> bool:
+    """Whether ``word`` looks like a misspelt ``mark``: close to it (difflib), or it in capitals.
+
+    A letter left out, added or two swapped (``skp``, ``xfial``, ``skipp``) is close; a
+    word one letter apart in the middle (``skid``, ``ship``) is not.
+    """
+    if word in VERDICT_MARKS:
+        return False
+    return word.lower() == mark or bool(
+        difflib.get_close_matches(word.lower(), [mark], n=1, cutoff=NEAR_MISS_RATIO))
+
+
+# difflib's ratio from which a mark is taken for a misspelt verdict mark (2 x letters in common
+# over both lengths): skp/skip 0.86, xfial/xfail 0.80; skid/skip and ship/skip 0.75.
+NEAR_MISS_RATIO = 0.8
+
+
+def _check_marks(doc: Document) -> None:
+    """Refuse marks that would silently do nothing, or not what they look like they do.
+
+    pytest's marks that need arguments (bare, no-ops), and near misses of the marks that change
+    a verdict (``skp``, ``xfial``): the plugin registers every scene mark, so pytest's
+    ``--strict-markers`` cannot catch those.
+    """
+    for i, mark in enumerate(doc.data.get("marks", [])):
+        if mark in MARKS_NEEDING_ARGUMENTS:
+            raise doc.error(("marks", i),
+                            f"{mark!r} is a pytest mark that needs arguments, which a scene's "
+                            f"marks cannot give (bare, pytest ignores it); "
+                            f"{MARKS_NEEDING_ARGUMENTS[mark]}")
+        near = next((m for m in VERDICT_MARKS if _near_miss(mark, m)), None)
+        if near is not None:
+            raise doc.error(("marks", i),
+                            f"{mark!r} looks like a misspelt {near!r}, which would then not "
+                            f"apply; the marks that change a verdict are "
+                            f"{', '.join(map(repr, VERDICT_MARKS))}: write {near!r}, or name "
+                            f"the label so that it is not mistaken for one")
+
+
 def _check_target_limits(doc: Document) -> None:
     """Refuse a limit of the whole scene in a target's ``expected_limits``.
 
@@ -243,7 +316,10 @@ def _check_frames(doc: Document, frames: _Frames) -> None:
         return abs(n_periods - round(n_periods)) <= FRAME_SLACK and round(n_periods) >= 1
 
     durations = " or ".join(_shown(n * period, lambda d: whole(d * rate)) for n in counts)
-    rates = " or ".join(_shown(n / declared, lambda r: whole(declared * r)) for n in counts)
+    max_rate = scenario_schema()["properties"]["frame_rate_hz"]["maximum"]
+    # Only rates the schema takes: a duration of 1e-300 s has none.
+    rates = " or ".join(_shown(n / declared, lambda r: whole(declared * r)) for n in counts
+                        if n / declared <= max_rate)
     plural = "s" if frames.n > 1 else ""
     held = f"held {period:g} s each" if frames.n > 1 else f"held {period:g} s"
     if periods >= 1.0:
@@ -264,8 +340,9 @@ def _check_frames(doc: Document, frames: _Frames) -> None:
         f"periods, not a whole number of them: the scene would play {frames.n} frame{plural} "
         f"{held}, {played:g} s in all, not the {declared:g} s declared{hint}; the frames must "
         f"cover duration_s to within {FRAME_SLACK:g} of a frame period: e.g. duration_s: "
-        f"{durations} ({' or '.join(map(str, counts))} frame{'s' if counts[-1] > 1 else ''}) "
-        f"or frame_rate_hz: {rates}",
+        f"{durations} ({' or '.join(map(str, counts))} frame{'s' if counts[-1] > 1 else ''})"
+        + (f" or frame_rate_hz: {rates}" if rates else
+           f" (no frame rate up to {max_rate:g} Hz plays {declared:g} s in whole frames)"),
     )
 
 
@@ -556,10 +633,21 @@ def _load_referenced(doc: Document, key: KeyPath, root: Path, name: str, presets
             key, f"unknown preset {name!r}; valid presets: {', '.join(presets)}, or a relative "
                  f"path to a *{suffix} file",
         )
+    stem = name.removesuffix(suffix)
+    if stem != name and stem in presets and not (root / name).is_file():
+        raise doc.error(key, f"file not found: {name!r} (looked in {root}); the preset {stem!r} "
+                             f"is named without {suffix}: {format_key_path(key)}: {stem}")
+    resolved = _inside(doc, key, root, name)
     try:
-        return from_file(_inside(doc, key, root, name))
-    except ScenarioError:
-        raise
+        return from_file(resolved)
+    except ScenarioError as exc:
+        if exc.line is not None:  # located in the file itself
+            raise
+        # About the whole file (another kind of file, unreadable, empty): the scene's key
+        # that names it is where to look.
+        named_first = exc.detail.startswith(f"{resolved} ")
+        raise doc.error(key, f"{name!r}{exc.detail[len(str(resolved)):]}" if named_first
+                        else f"{name}: {exc.detail}") from None
     except RtsError as exc:
         raise doc.error(key, f"{name}: {exc}") from None
 
@@ -689,6 +777,24 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
 # Speeds along a path run from -MAX_SPEED_MPS to MAX_SPEED_MPS (the schema's bound on each
 # speed given; the loader holds a motion's every speed within the scene to it).
 MAX_SPEED_MPS = 150.0
+# Accelerations along a path run from -MAX_ACCELERATION_MPS2 to MAX_ACCELERATION_MPS2 (the
+# schema's bound on acceleration_mps2; the loader holds the accelerations a speed profile's or
+# the waypoints' speeds imply to it): beyond any road vehicle's braking, and a speed jump
+# written by mistake (a time or a distance a thousand times too short) shows as one.
+MAX_ACCELERATION_MPS2 = 15.0
+
+
+def _check_acceleration(doc: Document, key: KeyPath, acceleration_mps2: float,
+                        implied_by: str) -> None:
+    """Refuse an acceleration ``implied_by`` (words) beyond +-`MAX_ACCELERATION_MPS2`."""
+    # A hair over the bound: an acceleration of exactly 15 m/s2 computed from speeds and
+    # times written to a few decimals may round above it.
+    if abs(acceleration_mps2) <= MAX_ACCELERATION_MPS2 * (1.0 + 1e-6):
+        return
+    raise doc.error(key, f"{implied_by} is an acceleration of {acceleration_mps2:.6g} m/s2; "
+                         f"accelerations run from {-MAX_ACCELERATION_MPS2:g} to "
+                         f"{MAX_ACCELERATION_MPS2:g} m/s2 (as acceleration_mps2 of "
+                         f"constant_acceleration)")
 
 
 def _check_speed(doc: Document, key: KeyPath, law: TravelLaw, frames: _Frames,
@@ -727,6 +833,11 @@ def _speed_profile(doc: Document, key: KeyPath, profile: list[dict[str, float]])
         if times[i] <= times[i - 1]:
             raise doc.error((*key, i, "t_s"),
                             f"times must increase, got {times[i]:g} after {times[i - 1]:g}")
+        _check_acceleration(
+            doc, (*key, i),
+            (speeds[i] - speeds[i - 1]) / (times[i] - times[i - 1]),
+            f"from profile[{i - 1}] to profile[{i}] the speed goes from {speeds[i - 1]:g} to "
+            f"{speeds[i]:g} m/s in {times[i] - times[i - 1]:.6g} s: that")
     return TravelLaw.speed_profile(times, speeds)
 
 
@@ -850,6 +961,10 @@ def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
     t = start
     for i, length in enumerate(lengths):
         a = (speeds[i + 1] ** 2 - speeds[i] ** 2) / (2.0 * length)
+        _check_acceleration(
+            doc, (*key, "points", i + 1),
+            a, f"from waypoint {i} to waypoint {i + 1} the speed goes from {speeds[i]:g} to "
+               f"{speeds[i + 1]:g} m/s over {length:.6g} m of path: that")
         if i > 0 and motion.get("path", "polyline") == "polyline":
             _corner_offset(doc, (*key, "points", i, "position_m"), points[i - 1: i + 2], t,
                            lane_changes)
