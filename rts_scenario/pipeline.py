@@ -296,6 +296,8 @@ class Pipeline:
         # The host's wall clock, watched for steps against its monotonic clock from here on
         # (`HostClockWatch`): the receiver reads it at every cycle, a run at every batch.
         self.host_clock = HostClockWatch()
+        # How the simulated radar runs, where it is the output (`_vacuous_empty_bench`).
+        self._radar_options = radar_options or RadarOptions()
         # The level of the host's clock (`HostClockWatch.level_s`) the scene's start was taken
         # at, by the simulated radar in process; and the monotonic time of that start.
         self._bus_origin_level_s = 0.0
@@ -339,8 +341,8 @@ class Pipeline:
                 self._listeners = [self._recording]
             self._notifier = can.Notifier(listen, self._listeners, timeout=0.05)
             name, argument = split_spec(options.output)
-            context = RunContext(rig=rig, radar=radar, radar_options=radar_options
-                                 or RadarOptions(), open_publisher=self._open_publisher,
+            context = RunContext(rig=rig, radar=radar, radar_options=self._radar_options,
+                                 open_publisher=self._open_publisher,
                                  rng=rng if rng is not None else np.random.default_rng(0),
                                  errors=errors)
             self._new_output = lambda: output_class(name).for_run(argument, context)
@@ -1092,6 +1094,10 @@ class Pipeline:
         playback.rts_unreachable = self.output.rts_unreachable()
         # Which output played the scene: "simulated-radar" is no bench (docs/report.md).
         report.playback = {**playback.to_dict(), "output": options.output}
+        vacuous = self._vacuous_empty_bench(scene, options)
+        if vacuous:
+            report.reasons.append(FailReason(vacuous, "nothing_checked"))
+            report.passed = False
         failures = playback.reasons(scene.expectations.expected_limits)
         report.add_expected_not_hit(playback.not_hit(scene.expectations.expected_limits))
         if failures:
@@ -1130,6 +1136,22 @@ class Pipeline:
             # Said where the host's clock stepped: the times were brought back (`_unstep`).
             report.radar_clock["host_clock_steps"] = steps
         return RunResult(scene=scene, report=report, sidecar_error=sidecar_error)
+
+    def _vacuous_empty_bench(self, scene: Scenario, options: RunOptions) -> str | None:
+        """Why an empty bench on the built-in simulated radar checked nothing, else None.
+
+        A scene without targets checks only the radar's false detections; the simulated
+        radar makes them only from the cube's noise (`adc` fidelity, noise on). Played to an
+        RTS, the radar is the bench's, and the check is real.
+        """
+        ro = self._radar_options
+        if scene.targets or options.output != "simulated-radar" or (
+                ro.fidelity != "analytic" and ro.noise):
+            return None
+        why = "at analytic fidelity" if ro.fidelity == "analytic" else "with noise off"
+        return (f"nothing to check: the scene has no targets, and the built-in simulated radar "
+                f"{why} makes no false detections, so its one check could not fail; run it "
+                f"with radar.fidelity: adc and noise on, or play it to a bench")
 
     def _write_sidecar(self, options: RunOptions, scene: Scenario, played: PlayedRecord,
                        checker: Checker, scene_first: int, report: Report, playback: Playback,

@@ -331,3 +331,28 @@ def test_validate_refuses_a_scene_with_nothing_checkable_under_strict(tmp_path, 
     err = capsys.readouterr().err.splitlines()
     assert err[-1] == (f"error: {path}: no target is checkable in any frame (each is under a "
                        f"limit throughout): a run has nothing to check and fails")
+
+
+@pytest.mark.parametrize("radar, vacuous", [
+    ({"radar.fidelity": "analytic"}, "at analytic fidelity"),
+    ({"radar.noise": False, "duration_s": 0.5}, "with noise off"),
+    ({"duration_s": 0.5}, None),  # the cube's noise: CFAR false alarms exist, the check is real
+])
+def test_an_empty_bench_the_simulated_radar_cannot_fail_checks_nothing(radar, vacuous):
+    # A scene without targets checks only false detections; the built-in radar makes them
+    # from the cube's noise alone. Without it the run's PASS would rest on nothing.
+    from pathlib import Path
+
+    from rts_scenario.scenario import load_scenario
+
+    scene = load_scenario(Path(__file__).resolve().parents[1] / "scenarios"
+                          / "empty_bench.scenario.yaml", radar)
+    report = run_scene(scene, RunOptions()).report
+    said = [r for r in report.reasons if "nothing_checked" in r.codes]
+    if vacuous is None:
+        assert said == []
+        return
+    assert not report.passed
+    assert said == [f"nothing to check: the scene has no targets, and the built-in simulated "
+                    f"radar {vacuous} makes no false detections, so its one check could not "
+                    f"fail; run it with radar.fidelity: adc and noise on, or play it to a bench"]
