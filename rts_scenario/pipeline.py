@@ -40,7 +40,14 @@ from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
 from .playback import LOST_COUNTERS, Playback, lost_frames, rts_rig_record, unreachable_reason
-from .preflight import Preflight, angle_tolerance_deg, frames_per_batch, preflight, scene_limits
+from .preflight import (
+    Preflight,
+    angle_tolerance_deg,
+    frames_per_batch,
+    preflight,
+    scene_limits,
+    vacuous_empty_bench,
+)
 from .radar.clock import TIME_EPS_S, ClockTrack, RadarClock, latency_not_late_start_reason
 from .radar.profile import RadarProfile
 from .radar.simulate import ChannelErrors
@@ -1138,20 +1145,10 @@ class Pipeline:
         return RunResult(scene=scene, report=report, sidecar_error=sidecar_error)
 
     def _vacuous_empty_bench(self, scene: Scenario, options: RunOptions) -> str | None:
-        """Why an empty bench on the built-in simulated radar checked nothing, else None.
-
-        A scene without targets checks only the radar's false detections; the simulated
-        radar makes them only from the cube's noise (`adc` fidelity, noise on). Played to an
-        RTS, the radar is the bench's, and the check is real.
-        """
-        ro = self._radar_options
-        if scene.targets or options.output != "simulated-radar" or (
-                ro.fidelity != "analytic" and ro.noise):
-            return None
-        why = "at analytic fidelity" if ro.fidelity == "analytic" else "with noise off"
-        return (f"nothing to check: the scene has no targets, and the built-in simulated radar "
-                f"{why} makes no false detections, so its one check could not fail; run it "
-                f"with radar.fidelity: adc and noise on, or play it to a bench")
+        """`vacuous_empty_bench` where the scene plays to the built-in simulated radar."""
+        if options.output != "simulated-radar":
+            return None  # the radar is the bench's: the check is real
+        return vacuous_empty_bench(scene, self._radar_options)
 
     def _write_sidecar(self, options: RunOptions, scene: Scenario, played: PlayedRecord,
                        checker: Checker, scene_first: int, report: Report, playback: Playback,

@@ -16,7 +16,7 @@ import numpy as np
 
 from .check import checkable, limit_masks
 from .kinematics import Tracks, compute_tracks
-from .scenario.model import LIMITS, Scenario
+from .scenario.model import LIMITS, RadarOptions, Scenario
 from .schedule import Schedule, build_schedule
 
 BATCH_FRAMES = 2000
@@ -211,3 +211,19 @@ def preflight(scene: Scenario, method: str = "exact",
     for _, tracks, schedule in schedule_batches(scene, method, batch_frames):
         counter.add(tracks, schedule)
     return counter.result()
+
+
+def vacuous_empty_bench(scene: Scenario, radar_options: RadarOptions) -> str | None:
+    """Why an empty bench on the built-in simulated radar checks nothing, else None.
+
+    A scene without targets checks only the radar's false detections; the simulated radar
+    makes them only from the cube's noise (`adc` fidelity, noise on). Played to an RTS, the
+    radar is the bench's, and the check is real.
+    """
+    ro = radar_options
+    if scene.targets or (ro.fidelity != "analytic" and ro.noise):
+        return None
+    why = "at analytic fidelity" if ro.fidelity == "analytic" else "with noise off"
+    return (f"nothing to check: the scene has no targets, and the built-in simulated radar "
+            f"{why} makes no false detections, so its one check could not fail; run it with "
+            f"radar.fidelity: adc and noise on, or play it to a bench")

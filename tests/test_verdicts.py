@@ -356,3 +356,25 @@ def test_an_empty_bench_the_simulated_radar_cannot_fail_checks_nothing(radar, va
     assert said == [f"nothing to check: the scene has no targets, and the built-in simulated "
                     f"radar {vacuous} makes no false detections, so its one check could not "
                     f"fail; run it with radar.fidelity: adc and noise on, or play it to a bench"]
+
+
+def test_validate_says_an_empty_bench_the_simulated_radar_cannot_fail_checks_nothing(
+        tmp_path, capsys):
+    import shutil
+    from pathlib import Path
+
+    import rts_scenario.cli as cli
+
+    root = Path(__file__).resolve().parents[1] / "scenarios"
+    scene = tmp_path / "empty_bench.scenario.yaml"
+    shutil.copy(root / "empty_bench.scenario.yaml", scene)
+    scene.write_text(scene.read_text().replace("  profile: awr1843boost\n",
+                                               "  profile: awr1843boost\n  noise: false\n"))
+    assert cli.main(["validate", str(scene)]) == 0
+    out = capsys.readouterr().out
+    assert (f"note: {scene}: on the built-in simulated radar a run fails with nothing_checked: "
+            f"nothing to check: the scene has no targets, and the built-in simulated radar with "
+            f"noise off makes no false detections") in out
+    assert cli.main(["validate", str(root / "empty_bench.scenario.yaml")]) == 0
+    assert "nothing_checked" not in capsys.readouterr().out
+

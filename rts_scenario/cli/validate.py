@@ -12,7 +12,7 @@ from .common import EXIT_BAD_INPUT, EXIT_OK, METHODS
 
 def _do_validate(args: argparse.Namespace) -> int:
     from ..errors import RtsError
-    from ..preflight import preflight
+    from ..preflight import preflight, vacuous_empty_bench
     from ..radar.simulate import near_field_warning
     from ..scenario import load_scenario, parametrizations
     from ..schedule.build import delay_step_note
@@ -45,8 +45,11 @@ def _do_validate(args: argparse.Namespace) -> int:
             for line in pre.expected_lines():
                 print(f"note: {label}: {line}")
             bad += args.strict and bool(unexpected)
+            vacuous = vacuous_empty_bench(scene, scene.radar_options)
             for note in (near_field_warning(scene.radar, scene.rig),
-                         delay_step_note(scene.rig, scene.radar)):
+                         delay_step_note(scene.rig, scene.radar),
+                         vacuous and f"on the built-in simulated radar a run fails with "
+                                     f"nothing_checked: {vacuous}"):
                 if note and note not in reported:  # once per file, rig and radar
                     reported.add(note)
                     print(f"note: {label}: {note}")
