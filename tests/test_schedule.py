@@ -343,6 +343,23 @@ def test_static_targets_solved_once_and_not_resent():
     assert changed[0].all() and not changed[1:].any()
 
 
+def _played_moves(sch, rig, radar, az, el, turn=None):
+    """|peak - set| (deg, az and el) of frame 0's targets as played: the test's own plane-wave
+    sources at the FEs' directions, weighted as scheduled (``turn``: each channel's phase off
+    its exact one, radians), and `_bartlett_peak`."""
+    fe = np.maximum(sch.fe[0], 0)
+    k = 2.0 * np.pi / radar.array.wavelength_m
+    moved = []
+    for i in range(az.size):
+        a_az, a_el = np.radians(rig.az_deg[fe[i]]), np.radians(rig.el_deg[fe[i]])
+        sources = np.exp(1j * k * (np.outer(np.cos(a_el) * np.sin(a_az), radar.array.y_m)
+                                   + np.outer(np.sin(a_el), radar.array.z_m)))
+        w = sch.weight[0, i] if turn is None else sch.weight[0, i] * np.exp(1j * turn[i])
+        moved.append(np.abs(_bartlett_peak(radar.array, w @ sources, az[i], el[i])
+                            - [az[i], el[i]]))
+    return np.array(moved)
+
+
 def _bartlett_peak(array, x, az0, el0):
     """Peak of |a^H x|^2 near (az0, el0) (deg): a plane-wave beamformer of its own."""
     from scipy.optimize import minimize
@@ -459,15 +476,7 @@ def test_a_target_the_rts_s_steps_move_off_its_angle_is_flagged_but_played():
     assert sch.active[0][flagged].any(axis=1).all()  # played
     fe, on = np.maximum(sch.fe[0], 0), sch.active[0]
     turn = np.radians(np.where(on, np.degrees(sch.phase_rad[0]) - CAL_PHASE_DEG[fe], 0.0))
-    k = 2.0 * np.pi / radar.array.wavelength_m
-    moved = []
-    for i in range(az.size):
-        a_az, a_el = np.radians(rig.az_deg[fe[i]]), np.radians(rig.el_deg[fe[i]])
-        sources = np.exp(1j * k * (np.outer(np.cos(a_el) * np.sin(a_az), radar.array.y_m)
-                                   + np.outer(np.sin(a_el), radar.array.z_m)))
-        x = (sch.weight[0, i] * np.exp(1j * turn[i])) @ sources
-        moved.append(np.abs(_bartlett_peak(radar.array, x, az[i], el[i]) - [az[i], el[i]]))
-    over = np.array(moved) / [0.5 / 3.0, 1.0 / 3.0]
+    over = _played_moves(sch, rig, radar, az, el, turn) / [0.5 / 3.0, 1.0 / 3.0]
     clear = np.abs(over.max(axis=1) - 1.0) > 0.02  # the Newton step predicts to ~1e-3 deg
     assert 5 <= flagged.sum() <= az.size - 5
     np.testing.assert_array_equal(flagged[clear], (over.max(axis=1) > 1.0)[clear])
@@ -504,16 +513,7 @@ def test_a_channel_the_attenuator_s_range_switches_off_is_judged_for_the_angle_i
     off = (full.active[0] & ~sch.active[0]).any(axis=1)
     assert 10 <= off.sum() <= az.size - 10
     flagged = (sch.status[0] & Status.ANGLE_QUANTIZED) != 0
-    fe = np.maximum(sch.fe[0], 0)
-    k = 2.0 * np.pi / radar.array.wavelength_m
-    moved = []
-    for i in range(az.size):
-        a_az, a_el = np.radians(rig.az_deg[fe[i]]), np.radians(rig.el_deg[fe[i]])
-        sources = np.exp(1j * k * (np.outer(np.cos(a_el) * np.sin(a_az), radar.array.y_m)
-                                   + np.outer(np.sin(a_el), radar.array.z_m)))
-        moved.append(np.abs(_bartlett_peak(radar.array, sch.weight[0, i] @ sources, az[i],
-                                           el[i]) - [az[i], el[i]]))
-    over = np.array(moved).max(axis=1) / (0.1 / 3.0)
+    over = _played_moves(sch, rig, radar, az, el).max(axis=1) / (0.1 / 3.0)
     clear = np.abs(over - 1.0) > 0.02
     assert flagged[clear & (over > 1.0)].all() and not flagged[clear & (over < 1.0)].any()
     assert flagged.any() and not flagged[~off].any()  # only where a channel went off
