@@ -596,7 +596,8 @@ def test_the_euro_ncap_catalogue_sweeps_to_the_same_verdicts_everywhere(tmp_path
         out = tmp_path / f"catalogue-{i}.json"
         code, _, _ = sweep(capsys, *paths, "--json", out, *place)
         payload = json.loads(out.read_text())
-        assert code == 0, [r for r in payload["runs"] if r["status"] != "pass"][:3]
+        assert code == 0, [(r["file"], r["id"], r["status"], r.get("reason"))
+                           for r in payload["runs"] if r["status"] != "pass"][:3]
         return verdicts(payload)
 
     first = swept(scenes, ["--workers", "1"], 0)

@@ -18,6 +18,7 @@ def _do_validate(args: argparse.Namespace) -> int:
     from ..schedule.build import delay_step_note
 
     bad = 0
+    reported: set[str] = set()  # notes of a rig and radar: said once, for the first scene
     for path in args.scenes:
         try:
             combos = parametrizations(path)
@@ -25,7 +26,6 @@ def _do_validate(args: argparse.Namespace) -> int:
             print(f"error: {located(path, exc)}", file=sys.stderr)
             bad += 1
             continue
-        reported: set[str] = set()
         errors: dict[str, list[str]] = {}  # message -> the combinations that hit it
         for ident, overrides in combos:
             label = f"{path}[{ident}]" if ident else str(path)
@@ -50,7 +50,7 @@ def _do_validate(args: argparse.Namespace) -> int:
                          delay_step_note(scene.rig, scene.radar),
                          vacuous and f"on the built-in simulated radar a run fails with "
                                      f"nothing_checked: {vacuous}"):
-                if note and note not in reported:  # once per file, rig and radar
+                if note and note not in reported:  # once per rig and radar
                     reported.add(note)
                     print(f"note: {label}: {note}")
             if not (args.strict and unexpected):
