@@ -117,25 +117,40 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
             f"frames_sent_late: {late} of {frames} frames went out more than a frame period "
             f"({playback['late_after_s'] * 1e3:.3g} ms) after their time: the frame before was "
             f"held instead (worst {worst * 1e3:.3g} ms)", "frames_sent_late"))
-    rig = playback.get("rts_rig")
-    if rig is not None and not rig["matches_run"]:
-        played = rts is None or int(rts.get("frames_applied", 0)) > 0
-        out.append(FailReason(
-            f"rts_rig: the RTS plays a rig of {rig['front_ends']} FEs whose geometry (sha256 "
-            f"{rig['geometry_sha256'][:12]}) is not the run's ({rig['run']}, "
-            f"{rig['run_geometry_sha256'][:12]}): "
-            + ("its echoes came from other directions than the schedule put them in"
-               if played else "it applied none of the run's frames")
-            + "; run on the rig the RTS has (emulate: --rig the run's)", "rts_rig"))
-    if rts and rts.get("foreign_datagrams"):
-        # Whatever the scene expects: the counters, and what the RTS played, are not the run's.
-        out.append(FailReason(
-            f"rts_stream: the RTS's counters count {rts['foreign_datagrams']} datagrams more "
-            f"than this run sent ({int(rts['datagrams'])} in all): another sender's stream took "
-            f"the RTS over (a second run against it?), so what it played and counted is not "
-            f"this run's", "rts_stream"))
+    out += stream_reasons(rts, playback.get("rts_rig"))
     if "frames_lost" not in expected:
         out += delivery_reasons(rts, playback.get("rts_unreachable"))
+    return out
+
+
+def stream_reasons(rts: Mapping[str, int] | None, rig: Mapping[str, Any] | None,
+                   who: str = "run") -> list[str]:
+    """Why what the RTS played is not the stream's, whatever the scene expects.
+
+    ``rig``: what it said of its rig (`rts_rig_record`): another rig plays other directions;
+    ``rts``: its counters, where they count datagrams another sender sent (its stream took the
+    RTS over). ``who``: the sender, as the reasons name it.
+    """
+    out: list[str] = []
+    if rig is not None and not rig["matches_run"]:
+        played = rts is None or int(rts.get("frames_applied", 0)) > 0
+        differs = (f"{rig['front_ends']} FEs, not the {rig['run_front_ends']} of the {who}'s "
+                   f"({rig['run']})" if rig.get("run_front_ends", rig["front_ends"])
+                   != rig["front_ends"] else
+                   f"{rig['front_ends']} FEs whose geometry (sha256 "
+                   f"{rig['geometry_sha256'][:12]}) is not the {who}'s ({rig['run']}, "
+                   f"{rig['run_geometry_sha256'][:12]})")
+        out.append(FailReason(
+            f"rts_rig: the RTS plays a rig of {differs}: "
+            + ("its echoes came from other directions than the schedule put them in"
+               if played else f"it applied none of the {who}'s frames")
+            + f"; {who} on the rig the RTS has (emulate: --rig the {who}'s)", "rts_rig"))
+    if rts and rts.get("foreign_datagrams"):
+        out.append(FailReason(
+            f"rts_stream: the RTS's counters count {rts['foreign_datagrams']} datagrams more "
+            f"than this {who} sent ({int(rts['datagrams'])} in all): another sender's stream "
+            f"took the RTS over (a second run against it?), so what it played and counted is "
+            f"not this {who}'s", "rts_stream"))
     return out
 
 
@@ -199,7 +214,7 @@ def rts_rig_record(said: tuple[int, bytes] | None, rig: Any) -> dict[str, Any] |
     front_ends, digest = said
     own = rig.geometry_digest()
     return {"front_ends": front_ends, "geometry_sha256": digest.hex(), "run": rig.name,
-            "run_geometry_sha256": own.hex(),
+            "run_front_ends": rig.n_front_ends, "run_geometry_sha256": own.hex(),
             "matches_run": front_ends == rig.n_front_ends and digest == own}
 
 
@@ -236,6 +251,7 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
 
 
 __all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "delivery_reasons",
+           "stream_reasons",
            "lost_frames",
            "playback_not_hit", "playback_reasons", "rts_rig_record", "unpack_send_lateness",
            "unreachable_reason"]

@@ -295,6 +295,58 @@ def test_schedule_to_udp_fails_when_nothing_received_it(tmp_path, capsys):
     assert stats.frames_applied == 20 and capsys.readouterr().err == ""
 
 
+def test_schedule_fails_where_the_rts_plays_another_rig_or_another_sender_s_stream(
+        tmp_path, capsys):
+    # An RTS that says it has kit-table1 (4 FEs) plays the wide-3x5 schedule's entries from
+    # other directions; one whose stream another sender took over played that sender's. Both
+    # exited 0; they fail as run fails them, whatever the scene declares of lost frames.
+    import threading
+
+    from rts_scenario.outputs import open_output
+    from rts_scenario.outputs.udp import UdpReceiver
+    from rts_scenario.rig import Rig
+
+    scene = tmp_path / "short.scenario.yaml"
+    scene.write_text(SHORT_SCENE + "expectations: {expected_limits: [frames_lost]}\n")
+    kit = Rig.preset("kit-table1")
+    receiver = UdpReceiver(n_front_ends=kit.n_front_ends, rig_digest=kit.geometry_digest()
+                           ).start()
+    try:
+        assert cli.main(["schedule", str(scene), "--output",
+                         f"udp://127.0.0.1:{receiver.address[1]}"]) == 1
+    finally:
+        receiver.stop()
+    err = capsys.readouterr().err
+    assert err.startswith("error: rts_rig: the RTS plays a rig of 4 FEs, not the 15 of the "
+                          "schedule's (wide-3x5): "), err
+    # Another sender's stream, begun 0.3 s into this one's 3 s.
+    from rts_scenario.kinematics import compute_tracks
+    from rts_scenario.scenario import load_scenario
+    from rts_scenario.schedule import build_schedule
+
+    scene.write_text(scene.read_text().replace("duration_s: 1.0", "duration_s: 3.0"))
+    loaded = load_scenario(scene)
+    theirs = build_schedule(compute_tracks(loaded), loaded.rig, loaded.radar)
+    receiver = UdpReceiver().start()
+    address = f"udp://127.0.0.1:{receiver.address[1]}"
+
+    def take_over():
+        with open_output(address, pacing="fast") as other:
+            other.write(theirs)
+
+    thread = threading.Timer(0.3, take_over)
+    thread.start()
+    try:
+        code = cli.main(["schedule", str(scene), "--output", address])
+    finally:
+        thread.join()
+        receiver.stop()
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert re.search(r"error: rts_stream: the RTS's counters count \d+ datagrams more than "
+                     r"this schedule sent", err), err
+
+
 def test_unwritable_json_is_one_line_naming_option_and_path(tmp_path, capsys):
     from pathlib import Path
 

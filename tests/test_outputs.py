@@ -750,3 +750,41 @@ def test_a_file_export_whose_draft_cannot_be_made_keeps_the_earlier_file(tmp_pat
             with open_output(f"file:{path}") as out:
                 out.write(schedule)
         assert path.read_text() == "an earlier export"
+
+
+def test_a_scene_streamed_batch_by_batch_keeps_its_frame_numbers_or_is_refused():
+    # The scene in batches of 5 frames, each batch's tracks and schedule built alone. With
+    # its frame numbers every frame reaches the RTS; numbered 0..4 again in every batch, the
+    # RTS dropped every later batch as stale, and the sender said nothing: now refused.
+    from rts_scenario.schedule import ScheduleError
+
+    scene = load_scenario(ROOT / "scenarios" / "cut_in.scenario.yaml")
+    frames = np.arange(20)
+    receiver = UdpReceiver().start()
+    address = f"udp://127.0.0.1:{receiver.address[1]}"
+    try:
+        with open_output(address, pacing="fast") as out:
+            for a in range(0, 20, 5):
+                part = frames[a:a + 5]
+                tracks = compute_tracks(scene, scene.t_s[part], frame_index=part)
+                batch = build_schedule(tracks, scene.rig, scene.radar, frame_index=part)
+                np.testing.assert_array_equal(batch.frame_index, part)
+                out.write(batch)
+            status = out.rts_status(settle_s=0.5)
+    finally:
+        receiver.stop()
+    assert status is not None and status["frames_applied"] == 20
+    assert status["stale"] == 0
+    first = build_schedule(compute_tracks(scene, scene.t_s[:5]), scene.rig, scene.radar)
+    np.testing.assert_array_equal(first.frame_index, np.arange(5))
+    with open_output(address, pacing="fast") as out:
+        out.write(first)
+        with pytest.raises(OutputError, match=r"^udp: frame 0 after frame 4: a stream's frames "
+                                              r"go forward .*build_schedule\(\.\.\., "
+                                              r"frame_index=\.\.\.\)$"):
+            out.write(first)
+    tracks = compute_tracks(scene, scene.t_s[:5])
+    for bad in (np.arange(4), np.array([0, 1, 1, 2, 3]), np.array([-1, 0, 1, 2, 3]),
+                np.linspace(0, 4, 5)):
+        with pytest.raises(ScheduleError, match=r"^frame_index: one increasing whole number"):
+            build_schedule(tracks, scene.rig, scene.radar, frame_index=bad)

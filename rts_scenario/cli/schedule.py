@@ -21,7 +21,7 @@ def _do_schedule(args: argparse.Namespace) -> int:
 
     from ..outputs import open_output, split_spec
     from ..pipeline import RTS_SETTLE_S
-    from ..playback import delivery_reasons
+    from ..playback import delivery_reasons, rts_rig_record, stream_reasons
     from ..preflight import LimitCounter, schedule_batches
     from ..scenario import load_scenario, select_variant
 
@@ -46,6 +46,7 @@ def _do_schedule(args: argparse.Namespace) -> int:
         # nothing received is no success.
         rts = out.rts_status(settle_s=RTS_SETTLE_S)
         gone = out.rts_unreachable()
+        rig = rts_rig_record(out.rts_rig(), scene.rig)
     label = f"{args.scene}[{scene.variant}]" if scene.variant else args.scene
     # What the schedule does not play as specified, as validate and run say it.
     for line in limits.result().unexpected():
@@ -54,12 +55,17 @@ def _do_schedule(args: argparse.Namespace) -> int:
           f"{emitted / max(total, 1):.0%} of entries emitted -> {args.output}")
     # As `run` judges them: a scene that declares frames_lost (an RTS that drops some) is told
     # of them, not failed.
+    # Another rig, or another sender's stream, fails it whatever the scene declares: what the
+    # RTS played is not this schedule.
+    foreign = stream_reasons(rts, rig, "schedule")
+    for problem in foreign:
+        print(f"error: {problem}", file=sys.stderr)
     problems = delivery_reasons(rts, gone, "of the schedule")
     declared = "frames_lost" in scene.expectations.expected_limits
     for problem in problems:
         print(f"note: {problem} (the scene declares frames_lost)" if declared
               else f"error: {problem}", file=sys.stderr)
-    return EXIT_FAIL if problems and not declared else EXIT_OK
+    return EXIT_FAIL if foreign or (problems and not declared) else EXIT_OK
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:

@@ -171,6 +171,7 @@ class UdpOutput(Output):
         self._refused_s: list[float] = []
         self._sent_frame_t_s: float | None = None  # the last frame out, as errors are told
         self._last_sent: Schedule | None = None  # delta mode: the last frame written
+        self._last_frame_index = -1  # the stream's frames go forward (`_check_forward`)
         # Every datagram goes through ``send``; tests swap in a `FaultInjector` around
         # ``transmit``.
         self.send: Callable[[bytes], None] = self.transmit
@@ -206,6 +207,7 @@ class UdpOutput(Output):
 
     def _write(self, batch: Schedule) -> None:
         self._check_fits(batch)
+        self._check_forward(batch)
         # Frame 0 of a batch is a delta against the last frame of the batch before (kept as a
         # copy: one frame, whatever the scene's length).
         changed = batch.changed(self._last_sent) if self.mode == "delta" else None
@@ -243,6 +245,21 @@ class UdpOutput(Output):
             self._frames_sent += 1
             if self._frames_sent % STATUS_DRAIN_FRAMES == 0:
                 self.rts_status()  # the socket's buffer holds a few hundred replies at most
+
+    def _check_forward(self, batch: Schedule) -> None:
+        """Refuse frame numbers that do not go forward: the RTS would drop them as stale."""
+        if not batch.n_frames:
+            return
+        index = batch.frame_index.astype(np.int64)
+        steps = np.diff(np.r_[self._last_frame_index, index])
+        if (steps <= 0).any():
+            at = int(np.flatnonzero(steps <= 0)[0])
+            before = self._last_frame_index if at == 0 else int(index[at - 1])
+            raise OutputError(
+                f"udp: frame {int(index[at])} after frame {before}: a stream's frames go "
+                f"forward (the RTS drops a frame older than one it applied); a batch of a scene "
+                f"keeps the scene's frame numbers: build_schedule(..., frame_index=...)")
+        self._last_frame_index = int(index[-1])
 
     @staticmethod
     def _check_fits(batch: Schedule) -> None:

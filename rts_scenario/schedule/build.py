@@ -81,6 +81,7 @@ def build_schedule(
     fe_responses: str = FE_RESPONSES[0],
     estimator: str = "bartlett",
     angle_tolerance_deg: tuple[float, float] | None = None,
+    frame_index: NDArray[np.int64] | None = None,
 ) -> Schedule:
     """Turn per-frame target tracks into channel settings for the rig.
 
@@ -109,6 +110,10 @@ def build_schedule(
         RTS's steps move by more than `BENCH_ANGLE_SHARE` of either is flagged
         ``ANGLE_QUANTIZED`` (played off its angle; its predicted error against the weights'
         own, before the steps, so a method's intended aim is not counted). Without: no flag.
+    frame_index : ndarray, shape (F,), optional
+        The frames' numbers in the scene (default 0, 1, ...): a batch of a scene's frames
+        (`compute_tracks` at some of its times) keeps the scene's numbers, which an output
+        streams (a UDP stream's frames must go forward).
 
     Raises
     ------
@@ -245,7 +250,8 @@ def build_schedule(
     emitted = ((status & BLOCKING) == 0)[..., None] & active
     nan = np.nan
     return Schedule(
-        t_s=tracks.t_s, frame_index=np.arange(shape[0]), names=tracks.names,
+        t_s=tracks.t_s, frame_index=_frame_numbers(frame_index, shape[0]),
+        names=tracks.names,
         quad=np.where(emitted.any(-1), quad, -1), fe=np.where(emitted, fe, -1),
         weight=np.where(emitted, weight, 0.0),
         attenuation_db=np.where(emitted, attenuation, nan),
@@ -362,6 +368,18 @@ def _start_levels(
 # The share of the scene's angle tolerance the RTS's steps may take: beyond it a target is
 # flagged ANGLE_QUANTIZED (the radar would be judged for an angle the bench moved).
 BENCH_ANGLE_SHARE = 1.0 / 3.0
+
+
+def _frame_numbers(frame_index: NDArray[np.int64] | None, n_frames: int) -> NDArray[np.int64]:
+    """Return ``frame_index`` checked (one whole number >= 0 per frame, increasing), or 0.. ."""
+    if frame_index is None:
+        return np.arange(n_frames)
+    index = np.asarray(frame_index)
+    if index.shape != (n_frames,) or not np.issubdtype(index.dtype, np.integer) or (
+            n_frames and (index.min() < 0 or (np.diff(index) <= 0).any())):
+        raise ScheduleError(f"frame_index: one increasing whole number >= 0 per frame of the "
+                            f"tracks ({n_frames}), got shape {index.shape} of {index.dtype}")
+    return index.astype(np.int64)
 
 
 def _angle_quantized(angle_error: FloatArray, no_peak: NDArray[np.bool_], solved: FloatArray,
