@@ -25,6 +25,7 @@ from rts_scenario.outputs.udp import (
     FaultInjector,
     UdpReceiver,
     encode_frame,
+    frame_entries,
 )
 from rts_scenario.scenario import load_scenario
 from rts_scenario.schedule import build_schedule
@@ -788,3 +789,23 @@ def test_a_scene_streamed_batch_by_batch_keeps_its_frame_numbers_or_is_refused()
                 np.linspace(0, 4, 5)):
         with pytest.raises(ScheduleError, match=r"^frame_index: one increasing whole number"):
             build_schedule(tracks, scene.rig, scene.radar, frame_index=bad)
+
+
+def test_a_copy_the_rts_could_not_read_is_no_one_s_and_no_frame_lost(schedule):
+    # A copy of a datagram corrupted on the way: the RTS counts it (datagrams, corrupted) and
+    # applies every frame. It is neither another sender's stream (rts_stream) nor a lost frame
+    # (the reply to the second-to-last datagram already counted as many datagrams as sent).
+    receiver = UdpReceiver().start()
+    try:
+        with open_output(f"udp://127.0.0.1:{receiver.address[1]}", pacing="fast") as out:
+            out.write(schedule.frames(0, 9))
+            good = encode_frame(frame_entries(schedule, 9, None), kind=KIND_FULL, frame=9,
+                                t_s=float(schedule.t_s[9]), first_sequence=0)[0]
+            out.transmit(good[:-1] + bytes([good[-1] ^ 0xFF]))  # its CRC no longer fits
+            out.write(schedule.frames(9, 10))
+            status = out.rts_status(settle_s=0.5)
+    finally:
+        receiver.stop()
+    assert status is not None and status["corrupted"] == 1
+    assert status["frames_applied"] == 10 and status["lost_frames"] == 0
+    assert "foreign_datagrams" not in status

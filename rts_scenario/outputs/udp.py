@@ -305,8 +305,13 @@ class UdpOutput(Output):
             status = self._rts_status
             if status is None and settle_s == 0.0:
                 return None
-            if (status is not None and status.get("datagrams", 0) >= self.datagrams_sent) \
-                    or time.perf_counter() >= deadline:
+            # Done early only where the counters account for every frame sent: a reply that
+            # counts as many datagrams as were sent need not be the last one's (the RTS also
+            # counts a corrupted copy, another's late datagram), so with frames still
+            # unaccounted for the last reply is waited for until the deadline.
+            if (status is not None and status.get("datagrams", 0) >= self.datagrams_sent
+                    and status.get("frames_applied", 0) + status.get("unsynced_frames", 0)
+                    >= self._frames_sent) or time.perf_counter() >= deadline:
                 break
             time.sleep(0.002)
         if status is None or settle_s == 0.0:
@@ -314,9 +319,11 @@ class UdpOutput(Output):
         out = dict(status)
         unplayed = self._frames_sent - out.get("frames_applied", 0) - out.get("unsynced_frames", 0)
         out["lost_frames"] = max(out.get("lost_frames", 0), unplayed)
-        # Counters are per stream: more datagrams than this run sent are another sender's
-        # stream's (a second run against the RTS took it over), not this run's.
-        foreign = out.get("datagrams", 0) - out.get("duplicates", 0) - self.datagrams_sent
+        # Counters are per stream: more valid datagrams than this run sent are another
+        # sender's stream's (a second run against the RTS took it over), not this run's. Copies
+        # and datagrams the RTS could not read (a copy corrupted on the way) are no one's.
+        foreign = (out.get("datagrams", 0) - out.get("duplicates", 0) - out.get("corrupted", 0)
+                   - out.get("malformed", 0) - self.datagrams_sent)
         if foreign > 0:
             out["foreign_datagrams"] = foreign
         return out
