@@ -50,6 +50,10 @@ TRAILER = struct.Struct("!I")
 ENTRY = np.dtype([("target", ">u2"), ("channel", "u1"), ("flags", "u1"), ("fe", ">i2"),
                   ("status", ">u2"), ("attenuation_db", ">f4"), ("delay_s", ">f8"),
                   ("doppler_hz", ">f4"), ("phase_rad", ">f4")])
+# The schedule's fields as an entry carries them (`Schedule.changed`: a delta lists what
+# changed on the wire, the same however the frames came in batches).
+AS_SENT = {name: ENTRY[name].newbyteorder("=") for name in
+           ("attenuation_db", "delay_s", "doppler_hz", "phase_rad")}
 # The RTS's status reply (optional): its counters after each datagram it handled.
 STATUS_MAGIC = b"RTSR"
 STATUS_COUNTERS = ("datagrams", "corrupted", "malformed", "duplicates", "reordered", "stale",
@@ -210,7 +214,7 @@ class UdpOutput(Output):
         self._check_forward(batch)
         # Frame 0 of a batch is a delta against the last frame of the batch before (kept as a
         # copy: one frame, whatever the scene's length).
-        changed = batch.changed(self._last_sent) if self.mode == "delta" else None
+        changed = (batch.changed(self._last_sent, AS_SENT) if self.mode == "delta" else None)
         if self.mode == "delta" and batch.n_frames:
             self._last_sent = batch.take(np.array([batch.n_frames - 1]))
         self._sent_t_s = batch.t_s.astype(np.float64, copy=True)

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from enum import IntFlag
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -122,27 +124,33 @@ class Schedule:
         return replace(out, t_s=np.asarray(clock_t_s, dtype=np.float64)[keep],
                        frame_index=np.asarray(counters, dtype=np.int64)[keep])
 
-    def changed(self, before: Schedule | None = None) -> BoolArray:
+    def changed(self, before: Schedule | None = None,
+                as_sent: Mapping[str, Any] | None = None) -> BoolArray:
         """Entries (F, K) that differ from the previous frame.
 
         Frame 0 is compared with ``before``'s last frame (the batch sent before this one, of
         the same targets); without it, all of frame 0 counts as changed. Static targets and
         unchanged entries need not be sent again: an output in delta mode sends only these,
-        the same entries however the frames were cut into batches.
+        the same entries however the frames were cut into batches. ``as_sent``: per field,
+        the dtype an output sends it as (float32 on the wire): values compared as sent, so
+        that rounding differences of batches computed apart (1e-12 dB) are no change.
         """
         out = np.ones(self.status.shape, dtype=bool)
         if self.n_frames > 1:
-            out[1:] = ~self._same(slice(1, None), self, slice(None, -1))
+            out[1:] = ~self._same(slice(1, None), self, slice(None, -1), as_sent)
         if (self.n_frames and before is not None and before.n_frames
                 and before.status.shape[1:] == self.status.shape[1:]):
-            out[:1] = ~self._same(slice(0, 1), before, slice(-1, None))
+            out[:1] = ~self._same(slice(0, 1), before, slice(-1, None), as_sent)
         return out
 
-    def _same(self, rows: slice, other: Schedule, other_rows: slice) -> BoolArray:
+    def _same(self, rows: slice, other: Schedule, other_rows: slice,
+              as_sent: Mapping[str, Any] | None = None) -> BoolArray:
         """Whether each target's entries in frames ``rows`` equal ``other``'s ``other_rows``."""
         same = self.status[rows] == other.status[other_rows]
         for name in ("fe", "attenuation_db", "delay_s", "doppler_hz", "phase_rad", "active"):
             a, b = getattr(self, name)[rows], getattr(other, name)[other_rows]
+            if as_sent and name in as_sent:
+                a, b = a.astype(as_sent[name]), b.astype(as_sent[name])
             same &= np.all((a == b) | (np.isnan(a) & np.isnan(b)) if a.dtype.kind == "f"
                            else a == b, axis=-1)
         return same
