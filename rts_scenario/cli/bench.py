@@ -90,7 +90,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                              "(default 60 s; 0 skips it)")
     parser.add_argument("--targets", type=int, default=1_000_000,
                         help="targets per throughput run (default 1,000,000)")
-    parser.add_argument("--repeats", type=int, default=3, help="throughput runs, best kept")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="throughput runs, best kept (default 3)")
     parser.add_argument("--rig", default="kit-table1", help="rig preset (default kit-table1)")
     parser.add_argument("--no-performance", action="store_true",
                         help="skip the performance figures (CAN, solver against the paper "
