@@ -215,11 +215,13 @@ def build_schedule(
                 finish()
         raise
     if angle_tolerance_deg is not None:
-        # With steps, every entry; on a continuous rig, those whose attenuator's range
+        # With steps, every entry; on a continuous rig, those played whose attenuator's range
         # switched off a channel the method wanted (it needs more than the maximum): playing
         # it too loud would move the angle more, leaving it out may move it too.
         stepped = limits.attenuation_step_db > 0.0 or limits.phase_step_deg > 0.0
-        judged = ok if stepped else ok & ((solved > 0.0) & np.isnan(attenuation)).any(axis=-1)
+        # (A weight below `WANTED_WEIGHT`, -180 dB, is rounding: the solver's 1e-17 is 0.)
+        switched_off = ((solved > WANTED_WEIGHT) & np.isnan(attenuation)).any(axis=-1)
+        judged = ok if stepped else ok & switched_off & (weight > 0.0).any(axis=-1)
         if judged.any():
             status |= _angle_quantized(angle_error, no_peak, solved, quad, judged, tracks,
                                        responses, angle_tolerance_deg)
@@ -368,6 +370,11 @@ def _start_levels(
 # The share of the scene's angle tolerance the RTS's steps may take: beyond it a target is
 # flagged ANGLE_QUANTIZED (the radar would be judged for an angle the bench moved).
 BENCH_ANGLE_SHARE = 1.0 / 3.0
+
+
+# A solved weight (the largest 1) that a channel switched off beyond the attenuator's range
+# is judged for (`ANGLE_QUANTIZED` on a continuous rig): below it, rounding.
+WANTED_WEIGHT = 1e-9
 
 
 def _frame_numbers(frame_index: NDArray[np.int64] | None, n_frames: int) -> NDArray[np.int64]:
