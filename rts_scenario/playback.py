@@ -167,10 +167,15 @@ def delivery_reasons(rts: Mapping[str, int] | None, gone: Mapping[str, Any] | No
         out.append(FailReason(unreachable_reason(gone, within), "rts_unreachable"))
     lost = lost_frames(rts)
     if lost:
+        unaccounted = int((rts or {}).get("unaccounted_frames", 0))
         out.append(FailReason(
             f"frames_lost: the RTS reports {lost} schedule frames it did not apply ("
             + ", ".join(f"{k.replace('_', ' ')} {rts[k]}"
-                        for k in LOST_COUNTERS if rts and rts.get(k)) + ")", "frames_lost"))
+                        for k in LOST_COUNTERS if rts and rts.get(k)) + ")"
+            + (f"; {unaccounted} of them by the sender's count: frames its last reply, "
+               f"waited for at the stream's end, did not count as applied (lost on the way, "
+               f"still pending there, or its reply lost or late)" if unaccounted else ""),
+            "frames_lost"))
     return out
 
 

@@ -847,3 +847,26 @@ targets:
         streams.append(sent)
     assert len(streams[0]) >= n
     assert streams[1] == streams[0] and streams[2] == streams[0]
+
+
+def test_frames_the_rts_s_last_reply_does_not_account_for_are_said_as_the_sender_s_count(
+        schedule):
+    # The last frame's datagrams never reach the RTS: its counters say nothing was lost (the
+    # frame is not between two it saw), and the sender counts it. The reason says whose count.
+    from rts_scenario.playback import delivery_reasons
+
+    receiver = UdpReceiver().start()
+    try:
+        with open_output(f"udp://127.0.0.1:{receiver.address[1]}", pacing="fast") as out:
+            out.write(schedule.frames(0, 9))
+            out.send = lambda datagram: None  # the last frame: lost on the way
+            out.write(schedule.frames(9, 10))
+            status = out.rts_status(settle_s=0.3)
+    finally:
+        receiver.stop()
+    assert status is not None and status["frames_applied"] == 9
+    assert status["lost_frames"] == status["unaccounted_frames"] == 1
+    (reason,) = delivery_reasons(status, None)
+    assert reason.startswith("frames_lost: the RTS reports 1 schedule frames it did not apply "
+                             "(lost frames 1); 1 of them by the sender's count: frames its last "
+                             "reply, waited for at the stream's end, did not count as applied")

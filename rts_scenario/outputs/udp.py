@@ -322,6 +322,9 @@ class UdpOutput(Output):
             return status
         out = dict(status)
         unplayed = self._frames_sent - out.get("frames_applied", 0) - out.get("unsynced_frames", 0)
+        if unplayed > out.get("lost_frames", 0):
+            # The sender's count, not the RTS's: frames its last reply does not account for.
+            out["unaccounted_frames"] = unplayed - out.get("lost_frames", 0)
         out["lost_frames"] = max(out.get("lost_frames", 0), unplayed)
         # Counters are per stream: more valid datagrams than this run sent are another
         # sender's stream's (a second run against the RTS took it over), not this run's. Copies
