@@ -221,9 +221,11 @@ def vacuous_empty_bench(scene: Scenario, radar_options: RadarOptions) -> str | N
     radar is the bench's, and the check is real.
     """
     ro = radar_options
-    if scene.targets or (ro.fidelity != "analytic" and ro.noise):
+    if scene.targets or (ro.fidelity == "adc" and ro.noise):
         return None
-    why = "at analytic fidelity" if ro.fidelity == "analytic" else "with noise off"
+    why = ("with noise off" if not ro.noise else "at analytic fidelity"
+           if ro.fidelity == "analytic" else
+           f"at {ro.fidelity} fidelity (the cube only where targets crowd: none here)")
     return (f"nothing to check: the scene has no targets, and the built-in simulated radar "
             f"{why} makes no false detections, so its one check could not fail; run it with "
             f"radar.fidelity: adc and noise on, or play it to a bench")

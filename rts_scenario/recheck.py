@@ -669,6 +669,8 @@ def _iter_cycles(log: str | Path, mapping: CanMapping | None, stats: dict[str, i
                 continue
         receiver.on_message_received(msg)
         yield from take(receiver.pop())
+    # Detections held for a first header that never came: the log's, before any cycle.
+    skipped += len(early)
     yield from take(receiver.flush())
     if last_t_s is not None and (started or skipped or other or receiver.stats.messages):
         last_t_s.append(float(msg.timestamp))

@@ -848,6 +848,16 @@ def test_a_log_whose_detections_all_fail_their_checksum_says_so(tmp_path, desk_l
         check_log(scene, write_log(tmp_path / "broken.blf", broken))
 
 
+def test_a_log_of_detections_without_any_header_counts_them(tmp_path, desk_log):
+    # Detections held for a first header that never comes are the log's messages still:
+    # not a silent bus.
+    scene, log, _ = desk_log
+    parts = [m for c in radar_cycles(log) for m in c[1:]]
+    headless = write_log(tmp_path / "headless.blf", [parts])
+    with pytest.raises(LogError, match=rf"no radar cycle in it \({len(parts)} messages, none a "):
+        check_log(scene, headless)
+
+
 @pytest.mark.parametrize("kept", [1, 2, 3])
 def test_a_log_with_detections_in_a_few_cycles_fails_without_a_runtime_error(tmp_path,
                                                                               desk_log, kept):

@@ -378,3 +378,21 @@ def test_validate_says_an_empty_bench_the_simulated_radar_cannot_fail_checks_not
     assert cli.main(["validate", str(root / "empty_bench.scenario.yaml")]) == 0
     assert "nothing_checked" not in capsys.readouterr().out
 
+
+def test_an_empty_bench_at_auto_fidelity_through_the_api_checks_nothing_either():
+    # The loader makes a target-less scene's "auto" the cube; given as radar options through
+    # the API, "auto" runs the cube only where targets crowd: none here.
+    from pathlib import Path
+
+    from rts_scenario.preflight import vacuous_empty_bench
+    from rts_scenario.scenario import load_scenario
+    from rts_scenario.scenario.model import RadarOptions
+
+    scene = load_scenario(Path(__file__).resolve().parents[1] / "scenarios"
+                          / "empty_bench.scenario.yaml")
+    assert scene.radar_options.fidelity == "adc" and vacuous_empty_bench(
+        scene, scene.radar_options) is None
+    said = vacuous_empty_bench(scene, RadarOptions())
+    assert said is not None and "simulated radar at auto fidelity (the cube only where targets " \
+                                "crowd: none here) makes no false detections" in said
+
