@@ -39,7 +39,14 @@ from .hostclock import HostClockWatch, monotonic_s, wall_s
 from .kinematics import compute_tracks
 from .outputs import Output, output_class, split_spec
 from .outputs.base import RunContext
-from .playback import LOST_COUNTERS, Playback, lost_frames, rts_rig_record, unreachable_reason
+from .playback import (
+    LOST_COUNTERS,
+    Playback,
+    lost_frames,
+    rig_difference,
+    rts_rig_record,
+    unreachable_reason,
+)
 from .preflight import (
     Preflight,
     angle_tolerance_deg,
@@ -596,11 +603,10 @@ class Pipeline:
                     f"({counts}): it held the frame before, and what the radar measured then "
                     f"is not the frame's{why}")
         if rig is not None and not rig["matches_run"]:
-            return (f"rts_rig: the RTS plays a rig of {rig['front_ends']} FEs whose geometry "
-                    f"(sha256 {rig['geometry_sha256'][:12]}) is not the measured rig's "
-                    f"({rig['run']}, {rig['run_geometry_sha256'][:12]}), in {which}: its "
-                    f"echoes came from other directions than the pattern put them in; measure "
-                    f"the rig the RTS has (emulate: --rig the measured rig's)")
+            differs = rig_difference(rig, "the measured rig's")
+            return (f"rts_rig: the RTS plays a rig of {differs}, in {which}: its echoes came "
+                    f"from other directions than the pattern put them in; measure the rig the "
+                    f"RTS has (emulate: --rig the measured rig's)")
         return None
 
     def _counter_restart(self) -> int | None:

@@ -134,14 +134,9 @@ def stream_reasons(rts: Mapping[str, int] | None, rig: Mapping[str, Any] | None,
     out: list[str] = []
     if rig is not None and not rig["matches_run"]:
         played = rts is None or int(rts.get("frames_applied", 0)) > 0
-        differs = (f"{rig['front_ends']} FEs, not the {rig['run_front_ends']} of the {who}'s "
-                   f"({rig['run']})" if rig.get("run_front_ends", rig["front_ends"])
-                   != rig["front_ends"] else
-                   f"{rig['front_ends']} FEs whose geometry (sha256 "
-                   f"{rig['geometry_sha256'][:12]}) is not the {who}'s ({rig['run']}, "
-                   f"{rig['run_geometry_sha256'][:12]})")
+        whose = f"the {who}'s"
         out.append(FailReason(
-            f"rts_rig: the RTS plays a rig of {differs}: "
+            f"rts_rig: the RTS plays a rig of {rig_difference(rig, whose)}: "
             + ("its echoes came from other directions than the schedule put them in"
                if played else f"it applied none of the {who}'s frames")
             + f"; {who} on the rig the RTS has (emulate: --rig the {who}'s)", "rts_rig"))
@@ -152,6 +147,14 @@ def stream_reasons(rts: Mapping[str, int] | None, rig: Mapping[str, Any] | None,
             f"took the RTS over (a second run against it?), so what it played and counted is "
             f"not this {who}'s", "rts_stream"))
     return out
+
+
+def rig_difference(rig: Mapping[str, Any], whose: str) -> str:
+    """How the RTS's rig (`rts_rig_record`) differs from ``whose`` (e.g. "the run's")."""
+    if rig.get("run_front_ends", rig["front_ends"]) != rig["front_ends"]:
+        return f"{rig['front_ends']} FEs, not the {rig['run_front_ends']} of {whose} ({rig['run']})"
+    return (f"{rig['front_ends']} FEs whose geometry (sha256 {rig['geometry_sha256'][:12]}) is "
+            f"not {whose} ({rig['run']}, {rig['run_geometry_sha256'][:12]})")
 
 
 def delivery_reasons(rts: Mapping[str, int] | None, gone: Mapping[str, Any] | None,
@@ -256,7 +259,7 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
 
 
 __all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "delivery_reasons",
-           "stream_reasons",
+           "rig_difference", "stream_reasons",
            "lost_frames",
            "playback_not_hit", "playback_reasons", "rts_rig_record", "unpack_send_lateness",
            "unreachable_reason"]
