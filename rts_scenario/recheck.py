@@ -2042,8 +2042,10 @@ def _refuse_runs(log: str | Path, starts: tuple[float, ...], restart: int | None
 
     The profile's counter start begins each run's count (the RTS's stream restarts it): a
     log whose headers come back to it from another count holds several runs (a logger left
-    running), and would be judged as one, its reasons about cycles of the other run. A count
-    that wraps round to it from the counter before it, or a copy of its header, is no start
+    running), and would be judged as one, its reasons about cycles of the other run. A start
+    is a header with that count further back than `OPEN_CYCLES` from the header before (the
+    first header too): a wrap round to it, a reordered header or a copy is none; a count back
+    by more than half the counter's range reads as a step forward and is not told
     (`DetectionReceiver.count_starts`).
     """
     if restart is None or len(starts) < 2:
