@@ -91,6 +91,72 @@ def candidate_quads(
     return row * (columns - 1) + col
 
 
+# Cells of `locate_raster` along azimuth and elevation: 512 x 256 16-bit cells (256 KiB, in
+# the L2 cache), of which a few per cent straddle an edge or a grid mean on the wide-3x5 grid.
+RASTER_CELLS = (512, 256)
+# Angle (deg) by which a cell must clear every test to be certain: far above the rounding of
+# the tests (~1e-13 deg) and of a target's cell index, far below any quad.
+RASTER_GUARD_DEG = 1e-7
+
+
+def locate_raster(
+    column_az_deg: FloatArray, row_el_deg: FloatArray, lines: FloatArray, boxes: FloatArray,
+    cells: tuple[int, int] = RASTER_CELLS,
+) -> tuple[NDArray[np.int16], FloatArray]:
+    """Answers of `candidate_quads` and `inside_quads` on a raster of cells, where certain.
+
+    Returns ``(raster, frame)``: ``raster`` (``cells[1] * cells[0]``, row-major by elevation)
+    holds per cell the quad every direction in it is assigned (its candidate, inside it), -1
+    where every direction in it is outside its candidate, and -2 where directions in it may
+    differ (the test then runs per direction). ``frame`` is ``(az0, el0, 1/d_az, 1/d_el,
+    columns, rows)``: the cell of ``(az, el)`` is ``floor((az - az0) / d_az)`` along azimuth.
+    The raster reaches 1 deg beyond every quad; farther directions are outside.
+
+    Certain by construction, not by sampling: a cell's candidate is fixed when no grid mean
+    lies within it (`RASTER_GUARD_DEG` around it), and each test of `inside_quads` is linear in
+    ``(az, el)``, so it holds (fails) over the whole cell when it holds (fails) at its four
+    corners by that guard.
+    """
+    width, height = cells
+    az0, az1 = boxes[:, 0].min() - 1.0, boxes[:, 1].max() + 1.0
+    el0, el1 = boxes[:, 2].min() - 1.0, boxes[:, 3].max() + 1.0
+    d_az, d_el = (az1 - az0) / width, (el1 - el0) / height
+    az_lo = az0 + d_az * np.arange(width)
+    el_lo = el0 + d_el * np.arange(height)
+    az_hi, el_hi = az_lo + d_az, el_lo + d_el
+    guard = RASTER_GUARD_DEG
+    columns, rows = column_az_deg.size, row_el_deg.size
+
+    def cell_index(means: FloatArray, lo: FloatArray, hi: FloatArray,
+                   last: int) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+        first = np.clip(np.searchsorted(means, lo - guard) - 1, 0, last)
+        return first, np.clip(np.searchsorted(means, hi + guard) - 1, 0, last) == first
+
+    col, col_fixed = cell_index(column_az_deg, az_lo, az_hi, columns - 2)
+    row, row_fixed = cell_index(row_el_deg, el_lo, el_hi, rows - 2)
+    candidate = row[:, None] * (columns - 1) + col[None, :]
+    fixed = row_fixed[:, None] & col_fixed[None, :]
+    # Every cell's four corners, shape (height, width, 4).
+    az = np.stack(np.broadcast_arrays(az_lo, az_hi, az_lo, az_hi), axis=-1)[None].repeat(
+        height, axis=0)
+    el = np.stack(np.broadcast_arrays(el_lo, el_lo, el_hi, el_hi), axis=-1)[:, None].repeat(
+        width, axis=1)
+    box, line = boxes[candidate][..., None, :], lines[candidate]
+    slack = EDGE_TOL_DEG
+    margins = [az - (box[..., 0] - slack), (box[..., 1] + slack) - az,
+               el - (box[..., 2] - slack), (box[..., 3] + slack) - el]
+    margins += [line[..., i, None, 0] * az + line[..., i, None, 1] * el + line[..., i, None, 2]
+                + slack for i in range(4)]
+    margin = np.stack(margins)  # (8 tests, height, width, 4 corners)
+    inside = fixed & (margin.min(axis=(0, 3)) >= guard)
+    outside = fixed & (margin.max(axis=3) <= -guard).any(axis=0)
+    raster = np.full((height, width), -2, dtype=np.int16)
+    raster[inside] = candidate[inside]
+    raster[outside] = -1
+    frame = np.array([az0, el0, 1.0 / d_az, 1.0 / d_el, width, height], dtype=np.float64)
+    return raster.ravel(), frame
+
+
 def distance_to_polygon(az_deg: FloatArray, el_deg: FloatArray, polygon: FloatArray) -> FloatArray:
     """Distance (deg, in the az/el plane) from each point to the polygon's boundary segments."""
     best = np.full(az_deg.shape, np.inf)
@@ -120,6 +186,8 @@ class QuadGeometry:
         Quads collapsed onto a line.
     column_az_deg, row_el_deg : ndarray, shapes (columns,) and (rows,)
         Mean azimuth of every grid column and mean elevation of every grid row, degrees.
+    raster, raster_frame : ndarray, shapes (cells,) and (6,)
+        `locate_raster`'s cells and frame on a grid of quads; empty for a single quad.
     """
 
     polygons: FloatArray
@@ -128,6 +196,8 @@ class QuadGeometry:
     degenerate: NDArray[np.bool_]
     column_az_deg: FloatArray
     row_el_deg: FloatArray
+    raster: NDArray[np.int16]
+    raster_frame: FloatArray
 
     @classmethod
     def of(cls, rig: Rig) -> QuadGeometry:
@@ -142,10 +212,15 @@ class QuadGeometry:
         x, y = polygons[..., 0], polygons[..., 1]
         area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y,
                                    axis=1))
+        column_az = rig.az_deg.reshape(rig.rows, rig.columns).mean(axis=0)
+        row_el = rig.el_deg.reshape(rig.rows, rig.columns).mean(axis=1)
+        if len(polygons) > 1:
+            raster, frame = locate_raster(column_az, row_el, lines, boxes)
+        else:
+            raster, frame = np.zeros(0, dtype=np.int16), np.zeros(6)
         geometry = cls(
             polygons=polygons, lines=lines, boxes=boxes, degenerate=area <= DEGENERATE_AREA_DEG2,
-            column_az_deg=rig.az_deg.reshape(rig.rows, rig.columns).mean(axis=0),
-            row_el_deg=rig.el_deg.reshape(rig.rows, rig.columns).mean(axis=1),
+            column_az_deg=column_az, row_el_deg=row_el, raster=raster, raster_frame=frame,
         )
         # Shared between every caller with the same values: nobody may change it.
         for value in vars(geometry).values():

@@ -494,3 +494,65 @@ def test_import_does_not_load_numba():
     code = ("import sys, rts_scenario, rts_scenario.solver\n"
             "assert 'numba' not in sys.modules\n")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
+
+
+def _bent_grid():
+    """A 3 x 4 grid whose FEs sit off their columns and rows (bent edges, uneven means)."""
+    rng = np.random.default_rng(7)
+    az = np.array([-15.0, -5.0, 5.0, 15.0]) + rng.uniform(-1.5, 1.5, (3, 4))
+    el = np.array([[-8.0], [0.0], [8.0]]) + rng.uniform(-1.0, 1.0, (3, 4))
+    return rs.Rig.grid(az, el)
+
+
+def _on_every_edge_and_mean(geometry, rng):
+    """Directions on the quads' corners and edges, on the grid's means and beside them."""
+    corners = geometry.polygons.reshape(-1, 2)
+    start = geometry.polygons
+    end = np.roll(geometry.polygons, -1, axis=1)
+    t = rng.uniform(0, 1, (*start.shape[:2], 40, 1))
+    along = (start[:, :, None] + t * (end - start)[:, :, None]).reshape(-1, 2)
+    points = np.concatenate([corners, along])
+    az = np.concatenate([points[:, 0], np.repeat(geometry.column_az_deg, 50),
+                         rng.uniform(-30, 30, 50 * geometry.row_el_deg.size)])
+    el = np.concatenate([points[:, 1], rng.uniform(-12, 12, 50 * geometry.column_az_deg.size),
+                         np.repeat(geometry.row_el_deg, 50)])
+    tiny = np.array([0.0, 1e-12, -1e-12, 1e-9, -1e-9, 2e-9, -2e-9, 1e-7, -1e-7])
+    az = (az[:, None] + tiny[None, :]).ravel()
+    el = (el[:, None] + tiny[::-1][None, :]).ravel()
+    return az, el
+
+
+@pytest.mark.parametrize("rig", [rs.Rig.preset("wide-3x5"), _bent_grid()],
+                         ids=["wide-3x5", "bent 3x4"])
+def test_the_raster_locates_as_the_candidate_and_its_test(rig):
+    """`_locate` on a grid reads certain cells of `quads.locate_raster` and tests the rest: its
+    quads are those of `candidate_quads` and `inside_quads` (numpy) everywhere, on edges,
+    corners and grid means to within rounding, outside the raster and for NaN and infinities.
+    """
+    from rts_scenario.quads import EDGE_TOL_DEG, QuadGeometry, candidate_quads
+
+    kernel = kernel_or_skip()
+    geometry = QuadGeometry.of(rig)
+    assert geometry.raster.size  # a grid of quads has one
+    rng = np.random.default_rng(3)
+    edges_az, edges_el = _on_every_edge_and_mean(geometry, rng)
+    spread_az = rng.uniform(rig.az_deg.min() - 3, rig.az_deg.max() + 3, 200_000)
+    spread_el = rng.uniform(rig.el_deg.min() - 3, rig.el_deg.max() + 3, 200_000)
+    odd = [np.nan, np.inf, -np.inf, 0.0, 1e300, -1e300]
+    az = np.concatenate([edges_az, spread_az, odd, [0.0] * 3])
+    el = np.concatenate([edges_el, spread_el, [0.0] * 3, [np.nan, np.inf, -np.inf], odd[3:]])
+    candidate = candidate_quads(geometry.column_az_deg, geometry.row_el_deg, az, el)
+    with np.errstate(invalid="ignore"):
+        expected = np.where(geometry.within(az, el, candidate), candidate, -1)
+    quad = np.full(az.size, 99, dtype=np.int64)
+    kernel._locate(az, el, *(np.array(a, dtype=np.float64) for a in (
+        geometry.column_az_deg, geometry.row_el_deg, geometry.lines, geometry.boxes)),
+        EDGE_TOL_DEG, geometry.raster, geometry.raster_frame, quad)
+    np.testing.assert_array_equal(quad, expected)
+    # The edge cases reach both answers: inside and outside by rounding.
+    assert (expected[: edges_az.size] >= 0).any() and (expected[: edges_az.size] < 0).any()
+    # Most directions over the grid are answered by the raster itself.
+    inner = (spread_az > rig.az_deg.min()) & (spread_az < rig.az_deg.max())
+    cells = geometry.raster
+    assert (cells >= 0).sum() > 0.8 * (cells != -1).sum()
+    assert (quad[edges_az.size:][: spread_az.size][inner] >= 0).mean() > 0.5

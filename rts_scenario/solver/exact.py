@@ -508,7 +508,7 @@ class ExactTables:
             # Copies (tiny): one type for every geometry, so the kernel compiles once.
             *(np.array(a, dtype=np.float64, order="C") for a in (
                 geometry.column_az_deg, geometry.row_el_deg, geometry.lines, geometry.boxes)),
-            EDGE_TOL_DEG,
+            EDGE_TOL_DEG, geometry.raster, geometry.raster_frame,
             self.rows.z, self.rows.y, self.rows.centre, self.rows.offsets,
             self.rows.offset_step, self.rows.pair, self.rows.p_re, self.rows.p_im,
         )
@@ -745,6 +745,7 @@ def _indirect(plan: _ExpPlan) -> NDArray[np.int64]:
 _NO_GEOMETRY = QuadGeometry(
     polygons=np.zeros((1, 4, 2)), lines=np.zeros((1, 4, 3)), boxes=np.zeros((1, 4)),
     degenerate=np.zeros(1, dtype=bool), column_az_deg=np.zeros(2), row_el_deg=np.zeros(2),
+    raster=np.zeros(0, dtype=np.int16), raster_frame=np.zeros(6),
 )
 # The kernel's constants, in the order it reads them.
 _TOLERANCES = np.array([_NEGATIVE_TOL, _RANK_TOL, _GAIN_TOL, _RESIDUAL_TOL, _PHASE_TOL,
