@@ -212,6 +212,32 @@ _SAID = {"range_m": ("range", "m"), "radial_velocity_mps": ("radial velocity", "
          "az_deg": ("az", "deg"), "el_deg": ("el", "deg"), "rcs_db": ("rcs", "dB")}
 
 
+# A mapped quantity (`canbus.mapping.QUANTITIES`) per checked tolerance key.
+_MAPPED = {"range_m": "range_m", "radial_velocity_mps": "radial_velocity_mps",
+           "az_deg": "azimuth_deg", "el_deg": "elevation_deg", "rcs_db": "rcs_dbsm"}
+
+
+def tolerances_below_bus_steps(exp: Expectations, steps: dict[str, float],
+                               mapping_name: str) -> list[str]:
+    """Say which tolerances are finer than half the bus's step of their quantity.
+
+    ``steps``: `CanMapping.steps`. A radar exact to its bus still reports such a quantity up
+    to half a step off (more where it truncates), so it can fail the check by rounding alone.
+    One line per such quantity; none where every tolerance clears half a step.
+    """
+    out = []
+    for key, quantity in _MAPPED.items():
+        step = steps.get(quantity)
+        if step is None or key not in exp.tolerances or exp.tolerances[key] >= step / 2:
+            continue
+        said, unit = _SAID[key]
+        out.append(f"the {said} tolerance {exp.tolerances[key]:g} {unit} is finer than half "
+                   f"the bus's step of {quantity} in mapping {mapping_name!r} ({step:g} {unit}): "
+                   f"a radar exact to its bus reports it up to {step / 2:g} {unit} off and can "
+                   f"fail the check by rounding alone")
+    return out
+
+
 def _beyond_tolerance(target: TargetResult, exp: Expectations) -> str:
     """Say which quantities kept a target's matched detections from counting as detected.
 

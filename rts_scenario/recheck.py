@@ -216,6 +216,7 @@ class RecheckResult:
     scene: Scenario
     report: Report
     alignment: Alignment
+    mapping: CanMapping | None = None  # the one the log was read with
 
 
 @dataclass(frozen=True)
@@ -1844,7 +1845,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 f"frames went out up to {worst * 1e3:.1f} ms late in the run; the re-check "
                 f"judges them at their nominal times (the sidecar, from an older version, "
                 f"keeps no send times)")
-    return RecheckResult(scene=scene, report=result, alignment=alignment)
+    return RecheckResult(scene=scene, report=result, alignment=alignment,
+                         mapping=receiver_mapping)
 
 
 # How near a log's stamp must lie to the one the sidecar gives of the cycle a step of the

@@ -513,3 +513,53 @@ def test_an_8_bit_counter_that_comes_round_again_is_a_new_cycle(mux_mapping):
     assert (receiver.stats.duplicates, receiver.stats.conflicts) == (0, 0)
     assert [d.cycle for d in got] == [n % 256 for n in range(300)]
     assert all(d.complete for d in got)
+
+
+def test_the_bus_steps_of_a_mapping_are_its_signals_scales(mux_mapping):
+    steps = mux_mapping.steps()
+    named = {"az_deg": "azimuth_deg", "el_deg": "elevation_deg"}
+    assert steps == pytest.approx({named.get(q, q): abs(factor)
+                                   for q, factor, _ in MUX_RESOLUTION}, rel=1e-12)
+    builtin = CanMapping.builtin().steps()  # rts_detections.dbc: 0.005 steps, RCS and SNR 0.5
+    assert builtin == pytest.approx({"range_m": 0.005, "azimuth_deg": 0.005,
+                                     "elevation_deg": 0.005, "radial_velocity_mps": 0.005,
+                                     "rcs_dbsm": 0.5, "snr_db": 0.5}, rel=1e-12)
+
+
+@pytest.mark.parametrize("tolerances, said", [
+    ({"az_deg": 0.04}, ["az tolerance 0.04 deg", "azimuth_deg", "(0.1 deg)", "0.05 deg off"]),
+    ({"az_deg": 0.05, "range_m": 0.025, "rcs_db": 0.25}, []),  # half a step: enough
+    ({"range_m": 0.02, "rcs_db": 0.2}, ["range tolerance 0.02 m", "rcs tolerance 0.2 dB"]),
+])
+def test_a_tolerance_finer_than_half_the_bus_step_is_said(mux_mapping, tolerances, said):
+    from rts_scenario.check import tolerances_below_bus_steps
+    from rts_scenario.scenario.model import DEFAULT_TOLERANCES, Expectations
+
+    exp = Expectations(tolerances={**DEFAULT_TOLERANCES, **tolerances})
+    lines = tolerances_below_bus_steps(exp, mux_mapping.steps(), mux_mapping.name)
+    text = "\n".join(lines)
+    assert len(lines) == (len(tolerances) if said else 0)
+    for part in said:
+        assert part in text
+    assert all("'mux-test'" in line for line in lines)
+
+
+def test_run_and_check_warn_of_a_tolerance_the_mapping_cannot_carry(tmp_path, capsys):
+    from rts_scenario import cli
+
+    (tmp_path / "mux.dbc").write_text(TEST_MUX_DBC)
+    (tmp_path / "mux.mapping.yaml").write_text(TEST_MUX_MAPPING)
+    text = (Path(__file__).parents[1] / "scenarios" / "approaching_target.scenario.yaml"
+            ).read_text().replace("duration_s: 7.5", "duration_s: 1.0").replace(
+        "az_deg: 0.5, el_deg: 1.0}", "az_deg: 0.03, el_deg: 1.0}")
+    scene = tmp_path / "tight.scenario.yaml"
+    scene.write_text(text)
+    log = tmp_path / "run.blf"
+    cli.main(["run", str(scene), "--mapping", str(tmp_path / "mux.mapping.yaml"),
+              "--record", str(log)])
+    err = capsys.readouterr().err
+    assert f"warning: {scene}: the az tolerance 0.03 deg is finer than half" in err
+    cli.main(["check", str(scene), "--log", str(log)])  # the sidecar names the mapping
+    assert "warning: the az tolerance 0.03 deg is finer than half" in capsys.readouterr().err
+    cli.main(["run", str(scene)])  # rts-scenario's own messages: 0.005 deg steps
+    assert "finer than half" not in capsys.readouterr().err

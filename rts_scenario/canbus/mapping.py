@@ -366,6 +366,22 @@ class CanMapping:
             out += [(message, page) for page in pages(message)]
         return out
 
+    def steps(self) -> dict[str, float]:
+        """Return the bus step of each mapped quantity (its unit), the coarsest of its signals.
+
+        A signal's raw step times its DBC scale times the field's ``scale``: a radar's report
+        of the quantity is a multiple of it (plus offsets), however exact the radar.
+        """
+        out: dict[str, float] = {}
+        names = [*self.messages, *([self.fd_message] if self.fd_message else [])]
+        for quantity, f in self.fields.items():
+            for name in names:
+                for sig in self.db.get_message_by_name(name).signals:
+                    if sig.name == f.signal:
+                        step = abs(float(sig.scale) * f.scale)
+                        out[quantity] = max(out.get(quantity, 0.0), step)
+        return out
+
     def needed_parts(self, fd: bool = False) -> frozenset[PartKey]:
         """Return the parts a detection needs: those carrying a mapped quantity."""
         mapped = {f.signal for f in self.fields.values()}

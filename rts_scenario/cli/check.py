@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from .common import (
@@ -19,6 +20,7 @@ from .common import (
 
 def _do_check(args: argparse.Namespace) -> int:
     from ..canbus.mapping import CanMapping
+    from ..check import tolerances_below_bus_steps
     from ..errors import RtsError
     from ..recheck import check_log, check_log_file, log_variant
     from ..scenario import load_scenario
@@ -49,6 +51,10 @@ def _do_check(args: argparse.Namespace) -> int:
     print(f"log {args.log}: {result.alignment.describe()}")
     for note in result.alignment.notes:
         print(f"note: {note}")
+    if result.mapping is not None:
+        for line in tolerances_below_bus_steps(scene.expectations, result.mapping.steps(),
+                                               result.mapping.name):
+            print(f"warning: {line}", file=sys.stderr)
     print(report.table())
     if args.json:
         entry = {"file": args.scene, "log": args.log,

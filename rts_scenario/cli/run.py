@@ -78,7 +78,7 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
 
 def _run(args: argparse.Namespace, started: list[bool]) -> int:
     from ..canbus.mapping import CanMapping
-    from ..check import DETECTION_COLUMNS
+    from ..check import DETECTION_COLUMNS, tolerances_below_bus_steps
     from ..errors import BusError, RtsError, ScenarioError
     from ..pipeline import LOG_SIDECAR_SUFFIX, RunOptions, run_scene
     from ..plots import safe_stem
@@ -106,9 +106,10 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         check_output("--output", args.output, run=True)
         check_can_interface("--can-interface", args.can_interface, args.can_channel)
         check_radar_channel(args.radar_channel)
+        bus_mapping = CanMapping.builtin()
         if args.mapping:
-            mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
-            check_fd_mapping(args.can_fd, args.mapping, mapping)
+            bus_mapping = named_file("--mapping", CanMapping.from_file, args.mapping)
+            check_fd_mapping(args.can_fd, args.mapping, bus_mapping)
         check_distinct_paths(
             [("--json", args.json), ("--detections", args.detections), ("--record", args.record),
              ("--record's sidecar", f"{args.record}.rts.json" if args.record else None),
@@ -223,6 +224,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                     continue
                 # Loaded: an interrupted run's entry names the scene, not its file.
                 current = (scene.name, *current[1:])
+                for line in tolerances_below_bus_steps(scene.expectations, bus_mapping.steps(),
+                                                       bus_mapping.name):
+                    print(f"warning: {label}: {line}", file=sys.stderr)
                 unused = simulated_radar_parameters(scene.parameters)
                 if unused and args.output != "simulated-radar":
                     # A variant over the built-in radar's options plays the same on a bench:
