@@ -30,7 +30,12 @@ import yaml
 from scipy.optimize import brentq
 
 from .errors import RtsError, ScenarioError
-from .scenario.loader import FRAME_SLACK, MAX_ACCELERATION_MPS2
+from .scenario.loader import (
+    FRAME_SLACK,
+    LANE_CHANGE_PEAK,
+    MAX_ACCELERATION_MPS2,
+    lane_change_seconds,
+)
 from .scenario.trajectory import LaneChange, Trajectory, TrajectorySet, TravelLaw
 from .scenario.trajectory import Path as TrajectoryPath
 
@@ -56,10 +61,9 @@ XTOL_S = 1e-9
 # Radar mount when the ego has no bounding box: the shipped scenes' front-bumper radar.
 DEFAULT_MOUNT_X_M = 3.7
 MOUNT_HEIGHT_M = 0.5
-# The scene format's lane change is a quintic ramp: its peak slope, acceleration and jerk for a unit
-# offset over a unit time.
+# The scene format's lane change is a quintic ramp: its peak slope and jerk for a unit offset
+# over a unit time (its peak acceleration: `scenario.loader.LANE_CHANGE_PEAK`).
 QUINTIC_PEAK_SLOPE = 15.0 / 8.0
-QUINTIC_PEAK_ACCEL = 10.0 / math.sqrt(3.0)
 QUINTIC_PEAK_JERK = 60.0
 
 # Transition shapes over u in [0, 1]: value, peak slope, peak |second derivative|.
@@ -1402,7 +1406,7 @@ class _Importer:
             shift = new_offset - body.lane_offset_m
             body.lane_offset_m = new_offset
             duration = 0.0 if p["shape"] == "step" else math.sqrt(
-                QUINTIC_PEAK_ACCEL * abs(shift) / p["max_acc_mps2"])
+                LANE_CHANGE_PEAK * abs(shift) / p["max_acc_mps2"])
             self._shift(action, body, t, shift, duration, p["shape"])
             if p["continuous"] and "ref" in p:
                 self.notes.append(f"{where}: continuous lane offset of {action.actor!r} "
@@ -1417,7 +1421,7 @@ class _Importer:
             shift = gap + (p["distance_m"] if left else -p["distance_m"])
             body.lane_offset_m += shift
             limits = p["limits"]
-            duration = max(math.sqrt(QUINTIC_PEAK_ACCEL * abs(shift) / limits["acc"]),
+            duration = max(math.sqrt(LANE_CHANGE_PEAK * abs(shift) / limits["acc"]),
                            QUINTIC_PEAK_SLOPE * abs(shift) / limits["speed"],
                            (QUINTIC_PEAK_JERK * abs(shift) / limits["jerk"]) ** (1.0 / 3.0))
             self._shift(action, body, t, shift, duration, "LateralDistanceAction")
@@ -1467,10 +1471,18 @@ class _Importer:
         if abs(shift) < 1e-9:
             return
         where = f"{self.file}:{action.el.line}"
-        if duration < STEP_S:
-            body.lane_changes.append(LaneChange(max(0.0, t - STEP_S / 2), STEP_S, shift))
-            self.notes.append(f"{where}: lateral step of {action.actor!r} played as a "
-                              f"{STEP_S * 1000:g} ms quintic lane change")
+        shortest = lane_change_seconds(shift)
+        if duration < shortest:
+            # Faster than a scene's lane change may be sideways (as a speed step, which ramps
+            # at the bound): the shortest one within it, centred on the shift's middle, so the
+            # offset is the file's once both are over.
+            start = max(0.0, t + duration / 2 - shortest / 2)
+            body.lane_changes.append(LaneChange(start, shortest, shift))
+            what = "step" if duration < STEP_S else f"shift over {duration:.3f} s"
+            self.notes.append(f"{where}: lateral {what} of {action.actor!r} ({shift:+.3f} m) "
+                              f"played as the shortest quintic lane change within "
+                              f"{MAX_ACCELERATION_MPS2:g} m/s2 sideways: {shortest:.3f} s from "
+                              f"{start:.3f} s")
             return
         body.lane_changes.append(LaneChange(t, duration, shift))
         self.notes.append(f"{where}: {shape} lateral shift of {action.actor!r} ({shift:+.3f} m "

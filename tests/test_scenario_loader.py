@@ -227,10 +227,20 @@ BAD = [
           "      - {start_s: 1, duration_s: 0, offset_m: 3}"), 16,
      "targets[0].lane_changes[0].duration_s", "must be >= 0.001"),
     # 1e-300 s: the lateral acceleration's duration**2 underflowed to 0 (numpy's "invalid value
-    # encountered in divide" printed by validate and run). The floor is import's lateral step.
+    # encountered in divide" printed by validate and run). The schema's floor: 1 ms.
     (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
           "      - {start_s: 1, duration_s: 1.0e-300, offset_m: 3}"), 16,
      "targets[0].lane_changes[0].duration_s", "must be >= 0.001, got 1e-300"),
+    # Sideways as along the path: at most 15 m/s2 (a 3.5 m change in 1 s peaks at 20.2).
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
+          "      - {start_s: 1, duration_s: 1.0, offset_m: 3.5}"), 16,
+     "targets[0].lane_changes[0].duration_s",
+     "a lane change of 3.5 m in 1 s is a sideways acceleration of up to 20.2073 m/s2; "
+     "accelerations run from -15 to 15 m/s2 (as acceleration_mps2 of constant_acceleration): "
+     "give duration_s >= 1.161 s, or a smaller offset_m"),
+    (edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n    lane_changes:\n"
+          "      - {start_s: 1, duration_s: 0.001, offset_m: -3}"), 16,
+     "targets[0].lane_changes[0].duration_s", "give duration_s >= 1.075 s"),
     # A tolerance of 1e-300 overflowed the checker's gate (numpy's "overflow encountered in
     # multiply" printed by run); a micrometre, a micro-degree is below any radar's resolution.
     (GOOD + "expectations: {tolerances: {az_deg: 1.0e-300}}\n", 15,
@@ -250,11 +260,12 @@ BAD = [
 
 def test_the_shortest_lane_change_moves_the_target_by_its_offset_without_numpy_warnings(
         tmp_path):
-    # The floor of lane_changes[].duration_s (1 ms, import's lateral step): every frame is
-    # finite, and the target ends the offset away from where it would be without it.
+    # The shortest lane change of 3 m (sqrt(10 / sqrt(3) * 3 / 15) = 1.0746 s, its sideways
+    # acceleration then peaks at 15 m/s2): every frame is finite, and the target ends the
+    # offset away from where it would be without it.
     path = tmp_path / "s.scenario.yaml"
     path.write_text(edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n"
-                         "    lane_changes:\n      - {start_s: 1, duration_s: 0.001, "
+                         "    lane_changes:\n      - {start_s: 1, duration_s: 1.0746, "
                          "offset_m: 3}"))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -760,7 +771,7 @@ CORNER = """\
         - {{position_m: [30, -10, 0.5], speed_mps: 5}}
         - {{position_m: [30, 5, 0.5], speed_mps: 5}}
         - {{position_m: [50, 5, 0.5], speed_mps: 5}}
-    lane_changes: [{{start_s: {start_s}, duration_s: 1, offset_m: 3}}]
+    lane_changes: [{{start_s: {start_s}, duration_s: 1.5, offset_m: 3}}]
 """
 
 
@@ -1137,3 +1148,25 @@ def test_a_mapping_where_a_list_goes_is_quoted_short(tmp_path):
     message = str(info.value).split("targets: ", 1)[1]
     assert message.startswith("must be of type array, got {'car0': {'name': 'car0'")
     assert message.endswith(" ...}") and len(message) < 120
+
+
+def test_the_shortest_lane_change_peaks_at_the_acceleration_bound(tmp_path):
+    # The bound's constant against the motion itself: the lateral position's second difference
+    # over 1 ms steps peaks at 15 m/s2 for the shortest 3 m change, within the differences'
+    # error (~1e-5 relative).
+    from rts_scenario.scenario.loader import MAX_ACCELERATION_MPS2, lane_change_seconds
+
+    shortest = lane_change_seconds(3.0)
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n"
+                         "    lane_changes:\n      - {start_s: 1, duration_s: "
+                         f"{shortest!r}, offset_m: 3}}"))
+    from rts_scenario.scenario.trajectory import TrajectorySet
+
+    motion = TrajectorySet([load_scenario(path).targets[0].trajectory])
+    h = 1e-3
+    t = np.arange(0.5, 1.5 + shortest, h)
+    lateral = motion.evaluate(t).position_m[:, 0, 1]
+    peak = np.abs(np.diff(lateral, 2)).max() / h**2
+    assert peak == pytest.approx(MAX_ACCELERATION_MPS2, rel=1e-4)
+    assert lateral[-1] - lateral[0] == pytest.approx(3.0, abs=1e-9)

@@ -1203,3 +1203,39 @@ def test_a_step_ramps_at_the_scene_format_s_acceleration_keeping_positions_after
     assert np.abs(law.a_mps2).max() <= 15.0
     assert law.knots_s[-1] - law.knots_s[-2] == pytest.approx(1.4 / 15.0, abs=1e-7)
     assert not any("played as a ramp" in note for note in result.notes)
+
+
+@pytest.mark.parametrize("shape, value", [("step", "3"), ("linear", "-2")])
+def test_a_lateral_shift_faster_than_the_bound_plays_as_the_shortest_lane_change(
+        tmp_path, shape, value):
+    # A lane offset of 3 m as a step (or -2 m at 100 m/s2 sideways, over
+    # sqrt(10 / sqrt(3) * 2 / 100) s) at 3 s: the scene format allows 15 m/s2 sideways, so it
+    # plays as the shortest quintic within it, sqrt(10 / sqrt(3) * |offset| / 15) long,
+    # centred on the shift's middle.
+    duration = "" if shape == "step" else ' maxLateralAcc="100"'
+    event = f"""<Event name="Shift" priority="parallel">
+              <Action name="ShiftA">
+                <PrivateAction><LateralAction><LaneOffsetAction continuous="false">
+                  <LaneOffsetActionDynamics dynamicsShape="{shape}"{duration}/>
+                  <LaneOffsetTarget><AbsoluteTargetLaneOffset value="{value}"/></LaneOffsetTarget>
+                </LaneOffsetAction></LateralAction></PrivateAction>
+              </Action>
+              <StartTrigger><ConditionGroup>
+                <Condition name="ShiftC" delay="0" conditionEdge="none">
+                  <ByValueCondition>{at_time(3)}</ByValueCondition>
+                </Condition>
+              </ConditionGroup></StartTrigger>
+            </Event>
+"""
+    result, scene = imported(tmp_path, with_events(tmp_path, event))
+    offset = abs(float(value))
+    shortest = math.sqrt(10 / math.sqrt(3) * offset / 15)
+    fast = math.sqrt(10 / math.sqrt(3) * offset / 100)
+    middle = 3.0 if shape == "step" else 3.0 + fast / 2
+    (change,) = scene.targets[0].trajectory.lane_changes
+    assert abs(change.offset_m) == pytest.approx(offset)
+    assert change.duration_s == pytest.approx(shortest, abs=1e-6)  # the file's rounding
+    assert change.start_s == pytest.approx(middle - shortest / 2, abs=1e-6)
+    what = "step" if shape == "step" else f"shift over {fast:.3f} s"
+    assert any(f"lateral {what} of " in note and "played as the shortest quintic lane change "
+               "within 15 m/s2 sideways" in note for note in result.notes), result.notes

@@ -744,6 +744,8 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
     for i, lc in enumerate(spec.get("lane_changes", [])):
         _starts_in_scene(doc, (*key, "lane_changes", i, "start_s"), float(lc["start_s"]),
                          frames, "the lane change starts", "it would never happen")
+        _check_sideways(doc, (*key, "lane_changes", i), float(lc["offset_m"]),
+                        float(lc["duration_s"]))
     lane_changes = tuple(
         LaneChange(float(lc["start_s"]), float(lc["duration_s"]), float(lc["offset_m"]))
         for lc in spec.get("lane_changes", [])
@@ -782,6 +784,14 @@ MAX_SPEED_MPS = 150.0
 # the waypoints' speeds imply to it): beyond any road vehicle's braking, and a speed jump
 # written by mistake (a time or a distance a thousand times too short) shows as one.
 MAX_ACCELERATION_MPS2 = 15.0
+# Peak of the lane change's quintic ramp's second derivative, 10 / sqrt(3) at tau = (3 -
+# sqrt(3)) / 6: its sideways acceleration peaks at this times offset / duration^2.
+LANE_CHANGE_PEAK = 10.0 / math.sqrt(3.0)
+
+
+def lane_change_seconds(offset_m: float) -> float:
+    """Shortest lane change of ``offset_m`` within `MAX_ACCELERATION_MPS2` sideways (s)."""
+    return math.sqrt(LANE_CHANGE_PEAK * abs(offset_m) / MAX_ACCELERATION_MPS2)
 
 
 def _check_acceleration(doc: Document, key: KeyPath, acceleration_mps2: float,
@@ -795,6 +805,24 @@ def _check_acceleration(doc: Document, key: KeyPath, acceleration_mps2: float,
                          f"accelerations run from {-MAX_ACCELERATION_MPS2:g} to "
                          f"{MAX_ACCELERATION_MPS2:g} m/s2 (as acceleration_mps2 of "
                          f"constant_acceleration)")
+
+
+def _check_sideways(doc: Document, key: KeyPath, offset_m: float, duration_s: float) -> None:
+    """Refuse a lane change whose peak sideways acceleration is beyond `MAX_ACCELERATION_MPS2`.
+
+    The quintic's peak is `LANE_CHANGE_PEAK` times ``offset / duration^2`` (the same bound as
+    along the path: a 3.5 m change takes 1.16 s at least).
+    """
+    peak = LANE_CHANGE_PEAK * abs(offset_m) / duration_s**2 if duration_s > 0 else math.inf
+    if peak <= MAX_ACCELERATION_MPS2 * (1.0 + 1e-6):
+        return
+    shortest = lane_change_seconds(offset_m)
+    raise doc.error((*key, "duration_s"),
+                    f"a lane change of {offset_m:g} m in {duration_s:g} s is a sideways "
+                    f"acceleration of up to {peak:.6g} m/s2; accelerations run from "
+                    f"{-MAX_ACCELERATION_MPS2:g} to {MAX_ACCELERATION_MPS2:g} m/s2 (as "
+                    f"acceleration_mps2 of constant_acceleration): give duration_s >= "
+                    f"{math.ceil(shortest * 1000) / 1000:g} s, or a smaller offset_m")
 
 
 def _check_speed(doc: Document, key: KeyPath, law: TravelLaw, frames: _Frames,
