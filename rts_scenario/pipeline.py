@@ -22,6 +22,7 @@ from typing import Any, TextIO
 import can
 import numpy as np
 
+from . import mf4
 from .atomic import write_atomic
 from .canbus import (
     DetectionPublisher,
@@ -350,6 +351,7 @@ class Pipeline:
                 # An earlier recording's sidecar must not pass for this one's, should this one
                 # stop before its own is written (Ctrl-C, an error).
                 Path(str(options.bus_log) + LOG_SIDECAR_SUFFIX).unlink(missing_ok=True)
+                mf4.ready(options.bus_log)
                 self._logger = can.Logger(options.bus_log)
                 self._recording = _Recording(self.receiver, self._logger)
                 self._listeners = [self._recording]

@@ -43,6 +43,7 @@ import jsonschema
 import numpy as np
 from numpy.typing import NDArray
 
+from . import mf4
 from .canbus import DetectionReceiver, channel_label, mapping_reason, with_mapping_hint
 from .canbus.mapping import CanMapping
 from .check import Checker, checkable
@@ -1003,6 +1004,7 @@ def _messages(path: Path, unread: _Unread | None = None) -> Iterator[can.Message
                 if unread is not None:
                     unread.reader = reader
             else:
+                mf4.ready(path)
                 reader = can.LogReader(str(path))
         except ImportError as exc:
             problem = (f"--log {path}: {exc} (.mf4 logs need asammdf: pip install "

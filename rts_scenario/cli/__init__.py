@@ -165,6 +165,9 @@ def console() -> NoReturn:
     nothing of its is left to stop. A SIGTERM between the command's handler put back and
     these is noted, and acted on once they are in place.
     """
+    from ..mf4 import defer
+
+    defer()  # python-can's MF4 support loads with a MF4 log, not at start-up (0.7 s)
     main_thread = threading.current_thread() is threading.main_thread()
     noted: list[int] = []
     if main_thread:

@@ -351,6 +351,11 @@ class SimulatedRadar:
 
     # -- the radar -----------------------------------------------------------------------------
 
+    def finish_noise(self) -> None:
+        """Wait until the noise drawn ahead for the next frame (if any) is drawn."""
+        self._noise.finish()
+
+    @workers.with_one_blas_thread  # small products: BLAS threads would spin beside the noise
     def process(self, schedule: PlayedFrames) -> list[Detections]:
         """Return the detections of every frame of ``schedule``, in frame order.
 
@@ -644,6 +649,11 @@ class _NoiseAhead:
         self._size = size
         self._next = _drawing_pool().submit(self._rng.standard_normal, size)
         return out
+
+    def finish(self) -> None:
+        """Wait for the draw ahead, if one runs (it is kept for the next `take`)."""
+        if self._next is not None:
+            self._next.result()
 
 
 def _drawing_pool() -> ThreadPoolExecutor:
