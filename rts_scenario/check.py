@@ -1042,8 +1042,13 @@ class Checker:
                 f"(list adjacent_frame in expected_limits where the bench's race between a "
                 f"frame change and the radar's measurement is known)")
 
-    def report(self, bus: dict[str, int] | None = None) -> Report:
-        """Return the verdict so far (call `settle` first); ``bus``: the transport's counters."""
+    def report(self, bus: dict[str, int] | None = None,
+               unsendable_reason: str | None = None) -> Report:
+        """Return the verdict so far (call `settle` first); ``bus``: the transport's counters.
+
+        ``unsendable_reason``: why the simulated radar left detections out
+        (`DetectionPublisher.unsendable_reason`), said with ``bus["unsendable_detections"]``.
+        """
         exp = self.expectations
         targets = []
         limit_reasons = []
@@ -1113,8 +1118,11 @@ class Checker:
                     "conflicts": "conflicting messages (a cycle's header or detections came "
                                  "again with other values, or beyond the count its header "
                                  "announced)",
-                    "unsendable_detections": "detections the radar could not put on the bus (a "
-                                             "value its protocol's signals cannot carry)"}
+                    "unsendable_detections": "detections the radar could not put on the bus"
+                                             + (f": {unsendable_reason}" if unsendable_reason
+                                                else " (a value its protocol's signals cannot "
+                                                     "carry, or past the detections per cycle "
+                                                     "its index or count numbers)")}
             reasons += [FailReason(f"{bus[key]} {what}", key) for key, what in lost.items()
                         if bus.get(key, 0)]
         n_truth = int(self._checkable.sum())

@@ -1080,7 +1080,8 @@ class Pipeline:
             bus["unsendable_detections"] = self._publisher.unsendable_detections
         if options.radar_channel is not None:
             bus["other_channels"] = self.receiver.other_channels
-        report = checker.report(bus)
+        report = checker.report(bus, self._publisher.unsendable_reason
+                                if self._publisher is not None else None)
         late_reason = track.late_start_reason()
         late, lag = track.late_start_s(), checker.detection_lag_s(scene.radar.coupling_lag_s)
         if late_reason and late is not None and lag is not None:

@@ -152,8 +152,10 @@ def test_out_of_range_values_are_counted_and_not_sent(fd):
     publisher = publishers[0]
     assert publisher.unsendable == {"Range": 2, "RadialVelocity": 1}
     assert publisher.unsendable_detections == 3
-    assert publisher.unsendable_reason == ("CAN: cycle 0 detection 1 not sent: Range -0.146 "
-                                           "outside [0, 327.675] m")
+    assert publisher.unsendable_reason == (
+        "2 with Range outside [0, 327.675] m (the first: -0.146, cycle 0 detection 1); "
+        "1 with RadialVelocity outside [-163.84, 163.835] m/s (the first: nan, cycle 0 "
+        "detection 3)")
     assert receiver.stats.clean
     cycles = receiver.flush()
     assert [c.cycle for c in cycles] == [0, 1] and all(c.complete for c in cycles)

@@ -123,6 +123,7 @@ BO_ 2 Obj: 8 RADAR
  SG_ Dist : 15|16@0+ (0.01,0) [0|655.35] "m" CHECKER
  SG_ Angle : 31|16@0- (-0.01,0) [-327.67|327.68] "deg" CHECKER
  SG_ Speed : 47|16@0- (0.01,0) [-327.68|327.67] "m/s" CHECKER
+ SG_ Elev : 63|8@0- (0.5,0) [-64|63.5] "deg" CHECKER
 BO_ 3 ObjFD: 16 RADAR
  SG_ Id : 7|8@0+ (1,0) [0|255] "" CHECKER
  SG_ Dist : 15|16@0+ (0.01,0) [0|655.35] "m" CHECKER
@@ -405,6 +406,14 @@ def test_a_radar_without_height_reports_the_range_of_an_elevated_target():
     np.testing.assert_allclose(d.range_m, sent.range_m, atol=0.1 * np.sqrt(2))
 
 
+# Makes message 769 (Obj) a CAN FD message in the DBC, 8 bytes long as it is.
+FD_FRAME_FORMAT_769 = (
+    'BA_DEF_ BO_ "VFrameFormat" ENUM "StandardCAN","ExtendedCAN","reserved","reserved",'
+    '"reserved","reserved","reserved","reserved","reserved","reserved","reserved","reserved",'
+    '"reserved","reserved","StandardCAN_FD","ExtendedCAN_FD";\n'
+    'BA_DEF_DEF_ "VFrameFormat" "StandardCAN";\n'
+    'BA_ "VFrameFormat" BO_ 769 14;\n')
+
 BAD_MAPPINGS = [
     ("checksum-not-a-byte", ("checksum: Checksum}", "checksum: Count}"), "header.checksum",
      r"signal 'Count' of message 'Head' must fill one whole byte .* got 6 bits"),
@@ -471,6 +480,52 @@ BAD_MAPPINGS = [
     ("dbc-factor-zero-unmapped", ("ProbOfExist m2 : 11|3@0+ (1,0)",
                                   "ProbOfExist m2 : 11|3@0+ (0,0)"), "dbc",
      r"signal 'ProbOfExist' of message 'Obj' in DBC mux.dbc has factor 0"),
+    # detection.messages are classic CAN: a longer message (or one the DBC makes CAN FD) would
+    # go out as CAN FD without --can-fd; so would a header, which every cycle opens.
+    ("classic-message-over-8-bytes", ("messages: [Obj]", "messages: [Obj, ObjFD]"),
+     "detection.messages[1]",
+     r"message 'ObjFD' is 12 bytes long: detection.messages are classic CAN messages, of 8 "
+     r"bytes at most; a CAN FD message goes under fd_message \(sent with --can-fd\)$"),
+    ("classic-message-fd-in-the-dbc", ("BO_ 1280 Brake_Status", FD_FRAME_FORMAT_769
+                                       + "BO_ 1280 Brake_Status"),
+     "detection.messages[0]",
+     r"message 'Obj' is a CAN FD message in the DBC \(its frame format\), 8 bytes: "
+     r"detection.messages are classic CAN messages"),
+    ("header-over-8-bytes", ("BO_ 768 Head: 8 RADAR", "BO_ 768 Head: 12 RADAR"),
+     "header.message",
+     r"message 'Head' is 12 bytes long: the header opens every cycle, on classic CAN too "
+     r"\(detection.messages are classic\), so it is a classic message of 8 bytes at most$"),
+    ("multiplexed-header", ("BO_ 768 Head: 8 RADAR\n", "BO_ 768 Head: 8 RADAR\n"
+                            ' SG_ HPage M : 39|1@0+ (1,0) [0|1] "" CHECKER\n'
+                            ' SG_ HExtra m1 : 38|7@0+ (1,0) [0|127] "" CHECKER\n'),
+     "header.message",
+     r"message 'Head' is multiplexed \(multiplexer 'HPage', pages 1\): a multiplexed header "
+     r"is not supported; the header must be one plain message$"),
+    # Without --can-fd a detection is its classic messages, with it the CAN FD one alone:
+    # each must carry every mapped quantity.
+    ("quantity-only-in-fd", (' SG_ Azimuth m0 : 18|11@0- (-0.1,0) [-102.3|102.4] "deg" '
+                             'CHECKER\n', ""),
+     "detection.azimuth_deg",
+     r"signal 'Azimuth' is only in fd_message 'ObjFD', in none of the classic messages Obj: "
+     r"without --can-fd a detection goes in those, so each mapped quantity must be in one of "
+     r"them$"),
+    ("quantity-not-in-fd", (' SG_ Elevation : 43|10@0- (0.1,0) [-51.2|51.1] "deg" CHECKER\n',
+                            ""),
+     "detection.elevation_deg",
+     r"signal 'Elevation' is in Obj but not in fd_message 'ObjFD': with --can-fd a detection "
+     r"is that one message, so it must carry every mapped quantity$"),
+    ("message-listed-twice", ("messages: [Obj]", "messages: [Obj, Obj]"),
+     "detection.messages[1]",
+     r"message 'Obj' is listed twice \(entries 0 and 1\); each message carries its part of a "
+     r"detection once: list it once$"),
+    # The header's time is in seconds, as the quantities are in their units.
+    ("timestamp-in-ms", ('(0.001,0) [0|65.535] "s"', '(1,0) [0|65535] "ms"'),
+     "header.timestamp",
+     r"signal 'MeasTime' of message 'Head' is in ms \(its DBC unit\), the timestamp in s: "
+     r"give \{signal: MeasTime, scale: 0.001\} to convert it$"),
+    ("timestamp-in-a-length-unit", ('[0|65.535] "s"', '[0|65.535] "m"'), "header.timestamp",
+     r"signal 'MeasTime' of message 'Head' is in m \(its DBC unit\), not a time: the "
+     r"timestamp is in s; map a signal in s \(or give a scale that converts it\)$"),
 ]
 
 
@@ -563,3 +618,102 @@ def test_run_and_check_warn_of_a_tolerance_the_mapping_cannot_carry(tmp_path, ca
     assert "warning: the az tolerance 0.03 deg is finer than half" in capsys.readouterr().err
     cli.main(["run", str(scene)])  # rts-scenario's own messages: 0.005 deg steps
     assert "finer than half" not in capsys.readouterr().err
+
+
+def test_a_timestamp_in_ms_is_read_and_written_through_the_mapping_s_scale(tmp_path):
+    # MeasTime in ms with the DBC's factor 1: the mapping's scale 0.001 makes it seconds.
+    (tmp_path / "mux.dbc").write_text(TEST_MUX_DBC.replace('(0.001,0) [0|65.535] "s"',
+                                                           '(1,0) [0|65535] "ms"'))
+    (tmp_path / "mux.mapping.yaml").write_text(TEST_MUX_MAPPING.replace(
+        "timestamp: MeasTime", "timestamp: {signal: MeasTime, scale: 0.001}"))
+    mapping = CanMapping.from_file(tmp_path / "mux.mapping.yaml")
+    bus = Capture()
+    DetectionPublisher(bus, mapping=mapping).publish(cycle(1))  # t_s 12.345
+    assert motorola(bus.messages[0].data, 23, 16) == 12345  # ms on the bus
+    hand_packed = bytearray(bus.messages[0].data)
+    receiver = DetectionReceiver(mapping)
+    for msg in bus.messages:
+        receiver.on_message_received(msg)
+    d, = receiver.flush()
+    assert d.t_s == pytest.approx(12.345, abs=1e-9)
+    assert bytes(hand_packed[2:4]) == (12345).to_bytes(2, "big")
+
+
+def _objects(tmp_path, *changes):
+    """The object list of test_third_party_bus with its DBC changed (old, new, count)."""
+    from test_third_party_bus import OBJECTS_DBC, OBJECTS_MAPPING
+
+    dbc = OBJECTS_DBC
+    for old, new, count in changes:
+        assert dbc.count(old) == count, old
+        dbc = dbc.replace(old, new)
+    (tmp_path / "objects.dbc").write_text(dbc)
+    (tmp_path / "objects.mapping.yaml").write_text(OBJECTS_MAPPING)
+    return CanMapping.from_file(tmp_path / "objects.mapping.yaml")
+
+
+def _published(mapping, n):
+    """Publish one cycle of ``n`` detections; return the publisher, messages, and cycle read."""
+    bus = Capture()
+    sent = cycle(n, counter=9)
+    sent.az_deg[:] = np.linspace(-20, 20, n)  # inside the lateral distance's range
+    publisher = DetectionPublisher(bus, mapping=mapping)
+    publisher.publish(sent)
+    receiver = DetectionReceiver(mapping)
+    for msg in bus.messages:
+        receiver.on_message_received(msg)
+    got, = receiver.flush()
+    return publisher, bus.messages, got
+
+
+def test_an_index_numbered_from_1_starts_at_1_and_detections_past_its_last_are_left_out(
+        tmp_path):
+    # Obj_ID in 6 bits, raw 0..63 read as 1..64 (offset 1), in both messages.
+    mapping = _objects(tmp_path, ("Obj_ID : 7|8@0+ (1,0) [0|255]",
+                                  "Obj_ID : 7|6@0+ (1,1) [1|64]", 2))
+    publisher, messages, got = _published(mapping, 70)
+    assert messages[0].data[0] == 64  # Obj_NofObjects: the ones sent
+    general = [m.data for m in messages if m.arbitration_id == 1547]
+    quality = [m.data for m in messages if m.arbitration_id == 1548]
+    # Raw index (the top 6 bits of byte 0) 0..63: physical 1..64.
+    assert [d[0] >> 2 for d in general] == list(range(64))
+    assert [d[0] >> 2 for d in quality] == list(range(64))
+    assert publisher.unsendable == {"Obj_ID": 6}
+    assert publisher.unsendable_reason == (
+        "6 past the 64 per cycle that index Obj_ID numbers (1 to 64, in every message) "
+        "(the first: cycle 9 detection 64)")
+    assert got.complete and got.count == 64
+
+
+def test_an_index_narrower_in_one_message_numbers_what_every_message_carries(tmp_path):
+    # Obj_ID in 3 bits (0..7) in the general message, 8 bits in the quality message.
+    mapping = _objects(tmp_path, ("BO_ 1547 Obj_1_General: 8 RADAR\n SG_ Obj_ID : 7|8@0+ (1,0) "
+                                  "[0|255]", "BO_ 1547 Obj_1_General: 8 RADAR\n SG_ Obj_ID : "
+                                  "7|3@0+ (1,0) [0|7]", 1))
+    publisher, messages, got = _published(mapping, 10)
+    assert messages[0].data[0] == 8
+    assert [m.data[0] >> 5 for m in messages if m.arbitration_id == 1547] == list(range(8))
+    assert [m.data[0] for m in messages if m.arbitration_id == 1548] == list(range(8))
+    assert publisher.unsendable == {"Obj_ID": 2}
+    assert "2 past the 8 per cycle that index Obj_ID numbers (0 to 7, in every message)" \
+        in publisher.unsendable_reason
+    assert got.complete and got.count == 8
+
+
+def test_a_run_past_its_index_s_last_value_fails_saying_so(tmp_path):
+    # An index of one value (1) numbers 1 detection per cycle: the cut-out's other target is left
+    # out where both are seen, and the run fails naming the index's range, not a value its
+    # signals cannot carry.
+    import re
+
+    _objects(tmp_path, ("Obj_ID : 7|8@0+ (1,0) [0|255]", "Obj_ID : 7|1@0+ (1,0) [1|1]", 2))
+    scene = load_scenario(ROOT / "scenarios" / "cut_out.scenario.yaml",
+                          {"radar.noise": False, "radar.fidelity": "analytic"})
+    report = run_scene(scene, RunOptions(mapping=str(tmp_path / "objects.mapping.yaml"))).report
+    n = report.bus["unsendable_detections"]
+    assert n > 0 and not report.passed
+    said = [r for r in report.reasons if "could not put on the bus" in r]
+    assert len(said) == 1, report.reasons
+    assert re.fullmatch(rf"{n} detections the radar could not put on the bus: {n} past the 1 "
+                        rf"per cycle that index Obj_ID numbers \(1 to 1, in every message\) "
+                        rf"\(the first: cycle \d+ detection 1\)", said[0]), said[0]

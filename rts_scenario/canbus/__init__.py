@@ -13,6 +13,7 @@ grow with the length of a run.
 from __future__ import annotations
 
 import itertools
+import math
 import operator
 import socket
 import sys
@@ -138,12 +139,13 @@ class DetectionPublisher:
     sent : int
         Messages sent.
     unsendable : collections.Counter of str
-        Detections left out, by the signal that could not carry them (e.g. ``{"Range": 2}``);
-        a detection with several such values counts once, for the first of them.
+        Detections left out, by the signal that could not carry them (e.g. ``{"Range": 2}``;
+        the index signal, or the count's, for those past the last one it numbers); a detection
+        with several such values counts once, for the first of them.
     unsendable_detections : int
         Detections left out in total (``sum(unsendable.values())``).
     unsendable_reason : str or None
-        One line on the first detection left out: cycle, detection, signal, value, range.
+        Why, per signal (`unsendable`): how many, the cause, and the first one left out.
     """
 
     def __init__(self, bus: can.BusABC, *, fd: bool = False,
@@ -154,19 +156,31 @@ class DetectionPublisher:
         self._layout = _MappedLayout(self.mapping, fd)
         self.sent = 0
         self.unsendable: Counter[str] = Counter()
-        self.unsendable_reason: str | None = None
+        # Per signal of `unsendable`: why, and the first detection it left out.
+        self._causes: dict[str, tuple[str, str]] = {}
 
     @property
     def unsendable_detections(self) -> int:
         """Detections left out because no signal could carry them."""
         return sum(self.unsendable.values())
 
-    def _leave_out(self, cycle: int, index: int, signal: str, value: float,
-                   allowed: str) -> None:
+    @property
+    def unsendable_reason(self) -> str | None:
+        """Say why detections were left out (None: none was), per cause in the order met.
+
+        E.g. ``2 with Range outside [0, 327.675] m (the first: -0.146, cycle 0 detection 1)``
+        or ``44 past the 8 per cycle that index Id numbers (0 to 7; the first: cycle 3
+        detection 8)``.
+        """
+        if not self.unsendable:
+            return None
+        return "; ".join(f"{self.unsendable[signal]} {why} ({first})"
+                         for signal, (why, first) in self._causes.items())
+
+    def _leave_out(self, cycle: int, index: int, signal: str, why: str, first: str) -> None:
+        """Count a detection left out for ``signal``; keep ``why`` and the first such one."""
         self.unsendable[signal] += 1
-        if self.unsendable_reason is None:
-            self.unsendable_reason = (f"CAN: cycle {cycle} detection {index} not sent: {signal} "
-                                      f"{value:g} outside {allowed}")
+        self._causes.setdefault(signal, (why, f"{first}cycle {cycle} detection {index}"))
 
     def _send(self, codec: _Codec, raw: dict[str, int | float], timestamp: float) -> None:
         """Encode and send one message whose raw values were checked against their signals.
@@ -223,7 +237,8 @@ class DetectionPublisher:
                 c = int(cycle_of[j])
                 allowed = f"[{layout.low[s]:g}, {layout.high[s]:g}] {sig.unit or ''}".rstrip()
                 self._leave_out(frames[c].cycle, int(j - first[c]), sig.name,
-                                float(values[s, j]), allowed)
+                                f"with {sig.name} outside {allowed}",
+                                f"the first: {float(values[s, j]):g}, ")
         # Each cycle sends its fitting detections up to the capacity its index and count have.
         fitting = np.cumsum(fits)
         rank = fitting - 1 - np.concatenate(([0], fitting))[first][cycle_of]
@@ -231,8 +246,7 @@ class DetectionPublisher:
         for j in np.flatnonzero(over):
             c = int(cycle_of[j])
             self._leave_out(frames[c].cycle, int(j - first[c]), layout.capacity_signal,
-                            float(layout.capacity),
-                            f"the {layout.capacity} detections per cycle it numbers")
+                            layout.capacity_reason, "the first: ")
         send = fits & ~over
         sent = np.bincount(cycle_of[send], minlength=len(frames))
         index = rank[send]
@@ -253,7 +267,8 @@ class DetectionPublisher:
             for name in codec.carried:
                 if name != m.index:
                     columns[name] = codec.raw_column(name, values[layout.row[name], send])
-            columns[m.index] = codec.raw_column(m.index, index.astype(np.float64))
+            columns[m.index] = codec.raw_column(m.index, (index + layout.index_first)
+                                                .astype(np.float64))
             try:  # the packer refuses a value its bits cannot carry: never wrapped, never cut
                 payloads = codec.encode_rows(columns, len(index))
             except (OverflowError, TypeError, KeyError, ValueError) as exc:
@@ -404,10 +419,24 @@ class _MappedLayout:
         self.counter_modulus = m.counter_modulus
         self.frame_counter_modulus = (1 << self.signals[m.frame_counter].length
                                       if m.frame_counter in self.signals else 1)
-        index_top = int(_range_of(self.signals[m.index])[1]) + 1
+        # The index values every part's index signal carries (the parts may give it other
+        # widths or ranges), from the highest first value to the lowest last one: detections
+        # are numbered from that first value, one more each.
+        index_ranges = [_range_of(page_signals(message, page)[m.index])
+                        for message, page in self.parts]
+        self.index_first = math.ceil(max(low for low, _ in index_ranges) - 1e-9)
+        index_last = math.floor(min(high for _, high in index_ranges) + 1e-9)
+        index_top = max(index_last - self.index_first + 1, 0)
         count_top = sum(int(_range_of(self.header.get_signal_by_name(c))[1]) for c in m.count)
-        self.capacity, self.capacity_signal = min((index_top, m.index),
-                                                  (count_top, "+".join(m.count)))
+        if index_top <= count_top:
+            self.capacity, self.capacity_signal = index_top, m.index
+            self.capacity_reason = (f"past the {index_top} per cycle that index {m.index} "
+                                    f"numbers ({self.index_first} to {index_last}, in every "
+                                    f"message)")
+        else:
+            self.capacity, self.capacity_signal = count_top, "+".join(m.count)
+            self.capacity_reason = (f"past the {count_top} per cycle that the header's count "
+                                    f"{' + '.join(m.count)} announces")
         mapped = {f.signal for f in m.fields.values()}
         self.header_codec = _Codec(self.header, None, m.header_checksum_spec)
         self.count_tops = [int(_range_of(self.header.get_signal_by_name(c))[1]) for c in m.count]
@@ -472,8 +501,8 @@ class _MappedLayout:
             count -= part
         if m.timestamp is not None:
             low, high = self.timestamp_range  # (NaN stays NaN, as the packer refuses it)
-            values[m.timestamp] = header.raw(m.timestamp,
-                                             min(max(float(frame.t_s or 0.0), low), high))
+            stamp = float(frame.t_s or 0.0) / m.timestamp_scale  # the signal's unit
+            values[m.timestamp] = header.raw(m.timestamp, min(max(stamp, low), high))
         return values
 
 
@@ -1004,7 +1033,8 @@ class DetectionReceiver(can.Listener):
         frame = _Assembly(
             counter=counter, low=value % self._low_modulus,
             expected=int(sum(values[c] for c in m.count)),
-            timestamp_s=values.get(m.timestamp) if m.timestamp else None, bus_t_s=bus_t_s,
+            timestamp_s=(values[m.timestamp] * m.timestamp_scale
+                         if m.timestamp and m.timestamp in values else None), bus_t_s=bus_t_s,
             host_t_s=host_t_s, host_step_s=host_step_s, header=dict(raw))
         self._open[counter] = frame
         self._current = frame

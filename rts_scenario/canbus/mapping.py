@@ -37,6 +37,8 @@ QUANTITIES = ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps", 
 
 # Classic messages per detection (a radar's general, quality and extended-information messages).
 MAX_MESSAGES = 8
+# The most bytes a classic CAN message carries (a CAN FD message, up to 64).
+CLASSIC_BYTES = 8
 # Why a cycle counter takes `SMALLEST_COUNTER_MODULUS` values at least.
 _TOO_FEW_VALUES = ("with fewer, the header after one lost cycle cannot be told from a copy of a "
                    "cycle before")
@@ -47,6 +49,17 @@ _SIGNAL: dict[str, Any] = {
         {"type": "object", "additionalProperties": False, "required": ["signal"],
          "properties": {"signal": {"type": "string"}, "scale": {"type": "number"},
                         "offset": {"type": "number"}}},
+    ]
+}
+
+# The header's measurement time: a signal in seconds, or {signal, scale} (seconds per unit of
+# the signal's DBC value, e.g. 0.001 for ms). No offset: the radar's time starts where it will.
+_TIMESTAMP: dict[str, Any] = {
+    "oneOf": [
+        {"type": "string"},
+        {"type": "object", "additionalProperties": False, "required": ["signal"],
+         "properties": {"signal": {"type": "string"},
+                        "scale": {"type": "number", "exclusiveMinimum": 0}}},
     ]
 }
 
@@ -97,7 +110,7 @@ MAPPING_SCHEMA: dict[str, Any] = {
                 "counter_min": {"oneOf": [{"type": "integer", "minimum": 0},
                                           {"const": "dbc"}]},
                 "count": {"type": "array", "minItems": 1, "items": {"type": "string"}},
-                "timestamp": {"type": "string"}, "checksum": _CHECKSUM,
+                "timestamp": _TIMESTAMP, "checksum": _CHECKSUM,
             },
         },
         "detection": {
@@ -129,6 +142,8 @@ _UNITS: dict[str, tuple[str, float | None]] = {
     "m/s": ("velocity", 1.0), "mps": ("velocity", 1.0), "km/h": ("velocity", 1.0 / 3.6),
     "kph": ("velocity", 1.0 / 3.6), "kmh": ("velocity", 1.0 / 3.6), "mph": ("velocity", 0.44704),
     "cm/s": ("velocity", 0.01),
+    "s": ("time", 1.0), "sec": ("time", 1.0), "ms": ("time", 0.001), "us": ("time", 1e-6),
+    "µs": ("time", 1e-6), "μs": ("time", 1e-6), "ns": ("time", 1e-9),
     "db": ("level", 1.0), "dbsm": ("level", 1.0), "dbm2": ("level", 1.0),
     "dbm²": ("level", 1.0), "dbm^2": ("level", 1.0),
     "m2": ("area", None), "m²": ("area", None), "m^2": ("area", None),
@@ -141,7 +156,7 @@ _QUANTITY_UNITS = {
     "vy_mps": ("velocity", "m/s"), "rcs_dbsm": ("level", "dB"), "snr_db": ("level", "dB"),
 }
 _DIMENSION_NAMES = {"length": "a length", "angle": "an angle", "velocity": "a velocity",
-                    "level": "a level in dB", "area": "an area"}
+                    "level": "a level in dB", "area": "an area", "time": "a time"}
 
 Message = cantools.database.can.Message
 # A part of a detection: a message's frame id and its multiplexer page (None: not multiplexed).
@@ -309,6 +324,7 @@ class CanMapping:
     checksum_spec: Checksum | None = None
     counter_max: int | None = None  # the counter's last value before 0 (None: its width's)
     counter_min: int = 0  # the counter's first value, the one after its last
+    timestamp_scale: float = 1.0  # seconds per unit of the timestamp signal's DBC value
     # sha256 of the mapping's text and its DBC's (`digest_of`): what a recording's sidecar
     # keeps, so that a re-check tells a mapping or DBC edited since.
     sha256: str = ""
@@ -442,9 +458,13 @@ class CanMapping:
         fields = {q: Field(v) if isinstance(v, str) else Field(v["signal"], v.get("scale", 1.0),
                                                                v.get("offset", 0.0))
                   for q, v in det.items() if q in QUANTITIES}
+        stamp = head.get("timestamp")
+        stamp_scale = 1.0
+        if isinstance(stamp, dict):
+            stamp, stamp_scale = stamp["signal"], float(stamp.get("scale", 1.0))
         mapping = cls(
             name=d["name"], db=db, header=head["message"], counter=head["counter"],
-            count=tuple(head["count"]), timestamp=head.get("timestamp"),
+            count=tuple(head["count"]), timestamp=stamp, timestamp_scale=stamp_scale,
             messages=tuple(det["messages"]),
             fd_message=det.get("fd_message"), frame_counter=det.get("frame_counter"),
             index=det["index"], form=det["form"], fields=fields,
@@ -542,14 +562,28 @@ class CanMapping:
             return names[message]
 
         # Each signal is reported at the key that names it, with the signals it may name.
-        header = {s.name for s in message_of(("header", "message"), self.header).signals}
+        head = message_of(("header", "message"), self.header)
+        self._check_header_message(doc, head)
+        header = {s.name for s in head.signals}
         for key, name in self._named():
             if key[0] == "header" and name not in header:
                 raise doc.error(key, f"signal {name!r} is not in message {self.header!r}; "
                                      f"signals: {', '.join(sorted(header))}")
         carriers = [*self.messages, *([self.fd_message] if self.fd_message else [])]
-        for m in self.messages:
-            message_of(("detection", "messages"), m)
+        listed: dict[str, int] = {}
+        for i, m in enumerate(self.messages):
+            message = message_of(("detection", "messages"), m)
+            if m in listed:  # its every page would go out twice
+                raise doc.error(("detection", "messages", i),
+                                f"message {m!r} is listed twice (entries {listed[m]} and {i}); "
+                                f"each message carries its part of a detection once: list it "
+                                f"once")
+            listed[m] = i
+            if not _is_classic(message):
+                raise doc.error(("detection", "messages", i),
+                                f"message {m!r} is {_frame_kind(message)}: detection.messages "
+                                f"are classic CAN messages, of {CLASSIC_BYTES} bytes at most; "
+                                f"a CAN FD message goes under fd_message (sent with --can-fd)")
         if self.fd_message:
             message_of(("detection", "fd_message"), self.fd_message)
         carried = set().union(*({s.name for s in names[m].signals} for m in carriers))
@@ -558,6 +592,7 @@ class CanMapping:
                 raise doc.error(key, f"signal {name!r} is not in the detection message(s) "
                                      f"{', '.join(carriers)}; signals: "
                                      f"{', '.join(sorted(carried))}")
+        self._check_quantities_in_both(doc)
         for m in carriers:  # the index joins a detection's messages: every one carries it
             have = {s.name for s in names[m].signals}
             if self.index not in have:
@@ -604,6 +639,53 @@ class CanMapping:
                                             f"has factor 0: every raw value reads "
                                             f"{sig.offset:g}, so it carries nothing and cannot "
                                             f"be written; give it a factor other than 0")
+
+    def _check_header_message(self, doc: Document, header: Message) -> None:
+        """Refuse a header that is not one plain classic message.
+
+        The header opens every cycle in either mode, and a mapping's detections always have
+        their classic messages (``messages`` is required): so the header is classic. A
+        multiplexed header would need a page per cycle, and its pages joined: not supported.
+        """
+        if not _is_classic(header):
+            raise doc.error(("header", "message"),
+                            f"message {header.name!r} is {_frame_kind(header)}: the header opens "
+                            f"every cycle, on classic CAN too (detection.messages are "
+                            f"classic), so it is a classic message of {CLASSIC_BYTES} bytes at "
+                            f"most")
+        mux = multiplexer(header)
+        if mux is not None:
+            raise doc.error(("header", "message"),
+                            f"message {header.name!r} is multiplexed (multiplexer {mux!r}, "
+                            f"pages {', '.join(str(p) for p in pages(header))}): a "
+                            f"multiplexed header is not supported; the header must be one "
+                            f"plain message")
+
+    def _check_quantities_in_both(self, doc: Document) -> None:
+        """Refuse a quantity that the classic messages, or the CAN FD message, do not carry.
+
+        Without ``--can-fd`` a detection goes in the classic messages, with it in the
+        ``fd_message`` alone (if the mapping has one): each must carry every mapped quantity.
+        """
+        def carrying(names: list[str], signal: str) -> bool:
+            return any(signal in {s.name for s in self.db.get_message_by_name(n).signals}
+                       for n in names)
+
+        carriers = [*self.messages, *([self.fd_message] if self.fd_message else [])]
+        for q, f in self.fields.items():
+            holders = [n for n in carriers if carrying([n], f.signal)]
+            if not carrying(list(self.messages), f.signal):
+                raise doc.error(("detection", q),
+                                f"signal {f.signal!r} is only in fd_message "
+                                f"{self.fd_message!r}, in none of the classic messages "
+                                f"{', '.join(self.messages)}: without --can-fd a detection "
+                                f"goes in those, so each mapped quantity must be in one of "
+                                f"them")
+            if self.fd_message and not carrying([self.fd_message], f.signal):
+                raise doc.error(("detection", q),
+                                f"signal {f.signal!r} is in {', '.join(holders)} but not in "
+                                f"fd_message {self.fd_message!r}: with --can-fd a detection "
+                                f"is that one message, so it must carry every mapped quantity")
 
     def _check_checksum(self, doc: Document, key: tuple[str, ...], carrying: list[Message],
                         spec: Checksum) -> None:
@@ -670,20 +752,16 @@ class CanMapping:
                 sig = next((sg for sg in message.signals if sg.name == f.signal), None)
                 if sig is None or not sig.unit:
                     continue
-                known = _UNITS.get(sig.unit.strip().lower().replace(" ", ""))
-                if known is None or known == (dimension, 1.0):
-                    continue
-                where = (f"signal {f.signal!r} of message {name!r} is in {sig.unit.strip()} "
-                         f"(its DBC unit)")
-                if known[0] == dimension and known[1] is not None:
-                    raise doc.error(("detection", q),
-                                    f"{where}, {q} in {unit}: give {{signal: {f.signal}, "
-                                    f"scale: {known[1]:.6g}}} to convert it")
-                how = ("map a signal in dB" if dimension == "level"
-                       else f"map a signal in {unit} (or give a scale that converts it)")
-                raise doc.error(("detection", q),
-                                f"{where}, not {_DIMENSION_NAMES[dimension]}: {q} is in "
-                                f"{unit}; {how}")
+                problem = _unit_problem(sig, name, dimension, unit, q)
+                if problem is not None:
+                    raise doc.error(("detection", q), problem)
+        # The header's time, in seconds, alike (its own scale converts any unit).
+        if self.timestamp is not None and self.timestamp_scale == 1.0:
+            sig = self.db.get_message_by_name(self.header).get_signal_by_name(self.timestamp)
+            if sig.unit:
+                problem = _unit_problem(sig, self.header, "time", "s", "the timestamp")
+                if problem is not None:
+                    raise doc.error(("header", "timestamp"), problem)
 
     def _named(self) -> list[tuple[tuple[str | int, ...], str]]:
         """Every (mapping key, signal) pair, header roles first, in file order."""
@@ -708,6 +786,38 @@ class CanMapping:
                 raise doc.error(key, f"signal {name!r} is already mapped as "
                                      f"{format_key_path(first)}; each signal carries one "
                                      f"quantity")
+
+
+def _unit_problem(sig: cantools.database.can.Signal, message: str, dimension: str, unit: str,
+                  what: str) -> str | None:
+    """Say why a signal's DBC unit is not ``unit`` (of ``dimension``), where it knows one.
+
+    ``what``: the quantity read from it (``range_m``, the timestamp). None: its unit is the
+    quantity's, or one rts-scenario does not know (taken as the quantity's).
+    """
+    given = (sig.unit or "").strip()
+    known = _UNITS.get(given.lower().replace(" ", ""))
+    if known is None or known == (dimension, 1.0):
+        return None
+    where = f"signal {sig.name!r} of message {message!r} is in {given} (its DBC unit)"
+    if known[0] == dimension and known[1] is not None:
+        return (f"{where}, {what} in {unit}: give {{signal: {sig.name}, "
+                f"scale: {known[1]:.6g}}} to convert it")
+    how = ("map a signal in dB" if dimension == "level"
+           else f"map a signal in {unit} (or give a scale that converts it)")
+    return f"{where}, not {_DIMENSION_NAMES[dimension]}: {what} is in {unit}; {how}"
+
+
+def _is_classic(message: Message) -> bool:
+    """Whether a message goes on classic CAN: 8 bytes at most, not CAN FD in the DBC."""
+    return not message.is_fd and message.length <= CLASSIC_BYTES
+
+
+def _frame_kind(message: Message) -> str:
+    """Say what makes a message CAN FD: its length, or the DBC's frame format."""
+    if message.length > CLASSIC_BYTES:
+        return f"{message.length} bytes long"
+    return f"a CAN FD message in the DBC (its frame format), {message.length} bytes"
 
 
 def _check_dbc(doc: Document, db: cantools.database.can.Database) -> None:
