@@ -16,7 +16,9 @@ Per frame, detections are associated with the targets the RTS played (gated at 3
 quantity's tolerance, then an optimal assignment on the normalized distance). A checkable
 target (present, synthesizable, unambiguous for the radar, played) counts as detected in a
 frame when a detection is assigned to it and every checked quantity lies within its tolerance.
-A quantity the radar does not report is not checked.
+A quantity the radar does not report is not checked; where the run knows it from its CAN
+mapping (`Checker`'s ``not_carried``), the report says so (``unchecked_quantities``), and a
+tolerance the scene wrote for it fails the run (``quantity_unchecked``) unless expected.
 
 Verdict (pass only if all hold): every target's detection rate reaches the scene's
 ``detection_rate``; false detections per frame stay within ``max_false_detections_per_frame``;
@@ -238,6 +240,31 @@ def tolerances_below_bus_steps(exp: Expectations, steps: dict[str, float],
     return out
 
 
+def unchecked_quantities(not_carried: Mapping[str, str]) -> dict[str, str]:
+    """Return the tolerance keys of the checked quantities a mapping does not carry, and why.
+
+    ``not_carried``: `CanMapping.not_carried` (the mapping's quantity names). A detection
+    without a quantity is matched and judged on the others: the quantity is not checked, and
+    the report says so (`Checker`).
+    """
+    return {key: not_carried[q] for key, q in _MAPPED.items() if q in not_carried}
+
+
+def _quantity_unchecked(exp: Expectations, unchecked: Mapping[str, str]) -> str | None:
+    """Why the scene's own tolerances of quantities not checked fail the run, or None.
+
+    A tolerance the scene wrote is one it means checked (a scene separating a car from a
+    gantry by elevation); a default's is only said (`Report.unchecked_quantities`).
+    """
+    said = [f"the scene's {_SAID[key][0]} tolerance {exp.tolerances[key]:g} {_SAID[key][1]} "
+            f"is not checked: {why}" for key, why in unchecked.items()
+            if key in exp.tolerances_written]
+    if not said:
+        return None
+    return ("; ".join(said) + " (list quantity_unchecked in expected_limits where the scene "
+            "means to run on such a mapping)")
+
+
 def _beyond_tolerance(target: TargetResult, exp: Expectations) -> str:
     """Say which quantities kept a target's matched detections from counting as detected.
 
@@ -296,6 +323,11 @@ class Checker:
     cycle_s : float, optional
         The radar's cycle: a gap in its counters longer than half their range is told by the
         cycles' bus times (`sequential_numbers`). Without it, by the counters alone.
+    not_carried : mapping of str to str, optional
+        The checked quantities the run's CAN mapping does not carry, and why
+        (`CanMapping.not_carried`): not checked, said in the report, and failing the run
+        where the scene wrote their tolerance (``quantity_unchecked``). None: not known (the
+        cycles' source is no bus), nothing said.
     """
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
@@ -305,7 +337,8 @@ class Checker:
                  scene_limits: Mapping[str, str] | None = None,
                  detections_out: TextIO | None = None, variant: str = "",
                  parameters: Mapping[str, Any] | None = None,
-                 cycle_s: float | None = None, file: str = "") -> None:
+                 cycle_s: float | None = None, file: str = "",
+                 not_carried: Mapping[str, str] | None = None) -> None:
         self.scene = scene
         self.variant = variant
         self.file = file
@@ -335,6 +368,9 @@ class Checker:
         self._scene_limits = dict(scene_limits or {})
         # Whether the scene-wide limits were judged at all (a run's are; `check_cycles` has none).
         self._scene_limits_known = scene_limits is not None
+        # Tolerance key -> why it is not checked (None: the mapping is not known).
+        self._not_checked = (None if not_carried is None
+                             else unchecked_quantities(not_carried))
         self._csv = csv.writer(detections_out) if detections_out is not None else None
         self._limits = {name: np.zeros(n, dtype=np.int64) for name in LIMITS}
         self._out_of_tolerance = np.zeros(n, dtype=np.int64)
@@ -1077,6 +1113,11 @@ class Checker:
         adjacent = self._adjacent_frame(targets, per_frame)
         if adjacent is not None:
             scene_limits["adjacent_frame"] = adjacent
+        not_checked = self._not_checked or {}
+        # An empty bench checks false detections alone: no tolerance of it is meant checked.
+        unchecked_why = _quantity_unchecked(exp, not_checked) if self.names else None
+        if unchecked_why is not None:
+            scene_limits["quantity_unchecked"] = unchecked_why
         reasons: list[str] = [FailReason(f"{lim}: {why}", lim)
                               for lim, why in scene_limits.items()
                               if lim not in exp.expected_limits]
@@ -1143,6 +1184,9 @@ class Checker:
                          if lim in exp.expected_limits and lim not in self._scene_limits]
         if "adjacent_frame" in exp.expected_limits and adjacent is None:
             declared.append("adjacent_frame")
+        if (self._not_checked is not None and "quantity_unchecked" in exp.expected_limits
+                and unchecked_why is None):
+            declared.append("quantity_unchecked")
         own = [f"{t.name}: {lim}" for k, t in enumerate(targets)
                for lim in sorted(self._expected[k] - exp.expected_limits)
                if lim not in t.limits]
@@ -1164,7 +1208,10 @@ class Checker:
             expectations={"tolerances": dict(exp.tolerances),
                           "detection_rate": exp.detection_rate,
                           "max_false_detections_per_frame":
-                              exp.max_false_detections_per_frame})
+                              exp.max_false_detections_per_frame},
+            unchecked_quantities={key: {"why": why, "tolerance": exp.tolerances[key],
+                                        "written": key in exp.tolerances_written}
+                                  for key, why in not_checked.items()})
 
 
 def _status_flags(status: ArrayLike, tracks: Tracks) -> NDArray[np.uint16]:

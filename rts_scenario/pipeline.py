@@ -968,7 +968,8 @@ class Pipeline:
                           expected_limits=[t.expected_limits for t in scene.targets],
                           scene_limits=scene_limits(scene), detections_out=detections_out,
                           variant=scene.variant, parameters=scene.parameters,
-                          cycle_s=clock.cycle_s, file=scene.file)
+                          cycle_s=clock.cycle_s, file=scene.file,
+                          not_carried=self.receiver.mapping.not_carried())
         n_frames = scene.n_frames
         t_all = scene.t_s
         # What the run played, for a re-check of its log (`rts_scenario.recording`).

@@ -2132,7 +2132,8 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
                       counter_modulus=modulus, counter_start=clock.counter_start,
                       expected_limits=[t.expected_limits for t in scene.targets],
                       scene_limits=scene_limits(scene), variant=scene.variant,
-                      parameters=scene.parameters, cycle_s=clock.cycle_s)
+                      parameters=scene.parameters, cycle_s=clock.cycle_s,
+                      not_carried=(mapping or CanMapping.builtin()).not_carried())
     # The cycles the run judged (its sidecar), else those the clock puts in the scene.
     cycles = (sidecar or {}).get("clock", {}).get("cycles")
     total = cycles if cycles is not None else len(

@@ -228,6 +228,10 @@ class Report:
     # What the run was held to: ``tolerances`` per quantity, ``detection_rate`` (per target)
     # and ``max_false_detections_per_frame``, as the scene gives them or their defaults.
     expectations: dict[str, Any] = field(default_factory=dict)
+    # The checked quantities (tolerance keys) the run's CAN mapping does not carry: ``why``,
+    # the scene's ``tolerance`` and whether the scene ``written`` it (then it fails the run as
+    # ``quantity_unchecked`` unless expected); the run was not held to those tolerances.
+    unchecked_quantities: dict[str, dict[str, Any]] = field(default_factory=dict)
     worst_frames: list[dict[str, Any]] = field(default_factory=list, repr=False)
     record: FrameRecord | None = field(default=None, repr=False, compare=False)
 
@@ -294,8 +298,12 @@ class Report:
         if held:
             # A verdict says what it was held to, a pass as much as a fail.
             tol = held["tolerances"]
+            # A quantity the mapping does not carry held nothing: said so in its place.
+            unchecked = self.unchecked_quantities
             lines.append("held to: " + ", ".join(
-                f"{name} {tol[key]:g} {unit}" for key, name, unit in _HELD_TO if key in tol)
+                f"{name} not checked ({unchecked[key]['why']})" if key in unchecked
+                else f"{name} {tol[key]:g} {unit}"
+                for key, name, unit in _HELD_TO if key in tol)
                 + (f"; detection rate >= {held['detection_rate']:.1%} per target"
                    if self.targets else "")
                 + f"; false detections <= {held['max_false_detections_per_frame']:g} per cycle")
@@ -421,12 +429,13 @@ UNCODED_REASON = "other"
 # Codes that say the bench, not the radar, failed the run: the RTS did not play the schedule
 # (another rig, another sender's stream, datagrams back undelivered, frames it did not apply,
 # frames the host sent late), or the radar's messages were not seen (a silent bus, messages the
-# mapping does not match or on other channels), or another radar's cycles came with them. A
+# mapping does not match or on other channels), or another radar's cycles came with them, or
+# the mapping the bus is read with does not carry a quantity the scene means checked. A
 # scene's ``xfail`` mark (a known failure of the radar's check) does not cover them: such a
 # run fails (`bench_failures`).
 BENCH_FAILURE_CODES = ("rts_rig", "rts_stream", "rts_unreachable", "frames_lost",
                        "frames_sent_late", "bus_silent", "mapping", "radar_channel",
-                       "foreign_cycles")
+                       "foreign_cycles", "quantity_unchecked")
 
 
 def bench_failures(codes: Iterable[str], playback: Mapping[str, Any] | None = None

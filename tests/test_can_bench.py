@@ -108,6 +108,17 @@ def _mapping(folder, name, text):
     return path
 
 
+def approach(folder):
+    """approaching_target, declaring the elevation it names unchecked: the AUTOSAR-style
+    radar's messages carry none (its tolerances write el_deg, so it would fail on it)."""
+    path = folder / "approaching_target.scenario.yaml"
+    text = (ROOT / "scenarios" / "approaching_target.scenario.yaml").read_text()
+    assert "detection_rate: 0.95\n" in text
+    path.write_text(text.replace("detection_rate: 0.95\n", "detection_rate: 0.95\n"
+                                 "  expected_limits: [quantity_unchecked]\n"))
+    return path
+
+
 @pytest.fixture
 def autosar(tmp_path):
     return _mapping(tmp_path, "autosar", AUTOSAR_MAPPING)
@@ -440,7 +451,7 @@ def test_counter_max_dbc_takes_the_signal_s_maximum(tmp_path):
 
 def test_a_run_and_its_recheck_pass_with_e2e_checksums_and_a_counter_wrapping_after_14(
         autosar, tmp_path, capsys):
-    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    scene = approach(tmp_path)
     log = tmp_path / "drive.blf"
     assert cli.main(["run", str(scene), "--mapping", str(autosar), "--record", str(log)]) == 0
     out = capsys.readouterr().out
@@ -465,7 +476,7 @@ def test_an_after_scene_cycle_whose_counter_comes_again_counts_alike_live_and_re
     from rts_scenario.recheck import check_log
     from rts_scenario.scenario import load_scenario
 
-    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    scene = load_scenario(approach(tmp_path))
     log = tmp_path / "drive.blf"
     options = RunOptions(mapping=str(autosar), bus_log=str(log))
     copied = []
@@ -521,7 +532,7 @@ def _live_and_re_checked(autosar, tmp_path, monkeypatch, *, copy_before=None, lo
             super().send(msg)
 
     monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Repeating)
-    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml")
+    scene = load_scenario(approach(tmp_path))
     log = tmp_path / "drive.blf"
     with Pipeline.for_scene(scene, RunOptions(mapping=str(autosar), bus_log=str(log))) as run:
         sink = run.output._sink
@@ -628,7 +639,7 @@ def test_the_simulated_radar_counts_1_to_14(one_based):
 
 def test_a_run_and_its_recheck_pass_with_a_counter_running_1_to_14(one_based, tmp_path,
                                                                      capsys):
-    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    scene = approach(tmp_path)
     log = tmp_path / "drive.blf"
     assert cli.main(["run", str(scene), "--mapping", str(one_based), "--record",
                      str(log)]) == 0, capsys.readouterr().out
@@ -792,7 +803,7 @@ def test_a_channel_of_a_log_is_read_alone(autosar, tmp_path):
 
 @pytest.fixture
 def recorded(autosar, tmp_path, capsys):
-    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    scene = approach(tmp_path)
     log = tmp_path / "drive.blf"
     assert cli.main(["run", str(scene), "--mapping", str(autosar), "--record", str(log)]) == 0
     capsys.readouterr()
@@ -933,7 +944,8 @@ def test_a_run_hearing_the_radar_s_identifiers_on_two_channels_fails_naming_them
 
     two_channel_interface(monkeypatch)
     out_json, log = tmp_path / "report.json", tmp_path / "bench.blf"
-    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--json", str(out_json),
+    code = cli.main(["run", str(approach(tmp_path)),
+                     "--mapping", str(autosar), "--json", str(out_json),
                      "--record", str(log)])
     out, err = capsys.readouterr()
     assert code == 1, out + err
@@ -947,7 +959,7 @@ def test_a_run_hearing_the_radar_s_identifiers_on_two_channels_fails_naming_them
     # Which channel was the radar's is not known: the sidecar names none, and the log's
     # check does not pick one either.
     assert json.loads(Path(f"{log}.rts.json").read_text())["can_channel"] is None
-    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    code = cli.main(["check", str(approach(tmp_path)), "--log", str(log)])
     _, err = capsys.readouterr()
     assert code == 2 and "which is the radar's is not guessed" in err, err
 
@@ -959,7 +971,8 @@ def test_run_radar_channel_reads_one_channel_and_the_log_s_check_reads_the_same(
     two_channel_interface(monkeypatch)
     log = tmp_path / "bench.blf"
     out_json = tmp_path / "report.json"
-    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "0",
+    code = cli.main(["run", str(approach(tmp_path)),
+                     "--mapping", str(autosar), "--radar-channel", "0",
                      "--record", str(log), "--json", str(out_json)])
     out, err = capsys.readouterr()
     assert code == 0, out + err
@@ -970,7 +983,7 @@ def test_run_radar_channel_reads_one_channel_and_the_log_s_check_reads_the_same(
     sidecar = json.loads(Path(f"{log}.rts.json").read_text())
     assert sidecar["can_channel"] == "0"
     # The log holds both channels; its check reads the one the run read.
-    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    code = cli.main(["check", str(approach(tmp_path)), "--log", str(log)])
     out, err = capsys.readouterr()
     assert code == 0, out + err
     assert "read channel 0, the one the run listened on ('0', its sidecar)" in out, out
@@ -982,7 +995,8 @@ def test_run_radar_channel_without_the_radar_on_it_fails_naming_the_channels(
 
     two_channel_interface(monkeypatch)
     out_json = tmp_path / "report.json"
-    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "2",
+    code = cli.main(["run", str(approach(tmp_path)),
+                     "--mapping", str(autosar), "--radar-channel", "2",
                      "--json", str(out_json)])
     out, err = capsys.readouterr()
     assert code == 1, out + err
@@ -1012,7 +1026,7 @@ def test_a_run_hearing_the_radar_on_one_channel_keeps_it_in_the_sidecar(
 
     monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", Named)
     log = tmp_path / "drive.blf"
-    assert cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--record",
+    assert cli.main(["run", str(approach(tmp_path)), "--mapping", str(autosar), "--record",
                      str(log)]) == 0
     capsys.readouterr()
     assert json.loads(Path(f"{log}.rts.json").read_text())["can_channel"] == "vcan1"
@@ -1073,7 +1087,7 @@ def test_a_blf_its_writer_never_closed_fails_its_check(recorded, tmp_path, capsy
 
 
 def test_an_asc_cut_short_fails_its_check(autosar, tmp_path, capsys):
-    scene = ROOT / "scenarios" / "approaching_target.scenario.yaml"
+    scene = approach(tmp_path)
     log = tmp_path / "drive.asc"
     assert cli.main(["run", str(scene), "--mapping", str(autosar), "--record", str(log)]) == 0
     capsys.readouterr()
@@ -1105,29 +1119,32 @@ def test_the_check_of_a_run_whose_radar_channel_held_none_does_not_read_another(
 
     monkeypatch.setattr("rts_scenario.pipeline.ListenerBus", ChannelZero)
     log, out_json = tmp_path / "bench.blf", tmp_path / "report.json"
-    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "1",
+    code = cli.main(["run", str(approach(tmp_path)),
+                     "--mapping", str(autosar), "--radar-channel", "1",
                      "--record", str(log), "--json", str(out_json)])
     out, err = capsys.readouterr()
     assert code == 1, out + err
     assert any(r.startswith("--radar-channel 1: none of the radar's messages")
                for r in json.loads(out_json.read_text())["reasons"])
-    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    code = cli.main(["check", str(approach(tmp_path)), "--log", str(log)])
     out, err = capsys.readouterr()
     assert code == 2, out + err
     assert ("the run read channel 1 alone (run --radar-channel, its sidecar), and the log holds "
             "none of the radar's messages (the identifiers of mapping 'autosar-radar') there: "
             "only on 0 (") in err, err
     # Told which channel to judge, it judges that one.
-    assert cli.main(["check", str(APPROACH), "--log", str(log), "--log-channel", "0"]) == 0
+    assert cli.main(["check", str(approach(tmp_path)),
+                     "--log", str(log), "--log-channel", "0"]) == 0
     capsys.readouterr()
     # A run that read its --radar-channel: its log's check reads it, also where the log's
     # format names the channel otherwise (a canutils .log writes channel 0 as can0).
     log = tmp_path / "bench.log"
-    code = cli.main(["run", str(APPROACH), "--mapping", str(autosar), "--radar-channel", "0",
+    code = cli.main(["run", str(approach(tmp_path)),
+                     "--mapping", str(autosar), "--radar-channel", "0",
                      "--record", str(log)])
     out, err = capsys.readouterr()
     assert code == 0, out + err
-    code = cli.main(["check", str(APPROACH), "--log", str(log)])
+    code = cli.main(["check", str(approach(tmp_path)), "--log", str(log)])
     out, err = capsys.readouterr()
     assert code == 0, out + err
 

@@ -226,7 +226,10 @@ def out(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     res: dict[str, Any] = {"tmp": tmp}
     assert cli.main(["run", str(SCENE), "--json", str(tmp / "run.json"), "--record", str(log),
                      "--detections", str(tmp / "det.csv")]) == 0
-    cli.main(["run", str(fast), str(broken), "--json", str(tmp / "runs.json")])
+    # Through a mapping without elevation, which the scene's tolerances name: a quantity not
+    # checked (`unchecked_quantities`) and the scene-wide limit quantity_unchecked.
+    cli.main(["run", str(fast), str(broken), "--json", str(tmp / "runs.json"), "--mapping",
+              str(ROOT / "scenarios" / "can" / "cluster_list.mapping.yaml")])
     # Aligned by the sidecar, and (a copy without it) by the log's timestamps.
     assert cli.main(["check", str(SCENE), "--log", str(log), "--json",
                      str(tmp / "check.json")]) == 0

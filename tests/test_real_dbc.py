@@ -171,14 +171,23 @@ def test_rts_scenario_s_own_header_is_laid_out_as_its_dbc_says():
     assert all(m.data[0] == 70000 % 256 for m in bus.messages[1:])  # FrameCounter8
 
 
-@pytest.mark.parametrize("mapping", [OBJECT_LIST, CLUSTER_LIST])
-def test_a_scene_passes_with_the_simulated_radar_speaking_a_third_party_protocol(mapping):
+# The cluster list is cartesian without z_m: no elevation, which cut_in's tolerances name
+# (el_deg: 1.0), so the scene declares quantity_unchecked to run on it.
+@pytest.mark.parametrize("mapping, expected, unchecked", [
+    (OBJECT_LIST, [], {}),
+    (CLUSTER_LIST, ["quantity_unchecked"],
+     {"el_deg": {"why": "mapping 'cluster-list' carries no elevation, a cartesian one without "
+                        "z_m", "tolerance": 1.0, "written": True}})])
+def test_a_scene_passes_with_the_simulated_radar_speaking_a_third_party_protocol(
+        mapping, expected, unchecked):
     scene = load_scenario(ROOT / "scenarios" / "cut_in.scenario.yaml",
-                          {"radar.noise": False, "radar.fidelity": "analytic"})
+                          {"radar.noise": False, "radar.fidelity": "analytic",
+                           "expectations.expected_limits": expected})
     report = run_scene(scene, RunOptions(mapping=str(mapping))).report
     assert report.passed, report.reasons
     assert report.frames["checked"] == report.frames["total"]
     assert report.bus["unsendable_detections"] == 0
+    assert report.unchecked_quantities == unchecked
 
 
 # A radar protocol written for these tests: every signal Motorola, most of them across byte

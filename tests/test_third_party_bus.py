@@ -302,7 +302,7 @@ def test_check_of_a_log_with_a_cut_off_cycle_fails_and_counts_it(objects, tmp_pa
     scene = tmp_path / "approach.scenario.yaml"
     scene.write_text(text.replace("profile: awr1843boost", "profile: slow.radar.yaml").replace(
         "detection_rate: 0.95",
-        "detection_rate: 0.95\n  expected_limits: [frame_rate_above_radar]"))
+        "detection_rate: 0.95\n  expected_limits: [frame_rate_above_radar, quantity_unchecked]"))
     recorded = tmp_path / "drive.blf"
     assert cli.main(["run", str(scene), "--mapping", str(objects), "--record",
                      str(recorded)]) == 0

@@ -34,6 +34,9 @@ from ..located_yaml import Document, format_key_path, load_yaml, validate
 
 QUANTITIES = ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps", "x_m", "y_m",
               "z_m", "vx_mps", "vy_mps", "rcs_dbsm", "snr_db")
+# The quantities the checker checks (polar names), as a reason names them (`not_carried`).
+_CHECKED_WORDS = {"range_m": "range", "radial_velocity_mps": "radial velocity",
+                  "azimuth_deg": "azimuth", "elevation_deg": "elevation", "rcs_dbsm": "RCS"}
 
 # Classic messages per detection (a radar's general, quality and extended-information messages).
 MAX_MESSAGES = 8
@@ -369,6 +372,21 @@ class CanMapping:
             if {"vx_mps", "vy_mps"} <= have:
                 out.add("radial_velocity_mps")
         return out
+
+    def not_carried(self) -> dict[str, str]:
+        """Say which checked quantities a detection does not carry, and why (polar names).
+
+        ``{"elevation_deg": "mapping 'cluster-list' carries no elevation, a cartesian one
+        without z_m"}``: the checker cannot check them (`rts_scenario.check.unchecked_quantities`).
+        A cartesian mapping carries what the reader derives (`quantities`): elevation with
+        ``z_m``, radial velocity with both ``vx_mps`` and ``vy_mps``.
+        """
+        have = self.quantities
+        cartesian = {"elevation_deg": ", a cartesian one without z_m",
+                     "radial_velocity_mps": ", a cartesian one without both vx_mps and vy_mps"}
+        return {q: f"mapping {self.name!r} carries no {word}"
+                   + (cartesian.get(q, "") if self.form == "cartesian" else "")
+                for q, word in _CHECKED_WORDS.items() if q not in have}
 
     def parts(self, fd: bool = False) -> list[tuple[Message, int | None]]:
         """Return every message and page of one detection, in sending order.

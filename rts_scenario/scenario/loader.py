@@ -194,6 +194,9 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
                 expect.get("max_false_detections_per_frame", 0.1)
             ),
             expected_limits=frozenset(expect.get("expected_limits", ())),
+            # Which tolerances the scene means (a quantity a mapping leaves out fails on
+            # those), as against the defaults it took.
+            tolerances_written=frozenset(expect.get("tolerances", {})),
         ),
         effects=effects,
         marks=tuple(data.get("marks", [])),

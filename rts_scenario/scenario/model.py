@@ -42,12 +42,14 @@ LIMITS = {
     "adjacent_frame": "the verdict rests on radar cycles judged against the frame across a "
                       "frame change, not the frame held (a radar showing that frame and a "
                       "range offset of the targets' travel in one frame look alike)",
+    "quantity_unchecked": "the scene writes a tolerance for a quantity the run's CAN mapping "
+                          "does not carry: it is not checked",
 }
 
 # Limits of the whole scene, not of a target-frame: only ``expectations.expected_limits``
 # declares them.
 SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase", "frames_sent_late", "frames_lost",
-                "adjacent_frame")
+                "adjacent_frame", "quantity_unchecked")
 # Those known from the scene before anything plays (`rts_scenario.preflight.scene_limits`).
 PLANNED_SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase")
 
@@ -142,12 +144,21 @@ class TargetSpec:
 
 @dataclass(frozen=True)
 class Expectations:
-    """What the checker demands: error tolerances per quantity and rates."""
+    """What the checker demands: error tolerances per quantity and rates.
+
+    ``tolerances`` holds every quantity's (`DEFAULT_TOLERANCES` for those the scene leaves
+    out); ``tolerances_written`` names those the scene file wrote in
+    ``expectations.tolerances``. A quantity the run's CAN mapping does not carry is not
+    checked: where the scene wrote its tolerance, the scene means it checked and the run fails
+    (``quantity_unchecked``) unless the scene expects that; a default's is only said.
+    Expectations built in code write none unless they say so.
+    """
 
     tolerances: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
     detection_rate: float = 0.9
     max_false_detections_per_frame: float = 0.1
     expected_limits: frozenset[str] = frozenset()
+    tolerances_written: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
