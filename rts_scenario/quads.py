@@ -91,7 +91,7 @@ def candidate_quads(
     return row * (columns - 1) + col
 
 
-# Cells of `locate_raster` along azimuth and elevation: 512 x 256 16-bit cells (256 KiB, in
+# Cells of `locate_raster` along azimuth and elevation: 512 x 256 32-bit cells (512 KiB, in
 # the L2 cache), of which a few per cent straddle an edge or a grid mean on the wide-3x5 grid.
 RASTER_CELLS = (512, 256)
 # Angle (deg) by which a cell must clear every test to be certain: far above the rounding of
@@ -102,7 +102,7 @@ RASTER_GUARD_DEG = 1e-7
 def locate_raster(
     column_az_deg: FloatArray, row_el_deg: FloatArray, lines: FloatArray, boxes: FloatArray,
     cells: tuple[int, int] = RASTER_CELLS,
-) -> tuple[NDArray[np.int16], FloatArray]:
+) -> tuple[NDArray[np.int32], FloatArray]:
     """Answers of `candidate_quads` and `inside_quads` on a raster of cells, where certain.
 
     Returns ``(raster, frame)``: ``raster`` (``cells[1] * cells[0]``, row-major by elevation)
@@ -150,7 +150,7 @@ def locate_raster(
     margin = np.stack(margins)  # (8 tests, height, width, 4 corners)
     inside = fixed & (margin.min(axis=(0, 3)) >= guard)
     outside = fixed & (margin.max(axis=3) <= -guard).any(axis=0)
-    raster = np.full((height, width), -2, dtype=np.int16)
+    raster = np.full((height, width), -2, dtype=np.int32)  # any number of quads
     raster[inside] = candidate[inside]
     raster[outside] = -1
     frame = np.array([az0, el0, 1.0 / d_az, 1.0 / d_el, width, height], dtype=np.float64)
@@ -196,7 +196,7 @@ class QuadGeometry:
     degenerate: NDArray[np.bool_]
     column_az_deg: FloatArray
     row_el_deg: FloatArray
-    raster: NDArray[np.int16]
+    raster: NDArray[np.int32]
     raster_frame: FloatArray
 
     @classmethod
@@ -217,7 +217,7 @@ class QuadGeometry:
         if len(polygons) > 1:
             raster, frame = locate_raster(column_az, row_el, lines, boxes)
         else:
-            raster, frame = np.zeros(0, dtype=np.int16), np.zeros(6)
+            raster, frame = np.zeros(0, dtype=np.int32), np.zeros(6)
         geometry = cls(
             polygons=polygons, lines=lines, boxes=boxes, degenerate=area <= DEGENERATE_AREA_DEG2,
             column_az_deg=column_az, row_el_deg=row_el, raster=raster, raster_frame=frame,

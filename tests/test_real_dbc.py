@@ -584,10 +584,15 @@ def test_the_bus_steps_of_a_mapping_are_its_signals_scales(mux_mapping):
     named = {"az_deg": "azimuth_deg", "el_deg": "elevation_deg"}
     assert steps == pytest.approx({named.get(q, q): abs(factor)
                                    for q, factor, _ in MUX_RESOLUTION}, rel=1e-12)
-    builtin = CanMapping.builtin().steps()  # rts_detections.dbc: 0.005 steps, RCS and SNR 0.5
-    assert builtin == pytest.approx({"range_m": 0.005, "azimuth_deg": 0.005,
-                                     "elevation_deg": 0.005, "radial_velocity_mps": 0.005,
-                                     "rcs_dbsm": 0.5, "snr_db": 0.5}, rel=1e-12)
+    builtin = CanMapping.builtin()  # rts_detections.dbc: 0.005 steps, RCS and SNR 0.5 classic
+    classic = {"range_m": 0.005, "azimuth_deg": 0.005, "elevation_deg": 0.005,
+               "radial_velocity_mps": 0.005, "rcs_dbsm": 0.5, "snr_db": 0.5}
+    assert builtin.steps() == pytest.approx(classic, rel=1e-12)
+    # RTS_DetectionFD carries RCS in 0.01 dB steps, the rest as the classic messages; a bus not
+    # known: the finer of the two.
+    fd = {**classic, "rcs_dbsm": 0.01}
+    assert builtin.steps(fd=True) == pytest.approx(fd, rel=1e-12)
+    assert builtin.steps(fd=None) == pytest.approx(fd, rel=1e-12)
 
 
 @pytest.mark.parametrize("tolerances, said", [
@@ -626,6 +631,12 @@ def test_run_and_check_warn_of_a_tolerance_the_mapping_cannot_carry(tmp_path, ca
     cli.main(["check", str(scene), "--log", str(log)])  # the sidecar names the mapping
     assert "warning: the az tolerance 0.03 deg is finer than half" in capsys.readouterr().err
     cli.main(["run", str(scene)])  # rts-scenario's own messages: 0.005 deg steps
+    assert "finer than half" not in capsys.readouterr().err
+    # RCS: 0.5 dB steps in the classic messages, 0.01 dB in the FD one.
+    scene.write_text(text.replace("az_deg: 0.03, el_deg: 1.0}", "rcs_db: 0.2}"))
+    cli.main(["run", str(scene)])
+    assert "the rcs tolerance 0.2 dB is finer than half" in capsys.readouterr().err
+    cli.main(["run", str(scene), "--can-fd"])
     assert "finer than half" not in capsys.readouterr().err
 
 

@@ -506,9 +506,12 @@ def _bent_grid():
 
 def _on_every_edge_and_mean(geometry, rng):
     """Directions on the quads' corners and edges, on the grid's means and beside them."""
-    corners = geometry.polygons.reshape(-1, 2)
-    start = geometry.polygons
-    end = np.roll(geometry.polygons, -1, axis=1)
+    polygons = geometry.polygons
+    if len(polygons) > 200:  # a sample of a huge grid's quads
+        polygons = polygons[rng.choice(len(polygons), 200, replace=False)]
+    corners = polygons.reshape(-1, 2)
+    start = polygons
+    end = np.roll(polygons, -1, axis=1)
     t = rng.uniform(0, 1, (*start.shape[:2], 40, 1))
     along = (start[:, :, None] + t * (end - start)[:, :, None]).reshape(-1, 2)
     points = np.concatenate([corners, along])
@@ -522,8 +525,14 @@ def _on_every_edge_and_mean(geometry, rng):
     return az, el
 
 
-@pytest.mark.parametrize("rig", [rs.Rig.preset("wide-3x5"), _bent_grid()],
-                         ids=["wide-3x5", "bent 3x4"])
+def _huge_grid():
+    """200 x 200 FEs: 39,601 quads, more than a 16-bit cell could number."""
+    az, el = np.meshgrid(np.linspace(-60, 60, 200), np.linspace(-30, 30, 200))
+    return rs.Rig.grid(az, el)
+
+
+@pytest.mark.parametrize("rig", [rs.Rig.preset("wide-3x5"), _bent_grid(), _huge_grid()],
+                         ids=["wide-3x5", "bent 3x4", "200x200"])
 def test_the_raster_locates_as_the_candidate_and_its_test(rig):
     """`_locate` on a grid reads certain cells of `quads.locate_raster` and tests the rest: its
     quads are those of `candidate_quads` and `inside_quads` (numpy) everywhere, on edges,
@@ -554,5 +563,8 @@ def test_the_raster_locates_as_the_candidate_and_its_test(rig):
     # Most directions over the grid are answered by the raster itself.
     inner = (spread_az > rig.az_deg.min()) & (spread_az < rig.az_deg.max())
     cells = geometry.raster
-    assert (cells >= 0).sum() > 0.8 * (cells != -1).sum()
+    if len(geometry.polygons) < 1000:  # quads of many cells each
+        assert (cells >= 0).sum() > 0.8 * (cells != -1).sum()
+    else:  # quads numbered beyond 16 bits are answered by the raster too
+        assert cells.max() > 32767
     assert (quad[edges_az.size:][: spread_az.size][inner] >= 0).mean() > 0.5

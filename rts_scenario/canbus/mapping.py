@@ -400,14 +400,19 @@ class CanMapping:
             out += [(message, page) for page in pages(message)]
         return out
 
-    def steps(self) -> dict[str, float]:
+    def steps(self, fd: bool | None = False) -> dict[str, float]:
         """Return the bus step of each mapped quantity (its unit), the coarsest of its signals.
 
         A signal's raw step times its DBC scale times the field's ``scale``: a radar's report
-        of the quantity is a multiple of it (plus offsets), however exact the radar.
+        of the quantity is a multiple of it (plus offsets), however exact the radar. ``fd``:
+        on a CAN FD bus (the FD message where the mapping has one), on a classic one, or
+        (None) either: the finer of the two, for a log whose bus is not known.
         """
+        if fd is None:
+            classic, flexible = self.steps(False), self.steps(True)
+            return {q: min(step, flexible.get(q, step)) for q, step in classic.items()}
+        names = [self.fd_message] if fd and self.fd_message else list(self.messages)
         out: dict[str, float] = {}
-        names = [*self.messages, *([self.fd_message] if self.fd_message else [])]
         for quantity, f in self.fields.items():
             for name in names:
                 for sig in self.db.get_message_by_name(name).signals:

@@ -224,7 +224,8 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                     continue
                 # Loaded: an interrupted run's entry names the scene, not its file.
                 current = (scene.name, *current[1:])
-                for line in tolerances_below_bus_steps(scene.expectations, bus_mapping.steps(),
+                for line in tolerances_below_bus_steps(scene.expectations,
+                                                       bus_mapping.steps(args.can_fd),
                                                        bus_mapping.name):
                     print(f"warning: {label}: {line}", file=sys.stderr)
                 unused = simulated_radar_parameters(scene.parameters)

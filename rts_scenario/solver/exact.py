@@ -745,7 +745,7 @@ def _indirect(plan: _ExpPlan) -> NDArray[np.int64]:
 _NO_GEOMETRY = QuadGeometry(
     polygons=np.zeros((1, 4, 2)), lines=np.zeros((1, 4, 3)), boxes=np.zeros((1, 4)),
     degenerate=np.zeros(1, dtype=bool), column_az_deg=np.zeros(2), row_el_deg=np.zeros(2),
-    raster=np.zeros(0, dtype=np.int16), raster_frame=np.zeros(6),
+    raster=np.zeros(0, dtype=np.int32), raster_frame=np.zeros(6),
 )
 # The kernel's constants, in the order it reads them.
 _TOLERANCES = np.array([_NEGATIVE_TOL, _RANK_TOL, _GAIN_TOL, _RESIDUAL_TOL, _PHASE_TOL,
