@@ -1170,3 +1170,43 @@ def test_the_shortest_lane_change_peaks_at_the_acceleration_bound(tmp_path):
     peak = np.abs(np.diff(lateral, 2)).max() / h**2
     assert peak == pytest.approx(MAX_ACCELERATION_MPS2, rel=1e-4)
     assert lateral[-1] - lateral[0] == pytest.approx(3.0, abs=1e-9)
+
+
+def _quintic_accel(t, start, duration, offset):
+    """The lane change's sideways acceleration, from its position's second difference."""
+    h = 1e-4
+    pos = [offset * np.clip((t + k * h - start) / duration, 0, 1) ** 3
+           * (10 - 15 * np.clip((t + k * h - start) / duration, 0, 1)
+              + 6 * np.clip((t + k * h - start) / duration, 0, 1) ** 2) for k in (-1, 0, 1)]
+    return (pos[0] - 2 * pos[1] + pos[2]) / h**2
+
+
+@pytest.mark.parametrize("changes", [
+    [(1.0, 1.2, 3.5), (1.0, 1.2, 3.5)],        # the same change twice: 2 x 14.03 m/s2
+    [(0.5, 1.3, 3.0), (0.9, 1.3, 3.0)],        # shifted: their peaks add in part (12.4)
+    [(0.5, 1.5, 3.5), (1.4, 1.5, -3.5)],       # a return before the change ends: the
+                                               # change's braking and the return's start add
+                                               # (17.9)
+    [(0.5, 1.2, 3.5), (1.7, 1.2, -3.5)],       # one after the other: each alone (14.03)
+])
+def test_overlapping_lane_changes_are_held_to_the_bound_together(tmp_path, changes):
+    # The loader's peak (exact, piecewise cubic) against the second difference of the summed
+    # quintics on a 0.1 ms grid: refused exactly where the sum exceeds 15 m/s2.
+    t = np.arange(0.0, 4.0, 1e-4)
+    numeric = np.abs(sum(_quintic_accel(t, *c) for c in changes)).max()
+    items = "".join(f"\n      - {{start_s: {s}, duration_s: {d}, offset_m: {o}}}"
+                    for s, d, o in changes)
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(edit("    rcs: {rcs_dbsm: 10.0}", "    rcs: {rcs_dbsm: 10.0}\n"
+                         "    lane_changes:" + items))
+    if numeric <= 15.0:
+        load_scenario(path)
+        return
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    err = info.value
+    assert err.key_path == "targets[0].lane_changes"
+    peak = float(str(err).split("sideways up to ")[1].split(" m/s2")[0])
+    assert peak == pytest.approx(numeric, rel=1e-4)
+    assert "lane_changes[0] and lane_changes[1] overlap in time" in str(err)
+    assert "start one after the other ends, or make them longer" in str(err)

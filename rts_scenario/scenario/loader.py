@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.polynomial import Polynomial
 
 from ..errors import RtsError, ScenarioError
 from ..file_kinds import kind_by_name, kind_name, load_kind, other_than_fragment
@@ -753,6 +754,7 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
         LaneChange(float(lc["start_s"]), float(lc["duration_s"]), float(lc["offset_m"]))
         for lc in spec.get("lane_changes", [])
     )
+    _check_sideways_together(doc, (*key, "lane_changes"), lane_changes)
     if kind == "waypoints":
         return _waypoints(doc, mkey, motion, lane_changes, frames)
     start = np.asarray(motion["position_m"], dtype=float)
@@ -826,6 +828,44 @@ def _check_sideways(doc: Document, key: KeyPath, offset_m: float, duration_s: fl
                     f"{-MAX_ACCELERATION_MPS2:g} to {MAX_ACCELERATION_MPS2:g} m/s2 (as "
                     f"acceleration_mps2 of constant_acceleration): give duration_s >= "
                     f"{math.ceil(shortest * 1000) / 1000:g} s, or a smaller offset_m")
+
+
+def _check_sideways_together(doc: Document, key: KeyPath,
+                             changes: tuple[LaneChange, ...]) -> None:
+    """Refuse lane changes that overlap in time beyond `MAX_ACCELERATION_MPS2` together.
+
+    Each is held to the bound alone (`_check_sideways`); where they overlap their sideways
+    accelerations add. Between the starts and ends of the changes the sum is one cubic in
+    time, whose largest magnitude is at an end of the piece or where its derivative is 0:
+    exact, not sampled.
+    """
+    if len(changes) < 2:
+        return
+    ends = sorted({t for c in changes for t in (c.start_s, c.start_s + c.duration_s)})
+    for a, b in itertools.pairwise(ends):
+        active = [i for i, c in enumerate(changes)
+                  if c.start_s <= a and c.start_s + c.duration_s >= b]
+        if len(active) < 2:
+            continue
+        total = Polynomial([0.0])
+        for i in active:
+            c = changes[i]
+            tau = Polynomial([-c.start_s / c.duration_s, 1.0 / c.duration_s])
+            total += c.offset_m / c.duration_s**2 * (60 * tau - 180 * tau**2 + 120 * tau**3)
+        roots = np.asarray(total.deriv().roots(), dtype=complex)
+        inner = roots.real[(np.abs(roots.imag) < 1e-12) & (roots.real > a) & (roots.real < b)]
+        times = [a, b, *inner.tolist()]
+        values = np.abs(total(np.array(times)))
+        peak = float(values.max())
+        if peak <= MAX_ACCELERATION_MPS2 * (1.0 + 1e-6):
+            continue
+        at = times[int(values.argmax())]
+        which = " and ".join(f"lane_changes[{i}]" for i in active)
+        raise doc.error(key, f"{which} overlap in time: together they accelerate sideways up "
+                             f"to {peak:.6g} m/s2 (at {at:.6g} s); accelerations run from "
+                             f"{-MAX_ACCELERATION_MPS2:g} to {MAX_ACCELERATION_MPS2:g} m/s2 "
+                             f"(as acceleration_mps2 of constant_acceleration): start one after "
+                             f"the other ends, or make them longer")
 
 
 def _check_speed(doc: Document, key: KeyPath, law: TravelLaw, frames: _Frames,
