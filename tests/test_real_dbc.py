@@ -527,6 +527,15 @@ BAD_MAPPINGS = [
      "detection.messages[1]",
      r"message 'Obj' is listed twice \(entries 0 and 1\); each message carries its part of a "
      r"detection once: list it once$"),
+    # Detections and cycles are numbered one by one: an index or counter of factor 2 would
+    # give two detections one number.
+    ("index-counting-by-2", (' SG_ Id : 5|6@0+ (1,0) [0|63] "" CHECKER',
+                             ' SG_ Id : 5|6@0+ (2,0) [0|126] "" CHECKER'), "detection.index",
+     r"signal 'Id' of message 'Obj' counts in steps of 2 \(its DBC factor\); it numbers "
+     r"detections or cycles one by one, so its factor must be 1$"),
+    ("counter-counting-by-half", (' SG_ Counter : 1|8@0+ (1,0) [0|255] "" CHECKER',
+                                  ' SG_ Counter : 1|8@0+ (0.5,0) [0|127.5] "" CHECKER'),
+     "header.counter", r"signal 'Counter' of message 'Head' counts in steps of 0.5 "),
     # The header's time is in seconds, as the quantities are in their units.
     ("timestamp-in-ms", ('(0.001,0) [0|65.535] "s"', '(1,0) [0|65535] "ms"'),
      "header.timestamp",

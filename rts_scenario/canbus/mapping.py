@@ -421,6 +421,27 @@ class CanMapping:
                         out[quantity] = max(out.get(quantity, 0.0), step)
         return out
 
+    def _check_counting(self, doc: Document, names: dict[str, Message],
+                        carriers: list[str]) -> None:
+        """Refuse an index or counter signal that does not count in steps of 1.
+
+        Detections are numbered one by one and cycles counted one by one, in the signals'
+        values: a DBC factor other than 1 would give two detections one number (or skip
+        counts), and the receiver would join the wrong messages.
+        """
+        counting = [(("header", "counter"), self.counter, [self.header])]
+        counting.append((("detection", "index"), self.index, carriers))
+        if self.frame_counter:
+            counting.append((("detection", "frame_counter"), self.frame_counter, carriers))
+        for key, signal, messages in counting:
+            for m in messages:
+                for sig in names[m].signals:
+                    if sig.name == signal and float(sig.scale) != 1.0:
+                        raise doc.error(key, f"signal {signal!r} of message {m!r} counts in "
+                                             f"steps of {float(sig.scale):g} (its DBC factor); "
+                                             f"it numbers detections or cycles one by one, so "
+                                             f"its factor must be 1")
+
     def needed_parts(self, fd: bool = False) -> frozenset[PartKey]:
         """Return the parts a detection needs: those carrying a mapped quantity."""
         mapped = {f.signal for f in self.fields.values()}
@@ -630,6 +651,7 @@ class CanMapping:
                                                 if spec.signal in {s.name
                                                                    for s in names[m].signals}],
                                      spec)
+        self._check_counting(doc, names, carriers)
         for fd in (False, True):
             for message, page in self.parts(fd):
                 if (message.frame_id, page) in self.needed_parts(fd) and \
