@@ -709,9 +709,10 @@ def test_validate_builds_every_combination_and_strict_turns_warnings_into_errors
                     "parametrize: {radar.estimator: [bartlett, ti]}\n")
     assert call(["validate", str(path)]) == 0
     out, err = capsys.readouterr()
-    assert out.count("ok: ") == 2 and "[estimator=ti]" in out
-    # Valid, and a run of it fails: the ok line says so beside the warnings.
-    assert out.count(", 2 targets, schedule built; a run fails as the 1 warning say "
+    assert "ok: " not in out and "[estimator=ti]" in out
+    # Valid, and a run of it fails: its status line says so, not "ok".
+    assert out.count("valid, a run fails: ") == 2, out
+    assert out.count(", 2 targets, schedule built; the 1 warning says why "
                      "(--strict: errors)\n") == 2, out
     warnings = [line for line in err.splitlines() if line.startswith("warning: ")]
     assert len(warnings) == 2 and all(": aside: out_of_coverage in 5 frames" in w
@@ -719,7 +720,7 @@ def test_validate_builds_every_combination_and_strict_turns_warnings_into_errors
     assert "car" not in err
     assert call(["validate", "--strict", str(path)]) == 2
     out, err = capsys.readouterr()
-    assert "ok: " not in out
+    assert "ok: " not in out and "valid, a run fails" not in out
     assert [line.split(": ", 1)[0] for line in err.splitlines()] == ["error", "error"]
     # A limit the scene declares is shown, and is no error even with --strict.
     path.write_text(path.read_text().replace("    rcs: {rcs_dbsm: 10.0}\nparametrize",

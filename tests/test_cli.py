@@ -559,7 +559,10 @@ def test_list_validate_and_schedule_show_the_variants(tmp_path, capsys, monkeypa
     scene = two_variant_scene(tmp_path)
     assert cli.main(["validate", str(scene)]) == 0
     out = capsys.readouterr().out
-    assert f"ok: {scene}[1=3.5]: " in out and f"ok: {scene}[1=40.0]: " in out
+    # Each variant's status line (valid, a run of which fails where warnings say so).
+    assert f": {scene}[1=3.5]: " in out and f": {scene}[1=40.0]: " in out
+    assert all(line.startswith(("ok: ", "valid, a run fails: ", "note: "))
+               for line in out.splitlines()), out
     target = tmp_path / "s.npz"
     assert cli.main(["schedule", str(scene), "--output", f"file:{target}"]) == 2
     assert capsys.readouterr().err == (f"error: {scene}: a parametrized scene (2 variants): "

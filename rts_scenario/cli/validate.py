@@ -55,12 +55,14 @@ def _do_validate(args: argparse.Namespace) -> int:
                     print(f"note: {label}: {note}")
             if not (args.strict and unexpected):
                 # The file is valid; what a run of it would fail on is said beside it.
-                n = len(scene.targets)
-                print(f"ok: {label}: {scene.n_frames} frames, {n} target{'' if n == 1 else 's'}"
-                      f", schedule built"
-                      + (f"; a run fails as the {len(unexpected)} warning"
-                         f"{'' if len(unexpected) == 1 else 's'} say (--strict: errors)"
-                         if unexpected else ""))
+                # "ok" only where nothing said fails a run: a valid file a run of which fails
+                # says so in its status word.
+                n, k = len(scene.targets), len(unexpected)
+                status = "valid, a run fails" if unexpected else "ok"
+                print(f"{status}: {label}: {scene.n_frames} frames, {n} target"
+                      f"{'' if n == 1 else 's'}, schedule built"
+                      + (f"; the {k} warning{' says' if k == 1 else 's say'} why (--strict: "
+                         f"errors)" if unexpected else ""))
         # An error several combinations share, once, naming them all.
         for message, idents in errors.items():
             where = ("" if idents == [""] else
