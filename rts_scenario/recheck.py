@@ -1722,8 +1722,10 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     alignment.cycles_in_log = len(index)
     jump = None
     if "bus_time_shifts" not in ((sidecar or {}).get("clock") or {}):
-        # Nothing tells whether the host's clock stepped while the log was recorded.
-        jump = stamp_jump(numbers, index.bus_t_s, profile_clock)
+        # Nothing tells whether the host's clock stepped while the log was recorded. Against
+        # the cycle the check follows (the fitted one where the profile's is off, which the
+        # radar_clock reason tells): the profile's would read a cycle off it as a jump.
+        jump = stamp_jump(numbers, index.bus_t_s, replace(profile_clock, cycle_s=clock.cycle_s))
     if jump is not None:
         at, size = jump
         alignment.notes.append(

@@ -1192,9 +1192,10 @@ def test_a_free_radar_whose_first_cycle_measured_just_before_the_scene_re_checks
         check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
 
 
-def run_scattered(tmp_path, radar_cycle_s, step_s):
-    """Run the cut-in scene with a radar of ``radar_cycle_s`` whose latency jitters +-12 ms
-    (its profile: 50 ms, +-4 ms), ``step_s`` longer from cycle 120 on; its log re-checked."""
+def run_scattered(tmp_path, radar_cycle_s, step_s, spread_s=0.012):
+    """Run the cut-in scene with a radar of ``radar_cycle_s`` whose latency jitters
+    +-``spread_s`` (default 12 ms; its profile: 50 ms, +-4 ms), ``step_s`` longer from cycle
+    120 on; its log re-checked."""
     from rts_scenario.radar.clock import RadarClock
 
     shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
@@ -1212,12 +1213,28 @@ def run_scattered(tmp_path, radar_cycle_s, step_s):
             t = np.array([c.t_s for c in cycles])
             counter = np.array([c.cycle for c in cycles])
             publisher.publish_many(cycles, pipeline._bus_origin_s + t + 0.13
-                                   + rng.uniform(-0.012, 0.012, t.size)
+                                   + rng.uniform(-spread_s, spread_s, t.size)
                                    + step_s * (counter >= 120))
 
         pipeline.output._sink = stamp
         live = pipeline.run(scene).report
     return live, check_log(scene, log)
+
+
+def test_a_radar_5_percent_off_its_profile_s_cycle_is_no_jump_in_a_log_without_sidecar(
+        tmp_path):
+    # Checked without its sidecar, the log's cycle is fitted (52.5 ms against the profile's
+    # 50): the radar_clock reason says so. Its stamps, within the profile's jitter around
+    # that cycle, do not jump: measured against the profile's cycle they drifted 2.5 ms a
+    # cycle, which read as a jump of the stamps and failed the check as log_stamps.
+    _, with_sidecar = run_scattered(tmp_path, 0.0525, 0.0, spread_s=0.002)
+    log = tmp_path / "scattered.blf"
+    Path(str(log) + ".rts.json").unlink()
+    again = check_log(with_sidecar.scene, log)
+    assert again.alignment.cycle_s == pytest.approx(0.0525, rel=1e-3)
+    codes = [c for r in again.report.reasons for c in r.codes]
+    assert "radar_clock" in codes and "log_stamps" not in codes, again.report.reasons
+    assert not any("stamps jump" in note for note in again.alignment.notes)
 
 
 def test_a_radar_2000_ppm_off_with_more_jitter_than_its_profile_says_fails_live_and_again(
