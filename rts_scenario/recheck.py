@@ -1722,10 +1722,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     alignment.cycles_in_log = len(index)
     jump = None
     if "bus_time_shifts" not in ((sidecar or {}).get("clock") or {}):
-        # Nothing tells whether the host's clock stepped while the log was recorded. Against
-        # the cycle the check follows (the fitted one where the profile's is off, which the
-        # radar_clock reason tells): the profile's would read a cycle off it as a jump.
-        jump = stamp_jump(numbers, index.bus_t_s, replace(profile_clock, cycle_s=clock.cycle_s))
+        # Nothing tells whether the host's clock stepped while the log was recorded.
+        jump = stamp_jump(numbers, index.bus_t_s, profile_clock)
     if jump is not None:
         at, size = jump
         alignment.notes.append(
@@ -1896,8 +1894,13 @@ def stamp_jump(numbers: IntArray, bus_t_s: FloatArray,
                clock: RadarClock) -> tuple[int, float] | None:
     """Return where a log's stamps jump (log position of the first cycle after it) and by how much.
 
-    The stamps less the profile's cycle times their numbers, in log order: the median of the
-    `JUMP_CYCLES` after each cycle against that of those up to it. Each lies within the
+    The stamps less a cycle times their numbers, in log order: the median of the
+    `JUMP_CYCLES` after each cycle against that of those up to it. The cycle is the median of
+    the stamps' steps per cycle over a quarter of the log, which a jump (within a third of
+    them) leaves as it is: not the profile's,
+    against which a radar off it would drift by a cycle's difference per cycle and read as a
+    jump (its `radar_clock` reason tells that), nor a line fitted to the stamps, which a jump
+    tilts. Each lies within the
     radar's jitter of the latency, so the two differ by at most twice its jitter, plus the
     stamping's noise and what a crystal within `CLOCK_TOLERANCE_PPM` draws over the windows;
     beyond that the stamps moved for good from there on (a cycle held up moves one). The
@@ -1909,7 +1912,14 @@ def stamp_jump(numbers: IntArray, bus_t_s: FloatArray,
     if ok.sum() < 2 * k:
         return None
     positions = np.flatnonzero(ok)
-    r = t[ok] - t[ok][0] - (numbers[ok] - numbers[ok][0]) * clock.cycle_s
+    n = numbers[ok]
+    # Steps over a quarter of the log: jitter shrinks by the lag, and a jump lies within a
+    # third of them at most, which their median leaves out.
+    lag = max(1, n.size // 4)
+    steps, counted = t[ok][lag:] - t[ok][:-lag], n[lag:] - n[:-lag]
+    cycle_s = float(np.median(steps[counted > 0] / counted[counted > 0])) \
+        if (counted > 0).any() else clock.cycle_s
+    r = t[ok] - t[ok][0] - (n - n[0]) * cycle_s
     windows = np.lib.stride_tricks.sliding_window_view(r, k)
     medians = np.median(windows, axis=1)  # of r[i:i + k]
     jumps = medians[k:] - medians[:-k]  # after cycle i + k - 1 against up to it

@@ -1210,3 +1210,39 @@ def test_overlapping_lane_changes_are_held_to_the_bound_together(tmp_path, chang
     assert peak == pytest.approx(numeric, rel=1e-4)
     assert "lane_changes[0] and lane_changes[1] overlap in time" in str(err)
     assert "start one after the other ends, or make them longer" in str(err)
+
+
+EGO_LANE_CHANGE = "\n  lane_changes: [{start_s: 1.0, duration_s: 2.0, offset_m: 3.5}]"
+
+
+@pytest.mark.parametrize("motion, zero_at", [
+    # Standing: its body would face sideways, the radar with it.
+    ("{type: stationary, position_m: [0, 0, 0]}", 1.0),
+    # Braking from 10 m/s at 5 m/s2: stands from 2 s, within the change (1 to 3 s).
+    ("{type: constant_acceleration, position_m: [0, 0, 0], speed_mps: 10.0, "
+     "acceleration_mps2: -5.0}", 2.0),
+    # Backing out and driving off: speed 0 at 1.5 s (-2 m/s at 0.5 s, +2 m/s at 2.5 s).
+    ("{type: speed_profile, position_m: [0, 0, 0], profile: [{t_s: 0.5, speed_mps: -2}, "
+     "{t_s: 2.5, speed_mps: 2}]}", 1.5),
+    # Backwards throughout, or forwards throughout: the body faces one way, as in a run.
+    ("{type: constant_velocity, position_m: [0, 0, 0], speed_mps: -5.0}", None),
+    ("{type: constant_acceleration, position_m: [0, 0, 0], speed_mps: 10.0, "
+     "acceleration_mps2: -3.0}", None),
+])
+def test_an_ego_lane_change_while_it_stands_is_refused(tmp_path, motion, zero_at):
+    # The reviewer's scene: a standing ego changing lanes turned the radar by +-90 deg, and
+    # flipped it 180 deg between frames on rounding (azimuth -98.4, then +95.3, then -99.1).
+    path = tmp_path / "s.scenario.yaml"
+    path.write_text(GOOD.replace(
+        "  motion: {type: constant_velocity, position_m: [0, 0, 0], speed_mps: 20.0}",
+        f"  motion: {motion}{EGO_LANE_CHANGE}"))
+    if zero_at is None:
+        tracks = compute_tracks(load_scenario(path), np.arange(0.0, 4.0, 0.01))
+        assert np.abs(np.diff(tracks.az_deg[:, 0])).max() < 5.0  # no jump of the radar
+        return
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    err = info.value
+    assert err.key_path == "ego.lane_changes[0]" and err.line == 11
+    assert (f"the ego's speed along its path is 0 at {zero_at:g} s, during this lane change "
+            f"(1 to 3 s)") in str(err)

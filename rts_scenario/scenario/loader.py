@@ -756,7 +756,10 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
     )
     _check_sideways_together(doc, (*key, "lane_changes"), lane_changes)
     if kind == "waypoints":
-        return _waypoints(doc, mkey, motion, lane_changes, frames)
+        trajectory = _waypoints(doc, mkey, motion, lane_changes, frames)
+        if key == ("ego",):
+            _check_ego_moves_while_changing_lanes(doc, key, trajectory)
+        return trajectory
     start = np.asarray(motion["position_m"], dtype=float)
     path = TrajectoryPath.line(start, np.radians(motion.get("heading_deg", 0.0)))
     if kind == "stationary":
@@ -778,7 +781,43 @@ def _trajectory(doc: Document, key: KeyPath, spec: dict[str, Any],
     until = (gone - 1) / frames.rate_hz if gone < frames.n else None
     _check_speed(doc, (*mkey, "acceleration_mps2") if "acceleration_mps2" in motion else mkey,
                  law, frames, who, until)
-    return Trajectory(path=path, law=law, lane_changes=lane_changes)
+    trajectory = Trajectory(path=path, law=law, lane_changes=lane_changes)
+    if key == ("ego",):
+        _check_ego_moves_while_changing_lanes(doc, key, trajectory)
+    return trajectory
+
+
+def _check_ego_moves_while_changing_lanes(doc: Document, key: KeyPath,
+                                          trajectory: Trajectory) -> None:
+    """Refuse an ego lane change during which the ego stands or turns from forwards to back.
+
+    The ego's body (and the radar on it) faces its motion. A lane change of an ego that
+    stands along its path would turn it to face sideways, and where its speed along the path
+    reaches 0 the body would flip between facing its motion and its back (driving backwards)
+    on rounding: the radar's heading would jump by 90 to 180 deg between frames. A car cannot
+    move sideways while it stands. The speed along the path is linear between the travel
+    law's knots, so it reaches 0 within a lane change exactly where it is <= 0 at one of
+    them or at an end and >= 0 at another.
+    """
+    law = trajectory.law
+    for i, change in enumerate(trajectory.lane_changes):
+        t0, t1 = change.start_s, change.start_s + change.duration_s
+        times = np.sort([t0, t1, *law.knots_s[(law.knots_s > t0) & (law.knots_s < t1)]])
+        piece = np.searchsorted(law.knots_s, times, side="right") - 1
+        speed = law.v0_mps[piece] + law.a_mps2[piece] * (times - law.knots_s[piece])
+        if speed.min() <= 0.0 <= speed.max():
+            # The first 0: at a sample, or between two (one piece: linear there).
+            sign = np.sign(speed)
+            j = int(np.flatnonzero((sign == 0) | (sign != sign[0]))[0])
+            at = float(times[j]) if sign[j] == 0 or j == 0 else float(
+                times[j - 1] + (times[j] - times[j - 1]) * speed[j - 1]
+                / (speed[j - 1] - speed[j]))
+            raise doc.error((*key, "lane_changes", i),
+                            f"the ego's speed along its path is 0 at {at:g} s, during this "
+                            f"lane change ({t0:g} to {t1:g} s): the ego (and the radar on it) "
+                            f"faces its motion, and standing it would face sideways or flip "
+                            f"between frames; a car cannot move sideways while it stands: end "
+                            f"the lane change before the ego stops, or start it once it moves")
 
 
 # Speeds along a path run from -MAX_SPEED_MPS to MAX_SPEED_MPS (the schema's bound on each
