@@ -45,9 +45,6 @@ from typing import Any, TextIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from .detections import Detections, bus_times, sequential_numbers, unwrap_counter
 from .errors import CheckError
@@ -1311,6 +1308,12 @@ def _assign(frame_of: NDArray[np.int64], det: NDArray[np.int64], target: NDArray
     keep[simple] = True
     hard = np.flatnonzero(~simple)
     if hard.size:
+        # scipy only here: any of its modules costs a command about a quarter of a second
+        # to import (tests/test_startup.py), and most runs have no choice to make.
+        from scipy.optimize import linear_sum_assignment
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
         # Connected groups of detections and target-frames among the pairs with a choice.
         dets, d_of = np.unique(det[hard], return_inverse=True)
         slots, s_of = np.unique(slot_of[hard], return_inverse=True)

@@ -136,20 +136,33 @@ def locate_raster(
     row, row_fixed = cell_index(row_el_deg, el_lo, el_hi, rows - 2)
     candidate = row[:, None] * (columns - 1) + col[None, :]
     fixed = row_fixed[:, None] & col_fixed[None, :]
-    # Every cell's four corners, shape (height, width, 4).
-    az = np.stack(np.broadcast_arrays(az_lo, az_hi, az_lo, az_hi), axis=-1)[None].repeat(
-        height, axis=0)
-    el = np.stack(np.broadcast_arrays(el_lo, el_lo, el_hi, el_hi), axis=-1)[:, None].repeat(
-        width, axis=1)
-    box, line = boxes[candidate][..., None, :], lines[candidate]
+    # A row of quads covers whole rows of cells (``row`` never decreases), each column of them
+    # one quad's. Each test is linear in (az, el): over a cell its least and greatest values
+    # lie at the corners its coefficients' signs pick (the same sums as at those corners).
+    least = np.empty((height, width))
+    beyond = np.empty((height, width), dtype=bool)  # some test fails over the whole cell
     slack = EDGE_TOL_DEG
-    margins = [az - (box[..., 0] - slack), (box[..., 1] + slack) - az,
-               el - (box[..., 2] - slack), (box[..., 3] + slack) - el]
-    margins += [line[..., i, None, 0] * az + line[..., i, None, 1] * el + line[..., i, None, 2]
-                + slack for i in range(4)]
-    margin = np.stack(margins)  # (8 tests, height, width, 4 corners)
-    inside = fixed & (margin.min(axis=(0, 3)) >= guard)
-    outside = fixed & (margin.max(axis=3) <= -guard).any(axis=0)
+    row_at = np.searchsorted(row, np.arange(rows))
+    for r in range(rows - 1):
+        band = slice(row_at[r], row_at[r + 1])
+        el_l, el_h = el_lo[band, None], el_hi[band, None]
+        box, line = boxes[r * (columns - 1) + col], lines[r * (columns - 1) + col]
+        a0, a1 = box[:, 0] - slack, box[:, 1] + slack
+        e0, e1 = box[:, 2] - slack, box[:, 3] + slack
+        tests = [(az_lo - a0, az_hi - a0), (a1 - az_hi, a1 - az_lo),
+                 (el_l - e0, el_h - e0), (e1 - el_h, e1 - el_l)]
+        for i in range(4):
+            a, b, k = line[:, i, 0], line[:, i, 1], line[:, i, 2]
+            up_a, up_b = a >= 0.0, b >= 0.0
+            tests.append((a * np.where(up_a, az_lo, az_hi) + b * np.where(up_b, el_l, el_h)
+                          + k + slack,
+                          a * np.where(up_a, az_hi, az_lo) + b * np.where(up_b, el_h, el_l)
+                          + k + slack))
+        least[band] = np.minimum.reduce(np.broadcast_arrays(*(low for low, _ in tests)))
+        beyond[band] = np.logical_or.reduce(
+            np.broadcast_arrays(*(high <= -guard for _, high in tests)))
+    inside = fixed & (least >= guard)
+    outside = fixed & beyond
     raster = np.full((height, width), -2, dtype=np.int32)  # any number of quads
     raster[inside] = candidate[inside]
     raster[outside] = -1

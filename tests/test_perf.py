@@ -57,5 +57,5 @@ def test_readme_performance_table_is_the_markdown_format():
     # CAN 1, solver 3 x 2, radar 2, quantization 1, scale 2, start-up 3.
     assert len(rows) == 15 and all(r.count("|") == 7 for r in rows)
     names = [r.split("|")[1].strip() for r in rows]
-    assert "import what a run needs (the command's)" in names
+    assert "start-up of a cut-in run (the command's)" in names
     assert any(n.startswith("adc frame, awr1843boost, 8 targets (20 in a row)") for n in names)

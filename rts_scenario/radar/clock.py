@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import fdtrc, ndtri
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -257,6 +256,8 @@ class LineSegments:
         scatter = np.sqrt(max(within, 0.0) / df_within)
         if scatter > 0.0:
             f = (between / df_between) / scatter ** 2
+            from scipy.special import fdtrc  # scipy when needed: see `check._assign`
+
             p = float(fdtrc(df_between, df_within, f))
         else:
             f, p = (np.inf, 0.0) if between > 0.0 else (0.0, 1.0)
@@ -576,6 +577,8 @@ class ClockTrack:
             [[0.0], np.cumsum(np.clip(np.diff(offset), -rate, rate))])
         # Each of K segments' means within z of its standard error of where it would lie
         # without the scatter, all at once with the chance of 3 sigma (Bonferroni).
+        from scipy.special import ndtri  # scipy when needed: see `check._assign`
+
         z = float(ndtri(1.0 - BENT_P / (2.0 * len(s))))
         error = bend.scatter_s / np.sqrt(s[:, 0])
         margin = 0.0

@@ -55,7 +55,6 @@ from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from .. import workers
 from ..arrays import direction_cosines
@@ -450,6 +449,8 @@ class SimulatedRadar:
         np.fft.fft(spec, axis=0, out=spec)
         power = np.einsum("lmn,lmn->ln", spec.real, spec.real)  # (L, N): non-coherent over
         power += np.einsum("lmn,lmn->ln", spec.imag, spec.imag)  # the channels
+        from scipy import ndimage  # scipy when needed: see `check._assign`
+
         noise = self._noise_floor(power)
         # Both FFTs are circular: a peak's neighbours wrap around in range and Doppler alike.
         hits = (power > noise * 10.0 ** (self.threshold_db / 10.0)) & (
@@ -494,6 +495,8 @@ class SimulatedRadar:
             inner = padded[train:-train, train:-train]
             floor = (_box_sum(padded, half) - _box_sum(inner, guard)) / footprint.sum()
         else:  # ordered statistic: the 3/4 quantile of the training cells
+            from scipy import ndimage
+
             floor = ndimage.rank_filter(padded, rank=int(0.75 * footprint.sum()),
                                         footprint=footprint, mode="constant")[half:-half,
                                                                               half:-half]

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 
 from ..piecewise import piece_index
 
@@ -139,6 +138,8 @@ def _sample_spline(
     """
     chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
     knots = np.concatenate([[0.0], np.cumsum(chords)])
+    from scipy.interpolate import CubicSpline  # scipy when needed: see `check._assign`
+
     curve = CubicSpline(knots, points, bc_type=(start_bc, end_bc))
     per_piece = np.maximum(SPLINE_MIN_SAMPLES, np.ceil(chords / SPLINE_STEP_M)).astype(int)
     params = np.concatenate(

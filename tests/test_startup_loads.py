@@ -1,0 +1,61 @@
+"""What a command loads before and during a run it has no use for.
+
+Any scipy module costs a command about a tenth of a second or more to import (scipy's array
+API layer loads numpy.f2py), so the run loads each where it is used: the Hungarian method only
+for frames with a choice, the spline only for spline paths, the CFAR filters only in `adc`
+frames.
+"""
+
+import itertools
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from rts_scenario.check import _assign
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_cut_in_run_loads_no_scipy_module_it_does_not_use():
+    code = (
+        "import sys\n"
+        "from rts_scenario.mf4 import defer\n"
+        "defer()\n"
+        "from rts_scenario.pipeline import run_scene\n"
+        f"result = run_scene({str(ROOT / 'scenarios' / 'cut_in.scenario.yaml')!r})\n"
+        "print(result.report.passed)\n"
+        "print(' '.join(sorted(m for m in ('scipy.optimize', 'scipy.sparse', 'scipy.ndimage',"
+        " 'scipy.interpolate') if m in sys.modules)) or 'none')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[:2] == ["True", "none"]
+
+
+def _best_pairs(cost):
+    """The cheapest one-to-one choice of pairs, by trying every one (the reference)."""
+    rows, cols = cost.shape
+    best, chosen = np.inf, None
+    for perm in itertools.permutations(range(cols), rows):
+        total = sum(cost[r, c] for r, c in enumerate(perm))
+        if total < best:
+            best, chosen = total, perm
+    return {(r, c) for r, c in enumerate(chosen)}
+
+
+def test_frames_with_a_choice_still_get_the_cheapest_pairs():
+    """Two frames: one where the nearest detection of each target is not the answer (the
+    greedy choice costs more), one without a choice; the pairs kept are the optimal ones."""
+    rng = np.random.default_rng(5)
+    cost3 = np.array([[1.0, 2.0, 9.0], [0.5, 8.0, 9.0], [3.0, 3.5, 0.2]])
+    det = np.array([0, 0, 0, 1, 1, 1, 2, 2, 2, 3])
+    target = np.array([0, 1, 2, 0, 1, 2, 0, 1, 2, 0])
+    cost = np.concatenate([cost3.ravel(), [rng.uniform()]])
+    frame_of = np.array([0, 0, 0, 1])  # detections 0-2 in frame 0, detection 3 in frame 1
+    kept = _assign(frame_of, det, target, cost, n_targets=3)
+    pairs = {(int(det[k]), int(target[k])) for k in kept if frame_of[det[k]] == 0}
+    assert pairs == _best_pairs(cost3) == {(0, 1), (1, 0), (2, 2)}
+    assert 9 in kept  # the frame without a choice keeps its only pair
+
