@@ -1977,7 +1977,10 @@ def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float,
         i = int(back[0])
         raise LogError(f"--log {log}: its radar cycles' timestamps go back: by "
                        f"{-step[i]:.6f} s from cycle {i + 1} to {i + 2} of the {timed.size} "
-                       f"with a timestamp ({back.size} such steps); {advice}")
+                       f"with a timestamp, in the order of the radar's counter "
+                       f"({back.size} such steps): the logger's clock was set back, or the "
+                       f"radar's counter restarted (switched off and on: a log of two runs, "
+                       f"cut it to one); {advice}")
 
 
 def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
@@ -2016,10 +2019,19 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
                            f"{cycle_s:.6g} s fits them); it cannot be aligned by them")
         # A cycle the stamps cannot tell from the profile's (within three standard errors, or
         # by less than rounding over the cycles), as live (`ClockTrack.cycle_from_bus`): the
-        # profile's, not the fit's noise.
-        kept = _indistinguishable(n, t, float(cycle_s), nominal_cycle_s)
+        # profile's, not the fit's noise. So too where they bend away from one line (a
+        # latency that changed on the way tilts the fit, the radar's clock running on), with
+        # the phase most of them keep (`CycleTimeFit.zero_s`); the check's `ClockTrack` then
+        # judges the bend (`ClockTrack.latency_change_reason`).
+        fit = CycleTimeFit()
+        fit.add(n.astype(np.int64), t)
+        bend = fit.bend()
+        kept = (bend is not None and bend.bent) or _indistinguishable(
+            n, t, float(cycle_s), nominal_cycle_s)
         if kept:
-            cycle_s, first_s = nominal_cycle_s, float(np.mean(t - nominal_cycle_s * n))
+            zero = fit.zero_s(nominal_cycle_s)
+            assert zero is not None  # cycles were added
+            cycle_s, first_s = nominal_cycle_s, zero
     else:
         kept = True
         cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - t0 - numbers[ok][0]

@@ -1624,3 +1624,89 @@ def test_a_profile_s_cycle_below_a_millisecond_is_bad_input_not_a_log_s(tmp_path
                                        r"0\.001|clock\.cycle_s: must be >= 0\.001"):
         RadarProfile.from_file(path)
     assert RadarClock(cycle_s=0.0007).cycle_s == 0.0007  # a fitted cycle is taken
+
+
+# -- a latency step: the phase is the one most cycles keep ------------------------------------
+
+@pytest.mark.parametrize("at", [0.3, 0.5, 0.7])
+def test_a_latency_step_leaves_the_phase_most_cycles_keep(at):
+    # 150 cycles of exactly 50 ms, their messages 100 ms +- 1 ms (uniform) after each, 120 ms
+    # later from some cycle on. The mean of the bus times less the cycles lies between the two
+    # latencies, the phase of no cycle; the fit takes the latency most cycles keep, and its
+    # error is that of the jitter (0.58 ms / root of the cycles), not of the step.
+    from rts_scenario.radar.clock import CycleTimeFit
+
+    n = np.arange(4242, 4392)
+    rng = np.random.default_rng(1)
+    step = 0.12 * (n >= 4242 + int(at * n.size))
+    bus = 100.0 + 0.05 * n + 0.1 + rng.uniform(-0.001, 0.001, n.size) + step
+    fit = CycleTimeFit()
+    fit.add(n[:40], bus[:40])
+    fit.add(n[40:], bus[40:])
+    assert fit.bend().bent
+    most = 0.1 if at > 0.5 else 0.22  # the latency of the side with more cycles
+    if at == 0.5:
+        most = 0.1  # equal sides: the shorter latency (a radar not taken for started late)
+    zero = fit.zero_s(0.05) - 100.0
+    assert zero == pytest.approx(most, abs=4 * fit.zero_error_s(0.05))
+    assert fit.zero_error_s(0.05) == pytest.approx(
+        0.001 / np.sqrt(3) / np.sqrt(max(at, 1 - at) * 150 if at != 0.5 else 72), rel=0.3)
+    flat = CycleTimeFit()
+    flat.add(n, bus - step)  # no step: the least-squares intercept, as before
+    assert not flat.bend().bent
+    assert flat.zero_s(0.05) - 100.0 == pytest.approx(np.mean(bus - step - 0.05 * n) - 100.0,
+                                                     abs=1e-9)
+
+
+def test_a_free_radar_whose_latency_steps_is_checked_at_its_phase(tmp_path):
+    # Switched on at 49 ms, the radar measures 1 ms before each frame change; its messages
+    # reach the bus 130 ms +- 1 ms later (its profile's latency), 16 ms more from half-way.
+    # Its phase (49 ms) is the one most cycles keep: every cycle is judged against the frame
+    # it saw, none missing, and the change is reported; the mean of both latencies put it 8 ms
+    # late (past the frame change: every cycle judged against the next frame).
+    scene, radar = free_radar(tmp_path, 0.05, 0.049, 4242)
+    log = tmp_path / "free.blf"
+    rng = np.random.default_rng(1)
+    report = run_stamped(scene, lambda n: 0.13 + rng.uniform(-0.001, 0.001, n.size)
+                         + 0.016 * (n >= 4242 + 120), log, radar)
+    assert report.passed, report.reasons
+    assert report.radar_clock["start_offset_s"] == pytest.approx(0.049, abs=1e-3)
+    assert report.radar_clock["latency_change_s"] == pytest.approx(0.016, abs=2e-3)
+    assert report.frames["total"] == report.frames["checked"] == 240
+    assert report.frames["missing"] == report.frames["after_scene"] == 0
+
+
+def test_a_radar_whose_latency_rises_by_more_than_a_cycle_did_not_start_late(tmp_path):
+    # The radar's count starts with the scene (4242 at 0 s); from half-way its messages take
+    # 120 ms more. The mean of its bus times lies 60 ms late, more than a cycle: a late start
+    # by the mean, which it is not; by the latency most cycles keep it started on time.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.1, jitter_s=0.002,
+                             counter_start=4242)
+    rng = np.random.default_rng(1)
+    report = run_stamped(scene, lambda n: 0.1 + rng.uniform(-0.001, 0.001, n.size)
+                         + 0.12 * (n >= 4242 + 120), tmp_path / "late.blf")
+    assert report.passed, report.reasons
+    assert report.radar_clock["start_from"] == "profile"
+    assert report.frames["total"] == report.frames["checked"] == 240
+
+
+def test_a_log_whose_latency_steps_is_re_checked_on_the_profile_s_cycle(tmp_path):
+    # Without a sidecar the re-check fits a clock to the log's stamps. A latency 11 ms longer
+    # from half-way (within the stamps' jumps the profile's 5 ms jitter allows) tilts that
+    # fit 0.14 % off the profile, which would judge cycles against the wrong frames; the stamps
+    # bend, so the profile's cycle is kept, as live, and its phase is the one most keep.
+    scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.13, jitter_s=0.005,
+                             counter_start=4242)
+    log = tmp_path / "step.blf"
+    rng = np.random.default_rng(2)
+    live = run_stamped(scene, lambda n: 0.13 + rng.uniform(-0.001, 0.001, n.size)
+                       + 0.011 * (n >= 4242 + 120), log)
+    assert live.passed, live.reasons
+    Path(str(log) + ".rts.json").unlink()
+    result = check_log(scene, log)
+    again = result.report
+    assert again.passed, again.reasons
+    assert result.alignment.cycle_s == 0.05 and result.alignment.cycle_source == "profile"
+    assert again.frames["total"] == again.frames["checked"] == 240
+    assert again.frames["missing"] == again.frames["after_scene"] == 0
+    assert again.radar_clock["latency_change_s"] == pytest.approx(0.011, abs=2e-3)
