@@ -369,7 +369,11 @@ class Checker:
         self._not_checked = (None if not_carried is None
                              else unchecked_quantities(not_carried))
         self._csv = csv.writer(detections_out) if detections_out is not None else None
+        # Target-frames under each limit: of the scene's frames (`add_frames`), or, where a
+        # caller gives none, of the frames its cycles saw.
         self._limits = {name: np.zeros(n, dtype=np.int64) for name in LIMITS}
+        self._limits_seen = {name: np.zeros(n, dtype=np.int64) for name in LIMITS}
+        self._frames_given = False
         self._out_of_tolerance = np.zeros(n, dtype=np.int64)
         self._missed = np.zeros(n, dtype=np.int64)
         self._unchecked_k = np.zeros(n, dtype=np.int64)
@@ -447,15 +451,22 @@ class Checker:
         self._blocks.append(_Block(first_frame, tracks, _status_flags(status, tracks),
                                    other if window is not None else None, window))
 
-    def add_frames(self, played: ArrayLike) -> None:
-        """Take where each target was checkable in the scene's frames (frames x targets).
+    def add_frames(self, tracks: Tracks, status: ArrayLike) -> None:
+        """Take the scene's frames: their ground truth and the schedule's `Status` flags.
 
-        Checkable: played exactly as specified and measurable (`checkable`); in any batches.
-        The truth of the radar's cycles says only what the cycles measured: a target played
-        in frames that no cycle measured (a radar slower than the frames, or starting after
-        them) was never checked, and fails the verdict.
+        In any batches, each frame once. Where each target was checkable (played exactly as
+        specified and measurable: `checkable`), and each target-frame under a limit
+        (`limit_masks`), counted here whether or not a radar cycle measured the frame: the
+        truth of the radar's cycles says only what the cycles measured. A target played in
+        frames that no cycle measured (a radar slower than the frames, or starting after
+        them) was never checked, and fails the verdict; one not played as the scene says
+        there fails unless the scene expects that limit, as where a cycle saw it.
         """
-        self._played += np.asarray(played, dtype=bool).sum(axis=0)
+        flags = _status_flags(status, tracks)
+        self._frames_given = True
+        self._played += checkable(tracks, flags).sum(axis=0)
+        for name, mask in limit_masks(tracks, flags).items():
+            self._limits[name] += mask.sum(axis=0)
 
     def anchor(self, number: int, bus_t_s: float) -> None:
         """Take cycle ``number``, on the bus at ``bus_t_s``, as the one before the first to come.
@@ -658,9 +669,9 @@ class Checker:
         for q, _ in QUANTITIES:
             self._stats[q].add(errors[q], truth)
         detected = assigned & within & truth
-
         for name, mask in judged.limits.items():
-            self._limits[name] += mask.sum(axis=0)
+            self._limits_seen[name] += mask.sum(axis=0)
+
         self._out_of_tolerance += (assigned & ~within & truth).sum(axis=0)
         self._missed += (ok[:, None] & truth & ~assigned).sum(axis=0)
         self._unchecked_k += ((~ok)[:, None] & truth).sum(axis=0)
@@ -706,8 +717,10 @@ class Checker:
         det, target = _range_candidates(frame_of, values["range_m"], tracks.range_m,
                                         GATE * tol["range_m"])
         # An echo the RTS's steps played off its angle (ANGLE_QUANTIZED, not checkable) is
-        # matched on range and radial velocity only: its detections are no false alarms.
-        on_angle = (flags & Status.ANGLE_QUANTIZED) == 0
+        # matched on range and radial velocity only: its detections are no false alarms. So is
+        # a clipped one (ATTENUATION_CLIPPED): each channel clamped at the attenuator's end on
+        # its own changes the channels' ratios, and with them the angle the radar sees.
+        on_angle = (flags & (Status.ANGLE_QUANTIZED | Status.ATTENUATION_CLIPPED)) == 0
         inside, cost, diffs = self._gate(det, target, frame_of, values, invalid, played,
                                          {q: getattr(tracks, q) for q, _ in QUANTITIES},
                                          angles=on_angle[frame_of[det], target])
@@ -716,7 +729,7 @@ class Checker:
         pair = _assign(frame_of, det, target, cost, n_targets)
         match = np.full(n_det, -1, dtype=np.int64)
         match[det[pair]] = target[pair]
-        self._match_folded(match, tracks, played, frame_of, values, invalid)
+        self._match_folded(match, tracks, played, on_angle, frame_of, values, invalid)
         self._match_off_angle(match, tracks, played & ~on_angle, frame_of, values, invalid)
         matched = match >= 0
         assigned = np.zeros((n_frames, n_targets), dtype=bool)
@@ -757,15 +770,16 @@ class Checker:
         return inside, cost, diffs
 
     def _match_folded(self, match: NDArray[np.int64], tracks: Tracks, played: BoolArray,
-                      frame_of: NDArray[np.int64], values: dict[str, FloatArray],
-                      invalid: BoolArray) -> None:
+                      on_angle: BoolArray, frame_of: NDArray[np.int64],
+                      values: dict[str, FloatArray], invalid: BoolArray) -> None:
         """Give detections left unmatched to the echoes beyond the radar's limits they show.
 
         A played echo beyond the radar's unambiguous range or velocity shows where the radar's
         FFTs fold it (`Tracks.folded`). Folded in velocity, its angles are not compared: the
         radar's TDM-MIMO compensation used the folded Doppler, so its angles are wrong, and it
-        may report the echo at several of them. Every unmatched detection within the gate of
-        such an echo is that echo's (the nearest one's), not a false alarm; the target-frame
+        may report the echo at several of them. Nor where the RTS played it off its angle
+        (``on_angle`` False: quantized or clipped). Every unmatched detection within the gate
+        of such an echo is that echo's (the nearest one's), not a false alarm; the target-frame
         stays under its limit (not checkable), so none of this decides a detection rate.
         """
         beyond = played & tracks.present & ~(tracks.in_range & tracks.in_velocity)
@@ -773,14 +787,15 @@ class Checker:
             range_m, velocity = tracks.folded()
             self._match_rest(match, tracks, beyond, frame_of, values, invalid,
                              {"range_m": range_m, "radial_velocity_mps": velocity},
-                             tracks.in_velocity)
+                             tracks.in_velocity & on_angle)
 
     def _match_off_angle(self, match: NDArray[np.int64], tracks: Tracks, off: BoolArray,
                          frame_of: NDArray[np.int64], values: dict[str, FloatArray],
                          invalid: BoolArray) -> None:
         """Give detections left unmatched to the echoes the RTS's steps played off their angle.
 
-        Settings that move a target's angle (``ANGLE_QUANTIZED``) may play more than one peak
+        Settings that move a target's angle (``ANGLE_QUANTIZED``, or channels clipped at the
+        attenuator's end one by one: ``ATTENUATION_CLIPPED``) may play more than one peak
         at its range and velocity (a split beam), which the radar reports as several
         detections. Every unmatched detection within the range and velocity gate of such an
         echo is that echo's (the nearest one's), not a false alarm; the target-frame is not
@@ -1083,13 +1098,14 @@ class Checker:
         (`DetectionPublisher.unsendable_reason`), said with ``bus["unsendable_detections"]``.
         """
         exp = self.expectations
+        limits = self._limits if self._frames_given else self._limits_seen
         targets = []
         limit_reasons = []
         for k, name in enumerate(self.names):  # one summary row per target
             n_check, n_det = int(self._checkable[k]), int(self._detected[k])
             rate = n_det / n_check if n_check else float("nan")
             unmeasured = n_check == 0 and self._played[k] > 0
-            hit = {lim: int(c[k]) for lim, c in self._limits.items() if c[k]}
+            hit = {lim: int(c[k]) for lim, c in limits.items() if c[k]}
             unexpected = [lim for lim in hit if lim not in self._expected[k]]
             if unexpected:
                 limit_reasons.append(FailReason(
@@ -1253,7 +1269,7 @@ def check_cycles(scene: str, tracks: Tracks, status: NDArray[np.uint16],
     checker = Checker(scene, tracks.names, expectations, counter_modulus=counter_modulus,
                       expected_limits=expected_limits)
     checker.add_truth(0, tracks, status)
-    checker.add_frames(checkable(tracks, _status_flags(status, tracks)))
+    checker.add_frames(tracks, status)
     checker.add_cycles(cycles)
     checker.settle()
     return checker.report(bus)

@@ -33,7 +33,7 @@ from .canbus import (
     with_mapping_hint,
 )
 from .canbus.mapping import CanMapping
-from .check import Checker, checkable
+from .check import Checker
 from .detections import Detections, bus_times, host_times, sequential_numbers, unwrap_counter
 from .errors import MeasurementError
 from .hostclock import HostClockWatch, monotonic_s, wall_s
@@ -1013,7 +1013,7 @@ class Pipeline:
                                       frame_rate_hz=scene.frame_rate_hz,
                                       angle_tolerance_deg=angle_tolerance_deg(scene))
             schedule = replace(schedule, frame_index=frames)
-            checker.add_frames(checkable(tracks, schedule.status))
+            checker.add_frames(tracks, schedule.status)
             if played is not None:
                 played.add(frames, tracks, schedule.status)
             mark = timer.add("schedule_s", mark)

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from . import mf4
 from .canbus import DetectionReceiver, channel_label, mapping_reason, with_mapping_hint
 from .canbus.mapping import CanMapping
-from .check import Checker, checkable
+from .check import Checker
 from .detections import Detections, sequential_numbers
 from .errors import RtsError, ScenarioError
 from .file_kinds import identify
@@ -2213,7 +2213,7 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
         if played is None:
             digest.update(status.tobytes())
         truth_sums.add(tracks, frames)
-        checker.add_frames(checkable(tracks, status))
+        checker.add_frames(tracks, status)
         sent = None if late is None else scene.t_s[frames] + late[frames]
         check_cycles(truths.add(frames, status, sent))
     check_cycles(truths.finish())

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rts_scenario.check import Checker, checkable
+from rts_scenario.check import Checker
 from rts_scenario.check import check_cycles as check
 from rts_scenario.detections import Detections, unwrap_counter
 from rts_scenario.kinematics import Tracks, compute_tracks
@@ -107,7 +107,7 @@ def test_streaming_in_blocks_equals_one_shot():
     edges = [0, 37, 150, 151, 399, 400]
     for i, (a, b) in enumerate(zip(edges, edges[1:], strict=False)):
         checker.add_truth(a, block(tr, a, b), played[a:b])
-        checker.add_frames(checkable(block(tr, a, b), played[a:b]))
+        checker.add_frames(block(tr, a, b), played[a:b])
         if i:  # cycles of a block arrive one block late, as from a radar with latency
             checker.add_cycles(cycles[edges[i - 1]:a])
         checker.settle(before_frame=edges[i - 1] if i else 0)
@@ -623,7 +623,7 @@ def test_cycles_measured_before_the_scene_are_counted_as_such_not_late_or_after_
     early = [Detections.empty(100 + scene_first - k, -0.05 * k, ()) for k in (3, 2, 1)]
     checker.add_cycles(early[:2])
     checker.add_truth(scene_first, tr, OK(10, 2))
-    checker.add_frames(checkable(tr, OK(10, 2)))
+    checker.add_frames(tr, OK(10, 2))
     checker.add_cycles(early[2:] + cycles_from(tr, first=100 + scene_first))
     checker.settle(before_frame=scene_first + 10)
     checker.add_cycles(cycles_from(truth(2, first=10), first=110 + scene_first))
@@ -641,7 +641,7 @@ def test_a_detection_rate_failed_by_detections_off_tolerance_names_the_quantity(
     tr = truth(10)
     checker = Checker("s", tr.names, EXPECT, counter_start=0)
     checker.add_truth(0, tr, OK(10, 2))
-    checker.add_frames(checkable(tr, OK(10, 2)))
+    checker.add_frames(tr, OK(10, 2))
     checker.add_cycles(cycles_from(tr, offset=0.5))
     checker.settle()
     reasons = checker.report().reasons
@@ -650,7 +650,7 @@ def test_a_detection_rate_failed_by_detections_off_tolerance_names_the_quantity(
     # Missing detections are no quantity off: the reason says the rate alone.
     checker = Checker("s", tr.names, EXPECT, counter_start=0)
     checker.add_truth(0, tr, OK(10, 2))
-    checker.add_frames(checkable(tr, OK(10, 2)))
+    checker.add_frames(tr, OK(10, 2))
     checker.add_cycles(cycles_from(tr, drop={(f, 0) for f in range(10)}))
     checker.settle()
     assert checker.report().reasons[0] == "t0: detection rate 0.0% < 90.0%"
@@ -676,7 +676,7 @@ def test_cycles_numbered_before_the_scene_that_come_during_it_are_no_cycles_of_t
     scene = on_bus(cycles_from(tr, first=100), 1000.0)
     other = on_bus([Detections.empty(50 + k, None, ()) for k in range(foreign)], 1000.2)
     checker.add_truth(0, tr, OK(10, 2))
-    checker.add_frames(checkable(tr, OK(10, 2)))
+    checker.add_frames(tr, OK(10, 2))
     checker.add_cycles(early + scene[:5] + other + scene[5:])
     checker.settle()
     report = checker.report()
