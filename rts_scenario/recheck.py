@@ -2021,8 +2021,8 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
         # by less than rounding over the cycles), as live (`ClockTrack.cycle_from_bus`): the
         # profile's, not the fit's noise. So too where they bend away from one line (a
         # latency that changed on the way tilts the fit, the radar's clock running on), with
-        # the phase most of them keep (`CycleTimeFit.zero_s`); the check's `ClockTrack` then
-        # judges the bend (`ClockTrack.latency_change_reason`).
+        # the phase of their lowest level (`CycleTimeFit.zero_s`); the check's `ClockTrack`
+        # then judges the bend (`ClockTrack.latency_change_reason`).
         fit = CycleTimeFit()
         fit.add(n.astype(np.int64), t)
         bend = fit.bend()

@@ -1628,29 +1628,31 @@ def test_a_profile_s_cycle_below_a_millisecond_is_bad_input_not_a_log_s(tmp_path
 
 # -- a latency step: the phase is the one most cycles keep ------------------------------------
 
-@pytest.mark.parametrize("at", [0.3, 0.5, 0.7])
-def test_a_latency_step_leaves_the_phase_most_cycles_keep(at):
-    # 150 cycles of exactly 50 ms, their messages 100 ms +- 1 ms (uniform) after each, 120 ms
-    # later from some cycle on. The mean of the bus times less the cycles lies between the two
-    # latencies, the phase of no cycle; the fit takes the latency most cycles keep, and its
-    # error is that of the jitter (0.58 ms / root of the cycles), not of the step.
+@pytest.mark.parametrize(("at", "rise"), [(0.3, 0.12), (0.5, 0.12), (0.7, 0.12), (0.3, -0.12),
+                                          (0.7, -0.12)])
+def test_a_latency_step_leaves_the_phase_of_the_radar_s_own_latency(at, rise):
+    # 150 cycles of exactly 50 ms, their messages 100 ms +- 1 ms (uniform) after each (or 220
+    # ms, held up), 120 ms later (earlier) from some cycle on. The mean of the bus times less
+    # the cycles lies between the two latencies, the phase of no cycle. A message held up
+    # only adds latency: the fit takes the lower level, however many cycles keep either, and
+    # its error is that of the jitter (0.58 ms / root of that level's cycles), not the step's.
     from rts_scenario.radar.clock import CycleTimeFit
 
     n = np.arange(4242, 4392)
     rng = np.random.default_rng(1)
-    step = 0.12 * (n >= 4242 + int(at * n.size))
-    bus = 100.0 + 0.05 * n + 0.1 + rng.uniform(-0.001, 0.001, n.size) + step
+    first = int(at * n.size)
+    base = 0.1 if rise > 0 else 0.22
+    step = rise * (n >= 4242 + first)
+    bus = 100.0 + 0.05 * n + base + rng.uniform(-0.001, 0.001, n.size) + step
     fit = CycleTimeFit()
     fit.add(n[:40], bus[:40])
     fit.add(n[40:], bus[40:])
     assert fit.bend().bent
-    most = 0.1 if at > 0.5 else 0.22  # the latency of the side with more cycles
-    if at == 0.5:
-        most = 0.1  # equal sides: the shorter latency (a radar not taken for started late)
     zero = fit.zero_s(0.05) - 100.0
-    assert zero == pytest.approx(most, abs=4 * fit.zero_error_s(0.05))
+    assert zero == pytest.approx(0.1, abs=4 * fit.zero_error_s(0.05))
+    lower = first if rise > 0 else n.size - first  # the cycles at the lower latency
     assert fit.zero_error_s(0.05) == pytest.approx(
-        0.001 / np.sqrt(3) / np.sqrt(max(at, 1 - at) * 150 if at != 0.5 else 72), rel=0.3)
+        0.001 / np.sqrt(3) / np.sqrt(lower), rel=0.35)
     flat = CycleTimeFit()
     flat.add(n, bus - step)  # no step: the least-squares intercept, as before
     assert not flat.bend().bent
@@ -1676,15 +1678,18 @@ def test_a_free_radar_whose_latency_steps_is_checked_at_its_phase(tmp_path):
     assert report.frames["missing"] == report.frames["after_scene"] == 0
 
 
-def test_a_radar_whose_latency_rises_by_more_than_a_cycle_did_not_start_late(tmp_path):
-    # The radar's count starts with the scene (4242 at 0 s); from half-way its messages take
-    # 120 ms more. The mean of its bus times lies 60 ms late, more than a cycle: a late start
-    # by the mean, which it is not; by the latency most cycles keep it started on time.
+@pytest.mark.parametrize("from_cycle", [72, 120, 200])
+def test_a_radar_whose_latency_rises_by_more_than_a_cycle_did_not_start_late(tmp_path,
+                                                                             from_cycle):
+    # The radar's count starts with the scene (4242 at 0 s); from some cycle on its messages
+    # take 120 ms more. The mean of its bus times lies up to 120 ms late, more than a cycle:
+    # a late start by the mean, which it is not; by its own (lowest) latency it started on
+    # time, whether the rise came before or after the middle of the run.
     scene = scene_with_clock(tmp_path, cycle_s=0.05, latency_s=0.1, jitter_s=0.002,
                              counter_start=4242)
     rng = np.random.default_rng(1)
     report = run_stamped(scene, lambda n: 0.1 + rng.uniform(-0.001, 0.001, n.size)
-                         + 0.12 * (n >= 4242 + 120), tmp_path / "late.blf")
+                         + 0.12 * (n >= 4242 + from_cycle), tmp_path / "late.blf")
     assert report.passed, report.reasons
     assert report.radar_clock["start_from"] == "profile"
     assert report.frames["total"] == report.frames["checked"] == 240
@@ -1710,3 +1715,22 @@ def test_a_log_whose_latency_steps_is_re_checked_on_the_profile_s_cycle(tmp_path
     assert again.frames["total"] == again.frames["checked"] == 240
     assert again.frames["missing"] == again.frames["after_scene"] == 0
     assert again.radar_clock["latency_change_s"] == pytest.approx(0.011, abs=2e-3)
+
+
+def test_exact_stamps_with_a_latency_step_give_a_verdict(tmp_path):
+    # Stamps exactly on a 40 ms grid (a logger stamping by a cycle counter), 16 ms later from
+    # cycle 500: the segments' scatter within is 0 but for rounding (a hair below 0), which
+    # must neither empty the level nor divide by zero: the phase is the lower level's.
+    from rts_scenario.radar.clock import CycleTimeFit
+    from rts_scenario.recheck import _fitted_clock
+
+    n = np.arange(1000)
+    bus = 1000.0 + 0.1 + 0.04 * n + 0.016 * (n >= 500)
+    fit = CycleTimeFit()
+    fit.add(n, bus)
+    assert fit.bend().bent
+    assert fit.zero_s(0.04) == pytest.approx(1000.1, abs=1e-9)
+    assert np.isfinite(fit.zero_error_s(0.04))
+    clock, kept = _fitted_clock(n, bus, n % 65536, 0.1, 1000.0, 65536, 0.04)
+    assert kept and clock.cycle_s == 0.04
+    assert clock.start_offset_s == pytest.approx(0.0, abs=1e-9)

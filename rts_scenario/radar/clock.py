@@ -350,7 +350,7 @@ class CycleTimeFit:
         The mean of their bus times less ``cycle_s`` times their numbers (the least-squares
         intercept for that slope). Where they bend away from one line (`bend`: a latency that
         changed on the way), the mean of the two sides of a step is the phase of neither: the
-        offset most cycles keep instead (`_level`). None before the first cycle.
+        radar's own level instead, the lowest (`_level`). None before the first cycle.
         """
         if self._origin is None:
             return None
@@ -374,33 +374,38 @@ class CycleTimeFit:
         return float(np.sqrt(max(var, 0.0) / (k - 1)))
 
     def _level(self, cycle_s: float) -> tuple[float, float] | None:
-        """Return the offset most cycles keep where they bend, and its error; None unbent.
+        """Return the radar's own level of offsets where they bend, and its error; None unbent.
 
         Offsets (mean bus time less ``cycle_s`` times the mean number, about the origin) of the
         segments that keep to one level: a segment across a step scatters within by far more
         than the others (more than nine times their median variance about that slope) and is
-        left out. The segment at their median weighted by their cycles is on the level most
-        cycles keep; that level is the segments within four standard errors of it, their
-        offsets' mean weighted by their cycles (its error from the scatter within them).
+        left out. A message held up only adds to its latency: the lowest level is the radar's
+        (a latency that rose later, or a start-up's messages held up, lie above it), whether
+        or not most cycles keep it. The level is the segments within four standard errors of
+        the lowest of the full-length ones, their offsets' mean weighted by their cycles (its
+        error from the scatter within them).
         """
         bend = self.bend()
         if bend is None or not bend.bent:
             return None
         s = bend.segments
         offset = s[:, 2] - cycle_s * s[:, 1]
-        spread = s[:, 5] - 2.0 * cycle_s * s[:, 4] + cycle_s * cycle_s * s[:, 3]
+        # Centred sums about each segment's own means: >= 0 but for rounding (exact stamps).
+        spread = np.maximum(s[:, 5] - 2.0 * cycle_s * s[:, 4] + cycle_s * cycle_s * s[:, 3],
+                            0.0)
         within = spread / np.maximum(s[:, 0] - 1.0, 1.0)
         several = s[:, 0] > 1.0  # one cycle alone cannot tell
         level = ~several
         if several.any():
             level |= within <= 9.0 * np.median(within[several])
         count, offset, spread = s[level, 0], offset[level], spread[level]
-        order = np.argsort(offset, kind="stable")
-        middle = order[int(np.searchsorted(np.cumsum(count[order]), 0.5 * count.sum()))]
+        full = np.flatnonzero(count >= np.median(count))
+        lowest = full[int(np.argmin(offset[full]))]
         dof = float(np.sum(count - 1.0))
         scatter = float(np.sqrt(np.sum(spread) / dof)) if dof > 0 else bend.scatter_s
-        same = np.abs(offset - offset[middle]) <= 4.0 * scatter * np.sqrt(
-            1.0 / count + 1.0 / count[middle])
+        same = np.abs(offset - offset[lowest]) <= 4.0 * scatter * np.sqrt(
+            1.0 / count + 1.0 / count[lowest])
+        same[lowest] = True
         cycles = float(count[same].sum())
         return (float(np.sum(count[same] * offset[same]) / cycles),
                 scatter / float(np.sqrt(cycles)))
@@ -500,8 +505,9 @@ class ClockTrack:
       scene, not started by it) measures at any point of the scene's frames. Where the scene's
       start is known on the bus's clock (``origin_s``: a paced stream, or the simulated radar
       in process), cycle ``n`` is measured at its bus time less the profile's latency less
-      ``origin_s``, on the fitted line (where the cycles bend, the latency most of them keep:
-      `CycleTimeFit.zero_s`). Otherwise the profile's ``start_offset_s`` holds.
+      ``origin_s``, on the fitted line (where the cycles bend, their lowest level: held-up
+      messages only add latency, `CycleTimeFit.zero_s`). Otherwise the profile's
+      ``start_offset_s`` holds.
 
     A bus stamped by an interface's own clock may run off the host's: ``scale`` is the host's
     seconds per second of the bus's clock (1: the same clock), and scene times are the bus's
