@@ -750,7 +750,9 @@ class Checker:
         """Which candidate pairs lie within the gate of a played echo, their costs and errors.
 
         ``seen``: each quantity's truth where the radar shows it; ``angles`` (per pair): where
-        its angles are compared (default: every pair).
+        its angles are compared (default: every pair). A pair whose angles are not compared
+        costs as much for them as the gate's edge: an echo played off its angle never takes a
+        detection from a target that is within the gate on its angles too.
         """
         tol = self.expectations.tolerances
         cost = np.zeros(det.size)
@@ -764,7 +766,7 @@ class Checker:
             if q != "rcs_dbsm":  # RCS fluctuates: it does not decide who is who
                 norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
                 if angles is not None and q in ("az_deg", "el_deg"):
-                    norm = np.where(angles, norm, 0.0)
+                    norm = np.where(angles, norm, GATE)
                 cost += norm * norm
                 inside &= np.abs(norm) <= GATE
         return inside, cost, diffs

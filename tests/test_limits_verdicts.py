@@ -9,6 +9,7 @@ limit the scene expects (clipped, off its angle, folded) is no false detection.
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -124,3 +125,41 @@ def test_an_echo_folded_in_range_and_played_off_its_angle_is_no_false_detection(
     assert report.folded_detections == 40 and report.false_detections == 0
     assert report.passed, report.reasons
 
+
+
+def test_an_echo_off_its_angle_takes_no_detection_from_a_checkable_target():
+    # Two targets at the same range and radial velocity, one played off its angle (not
+    # compared in angle), one checkable; the radar reports one detection, on the checkable
+    # target's angles. It is that target's: the off-angle echo costs the gate's edge in angle.
+    from rts_scenario.check import Checker
+    from rts_scenario.detections import Detections
+    from rts_scenario.kinematics import Tracks
+    from rts_scenario.scenario.model import Expectations
+    from rts_scenario.schedule import Status
+
+    expect = Expectations(tolerances={"range_m": 0.3, "radial_velocity_mps": 0.3,
+                                      "az_deg": 0.5, "el_deg": 1.0, "rcs_db": 100.0})
+    shape = (10, 2)
+    ones = np.ones(shape, dtype=bool)
+    tracks = Tracks(names=("clipped", "clear"), t_s=np.arange(10) * 0.05,
+                    range_m=np.full(shape, 20.0), radial_velocity_mps=np.zeros(shape),
+                    doppler_hz=np.zeros(shape), rcs_dbsm=np.full(shape, 10.0),
+                    az_deg=np.tile([0.4, 0.0], (10, 1)), el_deg=np.zeros(shape),
+                    position_m=np.zeros((*shape, 3)), present=ones, in_coverage=ones,
+                    in_range=ones, in_velocity=ones)
+    status = np.zeros(shape, dtype=np.uint16)
+    status[:, 0] = Status.ATTENUATION_CLIPPED
+    cycles = [Detections(cycle=f, t_s=0.05 * f, range_m=np.array([20.0]),
+                         radial_velocity_mps=np.array([0.0]), az_deg=np.array([0.05]),
+                         el_deg=np.array([0.0]), rcs_dbsm=np.array([10.0]),
+                         snr_db=np.array([30.0])) for f in range(10)]
+    checker = Checker("s", tracks.names, expect, counter_start=0,
+                      expected_limits=[frozenset({"attenuation_clipped"}), frozenset()])
+    checker.add_truth(0, tracks, status)
+    checker.add_frames(tracks, status)
+    checker.add_cycles(cycles)
+    checker.settle()
+    report = checker.report()
+    clear = next(t for t in report.targets if t.name == "clear")
+    assert clear.detection_rate == 1.0 and report.false_detections == 0
+    assert report.passed, report.reasons
