@@ -92,7 +92,8 @@ def write_plots(result: RunResult, folder: str | Path, stem: str | None = None,
     angles.plot(scene.rig.az_deg, scene.rig.el_deg, "k^", ms=6, label="front ends", zorder=1)
     top.set(xlabel="y (m, left)", ylabel="x (m, forward)", title="targets seen from the radar")
     top.invert_xaxis()
-    top.legend(fontsize=7, loc="best")
+    if top.get_legend_handles_labels()[0]:  # no target: nothing to name
+        top.legend(fontsize=7, loc="best")
     angles.set(xlabel="azimuth (deg, left)", ylabel="elevation (deg)",
                title="directions and rig coverage (dots: checkable frames)")
     angles.invert_xaxis()

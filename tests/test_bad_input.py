@@ -920,7 +920,8 @@ def test_random_command_lines_never_raise(places, capsys, data):
     (["run", "{scene}", "--output", "bogus"], 2, r"^--output 'bogus': unknown output"),
     (["run", "{tmp}/none.scenario.yaml"], 2, r"^{tmp}/none.scenario.yaml: cannot read file"),
     (["check", "{scene}", "--log", "{tmp}/none.blf"], 2, r"^--log {tmp}/none.blf: no such file"),
-], ids=["run-output", "run-missing-scene", "check-missing-log"])
+    (["validate", "{tmp}/none.scenario.yaml"], 2, r"^{tmp}/none.scenario.yaml: cannot read file"),
+], ids=["run-output", "run-missing-scene", "check-missing-log", "validate-missing-scene"])
 @pytest.mark.parametrize("where", ["before", "after"])
 def test_debug_adds_the_traceback_and_keeps_the_exit_code(places, capsys, argv, code, pattern,
                                                           where):

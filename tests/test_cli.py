@@ -720,7 +720,8 @@ def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_compl
     code = cli.main(["run", *scenes, "--detections", str(detections), "--json", str(report)])
     out, err = capsys.readouterr()
     assert code == 1 and calls == ["approaching-target", "cut-out"]
-    assert "cut_out.scenario.yaml: interrupted (Ctrl-C) while running: no verdict" in err
+    assert ("cut_out.scenario.yaml: interrupted (Ctrl-C or a stop signal) while running: "
+            "no verdict") in err
     entries = json.loads(report.read_text())
     # The scene under way had loaded: its entry names it by the scene's name (docs/cli.md),
     # as the summary line does.

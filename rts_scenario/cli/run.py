@@ -303,8 +303,8 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         interrupted = True
         if current is not None:
             name, path, variant, overrides, log = current
-            failed(name, path, RtsError("interrupted (Ctrl-C) while running: no verdict"),
-                   variant, overrides)
+            failed(name, path, RtsError("interrupted (Ctrl-C or a stop signal) while running: "
+                                        "no verdict"), variant, overrides)
             if log:
                 print(f"note: {log} is cut short and has no sidecar: a check of it aligns it "
                       f"by its timestamps and fails on the cycles it lacks", file=sys.stderr)

@@ -7,7 +7,7 @@ import sys
 from typing import Any
 
 from ..errors import located
-from .common import EXIT_BAD_INPUT, EXIT_OK, METHODS
+from .common import EXIT_BAD_INPUT, EXIT_OK, METHODS, show_traceback
 
 
 def _do_validate(args: argparse.Namespace) -> int:
@@ -23,6 +23,7 @@ def _do_validate(args: argparse.Namespace) -> int:
         try:
             combos = parametrizations(path)
         except RtsError as exc:
+            show_traceback(args)
             print(f"error: {located(path, exc)}", file=sys.stderr)
             bad += 1
             continue
@@ -33,6 +34,7 @@ def _do_validate(args: argparse.Namespace) -> int:
                 scene = load_scenario(path, overrides)
                 pre = preflight(scene, args.method)
             except RtsError as exc:
+                show_traceback(args)
                 bad += 1
                 errors.setdefault(located(path, exc), []).append(ident)
                 continue
