@@ -402,8 +402,8 @@ def memory_slopes(runs: dict[int, dict[str, Any]]) -> tuple[float, float, bool]:
 
 
 # Target counts whose peak memory tells its growth (`scale`): a run's batch is 500 frames up to
-# 32 targets (`preflight.frames_per_batch`), its peak growing with the batch (2.3 MB per target
-# from 8 to 32), and 16,384 target-frames beyond: there the peak grows by what a target keeps.
+# 32 targets (`preflight.frames_per_batch`), its peak growing with the batch, and 16,384
+# target-frames beyond: there the peak grows by what a target keeps.
 MEMORY_TARGETS = (128, 320)
 
 

@@ -134,6 +134,14 @@ def _moments(x: FloatArray, y: FloatArray) -> FloatArray:
     return np.array([x.size, mx, my, dx @ dx, dx @ dy, dy @ dy], dtype=np.float64)
 
 
+def _spread_about(s: FloatArray, slope: float) -> FloatArray:
+    """Return each segment's sum of squares about a line of ``slope`` through its means.
+
+    Rows of `_moments`; not clamped: rounding may leave a hair below 0 where the points lie on it.
+    """
+    return s[..., 5] - 2.0 * slope * s[..., 4] + slope * slope * s[..., 3]
+
+
 def _combine(a: FloatArray, b: FloatArray) -> FloatArray:
     """Moments of two groups of points together (rows of `_moments`, or arrays of them)."""
     k = a[..., 0] + b[..., 0]
@@ -252,7 +260,7 @@ class LineSegments:
             s = np.vstack([_combine(s[0:even:2], s[1:even:2]), s[even:]])
         residual = (s[:, 2] - my) - slope * (s[:, 1] - mx)
         between = float(s[:, 0] @ (residual * residual))
-        within = float(np.sum(s[:, 5] - 2.0 * slope * s[:, 4] + slope * slope * s[:, 3]))
+        within = float(np.sum(_spread_about(s, slope)))
         scatter = np.sqrt(max(within, 0.0) / df_within)
         if scatter > 0.0:
             f = (between / df_between) / scatter ** 2
@@ -391,8 +399,7 @@ class CycleTimeFit:
         s = bend.segments
         offset = s[:, 2] - cycle_s * s[:, 1]
         # Centred sums about each segment's own means: >= 0 but for rounding (exact stamps).
-        spread = np.maximum(s[:, 5] - 2.0 * cycle_s * s[:, 4] + cycle_s * cycle_s * s[:, 3],
-                            0.0)
+        spread = np.maximum(_spread_about(s, cycle_s), 0.0)
         within = spread / np.maximum(s[:, 0] - 1.0, 1.0)
         several = s[:, 0] > 1.0  # one cycle alone cannot tell
         level = ~several
