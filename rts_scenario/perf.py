@@ -474,16 +474,20 @@ def startup_seconds(scene: str | Path, rounds: int = 5, pycache: Path | None = N
     """Return what a fresh command spends before it runs ``scene`` as fast as a repeated run (s).
 
     Its imports as the command makes them (python-can's MF4 support deferred,
-    `rts_scenario.mf4.defer`) plus its first run, less a second run in the same interpreter.
-    Whatever the first run loads on first use (scipy for an assignment, the solver plan from
-    its disk cache) counts; the plan is built, if at all, in the untimed first interpreter.
+    `rts_scenario.mf4.defer`; the collector paused, `rts_scenario.startup`) plus its first
+    run, less a second run in the same interpreter. Whatever the first run loads on first use
+    (scipy for an assignment, the solver plan from its disk cache) counts; the plan is built,
+    if at all, in the untimed first interpreter.
     """
     code = textwrap.dedent(f"""
         import time
         t = time.perf_counter()
         from rts_scenario.mf4 import defer
+        from rts_scenario.startup import command_imports, mark_command_process
         defer()
-        from rts_scenario.pipeline import run_scene
+        mark_command_process()
+        with command_imports():
+            from rts_scenario.pipeline import run_scene
         run_scene({str(scene)!r})
         first = time.perf_counter() - t
         t = time.perf_counter()

@@ -355,7 +355,7 @@ class Pipeline:
                 self._logger = can.Logger(options.bus_log)
                 self._recording = _Recording(self.receiver, self._logger)
                 self._listeners = [self._recording]
-            self._notifier = can.Notifier(listen, self._listeners, timeout=0.05)
+            self._notifier = can.Notifier(listen, self._listeners, timeout=0.01)
             name, argument = split_spec(options.output)
             context = RunContext(rig=rig, radar=radar, radar_options=self._radar_options,
                                  open_publisher=self._open_publisher,

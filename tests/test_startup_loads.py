@@ -19,19 +19,26 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_a_cut_in_run_loads_no_scipy_module_it_does_not_use():
+    # Nor scipy.special: the radar clock's F test is asked only of cycles that depart from a
+    # line by more than rounding. Nor the installed estimators (every installed package's
+    # entry points, tens of ms): the scene's estimator is a built-in one.
     code = (
         "import sys\n"
         "from rts_scenario.mf4 import defer\n"
         "defer()\n"
         "from rts_scenario.pipeline import run_scene\n"
+        "import rts_scenario.registry as registry\n"
+        "calls = []\n"
+        "registry.entry_points = lambda **kw: calls.append(kw) or ()\n"
         f"result = run_scene({str(ROOT / 'scenarios' / 'cut_in.scenario.yaml')!r})\n"
         "print(result.report.passed)\n"
         "print(' '.join(sorted(m for m in ('scipy.optimize', 'scipy.sparse', 'scipy.ndimage',"
-        " 'scipy.interpolate') if m in sys.modules)) or 'none')\n")
+        " 'scipy.interpolate', 'scipy.special') if m in sys.modules)) or 'none')\n"
+        "print(len(calls))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=300)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split("\n")[:2] == ["True", "none"]
+    assert out.stdout.split("\n")[:3] == ["True", "none", "0"]
 
 
 def _best_pairs(cost):
@@ -59,3 +66,26 @@ def test_frames_with_a_choice_still_get_the_cheapest_pairs():
     assert pairs == _best_pairs(cost3) == {(0, 1), (1, 0), (2, 2)}
     assert 9 in kept  # the frame without a choice keeps its only pair
 
+
+
+def test_a_command_imports_with_the_collector_paused_once_and_only_in_its_own_process():
+    code = (
+        "import gc\n"
+        "from rts_scenario.startup import command_imports, mark_command_process\n"
+        "seen = []\n"
+        "with command_imports():\n"
+        "    seen.append((gc.isenabled(), gc.get_freeze_count()))\n"
+        "mark_command_process()\n"
+        "with command_imports():\n"
+        "    import json\n"
+        "    seen.append((gc.isenabled(), gc.get_freeze_count()))\n"
+        "frozen = gc.get_freeze_count()\n"
+        "seen.append((gc.isenabled(), frozen > 0))\n"
+        "with command_imports():\n"
+        "    seen.append((gc.isenabled(), gc.get_freeze_count() == frozen))\n"
+        "print(seen)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr
+    # Unmarked: as it was; marked: paused, then enabled with the objects frozen; once only.
+    assert out.stdout.strip() == "[(True, 0), (False, 0), (True, True), (True, True)]"

@@ -166,8 +166,10 @@ def console() -> NoReturn:
     these is noted, and acted on once they are in place.
     """
     from ..mf4 import defer
+    from ..startup import mark_command_process
 
     defer()  # python-can's MF4 support loads with a MF4 log, not at start-up (0.7 s)
+    mark_command_process()  # its imports with the collector paused (`command_imports`)
     main_thread = threading.current_thread() is threading.main_thread()
     noted: list[int] = []
     if main_thread:

@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import Any
 
+from ..startup import command_imports
 from .common import (
     EXIT_FAIL,
     EXIT_OK,
@@ -19,11 +20,12 @@ from .common import (
 
 
 def _do_check(args: argparse.Namespace) -> int:
-    from ..canbus.mapping import CanMapping
-    from ..check import tolerances_below_bus_steps
-    from ..errors import RtsError
-    from ..recheck import check_log, check_log_file, log_variant
-    from ..scenario import load_scenario
+    with command_imports():  # paused collector (`rts_scenario.startup`)
+        from ..canbus.mapping import CanMapping
+        from ..check import tolerances_below_bus_steps
+        from ..errors import RtsError
+        from ..recheck import check_log, check_log_file, log_variant
+        from ..scenario import load_scenario
 
     if args.mapping:
         named_file("--mapping", CanMapping.from_file, args.mapping)

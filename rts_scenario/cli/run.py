@@ -12,6 +12,7 @@ from typing import Any
 from .. import interrupts
 from ..atomic import Draft, check_draft
 from ..errors import located, one_line
+from ..startup import command_imports
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_FAIL,
@@ -77,16 +78,17 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
 
 
 def _run(args: argparse.Namespace, started: list[bool]) -> int:
-    from ..canbus.mapping import CanMapping
-    from ..check import DETECTION_COLUMNS, tolerances_below_bus_steps
-    from ..errors import BusError, RtsError, ScenarioError
-    from ..pipeline import LOG_SIDECAR_SUFFIX, RunOptions, run_scene
-    from ..plots import safe_stem
-    from ..preflight import Preflight
-    from ..report import bench_failures
-    from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
-    from ..scenario.model import simulated_radar_parameters
-    from ..schedule import ScheduleError
+    with command_imports():  # paused collector (`rts_scenario.startup`)
+        from ..canbus.mapping import CanMapping
+        from ..check import DETECTION_COLUMNS, tolerances_below_bus_steps
+        from ..errors import BusError, RtsError, ScenarioError
+        from ..pipeline import LOG_SIDECAR_SUFFIX, RunOptions, run_scene
+        from ..plots import safe_stem
+        from ..preflight import Preflight
+        from ..report import bench_failures
+        from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
+        from ..scenario.model import simulated_radar_parameters
+        from ..schedule import ScheduleError
 
     # Every combination of a scene's parametrize block is one run, as in the pytest plugin;
     # a file whose block cannot be expanded is reported in its turn, like one that does not load.

@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import Any
 
+from ..startup import command_imports
 from .common import (
     EXIT_FAIL,
     EXIT_OK,
@@ -19,11 +20,12 @@ from .common import (
 def _do_schedule(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from ..outputs import open_output, split_spec
-    from ..pipeline import RTS_SETTLE_S
-    from ..playback import delivery_reasons, rts_rig_record, stream_reasons
-    from ..preflight import LimitCounter, schedule_batches
-    from ..scenario import load_scenario, select_variant
+    with command_imports():  # paused collector (`rts_scenario.startup`)
+        from ..outputs import open_output, split_spec
+        from ..pipeline import RTS_SETTLE_S
+        from ..playback import delivery_reasons, rts_rig_record, stream_reasons
+        from ..preflight import LimitCounter, schedule_batches
+        from ..scenario import load_scenario, select_variant
 
     check_output("--output", args.output, run=False)
     name, argument = split_spec(args.output)

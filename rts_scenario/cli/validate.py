@@ -7,15 +7,17 @@ import sys
 from typing import Any
 
 from ..errors import located
+from ..startup import command_imports
 from .common import EXIT_BAD_INPUT, EXIT_OK, METHODS, show_traceback
 
 
 def _do_validate(args: argparse.Namespace) -> int:
-    from ..errors import RtsError
-    from ..preflight import preflight, vacuous_empty_bench
-    from ..radar.simulate import near_field_warning
-    from ..scenario import load_scenario, parametrizations
-    from ..schedule.build import delay_step_note
+    with command_imports():  # paused collector (`rts_scenario.startup`)
+        from ..errors import RtsError
+        from ..preflight import preflight, vacuous_empty_bench
+        from ..radar.simulate import near_field_warning
+        from ..scenario import load_scenario, parametrizations
+        from ..schedule.build import delay_step_note
 
     bad = 0
     reported: set[str] = set()  # notes of a rig and radar: said once, for the first scene

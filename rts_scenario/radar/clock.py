@@ -15,6 +15,7 @@ measurement time itself.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -164,8 +165,8 @@ class Bend:
     f : float
         Spread of the segments' mean residuals about the line over the spread of the cycles
         within the segments (each per its degrees of freedom): near 1 where they keep to it.
-    p : float
-        Chance of an ``f`` this large from cycles on one line.
+    dof : tuple of float
+        ``f``'s degrees of freedom: between the segments and within them.
     departure_s : float
         The largest distance of a segment's mean from the line.
     scatter_s : float
@@ -176,15 +177,27 @@ class Bend:
 
     slope_s: float
     f: float
-    p: float
+    dof: tuple[float, float]
     departure_s: float
     scatter_s: float
     segments: FloatArray
 
+    @cached_property
+    def p(self) -> float:
+        """Chance of an ``f`` this large from cycles on one line (Fisher's F, `dof`)."""
+        if self.f == np.inf or self.f == 0.0:  # no scatter within the segments
+            return 0.0 if self.f else 1.0
+        from scipy.special import fdtrc  # scipy when needed: see `check._assign`
+
+        return float(fdtrc(*self.dof, self.f))
+
     @property
     def bent(self) -> bool:
-        """Whether the cycles depart from one line: beyond `BENT_P`, and by more than rounding."""
-        return self.p < BENT_P and self.departure_s > DRIFT_FLOOR_S
+        """Whether the cycles depart from one line: by more than rounding, and beyond `BENT_P`.
+
+        The departure is asked first: cycles within rounding of a line need no F distribution.
+        """
+        return self.departure_s > DRIFT_FLOOR_S and self.p < BENT_P
 
 
 class LineSegments:
@@ -264,13 +277,10 @@ class LineSegments:
         scatter = np.sqrt(max(within, 0.0) / df_within)
         if scatter > 0.0:
             f = (between / df_between) / scatter ** 2
-            from scipy.special import fdtrc  # scipy when needed: see `check._assign`
-
-            p = float(fdtrc(df_between, df_within, f))
         else:
-            f, p = (np.inf, 0.0) if between > 0.0 else (0.0, 1.0)
-        return Bend(float(slope), float(f), p, float(np.abs(residual).max()), float(scatter),
-                    s.copy())
+            f = np.inf if between > 0.0 else 0.0
+        return Bend(float(slope), float(f), (float(df_between), float(df_within)),
+                    float(np.abs(residual).max()), float(scatter), s.copy())
 
 
 class CycleTimeFit:
@@ -631,9 +641,9 @@ class ClockTrack:
             [[0.0], np.cumsum(np.clip(np.diff(offset), -rate, rate))])
         # Each of K segments' means within z of its standard error of where it would lie
         # without the scatter, all at once with the chance of 3 sigma (Bonferroni).
-        from scipy.special import ndtri  # scipy when needed: see `check._assign`
+        from statistics import NormalDist  # when needed: it imports fractions and random
 
-        z = float(ndtri(1.0 - BENT_P / (2.0 * len(s))))
+        z = NormalDist().inv_cdf(1.0 - BENT_P / (2.0 * len(s)))
         error = bend.scatter_s / np.sqrt(s[:, 0])
         margin = 0.0
         for line in (offset, path):

@@ -65,6 +65,14 @@ FRAME_SLACK = 1e-3
 
 
 @lru_cache(maxsize=1)
+def _shipped_schema() -> dict[str, Any]:
+    """Return the shipped JSON Schema file as it is: the built-in estimators only."""
+    text = resources.files("rts_scenario").joinpath("data/scenario.schema.json").read_text()
+    schema: dict[str, Any] = json.loads(text)
+    return schema
+
+
+@lru_cache(maxsize=1)
 def scenario_schema() -> dict[str, Any]:
     """Return the JSON Schema of scene files (also shipped for editors).
 
@@ -73,16 +81,30 @@ def scenario_schema() -> dict[str, Any]:
     """
     from ..radar.angle import estimator_names
 
-    text = resources.files("rts_scenario").joinpath("data/scenario.schema.json").read_text()
-    schema: dict[str, Any] = json.loads(text)
+    schema = copy.deepcopy(_shipped_schema())
     estimator = schema["properties"]["radar"]["properties"]["estimator"]
     estimator["enum"] = [*estimator["enum"],
                          *(n for n in estimator_names() if n not in estimator["enum"])]
     return schema
 
 
+def _schema_for(data: object) -> dict[str, Any]:
+    """`scenario_schema`, or the shipped file's where it judges ``data`` the same.
+
+    A scene whose ``radar.estimator`` is absent or built in is judged alike by both; only
+    another value needs the installed estimators, whose look-up reads every installed
+    package's entry points (tens of milliseconds at a command's start).
+    """
+    shipped = _shipped_schema()
+    radar = data.get("radar") if isinstance(data, dict) else None
+    if not isinstance(radar, dict) or "estimator" not in radar or radar["estimator"] in (
+            shipped["properties"]["radar"]["properties"]["estimator"]["enum"]):
+        return shipped
+    return scenario_schema()
+
+
 def _fragment_schema() -> dict[str, Any]:
-    schema = scenario_schema()
+    schema = _shipped_schema()
     return {"$ref": "#/$defs/fragment", "$defs": schema["$defs"]}
 
 
@@ -109,7 +131,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         raise doc.error(("effects", "measurement_noise"),
                         "not supported; the simulated radar's noise comes from radar.noise")
     _check_target_limits(doc)
-    validate(doc, scenario_schema())
+    validate(doc, _schema_for(doc.data))
     _check_scene_name(doc)
     _check_marks(doc)
     data = doc.data
@@ -320,7 +342,7 @@ def _check_frames(doc: Document, frames: _Frames) -> None:
         return abs(n_periods - round(n_periods)) <= FRAME_SLACK and round(n_periods) >= 1
 
     durations = " or ".join(_shown(n * period, lambda d: whole(d * rate)) for n in counts)
-    max_rate = scenario_schema()["properties"]["frame_rate_hz"]["maximum"]
+    max_rate = _shipped_schema()["properties"]["frame_rate_hz"]["maximum"]
     # Only rates the schema takes: a duration of 1e-300 s has none.
     rates = " or ".join(_shown(n / declared, lambda r: whole(declared * r)) for n in counts
                         if n / declared <= max_rate)
@@ -328,7 +350,7 @@ def _check_frames(doc: Document, frames: _Frames) -> None:
     held = f"held {period:g} s each" if frames.n > 1 else f"held {period:g} s"
     if periods >= 1.0:
         key, hint = "duration_s", ""
-    elif whole(declared / rate) and 1.0 / rate <= scenario_schema()["properties"][
+    elif whole(declared / rate) and 1.0 / rate <= _shipped_schema()["properties"][
             "frame_rate_hz"]["maximum"]:
         key = "frame_rate_hz"
         hint = (f" (frame_rate_hz counts frames per second: if {rate:g} s is the frame period, "
@@ -389,7 +411,7 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     placed = [tuple(int(p) if p.isdigit() else p for p in path.strip().split("."))
               for key in block if isinstance(key, str) for path in key.split(",")
               ] if isinstance(block, dict) else []
-    validate(doc, scenario_schema(), skip=placed)
+    validate(doc, _schema_for(doc.data), skip=placed)
     for key, values in block.items():
         _check_plain(doc, ("parametrize", key), values)
     axes = [_parameter_axis(doc, key, values) for key, values in block.items()]
