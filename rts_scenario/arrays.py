@@ -459,12 +459,14 @@ class _ExpPlan:
 
     ``direct`` coordinates are computed, in increasing order: by ``exp`` or, when they form an
     arithmetic progression, from the first one and the common step by multiplication.
-    ``mirror[i]`` is the computed coordinate equal to ``-c_i`` (taken as a conjugate).
+    ``mirror[i]`` is the computed coordinate equal to ``-c_i`` (taken as a conjugate);
+    ``indirect`` the coordinates taken so, in increasing order.
     """
 
     direct: NDArray[np.int64]
     mirror: NDArray[np.int64]
     progression: bool
+    indirect: NDArray[np.int64]
 
 
 def _exp_plan(coords: FloatArray, tol: float) -> _ExpPlan:
@@ -474,7 +476,10 @@ def _exp_plan(coords: FloatArray, tol: float) -> _ExpPlan:
     direct = index[(coords >= -tol) | ~symmetric | (mirror == index)]
     steps = np.diff(coords[direct])
     progression = direct.size >= 3 and bool(np.all(np.abs(steps - steps[0]) <= tol))
-    return _ExpPlan(direct=direct, mirror=np.where(symmetric, mirror, -1), progression=progression)
+    taken = np.zeros(coords.size, dtype=bool)
+    taken[direct] = True
+    return _ExpPlan(direct=direct, mirror=np.where(symmetric, mirror, -1), progression=progression,
+                    indirect=index[~taken])
 
 
 def _exp_rows(k: float, coords: FloatArray, plan: _ExpPlan, x: FloatArray) -> ComplexArray:
@@ -490,6 +495,6 @@ def _exp_rows(k: float, coords: FloatArray, plan: _ExpPlan, x: FloatArray) -> Co
         for i in direct:
             np.exp(-1j * k * coords[i] * x, out=out[i])
     # exp(-j k (-c) x) = conj(exp(-j k c x)).
-    for i in np.setdiff1d(np.arange(coords.size), direct):
+    for i in plan.indirect:
         np.conjugate(out[plan.mirror[i]], out=out[i])
     return out

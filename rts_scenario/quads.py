@@ -6,7 +6,7 @@ values (never stored on a rig, so a rig changed with ``dataclasses.replace`` get
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -200,7 +200,9 @@ class QuadGeometry:
     column_az_deg, row_el_deg : ndarray, shapes (columns,) and (rows,)
         Mean azimuth of every grid column and mean elevation of every grid row, degrees.
     raster, raster_frame : ndarray, shapes (cells,) and (6,)
-        `locate_raster`'s cells and frame on a grid of quads; empty for a single quad.
+        `locate_raster`'s cells and frame on a grid of quads; empty for a single quad. Made
+        when first asked for: only the compiled kernel reads them, for many targets (a run of
+        a few targets, on the numpy code, does not pay the 5-25 ms).
     """
 
     polygons: FloatArray
@@ -209,8 +211,31 @@ class QuadGeometry:
     degenerate: NDArray[np.bool_]
     column_az_deg: FloatArray
     row_el_deg: FloatArray
-    raster: NDArray[np.int32]
-    raster_frame: FloatArray
+    _located: tuple[NDArray[np.int32], FloatArray] | None = field(
+        default=None, repr=False, compare=False)
+
+    @property
+    def raster(self) -> NDArray[np.int32]:
+        """`locate_raster`'s cells (see the class)."""
+        return self._locate()[0]
+
+    @property
+    def raster_frame(self) -> FloatArray:
+        """`locate_raster`'s frame (see the class)."""
+        return self._locate()[1]
+
+    def _locate(self) -> tuple[NDArray[np.int32], FloatArray]:
+        found = self._located
+        if found is None:  # two threads may both make it: the same values, either kept
+            if len(self.polygons) > 1:
+                found = locate_raster(self.column_az_deg, self.row_el_deg, self.lines,
+                                      self.boxes)
+            else:
+                found = np.zeros(0, dtype=np.int32), np.zeros(6)
+            for value in found:
+                value.setflags(write=False)
+            object.__setattr__(self, "_located", found)
+        return found
 
     @classmethod
     def of(cls, rig: Rig) -> QuadGeometry:
@@ -227,16 +252,12 @@ class QuadGeometry:
                                    axis=1))
         column_az = rig.az_deg.reshape(rig.rows, rig.columns).mean(axis=0)
         row_el = rig.el_deg.reshape(rig.rows, rig.columns).mean(axis=1)
-        if len(polygons) > 1:
-            raster, frame = locate_raster(column_az, row_el, lines, boxes)
-        else:
-            raster, frame = np.zeros(0, dtype=np.int32), np.zeros(6)
         geometry = cls(
             polygons=polygons, lines=lines, boxes=boxes, degenerate=area <= DEGENERATE_AREA_DEG2,
-            column_az_deg=column_az, row_el_deg=row_el, raster=raster, raster_frame=frame,
+            column_az_deg=column_az, row_el_deg=row_el,
         )
         # Shared between every caller with the same values: nobody may change it.
-        for value in vars(geometry).values():
+        for value in (polygons, lines, boxes, geometry.degenerate, column_az, row_el):
             value.setflags(write=False)
         return geometry
 

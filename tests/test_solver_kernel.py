@@ -568,3 +568,24 @@ def test_the_raster_locates_as_the_candidate_and_its_test(rig):
     else:  # quads numbered beyond 16 bits are answered by the raster too
         assert cells.max() > 32767
     assert (quad[edges_az.size:][: spread_az.size][inner] >= 0).mean() > 0.5
+
+
+def test_the_raster_is_made_only_when_the_kernel_asks_for_it():
+    """A run of a few targets, on the numpy code, assigns quads without the raster (5-25 ms a
+    rig); asked for, it is `locate_raster`'s of the rig's grid, read-only, made once."""
+    from rts_scenario.quads import QuadGeometry, assign_quads, locate_raster
+    from rts_scenario.rig import Rig
+
+    rig = Rig.preset("wide-3x5")
+    geometry = QuadGeometry.build(rig)
+    assert geometry._located is None
+    geometry.assign(np.array([0.5, 9.0]), np.array([0.2, -3.0]))
+    assert geometry._located is None
+    assign_quads(rig, np.array([0.5]), np.array([0.2]))
+    raster, frame = locate_raster(geometry.column_az_deg, geometry.row_el_deg, geometry.lines,
+                                  geometry.boxes)
+    np.testing.assert_array_equal(geometry.raster, raster)
+    np.testing.assert_array_equal(geometry.raster_frame, frame)
+    assert geometry.raster is geometry.raster and not geometry.raster.flags.writeable
+    # A single quad has none.
+    assert QuadGeometry.build(Rig.preset("kit-table1")).raster.size == 0

@@ -457,8 +457,8 @@ class ExactTables:
             phase_origin=origin, phase_table=np.ascontiguousarray(phase),
             curvature=np.array([q.check_local_max for q in quads]), response=first.response,
             centrosymmetric=first.centrosymmetric, row_scale=first.row_scale,
-            y_indirect=_indirect(first.response._y_plan),
-            z_indirect=_indirect(first.response._z_plan),
+            y_indirect=first.response._y_plan.indirect,
+            z_indirect=first.response._z_plan.indirect,
             fold_re=np.ascontiguousarray(fold.real), fold_im=np.ascontiguousarray(fold.imag),
             fold_iy=fold_iy, fold_iz=fold_iz,
             sep_y_re=np.ascontiguousarray(sep_y.real), sep_y_im=np.ascontiguousarray(sep_y.imag),
@@ -707,7 +707,7 @@ def _grid_factors(resp: SourceResponse) -> tuple[ComplexArray, ComplexArray] | N
         out[:, plan.direct] = factor[:, plan.direct]
         exact = np.zeros(coords.size, dtype=bool)
         exact[plan.direct] = coords[plan.direct] == 0.0
-        for j in _indirect(plan):
+        for j in plan.indirect:
             m = plan.mirror[j]
             out[:, m] += np.conj(factor[:, j])
             exact[m] = coords[j] == -coords[m]
@@ -728,7 +728,7 @@ def _conjugate_looks(phases: FloatArray, plan: _ExpPlan) -> NDArray[np.bool_]:
     n = phases.size
     root = np.arange(n)
     negated = np.zeros(n, dtype=bool)
-    indirect = _indirect(plan)
+    indirect = plan.indirect
     root[indirect] = plan.mirror[indirect]
     negated[indirect] = True
     real = np.zeros(n, dtype=bool)
@@ -737,15 +737,10 @@ def _conjugate_looks(phases: FloatArray, plan: _ExpPlan) -> NDArray[np.bool_]:
     return same & ((negated[:, None] != negated[None, :]) | real[root][:, None])
 
 
-def _indirect(plan: _ExpPlan) -> NDArray[np.int64]:
-    return np.setdiff1d(np.arange(plan.mirror.size), plan.direct)
-
-
 # Stands in for the geometry when the quads are given (same types, never read).
 _NO_GEOMETRY = QuadGeometry(
     polygons=np.zeros((1, 4, 2)), lines=np.zeros((1, 4, 3)), boxes=np.zeros((1, 4)),
     degenerate=np.zeros(1, dtype=bool), column_az_deg=np.zeros(2), row_el_deg=np.zeros(2),
-    raster=np.zeros(0, dtype=np.int32), raster_frame=np.zeros(6),
 )
 # The kernel's constants, in the order it reads them.
 _TOLERANCES = np.array([_NEGATIVE_TOL, _RANK_TOL, _GAIN_TOL, _RESIDUAL_TOL, _PHASE_TOL,
