@@ -212,7 +212,12 @@ class QuadGeometry:
     column_az_deg: FloatArray
     row_el_deg: FloatArray
     _located: tuple[NDArray[np.int32], FloatArray] | None = field(
-        default=None, repr=False, compare=False)
+        default=None, init=False, repr=False, compare=False)
+
+    def __getstate__(self) -> dict[str, object]:
+        # Made again where asked for (a pickled plan's raster would come back writable: to the
+        # compiled kernel another type of argument, compiled once more).
+        return {**vars(self), "_located": None}
 
     @property
     def raster(self) -> NDArray[np.int32]:

@@ -38,13 +38,14 @@ def command_imports() -> Iterator[None]:
         return
     _state["done"] = True
     enabled = gc.isenabled()
-    gc.disable()
     try:
+        gc.disable()
         yield
     finally:
-        gc.freeze()
+        # Enabled first: a stop between the two leaves it running, the objects only unfrozen.
         if enabled:
             gc.enable()
+        gc.freeze()
 
 
 __all__ = ["command_imports", "mark_command_process"]

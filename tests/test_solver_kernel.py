@@ -570,22 +570,39 @@ def test_the_raster_locates_as_the_candidate_and_its_test(rig):
     assert (quad[edges_az.size:][: spread_az.size][inner] >= 0).mean() > 0.5
 
 
-def test_the_raster_is_made_only_when_the_kernel_asks_for_it():
+def test_the_raster_is_made_only_when_the_kernel_asks_for_it(monkeypatch):
     """A run of a few targets, on the numpy code, assigns quads without the raster (5-25 ms a
     rig); asked for, it is `locate_raster`'s of the rig's grid, read-only, made once."""
+    import dataclasses
+    import pickle
+
+    from rts_scenario.arrays import VirtualArray
     from rts_scenario.quads import QuadGeometry, assign_quads, locate_raster
     from rts_scenario.rig import Rig
+    from rts_scenario.solver import solve_weights
+
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "off")  # the numpy code, kernel loaded or not
 
     rig = Rig.preset("wide-3x5")
     geometry = QuadGeometry.build(rig)
     assert geometry._located is None
     geometry.assign(np.array([0.5, 9.0]), np.array([0.2, -3.0]))
     assert geometry._located is None
-    assign_quads(rig, np.array([0.5]), np.array([0.2]))
+    # The shared geometry of a rig no other test uses, after a solve of a few targets.
+    odd = Rig.grid(np.array([[-7.1, 0.3, 6.9], [-7.3, 0.1, 7.2]]),
+                   np.array([[-2.8, -3.2, -3.0], [3.1, 2.9, 3.3]]))
+    assign_quads(odd, np.array([0.5, -3.0]), np.array([0.2, 1.0]))
+    solve_weights(np.array([0.5, -3.0]), np.array([0.2, 1.0]), rig=odd,
+                  array=VirtualArray.preset("awr1843boost"), method="exact")
+    assert QuadGeometry.of(odd)._located is None
     raster, frame = locate_raster(geometry.column_az_deg, geometry.row_el_deg, geometry.lines,
                                   geometry.boxes)
     np.testing.assert_array_equal(geometry.raster, raster)
     np.testing.assert_array_equal(geometry.raster_frame, frame)
     assert geometry.raster is geometry.raster and not geometry.raster.flags.writeable
-    # A single quad has none.
+    # A single quad has none. Pickled, made again (read-only); not copied by `replace`.
     assert QuadGeometry.build(Rig.preset("kit-table1")).raster.size == 0
+    again = pickle.loads(pickle.dumps(geometry))
+    assert again._located is None and not again.raster.flags.writeable
+    np.testing.assert_array_equal(again.raster, raster)
+    assert dataclasses.replace(geometry)._located is None
