@@ -18,6 +18,14 @@ from rts_scenario.check import _assign
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _printed(code: str) -> str:
+    """What ``code`` prints in a fresh interpreter (which must end without an error)."""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
 def test_a_cut_in_run_loads_no_scipy_module_it_does_not_use():
     # Nor scipy.special: the radar clock's F test is asked only of cycles that depart from a
     # line by more than rounding. Nor the installed estimators (every installed package's
@@ -35,10 +43,7 @@ def test_a_cut_in_run_loads_no_scipy_module_it_does_not_use():
         "print(' '.join(sorted(m for m in ('scipy.optimize', 'scipy.sparse', 'scipy.ndimage',"
         " 'scipy.interpolate', 'scipy.special') if m in sys.modules)) or 'none')\n"
         "print(len(calls))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split("\n")[:3] == ["True", "none", "0"]
+    assert _printed(code).split("\n")[:3] == ["True", "none", "0"]
 
 
 def _best_pairs(cost):
@@ -84,8 +89,5 @@ def test_a_command_imports_with_the_collector_paused_once_and_only_in_its_own_pr
         "with command_imports():\n"
         "    seen.append((gc.isenabled(), gc.get_freeze_count() == frozen))\n"
         "print(seen)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=60)
-    assert out.returncode == 0, out.stderr
     # Unmarked: as it was; marked: paused, then enabled with the objects frozen; once only.
-    assert out.stdout.strip() == "[(True, 0), (False, 0), (True, True), (True, True)]"
+    assert _printed(code).strip() == "[(True, 0), (False, 0), (True, True), (True, True)]"
