@@ -79,6 +79,9 @@ VEHICLE_KINDS = {"car": "car", "van": "car", "truck": "truck", "trailer": "truck
                  "semitrailer": "truck", "bus": "truck", "train": "truck", "tram": "truck",
                  "motorbike": "motorcycle", "bicycle": "bicycle"}
 PEDESTRIAN_KINDS = {"pedestrian": "pedestrian", "wheelchair": "pedestrian", "animal": "other"}
+# Categories whose RCS model is not their kind's (docs/import.md): an animal is of kind
+# "other", with the pedestrian's model, not the 10 dBsm constant of other objects.
+RCS_MODEL_OF_CATEGORY = {"animal": "pedestrian"}
 MISC_KINDS = {**dict.fromkeys(("barrier", "guardRail", "railing", "soundBarrier", "wall"),
                               "barrier"),
               **dict.fromkeys(("gantry", "pole", "streetLamp", "trafficSign"), "sign"),
@@ -626,6 +629,7 @@ class _Body:
     kind: str
     el: _El
     vehicle: bool = False  # described by a <Vehicle>
+    rcs_model: str = "other"  # the key of its RCS model (`RCS_MODELS`)
     center_m: np.ndarray | None = None
     size_m: np.ndarray | None = None
     position_m: np.ndarray | None = None
@@ -825,8 +829,10 @@ class _Importer:
         category, kinds = {"Vehicle": ("vehicleCategory", VEHICLE_KINDS),
                            "Pedestrian": ("pedestrianCategory", PEDESTRIAN_KINDS),
                            "MiscObject": ("miscObjectCategory", MISC_KINDS)}[what.tag]
-        kind = kinds[what.choice(category, tuple(kinds))]
-        body = _Body(name=name, kind=kind, el=obj, vehicle=what.tag == "Vehicle")
+        chosen = what.choice(category, tuple(kinds))
+        kind = kinds[chosen]
+        body = _Body(name=name, kind=kind, el=obj, vehicle=what.tag == "Vehicle",
+                     rcs_model=RCS_MODEL_OF_CATEGORY.get(chosen, kind))
         # Descriptive attributes and parts that do not change what the radar sees.
         for attr in ("name", "mass", "model", "model3d", "role"):
             what.read.add(attr)
@@ -1636,7 +1642,7 @@ class _Importer:
                                       "kind": body.kind, "motion": _motion(body, height)}
             if body.lane_changes:
                 target["lane_changes"] = _lane_changes(body)
-            target["rcs"] = copy.deepcopy(RCS_MODELS[body.kind])
+            target["rcs"] = copy.deepcopy(RCS_MODELS[body.rcs_model])
             targets.append(target)
         source = self.description.strip().rstrip(".")
         description = (f"{source}. " if source else "") + f"Imported from {Path(self.file).name}."

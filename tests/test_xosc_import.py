@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from rts_scenario.cli import main
 from rts_scenario.errors import RtsError, ScenarioError
@@ -1239,3 +1240,19 @@ def test_a_lateral_shift_faster_than_the_bound_plays_as_the_shortest_lane_change
     what = "step" if shape == "step" else f"shift over {fast:.3f} s"
     assert any(f"lateral {what} of " in note and "played as the shortest quintic lane change "
                "within 15 m/s2 sideways" in note for note in result.notes), result.notes
+
+
+@pytest.mark.parametrize("category, kind, rcs", [
+    ("pedestrian", "pedestrian", {"rcs_dbsm": -8.0, "fluctuation": "swerling1"}),
+    ("wheelchair", "pedestrian", {"rcs_dbsm": -8.0, "fluctuation": "swerling1"}),
+    # docs/import.md: an animal is of kind other with the pedestrian model (not other's 10 dBsm)
+    ("animal", "other", {"rcs_dbsm": -8.0, "fluctuation": "swerling1"}),
+])
+def test_each_pedestrian_category_gets_the_kind_and_rcs_the_docs_give(tmp_path, category, kind,
+                                                                      rcs):
+    path = variant(tmp_path, "pedestrian_crossing", 'pedestrianCategory="pedestrian"',
+                   f'pedestrianCategory="{category}"')
+    result, scene = imported(tmp_path, path, ego="Hero")
+    target = yaml.safe_load(result.text)["targets"][0]
+    assert (target["kind"], target["rcs"]) == (kind, rcs)
+    assert scene.targets[0].kind == kind
