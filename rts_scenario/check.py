@@ -78,6 +78,11 @@ LAG_MIN_CYCLES = 10
 # least.
 LAG_BIN_S = 0.5
 LAG_MIN_BINS = 5
+# Range rates whose spread (RMS about their mean) is below this did not vary (m/s): equal rates
+# of targets moving along a road that is not along x differ by round-off (1e-16 m/s), and a
+# lag would be told from nothing. Far below any radar's velocity resolution (centimetres per
+# second).
+LAG_RATE_FLOOR_MPS = 1e-6
 # Worst target-frames kept for the report.
 WORST_FRAMES = 8
 # The counter of rts-scenario's own frame header (16 bits).
@@ -942,7 +947,7 @@ class Checker:
         vv = s_vv - s_v * mean_v
         ev = s_ev - s_e * mean_v
         ee = s_ee - s_e * mean_e
-        if not vv > 1e-9 * s_vv:  # no spread beyond round-off of equal rates
+        if not vv > max(1e-9 * s_vv, n * LAG_RATE_FLOOR_MPS ** 2):  # equal but for round-off
             return None
         lag = -ev / vv
         residual = max(ee - lag * lag * vv, 0.0)

@@ -1292,6 +1292,15 @@ def test_the_detections_lag_is_the_least_squares_one_of_range_errors_on_range_ra
     assert steady.detection_lag_s() is None and steady.lag_reason(0.05) is None
     assert steady.lag_untold() == ("the targets' range rates did not vary: a lag would look "
                                    "like a range offset")
+    # Equal rates but for round-off (two cars side by side on a road at 30 deg to x: their
+    # range rates are 1e-16 m/s, not 0): no lag either, whatever the errors' scatter.
+    rng = np.random.default_rng(31)
+    level = Checker("s", ("a", "b"), Expectations())
+    level._add_lag(rng.normal(0.0, 0.05, (40, 2)), rng.normal(0.0, 2e-16, (40, 2)),
+                   np.ones((40, 2), dtype=bool), np.arange(40.0) * 0.1)
+    assert level.detection_lag_s() is None and level.lag_reason(0.05) is None
+    assert level.lag_untold() == ("the targets' range rates did not vary: a lag would look "
+                                  "like a range offset")
 
 
 def test_a_lag_that_needs_a_range_offset_beyond_the_gate_is_not_told():
