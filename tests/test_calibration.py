@@ -245,6 +245,13 @@ def test_range_response_of_the_radar_is_its_hann_window_s_dft(name):
         got = radar.range_response(np.array([offset]))[0]
         assert abs(got) == pytest.approx(want, rel=1e-9, abs=1e-12)
         assert got > 0.0  # the main lobe: no sign flip between channels
+    # Along slow time likewise, over its chirp loops (the analytic radar's straddle loss).
+    n = radar.chirp_loops
+    w = np.hanning(n + 2)[1:-1]
+    for offset in (0.0, 0.25, 0.5):
+        x = np.fft.fft(np.exp(2j * np.pi * (3.0 + offset) * np.arange(n) / n) * w)
+        assert radar.doppler_response(np.array([offset]))[0] == pytest.approx(
+            abs(x[3]) / w.sum(), rel=1e-9)
 
 
 def test_noisy_adc_radar():

@@ -44,6 +44,29 @@ MAX_APERTURE_WAVELENGTHS = 64
 MAX_CUBE_SAMPLES = 2**26
 
 
+def hann_dft_response(offset_bins: FloatArray | float, n: int) -> FloatArray:
+    """Response of an ``n``-point DFT windowed with ``hanning(n + 2)[1:-1]``, re its peak.
+
+    The window is ``1/2 + 1/2 cos(2 pi (m - c) / (n + 1))`` about its centre ``c``; its DFT
+    (real, the phase referred to the centre) ``offset_bins`` from a tone is a sum of three
+    Dirichlet kernels ``sin(n t / 2) / sin(t / 2)``, ``t = 2 pi offset / n`` and shifted by
+    ``+-2 pi / (n + 1)``.
+    """
+    t = 2.0 * np.pi * np.asarray(offset_bins, dtype=np.float64) / n
+    shift = 2.0 * np.pi / (n + 1)
+
+    def dirichlet(x: FloatArray) -> FloatArray:
+        half = np.sin(0.5 * x)
+        small = np.abs(half) < 1e-12
+        return np.where(small, float(n), np.sin(0.5 * n * x) / np.where(small, 1.0, half))
+
+    def window(x: FloatArray) -> FloatArray:
+        return 0.5 * dirichlet(x) + 0.25 * (dirichlet(x - shift) + dirichlet(x + shift))
+
+    out: FloatArray = window(t) / window(np.zeros(1))
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class RadarProfile:
     """An FMCW TDM-MIMO radar: chirp, timing, noise and virtual array.
@@ -157,25 +180,18 @@ class RadarProfile:
     def range_response(self, offset_bins: FloatArray | float) -> FloatArray:
         """Response of the Hann-windowed range DFT ``offset_bins`` from a tone, re its peak.
 
-        The radar windows its ``N = adc_samples`` samples with ``hanning(N + 2)[1:-1]``, which
-        is ``1/2 + 1/2 cos(2 pi (m - c) / (N + 1))`` about its centre ``c``; its DFT (real, the
-        phase referred to the centre) is a sum of three Dirichlet kernels
-        ``sin(N t / 2) / sin(t / 2)``, ``t = 2 pi offset / N`` and shifted by ``+-2 pi / (N + 1)``.
+        The radar windows its ``N = adc_samples`` samples with ``hanning(N + 2)[1:-1]``
+        (`hann_dft_response`).
         """
-        n = self.adc_samples
-        t = 2.0 * np.pi * np.asarray(offset_bins, dtype=np.float64) / n
-        shift = 2.0 * np.pi / (n + 1)
+        return hann_dft_response(offset_bins, self.adc_samples)
 
-        def dirichlet(x: FloatArray) -> FloatArray:
-            half = np.sin(0.5 * x)
-            small = np.abs(half) < 1e-12
-            return np.where(small, float(n), np.sin(0.5 * n * x) / np.where(small, 1.0, half))
+    def doppler_response(self, offset_bins: FloatArray | float) -> FloatArray:
+        """Response of the Hann-windowed Doppler DFT ``offset_bins`` from a tone, re its peak.
 
-        def window(x: FloatArray) -> FloatArray:
-            return 0.5 * dirichlet(x) + 0.25 * (dirichlet(x - shift) + dirichlet(x + shift))
-
-        out: FloatArray = window(t) / window(np.zeros(1))
-        return out
+        Its ``L = chirp_loops`` loops windowed with ``hanning(L + 2)[1:-1]``
+        (`hann_dft_response`).
+        """
+        return hann_dft_response(offset_bins, self.chirp_loops)
 
     @property
     def steering_wavelength_m(self) -> float:
