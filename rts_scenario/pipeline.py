@@ -1112,9 +1112,15 @@ class Pipeline:
         # Which output played the scene: "simulated-radar" is no bench (docs/report.md).
         report.playback = {**playback.to_dict(), "output": options.output}
         vacuous = self._vacuous_empty_bench(scene, options)
-        if vacuous:
+        expected = scene.expectations.expected_limits
+        if vacuous and "nothing_checked" in expected:
+            # Declared: said beside the verdict, as the other limits of the whole scene.
+            report.scene_limits["nothing_checked"] = {"why": vacuous, "expected": True}
+        elif vacuous:
             report.reasons.append(FailReason(vacuous, "nothing_checked"))
             report.passed = False
+        elif "nothing_checked" in expected and not report.reason_codes.count("nothing_checked"):
+            report.add_expected_not_hit(["nothing_checked"])
         failures = playback.reasons(scene.expectations.expected_limits)
         report.add_expected_not_hit(playback.not_hit(scene.expectations.expected_limits))
         if failures:

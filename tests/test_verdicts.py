@@ -2,6 +2,7 @@
 
 import textwrap
 
+import numpy as np
 import pytest
 
 from rts_scenario.pipeline import RunOptions, run_scene
@@ -333,29 +334,82 @@ def test_validate_refuses_a_scene_with_nothing_checkable_under_strict(tmp_path, 
                        f"limit throughout): a run has nothing to check and fails")
 
 
+_NOISE_THROUGH = ("'s thermal noise crosses its CFAR threshold (13 dB over the noise of its 12 "
+                  "channels summed) with a chance of 6.4e-84 per cell: ")
+
+
 @pytest.mark.parametrize("radar, vacuous", [
-    ({"radar.fidelity": "analytic"}, "at analytic fidelity"),
-    ({"radar.noise": False, "duration_s": 0.5}, "with noise off"),
-    ({"duration_s": 0.5}, None),  # the cube's noise: CFAR false alarms exist, the check is real
+    ({"radar.fidelity": "analytic"}, " at analytic fidelity makes no false detections"),
+    ({"radar.noise": False, "duration_s": 0.5}, " with noise off makes no false detections"),
+    # The cube's noise: its CFAR lets it through with a chance of 6e-84 per cell, none expected.
+    ({"duration_s": 0.5}, _NOISE_THROUGH + "1e-78 false detections are to be expected in this "
+                                           "run"),
 ])
-def test_an_empty_bench_the_simulated_radar_cannot_fail_checks_nothing(radar, vacuous):
+@pytest.mark.parametrize("declared", [False, True])
+def test_an_empty_bench_the_simulated_radar_cannot_fail_checks_nothing(radar, vacuous, declared):
     # A scene without targets checks only false detections; the built-in radar makes them
-    # from the cube's noise alone. Without it the run's PASS would rest on nothing.
+    # from the cube's noise alone, where its CFAR lets it through. Without them the run's PASS
+    # would rest on nothing: it fails, unless the scene declares nothing_checked (the shipped
+    # empty bench does: it is a bench's check), and then says it beside the verdict.
     from pathlib import Path
 
     from rts_scenario.scenario import load_scenario
 
     scene = load_scenario(Path(__file__).resolve().parents[1] / "scenarios"
-                          / "empty_bench.scenario.yaml", radar)
+                          / "empty_bench.scenario.yaml",
+                          {**radar, "expectations.expected_limits": (
+                              ["nothing_checked"] if declared else [])})
     report = run_scene(scene, RunOptions()).report
     said = [r for r in report.reasons if "nothing_checked" in r.codes]
-    if vacuous is None:
-        assert said == []
+    why = (f"nothing to check: the scene has no targets, and the built-in simulated radar"
+           f"{vacuous}, so its one check could not fail; play it to a bench (expected where the "
+           f"scene lists nothing_checked in expected_limits)")
+    if declared:
+        assert report.passed and said == []
+        assert report.scene_limits == {"nothing_checked": {"why": why, "expected": True}}
+        assert "limits (target-frames not played or not measurable as specified): " \
+               "nothing_checked (expected)" in report.table()
         return
     assert not report.passed
-    assert said == [f"nothing to check: the scene has no targets, and the built-in simulated "
-                    f"radar {vacuous} makes no false detections, so its one check could not "
-                    f"fail; run it with radar.fidelity: adc and noise on, or play it to a bench"]
+    assert said == [why]
+
+
+def test_the_chance_that_noise_crosses_the_cfar_is_fisher_s_f_tail():
+    """Over noise alone a cell's power summed over M channels against the mean of N training
+    cells' is an F(2M, 2NM) ratio: measured on the cube's CFAR at thresholds where it crosses
+    often enough to count, the share of cells above agrees with the tail; at 13 dB, 6.4e-84."""
+    from scipy import stats
+
+    from rts_scenario.radar import RadarProfile
+    from rts_scenario.radar.simulate import Echoes, SimulatedRadar, thermal_false_alarm_chance
+    from rts_scenario.rig import Rig
+
+    awr = RadarProfile.preset("awr1843boost")
+    radar = SimulatedRadar(awr, Rig.preset("kit-table1"), fidelity="adc", noise=True,
+                           rng=np.random.default_rng(3))
+    m = awr.array.n_elements
+    none = Echoes(frame=np.zeros(0, np.int64), target=np.zeros(0, np.int64),
+                  delay_s=np.zeros(0), doppler_hz=np.zeros(0),
+                  channel=np.zeros((0, m), complex), channel_delay_s=np.zeros((0, m)))
+    powers, floors = [], []
+    for _ in range(40):  # 40 frames of noise alone, through the radar's own FFTs and CFAR
+        spec = radar.cube(none, windowed=True)
+        np.fft.ifft(spec, axis=2, out=spec)
+        np.fft.fft(spec, axis=0, out=spec)
+        power = (np.abs(spec) ** 2).sum(axis=1)
+        powers.append(power)
+        floors.append(radar._noise_floor(power))
+    ratio = np.concatenate([(p / f).ravel() for p, f in zip(powers, floors, strict=True)])
+    for threshold_db in (2.0, 3.0, 4.0):
+        chance = thermal_false_alarm_chance(awr, threshold_db)
+        # The reference: scipy's F distribution with the degrees of freedom written out.
+        assert chance == pytest.approx(stats.f.sf(10 ** (threshold_db / 10), 2 * m, 2 * 416 * m),
+                                       rel=1e-9)
+        crossed = np.mean(ratio > 10 ** (threshold_db / 10))
+        # Cells of one frame are not independent (the windows spread a cell's noise over its
+        # neighbours): a wide margin, 25 %.
+        assert crossed == pytest.approx(chance, rel=0.25), threshold_db
+    assert thermal_false_alarm_chance(awr) == pytest.approx(6.4e-84, rel=0.01)
 
 
 def test_validate_says_an_empty_bench_the_simulated_radar_cannot_fail_checks_nothing(
@@ -368,15 +422,32 @@ def test_validate_says_an_empty_bench_the_simulated_radar_cannot_fail_checks_not
     root = Path(__file__).resolve().parents[1] / "scenarios"
     scene = tmp_path / "empty_bench.scenario.yaml"
     shutil.copy(root / "empty_bench.scenario.yaml", scene)
-    scene.write_text(scene.read_text().replace("  profile: awr1843boost\n",
-                                               "  profile: awr1843boost\n  noise: false\n"))
+    text = scene.read_text()
+    scene.write_text(text.replace("  profile: awr1843boost\n",
+                                  "  profile: awr1843boost\n  noise: false\n")
+                     .replace("  expected_limits: [nothing_checked]", "  expected_limits: []"))
     assert cli.main(["validate", str(scene)]) == 0
     out = capsys.readouterr().out
     assert (f"note: {scene}: on the built-in simulated radar a run fails with nothing_checked: "
             f"nothing to check: the scene has no targets, and the built-in simulated radar with "
             f"noise off makes no false detections") in out
     assert cli.main(["validate", str(root / "empty_bench.scenario.yaml")]) == 0
-    assert "nothing_checked" not in capsys.readouterr().out
+    assert ("on the built-in simulated radar a run reports nothing_checked (expected): nothing "
+            "to check: the scene has no targets, and the built-in simulated radar"
+            + _NOISE_THROUGH) in capsys.readouterr().out
+
+
+def test_nothing_checked_is_for_a_scene_without_targets(tmp_path):
+    from pathlib import Path
+
+    from rts_scenario.errors import ScenarioError
+    from rts_scenario.scenario import load_scenario
+
+    root = Path(__file__).resolve().parents[1] / "scenarios"
+    path = tmp_path / "cut_in.scenario.yaml"
+    path.write_text((root / "cut_in.scenario.yaml").read_text())
+    with pytest.raises(ScenarioError, match="'nothing_checked' is for a scene without targets"):
+        load_scenario(path, {"expectations.expected_limits": ["nothing_checked"]})
 
 
 def test_an_empty_bench_at_auto_fidelity_through_the_api_checks_nothing_either():
@@ -390,8 +461,9 @@ def test_an_empty_bench_at_auto_fidelity_through_the_api_checks_nothing_either()
 
     scene = load_scenario(Path(__file__).resolve().parents[1] / "scenarios"
                           / "empty_bench.scenario.yaml")
-    assert scene.radar_options.fidelity == "adc" and vacuous_empty_bench(
-        scene, scene.radar_options) is None
+    # (the cube itself: its CFAR lets no thermal noise through, none expected)
+    assert scene.radar_options.fidelity == "adc" and "crosses its CFAR threshold" in \
+        vacuous_empty_bench(scene, scene.radar_options)
     said = vacuous_empty_bench(scene, RadarOptions())
     assert said is not None and "simulated radar at auto fidelity (the cube only where targets " \
                                 "crowd: none here) makes no false detections" in said

@@ -183,6 +183,29 @@ class Echoes:
         return Echoes(**{f.name: getattr(self, f.name)[pick] for f in fields(self)})
 
 
+# The CFAR's window about each range-Doppler cell: guard cells and training cells on each side.
+CFAR_GUARD, CFAR_TRAIN = 2, 8
+# What the radar detects above its CFAR's noise estimate (dB), by default.
+THRESHOLD_DB = 13.0
+
+
+def thermal_false_alarm_chance(profile: RadarProfile, threshold_db: float = THRESHOLD_DB
+                               ) -> float:
+    """Chance that thermal noise alone crosses the CA-CFAR's threshold in one cell of a frame.
+
+    A cell's power summed over the ``M`` channels and the mean of its ``N`` training cells'
+    (each such a sum) are, over noise alone, ``M`` and ``N M`` exponentials of one mean: the
+    ratio of the first to the second follows Fisher's F with ``(2 M, 2 N M)`` degrees of
+    freedom, and crosses the threshold with its tail's chance. The OS-CFAR's estimate (the
+    training cells' 3/4 quantile) lies above their mean: it crosses less often.
+    """
+    from scipy.special import fdtrc  # scipy when needed: see `check._assign`
+
+    m = profile.array.n_elements
+    n = (2 * (CFAR_GUARD + CFAR_TRAIN) + 1) ** 2 - (2 * CFAR_GUARD + 1) ** 2
+    return float(fdtrc(2.0 * m, 2.0 * n * m, 10.0 ** (threshold_db / 10.0)))
+
+
 @dataclass
 class SimulatedRadar:
     """A radar under test in software: feed it schedules, get detections.
@@ -214,7 +237,7 @@ class SimulatedRadar:
     noise: bool = True
     errors: ChannelErrors | None = None
     rng: np.random.Generator = field(default_factory=np.random.default_rng)
-    threshold_db: float = 13.0
+    threshold_db: float = THRESHOLD_DB
     frames_adc: int = 0
     frames_analytic: int = 0
 
@@ -485,7 +508,7 @@ class SimulatedRadar:
 
     def _noise_floor(self, power: FloatArray) -> FloatArray:
         """CFAR noise estimate per cell from its training cells (guard cells excluded)."""
-        guard, train = 2, 8
+        guard, train = CFAR_GUARD, CFAR_TRAIN
         half = guard + train
         footprint = np.ones((2 * half + 1, 2 * half + 1), dtype=bool)
         footprint[train : train + 2 * guard + 1, train : train + 2 * guard + 1] = False

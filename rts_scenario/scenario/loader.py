@@ -158,6 +158,14 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         target_sources += [(fragment, ("targets", j), t)
                            for j, t in enumerate(fragment.data["targets"])]
     target_sources += [(doc, ("targets", j), t) for j, t in enumerate(data["targets"])]
+    limits = data.get("expectations", {}).get("expected_limits", [])
+    if target_sources and "nothing_checked" in limits:
+        # Declared, it lets an empty bench pass on a radar that cannot fail its check: a scene
+        # whose targets make something checkable has no such run.
+        raise doc.error(("expectations", "expected_limits", limits.index("nothing_checked")),
+                        "'nothing_checked' is for a scene without targets (an empty bench "
+                        "played to the built-in simulated radar, which makes no false "
+                        "detections); a scene with targets checks them")
     if not target_sources and "max_false_detections_per_frame" not in data.get(
             "expectations", {}):
         # A run of an empty bench checks only the radar's false detections: the scene says how

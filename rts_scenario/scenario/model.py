@@ -44,12 +44,15 @@ LIMITS = {
                       "range offset of the targets' travel in one frame look alike)",
     "quantity_unchecked": "the scene writes a tolerance for a quantity the run's CAN mapping "
                           "does not carry: it is not checked",
+    "nothing_checked": "a scene without targets (an empty bench) played to the built-in "
+                       "simulated radar, whose false detections it checks, which makes none "
+                       "(no noise, or a CFAR that thermal noise does not cross)",
 }
 
 # Limits of the whole scene, not of a target-frame: only ``expectations.expected_limits``
 # declares them.
 SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase", "frames_sent_late", "frames_lost",
-                "adjacent_frame", "quantity_unchecked")
+                "adjacent_frame", "quantity_unchecked", "nothing_checked")
 # Those known from the scene before anything plays (`rts_scenario.preflight.scene_limits`).
 PLANNED_SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase")
 
