@@ -637,6 +637,8 @@ class _Body:
     knots_s: list[float] = field(default_factory=lambda: [0.0])
     knots_mps: list[float] = field(default_factory=lambda: [0.0])
     lane_changes: list[LaneChange] = field(default_factory=list)
+    # The .xosc element (tag, line) each lane change came from.
+    lane_change_sources: list[tuple[str, int | None]] = field(default_factory=list)
     lane_offset_m: float = 0.0
     runs: dict[str, _Run] = field(default_factory=dict)  # by domain: the latest action
 
@@ -727,6 +729,18 @@ class ImportResult:
     parameters: dict[str, Parameter]
     ego: str
     notes: list[str]
+    # Where in the .xosc what the scene writes came from: key path (``targets[1]``,
+    # ``ego.lane_changes[0]``, as errors name them) to the element's tag and line.
+    sources: dict[str, tuple[str, int | None]] = field(default_factory=dict)
+
+    def source_of(self, key_path: str | None) -> tuple[str, int | None] | None:
+        """Return the .xosc element (tag, line) behind a scene key path, or its parent's."""
+        while key_path:
+            if key_path in self.sources:
+                return self.sources[key_path]
+            cut = max(key_path.rfind("."), key_path.rfind("["))
+            key_path = key_path[:cut] if cut > 0 else ""
+        return None
 
 
 class _Importer:
@@ -735,6 +749,7 @@ class _Importer:
         self.root = root
         self.lane_width_m = lane_width_m
         self.notes: list[str] = []
+        self.sources: dict[str, tuple[str, int | None]] = {}
         self.bodies: dict[str, _Body] = {}
         self.init_actions: list[_Action] = []
         self.acts: list[_Act] = []
@@ -1484,6 +1499,7 @@ class _Importer:
             # offset is the file's once both are over.
             start = max(0.0, t + duration / 2 - shortest / 2)
             body.lane_changes.append(LaneChange(start, shortest, shift))
+            body.lane_change_sources.append(_source(action.el))
             what = "step" if duration < STEP_S else f"shift over {duration:.3f} s"
             self.notes.append(f"{where}: lateral {what} of {action.actor!r} ({shift:+.3f} m) "
                               f"played as the shortest quintic lane change within "
@@ -1491,6 +1507,7 @@ class _Importer:
                               f"{start:.3f} s")
             return
         body.lane_changes.append(LaneChange(t, duration, shift))
+        body.lane_change_sources.append(_source(action.el))
         self.notes.append(f"{where}: {shape} lateral shift of {action.actor!r} ({shift:+.3f} m "
                           f"over {duration:.3f} s from {t:.3f} s) played as the scene "
                           f"format's quintic lane change")
@@ -1629,9 +1646,12 @@ class _Importer:
         if ego.center_m is not None and ego.size_m is not None:
             mount_x = float(ego.center_m[0] + ego.size_m[0] / 2.0)
         ego_spec: dict[str, Any] = {"motion": _motion(ego, 0.0)}
+        self.sources = {"ego": _source(ego.el)}
         if ego.lane_changes:
             ego_spec["lane_changes"] = _lane_changes(ego)
-        targets = []
+            self.sources.update({f"ego.lane_changes[{i}]": where
+                                 for i, where in enumerate(ego.lane_change_sources)})
+        targets: list[dict[str, Any]] = []
         used: set[str] = set()
         for body in self.bodies.values():
             if body is ego:
@@ -1640,8 +1660,12 @@ class _Importer:
                 DEFAULT_HEIGHT_M.get(body.kind, 0.5)
             target: dict[str, Any] = {"name": self._target_name(body.name, used),
                                       "kind": body.kind, "motion": _motion(body, height)}
+            at = f"targets[{len(targets)}]"
+            self.sources[at] = _source(body.el)
             if body.lane_changes:
                 target["lane_changes"] = _lane_changes(body)
+                self.sources.update({f"{at}.lane_changes[{i}]": where
+                                     for i, where in enumerate(body.lane_change_sources)})
             target["rcs"] = copy.deepcopy(RCS_MODELS[body.rcs_model])
             targets.append(target)
         source = self.description.strip().rstrip(".")
@@ -1700,6 +1724,10 @@ def _motion(body: _Body, height_m: float) -> dict[str, Any]:
     return {"type": "speed_profile", "position_m": position, "heading_deg": heading,
             "profile": [{"t_s": _round(t), "speed_mps": _round(v)}
                         for t, v in zip(body.knots_s, body.knots_mps, strict=True)]}
+
+
+def _source(el: _El) -> tuple[str, int | None]:
+    return el.tag, el.line
 
 
 def _lane_changes(body: _Body) -> list[dict[str, float]]:
@@ -1796,4 +1824,4 @@ def import_xosc(path: str | Path, *, radar: str, rig: str, ego: str | None = Non
                           allow_unicode=True)
     text = "".join(f"# {' '.join(line.split())}\n" for line in header) + body
     return ImportResult(text=text, scene=scene, parameters=params, ego=importer.ego,
-                        notes=importer.notes)
+                        notes=importer.notes, sources=importer.sources)

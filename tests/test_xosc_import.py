@@ -1256,3 +1256,19 @@ def test_each_pedestrian_category_gets_the_kind_and_rcs_the_docs_give(tmp_path, 
     target = yaml.safe_load(result.text)["targets"][0]
     assert (target["kind"], target["rcs"]) == (kind, rcs)
     assert scene.targets[0].kind == kind
+
+
+def test_cli_import_refused_names_the_xosc_element_the_failing_key_came_from(tmp_path, capsys):
+    # The ego stands (no SpeedAction) and changes lane from 1 s: the scene refuses the lane
+    # change; the error points at the LaneChangeAction in the .xosc, not at the scene it did
+    # not write.
+    source = DATA / "ego_lane_change_standing.xosc"
+    out = tmp_path / "stand.scenario.yaml"
+    assert main(["import", str(source), "--radar", "awr1843boost", "--rig", "wide-3x5",
+                 "--output", str(out)]) == 2
+    err = capsys.readouterr().err
+    line = line_of(source, "<LaneChangeAction>")
+    assert err.startswith(f"error: {source}:{line}: <LaneChangeAction>: the scene it converts "
+                          f"to does not load")
+    assert "ego.lane_changes[0]: the ego's speed along its path is 0 at 1 s" in err
+    assert list(tmp_path.iterdir()) == []

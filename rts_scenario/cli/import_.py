@@ -93,7 +93,11 @@ def _do_import(args: argparse.Namespace) -> int:
             scene = load_scenario(draft)  # what validate and run will read
         except RtsError as exc:
             reason = one_line(exc).replace(str(draft), str(output))
-            raise RtsError(f"{args.file}: the scene it converts to does not load (a value "
+            # Named by the .xosc element the failing key came from, where the import knows it.
+            source = result.source_of(getattr(exc, "key_path", None))
+            where = (f"{args.file}{f':{source[1]}' if source[1] else ''}: <{source[0]}>"
+                     if source else args.file)
+            raise RtsError(f"{where}: the scene it converts to does not load (a value "
                            f"beyond the scene format's or the bench's limits); {output} not "
                            f"written: {reason}") from None
         try:
