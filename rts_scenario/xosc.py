@@ -1417,6 +1417,11 @@ class _Importer:
                 duration = QUINTIC_PEAK_SLOPE * abs(shift) / dyn.value
             else:
                 duration = self._time_to_travel(action, body, t, dyn.value)
+                self.notes.append(f"{self.file}:{action.el.line}: lane change of "
+                                  f"{action.actor!r} over {dyn.value:g} m played over the "
+                                  f"{duration:.3f} s its speeds as known at {t:.3f} s take to "
+                                  f"cover it: a speed action that starts later does not "
+                                  f"stretch it")
             self._shift(action, body, t, shift, duration, dyn.shape)
             return duration
         if action.kind == "lane_offset":

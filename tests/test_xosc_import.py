@@ -1272,3 +1272,15 @@ def test_cli_import_refused_names_the_xosc_element_the_failing_key_came_from(tmp
                           f"to does not load")
     assert "ego.lane_changes[0]: the ego's speed along its path is 0 at 1 s" in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_lane_change_over_a_distance_says_it_is_timed_at_its_start(tmp_path):
+    # 60 m at the cutter's 20 m/s: 3 s, fixed when it starts (2 s); a note says so.
+    path = variant(tmp_path, "cut_in", 'value="$LaneChangeTime" dynamicsDimension="time"',
+                   'value="60" dynamicsDimension="distance"')
+    result, _ = imported(tmp_path, path)
+    change = yaml.safe_load(result.text)["targets"][0]["lane_changes"][0]
+    assert (change["start_s"], change["duration_s"]) == pytest.approx((2.0, 3.0))
+    assert any(note.endswith("lane change of 'Cutter' over 60 m played over the 3.000 s its "
+                             "speeds as known at 2.000 s take to cover it: a speed action that "
+                             "starts later does not stretch it") for note in result.notes)
