@@ -552,3 +552,28 @@ def test_a_target_at_or_near_the_radar_is_too_close_for_the_rts(range_m):
     sch = build_schedule(tracks([0.0], [0.0], range_m=range_m), rig_with(), RADAR)
     assert Status.TOO_CLOSE in Status(int(sch.status[0, 0]))
     assert not sch.emitted[0, 0] and not sch.active[0, 0].any()
+
+
+def test_an_if_rts_with_fes_at_different_distances_and_no_phase_calibration_is_said():
+    # Behind a digital RTS each FE's air path D turns its echo by (fc - f_if) 2 D / c0, which
+    # its delay does not take back: 1 mm is (77 GHz - 0.5 GHz) x 2 mm / c0 = 0.51 turns.
+    from rts_scenario.schedule.build import if_distance_note
+
+    kit = rs.Rig.preset("kit-table1")
+    per_mm = (RADAR.fc_hz - 0.5e9) * 2e-3 / 299_792_458.0 * 360.0 % 360.0
+    assert per_mm == pytest.approx(184.0, abs=1.0)
+
+    def rig(distance_m, model="if", phase_deg=0.0):
+        return rs.Rig.from_angles(kit.az_deg, kit.el_deg, distance_m=np.array(distance_m),
+                                  limits=kit.limits, reference=kit.reference,
+                                  rts=RtsDelayModel(delay_model=model),
+                                  cal_phase_deg=phase_deg)
+
+    said = if_distance_note(rig([1.0, 1.001, 1.0, 1.0]), RADAR)
+    assert said is not None and "behind an IF RTS" in said and "up to 176 deg apart" in said
+    assert f"turns its echo by {per_mm:.0f} deg per mm" in said
+    for quiet in (rig([1.0, 1.0, 1.0, 1.0]),                       # equal: a common phase
+                  rig([1.0, 1.001, 1.0, 1.0], model="rf"),          # an RF delay line takes it
+                  rig([1.0, 1.001, 1.0, 1.0], phase_deg=[0.0, 176.0, 0.0, 0.0])):  # calibrated
+        assert if_distance_note(quiet, RADAR) is None
+    assert if_distance_note(kit, RADAR) is None

@@ -17,7 +17,7 @@ def _do_validate(args: argparse.Namespace) -> int:
         from ..preflight import preflight, vacuous_empty_bench
         from ..radar.simulate import near_field_warning
         from ..scenario import load_scenario, parametrizations
-        from ..schedule.build import delay_step_note
+        from ..schedule.build import delay_step_note, if_distance_note
 
     bad = 0
     reported: set[str] = set()  # notes of a rig and radar: said once, for the first scene
@@ -53,6 +53,7 @@ def _do_validate(args: argparse.Namespace) -> int:
             declared = "nothing_checked" in scene.expectations.expected_limits
             for note in (near_field_warning(scene.radar, scene.rig),
                          delay_step_note(scene.rig, scene.radar),
+                         if_distance_note(scene.rig, scene.radar),
                          vacuous and f"on the built-in simulated radar a run "
                                      f"{'reports' if declared else 'fails with'} "
                                      f"nothing_checked"

@@ -516,5 +516,37 @@ def delay_step_note(rig: Rig, radar: RadarProfile) -> str | None:
             f"with the step beyond {COARSE_DELAY_STEP_BINS:g} bins")
 
 
-__all__ = ["FE_RESPONSES", "build_schedule", "channel_delays", "delay_step_note",
-           "solver_inputs"]
+# FE phases further apart than this (deg) from the FEs' distances behind an IF RTS, with no
+# phase calibration: `if_distance_note` says so.
+IF_DISTANCE_PHASE_DEG = 5.0
+
+
+def if_distance_note(rig: Rig, radar: RadarProfile) -> str | None:
+    """Say that an IF RTS's FEs at different distances need a phase calibration; None if not.
+
+    A digital RTS delays the signal at its IF: each FE's air path ``D`` turns its echo by
+    ``(f - f_if) 2 D / c0`` (184 deg per mm at 77 GHz), which the RTS's delay does not take
+    back, as an RF delay line would. The schedule leaves it to the rig's phase calibration
+    (`calibrate` measures it): a rig without one (every ``calibration.phase_deg`` 0) whose FEs'
+    distances turn them more than `IF_DISTANCE_PHASE_DEG` apart plays its targets off their
+    angles, on a bench and on the built-in simulated radar alike.
+    """
+    if rig.rts.delay_model != "if" or np.any(rig.cal_phase_deg != 0.0):
+        return None
+    turn = 360.0 * (radar.fc_hz - rig.rts.if_frequency_hz) * 2.0 * rig.distance_m / C0_MPS
+    apart = (turn - turn[0] + 180.0) % 360.0 - 180.0
+    if not np.abs(apart).max() > IF_DISTANCE_PHASE_DEG:
+        return None
+    per_mm = 360.0 * (radar.fc_hz - rig.rts.if_frequency_hz) * 2e-3 / C0_MPS
+    return (f"rig {rig.name!r}: its FEs lie {rig.distance_m.min():.4g} to "
+            f"{rig.distance_m.max():.4g} m from the radar behind an IF RTS (rts.delay_model if), "
+            f"and it has no phase calibration: each FE's air path turns its echo by "
+            f"{per_mm % 360.0:.0f} deg per mm of distance (modulo 360) at the "
+            f"{radar.fc_hz / 1e9:.4g} GHz of radar {radar.name!r}, which the RTS's delay does "
+            f"not take back; here they lie up to {np.abs(apart).max():.0f} deg apart, so its "
+            f"targets are played off their angles: calibrate the rig (rts-scenario calibrate "
+            f"measures each FE's phase)")
+
+
+__all__ = ["FE_RESPONSES", "IF_DISTANCE_PHASE_DEG", "build_schedule", "channel_delays",
+           "delay_step_note", "if_distance_note", "solver_inputs"]
