@@ -1111,16 +1111,7 @@ class Pipeline:
         playback.rts_unreachable = self.output.rts_unreachable()
         # Which output played the scene: "simulated-radar" is no bench (docs/report.md).
         report.playback = {**playback.to_dict(), "output": options.output}
-        vacuous = self._vacuous_empty_bench(scene, options)
-        expected = scene.expectations.expected_limits
-        if vacuous and "nothing_checked" in expected:
-            # Declared: said beside the verdict, as the other limits of the whole scene.
-            report.scene_limits["nothing_checked"] = {"why": vacuous, "expected": True}
-        elif vacuous:
-            report.reasons.append(FailReason(vacuous, "nothing_checked"))
-            report.passed = False
-        elif "nothing_checked" in expected and not report.reason_codes.count("nothing_checked"):
-            report.add_expected_not_hit(["nothing_checked"])
+        judge_empty_bench(report, scene, self._radar_options, options.output)
         failures = playback.reasons(scene.expectations.expected_limits)
         report.add_expected_not_hit(playback.not_hit(scene.expectations.expected_limits))
         if failures:
@@ -1159,12 +1150,6 @@ class Pipeline:
             # Said where the host's clock stepped: the times were brought back (`_unstep`).
             report.radar_clock["host_clock_steps"] = steps
         return RunResult(scene=scene, report=report, sidecar_error=sidecar_error)
-
-    def _vacuous_empty_bench(self, scene: Scenario, options: RunOptions) -> str | None:
-        """`vacuous_empty_bench` where the scene plays to the built-in simulated radar."""
-        if options.output != "simulated-radar":
-            return None  # the radar is the bench's: the check is real
-        return vacuous_empty_bench(scene, self._radar_options)
 
     def _write_sidecar(self, options: RunOptions, scene: Scenario, played: PlayedRecord,
                        checker: Checker, scene_first: int, report: Report, playback: Playback,
@@ -1395,6 +1380,28 @@ class CycleTruth:
         self.checker.add_truth(int(n[0]), truth, status[held], other=other,
                                ambiguous=ambiguous)
         return n
+
+
+def judge_empty_bench(report: Report, scene: Scenario, radar_options: RadarOptions,
+                      output: str | None) -> None:
+    """Fail an empty bench the built-in simulated radar played, whose check could not fail.
+
+    `vacuous_empty_bench` says why, where ``output`` (the run's, or a re-checked log's from
+    its sidecar) is ``simulated-radar``; played to an RTS, the radar is the bench's and the
+    check is real. A scene that declares ``nothing_checked`` passes with the limit said
+    (``scene_limits``), or, where the check was real, said as not hit.
+    """
+    vacuous = (vacuous_empty_bench(scene, radar_options) if output == "simulated-radar"
+               else None)
+    expected = scene.expectations.expected_limits
+    if vacuous and "nothing_checked" in expected:
+        # Declared: said beside the verdict, as the other limits of the whole scene.
+        report.scene_limits["nothing_checked"] = {"why": vacuous, "expected": True}
+    elif vacuous:
+        report.reasons.append(FailReason(vacuous, "nothing_checked"))
+        report.passed = False
+    elif "nothing_checked" in expected and "nothing_checked" not in report.reason_codes:
+        report.add_expected_not_hit(["nothing_checked"])
 
 
 def _stamped(message: can.Message) -> float:

@@ -9,6 +9,7 @@ was never played.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -213,9 +214,9 @@ def preflight(scene: Scenario, method: str = "exact",
     return counter.result()
 
 
-# Fewer false detections than this to be expected in a whole run: an empty bench's check could
-# not fail (`vacuous_empty_bench`).
-VACUOUS_FALSE_ALARMS = 1e-3
+# A chance below this that the simulated radar's thermal noise makes more false detections than
+# an empty bench allows: its check could not fail (`vacuous_empty_bench`).
+VACUOUS_CHANCE = 1e-3
 
 
 def vacuous_empty_bench(scene: Scenario, radar_options: RadarOptions) -> str | None:
@@ -223,28 +224,36 @@ def vacuous_empty_bench(scene: Scenario, radar_options: RadarOptions) -> str | N
 
     A scene without targets checks only the radar's false detections; the simulated radar
     makes them only from the cube's noise (`adc` fidelity, noise on), as far as its CFAR lets
-    thermal noise through (`thermal_false_alarm_chance`): where not one false detection is to
-    be expected in the run (`VACUOUS_FALSE_ALARMS`), its check could not fail either. Played to
-    an RTS, the radar is the bench's, and the check is real.
+    thermal noise through (`thermal_false_alarm_chance`, CA-CFAR; an OS-CFAR lets less
+    through): where more of them than the scene allows over its cycles (Poisson) have a chance
+    below `VACUOUS_CHANCE`, its check could not fail either. Played to an RTS, the radar is the
+    bench's, and the check is real.
     """
     ro = radar_options
     if scene.targets:
         return None
     if ro.fidelity == "adc" and ro.noise:
+        from scipy.special import pdtrc  # scipy when needed: see `check._assign`
+
         from .radar.simulate import THRESHOLD_DB, thermal_false_alarm_chance
 
         radar = scene.radar
         chance = thermal_false_alarm_chance(radar)
-        cycles = scene.duration_s / radar.radar_clock.cycle_s
+        cycles = max(1, round(scene.duration_s / radar.radar_clock.cycle_s))
         expected = chance * radar.adc_samples * radar.chirp_loops * cycles
-        if expected >= VACUOUS_FALSE_ALARMS:
+        allowed = math.floor(scene.expectations.max_false_detections_per_frame * cycles + 1e-9)
+        beyond = float(pdtrc(allowed, expected))
+        if beyond >= VACUOUS_CHANCE:
             return None
+        bound = "" if ro.cfar == "ca" else " at most (its OS-CFAR lets less through)"
         return (f"nothing to check: the scene has no targets, and the built-in simulated radar's "
                 f"thermal noise crosses its CFAR threshold ({THRESHOLD_DB:g} dB over the noise "
                 f"of its {radar.array.n_elements} channels summed) with a chance of "
-                f"{chance:.2g} per cell: {expected:.2g} false detections are to be expected in "
-                f"this run, so its one check could not fail; play it to a bench (expected "
-                f"where the scene lists nothing_checked in expected_limits)")
+                f"{chance:.2g} per cell{bound}: {expected:.2g} false detections are to be "
+                f"expected in this run's {cycles} radar cycles, more than the {allowed} it "
+                f"allows with a chance of {beyond:.2g}, so its one check could not fail; play "
+                f"it to a bench (expected where the scene lists nothing_checked in "
+                f"expected_limits)")
     why = ("with noise off" if not ro.noise else "at analytic fidelity"
            if ro.fidelity == "analytic" else
            f"at {ro.fidelity} fidelity (the cube only where targets crowd: none here)")

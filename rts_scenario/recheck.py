@@ -59,6 +59,7 @@ from .pipeline import (
     CycleTruth,
     after_scene_until_s,
     ambiguity_window_s,
+    judge_empty_bench,
     lag_dict,
 )
 from .playback import (
@@ -1840,6 +1841,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         if failures:
             result.reasons += failures
             result.passed = False
+        # An empty bench the simulated radar played: judged as the run judged it.
+        judge_empty_bench(result, scene, scene.radar_options, result.playback["output"])
         worst = (playback.get("lateness_s") or {}).get("max")
         if (worst is not None and worst > float(playback.get("ambiguity_window_s") or 0.0)
                 and not (sidecar or {}).get("send_lateness")):

@@ -1417,6 +1417,8 @@ class _Importer:
                 duration = QUINTIC_PEAK_SLOPE * abs(shift) / dyn.value
             else:
                 duration = self._time_to_travel(action, body, t, dyn.value)
+            if dyn.dimension == "distance" and dyn.shape != "step" and abs(shift) >= 1e-9 \
+                    and duration >= lane_change_seconds(shift):  # else `_shift` says how
                 self.notes.append(f"{self.file}:{action.el.line}: lane change of "
                                   f"{action.actor!r} over {dyn.value:g} m played over the "
                                   f"{duration:.3f} s its speeds as known at {t:.3f} s take to "

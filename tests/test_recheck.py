@@ -1989,3 +1989,21 @@ def test_a_log_cut_short_before_any_message_is_not_a_silent_bus(tmp_path, capsys
     assert report["reasons"][0].startswith(f"the log {cut} was cut short"), report["reasons"]
     assert not any("silent" in r for r in report["reasons"]), report["reasons"]
     assert report["bus"]["messages"] == 0
+
+
+@pytest.mark.parametrize("declared", [False, True])
+def test_an_empty_bench_the_simulated_radar_played_re_checks_to_the_live_verdict(tmp_path,
+                                                                                 declared):
+    # The simulated radar's empty bench checks nothing: the run fails with nothing_checked
+    # unless the scene declares it, and the re-check of its log (the sidecar says what played
+    # it) does the same, where it passed with nothing said.
+    scene = load_scenario(ROOT / "scenarios" / "empty_bench.scenario.yaml", {
+        "duration_s": 1.0,
+        "expectations.expected_limits": ["nothing_checked"] if declared else []})
+    log = tmp_path / "bench.blf"
+    live = run_scene(scene, RunOptions(bus_log=str(log))).report
+    again = check_log(scene, log).report
+    assert (live.passed, again.passed) == (declared, declared)
+    assert again.reason_codes == live.reason_codes == ([] if declared else ["nothing_checked"])
+    assert again.scene_limits == live.scene_limits
+    assert ("nothing_checked" in again.scene_limits) == declared

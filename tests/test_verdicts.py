@@ -343,7 +343,8 @@ _NOISE_THROUGH = ("'s thermal noise crosses its CFAR threshold (13 dB over the n
     ({"radar.noise": False, "duration_s": 0.5}, " with noise off makes no false detections"),
     # The cube's noise: its CFAR lets it through with a chance of 6e-84 per cell, none expected.
     ({"duration_s": 0.5}, _NOISE_THROUGH + "1e-78 false detections are to be expected in this "
-                                           "run"),
+                                           "run's 10 radar cycles, more than the 0 it allows "
+                                           "with a chance of 1e-78"),
 ])
 @pytest.mark.parametrize("declared", [False, True])
 def test_an_empty_bench_the_simulated_radar_cannot_fail_checks_nothing(radar, vacuous, declared):
@@ -468,3 +469,35 @@ def test_an_empty_bench_at_auto_fidelity_through_the_api_checks_nothing_either()
     assert said is not None and "simulated radar at auto fidelity (the cube only where targets " \
                                 "crowd: none here) makes no false detections" in said
 
+
+
+def test_an_empty_bench_judged_on_the_chance_of_more_false_detections_than_it_allows(
+        monkeypatch):
+    """The check could fail where thermal noise makes more false detections than the scene
+    allows with a real chance: not at the default 13 dB over 12 channels (none expected), but
+    over a single channel (F(2, 832)'s tail at 13 dB: 3.4e-9 per cell) and a strict limit; the
+    chance is Poisson's tail (written out here)."""
+    import dataclasses
+    import math
+    from pathlib import Path
+
+    from scipy import stats
+
+    import rts_scenario.radar.simulate as simulate
+    from rts_scenario.preflight import vacuous_empty_bench
+    from rts_scenario.scenario import load_scenario
+
+    per_cell = float(stats.f.sf(10 ** 1.3, 2, 2 * 416))
+    monkeypatch.setattr(simulate, "thermal_false_alarm_chance", lambda profile: per_cell)
+    scene = load_scenario(Path(__file__).resolve().parents[1] / "scenarios"
+                          / "empty_bench.scenario.yaml")
+    rate = per_cell * scene.radar.adc_samples * scene.radar.chirp_loops * 60
+    # 3 allowed in 60 cycles at 0.05 per cycle: more than 3 has the chance 1 - P(N <= 3).
+    beyond = 1.0 - sum(math.exp(-rate) * rate ** k / math.factorial(k) for k in range(4))
+    said = vacuous_empty_bench(scene, scene.radar_options)
+    assert said is not None and f"more than the 3 it allows with a chance of {beyond:.2g}" in said
+    # Allowed none: one false detection fails it, and has a real chance.
+    strict = dataclasses.replace(scene, expectations=dataclasses.replace(
+        scene.expectations, max_false_detections_per_frame=0.0))
+    assert 1.0 - math.exp(-rate) > 1e-3
+    assert vacuous_empty_bench(strict, scene.radar_options) is None

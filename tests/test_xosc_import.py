@@ -1284,3 +1284,13 @@ def test_a_lane_change_over_a_distance_says_it_is_timed_at_its_start(tmp_path):
     assert any(note.endswith("lane change of 'Cutter' over 60 m played over the 3.000 s its "
                              "speeds as known at 2.000 s take to cover it: a speed action that "
                              "starts later does not stretch it") for note in result.notes)
+
+
+def test_a_lane_change_over_a_short_distance_is_said_once_as_the_shortest_quintic(tmp_path):
+    # 5 m at 20 m/s: 0.25 s, faster than a scene's lane change may be; said as the shortest
+    # quintic, not as one timed over 0.25 s.
+    path = variant(tmp_path, "cut_in", 'value="$LaneChangeTime" dynamicsDimension="time"',
+                   'value="5" dynamicsDimension="distance"')
+    result, _ = imported(tmp_path, path)
+    assert any("played as the shortest quintic lane change" in note for note in result.notes)
+    assert not any("its speeds as known at" in note for note in result.notes)

@@ -38,7 +38,8 @@ up to 2.9 dB, half a cell off in range and Doppler); ``auto`` uses the cube
 only for frames where targets share a range-Doppler neighbourhood (within 2.5 bins), where the
 analytic model cannot tell them apart. Interactions between separate cells (a strong target
 masking a weak one in the CFAR's training cells) and false alarms exist only in ``adc``: force it
-when a test is about them.
+when a test is about them (at the default threshold thermal noise crosses the CFAR's with a
+chance of 6e-84 per cell, `thermal_false_alarm_chance`: none in practice).
 
 Both FFTs are circular, so in every fidelity range and velocity fold as a real radar's do: the
 sampled beat frequency ``S T - fD`` aliases modulo the (complex) sample rate, so the range bin
@@ -559,7 +560,7 @@ class SimulatedRadar:
         doppler_bin = self._bins(e.select(first))[1]
         noise_power = self._sigma**2 * self._noise_gain  # per channel, after both FFTs
         # A target between bins reaches its peak cell weakened by both windows' responses (the
-        # straddle loss, up to 2.8 dB at half a bin in range and Doppler): what the CFAR sees.
+        # straddle loss, up to 2.9 dB at half a bin in range and Doppler): what the CFAR sees.
         # As `_detect_adc`: detected on the peak cell's power, its snapshot and SNR then
         # divided by that loss (the noise with them).
         straddle = (p.range_response(target_bin - cell)
