@@ -1246,3 +1246,42 @@ def test_an_ego_lane_change_while_it_stands_is_refused(tmp_path, motion, zero_at
     assert err.key_path == "ego.lane_changes[0]" and err.line == 11
     assert (f"the ego's speed along its path is 0 at {zero_at:g} s, during this lane change "
             f"(1 to 3 s)") in str(err)
+
+
+@pytest.mark.parametrize("speed_mps, refused", [(12.0, False), (25.0, True)])
+def test_a_spline_that_turns_too_hard_for_its_speed_is_refused(tmp_path, speed_mps, refused):
+    # Waypoints on a circle of 30 m radius, a quarter of it, driven at a constant speed: the
+    # sideways acceleration is about v^2 / R (12 m/s: 4.8 m/s2; 25 m/s: 21 m/s2, beyond the
+    # 15 m/s2 a scene allows along a path and for lane changes).
+    angles = np.radians([0.0, 22.5, 45.0, 67.5, 90.0])
+    points = "".join(f"        - {{position_m: [{40 + 30 * np.sin(a):.6f}, "
+                     f"{30 - 30 * np.cos(a):.6f}, 0.6], speed_mps: {speed_mps}}}\n"
+                     for a in angles)
+    motion = f"    motion:\n      type: waypoints\n      path: spline\n      points:\n{points}"
+    text = GOOD.replace("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], "
+                        "speed_mps: 19.0}\n", motion)
+    scene = tmp_path / "turn.scenario.yaml"
+    scene.write_text(text)
+    if not refused:
+        load_scenario(scene)
+        return
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    message = str(info.value)
+    assert "targets[0].motion.points[" in message and "the spline path turns" in message
+    across = float(re.search(r"a sideways acceleration of ([0-9.]+) m/s2", message).group(1))
+    radius = float(re.search(r"with a radius of ([0-9.]+) m", message).group(1))
+    # The reference: the natural cubic spline through the points (chord-length parameter),
+    # its curvature on a fine grid: it bends more than the circle (21 m/s2) in its middle, its
+    # curvature being 0 at its ends.
+    from scipy.interpolate import CubicSpline
+
+    xy = np.stack([40 + 30 * np.sin(angles), 30 - 30 * np.cos(angles)], axis=1)
+    u = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    spline = CubicSpline(u, xy, bc_type="natural")
+    fine = np.linspace(0.0, u[-1], 20001)
+    d1, d2 = spline(fine, 1), spline(fine, 2)
+    curvature = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / np.linalg.norm(d1, axis=1) ** 3
+    assert across == pytest.approx(speed_mps ** 2 * curvature.max(), rel=0.01)
+    assert radius == pytest.approx(1.0 / curvature.max(), rel=0.01)
+    assert across > speed_mps ** 2 / 30.0

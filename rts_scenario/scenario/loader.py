@@ -1115,4 +1115,47 @@ def _waypoints(doc: Document, key: KeyPath, motion: dict[str, Any],
     knots.append(t)
     v0.append(speeds[-1])
     acc.append(0.0)
-    return Trajectory(path=path, law=TravelLaw.pieces(knots, v0, acc), lane_changes=lane_changes)
+    trajectory = Trajectory(path=path, law=TravelLaw.pieces(knots, v0, acc),
+                            lane_changes=lane_changes)
+    if motion.get("path", "polyline") == "spline":
+        _check_turns(doc, key, trajectory, np.array(knots[-len(points):]))
+    return trajectory
+
+
+# Points per piece of a spline path (between two waypoints) its sideways acceleration is
+# checked on (`_check_turns`): the spline's curvature is smooth between waypoints.
+TURN_SAMPLES = 64
+
+
+def _check_turns(doc: Document, key: KeyPath, trajectory: Trajectory,
+                 at_waypoints_s: np.ndarray) -> None:
+    """Refuse a spline path that turns harder than `MAX_ACCELERATION_MPS2` sideways.
+
+    Its acceleration across the direction of travel (``v^2`` times the path's curvature, and
+    its lane changes' with it), on `TURN_SAMPLES` times between each two waypoints: a path that
+    bends sharply between waypoints far apart, driven fast, would have the object slide
+    sideways as no car can (the same bound as along the path and for lane changes).
+    """
+    from .trajectory import TrajectorySet
+
+    share = np.linspace(0.0, 1.0, TURN_SAMPLES + 1)
+    t = (at_waypoints_s[:-1, None] + np.diff(at_waypoints_s)[:, None] * share).ravel()
+    motion = TrajectorySet([trajectory]).evaluate(t)
+    v = motion.velocity_mps[:, 0]
+    a = motion.acceleration_mps2[:, 0] if motion.acceleration_mps2 is not None else v * 0.0
+    speed = np.linalg.norm(v, axis=1)
+    along = np.where(speed > 1e-9, np.einsum("ij,ij->i", a, v) / np.maximum(speed, 1e-300), 0.0)
+    across = np.sqrt(np.maximum(np.einsum("ij,ij->i", a, a) - along**2, 0.0))
+    worst = int(np.argmax(across))
+    if across[worst] <= MAX_ACCELERATION_MPS2 * (1.0 + 1e-6):
+        return
+    piece = worst // (TURN_SAMPLES + 1)
+    radius = speed[worst] ** 2 / across[worst]
+    raise doc.error((*key, "points", piece + 1),
+                    f"between waypoints {piece} and {piece + 1} the spline path turns (with "
+                    f"the object's lane changes) at {t[worst]:.3g} s with a radius of "
+                    f"{radius:.3g} m at {speed[worst]:.3g} m/s: a sideways acceleration of "
+                    f"{across[worst]:.3g} m/s2; accelerations run from "
+                    f"{-MAX_ACCELERATION_MPS2:g} to {MAX_ACCELERATION_MPS2:g} m/s2 (as "
+                    f"acceleration_mps2 of constant_acceleration): lower the speeds there, or "
+                    f"add waypoints that keep the path straighter")
