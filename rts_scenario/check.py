@@ -104,7 +104,11 @@ _LIMIT_FLAGS = {
 }
 # Columns of the detections CSV (``run --detections``), in order.
 DETECTION_COLUMNS = ("scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
-                     "el_deg", "snr_db", "rcs_dbsm", "target", "variant", "file")
+                     "el_deg", "snr_db", "rcs_dbsm", "target", "variant", "file",
+                     "truth_range_m", "truth_radial_velocity_mps", "truth_az_deg",
+                     "truth_el_deg", "truth_rcs_dbsm")
+# The ground truth beside each detection: its target's in the frame the cycle was judged against.
+_TRUTH_COLUMNS = ("range_m", "radial_velocity_mps", "az_deg", "el_deg", "rcs_dbsm")
 
 
 def limit_masks(tracks: Tracks, status: NDArray[np.uint16]) -> dict[str, BoolArray]:
@@ -681,7 +685,7 @@ class Checker:
         self._missed += (ok[:, None] & truth & ~assigned).sum(axis=0)
         self._unchecked_k += ((~ok)[:, None] & truth).sum(axis=0)
         if self._csv is not None and n_det:
-            self._write_detections(got, counts, block, frame_of, match)
+            self._write_detections(got, counts, block, frame_of, match, use_other)
         whole = ok & ~(truth & ~assigned).any(axis=1)
         self._checkable += truth.sum(axis=0)
         self._detected += detected.sum(axis=0)
@@ -1009,8 +1013,13 @@ class Checker:
                 f"knows")
 
     def _write_detections(self, got: list[Detections], counts: list[int], block: _Block,
-                          frame_of: NDArray[np.int64], match: NDArray[np.int64]) -> None:
-        """One CSV row per detection (`DETECTION_COLUMNS`); the target it was assigned to."""
+                          frame_of: NDArray[np.int64], match: NDArray[np.int64],
+                          use_other: BoolArray) -> None:
+        """One CSV row per detection (`DETECTION_COLUMNS`); the target it was assigned to.
+
+        Beside it the target's ground truth in the frame its cycle was judged against (the
+        frame across a change where ``use_other`` says so); empty for a false detection.
+        """
         assert self._csv is not None
         cycle = np.repeat([c.cycle for c in got], counts)
         # The radar's measurement time; the frame's time where the radar gives none.
@@ -1026,6 +1035,15 @@ class Checker:
         columns.append(names[match + 1].tolist())
         columns.append([self.variant] * frame_of.size)
         columns.append([self.file] * frame_of.size)
+        assigned = match >= 0
+        k = np.where(assigned, match, 0)
+        across = use_other[frame_of] if block.other is not None else np.zeros(k.size, bool)
+        for q in _TRUTH_COLUMNS:
+            values = getattr(block.tracks, q)[frame_of, k]
+            if block.other is not None:
+                values = np.where(across, getattr(block.other[0], q)[frame_of, k], values)
+            columns.append(["" if not a or np.isnan(v) else f"{v:.6g}"
+                            for a, v in zip(assigned.tolist(), values.tolist(), strict=True)])
         self._csv.writerows(zip(*columns, strict=True))
 
     def _keep_worst(self, block: _Block, truth: BoolArray, assigned: BoolArray,

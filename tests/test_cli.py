@@ -397,8 +397,11 @@ def test_run_writes_every_detection_as_csv(tmp_path, capsys):
         detected = sum(t["detected_frames"] + t["out_of_tolerance_frames"]
                        for t in entry["targets"])
         assert len(mine) == detected + entry["false_detections"]
+    # The columns outside tools read, in their places; the ground truth after them.
     assert list(rows[0]) == ["scene", "cycle", "t_s", "range_m", "radial_velocity_mps", "az_deg",
-                             "el_deg", "snr_db", "rcs_dbsm", "target", "variant", "file"]
+                             "el_deg", "snr_db", "rcs_dbsm", "target", "variant", "file",
+                             "truth_range_m", "truth_radial_velocity_mps", "truth_az_deg",
+                             "truth_el_deg", "truth_rcs_dbsm"]
     assert {r["target"] for r in rows} <= {"cutting-car", "overtaker", ""}
     assert {r["file"] for r in rows} == set(scenes)
 

@@ -110,6 +110,17 @@ def test_detections_csv_has_every_detection_and_its_target():
     assert record["scene"] == "cut-in" and record["cycle"] == "0" and record["t_s"] == "0.0"
     assert record["target"] == "cutting-car" and float(record["range_m"]) > 0
     assert [int(r[1]) for r in rows] == sorted(int(r[1]) for r in rows)
+    # Beside each detection its target's ground truth (empty for a false one), within the
+    # scene's tolerances of what the radar reported where the run passed.
+    tolerance = {"range_m": 0.3, "radial_velocity_mps": 0.3, "az_deg": 0.5, "el_deg": 1.0}
+    for row in rows:
+        record = dict(zip(DETECTION_COLUMNS, row, strict=True))
+        if not record["target"]:
+            assert all(record[f"truth_{q}"] == "" for q in (*tolerance, "rcs_dbsm"))
+            continue
+        for q, tol in tolerance.items():
+            assert abs(float(record[q]) - float(record[f"truth_{q}"])) <= tol, (q, record)
+        assert abs(float(record["rcs_dbsm"]) - float(record["truth_rcs_dbsm"])) <= 6.0
 
 
 def test_cycles_at_a_frame_change_are_counted_only_where_they_came_back():
