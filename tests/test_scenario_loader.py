@@ -843,6 +843,20 @@ REVERSAL = """\
 """
 
 
+def _with_target_motion(tmp_path, name, motion, refused):
+    """Load GOOD with its target's motion replaced by ``motion`` (YAML lines): the error where
+    ``refused`` (it must be), else None (it must load)."""
+    scene = tmp_path / f"{name}.scenario.yaml"
+    scene.write_text(GOOD.replace("    motion: {type: constant_velocity, position_m: [30, 0, "
+                                  "0.6], speed_mps: 19.0}\n", motion))
+    if not refused:
+        load_scenario(scene)
+        return None
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(scene)
+    return info.value
+
+
 @pytest.mark.parametrize("path, speed, refused", [
     ("spline", 1.5, True),       # a reversal passed at 1.5 m/s: impossible
     ("spline", 0, False),        # stops at the cusp, then backs out
@@ -851,16 +865,10 @@ REVERSAL = """\
 def test_a_spline_reversal_passed_at_speed_is_refused(tmp_path, path, speed, refused):
     # The path turns 161.6 deg at the second waypoint: a spline path reverses there (a cusp),
     # where the object must stand for an instant.
-    text = GOOD.replace("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], "
-                        "speed_mps: 19.0}\n", REVERSAL.format(path=path, speed=speed))
-    scene = tmp_path / "reversal.scenario.yaml"
-    scene.write_text(text)
-    if not refused:
-        load_scenario(scene)
+    err = _with_target_motion(tmp_path, "reversal", REVERSAL.format(path=path, speed=speed),
+                              refused)
+    if err is None:
         return
-    with pytest.raises(ScenarioError) as info:
-        load_scenario(scene)
-    err = info.value
     assert err.file.endswith("reversal.scenario.yaml")
     assert (err.line, err.key_path) == (18, "targets[0].motion.points[1].speed_mps")
     assert ("the path reverses at this waypoint (it turns 162 deg, more than 90 deg): a spline "
@@ -1258,16 +1266,10 @@ def test_a_spline_that_turns_too_hard_for_its_speed_is_refused(tmp_path, speed_m
                      f"{30 - 30 * np.cos(a):.6f}, 0.6], speed_mps: {speed_mps}}}\n"
                      for a in angles)
     motion = f"    motion:\n      type: waypoints\n      path: spline\n      points:\n{points}"
-    text = GOOD.replace("    motion: {type: constant_velocity, position_m: [30, 0, 0.6], "
-                        "speed_mps: 19.0}\n", motion)
-    scene = tmp_path / "turn.scenario.yaml"
-    scene.write_text(text)
-    if not refused:
-        load_scenario(scene)
+    err = _with_target_motion(tmp_path, "turn", motion, refused)
+    if err is None:
         return
-    with pytest.raises(ScenarioError) as info:
-        load_scenario(scene)
-    message = str(info.value)
+    message = str(err)
     assert "targets[0].motion.points[" in message and "the spline path turns" in message
     across = float(re.search(r"a sideways acceleration of ([0-9.]+) m/s2", message).group(1))
     radius = float(re.search(r"with a radius of ([0-9.]+) m", message).group(1))
