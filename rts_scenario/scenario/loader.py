@@ -1141,11 +1141,12 @@ def _check_turns(doc: Document, key: KeyPath, trajectory: Trajectory,
     share = np.linspace(0.0, 1.0, TURN_SAMPLES + 1)
     t = (at_waypoints_s[:-1, None] + np.diff(at_waypoints_s)[:, None] * share).ravel()
     motion = TrajectorySet([trajectory]).evaluate(t)
-    v = motion.velocity_mps[:, 0]
-    a = motion.acceleration_mps2[:, 0] if motion.acceleration_mps2 is not None else v * 0.0
-    speed = np.linalg.norm(v, axis=1)
-    along = np.where(speed > 1e-9, np.einsum("ij,ij->i", a, v) / np.maximum(speed, 1e-300), 0.0)
-    across = np.sqrt(np.maximum(np.einsum("ij,ij->i", a, a) - along**2, 0.0))
+    assert motion.acceleration_mps2 is not None  # evaluated with it
+    a, tangent = motion.acceleration_mps2[:, 0], motion.tangent[:, 0]
+    speed = np.linalg.norm(motion.velocity_mps[:, 0], axis=1)
+    # Across the path's tangent (a unit vector, defined where the object stands too).
+    along = np.einsum("ij,ij->i", a, tangent)
+    across = np.linalg.norm(a - along[:, None] * tangent, axis=1)
     worst = int(np.argmax(across))
     if across[worst] <= MAX_ACCELERATION_MPS2 * (1.0 + 1e-6):
         return
