@@ -60,6 +60,8 @@ class Draft:
         target = _replaced(path)
         self._target = target
         self._draft: str | None = None
+        # The first error writing (`write`): the file is then cut short whatever follows.
+        self.error: OSError | None = None
         if target is not None:
             permissions = _permissions(target)
             try:
@@ -76,6 +78,20 @@ class Draft:
                     raise
                 return
         self.file = open(path, "w", encoding="utf-8", newline=newline)
+
+    def write(self, text: str) -> int:
+        """Write ``text`` to ``file``, unless a write failed before: then nothing, silently.
+
+        A failing write (a full disk) is kept in `error` and not raised, so that the work
+        whose by-product this file is goes on (a run's verdicts stand); whoever ends the draft
+        asks `error`, and `cut_short` names what was written as not whole.
+        """
+        if self.error is None:
+            try:
+                return self.file.write(text)
+            except OSError as exc:
+                self.error = exc
+        return len(text)
 
     def keep(self) -> Path:
         """Close the file and name it ``path``; return that."""
@@ -95,7 +111,12 @@ class Draft:
                 os.unlink(self._draft)
 
     def _close_as(self, name: Path | None) -> Path:
-        self.file.close()
+        try:
+            self.file.close()  # closed even where its last flush fails
+        except OSError:
+            if name == self._target:
+                raise  # not whole: not named ``path``
+            # Cut short anyway: what the flush could not write is lost with the rest.
         if name is None or (self._draft is None and name == self._target):
             return self.path
         os.replace(self.path if self._draft is None else self._draft, name)

@@ -974,7 +974,13 @@ def test_a_json_report_that_cannot_be_written_whole_leaves_the_old_one(tmp_path,
         cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.strip().endswith(f"error: --json {report}: cannot write: File too large")
-    assert report.read_text() == '{"previous": "report"}\n'
+    if command == "run":
+        # Before the scene ran, the earlier report was replaced by one with no verdict (small
+        # enough to be written): whatever stops the run later leaves no earlier pass in place.
+        left = json.loads(report.read_text())
+        assert left["status"] == "error" and left["error"].startswith("no verdict")
+    else:
+        assert report.read_text() == '{"previous": "report"}\n'
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]  # no draft left behind
 
 
@@ -1387,3 +1393,111 @@ def test_a_variant_over_the_simulated_radar_s_options_on_a_bench_is_noted(tmp_pa
     assert (f"note: {scene}[estimator=ti]: radar.estimator set the built-in simulated radar; on "
             f"the bench (udp://127.0.0.1:{closed}) the radar measures as it is set, so this "
             f"variant runs as the others do") in out
+
+
+@pytest.mark.parametrize("where", ["json", "detections"])
+def test_a_stop_after_the_scenes_leaves_no_earlier_pass_report(tmp_path, capsys, monkeypatch,
+                                                               where):
+    # A stop after the last scene, while the detections were named or the report written,
+    # left the earlier run's passing --json in place under an exit code of 1.
+    import rts_scenario.cli.run as run_cli
+
+    report, detections = tmp_path / "r.json", tmp_path / "d.csv"
+    report.write_text(json.dumps({"scene": "an earlier run", "status": "pass"}))
+
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    if where == "json":
+        # The first write is the placeholder, before the scene; the second the report.
+        monkeypatch.setattr(run_cli, "write_json", _first_call_then(run_cli.write_json, stop))
+    else:
+        monkeypatch.setattr(run_cli, "_finish_detections", stop)
+    scene = str(ROOT / "scenarios" / "cut_out.scenario.yaml")
+    code = cli.main(["run", scene, "--json", str(report), "--detections", str(detections)])
+    out, err = capsys.readouterr()
+    assert code == 1 and "error: interrupted" in err
+    written = json.loads(report.read_text())
+    if where == "json":
+        # The placeholder written before the scene ran: no verdict.
+        assert (written["scene"], written["status"]) == ("cut_out", "error")
+        assert written["error"].startswith("no verdict: the command stopped before it wrote "
+                                           "its report")
+    else:
+        # The scene's verdict was known: the report is this run's, the stop said apart.
+        assert (written["scene"], written["status"]) == ("cut-out", "pass")
+        assert written["targets"]
+        assert not detections.exists()
+
+
+def test_a_run_stopped_after_its_verdict_keeps_it_and_its_log(tmp_path, capsys, monkeypatch):
+    # A stop after the scene's verdict and its log's sidecar were written (while the timing
+    # line was printed) marked the run "no verdict" and said its complete log was cut short.
+    import rts_scenario.cli.run as run_cli
+
+    def print_then_stop(*args, **kwargs):
+        if args and str(args[0]).startswith("timing: "):
+            raise KeyboardInterrupt
+        return print(*args, **kwargs)
+
+    monkeypatch.setattr(run_cli, "print", print_then_stop, raising=False)
+    log, report = tmp_path / "drive.asc", tmp_path / "r.json"
+    scene = str(ROOT / "scenarios" / "cut_out.scenario.yaml")
+    code = cli.main(["run", scene, "--record", str(log), "--json", str(report)])
+    _, err = capsys.readouterr()
+    assert code == 1 and "error: interrupted" in err and "cut short" not in err
+    assert json.loads(report.read_text())["status"] == "pass"
+    assert log.exists() and Path(f"{log}.rts.json").exists()
+
+
+def test_a_full_disk_under_the_detections_keeps_the_verdicts(tmp_path, capsys, monkeypatch):
+    # A write of the detections that failed (a full disk) failed the scene whose detections
+    # it was writing: its verdict lost, the option not named, and the CSV, cut mid-row, named
+    # as whole.
+    import errno
+
+    from rts_scenario.atomic import Draft
+
+    real_init = Draft.__init__
+
+    class Full:
+        def __init__(self, file):
+            self.file, self.written = file, 0
+
+        def write(self, text):
+            if self.written > 2000:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            self.written += len(text)
+            return self.file.write(text)
+
+        def close(self):
+            self.file.close()
+
+    def init(self, path, newline=None):
+        real_init(self, path, newline)
+        self.file = Full(self.file)
+
+    monkeypatch.setattr(Draft, "__init__", init)
+    detections, report = tmp_path / "d.csv", tmp_path / "r.json"
+    scenes = [str(ROOT / "scenarios" / f"{name}.scenario.yaml")
+              for name in ("approaching_target", "cut_out")]
+    code = cli.main(["run", *scenes, "--detections", str(detections), "--json", str(report)])
+    out, err = capsys.readouterr()
+    assert code == 3
+    assert [(e["scene"], e["status"]) for e in json.loads(report.read_text())] == [
+        ("approaching-target", "pass"), ("cut-out", "pass")]
+    assert (f"error: --detections {detections}: cannot write: No space left on device; the "
+            f"verdicts stand; the rows written are in {detections}.partial (cut short)") in err
+    assert not detections.exists() and f"wrote {detections}" not in out
+    rows = Path(f"{detections}.partial").read_text()
+    assert 1000 < len(rows) < 2000 + 400  # up to the write that failed (a row)
+
+
+def _first_call_then(real, then):
+    calls = []
+
+    def call(*args, **kwargs):
+        calls.append(args)
+        return real(*args, **kwargs) if len(calls) == 1 else then(*args, **kwargs)
+
+    return call

@@ -472,6 +472,33 @@ def test_interrupted_sweep_keeps_the_runs_done(scenes, tmp_path, capsys, monkeyp
     payload = json.loads(out.read_text())
     assert [r["id"] for r in payload["runs"]] == ["1=0.0-rcs_dbsm=5.0", "1=0.0-rcs_dbsm=10.0"]
     assert payload["summary"]["runs"] == 2 and payload["summary"]["interrupted"] is True
+    # The runs not run are counted: 2 of the 6 planned.
+    assert payload["summary"]["planned"] == 6
+
+
+def test_a_sweep_killed_or_failing_after_its_runs_leaves_no_earlier_report(
+        scenes, tmp_path, capsys, monkeypatch):
+    # Its report was written only at the end: a sweep killed outright, or stopped as it wrote
+    # its report, left an earlier sweep's passing report in place.
+    import rts_scenario.cli.sweep as sweep_cli
+
+    out = tmp_path / "s.json"
+    out.write_text(json.dumps({"runs": [], "summary": {"runs": 9, "passed": 9}}))
+    real, calls = sweep_cli.write_json, []
+
+    def stop_at_the_report(*args, **kwargs):
+        calls.append(args)
+        if len(calls) > 1:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweep_cli, "write_json", stop_at_the_report)
+    code, _, err = sweep(capsys, scenes / "b_swept.scenario.yaml", "--workers", "1",
+                         "--json", out)
+    assert code == 1 and "error: interrupted" in err
+    left = json.loads(out.read_text())
+    assert left["runs"] == [] and left["summary"]["interrupted"] is True
+    assert left["summary"]["planned"] == 6 and left["error"].startswith("no verdict")
 
 
 # A sweep whose runs each take two minutes, its first run's flag written as it starts.

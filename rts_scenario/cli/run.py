@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO, cast
 
 from .. import interrupts
 from ..atomic import Draft, check_draft
-from ..errors import located, one_line
+from ..errors import RtsError, located, one_line
 from ..startup import command_imports
 from .common import (
     EXIT_BAD_INPUT,
@@ -81,7 +82,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
     with command_imports():  # paused collector (`rts_scenario.startup`)
         from ..canbus.mapping import CanMapping
         from ..check import DETECTION_COLUMNS, tolerances_below_bus_steps
-        from ..errors import BusError, RtsError, ScenarioError
+        from ..errors import BusError, ScenarioError
         from ..pipeline import LOG_SIDECAR_SUFFIX, RunOptions, run_scene
         from ..plots import safe_stem
         from ..preflight import Preflight
@@ -174,6 +175,18 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
               f"simulated radar measures (no RTS plays the scene) and sends its detections on "
               f"that bus; the verdicts are the simulated radar's; on a bench, give --output "
               f"udp://HOST:PORT", file=sys.stderr)
+    # Until this run's report replaces it, --json says no verdict: a run stopped, killed or
+    # failing before its report leaves no earlier run's report to be read as its own.
+    if args.json and (not os.path.exists(args.json) or os.path.isfile(args.json)):
+        # Not into a pipe or a device (``--json /dev/stdout``): the report alone goes there.
+        _write_not_run(args, "no verdict: the command stopped before it wrote its report (it "
+                             "was interrupted, killed or failed); or it is still running")
+    for log in logs.values() or ([args.record] if args.record else []):
+        # Nor an earlier run's bus log and sidecar, which a check would take for this run's.
+        for old in (Path(log), Path(f"{log}{LOG_SIDECAR_SUFFIX}")):
+            with writing("--record", old):
+                if old.is_file():
+                    old.unlink()
     entries: list[dict[str, Any]] = []
     bench_of_run: dict[int, list[str]] = {}  # a failed entry's bench failures, by index
     stems: set[str] = set()
@@ -184,7 +197,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         with writing("--detections", args.detections):
             # A draft beside it until the last scene ends (`atomic.Draft`).
             draft = Draft(args.detections, newline="")
-        detections = draft.file
+        # Written through the draft, which keeps a write's error (a full disk) for the end
+        # instead of failing the scene whose detections it was writing.
+        detections = cast(TextIO, draft)
         detections.write(",".join(DETECTION_COLUMNS) + "\n")
 
     def failed(scene: str, path: str, exc: BaseException, variant: str = "",
@@ -199,8 +214,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         entries.append(_error_entry(scene, path, message, variant, parameters))
 
     # The run under way when Ctrl-C came: (scene name, or file name until it loaded, path,
-    # variant, overrides, log).
+    # variant, overrides, log); its entry once its verdict is known (its log then complete).
     current: tuple[str, str, str, dict[str, Any], str | None] | None = None
+    verdict: list[dict[str, Any]] = []
     interrupted = False
     started[0] = True  # from here on the loop keeps what finished (`--json` included)
     try:
@@ -215,6 +231,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
             for variant, overrides in combos:
                 label = f"{path}[{variant}]" if variant else path
                 current = (file_name, path, variant, overrides, logs.get(variant, args.record))
+                verdict.clear()
                 start = time.perf_counter()
                 try:
                     scene = load_scenario(path, overrides)
@@ -256,6 +273,8 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                                        progress=Progress(run_label(Path(path).name, variant)),
                                        detections_out=detections, on_preflight=warn, timing=loaded)
                     report = result.report
+                    verdict.append({"file": path, "status": "pass" if report.passed else "fail",
+                                    "marks": list(scene.marks), **report.to_dict()})
                     print(report.table())
                     marked = marks_note(scene.marks, report.passed,
                                         bench_failures(report.reason_codes, report.playback))
@@ -294,8 +313,8 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                     continue
                 finally:
                     print()
-                entries.append({"file": path, "status": "pass" if report.passed else "fail",
-                                "marks": list(scene.marks), **report.to_dict()})
+                entries.append(verdict.pop())
+                current = None
                 if not report.passed:  # for the summary's marks note, not the --json
                     bench_of_run[len(entries) - 1] = bench_failures(report.reason_codes,
                                                                     report.playback)
@@ -303,7 +322,11 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         # What finished is kept and reported; nothing cut short is left looking complete.
         interrupts.handled()
         interrupted = True
-        if current is not None:
+        if verdict:
+            # Stopped after its verdict (the log and sidecar written): the verdict stands.
+            entries.append(verdict.pop())
+            print("error: interrupted", file=sys.stderr)
+        elif current is not None:
             name, path, variant, overrides, log = current
             failed(name, path, RtsError("interrupted (Ctrl-C or a stop signal) while running: "
                                         "no verdict"), variant, overrides)
@@ -312,12 +335,14 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                       f"by its timestamps and fails on the cycles it lacks", file=sys.stderr)
         else:
             print("error: interrupted", file=sys.stderr)
-    if draft is not None:
-        with writing("--detections", args.detections):
-            if interrupted:
-                print(f"wrote {draft.cut_short()} (cut short: the run was interrupted)")
-            else:
-                print(f"wrote {draft.keep()}")
+    try:
+        if draft is not None and not _finish_detections(draft, args.detections, interrupted):
+            runtime_error = True
+    except KeyboardInterrupt:
+        # The draft stays a draft, named as no output; the report below is still written.
+        interrupts.handled()
+        interrupted = True
+        print("error: interrupted", file=sys.stderr)
     if len(entries) > 1:
         for i, entry in enumerate(entries):
             name = run_label(entry["scene"], entry["variant"])
@@ -338,6 +363,36 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
     if interrupted:  # even before the first scene started: never a pass
         return EXIT_FAIL
     return EXIT_OK if all(e["status"] == "pass" for e in entries) else EXIT_FAIL
+
+
+def _finish_detections(draft: Draft, path: str, interrupted: bool) -> bool:
+    """Name the ``--detections`` draft ``path``, or ``path.partial`` where it is not whole.
+
+    Returns False, having said why on standard error, where it could not be written whole (a
+    full disk): the run's verdicts stand, the rows written are in ``path.partial``.
+    """
+    failure = None if draft.error is None else RtsError(
+        f"--detections {path}: cannot write: {draft.error.strerror or draft.error}")
+    if failure is None and not interrupted:
+        try:
+            with writing("--detections", path):
+                print(f"wrote {draft.keep()}")
+            return True
+        except RtsError as exc:
+            failure = exc
+    try:
+        with writing("--detections", path):
+            partial = draft.cut_short()
+    except RtsError as exc:
+        draft.discard()
+        print(f"error: {failure or exc}" + (f"; {exc}" if failure else ""), file=sys.stderr)
+        return False
+    if failure is None:
+        print(f"wrote {partial} (cut short: the run was interrupted)")
+        return True
+    print(f"error: {failure}; the verdicts stand; the rows written are in {partial} (cut "
+          f"short)", file=sys.stderr)
+    return False
 
 
 def marks_note(marks: Sequence[str], passed: bool, bench: Sequence[str] = ()

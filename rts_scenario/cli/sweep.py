@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -209,6 +210,16 @@ def _do_sweep(args: argparse.Namespace) -> int:
     print(f"sweep: {len(tasks)} run{'s' if len(tasks) != 1 else ''} on {where}"
           + (f" ({deselected} deselected by -m {args.marks!r})" if deselected else ""),
           file=sys.stderr)
+    if args.json and (not os.path.exists(args.json) or os.path.isfile(args.json)):
+        # Until the sweep's report replaces it: no run, interrupted, the runs planned. A sweep
+        # killed outright, or stopped or failing after its runs, leaves no earlier report in
+        # place (not into a pipe or a device, which get the report alone).
+        write_json("--json", args.json, {
+            "runs": [], "summary": {**summarize([], deselected=deselected), "interrupted": True,
+                                    "planned": len(tasks)},
+            "config": settings.as_json(),
+            "error": "no verdict: the sweep stopped before it wrote its report (it was "
+                     "interrupted, killed or failed); or it is still running"})
     start = time.perf_counter()
     progress = SweepProgress(len(tasks))
     finished: list[dict[str, Any]] = []
@@ -228,7 +239,8 @@ def _do_sweep(args: argparse.Namespace) -> int:
         done = sorted(finished, key=lambda e: order.get((e["file"], e["id"]), len(order)))
         if progress.tty:  # off the progress bar's line
             progress.stream.write("\n")
-        _print_runs(done, {**summarize(done, deselected=deselected), "interrupted": True},
+        _print_runs(done, {**summarize(done, deselected=deselected), "interrupted": True,
+                           "planned": len(tasks)},
                     time.perf_counter() - start, args, settings, total=len(tasks))
         print("error: interrupted", file=sys.stderr)
         # Never a pass; a run that erred before keeps its exit code.
