@@ -1501,3 +1501,24 @@ def _first_call_then(real, then):
         return real(*args, **kwargs) if len(calls) == 1 else then(*args, **kwargs)
 
     return call
+
+
+def test_a_calibrated_rig_on_the_simulated_radar_is_said_to_play_its_offsets_as_errors(
+        tmp_path, capsys):
+    # lab-2x3's calibration (12.5, -41 and 77 deg, -0.3 and 0.2 dB) cancels its bench's
+    # channel errors; the simulated radar's bench has none, so there the offsets put targets
+    # 2-3 deg off and the radar was blamed without a word.
+    import shutil
+
+    shutil.copy(ROOT / "scenarios" / "rigs" / "lab-2x3.rig.yaml", tmp_path / "lab.rig.yaml")
+    scene = tmp_path / "s.scenario.yaml"
+    scene.write_text((ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml").read_text()
+                     .replace("rig: wide-3x5", "rig: lab.rig.yaml"))
+    cli.main(["run", str(scene)])
+    err = capsys.readouterr().err
+    assert ("rig 'lab-2x3' carries the calibration of its bench (calibration.phase_deg 0, "
+            "12.5, -41, 0, 77, 0; calibration.gain_db 0, -0.3, 0, 0, 0.2, 0; "
+            "calibration.delay_s 0, 1.2e-12, 0, 0, 0, 0)") in err
+    # A rig without calibration: nothing said.
+    cli.main(["run", str(ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml")])
+    assert "carries the calibration" not in capsys.readouterr().err

@@ -548,5 +548,27 @@ def if_distance_note(rig: Rig, radar: RadarProfile) -> str | None:
             f"measures each FE's phase)")
 
 
-__all__ = ["FE_RESPONSES", "IF_DISTANCE_PHASE_DEG", "build_schedule", "channel_delays",
-           "delay_step_note", "if_distance_note", "solver_inputs"]
+def calibration_note(rig: Rig) -> str | None:
+    """Say that a rig's calibration plays as errors on the built-in simulated radar; else None.
+
+    A rig's ``calibration`` entries cancel the channel errors of the bench they were measured
+    on; the simulated radar's bench has none of them (unless a calibration study injects them),
+    so there each offset turns, weakens or delays its channel for nothing, and targets land off
+    their angles and levels: a failure is the rig file's, not the radar's.
+    """
+    offsets = [(name, values) for name, values in (
+        ("phase_deg", rig.cal_phase_deg), ("gain_db", rig.cal_gain_db),
+        ("delay_s", rig.cal_delay_s)) if np.any(values != 0.0)]
+    if not offsets:
+        return None
+    said = "; ".join(f"calibration.{name} " + ", ".join(f"{v:.4g}" for v in values)
+                     for name, values in offsets)
+    return (f"rig {rig.name!r} carries the calibration of its bench ({said}); the built-in "
+            f"simulated radar plays a bench without those channel errors, where the offsets "
+            f"turn, weaken or delay each channel for nothing and can put targets off their "
+            f"angles and levels: a failure here may be the rig file's, not the radar's (for the "
+            f"simulated radar, a copy of the rig without its calibration entries)")
+
+
+__all__ = ["FE_RESPONSES", "IF_DISTANCE_PHASE_DEG", "build_schedule", "calibration_note",
+           "channel_delays", "delay_step_note", "if_distance_note", "solver_inputs"]

@@ -312,6 +312,8 @@ def start_attenuator_settings(
     def finish() -> tuple[FloatArray, BoolArray]:
         if searched is not None:
             searched()
+        if step > 0.0 and mode == "aware":
+            _relevel(resp[0], weights, chosen, full, grid)
         # A target too weak for every channel is played as weak as possible: its strongest
         # channel at the attenuator's maximum, the others kept in proportion where they fit
         # (flagged as clipped).
@@ -320,11 +322,40 @@ def start_attenuator_settings(
             lifted = exact[dark] - (exact[dark].min(axis=1, keepdims=True) - grid.high)
             chosen[dark] = grid.nearest(lifted) if step > 0.0 else np.where(
                 lifted <= grid.high + GRID_SLACK_DB, lifted, np.inf)
-        clipped = np.asarray(dark | (on & (exact < grid.low - GRID_SLACK_DB)).any(axis=1),
-                             dtype=bool)
+        # Louder than the attenuator's minimum by more than its rounding (half a step): a
+        # shortfall within it is the rounding every setting has, not a clipped level.
+        short = grid.low - step / 2.0 - GRID_SLACK_DB
+        clipped = np.asarray(dark | (on & (exact < short)).any(axis=1), dtype=bool)
         return chosen, clipped
 
     return finish
+
+
+def _relevel(f: NDArray[np.complex128], weights: FloatArray, chosen: FloatArray,
+             full: FloatArray, grid: _Grid) -> None:
+    """Shift each entry's settings by whole steps, all alike, to the level its weights give.
+
+    The search (`_search_grid`) holds the angle, and its settings may play the peak several
+    steps louder or weaker than wanted (the others' changes move the level too). A common
+    change of every channel leaves the angle as it is and moves the level by the same steps:
+    taken as far as the attenuator's range allows, it leaves at most half a step, as rounding
+    each channel does. ``f`` (4, N): the channels' responses at the set directions; ``chosen``
+    is changed in place.
+    """
+    on = np.isfinite(chosen)
+    amps = np.where(on, 10.0 ** (-(np.where(on, chosen, 0.0) - full) / 20.0), 0.0)
+    played = np.abs(np.einsum("qn,nq->n", f, amps))
+    wanted = np.abs(np.einsum("qn,nq->n", f, weights))
+    fine = on.any(axis=1) & (played > 0.0) & (wanted > 0.0)
+    level_db = 20.0 * np.log10(np.where(fine, played, 1.0) / np.where(fine, wanted, 1.0))
+    steps = np.round(level_db / grid.step)
+    # Every channel that plays stays within the attenuator's range.
+    top = np.max(np.where(on, chosen, -np.inf), axis=1)
+    bottom = np.min(np.where(on, chosen, np.inf), axis=1)
+    most = np.floor((grid.high + GRID_SLACK_DB - top) / grid.step)
+    least = np.ceil((grid.low - GRID_SLACK_DB - bottom) / grid.step)
+    steps = np.where(fine, np.clip(steps, np.minimum(least, 0.0), np.maximum(most, 0.0)), 0.0)
+    chosen += np.where(on, steps[:, None] * grid.step, 0.0)
 
 
 @dataclass(frozen=True)
