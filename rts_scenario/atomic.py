@@ -79,6 +79,11 @@ class Draft:
                 return
         self.file = open(path, "w", encoding="utf-8", newline=newline)
 
+    @property
+    def name(self) -> Path:
+        """The file being written: the draft, or ``path`` itself where it is written into."""
+        return self.path if self._draft is None else Path(self._draft)
+
     def write(self, text: str) -> int:
         """Write ``text`` to ``file``, unless a write failed before: then nothing, silently.
 

@@ -8,6 +8,7 @@ not know with a `SettingError`.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 from .errors import SettingError
 
@@ -31,9 +32,36 @@ def jit_mode() -> str:
     return chosen
 
 
+# Environment variable naming the solver plans' disk cache folder ("off" or empty: none).
+CACHE_DIR_ENV = "RTS_SCENARIO_CACHE_DIR"
+
+
+def cache_dir_setting() -> Path | None | bool:
+    """``$RTS_SCENARIO_CACHE_DIR``: its folder, False for "off" or empty, None when unset.
+
+    "off" in any case, spaces aside. Raises `SettingError` naming the variable for a value that
+    names no usable folder: a ``~user`` that does not exist, or something that is not a folder
+    (a file, a device); a folder not there yet is made when a plan is first stored.
+    """
+    raw = os.environ.get(CACHE_DIR_ENV)
+    if raw is None:
+        return None
+    if raw.strip().lower() in ("", "off"):
+        return False
+    allowed = "a folder path, or off (or empty) for no disk cache"
+    try:
+        folder = Path(raw).expanduser()
+    except RuntimeError as exc:  # "~nosuchuser": no home to expand it to
+        raise SettingError(f"{CACHE_DIR_ENV}={raw!r}: {exc}; allowed: {allowed}") from None
+    if folder.exists() and not folder.is_dir():
+        raise SettingError(f"{CACHE_DIR_ENV}={raw!r}: not a folder; allowed: {allowed}")
+    return folder
+
+
 def check_environment() -> None:
     """Raise `SettingError` for the first environment setting whose value is not known."""
     jit_mode()
+    cache_dir_setting()
 
 
-__all__ = ["JIT_ENV", "check_environment", "jit_mode"]
+__all__ = ["CACHE_DIR_ENV", "JIT_ENV", "cache_dir_setting", "check_environment", "jit_mode"]

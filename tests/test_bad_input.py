@@ -1043,6 +1043,33 @@ def test_an_unknown_jit_setting_is_refused_before_anything_runs(places, capsys, 
     assert out == "" and not Path(places["tmp"], "out.json").exists()
 
 
+@pytest.mark.parametrize(("value", "why"), [
+    ("~no-such-user-here/plans", "Could not determine home directory"),
+    ("{tmp}/a-file", "not a folder"), (os.devnull, "not a folder")])
+def test_a_cache_folder_setting_that_names_no_folder_is_refused_before_anything_runs(
+        places, capsys, monkeypatch, value, why):
+    """A ~user that does not exist was a runtime error per scene without the variable named;
+    a file or a device was ignored without a word, every plan rebuilt."""
+    Path(places["tmp"], "a-file").write_text("not a folder")
+    value = value.format(**places)
+    monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", value)
+    assert call(["run", places["scene"]]) == 2
+    out, err = capsys.readouterr()
+    assert one_error(err).startswith(f"RTS_SCENARIO_CACHE_DIR={value!r}: {why}")
+    assert one_error(err).endswith("allowed: a folder path, or off (or empty) for no disk cache")
+    assert out == ""
+
+
+@pytest.mark.parametrize("value", ["OFF", " Off "])
+def test_the_cache_folder_setting_off_in_any_case(monkeypatch, tmp_path, value):
+    """"OFF" made a folder called OFF in the current folder."""
+    from rts_scenario.solver import plan_cache_dir
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", value)
+    assert plan_cache_dir() is None
+
+
 @pytest.mark.parametrize(("value", "expected"), [
     ("", "auto"), ("auto", "auto"), (" ON ", "on"), ("1", "on"), ("yes", "on"), ("true", "on"),
     ("off", "off"), ("0", "off"), ("No", "off"), ("false", "off")])

@@ -1,6 +1,5 @@
 import errno
 import os
-import re
 import socket
 import sys
 import time
@@ -740,17 +739,33 @@ def test_a_delta_stream_is_the_same_however_the_frames_come_in_batches(schedule)
     assert sum(HEADER.unpack_from(d)[8] for d in whole) == entries
 
 
-def test_a_file_export_whose_draft_cannot_be_made_keeps_the_earlier_file(tmp_path, schedule):
-    # PATH.partial a folder: the earlier PATH was removed first, and the error named PATH.
-    for suffix in (".csv", ".npz"):
-        path = tmp_path / f"s{suffix}"
-        path.write_text("an earlier export")
-        (tmp_path / f"s{suffix}.partial").mkdir()
-        with pytest.raises(OutputError, match=rf"^{re.escape(str(path))}.partial: cannot "
-                                              rf"write: Is a directory$"):
-            with open_output(f"file:{path}") as out:
-                out.write(schedule)
-        assert path.read_text() == "an earlier export"
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_two_exports_to_one_file_at_once_each_write_their_own(tmp_path, schedule, suffix):
+    # Both wrote the same PATH.partial: the second's open cut the first's rows, the first
+    # renamed the mix to PATH, and the second then failed; a schedule of two that looked whole.
+    from dataclasses import replace
+
+    path = tmp_path / f"s{suffix}"
+    first, second = schedule.frames(0, 10), schedule.frames(10, 30)
+    with open_output(f"file:{path}") as a, open_output(f"file:{path}") as b:
+        a.write(first)
+        b.write(second)
+        a.write(replace(first, frame_index=first.frame_index + 30))
+    # b closed first, then a: PATH is a's schedule, whole (not a mix); nothing else is left.
+    got = read_schedule(path)
+    assert got.frame_index.tolist() == [*range(10), *range(30, 40)]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+def test_a_file_export_to_a_link_replaces_the_file_it_names(tmp_path, schedule):
+    # The export replaced the link itself, the file it named keeping the old schedule.
+    real = tmp_path / "real.csv"
+    real.write_text("an earlier export")
+    link = tmp_path / "s.csv"
+    link.symlink_to(real)
+    with open_output(f"file:{link}") as out:
+        out.write(schedule.frames(0, 10))
+    assert link.is_symlink() and read_schedule(real).n_frames == 10
 
 
 def test_a_scene_streamed_batch_by_batch_keeps_its_frame_numbers_or_is_refused():

@@ -33,6 +33,7 @@ from typing import TextIO
 import numpy as np
 
 from .. import interrupts
+from ..atomic import Draft
 from ..errors import OutputError
 from ..schedule import Schedule
 from .base import Output
@@ -50,9 +51,10 @@ class FileOutput(Output):
 
     Memory does not grow with the schedule: a ``.csv`` is written batch by batch; a ``.npz``
     (one array per field) goes to a private temporary folder, one raw file per field, and is
-    zipped from there on close. Either is written as ``PATH.partial`` and named ``PATH`` once
-    closed whole: a schedule cut short (an error or Ctrl-C inside ``with``) stays ``.partial``,
-    and what ``PATH`` held before is removed as the first batch comes.
+    zipped from there on close. Either is written to a draft beside ``PATH`` (`atomic.Draft`:
+    exports to one ``PATH`` at once each write their own) and named ``PATH`` once closed whole:
+    a schedule cut short (an error or Ctrl-C inside ``with``) is named ``PATH.partial``, and
+    what ``PATH`` held before is removed as the first batch comes. A link is followed.
     """
 
     name = "file"
@@ -69,7 +71,7 @@ class FileOutput(Output):
             )
         if not self.path.parent.is_dir():
             raise OutputError(f"file:{path}: folder {self.path.parent} does not exist")
-        self.partial = self.path.with_name(self.path.name + ".partial")
+        self._draft: Draft | None = None
         self._csv: TextIO | None = None
         self._spill: _Spill | None = None
         self._cut_short = False
@@ -86,17 +88,18 @@ class FileOutput(Output):
             raise OutputError(f"file:{self.path}: a schedule without targets has no rows for a "
                               f".csv to hold its frames in; use .npz")
         with _writing(self.path):
-            if self._csv is None and self._spill is None:
-                # The draft first: where it cannot be made, PATH keeps what it held.
-                draft = self.partial.open("w", encoding="utf-8")
+            if self._draft is None:
+                # What PATH held before is removed as the draft is made: it is not this
+                # schedule, whether that ends whole or not.
+                self._draft = draft = Draft(self.path)
+                # Nor is an earlier export's cut short one.
+                Path(f"{os.path.realpath(self.path)}.partial").unlink(missing_ok=True)
                 if self.path.suffix == ".csv":
-                    self._csv = draft
-                    draft.write(f"{_MAGIC}\n# targets: {','.join(batch.names)}\n")
-                    draft.write(",".join(CSV_COLUMNS) + "\n")
+                    self._csv = draft.file
+                    draft.file.write(f"{_MAGIC}\n# targets: {','.join(batch.names)}\n")
+                    draft.file.write(",".join(CSV_COLUMNS) + "\n")
                 else:
-                    draft.close()  # zipped into on close (`_Spill.zip_to`)
-                # What PATH held before is not this schedule, whether it ends whole or not.
-                self.path.unlink(missing_ok=True)
+                    draft.file.close()  # zipped into on close (`_Spill.zip_to`)
             if self._csv is not None:
                 _write_csv_rows(batch, self._csv)
             else:
@@ -105,20 +108,29 @@ class FileOutput(Output):
                 self._spill.add(batch)
 
     def _close(self) -> None:
+        draft = self._draft
+        if draft is None:
+            return
         with _writing(self.path):
+            whole = False
             try:
-                if self._csv is not None:
-                    self._csv.close()
                 if self._spill is not None:
-                    self._spill.zip_to(self.partial)
+                    self._spill.zip_to(draft.name)
+                # A stop whose interrupt numpy swallowed (it does inside some of its calls) ran
+                # the export on to its end: stopped all the same, it is cut short.
+                whole = not self._cut_short and not interrupts.seen()
             finally:
                 if self._spill is not None:
                     self._spill.close()
-            # A stop whose interrupt numpy swallowed (it does inside some of its calls) ran
-            # the export on to its end: stopped all the same, it stays `.partial`.
-            if ((self._csv is not None or self._spill is not None) and not self._cut_short
-                    and not interrupts.seen()):
-                os.replace(self.partial, self.path)
+                try:
+                    if whole:
+                        draft.keep()
+                except OSError:
+                    whole = False  # not whole where its last write failed: cut short
+                    raise
+                finally:
+                    if not whole:
+                        draft.cut_short()
 
 
 @contextmanager
@@ -127,9 +139,8 @@ def _writing(path: Path) -> Iterator[None]:
     try:
         yield
     except OSError as exc:
-        # The file that failed: PATH, or its draft PATH.partial.
-        failed = exc.filename if isinstance(exc.filename, str) else path
-        raise OutputError(f"{failed}: cannot write: {exc.strerror or exc}") from None
+        # Named as the user gave it, whether PATH or its draft beside it failed.
+        raise OutputError(f"{path}: cannot write: {exc.strerror or exc}") from None
 
 
 class _Spill:

@@ -38,6 +38,7 @@ from ..quads import QuadGeometry
 from ..registry import Registry
 from ..responses import FrontEndModel
 from ..rig import Rig
+from ..settings import CACHE_DIR_ENV, cache_dir_setting
 from . import exact, globalmax
 from .exact import ExactQuad, ExactTables, PhaseMap
 from .globalmax import GlobalMaxCheck
@@ -58,7 +59,6 @@ SURVEY_MARGIN = 0.1
 # view).
 MEMORY_PLANS = 16
 # Environment variable naming the disk cache directory; "off" or empty disables it.
-CACHE_DIR_ENV = "RTS_SCENARIO_CACHE_DIR"
 
 Origin = Literal["built", "memory", "disk"]
 
@@ -221,14 +221,16 @@ def plan_key(
 def plan_cache_dir() -> Path | None:
     r"""Directory of the disk cache of plans, or ``None`` when disabled.
 
-    ``$RTS_SCENARIO_CACHE_DIR`` if set ("off" or empty: disabled); else the user's cache
-    directory: ``%LOCALAPPDATA%\rts-scenario\Cache`` on Windows,
-    ``~/Library/Caches/rts-scenario`` on macOS, ``$XDG_CACHE_HOME/rts-scenario`` or
-    ``~/.cache/rts-scenario`` elsewhere.
+    ``$RTS_SCENARIO_CACHE_DIR`` if set ("off" or empty: disabled; `settings.cache_dir_setting`
+    refuses a value naming no folder); else the user's cache directory:
+    ``%LOCALAPPDATA%\rts-scenario\Cache`` on Windows, ``~/Library/Caches/rts-scenario`` on
+    macOS, ``$XDG_CACHE_HOME/rts-scenario`` or ``~/.cache/rts-scenario`` elsewhere.
     """
-    chosen = os.environ.get(CACHE_DIR_ENV)
-    if chosen is not None:
-        return None if chosen.strip() in ("", "off") else Path(chosen).expanduser()
+    chosen = cache_dir_setting()
+    if isinstance(chosen, Path):
+        return chosen
+    if chosen is False:
+        return None
     if sys.platform == "win32":
         local = os.environ.get("LOCALAPPDATA")
         base = Path(local) if local else Path.home() / "AppData" / "Local"
