@@ -729,8 +729,12 @@ def test_an_interrupted_run_keeps_what_finished_and_leaves_nothing_looking_compl
     # The scene under way had loaded: its entry names it by the scene's name (docs/cli.md),
     # as the summary line does.
     assert [(e["scene"], e["status"]) for e in entries] == [("approaching-target", "pass"),
-                                                            ("cut-out", "error")]
+                                                            ("cut-out", "error"),
+                                                            ("motorcycle", "error")]
     assert "ERROR cut-out (" in out
+    # The scene the stop kept from running is not missing: not run, by its file's name.
+    assert entries[2]["error"] == "not run: interrupted (Ctrl-C or SIGTERM) before it ran"
+    assert "ERROR motorcycle (" in out
     # The detections so far are kept under a name that says they are not the whole run's.
     assert not detections.exists()
     rows = (tmp_path / "d.csv.partial").read_text().splitlines()
@@ -1522,3 +1526,44 @@ def test_a_calibrated_rig_on_the_simulated_radar_is_said_to_play_its_offsets_as_
     # A rig without calibration: nothing said.
     cli.main(["run", str(ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml")])
     assert "carries the calibration" not in capsys.readouterr().err
+
+
+def test_a_json_report_named_like_a_variant_s_log_sidecar_is_refused(tmp_path, capsys):
+    # cut_in's variants record to drive[estimator=ti].blf and its sidecar: a --json of that
+    # sidecar's name replaced it with the report, and its check then failed.
+    scene = str(ROOT / "scenarios" / "cut_in.scenario.yaml")
+    log, report = tmp_path / "drive.asc", tmp_path / "drive[estimator=ti].asc.rts.json"
+    code = cli.main(["run", scene, "--record", str(log), "--json", str(report)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert (f"error: --json {report} and --record's sidecar of "
+            f"{tmp_path / 'drive[estimator=ti].asc'} {report}: the same file") in err, err
+    assert not report.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_a_png_report_in_the_plot_folder_is_refused(tmp_path, capsys):
+    # --plot p with --json p/highway-following-errors.png: the plot replaced the report, or
+    # the report a plot, and "wrote" was printed for both.
+    pytest.importorskip("matplotlib")
+    scene = str(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    plots = tmp_path / "p"
+    plots.mkdir()
+    report = plots / "highway-following-errors.png"
+    code = cli.main(["run", scene, "--plot", str(plots), "--json", str(report)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert f"error: --json {report}: a .png in the --plot folder {plots}" in err
+    assert list(plots.iterdir()) == []
+
+
+def test_a_report_given_as_a_dangling_link_is_written_where_the_link_points(tmp_path, capsys):
+    # The up-front probe created the file the link named, then removed the link itself: the
+    # report went to a plain file at the link's place and an empty file stayed at its target.
+    (tmp_path / "real").mkdir()
+    link = tmp_path / "r.json"
+    link.symlink_to(tmp_path / "real" / "r.json")
+    scene = str(ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml")
+    assert cli.main(["run", scene, "--json", str(link)]) == 0
+    capsys.readouterr()
+    assert link.is_symlink()
+    assert json.loads((tmp_path / "real" / "r.json").read_text())["status"] == "pass"

@@ -250,6 +250,13 @@ def check_writable_file(option: str, path: str | Path, kind: str | None = None, 
     if not parent.is_dir():
         what = "is not a folder" if parent.exists() else "does not exist"
         raise RtsError(f"{option} {path}: cannot write: folder {parent} {what}")
+    if target.is_symlink() and not target.exists():
+        # A dangling link: the file it names is what gets written. Probe that one, and leave
+        # the link in place.
+        target = Path(os.path.realpath(target))
+        if not target.parent.is_dir():
+            raise RtsError(f"{option} {path}: cannot write: it links to {target}, whose folder "
+                           f"does not exist")
     existed = target.exists()
     with writing(option, path):
         if existed and stat.S_ISFIFO(target.stat().st_mode):

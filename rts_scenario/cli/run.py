@@ -151,6 +151,13 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
             combos = expanded[0][1]
             logs = variant_logs(args.record, [] if isinstance(combos, Exception)
                                 else [ident for ident, _ in combos])
+            # Each variant's log and sidecar, against the other outputs (the sidecar of one
+            # named by --json was replaced by the report).
+            check_distinct_paths(
+                [("--json", args.json), ("--detections", args.detections), ("--plot", args.plot),
+                 *((f"--record's log {log}", log) for log in logs.values()),
+                 *((f"--record's sidecar of {log}", f"{log}{LOG_SIDECAR_SUFFIX}")
+                   for log in logs.values())])
             for log in logs.values() or [args.record]:
                 # The log is written as the bus goes, its sidecar whole, through a draft.
                 check_writable_file("--record", log, in_place=True)
@@ -162,6 +169,14 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
 
             require_matplotlib()
             check_writable_folder("--plot", args.plot)
+            for option, path in (("--json", args.json), ("--detections", args.detections),
+                                 ("--record", args.record)):
+                # The plots are SCENE-KIND.png files in the folder: a .png there may be one.
+                if path and Path(path).suffix.lower() == ".png" and \
+                        same_as_any(Path(path).resolve().parent, [args.plot]):
+                    raise RtsError(f"{option} {path}: a .png in the --plot folder {args.plot}, "
+                                   f"where a plot may replace it or it a plot; give {option} "
+                                   f"another name or folder")
         # Last: the interface opens once (and closes) only when every other option is good.
         check_can_opens("--can-interface", args.can_interface, args.can_channel, "--can-channel",
                         fd=args.can_fd)
@@ -339,6 +354,15 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                       f"by its timestamps and fails on the cycles it lacks", file=sys.stderr)
         else:
             print("error: interrupted", file=sys.stderr)
+        # The runs the stop kept from starting: each an entry, so none is missing from the
+        # summary and the report (one entry per run, in order, whatever became of it).
+        planned = [(Path(path).name.removesuffix(SCENE_SUFFIX), path, variant, overrides)
+                   for path, combos in expanded
+                   for variant, overrides in ([("", {})] if isinstance(combos, Exception)
+                                              else combos)]
+        entries += [_error_entry(*run[:2], "not run: interrupted (Ctrl-C or SIGTERM) before "
+                                           "it ran", *run[2:])
+                    for run in planned[len(entries):]]
     try:
         if draft is not None and not _finish_detections(draft, args.detections, interrupted):
             runtime_error = True
