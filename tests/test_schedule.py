@@ -631,3 +631,17 @@ def test_a_level_short_of_the_attenuators_minimum_by_less_than_its_rounding_is_n
         sch = build_schedule(tracks([rig.az_deg[2]], [rig.el_deg[2]], range_m=ref.range_m,
                                     rcs=rcs), rig, RADAR, fe_responses="plane-wave")
         assert bool(sch.status[0, 0] & Status.ATTENUATION_CLIPPED) == clipped, rcs
+
+
+def test_a_level_within_an_attenuator_range_of_no_whole_steps_plays_on_its_top_step():
+    # 0..79.8 dB in 0.5 dB steps: the top setting is 79.5 dB. A channel needing 79.76 dB,
+    # within the attenuator's range, rounded to 80.0 dB, beyond it, and was switched off.
+    from rts_scenario.schedule.quantization import _Grid
+
+    grid = _Grid(0.0, 0.5, 79.8)
+    got = grid.nearest(np.array([79.4, 79.74, 79.76, 79.8, 79.81, -0.3]))
+    np.testing.assert_array_equal(got, [79.5, 79.5, 79.5, 79.5, np.inf, 0.0])
+    # A range of whole steps is as it was: off beyond half a step past the maximum.
+    whole = _Grid(0.0, 0.5, 80.0)
+    np.testing.assert_array_equal(whole.nearest(np.array([79.76, 80.25, 80.26])),
+                                  [80.0, 80.0, np.inf])

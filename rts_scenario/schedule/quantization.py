@@ -367,10 +367,17 @@ class _Grid:
     high: float
 
     def nearest(self, att: FloatArray) -> FloatArray:
-        """Nearest setting (the minimum below it; off above the maximum)."""
+        """Nearest setting (the minimum below it; off above the maximum).
+
+        Where the range is not a whole number of steps, its top setting is the last step below
+        the maximum, and a level up to the maximum, or within half a step of that setting,
+        plays there (not off: a channel a little too loud moves the angle less than none).
+        """
+        top = self.low + np.floor((self.high - self.low) / self.step + 1e-9) * self.step
         snapped = self.low + np.round((att - self.low) / self.step) * self.step
         snapped = np.maximum(snapped, self.low)
-        return np.where(snapped <= self.high + GRID_SLACK_DB, snapped, np.inf)
+        within = att <= max(top + self.step / 2.0, self.high) + GRID_SLACK_DB
+        return np.where(within, np.minimum(snapped, top), np.inf)
 
     def holds(self, att: FloatArray) -> BoolArray:
         """Return where the settings lie within the attenuator's range."""
