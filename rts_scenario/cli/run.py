@@ -90,7 +90,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
         from ..scenario.model import simulated_radar_parameters
         from ..schedule import ScheduleError
-        from ..schedule.build import calibration_note
+        from ..schedule.build import calibration_note, if_distance_note
 
     # Every combination of a scene's parametrize block is one run, as in the pytest plugin;
     # a file whose block cannot be expanded is reported in its turn, like one that does not load.
@@ -266,6 +266,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                 calibrated = calibration_note(scene.rig)
                 if calibrated is not None and args.output == "simulated-radar":
                     print(f"warning: {label}: {calibrated}", file=sys.stderr)
+                uncalibrated = if_distance_note(scene.rig, scene.radar)
+                if uncalibrated is not None:  # on a bench and the simulated radar alike
+                    print(f"warning: {label}: {uncalibrated}", file=sys.stderr)
                 unused = simulated_radar_parameters(scene.parameters)
                 if unused and args.output != "simulated-radar":
                     # A variant over the built-in radar's options plays the same on a bench:
