@@ -71,7 +71,7 @@ class Draft:
             else:
                 self.file = cast(TextIO, handle)
                 try:
-                    os.fchmod(handle.fileno(), permissions)
+                    _chmod(handle, self._draft, permissions)
                     target.unlink(missing_ok=True)
                 except BaseException:
                     self.discard()
@@ -162,12 +162,23 @@ def _replacing(path: str | Path, mode: str) -> Iterator[IO[Any]]:
         with file:
             yield file
             file.flush()
-            os.fchmod(file.fileno(), permissions)
+            _chmod(file, draft, permissions)
         os.replace(draft, target)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(draft)
         raise
+
+
+def _chmod(file: IO[Any], path: str, permissions: int) -> None:
+    """Give the open draft ``file`` (at ``path``) ``permissions``.
+
+    By its path where there is no ``os.fchmod`` (Windows before Python 3.13).
+    """
+    if hasattr(os, "fchmod"):
+        os.fchmod(file.fileno(), permissions)
+    else:
+        os.chmod(path, permissions)
 
 
 def _permissions(target: Path) -> int:

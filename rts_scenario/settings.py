@@ -53,7 +53,11 @@ def cache_dir_setting() -> Path | None | bool:
         folder = Path(raw).expanduser()
     except RuntimeError as exc:  # "~nosuchuser": no home to expand it to
         raise SettingError(f"{CACHE_DIR_ENV}={raw!r}: {exc}; allowed: {allowed}") from None
-    if folder.exists() and not folder.is_dir():
+    try:
+        not_a_folder = folder.exists() and not folder.is_dir()
+    except OSError:  # out of reach (no permission): the plans are then not stored, as before
+        return folder
+    if not_a_folder:
         raise SettingError(f"{CACHE_DIR_ENV}={raw!r}: not a folder; allowed: {allowed}")
     return folder
 

@@ -1372,3 +1372,17 @@ def test_a_binary_dbc_is_one_readable_error_line(tmp_path, data):
     message = str(caught.value)
     assert "cannot load DBC" in message and message.isprintable(), message
     assert len(message) < 600
+
+
+def test_a_cache_folder_out_of_reach_is_no_disk_cache_not_a_crash(monkeypatch, tmp_path):
+    """A folder below one without permission: looking at it raised PermissionError, a
+    traceback in every command and an internal error in pytest."""
+    from rts_scenario import settings
+
+    def denied(self):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", str(tmp_path / "priv" / "cache"))
+    monkeypatch.setattr(Path, "exists", denied)
+    settings.check_environment()
+    assert settings.cache_dir_setting() == tmp_path / "priv" / "cache"

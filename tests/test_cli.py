@@ -1585,3 +1585,70 @@ def test_a_run_warns_of_an_if_rts_whose_fes_need_a_phase_calibration(tmp_path, c
     assert "carries the calibration" not in err
     assert re.search(r"warning: .*: rig 'lab-2x3': its FEs lie 1 to 1\.01 m from the radar "
                      r"behind an IF RTS .* and it has no phase calibration", err), err
+
+
+def test_a_stop_while_a_run_s_error_is_said_keeps_one_entry_per_run(tmp_path, capsys,
+                                                                    monkeypatch):
+    # Stopped while b's error (a parametrize block that does not expand) was printed: the
+    # report held a twice (its error, then "interrupted") and b not at all.
+    import rts_scenario.cli.run as run_cli
+
+    gantry = (ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml").read_text()
+    (tmp_path / "a.scenario.yaml").write_text(gantry.replace("rig: wide-3x5",
+                                                             "rig: nowhere.rig.yaml"))
+    (tmp_path / "b.scenario.yaml").write_text(gantry + "parametrize: 3\n")
+
+    stops = []
+
+    def stop_at_b(*args, **kwargs):
+        if not stops and args and str(args[0]).startswith(f"error: {tmp_path}/b.scenario"):
+            stops.append(args[0])  # once, as Ctrl-C pressed once
+            raise KeyboardInterrupt
+        return print(*args, **kwargs)
+
+    monkeypatch.setattr(run_cli, "print", stop_at_b, raising=False)
+    report = tmp_path / "r.json"
+    code = cli.main(["run", str(tmp_path / "a.scenario.yaml"), str(tmp_path / "b.scenario.yaml"),
+                     str(ROOT / "scenarios" / "cut_out.scenario.yaml"), "--json", str(report)])
+    assert code != 0
+    entries = json.loads(report.read_text())
+    assert [(e["scene"], e["status"]) for e in entries] == [
+        ("a", "error"), ("b", "error"), ("cut_out", "error")]
+    assert "rig: file not found" in entries[0]["error"]
+    assert entries[1]["error"].endswith("interrupted (Ctrl-C or a stop signal) while running: "
+                                        "no verdict")
+    assert entries[2]["error"] == "not run: interrupted (Ctrl-C or SIGTERM) before it ran"
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="/dev/stdout as a path is Linux's")
+def test_a_json_report_to_dev_stdout_redirected_to_a_file_is_the_report(tmp_path):
+    # `run SCENE --json /dev/stdout > out.txt`: the placeholder was renamed over out.txt, and
+    # the report then went to "out.txt (deleted)"; out.txt said "no verdict".
+    import subprocess
+
+    scene = ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    out = tmp_path / "out.txt"
+    with out.open("w") as stdout:
+        proc = subprocess.run([sys.executable, "-m", "rts_scenario", "run", str(scene),
+                               "--json", "/dev/stdout"], stdout=stdout, stderr=subprocess.PIPE,
+                              text=True, env=env, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    text = out.read_text()
+    assert json.loads(text[text.index("{"):text.rindex("}") + 1])["status"] == "pass"
+    assert "no verdict" not in text
+
+
+def test_a_recording_through_a_link_rewrites_the_file_it_names(tmp_path, capsys):
+    # The earlier recording was removed by removing the link: the new log became a plain file
+    # at the link's place, the file it named keeping the stale recording.
+    (tmp_path / "store").mkdir()
+    real = tmp_path / "store" / "real.asc"
+    real.write_text("OLD")
+    link = tmp_path / "log.asc"
+    link.symlink_to(real)
+    scene = str(ROOT / "scenarios" / "gantry_stopped_car.scenario.yaml")
+    assert cli.main(["run", scene, "--record", str(link)]) == 0
+    capsys.readouterr()
+    assert link.is_symlink() and real.read_text() != "OLD" and real.stat().st_size > 1000

@@ -296,6 +296,36 @@ def _same_file(a: str | Path, b: str | Path) -> bool:
 Paths = Iterable[tuple[str, str | Path | None]]
 
 
+def is_standard_stream(path: str | Path) -> bool:
+    """Whether ``path`` is this process's standard output or error.
+
+    ``/dev/stdout``, and the file a shell redirected it to: what is written there goes to the
+    stream's reader.
+    """
+    try:
+        found = os.stat(path)
+    except OSError:
+        return False
+    for fd in (1, 2):
+        try:
+            if os.path.samestat(found, os.fstat(fd)):
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def takes_placeholder(path: str | Path | None) -> bool:
+    """Whether a report at ``path`` gets a placeholder until it is written.
+
+    A regular file, or none yet; not a pipe, a device or the command's own output, which get
+    the report alone.
+    """
+    if not path or is_standard_stream(path):
+        return False
+    return not os.path.exists(path) or os.path.isfile(path)
+
+
 def same_as_any(path: str | Path, others: Iterable[str | Path | None]) -> bool:
     """Whether ``path`` names the same file as one of ``others`` (links followed)."""
     return any(other is not None and _same_file(path, other) for other in others)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import time
@@ -34,6 +35,7 @@ from .common import (
     replacing_after_stop,
     same_as_any,
     show_traceback,
+    takes_placeholder,
     write_json,
     writing,
 )
@@ -193,16 +195,16 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
               f"udp://HOST:PORT", file=sys.stderr)
     # Until this run's report replaces it, --json says no verdict: a run stopped, killed or
     # failing before its report leaves no earlier run's report to be read as its own.
-    if args.json and (not os.path.exists(args.json) or os.path.isfile(args.json)):
-        # Not into a pipe or a device (``--json /dev/stdout``): the report alone goes there.
+    if takes_placeholder(args.json):
         _write_not_run(args, "no verdict: the command stopped before it wrote its report (it "
                              "was interrupted, killed or failed); or it is still running")
     for log in logs.values() or ([args.record] if args.record else []):
         # Nor an earlier run's bus log and sidecar, which a check would take for this run's.
         for old in (Path(log), Path(f"{log}{LOG_SIDECAR_SUFFIX}")):
+            real = Path(os.path.realpath(old))  # through a link, the file it names
             with writing("--record", old):
-                if old.is_file():
-                    old.unlink()
+                if real.is_file():
+                    real.unlink()
     entries: list[dict[str, Any]] = []
     bench_of_run: dict[int, list[str]] = {}  # a failed entry's bench failures, by index
     stems: set[str] = set()
@@ -234,11 +236,17 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
     current: tuple[str, str, str, dict[str, Any], str | None] | None = None
     verdict: list[dict[str, Any]] = []
     interrupted = False
+    # Runs begun (a file that does not expand is one), and the entries before the last began:
+    # each run gets exactly one entry, whenever the stop comes.
+    begun, run_start = 0, 0
     started[0] = True  # from here on the loop keeps what finished (`--json` included)
     try:
         for path, combos in expanded:
             file_name = Path(path).name.removesuffix(SCENE_SUFFIX)
             if isinstance(combos, Exception):
+                begun, run_start = begun + 1, len(entries)
+                current = (file_name, path, "", {}, None)
+                verdict.clear()
                 failed(file_name, path, combos)
                 # A file that does not load is bad input; anything else is a runtime error.
                 bad_input = bad_input or isinstance(combos, RtsError)
@@ -246,6 +254,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                 continue
             for variant, overrides in combos:
                 label = f"{path}[{variant}]" if variant else path
+                begun, run_start = begun + 1, len(entries)
                 current = (file_name, path, variant, overrides, logs.get(variant, args.record))
                 verdict.clear()
                 start = time.perf_counter()
@@ -344,19 +353,20 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         # What finished is kept and reported; nothing cut short is left looking complete.
         interrupts.handled()
         interrupted = True
-        if verdict:
+        if current is None or len(entries) > run_start:
+            # Between runs, or the run under way had its entry already (its error said).
+            print("error: interrupted", file=sys.stderr)
+        elif verdict:
             # Stopped after its verdict (the log and sidecar written): the verdict stands.
             entries.append(verdict.pop())
             print("error: interrupted", file=sys.stderr)
-        elif current is not None:
+        else:
             name, path, variant, overrides, log = current
             failed(name, path, RtsError("interrupted (Ctrl-C or a stop signal) while running: "
                                         "no verdict"), variant, overrides)
             if log:
                 print(f"note: {log} is cut short and has no sidecar: a check of it aligns it "
                       f"by its timestamps and fails on the cycles it lacks", file=sys.stderr)
-        else:
-            print("error: interrupted", file=sys.stderr)
         # The runs the stop kept from starting: each an entry, so none is missing from the
         # summary and the report (one entry per run, in order, whatever became of it).
         planned = [(Path(path).name.removesuffix(SCENE_SUFFIX), path, variant, overrides)
@@ -365,15 +375,18 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                                               else combos)]
         entries += [_error_entry(*run[:2], "not run: interrupted (Ctrl-C or SIGTERM) before "
                                            "it ran", *run[2:])
-                    for run in planned[len(entries):]]
+                    for run in planned[begun:]]
     try:
         if draft is not None and not _finish_detections(draft, args.detections, interrupted):
             runtime_error = True
     except KeyboardInterrupt:
-        # The draft stays a draft, named as no output; the report below is still written.
+        # The report below is still written; the rows are named as not whole, if they can be.
         interrupts.handled()
         interrupted = True
         print("error: interrupted", file=sys.stderr)
+        assert draft is not None
+        with contextlib.suppress(OSError):
+            print(f"wrote {draft.cut_short()} (cut short: the run was interrupted)")
     if len(entries) > 1:
         for i, entry in enumerate(entries):
             name = run_label(entry["scene"], entry["variant"])

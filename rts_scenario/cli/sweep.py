@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -20,6 +19,7 @@ from .common import (
     read_by_scenes,
     replacing_after_stop,
     same_as_any,
+    takes_placeholder,
     write_json,
     writing,
 )
@@ -210,7 +210,7 @@ def _do_sweep(args: argparse.Namespace) -> int:
     print(f"sweep: {len(tasks)} run{'s' if len(tasks) != 1 else ''} on {where}"
           + (f" ({deselected} deselected by -m {args.marks!r})" if deselected else ""),
           file=sys.stderr)
-    if args.json and (not os.path.exists(args.json) or os.path.isfile(args.json)):
+    if takes_placeholder(args.json):
         # Until the sweep's report replaces it: no run, interrupted, the runs planned. A sweep
         # killed outright, or stopped or failing after its runs, leaves no earlier report in
         # place (not into a pipe or a device, which get the report alone).
@@ -245,7 +245,7 @@ def _do_sweep(args: argparse.Namespace) -> int:
         print("error: interrupted", file=sys.stderr)
         # Never a pass; a run that erred before keeps its exit code.
         return max(exit_code(done), EXIT_FAIL)
-    _print_runs(entries, summarize(entries, deselected=deselected),
+    _print_runs(entries, {**summarize(entries, deselected=deselected), "planned": len(tasks)},
                 time.perf_counter() - start, args, settings)
     if args.plot:
         from ..plots import write_sweep_plot

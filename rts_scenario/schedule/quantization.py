@@ -33,6 +33,9 @@ QUANTIZATION_MODES = ("aware", "naive")
 # attenuator's limits allow this much so that rounding (of order 1e-14 dB) never turns a
 # reachable setting into an unreachable one. Far below any attenuator's resolution.
 GRID_SLACK_DB = 1e-9
+# A level off by half a step plus this is beyond rounding (`_relevel`): the response's level
+# at the set direction, not quite the peak's, and the phase shifter's turns, differ by less.
+LEVEL_SLACK_DB = 0.01
 # Settings whose predicted angle errors differ by less than this (deg) are alike: the simpler
 # one is kept (far below any error a radar reports, far above the predictions' rounding).
 ANGLE_TIE_DEG = 1e-9
@@ -312,8 +315,9 @@ def start_attenuator_settings(
     def finish() -> tuple[FloatArray, BoolArray]:
         if searched is not None:
             searched()
-        if step > 0.0 and mode == "aware":
-            _relevel(resp[0], weights, chosen, full, grid)
+        # Off the level wanted by more than rounding where the range held the shift back.
+        off_level = (_relevel(resp[0], weights, chosen, full, grid)
+                     if step > 0.0 and mode == "aware" else np.zeros(len(weights), dtype=bool))
         # A target too weak for every channel is played as weak as possible: its strongest
         # channel at the attenuator's maximum, the others kept in proportion where they fit
         # (flagged as clipped).
@@ -325,14 +329,14 @@ def start_attenuator_settings(
         # Louder than the attenuator's minimum by more than its rounding (half a step): a
         # shortfall within it is the rounding every setting has, not a clipped level.
         short = grid.low - step / 2.0 - GRID_SLACK_DB
-        clipped = np.asarray(dark | (on & (exact < short)).any(axis=1), dtype=bool)
+        clipped = np.asarray(dark | off_level | (on & (exact < short)).any(axis=1), dtype=bool)
         return chosen, clipped
 
     return finish
 
 
 def _relevel(f: NDArray[np.complex128], weights: FloatArray, chosen: FloatArray,
-             full: FloatArray, grid: _Grid) -> None:
+             full: FloatArray, grid: _Grid) -> BoolArray:
     """Shift each entry's settings by whole steps, all alike, to the level its weights give.
 
     The search (`_search_grid`) holds the angle, and its settings may play the peak several
@@ -340,7 +344,8 @@ def _relevel(f: NDArray[np.complex128], weights: FloatArray, chosen: FloatArray,
     change of every channel leaves the angle as it is and moves the level by the same steps:
     taken as far as the attenuator's range allows, it leaves at most half a step, as rounding
     each channel does. ``f`` (4, N): the channels' responses at the set directions; ``chosen``
-    is changed in place.
+    is changed in place. Returns the entries the range kept more than half a step off the level
+    (a channel at the attenuator's minimum or maximum held the shift back).
     """
     on = np.isfinite(chosen)
     amps = np.where(on, 10.0 ** (-(np.where(on, chosen, 0.0) - full) / 20.0), 0.0)
@@ -354,8 +359,10 @@ def _relevel(f: NDArray[np.complex128], weights: FloatArray, chosen: FloatArray,
     bottom = np.min(np.where(on, chosen, np.inf), axis=1)
     most = np.floor((grid.high + GRID_SLACK_DB - top) / grid.step)
     least = np.ceil((grid.low - GRID_SLACK_DB - bottom) / grid.step)
-    steps = np.where(fine, np.clip(steps, np.minimum(least, 0.0), np.maximum(most, 0.0)), 0.0)
-    chosen += np.where(on, steps[:, None] * grid.step, 0.0)
+    shift = np.where(fine, np.clip(steps, np.minimum(least, 0.0), np.maximum(most, 0.0)), 0.0)
+    chosen += np.where(on, shift[:, None] * grid.step, 0.0)
+    left_db = np.abs(level_db - shift * grid.step)
+    return np.asarray(fine & (left_db > grid.step / 2.0 + LEVEL_SLACK_DB), dtype=bool)
 
 
 @dataclass(frozen=True)
