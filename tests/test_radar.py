@@ -399,3 +399,18 @@ def test_the_simulated_rts_sets_the_nearest_phase_step():
                                   channels(kit, [2.9, -2.7, np.nan, np.nan]))
     turned = channels(kit, asked) / channels(kit, [5.625, 0.0, np.nan, np.nan])
     np.testing.assert_allclose(np.angle(turned[0]), np.radians(2.9 - 5.625), atol=1e-12)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 16, 17, 255, 256, 300])
+def test_the_beat_phasors_are_the_powers_of_their_step(n):
+    # first * step**k by two short running products and their outer product, against the
+    # exponential of each sample's phase.
+    from rts_scenario.radar.simulate import _powers
+
+    rng = np.random.default_rng(n)
+    cycles = rng.uniform(-0.5, 0.5, (5, 3))
+    first = rng.normal(size=(5, 3)) + 1j * rng.normal(size=(5, 3))
+    got = _powers(first, np.exp(-2j * np.pi * cycles), n)
+    want = first[..., None] * np.exp(-2j * np.pi * cycles[..., None] * np.arange(n))
+    assert got.shape == (5, 3, n)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * np.abs(first).max())
