@@ -1,5 +1,6 @@
 import errno
 import os
+import re
 import socket
 import sys
 import time
@@ -885,3 +886,13 @@ def test_frames_the_rts_s_last_reply_does_not_account_for_are_said_as_the_sender
     assert reason.startswith("frames_lost: the RTS reports 1 schedule frames it did not apply "
                              "(lost frames 1); 1 of them by the sender's count: frames its last "
                              "reply, waited for at the stream's end, did not count as applied")
+
+
+@pytest.mark.parametrize(("host", "kind"), [("255.255.255.255", "broadcast"),
+                                            ("239.1.2.3", "multicast"), ("[ff02::1]", "multicast")])
+def test_a_udp_output_to_a_broadcast_or_multicast_address_is_refused(host, kind):
+    # 255.255.255.255 passed the checks before the run and failed at its first frame
+    # (a socket may not send there), exit 3 instead of bad input.
+    with pytest.raises(OutputError, match=rf"^udp://{re.escape(host)}:5000: .* is a {kind} "
+                                          rf"address; give the RTS's own address$"):
+        open_output(f"udp://{host}:5000")

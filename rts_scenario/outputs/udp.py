@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import ipaddress
 import os
 import platform
 import select
@@ -164,6 +165,13 @@ class UdpOutput(Output):
             reason = getattr(exc, "strerror", None) or exc
             raise OutputError(f"udp://{address}: unknown host {self.address[0]!r} "
                               f"({reason})") from None
+        resolved = ipaddress.ip_address(self._sockaddr[0].split("%")[0])
+        if resolved.is_multicast or resolved == ipaddress.IPv4Address("255.255.255.255"):
+            # One RTS is addressed: a broadcast fails only at the first frame (a socket may
+            # not send there), and a group's members would each play the schedule.
+            raise OutputError(f"udp://{address}: {resolved} is a "
+                              f"{'multicast' if resolved.is_multicast else 'broadcast'} "
+                              f"address; give the RTS's own address")
         try:
             self._socket = socket.socket(family, socket.SOCK_DGRAM)
         except OSError as exc:
