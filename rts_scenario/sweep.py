@@ -267,7 +267,9 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None,
                 bad = isinstance(exc, RtsError)
                 tasks.append(SweepTask(len(tasks), name, error=_message(name, exc),
                                        error_type="bad_input" if bad else "runtime",
-                                       marks=() if bad else marks_of({}),
+                                       # To be selected by, not skipped by (as the plugin).
+                                       marks=tuple(m for m in marks_of({})
+                                                   if not bad or m not in SKIP_MARKS),
                                        xfail_strict=settings.xfail_strict))
                 continue
             written = marks_of({})

@@ -743,7 +743,7 @@ def test_marks_give_the_verdicts_the_pytest_plugin_gives(pytester, capsys, tmp_p
     """xfail expects the check to fail (a pass is an xpass, not a failure, as pytest's default
     xfail_strict says), skip and skipif skip, and a scene that does not load is an error even
     when marked xfail; a skip mark skips a variant that does not load, as in pytest, but a
-    broken parametrize block has no marks to read."""
+    broken parametrize block is selected by its marks (-m) but not skipped by them."""
     pytester.makefile(".scenario.yaml", **{
         "a_plain": tiny_scene("plain"),
         "b_known": missed("known", "marks: [xfail, slow]\n"),
@@ -1274,3 +1274,16 @@ def test_a_misnamed_scene_in_a_folder_is_no_place_for_the_report(tmp_path, capsy
     assert code == 2
     assert f"--json {misnamed}: the same file as SCENE {misnamed}" in capsys.readouterr().err
     assert misnamed.read_text() == tiny_scene("b")
+
+
+def test_a_marked_scene_whose_parametrize_block_is_broken_is_selected_by_its_marks(tmp_path,
+                                                                                    capsys):
+    # `sweep -m slow` left out a slow scene whose parametrize block did not expand.
+    (tmp_path / "ok.scenario.yaml").write_text(tiny_scene("ok") + "marks: [slow]\n")
+    (tmp_path / "empty_list.scenario.yaml").write_text(
+        tiny_scene("empty-list") + "marks: [slow]\nparametrize:\n  targets.0.rcs.rcs_dbsm: []\n")
+    (tmp_path / "fast.scenario.yaml").write_text(
+        tiny_scene("fast") + "parametrize:\n  targets.0.rcs.rcs_dbsm: []\n")
+    got, code, payload, _ = sweep_verdicts(capsys, tmp_path, tmp_path, "-m", "slow")
+    assert got == {"ok": "pass", "empty_list": "error"} and code == 2
+    assert payload["summary"]["deselected"] == 1
