@@ -597,15 +597,20 @@ def _levels_db(sch, rig, radar, az, el):
     return np.array(out)
 
 
+def _stepped(step_db):
+    """The AWR1843BOOST on kit-table1 with ``step_db`` attenuator steps, the evaluation grid,
+    plane-wave FEs (what `_levels_db` superposes)."""
+    rig = rig_with(attenuation_step_db=step_db, echoes_per_channel=64)
+    az, el = evaluation_grid()
+    return RadarProfile.preset("awr1843boost"), rig, az, el, {"fe_responses": "plane-wave"}
+
+
 @pytest.mark.parametrize("step_db", [1.0, 2.0])
 def test_the_aware_search_plays_the_level_within_half_a_step(step_db):
     # The search holds the angle; its settings played the peak up to 3-5 dB off the level
     # wanted (2 dB steps), where rounding each channel misses by half a step at most, and
     # nothing flagged it: the radar was judged for an RCS error the bench made.
-    radar = RadarProfile.preset("awr1843boost")
-    rig = rig_with(attenuation_step_db=step_db, echoes_per_channel=64)
-    az, el = evaluation_grid()
-    kwargs = {"fe_responses": "plane-wave"}
+    radar, rig, az, el, kwargs = _stepped(step_db)
     wanted = build_schedule(tracks(az, el), rig_with(echoes_per_channel=64), radar, **kwargs)
     aware = build_schedule(tracks(az, el), rig, radar, quantization="aware", **kwargs)
     naive = build_schedule(tracks(az, el), rig, radar, quantization="naive", **kwargs)
@@ -632,10 +637,7 @@ def test_the_aware_search_plays_the_level_within_half_a_step(step_db):
 def test_near_the_attenuators_minimum_a_level_off_by_more_than_rounding_is_clipped(step_db):
     # Strong targets: a channel at the attenuator's minimum holds the common shift back, and
     # the level stayed up to 3.3 dB weak (2 dB steps) with status OK.
-    radar = RadarProfile.preset("awr1843boost")
-    rig = rig_with(attenuation_step_db=step_db, echoes_per_channel=64)
-    az, el = evaluation_grid()
-    kwargs = {"fe_responses": "plane-wave"}
+    radar, rig, az, el, kwargs = _stepped(step_db)
     checked = 0
     for rcs in np.arange(52.0, 60.01, 0.25):
         wanted = build_schedule(tracks(az, el, rcs=rcs), rig_with(echoes_per_channel=64),
