@@ -8,12 +8,37 @@ from __future__ import annotations
 from fnmatch import fnmatch
 from pathlib import Path
 
+from .errors import RtsError
 from .file_kinds import holds_scene
 
 # The plugin's ini option naming the scene files (a glob matched against a file's name), and
 # its default.
 PATTERN_OPTION = "rts_scenario_pattern"
 DEFAULT_PATTERN = "*.scenario.yaml"
+
+
+def check_pattern(pattern: str, where: object = None) -> None:
+    """Refuse an ``rts_scenario_pattern`` that names no scene files (``where``: its file).
+
+    A glob of file names that can end in ``.yaml`` or ``.yml``, as far as its text after its
+    last wildcard tells (``*.scn.yaml``, ``fine.*``): empty, it matched nothing and every scene
+    failed as misnamed; ``*.py`` took test modules for scenes.
+
+    Raises
+    ------
+    RtsError
+        Naming the setting, its file, the value and what is allowed.
+    """
+    name = pattern.strip()
+    # What follows the last wildcard must end as a YAML file's name does, or be the end of one.
+    tail = name[max(name.rfind(c) for c in "*?]") + 1:].lower()
+    yaml_end = tail.endswith((".yaml", ".yml")) or any(s.endswith(tail) for s in (".yaml",
+                                                                                   ".yml"))
+    if name and not any(sep in name for sep in "/\\") and yaml_end:
+        return
+    source = f"{where}: " if where else ""
+    raise RtsError(f"{source}{PATTERN_OPTION} = {pattern!r}: must be a glob of scene file names "
+                   f"that can end in .yaml or .yml, without a folder (default {DEFAULT_PATTERN})")
 
 
 def scene_file_kind(path: Path, pattern: str = DEFAULT_PATTERN) -> str | None:
@@ -45,4 +70,5 @@ def misnamed_scene(name: str, pattern: str = DEFAULT_PATTERN) -> str:
             f"not run as one; {rename}")
 
 
-__all__ = ["DEFAULT_PATTERN", "PATTERN_OPTION", "misnamed_scene", "scene_file_kind"]
+__all__ = ["DEFAULT_PATTERN", "PATTERN_OPTION", "check_pattern", "misnamed_scene",
+           "scene_file_kind"]

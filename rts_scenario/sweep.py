@@ -29,7 +29,13 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from .errors import RtsError
-from .scene_files import DEFAULT_PATTERN, PATTERN_OPTION, misnamed_scene, scene_file_kind
+from .scene_files import (
+    DEFAULT_PATTERN,
+    PATTERN_OPTION,
+    check_pattern,
+    misnamed_scene,
+    scene_file_kind,
+)
 
 # Runs the summary lists as the worst ones (failed and erred runs first).
 WORST_RUNS = 10
@@ -137,6 +143,7 @@ def pytest_settings(paths: Iterable[str | Path]) -> PytestSettings:
         if value is not None:
             strict = bool(value)
             break
+    check_pattern(pattern, config.inipath)
     return PytestSettings(config.inipath, config.rootpath, strict,
                           tuple(config.getini("norecursedirs")), pattern)
 

@@ -641,3 +641,16 @@ def test_a_marked_scene_whose_parametrize_block_is_broken_is_selected_by_its_mar
     result = pytester.runpytest("-m", "slow", "-p", "no:cacheprovider")
     result.assert_outcomes(passed=1, failed=1, deselected=1)
     result.stdout.fnmatch_lines(["FAILED empty_list.scenario.yaml::empty_list*"])
+
+
+@pytest.mark.parametrize("pattern", ["", "[", "*.py", "scenes/*.yaml"])
+def test_a_scene_pattern_that_names_no_scene_files_is_refused_up_front(pytester, pattern):
+    # Empty, every scene failed as misnamed "not named  (the project's ...)"; *.py took test
+    # modules for scenes and told the scenes to be renamed .py.
+    pytester.makefile(".scenario.yaml", fine=scene("fine"))
+    pytester.makeini(f"[pytest]\nrts_scenario_pattern = {pattern}\n")
+    result = pytester.runpytest()
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines([f"*: rts_scenario_pattern = {pattern.strip()!r}: must be a glob "
+                                 f"of scene file names that can end in .yaml or .yml, without "
+                                 f"a folder (default *.scenario.yaml)"])

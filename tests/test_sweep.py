@@ -1287,3 +1287,14 @@ def test_a_marked_scene_whose_parametrize_block_is_broken_is_selected_by_its_mar
     got, code, payload, _ = sweep_verdicts(capsys, tmp_path, tmp_path, "-m", "slow")
     assert got == {"ok": "pass", "empty_list": "error"} and code == 2
     assert payload["summary"]["deselected"] == 1
+
+
+def test_a_scene_pattern_that_names_no_scene_files_stops_the_sweep(tmp_path, capsys):
+    # As in the plugin: an empty pattern made every scene an erred run, misnamed.
+    (tmp_path / "ok.scenario.yaml").write_text(tiny_scene("ok"))
+    (tmp_path / "pytest.ini").write_text("[pytest]\nrts_scenario_pattern = *.py\n")
+    code, out, err = sweep(capsys, tmp_path)
+    assert code == 2 and out == ""
+    assert err.strip() == (f"error: {tmp_path / 'pytest.ini'}: rts_scenario_pattern = '*.py': "
+                           f"must be a glob of scene file names that can end in .yaml or .yml, "
+                           f"without a folder (default *.scenario.yaml)")

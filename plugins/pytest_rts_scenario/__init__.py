@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from rts_scenario.scene_files import DEFAULT_PATTERN, PATTERN_OPTION
+from rts_scenario.scene_files import DEFAULT_PATTERN, PATTERN_OPTION, check_pattern
 
 if TYPE_CHECKING:
     from rts_scenario.pipeline import RunOptions, RunResult
@@ -61,6 +61,7 @@ def pytest_configure(config: pytest.Config) -> None:
 
     try:
         check_environment()
+        check_pattern(config.getini(PATTERN_OPTION), config.inipath)
     except RtsError as exc:
         raise pytest.UsageError(str(exc)) from None
     for option in ("--rts-output", "--rts-can-interface", "--rts-can-channel", "--rts-mapping"):
