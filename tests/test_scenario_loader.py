@@ -1287,3 +1287,38 @@ def test_a_spline_that_turns_too_hard_for_its_speed_is_refused(tmp_path, speed_m
     assert across == pytest.approx(speed_mps ** 2 * curvature.max(), rel=0.01)
     assert radius == pytest.approx(1.0 / curvature.max(), rel=0.01)
     assert across > speed_mps ** 2 / 30.0
+
+
+def test_a_parametrize_block_of_too_many_combinations_is_refused_before_expanding(tmp_path):
+    # 8 keys x 10 values: 10^8 combinations, each loaded where pytest collects it; collection
+    # hung for ever without a word.
+    import time
+
+    keys = ["targets.0.rcs.rcs_dbsm", "targets.0.motion.speed_mps", "ego.motion.speed_mps",
+            "duration_s", "frame_rate_hz", "targets.0.motion.position_m.0",
+            "targets.0.motion.position_m.1", "radar.mount.x_m"]
+    block = "".join(f"  {key}: [{', '.join(str(1.0 + i) for i in range(10))}]\n"
+                    for key in keys)
+    path = tmp_path / "many.scenario.yaml"
+    path.write_text(GOOD + "parametrize:\n" + block)
+    start = time.perf_counter()
+    with pytest.raises(ScenarioError, match=r"many.scenario.yaml:15:\d+: parametrize: "
+                                            r"100,000,000 combinations \(10 x 10 x 10 x 10 x 10 "
+                                            r"x 10 x 10 x 10\); at most 100,000 in one scene "
+                                            r"file: split it"):
+        parametrizations(path)
+    assert time.perf_counter() - start < 30.0  # refused before expanding (a wide margin)
+
+
+def test_a_parametrize_block_of_as_many_combinations_as_allowed_expands(tmp_path, monkeypatch):
+    import rts_scenario.scenario.loader as loader
+
+    monkeypatch.setattr(loader, "MAX_COMBINATIONS", 6)
+    path = tmp_path / "six.scenario.yaml"
+    path.write_text(GOOD + "parametrize:\n  targets.0.rcs.rcs_dbsm: [1, 2, 3]\n"
+                           "  radar.noise: [true, false]\n")
+    assert len(parametrizations(path)) == 6
+    path.write_text(GOOD + "parametrize:\n  targets.0.rcs.rcs_dbsm: [1, 2, 3, 4]\n"
+                           "  radar.noise: [true, false]\n")
+    with pytest.raises(ScenarioError, match=r"8 combinations \(4 x 2\); at most 6 in one"):
+        parametrizations(path)

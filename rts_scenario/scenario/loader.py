@@ -399,6 +399,11 @@ def _check_size(doc: Document, frames: _Frames, n_targets: int) -> None:
         )
 
 
+# Combinations one scene file's parametrize block may give: each is a test, a run, loaded
+# where it is collected.
+MAX_COMBINATIONS = 100_000
+
+
 def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     """List the scene's test combinations: ``(id, overrides)``; one ``("", {})`` if none.
 
@@ -434,6 +439,13 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
                                 f"{dotted}: a key path given twice ({where}); each key path "
                                 f"takes one value per run")
             first_entry[dotted] = key
+    count = math.prod(len(axis) for axis in axes)
+    if count > MAX_COMBINATIONS:
+        # Each is loaded where it is collected (a few ms): 10^8 hung a session without a word.
+        raise doc.error(("parametrize",),
+                        f"{count:,} combinations ({' x '.join(str(len(a)) for a in axes)}); at "
+                        f"most {MAX_COMBINATIONS:,} in one scene file: split it into several "
+                        f"files, or vary fewer keys together")
     combos: list[tuple[str, dict[str, Any]]] = []
     seen: dict[str, int] = {}
     values_seen: dict[str, int] = {}
