@@ -102,11 +102,18 @@ class Draft:
         """Close the file and name it ``path``; return that."""
         return self._close_as(self._target)
 
-    def cut_short(self) -> Path:
-        """Close the file and name it ``path.partial`` (``path`` not a regular file: itself)."""
-        partial = None if self._target is None else self._target.with_name(
+    @property
+    def partial(self) -> Path | None:
+        """What `cut_short` names the file: ``path.partial``, beside the file ``path`` names.
+
+        None where ``path`` is not a regular file (written into).
+        """
+        return None if self._target is None else self._target.with_name(
             self._target.name + ".partial")
-        return self._close_as(partial)
+
+    def cut_short(self) -> Path:
+        """Close the file and name it `partial` (``path`` not a regular file: itself)."""
+        return self._close_as(self.partial)
 
     def discard(self) -> None:
         """Close the file and remove the draft (nothing written stays)."""

@@ -234,7 +234,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
     # The run under way when Ctrl-C came: (scene name, or file name until it loaded, path,
     # variant, overrides, log); its entry once its verdict is known (its log then complete).
     current: tuple[str, str, str, dict[str, Any], str | None] | None = None
-    verdict: list[dict[str, Any]] = []
+    finished: dict[str, Any] | None = None
     interrupted = False
     # Runs begun (a file that does not expand is one), and the entries before the last began:
     # each run gets exactly one entry, whenever the stop comes.
@@ -246,7 +246,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
             if isinstance(combos, Exception):
                 begun, run_start = begun + 1, len(entries)
                 current = (file_name, path, "", {}, None)
-                verdict.clear()
+                finished = None
                 failed(file_name, path, combos)
                 # A file that does not load is bad input; anything else is a runtime error.
                 bad_input = bad_input or isinstance(combos, RtsError)
@@ -256,7 +256,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                 label = f"{path}[{variant}]" if variant else path
                 begun, run_start = begun + 1, len(entries)
                 current = (file_name, path, variant, overrides, logs.get(variant, args.record))
-                verdict.clear()
+                finished = None
                 start = time.perf_counter()
                 try:
                     scene = load_scenario(path, overrides)
@@ -304,8 +304,8 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                                        progress=Progress(run_label(Path(path).name, variant)),
                                        detections_out=detections, on_preflight=warn, timing=loaded)
                     report = result.report
-                    verdict.append({"file": path, "status": "pass" if report.passed else "fail",
-                                    "marks": list(scene.marks), **report.to_dict()})
+                    finished = {"file": path, "status": "pass" if report.passed else "fail",
+                                "marks": list(scene.marks), **report.to_dict()}
                     print(report.table())
                     marked = marks_note(scene.marks, report.passed,
                                         bench_failures(report.reason_codes, report.playback))
@@ -344,8 +344,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                     continue
                 finally:
                     print()
-                entries.append(verdict.pop())
-                current = None
+                assert finished is not None  # set where the run ended in a report
+                entries.append(finished)
+                current, finished = None, None
                 if not report.passed:  # for the summary's marks note, not the --json
                     bench_of_run[len(entries) - 1] = bench_failures(report.reason_codes,
                                                                     report.playback)
@@ -356,9 +357,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         if current is None or len(entries) > run_start:
             # Between runs, or the run under way had its entry already (its error said).
             print("error: interrupted", file=sys.stderr)
-        elif verdict:
+        elif finished is not None:
             # Stopped after its verdict (the log and sidecar written): the verdict stands.
-            entries.append(verdict.pop())
+            entries.append(finished)
             print("error: interrupted", file=sys.stderr)
         else:
             name, path, variant, overrides, log = current

@@ -92,8 +92,8 @@ class FileOutput(Output):
                 # What PATH held before is removed as the draft is made: it is not this
                 # schedule, whether that ends whole or not.
                 self._draft = draft = Draft(self.path)
-                # Nor is an earlier export's cut short one.
-                Path(f"{os.path.realpath(self.path)}.partial").unlink(missing_ok=True)
+                if draft.partial is not None:  # nor is an earlier export's cut short one
+                    draft.partial.unlink(missing_ok=True)
                 if self.path.suffix == ".csv":
                     self._csv = draft.file
                     draft.file.write(f"{_MAGIC}\n# targets: {','.join(batch.names)}\n")

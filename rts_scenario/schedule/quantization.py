@@ -320,7 +320,7 @@ def start_attenuator_settings(
         off_level = np.zeros(len(weights), dtype=bool)
         if step > 0.0 and mode == "aware":
             # Only where the search moved a setting: rounding alone leaves half a step at most.
-            moved = ~((chosen == rounded) | (np.isinf(chosen) & np.isinf(rounded)))
+            moved = chosen != rounded  # inf (off) equals inf
             rows = np.flatnonzero(moved[:, 0] | moved[:, 1] | moved[:, 2] | moved[:, 3])
             part = chosen[rows]
             off_level[rows] = _relevel(resp[0][:, rows], weights[rows], part, full[rows], grid)
