@@ -8,6 +8,7 @@ not know with a `SettingError`.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 from .errors import SettingError
@@ -62,10 +63,34 @@ def cache_dir_setting() -> Path | None | bool:
     return folder
 
 
+def cache_dir() -> Path | None:
+    r"""Return the disk cache's folder (solver plans, documents found valid); None: disabled.
+
+    ``$RTS_SCENARIO_CACHE_DIR`` if set ("off" or empty: disabled; `cache_dir_setting` refuses a
+    value naming no folder); else the user's cache directory:
+    ``%LOCALAPPDATA%\rts-scenario\Cache`` on Windows, ``~/Library/Caches/rts-scenario`` on
+    macOS, ``$XDG_CACHE_HOME/rts-scenario`` or ``~/.cache/rts-scenario`` elsewhere.
+    """
+    chosen = cache_dir_setting()
+    if isinstance(chosen, Path):
+        return chosen
+    if chosen is False:
+        return None
+    if sys.platform == "win32":
+        local = os.environ.get("LOCALAPPDATA")
+        base = Path(local) if local else Path.home() / "AppData" / "Local"
+        return base / "rts-scenario" / "Cache"
+    if sys.platform == "darwin":
+        return Path.home() / "Library" / "Caches" / "rts-scenario"
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "rts-scenario"
+
+
 def check_environment() -> None:
     """Raise `SettingError` for the first environment setting whose value is not known."""
     jit_mode()
     cache_dir_setting()
 
 
-__all__ = ["CACHE_DIR_ENV", "JIT_ENV", "cache_dir_setting", "check_environment", "jit_mode"]
+__all__ = ["CACHE_DIR_ENV", "JIT_ENV", "cache_dir", "cache_dir_setting", "check_environment",
+           "jit_mode"]

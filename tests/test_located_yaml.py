@@ -132,3 +132,100 @@ def test_a_byte_that_is_not_utf8_is_located_by_line_and_column(tmp_path, raw, li
         load_yaml(path)
     assert (info.value.line, info.value.column) == (line, column)
     assert str(info.value).startswith(f"{path}:{line}:{column}: not UTF-8 text: ")
+
+
+# -- documents found valid, remembered ---------------------------------------------------------
+
+SCHEMA = {"type": "object", "properties": {"speed_mps": {"type": "number", "maximum": 100}},
+          "required": ["speed_mps"], "additionalProperties": False}
+
+
+@pytest.fixture
+def judged(monkeypatch, tmp_path):
+    """The cache in ``tmp_path``; the number of documents jsonschema judged so far."""
+    import jsonschema
+
+    monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", str(tmp_path))
+    count = [0]
+    validator = jsonschema.Draft202012Validator
+
+    def counted(schema):
+        count[0] += 1
+        return validator(schema)
+
+    monkeypatch.setattr(jsonschema, "Draft202012Validator", counted)
+    return count
+
+
+def _validate(text: str, schema=SCHEMA, skip=()) -> None:
+    located_yaml.validate(load_yaml("x.yaml", text), schema, skip)
+
+
+def test_a_document_found_valid_is_not_judged_again(judged, tmp_path):
+    _validate("speed_mps: 20\n")
+    _validate("speed_mps: 20  # a comment changes nothing\n")
+    assert judged[0] == 1
+    assert len(list((tmp_path / located_yaml.VALIDATED_FOLDER).iterdir())) == 1
+
+
+@pytest.mark.parametrize("text", ["speed_mps: 200\n", "speed_mps: 20\nspeed: 1\n",
+                                  "speed_mps: '20'\n", "{}\n"])
+def test_a_document_changed_from_a_valid_one_is_judged_and_refused(judged, text):
+    _validate("speed_mps: 20\n")
+    with pytest.raises(ScenarioError, match="speed"):
+        _validate(text)
+    with pytest.raises(ScenarioError, match="speed"):  # an error is never remembered
+        _validate(text)
+    assert judged[0] == 3
+
+
+def test_a_valid_document_is_judged_again_against_another_schema_or_skip(judged):
+    _validate("speed_mps: 20\n")
+    with pytest.raises(ScenarioError, match="must be <= 10"):
+        _validate("speed_mps: 20\n",
+                  {**SCHEMA, "properties": {"speed_mps": {"type": "number", "maximum": 10}}})
+    _validate("speed_mps: 20\n", skip=[("speed_mps",)])
+    assert judged[0] == 3
+
+
+def test_a_document_json_would_read_alike_is_not_taken_for_a_known_one(judged):
+    # An integer key reads as a string in JSON's text; such a document keeps no memo.
+    schema = {"type": "object"}
+    located_yaml.validate(located_yaml.Document({1: 2}, "x.yaml", {}), schema)
+    located_yaml.validate(located_yaml.Document({1: 2}, "x.yaml", {}), schema)
+    assert judged[0] == 2
+
+
+@pytest.mark.parametrize("setting", ["off", ""])
+def test_no_document_is_remembered_without_a_disk_cache(judged, monkeypatch, tmp_path,
+                                                       setting):
+    monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", setting)
+    monkeypatch.chdir(tmp_path)
+    _validate("speed_mps: 20\n")
+    _validate("speed_mps: 20\n")
+    assert judged[0] == 2
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_cache_out_of_reach_judges_every_document(judged, tmp_path, monkeypatch):
+    (tmp_path / located_yaml.VALIDATED_FOLDER).write_text("a file where the folder goes")
+    _validate("speed_mps: 20\n")
+    _validate("speed_mps: 20\n")
+    assert judged[0] == 2
+
+
+def test_the_documents_remembered_are_bounded_and_the_latest_kept(judged, tmp_path,
+                                                                  monkeypatch):
+    import os
+
+    monkeypatch.setattr(located_yaml, "VALIDATED_KEEP", 4)
+    folder = tmp_path / located_yaml.VALIDATED_FOLDER
+    for speed in range(5):
+        _validate(f"speed_mps: {speed}\n")
+        for k, marker in enumerate(sorted(folder.iterdir(), key=os.path.getmtime)):
+            os.utime(marker, (1000.0 + k, 1000.0 + k))  # distinct times, in their order
+    assert judged[0] == 5 and len(list(folder.iterdir())) == 2
+    _validate("speed_mps: 4\n")  # the latest: still known
+    assert judged[0] == 5
+    _validate("speed_mps: 0\n")  # the oldest: judged again
+    assert judged[0] == 6

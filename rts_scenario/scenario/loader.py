@@ -10,7 +10,6 @@ names, files inside the scene's folder tree). Every error is one `ScenarioError`
 from __future__ import annotations
 
 import copy
-import difflib
 import itertools
 import json
 import math
@@ -23,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.polynomial import Polynomial
 
 from ..errors import RtsError, ScenarioError
 from ..file_kinds import kind_by_name, kind_name, load_kind, other_than_fragment
@@ -273,6 +271,8 @@ def _near_miss(word: str, mark: str) -> bool:
     """
     if word in VERDICT_MARKS:
         return False
+    import difflib  # here: only a scene's marks are judged by it
+
     return word.lower() == mark or bool(
         difflib.get_close_matches(word.lower(), [mark], n=1, cutoff=NEAR_MISS_RATIO))
 
@@ -928,6 +928,8 @@ def _check_sideways_together(doc: Document, key: KeyPath,
                   if c.start_s <= a and c.start_s + c.duration_s >= b]
         if len(active) < 2:
             continue
+        from numpy.polynomial import Polynomial  # here: 2 ms of a command's start, rarely used
+
         total = Polynomial([0.0])
         for i in active:
             c = changes[i]

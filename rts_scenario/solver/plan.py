@@ -17,7 +17,6 @@ import hashlib
 import importlib.metadata
 import os
 import pickle
-import sys
 import tempfile
 import threading
 import time
@@ -38,7 +37,7 @@ from ..quads import QuadGeometry
 from ..registry import Registry
 from ..responses import FrontEndModel
 from ..rig import Rig
-from ..settings import CACHE_DIR_ENV, cache_dir_setting
+from ..settings import CACHE_DIR_ENV, cache_dir
 from . import exact, globalmax
 from .exact import ExactQuad, ExactTables, PhaseMap
 from .globalmax import GlobalMaxCheck
@@ -219,26 +218,8 @@ def plan_key(
 
 
 def plan_cache_dir() -> Path | None:
-    r"""Directory of the disk cache of plans, or ``None`` when disabled.
-
-    ``$RTS_SCENARIO_CACHE_DIR`` if set ("off" or empty: disabled; `settings.cache_dir_setting`
-    refuses a value naming no folder); else the user's cache directory:
-    ``%LOCALAPPDATA%\rts-scenario\Cache`` on Windows, ``~/Library/Caches/rts-scenario`` on
-    macOS, ``$XDG_CACHE_HOME/rts-scenario`` or ``~/.cache/rts-scenario`` elsewhere.
-    """
-    chosen = cache_dir_setting()
-    if isinstance(chosen, Path):
-        return chosen
-    if chosen is False:
-        return None
-    if sys.platform == "win32":
-        local = os.environ.get("LOCALAPPDATA")
-        base = Path(local) if local else Path.home() / "AppData" / "Local"
-        return base / "rts-scenario" / "Cache"
-    if sys.platform == "darwin":
-        return Path.home() / "Library" / "Caches" / "rts-scenario"
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "rts-scenario"
+    """Directory of the disk cache of plans, or ``None`` when disabled (`settings.cache_dir`)."""
+    return cache_dir()
 
 
 def clear_memory_cache() -> None:
