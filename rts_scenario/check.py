@@ -703,7 +703,8 @@ class Checker:
         tally["unmatched"] += int((ok & ~whole).sum())
         tally["missing"] += int((status == _MISSING).sum())
         tally["incomplete"] += int((status == _INCOMPLETE).sum())
-        self._keep_worst(block, truth, assigned, errors)
+        # Of the cycles that came back: one never received was not judged (frames["missing"]).
+        self._keep_worst(block, truth & ok[:, None], assigned, errors)
         if self.record is not None:
             self.record.append({"frame": np.arange(block.first, block.end),
                                 "t_s": block.tracks.t_s, "detected": detected,
@@ -1048,7 +1049,10 @@ class Checker:
 
     def _keep_worst(self, block: _Block, truth: BoolArray, assigned: BoolArray,
                     errors: dict[str, FloatArray]) -> None:
-        """Keep the `WORST_FRAMES` worst target-frames: misses first, then error/tolerance."""
+        """Keep the `WORST_FRAMES` worst target-frames: misses first, then error/tolerance.
+
+        ``truth``: the target-frames judged (checkable, and their cycle received).
+        """
         tol = self.expectations.tolerances
         score = np.zeros(truth.shape)
         for q, key in QUANTITIES[:4]:

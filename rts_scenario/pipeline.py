@@ -217,6 +217,9 @@ class RunOptions:
         (``Message.channel`` as text, `rts_scenario.canbus.channel_label`): the others are
         not read (``other_channels`` in the report's bus). Without it, radar identifiers
         heard on several channels fail the verdict (`DetectionReceiver.channel_reason`).
+    radar_channel_option : str
+        The option that gives ``radar_channel`` where a reason names it: ``--radar-channel``
+        (the command's), ``--rts-radar-channel`` under pytest.
     mapping : str, optional
         ``*.mapping.yaml`` of a third-party radar's DBC.
     method : {"exact", "paper", "estimator"}
@@ -240,6 +243,7 @@ class RunOptions:
     can_channel: str | None = None
     can_fd: bool = False
     radar_channel: str | None = None
+    radar_channel_option: str = "--radar-channel"
     mapping: str | None = None
     method: str = "exact"
     drain_s: float = 2.0
@@ -344,7 +348,8 @@ class Pipeline:
             self.mapping = CanMapping.from_file(options.mapping) if options.mapping else None
             self.receiver = DetectionReceiver(self.mapping, radar.radar_clock.cycle_s,
                                               channel=options.radar_channel,
-                                              host_clock=self.host_clock)
+                                              host_clock=self.host_clock,
+                                              channel_option=options.radar_channel_option)
             listen = self._open_bus()
             self._listeners: list[can.Listener] = [self.receiver]
             if options.bus_log:

@@ -273,8 +273,11 @@ class Report:
         """Render the report as strict JSON (keys documented in docs/report.md; NaN: null)."""
         return json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n"
 
-    def table(self) -> str:
-        """Render the report as a text table for people."""
+    def table(self, verdict: bool = True) -> str:
+        """Render the report as a text table for people; its last line the verdict (``verdict``).
+
+        The pytest plugin leaves the verdict out: its failure text begins with it.
+        """
         head = (f"{'target':<18} {'cycles':>6} {'det. rate':>9} {'missed':>6} {'out tol':>7}  "
                 f"{'range rms/max m':>15}  {'vel rms/max m/s':>15}  {'az rms/max deg':>14}  "
                 f"{'el rms/max deg':>14}  {'rcs rms/max dB':>14}  verdict")
@@ -369,8 +372,9 @@ class Report:
         if problems:
             lines.append("bus: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in
                                              problems.items()))
-        lines.append(("PASS" if self.passed else "FAIL") + f": {self.label}"
-                     + ("" if self.passed else " - " + "; ".join(self.reasons)))
+        if verdict:
+            lines.append(("PASS" if self.passed else "FAIL") + f": {self.label}"
+                         + ("" if self.passed else " - " + "; ".join(self.reasons)))
         return "\n".join(lines)
 
 

@@ -1,11 +1,17 @@
+import gc
 import os
 
 import can.interfaces.virtual
 import numpy as np
+import numpy.fft  # noqa: F401  (below)
 import pytest
 from hypothesis import settings
 
 import rts_scenario as rs
+
+# pytester's in-process runs drop the modules first imported inside them when they end, and
+# numpy.fft (numpy loads it on first use) refuses to load a second time: imported here, before
+# any, so that a worker whose first FFT came inside a plugin test does not fail every later one.
 
 # CI replays the same examples every run (a new counterexample should come from a developer's
 # run, not block a landing at random); locally hypothesis explores freely.
@@ -50,6 +56,20 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
                     len(SLOW_FIRST))
 
     items.sort(key=rank)  # stable: the rest keep pytest's order
+
+
+@pytest.fixture(autouse=True)
+def frozen_heap():
+    """Each test runs with what the session made before it frozen (`gc.freeze`), as a command
+    runs with its start-up's objects frozen (`rts_scenario.startup`).
+
+    A worker's heap grows over the session: late in a parallel run a full collection of it
+    took 200-340 ms (measured), holding every thread, and an emulated radar's thread then
+    measured that late. Frozen, no collection scans it; it is collected again after the test.
+    """
+    gc.freeze()
+    yield
+    gc.unfreeze()
 
 
 @pytest.fixture(scope="session", autouse=True)

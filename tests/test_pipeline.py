@@ -184,3 +184,15 @@ def test_a_run_listens_at_its_end_as_long_as_a_slow_radar_s_last_cycles_take(mon
         start = monotonic_s()
         pipeline.receive(final=True, until_monotonic_s=start + 2.5)
         assert monotonic_s() - start >= 2.5
+
+
+def test_an_unknown_run_method_lists_every_method_a_run_takes():
+    # "estimator" is a run's method (aimed at the radar's estimator), not the solver's.
+    from rts_scenario.errors import SolverError
+
+    scene = load_scenario(ROOT / "scenarios" / "approaching_target.scenario.yaml",
+                          {"duration_s": 0.2})
+    with pytest.raises(SolverError, match="unknown method 'bogus'; valid methods: exact, "
+                                          "paper, estimator$"):
+        run_scene(scene, RunOptions(method="bogus"))
+    assert run_scene(scene, RunOptions(method="estimator")).report.passed

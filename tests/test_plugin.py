@@ -80,6 +80,8 @@ def test_failure_summary_starts_with_the_verdict_and_its_reasons(pytester):
     verdict = next(i for i, line in enumerate(lines) if line.startswith("FAIL: impossible - "))
     assert "nothing to check" in lines[verdict]
     assert lines[verdict + 2].startswith("target ")  # then the table
+    # Said once: the table under it leaves its own verdict line out.
+    assert sum(line.startswith("FAIL: impossible") for line in lines) == 1
 
 
 def test_bad_rts_output_stops_the_session_once(pytester):
@@ -114,8 +116,14 @@ def test_rts_radar_channel_reads_the_radar_s_channel_alone(pytester, monkeypatch
     pytester.makefile(".scenario.yaml", one=scene("one"))
     result = pytester.runpytest()
     result.assert_outcomes(failed=1)
-    assert "came on 2 channels" in result.stdout.str()
+    # The reason names the plugin's option, not the command's.
+    text = result.stdout.str()
+    assert "came on 2 channels" in text and "give --rts-radar-channel CH" in text
+    assert "give --radar-channel" not in text
     pytester.runpytest("--rts-radar-channel", "0").assert_outcomes(passed=1)
+    result = pytester.runpytest("--rts-radar-channel", "7")
+    result.assert_outcomes(failed=1)
+    assert "--rts-radar-channel 7: none of the radar's messages" in result.stdout.str()
     result = pytester.runpytest("--rts-radar-channel", " ")
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     text = result.stderr.str() + result.stdout.str()
@@ -189,7 +197,7 @@ def test_worst_frames_are_error_over_tolerance_as_their_heading_says():
     row = {"frame": 7, "t_s": 0.35, "target": "car", "missed": False, "range_m": -0.15,
            "radial_velocity_mps": 0.05, "az_deg": -0.005, "el_deg": 0.25, "rcs_dbsm": 0.0}
     report = SimpleNamespace(label="s", reasons=["car: detection rate 0.0% < 90.0%"],
-                             table=lambda: "TABLE", worst_frames=[row])
+                             table=lambda verdict=True: "TABLE", worst_frames=[row])
     text = _render(SimpleNamespace(scene=scene_, report=report))
     heading, columns, line = text.splitlines()[4:7]
     assert heading == "worst frames (error / tolerance):"
@@ -203,8 +211,8 @@ def test_no_worst_frames_is_said_not_an_empty_table():
     from pytest_rts_scenario import _render
 
     scene_ = SimpleNamespace(expectations=SimpleNamespace(tolerances={}))
-    report = SimpleNamespace(label="s", reasons=["nothing to check"], table=lambda: "TABLE",
-                             worst_frames=[])
+    report = SimpleNamespace(label="s", reasons=["nothing to check"],
+                             table=lambda verdict=True: "TABLE", worst_frames=[])
     text = _render(SimpleNamespace(scene=scene_, report=report))
     assert text.splitlines()[-1] == "worst frames: none (no target-frame was judged)"
 

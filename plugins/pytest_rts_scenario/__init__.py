@@ -191,6 +191,7 @@ def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
         "can_fd": config.getoption("--rts-can-fd"),
         "mapping": config.getoption("--rts-mapping"),
         "radar_channel": config.getoption("--rts-radar-channel"),
+        "radar_channel_option": "--rts-radar-channel",
         "method": config.getoption("--rts-method"),
     }
     values.update(overrides)
@@ -481,7 +482,8 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
 def _render(result: RunResult) -> str:
     """Render the report table and the worst frames (misses first, then largest errors)."""
     report = result.report
-    lines = [f"FAIL: {report.label} - {'; '.join(report.reasons)}", "", report.table(), ""]
+    lines = [f"FAIL: {report.label} - {'; '.join(report.reasons)}", "",
+             report.table(verdict=False), ""]
     if not report.worst_frames:
         return "\n".join([*lines, "worst frames: none (no target-frame was judged)"])
     lines += ["worst frames (error / tolerance):",

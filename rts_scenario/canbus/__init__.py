@@ -649,11 +649,15 @@ class DetectionReceiver(can.Listener):
     def __init__(self, mapping: CanMapping | None = None, cycle_s: float | None = None,
                  received_at: Callable[[can.Message], float] | None = None, *,
                  channel: str | None = None,
-                 host_clock: HostClockWatch | None = None) -> None:
+                 host_clock: HostClockWatch | None = None,
+                 channel_option: str = "--radar-channel") -> None:
         self.mapping = mapping or CanMapping.builtin()
         self.host_clock = host_clock
         self.cycle_s = cycle_s
         self.channel = channel
+        # The option that gives ``channel``, named in `channel_reason` (the plugin's is
+        # ``--rts-radar-channel``).
+        self.channel_option = channel_option
         self.received_at: Callable[[can.Message], float] = (
             received_at or self._wall_receipt)
         db = self.mapping.db
@@ -897,23 +901,24 @@ class DetectionReceiver(can.Listener):
         held = {c: n for c, n in self.channels.items() if n}
         listing = ", ".join(f"{'(none)' if c is None else c} ({n} messages)"
                             for c, n in sorted(held.items(), key=lambda cn: str(cn[0])))
+        option = self.channel_option
         what = f"the radar's messages (the identifiers of mapping {self.mapping.name!r})"
         if self.channel is not None:
             if self.channel in held:
                 return None
             if held and set(held) == {None}:
                 # python-can's udp_multicast and virtual buses name no channel: one channel.
-                return (f"--radar-channel {self.channel}: the interface names no channel on "
+                return (f"{option} {self.channel}: the interface names no channel on "
                         f"its messages (python-can gives Message.channel None; {what}: "
-                        f"{held[None]} messages): it reads one channel, which --radar-channel "
-                        f"cannot pick; leave --radar-channel out")
+                        f"{held[None]} messages): it reads one channel, which {option} "
+                        f"cannot pick; leave {option} out")
             found = f"the channels they came on: {listing}" if held else "none came on any"
-            return (f"--radar-channel {self.channel}: none of {what} came on channel "
+            return (f"{option} {self.channel}: none of {what} came on channel "
                     f"{self.channel}; {found}")
         if len(held) <= 1:
             return None
         return (f"{what} came on {len(held)} channels: {listing}: the radar's cycles and "
-                f"another bus's were mixed; give --radar-channel CH (the channel as python-can "
+                f"another bus's were mixed; give {option} CH (the channel as python-can "
                 f"gives it)")
 
     def _receive(self, msg: can.Message) -> None:

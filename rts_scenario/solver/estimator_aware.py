@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..arrays import VirtualArray
+from ..errors import SolverError
 from ..radar.angle import make_estimator
 from ..responses import FrontEndModel
 from ..rig import Rig
@@ -43,8 +44,22 @@ SCHEDULE_METHODS = ("exact", "paper", "estimator")
 
 
 def plan_method(method: str) -> str:
-    """Return the solver method whose plan a schedule method uses (estimator-aware: exact)."""
-    return "exact" if method == "estimator" else method
+    """Return the solver method whose plan a schedule method uses (estimator-aware: exact).
+
+    Raises
+    ------
+    SolverError
+        ``method`` is none of `SCHEDULE_METHODS` nor a registered solver method (the message
+        lists them all).
+    """
+    if method == "estimator":
+        return "exact"
+    from .plan import METHODS
+
+    if method not in METHODS:
+        valid = [*SCHEDULE_METHODS, *(name for name in METHODS if name not in SCHEDULE_METHODS)]
+        raise SolverError(f"unknown method {method!r}; valid methods: {', '.join(valid)}")
+    return method
 
 
 def front_end_vectors(rig: Rig, array: VirtualArray) -> ComplexArray:
