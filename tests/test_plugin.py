@@ -662,3 +662,28 @@ def test_a_scene_pattern_that_names_no_scene_files_is_refused_up_front(pytester,
     result.stderr.fnmatch_lines([f"*: rts_scenario_pattern = {pattern.strip()!r}: must be a glob "
                                  f"of scene file names that can end in .yaml or .yml, without "
                                  f"a folder (default *.scenario.yaml)"])
+
+
+def test_a_scene_plays_with_the_session_s_heap_frozen(pytester, monkeypatch):
+    # As a command plays it (`rts_scenario.startup`): no full collection of a long session's
+    # objects holds the sender mid-scene; they are collected again after it.
+    import gc
+
+    import rts_scenario.pipeline
+
+    gc.unfreeze()  # this test's own freeze (conftest): the session's heap as pytest has it
+    real, seen = rts_scenario.pipeline.run_scene, []
+
+    def recording(*args, **kwargs):
+        seen.append(gc.get_freeze_count())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(rts_scenario.pipeline, "run_scene", recording)
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    pytester.makepyfile(test_fixture="""
+        def test_it(rts_run):
+            assert rts_run("one.scenario.yaml").report.passed
+    """)
+    pytester.runpytest().assert_outcomes(passed=2)
+    assert len(seen) == 2 and all(count > 1000 for count in seen)
+    assert gc.get_freeze_count() == 0

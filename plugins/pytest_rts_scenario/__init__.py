@@ -12,6 +12,8 @@ this plugin, most of them for tests that have nothing to do with scenes.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import math
 import os
 import uuid
@@ -177,6 +179,25 @@ def pytest_make_collect_report(collector: pytest.Collector
                 report.result.append(DanglingScene.from_parent(collector,
                                                                path=Path(entry.path)))
     return report
+
+
+@contextlib.contextmanager
+def frozen_heap() -> Iterator[None]:
+    """Play a scene with the session's objects frozen (`gc.freeze`), as a command plays one.
+
+    A test session's heap grows with its tests: a full collection of it (hundreds of
+    milliseconds late in a long session) holds every thread, the sender pacing frames to an
+    RTS among them, whose frames then go out late. Frozen, no collection scans it; it is
+    collected again after the scene. Left alone where the session froze objects itself.
+    """
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
@@ -382,7 +403,8 @@ class ScenarioItem(pytest.Item):
                     f"{self.name}: {', '.join(unused)} set the built-in simulated radar; on "
                     f"the bench ({options.output}) the radar measures as it is set, so this "
                     f"combination runs as the others do"), stacklevel=1)
-        result = run_scene(scene, options)
+        with frozen_heap():
+            result = run_scene(scene, options)
         report = result.report
         self.user_properties.extend(_metrics(report))
         if not report.passed:
@@ -576,6 +598,7 @@ def rts_run(request: pytest.FixtureRequest) -> Callable[..., RunResult]:
         elif variant is not None:
             raise TypeError("rts_run: variant= names a variant of a scene file; a loaded "
                             "Scenario is one already")
-        return run_scene(scene, _options(request.config, **options))
+        with frozen_heap():
+            return run_scene(scene, _options(request.config, **options))
 
     return run
