@@ -61,6 +61,20 @@ def bench_scene(tmp_path: Path, duration_s: float = 2.0, counter_start="4242",
 
 
 OBJECT_LIST = ROOT / "scenarios" / "can" / "object_list.mapping.yaml"
+def mid_cycle_scene(tmp_path):
+    """approaching-target, 2 s, on an AWR1843BOOST that measures half a cycle after each frame
+    change (start offset 25 ms of 50): no cycle races its frame's datagram."""
+    shutil.copy(ROOT / "scenarios" / "approaching_target.scenario.yaml", tmp_path)
+    data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
+                          .read_text())
+    data["clock"] = {"cycle_s": 0.05, "start_offset_s": 0.025, "counter_start": 0}
+    (tmp_path / "mid.radar.yaml").write_text(yaml.safe_dump(data))
+    return load_scenario(tmp_path / "approaching_target.scenario.yaml",
+                         {"duration_s": 2.0, "radar.noise": False,
+                          "radar.profile": "mid.radar.yaml",
+                          "expectations.expected_limits": ["frames_sent_late"]})
+
+
 # What a scene played to the emulator's in-step radar (the shipped profiles': it measures each
 # cycle as the next frame is due) declares expected: frames sent late (a shared machine may hold
 # the sender), and the race at every change. Where a loaded machine sends each frame after the
@@ -310,15 +324,7 @@ def test_two_runs_against_one_emulator_both_pass(tmp_path):
     # profile's), each cycle would race its frame's datagram, and where a loaded machine sends
     # every frame after the first a little late, the radar shows the frame across each change
     # and the verdict fails as it must (adjacent_frame), whatever the streams do.
-    shutil.copy(ROOT / "scenarios" / "approaching_target.scenario.yaml", tmp_path)
-    data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
-                          .read_text())
-    data["clock"] = {"cycle_s": 0.05, "start_offset_s": 0.025, "counter_start": 0}
-    (tmp_path / "mid.radar.yaml").write_text(yaml.safe_dump(data))
-    scene = load_scenario(tmp_path / "approaching_target.scenario.yaml",
-                          {"duration_s": 2.0, "radar.noise": False,
-                           "radar.profile": "mid.radar.yaml",
-                           "expectations.expected_limits": ["frames_sent_late"]})
+    scene = mid_cycle_scene(tmp_path)
     channel = f"rts-emulate-test-{next(_channels)}-bus"
     emulator = Emulator(scene.rig, scene.radar, can_channel=channel, noise=False).start()
     reports = []
@@ -896,15 +902,7 @@ def test_an_rts_whose_receiving_thread_wakes_late_applies_each_frame_as_it_arriv
         handle(self, datagram, sender, *args, **kwargs)
 
     monkeypatch.setattr(UdpReceiver, "handle", starved)
-    shutil.copy(ROOT / "scenarios" / "approaching_target.scenario.yaml", tmp_path)
-    data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
-                          .read_text())
-    data["clock"] = {"cycle_s": 0.05, "start_offset_s": 0.025, "counter_start": 0}
-    (tmp_path / "mid.radar.yaml").write_text(yaml.safe_dump(data))
-    scene = load_scenario(tmp_path / "approaching_target.scenario.yaml",
-                          {"duration_s": 2.0, "radar.noise": False,
-                           "radar.profile": "mid.radar.yaml",
-                           "expectations.expected_limits": ["frames_sent_late"]})
+    scene = mid_cycle_scene(tmp_path)
     report, stats = rehearse(scene, mapping=None)
     assert stats["udp"]["frames_applied"] == scene.n_frames
     assert report.passed, report.reasons
