@@ -448,8 +448,11 @@ class _Validated:
             return None
         if folder is None:
             return None
-        text = json.dumps([VALIDATED_FORMAT, schema, skipped, data], sort_keys=True,
-                          separators=(",", ":"))
+        try:
+            text = json.dumps([VALIDATED_FORMAT, schema, skipped, data], sort_keys=True,
+                              separators=(",", ":"))
+        except (TypeError, ValueError):  # a schema built in code with what JSON cannot write
+            return None
         return cls(folder / VALIDATED_FOLDER / hashlib.sha256(text.encode()).hexdigest())
 
     def seen(self) -> bool:

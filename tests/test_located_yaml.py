@@ -229,3 +229,13 @@ def test_the_documents_remembered_are_bounded_and_the_latest_kept(judged, tmp_pa
     assert judged[0] == 5
     _validate("speed_mps: 0\n")  # the oldest: judged again
     assert judged[0] == 6
+
+
+def test_a_schema_json_cannot_write_is_judged_every_time(judged, tmp_path):
+    # A schema built in code with a set in it: no digest, no memo, no error of its own.
+    schema = {"type": "object", "properties": {"mode": {"enum": {"fast", "slow"}}}}
+    _validate("mode: fast\n", schema)
+    _validate("mode: fast\n", schema)
+    with pytest.raises(ScenarioError, match="mode"):
+        _validate("mode: auto\n", schema)
+    assert judged[0] == 3 and not (tmp_path / located_yaml.VALIDATED_FOLDER).exists()
