@@ -33,7 +33,8 @@ def jit_mode() -> str:
     return chosen
 
 
-# Environment variable naming the solver plans' disk cache folder ("off" or empty: none).
+# Environment variable naming the disk cache's folder (solver plans, documents found valid;
+# "off" or empty: none).
 CACHE_DIR_ENV = "RTS_SCENARIO_CACHE_DIR"
 
 
@@ -66,6 +67,9 @@ def cache_dir_setting() -> Path | None | bool:
 def cache_dir() -> Path | None:
     r"""Return the disk cache's folder (solver plans, documents found valid); None: disabled.
 
+    Also None where the user has no home to hold it (no disk cache then, as where it cannot
+    be written).
+
     ``$RTS_SCENARIO_CACHE_DIR`` if set ("off" or empty: disabled; `cache_dir_setting` refuses a
     value naming no folder); else the user's cache directory:
     ``%LOCALAPPDATA%\rts-scenario\Cache`` on Windows, ``~/Library/Caches/rts-scenario`` on
@@ -76,14 +80,17 @@ def cache_dir() -> Path | None:
         return chosen
     if chosen is False:
         return None
-    if sys.platform == "win32":
-        local = os.environ.get("LOCALAPPDATA")
-        base = Path(local) if local else Path.home() / "AppData" / "Local"
-        return base / "rts-scenario" / "Cache"
-    if sys.platform == "darwin":
-        return Path.home() / "Library" / "Caches" / "rts-scenario"
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "rts-scenario"
+    try:
+        if sys.platform == "win32":
+            local = os.environ.get("LOCALAPPDATA")
+            base = Path(local) if local else Path.home() / "AppData" / "Local"
+            return base / "rts-scenario" / "Cache"
+        if sys.platform == "darwin":
+            return Path.home() / "Library" / "Caches" / "rts-scenario"
+        xdg = os.environ.get("XDG_CACHE_HOME")
+        return (Path(xdg) if xdg else Path.home() / ".cache") / "rts-scenario"
+    except RuntimeError:  # no home: $HOME unset and the user has no entry (a bare container)
+        return None
 
 
 def check_environment() -> None:

@@ -59,14 +59,21 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 @pytest.fixture(autouse=True)
-def frozen_heap():
-    """Each test runs with what the session made before it frozen (`gc.freeze`), as a command
-    runs with its start-up's objects frozen (`rts_scenario.startup`).
+def frozen_heap(request: pytest.FixtureRequest):
+    """In a module that sets ``REAL_TIME = True`` (rehearsals against an emulated bench, in
+    wall-clock time), each test runs with what the session made before it collected and the
+    rest frozen (`gc.freeze`), as a command runs with its start-up's objects frozen
+    (`rts_scenario.startup`).
 
     A worker's heap grows over the session: late in a parallel run a full collection of it
     took 200-340 ms (measured), holding every thread, and an emulated radar's thread then
-    measured that late. Frozen, no collection scans it; it is collected again after the test.
+    measured that late. Frozen, no collection scans it; collected first, no garbage of earlier
+    tests is kept frozen; unfrozen after the test.
     """
+    if not getattr(request.module, "REAL_TIME", False):
+        yield
+        return
+    gc.collect()
     gc.freeze()
     yield
     gc.unfreeze()

@@ -23,6 +23,9 @@ from rts_scenario.errors import MeasurementError
 from rts_scenario.radar.profile import RadarProfile
 from rts_scenario.radar.simulate import ChannelErrors
 
+# In wall-clock time: run with the session's heap frozen (conftest `frozen_heap`).
+REAL_TIME = True
+
 _channels = itertools.count()
 
 

@@ -27,6 +27,9 @@ from rts_scenario.radar.profile import RadarProfile
 from rts_scenario.recheck import check_log
 from rts_scenario.scenario import load_scenario
 
+# In wall-clock time: run with the session's heap frozen (conftest `frozen_heap`).
+REAL_TIME = True
+
 ROOT = Path(__file__).resolve().parents[1]
 _channels = itertools.count()
 

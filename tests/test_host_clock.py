@@ -22,6 +22,9 @@ from rts_scenario.pipeline import Pipeline, RunOptions
 from rts_scenario.radar.profile import RadarProfile
 from rts_scenario.recheck import check_log
 
+# In wall-clock time: run with the session's heap frozen (conftest `frozen_heap`).
+REAL_TIME = True
+
 
 class SteppedWallClock:
     """``time.time`` as a host's wall clock that steps by ``step`` when told (`step`)."""

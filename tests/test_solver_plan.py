@@ -214,3 +214,19 @@ def test_plan_holds_the_schedule_responses(kit_rig):
     expected = array.response(az, el, kit_rig.az_deg[fes], kit_rig.el_deg[fes])
     np.testing.assert_allclose(plan.responses[0].evaluate(u, s, terms=1)[0].T, expected,
                                rtol=1e-12, atol=1e-9)
+
+
+def test_no_home_is_no_disk_cache_not_an_error(kit_rig, monkeypatch, tmp_path):
+    # $HOME unset for a user without an entry (a bare container): Path.home() raises; the
+    # scene still loads and solves, with no disk cache.
+    monkeypatch.delenv("RTS_SCENARIO_CACHE_DIR")
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+
+    def no_home(cls):
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.setattr(Path, "home", classmethod(no_home))
+    assert plan_cache_dir() is None
+    clear_memory_cache()
+    scene = rs.load_scenario(Path(__file__).parents[1] / "scenarios" / "cut_in.scenario.yaml")
+    assert solver_plan(kit_rig, scene.radar.array, "exact").origin == "built"

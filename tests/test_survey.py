@@ -16,6 +16,9 @@ from rts_scenario.radar.simulate import ChannelErrors
 from rts_scenario.scenario.model import RadarOptions
 from rts_scenario.survey import survey
 
+# In wall-clock time: run with the session's heap frozen (conftest `frozen_heap`).
+REAL_TIME = True
+
 OBJECT_LIST = (Path(__file__).resolve().parents[1] / "scenarios" / "can"
                / "object_list.mapping.yaml")
 # The object list's angle signals: 0.05 deg a step (object_list.dbc), against 0.005 deg on

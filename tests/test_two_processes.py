@@ -19,6 +19,9 @@ import numpy as np
 import pytest
 import yaml
 
+# In wall-clock time: run with the session's heap frozen (conftest `frozen_heap`).
+REAL_TIME = True
+
 GROUP = "239.74.163.{}"
 _groups = itertools.count(40 + os.getpid() % 150)
 

@@ -182,17 +182,20 @@ def pytest_make_collect_report(collector: pytest.Collector
 
 
 @contextlib.contextmanager
-def frozen_heap() -> Iterator[None]:
-    """Play a scene with the session's objects frozen (`gc.freeze`), as a command plays one.
+def frozen_heap(output: str) -> Iterator[None]:
+    """Play a scene to an RTS (``output``) with the session's objects frozen, as a command does.
 
     A test session's heap grows with its tests: a full collection of it (hundreds of
-    milliseconds late in a long session) holds every thread, the sender pacing frames to an
-    RTS among them, whose frames then go out late. Frozen, no collection scans it; it is
-    collected again after the scene. Left alone where the session froze objects itself.
+    milliseconds late in a long session) holds every thread, the sender pacing frames to the
+    RTS among them, whose frames then go out late. Collected first (no garbage of earlier
+    tests is kept), then frozen (`gc.freeze`), so no collection scans it while the scene
+    plays; unfrozen after it. The built-in simulated radar keeps no wall-clock time: its
+    scenes play as they are. Left alone where the session froze objects itself.
     """
-    if gc.get_freeze_count():
+    if output == "simulated-radar" or gc.get_freeze_count():
         yield
         return
+    gc.collect()
     gc.freeze()
     try:
         yield
@@ -403,7 +406,7 @@ class ScenarioItem(pytest.Item):
                     f"{self.name}: {', '.join(unused)} set the built-in simulated radar; on "
                     f"the bench ({options.output}) the radar measures as it is set, so this "
                     f"combination runs as the others do"), stacklevel=1)
-        with frozen_heap():
+        with frozen_heap(options.output):
             result = run_scene(scene, options)
         report = result.report
         self.user_properties.extend(_metrics(report))
@@ -598,7 +601,8 @@ def rts_run(request: pytest.FixtureRequest) -> Callable[..., RunResult]:
         elif variant is not None:
             raise TypeError("rts_run: variant= names a variant of a scene file; a loaded "
                             "Scenario is one already")
-        with frozen_heap():
-            return run_scene(scene, _options(request.config, **options))
+        run_options = _options(request.config, **options)
+        with frozen_heap(run_options.output):
+            return run_scene(scene, run_options)
 
     return run
