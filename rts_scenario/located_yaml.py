@@ -6,6 +6,7 @@ Every error names the file, line, column and key path of the offending value, as
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -371,11 +372,13 @@ VERSION_KEYS = frozenset({"rts_scenario", "rts_rig", "rts_radar", "rts_can_mappi
 
 
 def validate(document: Document, schema: dict[str, Any],
-             skip: Iterable[KeyPath] = ()) -> None:
+             skip: Iterable[KeyPath] = (), remember: bool = True) -> None:
     """Check ``document`` against a JSON Schema; raise the most relevant error, located.
 
     ``skip``: key paths whose values are not judged (errors at or below them are left out,
-    and a key among them missing is none).
+    and a key among them missing is none). ``remember``: keep a document found valid in the
+    disk cache, and look it up there first (`_Validated`); not for a document made for one
+    run (a file with a run's overrides), which would only push out the files' own.
 
     Raises
     ------
@@ -386,7 +389,7 @@ def validate(document: Document, schema: dict[str, Any],
         raise document.error((), "the file is empty: expected a mapping of keys")
     _reject_non_finite(document, document.data, ())
     skipped = [tuple(path) for path in skip]
-    known = _Validated.of(document.data, schema, skipped)
+    known = _Validated.of(document.data, schema, skipped) if remember else None
     if known is not None and known.seen():
         return
     import jsonschema  # here: 27 ms of a command's start, spared where the document is known
@@ -427,10 +430,13 @@ def validate(document: Document, schema: dict[str, Any],
 class _Validated:
     """A document found valid, remembered in the disk cache (`settings.cache_dir`).
 
-    By the digest of the document, the schema and the keys skipped: a file validated once is
-    not judged again while none of them changes (a command then spares jsonschema's import,
-    about 27 ms of its start). Empty marker files in `VALIDATED_FOLDER`, the oldest removed
-    past `VALIDATED_KEEP`; a folder out of reach is no memo, never an error.
+    By the digest of the document, the schema, the keys skipped and the code that judges
+    (this module's text): a file validated once is not judged again while none of them
+    changes (a command then spares jsonschema's import, about 27 ms of its start). Empty
+    marker files in `VALIDATED_FOLDER`, spread over `VALIDATED_SHARDS` subfolders by the
+    digest's first characters, each keeping at most its share of `VALIDATED_KEEP` (the oldest
+    half of a full one removed). A folder out of reach is no memo, never an error; one that
+    can be read but not written still gives the memos in it.
     """
 
     def __init__(self, path: Path) -> None:
@@ -446,43 +452,65 @@ class _Validated:
             folder = cache_dir()
         except SettingError:  # said where the setting is checked (the command, the solver)
             return None
-        if folder is None:
+        if folder is None or _judge_digest() is None:
             return None
         try:
-            text = json.dumps([VALIDATED_FORMAT, schema, skipped, data], sort_keys=True,
-                              separators=(",", ":"))
+            # Not ASCII-escaped: a character and its two surrogates would read alike.
+            text = json.dumps([VALIDATED_FORMAT, _judge_digest(), schema, skipped, data],
+                              sort_keys=True, separators=(",", ":"), ensure_ascii=False)
         except (TypeError, ValueError):  # a schema built in code with what JSON cannot write
             return None
-        return cls(folder / VALIDATED_FOLDER / hashlib.sha256(text.encode()).hexdigest())
+        key = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()
+        shard = int(key[:4], 16) % VALIDATED_SHARDS
+        return cls(folder / VALIDATED_FOLDER / f"{shard:03x}" / key)
 
     def seen(self) -> bool:
         """Whether this document was found valid before (and mark it used now)."""
         try:
             os.utime(self.path)
+        except PermissionError:  # another user's marker, or a cache mounted read-only
+            return self.path.is_file()
         except OSError:
             return False
         return True
 
     def remember(self) -> None:
-        """Remember the document as valid; past `VALIDATED_KEEP`, forget the oldest half."""
+        """Remember the document as valid; past its shard's share, forget its oldest half."""
+        share = max(1, VALIDATED_KEEP // VALIDATED_SHARDS)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.path.touch()
             with os.scandir(self.path.parent) as entries:
                 kept = [entry for entry in entries if entry.is_file()]
-            if len(kept) > VALIDATED_KEEP:
+            if len(kept) > share:
                 kept.sort(key=lambda entry: entry.stat().st_mtime)
-                for entry in kept[:len(kept) - VALIDATED_KEEP // 2]:
+                for entry in kept[:len(kept) - max(1, share // 2)]:
                     os.unlink(entry.path)
         except OSError:  # a cache out of reach, or a marker another process removed first
             pass
 
 
-# The disk cache's folder of documents found valid, how many it keeps, and the version of the
-# digest's layout (a change of it leaves the old markers unused).
+@functools.lru_cache(maxsize=1)
+def _judge_digest() -> str | None:
+    """Return the digest of the code that judges: this module's text and the package version.
+
+    None where the text cannot be read (no memo then).
+    """
+    from ._version import __version__
+
+    try:
+        text = Path(__file__).read_bytes()
+    except OSError:
+        return None
+    return hashlib.sha256(text + __version__.encode()).hexdigest()
+
+
+# The disk cache's folder of documents found valid, its subfolders, how many it keeps, and
+# the version of the digest's layout (a change of it leaves the old markers unused).
 VALIDATED_FOLDER = "validated"
+VALIDATED_SHARDS = 256
 VALIDATED_KEEP = 4096
-VALIDATED_FORMAT = 1
+VALIDATED_FORMAT = 2
 
 
 def _plain(node: Any) -> bool:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import yaml
 
@@ -165,7 +167,8 @@ def test_a_document_found_valid_is_not_judged_again(judged, tmp_path):
     _validate("speed_mps: 20\n")
     _validate("speed_mps: 20  # a comment changes nothing\n")
     assert judged[0] == 1
-    assert len(list((tmp_path / located_yaml.VALIDATED_FOLDER).iterdir())) == 1
+    assert len([p for p in (tmp_path / located_yaml.VALIDATED_FOLDER).rglob("*")
+                if p.is_file()]) == 1
 
 
 @pytest.mark.parametrize("text", ["speed_mps: 200\n", "speed_mps: 20\nspeed: 1\n",
@@ -218,8 +221,9 @@ def test_the_documents_remembered_are_bounded_and_the_latest_kept(judged, tmp_pa
                                                                   monkeypatch):
     import os
 
+    monkeypatch.setattr(located_yaml, "VALIDATED_SHARDS", 1)
     monkeypatch.setattr(located_yaml, "VALIDATED_KEEP", 4)
-    folder = tmp_path / located_yaml.VALIDATED_FOLDER
+    folder = tmp_path / located_yaml.VALIDATED_FOLDER / "000"
     for speed in range(5):
         _validate(f"speed_mps: {speed}\n")
         for k, marker in enumerate(sorted(folder.iterdir(), key=os.path.getmtime)):
@@ -229,6 +233,63 @@ def test_the_documents_remembered_are_bounded_and_the_latest_kept(judged, tmp_pa
     assert judged[0] == 5
     _validate("speed_mps: 0\n")  # the oldest: judged again
     assert judged[0] == 6
+
+
+def test_the_documents_remembered_spread_over_shards_each_bounded(judged, tmp_path,
+                                                                  monkeypatch):
+    # Each new document scans its shard only (a few markers), never all 4,096.
+    monkeypatch.setattr(located_yaml, "VALIDATED_KEEP", 512)  # 2 per shard
+    for speed in range(600):
+        _validate(f"speed_mps: {speed / 10}\n")
+    shards = [p for p in (tmp_path / located_yaml.VALIDATED_FOLDER).iterdir()]
+    assert len(shards) > 200
+    assert all(len(list(shard.iterdir())) <= 2 for shard in shards)
+
+
+def test_a_string_and_its_surrogate_pair_are_told_apart(judged):
+    # One character, or the two UTF-16 halves of it: JSON's ASCII escapes read them alike.
+    schema = {"type": "object", "properties": {"name": {"type": "string", "maxLength": 1}}}
+    located_yaml.validate(located_yaml.Document({"name": "\U0001F600"}, "x.yaml", {}), schema)
+    with pytest.raises(ScenarioError, match="name"):
+        located_yaml.validate(located_yaml.Document({"name": "\ud83d\ude00"}, "x.yaml",
+                                                    {("name",): (1, 1)}), schema)
+    assert judged[0] == 2
+
+
+def test_a_change_of_the_code_that_judges_judges_again(judged, monkeypatch):
+    _validate("speed_mps: 20\n")
+    monkeypatch.setattr(located_yaml, "_judge_digest", lambda: "another version")
+    _validate("speed_mps: 20\n")
+    assert judged[0] == 2
+
+
+def test_a_cache_that_cannot_be_written_still_gives_its_memos(judged, monkeypatch):
+    # Another user's markers, or a cache mounted read-only: the marker is there.
+    _validate("speed_mps: 20\n")
+
+    def refused(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(located_yaml.os, "utime", refused)
+    _validate("speed_mps: 20\n")
+    assert judged[0] == 1
+    _validate("speed_mps: 21\n")  # not there: judged, and not remembered without an error
+    assert judged[0] == 2
+
+
+def test_a_scene_with_a_run_s_overrides_is_judged_and_not_remembered(judged, tmp_path):
+    from rts_scenario.scenario import load_scenario
+
+    cut_in = Path(__file__).parents[1] / "scenarios" / "cut_in.scenario.yaml"
+    load_scenario(cut_in)
+    before = judged[0]
+    load_scenario(cut_in)  # the file, known: not judged again (nor its rig, profile)
+    assert judged[0] == before
+    markers = len([p for p in tmp_path.rglob("*") if p.is_file()])
+    load_scenario(cut_in, {"duration_s": 9.0})
+    load_scenario(cut_in, {"duration_s": 9.0})
+    assert judged[0] == before + 2
+    assert len([p for p in tmp_path.rglob("*") if p.is_file()]) == markers
 
 
 def test_a_schema_json_cannot_write_is_judged_every_time(judged, tmp_path):

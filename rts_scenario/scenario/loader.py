@@ -129,7 +129,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         raise doc.error(("effects", "measurement_noise"),
                         "not supported; the simulated radar's noise comes from radar.noise")
     _check_target_limits(doc)
-    validate(doc, _schema_for(doc.data))
+    validate(doc, _schema_for(doc.data), remember=not overrides)
     _check_scene_name(doc)
     _check_marks(doc)
     data = doc.data
