@@ -217,9 +217,10 @@ class RunOptions:
         (``Message.channel`` as text, `rts_scenario.canbus.channel_label`): the others are
         not read (``other_channels`` in the report's bus). Without it, radar identifiers
         heard on several channels fail the verdict (`DetectionReceiver.channel_reason`).
-    radar_channel_option : str
-        The option that gives ``radar_channel`` where a reason names it: ``--radar-channel``
-        (the command's), ``--rts-radar-channel`` under pytest.
+    option_prefix : str
+        What comes after the dashes of an option a reason names (``--radar-channel``,
+        ``--mapping``): none for the command's, ``rts-`` for the pytest plugin's
+        (``--rts-radar-channel``, ``--rts-mapping``).
     mapping : str, optional
         ``*.mapping.yaml`` of a third-party radar's DBC.
     method : {"exact", "paper", "estimator"}
@@ -243,13 +244,17 @@ class RunOptions:
     can_channel: str | None = None
     can_fd: bool = False
     radar_channel: str | None = None
-    radar_channel_option: str = "--radar-channel"
+    option_prefix: str = ""
     mapping: str | None = None
     method: str = "exact"
     drain_s: float = 2.0
     batch_frames: int | None = None
     record: bool = False
     bus_log: str | None = None
+
+    def option(self, name: str) -> str:
+        """Return option ``name`` (the command's, without dashes) as the caller spells it."""
+        return f"--{self.option_prefix}{name}"
 
 
 @dataclass
@@ -349,7 +354,7 @@ class Pipeline:
             self.receiver = DetectionReceiver(self.mapping, radar.radar_clock.cycle_s,
                                               channel=options.radar_channel,
                                               host_clock=self.host_clock,
-                                              channel_option=options.radar_channel_option)
+                                              channel_option=options.option("radar-channel"))
             listen = self._open_bus()
             self._listeners: list[can.Listener] = [self.receiver]
             if options.bus_log:
@@ -555,7 +560,8 @@ class Pipeline:
         # messages of identifiers it does not know did.
         reason = (self.receiver.channel_reason() or self._rts_refusal(played.n_frames)
                   or mapping_reason(self.receiver.mapping, self.receiver.headers,
-                                    self.receiver.stats.unknown_ids - unknown_before))
+                                    self.receiver.stats.unknown_ids - unknown_before,
+                                    option=self.options.option("mapping")))
         if reason:
             raise MeasurementError(reason)
         self.host_clock.sample()  # a step is told by the measurement, if no cycle told it
@@ -1097,7 +1103,8 @@ class Pipeline:
         for code, drifted in (
                 ("radar_channel", self.receiver.channel_reason()),
                 ("mapping", mapping_reason(self.receiver.mapping, self.receiver.headers,
-                                           bus["unknown_ids"], report.frames)),
+                                           bus["unknown_ids"], report.frames,
+                                           option=options.option("mapping"))),
                 ("radar_clock", track.off_profile_reason(0.5 * window_s)),
                 ("radar_clock", track.latency_change_reason(0.5 * window_s)),
                 ("radar_clock", late_reason),
@@ -1106,7 +1113,8 @@ class Pipeline:
             if drifted:
                 if code == "radar_clock":
                     drifted = with_mapping_hint(drifted, self.receiver.mapping,
-                                                bus["unknown_ids"])
+                                                bus["unknown_ids"],
+                                                option=options.option("mapping"))
                 report.reasons.append(FailReason(drifted, code))
                 report.passed = False
         assert self.output is not None

@@ -104,13 +104,14 @@ def emulated_bench(rig, radar):
 
 
 def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=None, bus_log=None,
-             emulator_rig=None, hold=None, drop_before=0, radar_mapping=...):
+             emulator_rig=None, hold=None, drop_before=0, radar_mapping=..., option_prefix=""):
     """Play ``scene`` over UDP to the emulator; its radar (``radar``, else the scene's) speaks
     ``mapping``'s protocol (the object list with Motorola signals by default) on a virtual CAN
     bus. ``hold(frame)``: seconds the sender is held before each datagram of frame ``frame``
     goes out (a loaded host preempting it after it woke on time). Datagrams of frames before
     ``drop_before`` never reach the emulator (an RTS that came up late). ``radar_mapping``:
-    the protocol the radar speaks where it is not the one the run is given."""
+    the protocol the radar speaks where it is not the one the run is given. ``option_prefix``:
+    `RunOptions.option_prefix` (the plugin's ``rts-``)."""
     channel = f"rts-emulate-test-{next(_channels)}-bus"
     speaks = mapping if radar_mapping is ... else radar_mapping
     emulator = Emulator(emulator_rig or scene.rig, radar or scene.radar, can_channel=channel,
@@ -120,7 +121,7 @@ def rehearse(scene, tamper=None, udp_faults=None, mapping=OBJECT_LIST, radar=Non
         host, port = emulator.address
         options = RunOptions(output=f"udp://{host}:{port}", can_interface="virtual",
                              can_channel=channel, mapping=str(mapping) if mapping else None,
-                             bus_log=bus_log)
+                             bus_log=bus_log, option_prefix=option_prefix)
         with Pipeline.for_scene(scene, options) as pipeline:
             if udp_faults is not None:
                 injector = FaultInjector(pipeline.output.transmit, np.random.default_rng(2),
@@ -202,6 +203,10 @@ def test_a_run_given_another_radar_s_mapping_says_so_live_and_re_checked(tmp_pat
     assert again.bus["before_first_cycle"] == 0
     assert again.bus["unknown_ids"] == live.bus["unknown_ids"]
     assert again.reasons == live.reasons
+    # Under pytest the reason names the plugin's option.
+    plugin, _ = rehearse(scene, mapping=OBJECT_LIST, radar_mapping=None, option_prefix="rts-")
+    assert any(r.endswith("is --rts-mapping the radar's?") for r in plugin.reasons)
+    assert not any("is --mapping" in r for r in plugin.reasons)
 
 
 def test_a_run_given_a_mapping_sharing_the_radar_s_header_says_so_live_and_re_checked(

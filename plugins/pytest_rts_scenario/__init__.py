@@ -215,7 +215,7 @@ def _options(config: pytest.Config, **overrides: Any) -> RunOptions:
         "can_fd": config.getoption("--rts-can-fd"),
         "mapping": config.getoption("--rts-mapping"),
         "radar_channel": config.getoption("--rts-radar-channel"),
-        "radar_channel_option": "--rts-radar-channel",
+        "option_prefix": "rts-",  # reasons name the plugin's options
         "method": config.getoption("--rts-method"),
     }
     values.update(overrides)

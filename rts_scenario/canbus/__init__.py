@@ -1310,7 +1310,8 @@ class DetectionReceiver(can.Listener):
 
 
 def mapping_reason(mapping: CanMapping, headers: int, unknown_ids: int,
-                   frames: dict[str, int] | None = None) -> str | None:
+                   frames: dict[str, int] | None = None, *,
+                   option: str = "--mapping") -> str | None:
     """Why a bus's messages are not the mapping's radar's, or None.
 
     Where no message had the identifier of the mapping's header (``headers``) and some had
@@ -1319,32 +1320,35 @@ def mapping_reason(mapping: CanMapping, headers: int, unknown_ids: int,
     no cycle came whole (the check's ``frames``: none ``received``, some ``incomplete``) and
     messages of unknown identifiers did: another protocol whose status message has the same
     identifier (one radar's two modes, a cluster and an object list), its detections unread.
+    ``option``: the option that gives the mapping, as the caller spells it.
     """
     if not unknown_ids:
         return None
     if not headers:
         return (f"no message matched the mapping's header ({mapping.header} of mapping "
                 f"{mapping.name!r}); {unknown_ids} messages with identifiers the mapping does "
-                f"not know: is --mapping the radar's?")
+                f"not know: is {option} the radar's?")
     if frames is None or frames.get("received", 0) or not frames.get("incomplete", 0):
         return None
     return (f"the mapping's header ({mapping.header} of mapping {mapping.name!r}) came, but "
             f"none of its {frames['incomplete']} cycles whole; {unknown_ids} messages with "
-            f"identifiers the mapping does not know: is --mapping the radar's?")
+            f"identifiers the mapping does not know: is {option} the radar's?")
 
 
-def with_mapping_hint(reason: str, mapping: CanMapping | None, unknown_ids: int) -> str:
+def with_mapping_hint(reason: str, mapping: CanMapping | None, unknown_ids: int, *,
+                      option: str = "--mapping") -> str:
     """``reason`` of the radar's clock, with the mapping named where the bus hints at it.
 
     A radar read with another protocol's mapping whose header has the same identifier (a
     cluster list read as an object list) has its cycles read whole, their counters from
     another signal: a count far off reads as a radar started late or on another cycle. Where
-    messages of identifiers the mapping does not know came too, the reason says so.
+    messages of identifiers the mapping does not know came too, the reason says so
+    (``option``: the option that gives the mapping, as the caller spells it).
     """
     if mapping is None or not unknown_ids:
         return reason
     return (f"{reason}; {unknown_ids} messages with identifiers mapping {mapping.name!r} does "
-            f"not know came too: is --mapping the radar's (a counter read from another "
+            f"not know came too: is {option} the radar's (a counter read from another "
             f"protocol's signal reads as this)?")
 
 
