@@ -461,17 +461,17 @@ class _Validated:
         except (TypeError, ValueError):  # a schema built in code with what JSON cannot write
             return None
         key = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()
-        shard = int(key[:4], 16) % VALIDATED_SHARDS
-        return cls(folder / VALIDATED_FOLDER / f"{shard:03x}" / key)
+        shard = int(key[:4], 16) * VALIDATED_SHARDS >> 16  # by its first digits
+        return cls(folder / VALIDATED_FOLDER / f"{shard:02x}" / key)
 
     def seen(self) -> bool:
         """Whether this document was found valid before (and mark it used now)."""
         try:
             os.utime(self.path)
-        except PermissionError:  # another user's marker, or a cache mounted read-only
-            return self.path.is_file()
-        except OSError:
+        except FileNotFoundError:
             return False
+        except OSError:  # another user's marker, a cache mounted read-only, a folder shut
+            return os.path.isfile(self.path)  # False on any error
         return True
 
     def remember(self) -> None:

@@ -64,9 +64,12 @@ def bench_scene(tmp_path: Path, duration_s: float = 2.0, counter_start="4242",
 
 
 OBJECT_LIST = ROOT / "scenarios" / "can" / "object_list.mapping.yaml"
+
+
 def mid_cycle_scene(tmp_path):
     """approaching-target, 2 s, on an AWR1843BOOST that measures half a cycle after each frame
-    change (start offset 25 ms of 50): no cycle races its frame's datagram."""
+    change (start offset 25 ms of 50): no cycle races its frame's datagram unless a frame goes
+    out about half a cycle late."""
     shutil.copy(ROOT / "scenarios" / "approaching_target.scenario.yaml", tmp_path)
     data = yaml.safe_load((ROOT / "rts_scenario/data/radars/awr1843boost.radar.yaml")
                           .read_text())

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import os
 from pathlib import Path
 
 import pytest
@@ -223,7 +225,7 @@ def test_the_documents_remembered_are_bounded_and_the_latest_kept(judged, tmp_pa
 
     monkeypatch.setattr(located_yaml, "VALIDATED_SHARDS", 1)
     monkeypatch.setattr(located_yaml, "VALIDATED_KEEP", 4)
-    folder = tmp_path / located_yaml.VALIDATED_FOLDER / "000"
+    folder = tmp_path / located_yaml.VALIDATED_FOLDER / "00"
     for speed in range(5):
         _validate(f"speed_mps: {speed}\n")
         for k, marker in enumerate(sorted(folder.iterdir(), key=os.path.getmtime)):
@@ -263,17 +265,38 @@ def test_a_change_of_the_code_that_judges_judges_again(judged, monkeypatch):
     assert judged[0] == 2
 
 
-def test_a_cache_that_cannot_be_written_still_gives_its_memos(judged, monkeypatch):
+@pytest.mark.parametrize("error", [errno.EPERM, errno.EROFS])
+def test_a_cache_that_cannot_be_written_still_gives_its_memos(judged, monkeypatch, error):
     # Another user's markers, or a cache mounted read-only: the marker is there.
     _validate("speed_mps: 20\n")
 
     def refused(*args, **kwargs):
-        raise PermissionError(13, "Permission denied")
+        raise OSError(error, os.strerror(error))
 
     monkeypatch.setattr(located_yaml.os, "utime", refused)
     _validate("speed_mps: 20\n")
     assert judged[0] == 1
-    _validate("speed_mps: 21\n")  # not there: judged, and not remembered without an error
+    _validate("speed_mps: 21\n")  # not there: judged, without an error
+    assert judged[0] == 2
+
+
+def test_a_cache_folder_that_cannot_be_searched_judges_every_document(judged, monkeypatch):
+    # A folder shut to this user (a run under sudo with umask 077 made it): neither the
+    # marker's time nor its presence can be had; the document is judged, no error.
+    _validate("speed_mps: 20\n")
+    real_stat = os.stat
+
+    def shut(path, *args, **kwargs):
+        if located_yaml.VALIDATED_FOLDER in str(path):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_stat(path, *args, **kwargs)
+
+    def refused(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(located_yaml.os, "utime", refused)
+    monkeypatch.setattr(located_yaml.os, "stat", shut)
+    _validate("speed_mps: 20\n")
     assert judged[0] == 2
 
 

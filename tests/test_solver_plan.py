@@ -220,7 +220,8 @@ def test_no_home_is_no_disk_cache_not_an_error(kit_rig, monkeypatch, tmp_path):
     # $HOME unset for a user without an entry (a bare container): Path.home() raises; the
     # scene still loads and solves, with no disk cache.
     monkeypatch.delenv("RTS_SCENARIO_CACHE_DIR")
-    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    for name in ("XDG_CACHE_HOME", "LOCALAPPDATA"):
+        monkeypatch.delenv(name, raising=False)
 
     def no_home(cls):
         raise RuntimeError("Could not determine home directory.")
