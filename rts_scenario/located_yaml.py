@@ -452,11 +452,12 @@ class _Validated:
             folder = cache_dir()
         except SettingError:  # said where the setting is checked (the command, the solver)
             return None
-        if folder is None or _judge_digest() is None:
+        judge = _judge_digest()
+        if folder is None or judge is None:
             return None
         try:
             # Not ASCII-escaped: a character and its two surrogates would read alike.
-            text = json.dumps([VALIDATED_FORMAT, _judge_digest(), schema, skipped, data],
+            text = json.dumps([VALIDATED_FORMAT, judge, schema, skipped, data],
                               sort_keys=True, separators=(",", ":"), ensure_ascii=False)
         except (TypeError, ValueError):  # a schema built in code with what JSON cannot write
             return None

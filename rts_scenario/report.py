@@ -250,6 +250,12 @@ class Report:
         return run_label(self.scene, self.variant)
 
     @property
+    def verdict_line(self) -> str:
+        """``PASS: label``, or ``FAIL: label - reasons``: the table's last line."""
+        return (("PASS" if self.passed else "FAIL") + f": {self.label}"
+                + ("" if self.passed else " - " + "; ".join(self.reasons)))
+
+    @property
     def reason_codes(self) -> list[str]:
         """The codes of the reasons the run failed, each once (`reason_codes`)."""
         return reason_codes(self.reasons)
@@ -373,8 +379,7 @@ class Report:
             lines.append("bus: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in
                                              problems.items()))
         if verdict:
-            lines.append(("PASS" if self.passed else "FAIL") + f": {self.label}"
-                         + ("" if self.passed else " - " + "; ".join(self.reasons)))
+            lines.append(self.verdict_line)
         return "\n".join(lines)
 
 

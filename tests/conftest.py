@@ -1,4 +1,3 @@
-import gc
 import os
 
 import can.interfaces.virtual
@@ -61,22 +60,17 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 @pytest.fixture(autouse=True)
 def frozen_heap(request: pytest.FixtureRequest):
     """In a module that sets ``REAL_TIME = True`` (rehearsals against an emulated bench, in
-    wall-clock time), each test runs with what the session made before it collected and the
-    rest frozen (`gc.freeze`), as a command runs with its start-up's objects frozen
-    (`rts_scenario.startup`).
+    wall-clock time), each test runs as the plugin plays a scene to an RTS: the session's heap
+    collected, then frozen (`pytest_rts_scenario.frozen_heap`).
 
     A worker's heap grows over the session: late in a parallel run a full collection of it
     took 200-340 ms (measured), holding every thread, and an emulated radar's thread then
-    measured that late. Frozen, no collection scans it; collected first, no garbage of earlier
-    tests is kept frozen; unfrozen after the test.
+    measured that late.
     """
-    if not getattr(request.module, "REAL_TIME", False) or gc.get_freeze_count():
+    from pytest_rts_scenario import frozen_heap as frozen
+
+    with frozen(getattr(request.module, "REAL_TIME", False)):
         yield
-        return
-    gc.collect()
-    gc.freeze()
-    yield
-    gc.unfreeze()
 
 
 @pytest.fixture(scope="session", autouse=True)

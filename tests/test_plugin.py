@@ -197,6 +197,7 @@ def test_worst_frames_are_error_over_tolerance_as_their_heading_says():
     row = {"frame": 7, "t_s": 0.35, "target": "car", "missed": False, "range_m": -0.15,
            "radial_velocity_mps": 0.05, "az_deg": -0.005, "el_deg": 0.25, "rcs_dbsm": 0.0}
     report = SimpleNamespace(label="s", reasons=["car: detection rate 0.0% < 90.0%"],
+                             verdict_line="FAIL: s - car: detection rate 0.0% < 90.0%",
                              table=lambda verdict=True: "TABLE", worst_frames=[row])
     text = _render(SimpleNamespace(scene=scene_, report=report))
     heading, columns, line = text.splitlines()[4:7]
@@ -212,6 +213,7 @@ def test_no_worst_frames_is_said_not_an_empty_table():
 
     scene_ = SimpleNamespace(expectations=SimpleNamespace(tolerances={}))
     report = SimpleNamespace(label="s", reasons=["nothing to check"],
+                             verdict_line="FAIL: s - nothing to check",
                              table=lambda verdict=True: "TABLE", worst_frames=[])
     text = _render(SimpleNamespace(scene=scene_, report=report))
     assert text.splitlines()[-1] == "worst frames: none (no target-frame was judged)"

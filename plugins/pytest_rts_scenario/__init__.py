@@ -182,17 +182,17 @@ def pytest_make_collect_report(collector: pytest.Collector
 
 
 @contextlib.contextmanager
-def frozen_heap(output: str) -> Iterator[None]:
-    """Play a scene to an RTS (``output``) with the session's objects frozen, as a command does.
+def frozen_heap(active: bool = True) -> Iterator[None]:
+    """Run the body with the session's objects frozen, as a command plays a scene (``active``).
 
     A test session's heap grows with its tests: a full collection of it (hundreds of
-    milliseconds late in a long session) holds every thread, the sender pacing frames to the
+    milliseconds late in a long session) holds every thread, the sender pacing frames to an
     RTS among them, whose frames then go out late. Collected first (no garbage of earlier
-    tests is kept), then frozen (`gc.freeze`), so no collection scans it while the scene
-    plays; unfrozen after it. The built-in simulated radar keeps no wall-clock time: its
-    scenes play as they are. Left alone where the session froze objects itself.
+    tests is kept), then frozen (`gc.freeze`), so no collection scans it while the body runs;
+    unfrozen after it. Left alone where the session froze objects itself. The plugin freezes
+    for scenes played to an RTS: the built-in simulated radar keeps no wall-clock time.
     """
-    if output == "simulated-radar" or gc.get_freeze_count():
+    if not active or gc.get_freeze_count():
         yield
         return
     gc.collect()
@@ -406,7 +406,7 @@ class ScenarioItem(pytest.Item):
                     f"{self.name}: {', '.join(unused)} set the built-in simulated radar; on "
                     f"the bench ({options.output}) the radar measures as it is set, so this "
                     f"combination runs as the others do"), stacklevel=1)
-        with frozen_heap(options.output):
+        with frozen_heap(options.output != "simulated-radar"):
             result = run_scene(scene, options)
         report = result.report
         self.user_properties.extend(_metrics(report))
@@ -507,8 +507,7 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
 def _render(result: RunResult) -> str:
     """Render the report table and the worst frames (misses first, then largest errors)."""
     report = result.report
-    lines = [f"FAIL: {report.label} - {'; '.join(report.reasons)}", "",
-             report.table(verdict=False), ""]
+    lines = [report.verdict_line, "", report.table(verdict=False), ""]
     if not report.worst_frames:
         return "\n".join([*lines, "worst frames: none (no target-frame was judged)"])
     lines += ["worst frames (error / tolerance):",
@@ -602,7 +601,7 @@ def rts_run(request: pytest.FixtureRequest) -> Callable[..., RunResult]:
             raise TypeError("rts_run: variant= names a variant of a scene file; a loaded "
                             "Scenario is one already")
         run_options = _options(request.config, **options)
-        with frozen_heap(run_options.output):
+        with frozen_heap(run_options.output != "simulated-radar"):
             return run_scene(scene, run_options)
 
     return run
