@@ -220,6 +220,10 @@ _SAID = {"range_m": ("range", "m"), "radial_velocity_mps": ("radial velocity", "
          "az_deg": ("az", "deg"), "el_deg": ("el", "deg"), "rcs_db": ("rcs", "dB")}
 
 
+# The unit of each checked quantity (`QUANTITIES`), as reasons say it.
+_UNITS = {"range_m": "m", "radial_velocity_mps": "m/s", "az_deg": "deg", "el_deg": "deg",
+          "rcs_dbsm": "dBsm"}
+
 # A mapped quantity (`canbus.mapping.QUANTITIES`) per checked tolerance key.
 _MAPPED = {"range_m": "range_m", "radial_velocity_mps": "radial_velocity_mps",
            "az_deg": "azimuth_deg", "el_deg": "elevation_deg", "rcs_db": "rcs_dbsm"}
@@ -334,6 +338,15 @@ class Checker:
         (`CanMapping.not_carried`): not checked, said in the report, and failing the run
         where the scene wrote their tolerance (``quantity_unchecked``). None: not known (the
         cycles' source is no bus), nothing said.
+    limits : mapping of str to tuple, optional
+        The ends of what the mapping's signals carry of the quantities read as they are
+        (`CanMapping.limits`: ``(low, high, step, signal)`` by `Detections` quantity name): a
+        detection reporting one at an end, where the target's truth lies beyond it by more
+        than half a step, reported all its signal could; that quantity of that target-cycle
+        is not checked, and the report says how many (``unchecked_quantities``, failing the
+        run where the scene wrote its tolerance). None: no signal ends.
+    mapping_name : str, optional
+        The mapping's name, for the reasons ``limits`` give.
     """
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
@@ -344,7 +357,9 @@ class Checker:
                  detections_out: TextIO | None = None, variant: str = "",
                  parameters: Mapping[str, Any] | None = None,
                  cycle_s: float | None = None, file: str = "",
-                 not_carried: Mapping[str, str] | None = None) -> None:
+                 not_carried: Mapping[str, str] | None = None,
+                 limits: Mapping[str, tuple[float, float, float, str]] | None = None,
+                 mapping_name: str = "") -> None:
         self.scene = scene
         self.variant = variant
         self.file = file
@@ -377,6 +392,14 @@ class Checker:
         # Tolerance key -> why it is not checked (None: the mapping is not known).
         self._not_checked = (None if not_carried is None
                              else unchecked_quantities(not_carried))
+        # Quantities a signal carries within ends (`limits`), and per quantity how many
+        # matched target-cycles reported it at an end with the truth beyond it (not checked).
+        ends = limits or {}
+        self._ends: dict[str, tuple[float, float, float, str]] = {
+            q: (float(ends[q][0]), float(ends[q][1]), float(ends[q][2]), str(ends[q][3]))
+            for q, _ in QUANTITIES if q in ends}
+        self._at_end = dict.fromkeys(self._ends, 0)
+        self._mapping_name = mapping_name
         self._csv = csv.writer(detections_out) if detections_out is not None else None
         # Target-frames under each limit: of the scene's frames (`add_frames`), or, where a
         # caller gives none, of the frames its cycles saw.
@@ -677,6 +700,8 @@ class Checker:
                       block.tracks.radial_velocity_mps, assigned & truth, block.tracks.t_s)
         for q, _ in QUANTITIES:
             self._stats[q].add(errors[q], truth)
+        for q in self._ends:  # a matched pair's error is NaN only where it was at an end
+            self._at_end[q] += int((assigned & truth & np.isnan(errors[q])).sum())
         detected = assigned & within & truth
         for name, mask in judged.limits.items():
             self._limits_seen[name] += mask.sum(axis=0)
@@ -772,6 +797,13 @@ class Checker:
             diff = values[q][det] - seen[q][frame_of[det], target]
             if q == "az_deg":
                 diff = (diff + 180.0) % 360.0 - 180.0
+            if q in self._ends:
+                # A reading at its signal's end with the truth beyond it: not a measurement.
+                low, high, step, _ = self._ends[q]
+                value, truth = values[q][det], seen[q][frame_of[det], target]
+                beyond = (((value >= high - step / 2) & (truth > high + step / 2))
+                          | ((value <= low + step / 2) & (truth < low - step / 2)))
+                diff = np.where(beyond, np.nan, diff)
             diffs[q] = diff
             if q != "rcs_dbsm":  # RCS fluctuates: it does not decide who is who
                 norm = np.nan_to_num(diff / tol[key], nan=0.0)  # absent: not checked
@@ -1155,7 +1187,9 @@ class Checker:
         adjacent = self._adjacent_frame(targets, per_frame)
         if adjacent is not None:
             scene_limits["adjacent_frame"] = adjacent
-        not_checked = self._not_checked or {}
+        not_checked = dict(self._not_checked or {})
+        at_end = self._quantities_at_end()
+        not_checked.update({key: why for key, (_, why) in at_end.items()})
         # An empty bench checks false detections alone: no tolerance of it is meant checked.
         unchecked_why = _quantity_unchecked(exp, not_checked) if self.names else None
         if unchecked_why is not None:
@@ -1252,8 +1286,28 @@ class Checker:
                           "max_false_detections_per_frame":
                               exp.max_false_detections_per_frame},
             unchecked_quantities={key: {"why": why, "tolerance": exp.tolerances[key],
-                                        "written": key in exp.tolerances_written}
+                                        "written": key in exp.tolerances_written,
+                                        "target_cycles": at_end[key][0] if key in at_end
+                                        else None}
                                   for key, why in not_checked.items()})
+
+    def _quantities_at_end(self) -> dict[str, tuple[int, str]]:
+        """Tolerance key -> (target-cycles, why) of quantities reported at a signal's end.
+
+        Those matched target-cycles whose detection reported the quantity at its signal's
+        end, the truth beyond it (`limits`): not checked.
+        """
+        out = {}
+        for q, key in QUANTITIES:
+            n = self._at_end.get(q, 0)
+            if n:
+                low, high, _, signal = self._ends[q]
+                unit = _UNITS[q]
+                out[key] = (n, f"in {n} of {self._matched} matched target-cycles, reported "
+                               f"at the end of signal {signal!r} of mapping "
+                               f"{self._mapping_name!r} ({low:g} to {high:g} {unit}) with the "
+                               f"truth beyond it")
+        return out
 
 
 def _status_flags(status: ArrayLike, tracks: Tracks) -> NDArray[np.uint16]:

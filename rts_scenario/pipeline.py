@@ -980,7 +980,9 @@ class Pipeline:
                           scene_limits=scene_limits(scene), detections_out=detections_out,
                           variant=scene.variant, parameters=scene.parameters,
                           cycle_s=clock.cycle_s, file=scene.file,
-                          not_carried=self.receiver.mapping.not_carried())
+                          not_carried=self.receiver.mapping.not_carried(),
+                          limits=self.receiver.mapping.limits(options.can_fd),
+                          mapping_name=self.receiver.mapping.name)
         n_frames = scene.n_frames
         t_all = scene.t_s
         # What the run played, for a re-check of its log (`rts_scenario.recording`).

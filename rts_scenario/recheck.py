@@ -2155,12 +2155,16 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     Returns the report and whether the log ends before the cycles counted end (the scene's
     and those after it counted as ``after_scene``): what a log cut short lacks may count.
     """
+    # The bus the run sent on (its sidecar), else not known: both ends of a signal count.
+    fd = (sidecar or {}).get("can_fd")
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
                       expected_limits=[t.expected_limits for t in scene.targets],
                       scene_limits=scene_limits(scene), variant=scene.variant,
                       parameters=scene.parameters, cycle_s=clock.cycle_s,
-                      not_carried=(mapping or CanMapping.builtin()).not_carried())
+                      not_carried=(mapping or CanMapping.builtin()).not_carried(),
+                      limits=(mapping or CanMapping.builtin()).limits(fd),
+                      mapping_name=(mapping or CanMapping.builtin()).name)
     # The cycles the run judged (its sidecar), else those the clock puts in the scene.
     cycles = (sidecar or {}).get("clock", {}).get("cycles")
     total = cycles if cycles is not None else len(

@@ -310,8 +310,10 @@ class Report:
             # A quantity the mapping does not carry held nothing: said so in its place.
             unchecked = self.unchecked_quantities
             lines.append("held to: " + ", ".join(
-                f"{name} not checked ({unchecked[key]['why']})" if key in unchecked
+                f"{name} not checked ({unchecked[key]['why']})"
+                if key in unchecked and unchecked[key].get("target_cycles") is None
                 else f"{name} {tol[key]:g} {unit}"
+                + (f" (not checked {unchecked[key]['why']})" if key in unchecked else "")
                 for key, name, unit in _HELD_TO if key in tol)
                 + (f"; detection rate >= {held['detection_rate']:.1%} per target"
                    if self.targets else "")

@@ -177,7 +177,8 @@ def test_rts_scenario_s_own_header_is_laid_out_as_its_dbc_says():
     (OBJECT_LIST, [], {}),
     (CLUSTER_LIST, ["quantity_unchecked"],
      {"el_deg": {"why": "mapping 'cluster-list' carries no elevation, a cartesian one without "
-                        "z_m", "tolerance": 1.0, "written": True}})])
+                        "z_m", "tolerance": 1.0, "written": True,
+                        "target_cycles": None}})])
 def test_a_scene_passes_with_the_simulated_radar_speaking_a_third_party_protocol(
         mapping, expected, unchecked):
     scene = load_scenario(ROOT / "scenarios" / "cut_in.scenario.yaml",

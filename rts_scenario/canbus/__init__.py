@@ -34,6 +34,7 @@ from ..errors import BusError, OutputError
 from ..hostclock import HostClockWatch
 from .checksums import Seal, Verify, checksum_of
 from .mapping import CanMapping, Checksum, PartKey, multiplexer, page_signals
+from .mapping import signal_range as _range_of
 
 DEFAULT_INTERFACE = "virtual"
 DEFAULT_CHANNEL = "rts-scenario"
@@ -390,21 +391,6 @@ class _Codec:
         if not self._little:
             return formats.big_endian.unpack(data)
         return {**formats.big_endian.unpack(data), **formats.little_endian.unpack(data[::-1])}
-
-
-def _range_of(sig: cantools.database.can.Signal) -> tuple[float, float]:
-    """Return a signal's physical range: what its bits carry, within the DBC's stated range."""
-    if sig.conversion.is_float:
-        low, high = -np.inf, np.inf
-    else:
-        raw_low = -(1 << (sig.length - 1)) if sig.is_signed else 0
-        raw_high = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
-        low, high = sorted((raw_low * sig.scale + sig.offset, raw_high * sig.scale + sig.offset))
-    if sig.minimum is not None:
-        low = max(low, float(sig.minimum))
-    if sig.maximum is not None:
-        high = min(high, float(sig.maximum))
-    return float(low), float(high)
 
 
 class _MappedLayout:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import cantools
 
@@ -213,6 +213,21 @@ def multiplexer(message: Message) -> str | None:
                  if sg.is_multiplexer and sg.multiplexer_ids is None), None)
 
 
+def signal_range(sig: cantools.database.can.Signal) -> tuple[float, float]:
+    """Return a signal's physical range: what its bits carry, within the DBC's stated range."""
+    if sig.conversion.is_float:
+        low, high = -math.inf, math.inf
+    else:
+        raw_low = -(1 << (sig.length - 1)) if sig.is_signed else 0
+        raw_high = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
+        low, high = sorted((raw_low * sig.scale + sig.offset, raw_high * sig.scale + sig.offset))
+    if sig.minimum is not None:
+        low = max(low, float(sig.minimum))
+    if sig.maximum is not None:
+        high = min(high, float(sig.maximum))
+    return float(low), float(high)
+
+
 def checksum_byte(message: Message, name: str) -> int | None:
     """Return the byte a checksum signal fills, or None if it is not one whole byte.
 
@@ -287,6 +302,15 @@ class Checksum:
         if isinstance(self.data_id, dict):
             return self.data_id.get(message)
         return self.data_id
+
+
+class SignalEnds(NamedTuple):
+    """The lowest and highest values a quantity's signal carries (`CanMapping.limits`)."""
+
+    low: float
+    high: float
+    step: float  # between two raw values, in the quantity's unit (0: a float signal)
+    signal: str
 
 
 @dataclass(frozen=True)
@@ -419,6 +443,54 @@ class CanMapping:
                     if sig.name == f.signal:
                         step = abs(float(sig.scale) * f.scale)
                         out[quantity] = max(out.get(quantity, 0.0), step)
+        return out
+
+    def limits(self, fd: bool | None = False) -> dict[str, SignalEnds]:
+        """Return the ends of what a detection's message can carry of each quantity read as is.
+
+        ``{"rcs_dbsm": SignalEnds(low, high, step, signal)}``: the lowest and highest values
+        the signal's raw values decode to within its DBC range (`signal_range`), through the
+        field's ``scale`` and ``offset``, in the quantity's unit, keyed as
+        `rts_scenario.detections.Detections` names the quantities: RCS, and a polar mapping's
+        range, radial velocity and angles (a cartesian mapping derives those from several
+        signals). A radar reports a value beyond its signal's range at the signal's end, if at
+        all: the checker does not judge a reading at an end against a truth beyond it
+        (`rts_scenario.check.Checker`). ``fd`` as in `steps`; for a bus not known (None), the
+        narrower ends of the two, the coarser step.
+        """
+        if fd is None:
+            classic, flexible = self.limits(False), self.limits(True)
+            return {q: SignalEnds(max(a.low, b.low), min(a.high, b.high), max(a.step, b.step),
+                                  a.signal)
+                    for q, a in classic.items() for b in [flexible.get(q, a)]}
+        names = [self.fd_message] if fd and self.fd_message else list(self.messages)
+        direct = {"rcs_dbsm": "rcs_dbsm"}
+        if self.form == "polar":
+            direct.update(range_m="range_m", radial_velocity_mps="radial_velocity_mps",
+                          azimuth_deg="az_deg", elevation_deg="el_deg")
+        out: dict[str, SignalEnds] = {}
+        for quantity, name in direct.items():
+            f = self.fields.get(quantity)
+            if f is None:
+                continue
+            for message in names:
+                for sig in self.db.get_message_by_name(message).signals:
+                    if sig.name != f.signal:
+                        continue
+                    low, high = signal_range(sig)
+                    scale, offset = float(sig.scale), float(sig.offset)
+                    if not sig.conversion.is_float and math.isfinite(low + high):
+                        # The raw values within the range, at their ends (scale may be < 0).
+                        raws = sorted(((low - offset) / scale, (high - offset) / scale))
+                        low, high = sorted((math.ceil(raws[0] - 1e-9) * scale + offset,
+                                            math.floor(raws[1] + 1e-9) * scale + offset))
+                    ends = sorted((low * f.scale + f.offset, high * f.scale + f.offset))
+                    step = abs(scale * f.scale)
+                    was = out.get(name)
+                    if was is not None:
+                        ends = [max(was.low, ends[0]), min(was.high, ends[1])]
+                        step = max(step, was.step)
+                    out[name] = SignalEnds(ends[0], ends[1], step, f.signal)
         return out
 
     def _check_counting(self, doc: Document, names: dict[str, Message],
