@@ -265,6 +265,18 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      "  duration_s, seed: [[1.0, 3]]\n",
      r"^{f}:17:3: parametrize.duration_s, seed: seed: a key path given twice \(first in "
      r"'seed'\); each key path takes one value per run$"),
+    # A key path inside another: the runs were named after values they did not play.
+    ("parametrize-path-inside-another", TINY + "parametrize:\n  targets.0.motion.speed_mps: "
+     "[10.0, 30.0]\n  targets.0.motion: [{type: stationary, position_m: [20, 0, 0]}]\n",
+     r"^{f}:16:3: parametrize.targets.0.motion.speed_mps: targets.0.motion.speed_mps lies "
+     r"inside the key path 'targets.0.motion' varied too: a run would take one's value in "
+     r"place of the other's and be named after both; write the values for "
+     r"targets.0.motion.speed_mps into those of targets.0.motion, or vary only key paths "
+     r"inside it$"),
+    ("parametrize-path-inside-a-group", TINY + "parametrize:\n  radar: [{profile: "
+     "awr1843boost}]\n  seed, radar.estimator: [[1, ti], [2, bartlett]]\n",
+     r"^{f}:17:3: parametrize.seed, radar.estimator: radar.estimator lies inside the key path "
+     r"'radar' varied too: .*$"),
     ("parametrize-group-empty-path", TINY + "parametrize:\n  'duration_s,': [[1.0, 2]]\n",
      r"^{f}:16:\d+: parametrize.duration_s,: 'duration_s,': an empty key path"),
     ("parametrize-empty-path", TINY + "parametrize:\n  '': [1.0, 2.0]\n",

@@ -439,6 +439,21 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
                                 f"{dotted}: a key path given twice ({where}); each key path "
                                 f"takes one value per run")
             first_entry[dotted] = key
+    # A key path inside another: one's value replaces the part of the other's it lies in (or
+    # is replaced by it), and the run is labelled with a value it may not play.
+    parts = {dotted: dotted.split(".") for dotted in first_entry}
+    for inner, inner_parts in parts.items():
+        for outer, outer_parts in parts.items():
+            if len(outer_parts) < len(inner_parts) and inner_parts[:len(outer_parts)] == \
+                    outer_parts:
+                entry = first_entry[outer]
+                raise doc.error(("parametrize", first_entry[inner]),
+                                f"{inner} lies inside the key path {outer!r}"
+                                + (f" (in {entry!r})" if entry != outer else "")
+                                + f" varied too: a run would take one's value in place of "
+                                  f"the other's and be named after both; write the values "
+                                  f"for {inner} into those of {outer}, or vary only key "
+                                  f"paths inside it")
     count = math.prod(len(axis) for axis in axes)
     if count > MAX_COMBINATIONS:
         # Each is loaded where it is collected (a few ms): 10^8 hung a session without a word.
