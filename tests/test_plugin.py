@@ -142,6 +142,31 @@ def test_an_empty_rts_option_is_a_usage_error(pytester, option):
     assert f"{option}: an empty value; give one, or leave the option out" in text
     assert text.count("an empty value") == 1 and "Traceback" not in text
 
+@pytest.mark.parametrize("first, second", [
+    (["--rts-mapping", "a.mapping.yaml"], ["--rts-mapping=b.mapping.yaml"]),
+    (["--rts-output=udp://127.0.0.1:5999"], ["--rts-output", "simulated-radar"]),
+    (["--rts-method", "paper"], ["--rts-method", "exact"])])
+def test_an_rts_option_given_twice_is_a_usage_error(pytester, first, second):
+    # argparse kept the last: every scene was judged by the second mapping, or played to the
+    # simulated radar instead of the bench, without a word (`rts-scenario run` refuses it).
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    result = pytester.runpytest(*first, *second)
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    name = second[0].split("=")[0]
+    assert f"{name}: given twice (" in text and "give it once" in text
+    assert "Traceback" not in text
+
+
+def test_an_rts_option_from_addopts_is_overridden_on_the_command_line(pytester, monkeypatch):
+    # pytest's way to override an option its configuration gives: not a repeat.
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    pytester.makeini("[pytest]\naddopts = --rts-method paper\n")
+    pytester.runpytest("--rts-method", "exact").assert_outcomes(passed=1)
+    monkeypatch.setenv("PYTEST_ADDOPTS", "--rts-output udp://127.0.0.1:5999")
+    pytester.runpytest("--rts-output", "simulated-radar").assert_outcomes(passed=1)
+
+
 def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):
     sub = pytester.mkdir("sub")
     (sub / "data").mkdir()

@@ -18,7 +18,7 @@ import math
 import os
 import uuid
 import warnings
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Callable, Generator, Iterator, Sequence
 from fnmatch import fnmatch
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -53,6 +53,34 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                                   "under another name fails)", default=DEFAULT_PATTERN)
 
 
+# The options that take one value (``--rts-can-fd`` is a switch).
+_ONE_VALUE = ("--rts-output", "--rts-can-interface", "--rts-can-channel", "--rts-mapping",
+              "--rts-radar-channel", "--rts-method")
+
+
+def _refuse_repeats(args: Sequence[str]) -> None:
+    """Refuse an ``--rts-*`` option given twice on the command line, as ``run`` does.
+
+    argparse keeps the last: ``--rts-mapping A --rts-mapping B`` judged every scene by B
+    without a word. One from ``addopts`` (or ``PYTEST_ADDOPTS``) that the command line gives
+    again is pytest's way to override it, and stays so: ``args`` are the command line's alone.
+    """
+    given: dict[str, str] = {}
+    words = list(args)
+    for i, word in enumerate(words):
+        name, equals, value = word.partition("=")
+        if word == "--":
+            break
+        if name not in _ONE_VALUE:
+            continue
+        if not equals:
+            value = words[i + 1] if i + 1 < len(words) else ""
+        if name in given:
+            raise pytest.UsageError(f"{name}: given twice ({given[name]!r}, then {value!r}); "
+                                    f"give it once")
+        given[name] = value
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """Register the marks shipped scenes use; refuse bad ``--rts-*`` options once, up front."""
     for line in ("slow: a long scene", "hardware: needs a real RTS and radar",
@@ -66,6 +94,7 @@ def pytest_configure(config: pytest.Config) -> None:
         check_pattern(config.getini(PATTERN_OPTION), config.inipath)
     except RtsError as exc:
         raise pytest.UsageError(str(exc)) from None
+    _refuse_repeats(config.invocation_params.args)
     for option in ("--rts-output", "--rts-can-interface", "--rts-can-channel", "--rts-mapping"):
         # An unset shell variable (``--rts-mapping=$MAPPING``) is not the option left out, as
         # for ``rts-scenario run``.
