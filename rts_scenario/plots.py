@@ -37,10 +37,22 @@ def safe_stem(name: str) -> str:
 
     Names come from files anyone may write; a stem never leaves the plot folder. ``=`` and
     brackets are kept so that a run of a parametrized scene keeps the name pytest gives it
-    (``cut-in[estimator=ti]``).
+    (``cut-in[estimator=ti]``). A name longer than `MAX_STEM` is cut, with a digest of it.
     """
-    stem = re.sub(r"[^A-Za-z0-9._=\[\]-]+", "_", name).lstrip(".")
-    return stem or "scene"
+    stem = re.sub(r"[^A-Za-z0-9._=\[\]-]+", "_", name).lstrip(".") or "scene"
+    if len(stem) > MAX_STEM:
+        # A file name holds 255 bytes: a long name (a scene's, a variant's id with a long
+        # value) keeps its start and a digest of the whole, which tells it from its kin.
+        import hashlib
+
+        digest = hashlib.sha256(name.encode("utf-8", "surrogatepass")).hexdigest()[:10]
+        stem = f"{stem[:MAX_STEM - 11]}-{digest}"
+    return stem
+
+
+# The longest stem `safe_stem` gives: room beside it in a file name of 255 bytes for what a
+# run adds (a log's own stem and suffix, "-calibration.png", a sidecar's ".rts.json").
+MAX_STEM = 120
 
 
 def write_plots(result: RunResult, folder: str | Path, stem: str | None = None,

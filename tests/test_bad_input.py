@@ -370,6 +370,17 @@ CLI_CASES: list[tuple[str, list[str], int, str]] = [
      r"^--json {missing}: cannot write: folder .* does not exist"),
     ("run-plot-on-file", ["run", "{scene}", "--plot", "{file}"], 2,
      r"^--plot (needs matplotlib|{file}: cannot write: not a folder)"),
+    # A .png name was made a folder of that name; a mistyped parent a tree of new folders.
+    ("run-plot-png-name", ["run", "{scene}", "--plot", "{tmp}/plots.png"], 2,
+     r"^--plot (needs matplotlib|{tmp}/plots.png: names a file \(.png\); --plot takes the "
+     r"folder its .png files go into \(made if missing\))"),
+    ("run-plot-missing-parent", ["run", "{scene}", "--plot", "{tmp}/no/such/plots"], 2,
+     r"^--plot (needs matplotlib|{tmp}/no/such/plots: cannot write: folder {tmp}/no/such does "
+     r"not exist)"),
+    # A generated name too long for the file system (a variant's id with a long value) was a
+    # runtime error, exit 3; a name too long given is refused up front, naming the option.
+    ("run-json-name-too-long", ["run", "{scene}", "--json", "{tmp}/" + "j" * 300 + ".json"], 2,
+     r"^--json {tmp}/j+.json: cannot write: File name too long$"),
     ("run-output-unknown", ["run", "{scene}", "--output", "carrier-pigeon"], 2,
      r"^--output 'carrier-pigeon': unknown output 'carrier-pigeon'; valid outputs: .*udp"),
     ("run-output-file", ["run", "{scene}", "--output", "file:{tmp}/x.npz"], 2,
@@ -824,6 +835,14 @@ def test_plot_file_names_are_safe_and_unique():
     assert safe_stem("...hidden") == "hidden"
     assert safe_stem("cut in: A/B") == "cut_in_A_B"
     assert safe_stem("///") == "_" and safe_stem("..") == "scene"
+    # A long name is cut to MAX_STEM characters with a digest of the whole: two that differ
+    # only past the cut stay apart, and a file name holds the stem with room to spare.
+    from rts_scenario.plots import MAX_STEM
+
+    long_a, long_b = "v" * 300 + "a", "v" * 300 + "b"
+    assert len(safe_stem(long_a)) == MAX_STEM <= 150
+    assert safe_stem(long_a) != safe_stem(long_b)
+    assert safe_stem(long_a).startswith("v" * 100) and safe_stem("v" * MAX_STEM) == "v" * MAX_STEM
     taken: set[str] = set()
     assert [_unique(s, taken) for s in ("a", "a", "b", "a")] == ["a", "a-2", "b", "a-3"]
 

@@ -540,6 +540,24 @@ def test_check_log_refuses_a_scene_other_than_the_recorded_variant(tmp_path):
                      log).report.passed
 
 
+def test_a_variant_with_a_long_id_records_and_plots_under_a_name_that_fits(tmp_path, capsys):
+    # Its log name, LOG[ID].blf, ran past the 255 bytes of a file name: the run stopped with
+    # "error: OSError: File name too long", exit 3, no scene run.
+    scene = tmp_path / "short.scenario.yaml"
+    scene.write_text(SHORT_SCENE + "parametrize:\n  description: ['" + "d" * 300
+                     + "', plain]\n")
+    assert cli.main(["run", str(scene), "--record", str(tmp_path / "bus.blf"),
+                     "--plot", str(tmp_path / "plots")]) == 0
+    logs = sorted(p.name for p in tmp_path.glob("bus*.blf"))
+    assert len(logs) == 2 and "bus[description=plain].blf" in logs
+    assert all(len(name.encode()) < 200 for name in logs)
+    assert all(len(p.name) < 200 for p in (tmp_path / "plots").iterdir())
+    # The log's variant comes from its sidecar, not its name: the cut one checks.
+    (long,) = [name for name in logs if name != "bus[description=plain].blf"]
+    capsys.readouterr()
+    assert cli.main(["check", str(scene), "--log", str(tmp_path / long)]) == 0
+
+
 def test_validate_says_which_variants_an_error_is_of(tmp_path, capsys):
     # One line per error; its variants named, not only the first that hit it.
     scene = two_variant_scene(tmp_path)

@@ -241,24 +241,26 @@ def check_writable_file(option: str, path: str | Path, kind: str | None = None, 
         # a radar's DBC that another run needs.
         raise RtsError(f"{option} {path}: named like {named[1]} ({named[0]}), which "
                        f"{option} would overwrite; give the output another name")
-    if target.is_dir():
-        raise RtsError(f"{option} {path}: cannot write: is a folder; give a file path")
-    if str(path).endswith(("/", os.sep)):
-        # pathlib drops the slash: "out.json/" would be written as the file out.json.
-        raise RtsError(f"{option} {path}: names a folder (it ends in a slash); give a file path")
-    parent = target.parent
-    if not parent.is_dir():
-        what = "is not a folder" if parent.exists() else "does not exist"
-        raise RtsError(f"{option} {path}: cannot write: folder {parent} {what}")
-    if target.is_symlink() and not target.exists():
-        # A dangling link: the file it names is what gets written. Probe that one, and leave
-        # the link in place.
-        target = Path(os.path.realpath(target))
-        if not target.parent.is_dir():
-            raise RtsError(f"{option} {path}: cannot write: it links to {target}, whose folder "
-                           f"does not exist")
-    existed = target.exists()
+    # A path the system refuses to look at (a name too long) is named as not writable.
     with writing(option, path):
+        if target.is_dir():
+            raise RtsError(f"{option} {path}: cannot write: is a folder; give a file path")
+        if str(path).endswith(("/", os.sep)):
+            # pathlib drops the slash: "out.json/" would be written as the file out.json.
+            raise RtsError(f"{option} {path}: names a folder (it ends in a slash); give a file "
+                           f"path")
+        parent = target.parent
+        if not parent.is_dir():
+            what = "is not a folder" if parent.exists() else "does not exist"
+            raise RtsError(f"{option} {path}: cannot write: folder {parent} {what}")
+        if target.is_symlink() and not target.exists():
+            # A dangling link: the file it names is what gets written. Probe that one, and
+            # leave the link in place.
+            target = Path(os.path.realpath(target))
+            if not target.parent.is_dir():
+                raise RtsError(f"{option} {path}: cannot write: it links to {target}, whose "
+                               f"folder does not exist")
+        existed = target.exists()
         if existed and stat.S_ISFIFO(target.stat().st_mode):
             # A named pipe opened for writing waits for a reader: the probe would hang the
             # command before it starts. Permission is what can be checked (the writer waits
@@ -385,17 +387,34 @@ def check_rig_out(option: str, path: str) -> None:
     check_writable_file(option, path, ".rig.yaml")
 
 
+# Suffixes of files, not folders, a folder option refuses where no such folder exists.
+_FILE_SUFFIXES = frozenset({".png", ".svg", ".pdf", ".jpg", ".jpeg", ".json", ".csv", ".txt",
+                            ".html", ".blf", ".asc", ".mf4", ".yaml", ".yml"})
+
+
 def check_writable_folder(option: str, path: str | Path) -> None:
-    """Fail now if the folder ``option`` names (created when missing) could not be written."""
+    """Fail now if the folder ``option`` names could not be written.
+
+    The folder is made when missing, in a folder that exists (a mistyped parent is not made
+    as a tree of new folders, as no file output makes one); a name with a file's suffix
+    (``plots/run.png``) is refused, not made into a folder of that name.
+    """
     if str(path) == "":
         raise RtsError(f"{option}: needs a folder path, got an empty one")
     folder = Path(path)
-    probe = folder
-    while not probe.exists() and probe != probe.parent:
-        probe = probe.parent
-    if not probe.is_dir():
-        where = "" if probe == folder else f" ({probe} is a file)"
-        raise RtsError(f"{option} {path}: cannot write: not a folder{where}")
+    with writing(option, path):
+        exists = folder.exists()
+    if not exists and folder.suffix.lower() in _FILE_SUFFIXES:
+        raise RtsError(f"{option} {path}: names a file ({folder.suffix}); {option} takes the "
+                       f"folder its .png files go into (made if missing)")
+    probe = folder if exists else folder.parent
+    with writing(option, path):
+        is_dir, there = probe.is_dir(), probe.exists()
+    if not is_dir:
+        if probe == folder:
+            raise RtsError(f"{option} {path}: cannot write: not a folder")
+        what = "is a file" if there else "does not exist"
+        raise RtsError(f"{option} {path}: cannot write: folder {probe} {what}")
     with writing(option, path):
         if not os.access(probe, os.W_OK | os.X_OK):
             raise PermissionError(13, "Permission denied")
