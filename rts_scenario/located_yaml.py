@@ -6,6 +6,7 @@ Every error names the file, line, column and key path of the offending value, as
 
 from __future__ import annotations
 
+import datetime
 import functools
 import hashlib
 import json
@@ -185,7 +186,13 @@ def _construct(node: yaml.Node, path: KeyPath, marks: dict[KeyPath, tuple[int, i
         return [
             _construct(item, (*path, i), marks, loader, file) for i, item in enumerate(node.value)
         ]
-    value = loader.construct_object(node, deep=True)
+    try:
+        value = loader.construct_object(node, deep=True)
+    except (ValueError, TypeError, OverflowError) as exc:  # a tag's value it cannot read
+        raise ScenarioError(f"invalid YAML value {node.tag.rsplit(':', 1)[-1]} "
+                            f"{getattr(node, 'value', '')!r}: {exc}", file=file,
+                            line=node.start_mark.line + 1, column=node.start_mark.column + 1,
+                            key_path=format_key_path(path) or None) from None
     if isinstance(node, yaml.ScalarNode):
         ambiguous = _ambiguous_number(node, value)
         if ambiguous is not None:
@@ -256,8 +263,12 @@ def _check_bounds(text: str, file: str) -> None:
                 total += 1
             elif isinstance(event, yaml.AliasEvent):
                 if event.anchor not in sizes:
-                    raise fail(event, f"alias *{event.anchor} refers to a node that contains "
-                                      f"it (recursive data is not allowed)")
+                    if any(anchor == event.anchor for anchor, _ in stack):
+                        raise fail(event, f"alias *{event.anchor} refers to a node that "
+                                          f"contains it (recursive data is not allowed)")
+                    raise fail(event, f"alias *{event.anchor}: no anchor &{event.anchor} "
+                                      f"before it (an alias repeats a node anchored earlier "
+                                      f"in the file)")
                 total += sizes[event.anchor]
             elif isinstance(event, yaml.ScalarEvent):
                 total += 1
@@ -321,7 +332,50 @@ def _plain_words(error: yaml.MarkedYAMLError, text: str) -> str:
                 and len(key.group(1)) not in (context.column, mark.column)):
             hint += f" and line {above + 1} above it at {len(key.group(1))}"
         return f"invalid YAML: {hint}; keys of one mapping line up"
+    if problem == "but found another document":
+        return ("invalid YAML: a second document begins here (after ---); a file holds one "
+                "document")
+    if _starts_elsewhere(error):
+        # The error is placed where the construct began (`_error_mark`); where the parser
+        # gave up is said.
+        return (f"invalid YAML: {problem} at line {mark.line + 1}, column {mark.column + 1} "
+                f"({error.context} that begins here)")
+    if error.context and context is not None and context.line != mark.line:
+        return (f"invalid YAML: {problem} ({error.context} from line {context.line + 1}, "
+                f"column {context.column + 1})")
     return f"invalid YAML: {problem}"
+
+
+def _tab_at(error: yaml.MarkedYAMLError, text: str) -> bool:
+    """Whether the parser stopped at a tab (said where it is, `_plain_words`)."""
+    mark = error.problem_mark
+    if mark is None:
+        return False
+    lines = text.splitlines()
+    line = lines[mark.line] if mark.line < len(lines) else ""
+    return line[mark.column:mark.column + 1] == "\t"
+
+
+def _starts_elsewhere(error: yaml.MarkedYAMLError) -> bool:
+    """Whether the parser gave up on a line after the one where the broken construct began.
+
+    An unclosed quote or bracket is found only at the end of the file, a key without its colon
+    on the line after it: the line to fix is the one where the quoted scalar, the flow
+    collection or the key began.
+    """
+    context, mark = error.context_mark, error.problem_mark
+    return (context is not None and mark is not None and context.line != mark.line
+            and (error.context or "").startswith(("while scanning", "while parsing a flow")))
+
+
+def _error_mark(error: yaml.MarkedYAMLError, text: str) -> Any:
+    """Return the mark an error is placed at: where the broken construct began, else the problem.
+
+    A tab is placed where it is.
+    """
+    if _starts_elsewhere(error) and not _tab_at(error, text):
+        return error.context_mark
+    return error.problem_mark or error.context_mark
 
 
 def load_yaml(path: str | Path, text: str | None = None) -> Document:
@@ -348,7 +402,7 @@ def load_yaml(path: str | Path, text: str | None = None) -> Document:
         marks: dict[KeyPath, tuple[int, int]] = {}
         data = None if node is None else _construct(node, (), marks, loader, file)
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
+        mark = _error_mark(exc, text)
         line = mark.line + 1 if mark else None
         column = mark.column + 1 if mark else None
         raise ScenarioError(_plain_words(exc, text), file=file, line=line,
@@ -571,6 +625,12 @@ def _describe(error: jsonschema.ValidationError) -> str:
     if kind == "enum":
         return f"got {_quoted(value)}; allowed values: {', '.join(map(repr, schema_value))}"
     if kind == "type":
+        if isinstance(value, (datetime.date, datetime.datetime)):
+            # YAML reads an unquoted 2024-01-01 as a date.
+            return (f"must be of type {schema_value}, got a date ({value.isoformat()}); "
+                    f"quote it for a string: '{value.isoformat()}'")
+        if isinstance(value, bytes):
+            return f"must be of type {schema_value}, got binary data (!!binary)"
         return f"must be of type {schema_value}, got {_quoted(value)}"
     if kind == "required":
         message = error.message.replace("is a required property", "is required but missing")

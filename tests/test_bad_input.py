@@ -285,6 +285,9 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("parametrize-empty-part", TINY + "parametrize:\n  targets..name: [a, b]\n",
      r"^{f}:16:\d+: parametrize.targets..name: 'targets..name': an empty key path, or an empty "
      r"part between dots"),
+    ("date-for-a-string", TINY + "description: 2024-01-01\n",
+     r"^{f}:15:1: description: must be of type string, got a date \(2024-01-01\); quote it "
+     r"for a string: '2024-01-01'$"),
     # A YAML date is no value a report can hold (run --json, sweep --json lost every verdict).
     ("parametrize-date", TINY + "parametrize:\n  description: [2024-01-01, plain]\n",
      r"^{f}:16:\d+: parametrize.description\[0\]: got a date \(2024-01-01\); a value must be "

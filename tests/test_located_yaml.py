@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -52,6 +53,44 @@ def test_a_tab_is_named_where_it_is(parser, text, line, column, message):
     error = error_of(text)
     assert (error.detail, error.line, error.column) == (message, line, column)
     assert str(error) == f"x.yaml:{line}:{column}: {message}"
+
+
+@pytest.mark.parametrize(("text", "line", "column", "starts"), [
+    # An unclosed quote is found at the end of the file; the line to fix is where it opens.
+    ("a: 1\nname: \"short\nb: 2\nc: 3\n", 2, 7, "while scanning a quoted scalar"),
+    # A key without its colon: the parser gives up on the line after it.
+    ("a: 1\nrig wide\nb: 2\n", 2, 1, "while scanning a simple key"),
+    # An unclosed bracket.
+    ("a: 1\nname: [cut-in\nb: 2\n", 2, 7, "while parsing a flow sequence"),
+])
+def test_a_broken_construct_is_placed_where_it_begins(parser, text, line, column, starts):
+    error = error_of(text)
+    assert (error.line, error.column) == (line, column), str(error)
+    assert error.detail.startswith("invalid YAML: ")
+    assert error.detail.endswith(f"({starts} that begins here)"), error.detail
+    assert re.search(r" at line \d+, column \d+ \(", error.detail)
+
+
+def test_an_alias_without_its_anchor_says_so():
+    error = error_of("a: *prof\n")
+    assert (error.line, error.column) == (1, 4)
+    assert error.detail == ("alias *prof: no anchor &prof before it (an alias repeats a node "
+                            "anchored earlier in the file)")
+    recursive = error_of("a: &loop [1, *loop]\n")
+    assert "refers to a node that contains it (recursive data is not allowed)" in str(recursive)
+
+
+def test_a_value_its_tag_cannot_read_names_its_line_and_key():
+    error = error_of("name: x\nduration_s: !!int abc\n")
+    assert (error.line, error.column, error.key_path) == (2, 13, "duration_s")
+    assert error.detail.startswith("invalid YAML value int 'abc': ")
+
+
+def test_a_second_document_is_named_as_such():
+    error = error_of("a: 1\n---\nb: 2\n")
+    assert error.line == 2
+    assert error.detail == ("invalid YAML: a second document begins here (after ---); a file "
+                            "holds one document")
 
 
 @pytest.mark.parametrize(("text", "line", "column", "message"), [

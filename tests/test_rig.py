@@ -249,7 +249,8 @@ BAD_RIGS = [
      "  range_m: 1000000000000000000000000000000\n", 5, "reference.range_m",
      "an integer beyond 64 bits"),
     ("rts_rig: 1\nname: x\nname: y\n", 3, "name", "duplicate key"),
-    ("rts_rig: 1\nname: [x\n", 3, "", "invalid YAML"),
+    # An unclosed bracket is placed where it opens, not at the end of the file.
+    ("rts_rig: 1\nname: [x\n", 2, "", "invalid YAML"),
     ("rts_rig: 1\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n", 1, "", "'name' is required"),
     ("# nothing but a comment\n", None, "", "the file is empty: expected a mapping of keys"),
 ]

@@ -415,7 +415,8 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
         raise ScenarioError(f"cannot read file: a folder, where a scene file goes "
                             f"({Path(path) / '*'}{SCENE_SUFFIX}); rts-scenario sweep and "
                             f"pytest take folders", file=str(path))
-    doc = load_yaml(path)
+    # A file of another kind (a DBC, a rig) is named as such, not read as a broken scene.
+    doc = load_kind(path, ".scenario.yaml")
     block = doc.data.get("parametrize") if isinstance(doc.data, dict) else None
     if not block:
         return [("", {})]
