@@ -378,6 +378,12 @@ class Checker:
         self._out_of_count: dict[int, int] = {}
         self._out_of_count_before = 0
         self._out_of_count_span: tuple[float, float] | None = None
+        # Cycles numbered after the scene (beyond those counted) that came on the bus during
+        # it, far earlier than their numbers say (`tally_ahead`): how many, the first number,
+        # and when they came (after the anchor).
+        self._ahead = 0
+        self._ahead_first: int | None = None
+        self._ahead_span: tuple[float, float] | None = None
         # The first cycle after the scene not counted in ``frames["after_scene"]`` (None: all
         # are): those measured later than the window after the scene's end
         # (`rts_scenario.pipeline.after_scene_until_s`) depend on how long a bus was listened to.
@@ -577,6 +583,34 @@ class Checker:
             lo, hi = min(lo, self._out_of_count_span[0]), max(hi, self._out_of_count_span[1])
         self._out_of_count_span = (lo, hi)
 
+    def tally_ahead(self, frames: IntArray, bus_t: FloatArray) -> BoolArray:
+        """Count cycles numbered after the scene that came far earlier than their numbers say.
+
+        ``frames``: numbers of cycles not counted (beyond `after_scene_end`), ``bus_t`` their
+        bus times (NaN: none). A radar's own cycles after the scene come after its end; these
+        came on the bus while the scene played, by more than `OUT_OF_COUNT_SLACK_CYCLES`
+        cycles and `OUT_OF_COUNT_SLACK_S` before their numbers allow: another radar's, or a
+        count that does not start where the profile says (`out_of_count_reason`). Returns
+        which. Without `anchor` or a cycle time: none.
+        """
+        frames = np.asarray(frames, dtype=np.int64)
+        if self._anchor is None or self.cycle_s is None or not frames.size:
+            return np.zeros(frames.size, dtype=bool)
+        number, at = self._anchor
+        came_after_s = np.asarray(bus_t, dtype=np.float64) - at
+        early_s = (frames - number) * self.cycle_s - came_after_s
+        odd = early_s > OUT_OF_COUNT_SLACK_CYCLES * self.cycle_s + OUT_OF_COUNT_SLACK_S
+        if odd.any():
+            self._ahead += int(odd.sum())
+            first = int(frames[odd].min())
+            self._ahead_first = first if self._ahead_first is None else min(
+                first, self._ahead_first)
+            lo, hi = float(came_after_s[odd].min()), float(came_after_s[odd].max())
+            if self._ahead_span is not None:
+                lo, hi = min(lo, self._ahead_span[0]), max(hi, self._ahead_span[1])
+            self._ahead_span = (lo, hi)
+        return odd
+
     def out_of_count_reason(self) -> str | None:
         """Cycles numbered before the scene that came on the bus during it: not this radar's.
 
@@ -588,13 +622,24 @@ class Checker:
         """
         n = self._out_of_count_before + sum(c for f, c in self._out_of_count.items()
                                             if f < self._scene_first)
-        if not n or self._out_of_count_span is None:
-            return None
-        lo, hi = self._out_of_count_span
-        return (f"{n} radar cycles numbered before the scene came on the bus {lo:.3f} to "
-                f"{hi:.3f} s after its first cycle's time, later than their numbers allow: "
-                f"not this radar's count (another radar with the same identifiers on the bus, "
-                f"or a counter that went back); counted as before_scene, not checked")
+        said = []
+        if n and self._out_of_count_span is not None:
+            lo, hi = self._out_of_count_span
+            said.append(f"{n} radar cycles numbered before the scene came on the bus {lo:.3f} "
+                        f"to {hi:.3f} s after its first cycle's time, later than their numbers "
+                        f"allow: not this radar's count (another radar with the same "
+                        f"identifiers on the bus, or a counter that went back); counted as "
+                        f"before_scene, not checked")
+        if self._ahead and self._ahead_span is not None:
+            lo, hi = self._ahead_span
+            said.append(f"{self._ahead} radar cycles numbered after the scene (cycle "
+                        f"{self._ahead_first} on, counted from the profile's counter_start "
+                        f"{self.counter_start}) came on the bus {lo:.3f} to {hi:.3f} s after "
+                        f"its first cycle's time, earlier than their numbers allow: not this "
+                        f"radar's count (another radar with the same identifiers on the bus, or "
+                        f"a count that does not start where the radar's profile says); not "
+                        f"checked")
+        return "; ".join(said) or None
 
     def settle(self, before_frame: int | None = None) -> None:
         """Check every truth block that ends at or before ``before_frame`` (all if None)."""
@@ -610,13 +655,19 @@ class Checker:
             # A second cycle with the number of one after the scene is repeated where that one
             # counts; those before the scene all count as before_scene, as a re-check does.
             end = self.after_scene_end
-            for f in self._cycles:
+            beyond: list[tuple[int, float]] = []
+            for f, cycle in self._cycles.items():
                 copies = self._copies.pop(f, 0)
                 if f < self._scene_first:
                     self.frames["before_scene"] += 1 + copies
                 elif end is None or f < end:
                     self.frames["after_scene"] += 1
                     self.frames["repeated"] += copies
+                else:  # not counted: unless it came during the scene (`tally_ahead`)
+                    beyond.append((f, np.nan if cycle.bus_t_s is None else cycle.bus_t_s))
+            if beyond:
+                numbers, times = zip(*beyond, strict=True)
+                self.tally_ahead(np.array(numbers), np.array(times, dtype=np.float64))
             self._cycles.clear()
             self._copies.clear()
 

@@ -2238,7 +2238,8 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     checker.frames["repeated"] += int(after.size) - distinct
     checker.frames["before_scene"] += int((rel < 0).sum())
     checker.tally_out_of_count(rel[rel < 0], bus_t_s[rel < 0])
-    later = int((rel >= end).sum())
+    # Those that came while the scene played are not the radar's own after it (`tally_ahead`).
+    later = int((~checker.tally_ahead(rel[rel >= end], bus_t_s[rel >= end])).sum())
     if later:
         alignment.notes.append(
             f"{later} cycles in the log were measured after the scene's end and the "

@@ -703,6 +703,36 @@ def test_cycles_numbered_before_the_scene_that_come_during_it_are_no_cycles_of_t
                              "allow: not this radar's count")
 
 
+def test_cycles_numbered_after_the_scene_that_come_during_it_are_no_cycles_of_this_radar():
+    # A radar counting from 4242 where its profile says 0: every cycle it sent during the
+    # scene is numbered far after it. They were counted nowhere (neither received nor
+    # after_scene), and the verdict blamed missing cycles alone.
+    import dataclasses
+
+    tr = truth(10)
+    checker = Checker("s", tr.names, EXPECT, counter_start=0, cycle_s=0.05)
+    checker.anchor(0, 1000.0)
+    checker.after_scene_end = 14  # the run counts 4 cycles after the scene's 10
+    cycles = [dataclasses.replace(c, bus_t_s=1000.0 + 0.05 * i)
+              for i, c in enumerate(cycles_from(tr, first=4242))]
+    # The radar's own cycles after the window, measured after the scene: not the reason.
+    late = [dataclasses.replace(Detections.empty(20 + k, None, ()), bus_t_s=1001.0 + 0.05 * k)
+            for k in range(3)]
+    checker.add_truth(0, tr, OK(10, 2))
+    checker.add_frames(tr, OK(10, 2))
+    checker.add_cycles(cycles + late)
+    checker.settle()
+    report = checker.report()
+    assert report.frames["missing"] == 10 and report.frames["received"] == 0
+    foreign = [r for r in report.reasons if "foreign_cycles" in r.codes]
+    assert foreign == [
+        "10 radar cycles numbered after the scene (cycle 4242 on, counted from the profile's "
+        "counter_start 0) came on the bus 0.000 to 0.450 s after its first cycle's time, "
+        "earlier than their numbers allow: not this radar's count (another radar with the same "
+        "identifiers on the bus, or a count that does not start where the radar's profile "
+        "says); not checked"]
+
+
 def test_limits_a_scene_expects_but_never_hits_are_said(tmp_path):
     # The scene expects its car to leave the rig's coverage and the radar to be slower than
     # the frames, and the car to come too close: none of it happens in its 3 s. The run

@@ -1367,6 +1367,38 @@ def test_a_second_radar_on_the_recorded_bus_fails_the_re_check(recorded, tmp_pat
     assert report.frames["before_scene"] == 40
 
 
+def test_a_second_radar_counting_ahead_on_the_recorded_bus_fails_the_re_check(recorded,
+                                                                              tmp_path):
+    # Another radar with the same identifiers, counting from 30000 (after the scene on a
+    # 16-bit count from 0), during the scene: its cycles were said to be "measured after the
+    # scene's end ... the recorder went on", and counted nowhere. They fail the re-check.
+    with can.LogReader(str(recorded)) as reader:
+        messages = list(reader)
+    first = messages[0].timestamp
+    extra: list[can.Message] = []
+    stamp = {"t": 0.0}
+
+    class Recorder:
+        def send(self, msg):
+            msg.timestamp = stamp["t"]
+            extra.append(msg)
+
+    publisher = DetectionPublisher(Recorder())
+    for k in range(40):  # 2 s of a 50 ms radar, from 1 s into the scene
+        stamp["t"] = first + 1.0 + 0.05 * k + 0.021
+        publisher.publish(Detections.empty(30000 + k, 1.0 + 0.05 * k))
+    log = write_log(tmp_path / "ahead.blf", [sorted(messages + extra, key=lambda m: m.timestamp)])
+    shutil.copy(str(recorded) + ".rts.json", str(log) + ".rts.json")
+    scene = load_scenario(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    result = check_log(scene, log)
+    report = result.report
+    assert not report.passed
+    [foreign] = [r for r in report.reasons if "foreign_cycles" in r.codes]
+    assert foreign.startswith("40 radar cycles numbered after the scene (cycle 30000 on, "
+                              "counted from the profile's counter_start 0) came on the bus 1.0")
+    assert not any("recorder went on" in note for note in result.alignment.notes)
+
+
 def test_a_mapping_or_dbc_edited_since_the_recording_is_refused_and_a_copy_is_the_same(
         tmp_path):
     # A run recorded with a copy of rts-scenario's mapping and DBC. Its DBC edited since
