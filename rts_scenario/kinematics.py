@@ -15,6 +15,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numpy.typing import NDArray
 
+from .propagation import C0_MPS
 from .quads import assign_quads
 from .rcs import rcs_series
 from .scenario.model import Scenario
@@ -52,6 +53,11 @@ class Tracks:
         Those limits (infinite: none known). Beyond them the radar's FFTs fold an echo: its
         range into ``[0, max_range_m)``, its radial velocity into
         ``[-max_radial_velocity_mps, max_radial_velocity_mps)`` (`folded`).
+    beat_m_per_hz : float
+        How far the range spectrum shows an echo per Hz of Doppler, ``c0 / (2 S)`` (0: not
+        known). The range FFT folds at the beat frequency ``S T - fD``, not at the range: an
+        echo receding at 10 m/s on the awr1843boost folds 19 mm short of ``max_range_m``
+        (`beat_range_m`).
     """
 
     names: tuple[str, ...]
@@ -69,6 +75,7 @@ class Tracks:
     in_velocity: BoolArray
     max_range_m: float = np.inf
     max_radial_velocity_mps: float = np.inf
+    beat_m_per_hz: float = 0.0
 
     @property
     def checkable(self) -> BoolArray:
@@ -84,6 +91,14 @@ class Tracks:
             out["t_s"] = np.asarray(t_s, dtype=np.float64)
         return Tracks(**{name: getattr(self, name) for name in _SCALARS}, **out)
 
+    def beat_range_m(self) -> FloatArray:
+        """Range where the radar's range FFT shows each echo: its beat frequency, in metres.
+
+        ``range_m - doppler_hz * beat_m_per_hz``: a receding target farther, an approaching
+        one nearer (the range-Doppler coupling of an up-chirp).
+        """
+        return self.range_m - self.doppler_hz * self.beat_m_per_hz
+
     def folded(self) -> tuple[FloatArray, FloatArray]:
         """Range and radial velocity as the radar's FFTs show them, shape (F, K) each.
 
@@ -91,8 +106,11 @@ class Tracks:
         folds them (and as a real radar's circular FFTs do).
         """
         r_max, v_max = self.max_range_m, self.max_radial_velocity_mps
+        # Folded by whole unambiguous ranges, as many as the beat frequency wrapped: a radar
+        # that keeps the coupling reports it on top, as within the limits.
         range_m = self.range_m if not np.isfinite(r_max) else np.where(
-            self.in_range, self.range_m, np.mod(self.range_m, r_max))
+            self.in_range, self.range_m,
+            self.range_m - np.floor(self.beat_range_m() / r_max) * r_max)
         velocity = self.radial_velocity_mps if not np.isfinite(v_max) else np.where(
             self.in_velocity, self.radial_velocity_mps,
             np.mod(self.radial_velocity_mps + v_max, 2.0 * v_max) - v_max)
@@ -100,7 +118,7 @@ class Tracks:
 
 
 # Fields of `Tracks` that are not per frame.
-_SCALARS = ("names", "max_range_m", "max_radial_velocity_mps")
+_SCALARS = ("names", "max_range_m", "max_radial_velocity_mps", "beat_m_per_hz")
 
 
 def _rotation_z(yaw: FloatArray) -> FloatArray:
@@ -199,20 +217,25 @@ def compute_tracks(scenario: Scenario, t_s: FloatArray | None = None,
     appear = np.array([tg.appear_s for tg in targets])
     disappear = np.array([tg.disappear_s for tg in targets])
     profile = scenario.radar
+    doppler_hz = -2.0 * radial / profile.wavelength_m
+    beat_m_per_hz = C0_MPS / (2.0 * profile.slope_hz_per_s)
+    beat_range = range_m - doppler_hz * beat_m_per_hz
     return Tracks(
         names=tuple(tg.name for tg in targets),
         t_s=t,
         range_m=range_m,
         radial_velocity_mps=radial,
-        doppler_hz=-2.0 * radial / profile.wavelength_m,
+        doppler_hz=doppler_hz,
         rcs_dbsm=rcs,
         az_deg=az,
         el_deg=el,
         position_m=to_radar,
         present=(t[:, None] >= appear) & (t[:, None] < disappear),
         in_coverage=assign_quads(scenario.rig, az, el) >= 0,
-        in_range=range_m < profile.max_range_m,
+        # The range FFT folds at the beat frequency (`Tracks.beat_range_m`).
+        in_range=(beat_range >= 0.0) & (beat_range < profile.max_range_m),
         in_velocity=np.abs(radial) < profile.max_radial_velocity_mps,
         max_range_m=profile.max_range_m,
         max_radial_velocity_mps=profile.max_radial_velocity_mps,
+        beat_m_per_hz=beat_m_per_hz,
     )

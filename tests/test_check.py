@@ -855,6 +855,65 @@ def test_tracks_fold_the_range_into_the_radar_s_unambiguous_range():
     assert beyond(5.0, range_m=40.0).folded()[0][0, 0] == pytest.approx(40.0)
 
 
+EDGE_SCENE = """rts_scenario: 1
+name: edge
+duration_s: 0.5
+frame_rate_hz: 10.0
+radar: {profile: awr1843boost, fidelity: analytic, noise: false}
+rig: wide-3x5
+ego: {motion: {type: stationary, position_m: [0, 0, 0]}}
+targets:
+  - name: edge
+    motion: {type: constant_velocity, position_m: [RANGE, 0.0, 0.0], heading_deg: 0,
+             speed_mps: SPEED}
+    rcs: {rcs_dbsm: 25.0}
+  - name: near
+    motion: {type: stationary, position_m: [30.0, 2.0, 0.0]}
+    rcs: {rcs_dbsm: 10.0}
+expectations: {expected_limits: [beyond_radar_range]}
+"""
+
+
+@pytest.mark.parametrize("speed", [10.0, -10.0])
+def test_the_range_folds_where_the_beat_frequency_reaches_the_sample_rate(tmp_path, speed):
+    # An up-chirp's beat frequency is 2 S R / c + 2 v / lambda (v > 0 receding): the range
+    # FFT folds where it reaches the sample rate, R = (fs - 2 v / lambda) c / (2 S), 19 mm
+    # short of fs c / (2 S) for a target receding at 10 m/s (beyond it, approaching). A target
+    # between the two was taken as checkable: its detection near 0 m counted as false, and the
+    # target as missed.
+    from rts_scenario.kinematics import compute_tracks
+    from rts_scenario.pipeline import RunOptions, run_scene
+
+    c0 = 299_792_458.0
+    scene_file = tmp_path / "edge.scenario.yaml"
+
+    def tracks_at(range_m):
+        scene_file.write_text(EDGE_SCENE.replace("RANGE", repr(float(range_m)))
+                              .replace("SPEED", repr(speed)))
+        scene = load_scenario(scene_file)
+        p = scene.radar
+        fold_m = (p.sample_rate_hz - 2.0 * speed / p.wavelength_m) * c0 / (2.0 * p.slope_hz_per_s)
+        return scene, compute_tracks(scene), fold_m
+
+    _, probe, fold_m = tracks_at(70.0)
+    offset = probe.range_m[0, 0] - 70.0  # the radar's mount: range less the position's x
+    plain_m = 74.948  # fs c / (2 S) of the awr1843boost profile
+    assert abs(fold_m - plain_m) == pytest.approx(0.0193, abs=3e-4)
+    # The first frame (t = 0) at 2 mm either side of the fold.
+    for range_m, inside in ((fold_m - 0.002, True), (fold_m + 0.002, False)):
+        scene, tracks, _ = tracks_at(range_m - offset)
+        assert tracks.range_m[0, 0] == pytest.approx(range_m, abs=1e-9)
+        assert bool(tracks.in_range[0, 0]) is inside, (range_m, fold_m)
+    # Receding between the fold and fs c / (2 S): not checkable, and its detection, folded to
+    # near 0 m, is the folded echo's, not a false one.
+    if speed > 0:
+        scene, tracks, _ = tracks_at(fold_m + 0.001 - offset)
+        assert not tracks.in_range[:, 0].any() and tracks.range_m[0, 0] < plain_m
+        report = run_scene(scene, RunOptions()).report
+        assert report.passed, report.reasons
+        assert report.false_detections == 0 and report.folded_detections > 0
+
+
 def test_detections_of_an_echo_folded_in_velocity_are_not_false():
     # 12 m/s beyond a radar's 10: it shows at -8 m/s, at two wrong angles (its TDM-MIMO
     # compensation used the folded Doppler). Expected, the run passes; its detections are the
