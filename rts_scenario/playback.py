@@ -248,7 +248,12 @@ def unpack_send_lateness(record: Mapping[str, Any], n_frames: int) -> NDArray[np
     if len(raw) != 4 * n_frames or record.get("frames") != n_frames:
         raise ValueError(f"holds {len(raw) // 4} frames (says {record.get('frames')}), the "
                          f"scene has {n_frames}")
-    return np.frombuffer(raw, dtype="<i4").astype(np.float64) * 1e-6
+    late = np.frombuffer(raw, dtype="<i4").astype(np.float64) * 1e-6
+    if late.size and late.min() < 0.0:
+        k = int(np.argmin(late))
+        raise ValueError(f"frame {k} went out {-late[k]:g} s before its time: a run writes "
+                         f"every frame's lateness as 0 or more")
+    return late
 
 
 def lost_frames(rts: Mapping[str, int] | None) -> int:

@@ -251,6 +251,10 @@ class _LoggedCycle:
     bus_t_s: float
 
 
+# The largest bus time or clock step a sidecar may hold (s): about 300 years.
+_BUS_SPAN_S = 1e10
+
+
 def _number(**bounds: float) -> dict[str, Any]:
     return {"type": "number", **bounds}
 
@@ -281,19 +285,26 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
                 "cycles": {"type": ["integer", "null"], "minimum": 0},
-                "origin_bus_s": {"type": ["number", "null"]},
+                # Bus times and clock steps within a few centuries of the epoch (a float's
+                # millisecond still counts there).
+                "origin_bus_s": {"type": ["number", "null"], "minimum": -_BUS_SPAN_S,
+                                 "maximum": _BUS_SPAN_S},
                 # A delivery delay: beyond RECEIPT_OFF_S receipts are no deliveries.
                 "early_s": _number(minimum=0, maximum=RECEIPT_OFF_S),
                 # The host's clock steps the run saw, and where they moved the log's stamps.
                 "host_clock_steps": {"type": "array", "items": {
                     "type": "object", "required": ["at_s", "within_s", "size_s", "corrected"],
                     "properties": {"at_s": _number(), "within_s": _number(minimum=0),
-                                   "size_s": _number(), "corrected": {"type": "string"}}}},
+                                   "size_s": _number(minimum=-_BUS_SPAN_S,
+                                                     maximum=_BUS_SPAN_S),
+                                   "corrected": {"type": "string"}}}},
                 "bus_time_shifts": {"type": "array", "items": {
                     "type": "object", "required": ["bus_s", "counter", "shift_s"],
-                    "properties": {"bus_s": _number(),
+                    "properties": {"bus_s": _number(minimum=-_BUS_SPAN_S,
+                                                    maximum=_BUS_SPAN_S),
                                    "counter": {"type": "integer", "minimum": 0},
-                                   "shift_s": _number()}}},
+                                   "shift_s": _number(minimum=-_BUS_SPAN_S,
+                                                      maximum=_BUS_SPAN_S)}}},
             },
         },
         "mapping": {"type": ["string", "null"]},
@@ -1831,6 +1842,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         # The run's, as it said them: the log's stamps were brought back as it did.
         result.radar_clock["host_clock_steps"] = steps
     playback = (sidecar or {}).get("playback")
+    if sidecar is not None and not playback:
+        alignment.notes.append("the sidecar records no playback: frames the run sent late, "
+                               "or the RTS lost, are not judged")
     if playback:
         # The run's playback, as its sidecar recorded it: the re-check fails on it as the run
         # did.

@@ -1,5 +1,6 @@
 """Recording the bus and re-checking logs: the live verdict again, or aligned by timestamps."""
 
+import base64
 import dataclasses
 import json
 import os
@@ -8,6 +9,7 @@ import shutil
 import subprocess
 import sys
 import time
+import zlib
 from dataclasses import replace
 from pathlib import Path
 
@@ -99,6 +101,14 @@ def test_a_re_check_judges_cycles_by_the_send_times_of_the_run(tmp_path):
         "send_lateness"], "frames": 100}
     with pytest.raises(LogError, match=r"send_lateness: holds 240 frames \(says 100\), the "
                                        r"scene has 240"):
+        check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
+    # A frame sent before its time: the run writes none (its lateness is clipped at 0).
+    early = np.zeros(240, dtype="<i4")
+    early[7] = -1_000_000_000
+    sidecar["send_lateness"] = {**sidecar["send_lateness"], "frames": 240, "data": base64.b64encode(
+        zlib.compress(early.tobytes())).decode()}
+    with pytest.raises(LogError, match=r"send_lateness: frame 7 went out 1000 s before its "
+                                       r"time: a run writes every frame's lateness as 0 or more"):
         check_log(scene, _copy(log, tmp_path / "old", json.dumps(sidecar)))
 
 
@@ -447,6 +457,13 @@ def _copy(log: Path, folder: Path, sidecar: str | None = None) -> Path:
      r"truth: missing, but the sidecar keeps the statuses written with it"),
     (lambda d: {**d, "truth": None},
      r"truth: missing, but the sidecar keeps the statuses written with it"),
+    # Bus times and clock steps of 10**300 s: a numpy overflow on standard error and a reason
+    # printing a 300-digit number; the check that refuses another run's log was skipped.
+    (lambda d: {**d, "clock": {**d["clock"], "origin_bus_s": 1e308}},
+     r"clock\.origin_bus_s: 1e\+308 is greater than the maximum of 10000000000"),
+    (lambda d: {**d, "clock": {**d["clock"], "bus_time_shifts": [
+        {"bus_s": 1.0, "counter": 3, "shift_s": 1e300}]}},
+     r"clock\.bus_time_shifts\.0\.shift_s: 1e\+300 is greater than the maximum"),
 ])
 def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, capsys, edit,
                                                          message):
@@ -458,6 +475,17 @@ def test_a_malformed_sidecar_is_bad_input_naming_the_key(recorded, tmp_path, cap
     assert err.count("error:") == 1 and "Traceback" not in err
     assert f"{log}.rts.json: " in err
     assert re.search(message, err), err
+
+
+def test_a_sidecar_without_playback_says_what_is_not_judged(recorded, tmp_path):
+    # Frames sent late, or lost by the RTS, fail a re-check as they failed the run: a sidecar
+    # without the run's playback passed without a word that none of it was judged.
+    data = json.loads(Path(str(recorded) + ".rts.json").read_text())
+    scene = load_scenario(ROOT / "scenarios" / "highway_following.scenario.yaml")
+    assert not any("no playback" in n for n in check_log(scene, recorded).alignment.notes)
+    log = _copy(recorded, tmp_path, json.dumps({**data, "playback": None}))
+    assert ("the sidecar records no playback: frames the run sent late, or the RTS lost, are "
+            "not judged") in check_log(scene, log).alignment.notes
 
 
 def test_a_log_recorded_with_another_radar_is_refused(recorded, tmp_path, capsys):
