@@ -347,6 +347,9 @@ class Checker:
         run where the scene wrote its tolerance). None: no signal ends.
     mapping_name : str, optional
         The mapping's name, for the reasons ``limits`` give.
+    jitter_s : float, optional
+        The radar's latency jitter (its profile's ``clock.jitter_s``): a cycle may reach the
+        bus this much off its time without being another radar's (`tally_out_of_count`).
     """
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
@@ -359,8 +362,9 @@ class Checker:
                  cycle_s: float | None = None, file: str = "",
                  not_carried: Mapping[str, str] | None = None,
                  limits: Mapping[str, tuple[float, float, float, str]] | None = None,
-                 mapping_name: str = "") -> None:
+                 mapping_name: str = "", jitter_s: float = 0.0) -> None:
         self.scene = scene
+        self.jitter_s = jitter_s
         self.variant = variant
         self.file = file
         self.parameters = dict(parameters or {})
@@ -570,8 +574,7 @@ class Checker:
         cycle_s = self.cycle_s
         came_after_s = bus_t - at
         late_s = came_after_s - (frames - number) * cycle_s
-        odd = (frames < number + 2) & (late_s > OUT_OF_COUNT_SLACK_CYCLES * cycle_s
-                                       + OUT_OF_COUNT_SLACK_S)
+        odd = (frames < number + 2) & (late_s > self._out_of_count_slack_s())
         if not odd.any():
             return
         for f in frames[odd & (frames >= number)].tolist():
@@ -583,13 +586,20 @@ class Checker:
             lo, hi = min(lo, self._out_of_count_span[0]), max(hi, self._out_of_count_span[1])
         self._out_of_count_span = (lo, hi)
 
+    def _out_of_count_slack_s(self) -> float:
+        """How far off its number's time a cycle may reach the bus and be this radar's."""
+        assert self.cycle_s is not None
+        return (OUT_OF_COUNT_SLACK_CYCLES * self.cycle_s + OUT_OF_COUNT_SLACK_S
+                + 2.0 * self.jitter_s)
+
     def tally_ahead(self, frames: IntArray, bus_t: FloatArray) -> BoolArray:
         """Count cycles numbered after the scene that came far earlier than their numbers say.
 
         ``frames``: numbers of cycles not counted (beyond `after_scene_end`), ``bus_t`` their
         bus times (NaN: none). A radar's own cycles after the scene come after its end; these
-        came on the bus while the scene played, by more than `OUT_OF_COUNT_SLACK_CYCLES`
-        cycles and `OUT_OF_COUNT_SLACK_S` before their numbers allow: another radar's, or a
+        came on the bus while the scene's cycles did, by more than `OUT_OF_COUNT_SLACK_CYCLES`
+        cycles, `OUT_OF_COUNT_SLACK_S`, twice the jitter and 1 % of the time to their number
+        before their numbers allow: another radar's, or a
         count that does not start where the profile says (`out_of_count_reason`). Returns
         which. Without `anchor` or a cycle time: none.
         """
@@ -598,8 +608,13 @@ class Checker:
             return np.zeros(frames.size, dtype=bool)
         number, at = self._anchor
         came_after_s = np.asarray(bus_t, dtype=np.float64) - at
-        early_s = (frames - number) * self.cycle_s - came_after_s
-        odd = early_s > OUT_OF_COUNT_SLACK_CYCLES * self.cycle_s + OUT_OF_COUNT_SLACK_S
+        since_s = (frames - number) * self.cycle_s
+        early_s = since_s - came_after_s
+        # Came while the scene's cycles did (by the time its last one was due), earlier than
+        # the number allows beyond a latency's jitter and a clock 1 % fast: a radar's own
+        # cycles after the scene come after the window counted after its end.
+        during = came_after_s <= (self._settled - number) * self.cycle_s
+        odd = during & (early_s > self._out_of_count_slack_s() + 0.01 * since_s)
         if odd.any():
             self._ahead += int(odd.sum())
             first = int(frames[odd].min())

@@ -335,7 +335,7 @@ def _plain_words(error: yaml.MarkedYAMLError, text: str) -> str:
     if problem == "but found another document":
         return ("invalid YAML: a second document begins here (after ---); a file holds one "
                 "document")
-    if _starts_elsewhere(error):
+    if _starts_elsewhere(error, text):
         # The error is placed where the construct began (`_error_mark`); where the parser
         # gave up is said.
         return (f"invalid YAML: {problem} at line {mark.line + 1}, column {mark.column + 1} "
@@ -356,16 +356,21 @@ def _tab_at(error: yaml.MarkedYAMLError, text: str) -> bool:
     return line[mark.column:mark.column + 1] == "\t"
 
 
-def _starts_elsewhere(error: yaml.MarkedYAMLError) -> bool:
+def _starts_elsewhere(error: yaml.MarkedYAMLError, text: str) -> bool:
     """Whether the parser gave up on a line after the one where the broken construct began.
 
-    An unclosed quote or bracket is found only at the end of the file, a key without its colon
-    on the line after it: the line to fix is the one where the quoted scalar, the flow
-    collection or the key began.
+    An unclosed quote is found only at the end of the file, a key without its colon on the
+    line after it: the line to fix is the one where the quoted scalar or the key began. So is
+    an unclosed bracket, found at the end of the file; a flow collection broken within the
+    file (a comma left out) is placed where the parser stopped, the line that lacks it.
     """
     context, mark = error.context_mark, error.problem_mark
-    return (context is not None and mark is not None and context.line != mark.line
-            and (error.context or "").startswith(("while scanning", "while parsing a flow")))
+    if context is None or mark is None or context.line == mark.line:
+        return False
+    what = error.context or ""
+    if what.startswith("while scanning"):
+        return True
+    return what.startswith("while parsing a flow") and not text[mark.index:].strip()
 
 
 def _error_mark(error: yaml.MarkedYAMLError, text: str) -> Any:
@@ -373,7 +378,7 @@ def _error_mark(error: yaml.MarkedYAMLError, text: str) -> Any:
 
     A tab is placed where it is.
     """
-    if _starts_elsewhere(error) and not _tab_at(error, text):
+    if _starts_elsewhere(error, text) and not _tab_at(error, text):
         return error.context_mark
     return error.problem_mark or error.context_mark
 

@@ -982,7 +982,7 @@ class Pipeline:
                           cycle_s=clock.cycle_s, file=scene.file,
                           not_carried=self.receiver.mapping.not_carried(),
                           limits=self.receiver.mapping.limits(options.can_fd),
-                          mapping_name=self.receiver.mapping.name)
+                          mapping_name=self.receiver.mapping.name, jitter_s=clock.jitter_s)
         n_frames = scene.n_frames
         t_all = scene.t_s
         # What the run played, for a re-check of its log (`rts_scenario.recording`).

@@ -2178,7 +2178,8 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
                       parameters=scene.parameters, cycle_s=clock.cycle_s,
                       not_carried=(mapping or CanMapping.builtin()).not_carried(),
                       limits=(mapping or CanMapping.builtin()).limits(fd),
-                      mapping_name=(mapping or CanMapping.builtin()).name)
+                      mapping_name=(mapping or CanMapping.builtin()).name,
+                      jitter_s=clock.jitter_s)
     # The cycles the run judged (its sidecar), else those the clock puts in the scene.
     cycles = (sidecar or {}).get("clock", {}).get("cycles")
     total = cycles if cycles is not None else len(

@@ -273,6 +273,20 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      r"place of the other's and be named after both; write the values for "
      r"targets.0.motion.speed_mps into those of targets.0.motion, or vary only key paths "
      r"inside it$"),
+    # An index spelled otherwise is the same index (the loader reads 00 as 0).
+    ("parametrize-path-inside-another-spelled-otherwise", TINY + "parametrize:\n  "
+     "targets.00.motion.speed_mps: [10.0, 30.0]\n  targets.0.motion: [{type: stationary, "
+     "position_m: [20, 0, 0]}]\n",
+     r"^{f}:16:3: parametrize.targets.00.motion.speed_mps: targets.00.motion.speed_mps lies "
+     r"inside the key path 'targets.0.motion' varied too"),
+    ("parametrize-path-twice-spelled-otherwise", TINY + "parametrize:\n  seed: [1, 2]\n"
+     "  duration_s, seed: [[1.0, 3]]\n  targets.0.name: [a]\n  targets.00.name: [b]\n",
+     r"^{f}:17:3: parametrize.duration_s, seed: seed: a key path given twice \(first in "
+     r"'seed'\)"),
+    ("parametrize-index-twice-spelled-otherwise", TINY + "parametrize:\n  targets.0.name: [a]\n"
+     "  targets.00.name: [b]\n",
+     r"^{f}:17:3: parametrize.targets.00.name: targets.00.name: a key path given twice \(as "
+     r"'targets.0.name'\) \(first in 'targets.0.name'\)"),
     ("parametrize-path-inside-a-group", TINY + "parametrize:\n  radar: [{profile: "
      "awr1843boost}]\n  seed, radar.estimator: [[1, ti], [2, bartlett]]\n",
      r"^{f}:17:3: parametrize.seed, radar.estimator: radar.estimator lies inside the key path "

@@ -733,6 +733,35 @@ def test_cycles_numbered_after_the_scene_that_come_during_it_are_no_cycles_of_th
         "says); not checked"]
 
 
+@pytest.mark.parametrize("jitter_s, early_s, drift", [
+    (0.3, 0.25, 0.0),   # within the profile's jitter
+    (0.0, 0.0, 5e-4),   # a clock 500 ppm fast over 500 s
+])
+def test_a_radars_own_cycles_after_the_scene_are_not_taken_for_anothers(jitter_s, early_s,
+                                                                        drift):
+    # A radar whose latency jitters by 0.3 s, or whose clock runs fast, puts its own cycles
+    # after the scene on the bus earlier than their numbers say, but after the scene's last:
+    # not another radar's (foreign_cycles failed such a run).
+    import dataclasses
+
+    n = 10_000 if drift else 10
+    tr = truth(n)
+    checker = Checker("s", tr.names, EXPECT, counter_start=0, cycle_s=0.05, jitter_s=jitter_s)
+    checker.anchor(0, 1000.0)
+    checker.after_scene_end = n + 5
+    cycles = [dataclasses.replace(c, bus_t_s=1000.0 + 0.05 * i * (1 - drift))
+              for i, c in enumerate(cycles_from(tr))]
+    after = [dataclasses.replace(Detections.empty(n + 5 + k, None, ()),
+                                 bus_t_s=1000.0 + 0.05 * (n + 5 + k) * (1 - drift) - early_s)
+             for k in range(5)]
+    checker.add_truth(0, tr, OK(n, 2))
+    checker.add_frames(tr, OK(n, 2))
+    checker.add_cycles(cycles + after)
+    checker.settle()
+    report = checker.report()
+    assert report.passed, report.reasons
+
+
 def test_limits_a_scene_expects_but_never_hits_are_said(tmp_path):
     # The scene expects its car to leave the rig's coverage and the radar to be slower than
     # the frames, and the car to come too close: none of it happens in its 3 s. The run

@@ -60,8 +60,8 @@ def test_a_tab_is_named_where_it_is(parser, text, line, column, message):
     ("a: 1\nname: \"short\nb: 2\nc: 3\n", 2, 7, "while scanning a quoted scalar"),
     # A key without its colon: the parser gives up on the line after it.
     ("a: 1\nrig wide\nb: 2\n", 2, 1, "while scanning a simple key"),
-    # An unclosed bracket.
-    ("a: 1\nname: [cut-in\nb: 2\n", 2, 7, "while parsing a flow sequence"),
+    # An unclosed bracket, found at the end of the file.
+    ("a: 1\nname: [cut-in, b\n", 2, 7, "while parsing a flow sequence"),
 ])
 def test_a_broken_construct_is_placed_where_it_begins(parser, text, line, column, starts):
     error = error_of(text)
@@ -69,6 +69,18 @@ def test_a_broken_construct_is_placed_where_it_begins(parser, text, line, column
     assert error.detail.startswith("invalid YAML: ")
     assert error.detail.endswith(f"({starts} that begins here)"), error.detail
     assert re.search(r" at line \d+, column \d+ \(", error.detail)
+
+
+def test_a_flow_collection_broken_within_the_file_is_placed_where_the_parser_stopped(parser):
+    # A comma left out at the end of line 3 of a list over four lines: the line to fix is
+    # where the parser stopped, not where the list opened.
+    error = error_of("a: 1\nt: [{x: 1},\n  {x: 2},\n  {x: 3}\n  {x: 4}]\nb: 2\n")
+    assert error.line == 5, str(error)
+    assert "(while parsing a flow sequence from line 2, column 4)" in error.detail
+    # An unclosed bracket the parser read on past: placed where it stopped, the opening said.
+    error = error_of("a: 1\nname: [cut-in\nb: 2\n")
+    assert error.line == 3, str(error)
+    assert "(while parsing a flow sequence from line 2, column 7)" in error.detail
 
 
 def test_an_alias_without_its_anchor_says_so():

@@ -159,12 +159,36 @@ def test_an_rts_option_given_twice_is_a_usage_error(pytester, first, second):
 
 
 def test_an_rts_option_from_addopts_is_overridden_on_the_command_line(pytester, monkeypatch):
-    # pytest's way to override an option its configuration gives: not a repeat.
+    # pytest's way to override an option its configuration gives: not a repeat. The values
+    # overridden would each stop the session (no such mapping; an output nothing answers).
     pytester.makefile(".scenario.yaml", one=scene("one"))
-    pytester.makeini("[pytest]\naddopts = --rts-method paper\n")
-    pytester.runpytest("--rts-method", "exact").assert_outcomes(passed=1)
-    monkeypatch.setenv("PYTEST_ADDOPTS", "--rts-output udp://127.0.0.1:5999")
-    pytester.runpytest("--rts-output", "simulated-radar").assert_outcomes(passed=1)
+    own = ROOT / "rts_scenario" / "data" / "can" / "rts_detections.mapping.yaml"
+    pytester.makeini("[pytest]\naddopts = --rts-mapping /no/such.mapping.yaml\n")
+    assert pytester.runpytest().ret == pytest.ExitCode.USAGE_ERROR
+    pytester.runpytest("--rts-mapping", str(own)).assert_outcomes(passed=1)
+    monkeypatch.setenv("PYTEST_ADDOPTS", "--rts-output udp://127.0.0.1:9")
+    pytester.runpytest("--rts-mapping", str(own), "--rts-output",
+                       "simulated-radar").assert_outcomes(passed=1)
+
+
+def test_an_rts_option_twice_through_an_args_file_is_a_usage_error(pytester):
+    # pytest reads arguments from @FILE, one per line: its repeats are the command line's.
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    pytester.makefile(".txt", args="--rts-method\npaper\n")
+    result = pytester.runpytest("@args.txt", "--rts-method", "exact")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "--rts-method: given twice ('paper', then 'exact')" in (result.stderr.str()
+                                                                   + result.stdout.str())
+
+
+def test_path_arguments_are_read_as_the_command_line(tmp_path):
+    # pytest.main([Path(...)]) gives invocation_params.args as os.PathLike: the repeat check
+    # took them for strings (INTERNALERROR).
+    import pytest_rts_scenario as plugin
+
+    plugin._refuse_repeats([tmp_path / "one.scenario.yaml", "--rts-method", "exact"])
+    with pytest.raises(pytest.UsageError, match="--rts-method: given twice"):
+        plugin._refuse_repeats([tmp_path, "--rts-method", "exact", "--rts-method=paper"])
 
 
 def test_rts_run_finds_relative_paths_beside_the_test_file(pytester):

@@ -249,7 +249,7 @@ BAD_RIGS = [
      "  range_m: 1000000000000000000000000000000\n", 5, "reference.range_m",
      "an integer beyond 64 bits"),
     ("rts_rig: 1\nname: x\nname: y\n", 3, "name", "duplicate key"),
-    # An unclosed bracket is placed where it opens, not at the end of the file.
+    # An unclosed bracket found at the end of the file is placed where it opens.
     ("rts_rig: 1\nname: [x\n", 2, "", "invalid YAML"),
     ("rts_rig: 1\nlayout: {az_deg: [-5, 5], el_deg: [-5, 5]}\n", 1, "", "'name' is required"),
     ("# nothing but a comment\n", None, "", "the file is empty: expected a mapping of keys"),

@@ -333,6 +333,26 @@ def test_the_ends_a_mapping_carries(tmp_path):
     assert set(CanMapping.from_file(CLUSTER).limits()) == {"rcs_dbsm"}
 
 
+def test_a_float_signal_is_at_its_end_only_at_its_end(tmp_path):
+    # A float signal's step is 0: a reading of 49.6 in a [-50|50] float signal is a reading,
+    # 10.4 dB off a 60 dBsm truth, not "this much or more".
+    text = (PINNED_DBC + "\nBO_ 1538 Extra: 8 RADAR\n SG_ Id : 0|8@1+ (1,0) [0|255] \"\" "
+            "GATEWAY\n SG_ Ext : 8|32@1- (1,0) [-50|50] \"dBsm\" GATEWAY\n\n"
+            "SIG_VALTYPE_ 1538 Ext : 1;\n")
+    (tmp_path / "pinned.dbc").write_text(text)
+    mapping = tmp_path / "pinned.mapping.yaml"
+    mapping.write_text(PINNED_MAPPING.replace("messages: [Obj]", "messages: [Obj, Extra]")
+                       .replace("rcs_dbsm: Rcs", "rcs_dbsm: Ext"))
+    ends = CanMapping.from_file(mapping).limits()
+    assert ends["rcs_dbsm"] == (-50.0, 50.0, 0.0, "Ext")
+    report = _pinned_checker(60.0, 49.6, ends["rcs_dbsm"])
+    assert report.unchecked_quantities == {}
+    assert report.errors["rcs_dbsm"].max == pytest.approx(10.4)
+    assert not report.passed
+    # At its very end, against a truth beyond it: not checked.
+    assert _pinned_checker(60.0, 50.0, ends["rcs_dbsm"]).errors["rcs_dbsm"].count == 0
+
+
 def test_an_rcs_pinned_at_its_signals_end_is_not_checked_and_said(tmp_path, capsys):
     scene, mapping = pinned(tmp_path)
     out = tmp_path / "run.json"
@@ -372,7 +392,7 @@ def test_an_rcs_within_its_signals_range_is_checked(tmp_path):
     assert report.errors["rcs_dbsm"].count == report.target_frames["matched"] == 40
 
 
-def _pinned_checker(truth_rcs, reported_rcs):
+def _pinned_checker(truth_rcs, reported_rcs, ends=(-64.0, 2.0, 0.5, "Rcs")):
     """A checker with the pinned mapping's RCS ends, one target-frame, one detection."""
     from rts_scenario.detections import Detections
     from rts_scenario.kinematics import Tracks
@@ -386,7 +406,7 @@ def _pinned_checker(truth_rcs, reported_rcs):
     tolerances = {"range_m": 0.3, "radial_velocity_mps": 0.3, "az_deg": 0.5, "el_deg": 1.0,
                   "rcs_db": 6.0}
     exp = Expectations(tolerances=tolerances, tolerances_written=frozenset(tolerances))
-    checker = Checker("pinned", ("car",), exp, limits={"rcs_dbsm": (-64.0, 2.0, 0.5, "Rcs")},
+    checker = Checker("pinned", ("car",), exp, limits={"rcs_dbsm": ends},
                       mapping_name="pinned")
     status = np.zeros((1, 1), dtype=np.uint16)
     checker.add_truth(0, tracks, status)

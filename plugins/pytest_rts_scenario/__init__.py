@@ -58,7 +58,7 @@ _ONE_VALUE = ("--rts-output", "--rts-can-interface", "--rts-can-channel", "--rts
               "--rts-radar-channel", "--rts-method")
 
 
-def _refuse_repeats(args: Sequence[str]) -> None:
+def _refuse_repeats(args: Sequence[str | os.PathLike[str]]) -> None:
     """Refuse an ``--rts-*`` option given twice on the command line, as ``run`` does.
 
     argparse keeps the last: ``--rts-mapping A --rts-mapping B`` judged every scene by B
@@ -66,7 +66,7 @@ def _refuse_repeats(args: Sequence[str]) -> None:
     again is pytest's way to override it, and stays so: ``args`` are the command line's alone.
     """
     given: dict[str, str] = {}
-    words = list(args)
+    words = _expanded([os.fspath(a) for a in args])
     for i, word in enumerate(words):
         name, equals, value = word.partition("=")
         if word == "--":
@@ -79,6 +79,25 @@ def _refuse_repeats(args: Sequence[str]) -> None:
             raise pytest.UsageError(f"{name}: given twice ({given[name]!r}, then {value!r}); "
                                     f"give it once")
         given[name] = value
+
+
+def _expanded(args: list[str], depth: int = 0) -> list[str]:
+    """``args`` with each ``@FILE`` replaced by the arguments in it, one per line, as pytest does.
+
+    A file that cannot be read is left as it is (pytest says so itself).
+    """
+    out: list[str] = []
+    for word in args:
+        if word.startswith("@") and depth < 8:
+            try:
+                lines = Path(word[1:]).read_text().splitlines()
+            except (OSError, UnicodeDecodeError):
+                out.append(word)
+                continue
+            out += _expanded([line for line in lines if line], depth + 1)
+        else:
+            out.append(word)
+    return out
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -485,7 +485,8 @@ class CanMapping:
                         low, high = sorted((math.ceil(raws[0] - 1e-9) * scale + offset,
                                             math.floor(raws[1] + 1e-9) * scale + offset))
                     ends = sorted((low * f.scale + f.offset, high * f.scale + f.offset))
-                    step = abs(scale * f.scale)
+                    # A float signal carries any value: only its ends are at its ends.
+                    step = 0.0 if sig.conversion.is_float else abs(scale * f.scale)
                     was = out.get(name)
                     if was is not None:
                         ends = [max(was.low, ends[0]), min(was.high, ends[1])]

@@ -429,20 +429,25 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     for key, values in block.items():
         _check_plain(doc, ("parametrize", key), values)
     axes = [_parameter_axis(doc, key, values) for key, values in block.items()]
-    # Each key path once: a second one silently took the place of the first's value.
+    # Each key path once: a second one silently took the place of the first's value. Paths
+    # compare by their parts as the loader reads them (``targets.00`` is ``targets.0``).
     first_entry: dict[str, str] = {}
+    parts: dict[str, tuple[str | int, ...]] = {}
     for key in block:
         for dotted in (p.strip() for p in key.split(",")):
-            if dotted in first_entry:
-                where = ("in the same entry" if first_entry[dotted] == key
-                         else f"first in {first_entry[dotted]!r}")
+            normal = tuple(int(p) if p.isdigit() else p for p in dotted.split("."))
+            same = next((d for d, n in parts.items() if n == normal), None)
+            if same is not None:
+                where = ("in the same entry" if first_entry[same] == key
+                         else f"first in {first_entry[same]!r}")
+                also = f" (as {same!r})" if same != dotted else ""
                 raise doc.error(("parametrize", key),
-                                f"{dotted}: a key path given twice ({where}); each key path "
-                                f"takes one value per run")
+                                f"{dotted}: a key path given twice{also} ({where}); each key "
+                                f"path takes one value per run")
             first_entry[dotted] = key
+            parts[dotted] = normal
     # A key path inside another: one's value replaces the part of the other's it lies in (or
     # is replaced by it), and the run is labelled with a value it may not play.
-    parts = {dotted: dotted.split(".") for dotted in first_entry}
     for inner, inner_parts in parts.items():
         for outer, outer_parts in parts.items():
             if len(outer_parts) < len(inner_parts) and inner_parts[:len(outer_parts)] == \
