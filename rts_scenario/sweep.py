@@ -222,8 +222,8 @@ def collect_tasks(paths: Iterable[str | Path], notes: list[str] | None = None,
         if path.is_dir():
             found, left_out, loops = folder_files(path, settings.norecursedirs)
             if notes is not None:
-                notes += [f"{loop}: a link to {os.readlink(loop)}, a folder that holds it: "
-                          f"not walked again" for loop in loops]
+                notes += [f"{loop}: {_loop_words(loop)}, a folder that holds it: not walked "
+                          f"again" for loop in loops]
             kinds = {p: scene_file_kind(p, pattern) for p in found}
             scenes = [p for p, kind in kinds.items() if kind == "scene"]
             misnamed = {p for p, kind in kinds.items() if kind == "misnamed"}
@@ -294,6 +294,20 @@ class FolderFiles(NamedTuple):
     files: list[Path]
     left_out: list[Path]  # the folders it does not walk into, as pytest does not
     loops: list[Path]  # the linked folders it does not walk: each holds the link itself
+
+
+def _loop_words(loop: Path) -> str:
+    """Say what a folder the walk does not enter again is: a link, or one reached through one.
+
+    ``sweep sub``, where ``sub/back`` links to ``..``, walks ``sub/back`` (the parent) and
+    meets ``sub/back/sub``: no link itself, but ``sub`` again.
+    """
+    try:
+        if loop.is_symlink():
+            return f"a link to {os.readlink(loop)}"
+    except OSError:
+        pass
+    return f"{loop.resolve()} again (through a link above it)"
 
 
 def folder_files(folder: Path, norecursedirs: Sequence[str] = NORECURSE_PATTERNS

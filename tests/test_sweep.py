@@ -1134,6 +1134,41 @@ def test_a_folder_s_sweep_follows_linked_folders_as_pytest_does_and_stops_at_loo
     assert swept == {"home": "pass"}
 
 
+def test_a_sweep_of_a_folder_whose_link_leads_back_above_it_runs(pytester, capsys, tmp_path):
+    # sweep sub, sub/back -> ..: the walk meets sub/back/sub, no link itself but sub again.
+    # Its note read the link of it: OSError, exit 3, no run and no report.
+    root = pytester.path
+    (root / "good.scenario.yaml").write_text(tiny_scene("good"))
+    (root / "sub").mkdir()
+    (root / "sub" / "back").symlink_to("..")
+    out = tmp_path / "verdicts.json"
+    code, stdout, err = sweep(capsys, root / "sub", "--workers", "1", "--json", out)
+    assert code == 0 and "Traceback" not in stdout + err and "error:" not in err
+    assert [r["status"] for r in json.loads(out.read_text())["runs"]] == ["pass"]
+    assert (f"note: {root / 'sub' / 'back' / 'sub'}: {(root / 'sub').resolve()} again (through "
+            f"a link above it), a folder that holds it: not walked again") in err
+
+
+@pytest.mark.parametrize("bad, code, why", [
+    (["-m", "nightly"], 5, "-m/--marks 'nightly': selects none of the 1 run (their marks: "
+                              "none)"),
+    (["-m", "fast and"], 2, "-m/--marks 'fast and': not a mark expression"),
+    (["--workers", "0"], 2, "--workers: must be >= 1, got 0"),
+    (["--plot", "sweep.jpg"], 2, "--plot sweep.jpg: must name a .png file")])
+def test_a_sweep_stopped_by_bad_input_leaves_no_earlier_report(pytester, capsys, bad, code,
+                                                                why):
+    # Each printed its error and left an earlier sweep's --json in place, to be read by CI as
+    # this sweep's verdicts.
+    pytester.makefile(".scenario.yaml", plain=tiny_scene("plain"))
+    out = pytester.path / "verdicts.json"
+    out.write_text('{"runs": [{"status": "pass"}]}')
+    got, _, err = sweep(capsys, pytester.path, "--json", out, *bad)
+    assert got == code and f"error: {why}" in err
+    payload = json.loads(out.read_text())
+    assert payload["runs"] == [] and payload["error"].startswith(why)
+    assert payload["summary"]["runs"] == 0
+
+
 def test_a_config_file_pytest_cannot_read_stops_the_sweep_as_it_stops_pytest(pytester, capsys):
     pytester.makefile(".scenario.yaml", plain=tiny_scene("plain"))
     (pytester.path / "pyproject.toml").write_text("[tool.pytest.ini_options\n")

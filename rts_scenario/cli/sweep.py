@@ -120,8 +120,13 @@ def _outputs_checked(args: argparse.Namespace) -> PytestSettings:
     return settings
 
 
-def _write_interrupted(args: argparse.Namespace) -> None:
-    """Write ``--json`` with no run and ``"interrupted": true``: stopped before any run."""
+def _write_interrupted(args: argparse.Namespace, error: str | None = None) -> None:
+    """Write ``--json`` with no run and ``"interrupted": true``: stopped before any run.
+
+    ``error``: the sweep stopped on bad input instead (a bad ``-m`` expression, ``--workers
+    0``, ``-m`` selecting no run): no run, not interrupted, and why. Not where ``--json``
+    itself is what is wrong (its check fails here again): the error line says it.
+    """
     from ..errors import RtsError
 
     if not args.json:
@@ -130,7 +135,9 @@ def _write_interrupted(args: argparse.Namespace) -> None:
         try:
             from ..sweep import summarize
 
-            settings = _outputs_checked(args)  # again: the stop may have come before them
+            # Again (the stop may have come before them), --json's alone: a bad --plot is no
+            # reason to leave an earlier report in place.
+            settings = _outputs_checked(argparse.Namespace(**{**vars(args), "plot": None}))
             summary, config = summarize([]), settings.as_json()
         except (RtsError, KeyboardInterrupt):
             return  # the exit code says it
@@ -141,9 +148,13 @@ def _write_interrupted(args: argparse.Namespace) -> None:
                     Path(args.json).suffix.lower() in (".yaml", ".yml"):
                 return
             summary, config = {"runs": 0}, None
-        write_json("--json", args.json, {"runs": [], "summary": {**summary,
-                                                                 "interrupted": True},
-                                         "config": config})
+        if error is None:
+            write_json("--json", args.json, {"runs": [], "summary": {**summary,
+                                                                     "interrupted": True},
+                                             "config": config})
+        else:
+            write_json("--json", args.json, {"runs": [], "summary": summary, "config": config,
+                                             "error": error})
 
 
 def _prepare(args: argparse.Namespace
@@ -185,11 +196,14 @@ def _prepare(args: argparse.Namespace
             tasks, deselected = select_tasks(tasks, args.marks)
         except NoRunSelected as exc:
             print(f"error: {exc}", file=sys.stderr)
+            _write_interrupted(args, str(exc))
             return EXIT_NO_RUNS
     return workers, settings, tasks, deselected
 
 
 def _do_sweep(args: argparse.Namespace) -> int:
+    from ..errors import RtsError
+
     try:
         prepared = _prepare(args)
         from ..sweep import LOCAL_SCHEDULER, exit_code, run_sweep, summarize
@@ -197,6 +211,9 @@ def _do_sweep(args: argparse.Namespace) -> int:
         # Stopped before any run: an earlier sweep's --json must not stay to be read as this
         # one's (as `run` writes its "not run" entries).
         _write_interrupted(args)
+        raise
+    except RtsError as exc:  # bad input before any run: the same, saying why
+        _write_interrupted(args, str(exc))
         raise
     if isinstance(prepared, int):
         return prepared
