@@ -345,7 +345,7 @@ def _evaluate(expression: str, params: dict[str, Parameter]) -> str:
         result = value(ast.parse(_PARAM_REF.sub(r"\1", expression).strip(), mode="eval"))
     except SyntaxError:
         raise ValueError("not a valid expression") from None
-    except RecursionError:
+    except (RecursionError, MemoryError):  # MemoryError: CPython's parser, deeper still
         raise ValueError("expression nested too deeply") from None
     except (ZeroDivisionError, OverflowError, TypeError, ValueError) as exc:
         raise ValueError(str(exc) or type(exc).__name__) from None
@@ -382,15 +382,21 @@ _PARAMETER_TYPES = ("double", "integer", "unsignedInt", "unsignedShort", "string
                     "dateTime")
 
 
+# OpenSCENARIO's integer types and their ranges (XML Schema's int, unsignedInt, unsignedShort).
+_INTEGER_RANGES = {"integer": (-(2**31), 2**31 - 1), "unsignedInt": (0, 2**32 - 1),
+                   "unsignedShort": (0, 2**16 - 1)}
+
+
 def _check_type(name: str, kind: str, value: str) -> str | None:
     """Return why ``value`` is not a ``kind``, or None."""
     try:
         if kind == "double":
             float(value)
-        elif kind in ("integer", "unsignedInt", "unsignedShort"):
+        elif kind in _INTEGER_RANGES:
             number = int(value)
-            if kind != "integer" and number < 0:
-                return f"{name} is an {kind}, got {value!r}"
+            low, high = _INTEGER_RANGES[kind]
+            if not low <= number <= high:
+                return f"{name} is an {kind} ({low} to {high}), got {value!r}"
         elif kind == "boolean" and value not in ("true", "false"):
             return f"{name} is a boolean (true or false), got {value!r}"
     except ValueError:
@@ -1221,6 +1227,18 @@ class _Importer:
                 raise action.el.error(f"entity {action.actor!r} is placed twice in <Init> "
                                       f"(first at line {placed[action.actor].el.line})")
             placed[action.actor] = action
+        # Init happens at t = 0 as a whole: two speeds for one entity there leave one of them
+        # unplayed, whichever the order.
+        speeds: dict[str, _Action] = {}
+        for action in self.init_actions:
+            if action.kind != "speed":
+                continue
+            if action.actor in speeds:
+                raise action.el.error(f"entity {action.actor!r} is given a speed twice in "
+                                      f"<Init> (first at line {speeds[action.actor].el.line}): "
+                                      f"Init happens at t = 0 as a whole; give it one, and "
+                                      f"the change in an event of the storyboard")
+            speeds[action.actor] = action
         todo = list(teleports)
         while todo:
             ready = [a for a in todo if a.params["type"] == "WorldPosition"

@@ -611,6 +611,63 @@ def test_cli_import_rejects_a_parameter_given_twice(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_cli_import_rejects_a_parameter_given_twice_with_and_without_its_dollar(tmp_path,
+                                                                                capsys):
+    # --param takes the name with or without $: EgoSpeed=2 and $EgoSpeed=30 were both taken,
+    # the last played.
+    out = tmp_path / "cut.scenario.yaml"
+    code = main(["import", str(DATA / "cut_in.xosc"), "--radar", "awr1843boost", "--rig",
+                 "wide-3x5", "--param", "EgoSpeed=2", "--param", "$EgoSpeed=30",
+                 "--output", str(out)])
+    assert code == 2
+    assert capsys.readouterr().err == ("error: --param $EgoSpeed: given twice (EgoSpeed=2 and "
+                                       "$EgoSpeed=30); give each parameter once\n")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("kind, value, allowed", [
+    ("unsignedShort", "70000", "0 to 65535"), ("unsignedShort", "-1", "0 to 65535"),
+    ("unsignedInt", "4294967296", "0 to 4294967295"),
+    ("integer", "2147483648", "-2147483648 to 2147483647")])
+def test_an_integer_parameter_beyond_its_type_is_refused(tmp_path, kind, value, allowed):
+    path = variant(tmp_path, "cut_in",
+                   '<ParameterDeclaration name="TriggerDistance" parameterType="double" '
+                   'value="20"/>',
+                   f'<ParameterDeclaration name="TriggerDistance" parameterType="double" '
+                   f'value="20"/><ParameterDeclaration name="M" parameterType="{kind}" '
+                   f'value="{value}"/>')
+    with pytest.raises(ScenarioError, match=rf"M is an {kind} \({allowed}\), got '{value}'"):
+        import_xosc(path, radar="awr1843boost", rig="wide-3x5")
+
+
+def test_an_expression_nested_beyond_the_parser_is_located(tmp_path):
+    # 10,000 unary minus signs: CPython's parser ran out of memory (MemoryError, exit 3).
+    path = variant(tmp_path, "cut_in",
+                   '<ParameterDeclaration name="TriggerDistance" parameterType="double" '
+                   'value="20"/>',
+                   '<ParameterDeclaration name="TriggerDistance" parameterType="double" '
+                   'value="${' + "-" * 10_000 + '20}"/>')
+    with pytest.raises(ScenarioError, match=r"cut_in\.xosc:11: <ParameterDeclaration "
+                                            r"name=\"TriggerDistance\">: expression nested "
+                                            r"too deeply"):
+        import_xosc(path, radar="awr1843boost", rig="wide-3x5")
+
+
+def test_two_speeds_for_one_entity_in_init_are_refused(tmp_path):
+    # The first was dropped without a word, the header still naming its parameter.
+    speed = ('<PrivateAction>\n            <LongitudinalAction>\n              <SpeedAction>\n'
+             '                <SpeedActionDynamics dynamicsShape="step" value="0" '
+             'dynamicsDimension="time"/>\n                <SpeedActionTarget>'
+             '<AbsoluteTargetSpeed value="$EgoSpeed"/></SpeedActionTarget>\n'
+             '              </SpeedAction>\n            </LongitudinalAction>\n'
+             '          </PrivateAction>')
+    again = speed.replace('value="$EgoSpeed"', 'value="5"')
+    path = variant(tmp_path, "cut_in", speed, speed + "\n          " + again)
+    with pytest.raises(ScenarioError, match=r"entity 'Ego' is given a speed twice in <Init> "
+                                            r"\(first at line 57\)"):
+        import_xosc(path, radar="awr1843boost", rig="wide-3x5")
+
+
 def test_cli_import_that_does_not_load_leaves_no_file_and_keeps_the_old_one(tmp_path, capsys,
                                                                             monkeypatch):
     import dataclasses

@@ -52,8 +52,10 @@ def _parameters(values: list[str]) -> dict[str, str]:
         if not sep or not name.strip():
             raise RtsError(f"--param {item!r}: expected NAME=VALUE")
         name, value = name.strip(), value.strip()
-        if name in out:
-            raise RtsError(f"--param {name}: given twice ({name}={out[name]} and "
+        # With or without its $: one parameter.
+        same = next((given for given in out if given.lstrip("$") == name.lstrip("$")), None)
+        if same is not None:
+            raise RtsError(f"--param {name}: given twice ({same}={out[same]} and "
                            f"{name}={value}); give each parameter once")
         out[name] = value
     return out
