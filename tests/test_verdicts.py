@@ -432,10 +432,16 @@ def test_validate_says_an_empty_bench_the_simulated_radar_cannot_fail_checks_not
     assert (f"note: {scene}: on the built-in simulated radar a run fails with nothing_checked: "
             f"nothing to check: the scene has no targets, and the built-in simulated radar with "
             f"noise off makes no false detections") in out
+    # Not "ok": a run of it fails there (the status word says so, as for a limit).
+    assert (f"valid, a run fails: {scene}: 60 frames, 0 targets, schedule built; on the "
+            f"built-in simulated radar, with nothing_checked (the note says why)") in out
+    assert f"ok: {scene}" not in out
     assert cli.main(["validate", str(root / "empty_bench.scenario.yaml")]) == 0
+    out = capsys.readouterr().out
     assert ("on the built-in simulated radar a run reports nothing_checked (expected): nothing "
             "to check: the scene has no targets, and the built-in simulated radar"
-            + _NOISE_THROUGH) in capsys.readouterr().out
+            + _NOISE_THROUGH) in out
+    assert "\nok: " in "\n" + out
 
 
 def test_nothing_checked_is_for_a_scene_without_targets(tmp_path):
