@@ -1364,11 +1364,8 @@ def test_a_log_the_mapping_reads_no_cycle_of_counts_its_messages(recorded, tmp_p
             f"mapping 'cluster-list')") in capsys.readouterr().err
 
 
-def test_a_second_radar_on_the_recorded_bus_fails_the_re_check(recorded, tmp_path):
-    # Another radar with the same identifiers on the bus, counting from 60000: its cycles are
-    # numbered before the scene (60000 on a 16-bit count from 0), yet came on the bus during
-    # it. Counted as before_scene alone, the re-check passed; they are no cycles of this
-    # radar, and fail it.
+def with_a_second_radar(recorded: Path, log: Path, first_counter: int) -> Path:
+    """``recorded`` with another radar's cycles, counting from ``first_counter``, during it."""
     with can.LogReader(str(recorded)) as reader:
         messages = list(reader)
     first = messages[0].timestamp
@@ -1383,9 +1380,18 @@ def test_a_second_radar_on_the_recorded_bus_fails_the_re_check(recorded, tmp_pat
     publisher = DetectionPublisher(Recorder())
     for k in range(40):  # 2 s of a 50 ms radar, from 1 s into the scene
         stamp["t"] = first + 1.0 + 0.05 * k + 0.021
-        publisher.publish(Detections.empty(60000 + k, 1.0 + 0.05 * k))
-    log = write_log(tmp_path / "two.blf", [sorted(messages + extra, key=lambda m: m.timestamp)])
+        publisher.publish(Detections.empty(first_counter + k, 1.0 + 0.05 * k))
+    log = write_log(log, [sorted(messages + extra, key=lambda m: m.timestamp)])
     shutil.copy(str(recorded) + ".rts.json", str(log) + ".rts.json")
+    return log
+
+
+def test_a_second_radar_on_the_recorded_bus_fails_the_re_check(recorded, tmp_path):
+    # Another radar with the same identifiers on the bus, counting from 60000: its cycles are
+    # numbered before the scene (60000 on a 16-bit count from 0), yet came on the bus during
+    # it. Counted as before_scene alone, the re-check passed; they are no cycles of this
+    # radar, and fail it.
+    log = with_a_second_radar(recorded, tmp_path / "two.blf", 60000)
     scene = load_scenario(ROOT / "scenarios" / "highway_following.scenario.yaml")
     assert check_log(scene, recorded).report.passed
     report = check_log(scene, log).report
@@ -1400,23 +1406,7 @@ def test_a_second_radar_counting_ahead_on_the_recorded_bus_fails_the_re_check(re
     # Another radar with the same identifiers, counting from 30000 (after the scene on a
     # 16-bit count from 0), during the scene: its cycles were said to be "measured after the
     # scene's end ... the recorder went on", and counted nowhere. They fail the re-check.
-    with can.LogReader(str(recorded)) as reader:
-        messages = list(reader)
-    first = messages[0].timestamp
-    extra: list[can.Message] = []
-    stamp = {"t": 0.0}
-
-    class Recorder:
-        def send(self, msg):
-            msg.timestamp = stamp["t"]
-            extra.append(msg)
-
-    publisher = DetectionPublisher(Recorder())
-    for k in range(40):  # 2 s of a 50 ms radar, from 1 s into the scene
-        stamp["t"] = first + 1.0 + 0.05 * k + 0.021
-        publisher.publish(Detections.empty(30000 + k, 1.0 + 0.05 * k))
-    log = write_log(tmp_path / "ahead.blf", [sorted(messages + extra, key=lambda m: m.timestamp)])
-    shutil.copy(str(recorded) + ".rts.json", str(log) + ".rts.json")
+    log = with_a_second_radar(recorded, tmp_path / "ahead.blf", 30000)
     scene = load_scenario(ROOT / "scenarios" / "highway_following.scenario.yaml")
     result = check_log(scene, log)
     report = result.report
