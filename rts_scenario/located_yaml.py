@@ -340,10 +340,34 @@ def _plain_words(error: yaml.MarkedYAMLError, text: str) -> str:
         # gave up is said.
         return (f"invalid YAML: {problem} at line {mark.line + 1}, column {mark.column + 1} "
                 f"({error.context} that begins here)")
+    if _flow_line_before(error, text) is not None:
+        assert context is not None
+        # Placed at the end of the line before the one the parser stopped on (`_error_mark`).
+        return (f"invalid YAML: {problem} at line {mark.line + 1}, column {mark.column + 1} "
+                f"({error.context} from line {context.line + 1}, column "
+                f"{context.column + 1}): a comma left out at the end of this line, or that "
+                f"bracket left open?")
     if error.context and context is not None and context.line != mark.line:
         return (f"invalid YAML: {problem} ({error.context} from line {context.line + 1}, "
                 f"column {context.column + 1})")
     return f"invalid YAML: {problem}"
+
+
+def _flow_line_before(error: yaml.MarkedYAMLError, text: str) -> int | None:
+    """Return the line (0-based) where a flow collection broken within the file likely breaks.
+
+    The parser stops on the line after the one that lacks its comma (or after the line that
+    left a bracket open): the last line with content before the one it stopped on, from the
+    collection's first line on. None for other errors.
+    """
+    context, mark = error.context_mark, error.problem_mark
+    if (context is None or mark is None or context.line == mark.line
+            or not (error.context or "").startswith("while parsing a flow")
+            or not text[mark.index:].strip()):
+        return None
+    lines = text.splitlines()
+    return next((i for i in range(mark.line - 1, context.line - 1, -1)
+                 if lines[i].strip() and not lines[i].lstrip().startswith("#")), None)
 
 
 def _tab_at(error: yaml.MarkedYAMLError, text: str) -> bool:
@@ -362,7 +386,7 @@ def _starts_elsewhere(error: yaml.MarkedYAMLError, text: str) -> bool:
     An unclosed quote is found only at the end of the file, a key without its colon on the
     line after it: the line to fix is the one where the quoted scalar or the key began. So is
     an unclosed bracket, found at the end of the file; a flow collection broken within the
-    file (a comma left out) is placed where the parser stopped, the line that lacks it.
+    file is placed at the end of the line before the parser stopped (`_flow_line_before`).
     """
     context, mark = error.context_mark, error.problem_mark
     if context is None or mark is None or context.line == mark.line:
@@ -378,8 +402,14 @@ def _error_mark(error: yaml.MarkedYAMLError, text: str) -> Any:
 
     A tab is placed where it is.
     """
-    if _starts_elsewhere(error, text) and not _tab_at(error, text):
+    if _tab_at(error, text):
+        return error.problem_mark
+    if _starts_elsewhere(error, text):
         return error.context_mark
+    before = _flow_line_before(error, text)
+    if before is not None:
+        line = text.splitlines()[before]
+        return yaml.Mark("", 0, before, len(line.rstrip()), "", 0)
     return error.problem_mark or error.context_mark
 
 

@@ -44,6 +44,7 @@ from .playback import (
     LOST_COUNTERS,
     Playback,
     lost_frames,
+    playback_limits,
     rig_difference,
     rts_rig_record,
     unreachable_reason,
@@ -1127,7 +1128,11 @@ class Pipeline:
         # Which output played the scene: "simulated-radar" is no bench (docs/report.md).
         report.playback = {**playback.to_dict(), "output": options.output}
         judge_empty_bench(report, scene, self._radar_options, options.output)
+        judge_crowded_analytic(report, scene, getattr(getattr(self.output, "radar", None),
+                                                      "frames_crowded_analytic", 0))
         failures = playback.reasons(scene.expectations.expected_limits)
+        report.add_playback_limits(playback_limits(report.playback),
+                                   scene.expectations.expected_limits)
         report.add_expected_not_hit(playback.not_hit(scene.expectations.expected_limits))
         if failures:
             report.reasons += failures
@@ -1417,6 +1422,27 @@ def judge_empty_bench(report: Report, scene: Scenario, radar_options: RadarOptio
         report.passed = False
     elif "nothing_checked" in expected and "nothing_checked" not in report.reason_codes:
         report.add_expected_not_hit(["nothing_checked"])
+
+
+def judge_crowded_analytic(report: Report, scene: Scenario, frames: int) -> None:
+    """Fail a run whose built-in radar read crowded frames in analytic fidelity, unless expected.
+
+    ``frames``: how many (`SimulatedRadar.frames_crowded_analytic`). The analytic model reports
+    targets that share a range-Doppler neighbourhood each as if alone, where a radar (and the
+    cube of fidelity ``auto`` or ``adc``) merges or loses them: what passed there is not what
+    a radar does. Said in ``scene_limits`` (``crowded_in_analytic``).
+    """
+    if not frames:
+        return
+    why = (f"in {frames} frames targets shared a range-Doppler neighbourhood (within 2.5 range "
+           f"and Doppler bins) where the built-in simulated radar, in analytic fidelity, read "
+           f"each as if alone: a radar merges or loses them; fidelity auto or adc runs such "
+           f"frames through the beat-signal cube")
+    expected = "crowded_in_analytic" in scene.expectations.expected_limits
+    report.scene_limits["crowded_in_analytic"] = {"why": why, "expected": expected}
+    if not expected:
+        report.reasons.append(FailReason(f"crowded_in_analytic: {why}", "crowded_in_analytic"))
+        report.passed = False
 
 
 def _stamped(message: can.Message) -> float:

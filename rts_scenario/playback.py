@@ -123,6 +123,23 @@ def playback_reasons(playback: Mapping[str, Any], expected: frozenset[str] | set
     return out
 
 
+def playback_limits(playback: Mapping[str, Any]) -> dict[str, str]:
+    """Return the scene-wide limits the playback hit and why, expected by the scene or not.
+
+    ``frames_sent_late`` (frames went out late), ``frames_lost`` (the RTS lost or did not
+    apply frames, or datagrams came back undelivered): the report's ``scene_limits`` list
+    them as they list every scene-wide limit hit.
+    """
+    out: dict[str, str] = {}
+    for reason in playback_reasons(playback, frozenset()):
+        code = reason.codes[0] if isinstance(reason, FailReason) and reason.codes else ""
+        if code in ("frames_sent_late", "frames_lost"):
+            out[code] = str(reason).removeprefix(f"{code}: ")
+        elif code == "rts_unreachable":
+            out.setdefault("frames_lost", str(reason))
+    return out
+
+
 def stream_reasons(rts: Mapping[str, int] | None, rig: Mapping[str, Any] | None,
                    who: str = "run") -> list[str]:
     """Why what the RTS played is not the stream's, whatever the scene expects.
@@ -266,5 +283,6 @@ def lost_frames(rts: Mapping[str, int] | None) -> int:
 __all__ = ["LOST_COUNTERS", "SEND_LATENESS_ENCODING", "Playback", "delivery_reasons",
            "rig_difference", "stream_reasons",
            "lost_frames",
-           "playback_not_hit", "playback_reasons", "rts_rig_record", "unpack_send_lateness",
+           "playback_limits", "playback_not_hit", "playback_reasons", "rts_rig_record",
+           "unpack_send_lateness",
            "unreachable_reason"]

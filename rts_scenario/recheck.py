@@ -64,6 +64,7 @@ from .pipeline import (
 )
 from .playback import (
     SEND_LATENESS_ENCODING,
+    playback_limits,
     playback_not_hit,
     playback_reasons,
     unpack_send_lateness,
@@ -80,6 +81,9 @@ from .radar.clock import (
     RadarClock,
     late_start_reason,
     late_start_s,
+)
+from .radar.clock import (
+    MAX_LATENCY_S as MAX_CLOCK_LATENCY_S,
 )
 from .recording import STATUS_ENCODING, StatusRecord, TruthChecksums
 from .report import FailReason, Report
@@ -282,7 +286,8 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                 "cycle_s": _number(minimum=MIN_CYCLE_S),
                 # Signed (older versions wrote it clamped at 0): within a cycle of the start.
                 "start_offset_s": _number(),
-                "latency_s": _number(minimum=0), "jitter_s": _number(minimum=0),
+                "latency_s": _number(minimum=0, maximum=MAX_CLOCK_LATENCY_S),
+                "jitter_s": _number(minimum=0, maximum=MAX_CLOCK_LATENCY_S),
                 "counter_start": {"type": ["integer", "null"], "minimum": 0},
                 "cycles": {"type": ["integer", "null"], "minimum": 0},
                 # Bus times and clock steps within a few centuries of the epoch (a float's
@@ -1851,6 +1856,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         result.playback = {**playback, "output": playback.get("output",
                                                              (sidecar or {}).get("output"))}
         failures = playback_reasons(playback, scene.expectations.expected_limits)
+        result.add_playback_limits(playback_limits(playback),
+                                   scene.expectations.expected_limits)
         result.add_expected_not_hit(playback_not_hit(playback, scene.expectations.expected_limits))
         if failures:
             result.reasons += failures

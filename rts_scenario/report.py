@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import math
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -243,6 +243,14 @@ class Report:
         """
         scene = sorted({*(x for x in self.expected_not_hit if ":" not in x), *limits})
         self.expected_not_hit = scene + [x for x in self.expected_not_hit if ":" in x]
+
+    def add_playback_limits(self, limits: Mapping[str, str], expected: Collection[str]) -> None:
+        """Add the scene-wide ``limits`` the playback hit (name -> why) to ``scene_limits``.
+
+        ``expected``: the scene's expected limits (those hit and expected say so).
+        """
+        for name, why in limits.items():
+            self.scene_limits[name] = {"why": why, "expected": name in expected}
 
     @property
     def label(self) -> str:

@@ -287,6 +287,10 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
      "  targets.00.name: [b]\n",
      r"^{f}:17:3: parametrize.targets.00.name: targets.00.name: a key path given twice \(as "
      r"'targets.0.name'\) \(first in 'targets.0.name'\)"),
+    # A superscript two is a digit to str.isdigit, no index: int() of it was a runtime error.
+    ("parametrize-superscript-index",
+     TINY + "parametrize:\n  targets.\u00b2.rcs.rcs_dbsm: [1, 2]\n",
+     r"^{f}:15:1: parametrize: targets.\u00b2.rcs.rcs_dbsm: no such key path in the scene"),
     ("parametrize-path-inside-a-group", TINY + "parametrize:\n  radar: [{profile: "
      "awr1843boost}]\n  seed, radar.estimator: [[1, ti], [2, bartlett]]\n",
      r"^{f}:17:3: parametrize.seed, radar.estimator: radar.estimator lies inside the key path "

@@ -831,6 +831,34 @@ def test_playback_limits_not_hit_follow_the_playback(late, rts, not_hit):
     assert playback_not_hit(playback, set()) == []
 
 
+@pytest.mark.parametrize("late, rts, gone, hit", [
+    (0, None, None, set()),
+    (2, None, None, {"frames_sent_late"}),
+    (0, {"lost_frames": 3, "unsynced_frames": 0}, None, {"frames_lost"}),
+    (0, None, {"address": "udp://192.0.2.1:5005", "datagrams": 4, "error": "No route to host",
+               "first_s": 0.0, "last_s": 0.2}, {"frames_lost"}),
+    (1, {"lost_frames": 0, "unsynced_frames": 1}, None, {"frames_sent_late", "frames_lost"}),
+])
+def test_the_playback_s_limits_hit_join_the_scene_limits(late, rts, gone, hit):
+    # A run failed with frames_lost while its JSON's scene_limits, "limits the whole scene
+    # hits", listed none of them.
+    from rts_scenario.playback import playback_limits
+    from rts_scenario.report import Report
+
+    playback = {"frames_sent": 10, "late_frames": late, "rts": rts, "rts_unreachable": gone,
+                "lateness_s": {"max": 0.2}, "late_after_s": 0.05}
+    limits = playback_limits(playback)
+    assert set(limits) == hit
+    if "frames_sent_late" in hit:
+        assert limits["frames_sent_late"].startswith(f"{late} of 10 frames went out more than")
+    report = Report(scene="s", passed=False, reasons=[], frames={}, targets=[], errors={},
+                    detection_rate=1.0, false_detections=0, false_detections_per_frame=0.0,
+                    bus={})
+    report.add_playback_limits(limits, {"frames_lost"})
+    assert report.scene_limits == {name: {"why": limits[name],
+                                          "expected": name == "frames_lost"} for name in hit}
+
+
 def test_a_scene_wide_limit_is_said_not_hit_only_where_scene_limits_were_judged():
     from rts_scenario.check import Checker
 

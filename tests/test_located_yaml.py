@@ -71,15 +71,17 @@ def test_a_broken_construct_is_placed_where_it_begins(parser, text, line, column
     assert re.search(r" at line \d+, column \d+ \(", error.detail)
 
 
-def test_a_flow_collection_broken_within_the_file_is_placed_where_the_parser_stopped(parser):
-    # A comma left out at the end of line 3 of a list over four lines: the line to fix is
-    # where the parser stopped, not where the list opened.
+def test_a_flow_collection_broken_within_the_file_is_placed_at_the_line_that_breaks_it(parser):
+    # A comma left out at the end of line 4 of a list over four lines: the parser stops on
+    # line 5, the list opened on line 2; the line to fix is 4.
     error = error_of("a: 1\nt: [{x: 1},\n  {x: 2},\n  {x: 3}\n  {x: 4}]\nb: 2\n")
-    assert error.line == 5, str(error)
-    assert "(while parsing a flow sequence from line 2, column 4)" in error.detail
-    # An unclosed bracket the parser read on past: placed where it stopped, the opening said.
+    assert (error.line, error.column) == (4, 9), str(error)
+    assert error.detail.endswith("(while parsing a flow sequence from line 2, column 4): a "
+                                 "comma left out at the end of this line, or that bracket "
+                                 "left open?")
+    # A bracket left open that the parser read on past: the line that opened it.
     error = error_of("a: 1\nname: [cut-in\nb: 2\n")
-    assert error.line == 3, str(error)
+    assert (error.line, error.column) == (2, 14), str(error)
     assert "(while parsing a flow sequence from line 2, column 7)" in error.detail
 
 

@@ -91,6 +91,40 @@ def test_closed_loop_exact_hits_the_set_angle_and_paper_shows_its_error(fidelity
     assert np.sqrt(np.mean(paper_el**2)) == pytest.approx(0.33, rel=0.1)
 
 
+@pytest.mark.parametrize("fidelity, cube, alone", [("analytic", 0, 1), ("auto", 1, 0),
+                                                    ("adc", 1, 0)])
+def test_targets_sharing_a_cell_read_alone_in_analytic_fidelity_are_counted(fidelity, cube,
+                                                                             alone):
+    # The analytic model reads each target at its own cell, as if alone: a scene forcing
+    # analytic passed a crowded bench that auto and adc failed, without a word. Such frames
+    # are counted (the run fails with crowded_in_analytic unless the scene expects it).
+    rig = rs.Rig.preset("wide-3x5")
+    sch = build_schedule(scene_tracks([-15.0, 15.0], [0.0, 2.0], 15.0, -1.0, radar=AWR), rig,
+                         AWR)
+    sim = SimulatedRadar(AWR, rig, fidelity=fidelity, noise=False)
+    sim.process(sch)
+    assert (sim.frames_adc, sim.frames_crowded_analytic) == (cube, alone)
+    # Apart (40 m and 15 m): no frame is crowded, none counted.
+    far = build_schedule(scene_tracks([-15.0, 15.0], [0.0, 2.0], [15.0, 40.0], -1.0,
+                                      radar=AWR), rig, AWR)
+    sim = SimulatedRadar(AWR, rig, fidelity=fidelity, noise=False)
+    sim.process(far)
+    assert sim.frames_crowded_analytic == 0
+
+
+def test_an_os_cfar_goes_through_the_cube_whatever_the_fidelity():
+    # The analytic model detects as a CA-CFAR does: cfar os was ignored outside the cube.
+    rig = rs.Rig.preset("wide-3x5")
+    sch = build_schedule(scene_tracks([-15.0], [0.0], 15.0, -1.0, radar=AWR), rig, AWR)
+    for fidelity in ("analytic", "auto"):
+        sim = SimulatedRadar(AWR, rig, fidelity=fidelity, cfar="os", noise=False)
+        sim.process(sch)
+        assert sim.frames_adc == sch.n_frames and sim.frames_analytic == 0
+        ca = SimulatedRadar(AWR, rig, fidelity=fidelity, cfar="ca", noise=False)
+        ca.process(sch)
+        assert ca.frames_adc == 0
+
+
 def test_two_targets_in_one_cell():
     rig = rs.Rig.preset("wide-3x5")
     # Same range and velocity, 30 deg apart: one range-Doppler cell, two angle peaks.

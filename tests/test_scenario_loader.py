@@ -248,9 +248,10 @@ BAD = [
     (edit("targets:", "include: [../outside.yaml]\ntargets:"), 11, "include[0]",
      "leaves the scene's folder tree"),
     (edit("name: good", "name: good\nname: again"), 3, "name", "duplicate key"),
-    # An unclosed bracket the parser read on past: where it stopped, and where it opened.
-    (edit("rig: wide-3x5", "rig: [wide"), 9, "", "invalid YAML: did not find expected ',' or "
-     "']' (while parsing a flow sequence from line 8, column 6)"),
+    # An unclosed bracket the parser read on past: placed at the line that opened it.
+    (edit("rig: wide-3x5", "rig: [wide"), 8, "", "invalid YAML: did not find expected ',' or "
+     "']' at line 9, column 4 (while parsing a flow sequence from line 8, column 6): a comma "
+     "left out at the end of this line, or that bracket left open?"),
     (edit("name: good", "name: !!python/object/apply:os.system [echo]"), 2, "name",
      "invalid YAML"),
     ("- just\n- a list\n", 1, "", "a scene must be a mapping"),

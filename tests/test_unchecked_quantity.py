@@ -331,6 +331,13 @@ def test_the_ends_a_mapping_carries(tmp_path):
     assert own.limits(None)["rcs_dbsm"][:2] == (-64.0, 63.5)  # a bus not known: the narrower
     # A cartesian mapping derives range and angles from several signals: RCS alone.
     assert set(CanMapping.from_file(CLUSTER).limits()) == {"rcs_dbsm"}
+    # Two messages carrying the range, one to 100 m: the widest (a reading of 100 m in the
+    # other is a measurement, not its end).
+    (tmp_path / "pinned.dbc").write_text(
+        PINNED_DBC + '\nBO_ 1538 Near: 8 RADAR\n SG_ Id : 0|8@1+ (1,0) [0|255] "" GATEWAY\n'
+        ' SG_ Range : 8|14@1+ (0.02,0) [0|100] "m" GATEWAY\n')
+    mapping.write_text(PINNED_MAPPING.replace("messages: [Obj]", "messages: [Obj, Near]"))
+    assert CanMapping.from_file(mapping).limits()["range_m"][:2] == pytest.approx((0.0, 327.66))
 
 
 def test_a_float_signal_is_at_its_end_only_at_its_end(tmp_path):
@@ -344,13 +351,21 @@ def test_a_float_signal_is_at_its_end_only_at_its_end(tmp_path):
     mapping.write_text(PINNED_MAPPING.replace("messages: [Obj]", "messages: [Obj, Extra]")
                        .replace("rcs_dbsm: Rcs", "rcs_dbsm: Ext"))
     ends = CanMapping.from_file(mapping).limits()
-    assert ends["rcs_dbsm"] == (-50.0, 50.0, 0.0, "Ext")
+    # Two units in the last place of 50 in single precision: 2 * 2**-18.
+    assert ends["rcs_dbsm"] == (-50.0, 50.0, 2.0**-17, "Ext")
     report = _pinned_checker(60.0, 49.6, ends["rcs_dbsm"])
     assert report.unchecked_quantities == {}
     assert report.errors["rcs_dbsm"].max == pytest.approx(10.4)
     assert not report.passed
     # At its very end, against a truth beyond it: not checked.
     assert _pinned_checker(60.0, 50.0, ends["rcs_dbsm"]).errors["rcs_dbsm"].count == 0
+    # An end single precision cannot hold: 2.3 is stored as 2.29999995, still its end.
+    (tmp_path / "pinned.dbc").write_text(text.replace("[-50|50]", "[-50|2.3]"))
+    ends = CanMapping.from_file(mapping).limits()
+    stored = float(np.float32(2.3))
+    assert stored < 2.3 and ends["rcs_dbsm"][1] == 2.3
+    assert _pinned_checker(12.0, stored, ends["rcs_dbsm"]).errors["rcs_dbsm"].count == 0
+    assert _pinned_checker(12.0, 2.29, ends["rcs_dbsm"]).errors["rcs_dbsm"].count == 1
 
 
 def test_an_rcs_pinned_at_its_signals_end_is_not_checked_and_said(tmp_path, capsys):

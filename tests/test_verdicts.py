@@ -37,9 +37,10 @@ CAR = "- {name: car, rcs: {rcs_dbsm: 10.0}, motion: {type: stationary, position_
 
 def posts(expect):
     # 20 posts nearer than the car, in the same direction: the FEs' echo slots (8) run out.
+    # A metre apart (3.4 range bins): each its own range cell, none crowded.
     return "".join(
         f"- {{name: post-{i}, rcs: {{rcs_dbsm: 0.0}}, {expect}"
-        f"motion: {{type: stationary, position_m: [{14 + i * 0.5}, {0.2 * (i % 3 - 1):.1f}, "
+        f"motion: {{type: stationary, position_m: [{14 + i * 1.0}, {0.2 * (i % 3 - 1):.1f}, "
         f"1.1]}}}}\n" for i in range(20))
 
 
@@ -436,6 +437,15 @@ def test_validate_says_an_empty_bench_the_simulated_radar_cannot_fail_checks_not
     assert (f"valid, a run fails: {scene}: 60 frames, 0 targets, schedule built; on the "
             f"built-in simulated radar, with nothing_checked (the note says why)") in out
     assert f"ok: {scene}" not in out
+    # Each scene that gets the status gets its note, not only the first of the files.
+    other = tmp_path / "second.scenario.yaml"
+    other.write_text(scene.read_text())
+    assert cli.main(["validate", str(scene), str(other)]) == 0
+    out = capsys.readouterr().out
+    for path in (scene, other):
+        assert (f"note: {path}: on the built-in simulated radar a run fails with "
+                f"nothing_checked: ") in out
+        assert f"valid, a run fails: {path}: " in out
     assert cli.main(["validate", str(root / "empty_bench.scenario.yaml")]) == 0
     out = capsys.readouterr().out
     assert ("on the built-in simulated radar a run reports nothing_checked (expected): nothing "

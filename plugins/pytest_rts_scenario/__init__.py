@@ -82,19 +82,22 @@ def _refuse_repeats(args: Sequence[str | os.PathLike[str]]) -> None:
 
 
 def _expanded(args: list[str], depth: int = 0) -> list[str]:
-    """``args`` with each ``@FILE`` replaced by the arguments in it, one per line, as pytest does.
+    """``args`` with each ``@FILE`` replaced by the arguments in it, as pytest reads them.
 
-    A file that cannot be read is left as it is (pytest says so itself).
+    pytest's parser (argparse's ``fromfile_prefix_chars``) takes each line of the file as one
+    argument, an empty one too, and reads ``@FILE`` arguments in it in turn. A file that
+    cannot be read is left as it is (pytest says so itself); files nested past 100 deep (a
+    file naming itself) are left too.
     """
     out: list[str] = []
     for word in args:
-        if word.startswith("@") and depth < 8:
+        if word.startswith("@") and depth < 100:
             try:
                 lines = Path(word[1:]).read_text().splitlines()
             except (OSError, UnicodeDecodeError):
                 out.append(word)
                 continue
-            out += _expanded([line for line in lines if line], depth + 1)
+            out += _expanded(lines, depth + 1)
         else:
             out.append(word)
     return out

@@ -213,6 +213,19 @@ def multiplexer(message: Message) -> str | None:
                  if sg.is_multiplexer and sg.multiplexer_ids is None), None)
 
 
+def _float_ulp(value: float, bits: int) -> float:
+    """Return the unit in the last place of ``value`` in a float of ``bits`` (32: else 64).
+
+    0 for an infinite value (a float signal without DBC ends: none to be at).
+    """
+    if not math.isfinite(value):
+        return 0.0
+    if bits != 32:
+        return math.ulp(value)
+    _, exponent = math.frexp(value or 2.0**-126)
+    return 2.0 ** (exponent - 24)
+
+
 def signal_range(sig: cantools.database.can.Signal) -> tuple[float, float]:
     """Return a signal's physical range: what its bits carry, within the DBC's stated range."""
     if sig.conversion.is_float:
@@ -309,7 +322,7 @@ class SignalEnds(NamedTuple):
 
     low: float
     high: float
-    step: float  # between two raw values, in the quantity's unit (0: a float signal)
+    step: float  # between two raw values, in the quantity's unit (a float's: 2 ulp at its ends)
     signal: str
 
 
@@ -456,7 +469,8 @@ class CanMapping:
         signals). A radar reports a value beyond its signal's range at the signal's end, if at
         all: the checker does not judge a reading at an end against a truth beyond it
         (`rts_scenario.check.Checker`). ``fd`` as in `steps`; for a bus not known (None), the
-        narrower ends of the two, the coarser step.
+        narrower ends of the two, the coarser step. Messages of one bus that carry a quantity
+        with other ranges give the widest.
         """
         if fd is None:
             classic, flexible = self.limits(False), self.limits(True)
@@ -485,11 +499,16 @@ class CanMapping:
                         low, high = sorted((math.ceil(raws[0] - 1e-9) * scale + offset,
                                             math.floor(raws[1] + 1e-9) * scale + offset))
                     ends = sorted((low * f.scale + f.offset, high * f.scale + f.offset))
-                    # A float signal carries any value: only its ends are at its ends.
-                    step = 0.0 if sig.conversion.is_float else abs(scale * f.scale)
+                    # A float signal's step: two units in the last place at its ends (its DBC
+                    # ends as it stores them, 2.3 as 2.29999995 in 32 bits, are within one).
+                    step = (2.0 * _float_ulp(max(abs(low), abs(high)), sig.length)
+                            * abs(scale * f.scale) if sig.conversion.is_float
+                            else abs(scale * f.scale))
                     was = out.get(name)
                     if was is not None:
-                        ends = [max(was.low, ends[0]), min(was.high, ends[1])]
+                        # Messages of one bus that carry it with other ranges: the widest
+                        # (a reading within it is a measurement in one of them).
+                        ends = [min(was.low, ends[0]), max(was.high, ends[1])]
                         step = max(step, was.step)
                     out[name] = SignalEnds(ends[0], ends[1], step, f.signal)
         return out

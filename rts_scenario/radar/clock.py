@@ -31,6 +31,9 @@ TIME_EPS_S = 1e-9
 # every 10 to 100 ms): shorter ones are typos, and would count millions of cycles into a scene.
 # A cycle fitted to a log's stamps is the log's to answer for: any positive one is taken.
 MIN_CYCLE_S = 1e-3
+# The longest latency a radar's clock may have (s): radars report within a second; beyond
+# this, sums with bus times lose their milliseconds.
+MAX_LATENCY_S = 600.0
 
 
 @dataclass(frozen=True)
@@ -66,6 +69,9 @@ class RadarClock:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"clock.{name}: must be >= 0, got {value!r}")
+        if self.latency_s > MAX_LATENCY_S:
+            raise ValueError(f"clock.latency_s: must be <= {MAX_LATENCY_S:g}, got "
+                             f"{self.latency_s:g}")
         if self.jitter_s > self.latency_s:
             raise ValueError(f"clock.jitter_s: must not exceed latency_s ({self.latency_s:g}), "
                              f"got {self.jitter_s:g}")

@@ -24,7 +24,7 @@ from ..file_kinds import load_kind
 from ..located_yaml import Document, load_yaml, validate
 from ..propagation import C0_MPS
 from ..responses import FrontEndModel
-from .clock import MIN_CYCLE_S, RadarClock
+from .clock import MAX_LATENCY_S, MIN_CYCLE_S, RadarClock
 
 if TYPE_CHECKING:
     from ..rig import Rig
@@ -440,7 +440,8 @@ PROFILE_SCHEMA: dict[str, Any] = {
             "properties": {
                 "cycle_s": {"type": "number", "minimum": MIN_CYCLE_S},
                 "start_offset_s": {"type": "number", "minimum": 0},
-                "latency_s": {"type": "number", "minimum": 0},
+                # Seconds from measuring to the bus: a radar's take some ms to a second.
+                "latency_s": {"type": "number", "minimum": 0, "maximum": MAX_LATENCY_S},
                 "jitter_s": {"type": "number", "minimum": 0},
                 "counter_start": {"oneOf": [{"type": "integer", "minimum": 0},
                                             {"enum": ["auto"]}]},

@@ -34,9 +34,12 @@ Fidelity ``analytic`` evaluates the same superposition at each target's range-Do
 beat phasors at the centre of the sampled sweep, which is what a symmetric window's FFT peak
 gives) without the cube (and draws the noise from the SNR), detecting on the peak cell's level
 as the cube's CFAR does (a target between cells reaches it weakened by both windows' responses:
-up to 2.9 dB, half a cell off in range and Doppler); ``auto`` uses the cube
-only for frames where targets share a range-Doppler neighbourhood (within 2.5 bins), where the
-analytic model cannot tell them apart. Interactions between separate cells (a strong target
+up to 2.9 dB, half a cell off in range and Doppler); ``auto`` uses the cube only for frames
+where targets share a range-Doppler neighbourhood (within 2.5 bins), where the analytic model
+cannot tell them apart: forced ``analytic`` reads them as if alone, and counts such frames
+(``frames_crowded_analytic``: a run fails with ``crowded_in_analytic`` unless the scene
+expects it). Every frame of a radar with an OS-CFAR goes through the cube (the analytic model
+detects as a CA-CFAR does). Interactions between separate cells (a strong target
 masking a weak one in the CFAR's training cells) and false alarms exist only in ``adc``: force it
 when a test is about them (at the default threshold thermal noise crosses the CFAR's with a
 chance of 6e-84 per cell, `thermal_false_alarm_chance`: none in practice).
@@ -109,7 +112,7 @@ def cube_every_frame(radar: SimulatedRadar, echoes: Echoes, n_frames: int) -> ND
 
 
 def cube_no_frame(radar: SimulatedRadar, echoes: Echoes, n_frames: int) -> NDArray[np.bool_]:
-    """Fidelity ``analytic``: no frame needs the cube."""
+    """Fidelity ``analytic``: no frame needs the cube (an OS-CFAR's all go)."""
     return np.zeros(n_frames, dtype=bool)
 
 
@@ -242,6 +245,8 @@ class SimulatedRadar:
     threshold_db: float = THRESHOLD_DB
     frames_adc: int = 0
     frames_analytic: int = 0
+    # Frames read by the analytic model although targets shared a neighbourhood in them.
+    frames_crowded_analytic: int = 0
 
     def __post_init__(self) -> None:
         if self.cfar not in CFARS:
@@ -391,6 +396,15 @@ class SimulatedRadar:
         echoes = self.echoes(schedule)
         n_frames = schedule.n_frames
         use_adc = self._cube_frames(self, echoes, n_frames)
+        if self.cfar != "ca":
+            # The analytic model detects as a CA-CFAR does: an OS-CFAR is the cube's alone.
+            use_adc = np.ones(n_frames, dtype=bool)
+        elif not use_adc.all():
+            # Where targets share a range-Doppler neighbourhood the analytic model cannot tell
+            # them apart: it reports each as if alone, where a radar merges or loses them.
+            # Counted (the run fails with crowded_in_analytic unless the scene expects it).
+            self.frames_crowded_analytic += int((self.crowded(echoes, n_frames)
+                                                 & ~use_adc).sum())
         self.frames_adc += int(use_adc.sum())
         self.frames_analytic += int(n_frames - use_adc.sum())
         out = self._detect_analytic(echoes, schedule, ~use_adc)

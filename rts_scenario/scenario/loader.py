@@ -404,6 +404,11 @@ def _check_size(doc: Document, frames: _Frames, n_targets: int) -> None:
 MAX_COMBINATIONS = 100_000
 
 
+def _key_part(part: str) -> str | int:
+    """Return a key path's part: a list index where it is ASCII digits (not ``²``), else a key."""
+    return int(part) if part.isascii() and part.isdigit() else part
+
+
 def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     """List the scene's test combinations: ``(id, overrides)``; one ``("", {})`` if none.
 
@@ -422,7 +427,7 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
         return [("", {})]
     # The file as written is none of the runs: what the block puts in place is judged in each
     # combination (`load_scenario`), so a placeholder there is no error of the file.
-    placed = [tuple(int(p) if p.isdigit() else p for p in path.strip().split("."))
+    placed = [tuple(_key_part(p) for p in path.strip().split("."))
               for key in block if isinstance(key, str) for path in key.split(",")
               ] if isinstance(block, dict) else []
     validate(doc, _schema_for(doc.data), skip=placed)
@@ -435,7 +440,7 @@ def parametrizations(path: str | Path) -> list[tuple[str, dict[str, Any]]]:
     parts: dict[str, tuple[str | int, ...]] = {}
     for key in block:
         for dotted in (p.strip() for p in key.split(",")):
-            normal = tuple(int(p) if p.isdigit() else p for p in dotted.split("."))
+            normal = tuple(_key_part(p) for p in dotted.split("."))
             same = next((d for d, n in parts.items() if n == normal), None)
             if same is not None:
                 where = ("in the same entry" if first_entry[same] == key
@@ -616,7 +621,7 @@ def _parameter_axis(doc: Document, key: str,
 
 
 def _override(doc: Document, key: str, value: Any) -> None:
-    parts: list[str | int] = [int(p) if p.isdigit() else p for p in key.split(".")]
+    parts: list[str | int] = [_key_part(p) for p in key.split(".")]
     node: Any = doc.data
     for i, part in enumerate(parts[:-1]):
         try:

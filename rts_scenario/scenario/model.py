@@ -44,6 +44,9 @@ LIMITS = {
                       "range offset of the targets' travel in one frame look alike)",
     "quantity_unchecked": "the scene writes a tolerance for a quantity the run's CAN mapping "
                           "does not carry: it is not checked",
+    "crowded_in_analytic": "targets shared a range-Doppler neighbourhood in frames the built-in "
+                           "simulated radar read in analytic fidelity, which reports each as if "
+                           "alone where a radar merges or loses them",
     "nothing_checked": "a scene without targets (an empty bench) played to the built-in "
                        "simulated radar, whose false detections it checks, which makes none "
                        "(no noise, or a CFAR that thermal noise does not cross)",
@@ -52,7 +55,8 @@ LIMITS = {
 # Limits of the whole scene, not of a target-frame: only ``expectations.expected_limits``
 # declares them.
 SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase", "frames_sent_late", "frames_lost",
-                "adjacent_frame", "quantity_unchecked", "nothing_checked")
+                "adjacent_frame", "quantity_unchecked", "crowded_in_analytic",
+                "nothing_checked")
 # Those known from the scene before anything plays (`rts_scenario.preflight.scene_limits`).
 PLANNED_SCENE_LIMITS = ("frame_rate_above_radar", "motion_staircase")
 
