@@ -597,11 +597,11 @@ class Checker:
 
         ``frames``: numbers of cycles not counted (beyond `after_scene_end`), ``bus_t`` their
         bus times (NaN: none). A radar's own cycles after the scene come after its end; these
-        came on the bus while the scene's cycles did, by more than `OUT_OF_COUNT_SLACK_CYCLES`
-        cycles, `OUT_OF_COUNT_SLACK_S`, twice the jitter and 1 % of the time to their number
-        before their numbers allow: another radar's, or a
-        count that does not start where the profile says (`out_of_count_reason`). Returns
-        which. Without `anchor` or a cycle time: none.
+        came on the bus while the scene's cycles did, earlier than their numbers allow by more
+        than `OUT_OF_COUNT_SLACK_CYCLES` cycles, `OUT_OF_COUNT_SLACK_S`, twice the jitter and
+        1 % of the time to their number: another radar's, or a count that does not start where
+        the profile says (`out_of_count_reason`). Returns which. Without `anchor` or a cycle
+        time: none.
         """
         frames = np.asarray(frames, dtype=np.int64)
         if self._anchor is None or self.cycle_s is None or not frames.size:
@@ -627,13 +627,15 @@ class Checker:
         return odd
 
     def out_of_count_reason(self) -> str | None:
-        """Cycles numbered before the scene that came on the bus during it: not this radar's.
+        """Say which cycles numbered outside the scene came on the bus during it: not its radar's.
 
         One radar's cycles before the scene (measured before it began) come before its first
-        cycle's, not seconds after: those are another radar's with the same identifiers on
-        the bus (a second radar, a recording replayed onto it), or a counter that went back;
-        they were not checked (``frames["before_scene"]``), and the verdict cannot rest on a
-        bus that carries them. Needs the bus time of a cycle (`anchor`); else None.
+        cycle's, not seconds after, and its cycles after the scene after its last: those are
+        another radar's with the same identifiers on the bus (a second radar, a recording
+        replayed onto it), or a counter that went back or starts elsewhere than the profile
+        says (`tally_out_of_count`, `tally_ahead`); they were not checked, and the verdict
+        cannot rest on a bus that carries them. Needs the bus time of a cycle (`anchor`); else
+        None.
         """
         n = self._out_of_count_before + sum(c for f, c in self._out_of_count.items()
                                             if f < self._scene_first)

@@ -1432,13 +1432,15 @@ def judge_crowded_analytic(report: Report, scene: Scenario, frames: int) -> None
     cube of fidelity ``auto`` or ``adc``) merges or loses them: what passed there is not what
     a radar does. Said in ``scene_limits`` (``crowded_in_analytic``).
     """
+    expected = "crowded_in_analytic" in scene.expectations.expected_limits
     if not frames:
+        if expected:  # declared, not hit (another fidelity, no crowding, a bench's radar)
+            report.add_expected_not_hit(["crowded_in_analytic"])
         return
     why = (f"in {frames} frames targets shared a range-Doppler neighbourhood (within 2.5 range "
            f"and Doppler bins) where the built-in simulated radar, in analytic fidelity, read "
            f"each as if alone: a radar merges or loses them; fidelity auto or adc runs such "
            f"frames through the beat-signal cube")
-    expected = "crowded_in_analytic" in scene.expectations.expected_limits
     report.scene_limits["crowded_in_analytic"] = {"why": why, "expected": expected}
     if not expected:
         report.reasons.append(FailReason(f"crowded_in_analytic: {why}", "crowded_in_analytic"))

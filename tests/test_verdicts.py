@@ -57,6 +57,32 @@ def test_a_target_that_lost_its_echo_slot_fails_naming_the_limit(tmp_path):
     assert not any(r.startswith("post-") for r in report.reasons)
 
 
+# Two cars side by side at one range and speed: one range-Doppler cell.
+SIDE_BY_SIDE = ("- {name: left, rcs: {rcs_dbsm: 10.0}, motion: {type: stationary, "
+                "position_m: [30, 3.0, 1.1]}}\n"
+                "- {name: right, rcs: {rcs_dbsm: 10.0}, motion: {type: stationary, "
+                "position_m: [30, -3.0, 1.1]}}\n")
+
+
+def test_targets_the_analytic_radar_read_alone_in_one_cell_fail_unless_expected(tmp_path):
+    # Forced analytic fidelity read each as if alone and passed; auto and adc (the cube, a
+    # radar) merge them. The run now says so and fails.
+    report = run_scene(scene(tmp_path, "side", SIDE_BY_SIDE), RunOptions(drain_s=1.0)).report
+    assert not report.passed and report.reason_codes == ["crowded_in_analytic"]
+    assert report.reasons[0].startswith("crowded_in_analytic: in 20 frames targets shared a "
+                                        "range-Doppler neighbourhood")
+    assert report.scene_limits["crowded_in_analytic"]["expected"] is False
+    expects = scene(tmp_path, "side-expected", SIDE_BY_SIDE,
+                    expectations="  expected_limits: [crowded_in_analytic]\n")
+    report = run_scene(expects, RunOptions(drain_s=1.0)).report
+    assert report.passed, report.reasons
+    assert report.scene_limits["crowded_in_analytic"]["expected"] is True
+    # Declared where no frame is crowded: said as not hit.
+    apart = scene(tmp_path, "apart", CAR, expectations="  expected_limits: [crowded_in_analytic]\n")
+    report = run_scene(apart, RunOptions(drain_s=1.0)).report
+    assert report.passed and "crowded_in_analytic" in report.expected_not_hit
+
+
 def test_the_same_limit_passes_when_the_scene_expects_it(tmp_path):
     path = scene(tmp_path, "posts-expected", CAR + posts(""),
                  expectations="  expected_limits: [no_echo_slot]\n")
