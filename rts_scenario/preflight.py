@@ -49,6 +49,10 @@ class Preflight:
         Scene-wide limits the scene declares expected.
     checkable_frames : int or None
         Target-frames under no limit, all targets together (None: not counted).
+    crowded_analytic_frames : int
+        Scene frames in which targets share a range-Doppler neighbourhood where the scene
+        forces the built-in simulated radar's analytic fidelity: a run on that radar fails
+        with ``crowded_in_analytic`` unless the scene expects it (it counts radar cycles).
     """
 
     scene: str
@@ -57,6 +61,7 @@ class Preflight:
     expected: dict[str, frozenset[str]]
     scene_expected: frozenset[str]
     checkable_frames: int | None = None
+    crowded_analytic_frames: int = 0
 
     def unexpected(self) -> list[str]:
         """One line per limit the scene does not declare (these fail a run's verdict).
@@ -184,12 +189,25 @@ class LimitCounter:
         self.scene = scene
         self._counts = {lim: np.zeros(len(scene.targets), dtype=np.int64) for lim in LIMITS}
         self._checkable = 0
+        self._crowded = 0
+        options = scene.radar_options
+        # The built-in radar's analytic model reads crowded frames as if alone: counted where
+        # the scene forces it (an OS-CFAR runs every frame through the cube).
+        self._radar = None
+        if options.fidelity == "analytic" and options.cfar == "ca" and scene.targets:
+            from .radar.simulate import SimulatedRadar
+
+            self._radar = SimulatedRadar(scene.radar, scene.rig, fidelity="analytic",
+                                         noise=False)
 
     def add(self, tracks: Tracks, schedule: Schedule) -> None:
         """Count one batch's target-frames under each limit, and the checkable ones."""
         for lim, mask in limit_masks(tracks, schedule.status).items():
             self._counts[lim] += mask.sum(axis=0)
         self._checkable += int(checkable(tracks, schedule.status).sum())
+        if self._radar is not None:
+            echoes = self._radar.echoes(schedule)
+            self._crowded += int(self._radar.crowded(echoes, schedule.n_frames).sum())
 
     def result(self) -> Preflight:
         """Return the `Preflight` of the batches added."""
@@ -202,7 +220,8 @@ class LimitCounter:
                      if any(c[k] for c in counts.values())},
             scene_limits=scene_limits(scene),
             expected={t.name: expected | t.expected_limits for t in scene.targets},
-            scene_expected=expected, checkable_frames=self._checkable)
+            scene_expected=expected, checkable_frames=self._checkable,
+            crowded_analytic_frames=self._crowded)
 
 
 def preflight(scene: Scenario, method: str = "exact",

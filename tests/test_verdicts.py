@@ -64,7 +64,8 @@ SIDE_BY_SIDE = ("- {name: left, rcs: {rcs_dbsm: 10.0}, motion: {type: stationary
                 "position_m: [30, -3.0, 1.1]}}\n")
 
 
-def test_targets_the_analytic_radar_read_alone_in_one_cell_fail_unless_expected(tmp_path):
+def test_targets_the_analytic_radar_read_alone_in_one_cell_fail_unless_expected(tmp_path,
+                                                                              capsys):
     # Forced analytic fidelity read each as if alone and passed; auto and adc (the cube, a
     # radar) merge them. The run now says so and fails.
     report = run_scene(scene(tmp_path, "side", SIDE_BY_SIDE), RunOptions(drain_s=1.0)).report
@@ -77,6 +78,20 @@ def test_targets_the_analytic_radar_read_alone_in_one_cell_fail_unless_expected(
     report = run_scene(expects, RunOptions(drain_s=1.0)).report
     assert report.passed, report.reasons
     assert report.scene_limits["crowded_in_analytic"]["expected"] is True
+    # validate says it before a run, as a run on the built-in radar fails (not "ok").
+    import rts_scenario.cli as cli
+
+    capsys.readouterr()
+    side = tmp_path / "side.scenario.yaml"
+    assert cli.main(["validate", str(side)]) == 0
+    out = capsys.readouterr().out
+    assert (f"note: {side}: on the built-in simulated radar a run fails with "
+            f"crowded_in_analytic: in 20 of its frames targets share a range-Doppler "
+            f"neighbourhood") in out
+    assert f"valid, a run fails: {side}: 20 frames, 2 targets, schedule built" in out
+    assert cli.main(["validate", str(expects)]) == 0
+    out = capsys.readouterr().out
+    assert "a run reports crowded_in_analytic (expected)" in out and f"ok: {expects}" in out
     # Declared where no frame is crowded: said as not hit.
     apart = scene(tmp_path, "apart", CAR, expectations="  expected_limits: [crowded_in_analytic]\n")
     report = run_scene(apart, RunOptions(drain_s=1.0)).report

@@ -61,6 +61,15 @@ def _do_validate(args: argparse.Namespace) -> int:
                 print(f"note: {label}: on the built-in simulated radar a run "
                       f"{'reports' if declared else 'fails with'} nothing_checked"
                       f"{' (expected)' if declared else ''}: {vacuous}")
+            crowded = pre.crowded_analytic_frames
+            crowded_declared = "crowded_in_analytic" in scene.expectations.expected_limits
+            if crowded:
+                print(f"note: {label}: on the built-in simulated radar a run "
+                      f"{'reports' if crowded_declared else 'fails with'} crowded_in_analytic"
+                      f"{' (expected)' if crowded_declared else ''}: in {crowded} of its frames "
+                      f"targets share a range-Doppler neighbourhood, which the analytic "
+                      f"fidelity the scene forces reads as if each were alone (fidelity auto "
+                      f"or adc runs them through the beat-signal cube)")
             if not (args.strict and unexpected):
                 # The file is valid; what a run of it would fail on is said beside it.
                 # "ok" only where nothing said fails a run: a valid file a run of which fails
@@ -68,13 +77,17 @@ def _do_validate(args: argparse.Namespace) -> int:
                 n, k = len(scene.targets), len(unexpected)
                 # An empty bench the simulated radar cannot fail: a run of it there fails.
                 fails_empty = bool(vacuous) and not declared
-                status = "valid, a run fails" if unexpected or fails_empty else "ok"
+                fails_crowded = bool(crowded) and not crowded_declared
+                status = ("valid, a run fails" if unexpected or fails_empty or fails_crowded
+                          else "ok")
                 print(f"{status}: {label}: {scene.n_frames} frames, {n} target"
                       f"{'' if n == 1 else 's'}, schedule built"
                       + (f"; the {k} warning{' says' if k == 1 else 's say'} why (--strict: "
                          f"errors)" if unexpected else "")
                       + ("; on the built-in simulated radar, with nothing_checked (the note "
-                         "says why)" if fails_empty and not unexpected else ""))
+                         "says why)" if fails_empty and not unexpected else "")
+                      + ("; on the built-in simulated radar, with crowded_in_analytic (the "
+                         "note says why)" if fails_crowded and not unexpected else ""))
         # An error several combinations share, once, naming them all.
         for message, idents in errors.items():
             where = ("" if idents == [""] else
