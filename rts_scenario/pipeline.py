@@ -1424,10 +1424,13 @@ def judge_empty_bench(report: Report, scene: Scenario, radar_options: RadarOptio
         report.add_expected_not_hit(["nothing_checked"])
 
 
-def judge_crowded_analytic(report: Report, scene: Scenario, frames: int) -> None:
+def judge_crowded_analytic(report: Report, scene: Scenario, frames: int,
+                           what: str = "radar cycles") -> None:
     """Fail a run whose built-in radar read crowded frames in analytic fidelity, unless expected.
 
-    ``frames``: how many (`SimulatedRadar.frames_crowded_analytic`). The analytic model reports
+    ``frames``: how many ``what`` (`SimulatedRadar.frames_crowded_analytic`, which counts the
+    frames it processed: its radar cycles; a re-check counts the scene's frames,
+    `rts_scenario.preflight.Preflight.crowded_analytic_frames`). The analytic model reports
     targets that share a range-Doppler neighbourhood each as if alone, where a radar (and the
     cube of fidelity ``auto`` or ``adc``) merges or loses them: what passed there is not what
     a radar does. Said in ``scene_limits`` (``crowded_in_analytic``).
@@ -1437,10 +1440,10 @@ def judge_crowded_analytic(report: Report, scene: Scenario, frames: int) -> None
         if expected:  # declared, not hit (another fidelity, no crowding, a bench's radar)
             report.add_expected_not_hit(["crowded_in_analytic"])
         return
-    why = (f"in {frames} frames targets shared a range-Doppler neighbourhood (within 2.5 range "
-           f"and Doppler bins) where the built-in simulated radar, in analytic fidelity, read "
-           f"each as if alone: a radar merges or loses them; fidelity auto or adc runs such "
-           f"frames through the beat-signal cube")
+    why = (f"in {frames} {what} targets shared a range-Doppler neighbourhood (within 2.5 "
+           f"range and Doppler bins) where the built-in simulated radar, in analytic fidelity, "
+           f"read each as if alone: a radar merges or loses them; fidelity auto or adc runs "
+           f"such {what} through the beat-signal cube")
     report.scene_limits["crowded_in_analytic"] = {"why": why, "expected": expected}
     if not expected:
         report.reasons.append(FailReason(f"crowded_in_analytic: {why}", "crowded_in_analytic"))

@@ -127,16 +127,15 @@ def playback_limits(playback: Mapping[str, Any]) -> dict[str, str]:
     """Return the scene-wide limits the playback hit and why, expected by the scene or not.
 
     ``frames_sent_late`` (frames went out late), ``frames_lost`` (the RTS lost or did not
-    apply frames, or datagrams came back undelivered): the report's ``scene_limits`` list
-    them as they list every scene-wide limit hit.
+    apply frames): the report's ``scene_limits`` list them as they list every scene-wide limit
+    hit. Datagrams that came back undelivered are no RTS's limit (``rts_unreachable``, a
+    reason of its own).
     """
     out: dict[str, str] = {}
     for reason in playback_reasons(playback, frozenset()):
         code = reason.codes[0] if isinstance(reason, FailReason) and reason.codes else ""
         if code in ("frames_sent_late", "frames_lost"):
             out[code] = str(reason).removeprefix(f"{code}: ")
-        elif code == "rts_unreachable":
-            out.setdefault("frames_lost", str(reason))
     return out
 
 

@@ -242,8 +242,8 @@ def vacuous_empty_bench(scene: Scenario, radar_options: RadarOptions) -> str | N
     """Why an empty bench on the built-in simulated radar checks nothing, else None.
 
     A scene without targets checks only the radar's false detections; the simulated radar
-    makes them only from the cube's noise (`adc` fidelity, noise on), as far as its CFAR lets
-    thermal noise through (`thermal_false_alarm_chance`, CA-CFAR; an OS-CFAR lets less
+    makes them only from the cube's noise (`adc` fidelity or an OS-CFAR, noise on), as far as
+    its CFAR lets thermal noise through (`thermal_false_alarm_chance`, CA-CFAR; an OS-CFAR lets less
     through): where more of them than the scene allows over its cycles (Poisson) have a chance
     below `VACUOUS_CHANCE`, its check could not fail either. Played to an RTS, the radar is the
     bench's, and the check is real.
@@ -251,7 +251,8 @@ def vacuous_empty_bench(scene: Scenario, radar_options: RadarOptions) -> str | N
     ro = radar_options
     if scene.targets:
         return None
-    if ro.fidelity == "adc" and ro.noise:
+    # The cube's frames: every one at fidelity adc, and with an OS-CFAR at any fidelity.
+    if (ro.fidelity == "adc" or ro.cfar != "ca") and ro.noise:
         from scipy.special import pdtrc  # scipy when needed: see `check._assign`
 
         from .radar.simulate import THRESHOLD_DB, thermal_false_alarm_chance

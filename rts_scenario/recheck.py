@@ -59,6 +59,7 @@ from .pipeline import (
     CycleTruth,
     after_scene_until_s,
     ambiguity_window_s,
+    judge_crowded_analytic,
     judge_empty_bench,
     lag_dict,
 )
@@ -69,7 +70,7 @@ from .playback import (
     playback_reasons,
     unpack_send_lateness,
 )
-from .preflight import scene_limits, schedule_batches, track_batches
+from .preflight import preflight, scene_limits, schedule_batches, track_batches
 from .radar.clock import (
     CLOCK_TOLERANCE_PPM,
     DRIFT_FLOOR_S,
@@ -1864,6 +1865,12 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             result.passed = False
         # An empty bench the simulated radar played: judged as the run judged it.
         judge_empty_bench(result, scene, scene.radar_options, result.playback["output"])
+        # Crowded frames the simulated radar read alone: judged again from the schedule.
+        options = scene.radar_options
+        if (result.playback["output"] == "simulated-radar" and options.fidelity == "analytic"
+                and options.cfar == "ca"):
+            crowded = preflight(scene, method).crowded_analytic_frames
+            judge_crowded_analytic(result, scene, crowded, "frames of the scene")
         worst = (playback.get("lateness_s") or {}).get("max")
         if (worst is not None and worst > float(playback.get("ambiguity_window_s") or 0.0)
                 and not (sidecar or {}).get("send_lateness")):

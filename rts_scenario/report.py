@@ -454,7 +454,7 @@ UNCODED_REASON = "other"
 # run fails (`bench_failures`).
 BENCH_FAILURE_CODES = ("rts_rig", "rts_stream", "rts_unreachable", "frames_lost",
                        "frames_sent_late", "bus_silent", "mapping", "radar_channel",
-                       "foreign_cycles", "quantity_unchecked")
+                       "foreign_cycles", "quantity_unchecked", "crowded_in_analytic")
 
 
 def bench_failures(codes: Iterable[str], playback: Mapping[str, Any] | None = None

@@ -7,6 +7,8 @@ import pytest
 
 from rts_scenario.pipeline import RunOptions, run_scene
 
+pytest_plugins = ["pytester"]
+
 HEAD = """\
 rts_scenario: 1
 name: {name}
@@ -70,7 +72,7 @@ def test_targets_the_analytic_radar_read_alone_in_one_cell_fail_unless_expected(
     # radar) merge them. The run now says so and fails.
     report = run_scene(scene(tmp_path, "side", SIDE_BY_SIDE), RunOptions(drain_s=1.0)).report
     assert not report.passed and report.reason_codes == ["crowded_in_analytic"]
-    assert report.reasons[0].startswith("crowded_in_analytic: in 20 frames targets shared a "
+    assert report.reasons[0].startswith("crowded_in_analytic: in 20 radar cycles targets shared a "
                                         "range-Doppler neighbourhood")
     assert report.scene_limits["crowded_in_analytic"]["expected"] is False
     expects = scene(tmp_path, "side-expected", SIDE_BY_SIDE,
@@ -92,10 +94,31 @@ def test_targets_the_analytic_radar_read_alone_in_one_cell_fail_unless_expected(
     assert cli.main(["validate", str(expects)]) == 0
     out = capsys.readouterr().out
     assert "a run reports crowded_in_analytic (expected)" in out and f"ok: {expects}" in out
+    # A re-check of its log judges it again (the sidecar says the simulated radar played it).
+    from rts_scenario.recheck import check_log
+    from rts_scenario.scenario import load_scenario
+
+    log = tmp_path / "side.blf"
+    assert not run_scene(scene(tmp_path, "side", SIDE_BY_SIDE),
+                         RunOptions(drain_s=1.0, bus_log=str(log))).report.passed
+    again = check_log(load_scenario(tmp_path / "side.scenario.yaml"), log).report
+    assert again.reason_codes == ["crowded_in_analytic"]
+    assert again.reasons[0].startswith("crowded_in_analytic: in 20 frames of the scene targets")
     # Declared where no frame is crowded: said as not hit.
     apart = scene(tmp_path, "apart", CAR, expectations="  expected_limits: [crowded_in_analytic]\n")
     report = run_scene(apart, RunOptions(drain_s=1.0)).report
     assert report.passed and "crowded_in_analytic" in report.expected_not_hit
+
+
+def test_an_xfail_mark_does_not_cover_crowded_in_analytic(tmp_path, pytester):
+    # xfail expects the radar's check to fail; targets the simulated radar read as if alone
+    # were never judged as a radar would: such a run was XFAIL, and XPASS(strict) before.
+    text = scene(tmp_path, "side-xfail", SIDE_BY_SIDE).read_text() + "marks: [xfail]\n"
+    pytester.makefile(".scenario.yaml", side=text)
+    result = pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    assert ("the scene's xfail mark expects the radar's check to fail, not the bench: "
+            "crowded_in_analytic") in result.stdout.str()
 
 
 def test_the_same_limit_passes_when_the_scene_expects_it(tmp_path):
@@ -387,6 +410,12 @@ _NOISE_THROUGH = ("'s thermal noise crosses its CFAR threshold (13 dB over the n
     ({"duration_s": 0.5}, _NOISE_THROUGH + "1e-78 false detections are to be expected in this "
                                            "run's 10 radar cycles, more than the 0 it allows "
                                            "with a chance of 1e-78"),
+    # An OS-CFAR runs every frame through the cube, at analytic fidelity too: its noise, not
+    # "makes no false detections".
+    ({"radar.fidelity": "analytic", "radar.cfar": "os", "duration_s": 0.5},
+     _NOISE_THROUGH.replace(" per cell: ", " per cell at most (its OS-CFAR lets less through): ")
+     + "1e-78 false detections are to be expected in this run's 10 radar cycles, more than the "
+       "0 it allows with a chance of 1e-78"),
 ])
 @pytest.mark.parametrize("declared", [False, True])
 def test_an_empty_bench_the_simulated_radar_cannot_fail_checks_nothing(radar, vacuous, declared):
