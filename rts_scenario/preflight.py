@@ -52,7 +52,8 @@ class Preflight:
     crowded_analytic_frames : int
         Scene frames in which targets share a range-Doppler neighbourhood where the scene
         forces the built-in simulated radar's analytic fidelity: a run on that radar fails
-        with ``crowded_in_analytic`` unless the scene expects it (it counts radar cycles).
+        with ``crowded_in_analytic`` unless the scene expects it (the run counts the radar's
+        cycles, which may be more or fewer than the scene's frames).
     """
 
     scene: str

@@ -2185,14 +2185,14 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     """
     # The bus the run sent on (its sidecar), else not known: both ends of a signal count.
     fd = (sidecar or {}).get("can_fd")
+    read_with = mapping or CanMapping.builtin()
     checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                       counter_modulus=modulus, counter_start=clock.counter_start,
                       expected_limits=[t.expected_limits for t in scene.targets],
                       scene_limits=scene_limits(scene), variant=scene.variant,
                       parameters=scene.parameters, cycle_s=clock.cycle_s,
-                      not_carried=(mapping or CanMapping.builtin()).not_carried(),
-                      limits=(mapping or CanMapping.builtin()).limits(fd),
-                      mapping_name=(mapping or CanMapping.builtin()).name,
+                      not_carried=read_with.not_carried(), limits=read_with.limits(fd),
+                      mapping_name=read_with.name,
                       jitter_s=clock.jitter_s)
     # The cycles the run judged (its sidecar), else those the clock puts in the scene.
     cycles = (sidecar or {}).get("clock", {}).get("cycles")
