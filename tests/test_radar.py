@@ -149,7 +149,8 @@ def test_noise_statistics_follow_the_snr():
     # shrinking like 1 / sqrt(SNR).
     n = 400
     spreads = {}
-    for rcs in (-15.0, 5.0):
+    # Weak enough that the own sidelobes in the CFAR's training cells do not count (0.3 dB).
+    for rcs in (-25.0, -5.0):
         sch = build_schedule(tracks(np.full(n, KIT.az_deg[3]), np.full(n, KIT.el_deg[3]),
                                     range_m=25.0, rcs=rcs), KIT, PAPER,
                              fe_responses="plane-wave")
@@ -167,7 +168,7 @@ def test_noise_statistics_follow_the_snr():
         expected = 10 * np.log10(amp**2 * gain**2 / noise)
         assert np.median(snr) == pytest.approx(expected, abs=1.0)
         spreads[rcs] = (np.std(az), expected)
-    (s_low, e_low), (s_high, e_high) = spreads[-15.0], spreads[5.0]
+    (s_low, e_low), (s_high, e_high) = spreads[-25.0], spreads[-5.0]
     ratio = s_low / s_high
     assert ratio == pytest.approx(10 ** ((e_high - e_low) / 20), rel=0.25)
 

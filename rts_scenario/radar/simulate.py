@@ -39,10 +39,13 @@ where targets share a range-Doppler neighbourhood (within 2.5 bins), where the a
 cannot tell them apart: forced ``analytic`` reads them as if alone, and counts such frames
 (``frames_crowded_analytic``: a run fails with ``crowded_in_analytic`` unless the scene
 expects it). Every frame of a radar with an OS-CFAR goes through the cube (the analytic model
-detects as a CA-CFAR does). Interactions between separate cells (a strong target
-masking a weak one in the CFAR's training cells) and false alarms exist only in ``adc``: force it
-when a test is about them (at the default threshold thermal noise crosses the CFAR's with a
-chance of 6e-84 per cell, `thermal_false_alarm_chance`: none in practice).
+detects as a CA-CFAR does). The analytic CA-CFAR estimates what the cube's does: the thermal
+noise plus the mean, over each target's training cells, of every target's window response
+there (`_leakage`), so a strong target masks a weaker one near it and its own sidelobes bound
+its SNR, as in ``adc`` (to a few tenths of a dB). A strong target's sidelobes within a weaker
+one's own cell, and false alarms, exist only in ``adc``: force it when a test is about them (at
+the default threshold thermal noise crosses the CFAR's with a chance of 6e-84 per cell,
+`thermal_false_alarm_chance`: none in practice).
 
 Both FFTs are circular, so in every fidelity range and velocity fold as a real radar's do: the
 sampled beat frequency ``S T - fD`` aliases modulo the (complex) sample rate, so the range bin
@@ -58,6 +61,7 @@ from __future__ import annotations
 import math
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
+from functools import cached_property
 from typing import Any, Protocol
 
 import numpy as np
@@ -399,15 +403,16 @@ class SimulatedRadar:
         if self.cfar != "ca":
             # The analytic model detects as a CA-CFAR does: an OS-CFAR is the cube's alone.
             use_adc = np.ones(n_frames, dtype=bool)
-        elif not use_adc.all():
+        alone = np.zeros(n_frames, dtype=bool)
+        if self.cfar == "ca" and not use_adc.all():
             # Where targets share a range-Doppler neighbourhood the analytic model cannot tell
             # them apart: it reports each as if alone, where a radar merges or loses them.
             # Counted (the run fails with crowded_in_analytic unless the scene expects it).
-            self.frames_crowded_analytic += int((self.crowded(echoes, n_frames)
-                                                 & ~use_adc).sum())
+            alone = self.crowded(echoes, n_frames) & ~use_adc
+            self.frames_crowded_analytic += int(alone.sum())
         self.frames_adc += int(use_adc.sum())
         self.frames_analytic += int(n_frames - use_adc.sum())
-        out = self._detect_analytic(echoes, schedule, ~use_adc)
+        out = self._detect_analytic(echoes, schedule, ~use_adc, alone)
         for pos in np.flatnonzero(use_adc):  # one cube per frame
             one = self.echoes(schedule, slice(pos, pos + 1))
             out[pos] = self._detect_adc(one, int(schedule.frame_index[pos]),
@@ -490,10 +495,10 @@ class SimulatedRadar:
         power += np.einsum("lmn,lmn->ln", spec.imag, spec.imag)  # the channels
         from scipy import ndimage  # scipy when needed: see `check._assign`
 
-        noise = self._noise_floor(power)
         # Both FFTs are circular: a peak's neighbours wrap around in range and Doppler alike.
-        hits = (power > noise * 10.0 ** (self.threshold_db / 10.0)) & (
-            power == ndimage.maximum_filter(power, size=3, mode="wrap"))
+        peaks = power == ndimage.maximum_filter(power, size=3, mode="wrap")
+        noise = self._noise_floor(power, peaks)
+        hits = peaks & (power > noise * 10.0 ** (self.threshold_db / 10.0))
         d_idx, r_idx = np.nonzero(hits)
         if d_idx.size == 0:
             return _empty(frame, t_s)
@@ -520,8 +525,13 @@ class SimulatedRadar:
         return Detections(cycle=frame, t_s=t_s,
                           **{name: v for name, v in found.items() if name != "source"})
 
-    def _noise_floor(self, power: FloatArray) -> FloatArray:
-        """CFAR noise estimate per cell from its training cells (guard cells excluded)."""
+    def _noise_floor(self, power: FloatArray,
+                     where: NDArray[np.bool_] | None = None) -> FloatArray:
+        """CFAR noise estimate per cell from its training cells (guard cells excluded).
+
+        ``where``: the cells wanted (the others may be left infinite: an OS-CFAR's order
+        statistic is taken at those alone, a tenth of the cost at a frame's local maxima).
+        """
         guard, train = CFAR_GUARD, CFAR_TRAIN
         half = guard + train
         footprint = np.ones((2 * half + 1, 2 * half + 1), dtype=bool)
@@ -534,17 +544,29 @@ class SimulatedRadar:
             inner = padded[train:-train, train:-train]
             floor = (_box_sum(padded, half) - _box_sum(inner, guard)) / footprint.sum()
         else:  # ordered statistic: the 3/4 quantile of the training cells
-            from scipy import ndimage
+            rank = int(0.75 * footprint.sum())
+            if where is None:
+                from scipy import ndimage
 
-            floor = ndimage.rank_filter(padded, rank=int(0.75 * footprint.sum()),
-                                        footprint=footprint, mode="constant")[half:-half,
-                                                                              half:-half]
+                floor = ndimage.rank_filter(padded, rank=rank, footprint=footprint,
+                                            mode="constant")[half:-half, half:-half]
+            else:
+                floor = np.full(power.shape, np.inf)
+                d_idx, r_idx = np.nonzero(where)
+                windows = np.lib.stride_tricks.sliding_window_view(
+                    padded, footprint.shape)[d_idx, r_idx][:, footprint]
+                floor[d_idx, r_idx] = np.partition(windows, rank, axis=1)[:, rank]
         # Without noise the floor is the echoes' sidelobes: keep it above numerical zero.
         return np.maximum(floor, power.max(initial=0.0) * 1e-12 + 1e-300)
 
     def _detect_analytic(self, echoes: Echoes, schedule: PlayedFrames,
-                         frames: NDArray[np.bool_]) -> list[Detections | None]:
-        """Detect the selected frames with the superposition model (None for the others)."""
+                         frames: NDArray[np.bool_],
+                         alone: NDArray[np.bool_] | None = None) -> list[Detections | None]:
+        """Detect the selected frames with the superposition model (None for the others).
+
+        ``alone``: frames whose targets are read each as if alone (crowded frames the cube does
+        not take: each target's CFAR estimate holds its own sidelobes, no other target's).
+        """
         p = self.profile
         arr = p.array
         out: list[Detections | None] = [None] * schedule.n_frames
@@ -578,18 +600,29 @@ class SimulatedRadar:
         # divided by that loss (the noise with them).
         straddle = (p.range_response(target_bin - cell)
                     * p.doppler_response(doppler_bin - np.round(doppler_bin)))
+        # What the CA-CFAR estimates at each target's peak cell: the thermal noise plus every
+        # target's window response in its training cells (a strong target masks a weaker one
+        # near it, and its own sidelobes bound its SNR), as the cube's CFAR sees them.
+        peak_power = (np.abs(snap) ** 2).sum(axis=1)
+        floor = arr.n_elements * noise_power + self._leakage(frame_of, *self._fold(
+            target_bin, doppler_bin), peak_power,
+            None if alone is None else alone[frame_of])
         if self._sigma > 0.0:
             noise = self.rng.standard_normal((2, *snap.shape)) * np.sqrt(noise_power / 2.0)
-            clean = (np.abs(snap) ** 2).sum(axis=1) / (noise_power * arr.n_elements)
+            clean = peak_power / (noise_power * arr.n_elements)
             snap = snap + (noise[0] + 1j * noise[1]) / straddle[:, None]
             # Sub-bin estimates scatter like the interpolated FFT peak: ~1 / (pi sqrt(2 SNR)),
-            # the peak cell's SNR.
+            # the peak cell's SNR over the thermal noise.
             spread = 1.0 / (np.pi * np.sqrt(2.0 * clean * straddle**2))
             range_bin = range_bin + self.rng.standard_normal(clean.size) * spread
             doppler_bin = doppler_bin + self.rng.standard_normal(clean.size) * spread
-            snr = (np.abs(snap) ** 2).sum(axis=1) / (noise_power * arr.n_elements)
         else:
-            snr = np.full(entry.size, np.inf)
+            # Without noise the cube's floor is the echoes' sidelobes, kept above numerical
+            # zero by the frame's strongest cell (`_noise_floor`).
+            strongest = np.zeros(schedule.n_frames)
+            np.maximum.at(strongest, frame_of, peak_power * straddle**2)
+            floor = np.maximum(floor, strongest[frame_of] * 1e-12 + 1e-300)
+        snr = (np.abs(snap) ** 2).sum(axis=1) / floor
         # What the FFTs show; the TDM compensation and the angles get the folded Doppler too.
         range_bin, doppler_bin = self._fold(range_bin, doppler_bin)
         range_m = range_bin * self._range_bin_m
@@ -607,6 +640,74 @@ class SimulatedRadar:
                 cycle=int(schedule.frame_index[pos]), t_s=float(schedule.t_s[pos]),
                 **{name: values[rows] for name, values in found.items() if name != "source"})
         return out
+
+    def _leakage(self, frame: NDArray[np.int64], range_bin: FloatArray, doppler_bin: FloatArray,
+                 power: FloatArray, alone: NDArray[np.bool_] | None = None) -> FloatArray:
+        """Every target's power in each target's CA-CFAR training cells, their mean there.
+
+        ``range_bin, doppler_bin``: folded bins, ``power``: each target's power at its own
+        position summed over the channels; ``alone``: targets that see their own power alone
+        (`_detect_analytic`). A target at offset ``(dr, dd)`` from a peak cell
+        puts ``power |H_r(x - dr)|^2 |H_d(y - dd)|^2`` in the cell ``(x, y)`` cells from it
+        (`RadarProfile.range_response`, `doppler_response`), the training cells are the
+        CFAR's window less its guard window, so its share is a difference of two products of
+        sums over one axis each (`_LeakageTables`). Targets are summed in power (their cross
+        terms average out over the cells); pairs farther apart than `LEAKAGE_REACH_BINS` on an
+        axis are left out (below -100 dB of the farther target's power). Near the ends of the
+        range axis the cube's CFAR mirrors its window (`_noise_floor`): those cells are summed
+        one by one.
+        """
+        tables = self._leakage_tables
+        n_r, n_d = self._n, self._loops
+        cell_r = np.mod(np.round(range_bin), n_r)
+        cell_d = np.round(doppler_bin)
+        leak = power * tables.share(_circular(range_bin - cell_r, n_r), doppler_bin - cell_d)
+        among = np.arange(frame.size) if alone is None else np.flatnonzero(~alone)
+        first, second = (among[pick] for pick in _near_pairs(
+            frame[among], range_bin[among], doppler_bin[among], n_r, n_d, LEAKAGE_REACH_BINS))
+        for chunk in range(0, first.size, _LEAKAGE_PAIRS):
+            i = np.concatenate([first[chunk : chunk + _LEAKAGE_PAIRS],
+                                second[chunk : chunk + _LEAKAGE_PAIRS]])
+            j = np.concatenate([second[chunk : chunk + _LEAKAGE_PAIRS],
+                                first[chunk : chunk + _LEAKAGE_PAIRS]])
+            share = tables.share(_circular(range_bin[j] - cell_r[i], n_r),
+                                 _circular(doppler_bin[j] - cell_d[i], n_d))
+            leak += np.bincount(i, weights=power[j] * share, minlength=leak.size)
+        # The mirrored window near the range ends: those targets' sums again, cell by cell.
+        half = CFAR_GUARD + CFAR_TRAIN
+        edge = np.flatnonzero((cell_r < half) | (cell_r > n_r - 1 - half))
+        if edge.size:
+            leak[edge] = self._edge_leakage(edge, frame, range_bin, doppler_bin, cell_r, cell_d,
+                                            power, first, second)
+        return leak / tables.n_train
+
+    def _edge_leakage(self, edge: NDArray[np.int64], frame: NDArray[np.int64],
+                      range_bin: FloatArray, doppler_bin: FloatArray, cell_r: FloatArray,
+                      cell_d: FloatArray, power: FloatArray, first: NDArray[np.int64],
+                      second: NDArray[np.int64]) -> FloatArray:
+        """`_leakage`'s sums, undivided, for peak cells whose window the range ends mirror."""
+        p, n_r, n_d = self.profile, self._n, self._loops
+        guard, half = CFAR_GUARD, CFAR_GUARD + CFAR_TRAIN
+        # The targets each edge target sees: itself and its partners.
+        at_edge = np.zeros(frame.size, dtype=bool)
+        at_edge[edge] = True
+        i = np.concatenate([edge, first[at_edge[first]], second[at_edge[second]]])
+        j = np.concatenate([edge, second[at_edge[first]], first[at_edge[second]]])
+        offsets = np.arange(-half, half + 1)
+        x = cell_r[i, None] + offsets  # the window's range cells, mirrored as numpy's "reflect"
+        x = np.where(x < 0, -x, np.where(x > n_r - 1, 2 * (n_r - 1) - x, x))
+        r_power = p.range_response(_circular(x - range_bin[j, None], n_r)) ** 2
+        d_power = p.doppler_response(_circular(cell_d[i, None] + offsets
+                                               - doppler_bin[j, None], n_d)) ** 2
+        inner = np.abs(offsets) <= guard
+        share = (r_power[:, ~inner].sum(axis=1) * d_power.sum(axis=1)
+                 + r_power[:, inner].sum(axis=1) * d_power[:, ~inner].sum(axis=1))
+        total = np.bincount(i, weights=power[j] * share, minlength=frame.size)
+        return np.asarray(total[edge], dtype=np.float64)
+
+    @cached_property
+    def _leakage_tables(self) -> _LeakageTables:
+        return _LeakageTables(self.profile)
 
     def _measure(self, snap: ComplexArray, range_m: FloatArray, doppler_hz: FloatArray,
                  snr_db: FloatArray) -> dict[str, Any]:
@@ -637,17 +738,95 @@ class SimulatedRadar:
 
 # Two targets closer than this in range and in Doppler bins share a neighbourhood (crowded).
 CROWDED_BINS = 2.5
+# Targets farther apart than this on an axis (bins) leave each other's CFAR estimate alone in
+# the analytic model: 16 bins beyond the CFAR's window, the Hann windows' sidelobes there are
+# below -100 dB of the target's power, averaged over the training cells.
+LEAKAGE_REACH_BINS = CFAR_GUARD + CFAR_TRAIN + 16
+# Pairs of targets per step of the analytic leakage sums (bounded temporaries).
+_LEAKAGE_PAIRS = 65_536
+# Sub-bin steps of the leakage tables (linear interpolation: within 3e-4 of the value).
+_LEAKAGE_STEPS_PER_BIN = 256
+
+
+def _circular(offset: FloatArray, n: int) -> FloatArray:
+    """Offsets on a circular axis of ``n`` bins, in [-n / 2, n / 2)."""
+    return np.mod(offset + n / 2.0, n) - n / 2.0
+
+
+class _LeakageTables:
+    """A target's share of a CA-CFAR estimate by its offset from the peak cell (`_leakage`).
+
+    Per axis, the sums of the window's power response over the CFAR's guard window and over
+    the rest of its window, tabulated at `_LEAKAGE_STEPS_PER_BIN` steps per bin over the offsets
+    `_leakage` reaches (the whole axis where that is shorter), on the axis's circle. The
+    training cells are the window's cells outside the guard on one axis or the other: a sum of
+    two positive products (no difference of near-equal ones, which would lose a target's own
+    sidelobes to its main lobe's rounding).
+    """
+
+    def __init__(self, profile: RadarProfile) -> None:
+        half = CFAR_GUARD + CFAR_TRAIN
+        self.n_train = (2 * half + 1) ** 2 - (2 * CFAR_GUARD + 1) ** 2
+        self._axes = [self._sums(profile.range_response, profile.adc_samples),
+                      self._sums(profile.doppler_response, profile.chirp_loops)]
+
+    @staticmethod
+    def _sums(response: Any, n: int) -> tuple[float, FloatArray, FloatArray]:
+        steps, half = _LEAKAGE_STEPS_PER_BIN, CFAR_GUARD + CFAR_TRAIN
+        reach = min(float(LEAKAGE_REACH_BINS + 1), n / 2.0)
+        size = int(round(2 * reach * steps)) + 1  # offsets -reach + i / steps
+        # Cell m at offset o from the target lies at m - o: on the same grid of steps, the
+        # response once at every point, then each cell's values a slice of it.
+        wide = int(round((reach + half) * steps))
+        power = response(_circular(np.arange(-wide, wide + 1) / steps, n)) ** 2
+        guard = np.zeros(size)
+        outside = np.zeros(size)
+        for m in range(-half, half + 1):
+            start = wide + m * steps + int(round(reach * steps))  # offset -reach: m + reach
+            values = power[start - size + 1 : start + 1][::-1]
+            if abs(m) <= CFAR_GUARD:
+                guard += values
+            else:
+                outside += values
+        return reach, guard, outside
+
+    def share(self, range_offset: FloatArray, doppler_offset: FloatArray) -> FloatArray:
+        """Sum over the training cells of a unit target's power at these offsets from them."""
+        sums = []
+        for (reach, guard, outside), offset in zip(self._axes, (range_offset, doppler_offset),
+                                                   strict=True):
+            at = (np.clip(offset, -reach, reach) + reach) * _LEAKAGE_STEPS_PER_BIN
+            low = np.minimum(at.astype(np.int64), guard.size - 2)
+            frac = at - low
+            sums.append(((1.0 - frac) * guard[low] + frac * guard[low + 1],
+                         (1.0 - frac) * outside[low] + frac * outside[low + 1]))
+        (r_guard, r_out), (d_guard, d_out) = sums
+        # Outside the guard in range (any Doppler cell), or inside it in range and outside it
+        # in Doppler.
+        return r_out * (d_guard + d_out) + r_guard * d_out
 
 
 def _close_pairs(frame: NDArray[np.int64], r: FloatArray, d: FloatArray, n_r: int, n_d: int,
                  within: float) -> NDArray[np.int64]:
     """Return the entries with another of the same frame within ``within`` bins on both axes.
 
-    ``r`` in [0, n_r) and ``d`` in [-n_d / 2, n_d / 2) are folded bins on circular axes. Sorted
-    by frame and range, each entry is compared with its successors while they are still within
-    reach in range (entries near the end of the range axis also meet those near its start): the
-    cost grows with the entries times the largest group sharing a range neighbourhood, never
-    with the square of the entries.
+    ``r`` in [0, n_r) and ``d`` in [-n_d / 2, n_d / 2) are folded bins on circular axes
+    (`_near_pairs`).
+    """
+    first, second = _near_pairs(frame, r, d, n_r, n_d, within)
+    return np.unique(np.concatenate([first, second]))
+
+
+def _near_pairs(frame: NDArray[np.int64], r: FloatArray, d: FloatArray, n_r: int, n_d: int,
+                within: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Return the pairs of entries of one frame within ``within`` bins of each other on both axes.
+
+    ``r`` in [0, n_r) and ``d`` in [-n_d / 2, n_d / 2) are folded bins on circular axes. Each
+    pair of distinct entries once, as two index arrays (``first < second``). Sorted by frame
+    and range, each entry is compared with its successors while they are still within reach in
+    range (entries near the start of the range axis are also seen one axis length on, next to
+    its end): the cost grows with the entries times the largest group sharing a range
+    neighbourhood, never with the square of the entries.
     """
     index = np.arange(frame.size)
     wrap = r < within  # also seen one axis length further on, next to the end
@@ -657,16 +836,18 @@ def _close_pairs(frame: NDArray[np.int64], r: FloatArray, d: FloatArray, n_r: in
     who = np.concatenate([index, index[wrap]])
     order = np.lexsort((rr, f))
     f, rr, dd, who = f[order], rr[order], dd[order], who[order]
-    close = np.zeros(frame.size, dtype=bool)
+    found: list[NDArray[np.int64]] = []
     for lag in range(1, f.size):
         reach = (f[lag:] == f[:-lag]) & (rr[lag:] - rr[:-lag] < within)
         if not reach.any():
             break
         apart = np.abs(np.mod(dd[lag:] - dd[:-lag] + n_d / 2, n_d) - n_d / 2)
         pair = reach & (apart < within) & (who[lag:] != who[:-lag])
-        close[who[:-lag][pair]] = True
-        close[who[lag:][pair]] = True
-    return np.flatnonzero(close)
+        a, b = who[:-lag][pair], who[lag:][pair]
+        found.append(np.minimum(a, b) * frame.size + np.maximum(a, b))
+    # A pair met both directly and through the wrap (reach beyond half the axis): once.
+    keys = np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+    return keys // max(frame.size, 1), keys % max(frame.size, 1)
 
 
 class _NoiseAhead:
