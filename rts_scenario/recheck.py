@@ -2216,6 +2216,15 @@ def _check(scene: Scenario, log: str | Path, mapping: CanMapping | None, counter
     else:
         first = int(np.mod(counters[0] - clock.counter_start + modulus // 2, modulus)
                     - modulus // 2) if counters.size else 0
+        if (sidecar is None and alignment.offset_s is not None and counters.size
+                and np.isfinite(bus_t_s[0])):
+            # Aligned by its stamps: they tell how many cycles from the scene's first the log's
+            # first was measured, the counter which of those its wrap allows (a logger started
+            # long before the scene, or after it began, beyond half the counter's range).
+            zero_s = alignment.offset_s + clock.latency_s + clock.start_offset_s
+            timed = (float(bus_t_s[0]) - zero_s) / clock.cycle_s
+            first += int(np.round((timed - first) / modulus)) * modulus
+            checker.anchor(0, zero_s)  # the checker numbers its first cycle alike
         rel = sequential_numbers(counters, modulus, bus_t_s, clock.cycle_s) + first
     inside = (rel >= 0) & (rel < total)
     recorded_clock = (sidecar or {}).get("clock") or {}

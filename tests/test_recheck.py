@@ -1119,6 +1119,37 @@ def test_an_8_bit_radar_silent_for_its_first_seven_seconds_misses_them(tmp_path,
         assert (report.frames["late"], report.frames["repeated"]) == (0, 0)
 
 
+@pytest.mark.parametrize("free", [False, True])
+def test_a_log_without_sidecar_begun_over_half_an_8_bit_count_into_the_scene_misses_those(
+        tmp_path, free):
+    # The logger started 150 cycles (7.5 s) into the scene. Numbered by the counter from the
+    # profile's start alone, the log's first cycle read as 106 before the scene: every cycle
+    # 256 early, none of them the scene's (a counter counting from "auto", by the fitted
+    # clock, likewise). The stamps, aligned to the scene by the detections, tell the 150.
+    from test_radar_clock import write_radar
+
+    from rts_scenario.radar.clock import RadarClock
+
+    shutil.copy(CUT_IN, tmp_path / "cut_in.scenario.yaml")
+    shutil.copytree(CUT_IN.parent / "rigs", tmp_path / "rigs", dirs_exist_ok=True)
+    radar = write_radar(tmp_path, cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                        jitter_s=0.004, counter_start="auto" if free else 100)
+    scene = load_scenario(tmp_path / "cut_in.scenario.yaml",
+                          {**QUIET, "radar.profile": radar, "duration_s": 20.0})
+    log = tmp_path / "late.blf"
+    options = RunOptions(mapping=eight_bit_mapping(tmp_path), bus_log=str(log))
+    with Pipeline.for_scene(scene, options) as pipeline:
+        pipeline.output.clock = RadarClock(cycle_s=0.05, start_offset_s=0.01, latency_s=0.13,
+                                           jitter_s=0.004, counter_start=100)
+        pipeline.run(scene)
+    copy = write_log(tmp_path / "copy.blf", radar_cycles(log)[150:])
+    report = check_log(scene, copy, mapping=options.mapping).report
+    assert report.frames["total"] == 400
+    assert report.frames["checked"] == 250 and report.frames["missing"] == 150
+    assert (report.frames["late"], report.frames["repeated"]) == (0, 0)
+    assert report.errors["range_m"].max < 0.05  # every cycle against its own frame
+
+
 def test_a_log_whose_clock_moved_an_hour_re_checks_by_its_sidecar_to_the_live_verdict(tmp_path):
     # A copy of the log whose timestamps a tool moved by an hour (a time zone): its first
     # cycle is not an hour of cycles after the scene's start the sidecar keeps; an 8-bit
