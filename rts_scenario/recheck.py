@@ -130,6 +130,9 @@ FIT_OUTLIER_FLOOR_S = 0.001
 BOOTSTRAP_ROUNDS = 30
 # A detection farther than this (normalized by the tolerances) from every target counts this.
 GATE2 = 9.0
+# A second offset matching this share of what the best one matches, a scene's length away: the
+# log holds the scene played again (`estimate_offset`).
+REPEAT_MATCH = 0.3
 
 
 class LogError(RtsError):
@@ -1341,11 +1344,15 @@ class OffsetEstimate:
         Offsets up to this much earlier match the detections as well (>= 0).
     spread_s : float or None
         Spread of ``offset_s`` over resampled cycles (None: too few cycles to tell).
+    others_s : tuple of float
+        Offsets a scene's length or more away that match a good part as many detections
+        (`REPEAT_MATCH`): the log holds the scene played again there.
     """
 
     offset_s: float
     plateau_s: float
     spread_s: float | None
+    others_s: tuple[float, ...] = ()
 
     @property
     def uncertainty_s(self) -> float:
@@ -1354,14 +1361,16 @@ class OffsetEstimate:
 
 
 def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections],
-                    latency_s: float) -> OffsetEstimate:
+                    latency_s: float, within_s: tuple[float, float] | None = None
+                    ) -> OffsetEstimate:
     """Log time of scene time 0 that best matches detections to the truth, and its uncertainty.
 
     A coarse search (10 ms steps, on at most `COARSE_CYCLES` cycles with detections) over every
     offset that puts the log inside the scene - or, for a log much longer than `FULL_SEARCH_S`,
     within `ONSET_WINDOW_S` of where the first detections put the scene's first visible
     target - then a fine one (1 ms, every cycle) over the coarse minima and `FINE_SPAN_S` on
-    either side, and the edges of the best offsets to `EDGE_RESOLUTION_S`.
+    either side, and the edges of the best offsets to `EDGE_RESOLUTION_S`. ``within_s``: the
+    offsets searched are kept within these bounds too, where any of them lies within the log.
 
     The cost is flat between frame changes: a radar sees the frame the RTS holds, so moving
     the offset changes nothing until some cycle crosses into another frame. A radar whose cycle
@@ -1395,8 +1404,11 @@ def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections]
     if hi - lo > FULL_SEARCH_S and first_seen is not None:
         onset = float(t_log[with_detections[0]]) - first_seen
         lo, hi = max(lo, onset - ONSET_WINDOW_S), min(hi, onset + ONSET_WINDOW_S)
+    if within_s is not None and max(lo, within_s[0]) <= min(hi, within_s[1]):
+        lo, hi = max(lo, within_s[0]), min(hi, within_s[1])
     grid = np.arange(lo, hi + COARSE_STEP_S, COARSE_STEP_S)
     coarse = np.array([table.cost(t_log[pick] - s, some) for s in grid])
+    others = _repeats(grid, coarse, scene.duration_s)
     best = grid[_best(coarse)]
     span = float(best[-1] - best[0]) + 2 * FINE_SPAN_S
     step = max(FINE_STEP_S, span / MAX_FINE_POINTS)
@@ -1415,7 +1427,31 @@ def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections]
         else float(fine[first])
     plateau = top - bottom
     offset = top - min(EDGE_GUARD_S, plateau / 2)
-    return OffsetEstimate(offset, plateau, _offset_uncertainty(table, every, t_log, fine))
+    return OffsetEstimate(offset, plateau, _offset_uncertainty(table, every, t_log, fine),
+                          others)
+
+
+def _repeats(grid: FloatArray, costs: FloatArray, duration_s: float) -> tuple[float, ...]:
+    """Offsets of ``grid`` a scene's length or more apart that match as the best nearly does.
+
+    Each matches at least `REPEAT_MATCH` of what the best matches: the scene played again.
+    A detection matched costs little, one unmatched `GATE2`: ``GATE2 - cost`` grows with the
+    detections an offset matches. Offsets less than a scene's length apart share cycles.
+    """
+    matched = GATE2 - costs
+    top = float(matched.max(initial=0.0))
+    if not top > 0.0:
+        return ()
+    found: list[float] = []
+    free = np.ones(grid.size, dtype=bool)
+    away = duration_s + 1.0
+    while free.any():
+        at = int(np.flatnonzero(free)[np.argmax(matched[free])])
+        if found and matched[at] < REPEAT_MATCH * top:
+            break
+        found.append(float(grid[at]))
+        free &= np.abs(grid - grid[at]) >= away
+    return tuple(sorted(found[1:]))
 
 
 def _best(costs: FloatArray) -> IntArray:
@@ -1637,6 +1673,16 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             # The profile's latency, the offset from the data.
             found = estimate_offset(scene, bus_t[chosen], dets, latency)
             offset = found.offset_s
+            if found.others_s:
+                starts = sorted((offset, *found.others_s))
+                times = ", ".join(f"{t:.3f}" for t in starts[:5]) + (
+                    ", ..." if len(starts) > 5 else "")
+                raise LogError(
+                    f"--log {log}: the detections fit the scene at {len(starts)} times in the "
+                    f"log (scene time 0 at log times {times} s): the log holds {len(starts)} "
+                    f"plays of the scene, and a scene is checked against one; check a log of "
+                    f"one run (`run --record` writes one, with the sidecar that aligns it), or "
+                    f"give --time-offset-s (the log time of the play's scene time 0)")
             alignment = Alignment("estimated", 0.0, offset, found.uncertainty_s,
                                   found.plateau_s, latency)
             span_s = (found.plateau_s or 0.0) + (found.uncertainty_s or 0.0)
@@ -1659,7 +1705,21 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             # data allow (the radar measuring each frame as it was applied); a shorter one by
             # up to the plateau fits as well (measuring later in each frame).
             offset = float(time_offset_s)
-            found = estimate_offset(scene, bus_t[chosen], dets, 0.0)
+            # Plays of the scene the log holds from the given start on: the first is checked
+            # (one before it lies a scene's length or more earlier: outside).
+            plays_note = None
+            within = (offset - 0.5 * scene.duration_s, offset + MAX_LATENCY_S)
+            found = estimate_offset(scene, bus_t[chosen], dets, 0.0, within)
+            plays = sorted((found.offset_s, *found.others_s))
+            if len(plays) > 1:
+                within = (within[0], 0.5 * (plays[0] + plays[1]))
+                found = estimate_offset(scene, bus_t[chosen], dets, 0.0, within)
+                plays_note = (
+                    f"the detections fit the scene at {len(plays)} times in the log from "
+                    f"--time-offset-s on (scene time 0 at log times "
+                    f"{', '.join(f'{t:.3f}' for t in plays[:5])} s, the latency taken out): "
+                    f"the play from {plays[0]:.3f} s is checked; the cycles after it are not "
+                    f"the scene's")
             latency = found.offset_s - offset
             slack = 3 * (found.spread_s or 0.0) + 0.005
             if latency < -slack:
@@ -1682,6 +1742,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                                   latency_source="estimated",
                                   latency_uncertainty_s=replace(
                                       found, plateau_s=plateau).uncertainty_s)
+            if plays_note:
+                alignment.notes.append(plays_note)
             if not (latency - plateau - slack <= profile_clock.latency_s <= latency + slack):
                 alignment.notes.append(
                     f"the radar's latency from the data, {latency * 1e3:.1f} ms, differs from "

@@ -752,6 +752,35 @@ def test_a_log_holding_two_runs_is_refused_naming_where_each_starts(tmp_path):
         check_log(scene, both)
 
 
+def test_a_log_holding_two_plays_for_a_free_radar_is_refused_naming_where_each_starts(tmp_path):
+    # A logger left running over two plays of the scene, the radar counting on (free, no
+    # count start to tell runs by), 70 s apart. Aligned by its detections, the check took the
+    # better of the two and judged it alone: a play with cycles lost passed unseen.
+    free = {**OWN_CLOCK, "counter_start": "auto"}
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    gap = 972  # cycles of 72 ms: 69.984 s
+    origins = (1.7e9 + 100.0, 1.7e9 + 100.0 + gap * OWN_CLOCK["cycle_s"])
+    scene, first, _ = foreign_log(tmp_path / "a", origins[0], clock=free)
+    _, second, _ = foreign_log(tmp_path / "b", origins[1], seed=1, clock=free,
+                               tamper=lambda c: replace(c, cycle=c.cycle + gap))
+    assert check_log(scene, first).report.passed
+    messages = []
+    for log in (first, second):
+        with can.LogReader(str(log)) as reader:
+            messages += list(reader)
+    both = write_log(tmp_path / "both.blf", [messages])
+    with pytest.raises(LogError, match=r"the detections fit the scene at 2 times in the log "
+                                       r"\(scene time 0 at log times ([\d.]+), ([\d.]+) s\): "
+                                       r"the log holds 2 plays") as refused:
+        check_log(scene, both)
+    times = re.search(r"log times ([\d.]+), ([\d.]+) s", str(refused.value)).groups()
+    np.testing.assert_allclose([float(t) for t in times], origins, atol=0.05)
+    # Told which play to check, it checks that one.
+    report = check_log(scene, both, time_offset_s=origins[1]).report
+    assert report.passed and report.frames["checked"] == report.frames["total"]
+
+
 @pytest.mark.parametrize(("start_offset_s", "jitter_s"), [(0.0, 0.0), (0.0, 0.004),
                                                           (0.02, 0.0)])
 def test_a_radar_in_step_with_the_frames_is_aligned_to_the_frame_it_saw(tmp_path, start_offset_s,
