@@ -149,7 +149,9 @@ class Alignment:
     uncertainty_s: float | None = None
     plateau_s: float | None = None  # offsets up to this much earlier fit the data as well
     latency_s: float = 0.0
-    latency_source: str = "profile"  # or "estimated" (the offset given, the latency not)
+    # "profile", "sidecar" (the run's, as recorded) or "estimated" (the offset given, the
+    # latency not)
+    latency_source: str = "profile"
     latency_uncertainty_s: float | None = None
     # Where ``cycle_s`` came from: "sidecar" (the run's), "fitted" (to the log's timestamps)
     # or "profile" (kept: the timestamps could not tell a cycle apart from the profile's).
@@ -1606,7 +1608,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
         fit.add(numbers, index.bus_t_s)
         drifted = fit.drift_reason(clock.cycle_s, 0.5 * ambiguity_window_s(scene.radar,
                                                                             scene.rig))
-        alignment = Alignment("sidecar", clock.cycle_s, latency_s=clock.latency_s)
+        alignment = Alignment("sidecar", clock.cycle_s, latency_s=clock.latency_s,
+                              latency_source="sidecar")
         if drifted:
             alignment.notes.append(drifted.removeprefix("radar_clock: ").replace(
                 "its profile says", "the run took").replace(
@@ -1754,12 +1757,14 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                     # As live (`time_alignment`): more than half a frame off, the detections
                     # were judged against frames the radar had not seen.
                     latency_reason = (
-                        f"given the scene's start, the radar's latency from the data is "
-                        f"{latency * 1e3:.1f} ms (the data fit as well down to "
-                        f"{(latency - plateau) * 1e3:.1f} ms), its profile's "
+                        f"time_alignment: given the scene's start, the radar's latency from "
+                        f"the data is {latency * 1e3:.1f} ms (the data fit as well down to "
+                        f"{(latency - plateau) * 1e3:.1f} ms, give or take "
+                        f"{slack * 1e3:.1f} ms), its profile's "
                         f"{profile_clock.latency_s * 1e3:.1f} ms: more than half a frame "
-                        f"({half_frame * 1e3:.0f} ms) apart, the radar reports at other times "
-                        f"than its profile says (or --time-offset-s is not the scene's start)")
+                        f"({half_frame * 1e3:.0f} ms) beyond that apart, the radar reports at "
+                        f"other times than its profile says (or --time-offset-s is not the "
+                        f"scene's start)")
         clock, kept = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
                                     profile_clock.cycle_s, restart)
         if (time_offset_s is None and restart is not None and counters.size
@@ -1782,11 +1787,11 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             # noise, and the detections' lag (`time_alignment`) judges what the count leaves.
             if later_s > span_s + 0.5 * clock.cycle_s:
                 count_reason = (
-                    f"the log's first cycle carries the count the radar restarts at with the "
-                    f"scene ({restart}, its profile's), but the detections fit the scene only "
-                    f"{later_cycles:.0f} cycles ({later_s * 1e3:.0f} ms) later, beyond the "
-                    f"estimate's span ({span_s * 1e3:.0f} ms) and half a cycle: the radar "
-                    f"reported "
+                    f"radar_clock: the log's first cycle carries the count the radar "
+                    f"restarts at with the scene ({restart}, its profile's), but the "
+                    f"detections fit the scene only {later_cycles:.0f} cycles "
+                    f"({later_s * 1e3:.0f} ms) later, beyond the estimate's span "
+                    f"({span_s * 1e3:.0f} ms) and half a cycle: the radar reported "
                     f"{later_s * 1e3:.0f} ms later than its profile's latency, or missed the "
                     f"scene's start and saw targets after its end; a check without the "
                     f"recording's sidecar cannot tell which (check the log with its sidecar, "
@@ -1804,13 +1809,21 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if "bus_time_shifts" not in ((sidecar or {}).get("clock") or {}):
         # Nothing tells whether the host's clock stepped while the log was recorded.
         jump = stamp_jump(numbers, index.bus_t_s, profile_clock)
+    skipped = None if jump is None else counter_skip(jump[1], profile_clock, modulus)
+    why = ("the host's clock stepped while it was recorded (no sidecar of this version says "
+           "so), or the radar's latency changed")
+    if skipped is not None:
+        # Whole cycles: as well the radar's count stepping beyond its stamps.
+        why = (f"{abs(skipped)} whole cycles: the radar's counter skipped {abs(skipped)} "
+               f"cycles {'ahead' if skipped > 0 else 'back'} (the cycles after it are named "
+               f"by their counter), or the host's clock stepped by as much while it was "
+               f"recorded")
     if jump is not None:
         at, size = jump
         alignment.notes.append(
             f"the log's stamps jump by {size * 1e3:+.1f} ms from its cycle {at + 1} on "
-            f"(stamped {index.bus_t_s[at]:.6f} s), beyond the radar's jitter: the host's "
-            f"clock stepped while it was recorded (no sidecar of this version says so), or "
-            f"the radar's latency changed; the stamps are taken as they are")
+            f"(stamped {index.bus_t_s[at]:.6f} s), beyond the radar's jitter: {why}; the "
+            f"stamps are taken as they are")
     alignment.log_cut_short = cut_short
     if channel_note:
         alignment.notes.append(channel_note)
@@ -1824,8 +1837,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             f"log_stamps: the log's stamps jump by {jump[1] * 1e3:+.1f} ms from its cycle "
             f"{jump[0] + 1} on, more than half the ambiguity window ({half_window_s * 1e3:.3g}"
             f" ms): aligned by its timestamps, the cycles after it may be judged against the "
-            f"wrong frames (a step of the host's clock as it was recorded, or the radar's "
-            f"latency changed); a recording's sidecar says where the host's clock stepped",
+            f"wrong frames ({why}); a recording's sidecar says where the host's clock stepped",
             "log_stamps"))
         result.passed = False
     if unplaced:
@@ -1979,8 +1991,11 @@ def _bus_time_shifts(index: _LogIndex,
     return shifts, None
 
 
-# Cycles on either side of a jump in a log's stamps whose medians are compared (`stamp_jump`).
+# Cycles on either side of a jump in a log's stamps whose medians are compared (`stamp_jump`),
+# and at most as many on either side that confirm it (the stamps' scatter, which may be more
+# than the profile's jitter, averages out over them: a jump is a step for good).
 JUMP_CYCLES = 8
+JUMP_CONFIRM_CYCLES = 64
 
 
 def stamp_jump(numbers: IntArray, bus_t_s: FloatArray,
@@ -1996,8 +2011,11 @@ def stamp_jump(numbers: IntArray, bus_t_s: FloatArray,
     tilts. Each lies within the
     radar's jitter of the latency, so the two differ by at most twice its jitter, plus the
     stamping's noise and what a crystal within `CLOCK_TOLERANCE_PPM` draws over the windows;
-    beyond that the stamps moved for good from there on (a cycle held up moves one). The
-    largest such jump; None where there is none.
+    beyond that the stamps moved for good from there on (a cycle held up moves one). A jump
+    found so is measured again over up to `JUMP_CONFIRM_CYCLES` on either side: stamps that
+    scatter more than the profile's jitter (a busy host's stamping delays) move the median of
+    8 by more than the bound now and then, not that of 64. The largest such jump; None where
+    there is none.
     """
     t = np.asarray(bus_t_s, dtype=np.float64)
     ok = np.isfinite(t)
@@ -2020,8 +2038,59 @@ def stamp_jump(numbers: IntArray, bus_t_s: FloatArray,
              + CLOCK_TOLERANCE_PPM * 1e-6 * 2 * k * clock.cycle_s)
     if not jumps.size or np.abs(jumps).max() <= bound:
         return None
-    i = int(np.argmax(np.abs(jumps)))
-    return int(positions[i + k]), float(jumps[i])
+    # The strongest candidates (a step shows at up to k positions about it), each measured over
+    # as many cycles on either side as the log and `JUMP_CONFIRM_CYCLES` allow, with a cycle
+    # from the steps that do not cross it (those across tilt the stamps by the jump over the
+    # lag: over 64 cycles, as much again as a jump's tenth).
+    tn, nn = t[ok] - t[ok][0], (n - n[0]).astype(np.float64)
+    candidates = np.flatnonzero(np.abs(jumps) > bound)
+    candidates = candidates[np.argsort(-np.abs(jumps[candidates]), kind="stable")][:64]
+    best: tuple[float, int, FloatArray] | None = None
+    for i in candidates:  # a few dozen at most: not a loop over the log
+        after = int(i) + k  # the first cycle after the jump
+        same = ((np.arange(counted.size) + lag < after) | (np.arange(counted.size) >= after)) \
+            & (counted > 0)
+        c = float(np.median(steps[same] / counted[same])) if same.any() else cycle_s
+        rr = tn - nn * c
+        w = min(JUMP_CONFIRM_CYCLES, after, rr.size - after)
+        wide = float(np.median(rr[after : after + w]) - np.median(rr[after - w : after]))
+        if abs(wide) > bound and (best is None or abs(wide) > abs(best[0])):
+            best = (wide, after, rr)
+    if best is None:
+        return None
+    # Where it lies: the split about it that leaves the least deviation from the medians on
+    # either side (a median moves with a few cycles on the wrong side, the deviations do not).
+    _, after, rr = best
+    lo, hi = max(1, after - k), min(rr.size - 1, after + k)
+    region = rr[max(0, lo - JUMP_CONFIRM_CYCLES) : hi + JUMP_CONFIRM_CYCLES]
+    base = max(0, lo - JUMP_CONFIRM_CYCLES)
+    splits = np.arange(lo, hi + 1)
+    cost = [np.abs(region[: q - base] - np.median(region[: q - base])).sum()
+            + np.abs(region[q - base :] - np.median(region[q - base :])).sum() for q in splits]
+    after = int(splits[int(np.argmin(cost))])
+    w = min(JUMP_CONFIRM_CYCLES, after, rr.size - after)
+    size = float(np.median(rr[after : after + w]) - np.median(rr[after - w : after]))
+    return int(positions[after]), size
+
+
+def counter_skip(jump_s: float, clock: RadarClock, modulus: int) -> int | None:
+    """Cycles a radar's counter stepped beyond its stamps, where a jump of ``jump_s`` is that.
+
+    Stamps that keep their pace while the counter steps ahead by ``m`` cycles more than they
+    do read, less a cycle times their numbers, as a jump of ``-m`` cycles (`stamp_jump`):
+    whole cycles, within twice the jitter and the stamping's noise (the jump is measured with
+    the cycle of its own stamps, `stamp_jump`: no crystal's drift adds). None for a jump of
+    no whole number of cycles, of more than half of what the counter counts (a step of the
+    host's clock: an hour is whole cycles of many radars), or where that tolerance is a
+    quarter of a cycle or more (whole cycles cannot be told).
+    """
+    cycles = -jump_s / clock.cycle_s
+    m = int(round(cycles))
+    tolerance_s = 2.0 * clock.jitter_s + STAMP_NOISE_S
+    if (m == 0 or abs(m) >= modulus // 2 or tolerance_s >= 0.25 * clock.cycle_s
+            or abs(cycles - m) * clock.cycle_s > tolerance_s):
+        return None
+    return m
 
 
 def _check_sidecar_cycles(scene: Scenario, log: str | Path, clock: RadarClock,
