@@ -1323,6 +1323,80 @@ def test_a_run_stopped_by_a_bad_option_leaves_no_earlier_report_in_its_json(tmp_
     assert cli.main(["run", str(scene), "--json", str(tmp_path / "no" / "r.json")]) == 2
 
 
+def usage_error(argv, capsys):
+    """Run the CLI on a command line argparse refuses; return its error message."""
+    with pytest.raises(SystemExit) as exited:
+        cli.main(argv)
+    assert exited.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return err.splitlines()[-1].split(" error: ", 1)[1]
+
+
+@pytest.mark.parametrize("bad", [["--method", "nope"], ["--record", "x.blf", "--record", "y.blf"],
+                                 ["--workers", "3"], ["--can-fd=1"]])
+@pytest.mark.parametrize("json_option", ["--json", "--json="])
+def test_a_run_refused_by_the_argument_parser_leaves_no_earlier_report(tmp_path, capsys, bad,
+                                                                        json_option):
+    # argparse exited before the command's own checks: a passing report of an earlier run stayed
+    # in --json, to be read as this one's.
+    scene = str(ROOT / "scenarios" / "cut_in.scenario.yaml")
+    out = tmp_path / "report.json"
+    out.write_text('{"scene": "cut-in", "status": "pass", "passed": true}\n')
+    given = [json_option + str(out)] if json_option.endswith("=") else [json_option, str(out)]
+    message = usage_error(["run", scene, scene, *given, *bad], capsys)
+    entries = json.loads(out.read_text())
+    assert entries == [{"scene": "cut_in", "file": scene, "status": "error",
+                        "error": f"not run: {message}", "variant": "", "parameters": {}}] * 2
+
+
+def test_a_run_refused_before_its_scenes_are_told_says_so_in_one_entry(tmp_path, capsys):
+    out = tmp_path / "report.json"
+    out.write_text('{"scene": "cut-in", "status": "pass", "passed": true}\n')
+    message = usage_error(["run", "--json", str(out)], capsys)
+    assert message == "the following arguments are required: SCENE"
+    assert json.loads(out.read_text()) == {
+        "scene": "", "file": "", "status": "error", "error": f"not run: {message}",
+        "variant": "", "parameters": {}}
+
+
+@pytest.mark.parametrize("bad", [["--json", "other.json"], ["--json"], ["--json="],
+                                 ["--detections", "{out}", "--method", "nope"],
+                                 ["--method", "nope", "--record", "{out}"]])
+def test_a_usage_error_writes_no_report_where_json_is_at_fault_or_names_another_file(
+        tmp_path, capsys, bad):
+    scene = str(ROOT / "scenarios" / "cut_in.scenario.yaml")
+    out = tmp_path / "report.json"
+    out.write_text("earlier\n")
+    usage_error(["run", scene, "--json", str(out), *(b.format(out=out) for b in bad)], capsys)
+    assert out.read_text() == "earlier\n"
+
+
+def test_a_run_stopped_before_its_first_scene_leaves_no_earlier_detections(tmp_path, capsys,
+                                                                             monkeypatch):
+    # The report said "not run: interrupted", and the detections an earlier run wrote stayed
+    # under the name this run was to write them to.
+    import rts_scenario.cli.run as run_module
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_module, "check_output", stopped)
+    scene = str(ROOT / "scenarios" / "cut_in.scenario.yaml")
+    report, detections = tmp_path / "report.json", tmp_path / "detections.csv"
+    detections.write_text("scene,cycle\nold,1\n")
+    assert cli.main(["run", scene, "--json", str(report), "--detections", str(detections)]) == 1
+    assert json.loads(report.read_text())["error"] == ("not run: interrupted (Ctrl-C or SIGTERM) "
+                                                       "before it ran")
+    assert not detections.exists() and not Path(f"{detections}.partial").exists()
+    # Never a file the command reads, whose check may not have run.
+    mapping = tmp_path / "radar.mapping.yaml"
+    mapping.write_text("rts_can_mapping: 1\n")
+    assert cli.main(["run", scene, "--mapping", str(mapping), "--detections", str(mapping)]) == 1
+    assert mapping.read_text() == "rts_can_mapping: 1\n"
+    capsys.readouterr()
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
 def test_a_stop_while_the_process_exits_never_kills_it_without_a_word(signum):

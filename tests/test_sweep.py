@@ -1169,6 +1169,51 @@ def test_a_sweep_stopped_by_bad_input_leaves_no_earlier_report(pytester, capsys,
     assert payload["summary"]["runs"] == 0
 
 
+def test_a_sweep_selecting_no_run_counts_them_as_a_sweep_does(pytester, capsys, tmp_path):
+    # Its summary had "deselected": 0 and no "planned": the runs -m left out were not counted.
+    pytester.makefile(".scenario.yaml", plain=tiny_scene("plain") + "parametrize:\n"
+                                                  "  targets.0.rcs.rcs_dbsm: [5.0, 10.0]\n")
+    _, code, payload, _ = sweep_verdicts(capsys, tmp_path, pytester.path, "-m", "nightly")
+    assert code == 5
+    summary = payload["summary"]
+    assert summary["runs"] == summary["planned"] == 0 and summary["deselected"] == 2
+    _, _, normal, _ = sweep_verdicts(capsys, tmp_path, pytester.path)
+    assert set(summary) == set(normal["summary"])
+    assert normal["summary"]["planned"] == 2 and normal["summary"]["deselected"] == 0
+
+
+@pytest.mark.parametrize("address", ["bogus://x", "tcp://127.0.0.1:9"])
+def test_a_sweep_whose_scheduler_cannot_be_reached_leaves_no_report_of_a_sweep_under_way(
+        scenes, capsys, monkeypatch, address):
+    # Its --json kept the placeholder: "interrupted ... or it is still running".
+    pytest.importorskip("distributed")
+    monkeypatch.setattr("rts_scenario.sweep.CONNECT_TIMEOUT_S", 1.0)
+    out = scenes / "verdicts.json"
+    code, _, err = sweep(capsys, scenes / "sub", "--scheduler", address, "--json", out)
+    assert code == 2
+    why = err.splitlines()[-1].removeprefix("error: ")
+    assert why.startswith(f"--scheduler {address}: cannot connect")
+    payload = json.loads(out.read_text())
+    assert payload["runs"] == [] and payload["error"] == why
+    assert "interrupted" not in payload["summary"] and payload["summary"]["planned"] == 1
+
+
+@pytest.mark.parametrize("bad", [["--workers", "abc"], ["--method", "nope"], ["--bogus"],
+                                 ["--plot", "a.png", "--plot", "b.png"]])
+def test_a_sweep_refused_by_the_argument_parser_leaves_no_earlier_report(pytester, capsys, bad):
+    pytester.makefile(".scenario.yaml", plain=tiny_scene("plain"))
+    out = pytester.path / "verdicts.json"
+    out.write_text('{"runs": [{"status": "pass"}]}')
+    with pytest.raises(SystemExit) as exited:
+        main(["sweep", str(pytester.path), "--json", str(out), *bad])
+    assert exited.value.code == 2
+    why = capsys.readouterr().err.splitlines()[-1].split(" error: ", 1)[1]
+    payload = json.loads(out.read_text())
+    assert payload["runs"] == [] and payload["error"] == why
+    assert payload["summary"]["runs"] == payload["summary"]["planned"] == 0
+    assert "interrupted" not in payload["summary"]
+
+
 def test_a_config_file_pytest_cannot_read_stops_the_sweep_as_it_stops_pytest(pytester, capsys):
     pytester.makefile(".scenario.yaml", plain=tiny_scene("plain"))
     (pytester.path / "pyproject.toml").write_text("[tool.pytest.ini_options\n")

@@ -45,9 +45,12 @@ from .common import (
     EXIT_FAIL,
     EXIT_OK,
     EXIT_RUNTIME_ERROR,
+    check_writable_file,
     guarded_output,
     one_line,
+    other_files,
     replace_unwritten_report,
+    same_as_any,
     show_traceback,
 )
 
@@ -58,7 +61,20 @@ _SUBCOMMANDS = (bench, validate, run, sweep, check, schedule, calibrate, survey,
 
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser, subcommands = _parser(_Parser)
+    for sub in subcommands:
+        for action in sub._actions:
+            if action.nargs != 0 and action.type in (None, str) and action.choices is None:
+                action.type = _not_empty
+            if type(action) is argparse._StoreAction and action.option_strings:
+                action.__class__ = _StoreOnce
+    return parser
+
+
+def _parser(parser_class: type[argparse.ArgumentParser]
+            ) -> tuple[argparse.ArgumentParser, list[argparse.ArgumentParser]]:
+    """Build the parser of ``parser_class`` with every subcommand; return it and theirs."""
+    parser = parser_class(
         prog="rts-scenario",
         description="Replay traffic scenes on a radar target simulator with 2-D angle of arrival.",
         epilog="Exit codes: 0 pass, 1 a check failed, 2 bad input (arguments or files), "
@@ -76,12 +92,103 @@ def build_parser() -> argparse.ArgumentParser:
     for sub in subparsers.choices.values():
         # No option looks like a number: every negative number is a value.
         sub._negative_number_matcher = _NEGATIVE_NUMBER  # type: ignore[assignment]
-        for action in sub._actions:
-            if action.nargs != 0 and action.type in (None, str) and action.choices is None:
-                action.type = _not_empty
-            if type(action) is argparse._StoreAction and action.option_strings:
-                action.__class__ = _StoreOnce
-    return parser
+    return parser, list(subparsers.choices.values())
+
+
+class _UsageError(SystemExit):
+    """argparse's exit on a usage error (its usage and error printed, exit 2), with the error."""
+
+    def __init__(self, code: str | int | None, message: str) -> None:
+        super().__init__(code)
+        self.message = message
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose usage error says what it was (`_UsageError`)."""
+
+    def error(self, message: str) -> NoReturn:
+        try:
+            super().error(message)
+        except SystemExit as exc:
+            raise _UsageError(exc.code, message) from None
+
+
+class _Unreadable(Exception):
+    """A command line that even `_read_leniently` cannot read (no command, say)."""
+
+
+class _LenientParser(argparse.ArgumentParser):
+    """A parser that raises `_Unreadable` on what it still refuses, printing nothing."""
+
+    def error(self, message: str) -> NoReturn:
+        raise _Unreadable(message)
+
+
+class _Ignored(argparse.Action):
+    """``--help`` and ``--version`` read past, not acted on (`_read_leniently`)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        pass
+
+
+def _read_leniently(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]] | None:
+    """Read a command line that argparse refused as far as it goes: the command, its files.
+
+    Every option of a subcommand takes any value or none, none is required, an unknown one is
+    left over and one given twice keeps its last value, so that an error elsewhere on the line
+    does not hide ``--json PATH`` or the scenes. An abbreviated option (``--js``) is read as
+    argparse reads it; where that is ambiguous, as an unknown one, and a flag given a value
+    (``--can-fd=1``) as the flag. None where even so the line cannot be read (no command, an
+    unknown one); else the arguments and those left over.
+    """
+    for abbreviations in (True, False):
+        parser, subcommands = _parser(_LenientParser)
+        flags: set[str] = set()
+        for each in (parser, *subcommands):
+            each.allow_abbrev = abbreviations
+            for action in each._actions:
+                if action.nargs == 0:
+                    flags.update(action.option_strings)
+                if type(action) in (argparse._HelpAction, argparse._VersionAction):
+                    action.__class__ = _Ignored
+                elif each is not parser:
+                    action.type, action.choices, action.required = None, None, False
+                    if action.option_strings and action.nargs is None:
+                        action.nargs = "?"
+        if not abbreviations:
+            argv = [arg.partition("=")[0] if arg.partition("=")[0] in flags else arg
+                    for arg in argv]
+        try:
+            return parser.parse_known_args(argv)
+        except _Unreadable:
+            continue
+    return None
+
+
+def _report_usage_error(argv: Sequence[str], message: str) -> None:
+    """Write the ``--json`` report of a command line that argparse refused: no verdict.
+
+    An earlier run's report left in place would be read as this one's. For a command that
+    writes one (``run``, ``sweep``: its ``on_usage_error``), with argparse's error; not where
+    ``--json`` itself is what is wrong, nor over a file the command line names for another
+    option or one that `check_writable_file` refuses (a scene's name): the usage error stands.
+    """
+    if message.startswith("argument --json:"):
+        return
+    read = _read_leniently(argv)
+    if read is None:
+        return
+    args, left_over = read
+    report = getattr(args, "on_usage_error", None)
+    path = getattr(args, "json", None)
+    if report is None or not path or same_as_any(path, [*other_files(args), *left_over]):
+        return
+    try:
+        check_writable_file("--json", path)
+        report(args, message)
+    except RtsError:
+        pass  # the usage error is the command's outcome, said above
 
 
 class _StoreOnce(argparse._StoreAction):
@@ -210,7 +317,11 @@ def _ignore_stops() -> None:
 
 def _main(argv: Sequence[str] | None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as exc:
+        _report_usage_error(sys.argv[1:] if argv is None else argv, exc.message)
+        raise
     try:
         # Settings the environment gives are checked once, before anything runs.
         check_environment()

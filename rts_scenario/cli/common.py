@@ -203,17 +203,26 @@ def replace_unwritten_report(args: argparse.Namespace) -> None:
     path = getattr(args, "json", None)
     if not path or str(path) in _written_reports or args.command in ("run", "sweep"):
         return
-    named: list[Any] = []
-    for key, value in vars(args).items():
-        if key != "json":
-            named += value if isinstance(value, list) else [value]
-    if same_as_any(path, [v for v in named if isinstance(v, str)]):
+    if same_as_any(path, other_files(args)):
         return
     with replacing_after_stop(path):
         write_json("--json", path, {"command": args.command, "passed": False,
                                     "interrupted": True,
                                     "error": "interrupted (Ctrl-C or SIGTERM) before the "
                                              "command wrote its report: no verdict"})
+
+
+def other_files(args: argparse.Namespace) -> list[str]:
+    """Return every text the command line gives an argument other than ``--json``.
+
+    A report written without the command's own checks (after a stop, on a usage error) is
+    never written over a file the command line names for another purpose.
+    """
+    named: list[Any] = []
+    for key, value in vars(args).items():
+        if key != "json":
+            named += value if isinstance(value, list) else [value]
+    return [value for value in named if isinstance(value, str)]
 
 
 def check_writable_file(option: str, path: str | Path, kind: str | None = None, *,

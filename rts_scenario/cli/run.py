@@ -61,7 +61,37 @@ def _do_run(args: argparse.Namespace) -> int:
         if not started[0]:
             with replacing_after_stop(args.json):
                 _write_not_run(args, "not run: interrupted (Ctrl-C or SIGTERM) before it ran")
+            _remove_earlier_detections(args)
         raise
+
+
+def _usage_error(args: argparse.Namespace, message: str) -> None:
+    """Write ``--json`` for a command line argparse refused (``message``): no scene ran."""
+    _write_not_run(argparse.Namespace(**{**vars(args), "scenes": args.scenes or []}),
+                   f"not run: {message}")
+
+
+def _remove_earlier_detections(args: argparse.Namespace) -> None:
+    """Remove the ``--detections`` file an earlier run left: this one stopped before its scenes.
+
+    Its rows would be read as this run's, as the report is not. The file is removed where its
+    draft would have replaced it (a link is followed), unless the command reads it or another
+    option writes it, or it is named like a file the tool reads: the checks that refuse those
+    may not have run yet.
+    """
+    record = [args.record, f"{args.record}.rts.json"] if args.record else []
+    if not args.detections or same_as_any(args.detections, [*_inputs(args), args.json,
+                                                            *record]):
+        return
+    try:
+        from ..file_kinds import read_only_kind
+    except Exception:  # noqa: BLE001 - a module the stop left half imported: left alone
+        return
+    real = Path(os.path.realpath(args.detections))
+    if read_only_kind(args.detections) is None and read_only_kind(real) is None and \
+            real.is_file():
+        with contextlib.suppress(OSError):
+            real.unlink()
 
 
 def _write_not_run(args: argparse.Namespace, message: str) -> None:
@@ -75,8 +105,9 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
 
     if not args.json or same_as_any(args.json, _inputs(args)):
         return
+    # No scene to tell (a command line argparse refused): one entry naming none.
     unrun = [_error_entry(Path(path).name.removesuffix(SCENE_SUFFIX), path, message)
-             for path in args.scenes]
+             for path in args.scenes or [""]]
     write_json("--json", args.json, unrun[0] if len(unrun) == 1 else unrun)
 
 
@@ -538,4 +569,4 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
     parser.add_argument("--detections", metavar="CSV",
                         help="write every detection, with the target it was assigned to, as CSV "
                              "(columns in docs/report.md)")
-    parser.set_defaults(handler=_do_run)
+    parser.set_defaults(handler=_do_run, on_usage_error=_usage_error)

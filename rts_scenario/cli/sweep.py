@@ -120,12 +120,15 @@ def _outputs_checked(args: argparse.Namespace) -> PytestSettings:
     return settings
 
 
-def _write_interrupted(args: argparse.Namespace, error: str | None = None) -> None:
+def _write_interrupted(args: argparse.Namespace, error: str | None = None, *,
+                       planned: int = 0, deselected: int = 0) -> None:
     """Write ``--json`` with no run and ``"interrupted": true``: stopped before any run.
 
-    ``error``: the sweep stopped on bad input instead (a bad ``-m`` expression, ``--workers
-    0``, ``-m`` selecting no run): no run, not interrupted, and why. Not where ``--json``
-    itself is what is wrong (its check fails here again): the error line says it.
+    ``error``: the sweep stopped on bad input instead (a command line argparse refused, a bad
+    ``-m`` expression, ``--workers 0``, ``-m`` selecting no run, a scheduler it cannot reach):
+    no run, not interrupted, and why, with the summary's ``planned`` and ``deselected`` runs.
+    Not where ``--json`` itself is what is wrong (its check fails here again): the error line
+    says it.
     """
     from ..errors import RtsError
 
@@ -138,7 +141,7 @@ def _write_interrupted(args: argparse.Namespace, error: str | None = None) -> No
             # Again (the stop may have come before them), --json's alone: a bad --plot is no
             # reason to leave an earlier report in place.
             settings = _outputs_checked(argparse.Namespace(**{**vars(args), "plot": None}))
-            summary, config = summarize([]), settings.as_json()
+            summary, config = summarize([], deselected=deselected), settings.as_json()
         except (RtsError, KeyboardInterrupt):
             return  # the exit code says it
         except Exception:
@@ -153,8 +156,15 @@ def _write_interrupted(args: argparse.Namespace, error: str | None = None) -> No
                                                                      "interrupted": True},
                                              "config": config})
         else:
-            write_json("--json", args.json, {"runs": [], "summary": summary, "config": config,
-                                             "error": error})
+            write_json("--json", args.json, {"runs": [], "summary": {**summary,
+                                                                     "planned": planned},
+                                             "config": config, "error": error})
+
+
+def _usage_error(args: argparse.Namespace, message: str) -> None:
+    """Write ``--json`` for a command line argparse refused (``message``): no run."""
+    _write_interrupted(argparse.Namespace(**{**vars(args), "scenes": args.scenes or []}),
+                       message)
 
 
 def _prepare(args: argparse.Namespace
@@ -196,7 +206,7 @@ def _prepare(args: argparse.Namespace
             tasks, deselected = select_tasks(tasks, args.marks)
         except NoRunSelected as exc:
             print(f"error: {exc}", file=sys.stderr)
-            _write_interrupted(args, str(exc))
+            _write_interrupted(args, str(exc), deselected=len(tasks))
             return EXIT_NO_RUNS
     return workers, settings, tasks, deselected
 
@@ -262,6 +272,10 @@ def _do_sweep(args: argparse.Namespace) -> int:
         print("error: interrupted", file=sys.stderr)
         # Never a pass; a run that erred before keeps its exit code.
         return max(exit_code(done), EXIT_FAIL)
+    except RtsError as exc:
+        if not finished:  # bad input before any run (a scheduler it cannot reach)
+            _write_interrupted(args, str(exc), planned=len(tasks), deselected=deselected)
+        raise
     _print_runs(entries, {**summarize(entries, deselected=deselected), "planned": len(tasks)},
                 time.perf_counter() - start, args, settings)
     if args.plot:
@@ -403,4 +417,4 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser]) -> None:
                              "pytest -m selects them ('slow and not hardware'; needs pytest)")
     parser.add_argument("--plot", metavar="FILE.png",
                         help="plot pass/fail over the parameters (needs matplotlib)")
-    parser.set_defaults(handler=_do_sweep)
+    parser.set_defaults(handler=_do_sweep, on_usage_error=_usage_error)
