@@ -41,7 +41,7 @@ import heapq
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -52,6 +52,9 @@ from .kinematics import Tracks
 from .report import FailReason, FrameRecord, Report, RunningStats, TargetResult
 from .scenario.model import LIMITS, PLANNED_SCENE_LIMITS, SCENE_LIMITS, Expectations
 from .schedule.model import BLOCKING, Status
+
+if TYPE_CHECKING:
+    from .plots import PlotData
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -318,6 +321,8 @@ class Checker:
         None until the caller knows it (set the attribute before the first `add_cycles`).
     record : FrameRecord, optional
         Where per-frame arrays go (none kept without it).
+    plot : PlotData, optional
+        Takes each judged cycle's errors and misses for the plots (`PlotData.add_cycles`).
     expected_limits : sequence of frozenset of str, optional
         Per target, limits the scene expects besides ``expectations.expected_limits``.
     scene_limits : mapping of str to str, optional
@@ -354,7 +359,7 @@ class Checker:
 
     def __init__(self, scene: str, names: tuple[str, ...], expectations: Expectations, *,
                  counter_modulus: int = COUNTER_MODULUS, counter_start: int | None = 0,
-                 record: FrameRecord | None = None,
+                 record: FrameRecord | None = None, plot: PlotData | None = None,
                  expected_limits: Sequence[frozenset[str]] | None = None,
                  scene_limits: Mapping[str, str] | None = None,
                  detections_out: TextIO | None = None, variant: str = "",
@@ -393,6 +398,7 @@ class Checker:
         # (`rts_scenario.pipeline.after_scene_until_s`) depend on how long a bus was listened to.
         self.after_scene_end: int | None = None
         self.record = record
+        self.plot = plot
         n = len(names)
         self._expected = [expectations.expected_limits | (expected_limits[k] if expected_limits
                                                            else frozenset()) for k in range(n)]
@@ -804,6 +810,8 @@ class Checker:
                                 "checkable": truth, "frame_status": status,
                                 "adjacent_frame": use_other,
                                 **{f"error_{q}": e for q, e in errors.items()}})
+        if self.plot is not None:
+            self.plot.add_cycles(block.tracks.t_s, truth, detected, errors)
 
     def _judge(self, tracks: Tracks, flags: NDArray[np.uint16], frame_of: NDArray[np.int64],
                values: dict[str, FloatArray], invalid: BoolArray) -> _Judged:

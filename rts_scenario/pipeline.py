@@ -49,6 +49,7 @@ from .playback import (
     rts_rig_record,
     unreachable_reason,
 )
+from .plots import PlotData
 from .preflight import (
     Preflight,
     angle_tolerance_deg,
@@ -233,7 +234,10 @@ class RunOptions:
         Frames per streamed batch; default `BATCH_FRAMES`, fewer for scenes with many targets
         (`rts_scenario.preflight.frames_per_batch`: memory stays bounded).
     record : bool
-        Keep every frame's check arrays (on disk) for plots and post-processing.
+        Keep every frame's check arrays (on disk) for post-processing (`Report.per_frame`).
+    plot : bool
+        Gather what `rts_scenario.plots.write_plots` draws (`RunResult.plot`), in memory that
+        does not grow with the scene's length (`rts_scenario.plots.PlotData`).
     bus_log : str, optional
         Record the detection bus to this file with python-can's ``Logger`` (format by
         extension: .blf, .asc, .csv, .log, .trc, .mf4 with asammdf), plus ``LOG.rts.json``
@@ -251,6 +255,7 @@ class RunOptions:
     drain_s: float = 2.0
     batch_frames: int | None = None
     record: bool = False
+    plot: bool = False
     bus_log: str | None = None
 
     def option(self, name: str) -> str:
@@ -264,6 +269,8 @@ class RunResult:
 
     scene: Scenario
     report: Report
+    # What the plots draw, gathered as the run went (`RunOptions.plot`), else None.
+    plot: PlotData | None = None
     # Why the recorded log's sidecar (``LOG.rts.json``) could not be written, else None: the
     # verdict stands, but a check of the log then aligns it by its data alone.
     sidecar_error: str | None = None
@@ -973,10 +980,11 @@ class Pipeline:
         timer = _Timing(dict(timing or {}))
         start = mark = time.perf_counter()
         record = FrameRecord() if options.record else None
+        plot = PlotData(len(scene.targets)) if options.plot else None
         clock = self.radar.radar_clock
         checker = Checker(scene.name, tuple(t.name for t in scene.targets), scene.expectations,
                           counter_modulus=self.counter_modulus,
-                          counter_start=clock.counter_start, record=record,
+                          counter_start=clock.counter_start, record=record, plot=plot,
                           expected_limits=[t.expected_limits for t in scene.targets],
                           scene_limits=scene_limits(scene), detections_out=detections_out,
                           variant=scene.variant, parameters=scene.parameters,
@@ -1028,6 +1036,8 @@ class Pipeline:
                                       angle_tolerance_deg=angle_tolerance_deg(scene))
             schedule = replace(schedule, frame_index=frames)
             checker.add_frames(tracks, schedule.status)
+            if plot is not None:
+                plot.add_frames(tracks, schedule)
             if played is not None:
                 played.add(frames, tracks, schedule.status)
             mark = timer.add("schedule_s", mark)
@@ -1169,7 +1179,7 @@ class Pipeline:
         if steps:
             # Said where the host's clock stepped: the times were brought back (`_unstep`).
             report.radar_clock["host_clock_steps"] = steps
-        return RunResult(scene=scene, report=report, sidecar_error=sidecar_error)
+        return RunResult(scene=scene, report=report, plot=plot, sidecar_error=sidecar_error)
 
     def _write_sidecar(self, options: RunOptions, scene: Scenario, played: PlayedRecord,
                        checker: Checker, scene_first: int, report: Report, playback: Playback,

@@ -8,12 +8,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .arrays import FloatArray
 from .atomic import open_atomic
 from .errors import RtsError
 from .quads import quad_polygons
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+    from numpy.typing import ArrayLike, NDArray
+
+    from .kinematics import Tracks
     from .pipeline import RunResult
+    from .schedule import Schedule
 
 
 def _pyplot() -> Any:
@@ -55,54 +62,229 @@ def safe_stem(name: str) -> str:
 MAX_STEM = 120
 
 
-def write_plots(result: RunResult, folder: str | Path, stem: str | None = None,
-                method: str = "exact") -> list[Path]:
+# Buckets of samples a plotted series keeps per target, two samples each: a few thousand points
+# per target and series, whatever the scene's length.
+PLOT_BUCKETS = 1024
+
+# The errors plotted, by tolerance key: (label, key of `PlotData.errors`).
+_ERRORS = {"range_m": "range (m)", "radial_velocity_mps": "radial velocity (m/s)",
+           "az_deg": "azimuth (deg)", "el_deg": "elevation (deg)"}
+
+
+def _extremes(t_s: FloatArray, values: FloatArray, starts: NDArray[np.intp], by_time: bool
+              ) -> tuple[FloatArray, FloatArray]:
+    """Per segment of rows and per column, the samples of least and of greatest key.
+
+    ``t_s``, ``values``: shape (N, C), NaN where there is no sample (in both); ``starts``: the
+    first row of each segment (S,), ascending from 0, none empty. The key is ``t_s`` (the
+    segment's first and last sample) or, without ``by_time``, ``values`` (its extremes; of
+    equal ones, the first). Returns ``t_s`` and ``values`` of shape (S, 2, C), the least key
+    first, NaN where a segment has no sample (the second also where it has only one).
+    """
+    key = t_s if by_time else values
+    rows = np.arange(key.shape[0], dtype=np.float64)[:, None]
+    segment = np.repeat(np.arange(starts.size), np.diff(starts, append=key.shape[0]))
+    least, greatest = (np.fmin.reduceat(np.where(key == best[segment], rows, np.nan), starts,
+                                        axis=0)
+                       for best in (np.fmin.reduceat(key, starts, axis=0),
+                                    np.fmax.reduceat(key, starts, axis=0)))
+    greatest[greatest == least] = np.nan
+    row = np.stack([least, greatest], axis=1)
+    has = ~np.isnan(row)
+    at = np.where(has, row, 0.0).astype(np.intp), np.arange(key.shape[1])
+    return np.where(has, t_s[at], np.nan), np.where(has, values[at], np.nan)
+
+
+class Envelope:
+    """A series per column in bounded memory: of each bucket of consecutive samples, two.
+
+    Samples come in order, in batches of any length. Each bucket of `stride` samples keeps,
+    per column, its samples of least and of greatest key: the value (the extremes stay drawn,
+    an error out of tolerance however long the scene) or, ``by_time``, the time (the bucket's
+    first and last sample: a path, events). When the samples would fill more than ``buckets``
+    buckets, each two neighbours merge into one and the stride doubles: a series of any length
+    holds ``2 * buckets`` samples per column at most.
+
+    Parameters
+    ----------
+    columns : int
+        Columns of the series (C), e.g. targets.
+    by_time : bool
+        Keep each bucket's first and last sample rather than its extremes.
+    buckets : int
+        Buckets kept, an even number.
+    """
+
+    def __init__(self, columns: int, by_time: bool = False, buckets: int = PLOT_BUCKETS) -> None:
+        if buckets < 2 or buckets % 2:
+            raise ValueError(f"buckets: must be an even number >= 2, got {buckets}")
+        self.by_time = by_time
+        self.stride = 1  # samples per bucket
+        self.count = 0  # samples taken
+        self._t_s = np.full((buckets, 2, columns), np.nan)
+        self._values = np.full((buckets, 2, columns), np.nan)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the samples kept take, the same for a series of any length."""
+        return self._t_s.nbytes + self._values.nbytes
+
+    def add(self, t_s: ArrayLike, values: ArrayLike) -> None:
+        """Take the next samples: at times ``t_s`` (N,) s, ``values`` (N, C), NaN where none."""
+        t = np.asarray(t_s, dtype=np.float64)
+        v = np.asarray(values, dtype=np.float64).reshape(t.size, -1)
+        n = t.size
+        if n == 0:
+            return
+        buckets = self._t_s.shape[0]
+        while (self.count + n - 1) // self.stride >= buckets:
+            self._merge()
+        bucket = (self.count + np.arange(n)) // self.stride
+        first, last = int(bucket[0]), int(bucket[-1])
+        # The first bucket may hold samples of the batch before: its two join the new ones.
+        t_new = np.where(np.isnan(v), np.nan, t[:, None])
+        starts = np.concatenate([[0], 3 + np.flatnonzero(np.diff(bucket))]).astype(np.intp)
+        picked = _extremes(np.concatenate([self._t_s[first], t_new]),
+                           np.concatenate([self._values[first], v]), starts, self.by_time)
+        self._t_s[first:last + 1], self._values[first:last + 1] = picked
+        self.count += n
+
+    def _merge(self) -> None:
+        """Merge each two neighbouring buckets into one; double the stride."""
+        buckets, _, columns = self._t_s.shape
+        starts = np.arange(0, 2 * buckets, 4, dtype=np.intp)
+        t, v = _extremes(self._t_s.reshape(-1, columns), self._values.reshape(-1, columns),
+                         starts, self.by_time)
+        half = buckets // 2
+        self._t_s[:half], self._values[:half] = t, v
+        self._t_s[half:] = self._values[half:] = np.nan
+        self.stride *= 2
+
+    def samples(self) -> tuple[FloatArray, FloatArray]:
+        """Return the times (s) and values kept, shape (P, C) in bucket order, NaN where none."""
+        used = -(-self.count // self.stride)
+        columns = self._t_s.shape[2]
+        return self._t_s[:used].reshape(-1, columns), self._values[:used].reshape(-1, columns)
+
+
+class PlotData:
+    """What a run's plots draw, taken as the run goes in bounded memory (`Envelope`).
+
+    The run gives it the scene's frames as it plays them (`add_frames`: ground truth and the
+    schedule played), the checker the radar's cycles as it judges them (`add_cycles`).
+
+    Attributes
+    ----------
+    x_m, y_m, az_deg, el_deg : Envelope
+        Each target's position (radar frame) and direction while present (by time).
+    checkable_az_deg, checkable_el_deg : Envelope
+        Its direction in the frames where it was checkable (by time).
+    attenuation_db : Envelope
+        Each channel's attenuation while it plays, column ``4 * target + channel``.
+    delay_ns : Envelope
+        Each target's RTS delay (the mean over its channels) while it plays.
+    errors : dict of str to Envelope
+        Per tolerance key (range, radial velocity, azimuth, elevation), each target's error
+        per radar cycle.
+    missed : Envelope
+        Each target's radar cycles where it was checkable and not detected within tolerance
+        (value 0, by time).
+    """
+
+    def __init__(self, n_targets: int, buckets: int = PLOT_BUCKETS) -> None:
+        def series(columns: int = n_targets, by_time: bool = False) -> Envelope:
+            return Envelope(columns, by_time, buckets)
+
+        self.x_m, self.y_m, self.az_deg, self.el_deg = (series(by_time=True) for _ in range(4))
+        self.checkable_az_deg, self.checkable_el_deg = series(by_time=True), series(by_time=True)
+        self.attenuation_db = series(4 * n_targets)
+        self.delay_ns = series()
+        self.errors = {key: series() for key in _ERRORS}
+        self.missed = series(by_time=True)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the samples take, the same for a scene of any length."""
+        return sum(e.nbytes for e in (self.x_m, self.y_m, self.az_deg, self.el_deg,
+                                      self.checkable_az_deg, self.checkable_el_deg,
+                                      self.attenuation_db, self.delay_ns, self.missed,
+                                      *self.errors.values()))
+
+    def add_frames(self, tracks: Tracks, schedule: Schedule) -> None:
+        """Take a batch of the scene's frames: their ground truth and the schedule played."""
+        from .check import checkable
+
+        t = tracks.t_s
+        present = tracks.present
+        for series, value in ((self.x_m, tracks.position_m[..., 0]),
+                              (self.y_m, tracks.position_m[..., 1]),
+                              (self.az_deg, tracks.az_deg), (self.el_deg, tracks.el_deg)):
+            series.add(t, np.where(present, value, np.nan))
+        judged = checkable(tracks, schedule.status)
+        self.checkable_az_deg.add(t, np.where(judged, tracks.az_deg, np.nan))
+        self.checkable_el_deg.add(t, np.where(judged, tracks.el_deg, np.nan))
+        self.attenuation_db.add(t, np.where(schedule.active, schedule.attenuation_db, np.nan))
+        # The mean over the channels that play (the others' delay is NaN).
+        delay = np.where(schedule.active, schedule.delay_s, 0.0)
+        playing = schedule.active.sum(axis=2)
+        mean_ns = delay.sum(axis=2) / np.maximum(playing, 1) * 1e9
+        self.delay_ns.add(t, np.where(playing > 0, mean_ns, np.nan))
+
+    def add_cycles(self, t_s: FloatArray, checkable: NDArray[np.bool_],
+                   detected: NDArray[np.bool_], errors: Mapping[str, FloatArray]) -> None:
+        """Take a batch of judged radar cycles.
+
+        ``t_s`` (N,): their measurement times; ``checkable``, ``detected`` (N, K): each
+        target checkable, detected within tolerance; ``errors``: per tolerance key, the
+        errors (N, K), NaN where none was measured.
+        """
+        for key, series in self.errors.items():
+            series.add(t_s, errors[key])
+        self.missed.add(t_s, np.where(checkable & ~detected, 0.0, np.nan))
+
+
+def write_plots(result: RunResult, folder: str | Path, stem: str | None = None) -> list[Path]:
     """Write the run's plots into ``folder``; return the files written.
 
-    ``stem`` starts every file name (default: the scene's name, made safe by `safe_stem`);
-    ``method``: the weight solver the run played with (`RunOptions.method`), whose schedule
-    the plots draw.
+    ``stem`` starts every file name (default: the scene's name, made safe by `safe_stem`).
+    The plots draw what the run gathered (`RunResult.plot`, `RunOptions.plot`): a long
+    scene's series thinned to their first, last and extreme samples (`Envelope`).
     """
     plt = _pyplot()
+    data = result.plot
+    if data is None:
+        raise RtsError("plots need the run's plot data: run with RunOptions(plot=True)")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    from .check import checkable
-    from .kinematics import compute_tracks
-    from .preflight import angle_tolerance_deg
-    from .schedule import build_schedule
-
-    scene, report = result.scene, result.report
-    per_frame = report.per_frame
-    if not per_frame:
-        raise RtsError("plots need the per-frame record: run with RunOptions(record=True)")
-    # The run streamed its frames; the plots draw the whole scene, so it is evaluated again.
-    tracks = compute_tracks(scene)
-    # As the run built it: the statuses it judged by, the weights it played.
-    schedule = build_schedule(tracks, scene.rig, scene.radar, method=method,
-                              estimator=scene.radar_options.estimator,
-                              frame_rate_hz=scene.frame_rate_hz,
-                              angle_tolerance_deg=angle_tolerance_deg(scene))
-    judged = checkable(tracks, schedule.status)
+    scene = result.scene
     stem = safe_stem(stem if stem is not None else scene.name)
-    names = tracks.names
+    names = [t.name for t in scene.targets]
     colors = plt.cm.tab10(np.arange(len(names)) % 10)
     written = []
 
     fig, (top, angles) = plt.subplots(1, 2, figsize=(13, 5.5))
+    _, x = data.x_m.samples()
+    _, y = data.y_m.samples()
+    _, az = data.az_deg.samples()
+    _, el = data.el_deg.samples()
+    _, az_ok = data.checkable_az_deg.samples()
+    _, el_ok = data.checkable_el_deg.samples()
     for k, name in enumerate(names):
-        seen = tracks.present[:, k]
-        top.plot(tracks.position_m[seen, k, 1], tracks.position_m[seen, k, 0], color=colors[k],
-                 label=name)
-        angles.plot(tracks.az_deg[seen, k], tracks.el_deg[seen, k], color=colors[k])
-        ok = judged[:, k]
-        angles.plot(tracks.az_deg[ok, k], tracks.el_deg[ok, k], ".", ms=2, color=colors[k])
+        seen = ~np.isnan(x[:, k])
+        top.plot(y[seen, k], x[seen, k], color=colors[k], label=name)
+        angles.plot(az[seen, k], el[seen, k], color=colors[k])
+        ok = ~np.isnan(az_ok[:, k])
+        angles.plot(az_ok[ok, k], el_ok[ok, k], ".", ms=2, color=colors[k])
+    _draw_ends(top, y, x, colors)
+    _draw_ends(angles, az, el, colors)
     for poly in quad_polygons(scene.rig):
         ring = np.vstack([poly, poly[:1]])
         angles.fill(ring[:, 0], ring[:, 1], color="0.85", zorder=0)
         angles.plot(ring[:, 0], ring[:, 1], color="0.6", lw=0.8, zorder=0)
     # Under the targets' tracks: a target straight ahead is often in an FE's direction.
     angles.plot(scene.rig.az_deg, scene.rig.el_deg, "k^", ms=6, label="front ends", zorder=1)
-    top.set(xlabel="y (m, left)", ylabel="x (m, forward)", title="targets seen from the radar")
+    top.set(xlabel="y (m, left)", ylabel="x (m, forward)",
+            title="targets seen from the radar (o: start, dot: end)")
     top.invert_xaxis()
     if top.get_legend_handles_labels()[0]:  # no target: nothing to name
         top.legend(fontsize=7, loc="best")
@@ -114,17 +296,18 @@ def write_plots(result: RunResult, folder: str | Path, stem: str | None = None,
     written.append(_save(fig, folder / f"{stem}-scene.png"))
 
     fig, (att, delay) = plt.subplots(2, 1, figsize=(12, 7), sharex=True)
+    t_att, attenuation = data.attenuation_db.samples()
+    t_delay, delay_ns = data.delay_ns.samples()
     played = []
     for k, name in enumerate(names):
         for c in range(4):
-            on = schedule.active[:, k, c]
+            on = ~np.isnan(attenuation[:, 4 * k + c])
             if on.any():  # each target named once, on its first channel that plays
-                att.plot(schedule.t_s[on], schedule.attenuation_db[on, k, c], ".", ms=2,
+                att.plot(t_att[on, 4 * k + c], attenuation[on, 4 * k + c], ".", ms=2,
                          color=colors[k], label=None if name in played else name)
                 played.append(name)
-        on = np.asarray(schedule.active[:, k].any(axis=1), dtype=bool)
-        delay.plot(schedule.t_s[on], np.nanmean(schedule.delay_s[on, k], axis=1) * 1e9, ".",
-                   ms=2, color=colors[k])
+        on = ~np.isnan(delay_ns[:, k])
+        delay.plot(t_delay[on, k], delay_ns[on, k], ".", ms=2, color=colors[k])
     att.set(ylabel="attenuation per channel (dB)",
             title="schedule" if played else "schedule: no target played")
     if played:
@@ -132,27 +315,39 @@ def write_plots(result: RunResult, folder: str | Path, stem: str | None = None,
     delay.set(xlabel="time (s)", ylabel="RTS delay (ns)")
     written.append(_save(fig, folder / f"{stem}-schedule.png"))
 
-    quantities = [("error_range_m", "range (m)", "range_m"),
-                  ("error_radial_velocity_mps", "radial velocity (m/s)", "radial_velocity_mps"),
-                  ("error_az_deg", "azimuth (deg)", "az_deg"),
-                  ("error_el_deg", "elevation (deg)", "el_deg")]
-    fig, axes = plt.subplots(len(quantities), 1, figsize=(12, 9), sharex=True)
-    for ax, (key, label, tol_key) in zip(axes, quantities, strict=True):
-        err = per_frame.get(key)
-        tol = scene.expectations.tolerances[tol_key]
+    fig, axes = plt.subplots(len(_ERRORS), 1, figsize=(12, 9), sharex=True)
+    for ax, (key, label) in zip(axes, _ERRORS.items(), strict=True):
+        tol = scene.expectations.tolerances[key]
         ax.axhspan(-tol, tol, color="0.9", zorder=0)
-        if err is not None:
-            for k in range(len(names)):
-                ax.plot(tracks.t_s, err[:, k], ".", ms=2, color=colors[k])
+        t, err = data.errors[key].samples()
+        for k in range(len(names)):
+            ax.plot(t[:, k], err[:, k], ".", ms=2, color=colors[k])
         ax.set_ylabel(label)
-    missed = per_frame["checkable"] & ~per_frame["detected"]
+    t_missed, _ = data.missed.samples()
     for k in range(len(names)):
-        t = tracks.t_s[missed[:, k]]
+        t = t_missed[~np.isnan(t_missed[:, k]), k]
         axes[0].plot(t, np.zeros_like(t), "x", ms=3, color=colors[k])
     axes[0].set_title("detection errors (band: tolerance; x: missed)")
     axes[-1].set_xlabel("time (s)")
     written.append(_save(fig, folder / f"{stem}-errors.png"))
     return written
+
+
+def _draw_ends(ax: Any, x: FloatArray, y: FloatArray, colors: FloatArray) -> None:
+    """Mark where each column's path (x, y: (P, K), NaN where none) starts and ends.
+
+    A target that does not move has a path of no length: the marks are all it shows.
+    """
+    seen = ~np.isnan(x) & ~np.isnan(y)
+    has = seen.any(axis=0)
+    if not has.any():  # no target, or none present
+        return
+    columns = np.flatnonzero(has)
+    first = np.argmax(seen, axis=0)[has]
+    last = (x.shape[0] - 1 - np.argmax(seen[::-1], axis=0))[has]
+    ax.scatter(x[first, columns], y[first, columns], s=36, facecolors="none",
+               edgecolors=colors[has], zorder=2)
+    ax.scatter(x[last, columns], y[last, columns], s=12, color=colors[has], zorder=2)
 
 
 def _save(fig: Any, path: Path) -> Path:

@@ -191,15 +191,15 @@ def test_plots_draw_the_schedule_the_run_played(tmp_path, monkeypatch):
     # --method paper plays the paper's weights: the schedule plot is of those, not the exact
     # solver's, with the statuses the run judged by.
     pytest.importorskip("matplotlib")
-    import rts_scenario.schedule as schedule
+    import rts_scenario.pipeline as pipeline
 
-    real, calls = schedule.build_schedule, []
+    real, calls = pipeline.build_schedule, []
 
     def spy(*args, **kwargs):
         calls.append(kwargs)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(schedule, "build_schedule", spy)
+    monkeypatch.setattr(pipeline, "build_schedule", spy)
     import matplotlib.pyplot as plt
 
     from rts_scenario import plots
@@ -216,7 +216,7 @@ def test_plots_draw_the_schedule_the_run_played(tmp_path, monkeypatch):
     scene.write_text((ROOT / "scenarios" / "approaching_target.scenario.yaml").read_text()
                      .replace("duration_s: 7.5", "duration_s: 0.5"))
     assert cli.main(["run", str(scene), "--method", "paper", "--plot", str(tmp_path / "p")]) == 0
-    # Every schedule built, the plot's among them, as the run played it.
+    # The plot draws the schedules the run played, every one built as the run played it.
     assert calls and {(c.get("method"), c.get("angle_tolerance_deg")) for c in calls} == {
         ("paper", (0.5, 1.0))}
     # The car straight ahead sits on the middle FE's direction: its track is drawn over the

@@ -442,10 +442,10 @@ class ScenarioItem(pytest.Item):
         if self.crash is not None:
             raise self.crash
 
-        # The HTML report's plots need every frame's errors: record them only for it.
-        record = self.config.pluginmanager.hasplugin("rts-scenario-html")
+        # The HTML report's plots need what the run plays and measures: gather it only for it.
+        plot = self.config.pluginmanager.hasplugin("rts-scenario-html")
         scene = load_scenario(self.path, self.overrides)
-        options = _options(self.config, record=record)
+        options = _options(self.config, plot=plot)
         unused = simulated_radar_parameters(scene.parameters)
         if unused and options.output != "simulated-radar":
             # As `rts-scenario run` notes it: the item's verdict is not one of that setting.
@@ -578,7 +578,7 @@ class HtmlReport:
     """With pytest-html and ``--html``: a failed scene's report carries its table and plots.
 
     Registered by `pytest_configure` only when pytest-html is installed and writes a report,
-    so without it nothing changes (and no run records its frames).
+    so without it nothing changes (and no run gathers what plots draw).
     """
 
     @pytest.hookimpl(wrapper=True)
@@ -590,18 +590,13 @@ class HtmlReport:
         failure = call.excinfo.value if call.excinfo is not None else None
         if isinstance(failure, RunFailed):
             extras = [*getattr(report, "extras", []),
-                      *_html_extras(failure.result, item.config.getoption("--rts-method"))]
+                      *_html_extras(failure.result)]
             report.extras = extras  # type: ignore[attr-defined]  # pytest-html reads it
-            if failure.result.report.record is not None:
-                failure.result.report.record.close()  # the plots are drawn; free the disk
         return report
 
 
-def _html_extras(result: RunResult, method: str) -> list[dict[str, Any]]:
-    """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG.
-
-    ``method``: the weight solver the run played with (``--rts-method``).
-    """
+def _html_extras(result: RunResult) -> list[dict[str, Any]]:
+    """Return the report table (as the CLI prints it) and every plot of the run, base64 PNG."""
     import base64
     import html
     import importlib.util
@@ -618,7 +613,7 @@ def _html_extras(result: RunResult, method: str) -> list[dict[str, Any]]:
                                   "'rts-scenario[plot]').</p>")]
     with tempfile.TemporaryDirectory(prefix="rts-scenario-html-") as folder:
         try:
-            written = write_plots(result, folder, method=method)
+            written = write_plots(result, folder)
         except Exception as exc:  # a report that cannot draw must not break the test session
             return [*out, extras.html(f"<p>No plots: {html.escape(type(exc).__name__)}: "
                                       f"{html.escape(str(exc))}</p>")]

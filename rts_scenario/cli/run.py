@@ -330,7 +330,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
                                          can_channel=args.can_channel, can_fd=args.can_fd,
                                          radar_channel=args.radar_channel,
                                          mapping=args.mapping, method=args.method,
-                                         record=bool(args.plot), bus_log=log)
+                                         plot=bool(args.plot), bus_log=log)
                     result = run_scene(scene, options,
                                        progress=Progress(run_label(Path(path).name, variant)),
                                        detections_out=detections, on_preflight=warn, timing=loaded)
@@ -359,7 +359,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
 
                         stem = _unique(safe_stem(scene.label), stems)
                         with writing("--plot", args.plot):
-                            written_plots = write_plots(result, args.plot, stem, args.method)
+                            written_plots = write_plots(result, args.plot, stem)
                         for written in written_plots:
                             print(f"wrote {written}")
                 except Exception as exc:
