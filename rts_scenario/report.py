@@ -184,6 +184,18 @@ class TargetResult:
         return "FAIL" if self.checked else "FAIL (not checked)"
 
 
+def not_checked_note(not_checked: int, targets: int) -> str:
+    """`` (N of M targets not checked: ...)`` after a pass's name, or "" where all were.
+
+    A scene that expects its limits may pass with targets the RTS never played or the radar
+    could not be judged on: the pass says so beside its name, not only in its table.
+    """
+    if not not_checked:
+        return ""
+    return (f" ({not_checked} of {targets} targets not checked: under limits the scene "
+            f"expects all along)")
+
+
 @dataclass
 class Report:
     """The verdict of a run and the evidence for it.
@@ -258,10 +270,20 @@ class Report:
         return run_label(self.scene, self.variant)
 
     @property
+    def not_checked_targets(self) -> list[str]:
+        """Targets no radar cycle judged (`TargetResult.checked`): under limits all along."""
+        return [t.name for t in self.targets if not t.checked]
+
+    @property
     def verdict_line(self) -> str:
-        """``PASS: label``, or ``FAIL: label - reasons``: the table's last line."""
-        return (("PASS" if self.passed else "FAIL") + f": {self.label}"
-                + ("" if self.passed else " - " + "; ".join(self.reasons)))
+        """``PASS: label``, or ``FAIL: label - reasons``: the table's last line.
+
+        A pass with targets never checked says how many (`not_checked_note`).
+        """
+        if self.passed:
+            return f"PASS: {self.label}" + not_checked_note(len(self.not_checked_targets),
+                                                            len(self.targets))
+        return f"FAIL: {self.label} - " + "; ".join(self.reasons)
 
     @property
     def reason_codes(self) -> list[str]:

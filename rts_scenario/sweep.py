@@ -404,7 +404,8 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     ``reason`` (its one-line message), ``error_type`` (``bad_input``: the scene does not load
     or its schedule cannot be built; ``runtime``: anything else) and the quantities of
     `QUANTITY_KEYS`, each None. Finished runs add ``detection_rate``, ``false_detections``,
-    ``errors`` (rms and max per quantity), ``max_error_ratio`` and ``max_error_quantity`` (the
+    ``targets`` and ``targets_not_checked`` (those no radar cycle judged), ``errors`` (rms
+    and max per quantity), ``max_error_ratio`` and ``max_error_quantity`` (the
     largest max error over its tolerance), ``solver_plan`` (where its solver plan came from:
     ``built``, ``memory`` or ``disk``) and ``seconds``.
     """
@@ -467,6 +468,8 @@ def run_task(task: SweepTask, method: str = "exact") -> Entry:
     entry.update(strict({
         "detection_rate": report.detection_rate,
         "false_detections": report.false_detections,
+        "targets_not_checked": len(report.not_checked_targets),
+        "targets": len(report.targets),
         "errors": {q: {"rms": s.rms, "max": s.max} for q, s in report.errors.items()
                    if s.count},
         "max_error_ratio": ratio if worst else None,
@@ -519,8 +522,8 @@ def _file_scene(file: str) -> str:
 
 
 # What a finished run measured (`run_task`): an erred run has each of them, as null.
-QUANTITY_KEYS = ("detection_rate", "false_detections", "errors", "max_error_ratio",
-                 "max_error_quantity")
+QUANTITY_KEYS = ("detection_rate", "false_detections", "targets_not_checked", "targets",
+                 "errors", "max_error_ratio", "max_error_quantity")
 
 
 def error_entry(entry: Entry, message: str, error_type: str) -> Entry:

@@ -590,3 +590,43 @@ def test_an_empty_bench_judged_on_the_chance_of_more_false_detections_than_it_al
         scene.expectations, max_false_detections_per_frame=0.0))
     assert 1.0 - math.exp(-rate) > 1e-3
     assert vacuous_empty_bench(strict, scene.radar_options) is None
+
+
+BEHIND = ("- {name: behind, rcs: {rcs_dbsm: 10.0}, expected_limits: [out_of_coverage], "
+          "motion: {type: stationary, position_m: [-20, 0, 1.1]}}\n")
+
+
+def test_a_pass_with_targets_never_checked_says_how_many_beside_its_name(tmp_path, capsys):
+    # A target behind the radar all along, its limit expected: the scene passes, and said
+    # only "PASS" (the table alone said "not checked"), as did pytest and sweep.
+    import json
+
+    from rts_scenario import cli
+    from rts_scenario.sweep import SweepTask, run_task
+
+    path = scene(tmp_path, "behind", CAR + BEHIND)
+    report = run_scene(path, RunOptions(drain_s=1.0)).report
+    assert report.passed and report.not_checked_targets == ["behind"]
+    note = "(1 of 2 targets not checked: under limits the scene expects all along)"
+    assert report.verdict_line == f"PASS: behind {note}"
+    other = scene(tmp_path, "only", CAR)
+    assert cli.main(["run", str(path), str(other), "--json", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    assert f"PASS behind ({path}) {note}" in out.splitlines()
+    assert f"PASS only ({other})" in out.splitlines()
+    assert [[t["checked"] for t in e["targets"]]
+            for e in json.loads((tmp_path / "r.json").read_text())] == [[True, False], [True]]
+    entry = run_task(SweepTask(index=0, file=str(path)), "exact")
+    assert (entry["status"], entry["targets_not_checked"], entry["targets"]) == ("pass", 1, 2)
+
+
+def test_the_plugin_warns_of_a_pass_with_targets_never_checked(pytester):
+    pytester.makefile(".scenario.yaml", behind=HEAD.format(name="behind", rate=20.0)
+                      + "targets:\n" + textwrap.indent(CAR + BEHIND, "  "))
+    result = pytester.runpytest("-p", "no:cacheprovider", "--junitxml=j.xml")
+    result.assert_outcomes(passed=1, warnings=1)
+    result.stdout.fnmatch_lines(["*TargetsNotCheckedWarning: behind: passed with 1 of 2 "
+                                 "targets not checked (under limits the scene expects all "
+                                 "along): behind"])
+    assert '<property name="targets_not_checked" value="1" />' in (
+        pytester.path / "j.xml").read_text()

@@ -383,6 +383,10 @@ class BenchSettingWarning(UserWarning):
     """A combination over the built-in simulated radar's options, played to an RTS."""
 
 
+class TargetsNotCheckedWarning(UserWarning):
+    """A scene passed with targets no radar cycle judged (under limits it expects all along)."""
+
+
 class RunFailed(Exception):
     """A scene ran and failed (`ScenarioFailed`, `BenchFailed`)."""
 
@@ -461,6 +465,16 @@ class ScenarioItem(pytest.Item):
             result = run_scene(scene, options)
         report = result.report
         self.user_properties.extend(_metrics(report))
+        unchecked = report.not_checked_targets
+        if report.passed and unchecked:
+            # PASSED alone would hide them (`rts-scenario run` says so beside the pass).
+            with warnings.catch_warnings():
+                warnings.simplefilter("always", TargetsNotCheckedWarning)
+                warnings.warn(TargetsNotCheckedWarning(
+                    f"{self.name}: passed with {len(unchecked)} of {len(report.targets)} "
+                    f"targets not checked (under limits the scene expects all along): "
+                    f"{', '.join(unchecked[:5])}{', ...' if len(unchecked) > 5 else ''}"),
+                    stacklevel=1)
         if not report.passed:
             from rts_scenario.report import bench_failures
 
@@ -545,7 +559,8 @@ def _metrics(report: Report) -> list[tuple[str, object]]:
     out: list[tuple[str, object]] = [("passed", report.passed),
                                      ("detection_rate",
                                       round(rate, 4) if math.isfinite(rate) else "null"),
-                                     ("false_detections", report.false_detections)]
+                                     ("false_detections", report.false_detections),
+                                     ("targets_not_checked", len(report.not_checked_targets))]
     for name, stats in report.errors.items():
         if stats.count:
             out += [(f"{name}_rms", round(stats.rms, 5)), (f"{name}_max", round(stats.max, 5))]

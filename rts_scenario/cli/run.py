@@ -119,7 +119,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         from ..pipeline import LOG_SIDECAR_SUFFIX, RunOptions, run_scene
         from ..plots import safe_stem
         from ..preflight import Preflight
-        from ..report import bench_failures
+        from ..report import bench_failures, not_checked_note
         from ..scenario import SCENE_SUFFIX, load_scenario, parametrizations, run_label
         from ..scenario.model import simulated_radar_parameters
         from ..schedule import ScheduleError
@@ -423,6 +423,9 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         for i, entry in enumerate(entries):
             name = run_label(entry["scene"], entry["variant"])
             line = f"{entry['status'].upper()} {name} ({entry['file']})"
+            if entry["status"] == "pass":
+                targets = entry.get("targets") or []
+                line += not_checked_note(sum(not t["checked"] for t in targets), len(targets))
             marked = marks_note(entry.get("marks", ()), entry["status"] == "pass",
                                 bench_of_run.get(i, ()))
             if marked is not None:

@@ -294,11 +294,15 @@ def _print_runs(entries: list[dict[str, Any]], summary: dict[str, Any], seconds:
 
     ``total``: the runs the sweep had, when it was interrupted before all of them finished.
     """
+    from ..report import not_checked_note
     from ..sweep import run_label
 
     print(_settings_text(settings))
     for entry in entries:
         line = f"{entry['status'].upper()} {run_label(entry)} ({entry['file']})"
+        if entry["status"] == "pass":
+            line += not_checked_note(entry.get("targets_not_checked") or 0,
+                                     entry.get("targets") or 0)
         print(line + (f": {entry['reason']}" if "reason" in entry else ""))
     print()
     print(_summary_text(summary, seconds, total))
