@@ -1669,6 +1669,9 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"detections cannot tell when the scene started; give "
                            f"--time-offset-s (the log time of the scene's time 0)")
         span_s = 0.0
+        # How far before the scene's start as the estimate puts it a cycle may lie and be its
+        # first: three of the estimate's standard errors, as live (`ClockTrack`).
+        start_tolerance_s = START_TOLERANCE_S
         if time_offset_s is None:
             if not aligned_by_data:
                 raise LogError(f"--log {log}: no detection to align the scene with"
@@ -1676,6 +1679,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             # The profile's latency, the offset from the data.
             found = estimate_offset(scene, bus_t[chosen], dets, latency)
             offset = found.offset_s
+            start_tolerance_s += 3.0 * (found.spread_s or 0.0)
             if found.others_s:
                 starts = sorted((offset, *found.others_s))
                 times = ", ".join(f"{t:.3f}" for t in starts[:5]) + (
@@ -1725,6 +1729,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                     f"the scene's")
             latency = found.offset_s - offset
             slack = 3 * (found.spread_s or 0.0) + 0.005
+            start_tolerance_s += 3.0 * (found.spread_s or 0.0)
             if latency < -slack:
                 raise LogError(f"--time-offset-s {offset:.6f}: the log's cycles would reach the "
                                f"bus {-latency * 1e3:.1f} ms before the radar measured them; "
@@ -1766,7 +1771,7 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                         f"other times than its profile says (or --time-offset-s is not the "
                         f"scene's start)")
         clock, kept = _fitted_clock(numbers, bus_t, counters, latency, offset, modulus,
-                                    profile_clock.cycle_s, restart)
+                                    profile_clock.cycle_s, restart, start_tolerance_s)
         if (time_offset_s is None and restart is not None and counters.size
                 and int(counters[0]) == restart):
             # The log's first cycle carries the count the radar restarts at with the scene
@@ -1780,7 +1785,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                 offset -= later_s  # the count decides
                 alignment.offset_s = offset
                 clock, kept = _fitted_clock(numbers, bus_t, counters, latency, offset,
-                                            modulus, profile_clock.cycle_s, restart)
+                                            modulus, profile_clock.cycle_s, restart,
+                                            start_tolerance_s)
             later_cycles = later_s / clock.cycle_s
             # Beyond the estimate's span and half a cycle (the span is no hard bound: noise
             # moves the estimate by a millisecond or two beyond it); less is the estimate's
@@ -2147,7 +2153,8 @@ def _check_timestamps(log: str | Path, bus_t: FloatArray, cycle_s: float,
 
 def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, latency_s: float,
                   offset_s: float, modulus: int, nominal_cycle_s: float,
-                  restart: int | None = None) -> tuple[RadarClock, bool]:
+                  restart: int | None = None, start_tolerance_s: float = START_TOLERANCE_S
+                  ) -> tuple[RadarClock, bool]:
     """Return the radar's clock in scene time fitted to the header timestamps.
 
     And whether its cycle is the profile's (``nominal_cycle_s``), kept where the timestamps
@@ -2157,7 +2164,8 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
     holds it or not: a log that begins after the scene did lacks the cycles before, and those
     are missing. Unless the log's first cycle carries the counter the radar's count starts at
     (``restart``, its profile's): a radar started after the scene began measured none
-    before it.
+    before it. A cycle up to ``start_tolerance_s`` before the scene's start (the offset's
+    uncertainty) is its first.
     """
     ok = np.isfinite(bus_t)
     if not ok.any():
@@ -2199,7 +2207,7 @@ def _fitted_clock(numbers: IntArray, bus_t: FloatArray, counters: IntArray, late
         cycle_s, first_s = nominal_cycle_s, float(bus_t[ok][0] - t0 - numbers[ok][0]
                                                   * nominal_cycle_s)
     start = (t0 - offset_s) - latency_s + first_s  # scene time of the log's cycle number 0
-    shift = int(np.ceil((-start - START_TOLERANCE_S) / cycle_s))
+    shift = int(np.ceil((-start - start_tolerance_s) / cycle_s))
     if restart is not None and counters.size and int(counters[0]) == restart:
         shift = max(shift, 0)
     return RadarClock(cycle_s=float(cycle_s),

@@ -2143,3 +2143,17 @@ def test_a_re_check_by_the_sidecar_names_the_sidecar_as_the_latency_s_source(rec
     alignment = check_log(scene, recorded).alignment
     assert alignment.source == "sidecar" and alignment.latency_source == "sidecar"
     assert alignment.to_dict()["latency_source"] == "sidecar"
+
+
+@pytest.mark.parametrize("start_offset_s", [0.0005, 0.0015])
+def test_a_log_without_sidecar_counts_a_first_cycle_within_the_estimate_s_error(
+        tmp_path, start_offset_s):
+    # The radar measured its first cycle 0.5 ms (1.5 ms) into the scene; the detections put
+    # the scene's start 1.3 ms (2.3 ms) after the truth, within three of the estimate's
+    # standard errors (1.8 ms each). The re-check took that first cycle as before the scene,
+    # where a run counts it as the scene's first.
+    clock = {**OWN_CLOCK, "counter_start": "auto", "start_offset_s": start_offset_s}
+    scene, log, _ = foreign_log(tmp_path, 1.7e9 + 5.0, seed=3, clock=clock)
+    frames = check_log(scene, log).report.frames
+    assert frames["total"] == frames["checked"] == 167
+    assert frames["before_scene"] == 0 and frames["missing"] == 0
