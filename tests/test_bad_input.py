@@ -242,7 +242,17 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     ("seed-negative", TINY + "seed: -4\n", r"^{f}:15:1: seed: must be >= 0, got -4"),
     ("bad-mark", TINY + "marks: [not a mark]\n", r"^{f}:15:\d+: marks\[0\]: .*does not match"),
     ("parametrize-bad-path", TINY + "parametrize: {radar.nothing.here: [1, 2]}\n",
-     r"^{f}:15:1: parametrize: radar.nothing.here: no such key path in the scene"),
+     r"^{f}:15:15: parametrize.radar.nothing.here: radar.nothing.here: no such key path in the "
+     r"scene"),
+    # A key path the scene does not have is wrong in its entry, not in the whole block.
+    ("parametrize-path-past-the-list", TINY + "parametrize:\n  seed: [1]\n"
+     "  targets.5.motion.speed_mps: [1]\n",
+     r"^{f}:17:3: parametrize.targets.5.motion.speed_mps: targets.5.motion.speed_mps: no such "
+     r"key path in the scene \(at targets.5\) \[seed=1-speed_mps=1\]$"),
+    ("parametrize-index-past-the-list", TINY + "parametrize:\n  seed: [1]\n"
+     "  duration_s, targets.0.motion.position_m.3: [[1.0, 2]]\n",
+     r"^{f}:17:3: parametrize.duration_s, targets.0.motion.position_m.3: "
+     r"targets.0.motion.position_m.3: no such key path in the scene \["),
     ("parametrize-combination-fails", TINY + "parametrize: {frame_rate_hz: [10, 400]}\n",
      r"^{f}:15:\d+: frame_rate_hz: the scene runs at 400 Hz .*\[frame_rate_hz=400\]$"),
     # A value a combination puts in place is wrong where the parametrize block gives it.
@@ -290,7 +300,8 @@ SCENE_CASES: list[tuple[str, str | bytes, str]] = [
     # A superscript two is a digit to str.isdigit, no index: int() of it was a runtime error.
     ("parametrize-superscript-index",
      TINY + "parametrize:\n  targets.\u00b2.rcs.rcs_dbsm: [1, 2]\n",
-     r"^{f}:15:1: parametrize: targets.\u00b2.rcs.rcs_dbsm: no such key path in the scene"),
+     r"^{f}:16:3: parametrize.targets.\u00b2.rcs.rcs_dbsm: targets.\u00b2.rcs.rcs_dbsm: no such "
+     r"key path in the scene"),
     ("parametrize-path-inside-a-group", TINY + "parametrize:\n  radar: [{profile: "
      "awr1843boost}]\n  seed, radar.estimator: [[1, ti], [2, bartlett]]\n",
      r"^{f}:17:3: parametrize.seed, radar.estimator: radar.estimator lies inside the key path "

@@ -622,22 +622,24 @@ def _parameter_axis(doc: Document, key: str,
 
 def _override(doc: Document, key: str, value: Any) -> None:
     parts: list[str | int] = [_key_part(p) for p in key.split(".")]
+    # The parametrize block's entry that gives the key path: an error in it points there.
+    block = doc.data.get("parametrize")
+    entry = next((k for k in (block if isinstance(block, dict) else {})
+                  if key in (p.strip() for p in k.split(","))), None)
+    at: KeyPath = ("parametrize", entry) if entry is not None else ("parametrize",)
     node: Any = doc.data
     for i, part in enumerate(parts[:-1]):
         try:
             node = node[part]
         except (KeyError, IndexError, TypeError):
-            raise doc.error(("parametrize",), f"{key}: no such key path in the scene (at "
-                                              f"{'.'.join(map(str, parts[: i + 1]))})") from None
+            raise doc.error(at, f"{key}: no such key path in the scene (at "
+                                f"{'.'.join(map(str, parts[: i + 1]))})") from None
     try:
         node[parts[-1]] = value
     except (IndexError, TypeError):
-        raise doc.error(("parametrize",), f"{key}: no such key path in the scene") from None
+        raise doc.error(at, f"{key}: no such key path in the scene") from None
     # The value now there is the parametrize block's: an error in it points at its entry.
-    block = doc.data.get("parametrize")
-    entry = next((k for k in (block if isinstance(block, dict) else {})
-                  if key in (p.strip() for p in k.split(","))), None)
-    where = doc.marks.get(("parametrize", entry) if entry is not None else ("parametrize",))
+    where = doc.marks.get(at)
     if where is not None:
         path = tuple(parts)
         for old in [m for m in doc.marks if m[:len(path)] == path]:
