@@ -371,6 +371,19 @@ def test_validate_a_directory_is_a_clear_error(tmp_path, capsys):
     assert "Traceback" not in err
 
 
+def test_validate_notes_the_bench_once_per_scene_file(capsys):
+    # Both scenes play on awr1843boost and wide-3x5: each file's lines say its bench whole,
+    # once for its variants, whatever file came before it.
+    scenes = [str(ROOT / "scenarios" / f"{name}.scenario.yaml")
+              for name in ("cut_in", "accelerating_lead")]
+    assert cli.main(["validate", *scenes]) == 0
+    notes = [line for line in capsys.readouterr().out.splitlines()
+             if "Fraunhofer distance" in line]
+    assert [line.split(": ", 2)[1] for line in notes] == [f"{scenes[0]}[estimator=bartlett]",
+                                                         scenes[1]], notes
+    assert len({line.split(": ", 2)[2] for line in notes}) == 1
+
+
 @pytest.mark.parametrize("command", ["run", "validate"])
 def test_a_folder_given_as_a_scene_says_which_commands_take_folders(tmp_path, capsys, command):
     # `sweep scenarios/` and `pytest scenarios/` take a folder; run and validate take files.

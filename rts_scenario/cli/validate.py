@@ -20,7 +20,6 @@ def _do_validate(args: argparse.Namespace) -> int:
         from ..schedule.build import delay_step_note, if_distance_note
 
     bad = 0
-    reported: set[str] = set()  # notes of a rig and radar: said once, for the first scene
     for path in args.scenes:
         try:
             combos = parametrizations(path)
@@ -30,6 +29,8 @@ def _do_validate(args: argparse.Namespace) -> int:
             bad += 1
             continue
         errors: dict[str, list[str]] = {}  # message -> the combinations that hit it
+        # Notes of a rig and radar: once per file, so each file's lines say all of its bench.
+        reported: set[str] = set()
         for ident, overrides in combos:
             label = f"{path}[{ident}]" if ident else str(path)
             try:
@@ -54,7 +55,7 @@ def _do_validate(args: argparse.Namespace) -> int:
             for note in (near_field_warning(scene.radar, scene.rig),
                          delay_step_note(scene.rig, scene.radar),
                          if_distance_note(scene.rig, scene.radar)):
-                if note and note not in reported:  # once per rig and radar
+                if note and note not in reported:
                     reported.add(note)
                     print(f"note: {label}: {note}")
             if vacuous:  # the scene's own: said for each scene
