@@ -42,25 +42,27 @@ def cache_dir_setting() -> Path | None | bool:
     """``$RTS_SCENARIO_CACHE_DIR``: its folder, False for "off" or empty, None when unset.
 
     "off" in any case, spaces aside. Raises `SettingError` naming the variable for a value that
-    names no usable folder: a ``~user`` that does not exist, or something that is not a folder
-    (a file, a device); a folder not there yet is made when a plan is first stored.
+    names no folder: a ``~user`` that does not exist, a path that is not there (a mistyped
+    path is not made into a tree of new folders) or something that is not a folder (a file, a
+    device).
     """
     raw = os.environ.get(CACHE_DIR_ENV)
     if raw is None:
         return None
     if raw.strip().lower() in ("", "off"):
         return False
-    allowed = "a folder path, or off (or empty) for no disk cache"
+    allowed = "an existing folder, or off (or empty) for no disk cache"
     try:
         folder = Path(raw).expanduser()
     except RuntimeError as exc:  # "~nosuchuser": no home to expand it to
         raise SettingError(f"{CACHE_DIR_ENV}={raw!r}: {exc}; allowed: {allowed}") from None
     try:
-        not_a_folder = folder.exists() and not folder.is_dir()
+        exists, is_folder = folder.exists(), folder.is_dir()
     except OSError:  # out of reach (no permission): the plans are then not stored, as before
         return folder
-    if not_a_folder:
-        raise SettingError(f"{CACHE_DIR_ENV}={raw!r}: not a folder; allowed: {allowed}")
+    if not is_folder:
+        why = "not a folder" if exists else "no such folder"
+        raise SettingError(f"{CACHE_DIR_ENV}={raw!r}: {why}; allowed: {allowed}")
     return folder
 
 
@@ -71,7 +73,8 @@ def cache_dir() -> Path | None:
     be written).
 
     ``$RTS_SCENARIO_CACHE_DIR`` if set ("off" or empty: disabled; `cache_dir_setting` refuses a
-    value naming no folder); else the user's cache directory:
+    value naming no folder); else the user's cache directory (made when a plan is first
+    stored):
     ``%LOCALAPPDATA%\rts-scenario\Cache`` on Windows, ``~/Library/Caches/rts-scenario`` on
     macOS, ``$XDG_CACHE_HOME/rts-scenario`` or ``~/.cache/rts-scenario`` elsewhere.
     """

@@ -1106,21 +1106,45 @@ def test_an_unknown_jit_setting_is_refused_before_anything_runs(places, capsys, 
     assert out == "" and not Path(places["tmp"], "out.json").exists()
 
 
+CACHE_ALLOWED = "allowed: an existing folder, or off (or empty) for no disk cache"
+
+
 @pytest.mark.parametrize(("value", "why"), [
     ("~no-such-user-here/plans", "Could not determine home directory"),
-    ("{tmp}/a-file", "not a folder"), (os.devnull, "not a folder")])
+    ("{tmp}/a-file", "not a folder"), (os.devnull, "not a folder"),
+    ("{tmp}/nope/deeper", "no such folder"), ("{tmp}/a-file/cache", "no such folder")])
+@pytest.mark.parametrize("command", ["run", "validate"])
 def test_a_cache_folder_setting_that_names_no_folder_is_refused_before_anything_runs(
-        places, capsys, monkeypatch, value, why):
+        places, capsys, monkeypatch, value, why, command):
     """A ~user that does not exist was a runtime error per scene without the variable named;
-    a file or a device was ignored without a word, every plan rebuilt."""
+    a file or a device was ignored without a word, every plan rebuilt; a mistyped path was
+    made, with every folder above it that was not there."""
     Path(places["tmp"], "a-file").write_text("not a folder")
     value = value.format(**places)
     monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", value)
-    assert call(["run", places["scene"]]) == 2
+    assert call([command, places["scene"]]) == 2
     out, err = capsys.readouterr()
     assert one_error(err).startswith(f"RTS_SCENARIO_CACHE_DIR={value!r}: {why}")
-    assert one_error(err).endswith("allowed: a folder path, or off (or empty) for no disk cache")
+    assert one_error(err).endswith(CACHE_ALLOWED)
     assert out == ""
+    assert not Path(places["tmp"], "nope").exists()
+
+
+def test_a_cache_folder_that_is_not_there_is_an_error_in_library_use(monkeypatch, tmp_path):
+    """The solver refuses it as the command does, and makes no folder."""
+    import numpy as np
+
+    import rts_scenario as rs
+    from rts_scenario.solver.plan import clear_memory_cache
+
+    missing = tmp_path / "nope" / "deeper"
+    monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", str(missing))
+    clear_memory_cache()
+    with pytest.raises(rs.SettingError, match=re.escape(
+            f"RTS_SCENARIO_CACHE_DIR={str(missing)!r}: no such folder; {CACHE_ALLOWED}")):
+        rs.solve_weights(np.array([0.0]), np.array([0.0]), rig=rs.Rig.preset("wide-3x5"),
+                         array=rs.VirtualArray.preset("awr1843boost"))
+    assert not (tmp_path / "nope").exists()
 
 
 @pytest.mark.parametrize("value", ["OFF", " Off "])

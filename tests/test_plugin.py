@@ -130,6 +130,18 @@ def test_rts_radar_channel_reads_the_radar_s_channel_alone(pytester, monkeypatch
     assert "--rts-radar-channel ' ': empty" in text and "Traceback" not in text
 
 
+def test_a_cache_folder_that_is_not_there_stops_the_session_up_front(pytester, monkeypatch):
+    # A mistyped path was made, with every folder above it that was not there.
+    pytester.makefile(".scenario.yaml", one=scene("one"))
+    missing = pytester.path / "nope" / "deeper"
+    monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", str(missing))
+    result = pytester.runpytest()
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    text = result.stderr.str() + result.stdout.str()
+    assert text.count(f"RTS_SCENARIO_CACHE_DIR={str(missing)!r}: no such folder; allowed: ") == 1
+    assert "Traceback" not in text and not missing.parent.exists()
+
+
 @pytest.mark.parametrize("option", ["--rts-mapping", "--rts-can-channel", "--rts-output",
                                     "--rts-can-interface"])
 def test_an_empty_rts_option_is_a_usage_error(pytester, option):

@@ -155,9 +155,14 @@ def test_corrupt_cache_file_is_rebuilt(kit_rig, tmp_path, monkeypatch, content):
 
 
 def test_unwritable_cache_dir_just_means_no_disk_cache(kit_rig, tmp_path, monkeypatch):
+    # The user's cache directory, made when a plan is first stored, cannot be made under a
+    # file. ($RTS_SCENARIO_CACHE_DIR naming no folder is refused: test_bad_input.py.)
     blocker = tmp_path / "a-file"
     blocker.write_text("not a directory")
-    monkeypatch.setenv("RTS_SCENARIO_CACHE_DIR", str(blocker / "cache"))
+    monkeypatch.delenv("RTS_SCENARIO_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocker))
+    monkeypatch.setattr(sys, "platform", "linux")
+    assert plan_cache_dir() == blocker / "rts-scenario"
     array = rs.VirtualArray.preset("paper")
     clear_memory_cache()
     assert solver_plan(kit_rig, array, "paper").origin == "built"
