@@ -17,6 +17,7 @@ from rts_scenario.cli.sweep import SweepProgress
 from rts_scenario.sweep import collect_tasks, run_sweep, summarize
 
 pytest_plugins = ["pytester"]
+ROOT = Path(__file__).resolve().parents[1]
 
 # Two of the six combinations put the car 20 m to the side, outside the rig's coverage, and the
 # scene does not declare that limit: those runs fail by design.
@@ -809,6 +810,40 @@ def test_exit_code_is_pytest_s_for_known_failures_and_skips(pytester, capsys, tm
     swept, code, _, _ = sweep_verdicts(capsys, tmp_path, pytester.path)
     assert swept == plugin and swept["lost"] == "fail"
     assert plugin_code == code == 1
+
+
+def documented_exit_codes() -> dict[int, tuple[str, str]]:
+    """docs/cli.md's table of sweep's exit codes: ``{code: (sweep's cell, pytest's cell)}``."""
+    text = (ROOT / "docs" / "cli.md").read_text(encoding="utf-8")
+    lines = text[text.index("| code | `sweep` | `pytest`, for the same scenes |"):].splitlines()
+    rows = {}
+    for line in lines[2:]:
+        if not line.startswith("|"):
+            break
+        code, swept, by_pytest = (cell.strip() for cell in line.strip().strip("|").split("|"))
+        rows[int(code)] = swept, by_pytest
+    return rows
+
+
+def test_a_scene_that_does_not_load_exits_as_the_docs_say_for_sweep_and_pytest(pytester, capsys,
+                                                                              tmp_path):
+    """sweep exits 2, bad input as for run; pytest fails the scene's item, exit 1. The docs
+    said both gave the same exit code for the same scenes."""
+    pytester.makefile(".scenario.yaml", plain=tiny_scene("plain"),
+                      broken=tiny_scene("broken") + "colour: red\n")
+    plugin, plugin_code = plugin_verdicts(pytester)
+    swept, code, _, _ = sweep_verdicts(capsys, tmp_path, pytester.path)
+    assert swept == {"plain": "pass", "broken": "error"}
+    assert plugin == as_plugin_sees_it(swept)
+    assert (code, plugin_code) == (2, pytest.ExitCode.TESTS_FAILED)
+    swept_cell, pytest_cell = documented_exit_codes()[code]
+    assert "its scene did not load" in swept_cell
+    assert pytest_cell.startswith(f"{plugin_code:d} for a scene or combination that does not "
+                                  f"load")
+    readme = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    assert ("the same exit code where no run erred (a run that erred, a scene that does not "
+            "load or a run that raised, exits 2 or 3 as for `run`, where `pytest` fails its "
+            "item, exit 1)") in readme
 
 
 def test_a_sweep_whose_runs_were_all_skipped_has_no_pass_rate(pytester, capsys, tmp_path):
