@@ -1763,3 +1763,14 @@ def test_a_recording_through_a_link_rewrites_the_file_it_names(tmp_path, capsys)
     assert cli.main(["run", scene, "--record", str(link)]) == 0
     capsys.readouterr()
     assert link.is_symlink() and real.read_text() != "OLD" and real.stat().st_size > 1000
+
+
+def test_a_run_stopped_on_an_option_never_writes_its_report_over_a_scene(tmp_path, capsys):
+    # --json named like a scene (not one of the run's): the not-run report replaced it when
+    # another option stopped the run before the check that refuses such a name.
+    other = tmp_path / "other.scenario.yaml"
+    other.write_text("kept\n")
+    code = cli.main(["run", str(ROOT / "scenarios" / "cut_in.scenario.yaml"), "--json",
+                     str(other), "--output", f"file:{tmp_path / 'x.npz'}"])
+    assert code == 2
+    assert other.read_text() == "kept\n"

@@ -449,3 +449,15 @@ def test_the_beat_phasors_are_the_powers_of_their_step(n):
     want = first[..., None] * np.exp(-2j * np.pi * cycles[..., None] * np.arange(n))
     assert got.shape == (5, 3, n)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * np.abs(first).max())
+
+
+@pytest.mark.parametrize("shape", [(64, 256), (3, 5), (1, 7), (16, 1)])
+def test_the_neighbourhood_maximum_is_scipy_s_maximum_filter_wrapping(shape):
+    from scipy import ndimage
+
+    from rts_scenario.radar.simulate import _neighbourhood_max
+
+    power = np.random.default_rng(7).exponential(size=shape)
+    power[0, 0] = power[-1, -1] = 5.0  # peaks whose neighbours wrap round both axes
+    np.testing.assert_array_equal(_neighbourhood_max(power),
+                                  ndimage.maximum_filter(power, size=3, mode="wrap"))

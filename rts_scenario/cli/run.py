@@ -105,6 +105,10 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
 
     if not args.json or same_as_any(args.json, _inputs(args)):
         return
+    from ..file_kinds import read_only_kind
+
+    if read_only_kind(Path(args.json).name) is not None:
+        return  # named like a file the tool reads (another scene): never written over
     # No scene to tell (a command line argparse refused): one entry naming none.
     unrun = [_error_entry(Path(path).name.removesuffix(SCENE_SUFFIX), path, message)
              for path in args.scenes or [""]]
