@@ -54,7 +54,7 @@ from .scenario.model import LIMITS, PLANNED_SCENE_LIMITS, SCENE_LIMITS, Expectat
 from .schedule.model import BLOCKING, Status
 
 if TYPE_CHECKING:
-    from .plots import PlotData
+    from .plot_data import PlotData
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

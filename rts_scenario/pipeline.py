@@ -33,7 +33,7 @@ from .canbus import (
     with_mapping_hint,
 )
 from .canbus.mapping import CanMapping
-from .check import Checker
+from .check import Checker, checkable
 from .detections import Detections, bus_times, host_times, sequential_numbers, unwrap_counter
 from .errors import MeasurementError
 from .hostclock import HostClockWatch, monotonic_s, wall_s
@@ -49,7 +49,7 @@ from .playback import (
     rts_rig_record,
     unreachable_reason,
 )
-from .plots import PlotData
+from .plot_data import PlotData
 from .preflight import (
     Preflight,
     angle_tolerance_deg,
@@ -237,7 +237,7 @@ class RunOptions:
         Keep every frame's check arrays (on disk) for post-processing (`Report.per_frame`).
     plot : bool
         Gather what `rts_scenario.plots.write_plots` draws (`RunResult.plot`), in memory that
-        does not grow with the scene's length (`rts_scenario.plots.PlotData`).
+        does not grow with the scene's length (`rts_scenario.plot_data.PlotData`).
     bus_log : str, optional
         Record the detection bus to this file with python-can's ``Logger`` (format by
         extension: .blf, .asc, .csv, .log, .trc, .mf4 with asammdf), plus ``LOG.rts.json``
@@ -1037,7 +1037,7 @@ class Pipeline:
             schedule = replace(schedule, frame_index=frames)
             checker.add_frames(tracks, schedule.status)
             if plot is not None:
-                plot.add_frames(tracks, schedule)
+                plot.add_frames(tracks, schedule, checkable(tracks, schedule.status))
             if played is not None:
                 played.add(frames, tracks, schedule.status)
             mark = timer.add("schedule_s", mark)

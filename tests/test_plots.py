@@ -6,7 +6,7 @@ from scene_helpers import write_scene
 
 from rts_scenario import cli
 from rts_scenario.kinematics import compute_tracks
-from rts_scenario.plots import Envelope, PlotData
+from rts_scenario.plot_data import Envelope, PlotData
 from rts_scenario.scenario import load_scenario
 
 RATE_HZ = 20.0
