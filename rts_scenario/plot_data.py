@@ -121,7 +121,9 @@ class Envelope:
         """Return the times (s) and values kept, shape (P, C) in bucket order, NaN where none."""
         used = -(-self.count // self.stride)
         columns = self._t_s.shape[2]
-        return self._t_s[:used].reshape(-1, columns), self._values[:used].reshape(-1, columns)
+        # (no columns: a scene without targets)
+        return (self._t_s[:used].reshape(2 * used, columns),
+                self._values[:used].reshape(2 * used, columns))
 
 
 class PlotData:

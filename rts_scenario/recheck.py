@@ -1410,8 +1410,10 @@ def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections]
         lo, hi = max(lo, within_s[0]), min(hi, within_s[1])
     grid = np.arange(lo, hi + COARSE_STEP_S, COARSE_STEP_S)
     coarse = np.array([table.cost(t_log[pick] - s, some) for s in grid])
-    others = _repeats(grid, coarse, scene.duration_s)
     best = grid[_best(coarse)]
+    others = tuple(s for s in _repeats(grid, coarse, scene.duration_s)
+                   if not _held_after(table, scene.duration_s, max(s, float(best[-1])), t_log,
+                                      usable))
     span = float(best[-1] - best[0]) + 2 * FINE_SPAN_S
     step = max(FINE_STEP_S, span / MAX_FINE_POINTS)
     fine = best[0] - FINE_SPAN_S + step * np.arange(int(np.ceil(span / step)) + 1)
@@ -1431,6 +1433,23 @@ def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections]
     offset = top - min(EDGE_GUARD_S, plateau / 2)
     return OffsetEstimate(offset, plateau, _offset_uncertainty(table, every, t_log, fine),
                           others)
+
+
+def _held_after(table: _TruthTable, duration_s: float, later_s: float, t_log: FloatArray,
+                dets: list[Detections]) -> bool:
+    """Whether the later of two starts that fit matches the RTS holding the earlier's last frame.
+
+    Its detections are matched as well by the scene's last frame, which the RTS holds after
+    its play until it is told otherwise: no play again. A scene whose targets stand still
+    matches wherever they are held.
+    """
+    picked = np.flatnonzero((t_log - later_s >= 0.0) & (t_log - later_s <= duration_s))
+    if picked.size == 0:
+        return True
+    det = table.detected([dets[i] for i in picked])
+    played = table.cost(t_log[picked] - later_s, det)
+    held = table.cost(np.full(picked.size, duration_s - 0.5 * table.frame_s), det)
+    return held <= played + 0.1
 
 
 def _repeats(grid: FloatArray, costs: FloatArray, duration_s: float) -> tuple[float, ...]:
@@ -1670,7 +1689,8 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                            f"--time-offset-s (the log time of the scene's time 0)")
         span_s = 0.0
         # How far before the scene's start as the estimate puts it a cycle may lie and be its
-        # first: three of the estimate's standard errors, as live (`ClockTrack`).
+        # first: the estimate's error is no such allowance (a cycle measured before the scene
+        # saw the RTS idle: judged as its first, a miss), so none beyond rounding.
         start_tolerance_s = START_TOLERANCE_S
         if time_offset_s is None:
             if not aligned_by_data:
@@ -1679,7 +1699,6 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
             # The profile's latency, the offset from the data.
             found = estimate_offset(scene, bus_t[chosen], dets, latency)
             offset = found.offset_s
-            start_tolerance_s += 3.0 * (found.spread_s or 0.0)
             if found.others_s:
                 starts = sorted((offset, *found.others_s))
                 times = ", ".join(f"{t:.3f}" for t in starts[:5]) + (
@@ -1729,7 +1748,6 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
                     f"the scene's")
             latency = found.offset_s - offset
             slack = 3 * (found.spread_s or 0.0) + 0.005
-            start_tolerance_s += 3.0 * (found.spread_s or 0.0)
             if latency < -slack:
                 raise LogError(f"--time-offset-s {offset:.6f}: the log's cycles would reach the "
                                f"bus {-latency * 1e3:.1f} ms before the radar measured them; "
@@ -1815,7 +1833,12 @@ def check_log(scene: Scenario, log: str | Path, *, mapping: str | None = None,
     if "bus_time_shifts" not in ((sidecar or {}).get("clock") or {}):
         # Nothing tells whether the host's clock stepped while the log was recorded.
         jump = stamp_jump(numbers, index.bus_t_s, profile_clock)
-    skipped = None if jump is None else counter_skip(jump[1], profile_clock, modulus)
+    skipped = None
+    if jump is not None and 0 < jump[0] < counters.size:
+        # Only where the counter itself stepped by other than one there: a contiguous count
+        # with stamps that jump by whole cycles is a step of the host's clock (whole seconds).
+        if (int(counters[jump[0]]) - int(counters[jump[0] - 1])) % modulus != 1:
+            skipped = counter_skip(jump[1], profile_clock, modulus)
     why = ("the host's clock stepped while it was recorded (no sidecar of this version says "
            "so), or the radar's latency changed")
     if skipped is not None:

@@ -46,8 +46,28 @@ def brute_force_estimate(profile, ranges, dopplers, powers):
     return np.array(out)
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_leakage_is_the_ca_cfar_mean_of_every_targets_window_response(seed):
+TINY = """\
+rts_radar: 1
+name: tiny
+fc_hz: 77.0e+9
+bandwidth_hz: 1.0e+9
+ramp_time_s: 25.0e-6
+idle_time_s: 5.0e-6
+adc_samples: 8
+sample_rate_hz: 0.625e+6
+chirp_loops: 8
+tx_order: [0, 1, 2]
+frame_period_s: 0.05
+noise_level_db: -75.0
+array: awr1843boost
+"""
+
+
+@pytest.mark.parametrize(("seed", "decades"), [(0, 6), (1, 6), (2, 6), (3, 6), (4, 12),
+                                               (5, 12), (6, 12)])
+def test_leakage_is_the_ca_cfar_mean_of_every_targets_window_response(seed, decades):
+    # Powers over 60 dB, or 120 dB: a target that strong masks others 40 bins away (beyond
+    # the pairs `_near_pairs` finds).
     rng = np.random.default_rng(seed)
     radar = SimulatedRadar(AWR, KIT, fidelity="analytic", noise=False)
     n, loops = AWR.adc_samples, AWR.chirp_loops
@@ -64,13 +84,29 @@ def test_leakage_is_the_ca_cfar_mean_of_every_targets_window_response(seed):
         frames += [frame] * k
         ranges += list(r)
         dopplers += list(d)
-        powers += list(10.0 ** rng.uniform(0.0, 6.0, k))
+        powers += list(10.0 ** rng.uniform(0.0, decades, k))
     frames, ranges, dopplers, powers = map(np.array, (frames, ranges, dopplers, powers))
     got = radar._leakage(frames, ranges, dopplers, powers)
     want = np.concatenate([
         brute_force_estimate(AWR, ranges[frames == f], dopplers[frames == f],
                              powers[frames == f]) for f in range(3)])
-    np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-9 * powers.max())
+    # What is left out: targets whose far sidelobes stay below a thousandth of a twentieth of
+    # the frame's weakest.
+    np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-3 * powers.min())
+
+
+def test_leakage_on_an_axis_shorter_than_the_cfar_window_mirrors_it_again(tmp_path):
+    # 8 range bins: numpy's "reflect" pads the 21-cell window by mirroring twice.
+    (tmp_path / "tiny.radar.yaml").write_text(TINY)
+    tiny = RadarProfile.from_file(tmp_path / "tiny.radar.yaml")
+    radar = SimulatedRadar(tiny, KIT, fidelity="analytic", noise=False)
+    ranges = np.array([0.29, 1.99, 4.39, 5.99, 7.52])
+    dopplers = np.array([0.1, -2.4, 3.3, -4.0, 1.0])
+    frames = np.arange(ranges.size)  # each alone in its frame
+    got = radar._leakage(frames, ranges, dopplers, np.ones(ranges.size))
+    want = np.concatenate([brute_force_estimate(tiny, ranges[[f]], dopplers[[f]], np.ones(1))
+                           for f in frames])
+    np.testing.assert_allclose(got, want, rtol=2e-3)
 
 
 def truck_and_walker(separation_bins, walker_rcs=-15.0):
@@ -134,3 +170,35 @@ def test_a_crowded_frame_read_by_the_analytic_model_reads_each_target_alone():
     auto = SimulatedRadar(AWR, KIT, fidelity="auto", rng=np.random.default_rng(1))
     det = auto.process(schedule)[0]
     assert auto.frames_adc == 1 and not (np.abs(det.range_m - walker_m) < 0.5).any()
+
+
+@pytest.mark.parametrize(("separation_bins", "axis", "seen"),
+                         [(30.5, "range", False), (27.0, "range", False),
+                          (28.0, "doppler", True)])
+def test_a_target_120_db_over_the_noise_masks_one_beyond_the_near_pairs(separation_bins, axis,
+                                                                        seen):
+    # A 40 dBsm target 3 m away (the attenuator at its end: 120 dB over the noise) puts its
+    # far sidelobes into the training cells of a -36 dBsm one 27-30 bins away: the cube loses
+    # it (or, 28 Doppler bins away, sees it 14 dB weaker over its estimate); the analytic
+    # model, summing pairs within 26 bins only, reported it at the noise's level.
+    bin_m = SimulatedRadar(AWR, KIT)._range_bin_m
+    bin_mps = AWR.wavelength_m / 2.0 / (AWR.chirp_loops * AWR.loop_time_s)
+    near_m = 3.0 + 0.3 * bin_m
+    if axis == "range":
+        ranges, speeds = [near_m, near_m + separation_bins * bin_m], [0.0, 0.0]
+    else:
+        ranges, speeds = [near_m, near_m], [0.3 * bin_mps, (0.3 + separation_bins) * bin_mps]
+    tracks = scene_tracks([0.0, 1.0], [0.0, 1.0], ranges, speeds, radar=AWR,
+                          rcs=[40.0, -36.0])
+    schedule = build_schedule(tracks, KIT, AWR)
+    snr = {}
+    for fidelity in ("adc", "analytic", "auto"):
+        det = SimulatedRadar(AWR, KIT, fidelity=fidelity,
+                             rng=np.random.default_rng(2)).process(schedule)[0]
+        weak = ((np.abs(det.range_m - ranges[1]) < 0.5)
+                & (np.abs(det.radial_velocity_mps - speeds[1]) < 0.5))
+        assert weak.any() == seen, fidelity
+        snr[fidelity] = det.snr_db[weak]
+    if seen:
+        assert snr["analytic"][0] == pytest.approx(snr["adc"][0], abs=1.5)
+        assert snr["auto"][0] == snr["analytic"][0]

@@ -1774,3 +1774,46 @@ def test_a_run_stopped_on_an_option_never_writes_its_report_over_a_scene(tmp_pat
                      str(other), "--output", f"file:{tmp_path / 'x.npz'}"])
     assert code == 2
     assert other.read_text() == "kept\n"
+
+
+@pytest.mark.parametrize("argv", [["run", "--json", "{path}"],
+                                  ["run", "--json", "{path}", "--bogus"],
+                                  ["sweep", "--json", "{path}", "--bogus"]])
+def test_a_refused_command_line_writes_its_report_over_no_file_but_a_report(tmp_path, argv):
+    # `run --json plain.yaml` without a scene: read leniently, the scene the user meant is
+    # where --json goes; the not-run report replaced it (a scene, a bench recording).
+    for name, data in (("plain.yaml", b"rts_scenario: 1\n"), ("bench.blf", b"LOGG\x00\x01")):
+        path = tmp_path / name
+        path.write_bytes(data)
+        with pytest.raises(SystemExit):
+            cli.main([a.format(path=path) for a in argv])
+        assert path.read_bytes() == data
+    # An earlier report is replaced (it must not be read as this command's).
+    report = tmp_path / "report.json"
+    report.write_text('{"status": "pass"}')
+    with pytest.raises(SystemExit):
+        cli.main([a.format(path=report) for a in argv])
+    assert json.loads(report.read_text()) != {"status": "pass"}
+
+
+@pytest.mark.parametrize("stop", ["environment", "usage"])
+def test_a_run_stopped_before_it_ran_leaves_no_earlier_report_or_detections(tmp_path,
+                                                                             monkeypatch, stop):
+    # A bad setting in the environment stopped `run` after argparse and before anything ran:
+    # the earlier run's passing report and detections stayed, to be read as this one's (a
+    # line argparse refused left the detections).
+    scene = str(ROOT / "scenarios" / "cut_in.scenario.yaml")
+    report, rows = tmp_path / "r.json", tmp_path / "d.csv"
+    assert cli.main(["run", scene, "--json", str(report), "--detections", str(rows)]) == 0
+    assert rows.exists() and '"pass"' in report.read_text()
+    argv = ["run", scene, "--json", str(report), "--detections", str(rows)]
+    if stop == "environment":
+        monkeypatch.setenv("RTS_SCENARIO_JIT", "sometimes")
+        assert cli.main(argv) == 2
+    else:
+        with pytest.raises(SystemExit):
+            cli.main([*argv, "--bogus"])
+    entries = json.loads(report.read_text())
+    assert [e["status"] for e in (entries if isinstance(entries, list) else [entries])] == [
+        "error"]
+    assert not rows.exists()

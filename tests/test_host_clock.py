@@ -131,6 +131,9 @@ def test_a_host_clock_step_mid_run_is_told_and_its_cycles_judged_as_if_it_had_no
     (reason,) = [r for r in blind.report.reasons if r.startswith("log_stamps:")]
     size = float(reason.split("jump by ")[1].split(" ms")[0]) * 1e-3
     assert size == pytest.approx(step_s, abs=3e-3)
+    # Whole cycles of the radar's (0.5 s, 0.2 s of 50 ms), its count contiguous: no skip of
+    # its counter is named.
+    assert "counter skipped" not in reason and "host's clock stepped" in reason
     # A sidecar naming a cycle the log lacks: its stamps cannot be brought back, it says so.
     sidecar = Path(f"{log}.rts.json")
     data = json.loads(sidecar.read_text())

@@ -1,5 +1,7 @@
 """The plots' data (`Envelope`, `PlotData`: bounded whatever the scene's length) and drawing."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scene_helpers import write_scene
@@ -118,3 +120,12 @@ def test_a_stationary_target_is_drawn_where_it_stands(tmp_path, monkeypatch):
     marks = np.concatenate([c.get_offsets() for c in top.collections])
     assert np.any(np.all(np.isclose(marks, [y_m, x_m]), axis=1))
     plt.close("all")
+
+
+def test_a_scene_without_targets_gets_its_plots(tmp_path):
+    # An empty bench: series of no column; taking their samples raised (exit 3, no verdict).
+    root = Path(__file__).resolve().parents[1]
+    assert cli.main(["run", str(root / "scenarios" / "empty_bench.scenario.yaml"), "--plot",
+                     str(tmp_path / "plots")]) == 0
+    assert sorted(p.name for p in (tmp_path / "plots").iterdir()) == [
+        "empty-bench-errors.png", "empty-bench-scene.png", "empty-bench-schedule.png"]

@@ -2145,15 +2145,29 @@ def test_a_re_check_by_the_sidecar_names_the_sidecar_as_the_latency_s_source(rec
     assert alignment.to_dict()["latency_source"] == "sidecar"
 
 
-@pytest.mark.parametrize("start_offset_s", [0.0005, 0.0015])
-def test_a_log_without_sidecar_counts_a_first_cycle_within_the_estimate_s_error(
-        tmp_path, start_offset_s):
-    # The radar measured its first cycle 0.5 ms (1.5 ms) into the scene; the detections put
-    # the scene's start 1.3 ms (2.3 ms) after the truth, within three of the estimate's
-    # standard errors (1.8 ms each). The re-check took that first cycle as before the scene,
-    # where a run counts it as the scene's first.
-    clock = {**OWN_CLOCK, "counter_start": "auto", "start_offset_s": start_offset_s}
-    scene, log, _ = foreign_log(tmp_path, 1.7e9 + 5.0, seed=3, clock=clock)
-    frames = check_log(scene, log).report.frames
-    assert frames["total"] == frames["checked"] == 167
-    assert frames["before_scene"] == 0 and frames["missing"] == 0
+PARKED = """\
+rts_scenario: 1
+name: parked
+duration_s: 10.0
+frame_rate_hz: 20.0
+radar: {profile: awr1843boost, mount: {x_m: 3.7, z_m: 0.5}, fidelity: analytic}
+rig: wide-3x5
+ego:
+  motion: {type: stationary, position_m: [0, 0, 0]}
+targets:
+  - {name: parked-car, kind: car, rcs: {rcs_dbsm: 10.0},
+     motion: {type: stationary, position_m: [30.0, 1.0, 0.6]}}
+"""
+
+
+def test_a_still_scene_held_after_its_play_is_one_play_not_two(tmp_path):
+    # The RTS holds the last frame after the play; the logger ran on for 6 s. The held
+    # detections fit a still scene a scene's length later as well: "the log holds 2 plays",
+    # refused. They are the last frame held, which fits them as well.
+    path = tmp_path / "parked.scenario.yaml"
+    path.write_text(PARKED)
+    log = tmp_path / "held.blf"
+    run_scene(load_scenario(path, {"duration_s": 16.0}), RunOptions(bus_log=str(log)))
+    Path(f"{log}.rts.json").unlink()
+    report = check_log(load_scenario(path), log).report
+    assert report.frames["checked"] == report.frames["total"] == 200

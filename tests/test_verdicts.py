@@ -630,3 +630,10 @@ def test_the_plugin_warns_of_a_pass_with_targets_never_checked(pytester):
                                  "along): behind"])
     assert '<property name="targets_not_checked" value="1" />' in (
         pytester.path / "j.xml").read_text()
+    # The project's warning filters apply: one that makes it an error fails such a pass.
+    strict = pytester.runpytest("-p", "no:cacheprovider", "-W",
+                                "error::pytest_rts_scenario.TargetsNotCheckedWarning")
+    strict.assert_outcomes(failed=1)
+    quiet = pytester.runpytest("-p", "no:cacheprovider", "-W",
+                               "ignore::pytest_rts_scenario.TargetsNotCheckedWarning")
+    quiet.assert_outcomes(passed=1)

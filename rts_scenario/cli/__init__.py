@@ -184,11 +184,58 @@ def _report_usage_error(argv: Sequence[str], message: str) -> None:
     path = getattr(args, "json", None)
     if report is None or not path or same_as_any(path, [*other_files(args), *left_over]):
         return
+    if not _replaceable_report(path):
+        return
     try:
         check_writable_file("--json", path)
         report(args, message)
     except RtsError:
         pass  # the usage error is the command's outcome, said above
+
+
+def _report_stop(args: argparse.Namespace, message: str) -> None:
+    """Write the ``--json`` report of a command stopped before it ran (its ``on_usage_error``).
+
+    Not over a file the command line names for another option, nor one `check_writable_file`
+    refuses: the checks that refuse those have not run yet.
+    """
+    report = getattr(args, "on_usage_error", None)
+    path = getattr(args, "json", None)
+    if report is None or not path or same_as_any(path, other_files(args)):
+        return
+    try:
+        check_writable_file("--json", path)
+        report(args, message)
+    except RtsError:
+        pass  # the stop is the command's outcome, said above
+
+
+def _replaceable_report(path: str) -> bool:
+    """Whether ``path`` may take a refused command line's report: absent, or JSON already.
+
+    A line argparse refused may be read wrongly (``run --json scene.yaml`` without a scene puts
+    the scene where ``--json`` goes): only an earlier report, or no file, is written over.
+    """
+    import json
+
+    try:
+        with open(path, "rb") as f:
+            text = f.read(MAX_REPORT_BYTES + 1)
+    except FileNotFoundError:
+        return True
+    except OSError:
+        return False
+    if len(text) > MAX_REPORT_BYTES:
+        return False
+    try:
+        json.loads(text)
+    except ValueError:
+        return False
+    return True
+
+
+# The largest file a refused command line's report replaces (`_replaceable_report`).
+MAX_REPORT_BYTES = 64 << 20
 
 
 class _StoreOnce(argparse._StoreAction):
@@ -327,6 +374,7 @@ def _main(argv: Sequence[str] | None) -> int:
         check_environment()
     except RtsError as exc:
         print(f"error: {one_line(exc)}", file=sys.stderr)
+        _report_stop(args, one_line(exc))
         return EXIT_BAD_INPUT
     if sys.stdout is None:
         # Started with its standard output closed (``>&-``): Python drops what is printed to

@@ -66,9 +66,27 @@ def _do_run(args: argparse.Namespace) -> int:
 
 
 def _usage_error(args: argparse.Namespace, message: str) -> None:
-    """Write ``--json`` for a command line argparse refused (``message``): no scene ran."""
-    _write_not_run(argparse.Namespace(**{**vars(args), "scenes": args.scenes or []}),
-                   f"not run: {message}")
+    """Write ``--json`` for a command line refused before anything ran (``message``).
+
+    A line argparse refused, or a setting of the environment. An earlier run's
+    ``--detections`` goes too (`_remove_earlier_detections`), where it holds our header.
+    """
+    args = argparse.Namespace(**{**vars(args), "scenes": args.scenes or []})
+    _write_not_run(args, f"not run: {message}")
+    if getattr(args, "detections", None) and _holds_detections(args.detections):
+        _remove_earlier_detections(args)
+
+
+def _holds_detections(path: str) -> bool:
+    """Whether ``path`` begins with the header `run --detections` writes (a file of ours)."""
+    from ..check import DETECTION_COLUMNS
+
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            first = f.readline(4096)
+    except OSError:
+        return False
+    return first.strip() == ",".join(DETECTION_COLUMNS)
 
 
 def _remove_earlier_detections(args: argparse.Namespace) -> None:

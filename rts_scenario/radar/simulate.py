@@ -42,10 +42,13 @@ expects it). Every frame of a radar with an OS-CFAR goes through the cube (the a
 detects as a CA-CFAR does). The analytic CA-CFAR estimates what the cube's does: the thermal
 noise plus the mean, over each target's training cells, of every target's window response
 there (`_leakage`), so a strong target masks a weaker one near it and its own sidelobes bound
-its SNR, as in ``adc`` (to a few tenths of a dB). A strong target's sidelobes within a weaker
-one's own cell, and false alarms, exist only in ``adc``: force it when a test is about them (at
-the default threshold thermal noise crosses the CFAR's with a chance of 6e-84 per cell,
-`thermal_false_alarm_chance`: none in practice).
+its SNR, as in ``adc`` (to a few tenths of a dB). What exists only in ``adc``: a strong
+target's sidelobes within a weaker one's own cell (they matter where its main lobe does not
+mask it first: across the range ends, where the FFT wraps and the CFAR mirrors its window), the
+cell in which a target halfway between two cells peaks (the analytic model reads the one
+``round`` gives, whose neighbours may differ), and false alarms. Force it when a test is about
+them (at the default threshold thermal noise crosses the CFAR's with a chance of 6e-84 per
+cell, `thermal_false_alarm_chance`: none in practice).
 
 Both FFTs are circular, so in every fidelity range and velocity fold as a real radar's do: the
 sampled beat frequency ``S T - fD`` aliases modulo the (complex) sample rate, so the range bin
@@ -58,6 +61,7 @@ phase ramp over the TX slots and its angles come out wrong, as on the real radar
 
 from __future__ import annotations
 
+import functools
 import math
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
@@ -75,7 +79,7 @@ from ..propagation import C0_MPS
 from ..registry import Registry
 from ..rig import Rig
 from .angle import make_estimator
-from .profile import RadarProfile
+from .profile import RadarProfile, hann_dft_response
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -602,9 +606,10 @@ class SimulatedRadar:
         # target's window response in its training cells (a strong target masks a weaker one
         # near it, and its own sidelobes bound its SNR), as the cube's CFAR sees them.
         peak_power = (np.abs(snap) ** 2).sum(axis=1)
-        floor = arr.n_elements * noise_power + self._leakage(frame_of, *self._fold(
-            target_bin, doppler_bin), peak_power,
-            None if alone is None else alone[frame_of])
+        thermal = arr.n_elements * noise_power
+        floor = thermal + self._leakage(frame_of, *self._fold(target_bin, doppler_bin),
+                                        peak_power, None if alone is None else alone[frame_of],
+                                        thermal)
         if self._sigma > 0.0:
             noise = self.rng.standard_normal((2, *snap.shape)) * np.sqrt(noise_power / 2.0)
             clean = peak_power / (noise_power * arr.n_elements)
@@ -640,7 +645,8 @@ class SimulatedRadar:
         return out
 
     def _leakage(self, frame: NDArray[np.int64], range_bin: FloatArray, doppler_bin: FloatArray,
-                 power: FloatArray, alone: NDArray[np.bool_] | None = None) -> FloatArray:
+                 power: FloatArray, alone: NDArray[np.bool_] | None = None,
+                 thermal: float = 0.0) -> FloatArray:
         """Every target's power in each target's CA-CFAR training cells, their mean there.
 
         ``range_bin, doppler_bin``: folded bins, ``power``: each target's power at its own
@@ -650,10 +656,13 @@ class SimulatedRadar:
         (`RadarProfile.range_response`, `doppler_response`), the training cells are the
         CFAR's window less its guard window, so its share is a difference of two products of
         sums over one axis each (`_LeakageTables`). Targets are summed in power (their cross
-        terms average out over the cells); pairs farther apart than `LEAKAGE_REACH_BINS` on an
-        axis are left out (below -100 dB of the farther target's power). Near the ends of the
-        range axis the cube's CFAR mirrors its window (`_noise_floor`): those cells are summed
-        one by one.
+        terms average out over the cells). A target `LEAKAGE_REACH_BINS` or more away on an
+        axis puts 100 dB less than its power there at most (`_LeakageTables.far_share`): it
+        counts only where that much is still a thousandth of the noise, ``thermal`` (the
+        thermal estimate summed over the channels), or of a twentieth of the frame's weakest
+        target without noise, and then for every target of its frame (a target of 120 dB
+        masks one 40 bins away). Near the ends of the range axis the cube's CFAR mirrors its
+        window (`_noise_floor`): those cells are summed one by one.
         """
         tables = self._leakage_tables
         n_r, n_d = self._n, self._loops
@@ -671,29 +680,76 @@ class SimulatedRadar:
             share = tables.share(_circular(range_bin[j] - cell_r[i], n_r),
                                  _circular(doppler_bin[j] - cell_d[i], n_d))
             leak += np.bincount(i, weights=power[j] * share, minlength=leak.size)
+        victims, sources = self._far_pairs(frame, range_bin, doppler_bin, power, among, thermal)
+        for chunk in range(0, victims.size, _LEAKAGE_PAIRS):
+            i, j = victims[chunk : chunk + _LEAKAGE_PAIRS], sources[chunk : chunk + _LEAKAGE_PAIRS]
+            share = tables.share(_circular(range_bin[j] - cell_r[i], n_r),
+                                 _circular(doppler_bin[j] - cell_d[i], n_d))
+            leak += np.bincount(i, weights=power[j] * share, minlength=leak.size)
         # The mirrored window near the range ends: those targets' sums again, cell by cell.
         half = CFAR_GUARD + CFAR_TRAIN
         edge = np.flatnonzero((cell_r < half) | (cell_r > n_r - 1 - half))
         if edge.size:
-            leak[edge] = self._edge_leakage(edge, frame, range_bin, doppler_bin, cell_r, cell_d,
-                                            power, first, second)
+            leak[edge] = self._edge_leakage(
+                edge, frame, range_bin, doppler_bin, cell_r, cell_d, power,
+                np.concatenate([first, second, victims]), np.concatenate([second, first, sources]))
         return leak / tables.n_train
+
+    def _far_pairs(self, frame: NDArray[np.int64], range_bin: FloatArray,
+                   doppler_bin: FloatArray, power: FloatArray, among: NDArray[np.int64],
+                   thermal: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """`_leakage`'s (victim, source) pairs `LEAKAGE_REACH_BINS` or more apart on an axis.
+
+        Sources are the targets (of ``among``) strong enough to count that far; victims every
+        other target of ``among`` in their frame.
+        """
+        tables = self._leakage_tables
+        none = np.zeros(0, dtype=np.int64)
+        if among.size < 2:
+            return none, none
+        f = frame[among]
+        weakest = np.full(int(f.max()) + 1, np.inf)
+        np.minimum.at(weakest, f, power[among])
+        level = thermal if thermal > 0.0 else weakest[f] / 20.0
+        strong = among[power[among] * tables.far_share / tables.n_train > 1e-3 * level]
+        if strong.size == 0:
+            return none, none
+        # Each strong target against every target of its frame (one sweep per frame's block).
+        order = among[np.argsort(f, kind="stable")]
+        begin = np.searchsorted(frame[order], frame[strong], side="left")
+        count = np.searchsorted(frame[order], frame[strong], side="right") - begin
+        source = np.repeat(strong, count)
+        victim = order[np.repeat(begin - np.cumsum(count) + count, count)
+                       + np.arange(int(count.sum()))]
+        n_r, n_d = self._n, self._loops
+        reach = LEAKAGE_REACH_BINS
+        # Those within reach on both axes are `_near_pairs`' already.
+        far = (victim != source) & (
+            (np.abs(_circular(range_bin[victim] - range_bin[source], n_r)) >= reach)
+            | (np.abs(_circular(doppler_bin[victim] - doppler_bin[source], n_d)) >= reach))
+        return victim[far], source[far]
 
     def _edge_leakage(self, edge: NDArray[np.int64], frame: NDArray[np.int64],
                       range_bin: FloatArray, doppler_bin: FloatArray, cell_r: FloatArray,
-                      cell_d: FloatArray, power: FloatArray, first: NDArray[np.int64],
-                      second: NDArray[np.int64]) -> FloatArray:
-        """`_leakage`'s sums, undivided, for peak cells whose window the range ends mirror."""
+                      cell_d: FloatArray, power: FloatArray, victims: NDArray[np.int64],
+                      sources: NDArray[np.int64]) -> FloatArray:
+        """`_leakage`'s sums, undivided, for peak cells whose window the range ends mirror.
+
+        ``victims, sources``: the (victim, source) pairs of targets that reach each other.
+        """
         p, n_r, n_d = self.profile, self._n, self._loops
         guard, half = CFAR_GUARD, CFAR_GUARD + CFAR_TRAIN
-        # The targets each edge target sees: itself and its partners.
+        # The targets each edge target sees: itself and its sources.
         at_edge = np.zeros(frame.size, dtype=bool)
         at_edge[edge] = True
-        i = np.concatenate([edge, first[at_edge[first]], second[at_edge[second]]])
-        j = np.concatenate([edge, second[at_edge[first]], first[at_edge[second]]])
+        i = np.concatenate([edge, victims[at_edge[victims]]])
+        j = np.concatenate([edge, sources[at_edge[victims]]])
         offsets = np.arange(-half, half + 1)
-        x = cell_r[i, None] + offsets  # the window's range cells, mirrored as numpy's "reflect"
-        x = np.where(x < 0, -x, np.where(x > n_r - 1, 2 * (n_r - 1) - x, x))
+        # The window's range cells, mirrored as numpy's "reflect" pads (again and again on an
+        # axis shorter than the window).
+        period = max(2 * (n_r - 1), 1)
+        x = np.mod(cell_r[i, None] + offsets, period)
+        x = np.where(x > n_r - 1, period - x, x)
         r_power = p.range_response(_circular(x - range_bin[j, None], n_r)) ** 2
         d_power = p.doppler_response(_circular(cell_d[i, None] + offsets
                                                - doppler_bin[j, None], n_d)) ** 2
@@ -736,9 +792,10 @@ class SimulatedRadar:
 
 # Two targets closer than this in range and in Doppler bins share a neighbourhood (crowded).
 CROWDED_BINS = 2.5
-# Targets farther apart than this on an axis (bins) leave each other's CFAR estimate alone in
-# the analytic model: 16 bins beyond the CFAR's window, the Hann windows' sidelobes there are
-# below -100 dB of the target's power, averaged over the training cells.
+# Targets this far apart on an axis (bins) or more reach each other's CFAR estimate in the
+# analytic model only where one is strong (`SimulatedRadar._far_pairs`): 16 bins beyond the
+# CFAR's window, the Hann windows' sidelobes there are below -100 dB of the target's power,
+# averaged over the training cells.
 LEAKAGE_REACH_BINS = CFAR_GUARD + CFAR_TRAIN + 16
 # Pairs of targets per step of the analytic leakage sums (bounded temporaries).
 _LEAKAGE_PAIRS = 65_536
@@ -751,12 +808,39 @@ def _circular(offset: FloatArray, n: int) -> FloatArray:
     return np.mod(offset + n / 2.0, n) - n / 2.0
 
 
+@functools.lru_cache(maxsize=16)
+def _axis_sums(n: int) -> tuple[float, FloatArray, FloatArray]:
+    """`_LeakageTables`' sums for an axis of ``n`` bins, over the whole of its circle.
+
+    Sums of the Hann window's power response (`hann_dft_response`) over the CFAR's guard
+    cells and over its other cells on that axis, at every offset of a target from the window's
+    centre in steps of 1 / `_LEAKAGE_STEPS_PER_BIN` bin.
+    """
+    steps, half = _LEAKAGE_STEPS_PER_BIN, CFAR_GUARD + CFAR_TRAIN
+    reach = n / 2.0
+    size = int(round(2 * reach * steps)) + 1  # offsets -reach + i / steps
+    # Cell m at offset o from the target lies at m - o: on the same grid of steps, the
+    # response once at every point, then each cell's values a slice of it.
+    wide = int(round((reach + half) * steps))
+    power = hann_dft_response(_circular(np.arange(-wide, wide + 1) / steps, n), n) ** 2
+    guard = np.zeros(size)
+    outside = np.zeros(size)
+    for m in range(-half, half + 1):  # 21 cells
+        start = wide + m * steps + int(round(reach * steps))  # offset -reach: m + reach
+        values = power[start - size + 1 : start + 1][::-1]
+        if abs(m) <= CFAR_GUARD:
+            guard += values
+        else:
+            outside += values
+    return reach, guard, outside
+
+
 class _LeakageTables:
     """A target's share of a CA-CFAR estimate by its offset from the peak cell (`_leakage`).
 
     Per axis, the sums of the window's power response over the CFAR's guard window and over
-    the rest of its window, tabulated at `_LEAKAGE_STEPS_PER_BIN` steps per bin over the offsets
-    `_leakage` reaches (the whole axis where that is shorter), on the axis's circle. The
+    the rest of its window, tabulated at `_LEAKAGE_STEPS_PER_BIN` steps per bin over the whole
+    of the axis's circle (`_axis_sums`, once per axis length in a process). The
     training cells are the window's cells outside the guard on one axis or the other: a sum of
     two positive products (no difference of near-equal ones, which would lose a target's own
     sidelobes to its main lobe's rounding).
@@ -765,29 +849,11 @@ class _LeakageTables:
     def __init__(self, profile: RadarProfile) -> None:
         half = CFAR_GUARD + CFAR_TRAIN
         self.n_train = (2 * half + 1) ** 2 - (2 * CFAR_GUARD + 1) ** 2
-        self._axes = [self._sums(profile.range_response, profile.adc_samples),
-                      self._sums(profile.doppler_response, profile.chirp_loops)]
-
-    @staticmethod
-    def _sums(response: Any, n: int) -> tuple[float, FloatArray, FloatArray]:
-        steps, half = _LEAKAGE_STEPS_PER_BIN, CFAR_GUARD + CFAR_TRAIN
-        reach = min(float(LEAKAGE_REACH_BINS + 1), n / 2.0)
-        size = int(round(2 * reach * steps)) + 1  # offsets -reach + i / steps
-        # Cell m at offset o from the target lies at m - o: on the same grid of steps, the
-        # response once at every point, then each cell's values a slice of it.
-        wide = int(round((reach + half) * steps))
-        power = response(_circular(np.arange(-wide, wide + 1) / steps, n)) ** 2
-        guard = np.zeros(size)
-        outside = np.zeros(size)
-        for m in range(-half, half + 1):
-            start = wide + m * steps + int(round(reach * steps))  # offset -reach: m + reach
-            values = power[start - size + 1 : start + 1][::-1]
-            if abs(m) <= CFAR_GUARD:
-                guard += values
-            else:
-                outside += values
-        return reach, guard, outside
-
+        self._axes = [_axis_sums(profile.adc_samples), _axis_sums(profile.chirp_loops)]
+        # The largest share a target `LEAKAGE_REACH_BINS` or more away on an axis has.
+        reach = float(LEAKAGE_REACH_BINS)
+        self.far_share = float(max(self.share(np.array([reach]), np.zeros(1))[0],
+                                   self.share(np.zeros(1), np.array([reach]))[0]))
     def share(self, range_offset: FloatArray, doppler_offset: FloatArray) -> FloatArray:
         """Sum over the training cells of a unit target's power at these offsets from them."""
         sums = []
