@@ -1317,17 +1317,19 @@ class _TruthTable:
         visible = self.visible[i0] & self.visible[i0 + 1] & inside[:, None]
         return values, visible
 
-    def cost(self, t_s: FloatArray, det: _Detected, weight: FloatArray | None = None) -> float:
+    def cost(self, t_s: FloatArray, det: _Detected, weight: FloatArray | None = None,
+             angles: bool = True) -> float:
         """Mean over detections of the normalized distance to the nearest visible target.
 
         ``t_s`` are the cycles' scene times; ``weight`` (per detection) weighs the mean (a
-        bootstrap's resampled cycles).
+        bootstrap's resampled cycles); without ``angles``, by range and range rate alone (the
+        scene's motion, whatever the radar's angles).
         """
         if det.owner.size == 0:
             return float("inf")
         values, visible = self.at(t_s)
         total = np.zeros((det.owner.size, visible.shape[1]))
-        for q, key in self.QUANTITIES:
+        for q, key in self.QUANTITIES[: None if angles else 2]:
             diff = (det.values[q][:, None] - values[q][det.owner]) / self.tol[key]
             total += np.nan_to_num(diff, nan=0.0) ** 2
         total = np.where(visible[det.owner], total, np.inf)
@@ -1402,18 +1404,26 @@ def estimate_offset(scene: Scenario, bus_t_s: FloatArray, dets: list[Detections]
     some = table.detected([usable[i] for i in pick])
     t_log = bus - latency_s
     lo, hi = bus.min() - latency_s - scene.duration_s, bus.max() - latency_s
-    first_seen = table.first_visible_s
-    if hi - lo > FULL_SEARCH_S and first_seen is not None:
-        onset = float(t_log[with_detections[0]]) - first_seen
-        lo, hi = max(lo, onset - ONSET_WINDOW_S), min(hi, onset + ONSET_WINDOW_S)
     if within_s is not None and max(lo, within_s[0]) <= min(hi, within_s[1]):
         lo, hi = max(lo, within_s[0]), min(hi, within_s[1])
+    whole = (lo, hi)
+    first_seen = table.first_visible_s
+    # The first detections from where the search begins on.
+    onwards = with_detections[t_log[with_detections] >= lo + (first_seen or 0.0)]
+    if hi - lo > FULL_SEARCH_S and first_seen is not None and onwards.size:
+        onset = float(t_log[onwards[0]]) - first_seen
+        lo, hi = max(lo, onset - ONSET_WINDOW_S), min(hi, onset + ONSET_WINDOW_S)
     grid = np.arange(lo, hi + COARSE_STEP_S, COARSE_STEP_S)
     coarse = np.array([table.cost(t_log[pick] - s, some) for s in grid])
     best = grid[_best(coarse)]
-    others = tuple(s for s in _repeats(grid, coarse, scene.duration_s)
-                   if not _held_after(table, scene.duration_s, max(s, float(best[-1])), t_log,
-                                      usable))
+    # The scene played again in the log: looked for over all of it, a frame at a time, by the
+    # scene's motion alone (a play whose angles are off is a play all the same).
+    scan = np.arange(whole[0], whole[1] + table.frame_s, max(COARSE_STEP_S, table.frame_s))
+    plays = _repeats(scan, np.array([table.cost(t_log[pick] - s, some, angles=False)
+                                     for s in scan]), scene.duration_s)
+    others = tuple(s for s in plays if abs(s - float(best[-1])) >= scene.duration_s + 1.0
+                   and not _held_after(table, scene.duration_s, max(s, float(best[-1])),
+                                       t_log, usable))
     span = float(best[-1] - best[0]) + 2 * FINE_SPAN_S
     step = max(FINE_STEP_S, span / MAX_FINE_POINTS)
     fine = best[0] - FINE_SPAN_S + step * np.arange(int(np.ceil(span / step)) + 1)
@@ -1447,15 +1457,18 @@ def _held_after(table: _TruthTable, duration_s: float, later_s: float, t_log: Fl
     if picked.size == 0:
         return True
     det = table.detected([dets[i] for i in picked])
-    played = table.cost(t_log[picked] - later_s, det)
-    held = table.cost(np.full(picked.size, duration_s - 0.5 * table.frame_s), det)
+    played = table.cost(t_log[picked] - later_s, det, angles=False)
+    held = table.cost(np.full(picked.size, duration_s - 0.5 * table.frame_s), det,
+                      angles=False)
     return held <= played + 0.1
 
 
 def _repeats(grid: FloatArray, costs: FloatArray, duration_s: float) -> tuple[float, ...]:
     """Offsets of ``grid`` a scene's length or more apart that match as the best nearly does.
 
-    Each matches at least `REPEAT_MATCH` of what the best matches: the scene played again.
+    The best among them (all in order of offset); each other matches at least `REPEAT_MATCH`
+    of what the best matches: the scene played again.
+
     A detection matched costs little, one unmatched `GATE2`: ``GATE2 - cost`` grows with the
     detections an offset matches. Offsets less than a scene's length apart share cycles.
     """
@@ -1472,7 +1485,7 @@ def _repeats(grid: FloatArray, costs: FloatArray, duration_s: float) -> tuple[fl
             break
         found.append(float(grid[at]))
         free &= np.abs(grid - grid[at]) >= away
-    return tuple(sorted(found[1:]))
+    return tuple(sorted(found))
 
 
 def _best(costs: FloatArray) -> IntArray:

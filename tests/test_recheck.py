@@ -755,18 +755,23 @@ def test_a_log_holding_two_runs_is_refused_naming_where_each_starts(tmp_path):
         check_log(scene, both)
 
 
-def test_a_log_holding_two_plays_for_a_free_radar_is_refused_naming_where_each_starts(tmp_path):
+@pytest.mark.parametrize(("gap", "az_off_deg"), [(972, 0.0), (5556, 2.0)])
+def test_a_log_holding_two_plays_for_a_free_radar_is_refused_naming_where_each_starts(
+        tmp_path, gap, az_off_deg):
     # A logger left running over two plays of the scene, the radar counting on (free, no
-    # count start to tell runs by), 70 s apart. Aligned by its detections, the check took the
-    # better of the two and judged it alone: a play with cycles lost passed unseen.
+    # count start to tell runs by), 70 s apart (or 400 s, the second play's angles 2 deg off:
+    # a log that long is aligned about its first detections, and a play whose angles are off
+    # fits the scene by its motion all the same). Aligned by its detections, the check took
+    # the better of the two and judged it alone: a failing play passed unseen.
     free = {**OWN_CLOCK, "counter_start": "auto"}
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
-    gap = 972  # cycles of 72 ms: 69.984 s
     origins = (1.7e9 + 100.0, 1.7e9 + 100.0 + gap * OWN_CLOCK["cycle_s"])
     scene, first, _ = foreign_log(tmp_path / "a", origins[0], clock=free)
-    _, second, _ = foreign_log(tmp_path / "b", origins[1], seed=1, clock=free,
-                               tamper=lambda c: replace(c, cycle=c.cycle + gap))
+    _, second, _ = foreign_log(
+        tmp_path / "b", origins[1], seed=1, clock=free,
+        tamper=lambda c: replace(c, cycle=c.cycle + gap,
+                                 az_deg=None if c.az_deg is None else c.az_deg + az_off_deg))
     assert check_log(scene, first).report.passed
     messages = []
     for log in (first, second):
@@ -781,7 +786,10 @@ def test_a_log_holding_two_plays_for_a_free_radar_is_refused_naming_where_each_s
     np.testing.assert_allclose([float(t) for t in times], origins, atol=0.05)
     # Told which play to check, it checks that one.
     report = check_log(scene, both, time_offset_s=origins[1]).report
-    assert report.passed and report.frames["checked"] == report.frames["total"]
+    if az_off_deg:
+        assert not report.passed and report.errors["az_deg"].max > 1.0
+    else:
+        assert report.passed and report.frames["checked"] == report.frames["total"]
 
 
 @pytest.mark.parametrize(("start_offset_s", "jitter_s"), [(0.0, 0.0), (0.0, 0.004),
