@@ -110,8 +110,8 @@ class Envelope:
         """Merge each two neighbouring buckets into one; double the stride."""
         buckets, _, columns = self._t_s.shape
         starts = np.arange(0, 2 * buckets, 4, dtype=np.intp)
-        t, v = _extremes(self._t_s.reshape(-1, columns), self._values.reshape(-1, columns),
-                         starts, self.by_time)
+        t, v = _extremes(self._t_s.reshape(2 * buckets, columns),
+                         self._values.reshape(2 * buckets, columns), starts, self.by_time)
         half = buckets // 2
         self._t_s[:half], self._values[:half] = t, v
         self._t_s[half:] = self._values[half:] = np.nan

@@ -133,6 +133,10 @@ GATE2 = 9.0
 # A second offset matching this share of what the best one matches, a scene's length away: the
 # log holds the scene played again (`estimate_offset`).
 REPEAT_MATCH = 0.3
+# Detections a start must match that the scene's last frame, held, does not, to be a play
+# again (`_held_after`): one (a still scene held matches none such; a target crossing for a
+# few cycles among parked ones may be seen in one).
+HELD_EXTRA = 1
 
 
 class LogError(RtsError):
@@ -1327,13 +1331,18 @@ class _TruthTable:
         """
         if det.owner.size == 0:
             return float("inf")
+        return float(np.average(np.minimum(self.nearest(t_s, det, angles), GATE2),
+                                weights=weight))
+
+    def nearest(self, t_s: FloatArray, det: _Detected, angles: bool = True) -> FloatArray:
+        """Return each detection's normalized squared distance to its nearest visible target."""
         values, visible = self.at(t_s)
         total = np.zeros((det.owner.size, visible.shape[1]))
         for q, key in self.QUANTITIES[: None if angles else 2]:
             diff = (det.values[q][:, None] - values[q][det.owner]) / self.tol[key]
             total += np.nan_to_num(diff, nan=0.0) ** 2
         total = np.where(visible[det.owner], total, np.inf)
-        return float(np.average(np.minimum(total.min(axis=1), GATE2), weights=weight))
+        return np.asarray(total.min(axis=1, initial=np.inf), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -1457,10 +1466,12 @@ def _held_after(table: _TruthTable, duration_s: float, later_s: float, t_log: Fl
     if picked.size == 0:
         return True
     det = table.detected([dets[i] for i in picked])
-    played = table.cost(t_log[picked] - later_s, det, angles=False)
-    held = table.cost(np.full(picked.size, duration_s - 0.5 * table.frame_s), det,
-                      angles=False)
-    return held <= played + 0.1
+    played = table.nearest(t_log[picked] - later_s, det, angles=False) <= 1.0
+    held = table.nearest(np.full(picked.size, duration_s - 0.5 * table.frame_s), det,
+                         angles=False) <= 1.0
+    # A play again matches detections the held frame does not: a target that moves, even
+    # for a few cycles among many that stand still.
+    return int((played & ~held).sum()) < HELD_EXTRA
 
 
 def _repeats(grid: FloatArray, costs: FloatArray, duration_s: float) -> tuple[float, ...]:

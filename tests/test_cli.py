@@ -1782,7 +1782,9 @@ def test_a_run_stopped_on_an_option_never_writes_its_report_over_a_scene(tmp_pat
 def test_a_refused_command_line_writes_its_report_over_no_file_but_a_report(tmp_path, argv):
     # `run --json plain.yaml` without a scene: read leniently, the scene the user meant is
     # where --json goes; the not-run report replaced it (a scene, a bench recording).
-    for name, data in (("plain.yaml", b"rts_scenario: 1\n"), ("bench.blf", b"LOGG\x00\x01")):
+    for name, data in (("plain.yaml", b"rts_scenario: 1\n"), ("bench.blf", b"LOGG\x00\x01"),
+                       ("gen.json", b'{"rts_scenario": 1, "name": "a scene as JSON"}'),
+                       ("run.blf.rts.json", b'{"rts_scenario_log": 1, "clock": {}}')):
         path = tmp_path / name
         path.write_bytes(data)
         with pytest.raises(SystemExit):
@@ -1817,3 +1819,15 @@ def test_a_run_stopped_before_it_ran_leaves_no_earlier_report_or_detections(tmp_
     assert [e["status"] for e in (entries if isinstance(entries, list) else [entries])] == [
         "error"]
     assert not rows.exists()
+
+
+def test_a_setting_refused_before_a_run_never_writes_over_its_recording_s_sidecar(
+        tmp_path, monkeypatch):
+    # --json naming --record's sidecar: refused by the run's own checks; a bad setting in the
+    # environment stopped it before them and its report replaced the sidecar.
+    sidecar = tmp_path / "rec.blf.rts.json"
+    sidecar.write_text('{"rts_scenario_log": 1}')
+    monkeypatch.setenv("RTS_SCENARIO_JIT", "sometimes")
+    assert cli.main(["run", str(ROOT / "scenarios" / "cut_in.scenario.yaml"), "--json",
+                     str(sidecar), "--record", str(tmp_path / "rec.blf")]) == 2
+    assert sidecar.read_text() == '{"rts_scenario_log": 1}'

@@ -129,3 +129,12 @@ def test_a_scene_without_targets_gets_its_plots(tmp_path):
                      str(tmp_path / "plots")]) == 0
     assert sorted(p.name for p in (tmp_path / "plots").iterdir()) == [
         "empty-bench-errors.png", "empty-bench-scene.png", "empty-bench-schedule.png"]
+
+
+def test_an_envelope_of_no_column_takes_any_number_of_samples():
+    # A scene without targets longer than its buckets: merging them raised (exit 3).
+    envelope = Envelope(0, buckets=4)
+    for start in range(0, 40, 7):
+        envelope.add(np.arange(start, start + 7) * 0.05, np.zeros((7, 0)))
+    t, v = envelope.samples()
+    assert envelope.stride > 1 and t.shape[1] == v.shape[1] == 0

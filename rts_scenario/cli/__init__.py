@@ -211,7 +211,7 @@ def _report_stop(args: argparse.Namespace, message: str) -> None:
 
 
 def _replaceable_report(path: str) -> bool:
-    """Whether ``path`` may take a refused command line's report: absent, or JSON already.
+    """Whether ``path`` may take a refused command line's report: absent, or a report already.
 
     A line argparse refused may be read wrongly (``run --json scene.yaml`` without a scene puts
     the scene where ``--json`` goes): only an earlier report, or no file, is written over.
@@ -228,10 +228,14 @@ def _replaceable_report(path: str) -> bool:
     if len(text) > MAX_REPORT_BYTES:
         return False
     try:
-        json.loads(text)
+        data = json.loads(text)
     except ValueError:
         return False
-    return True
+    # A report of `run` (an entry, or a list of them) or of `sweep`; not a scene written as
+    # JSON, nor a recording's sidecar.
+    entries = data if isinstance(data, list) else [data]
+    return bool(entries) and all(isinstance(e, dict) and ("status" in e or "runs" in e)
+                                 for e in entries)
 
 
 # The largest file a refused command line's report replaces (`_replaceable_report`).

@@ -222,6 +222,9 @@ def other_files(args: argparse.Namespace) -> list[str]:
     for key, value in vars(args).items():
         if key != "json":
             named += value if isinstance(value, list) else [value]
+    record = getattr(args, "record", None)
+    if isinstance(record, str):  # and the sidecar `--record` writes beside its log
+        named.append(f"{record}.rts.json")
     return [value for value in named if isinstance(value, str)]
 
 

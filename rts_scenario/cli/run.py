@@ -121,8 +121,9 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
     # Not from the scenes' package: a stop during its import (a yaml half imported) broke that.
     from ..suffixes import SCENE_SUFFIX
 
-    if not args.json or same_as_any(args.json, _inputs(args)):
-        return
+    if not args.json or same_as_any(args.json, _inputs(args)) or (
+            getattr(args, "record", None) and same_as_any(args.json, [f"{args.record}.rts.json"])):
+        return  # (nor over the sidecar --record writes: a recording's)
     from ..file_kinds import read_only_kind
 
     if read_only_kind(Path(args.json).name) is not None:

@@ -742,21 +742,26 @@ class SimulatedRadar:
         # The targets each edge target sees: itself and its sources.
         at_edge = np.zeros(frame.size, dtype=bool)
         at_edge[edge] = True
-        i = np.concatenate([edge, victims[at_edge[victims]]])
-        j = np.concatenate([edge, sources[at_edge[victims]]])
+        victims_all = np.concatenate([edge, victims[at_edge[victims]]])
+        sources_all = np.concatenate([edge, sources[at_edge[victims]]])
         offsets = np.arange(-half, half + 1)
-        # The window's range cells, mirrored as numpy's "reflect" pads (again and again on an
-        # axis shorter than the window).
-        period = max(2 * (n_r - 1), 1)
-        x = np.mod(cell_r[i, None] + offsets, period)
-        x = np.where(x > n_r - 1, period - x, x)
-        r_power = p.range_response(_circular(x - range_bin[j, None], n_r)) ** 2
-        d_power = p.doppler_response(_circular(cell_d[i, None] + offsets
-                                               - doppler_bin[j, None], n_d)) ** 2
         inner = np.abs(offsets) <= guard
-        share = (r_power[:, ~inner].sum(axis=1) * d_power.sum(axis=1)
-                 + r_power[:, inner].sum(axis=1) * d_power[:, ~inner].sum(axis=1))
-        total = np.bincount(i, weights=power[j] * share, minlength=frame.size)
+        period = max(2 * (n_r - 1), 1)
+        total = np.zeros(frame.size)
+        # In steps of pairs: each step's arrays are pairs x the window's 21 cells.
+        step = max(1, _LEAKAGE_PAIRS // offsets.size)
+        for chunk in range(0, victims_all.size, step):
+            i, j = victims_all[chunk : chunk + step], sources_all[chunk : chunk + step]
+            # The window's range cells, mirrored as numpy's "reflect" pads (again and again on
+            # an axis shorter than the window).
+            x = np.mod(cell_r[i, None] + offsets, period)
+            x = np.where(x > n_r - 1, period - x, x)
+            r_power = p.range_response(_circular(x - range_bin[j, None], n_r)) ** 2
+            d_power = p.doppler_response(_circular(cell_d[i, None] + offsets
+                                                   - doppler_bin[j, None], n_d)) ** 2
+            share = (r_power[:, ~inner].sum(axis=1) * d_power.sum(axis=1)
+                     + r_power[:, inner].sum(axis=1) * d_power[:, ~inner].sum(axis=1))
+            total += np.bincount(i, weights=power[j] * share, minlength=frame.size)
         return np.asarray(total[edge], dtype=np.float64)
 
     @cached_property
@@ -850,10 +855,15 @@ class _LeakageTables:
         half = CFAR_GUARD + CFAR_TRAIN
         self.n_train = (2 * half + 1) ** 2 - (2 * CFAR_GUARD + 1) ** 2
         self._axes = [_axis_sums(profile.adc_samples), _axis_sums(profile.chirp_loops)]
-        # The largest share a target `LEAKAGE_REACH_BINS` or more away on an axis has.
-        reach = float(LEAKAGE_REACH_BINS)
-        self.far_share = float(max(self.share(np.array([reach]), np.zeros(1))[0],
-                                   self.share(np.zeros(1), np.array([reach]))[0]))
+        # The largest share a target `LEAKAGE_REACH_BINS` or more away on an axis has (its
+        # offset on the other axis anywhere, the sidelobes' ripple over a bin beyond).
+        beyond = LEAKAGE_REACH_BINS + np.arange(0, 2 * _LEAKAGE_STEPS_PER_BIN + 1) / float(
+            _LEAKAGE_STEPS_PER_BIN)
+        other = np.arange(-_LEAKAGE_STEPS_PER_BIN, _LEAKAGE_STEPS_PER_BIN + 1) / float(
+            _LEAKAGE_STEPS_PER_BIN)
+        a, b = np.meshgrid(beyond, other)
+        self.far_share = float(max(self.share(a.ravel(), b.ravel()).max(),
+                                   self.share(b.ravel(), a.ravel()).max()))
     def share(self, range_offset: FloatArray, doppler_offset: FloatArray) -> FloatArray:
         """Sum over the training cells of a unit target's power at these offsets from them."""
         sums = []
