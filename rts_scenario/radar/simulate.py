@@ -654,8 +654,8 @@ class SimulatedRadar:
         (`_detect_analytic`). A target at offset ``(dr, dd)`` from a peak cell
         puts ``power |H_r(x - dr)|^2 |H_d(y - dd)|^2`` in the cell ``(x, y)`` cells from it
         (`RadarProfile.range_response`, `doppler_response`), the training cells are the
-        CFAR's window less its guard window, so its share is a difference of two products of
-        sums over one axis each (`_LeakageTables`). Targets are summed in power (their cross
+        CFAR's window less its guard window, so its share is a sum of two products of sums
+        over one axis each (`_LeakageTables`). Targets are summed in power (their cross
         terms average out over the cells). A target `LEAKAGE_REACH_BINS` or more away on an
         axis puts 100 dB less than its power there at most (`_LeakageTables.far_share`): it
         counts only where that much is still a thousandth of the noise, ``thermal`` (the
@@ -672,15 +672,11 @@ class SimulatedRadar:
         among = np.arange(frame.size) if alone is None else np.flatnonzero(~alone)
         first, second = (among[pick] for pick in _near_pairs(
             frame[among], range_bin[among], doppler_bin[among], n_r, n_d, LEAKAGE_REACH_BINS))
-        for chunk in range(0, first.size, _LEAKAGE_PAIRS):
-            i = np.concatenate([first[chunk : chunk + _LEAKAGE_PAIRS],
-                                second[chunk : chunk + _LEAKAGE_PAIRS]])
-            j = np.concatenate([second[chunk : chunk + _LEAKAGE_PAIRS],
-                                first[chunk : chunk + _LEAKAGE_PAIRS]])
-            share = tables.share(_circular(range_bin[j] - cell_r[i], n_r),
-                                 _circular(doppler_bin[j] - cell_d[i], n_d))
-            leak += np.bincount(i, weights=power[j] * share, minlength=leak.size)
-        victims, sources = self._far_pairs(frame, range_bin, doppler_bin, power, among, thermal)
+        far_victims, far_sources = self._far_pairs(frame, range_bin, doppler_bin, power, among,
+                                                   thermal)
+        # (victim, source): the near pairs both ways, the far ones from their strong source.
+        victims = np.concatenate([first, second, far_victims])
+        sources = np.concatenate([second, first, far_sources])
         for chunk in range(0, victims.size, _LEAKAGE_PAIRS):
             i, j = victims[chunk : chunk + _LEAKAGE_PAIRS], sources[chunk : chunk + _LEAKAGE_PAIRS]
             share = tables.share(_circular(range_bin[j] - cell_r[i], n_r),
@@ -690,9 +686,8 @@ class SimulatedRadar:
         half = CFAR_GUARD + CFAR_TRAIN
         edge = np.flatnonzero((cell_r < half) | (cell_r > n_r - 1 - half))
         if edge.size:
-            leak[edge] = self._edge_leakage(
-                edge, frame, range_bin, doppler_bin, cell_r, cell_d, power,
-                np.concatenate([first, second, victims]), np.concatenate([second, first, sources]))
+            leak[edge] = self._edge_leakage(edge, frame, range_bin, doppler_bin, cell_r, cell_d,
+                                            power, victims, sources)
         return leak / tables.n_train
 
     def _far_pairs(self, frame: NDArray[np.int64], range_bin: FloatArray,
