@@ -70,6 +70,7 @@ from .schedule import Schedule, build_schedule, held_frames
 from .schedule.build import FE_RESPONSES, solver_inputs
 from .solver import solver_plan
 from .solver.estimator_aware import plan_method
+from .suffixes import LOG_SIDECAR_SUFFIX
 
 # Frames per batch: large enough to amortize per-call costs, small enough for bounded memory.
 BATCH_FRAMES = 500
@@ -1500,9 +1501,6 @@ def ambiguity_window_s(radar: RadarProfile, rig: Rig) -> float:
     update latency (`HardwareLimits.update_latency_s`); see `CycleTruth`.
     """
     return radar.measurement_s + rig.limits.update_latency_s
-
-
-LOG_SIDECAR_SUFFIX = ".rts.json"
 
 
 def write_log_sidecar(log: str | Path, scene: Scenario, radar: RadarProfile,

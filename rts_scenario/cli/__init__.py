@@ -180,28 +180,21 @@ def _report_usage_error(argv: Sequence[str], message: str) -> None:
     if read is None:
         return
     args, left_over = read
-    report = getattr(args, "on_usage_error", None)
     path = getattr(args, "json", None)
-    if report is None or not path or same_as_any(path, [*other_files(args), *left_over]):
-        return
-    if not _replaceable_report(path):
-        return
-    try:
-        check_writable_file("--json", path)
-        report(args, message)
-    except RtsError:
-        pass  # the usage error is the command's outcome, said above
+    if path and _replaceable_report(path):
+        _report_stop(args, message, left_over)
 
 
-def _report_stop(args: argparse.Namespace, message: str) -> None:
+def _report_stop(args: argparse.Namespace, message: str,
+                 also_named: Sequence[str] = ()) -> None:
     """Write the ``--json`` report of a command stopped before it ran (its ``on_usage_error``).
 
-    Not over a file the command line names for another option, nor one `check_writable_file`
-    refuses: the checks that refuse those have not run yet.
+    Not over a file the command line names for another option (or ``also_named``), nor one
+    `check_writable_file` refuses: the checks that refuse those have not run yet.
     """
     report = getattr(args, "on_usage_error", None)
     path = getattr(args, "json", None)
-    if report is None or not path or same_as_any(path, other_files(args)):
+    if report is None or not path or same_as_any(path, [*other_files(args), *also_named]):
         return
     try:
         check_writable_file("--json", path)

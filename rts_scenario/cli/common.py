@@ -17,6 +17,7 @@ from typing import Any, TextIO
 
 from ..atomic import check_draft, write_atomic
 from ..errors import RtsError, one_line
+from ..suffixes import LOG_SIDECAR_SUFFIX
 
 # Weight solver methods a command line can choose (``--method``).
 # The schedule's methods (`solver.estimator_aware.SCHEDULE_METHODS`; a test keeps them equal).
@@ -224,7 +225,7 @@ def other_files(args: argparse.Namespace) -> list[str]:
             named += value if isinstance(value, list) else [value]
     record = getattr(args, "record", None)
     if isinstance(record, str):  # and the sidecar `--record` writes beside its log
-        named.append(f"{record}.rts.json")
+        named.append(f"{record}{LOG_SIDECAR_SUFFIX}")
     return [value for value in named if isinstance(value, str)]
 
 

@@ -15,6 +15,7 @@ from .. import interrupts
 from ..atomic import Draft, check_draft
 from ..errors import RtsError, located, one_line
 from ..startup import command_imports
+from ..suffixes import LOG_SIDECAR_SUFFIX
 from .common import (
     EXIT_BAD_INPUT,
     EXIT_FAIL,
@@ -97,7 +98,7 @@ def _remove_earlier_detections(args: argparse.Namespace) -> None:
     option writes it, or it is named like a file the tool reads: the checks that refuse those
     may not have run yet.
     """
-    record = [args.record, f"{args.record}.rts.json"] if args.record else []
+    record = [args.record, f"{args.record}{LOG_SIDECAR_SUFFIX}"] if args.record else []
     if not args.detections or same_as_any(args.detections, [*_inputs(args), args.json,
                                                             *record]):
         return
@@ -121,8 +122,9 @@ def _write_not_run(args: argparse.Namespace, message: str) -> None:
     # Not from the scenes' package: a stop during its import (a yaml half imported) broke that.
     from ..suffixes import SCENE_SUFFIX
 
-    if not args.json or same_as_any(args.json, _inputs(args)) or (
-            getattr(args, "record", None) and same_as_any(args.json, [f"{args.record}.rts.json"])):
+    record = getattr(args, "record", None)
+    sidecar = [f"{record}{LOG_SIDECAR_SUFFIX}"] if record else []
+    if not args.json or same_as_any(args.json, [*_inputs(args), *sidecar]):
         return  # (nor over the sidecar --record writes: a recording's)
     from ..file_kinds import read_only_kind
 
@@ -139,7 +141,7 @@ def _run(args: argparse.Namespace, started: list[bool]) -> int:
         from ..canbus.mapping import CanMapping
         from ..check import DETECTION_COLUMNS, tolerances_below_bus_steps
         from ..errors import BusError, ScenarioError
-        from ..pipeline import LOG_SIDECAR_SUFFIX, RunOptions, run_scene
+        from ..pipeline import RunOptions, run_scene
         from ..plots import safe_stem
         from ..preflight import Preflight
         from ..report import bench_failures, not_checked_note
