@@ -11,6 +11,7 @@ import numpy as np
 from .arrays import FloatArray
 from .atomic import open_atomic
 from .errors import RtsError
+from .plot_data import ERROR_KEYS
 from .quads import quad_polygons
 
 if TYPE_CHECKING:
@@ -58,9 +59,9 @@ def safe_stem(name: str) -> str:
 MAX_STEM = 120
 
 
-# The errors plotted, by tolerance key (`rts_scenario.plot_data.ERROR_KEYS`): their labels.
-_ERRORS = {"range_m": "range (m)", "radial_velocity_mps": "radial velocity (m/s)",
-           "az_deg": "azimuth (deg)", "el_deg": "elevation (deg)"}
+# The errors plotted, by tolerance key (the keys `PlotData.errors` gathers them by): labels.
+_ERRORS = dict(zip(ERROR_KEYS, ("range (m)", "radial velocity (m/s)", "azimuth (deg)",
+                                "elevation (deg)"), strict=True))
 
 
 
